@@ -1,0 +1,125 @@
+//! # dflat-control — window, reference and the flatness-based controllers
+//!
+//! Pure: no I/O, no clock, no threads, deterministic; time enters as
+//! arguments. One flow, one direction:
+//!
+//! ```text
+//! pose → window → predict (F⁻¹) → reference → optimize → map (F) → saturate → command
+//! ```
+//!
+//! * [`window::Window`] — the last R measured outputs and R−1 sent inputs.
+//! * [`reference::Reference`] — a fixed setpoint or a path with a speed.
+//! * [`dfmpc::DfMpc`] — the discrete-flatness MPC of the paper (§V).
+//! * [`fmpc::FlatnessMpc`] and [`pd::Pd`] — the paper's baselines.
+//!
+//! All three implement [`Controller`], so shells choose one by configuration.
+//! Positions are local NED [m]; angles ZYX [rad]; thrust is specific
+//! collective thrust [m/s²] (thrust / mass).
+
+pub mod model;
+
+pub use model::ControlModel;
+
+use nalgebra::Vector3;
+use thiserror::Error;
+
+pub use dflat_model::{FlatError, Frame};
+
+/// One pose measurement as the controller sees it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Measurement {
+    /// Time of the measurement [s] (the shell's clock; only differences matter).
+    pub t: f64,
+    /// Position, local NED [m] (z unused by planar models).
+    pub position: Vector3<f64>,
+    /// Yaw ψ [rad].
+    pub yaw: f64,
+}
+
+/// The attitude and thrust command for the autopilot at one tick.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AttitudeCommand {
+    /// Pitch θ [rad], ZYX, FRD (nose down negative).
+    pub pitch: f64,
+    /// Roll φ [rad], ZYX, FRD (right wing down positive).
+    pub roll: f64,
+    /// Yaw ψ [rad].
+    pub yaw: f64,
+    /// Specific collective thrust [m/s²]; the planar model commands hover (g).
+    pub thrust: f64,
+}
+
+impl AttitudeCommand {
+    /// True when every field is finite.
+    pub fn is_finite(&self) -> bool {
+        self.pitch.is_finite() && self.roll.is_finite() && self.yaw.is_finite() && self.thrust.is_finite()
+    }
+}
+
+/// What a controller produced at one tick, for the shell to send and log.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TickOutput {
+    /// The (saturated) command to send.
+    pub command: AttitudeCommand,
+    /// The planned outputs y*_k … y*_{k+3} (NED m); baselines fill their
+    /// own prediction where they have one, else the measurement.
+    pub plan: [Vector3<f64>; 4],
+    /// The reference at the tick y_ref,k (NED m).
+    pub reference: Vector3<f64>,
+    /// True when the command was clipped by input saturation.
+    pub saturated: bool,
+    /// True when the inequality-constrained QP (clarabel) was solved.
+    pub constrained: bool,
+}
+
+/// Why a controller tick failed. The shell decides what to do (hold the
+/// previous plan, level hover, failsafe); the controller never emits NaN.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum ControlError {
+    /// A flatness map was singular or got invalid data.
+    #[error("flat map: {0}")]
+    Flat(#[from] FlatError),
+    /// The measurement holds NaN or infinite values.
+    #[error("non-finite measurement")]
+    NonFiniteMeasurement,
+    /// The reference holds NaN or infinite values.
+    #[error("non-finite reference")]
+    NonFiniteReference,
+    /// The constrained QP did not solve (status from clarabel).
+    #[error("QP solver failed: {0}")]
+    Solver(String),
+    /// The banded system was not positive definite (bad weights).
+    #[error("banded Cholesky failed: matrix not positive definite")]
+    NotPositiveDefinite,
+    /// Settings out of range; names the field.
+    #[error("invalid setting {field}: {reason}")]
+    InvalidSetting {
+        /// The field name.
+        field: &'static str,
+        /// What is allowed.
+        reason: String,
+    },
+}
+
+/// One interface for DF-MPC, Flatness MPC and PD.
+pub trait Controller: Send {
+    /// Short name for logs and plots ("df-mpc", "fmpc", "pd").
+    fn name(&self) -> &'static str;
+    /// One control tick at control step δt: takes the newest measurement
+    /// (at or before the tick) and the reference, returns the command and
+    /// records it as sent. On error nothing is recorded.
+    fn update(&mut self, measurement: &Measurement, reference: &mut dyn ReferenceSource) -> Result<TickOutput, ControlError>;
+    /// Forgets all history (window, estimates); the next update starts as
+    /// the first one did.
+    fn reset(&mut self);
+}
+
+/// A source of reference positions over a horizon.
+pub trait ReferenceSource {
+    /// Fills `out[j]` with the reference position at tick k+j, j = 0..out.len(),
+    /// given the measured position at tick k and the control step δt [s].
+    fn horizon(&mut self, measured: &Vector3<f64>, dt: f64, out: &mut [Vector3<f64>]);
+    /// Closest reference point to `measured` and the reference velocity
+    /// there [m/s] (for non-predictive controllers).
+    fn closest(&mut self, measured: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>);
+}

@@ -1,0 +1,2 @@
+//! dflat command-line interface.
+fn main() {}
