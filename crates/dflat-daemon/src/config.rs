@@ -1,0 +1,606 @@
+//! The daemon's TOML configuration: schema, defaults, validation.
+//!
+//! Every field has a default (the values of `config/default.toml`), unknown
+//! fields are rejected, and [`Config::validate`] checks every range. Errors
+//! name the file, the field (dotted path) and the allowed range. Angles are
+//! in degrees in the file (fields end in `_deg`) and radians in code.
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+
+/// A configuration that could not be read or is out of range.
+#[derive(Debug, Error)]
+pub enum ConfigError {
+    /// The file could not be read.
+    #[error("{file}: cannot read: {source}")]
+    Read {
+        /// The file.
+        file: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// The TOML did not parse or a field has the wrong type or name.
+    #[error("{file}: {message}")]
+    Parse {
+        /// The file.
+        file: PathBuf,
+        /// The parser's message (names the field and the line).
+        message: String,
+    },
+    /// A field is out of its allowed range.
+    #[error("{file}: field `{field}` = {value}: allowed {allowed}")]
+    Range {
+        /// The file.
+        file: PathBuf,
+        /// Dotted path of the field.
+        field: String,
+        /// The value found.
+        value: String,
+        /// The allowed range, in words.
+        allowed: String,
+    },
+}
+
+/// The whole configuration file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+#[serde(deny_unknown_fields, default)]
+pub struct Config {
+    /// MAVLink connection and ids.
+    pub link: LinkConfig,
+    /// The vehicle model the controller uses.
+    pub vehicle: VehicleConfig,
+    /// Controller choice and tuning.
+    pub controller: ControllerConfig,
+    /// What to fly: hold, a path, setpoints.
+    pub mission: MissionConfig,
+    /// Timeouts and failsafe behaviour.
+    pub safety: SafetyConfig,
+    /// Logs and flight records.
+    pub logging: LoggingConfig,
+    /// The SITL autopilot stand-in (read by `dflat sitl` and `dflat demo` only).
+    pub sitl: SitlConfig,
+}
+
+/// Which MAVLink message carries the pose the controller uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum PoseSourceKind {
+    /// LOCAL_POSITION_NED (#32); yaw from ATTITUDE (#30).
+    #[default]
+    LocalPositionNed,
+    /// ODOMETRY (#331).
+    Odometry,
+    /// VISION_POSITION_ESTIMATE (#102).
+    VisionPositionEstimate,
+}
+
+/// `[link]`: MAVLink connection and ids.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct LinkConfig {
+    /// Connection string of the mavlink crate: `udpout:HOST:PORT`,
+    /// `udpin:HOST:PORT`, `tcpout:HOST:PORT`, `serial:/dev/ttyTHS2:921600`.
+    pub url: String,
+    /// The vehicle's MAVLink system id (1–255).
+    pub system_id: u8,
+    /// The autopilot's component id (1–255; 1 = MAV_COMP_ID_AUTOPILOT1).
+    pub autopilot_component: u8,
+    /// This daemon's component id (1–255; 191 = MAV_COMP_ID_ONBOARD_COMPUTER).
+    pub component_id: u8,
+    /// The ground station's system id whose setpoints are accepted (1–255).
+    pub gcs_system_id: u8,
+    /// The pose message used by the controller.
+    pub pose_source: PoseSourceKind,
+}
+
+impl Default for LinkConfig {
+    fn default() -> Self {
+        Self {
+            url: "udpout:127.0.0.1:14540".into(),
+            system_id: 1,
+            autopilot_component: 1,
+            component_id: 191,
+            gcs_system_id: 255,
+            pose_source: PoseSourceKind::LocalPositionNed,
+        }
+    }
+}
+
+/// The controller's model of the vehicle.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum ModelKind {
+    /// x, y with first-order attitude; the autopilot holds altitude.
+    #[default]
+    Planar,
+    /// x, y, z with first-order attitude and collective thrust.
+    Spatial,
+}
+
+/// How the thrust field of SET_ATTITUDE_TARGET is filled.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum ThrustMode {
+    /// A fixed value (`thrust_value`): the autopilot holds altitude; for
+    /// ArduPilot GUIDED_NOGPS 0.5 means "climb rate 0".
+    #[default]
+    Fixed,
+    /// Collective thrust normalised so that hover = `hover_thrust`
+    /// (spatial model; PX4 offboard attitude).
+    Normalized,
+}
+
+/// `[vehicle]`: the model the controller uses.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct VehicleConfig {
+    /// `planar` or `spatial`.
+    pub model: ModelKind,
+    /// Attitude time constant τ [s] of the autopilot's attitude loop (0.02–2).
+    pub tau: f64,
+    /// Attitude gain k̃ [-] (0.2–5).
+    pub k: f64,
+    /// Thrust time constant τ_T [s] (spatial model; 0.005–1).
+    pub tau_thrust: f64,
+    /// Gravity [m/s²] (9–10.5).
+    pub gravity: f64,
+    /// Fixed yaw ψ⋆ [deg] (−180–180).
+    pub yaw_deg: f64,
+    /// Maximum commanded pitch/roll [deg] (1–60).
+    pub max_tilt_deg: f64,
+    /// `fixed` or `normalized`.
+    pub thrust_mode: ThrustMode,
+    /// The fixed thrust value sent in `fixed` mode (0–1).
+    pub thrust_value: f64,
+    /// Normalised thrust that hovers, for `normalized` mode (0.05–0.95).
+    pub hover_thrust: f64,
+}
+
+impl Default for VehicleConfig {
+    fn default() -> Self {
+        Self {
+            model: ModelKind::Planar,
+            tau: 0.2,
+            k: 1.0,
+            tau_thrust: 0.04,
+            gravity: 9.81,
+            yaw_deg: 0.0,
+            max_tilt_deg: 35.0,
+            thrust_mode: ThrustMode::Fixed,
+            thrust_value: 0.5,
+            hover_thrust: 0.5,
+        }
+    }
+}
+
+/// Which controller runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum ControllerKind {
+    /// The discrete-flatness MPC (the product).
+    #[default]
+    DfMpc,
+    /// The Flatness MPC baseline.
+    Fmpc,
+    /// The PD baseline.
+    Pd,
+}
+
+/// `[controller]`: choice and tuning.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ControllerConfig {
+    /// `df-mpc`, `fmpc` or `pd`.
+    pub kind: ControllerKind,
+    /// Control rate [Hz] (10–200); the model step is its inverse.
+    pub rate_hz: f64,
+    /// Horizon N [ticks] for df-mpc (10–2000).
+    pub horizon: usize,
+    /// Horizon N [ticks] for fmpc (10–2000).
+    pub fmpc_horizon: usize,
+    /// Tracking weight per axis x, y, z [1/m²] (> 0).
+    pub q: [f64; 3],
+    /// Jerk weight per axis x, y, z [s⁶/m²] (> 0): cost r·(Δ³y/δt³)².
+    pub r_jerk: [f64; 3],
+    /// Flatness MPC jerk weight per axis (> 0).
+    pub fmpc_r_jerk: [f64; 3],
+    /// PD proportional gain [1/s²] (> 0).
+    pub pd_kp: f64,
+    /// PD derivative gain [1/s] (> 0).
+    pub pd_kd: f64,
+    /// Optional bound on the planned horizontal acceleration, as a tilt
+    /// [deg] (0 = off; 1–60). Solved with clarabel when it binds.
+    pub constraint_tilt_deg: f64,
+    /// Optional bound on the planned speed per axis [m/s] (0 = off).
+    pub constraint_speed: f64,
+}
+
+impl Default for ControllerConfig {
+    fn default() -> Self {
+        Self {
+            kind: ControllerKind::DfMpc,
+            rate_hz: 50.0,
+            horizon: 100,
+            fmpc_horizon: 75,
+            q: [1.0, 1.0, 1.0],
+            r_jerk: [0.08, 0.08, 0.08],
+            fmpc_r_jerk: [0.1, 0.1, 0.1],
+            pd_kp: 1.5,
+            pd_kd: 2.5,
+            constraint_tilt_deg: 0.0,
+            constraint_speed: 0.0,
+        }
+    }
+}
+
+/// What the daemon does once it has pose.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum MissionStart {
+    /// Hold the first measured position until a setpoint arrives.
+    #[default]
+    Hold,
+    /// Fly `path` at `speed` as soon as pose is fresh.
+    Path,
+}
+
+/// `[mission]`: what to fly.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MissionConfig {
+    /// `hold` or `path`.
+    pub start: MissionStart,
+    /// Waypoints, local NED [m] (x north, y east, z down), ≥ 2 when used.
+    pub path: Vec<[f64; 3]>,
+    /// Desired speed along the path [m/s] (0.1–20).
+    pub speed: f64,
+    /// A SET_POSITION_TARGET_LOCAL_NED whose position equals the first
+    /// waypoint within this distance [m] starts the path (0 = never).
+    pub path_trigger_radius: f64,
+    /// Geofence half-widths around the origin [m]: setpoints outside are
+    /// refused (x, y, z).
+    pub geofence: [f64; 3],
+}
+
+impl Default for MissionConfig {
+    fn default() -> Self {
+        Self {
+            start: MissionStart::Hold,
+            path: vec![[-20.0, -30.0, -10.0], [0.0, -30.0, -10.0], [0.0, 0.0, -10.0]],
+            speed: 5.0,
+            path_trigger_radius: 0.5,
+            geofence: [500.0, 500.0, 200.0],
+        }
+    }
+}
+
+/// `[safety]`: timeouts and failsafe.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SafetyConfig {
+    /// Pose older than this [ms] stops the attitude stream (5–2000).
+    pub pose_timeout_ms: f64,
+    /// No autopilot HEARTBEAT for this long [ms] stops the stream (100–10000).
+    pub autopilot_timeout_ms: f64,
+}
+
+impl Default for SafetyConfig {
+    fn default() -> Self {
+        Self {
+            pose_timeout_ms: 100.0,
+            autopilot_timeout_ms: 3000.0,
+        }
+    }
+}
+
+/// `[logging]`: logs and flight records.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct LoggingConfig {
+    /// Directory for the per-flight CSV and .tlog ("" = no records).
+    pub dir: String,
+    /// Write the per-flight CSV.
+    pub csv: bool,
+    /// Write all MAVLink traffic to a .tlog.
+    pub tlog: bool,
+    /// Log format on stderr: `text` or `json`.
+    pub format: LogFormat,
+}
+
+impl Default for LoggingConfig {
+    fn default() -> Self {
+        Self {
+            dir: "flights".into(),
+            csv: true,
+            tlog: true,
+            format: LogFormat::Text,
+        }
+    }
+}
+
+/// Log output format.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum LogFormat {
+    /// Human-readable lines.
+    #[default]
+    Text,
+    /// One JSON object per line.
+    Json,
+}
+
+/// The SITL's plant.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum SitlPlant {
+    /// Planar plant; altitude held.
+    #[default]
+    Planar,
+    /// Spatial plant with collective thrust.
+    Spatial,
+    /// Full rigid body with an inner attitude controller.
+    Full,
+}
+
+/// `[sitl]`: the autopilot stand-in.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SitlConfig {
+    /// Where the SITL listens (`udpin:HOST:PORT`).
+    pub url: String,
+    /// Plant kind.
+    pub plant: SitlPlant,
+    /// Plant integration rate [Hz] (100–2000).
+    pub plant_rate_hz: f64,
+    /// Rate of LOCAL_POSITION_NED / ATTITUDE out [Hz] (1–200).
+    pub telemetry_rate_hz: f64,
+    /// Plant attitude time constant [s] (may differ from the model's).
+    pub tau: f64,
+    /// Plant attitude gain [-].
+    pub k: f64,
+    /// Plant hover thrust (normalised 0–1) — spatial/full plants.
+    pub hover_thrust: f64,
+    /// Plant mass factor relative to nominal (0.5–2).
+    pub mass_factor: f64,
+    /// Gaussian position noise σ [m] (0–1).
+    pub noise_sigma: f64,
+    /// Initial position, local NED [m].
+    pub start: [f64; 3],
+    /// Seconds without SET_ATTITUDE_TARGET after which the SITL holds position.
+    pub command_timeout_s: f64,
+    /// Random seed.
+    pub seed: u64,
+}
+
+impl Default for SitlConfig {
+    fn default() -> Self {
+        Self {
+            url: "udpin:127.0.0.1:14540".into(),
+            plant: SitlPlant::Planar,
+            plant_rate_hz: 200.0,
+            telemetry_rate_hz: 50.0,
+            tau: 0.2,
+            k: 1.0,
+            hover_thrust: 0.5,
+            mass_factor: 1.0,
+            noise_sigma: 0.0,
+            start: [-20.0, -30.0, -10.0],
+            command_timeout_s: 0.5,
+            seed: 1,
+        }
+    }
+}
+
+impl Config {
+    /// Reads, parses and validates a file.
+    pub fn load(path: &Path) -> Result<Self, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+            file: path.to_owned(),
+            source,
+        })?;
+        Self::parse(&text, path)
+    }
+
+    /// Parses and validates TOML text; `file` is used in error messages.
+    pub fn parse(text: &str, file: &Path) -> Result<Self, ConfigError> {
+        let cfg: Config = toml::from_str(text).map_err(|e| ConfigError::Parse {
+            file: file.to_owned(),
+            message: e.to_string().trim_end().to_owned(),
+        })?;
+        cfg.validate(file)?;
+        Ok(cfg)
+    }
+
+    /// The effective configuration as TOML.
+    pub fn to_toml(&self) -> String {
+        toml::to_string_pretty(self).unwrap_or_else(|e| format!("# cannot print: {e}"))
+    }
+
+    /// Checks every range; the error names the first offending field.
+    pub fn validate(&self, file: &Path) -> Result<(), ConfigError> {
+        let mut v = Validator { file };
+        let l = &self.link;
+        v.nonempty("link.url", &l.url)?;
+        for (name, id) in [
+            ("link.system_id", l.system_id),
+            ("link.autopilot_component", l.autopilot_component),
+            ("link.component_id", l.component_id),
+            ("link.gcs_system_id", l.gcs_system_id),
+        ] {
+            v.range(name, f64::from(id), 1.0, 255.0)?;
+        }
+        let ve = &self.vehicle;
+        v.range("vehicle.tau", ve.tau, 0.02, 2.0)?;
+        v.range("vehicle.k", ve.k, 0.2, 5.0)?;
+        v.range("vehicle.tau_thrust", ve.tau_thrust, 0.005, 1.0)?;
+        v.range("vehicle.gravity", ve.gravity, 9.0, 10.5)?;
+        v.range("vehicle.yaw_deg", ve.yaw_deg, -180.0, 180.0)?;
+        v.range("vehicle.max_tilt_deg", ve.max_tilt_deg, 1.0, 60.0)?;
+        v.range("vehicle.thrust_value", ve.thrust_value, 0.0, 1.0)?;
+        v.range("vehicle.hover_thrust", ve.hover_thrust, 0.05, 0.95)?;
+        if ve.model == ModelKind::Spatial && ve.thrust_mode == ThrustMode::Fixed {
+            return Err(v.err(
+                "vehicle.thrust_mode",
+                "\"fixed\"",
+                "\"normalized\" with model = \"spatial\" (the spatial model commands thrust)",
+            ));
+        }
+        let c = &self.controller;
+        v.range("controller.rate_hz", c.rate_hz, 10.0, 200.0)?;
+        v.range("controller.horizon", c.horizon as f64, 10.0, 2000.0)?;
+        v.range("controller.fmpc_horizon", c.fmpc_horizon as f64, 10.0, 2000.0)?;
+        for i in 0..3 {
+            v.positive(&format!("controller.q[{i}]"), c.q[i])?;
+            v.positive(&format!("controller.r_jerk[{i}]"), c.r_jerk[i])?;
+            v.positive(&format!("controller.fmpc_r_jerk[{i}]"), c.fmpc_r_jerk[i])?;
+        }
+        v.positive("controller.pd_kp", c.pd_kp)?;
+        v.positive("controller.pd_kd", c.pd_kd)?;
+        if c.constraint_tilt_deg != 0.0 {
+            v.range("controller.constraint_tilt_deg", c.constraint_tilt_deg, 1.0, 60.0)?;
+        }
+        v.range("controller.constraint_speed", c.constraint_speed, 0.0, 50.0)?;
+        let m = &self.mission;
+        v.range("mission.speed", m.speed, 0.1, 20.0)?;
+        v.range("mission.path_trigger_radius", m.path_trigger_radius, 0.0, 100.0)?;
+        for i in 0..3 {
+            v.positive(&format!("mission.geofence[{i}]"), m.geofence[i])?;
+        }
+        if m.start == MissionStart::Path && m.path.len() < 2 {
+            return Err(v.err(
+                "mission.path",
+                &format!("{} waypoints", m.path.len()),
+                "at least 2 waypoints when mission.start = \"path\"",
+            ));
+        }
+        for (i, w) in m.path.iter().enumerate() {
+            for (j, x) in w.iter().enumerate() {
+                if !x.is_finite() || x.abs() > m.geofence[j] {
+                    return Err(v.err(
+                        &format!("mission.path[{i}][{j}]"),
+                        &x.to_string(),
+                        &format!("finite and inside the geofence ±{}", m.geofence[j]),
+                    ));
+                }
+            }
+            if i > 0 && *w == m.path[i - 1] {
+                return Err(v.err(
+                    &format!("mission.path[{i}]"),
+                    &format!("{w:?}"),
+                    "distinct from the previous waypoint",
+                ));
+            }
+        }
+        let s = &self.safety;
+        v.range("safety.pose_timeout_ms", s.pose_timeout_ms, 5.0, 2000.0)?;
+        v.range("safety.autopilot_timeout_ms", s.autopilot_timeout_ms, 100.0, 10000.0)?;
+        let si = &self.sitl;
+        v.nonempty("sitl.url", &si.url)?;
+        v.range("sitl.plant_rate_hz", si.plant_rate_hz, 100.0, 2000.0)?;
+        v.range("sitl.telemetry_rate_hz", si.telemetry_rate_hz, 1.0, 200.0)?;
+        v.range("sitl.tau", si.tau, 0.02, 2.0)?;
+        v.range("sitl.k", si.k, 0.2, 5.0)?;
+        v.range("sitl.hover_thrust", si.hover_thrust, 0.05, 0.95)?;
+        v.range("sitl.mass_factor", si.mass_factor, 0.5, 2.0)?;
+        v.range("sitl.noise_sigma", si.noise_sigma, 0.0, 1.0)?;
+        v.range("sitl.command_timeout_s", si.command_timeout_s, 0.05, 10.0)?;
+        for i in 0..3 {
+            v.range(&format!("sitl.start[{i}]"), si.start[i], -1e4, 1e4)?;
+        }
+        Ok(())
+    }
+}
+
+struct Validator<'a> {
+    file: &'a Path,
+}
+
+impl Validator<'_> {
+    fn err(&self, field: &str, value: &str, allowed: &str) -> ConfigError {
+        ConfigError::Range {
+            file: self.file.to_owned(),
+            field: field.to_owned(),
+            value: value.to_owned(),
+            allowed: allowed.to_owned(),
+        }
+    }
+
+    fn range(&mut self, field: &str, x: f64, lo: f64, hi: f64) -> Result<(), ConfigError> {
+        if x.is_finite() && x >= lo && x <= hi {
+            Ok(())
+        } else {
+            Err(self.err(field, &x.to_string(), &format!("{lo} to {hi}")))
+        }
+    }
+
+    fn positive(&mut self, field: &str, x: f64) -> Result<(), ConfigError> {
+        if x.is_finite() && x > 0.0 {
+            Ok(())
+        } else {
+            Err(self.err(field, &x.to_string(), "finite and > 0"))
+        }
+    }
+
+    fn nonempty(&mut self, field: &str, s: &str) -> Result<(), ConfigError> {
+        if s.trim().is_empty() {
+            Err(self.err(field, "\"\"", "a non-empty connection string"))
+        } else {
+            Ok(())
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<Config, ConfigError> {
+        Config::parse(text, Path::new("test.toml"))
+    }
+
+    #[test]
+    fn empty_file_gives_defaults() {
+        assert_eq!(parse("").unwrap(), Config::default());
+    }
+
+    #[test]
+    fn unknown_field_is_refused_with_its_name() {
+        let e = parse("[vehicle]\ntaux = 0.3\n").unwrap_err().to_string();
+        assert!(e.contains("test.toml") && e.contains("taux"), "{e}");
+    }
+
+    #[test]
+    fn out_of_range_names_field_and_range() {
+        let e = parse("[vehicle]\ntau = 5.0\n").unwrap_err().to_string();
+        assert!(e.contains("vehicle.tau") && e.contains("0.02 to 2"), "{e}");
+        let e = parse("[controller]\nq = [1.0, -1.0, 1.0]\n").unwrap_err().to_string();
+        assert!(e.contains("controller.q[1]"), "{e}");
+    }
+
+    #[test]
+    fn spatial_needs_normalized_thrust() {
+        let e = parse("[vehicle]\nmodel = \"spatial\"\n").unwrap_err().to_string();
+        assert!(e.contains("vehicle.thrust_mode"), "{e}");
+        assert!(parse("[vehicle]\nmodel = \"spatial\"\nthrust_mode = \"normalized\"\n").is_ok());
+    }
+
+    #[test]
+    fn path_mission_needs_two_distinct_waypoints() {
+        let e = parse("[mission]\nstart = \"path\"\npath = [[0.0, 0.0, -5.0]]\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("mission.path"), "{e}");
+        let e = parse("[mission]\npath = [[0.0, 0.0, -5.0], [0.0, 0.0, -5.0]]\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("mission.path[1]"), "{e}");
+    }
+
+    #[test]
+    fn effective_config_round_trips() {
+        let c = Config::default();
+        assert_eq!(parse(&c.to_toml()).unwrap(), c);
+    }
+}
