@@ -46,8 +46,8 @@ impl Frame {
     }
 }
 
-/// Pitch θ and roll φ [rad] from the ratios `a = R13/R33`, `b = R23/R33` at
-/// yaw ψ [rad] (paper eqs. (pitch), (roll)): `θ = atan(a·cψ + b·sψ)`,
+/// Pitch θ and roll φ \[rad\] from the ratios `a = R13/R33`, `b = R23/R33` at
+/// yaw ψ \[rad\] (paper eqs. (pitch), (roll)): `θ = atan(a·cψ + b·sψ)`,
 /// `φ = atan((a·sψ − b·cψ)·cθ)`. Both lie in (−π/2, π/2).
 pub fn pitch_roll_from_ratios(a: f64, b: f64, psi: f64) -> (f64, f64) {
     let (s, c) = psi.sin_cos();
@@ -56,7 +56,7 @@ pub fn pitch_roll_from_ratios(a: f64, b: f64, psi: f64) -> (f64, f64) {
     (theta, phi)
 }
 
-/// The ratios `(R13/R33, R23/R33)` of the ZYX attitude (θ, φ, ψ) [rad]:
+/// The ratios `(R13/R33, R23/R33)` of the ZYX attitude (θ, φ, ψ) \[rad\]:
 /// `R13/R33 = cψ·tanθ + sψ·tanφ/cθ`, `R23/R33 = sψ·tanθ − cψ·tanφ/cθ`.
 ///
 /// Errors with [`FlatError::Singular`] when |θ| or |φ| reaches 90°.
@@ -72,7 +72,7 @@ pub fn ratios_from_pitch_roll(theta: f64, phi: f64, psi: f64) -> Result<(f64, f6
     Ok((c * tt + s * tp_over_ct, s * tt - c * tp_over_ct))
 }
 
-/// Thrust magnitude [m/s²] and ZYX pitch, roll [rad] from a specific-thrust
+/// Thrust magnitude [m/s²] and ZYX pitch, roll \[rad\] from a specific-thrust
 /// vector `t = T·R·e3` and yaw ψ. Errors with [`FlatError::FreeFall`] when
 /// the vector does not point up through the body (t_z ≤ 0 in thrust-vector
 /// coordinates, see [`Frame::thrust_vector`]).
@@ -81,19 +81,77 @@ pub fn thrust_pitch_roll(t: [f64; 3], psi: f64) -> Result<(f64, f64, f64), FlatE
     if !norm.is_finite() {
         return Err(FlatError::NonFinite("thrust vector"));
     }
-    if !(t[2] > 1e-9 * norm.max(1e-300)) || norm < 1e-12 {
+    // `norm` is finite here, so every component is too.
+    if t[2] <= 1e-9 * norm.max(1e-300) || norm < 1e-12 {
         return Err(FlatError::FreeFall);
     }
     let (theta, phi) = pitch_roll_from_ratios(t[0] / t[2], t[1] / t[2], psi);
     Ok((norm, theta, phi))
 }
 
-/// Unit thrust axis `R·e3` of the ZYX attitude (θ, φ, ψ) [rad].
+/// Unit thrust axis `R·e3` of the ZYX attitude (θ, φ, ψ) \[rad\].
 pub fn thrust_axis(theta: f64, phi: f64, psi: f64) -> [f64; 3] {
     let (st, ct) = theta.sin_cos();
     let (sp, cp) = phi.sin_cos();
     let (ss, cs) = psi.sin_cos();
     [cs * st * cp + ss * sp, ss * st * cp - cs * sp, ct * cp]
+}
+
+/// Body rates `[p, q, r]` [rad/s] from ZYX Euler-angle rates
+/// `[φ̇, θ̇, ψ̇]` [rad/s] at pitch θ and roll φ \[rad\].
+///
+/// This is `Rᵀ·W·[φ̇, θ̇, ψ̇]` with the ZYX matrix
+/// `W = [[cψcθ, −sψ, 0], [sψcθ, cψ, 0], [−sθ, 0, 1]]` (world angular
+/// velocity `ω = W·[φ̇, θ̇, ψ̇] = R·[p, q, r]`), multiplied out: ψ cancels,
+///
+/// ```text
+/// p = φ̇ − sθ·ψ̇,   q = cφ·θ̇ + sφ·cθ·ψ̇,   r = −sφ·θ̇ + cφ·cθ·ψ̇.
+/// ```
+///
+/// The same in both frames (NED/FRD and z-up): only the thrust sign differs.
+pub fn body_rates(theta: f64, phi: f64, euler_rates: [f64; 3]) -> [f64; 3] {
+    let (st, ct) = theta.sin_cos();
+    let (sp, cp) = phi.sin_cos();
+    let [dphi, dtheta, dpsi] = euler_rates;
+    [
+        dphi - st * dpsi,
+        cp * dtheta + sp * ct * dpsi,
+        -sp * dtheta + cp * ct * dpsi,
+    ]
+}
+
+/// ZYX Euler-angle rates `[φ̇, θ̇, ψ̇]` [rad/s] from body rates `[p, q, r]`
+/// [rad/s] at pitch θ and roll φ \[rad\]: `W⁻¹·R·[p, q, r]`, the inverse of
+/// [`body_rates`],
+///
+/// ```text
+/// θ̇ = cφ·q − sφ·r,   ψ̇ = (sφ·q + cφ·r)/cθ,   φ̇ = p + sθ·ψ̇.
+/// ```
+///
+/// Errors with [`FlatError::Singular`] at gimbal lock, |cos θ| ≤ 1e-9
+/// (pitch ±90°), where `W` is singular.
+pub fn euler_rates(theta: f64, phi: f64, body_rates: [f64; 3]) -> Result<[f64; 3], FlatError> {
+    let (st, ct) = theta.sin_cos();
+    if ct.is_nan() || ct.abs() <= 1e-9 {
+        return Err(FlatError::Singular);
+    }
+    let (sp, cp) = phi.sin_cos();
+    let [p, q, r] = body_rates;
+    let dpsi = (sp * q + cp * r) / ct;
+    Ok([p + st * dpsi, cp * q - sp * r, dpsi])
+}
+
+/// An angle difference \[rad\] wrapped to [−π, π]; returned unchanged (bit
+/// for bit) when already inside. Yaw differences of consecutive samples go
+/// through this, so yaw measurements wrapped to (−π, π] work as long as the
+/// yaw rate stays below π/δt.
+pub fn wrap_angle_difference(d: f64) -> f64 {
+    use std::f64::consts::{PI, TAU};
+    if (-PI..=PI).contains(&d) {
+        d
+    } else {
+        (d + PI).rem_euclid(TAU) - PI
+    }
 }
 
 #[cfg(test)]
@@ -123,9 +181,66 @@ mod tests {
     }
 
     #[test]
+    fn euler_and_body_rates_round_trip() {
+        for &(th, ph) in &[(0.3, -0.2), (-0.5, 0.4), (0.0, 0.0), (1.2, -1.1)] {
+            let w = [0.4, -1.3, 2.1];
+            let e = euler_rates(th, ph, w).unwrap();
+            let back = body_rates(th, ph, e);
+            for i in 0..3 {
+                assert!((back[i] - w[i]).abs() < 1e-13);
+            }
+        }
+        assert_eq!(
+            euler_rates(std::f64::consts::FRAC_PI_2, 0.0, [0.0, 1.0, 0.0]),
+            Err(FlatError::Singular)
+        );
+        assert_eq!(
+            euler_rates(f64::NAN, 0.0, [0.0; 3]),
+            Err(FlatError::Singular)
+        );
+    }
+
+    #[test]
+    fn body_rates_match_rt_w() {
+        // Rᵀ·W·ė with R, W built explicitly (ZYX).
+        let (th, ph, ps) = (0.3_f64, -0.4_f64, 2.0_f64);
+        let (st, ct) = th.sin_cos();
+        let (sp, cp) = ph.sin_cos();
+        let (ss, cs) = ps.sin_cos();
+        let r = [
+            [cs * ct, cs * st * sp - ss * cp, cs * st * cp + ss * sp],
+            [ss * ct, ss * st * sp + cs * cp, ss * st * cp - cs * sp],
+            [-st, ct * sp, ct * cp],
+        ];
+        let w = [[cs * ct, -ss, 0.0], [ss * ct, cs, 0.0], [-st, 0.0, 1.0]];
+        let e = [0.7, -0.2, 1.1];
+        let omega: Vec<f64> = (0..3)
+            .map(|i| (0..3).map(|j| w[i][j] * e[j]).sum())
+            .collect();
+        let body: Vec<f64> = (0..3)
+            .map(|i| (0..3).map(|j| r[j][i] * omega[j]).sum())
+            .collect();
+        let got = body_rates(th, ph, e);
+        for i in 0..3 {
+            assert!((got[i] - body[i]).abs() < 1e-14);
+        }
+    }
+
+    #[test]
+    fn wraps_angle_differences() {
+        use std::f64::consts::PI;
+        assert_eq!(wrap_angle_difference(0.25), 0.25);
+        assert!((wrap_angle_difference(2.0 * PI - 0.1) + 0.1).abs() < 1e-15);
+        assert!((wrap_angle_difference(-2.0 * PI + 0.1) - 0.1).abs() < 1e-15);
+    }
+
+    #[test]
     fn free_fall_is_an_error() {
         let t = Frame::Ned.thrust_vector([0.0, 0.0, 9.81], 9.81);
         assert_eq!(thrust_pitch_roll(t, 0.0), Err(FlatError::FreeFall));
-        assert_eq!(ratios_from_pitch_roll(std::f64::consts::FRAC_PI_2, 0.0, 0.0), Err(FlatError::Singular));
+        assert_eq!(
+            ratios_from_pitch_roll(std::f64::consts::FRAC_PI_2, 0.0, 0.0),
+            Err(FlatError::Singular)
+        );
     }
 }

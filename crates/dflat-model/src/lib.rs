@@ -11,6 +11,15 @@
 //! * F⁻¹ — [`FlatModel::next_output`] (the *input-to-output map*):
 //!   `y_{k+R} = F⁻¹(y_k, …, y_{k+R−1}, u_k)`, where the model has one.
 //!
+//! The models:
+//!
+//! * [`planar`] — paper §IV-B: x, y at constant altitude, first-order
+//!   pitch/roll loop, R = 3;
+//! * [`spatial`] — ours: the planar model plus altitude through a
+//!   first-order collective-thrust loop, R = 3 in every channel;
+//! * [`full`] — paper §IV-A: the 12-state rigid body with thrust and
+//!   torques, R = 4, no uniform F⁻¹ ([`FullModel::predict_outputs`]).
+//!
 //! Frames: [`Frame::Ned`] (MAVLink local NED, body FRD, thrust along −z body)
 //! or [`Frame::Zup`] (the paper's convention, thrust along +z body). Euler
 //! angles are ZYX: body→world rotation `R = Rz(ψ)·Ry(θ)·Rx(φ)`.
@@ -45,7 +54,7 @@ pub trait FlatModel {
     /// Flat output `y_k`.
     type Output: Copy;
 
-    /// Discretisation step δt [s].
+    /// Discretisation step δt \[s\].
     fn dt(&self) -> f64;
     /// Forward-Euler step `x_{k+1} = x_k + δt·f(x_k, u_k)`.
     fn step(&self, x: &Self::State, u: &Self::Input) -> Self::State;
@@ -67,6 +76,43 @@ pub(crate) fn check_len(got: usize, expected: usize) -> Result<(), FlatError> {
     } else {
         Err(FlatError::WindowLength { expected, got })
     }
+}
+
+/// Checks that a parameter is finite and strictly positive.
+pub(crate) fn check_positive(name: &'static str, value: f64) -> Result<(), FlatError> {
+    if value.is_finite() && value > 0.0 {
+        Ok(())
+    } else {
+        Err(FlatError::InvalidParameter {
+            name,
+            value,
+            allowed: "finite and > 0",
+        })
+    }
+}
+
+/// Checks that a parameter is finite.
+pub(crate) fn check_finite_param(name: &'static str, value: f64) -> Result<(), FlatError> {
+    if value.is_finite() {
+        Ok(())
+    } else {
+        Err(FlatError::InvalidParameter {
+            name,
+            value,
+            allowed: "finite",
+        })
+    }
+}
+
+/// Returns `v` if all its components are finite, else
+/// [`FlatError::NonFinite`]: finite but huge inputs can overflow inside a
+/// map (differences of ±1e308), and a map never returns NaN or ±∞.
+pub(crate) fn finite_result<const N: usize>(
+    v: nalgebra::SVector<f64, N>,
+    what: &'static str,
+) -> Result<nalgebra::SVector<f64, N>, FlatError> {
+    check_finite(v.iter(), what)?;
+    Ok(v)
 }
 
 /// Checks that every component of every sample is finite.

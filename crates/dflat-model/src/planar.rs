@@ -23,7 +23,10 @@
 use nalgebra::{SVector, Vector2};
 
 use crate::attitude::{Frame, pitch_roll_from_ratios, ratios_from_pitch_roll};
-use crate::{FlatError, FlatModel, check_finite, check_len};
+use crate::{
+    FlatError, FlatModel, check_finite, check_finite_param, check_len, check_positive,
+    finite_result,
+};
 
 /// State `[x, ẋ, y, ẏ, θ, φ]` (m, m/s, m, m/s, rad, rad).
 pub type PlanarState = SVector<f64, 6>;
@@ -35,15 +38,15 @@ pub type PlanarOutput = Vector2<f64>;
 /// Parameters of the planar model.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PlanarParams {
-    /// Discretisation step δt [s].
+    /// Discretisation step δt \[s\].
     pub dt: f64,
-    /// Attitude time constant τ [s].
+    /// Attitude time constant τ \[s\].
     pub tau: f64,
     /// Attitude gain k̃ [-].
     pub k: f64,
     /// Gravity g [m/s²].
     pub g: f64,
-    /// Fixed yaw ψ⋆ [rad].
+    /// Fixed yaw ψ⋆ \[rad\].
     pub psi: f64,
     /// Frame convention.
     pub frame: Frame,
@@ -76,13 +79,7 @@ impl PlanarModel {
         check_positive("tau", p.tau)?;
         check_positive("k", p.k)?;
         check_positive("g", p.g)?;
-        if !p.psi.is_finite() {
-            return Err(FlatError::InvalidParameter {
-                name: "psi",
-                value: p.psi,
-                allowed: "finite",
-            });
-        }
+        check_finite_param("psi", p.psi)?;
         Ok(Self { p })
     }
 
@@ -98,7 +95,7 @@ impl PlanarModel {
         Ok(Vector2::new(sg * a, sg * b))
     }
 
-    /// Attitude (θ, φ) [rad] that produces the horizontal acceleration `a` [m/s²].
+    /// Attitude (θ, φ) \[rad\] that produces the horizontal acceleration `a` [m/s²].
     pub fn attitude(&self, a: &Vector2<f64>) -> (f64, f64) {
         let s = self.p.frame.horizontal_sign() / self.p.g;
         pitch_roll_from_ratios(s * a.x, s * a.y, self.p.psi)
@@ -121,18 +118,6 @@ impl PlanarModel {
     }
 }
 
-pub(crate) fn check_positive(name: &'static str, value: f64) -> Result<(), FlatError> {
-    if value.is_finite() && value > 0.0 {
-        Ok(())
-    } else {
-        Err(FlatError::InvalidParameter {
-            name,
-            value,
-            allowed: "finite and > 0",
-        })
-    }
-}
-
 impl FlatModel for PlanarModel {
     const R: usize = 3;
     type State = PlanarState;
@@ -148,7 +133,9 @@ impl FlatModel for PlanarModel {
     /// states with [`FlatModel::state_from_outputs`] or their own limits).
     fn step(&self, x: &PlanarState, u: &PlanarInput) -> PlanarState {
         let dt = self.p.dt;
-        let acc = self.acceleration(x[4], x[5]).unwrap_or_else(|_| Vector2::zeros());
+        let acc = self
+            .acceleration(x[4], x[5])
+            .unwrap_or_else(|_| Vector2::zeros());
         PlanarState::from([
             x[0] + dt * x[1],
             x[1] + dt * acc.x,
@@ -168,7 +155,10 @@ impl FlatModel for PlanarModel {
         check_finite(y.iter().flat_map(|v| v.iter()), "outputs")?;
         let v = (y[1] - y[0]) / self.p.dt;
         let (theta, phi) = self.attitude_at(&y[0], &y[1], &y[2]);
-        Ok(PlanarState::from([y[0].x, v.x, y[0].y, v.y, theta, phi]))
+        finite_result(
+            PlanarState::from([y[0].x, v.x, y[0].y, v.y, theta, phi]),
+            "state",
+        )
     }
 
     fn input_from_outputs(&self, y: &[PlanarOutput]) -> Result<PlanarInput, FlatError> {
@@ -176,19 +166,22 @@ impl FlatModel for PlanarModel {
         check_finite(y.iter().flat_map(|v| v.iter()), "outputs")?;
         let (t0, p0) = self.attitude_at(&y[0], &y[1], &y[2]);
         let (t1, p1) = self.attitude_at(&y[1], &y[2], &y[3]);
-        Ok(PlanarInput::new(
-            self.attitude_command(t0, t1),
-            self.attitude_command(p0, p1),
-        ))
+        finite_result(
+            PlanarInput::new(self.attitude_command(t0, t1), self.attitude_command(p0, p1)),
+            "input",
+        )
     }
 
     fn next_output(&self, y: &[PlanarOutput], u: &PlanarInput) -> Result<PlanarOutput, FlatError> {
         check_len(y.len(), 3)?;
-        check_finite(y.iter().flat_map(|v| v.iter()).chain(u.iter()), "outputs and input")?;
+        check_finite(
+            y.iter().flat_map(|v| v.iter()).chain(u.iter()),
+            "outputs and input",
+        )?;
         let (t0, p0) = self.attitude_at(&y[0], &y[1], &y[2]);
         let acc = self.acceleration(self.attitude_step(t0, u.x), self.attitude_step(p0, u.y))?;
         let dt2 = self.p.dt * self.p.dt;
-        Ok(2.0 * y[2] - y[1] + dt2 * acc)
+        finite_result(2.0 * y[2] - y[1] + dt2 * acc, "next output")
     }
 }
 
@@ -214,10 +207,16 @@ mod tests {
         let y = [PlanarOutput::zeros(); 3];
         assert_eq!(
             m.input_from_outputs(&y),
-            Err(FlatError::WindowLength { expected: 4, got: 3 })
+            Err(FlatError::WindowLength {
+                expected: 4,
+                got: 3
+            })
         );
         let bad = [PlanarOutput::new(f64::NAN, 0.0), y[1], y[2]];
-        assert!(matches!(m.state_from_outputs(&bad), Err(FlatError::NonFinite(_))));
+        assert!(matches!(
+            m.state_from_outputs(&bad),
+            Err(FlatError::NonFinite(_))
+        ));
     }
 
     #[test]

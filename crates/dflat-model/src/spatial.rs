@@ -2,16 +2,63 @@
 //! attitude loop plus altitude through collective thrust, for autopilots
 //! that take a thrust value in attitude mode (PX4 offboard).
 //!
-//! State `[x, ẋ, y, ẏ, z, ż, θ, φ, T]`, input `[θ_cmd, φ_cmd, T_cmd]`,
-//! output `[x, y, z]`, window R = 3. T is the specific collective thrust
-//! [m/s²] (thrust / mass), with a first-order response of time constant τ_T.
+//! State `x = [x, ẋ, y, ẏ, z, ż, θ, φ, T]` (m, m/s, rad, m/s²), input
+//! `u = [θ_cmd, φ_cmd, T_cmd]` (rad, rad, m/s²), output `y = [x, y, z]` (m),
+//! all in the model's [`Frame`]; window R = 3. T is the specific collective
+//! thrust [m/s²] (thrust / mass) along the body thrust axis `R·e3`, with
+//! `R = Rz(ψ⋆)·Ry(θ)·Rx(φ)` at the fixed yaw ψ⋆. Euler step δt, with
+//! `p = [x, y, z]`, `v = [ẋ, ẏ, ż]`:
 //!
-//! TODO(model helper): implementation and derivation.
+//! ```text
+//! p_{k+1} = p_k + δt·v_k
+//! v_{k+1} = v_k + δt·a_k,   a_k = g·e3 − T_k·R_k·e3   (NED)
+//!                           a_k = T_k·R_k·e3 − g·e3   (z-up)
+//! θ_{k+1} = θ_k + δt·(k̃·θ_cmd − θ_k)/τ           (φ likewise)
+//! T_{k+1} = T_k + δt·(T_cmd − T_k)/τ_T
+//! ```
+//!
+//! ## Why the window is R = 3
+//!
+//! Follow an input through the step: u_k sets θ, φ, T at k+1, these set the
+//! acceleration a_{k+1}, which sets v_{k+2}, which sets the position y_{k+3}.
+//! Every input channel reaches the output after exactly three steps, so
+//!
+//! * Λ(y_k, y_{k+1}, y_{k+2}): `v_k = (y_{k+1} − y_k)/δt`,
+//!   `a_k = (y_{k+2} − 2·y_{k+1} + y_k)/δt²`; the specific-thrust vector
+//!   `t_k = T_k·R_k·e3` follows from a_k and gravity
+//!   ([`Frame::thrust_vector`]); its norm is T_k and its direction gives
+//!   θ_k, φ_k at ψ⋆ (paper eqs. (pitch), (roll)). A thrust vector that does
+//!   not point up through the body (a_k = gravity, free fall, or a tilt of
+//!   90° or more) has no attitude: [`FlatError::FreeFall`].
+//! * F(y_k, …, y_{k+3}): Λ's attitude and thrust at k and at k+1, then the
+//!   exact inverses of the Euler first-order steps,
+//!   `θ_cmd = (θ_k + τ·(θ_{k+1} − θ_k)/δt)/k̃` (φ likewise) and
+//!   `T_cmd = T_k + τ_T·(T_{k+1} − T_k)/δt`.
+//! * F⁻¹(y_k, y_{k+1}, y_{k+2}, u_k): Λ's attitude and thrust at k, one step
+//!   of the attitude and thrust loops with u_k, the acceleration a_{k+1}
+//!   from them, and `y_{k+3} = 2·y_{k+2} − y_{k+1} + δt²·a_{k+1}`.
+//!
+//! ## What the thrust lag buys
+//!
+//! With thrust as a direct input (T_k = T_cmd,k, as in the paper's full
+//! model, [`crate::full`]), thrust would reach the position after two steps
+//! and the attitude commands after three. F would still exist, but no
+//! uniform F⁻¹: y_{k+3} would depend on the thrust of u_{k+1}, and y_{k+2}
+//! on the thrust of u_k — the very input the controller is computing — so
+//! the DF-MPC could not pin y_{k+1}, y_{k+2} from the inputs already sent
+//! (paper eq. (input_to_output)). The first-order lag τ_T (physically: motor
+//! spin-up and the autopilot's thrust filter, tens of ms) makes the relative
+//! degree uniform, three in every channel, so the model plugs into the
+//! DF-MPC exactly like the planar model. The full model keeps mixed degrees
+//! (thrust two, torques four) and has no F⁻¹.
 
 use nalgebra::{SVector, Vector3};
 
-use crate::attitude::Frame;
-use crate::{FlatError, FlatModel};
+use crate::attitude::{Frame, thrust_axis, thrust_pitch_roll};
+use crate::{
+    FlatError, FlatModel, check_finite, check_finite_param, check_len, check_positive,
+    finite_result,
+};
 
 /// State `[x, ẋ, y, ẏ, z, ż, θ, φ, T]` (m, m/s, rad, m/s²).
 pub type SpatialState = SVector<f64, 9>;
@@ -23,17 +70,19 @@ pub type SpatialOutput = Vector3<f64>;
 /// Parameters of the spatial model.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SpatialParams {
-    /// Discretisation step δt [s].
+    /// Discretisation step δt \[s\].
     pub dt: f64,
-    /// Attitude time constant τ [s].
+    /// Attitude time constant τ \[s\].
     pub tau: f64,
     /// Attitude gain k̃ [-].
     pub k: f64,
-    /// Thrust time constant τ_T [s].
+    /// Thrust time constant τ_T \[s\]. The Euler step of a first-order lag
+    /// overshoots for δt > τ_T and diverges for δt ≥ 2·τ_T (likewise τ):
+    /// configure δt ≤ τ_T.
     pub tau_thrust: f64,
     /// Gravity g [m/s²].
     pub g: f64,
-    /// Fixed yaw ψ⋆ [rad].
+    /// Fixed yaw ψ⋆ \[rad\].
     pub psi: f64,
     /// Frame convention.
     pub frame: Frame,
@@ -61,13 +110,80 @@ pub struct SpatialModel {
 }
 
 impl SpatialModel {
-    /// Builds the model; errors name the invalid parameter.
+    /// Builds the model; errors name the invalid parameter (dt, tau, k,
+    /// tau_thrust, g must be finite and > 0; psi finite).
     pub fn new(p: SpatialParams) -> Result<Self, FlatError> {
+        check_positive("dt", p.dt)?;
+        check_positive("tau", p.tau)?;
+        check_positive("k", p.k)?;
+        check_positive("tau_thrust", p.tau_thrust)?;
+        check_positive("g", p.g)?;
+        check_finite_param("psi", p.psi)?;
         Ok(Self { p })
     }
+
     /// The parameters.
     pub fn params(&self) -> &SpatialParams {
         &self.p
+    }
+
+    /// Specific thrust [m/s²] that holds hover: g.
+    pub fn hover_thrust(&self) -> f64 {
+        self.p.g
+    }
+
+    /// World-frame acceleration [m/s²] (model frame) at pitch θ, roll φ
+    /// \[rad\], yaw ψ⋆ and specific thrust `thrust` [m/s²]. Defined for every
+    /// attitude.
+    pub fn acceleration(&self, theta: f64, phi: f64, thrust: f64) -> Vector3<f64> {
+        let t = thrust_axis(theta, phi, self.p.psi).map(|c| thrust * c);
+        Vector3::from(self.p.frame.acceleration(t, self.p.g))
+    }
+
+    /// Specific thrust T [m/s²], pitch θ and roll φ \[rad\] (at yaw ψ⋆) that
+    /// produce the world-frame acceleration `a` [m/s²] (model frame): the
+    /// inverse of [`Self::acceleration`] for T > 0 and |θ|, |φ| < 90°.
+    ///
+    /// Errors: [`FlatError::NonFinite`] for non-finite `a`,
+    /// [`FlatError::FreeFall`] when the required thrust does not point up
+    /// through the body (`a` equal to gravity, or beyond 90° of tilt).
+    pub fn attitude_thrust(&self, a: &Vector3<f64>) -> Result<(f64, f64, f64), FlatError> {
+        check_finite(a.iter(), "acceleration")?;
+        let t = self.p.frame.thrust_vector([a.x, a.y, a.z], self.p.g);
+        let (thrust, theta, phi) = thrust_pitch_roll(t, self.p.psi)?;
+        Ok((thrust, theta, phi))
+    }
+
+    /// Thrust and attitude (T, θ, φ) at the first of three outputs, from
+    /// their second difference.
+    fn attitude_thrust_at(
+        &self,
+        y0: &SpatialOutput,
+        y1: &SpatialOutput,
+        y2: &SpatialOutput,
+    ) -> Result<(f64, f64, f64), FlatError> {
+        let dt2 = self.p.dt * self.p.dt;
+        self.attitude_thrust(&((y2 - 2.0 * y1 + y0) / dt2))
+    }
+
+    /// One Euler step of the first-order attitude loop.
+    fn attitude_step(&self, angle: f64, cmd: f64) -> f64 {
+        angle + self.p.dt * (self.p.k * cmd - angle) / self.p.tau
+    }
+
+    /// Exact inverse of [`Self::attitude_step`]: the command taking `a0` to `a1`.
+    fn attitude_command(&self, a0: f64, a1: f64) -> f64 {
+        (a0 + self.p.tau * (a1 - a0) / self.p.dt) / self.p.k
+    }
+
+    /// One Euler step of the first-order thrust loop.
+    fn thrust_step(&self, thrust: f64, cmd: f64) -> f64 {
+        thrust + self.p.dt * (cmd - thrust) / self.p.tau_thrust
+    }
+
+    /// Exact inverse of [`Self::thrust_step`]: the command taking `t0` to `t1`.
+    fn thrust_command(&self, t0: f64, t1: f64) -> f64 {
+        t0 + self.p.tau_thrust * (t1 - t0) / self.p.dt
     }
 }
 
@@ -76,22 +192,162 @@ impl FlatModel for SpatialModel {
     type State = SpatialState;
     type Input = SpatialInput;
     type Output = SpatialOutput;
+
     fn dt(&self) -> f64 {
         self.p.dt
     }
-    fn step(&self, x: &SpatialState, _u: &SpatialInput) -> SpatialState {
-        *x
+
+    /// Forward Euler; defined for every state (the thrust axis exists at any
+    /// attitude).
+    fn step(&self, x: &SpatialState, u: &SpatialInput) -> SpatialState {
+        let dt = self.p.dt;
+        let a = self.acceleration(x[6], x[7], x[8]);
+        SpatialState::from([
+            x[0] + dt * x[1],
+            x[1] + dt * a.x,
+            x[2] + dt * x[3],
+            x[3] + dt * a.y,
+            x[4] + dt * x[5],
+            x[5] + dt * a.z,
+            self.attitude_step(x[6], u.x),
+            self.attitude_step(x[7], u.y),
+            self.thrust_step(x[8], u.z),
+        ])
     }
+
     fn output(&self, x: &SpatialState) -> SpatialOutput {
         SpatialOutput::new(x[0], x[2], x[4])
     }
-    fn state_from_outputs(&self, _y: &[SpatialOutput]) -> Result<SpatialState, FlatError> {
-        Err(FlatError::Singular)
+
+    fn state_from_outputs(&self, y: &[SpatialOutput]) -> Result<SpatialState, FlatError> {
+        check_len(y.len(), 3)?;
+        check_finite(y.iter().flat_map(|v| v.iter()), "outputs")?;
+        let v = (y[1] - y[0]) / self.p.dt;
+        let (thrust, theta, phi) = self.attitude_thrust_at(&y[0], &y[1], &y[2])?;
+        finite_result(
+            SpatialState::from([y[0].x, v.x, y[0].y, v.y, y[0].z, v.z, theta, phi, thrust]),
+            "state",
+        )
     }
-    fn input_from_outputs(&self, _y: &[SpatialOutput]) -> Result<SpatialInput, FlatError> {
-        Err(FlatError::Singular)
+
+    fn input_from_outputs(&self, y: &[SpatialOutput]) -> Result<SpatialInput, FlatError> {
+        check_len(y.len(), 4)?;
+        check_finite(y.iter().flat_map(|v| v.iter()), "outputs")?;
+        let (f0, t0, p0) = self.attitude_thrust_at(&y[0], &y[1], &y[2])?;
+        let (f1, t1, p1) = self.attitude_thrust_at(&y[1], &y[2], &y[3])?;
+        finite_result(
+            SpatialInput::new(
+                self.attitude_command(t0, t1),
+                self.attitude_command(p0, p1),
+                self.thrust_command(f0, f1),
+            ),
+            "input",
+        )
     }
-    fn next_output(&self, _y: &[SpatialOutput], _u: &SpatialInput) -> Result<SpatialOutput, FlatError> {
-        Err(FlatError::Singular)
+
+    fn next_output(
+        &self,
+        y: &[SpatialOutput],
+        u: &SpatialInput,
+    ) -> Result<SpatialOutput, FlatError> {
+        check_len(y.len(), 3)?;
+        check_finite(
+            y.iter().flat_map(|v| v.iter()).chain(u.iter()),
+            "outputs and input",
+        )?;
+        let (f0, t0, p0) = self.attitude_thrust_at(&y[0], &y[1], &y[2])?;
+        let acc = self.acceleration(
+            self.attitude_step(t0, u.x),
+            self.attitude_step(p0, u.y),
+            self.thrust_step(f0, u.z),
+        );
+        let dt2 = self.p.dt * self.p.dt;
+        finite_result(2.0 * y[2] - y[1] + dt2 * acc, "next output")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rejects_bad_parameters() {
+        for (name, p) in [
+            (
+                "dt",
+                SpatialParams {
+                    dt: 0.0,
+                    ..Default::default()
+                },
+            ),
+            (
+                "tau",
+                SpatialParams {
+                    tau: -1.0,
+                    ..Default::default()
+                },
+            ),
+            (
+                "k",
+                SpatialParams {
+                    k: f64::NAN,
+                    ..Default::default()
+                },
+            ),
+            (
+                "tau_thrust",
+                SpatialParams {
+                    tau_thrust: 0.0,
+                    ..Default::default()
+                },
+            ),
+            (
+                "g",
+                SpatialParams {
+                    g: f64::INFINITY,
+                    ..Default::default()
+                },
+            ),
+            (
+                "psi",
+                SpatialParams {
+                    psi: f64::NAN,
+                    ..Default::default()
+                },
+            ),
+        ] {
+            match SpatialModel::new(p) {
+                Err(FlatError::InvalidParameter { name: got, .. }) => assert_eq!(got, name),
+                other => panic!("{name}: {other:?}"),
+            }
+        }
+    }
+
+    #[test]
+    fn hover_is_a_fixed_point() {
+        for frame in [Frame::Ned, Frame::Zup] {
+            let m = SpatialModel::new(SpatialParams {
+                frame,
+                ..Default::default()
+            })
+            .unwrap();
+            let x = SpatialState::from([1.0, 0.0, 2.0, 0.0, -3.0, 0.0, 0.0, 0.0, 9.81]);
+            assert_eq!(m.step(&x, &SpatialInput::new(0.0, 0.0, 9.81)), x);
+        }
+    }
+
+    #[test]
+    fn ned_nose_down_accelerates_north_and_thrust_lifts() {
+        let m = SpatialModel::new(SpatialParams::default()).unwrap();
+        let a = m.acceleration(-0.2, 0.0, 9.81 / 0.2_f64.cos());
+        assert!((a.x - 9.81 * 0.2_f64.tan()).abs() < 1e-12 && a.z.abs() < 1e-12);
+        // More thrust than hover: up, i.e. −z in NED.
+        assert!(m.acceleration(0.0, 0.0, 12.0).z < 0.0);
+        let (t, th, ph) = m.attitude_thrust(&a).unwrap();
+        assert!(
+            (t - 9.81 / 0.2_f64.cos()).abs() < 1e-12
+                && (th + 0.2).abs() < 1e-14
+                && ph.abs() < 1e-14
+        );
     }
 }

@@ -1,0 +1,204 @@
+//! Agreement with the independently derived reference vectors in
+//! `shared/reference/` (80-bit arithmetic, rounded to f64).
+//!
+//! Rule (reference README): per vector `rtol = max(1e-9, 10·float64_roundoff)`,
+//! where `float64_roundoff` is the worst component-wise relative error of
+//! the reference maps themselves evaluated in float64 on the rounded
+//! outputs; each component must satisfy `|got − ref| ≤ rtol·max(|ref|, 1e-3)`.
+//! Every map is checked in isolation on the reference's own arguments:
+//! Λ(outputs[0..R]) vs `state`, F(outputs[0..=R]) vs `input`,
+//! F⁻¹(outputs[0..R], input) vs `next_output`, step(state, input) vs
+//! `next_state`.
+//!
+//! The JSON must be parsed with correct rounding (serde_json's
+//! `float_roundtrip` feature, enabled in this crate's dev-dependencies):
+//! the default parser may be one ulp off, and one ulp of a 15 m position
+//! becomes ~1e-9 rad in a pitch command at δt = 0.01 s, the whole tolerance.
+
+use std::path::PathBuf;
+
+use dflat_model::full::{FullInput, FullOutput, FullState};
+use dflat_model::planar::{PlanarInput, PlanarOutput, PlanarState};
+use dflat_model::{FlatError, FlatModel, Frame, FullModel, FullParams, PlanarModel, PlanarParams};
+use serde::Deserialize;
+
+#[derive(Deserialize)]
+struct File<V> {
+    vectors: Vec<V>,
+}
+
+#[derive(Deserialize)]
+struct PlanarVector {
+    params: PlanarJsonParams,
+    outputs: Vec<[f64; 2]>,
+    state: [f64; 6],
+    input: [f64; 2],
+    next_output: Option<[f64; 2]>,
+    next_state: [f64; 6],
+    float64_roundoff: f64,
+}
+
+#[derive(Deserialize)]
+struct PlanarJsonParams {
+    dt: f64,
+    tau: f64,
+    k: f64,
+    g: f64,
+    psi: f64,
+    frame: String,
+}
+
+#[derive(Deserialize)]
+struct FullVector {
+    params: FullJsonParams,
+    outputs: Vec<[f64; 4]>,
+    state: [f64; 12],
+    input: [f64; 4],
+    next_output: Option<[f64; 4]>,
+    next_state: [f64; 12],
+    float64_roundoff: f64,
+}
+
+#[derive(Deserialize)]
+struct FullJsonParams {
+    dt: f64,
+    m: f64,
+    g: f64,
+    #[serde(rename = "Ixx")]
+    ixx: f64,
+    #[serde(rename = "Iyy")]
+    iyy: f64,
+    #[serde(rename = "Izz")]
+    izz: f64,
+    frame: String,
+}
+
+fn reference_dir() -> PathBuf {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/reference");
+    assert!(
+        dir.is_dir(),
+        "reference vectors not found: expected the directory {} (the shared \
+         `reference/` folder beside the repository; it is present in CI)",
+        dir.display()
+    );
+    dir
+}
+
+fn load<V: for<'de> Deserialize<'de>>(name: &str) -> Vec<V> {
+    let path = reference_dir().join(name);
+    let text = std::fs::read_to_string(&path)
+        .unwrap_or_else(|e| panic!("cannot read reference file {}: {e}", path.display()));
+    let file: File<V> = serde_json::from_str(&text)
+        .unwrap_or_else(|e| panic!("cannot parse reference file {}: {e}", path.display()));
+    assert!(
+        !file.vectors.is_empty(),
+        "{} holds no vectors",
+        path.display()
+    );
+    file.vectors
+}
+
+fn frame(name: &str) -> Frame {
+    match name {
+        "zup" => Frame::Zup,
+        "ned" => Frame::Ned,
+        other => panic!("unknown frame {other:?} in the reference vectors"),
+    }
+}
+
+/// Compares component-wise by the README rule; returns the worst
+/// `|got − ref| / (rtol·max(|ref|, 1e-3))` (must be ≤ 1).
+fn check(case: usize, what: &str, got: &[f64], reference: &[f64], rtol: f64) -> f64 {
+    assert_eq!(got.len(), reference.len());
+    let mut worst: f64 = 0.0;
+    for (i, (g, r)) in got.iter().zip(reference).enumerate() {
+        let bound = rtol * r.abs().max(1e-3);
+        let err = (g - r).abs();
+        assert!(
+            err <= bound,
+            "vector {case}: {what}[{i}] = {g:e}, reference {r:e}, |err| = {err:e} > {bound:e} (rtol {rtol:e})"
+        );
+        worst = worst.max(err / bound);
+    }
+    worst
+}
+
+#[test]
+fn planar_matches_reference_vectors() {
+    let vectors: Vec<PlanarVector> = load("vectors_planar.json");
+    let mut worst: f64 = 0.0;
+    for (i, v) in vectors.iter().enumerate() {
+        let p = &v.params;
+        let m = PlanarModel::new(PlanarParams {
+            dt: p.dt,
+            tau: p.tau,
+            k: p.k,
+            g: p.g,
+            psi: p.psi,
+            frame: frame(&p.frame),
+        })
+        .expect("reference parameters are valid");
+        let rtol = (10.0 * v.float64_roundoff).max(1e-9);
+        let y: Vec<PlanarOutput> = v.outputs.iter().map(|o| PlanarOutput::from(*o)).collect();
+        assert_eq!(y.len(), 4, "vector {i}: planar vectors hold y_k..y_k+3");
+        let u_ref = PlanarInput::from(v.input);
+        let x_ref = PlanarState::from(v.state);
+
+        let x = m.state_from_outputs(&y[..3]).expect("Λ");
+        worst = worst.max(check(i, "state", x.as_slice(), &v.state, rtol));
+        let u = m.input_from_outputs(&y).expect("F");
+        worst = worst.max(check(i, "input", u.as_slice(), &v.input, rtol));
+        let next = v.next_output.expect("planar vectors have a next_output");
+        let y3 = m.next_output(&y[..3], &u_ref).expect("F⁻¹");
+        worst = worst.max(check(i, "next_output", y3.as_slice(), &next, rtol));
+        let x1 = m.step(&x_ref, &u_ref);
+        worst = worst.max(check(i, "next_state", x1.as_slice(), &v.next_state, rtol));
+    }
+    println!(
+        "planar: worst error / bound = {worst:.3e} over {} vectors",
+        vectors.len()
+    );
+}
+
+#[test]
+fn full_matches_reference_vectors() {
+    let vectors: Vec<FullVector> = load("vectors_full.json");
+    let mut worst: f64 = 0.0;
+    for (i, v) in vectors.iter().enumerate() {
+        let p = &v.params;
+        let m = FullModel::new(FullParams {
+            dt: p.dt,
+            m: p.m,
+            g: p.g,
+            ixx: p.ixx,
+            iyy: p.iyy,
+            izz: p.izz,
+            frame: frame(&p.frame),
+        })
+        .expect("reference parameters are valid");
+        let rtol = (10.0 * v.float64_roundoff).max(1e-9);
+        let y: Vec<FullOutput> = v.outputs.iter().map(|o| FullOutput::from(*o)).collect();
+        assert_eq!(y.len(), 5, "vector {i}: full vectors hold y_k..y_k+4");
+        let u_ref = FullInput::from(v.input);
+        let x_ref = FullState::from(v.state);
+
+        let x = m.state_from_outputs(&y[..4]).expect("Λ");
+        worst = worst.max(check(i, "state", x.as_slice(), &v.state, rtol));
+        let u = m.input_from_outputs(&y).expect("F");
+        worst = worst.max(check(i, "input", u.as_slice(), &v.input, rtol));
+        assert!(
+            v.next_output.is_none(),
+            "vector {i}: the full model has no F⁻¹"
+        );
+        assert_eq!(
+            m.next_output(&y[..4], &u_ref),
+            Err(FlatError::NoInputToOutputMap)
+        );
+        let x1 = m.step(&x_ref, &u_ref);
+        worst = worst.max(check(i, "next_state", x1.as_slice(), &v.next_state, rtol));
+    }
+    println!(
+        "full: worst error / bound = {worst:.3e} over {} vectors",
+        vectors.len()
+    );
+}
