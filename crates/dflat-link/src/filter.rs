@@ -1,0 +1,198 @@
+//! Who may say what: source filtering, and the receive pipeline that ties
+//! filter, decoder and counters together.
+
+use mavlink::dialects::common::MavMessage;
+use mavlink::{MavHeader, Message};
+
+use crate::inbound::{Inbound, decode};
+use crate::{FrameError, LinkError, LinkStats};
+
+/// Trusted MAVLink ids for one endpoint (the daemon, or the SITL autopilot).
+///
+/// Rules, in order:
+/// 1. Our own id (`vehicle_system_id`, `own_component_id`) is an echo:
+///    ignored.
+/// 2. HEARTBEAT, ATTITUDE, LOCAL_POSITION_NED: only from the autopilot
+///    (`vehicle_system_id`, `autopilot_component_id`).
+/// 3. ODOMETRY, VISION_POSITION_ESTIMATE: from the autopilot or from one of
+///    `pose_components` of the own vehicle (e.g. 197, a VIO component), or
+///    from the ground station (mocap relayed by a GCS).
+/// 4. SET_POSITION_TARGET_LOCAL_NED: from the ground station
+///    (`gcs_system_id`, any component) or one of `setpoint_components` of the
+///    own vehicle; and it must be addressed to us: `target_system` ∈ {0,
+///    vehicle}, `target_component` ∈ {0, own component} — else
+///    [`Verdict::IgnoreNotAddressed`].
+/// 5. SET_ATTITUDE_TARGET (the SITL side): from any other component of the
+///    own vehicle, addressed like rule 4.
+/// 6. Anything else: accepted from the autopilot or the ground station.
+///
+/// For the SITL, set `own_component_id` to the autopilot component (1).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SourceFilter {
+    /// The vehicle's system id (default 1).
+    pub vehicle_system_id: u8,
+    /// The autopilot's component id (default 1, MAV_COMP_ID_AUTOPILOT1).
+    pub autopilot_component_id: u8,
+    /// This endpoint's component id (daemon default 191, MAV_COMP_ID_ONBOARD_COMPUTER).
+    pub own_component_id: u8,
+    /// The ground station's system id (default 255).
+    pub gcs_system_id: u8,
+    /// Own-vehicle components allowed to send position setpoints (default none).
+    pub setpoint_components: Vec<u8>,
+    /// Own-vehicle components allowed to send ODOMETRY / VISION_POSITION_ESTIMATE
+    /// besides the autopilot (default none).
+    pub pose_components: Vec<u8>,
+}
+
+impl Default for SourceFilter {
+    fn default() -> Self {
+        Self {
+            vehicle_system_id: 1,
+            autopilot_component_id: 1,
+            own_component_id: 191,
+            gcs_system_id: 255,
+            setpoint_components: Vec::new(),
+            pose_components: Vec::new(),
+        }
+    }
+}
+
+/// The filter's decision for one message.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Verdict {
+    /// Act on it.
+    Accept,
+    /// The sender is not trusted for this message.
+    IgnoreWrongSource,
+    /// The message is addressed to another system or component.
+    IgnoreNotAddressed,
+}
+
+impl SourceFilter {
+    fn is(&self, header: &MavHeader, system: u8, component: u8) -> bool {
+        header.system_id == u32::from(system) && header.component_id == component
+    }
+
+    fn sent_by_vehicle(&self, header: &MavHeader) -> bool {
+        header.system_id == u32::from(self.vehicle_system_id)
+    }
+
+    fn sent_by_gcs(&self, header: &MavHeader) -> bool {
+        header.system_id == u32::from(self.gcs_system_id)
+    }
+
+    fn sent_by_autopilot(&self, header: &MavHeader) -> bool {
+        self.is(header, self.vehicle_system_id, self.autopilot_component_id)
+    }
+
+    fn addressed_to_us(&self, msg: &MavMessage) -> bool {
+        let system_ok = msg
+            .target_system_id()
+            .is_none_or(|s| s == 0 || s == self.vehicle_system_id);
+        let component_ok = msg
+            .target_component_id()
+            .is_none_or(|c| c == 0 || c == self.own_component_id);
+        system_ok && component_ok
+    }
+
+    /// Decides whether to act on `msg` from the sender in `header`.
+    pub fn check(&self, header: &MavHeader, msg: &MavMessage) -> Verdict {
+        if self.is(header, self.vehicle_system_id, self.own_component_id) {
+            return Verdict::IgnoreWrongSource;
+        }
+        let trusted = match msg {
+            MavMessage::HEARTBEAT(_)
+            | MavMessage::ATTITUDE(_)
+            | MavMessage::LOCAL_POSITION_NED(_) => self.sent_by_autopilot(header),
+            MavMessage::ODOMETRY(_) | MavMessage::VISION_POSITION_ESTIMATE(_) => {
+                self.sent_by_autopilot(header)
+                    || self.sent_by_gcs(header)
+                    || (self.sent_by_vehicle(header)
+                        && self.pose_components.contains(&header.component_id))
+            }
+            MavMessage::SET_POSITION_TARGET_LOCAL_NED(_) => {
+                self.sent_by_gcs(header)
+                    || (self.sent_by_vehicle(header)
+                        && self.setpoint_components.contains(&header.component_id))
+            }
+            MavMessage::SET_ATTITUDE_TARGET(_) => self.sent_by_vehicle(header),
+            _ => self.sent_by_autopilot(header) || self.sent_by_gcs(header),
+        };
+        if !trusted {
+            return Verdict::IgnoreWrongSource;
+        }
+        match msg {
+            MavMessage::SET_POSITION_TARGET_LOCAL_NED(_) | MavMessage::SET_ATTITUDE_TARGET(_)
+                if !self.addressed_to_us(msg) =>
+            {
+                Verdict::IgnoreNotAddressed
+            }
+            _ => Verdict::Accept,
+        }
+    }
+}
+
+/// What [`LinkRx::handle`] made of one message (already counted).
+#[derive(Debug)]
+pub enum RxOutcome {
+    /// Trusted and valid: act on it.
+    Accepted(Inbound),
+    /// Dropped by the source filter.
+    Ignored(Verdict),
+    /// Trusted but invalid (non-finite, wrong frame, bad quaternion, …).
+    Rejected(LinkError),
+}
+
+/// Receive pipeline: filter → decode → count. Pure and synchronous; the
+/// daemon feeds it what its connection (or [`crate::FrameParser`]) yields.
+#[derive(Debug, Clone, Default)]
+pub struct LinkRx {
+    /// The source filter.
+    pub filter: SourceFilter,
+    /// The counters.
+    pub stats: LinkStats,
+}
+
+impl LinkRx {
+    /// A pipeline with zeroed counters.
+    pub fn new(filter: SourceFilter) -> Self {
+        Self {
+            filter,
+            stats: LinkStats::default(),
+        }
+    }
+
+    /// Filters, decodes and counts one received message.
+    pub fn handle(&mut self, header: &MavHeader, msg: &MavMessage) -> RxOutcome {
+        self.stats.record_received(msg.message_id());
+        match self.filter.check(header, msg) {
+            Verdict::Accept => {}
+            verdict @ Verdict::IgnoreWrongSource => {
+                self.stats.ignored_wrong_source += 1;
+                return RxOutcome::Ignored(verdict);
+            }
+            verdict @ Verdict::IgnoreNotAddressed => {
+                self.stats.ignored_not_addressed += 1;
+                return RxOutcome::Ignored(verdict);
+            }
+        }
+        match decode(header, msg) {
+            Ok(inbound) => RxOutcome::Accepted(inbound),
+            Err(error) => {
+                self.stats.record_error(&error);
+                tracing::debug!(
+                    sysid = header.system_id,
+                    compid = header.component_id,
+                    %error,
+                    "inbound message rejected"
+                );
+                RxOutcome::Rejected(error)
+            }
+        }
+    }
+
+    /// Counts a framing error (CRC, unknown id, truncation, …).
+    pub fn frame_error(&mut self, error: &FrameError) {
+        self.stats.record_frame_error(error);
+    }
+}
