@@ -1,1 +1,33 @@
-//! dflat-sim
+//! # dflat-sim — dflat's simulation lab
+//!
+//! Plants, sensor models, a closed-loop harness and plot helpers for the
+//! controllers of `dflat-control`. Everything here is pure and deterministic
+//! from seeds: no wall clock, no global RNG. Time is simulated time [s].
+//!
+//! * [`plant`] — vehicle stand-ins integrated with RK4 at 200 Hz (default),
+//!   the command held between 50 Hz controller ticks: a planar plant with
+//!   first-order attitude (paper §IV-B), a spatial plant that adds altitude
+//!   through collective thrust, and a 12-state rigid body with an inner
+//!   attitude/rate autopilot. Options cover command saturation, drag, wind
+//!   and gusts, and model mismatch ([`plant::PlantOptions`]).
+//! * [`sensing`] — what the controller sees: Gaussian position noise at the
+//!   control rate, or a vision stand-in (15 Hz, latency, noise, dropouts,
+//!   jitter; paper §VII-B) extrapolated, held or passed raw.
+//! * [`harness`] — [`harness::run_trial`] / [`harness::run_trials`]: one or
+//!   many closed loops (rayon, results in input order, bit-identical for a
+//!   seed regardless of thread count), per-tick logs (CSV) and metrics.
+//! * [`plot`] — plotters wrappers (SVG + PNG, vendored font): line plots,
+//!   x-y path plots, grouped box plots, in the paper's colours.
+//!
+//! Conventions (see `DESIGN.md`): local NED [m], body FRD, ZYX Euler angles
+//! [rad], specific thrust [m/s²] (thrust / mass), SI units throughout.
+
+pub mod harness;
+pub mod plant;
+pub mod plot;
+pub mod sensing;
+
+mod error;
+mod rng;
+
+pub use error::SimError;

@@ -1,0 +1,162 @@
+//! The planar plant (paper §IV-B) with continuous-time dynamics.
+
+use dflat_control::AttitudeCommand;
+use nalgebra::{SVector, Vector3};
+
+use super::{
+    HeldCommand, Plant, PlantKind, PlantOptions, PlantState, Wind, integrate,
+    level_flight_acceleration,
+};
+use crate::SimError;
+
+/// 2-D motion at constant altitude and yaw with first-order pitch and roll.
+///
+/// State vector `[x, ẋ, y, ẏ, θ, φ]` (NED m, m/s, rad):
+///
+/// ```text
+/// ẍ = −g·R13/R33 − c·(ẋ − w_x),  ÿ = −g·R23/R33 − c·(ẏ − w_y)
+/// θ̇ = (k̃·θ_cmd − θ)/τ,            φ̇ = (k̃·φ_cmd − φ)/τ
+/// ```
+///
+/// Altitude and yaw stay at their reset values; the yaw and thrust commands
+/// are ignored (the autopilot holds altitude).
+#[derive(Debug, Clone)]
+pub struct PlanarPlant {
+    options: PlantOptions,
+    x: SVector<f64, 6>,
+    z: f64,
+    yaw: f64,
+    t: f64,
+    held: HeldCommand,
+    wind: Wind,
+}
+
+impl PlanarPlant {
+    /// A planar plant at level hover at the origin; `seed` drives the gusts.
+    pub fn new(options: PlantOptions, seed: u64) -> Result<Self, SimError> {
+        options.validate()?;
+        let wind = Wind::new(options.wind, options.gust_std, options.gust_tau, seed);
+        let state = PlantState::hover(Vector3::zeros(), options.g);
+        let mut plant = Self {
+            held: HeldCommand::steady(&options, &state),
+            options,
+            x: SVector::zeros(),
+            z: 0.0,
+            yaw: 0.0,
+            t: 0.0,
+            wind,
+        };
+        plant.reset(&state);
+        Ok(plant)
+    }
+
+    fn derivative(&self, x: &SVector<f64, 6>, w: &Vector3<f64>) -> SVector<f64, 6> {
+        let o = &self.options;
+        let (ax, ay) = level_flight_acceleration(o.g, x[5], x[4], self.yaw);
+        let c = &self.held.command;
+        SVector::from([
+            x[1],
+            ax - o.drag * (x[1] - w.x),
+            x[3],
+            ay - o.drag * (x[3] - w.y),
+            (o.attitude_gain * c.pitch - x[4]) / o.attitude_tau,
+            (o.attitude_gain * c.roll - x[5]) / o.attitude_tau,
+        ])
+    }
+}
+
+impl Plant for PlanarPlant {
+    fn kind(&self) -> PlantKind {
+        PlantKind::Planar
+    }
+
+    fn reset(&mut self, state: &PlantState) {
+        self.x = SVector::from([
+            state.position.x,
+            state.velocity.x,
+            state.position.y,
+            state.velocity.y,
+            state.pitch,
+            state.roll,
+        ]);
+        self.z = state.position.z;
+        self.yaw = state.yaw;
+        self.t = 0.0;
+        let mut s = *state;
+        s.thrust = self.options.g;
+        self.held = HeldCommand::steady(&self.options, &s);
+        self.wind.restart();
+    }
+
+    fn apply(&mut self, command: &AttitudeCommand) {
+        // Altitude is held by the autopilot: the thrust command plays no
+        // part (neither in the dynamics nor in the saturation flag).
+        let hover = self.options.thrust_command_for(self.options.g);
+        self.held.apply(
+            &self.options,
+            &AttitudeCommand {
+                thrust: hover,
+                ..*command
+            },
+        );
+    }
+
+    fn advance(&mut self, dt: f64) {
+        if !(dt.is_finite() && dt > 0.0) {
+            return;
+        }
+        let (n, h) = self.options.substeps(dt);
+        for _ in 0..n {
+            let w = self.wind.velocity();
+            self.x = integrate(self.options.integrator, &self.x, h, |x| {
+                self.derivative(x, &w)
+            });
+            self.wind.step(h);
+            self.t += h;
+        }
+    }
+
+    fn position(&self) -> Vector3<f64> {
+        Vector3::new(self.x[0], self.x[2], self.z)
+    }
+
+    fn velocity(&self) -> Vector3<f64> {
+        Vector3::new(self.x[1], self.x[3], 0.0)
+    }
+
+    fn attitude(&self) -> (f64, f64, f64) {
+        (self.x[5], self.x[4], self.yaw)
+    }
+
+    fn true_state(&self) -> PlantState {
+        PlantState {
+            position: self.position(),
+            velocity: self.velocity(),
+            roll: self.x[5],
+            pitch: self.x[4],
+            yaw: self.yaw,
+            body_rates: Vector3::zeros(),
+            thrust: self.options.g / (self.x[4].cos() * self.x[5].cos()),
+        }
+    }
+
+    fn state_vector(&self) -> Vec<f64> {
+        self.x.iter().copied().collect()
+    }
+
+    fn time(&self) -> f64 {
+        self.t
+    }
+
+    fn applied_command(&self) -> AttitudeCommand {
+        self.held.command
+    }
+
+    fn saturated(&self) -> bool {
+        self.held.saturated
+    }
+
+    fn wind(&self) -> Vector3<f64> {
+        self.wind.velocity()
+    }
+}
