@@ -1,0 +1,288 @@
+//! PD control, the paper's non-predictive baseline (§VII-C, its ref. c20).
+//!
+//! Each tick: the reference position and velocity are the closest point of
+//! the path and the desired speed along it ([`ReferenceSource::closest`]);
+//! the velocity is the first difference of the measured positions
+//! `(y_k − y_{k−1})/δt`, optionally low-pass filtered (no model-based
+//! estimate); the desired acceleration is
+//! `a = k_p (p_ref − p) + k_d (v_ref − v)` per axis, limited; the attitude
+//! (and, for the spatial model, the thrust) follows from the model's
+//! attitude map, `θ_cmd = θ/k̃`, saturated at the maximum tilt.
+
+use dflat_model::attitude::thrust_pitch_roll;
+use dflat_model::{FlatError, Frame};
+use nalgebra::{Vector2, Vector3};
+
+use crate::fmpc::{clamp_tilt, measurement_is_finite};
+use crate::{
+    AttitudeCommand, ControlError, ControlModel, Controller, Measurement, ReferenceSource,
+    TickOutput,
+};
+
+/// Settings of [`Pd`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PdSettings {
+    /// Position gains k_p per axis (x, y, z) [1/s²], finite, > 0 (z unused by
+    /// the planar model). Default 2.
+    pub kp: [f64; 3],
+    /// Velocity gains k_d per axis (x, y, z) [1/s], finite, ≥ 0. Default 2.5.
+    ///
+    /// With the attitude lag τ = 0.2 s the linearised loop per axis is
+    /// `τs³ + s² + k_d s + k_p`; the defaults place its poles at −1.3 and
+    /// −1.85 ± 2.07j (damping 0.67). Among the gains tried in closed loop
+    /// (k_p 0.5–3, k_d 1–4) they settle a 10 m step in ~4.5 s without
+    /// overshoot and keep the L-path error near the lowest; a higher k_p
+    /// lowers the path error a little but overshoots the step.
+    pub kd: [f64; 3],
+    /// Limit on the horizontal desired acceleration magnitude [m/s²], finite,
+    /// > 0 (direction kept). Default g·tan(35°) ≈ 6.87.
+    pub max_horizontal_acceleration: f64,
+    /// Limit on |a_z| [m/s²] (spatial model), finite, in (0, g). Default 4.
+    pub max_vertical_acceleration: f64,
+    /// Cut-off of the first-order low-pass on the finite-difference velocity
+    /// \[Hz\], finite, > 0; `None` (default) leaves it unfiltered.
+    pub velocity_cutoff_hz: Option<f64>,
+    /// Saturation of the pitch and roll commands \[rad\], in (0, π/2).
+    /// Default 35°.
+    pub max_tilt: f64,
+}
+
+impl Default for PdSettings {
+    fn default() -> Self {
+        let max_tilt = 35f64.to_radians();
+        Self {
+            kp: [2.0; 3],
+            kd: [2.5; 3],
+            max_horizontal_acceleration: 9.81 * max_tilt.tan(),
+            max_vertical_acceleration: 4.0,
+            velocity_cutoff_hz: None,
+            max_tilt,
+        }
+    }
+}
+
+fn invalid(field: &'static str, reason: impl Into<String>) -> ControlError {
+    ControlError::InvalidSetting {
+        field,
+        reason: reason.into(),
+    }
+}
+
+impl PdSettings {
+    /// Checks every field; the error names the first invalid one.
+    pub fn validate(&self) -> Result<(), ControlError> {
+        if let Some(k) = self.kp.iter().find(|k| !(k.is_finite() && **k > 0.0)) {
+            return Err(invalid(
+                "kp",
+                format!("must be finite and > 0 1/s², got {k}"),
+            ));
+        }
+        if let Some(k) = self.kd.iter().find(|k| !(k.is_finite() && **k >= 0.0)) {
+            return Err(invalid(
+                "kd",
+                format!("must be finite and >= 0 1/s, got {k}"),
+            ));
+        }
+        let a = self.max_horizontal_acceleration;
+        if !(a.is_finite() && a > 0.0) {
+            return Err(invalid(
+                "max_horizontal_acceleration",
+                format!("must be finite and > 0 m/s², got {a}"),
+            ));
+        }
+        let a = self.max_vertical_acceleration;
+        if !(a.is_finite() && a > 0.0) {
+            return Err(invalid(
+                "max_vertical_acceleration",
+                format!("must be finite and > 0 m/s² (and below g), got {a}"),
+            ));
+        }
+        if let Some(f) = self.velocity_cutoff_hz
+            && !(f.is_finite() && f > 0.0)
+        {
+            return Err(invalid(
+                "velocity_cutoff_hz",
+                format!("must be finite and > 0 Hz, got {f}"),
+            ));
+        }
+        let t = self.max_tilt;
+        if !(t.is_finite() && t > 0.0 && t < std::f64::consts::FRAC_PI_2) {
+            return Err(invalid(
+                "max_tilt",
+                format!("must be in (0, π/2) rad, got {t}"),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// The paper's PD controller (§VII-C): see the module docs.
+#[derive(Debug, Clone)]
+pub struct Pd {
+    model: ControlModel,
+    settings: PdSettings,
+    /// Control step δt \[s\] (the model's).
+    dt: f64,
+    /// Low-pass coefficient α ∈ (0, 1] of the velocity filter (1 = off).
+    alpha: f64,
+    /// Previous measured position (NED \[m\]).
+    prev: Vector3<f64>,
+    /// Velocity estimate (NED [m/s]).
+    velocity: Vector3<f64>,
+    /// Whether `prev` holds a measurement yet.
+    started: bool,
+}
+
+impl Pd {
+    /// Builds the controller for `model` (its δt is the control step).
+    /// Errors name an invalid setting; the vertical acceleration limit must
+    /// stay below the model's g (the thrust must point up).
+    pub fn new(model: ControlModel, settings: PdSettings) -> Result<Self, ControlError> {
+        settings.validate()?;
+        let (dt, g) = match &model {
+            ControlModel::Planar(m) => (m.params().dt, m.params().g),
+            ControlModel::Spatial(m) => (m.params().dt, m.params().g),
+        };
+        if !(dt.is_finite() && dt > 0.0) {
+            return Err(invalid(
+                "dt",
+                format!("model step must be finite and > 0 s, got {dt}"),
+            ));
+        }
+        if settings.max_vertical_acceleration >= g {
+            return Err(invalid(
+                "max_vertical_acceleration",
+                format!(
+                    "must be below g = {g} m/s², got {}",
+                    settings.max_vertical_acceleration
+                ),
+            ));
+        }
+        let alpha = match settings.velocity_cutoff_hz {
+            None => 1.0,
+            Some(f) => {
+                let time_constant = 1.0 / (2.0 * std::f64::consts::PI * f);
+                dt / (dt + time_constant)
+            }
+        };
+        Ok(Self {
+            model,
+            settings,
+            dt,
+            alpha,
+            prev: Vector3::zeros(),
+            velocity: Vector3::zeros(),
+            started: false,
+        })
+    }
+
+    /// The settings.
+    pub fn settings(&self) -> &PdSettings {
+        &self.settings
+    }
+
+    /// The current velocity estimate (NED [m/s]).
+    pub fn velocity(&self) -> Vector3<f64> {
+        self.velocity
+    }
+}
+
+/// Limits the horizontal part of `a` to `max` [m/s²] keeping its direction.
+fn limit_horizontal(a: &mut Vector3<f64>, max: f64, saturated: &mut bool) {
+    let h = Vector2::new(a.x, a.y);
+    let n = h.norm();
+    if n > max {
+        let scale = max / n;
+        a.x *= scale;
+        a.y *= scale;
+        *saturated = true;
+    }
+}
+
+impl Controller for Pd {
+    fn name(&self) -> &'static str {
+        "pd"
+    }
+
+    fn update(
+        &mut self,
+        measurement: &Measurement,
+        reference: &mut dyn ReferenceSource,
+    ) -> Result<TickOutput, ControlError> {
+        if !measurement_is_finite(measurement) {
+            return Err(ControlError::NonFiniteMeasurement);
+        }
+        let y = measurement.position;
+        let (p_ref, v_ref) = reference.closest(&y);
+        if !(p_ref.iter().chain(v_ref.iter()).all(|c| c.is_finite())) {
+            return Err(ControlError::NonFiniteReference);
+        }
+        let velocity = if self.started {
+            let raw = (y - self.prev) / self.dt;
+            self.velocity + (raw - self.velocity) * self.alpha
+        } else {
+            Vector3::zeros()
+        };
+
+        let s = &self.settings;
+        let mut a = Vector3::from_fn(|i, _| {
+            s.kp[i] * (p_ref[i] - y[i]) + s.kd[i] * (v_ref[i] - velocity[i])
+        });
+        let mut saturated = false;
+        limit_horizontal(&mut a, s.max_horizontal_acceleration, &mut saturated);
+        let limit = Some(s.max_tilt);
+
+        let command = match &self.model {
+            ControlModel::Planar(m) => {
+                let p = m.params();
+                let (theta, phi) = m.attitude(&Vector2::new(a.x, a.y));
+                AttitudeCommand {
+                    pitch: clamp_tilt(theta / p.k, limit, &mut saturated),
+                    roll: clamp_tilt(phi / p.k, limit, &mut saturated),
+                    yaw: p.psi,
+                    thrust: p.g,
+                }
+            }
+            ControlModel::Spatial(m) => {
+                let p = m.params();
+                let az_max = s.max_vertical_acceleration;
+                if a.z.abs() > az_max {
+                    a.z = a.z.clamp(-az_max, az_max);
+                    saturated = true;
+                }
+                let t = spatial_thrust_vector(p.frame, p.g, &a);
+                let (thrust, theta, phi) = thrust_pitch_roll(t, p.psi)?;
+                AttitudeCommand {
+                    pitch: clamp_tilt(theta / p.k, limit, &mut saturated),
+                    roll: clamp_tilt(phi / p.k, limit, &mut saturated),
+                    yaw: p.psi,
+                    thrust,
+                }
+            }
+        };
+        if !command.is_finite() {
+            return Err(ControlError::Flat(FlatError::NonFinite("PD command")));
+        }
+
+        self.prev = y;
+        self.velocity = velocity;
+        self.started = true;
+        Ok(TickOutput {
+            command,
+            plan: [y; 4],
+            reference: p_ref,
+            saturated,
+            constrained: false,
+        })
+    }
+
+    fn reset(&mut self) {
+        self.prev = Vector3::zeros();
+        self.velocity = Vector3::zeros();
+        self.started = false;
+    }
+}
+
+fn spatial_thrust_vector(frame: Frame, g: f64, a: &Vector3<f64>) -> [f64; 3] {
+    frame.thrust_vector([a.x, a.y, a.z], g)
+}

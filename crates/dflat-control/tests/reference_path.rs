@@ -1,0 +1,278 @@
+//! Reference generation: setpoint, path progress, corners, end hold,
+//! monotone progress, closest point, the named paths and validation.
+
+use dflat_control::reference::{Reference, paths};
+use dflat_control::{ControlError, ReferenceSource};
+use nalgebra::Vector3;
+
+const DT: f64 = 0.02;
+
+fn v(x: f64, y: f64, z: f64) -> Vector3<f64> {
+    Vector3::new(x, y, z)
+}
+
+fn close(a: &Vector3<f64>, b: &Vector3<f64>, tol: f64) -> bool {
+    (a - b).norm() <= tol
+}
+
+fn field_of(e: ControlError) -> &'static str {
+    match e {
+        ControlError::InvalidSetting { field, .. } => field,
+        other => panic!("expected InvalidSetting, got {other:?}"),
+    }
+}
+
+#[test]
+fn reference_setpoint_is_constant() {
+    let p = v(1.0, -2.0, -10.0);
+    let mut r = Reference::setpoint(p).unwrap();
+    let mut out = [Vector3::zeros(); 5];
+    r.horizon(&v(50.0, 3.0, 0.0), DT, &mut out);
+    assert_eq!(out, [p; 5]);
+    assert_eq!(r.closest(&v(9.0, 9.0, 9.0)), (p, Vector3::zeros()));
+    assert!(!r.is_finished());
+    assert_eq!((r.progress(), r.path_length()), (0.0, 0.0));
+    assert!((r.distance_to_path(&v(4.0, 2.0, -10.0)) - 5.0).abs() < 1e-12);
+}
+
+#[test]
+fn reference_closest_point_and_velocity_on_a_segment() {
+    let mut r = Reference::path(&[v(0.0, 0.0, -5.0), v(10.0, 0.0, -5.0)], 2.0).unwrap();
+    let (p, vel) = r.closest(&v(3.0, 4.0, -5.0));
+    assert!(close(&p, &v(3.0, 0.0, -5.0), 1e-12));
+    assert!(close(&vel, &v(2.0, 0.0, 0.0), 1e-12));
+    assert!((r.progress() - 3.0).abs() < 1e-12);
+    assert!((r.distance_to_path(&v(3.0, 4.0, -5.0)) - 4.0).abs() < 1e-12);
+    // Before the start: the start, moving.
+    let mut r2 = Reference::path(&[v(0.0, 0.0, -5.0), v(10.0, 0.0, -5.0)], 2.0).unwrap();
+    let (p, vel) = r2.closest(&v(-3.0, 1.0, -5.0));
+    assert_eq!(p, v(0.0, 0.0, -5.0));
+    assert_eq!(vel, v(2.0, 0.0, 0.0));
+}
+
+#[test]
+fn reference_horizon_advances_along_the_path_across_corners() {
+    // L path: 20 m north, then 30 m east (NED at 10 m altitude).
+    // A wide look-ahead so the first call finds the point near the corner.
+    let mut r = paths::l(-10.0, 5.0).unwrap().with_lookahead(100.0).unwrap();
+    assert!((r.path_length() - 50.0).abs() < 1e-12);
+    // Measured 1 m before the corner (and 0.5 m off): closest (−1, −30).
+    let mut out = [Vector3::zeros(); 51];
+    r.horizon(&v(-1.0, -30.5, -10.0), DT, &mut out);
+    assert!(close(&out[0], &v(-1.0, -30.0, -10.0), 1e-12));
+    // δt·speed = 0.1 m per step: the corner at j = 10, then east.
+    assert!(close(&out[5], &v(-0.5, -30.0, -10.0), 1e-12));
+    assert!(close(&out[10], &v(0.0, -30.0, -10.0), 1e-12));
+    assert!(close(&out[15], &v(0.0, -29.5, -10.0), 1e-12));
+    assert!(close(&out[50], &v(0.0, -26.0, -10.0), 1e-12));
+    // Every step is δt·speed of arc length, the corner step included.
+    for j in 1..out.len() {
+        let d = (out[j] - out[j - 1]).norm();
+        assert!(
+            (d - 0.1).abs() < 1e-9 || j == 10 || j == 11,
+            "step {j}: {d}"
+        );
+    }
+    // Reference velocity: along the first leg before the corner, the
+    // second leg's direction at and after it.
+    let (_, vel) = r.closest(&v(-1.0, -30.5, -10.0));
+    assert!(close(&vel, &v(5.0, 0.0, 0.0), 1e-12));
+    let (p, vel) = r.closest(&v(0.0, -30.0, -10.0));
+    assert!(close(&p, &v(0.0, -30.0, -10.0), 1e-12));
+    assert!(close(&vel, &v(0.0, 5.0, 0.0), 1e-12));
+}
+
+#[test]
+fn reference_holds_at_the_path_end() {
+    let mut r = Reference::path(&[v(0.0, 0.0, 0.0), v(3.0, 4.0, 0.0)], 10.0).unwrap();
+    let mut out = [Vector3::zeros(); 100];
+    r.horizon(&v(2.4, 3.2, 0.0), DT, &mut out);
+    assert!((r.progress() - 4.0).abs() < 1e-12);
+    assert!(!r.is_finished());
+    // 1 m left at 0.2 m per step: the end from j = 5 on.
+    for o in &out[5..] {
+        assert!(close(o, &v(3.0, 4.0, 0.0), 1e-12));
+    }
+    // Past the end: finished, the end point, zero velocity.
+    let (p, vel) = r.closest(&v(6.0, 8.0, 0.0));
+    assert!(close(&p, &v(3.0, 4.0, 0.0), 1e-12));
+    assert_eq!(vel, Vector3::zeros());
+    assert!(r.is_finished());
+    r.horizon(&v(6.0, 8.0, 0.0), DT, &mut out);
+    assert!(out.iter().all(|o| close(o, &v(3.0, 4.0, 0.0), 1e-12)));
+}
+
+#[test]
+fn reference_progress_is_monotone() {
+    let mut r = Reference::path(&[v(0.0, 0.0, 0.0), v(10.0, 0.0, 0.0)], 1.0).unwrap();
+    r.closest(&v(4.0, 0.0, 0.0));
+    assert!((r.progress() - 4.0).abs() < 1e-12);
+    // Measured behind: the reference stays where it was.
+    let (p, _) = r.closest(&v(1.0, 0.0, 0.0));
+    assert!((r.progress() - 4.0).abs() < 1e-12);
+    assert!(close(&p, &v(4.0, 0.0, 0.0), 1e-12));
+    // Non-finite measurement: unchanged.
+    r.closest(&v(f64::NAN, 0.0, 0.0));
+    assert!((r.progress() - 4.0).abs() < 1e-12);
+    r.reset();
+    assert_eq!(r.progress(), 0.0);
+}
+
+#[test]
+fn reference_does_not_grab_a_later_leg_early() {
+    // S-like path whose third leg passes 2 m from the first leg's start.
+    let w = [
+        v(0.0, 0.0, 0.0),
+        v(0.0, 20.0, 0.0),
+        v(2.0, 20.0, 0.0),
+        v(2.0, 0.0, 0.0),
+    ];
+    let mut r = Reference::path(&w, 3.0).unwrap();
+    // Near the start, slightly toward the third leg: still the first leg.
+    let (p, vel) = r.closest(&v(1.2, 0.5, 0.0));
+    assert!(close(&p, &v(0.0, 0.5, 0.0), 1e-12), "{p}");
+    assert!(close(&vel, &v(0.0, 3.0, 0.0), 1e-12));
+    // Whereas the pure distance metric sees the third leg.
+    assert!((r.distance_to_path(&v(1.2, 0.5, 0.0)) - 0.8).abs() < 1e-12);
+    // Walking along the first leg (0.6 m off it, 1.4 m from the third),
+    // progress tracks without jumping ahead to the third leg.
+    let mut last = r.progress();
+    for i in 1..=38 {
+        let y = 0.5 * i as f64;
+        r.closest(&v(0.6, y, 0.0));
+        assert!(r.progress() >= last);
+        assert!(
+            r.progress() <= y + 1e-9,
+            "jumped to {} at y = {y}",
+            r.progress()
+        );
+        last = r.progress();
+    }
+    // Around the U-turn and down the third leg.
+    r.closest(&v(2.0, 19.0, 0.0));
+    assert!(r.progress() > 22.0, "{}", r.progress());
+    for y in (11..=18).rev() {
+        r.closest(&v(2.5, y as f64, 0.0));
+    }
+    let (p, vel) = r.closest(&v(2.5, 10.0, 0.0));
+    assert!(close(&p, &v(2.0, 10.0, 0.0), 1e-12));
+    assert!(close(&vel, &v(0.0, -3.0, 0.0), 1e-12));
+}
+
+#[test]
+fn reference_lookahead_bounds_the_search() {
+    let w = [v(0.0, 0.0, 0.0), v(100.0, 0.0, 0.0)];
+    let mut r = Reference::path(&w, 1.0)
+        .unwrap()
+        .with_lookahead(2.0)
+        .unwrap();
+    r.closest(&v(50.0, 0.0, 0.0));
+    assert!((r.progress() - 2.0).abs() < 1e-12);
+    r.closest(&v(50.0, 0.0, 0.0));
+    assert!((r.progress() - 4.0).abs() < 1e-12);
+    // Default: max(5 m, 1 s · speed).
+    let mut r = Reference::path(&w, 8.0).unwrap();
+    r.closest(&v(50.0, 0.0, 0.0));
+    assert!((r.progress() - 8.0).abs() < 1e-12);
+}
+
+#[test]
+fn reference_distance_to_path_uses_the_whole_polyline() {
+    let r = paths::l(0.0, 3.0).unwrap();
+    assert!((r.distance_to_path(&v(-10.0, -28.0, 0.0)) - 2.0).abs() < 1e-12);
+    assert!((r.distance_to_path(&v(1.0, -10.0, 0.0)) - 1.0).abs() < 1e-12);
+    // Outside the corner: distance to the corner point.
+    assert!((r.distance_to_path(&v(3.0, -34.0, 0.0)) - 5.0).abs() < 1e-12);
+    assert_eq!(r.distance_to_path(&v(0.0, -30.0, 0.0)), 0.0);
+}
+
+#[test]
+fn reference_named_paths() {
+    let l = paths::waypoints(&paths::L_XY, -10.0);
+    assert_eq!(
+        l,
+        vec![
+            v(-20.0, -30.0, -10.0),
+            v(0.0, -30.0, -10.0),
+            v(0.0, 0.0, -10.0)
+        ]
+    );
+    for (r, speed) in [
+        (paths::d(-20.0, paths::D_SPEED).unwrap(), 10.0),
+        (paths::s(-20.0, paths::S_SPEED).unwrap(), 3.0),
+        (paths::dsl_l(-20.0, paths::DSL_L_SPEED).unwrap(), 8.0),
+        (paths::l(-10.0, 9.0).unwrap(), 9.0),
+    ] {
+        assert_eq!(r.speed(), speed);
+        assert!(
+            r.path_length() > 40.0 && r.path_length() < 120.0,
+            "{}",
+            r.path_length()
+        );
+    }
+    // The D bowl is a polyline on a 15 m circle.
+    for p in &paths::D_XY[2..9] {
+        let d = ((p[0] - 15.0).powi(2) + (p[1] - 5.0).powi(2)).sqrt();
+        assert!((d - 15.0).abs() < 1e-9);
+    }
+    // Flying each letter's horizon from its start ends at its end.
+    for mut r in [
+        paths::d(-20.0, 10.0).unwrap(),
+        paths::s(-20.0, 3.0).unwrap(),
+        paths::dsl_l(-20.0, 8.0).unwrap(),
+    ] {
+        let mut out = [Vector3::zeros(); 2];
+        let mut y = {
+            r.horizon(&Vector3::new(f64::NAN, 0.0, 0.0), DT, &mut out);
+            out[0]
+        };
+        for _ in 0..10_000 {
+            r.horizon(&y, DT, &mut out);
+            y = out[1];
+        }
+        assert!(
+            r.is_finished(),
+            "progress {} of {}",
+            r.progress(),
+            r.path_length()
+        );
+    }
+}
+
+#[test]
+fn reference_validation_names_the_field() {
+    let a = v(0.0, 0.0, 0.0);
+    let b = v(1.0, 0.0, 0.0);
+    assert_eq!(
+        field_of(Reference::setpoint(v(f64::NAN, 0.0, 0.0)).unwrap_err()),
+        "setpoint"
+    );
+    assert_eq!(
+        field_of(Reference::path(&[a], 1.0).unwrap_err()),
+        "waypoints"
+    );
+    assert_eq!(
+        field_of(Reference::path(&[], 1.0).unwrap_err()),
+        "waypoints"
+    );
+    assert_eq!(
+        field_of(Reference::path(&[a, a, b], 1.0).unwrap_err()),
+        "waypoints"
+    );
+    assert_eq!(
+        field_of(Reference::path(&[a, v(f64::INFINITY, 0.0, 0.0)], 1.0).unwrap_err()),
+        "waypoints"
+    );
+    assert_eq!(
+        field_of(Reference::path(&[a, b], 0.0).unwrap_err()),
+        "speed"
+    );
+    assert_eq!(
+        field_of(Reference::path(&[a, b], f64::NAN).unwrap_err()),
+        "speed"
+    );
+    let r = Reference::path(&[a, b], 1.0).unwrap();
+    assert_eq!(field_of(r.with_lookahead(-1.0).unwrap_err()), "lookahead");
+    // A closed path (end = start, not consecutive) is fine.
+    assert!(Reference::path(&[a, b, v(1.0, 1.0, 0.0), a], 1.0).is_ok());
+}
