@@ -1,1 +1,187 @@
-fn main() {}
+//! One controller tick (window update + prediction + solve + output-to-input
+//! map) for horizons N ∈ {50, 100, 200, 400, 800}, planar model, 2 axes.
+//!
+//! * `df_mpc::fast_tick` — DF-MPC, no binding constraint: banded Cholesky.
+//! * `df_mpc::tilt_constrained_tick` — DF-MPC with a 15° tilt constraint
+//!   that binds on both axes (clarabel).
+//! * `df_mpc::qp_banded` / `df_mpc::qp_clarabel` — the same unconstrained
+//!   DF QP (both axes) solved by the banded solver and handed whole to
+//!   clarabel: the generic baseline.
+//!
+//! Each tick iteration resets the controller and runs the first tick from
+//! rest 10 m from the setpoint, so every iteration solves the same problem.
+//!
+//! Run: `cargo bench -p dflat-control`.
+
+#![allow(missing_docs)]
+
+use dflat_control::dfmpc::{
+    AxisBounds, AxisProblem, AxisSolver, ConstrainedAxisSolver, DfMpc, DfMpcSettings,
+    OutputConstraints,
+};
+use dflat_control::{ControlModel, Controller, Frame, Measurement, ReferenceSource};
+use dflat_model::{PlanarModel, PlanarParams};
+use divan::{Bencher, black_box};
+use nalgebra::Vector3;
+
+const HORIZONS: &[usize] = &[50, 100, 200, 400, 800];
+const DT: f64 = 0.02;
+
+fn main() {
+    divan::main();
+}
+
+/// Constant setpoint.
+struct Setpoint(Vector3<f64>);
+
+impl ReferenceSource for Setpoint {
+    fn horizon(&mut self, _measured: &Vector3<f64>, _dt: f64, out: &mut [Vector3<f64>]) {
+        out.iter_mut().for_each(|o| *o = self.0);
+    }
+    fn closest(&mut self, _measured: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
+        (self.0, Vector3::zeros())
+    }
+}
+
+fn model() -> ControlModel {
+    ControlModel::Planar(
+        PlanarModel::new(PlanarParams {
+            psi: 0.6,
+            frame: Frame::Ned,
+            ..Default::default()
+        })
+        .unwrap(),
+    )
+}
+
+fn measurement() -> Measurement {
+    Measurement {
+        t: 0.0,
+        position: Vector3::new(0.0, 0.0, -2.0),
+        yaw: 0.6,
+    }
+}
+
+fn target() -> Setpoint {
+    Setpoint(Vector3::new(8.0, -6.0, -2.0))
+}
+
+mod df_mpc {
+    use super::*;
+
+    fn bench_tick(bencher: Bencher, settings: DfMpcSettings, expect_constrained: bool) {
+        let mut ctrl = DfMpc::new(model(), settings).unwrap();
+        let mut reference = target();
+        let m = measurement();
+        let out = ctrl.update(&m, &mut reference).unwrap();
+        assert_eq!(out.constrained, expect_constrained);
+        bencher.bench_local(|| {
+            ctrl.reset();
+            black_box(ctrl.update(black_box(&m), &mut reference).unwrap())
+        });
+    }
+
+    /// DF-MPC tick, fast path (no constraints), 2 axes.
+    #[divan::bench(args = HORIZONS)]
+    fn fast_tick(bencher: Bencher, n: usize) {
+        let settings = DfMpcSettings {
+            horizon: n,
+            ..Default::default()
+        };
+        bench_tick(bencher, settings, false);
+    }
+
+    /// DF-MPC tick with a binding 15° tilt constraint (clarabel), 2 axes.
+    #[divan::bench(args = HORIZONS, sample_count = 20, sample_size = 5)]
+    fn tilt_constrained_tick(bencher: Bencher, n: usize) {
+        let settings = DfMpcSettings {
+            horizon: n,
+            constraints: OutputConstraints {
+                max_tilt: Some(15f64.to_radians()),
+                ..Default::default()
+            },
+            solver_time_limit: f64::INFINITY,
+            ..Default::default()
+        };
+        bench_tick(bencher, settings, true);
+    }
+
+    fn qp_data(n: usize) -> ([[f64; 3]; 2], Vec<f64>, Vec<f64>) {
+        let fixed = [[0.0, 0.01, 0.021], [0.0, -0.005, -0.011]];
+        (fixed, vec![8.0; n + 1], vec![-6.0; n + 1])
+    }
+
+    /// The unconstrained DF QP on 2 axes, banded solver (solve only, the
+    /// two axes together as in the tick).
+    #[divan::bench(args = HORIZONS)]
+    fn qp_banded(bencher: Bencher, n: usize) {
+        let s = DfMpcSettings::default();
+        let (q, r) = (s.tracking_weight[0], s.jerk_weight[0]);
+        let mut solver = AxisSolver::new(n, q, r, DT).unwrap();
+        let (fixed, rx, ry) = qp_data(n);
+        let (mut px, mut py) = (vec![0.0; n + 1], vec![0.0; n + 1]);
+        bencher.bench_local(|| {
+            let a = AxisProblem {
+                fixed: &fixed[0],
+                reference: black_box(&rx),
+                plan: &mut px,
+            };
+            let b = AxisProblem {
+                fixed: &fixed[1],
+                reference: black_box(&ry),
+                plan: &mut py,
+            };
+            solver.solve_pair(a, b).unwrap();
+            black_box(px[3] + py[3])
+        });
+    }
+
+    /// The same unconstrained DF QP on 2 axes handed to clarabel (solve only).
+    #[divan::bench(args = HORIZONS, sample_count = 20, sample_size = 5)]
+    fn qp_clarabel(bencher: Bencher, n: usize) {
+        let s = DfMpcSettings::default();
+        let (q, r) = (s.tracking_weight[0], s.jerk_weight[0]);
+        let new = || {
+            ConstrainedAxisSolver::new(n, q, r, DT, AxisBounds::default(), f64::INFINITY).unwrap()
+        };
+        let mut solvers = [new(), new()];
+        let (fixed, rx, ry) = qp_data(n);
+        let mut plan = vec![0.0; n + 1];
+        bencher.bench_local(|| {
+            solvers[0]
+                .solve(&fixed[0], black_box(&rx), &mut plan)
+                .unwrap();
+            solvers[1]
+                .solve(&fixed[1], black_box(&ry), &mut plan)
+                .unwrap();
+            black_box(plan[3])
+        });
+    }
+}
+
+// ---------------------------------------------------------------------------
+// Flatness MPC (owned by the Flatness MPC engineer).
+// ---------------------------------------------------------------------------
+
+mod fmpc {
+    use super::*;
+    use dflat_control::fmpc::{FlatnessMpc, FmpcSettings};
+
+    /// Flatness MPC tick, 2 axes: flat state from finite differences, the
+    /// three needed rows of the precomputed gain H⁻¹Γᵀq (O(N) per axis),
+    /// feedback linearisation. Same fixtures as the DF-MPC ticks.
+    #[divan::bench(args = HORIZONS)]
+    fn fmpc_tick(bencher: Bencher, n: usize) {
+        let settings = FmpcSettings {
+            horizon: n,
+            ..Default::default()
+        };
+        let mut ctrl = FlatnessMpc::new(model(), settings).unwrap();
+        let mut reference = target();
+        let m = measurement();
+        bencher.bench_local(|| {
+            ctrl.reset();
+            black_box(ctrl.update(black_box(&m), &mut reference).unwrap())
+        });
+    }
+}

@@ -16,7 +16,13 @@
 //! Positions are local NED [m]; angles ZYX [rad]; thrust is specific
 //! collective thrust [m/s²] (thrust / mass).
 
+pub mod banded;
+pub mod dfmpc;
+pub mod fmpc;
 pub mod model;
+pub mod pd;
+pub mod reference;
+pub mod window;
 
 pub use model::ControlModel;
 
@@ -52,7 +58,10 @@ pub struct AttitudeCommand {
 impl AttitudeCommand {
     /// True when every field is finite.
     pub fn is_finite(&self) -> bool {
-        self.pitch.is_finite() && self.roll.is_finite() && self.yaw.is_finite() && self.thrust.is_finite()
+        self.pitch.is_finite()
+            && self.roll.is_finite()
+            && self.yaw.is_finite()
+            && self.thrust.is_finite()
     }
 }
 
@@ -108,7 +117,11 @@ pub trait Controller: Send {
     /// One control tick at control step δt: takes the newest measurement
     /// (at or before the tick) and the reference, returns the command and
     /// records it as sent. On error nothing is recorded.
-    fn update(&mut self, measurement: &Measurement, reference: &mut dyn ReferenceSource) -> Result<TickOutput, ControlError>;
+    fn update(
+        &mut self,
+        measurement: &Measurement,
+        reference: &mut dyn ReferenceSource,
+    ) -> Result<TickOutput, ControlError>;
     /// Forgets all history (window, estimates); the next update starts as
     /// the first one did.
     fn reset(&mut self);
