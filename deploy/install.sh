@@ -1,0 +1,29 @@
+#!/usr/bin/env bash
+# Installs dflat as a systemd service: binary, configuration, unit.
+#
+#   sudo deploy/install.sh [path/to/dflat] [path/to/config.toml]
+#
+# Defaults: target/release/dflat and config/default.toml. An existing
+# /etc/dflat/dflat.toml is kept (the new one is written beside it as
+# dflat.toml.new). Run from the repository root.
+set -euo pipefail
+bin=${1:-target/release/dflat}
+cfg=${2:-config/default.toml}
+[ -x "$bin" ] || { echo "install.sh: $bin not found; run: cargo build --release" >&2; exit 1; }
+[ -f "$cfg" ] || { echo "install.sh: $cfg not found" >&2; exit 1; }
+"$bin" check-config "$cfg" >/dev/null
+
+id -u dflat >/dev/null 2>&1 || useradd --system --no-create-home --shell /usr/sbin/nologin --groups dialout dflat
+install -D -m 0755 "$bin" /usr/local/bin/dflat
+install -d -m 0755 /etc/dflat
+if [ -f /etc/dflat/dflat.toml ]; then
+  install -m 0644 "$cfg" /etc/dflat/dflat.toml.new
+  echo "kept /etc/dflat/dflat.toml; new default written to /etc/dflat/dflat.toml.new"
+else
+  install -m 0644 "$cfg" /etc/dflat/dflat.toml
+fi
+install -D -m 0644 "$(dirname "$0")/dflat.service" /etc/systemd/system/dflat.service
+install -D -m 0644 README.md /usr/local/share/doc/dflat/README.md 2>/dev/null || true
+if command -v systemd-analyze >/dev/null; then systemd-analyze verify /etc/systemd/system/dflat.service; fi
+systemctl daemon-reload
+echo "installed; start with: systemctl enable --now dflat; logs: journalctl -u dflat -f"
