@@ -18,10 +18,13 @@
 //!   seed regardless of thread count), per-tick logs (CSV) and metrics.
 //! * [`plot`] — plotters wrappers (SVG + PNG, vendored font): line plots,
 //!   x-y path plots, grouped box plots, in the paper's colours.
+//! * [`experiments`] — the paper's studies (noise sweep, L-path comparison,
+//!   DSL demonstration): pure runs returning results, JSON and plot writers.
 //!
 //! Conventions (see `DESIGN.md`): local NED [m], body FRD, ZYX Euler angles
 //! [rad], specific thrust [m/s²] (thrust / mass), SI units throughout.
 
+pub mod experiments;
 pub mod harness;
 pub mod plant;
 pub mod plot;

@@ -93,6 +93,14 @@ pub struct LinkConfig {
     pub gcs_system_id: u8,
     /// The pose message used by the controller.
     pub pose_source: PoseSourceKind,
+    /// Also accept SET_POSITION_TARGET_LOCAL_NED from the vehicle's own
+    /// components (system `system_id`, any component but this daemon's),
+    /// besides the ground station.
+    pub vehicle_setpoints: bool,
+    /// Components of the own vehicle, besides the autopilot, whose ODOMETRY /
+    /// VISION_POSITION_ESTIMATE are accepted as pose (e.g. `[197]` for a
+    /// visual-odometry component; each 1–255).
+    pub pose_components: Vec<u8>,
 }
 
 impl Default for LinkConfig {
@@ -104,6 +112,8 @@ impl Default for LinkConfig {
             component_id: 191,
             gcs_system_id: 255,
             pose_source: PoseSourceKind::LocalPositionNed,
+            vehicle_setpoints: true,
+            pose_components: Vec::new(),
         }
     }
 }
@@ -268,7 +278,11 @@ impl Default for MissionConfig {
     fn default() -> Self {
         Self {
             start: MissionStart::Hold,
-            path: vec![[-20.0, -30.0, -10.0], [0.0, -30.0, -10.0], [0.0, 0.0, -10.0]],
+            path: vec![
+                [-20.0, -30.0, -10.0],
+                [0.0, -30.0, -10.0],
+                [0.0, 0.0, -10.0],
+            ],
             speed: 5.0,
             path_trigger_radius: 0.5,
             geofence: [500.0, 500.0, 200.0],
@@ -431,6 +445,14 @@ impl Config {
         ] {
             v.range(name, f64::from(id), 1.0, 255.0)?;
         }
+        for (i, c) in l.pose_components.iter().enumerate() {
+            v.range(
+                &format!("link.pose_components[{i}]"),
+                f64::from(*c),
+                1.0,
+                255.0,
+            )?;
+        }
         let ve = &self.vehicle;
         v.range("vehicle.tau", ve.tau, 0.02, 2.0)?;
         v.range("vehicle.k", ve.k, 0.2, 5.0)?;
@@ -450,7 +472,12 @@ impl Config {
         let c = &self.controller;
         v.range("controller.rate_hz", c.rate_hz, 10.0, 200.0)?;
         v.range("controller.horizon", c.horizon as f64, 10.0, 2000.0)?;
-        v.range("controller.fmpc_horizon", c.fmpc_horizon as f64, 10.0, 2000.0)?;
+        v.range(
+            "controller.fmpc_horizon",
+            c.fmpc_horizon as f64,
+            10.0,
+            2000.0,
+        )?;
         for i in 0..3 {
             v.positive(&format!("controller.q[{i}]"), c.q[i])?;
             v.positive(&format!("controller.r_jerk[{i}]"), c.r_jerk[i])?;
@@ -459,12 +486,22 @@ impl Config {
         v.positive("controller.pd_kp", c.pd_kp)?;
         v.positive("controller.pd_kd", c.pd_kd)?;
         if c.constraint_tilt_deg != 0.0 {
-            v.range("controller.constraint_tilt_deg", c.constraint_tilt_deg, 1.0, 60.0)?;
+            v.range(
+                "controller.constraint_tilt_deg",
+                c.constraint_tilt_deg,
+                1.0,
+                60.0,
+            )?;
         }
         v.range("controller.constraint_speed", c.constraint_speed, 0.0, 50.0)?;
         let m = &self.mission;
         v.range("mission.speed", m.speed, 0.1, 20.0)?;
-        v.range("mission.path_trigger_radius", m.path_trigger_radius, 0.0, 100.0)?;
+        v.range(
+            "mission.path_trigger_radius",
+            m.path_trigger_radius,
+            0.0,
+            100.0,
+        )?;
         for i in 0..3 {
             v.positive(&format!("mission.geofence[{i}]"), m.geofence[i])?;
         }
@@ -495,7 +532,12 @@ impl Config {
         }
         let s = &self.safety;
         v.range("safety.pose_timeout_ms", s.pose_timeout_ms, 5.0, 2000.0)?;
-        v.range("safety.autopilot_timeout_ms", s.autopilot_timeout_ms, 100.0, 10000.0)?;
+        v.range(
+            "safety.autopilot_timeout_ms",
+            s.autopilot_timeout_ms,
+            100.0,
+            10000.0,
+        )?;
         let si = &self.sitl;
         v.nonempty("sitl.url", &si.url)?;
         v.range("sitl.plant_rate_hz", si.plant_rate_hz, 100.0, 2000.0)?;
@@ -575,13 +617,17 @@ mod tests {
     fn out_of_range_names_field_and_range() {
         let e = parse("[vehicle]\ntau = 5.0\n").unwrap_err().to_string();
         assert!(e.contains("vehicle.tau") && e.contains("0.02 to 2"), "{e}");
-        let e = parse("[controller]\nq = [1.0, -1.0, 1.0]\n").unwrap_err().to_string();
+        let e = parse("[controller]\nq = [1.0, -1.0, 1.0]\n")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("controller.q[1]"), "{e}");
     }
 
     #[test]
     fn spatial_needs_normalized_thrust() {
-        let e = parse("[vehicle]\nmodel = \"spatial\"\n").unwrap_err().to_string();
+        let e = parse("[vehicle]\nmodel = \"spatial\"\n")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("vehicle.thrust_mode"), "{e}");
         assert!(parse("[vehicle]\nmodel = \"spatial\"\nthrust_mode = \"normalized\"\n").is_ok());
     }

@@ -1,0 +1,184 @@
+//! From the configuration to the controller, the reference and the thrust
+//! mapping the control loop runs with.
+
+use dflat_control::dfmpc::{DfMpc, DfMpcSettings, InputSaturation, OutputConstraints};
+use dflat_control::fmpc::{FlatnessMpc, FmpcSettings};
+use dflat_control::pd::{Pd, PdSettings};
+use dflat_control::reference::Reference;
+use dflat_control::{ControlError, ControlModel, Controller};
+use dflat_link::ThrustMapping;
+use dflat_model::{Frame, PlanarModel, PlanarParams, SpatialModel, SpatialParams};
+use nalgebra::Vector3;
+
+use crate::config::{Config, ControllerKind, ModelKind, ThrustMode};
+use crate::supervisor::Goal;
+
+/// Smallest specific thrust the spatial model may command \[m/s²\].
+const THRUST_MIN: f64 = 2.0;
+/// Largest vertical acceleration the PD baseline may demand \[m/s²\].
+const PD_MAX_VERTICAL_ACCELERATION: f64 = 4.0;
+
+/// The control model of `[vehicle]` at step δt = 1 / `controller.rate_hz`.
+pub fn control_model(cfg: &Config) -> Result<ControlModel, ControlError> {
+    let v = &cfg.vehicle;
+    let dt = 1.0 / cfg.controller.rate_hz;
+    let psi = v.yaw_deg.to_radians();
+    Ok(match v.model {
+        ModelKind::Planar => ControlModel::Planar(PlanarModel::new(PlanarParams {
+            dt,
+            tau: v.tau,
+            k: v.k,
+            g: v.gravity,
+            psi,
+            frame: Frame::Ned,
+        })?),
+        ModelKind::Spatial => ControlModel::Spatial(SpatialModel::new(SpatialParams {
+            dt,
+            tau: v.tau,
+            k: v.k,
+            tau_thrust: v.tau_thrust,
+            g: v.gravity,
+            psi,
+            frame: Frame::Ned,
+        })?),
+    })
+}
+
+/// How SET_ATTITUDE_TARGET's thrust is filled (`vehicle.thrust_mode`).
+pub fn thrust_mapping(cfg: &Config) -> ThrustMapping {
+    let v = &cfg.vehicle;
+    match v.thrust_mode {
+        ThrustMode::Fixed => ThrustMapping::Fixed(v.thrust_value),
+        ThrustMode::Normalized => ThrustMapping::Normalized {
+            hover_thrust: v.hover_thrust,
+            gravity: v.gravity,
+        },
+    }
+}
+
+/// The controller chosen by `controller.kind`, with the configured model,
+/// weights, horizons, saturation (`vehicle.max_tilt_deg`) and constraints.
+pub fn build_controller(cfg: &Config) -> Result<Box<dyn Controller>, ControlError> {
+    let model = control_model(cfg)?;
+    let c = &cfg.controller;
+    let v = &cfg.vehicle;
+    let max_tilt = v.max_tilt_deg.to_radians();
+    Ok(match c.kind {
+        ControllerKind::DfMpc => {
+            let settings = DfMpcSettings {
+                horizon: c.horizon,
+                tracking_weight: c.q,
+                jerk_weight: c.r_jerk,
+                saturation: Some(InputSaturation {
+                    max_tilt,
+                    thrust_min: THRUST_MIN,
+                    // Normalised thrust 1 is g / hover_thrust.
+                    thrust_max: (v.gravity / v.hover_thrust).max(THRUST_MIN + 1.0),
+                }),
+                constraints: OutputConstraints {
+                    max_tilt: (c.constraint_tilt_deg > 0.0)
+                        .then(|| c.constraint_tilt_deg.to_radians()),
+                    max_speed: (c.constraint_speed > 0.0).then_some(c.constraint_speed),
+                    vertical_acceleration: None,
+                },
+                ..DfMpcSettings::default()
+            };
+            Box::new(DfMpc::new(model, settings)?)
+        }
+        ControllerKind::Fmpc => Box::new(FlatnessMpc::new(
+            model,
+            FmpcSettings {
+                horizon: c.fmpc_horizon,
+                q: c.q,
+                r: c.fmpc_r_jerk,
+                max_tilt: Some(max_tilt),
+            },
+        )?),
+        ControllerKind::Pd => Box::new(Pd::new(
+            model,
+            PdSettings {
+                kp: [c.pd_kp; 3],
+                kd: [c.pd_kd; 3],
+                max_horizontal_acceleration: v.gravity * max_tilt.tan(),
+                max_vertical_acceleration: PD_MAX_VERTICAL_ACCELERATION.min(0.9 * v.gravity),
+                velocity_cutoff_hz: None,
+                max_tilt,
+            },
+        )?),
+    })
+}
+
+/// The configured path (`mission.path` at `mission.speed`), if it has at
+/// least two waypoints.
+pub fn configured_path(cfg: &Config) -> Option<Result<Reference, ControlError>> {
+    let m = &cfg.mission;
+    (m.path.len() >= 2).then(|| {
+        let points: Vec<Vector3<f64>> = m.path.iter().map(|p| Vector3::from(*p)).collect();
+        Reference::path(&points, m.speed)
+    })
+}
+
+/// The reference for a goal (`None` for [`Goal::None`]).
+pub fn reference_for(cfg: &Config, goal: Goal) -> Option<Result<Reference, ControlError>> {
+    match goal {
+        Goal::None => None,
+        Goal::Hold(p) | Goal::Setpoint(p) => Some(Reference::setpoint(Vector3::from(p))),
+        Goal::Path => configured_path(cfg),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use dflat_control::{Measurement, ReferenceSource};
+
+    fn hover(controller: &mut dyn Controller, at: [f64; 3]) {
+        let mut reference = Reference::setpoint(Vector3::from(at)).unwrap();
+        for k in 0..10 {
+            let out = controller
+                .update(
+                    &Measurement {
+                        t: k as f64 * 0.02,
+                        position: Vector3::from(at),
+                        yaw: 0.0,
+                    },
+                    &mut reference as &mut dyn ReferenceSource,
+                )
+                .unwrap();
+            assert!(out.command.is_finite());
+            assert!(out.command.pitch.abs() < 1e-9 && out.command.roll.abs() < 1e-9);
+        }
+    }
+
+    #[test]
+    fn every_kind_builds_from_the_shipped_defaults_and_hovers_level() {
+        for kind in [
+            ControllerKind::DfMpc,
+            ControllerKind::Fmpc,
+            ControllerKind::Pd,
+        ] {
+            let mut cfg = Config::default();
+            cfg.controller.kind = kind;
+            let mut c = build_controller(&cfg).unwrap();
+            hover(c.as_mut(), [1.0, 2.0, -10.0]);
+            cfg.vehicle.model = ModelKind::Spatial;
+            cfg.vehicle.thrust_mode = ThrustMode::Normalized;
+            let mut c = build_controller(&cfg).unwrap();
+            hover(c.as_mut(), [1.0, 2.0, -10.0]);
+        }
+    }
+
+    #[test]
+    fn thrust_and_references() {
+        let mut cfg = Config::default();
+        assert_eq!(thrust_mapping(&cfg), ThrustMapping::Fixed(0.5));
+        cfg.vehicle.thrust_mode = ThrustMode::Normalized;
+        let m = thrust_mapping(&cfg);
+        assert!((m.normalized(cfg.vehicle.gravity).unwrap() - 0.5).abs() < 1e-12);
+        assert!(reference_for(&cfg, Goal::None).is_none());
+        assert!(reference_for(&cfg, Goal::Path).unwrap().is_ok());
+        assert!(reference_for(&cfg, Goal::Hold([0.0; 3])).unwrap().is_ok());
+        cfg.mission.path.clear();
+        assert!(reference_for(&cfg, Goal::Path).is_none());
+    }
+}

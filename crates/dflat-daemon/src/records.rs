@@ -1,0 +1,320 @@
+//! Per-flight records: file names, the CSV row format and its writer thread.
+//!
+//! The control loop hands each tick's [`CsvRow`] (a small `Copy` value) to
+//! [`CsvRecorder::record`], which never blocks and never allocates; a
+//! dedicated thread formats and writes it through a buffer. A full queue
+//! drops the row and counts it. [`CsvRecorder::finish`] writes everything
+//! queued and flushes.
+
+use std::fs::File;
+use std::io::{self, BufWriter, Write};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::{SystemTime, UNIX_EPOCH};
+
+use serde::Serialize;
+
+use crate::supervisor::FlightState;
+
+/// Queue length between the control loop and the CSV thread \[rows\]
+/// (80 s at 50 Hz).
+const CSV_QUEUE: usize = 4096;
+
+/// `YYYYmmdd-HHMMSS` (UTC) of `t`, e.g. `20261102-134501`.
+pub fn utc_stamp(t: SystemTime) -> String {
+    let secs = t
+        .duration_since(UNIX_EPOCH)
+        .map(|d| d.as_secs())
+        .unwrap_or(0);
+    let days = (secs / 86_400) as i64;
+    let rem = secs % 86_400;
+    let (y, m, d) = civil_from_days(days);
+    format!(
+        "{y:04}{m:02}{d:02}-{:02}{:02}{:02}",
+        rem / 3600,
+        (rem / 60) % 60,
+        rem % 60
+    )
+}
+
+/// Proleptic Gregorian date (year, month 1–12, day 1–31) of a day count
+/// since 1970-01-01 (H. Hinnant's algorithm).
+fn civil_from_days(z: i64) -> (i64, u32, u32) {
+    let z = z + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z.rem_euclid(146_097);
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let y = yoe + era * 400;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = (doy - (153 * mp + 2) / 5 + 1) as u32;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 } as u32;
+    (if m <= 2 { y + 1 } else { y }, m, d)
+}
+
+/// `dir/flight-YYYYmmdd-HHMMSS` (UTC, no extension) for a flight starting
+/// at `t`; adds `-2`, `-3`, … if a `.csv` or `.tlog` of that name exists.
+pub fn flight_stem(dir: &Path, t: SystemTime) -> PathBuf {
+    let base = format!("flight-{}", utc_stamp(t));
+    let taken = |stem: &str| {
+        dir.join(format!("{stem}.csv")).exists() || dir.join(format!("{stem}.tlog")).exists()
+    };
+    if !taken(&base) {
+        return dir.join(base);
+    }
+    (2..)
+        .map(|i| format!("{base}-{i}"))
+        .find(|s| !taken(s))
+        .map(|s| dir.join(s))
+        .unwrap_or_else(|| dir.join(base))
+}
+
+/// One control tick as recorded. Positions local NED \[m\], angles ZYX \[rad\].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CsvRow {
+    /// Tick index k (deadline start + k·δt).
+    pub tick: u64,
+    /// Tick deadline since the daemon started \[s\].
+    pub t: f64,
+    /// State at the end of the tick.
+    pub state: FlightState,
+    /// Newest measured position used, if any.
+    pub measured: Option<[f64; 3]>,
+    /// Planned outputs y*_k … y*_{k+3}, if the controller ran.
+    pub plan: Option<[[f64; 3]; 4]>,
+    /// Reference y_ref,k, if the controller ran.
+    pub reference: Option<[f64; 3]>,
+    /// Command sent: roll, pitch, yaw \[rad\], normalised thrust \[0, 1\].
+    pub command: Option<[f64; 4]>,
+    /// Controller update time \[µs\], if it ran.
+    pub solve_us: Option<u32>,
+    /// Wake time − deadline \[µs\].
+    pub jitter_us: u32,
+}
+
+/// The CSV header line (no newline).
+pub const CSV_HEADER: &str = "tick,t,state,x,y,z,\
+plan0_x,plan0_y,plan0_z,plan1_x,plan1_y,plan1_z,plan2_x,plan2_y,plan2_z,plan3_x,plan3_y,plan3_z,\
+ref_x,ref_y,ref_z,roll,pitch,yaw,thrust,solve_us,jitter_us";
+
+fn opt3<W: Write>(w: &mut W, v: Option<[f64; 3]>, precision: usize) -> io::Result<()> {
+    match v {
+        Some([a, b, c]) => write!(w, ",{a:.precision$},{b:.precision$},{c:.precision$}"),
+        None => w.write_all(b",,,"),
+    }
+}
+
+/// Writes one row (with newline) in [`CSV_HEADER`]'s column order. Absent
+/// values are empty fields; positions have 0.1 mm, angles 1 µrad resolution.
+pub fn write_row<W: Write>(w: &mut W, row: &CsvRow) -> io::Result<()> {
+    write!(w, "{},{:.4},{}", row.tick, row.t, row.state.name())?;
+    opt3(w, row.measured, 4)?;
+    match row.plan {
+        Some(plan) => {
+            for p in plan {
+                opt3(w, Some(p), 4)?;
+            }
+        }
+        None => w.write_all(&[b','; 12])?,
+    }
+    opt3(w, row.reference, 4)?;
+    match row.command {
+        Some([r, p, y, t]) => write!(w, ",{r:.6},{p:.6},{y:.6},{t:.4}")?,
+        None => w.write_all(b",,,,")?,
+    }
+    match row.solve_us {
+        Some(s) => write!(w, ",{s}")?,
+        None => w.write_all(b",")?,
+    }
+    writeln!(w, ",{}", row.jitter_us)
+}
+
+/// Counters of a finished [`CsvRecorder`].
+#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize)]
+pub struct CsvReport {
+    /// The file written.
+    pub path: PathBuf,
+    /// Rows written.
+    pub rows: u64,
+    /// Rows dropped (queue full: the disk fell behind).
+    pub dropped: u64,
+    /// Write errors (the first is logged).
+    pub write_errors: u64,
+}
+
+/// The per-flight CSV, written by its own thread.
+#[derive(Debug)]
+pub struct CsvRecorder {
+    tx: std::sync::mpsc::SyncSender<CsvRow>,
+    dropped: Arc<AtomicU64>,
+    thread: std::thread::JoinHandle<CsvReport>,
+}
+
+impl CsvRecorder {
+    /// Creates (truncates) `path`, writes the header and starts the thread.
+    pub fn create(path: &Path) -> io::Result<Self> {
+        let file = File::create(path)?;
+        let (tx, rx) = std::sync::mpsc::sync_channel::<CsvRow>(CSV_QUEUE);
+        let dropped = Arc::new(AtomicU64::new(0));
+        let path = path.to_owned();
+        let thread = std::thread::Builder::new()
+            .name("dflat-csv".into())
+            .spawn(move || {
+                let mut w = BufWriter::with_capacity(64 * 1024, file);
+                let mut report = CsvReport {
+                    path,
+                    ..CsvReport::default()
+                };
+                let note = |e: io::Error, report: &mut CsvReport| {
+                    if report.write_errors == 0 {
+                        tracing::warn!(file = %report.path.display(), error = %e, "CSV write failed");
+                    }
+                    report.write_errors += 1;
+                };
+                if let Err(e) = writeln!(w, "{CSV_HEADER}") {
+                    note(e, &mut report);
+                }
+                // Ends when the sender is dropped (finish), after draining.
+                while let Ok(row) = rx.recv() {
+                    match write_row(&mut w, &row) {
+                        Ok(()) => report.rows += 1,
+                        Err(e) => note(e, &mut report),
+                    }
+                }
+                if let Err(e) = w.flush() {
+                    note(e, &mut report);
+                }
+                report
+            })?;
+        Ok(Self {
+            tx,
+            dropped,
+            thread,
+        })
+    }
+
+    /// Queues one row. Never blocks, never allocates.
+    pub fn record(&self, row: &CsvRow) {
+        if self.tx.try_send(*row).is_err() {
+            self.dropped.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+
+    /// Writes every queued row, flushes and ends the thread (blocks until done).
+    pub fn finish(self) -> CsvReport {
+        drop(self.tx);
+        let dropped = self.dropped.load(Ordering::Relaxed);
+        match self.thread.join() {
+            Ok(mut report) => {
+                report.dropped = dropped;
+                report
+            }
+            Err(_) => CsvReport {
+                dropped,
+                write_errors: 1,
+                ..CsvReport::default()
+            },
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::time::Duration;
+
+    #[test]
+    fn utc_stamps() {
+        assert_eq!(utc_stamp(UNIX_EPOCH), "19700101-000000");
+        // 2000-02-29 12:34:56 UTC = 951827696.
+        assert_eq!(
+            utc_stamp(UNIX_EPOCH + Duration::from_secs(951_827_696)),
+            "20000229-123456"
+        );
+        // 2026-11-02 00:00:00 UTC = 1793577600.
+        assert_eq!(
+            utc_stamp(UNIX_EPOCH + Duration::from_secs(1_793_577_600)),
+            "20261102-000000"
+        );
+        // 2100-03-01 (not a leap year) 23:59:59.
+        assert_eq!(
+            utc_stamp(UNIX_EPOCH + Duration::from_secs(4_107_628_799)),
+            "21000301-235959"
+        );
+    }
+
+    fn row() -> CsvRow {
+        CsvRow {
+            tick: 7,
+            t: 0.14,
+            state: FlightState::Tracking,
+            measured: Some([1.0, -2.5, -10.0]),
+            plan: Some([[1.0, 2.0, 3.0]; 4]),
+            reference: Some([0.0, 0.0, -10.0]),
+            command: Some([0.01, -0.2, 0.0, 0.5]),
+            solve_us: Some(42),
+            jitter_us: 120,
+        }
+    }
+
+    #[test]
+    fn row_format_matches_header() {
+        let mut out = Vec::new();
+        write_row(&mut out, &row()).unwrap();
+        let line = String::from_utf8(out).unwrap();
+        assert_eq!(
+            line,
+            "7,0.1400,TRACKING,1.0000,-2.5000,-10.0000,\
+1.0000,2.0000,3.0000,1.0000,2.0000,3.0000,1.0000,2.0000,3.0000,1.0000,2.0000,3.0000,\
+0.0000,0.0000,-10.0000,0.010000,-0.200000,0.000000,0.5000,42,120\n"
+        );
+        let columns = CSV_HEADER.split(',').count();
+        assert_eq!(line.trim_end().split(',').count(), columns);
+        // A tick without control: empty fields, same column count.
+        let mut out = Vec::new();
+        write_row(
+            &mut out,
+            &CsvRow {
+                state: FlightState::Failsafe,
+                measured: None,
+                plan: None,
+                reference: None,
+                command: None,
+                solve_us: None,
+                ..row()
+            },
+        )
+        .unwrap();
+        let line = String::from_utf8(out).unwrap();
+        assert_eq!(line.trim_end().split(',').count(), columns);
+        assert!(line.starts_with("7,0.1400,FAILSAFE,,,,"), "{line}");
+        assert!(line.ends_with(",,120\n"), "{line}");
+    }
+
+    #[test]
+    fn recorder_writes_everything_on_finish_and_names_are_unique() {
+        let dir = std::env::temp_dir().join(format!("dflat-csv-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let now = SystemTime::now();
+        let stem = flight_stem(&dir, now);
+        let path = stem.with_extension("csv");
+        let rec = CsvRecorder::create(&path).unwrap();
+        for k in 0..1000 {
+            rec.record(&CsvRow { tick: k, ..row() });
+        }
+        let report = rec.finish();
+        assert_eq!(
+            (report.rows, report.dropped, report.write_errors),
+            (1000, 0, 0)
+        );
+        let text = std::fs::read_to_string(&path).unwrap();
+        assert_eq!(text.lines().count(), 1001);
+        assert_eq!(text.lines().next().unwrap(), CSV_HEADER);
+        // Same second again: a different stem.
+        let again = flight_stem(&dir, now);
+        assert_ne!(again, stem);
+        assert!(again.to_string_lossy().ends_with("-2"));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}

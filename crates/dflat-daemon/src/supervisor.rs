@@ -1,0 +1,628 @@
+//! The daemon's flight state machine, as a pure struct.
+//!
+//! ```text
+//!              fresh pose + autopilot alive
+//! WaitingForPose ───────────────────────────► Holding ──setpoint──► Tracking
+//!        │ (mission.start = "path")              ▲  ◄──path finished──┘
+//!        └───────────────────────────────────────┼──────────────────► Tracking
+//!                                                │
+//!        stale pose / silent autopilot           │ fresh pose + autopilot alive
+//! Holding, Tracking ──────────────────► Failsafe ┘ (hold where it is now)
+//! ```
+//!
+//! Time enters as arguments: seconds on the daemon's monotonic clock (any
+//! origin; only differences matter). Pose and heartbeat times are *arrival*
+//! times on the companion computer's clock, so staleness does not depend on
+//! the sender's clock (vision timestamps are not used yet).
+//!
+//! In `Failsafe` and `WaitingForPose` no attitude target is streamed: a
+//! frozen stream would keep PX4 in offboard mode, while silence lets the
+//! autopilot's own failsafe take over.
+
+use serde::Serialize;
+
+/// The daemon's state.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FlightState {
+    /// No fresh pose (or no autopilot heartbeat) yet; not streaming.
+    WaitingForPose,
+    /// Holding a fixed position; streaming.
+    Holding,
+    /// Flying to a setpoint or along the path; streaming.
+    Tracking,
+    /// Pose stale or autopilot silent; not streaming; controller reset.
+    Failsafe,
+}
+
+impl FlightState {
+    /// All states, in the order of [`FlightState::index`].
+    pub const ALL: [FlightState; 4] = [
+        FlightState::WaitingForPose,
+        FlightState::Holding,
+        FlightState::Tracking,
+        FlightState::Failsafe,
+    ];
+
+    /// Position in [`FlightState::ALL`] (0–3).
+    pub fn index(self) -> usize {
+        match self {
+            FlightState::WaitingForPose => 0,
+            FlightState::Holding => 1,
+            FlightState::Tracking => 2,
+            FlightState::Failsafe => 3,
+        }
+    }
+
+    /// Upper-case name for STATUSTEXT and CSV (`WAITING`, `HOLDING`, …).
+    pub fn name(self) -> &'static str {
+        match self {
+            FlightState::WaitingForPose => "WAITING",
+            FlightState::Holding => "HOLDING",
+            FlightState::Tracking => "TRACKING",
+            FlightState::Failsafe => "FAILSAFE",
+        }
+    }
+
+    /// True in the states that stream SET_ATTITUDE_TARGET.
+    pub fn streams(self) -> bool {
+        matches!(self, FlightState::Holding | FlightState::Tracking)
+    }
+}
+
+/// What the controller is asked to fly. Positions local NED \[m\].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Goal {
+    /// Nothing yet (WaitingForPose).
+    None,
+    /// Hold this position.
+    Hold([f64; 3]),
+    /// Fly to this setpoint and hold it.
+    Setpoint([f64; 3]),
+    /// Fly the configured path, then hold its end.
+    Path,
+}
+
+/// Why the state changed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Cause {
+    /// Pose fresh and autopilot alive (start, or recovery from failsafe).
+    PoseFresh,
+    /// `mission.start = "path"`.
+    MissionStart,
+    /// A position setpoint was accepted.
+    Setpoint,
+    /// A setpoint near the path's first waypoint started the path.
+    PathTrigger,
+    /// The path was flown to its end.
+    PathFinished,
+    /// No pose for longer than the timeout.
+    PoseStale,
+    /// No autopilot HEARTBEAT for longer than the timeout.
+    AutopilotSilent,
+}
+
+impl Cause {
+    fn words(self) -> &'static str {
+        match self {
+            Cause::PoseFresh => "pose ok",
+            Cause::MissionStart => "path start",
+            Cause::Setpoint => "setpoint",
+            Cause::PathTrigger => "path start",
+            Cause::PathFinished => "path done",
+            Cause::PoseStale => "pose stale, stream off",
+            Cause::AutopilotSilent => "autopilot lost, stream off",
+        }
+    }
+}
+
+/// A state change, for STATUSTEXT and the log.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Transition {
+    /// State before.
+    pub from: FlightState,
+    /// State after.
+    pub to: FlightState,
+    /// Why.
+    pub cause: Cause,
+    /// When \[s\], the supervisor's clock.
+    pub at: f64,
+}
+
+impl Transition {
+    /// STATUSTEXT text (≤ 50 bytes), e.g. `dflat: FAILSAFE (pose stale, stream off)`.
+    pub fn text(&self) -> String {
+        format!("dflat: {} ({})", self.to.name(), self.cause.words())
+    }
+
+    /// True for transitions into failsafe (sent with a higher severity).
+    pub fn is_failsafe(&self) -> bool {
+        self.to == FlightState::Failsafe
+    }
+}
+
+/// Why a setpoint was refused.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Refusal {
+    /// A coordinate is NaN or infinite.
+    NonFinite,
+    /// Outside the geofence half-widths around the origin.
+    Geofence {
+        /// The refused position \[m\].
+        position: [f64; 3],
+    },
+    /// No control (waiting for pose, or failsafe).
+    NotInControl(FlightState),
+}
+
+impl Refusal {
+    /// STATUSTEXT text (≤ 50 bytes).
+    pub fn text(&self) -> String {
+        match self {
+            Refusal::NonFinite => "dflat: setpoint refused: not finite".into(),
+            Refusal::Geofence { position: p } => {
+                format!(
+                    "dflat: setpoint refused: fence {:.0},{:.0},{:.0}",
+                    p[0], p[1], p[2]
+                )
+            }
+            Refusal::NotInControl(s) => format!("dflat: setpoint refused: {}", s.name()),
+        }
+    }
+}
+
+/// Result of [`Supervisor::on_setpoint`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum SetpointOutcome {
+    /// Accepted; the goal changed. `transition` when the state changed too.
+    Accepted {
+        /// The new goal.
+        goal: Goal,
+        /// State change (Holding → Tracking), if any.
+        transition: Option<Transition>,
+    },
+    /// The same setpoint as the last accepted one (a streaming ground
+    /// station): nothing changes.
+    Unchanged,
+    /// Refused: say so with STATUSTEXT.
+    Refused(Refusal),
+}
+
+/// What the shell does at a tick.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TickDecision {
+    /// Run the controller and send SET_ATTITUDE_TARGET.
+    pub stream: bool,
+    /// Reset the controller before anything else (entering failsafe).
+    pub reset_controller: bool,
+    /// The state change at this tick, if any.
+    pub transition: Option<Transition>,
+}
+
+/// Parameters of the [`Supervisor`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct SupervisorConfig {
+    /// Pose older than this \[s\] is stale.
+    pub pose_timeout: f64,
+    /// No autopilot HEARTBEAT for this long \[s\] means it is silent.
+    pub autopilot_timeout: f64,
+    /// Geofence half-widths around the origin \[m\] (x, y, z).
+    pub geofence: [f64; 3],
+    /// The configured path's first and last waypoints, if a path is configured.
+    pub path_ends: Option<([f64; 3], [f64; 3])>,
+    /// A setpoint within this distance \[m\] of the path's first waypoint
+    /// starts the path (0 = never).
+    pub path_trigger_radius: f64,
+    /// Start the path as soon as pose is fresh (`mission.start = "path"`).
+    pub start_path: bool,
+}
+
+/// The flight state machine. Feed it events with their times; ask it at
+/// each tick whether to stream.
+#[derive(Debug, Clone)]
+pub struct Supervisor {
+    cfg: SupervisorConfig,
+    state: FlightState,
+    goal: Goal,
+    generation: u64,
+    last_pose: Option<(f64, [f64; 3])>,
+    last_heartbeat: Option<f64>,
+    last_setpoint: Option<[f64; 3]>,
+    entered_at: Option<f64>,
+    time_in: [f64; 4],
+    transitions: u64,
+}
+
+impl Supervisor {
+    /// A supervisor in `WaitingForPose`.
+    pub fn new(cfg: SupervisorConfig) -> Self {
+        Self {
+            cfg,
+            state: FlightState::WaitingForPose,
+            goal: Goal::None,
+            generation: 0,
+            last_pose: None,
+            last_heartbeat: None,
+            last_setpoint: None,
+            entered_at: None,
+            time_in: [0.0; 4],
+            transitions: 0,
+        }
+    }
+
+    /// The current state.
+    pub fn state(&self) -> FlightState {
+        self.state
+    }
+
+    /// The current goal.
+    pub fn goal(&self) -> Goal {
+        self.goal
+    }
+
+    /// Increments whenever the goal changes (rebuild the reference then).
+    pub fn goal_generation(&self) -> u64 {
+        self.generation
+    }
+
+    /// Number of state changes so far.
+    pub fn transitions(&self) -> u64 {
+        self.transitions
+    }
+
+    /// Seconds spent in each state up to `now`, indexed by [`FlightState::index`].
+    pub fn time_in_states(&self, now: f64) -> [f64; 4] {
+        let mut t = self.time_in;
+        if let Some(since) = self.entered_at {
+            t[self.state.index()] += (now - since).max(0.0);
+        }
+        t
+    }
+
+    /// A pose arrived at `arrival` \[s\] with `position` (local NED \[m\]).
+    /// Older arrivals than the newest are ignored.
+    pub fn on_pose(&mut self, arrival: f64, position: [f64; 3]) {
+        if self.last_pose.is_none_or(|(t, _)| arrival >= t) {
+            self.last_pose = Some((arrival, position));
+        }
+    }
+
+    /// An autopilot HEARTBEAT arrived at `arrival` \[s\].
+    pub fn on_heartbeat(&mut self, arrival: f64) {
+        if self.last_heartbeat.is_none_or(|t| arrival >= t) {
+            self.last_heartbeat = Some(arrival);
+        }
+    }
+
+    /// A position setpoint (local NED \[m\]) arrived at `t` \[s\].
+    pub fn on_setpoint(&mut self, t: f64, position: [f64; 3]) -> SetpointOutcome {
+        if !position.iter().all(|v| v.is_finite()) {
+            return SetpointOutcome::Refused(Refusal::NonFinite);
+        }
+        if position
+            .iter()
+            .zip(&self.cfg.geofence)
+            .any(|(p, fence)| p.abs() > *fence)
+        {
+            return SetpointOutcome::Refused(Refusal::Geofence { position });
+        }
+        if !self.state.streams() {
+            return SetpointOutcome::Refused(Refusal::NotInControl(self.state));
+        }
+        if self.last_setpoint == Some(position) {
+            return SetpointOutcome::Unchanged;
+        }
+        self.last_setpoint = Some(position);
+        let triggers_path = self.cfg.path_trigger_radius > 0.0
+            && self.cfg.path_ends.is_some_and(|(first, _)| {
+                distance(&first, &position) <= self.cfg.path_trigger_radius
+            });
+        let (goal, cause) = if triggers_path {
+            (Goal::Path, Cause::PathTrigger)
+        } else {
+            (Goal::Setpoint(position), Cause::Setpoint)
+        };
+        self.set_goal(goal);
+        let transition = if self.state == FlightState::Tracking {
+            None
+        } else {
+            Some(self.enter(FlightState::Tracking, cause, t))
+        };
+        SetpointOutcome::Accepted { goal, transition }
+    }
+
+    /// The path reached its end at `t`: hold the last waypoint.
+    pub fn on_path_finished(&mut self, t: f64) -> Option<Transition> {
+        if self.state != FlightState::Tracking || self.goal != Goal::Path {
+            return None;
+        }
+        let (_, end) = self.cfg.path_ends?;
+        self.set_goal(Goal::Hold(end));
+        Some(self.enter(FlightState::Holding, Cause::PathFinished, t))
+    }
+
+    /// The control tick at `t` \[s\].
+    pub fn tick(&mut self, t: f64) -> TickDecision {
+        if self.entered_at.is_none() {
+            self.entered_at = Some(t);
+        }
+        let pose = self
+            .last_pose
+            .filter(|(arrival, _)| t - arrival <= self.cfg.pose_timeout);
+        let autopilot_alive = self
+            .last_heartbeat
+            .is_some_and(|h| t - h <= self.cfg.autopilot_timeout);
+        let mut reset_controller = false;
+        let transition = match (self.state, pose) {
+            (FlightState::WaitingForPose, Some((_, position))) if autopilot_alive => {
+                if self.cfg.start_path && self.cfg.path_ends.is_some() {
+                    self.set_goal(Goal::Path);
+                    Some(self.enter(FlightState::Tracking, Cause::MissionStart, t))
+                } else {
+                    self.set_goal(Goal::Hold(position));
+                    Some(self.enter(FlightState::Holding, Cause::PoseFresh, t))
+                }
+            }
+            (FlightState::Failsafe, Some((_, position))) if autopilot_alive => {
+                self.set_goal(Goal::Hold(position));
+                Some(self.enter(FlightState::Holding, Cause::PoseFresh, t))
+            }
+            (FlightState::Holding | FlightState::Tracking, _)
+                if pose.is_none() || !autopilot_alive =>
+            {
+                reset_controller = true;
+                let cause = if pose.is_none() {
+                    Cause::PoseStale
+                } else {
+                    Cause::AutopilotSilent
+                };
+                Some(self.enter(FlightState::Failsafe, cause, t))
+            }
+            _ => None,
+        };
+        TickDecision {
+            stream: self.state.streams(),
+            reset_controller,
+            transition,
+        }
+    }
+
+    fn set_goal(&mut self, goal: Goal) {
+        if goal != self.goal {
+            self.goal = goal;
+            self.generation += 1;
+        }
+    }
+
+    fn enter(&mut self, to: FlightState, cause: Cause, t: f64) -> Transition {
+        let from = self.state;
+        if let Some(since) = self.entered_at {
+            self.time_in[from.index()] += (t - since).max(0.0);
+        }
+        self.entered_at = Some(t);
+        self.state = to;
+        self.transitions += 1;
+        if to == FlightState::Failsafe {
+            self.last_setpoint = None;
+        }
+        Transition {
+            from,
+            to,
+            cause,
+            at: t,
+        }
+    }
+}
+
+fn distance(a: &[f64; 3], b: &[f64; 3]) -> f64 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use FlightState::*;
+
+    const P0: [f64; 3] = [1.0, 2.0, -10.0];
+    const START: [f64; 3] = [-20.0, -30.0, -10.0];
+    const END: [f64; 3] = [0.0, 0.0, -10.0];
+
+    fn cfg() -> SupervisorConfig {
+        SupervisorConfig {
+            pose_timeout: 0.1,
+            autopilot_timeout: 3.0,
+            geofence: [500.0, 500.0, 200.0],
+            path_ends: Some((START, END)),
+            path_trigger_radius: 0.5,
+            start_path: false,
+        }
+    }
+
+    /// Feeds poses and heartbeats at 50 Hz from `from` to `to` [s] and ticks
+    /// at 50 Hz, returning the decisions.
+    fn fly(s: &mut Supervisor, from: f64, to: f64, pose: bool, hb: bool) -> Vec<TickDecision> {
+        let mut out = Vec::new();
+        let mut t = from;
+        while t < to - 1e-9 {
+            if pose {
+                s.on_pose(t, P0);
+            }
+            if hb {
+                s.on_heartbeat(t);
+            }
+            out.push(s.tick(t + 0.005));
+            t += 0.02;
+        }
+        out
+    }
+
+    #[test]
+    fn waits_for_pose_and_heartbeat_then_holds_the_first_position() {
+        let mut s = Supervisor::new(cfg());
+        assert_eq!(s.state(), WaitingForPose);
+        let d = s.tick(0.0);
+        assert!(!d.stream && d.transition.is_none());
+        // Pose but no autopilot heartbeat: still waiting, not streaming.
+        s.on_pose(0.01, P0);
+        assert!(!s.tick(0.02).stream);
+        s.on_heartbeat(0.03);
+        s.on_pose(0.03, P0);
+        let d = s.tick(0.04);
+        assert!(d.stream);
+        let tr = d.transition.unwrap();
+        assert_eq!(
+            (tr.from, tr.to, tr.cause),
+            (WaitingForPose, Holding, Cause::PoseFresh)
+        );
+        assert_eq!(s.goal(), Goal::Hold(P0));
+        assert!(tr.text().len() <= 50, "{}", tr.text());
+        // Steady: streaming, no further transitions.
+        assert!(
+            fly(&mut s, 0.06, 1.0, true, true)
+                .iter()
+                .all(|d| d.stream && d.transition.is_none())
+        );
+    }
+
+    #[test]
+    fn stale_pose_stops_the_stream_and_resets_then_fresh_pose_resumes_holding_here() {
+        let mut s = Supervisor::new(cfg());
+        fly(&mut s, 0.0, 1.0, true, true);
+        assert_eq!(s.state(), Holding);
+        // Poses stop at 0.98; heartbeats continue.
+        let d = fly(&mut s, 1.0, 2.0, false, true);
+        let first_off = d.iter().position(|d| !d.stream).unwrap();
+        // Last pose at 0.98; tick at 1.005 + 0.02 k; stale once t − 0.98 > 0.1.
+        assert_eq!(
+            first_off, 4,
+            "ticks: stream stops within the 100 ms timeout"
+        );
+        assert!(d[first_off].reset_controller);
+        let tr = d[first_off].transition.unwrap();
+        assert_eq!((tr.to, tr.cause), (Failsafe, Cause::PoseStale));
+        assert!(
+            d[first_off + 1..]
+                .iter()
+                .all(|d| !d.stream && !d.reset_controller)
+        );
+        assert_eq!(s.state(), Failsafe);
+        // A setpoint is refused in failsafe.
+        assert_eq!(
+            s.on_setpoint(1.5, [0.0; 3]),
+            SetpointOutcome::Refused(Refusal::NotInControl(Failsafe))
+        );
+        // Pose resumes at a new place: hold there.
+        let here = [5.0, 5.0, -10.0];
+        s.on_pose(2.0, here);
+        let d = s.tick(2.005);
+        assert!(d.stream);
+        assert_eq!(d.transition.unwrap().to, Holding);
+        assert_eq!(s.goal(), Goal::Hold(here));
+    }
+
+    #[test]
+    fn silent_autopilot_is_a_failsafe_too() {
+        let mut s = Supervisor::new(cfg());
+        fly(&mut s, 0.0, 1.0, true, true);
+        let d = fly(&mut s, 1.0, 5.0, true, false);
+        let off = d.iter().position(|d| !d.stream).unwrap();
+        assert_eq!(d[off].transition.unwrap().cause, Cause::AutopilotSilent);
+        // Heartbeat back + fresh pose: holding.
+        let d = fly(&mut s, 5.0, 5.1, true, true);
+        assert_eq!(d[0].transition.unwrap().to, Holding);
+    }
+
+    #[test]
+    fn setpoints_track_refuse_and_trigger_the_path() {
+        let mut s = Supervisor::new(cfg());
+        // Before pose: refused.
+        assert!(matches!(
+            s.on_setpoint(0.0, [1.0, 1.0, -5.0]),
+            SetpointOutcome::Refused(Refusal::NotInControl(WaitingForPose))
+        ));
+        fly(&mut s, 0.0, 0.5, true, true);
+        let g0 = s.goal_generation();
+        let SetpointOutcome::Accepted { goal, transition } = s.on_setpoint(0.5, [10.0, 0.0, -10.0])
+        else {
+            panic!()
+        };
+        assert_eq!(goal, Goal::Setpoint([10.0, 0.0, -10.0]));
+        assert_eq!(transition.unwrap().to, Tracking);
+        assert_eq!(s.goal_generation(), g0 + 1);
+        // The same setpoint again (a GCS streaming it): unchanged.
+        assert_eq!(
+            s.on_setpoint(0.6, [10.0, 0.0, -10.0]),
+            SetpointOutcome::Unchanged
+        );
+        assert_eq!(s.goal_generation(), g0 + 1);
+        // Outside the fence, or NaN: refused, goal kept.
+        let r = s.on_setpoint(0.7, [600.0, 0.0, -10.0]);
+        assert!(matches!(
+            r,
+            SetpointOutcome::Refused(Refusal::Geofence { .. })
+        ));
+        if let SetpointOutcome::Refused(r) = r {
+            assert!(r.text().len() <= 50, "{}", r.text());
+        }
+        assert_eq!(
+            s.on_setpoint(0.7, [f64::NAN, 0.0, 0.0]),
+            SetpointOutcome::Refused(Refusal::NonFinite)
+        );
+        assert_eq!(s.goal(), Goal::Setpoint([10.0, 0.0, -10.0]));
+        // Near the first waypoint: the path starts (already tracking: no transition).
+        let r = s.on_setpoint(0.8, [-20.2, -30.1, -10.0]);
+        assert_eq!(
+            r,
+            SetpointOutcome::Accepted {
+                goal: Goal::Path,
+                transition: None
+            }
+        );
+        // Path done: hold its end.
+        let tr = s.on_path_finished(5.0).unwrap();
+        assert_eq!((tr.to, tr.cause), (Holding, Cause::PathFinished));
+        assert_eq!(s.goal(), Goal::Hold(END));
+        assert!(s.on_path_finished(5.1).is_none());
+        // The GCS still streams the trigger setpoint: the path does not restart.
+        assert_eq!(
+            s.on_setpoint(5.2, [-20.2, -30.1, -10.0]),
+            SetpointOutcome::Unchanged
+        );
+        assert_eq!(s.state(), Holding);
+    }
+
+    #[test]
+    fn mission_start_path_tracks_at_once_and_time_in_states_adds_up() {
+        let mut s = Supervisor::new(SupervisorConfig {
+            start_path: true,
+            ..cfg()
+        });
+        s.tick(0.0);
+        s.on_pose(0.5, P0);
+        s.on_heartbeat(0.5);
+        let tr = s.tick(0.5).transition.unwrap();
+        assert_eq!((tr.to, tr.cause), (Tracking, Cause::MissionStart));
+        assert_eq!(s.goal(), Goal::Path);
+        let tr = s.tick(0.7).transition.unwrap(); // pose 0.2 s old
+        assert_eq!(tr.to, Failsafe);
+        let t = s.time_in_states(1.0);
+        assert!((t[WaitingForPose.index()] - 0.5).abs() < 1e-12);
+        assert!((t[Tracking.index()] - 0.2).abs() < 1e-12);
+        assert!((t[Failsafe.index()] - 0.3).abs() < 1e-12);
+        assert_eq!(s.transitions(), 2);
+        // Recovery holds (does not restart the path).
+        s.on_pose(1.0, P0);
+        s.on_heartbeat(1.0);
+        assert_eq!(s.tick(1.0).transition.unwrap().to, Holding);
+    }
+
+    #[test]
+    fn out_of_order_arrivals_do_not_refresh() {
+        let mut s = Supervisor::new(cfg());
+        fly(&mut s, 0.0, 0.2, true, true);
+        s.on_pose(0.1, [9.0; 3]); // older than the newest
+        let d = s.tick(0.35);
+        assert_eq!(d.transition.unwrap().to, Failsafe);
+    }
+}

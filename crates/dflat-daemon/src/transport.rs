@@ -1,0 +1,1124 @@
+//! MAVLink I/O shared by the daemon and the SITL autopilot.
+//!
+//! * [`Endpoint`] — a parsed connection string of the mavlink crate's syntax:
+//!   `udpin:HOST:PORT`, `udpout:HOST:PORT`, `tcpout:HOST:PORT`,
+//!   `serial:PATH:BAUD`.
+//! * [`Transport`] — a cloneable handle over one open connection:
+//!   [`Transport::send`] serializes and writes one MAVLink 2 frame,
+//!   [`Transport::recv`] yields the next decoded frame *or framing error*.
+//!
+//! Received bytes go through dflat-link's [`FrameParser`], so checksum
+//! failures, unknown message ids, truncated frames and garbage are reported
+//! as [`RecvEvent::Error`] for counting (the mavlink crate's own readers skip
+//! them silently).
+//!
+//! Semantics per kind:
+//! * `udpin` binds `HOST:PORT` and replies to the last sender; sends before
+//!   any peer has spoken are dropped ([`SendOutcome::NoPeer`]). This is the
+//!   autopilot (SITL) side.
+//! * `udpout` binds an ephemeral local port, sends to `HOST:PORT` and
+//!   receives from anyone (the source filter decides what to act on). This
+//!   is the daemon side.
+//! * `tcpout` connects once; a closed connection is [`TransportError::Closed`]
+//!   (no reconnect).
+//! * `serial` opens the port with the mavlink crate's direct-serial
+//!   transport (8N1, no flow control) in two blocking threads (reader,
+//!   writer). The mavlink reader verifies checksums itself and skips bad
+//!   frames, so on serial links CRC failures are *not* counted; payload
+//!   decoding errors still are.
+//!
+//! An optional [`TlogTap`] records every frame sent and received, with a µs
+//! UNIX timestamp, in a `.tlog` file, written by its own thread so socket
+//! tasks never wait on the disk.
+
+use std::collections::VecDeque;
+use std::fmt;
+use std::io::BufWriter;
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+use std::str::FromStr;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex as StdMutex};
+use std::time::{Instant, SystemTime, UNIX_EPOCH};
+
+use dflat_link::tlog::TlogWriter;
+use dflat_link::{FrameError, FrameParser, LinkError, MAX_FRAME_LEN, MavHeader, MavMessage};
+use thiserror::Error;
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::net::tcp::{OwnedReadHalf, OwnedWriteHalf};
+use tokio::net::{TcpStream, UdpSocket};
+use tokio::sync::{Mutex, mpsc, oneshot};
+
+/// Largest UDP datagram accepted \[bytes\].
+const DATAGRAM_MAX: usize = 65_536;
+/// Read chunk for byte streams (TCP) \[bytes\].
+const STREAM_CHUNK: usize = 4096;
+/// Capacity of the tlog tap queue \[records\]; beyond it records are dropped
+/// and counted.
+const TAP_QUEUE: usize = 8192;
+/// Capacity of the serial reader → async queue \[events\].
+const SERIAL_QUEUE: usize = 1024;
+
+/// Microseconds since the UNIX epoch on the system clock (0 if the clock is
+/// before 1970).
+pub fn unix_time_us() -> u64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map(|d| u64::try_from(d.as_micros()).unwrap_or(u64::MAX))
+        .unwrap_or(0)
+}
+
+/// Why a connection could not be opened or used.
+#[derive(Debug, Error)]
+pub enum TransportError {
+    /// The connection string is not one of the supported forms.
+    #[error("invalid connection string `{url}`: {reason}")]
+    BadUrl {
+        /// The string given.
+        url: String,
+        /// What is wrong, and the accepted forms.
+        reason: String,
+    },
+    /// The host name did not resolve to an address.
+    #[error("{endpoint}: cannot resolve `{host}`")]
+    Resolve {
+        /// The endpoint.
+        endpoint: String,
+        /// The host part.
+        host: String,
+    },
+    /// A socket, port or file operation failed.
+    #[error("{endpoint}: {op}: {source}")]
+    Io {
+        /// The endpoint (or file).
+        endpoint: String,
+        /// The operation (bind, connect, send, recv, …).
+        op: &'static str,
+        /// The OS error.
+        source: std::io::Error,
+    },
+    /// The peer closed the connection (TCP end of stream, serial port gone).
+    #[error("{endpoint}: connection closed")]
+    Closed {
+        /// The endpoint.
+        endpoint: String,
+    },
+    /// The message could not be serialized (e.g. system id > 255).
+    #[error("cannot encode message: {0}")]
+    Encode(#[from] LinkError),
+}
+
+/// A parsed MAVLink connection string.
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+pub enum Endpoint {
+    /// `udpin:HOST:PORT` — bind and reply to the last sender.
+    UdpIn {
+        /// Host name or address to bind (e.g. `0.0.0.0`, `127.0.0.1`).
+        host: String,
+        /// UDP port (0 = any free port, see [`Transport::local_addr`]).
+        port: u16,
+    },
+    /// `udpout:HOST:PORT` — send to the address and receive replies.
+    UdpOut {
+        /// Host name or address of the peer.
+        host: String,
+        /// UDP port of the peer.
+        port: u16,
+    },
+    /// `tcpout:HOST:PORT` — connect to a TCP server.
+    TcpOut {
+        /// Host name or address of the server.
+        host: String,
+        /// TCP port of the server.
+        port: u16,
+    },
+    /// `serial:PATH:BAUD` — a serial port, 8N1.
+    Serial {
+        /// Device path, e.g. `/dev/ttyTHS2`.
+        path: String,
+        /// Baud rate \[bit/s\].
+        baud: u32,
+    },
+}
+
+impl Endpoint {
+    /// Parses a connection string (see the variants). IPv6 hosts may be
+    /// written in brackets: `udpout:[::1]:14540`.
+    pub fn parse(url: &str) -> Result<Self, TransportError> {
+        let bad = |reason: &str| TransportError::BadUrl {
+            url: url.to_owned(),
+            reason: format!(
+                "{reason}; expected udpin:HOST:PORT, udpout:HOST:PORT, tcpout:HOST:PORT or serial:PATH:BAUD"
+            ),
+        };
+        let url_trim = url.trim();
+        let Some((scheme, rest)) = url_trim.split_once(':') else {
+            return Err(bad("no `kind:` prefix"));
+        };
+        let Some((head, tail)) = rest.rsplit_once(':') else {
+            return Err(bad("missing `:PORT` / `:BAUD`"));
+        };
+        if head.is_empty() {
+            return Err(bad("empty host / path"));
+        }
+        let host = head
+            .strip_prefix('[')
+            .and_then(|h| h.strip_suffix(']'))
+            .unwrap_or(head)
+            .to_owned();
+        let port = || {
+            tail.parse::<u16>()
+                .map_err(|_| bad(&format!("port `{tail}` is not an integer 0–65535")))
+        };
+        match scheme {
+            "udpin" => Ok(Endpoint::UdpIn {
+                host,
+                port: port()?,
+            }),
+            "udpout" | "udp" => Ok(Endpoint::UdpOut {
+                host,
+                port: port()?,
+            }),
+            "tcpout" | "tcp" => Ok(Endpoint::TcpOut {
+                host,
+                port: port()?,
+            }),
+            "serial" => {
+                let baud =
+                    tail.parse::<u32>().ok().filter(|b| *b > 0).ok_or_else(|| {
+                        bad(&format!("baud rate `{tail}` is not a positive integer"))
+                    })?;
+                Ok(Endpoint::Serial {
+                    path: head.to_owned(),
+                    baud,
+                })
+            }
+            other => Err(bad(&format!("unknown kind `{other}`"))),
+        }
+    }
+
+    fn host_port(host: &str, port: u16) -> String {
+        if host.contains(':') {
+            format!("[{host}]:{port}")
+        } else {
+            format!("{host}:{port}")
+        }
+    }
+}
+
+impl FromStr for Endpoint {
+    type Err = TransportError;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Endpoint::parse(s)
+    }
+}
+
+impl fmt::Display for Endpoint {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Endpoint::UdpIn { host, port } => write!(f, "udpin:{}", Self::host_port(host, *port)),
+            Endpoint::UdpOut { host, port } => {
+                write!(f, "udpout:{}", Self::host_port(host, *port))
+            }
+            Endpoint::TcpOut { host, port } => {
+                write!(f, "tcpout:{}", Self::host_port(host, *port))
+            }
+            Endpoint::Serial { path, baud } => write!(f, "serial:{path}:{baud}"),
+        }
+    }
+}
+
+/// One decoded frame as received.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Received {
+    /// Sender header (system id ≤ 255).
+    pub header: MavHeader,
+    /// The decoded message.
+    pub message: MavMessage,
+    /// When the bytes were read from the OS, on the monotonic clock (use it
+    /// for staleness: it is the companion computer's own clock).
+    pub arrival: Instant,
+}
+
+/// What [`Transport::recv`] yields.
+#[derive(Debug, Clone, PartialEq)]
+pub enum RecvEvent {
+    /// A frame with a valid checksum and a decodable payload.
+    Frame(Box<Received>),
+    /// A framing error to count (CRC mismatch, unknown id, truncated frame,
+    /// undecodable payload, or bytes without a start marker).
+    Error(FrameError),
+}
+
+/// What [`Transport::send`] did with a message.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SendOutcome {
+    /// Written (or, for serial, queued to the writer thread); the frame's
+    /// length in bytes.
+    Sent(usize),
+    /// `udpin` before any peer has spoken: dropped.
+    NoPeer,
+}
+
+/// A cloneable handle over one open MAVLink connection. All clones share
+/// the socket, the receive buffer and the tlog tap.
+///
+/// `recv` may be called from one task at a time (concurrent callers take
+/// turns); `send` from any number of tasks. Both are cancel-safe: dropping
+/// a pending `recv` loses no frame.
+#[derive(Clone)]
+pub struct Transport {
+    inner: Arc<Inner>,
+}
+
+impl fmt::Debug for Transport {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("Transport")
+            .field("endpoint", &self.inner.endpoint)
+            .field("local_addr", &self.inner.local_addr)
+            .finish()
+    }
+}
+
+struct Inner {
+    endpoint: Endpoint,
+    name: String,
+    local_addr: Option<SocketAddr>,
+    io: Io,
+    rx: Mutex<RxState>,
+    tap: Option<TlogTap>,
+}
+
+enum Io {
+    Udp {
+        socket: UdpSocket,
+        /// `udpin`: last sender (None until one spoke); `udpout`: fixed.
+        peer: StdMutex<Option<SocketAddr>>,
+        reply_to_last: bool,
+    },
+    Tcp {
+        read: Mutex<OwnedReadHalf>,
+        write: Mutex<OwnedWriteHalf>,
+    },
+    Serial {
+        /// Raw frames to the writer thread.
+        tx: std::sync::mpsc::Sender<mavlink::MAVLinkV2MessageRaw>,
+        /// Events from the reader thread.
+        rx: Mutex<mpsc::Receiver<Result<RecvEvent, TransportError>>>,
+    },
+}
+
+/// Receive side state: a scratch buffer, the stream parser and a mirror of
+/// the parser's unconsumed bytes (to tap frames byte-exactly).
+struct RxState {
+    buf: Vec<u8>,
+    parser: FrameParser,
+    mirror: Vec<u8>,
+    pending: VecDeque<RecvEvent>,
+}
+
+impl RxState {
+    fn new(buf_len: usize) -> Self {
+        Self {
+            buf: vec![0; buf_len],
+            parser: FrameParser::new(),
+            mirror: Vec::with_capacity(4 * MAX_FRAME_LEN),
+            pending: VecDeque::with_capacity(16),
+        }
+    }
+
+    /// Feeds `len` bytes of `self.buf` to the parser and queues the events.
+    /// `complete`: the bytes are a whole datagram (no frame continues).
+    fn ingest(&mut self, len: usize, complete: bool, arrival: Instant, tap: Option<&TlogTap>) {
+        let bytes = &self.buf[..len];
+        // Keep the mirror equal to the parser's buffer after `push`.
+        let keep = self.parser.pending();
+        let drop_n = self.mirror.len().saturating_sub(keep);
+        self.mirror.drain(..drop_n);
+        self.mirror.extend_from_slice(bytes);
+        let skipped_before = self.parser.skipped_bytes();
+        let errors_before = self.errors_queued();
+        self.parser.push(bytes);
+        let ts = unix_time_us();
+        while let Some(item) = self.parser.next_frame() {
+            match item {
+                Ok(frame) => {
+                    if let Some(tap) = tap {
+                        let end = self.mirror.len().saturating_sub(self.parser.pending());
+                        match self.mirror.get(end.saturating_sub(frame.len)..end) {
+                            Some(raw) if raw.len() == frame.len => tap.record(ts, raw),
+                            _ => tap.record_message(ts, &frame.header, &frame.message),
+                        }
+                    }
+                    self.pending.push_back(RecvEvent::Frame(Box::new(Received {
+                        header: frame.header,
+                        message: frame.message,
+                        arrival,
+                    })));
+                }
+                Err(e) => self.pending.push_back(RecvEvent::Error(e)),
+            }
+        }
+        let skipped = self.parser.skipped_bytes() > skipped_before;
+        if complete {
+            // `finish` also resets the parser's counters.
+            for item in self.parser.finish() {
+                match item {
+                    Ok(frame) => {
+                        if let Some(tap) = tap {
+                            tap.record_message(ts, &frame.header, &frame.message);
+                        }
+                        self.pending.push_back(RecvEvent::Frame(Box::new(Received {
+                            header: frame.header,
+                            message: frame.message,
+                            arrival,
+                        })));
+                    }
+                    Err(e) => self.pending.push_back(RecvEvent::Error(e)),
+                }
+            }
+            self.mirror.clear();
+        }
+        // Bytes outside any frame candidate: one error per chunk, unless a
+        // bad candidate in this chunk already explains them.
+        if skipped && self.errors_queued() == errors_before {
+            self.pending
+                .push_back(RecvEvent::Error(FrameError::NoMarker));
+        }
+    }
+
+    fn errors_queued(&self) -> usize {
+        self.pending
+            .iter()
+            .filter(|e| matches!(e, RecvEvent::Error(_)))
+            .count()
+    }
+}
+
+impl Transport {
+    /// Opens `endpoint` without a tlog tap.
+    pub async fn open(endpoint: &Endpoint) -> Result<Self, TransportError> {
+        Self::open_with_tap(endpoint, None).await
+    }
+
+    /// Opens `endpoint`; every frame sent or received is recorded in `tap`
+    /// (keep a clone of the tap to [`TlogTap::close`] it at the end).
+    pub async fn open_with_tap(
+        endpoint: &Endpoint,
+        tap: Option<TlogTap>,
+    ) -> Result<Self, TransportError> {
+        let name = endpoint.to_string();
+        let io_err = |op: &'static str| {
+            let name = name.clone();
+            move |source: std::io::Error| TransportError::Io {
+                endpoint: name,
+                op,
+                source,
+            }
+        };
+        let (io, local_addr, buf_len) = match endpoint {
+            Endpoint::UdpIn { host, port } => {
+                let addr = resolve(&name, host, *port).await?;
+                let socket = UdpSocket::bind(addr).await.map_err(io_err("bind"))?;
+                let local = socket.local_addr().map_err(io_err("local_addr"))?;
+                let io = Io::Udp {
+                    socket,
+                    peer: StdMutex::new(None),
+                    reply_to_last: true,
+                };
+                (io, Some(local), DATAGRAM_MAX)
+            }
+            Endpoint::UdpOut { host, port } => {
+                let addr = resolve(&name, host, *port).await?;
+                let any: SocketAddr = if addr.is_ipv4() {
+                    SocketAddr::from(([0, 0, 0, 0], 0))
+                } else {
+                    SocketAddr::from(([0u16; 8], 0))
+                };
+                let socket = UdpSocket::bind(any).await.map_err(io_err("bind"))?;
+                let local = socket.local_addr().map_err(io_err("local_addr"))?;
+                let io = Io::Udp {
+                    socket,
+                    peer: StdMutex::new(Some(addr)),
+                    reply_to_last: false,
+                };
+                (io, Some(local), DATAGRAM_MAX)
+            }
+            Endpoint::TcpOut { host, port } => {
+                let addr = resolve(&name, host, *port).await?;
+                let stream = TcpStream::connect(addr).await.map_err(io_err("connect"))?;
+                stream.set_nodelay(true).map_err(io_err("set_nodelay"))?;
+                let local = stream.local_addr().map_err(io_err("local_addr"))?;
+                let (read, write) = stream.into_split();
+                let io = Io::Tcp {
+                    read: Mutex::new(read),
+                    write: Mutex::new(write),
+                };
+                (io, Some(local), STREAM_CHUNK)
+            }
+            Endpoint::Serial { path, baud } => {
+                let io = serial::open(&name, path, *baud, tap.clone()).await?;
+                (io, None, 0)
+            }
+        };
+        tracing::debug!(endpoint = %name, ?local_addr, "link open");
+        Ok(Self {
+            inner: Arc::new(Inner {
+                endpoint: endpoint.clone(),
+                name,
+                local_addr,
+                io,
+                rx: Mutex::new(RxState::new(buf_len)),
+                tap,
+            }),
+        })
+    }
+
+    /// The endpoint this transport was opened on.
+    pub fn endpoint(&self) -> &Endpoint {
+        &self.inner.endpoint
+    }
+
+    /// The local socket address (UDP, TCP); `None` for serial. With
+    /// `udpin:127.0.0.1:0` this is the port the OS chose.
+    pub fn local_addr(&self) -> Option<SocketAddr> {
+        self.inner.local_addr
+    }
+
+    /// The UDP peer sends go to: `udpout`'s target, or `udpin`'s last
+    /// sender (`None` until one spoke). `None` for TCP / serial.
+    pub fn peer(&self) -> Option<SocketAddr> {
+        match &self.inner.io {
+            Io::Udp { peer, .. } => *peer.lock().unwrap_or_else(|p| p.into_inner()),
+            _ => None,
+        }
+    }
+
+    /// The tlog tap, if any.
+    pub fn tap(&self) -> Option<&TlogTap> {
+        self.inner.tap.as_ref()
+    }
+
+    /// Serializes `msg` with `header` (MAVLink 2, unsigned; the caller owns
+    /// the sequence number) and writes it. Does not allocate.
+    pub async fn send(
+        &self,
+        header: &MavHeader,
+        msg: &MavMessage,
+    ) -> Result<SendOutcome, TransportError> {
+        let frame = dflat_link::serialize_v2(header, msg)?;
+        let bytes = frame.as_bytes();
+        let io_err = |op: &'static str, source| TransportError::Io {
+            endpoint: self.inner.name.clone(),
+            op,
+            source,
+        };
+        match &self.inner.io {
+            Io::Udp { socket, peer, .. } => {
+                let target = *peer.lock().unwrap_or_else(|p| p.into_inner());
+                let Some(target) = target else {
+                    return Ok(SendOutcome::NoPeer);
+                };
+                socket
+                    .send_to(bytes, target)
+                    .await
+                    .map_err(|e| io_err("send", e))?;
+            }
+            Io::Tcp { write, .. } => {
+                let mut w = write.lock().await;
+                w.write_all(bytes).await.map_err(|e| io_err("send", e))?;
+            }
+            Io::Serial { tx, .. } => {
+                let mut raw = mavlink::MAVLinkV2MessageRaw::new();
+                raw.serialize_message(*header, msg);
+                tx.send(raw).map_err(|_| TransportError::Closed {
+                    endpoint: self.inner.name.clone(),
+                })?;
+            }
+        }
+        if let Some(tap) = &self.inner.tap {
+            tap.record(unix_time_us(), bytes);
+        }
+        Ok(SendOutcome::Sent(bytes.len()))
+    }
+
+    /// The next received frame or framing error. Errors are I/O failures of
+    /// the connection itself: on UDP they are usually transient (e.g. an
+    /// ICMP "port unreachable" reported by the OS), [`TransportError::Closed`]
+    /// is final.
+    pub async fn recv(&self) -> Result<RecvEvent, TransportError> {
+        if let Io::Serial { rx, .. } = &self.inner.io {
+            let mut rx = rx.lock().await;
+            return match rx.recv().await {
+                Some(item) => item,
+                None => Err(TransportError::Closed {
+                    endpoint: self.inner.name.clone(),
+                }),
+            };
+        }
+        let mut state = self.inner.rx.lock().await;
+        loop {
+            if let Some(event) = state.pending.pop_front() {
+                return Ok(event);
+            }
+            let io_err = |source| TransportError::Io {
+                endpoint: self.inner.name.clone(),
+                op: "recv",
+                source,
+            };
+            match &self.inner.io {
+                Io::Udp {
+                    socket,
+                    peer,
+                    reply_to_last,
+                } => {
+                    let (n, from) = socket.recv_from(&mut state.buf).await.map_err(io_err)?;
+                    let arrival = Instant::now();
+                    if *reply_to_last {
+                        *peer.lock().unwrap_or_else(|p| p.into_inner()) = Some(from);
+                    }
+                    state.ingest(n, true, arrival, self.inner.tap.as_ref());
+                }
+                Io::Tcp { read, .. } => {
+                    let n = {
+                        let mut r = read.lock().await;
+                        let RxState { buf, .. } = &mut *state;
+                        r.read(buf).await.map_err(io_err)?
+                    };
+                    let arrival = Instant::now();
+                    if n == 0 {
+                        return Err(TransportError::Closed {
+                            endpoint: self.inner.name.clone(),
+                        });
+                    }
+                    state.ingest(n, false, arrival, self.inner.tap.as_ref());
+                }
+                Io::Serial { .. } => unreachable!("handled above"),
+            }
+        }
+    }
+}
+
+async fn resolve(endpoint: &str, host: &str, port: u16) -> Result<SocketAddr, TransportError> {
+    let mut addrs = tokio::net::lookup_host((host, port))
+        .await
+        .map_err(|source| TransportError::Io {
+            endpoint: endpoint.to_owned(),
+            op: "resolve",
+            source,
+        })?;
+    addrs.next().ok_or_else(|| TransportError::Resolve {
+        endpoint: endpoint.to_owned(),
+        host: host.to_owned(),
+    })
+}
+
+mod serial {
+    //! Serial ports through the mavlink crate's direct-serial transport,
+    //! in two blocking threads.
+
+    use std::time::{Duration, Instant};
+
+    use dflat_link::FrameError;
+    use mavlink::error::MessageReadError;
+    use mavlink::{Connectable, MAVLinkMessageRaw, MavConnection, SerialConfig};
+    use tokio::sync::{Mutex, mpsc};
+
+    use super::{Io, Received, RecvEvent, SERIAL_QUEUE, TlogTap, TransportError, unix_time_us};
+
+    pub(super) async fn open(
+        name: &str,
+        path: &str,
+        baud: u32,
+        tap: Option<TlogTap>,
+    ) -> Result<Io, TransportError> {
+        let config = SerialConfig::new(path.to_owned(), baud).timeout(Duration::from_millis(100));
+        let conn = tokio::task::spawn_blocking(move || config.connect::<dflat_link::MavMessage>())
+            .await
+            .map_err(|e| TransportError::Io {
+                endpoint: name.to_owned(),
+                op: "open",
+                source: std::io::Error::other(e.to_string()),
+            })?
+            .map_err(|source| TransportError::Io {
+                endpoint: name.to_owned(),
+                op: "open",
+                source,
+            })?;
+        let conn = std::sync::Arc::new(conn);
+        let (ev_tx, ev_rx) = mpsc::channel(SERIAL_QUEUE);
+        let (raw_tx, raw_rx) = std::sync::mpsc::channel::<mavlink::MAVLinkV2MessageRaw>();
+
+        let reader = conn.clone();
+        let reader_name = name.to_owned();
+        std::thread::Builder::new()
+            .name("dflat-serial-rx".into())
+            .spawn(move || {
+                loop {
+                    let item = match reader.recv_raw() {
+                        Ok(raw) => {
+                            let arrival = Instant::now();
+                            let bytes = match &raw {
+                                MAVLinkMessageRaw::V1(r) => r.raw_bytes(),
+                                MAVLinkMessageRaw::V2(r) => r.raw_bytes(),
+                            };
+                            match dflat_link::parse_frame(bytes) {
+                                Ok(frame) => {
+                                    if let Some(tap) = &tap {
+                                        tap.record(unix_time_us(), bytes);
+                                    }
+                                    Ok(RecvEvent::Frame(Box::new(Received {
+                                        header: frame.header,
+                                        message: frame.message,
+                                        arrival,
+                                    })))
+                                }
+                                Err(e) => Ok(RecvEvent::Error(e)),
+                            }
+                        }
+                        Err(MessageReadError::Parse(e)) => {
+                            Ok(RecvEvent::Error(FrameError::from_parser_error(0, &e)))
+                        }
+                        Err(MessageReadError::Io(e)) => {
+                            let closed = e.kind() == std::io::ErrorKind::UnexpectedEof;
+                            let err = if closed {
+                                TransportError::Closed {
+                                    endpoint: reader_name.clone(),
+                                }
+                            } else {
+                                TransportError::Io {
+                                    endpoint: reader_name.clone(),
+                                    op: "recv",
+                                    source: e,
+                                }
+                            };
+                            let _ = ev_tx.blocking_send(Err(err));
+                            if closed {
+                                return;
+                            }
+                            std::thread::sleep(Duration::from_millis(100));
+                            continue;
+                        }
+                    };
+                    if ev_tx.blocking_send(item).is_err() {
+                        return; // the transport was dropped
+                    }
+                }
+            })
+            .map_err(|source| TransportError::Io {
+                endpoint: name.to_owned(),
+                op: "spawn reader",
+                source,
+            })?;
+
+        let writer_name = name.to_owned();
+        std::thread::Builder::new()
+            .name("dflat-serial-tx".into())
+            .spawn(move || {
+                while let Ok(raw) = raw_rx.recv() {
+                    if let Err(e) = conn.send_raw(&MAVLinkMessageRaw::V2(raw)) {
+                        tracing::warn!(endpoint = %writer_name, error = %e, "serial write failed");
+                    }
+                }
+            })
+            .map_err(|source| TransportError::Io {
+                endpoint: name.to_owned(),
+                op: "spawn writer",
+                source,
+            })?;
+
+        Ok(Io::Serial {
+            tx: raw_tx,
+            rx: Mutex::new(ev_rx),
+        })
+    }
+}
+
+/// Counters of a [`TlogTap`], returned by [`TlogTap::close`].
+#[derive(Debug, Clone, PartialEq, Eq, Default, serde::Serialize)]
+pub struct TlogReport {
+    /// The file written.
+    pub path: PathBuf,
+    /// Records written.
+    pub records: u64,
+    /// Records dropped because the writer fell behind (queue full) or the
+    /// tap was already closed.
+    pub dropped: u64,
+    /// Write errors (the first one is logged).
+    pub write_errors: u64,
+}
+
+// Records are inline so that queuing one never allocates; the channel's
+// slots are sized for them once.
+#[allow(clippy::large_enum_variant)]
+enum TapMsg {
+    Record {
+        ts_us: u64,
+        len: u16,
+        bytes: [u8; MAX_FRAME_LEN],
+    },
+    Close(oneshot::Sender<TlogReport>),
+}
+
+/// A `.tlog` recorder running on its own thread. Cloneable; all clones feed
+/// the same file. [`record`](Self::record) never blocks (a full queue drops
+/// and counts the record); [`close`](Self::close) flushes and ends it.
+#[derive(Clone)]
+pub struct TlogTap {
+    tx: std::sync::mpsc::SyncSender<TapMsg>,
+    dropped: Arc<AtomicU64>,
+    path: Arc<PathBuf>,
+}
+
+impl fmt::Debug for TlogTap {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("TlogTap").field("path", &self.path).finish()
+    }
+}
+
+impl TlogTap {
+    /// Creates (truncates) `path` and starts the writer thread.
+    pub fn create(path: &Path) -> Result<Self, TransportError> {
+        let io_err = |op, source| TransportError::Io {
+            endpoint: path.display().to_string(),
+            op,
+            source,
+        };
+        let file = std::fs::File::create(path).map_err(|e| io_err("create tlog", e))?;
+        let (tx, rx) = std::sync::mpsc::sync_channel::<TapMsg>(TAP_QUEUE);
+        let dropped = Arc::new(AtomicU64::new(0));
+        let thread_dropped = dropped.clone();
+        let thread_path = path.to_owned();
+        std::thread::Builder::new()
+            .name("dflat-tlog".into())
+            .spawn(move || {
+                let mut writer = TlogWriter::new(BufWriter::with_capacity(64 * 1024, file));
+                let mut write_errors = 0u64;
+                let note = |e: &dyn fmt::Display, write_errors: &mut u64| {
+                    if *write_errors == 0 {
+                        tracing::warn!(file = %thread_path.display(), error = %e, "tlog write failed");
+                    }
+                    *write_errors += 1;
+                };
+                let mut reply = None;
+                while let Ok(msg) = rx.recv() {
+                    match msg {
+                        TapMsg::Record { ts_us, len, bytes } => {
+                            if let Err(e) = writer.write_frame(ts_us, &bytes[..usize::from(len)]) {
+                                note(&e, &mut write_errors);
+                            }
+                        }
+                        TapMsg::Close(r) => {
+                            reply = Some(r);
+                            break;
+                        }
+                    }
+                }
+                if let Err(e) = writer.flush() {
+                    note(&e, &mut write_errors);
+                }
+                let report = TlogReport {
+                    path: thread_path.clone(),
+                    records: writer.records(),
+                    dropped: thread_dropped.load(Ordering::Relaxed),
+                    write_errors,
+                };
+                if let Some(r) = reply {
+                    let _ = r.send(report);
+                }
+            })
+            .map_err(|e| io_err("spawn tlog writer", e))?;
+        Ok(Self {
+            tx,
+            dropped,
+            path: Arc::new(path.to_owned()),
+        })
+    }
+
+    /// The file being written.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Queues one frame (`bytes`: exactly one MAVLink frame) with its
+    /// timestamp \[µs since the UNIX epoch\]. Never blocks, never allocates.
+    pub fn record(&self, ts_us: u64, bytes: &[u8]) {
+        if bytes.len() > MAX_FRAME_LEN {
+            self.dropped.fetch_add(1, Ordering::Relaxed);
+            return;
+        }
+        let mut buf = [0u8; MAX_FRAME_LEN];
+        buf[..bytes.len()].copy_from_slice(bytes);
+        let msg = TapMsg::Record {
+            ts_us,
+            len: bytes.len() as u16,
+            bytes: buf,
+        };
+        if self.tx.try_send(msg).is_err() {
+            self.dropped.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+
+    /// Serializes `msg` (MAVLink 2) and queues it like [`record`](Self::record).
+    pub fn record_message(&self, ts_us: u64, header: &MavHeader, msg: &MavMessage) {
+        match dflat_link::serialize_v2(header, msg) {
+            Ok(frame) => self.record(ts_us, frame.as_bytes()),
+            Err(_) => {
+                self.dropped.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+    }
+
+    /// Writes everything queued so far, flushes the file and stops the
+    /// writer; later records are dropped (and counted). Returns the counters,
+    /// or `None` if the tap was already closed.
+    pub async fn close(&self) -> Option<TlogReport> {
+        let (reply, done) = oneshot::channel();
+        // A blocking send: the queue may be full; the writer drains it.
+        let tx = self.tx.clone();
+        let sent = tokio::task::spawn_blocking(move || tx.send(TapMsg::Close(reply)).is_ok())
+            .await
+            .unwrap_or(false);
+        if !sent {
+            return None;
+        }
+        done.await.ok()
+    }
+
+    /// Blocking variant of [`close`](Self::close) for non-async callers.
+    pub fn close_blocking(&self) -> Option<TlogReport> {
+        let (reply, done) = oneshot::channel();
+        self.tx.send(TapMsg::Close(reply)).ok()?;
+        done.blocking_recv().ok()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use dflat_link::tlog::TlogReader;
+    use dflat_link::{DaemonStatus, heartbeat_onboard};
+    use std::time::Duration;
+
+    fn hdr(sys: u8, comp: u8, seq: u8) -> MavHeader {
+        dflat_link::header(sys, comp, seq)
+    }
+
+    #[test]
+    fn parses_connection_strings() {
+        assert_eq!(
+            Endpoint::parse("udpin:0.0.0.0:14540").unwrap(),
+            Endpoint::UdpIn {
+                host: "0.0.0.0".into(),
+                port: 14540
+            }
+        );
+        assert_eq!(
+            Endpoint::parse("udpout:localhost:14550").unwrap(),
+            Endpoint::UdpOut {
+                host: "localhost".into(),
+                port: 14550
+            }
+        );
+        assert_eq!(
+            Endpoint::parse("tcpout:[::1]:5760").unwrap(),
+            Endpoint::TcpOut {
+                host: "::1".into(),
+                port: 5760
+            }
+        );
+        assert_eq!(
+            Endpoint::parse("serial:/dev/ttyTHS2:921600").unwrap(),
+            Endpoint::Serial {
+                path: "/dev/ttyTHS2".into(),
+                baud: 921_600
+            }
+        );
+        for s in [
+            "udpin:0.0.0.0:14540",
+            "udpout:[::1]:1",
+            "serial:/dev/ttyUSB0:57600",
+        ] {
+            assert_eq!(Endpoint::parse(s).unwrap().to_string(), s);
+        }
+        for bad in [
+            "",
+            "udpin",
+            "udpin:1.2.3.4",
+            "udpin::5",
+            "udpin:h:99999",
+            "serial:/dev/x:0",
+            "ftp:h:1",
+        ] {
+            let e = Endpoint::parse(bad).unwrap_err().to_string();
+            assert!(e.contains("expected udpin"), "{bad}: {e}");
+        }
+    }
+
+    async fn recv_frame(t: &Transport) -> Received {
+        match tokio::time::timeout(Duration::from_secs(2), t.recv())
+            .await
+            .expect("timed out")
+            .expect("recv")
+        {
+            RecvEvent::Frame(r) => *r,
+            RecvEvent::Error(e) => panic!("unexpected frame error {e}"),
+        }
+    }
+
+    #[tokio::test]
+    async fn udp_round_trip_and_udpin_replies_to_last_sender() {
+        let server = Transport::open(&Endpoint::parse("udpin:127.0.0.1:0").unwrap())
+            .await
+            .unwrap();
+        let port = server.local_addr().unwrap().port();
+        // No peer yet: dropped.
+        let hb = heartbeat_onboard(DaemonStatus::Active);
+        assert_eq!(
+            server.send(&hdr(1, 1, 0), &hb).await.unwrap(),
+            SendOutcome::NoPeer
+        );
+        let client =
+            Transport::open(&Endpoint::parse(&format!("udpout:127.0.0.1:{port}")).unwrap())
+                .await
+                .unwrap();
+        assert!(matches!(
+            client.send(&hdr(1, 191, 7), &hb).await.unwrap(),
+            SendOutcome::Sent(_)
+        ));
+        let got = recv_frame(&server).await;
+        assert_eq!(got.header, hdr(1, 191, 7));
+        assert_eq!(got.message, hb);
+        assert_eq!(
+            server.peer().map(|a| a.port()),
+            client.local_addr().map(|a| a.port())
+        );
+        // Reply reaches the client.
+        assert!(matches!(
+            server.send(&hdr(1, 1, 3), &hb).await.unwrap(),
+            SendOutcome::Sent(_)
+        ));
+        let back = recv_frame(&client).await;
+        assert_eq!(back.header, hdr(1, 1, 3));
+    }
+
+    #[tokio::test]
+    async fn garbage_and_bad_crc_are_reported() {
+        let server = Transport::open(&Endpoint::parse("udpin:127.0.0.1:0").unwrap())
+            .await
+            .unwrap();
+        let addr = server.local_addr().unwrap();
+        let raw = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+        let hb = heartbeat_onboard(DaemonStatus::Standby);
+        let good = dflat_link::serialize_v2(&hdr(1, 1, 0), &hb).unwrap();
+        let mut bad = good.as_bytes().to_vec();
+        let n = bad.len();
+        bad[n - 1] ^= 0xff; // corrupt the CRC
+        raw.send_to(b"hello, not mavlink", addr).unwrap();
+        raw.send_to(&bad, addr).unwrap();
+        // Two frames in one datagram.
+        let mut two = good.as_bytes().to_vec();
+        two.extend_from_slice(good.as_bytes());
+        raw.send_to(&two, addr).unwrap();
+        let mut events = Vec::new();
+        while let Ok(ev) = tokio::time::timeout(Duration::from_millis(300), server.recv()).await {
+            events.push(ev.unwrap());
+        }
+        assert_eq!(events.len(), 4, "{events:?}");
+        assert_eq!(events[0], RecvEvent::Error(FrameError::NoMarker));
+        assert_eq!(events[1], RecvEvent::Error(FrameError::Crc { msg_id: 0 }));
+        assert!(matches!(&events[2], RecvEvent::Frame(r) if r.message == hb));
+        assert!(matches!(&events[3], RecvEvent::Frame(r) if r.message == hb));
+    }
+
+    #[tokio::test]
+    async fn tcp_stream_split_across_reads() {
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+        let port = listener.local_addr().unwrap().port();
+        let client_task = tokio::spawn(async move {
+            Transport::open(&Endpoint::parse(&format!("tcpout:127.0.0.1:{port}")).unwrap())
+                .await
+                .unwrap()
+        });
+        let (mut sock, _) = listener.accept().await.unwrap();
+        let client = client_task.await.unwrap();
+        let hb = heartbeat_onboard(DaemonStatus::Active);
+        let frame = dflat_link::serialize_v2(&hdr(1, 1, 9), &hb).unwrap();
+        let bytes = frame.as_bytes();
+        sock.write_all(&bytes[..5]).await.unwrap();
+        sock.flush().await.unwrap();
+        tokio::time::sleep(Duration::from_millis(20)).await;
+        sock.write_all(&bytes[5..]).await.unwrap();
+        let got = recv_frame(&client).await;
+        assert_eq!(got.header.sequence, 9);
+        client.send(&hdr(1, 191, 1), &hb).await.unwrap();
+        let mut buf = vec![0u8; bytes.len()];
+        sock.read_exact(&mut buf).await.unwrap();
+        assert_eq!(dflat_link::parse_frame(&buf).unwrap().message, hb);
+        drop(sock);
+        let end = tokio::time::timeout(Duration::from_secs(2), client.recv())
+            .await
+            .unwrap();
+        assert!(matches!(end, Err(TransportError::Closed { .. })));
+    }
+
+    #[tokio::test]
+    async fn tlog_tap_records_both_directions() {
+        let dir = std::env::temp_dir().join(format!("dflat-tap-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("t.tlog");
+        let tap = TlogTap::create(&path).unwrap();
+        let server = Transport::open_with_tap(
+            &Endpoint::parse("udpin:127.0.0.1:0").unwrap(),
+            Some(tap.clone()),
+        )
+        .await
+        .unwrap();
+        let port = server.local_addr().unwrap().port();
+        let client =
+            Transport::open(&Endpoint::parse(&format!("udpout:127.0.0.1:{port}")).unwrap())
+                .await
+                .unwrap();
+        let hb = heartbeat_onboard(DaemonStatus::Active);
+        let before = unix_time_us();
+        client.send(&hdr(1, 191, 0), &hb).await.unwrap();
+        recv_frame(&server).await;
+        server.send(&hdr(1, 1, 0), &hb).await.unwrap();
+        let report = tap.close().await.unwrap();
+        assert_eq!(report.records, 2);
+        assert_eq!(report.dropped, 0);
+        let file = std::fs::File::open(&path).unwrap();
+        let records: Vec<_> = TlogReader::new(std::io::BufReader::new(file))
+            .collect::<Result<_, _>>()
+            .unwrap();
+        assert_eq!(records.len(), 2);
+        assert_eq!(records[0].parse().unwrap().header, hdr(1, 191, 0));
+        assert_eq!(records[1].parse().unwrap().header, hdr(1, 1, 0));
+        assert!(records[0].timestamp_us >= before && records[1].timestamp_us >= before);
+        // Closed: further records are dropped, a second close says so.
+        tap.record(0, good_bytes().as_slice());
+        assert!(tap.close().await.is_none());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    fn good_bytes() -> Vec<u8> {
+        dflat_link::serialize_v2(&hdr(1, 1, 0), &heartbeat_onboard(DaemonStatus::Boot))
+            .unwrap()
+            .as_bytes()
+            .to_vec()
+    }
+
+    #[tokio::test]
+    async fn serial_open_failure_is_an_error() {
+        let e =
+            Transport::open(&Endpoint::parse("serial:/dev/does-not-exist-dflat:57600").unwrap())
+                .await
+                .unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("serial:/dev/does-not-exist-dflat:57600"),
+            "{e}"
+        );
+    }
+}

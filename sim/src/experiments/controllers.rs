@@ -1,0 +1,209 @@
+//! The controllers under test, as plain serialisable specifications.
+
+use std::sync::Arc;
+
+use dflat_control::dfmpc::{DfMpc, DfMpcSettings, InputSaturation};
+use dflat_control::fmpc::{FlatnessMpc, FmpcSettings};
+use dflat_control::pd::{Pd, PdSettings};
+use dflat_control::{
+    ControlError, ControlModel, Controller, Measurement, ReferenceSource, TickOutput,
+};
+use dflat_model::{PlanarModel, PlanarParams};
+use serde::{Deserialize, Serialize};
+
+use super::ExperimentError;
+use crate::harness::ControllerFactory;
+
+/// One controller with its settings, on the planar control model (δt =
+/// 0.02 s, τ = 0.2 s, k̃ = 1, g = 9.81, ψ = 0, NED — the plant's nominal
+/// values). Weights: q tracks position \[1/m²\], r weights the squared jerk
+/// \[s⁶/m²\] (DF-MPC: `R = r/δt⁶` on the raw third difference, so the
+/// paper's R = 1.25e9 is r = 0.08). Tilts in degrees.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum ControllerSpec {
+    /// Discrete-flatness MPC ([`DfMpc`]), unconstrained fast path, command
+    /// clipped at ±`max_tilt_deg`.
+    DfMpc {
+        /// Horizon N [steps of δt].
+        horizon: usize,
+        /// Tracking weight q (x and y).
+        q: f64,
+        /// Jerk weight r (x and y).
+        r: f64,
+        /// Command saturation \[deg\].
+        max_tilt_deg: f64,
+    },
+    /// Flatness MPC ([`FlatnessMpc`]) on finite-difference flat states.
+    Fmpc {
+        /// Horizon N [steps of δt].
+        horizon: usize,
+        /// Tracking weight q (x and y).
+        q: f64,
+        /// Jerk weight r (x and y).
+        r: f64,
+        /// Command saturation \[deg\].
+        max_tilt_deg: f64,
+    },
+    /// PD on the closest path point and the desired velocity ([`Pd`]),
+    /// finite-difference velocity.
+    Pd {
+        /// Position gain k_p \[1/s²\].
+        kp: f64,
+        /// Velocity gain k_d \[1/s\].
+        kd: f64,
+        /// Command saturation (and acceleration limit g·tan) \[deg\].
+        max_tilt_deg: f64,
+    },
+}
+
+impl ControllerSpec {
+    /// The controller's short name, as its [`Controller::name`]:
+    /// "df-mpc", "fmpc" or "pd".
+    pub fn name(&self) -> &'static str {
+        match self {
+            Self::DfMpc { .. } => "df-mpc",
+            Self::Fmpc { .. } => "fmpc",
+            Self::Pd { .. } => "pd",
+        }
+    }
+
+    /// The paper's label: "Discrete-Flatness", "Flatness MPC", "PD".
+    pub fn label(&self) -> &'static str {
+        match self {
+            Self::DfMpc { .. } => "Discrete-Flatness",
+            Self::Fmpc { .. } => "Flatness MPC",
+            Self::Pd { .. } => "PD",
+        }
+    }
+
+    /// The tuned parameter in words, e.g. "r = 0.08" or "kp = 2, kd = 2.5".
+    pub fn describe(&self) -> String {
+        match self {
+            Self::DfMpc { horizon, q, r, .. } | Self::Fmpc { horizon, q, r, .. } => {
+                format!("N = {horizon}, q = {q}, r = {r}")
+            }
+            Self::Pd { kp, kd, .. } => format!("kp = {kp}, kd = {kd}"),
+        }
+    }
+
+    /// Builds the controller.
+    pub fn build(&self) -> Result<Box<dyn Controller>, ExperimentError> {
+        let model = planar_model().map_err(|e| ExperimentError::Controller {
+            controller: self.name(),
+            source: e,
+        })?;
+        let wrap = |source| ExperimentError::Controller {
+            controller: self.name(),
+            source,
+        };
+        Ok(match *self {
+            Self::DfMpc {
+                horizon,
+                q,
+                r,
+                max_tilt_deg,
+            } => Box::new(
+                DfMpc::new(
+                    model,
+                    DfMpcSettings {
+                        horizon,
+                        tracking_weight: [q; 3],
+                        jerk_weight: [r; 3],
+                        saturation: Some(InputSaturation {
+                            max_tilt: max_tilt_deg.to_radians(),
+                            ..InputSaturation::default()
+                        }),
+                        ..DfMpcSettings::default()
+                    },
+                )
+                .map_err(wrap)?,
+            ),
+            Self::Fmpc {
+                horizon,
+                q,
+                r,
+                max_tilt_deg,
+            } => Box::new(
+                FlatnessMpc::new(
+                    model,
+                    FmpcSettings {
+                        horizon,
+                        q: [q; 3],
+                        r: [r; 3],
+                        max_tilt: Some(max_tilt_deg.to_radians()),
+                    },
+                )
+                .map_err(wrap)?,
+            ),
+            Self::Pd {
+                kp,
+                kd,
+                max_tilt_deg,
+            } => {
+                let tilt = max_tilt_deg.to_radians();
+                Box::new(
+                    Pd::new(
+                        model,
+                        PdSettings {
+                            kp: [kp; 3],
+                            kd: [kd; 3],
+                            max_horizontal_acceleration: 9.81 * tilt.tan(),
+                            max_tilt: tilt,
+                            ..PdSettings::default()
+                        },
+                    )
+                    .map_err(wrap)?,
+                )
+            }
+        })
+    }
+
+    /// A factory for the harness. The controller is built once here to
+    /// check the settings; should a later build fail anyway, the trial gets
+    /// a controller that reports the error at every tick (recorded by the
+    /// harness), never a panic.
+    pub fn factory(&self) -> Result<ControllerFactory, ExperimentError> {
+        self.build()?;
+        let spec = *self;
+        Ok(Arc::new(move || match spec.build() {
+            Ok(c) => c,
+            Err(e) => Box::new(Unbuildable {
+                name: spec.name(),
+                message: e.to_string(),
+            }),
+        }))
+    }
+}
+
+/// The planar control model with the lab's nominal parameters.
+fn planar_model() -> Result<ControlModel, ControlError> {
+    Ok(ControlModel::Planar(PlanarModel::new(
+        PlanarParams::default(),
+    )?))
+}
+
+/// Stand-in for a controller whose construction failed: every tick errors.
+struct Unbuildable {
+    name: &'static str,
+    message: String,
+}
+
+impl Controller for Unbuildable {
+    fn name(&self) -> &'static str {
+        self.name
+    }
+
+    fn update(
+        &mut self,
+        _m: &Measurement,
+        _r: &mut dyn ReferenceSource,
+    ) -> Result<TickOutput, ControlError> {
+        Err(ControlError::InvalidSetting {
+            field: "controller",
+            reason: self.message.clone(),
+        })
+    }
+
+    fn reset(&mut self) {}
+}
