@@ -3,5 +3,28 @@
 //! The imperative shell around `dflat-control`: configuration, MAVLink link
 //! tasks, the 50 Hz control loop, failsafe state machine, telemetry and the
 //! SITL autopilot stand-in.
+//!
+//! * [`config`] — the TOML schema, defaults and validation.
+//! * [`transport`] — MAVLink I/O (UDP, TCP, serial) with counted framing
+//!   errors and a `.tlog` tap; shared by the daemon and the SITL.
+//! * [`daemon`] — `dflat daemon`: [`daemon::run`], [`daemon::spawn`].
+//! * [`supervisor`] — the flight state machine (pure).
+//! * [`schedule`] — the control loop's absolute-deadline tick schedule (pure).
+//! * [`control`] — controller, reference and thrust mapping from the config.
+//! * [`records`] — per-flight CSV and file names.
+//! * [`summary`] — measurements and the shutdown summary.
+//! * [`sitl`], [`demo`] — the autopilot stand-in and `dflat demo`.
 
 pub mod config;
+pub mod control;
+pub mod daemon;
+pub mod demo;
+pub mod records;
+pub mod schedule;
+pub mod sitl;
+pub mod summary;
+pub mod supervisor;
+pub mod transport;
+
+pub use daemon::{DaemonError, DaemonHandle, run, shutdown_signal, spawn};
+pub use summary::FlightSummary;

@@ -1,0 +1,343 @@
+//! Shared helpers of the end-to-end tests: spawn the real `dflat` binary
+//! (SITL and daemon) on loopback, read the SITL's truth, fake a ground
+//! station.
+//!
+//! Ports: the SITL binds port 0 and prints the address it got
+//! (`sitl listening on udpin:127.0.0.1:PORT`); the daemon is then started
+//! with `--link udpout:127.0.0.1:PORT`. No port is guessed, so tests can run
+//! next to anything else on the machine.
+
+#![allow(dead_code)] // each test binary uses a subset
+
+use std::io::{BufRead, BufReader};
+use std::net::{SocketAddr, UdpSocket};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc::{Receiver, channel};
+use std::time::{Duration, Instant};
+
+use dflat_daemon::config::Config;
+use dflat_daemon::sitl::{self, SitlOptions, SitlReport, TapFrame};
+use dflat_link::MavMessage;
+use dflat_link::dialect::{MavFrame, PositionTargetTypemask, SET_POSITION_TARGET_LOCAL_NED_DATA};
+
+/// The binary under test.
+pub fn bin() -> &'static str {
+    env!("CARGO_BIN_EXE_dflat")
+}
+
+/// A fresh scratch directory for one test.
+pub fn scratch(name: &str) -> PathBuf {
+    let dir =
+        Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("e2e-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("create scratch dir");
+    dir
+}
+
+/// Writes a config file into `dir`.
+pub fn write_config(dir: &Path, name: &str, text: &str) -> PathBuf {
+    let path = dir.join(name);
+    std::fs::write(&path, text).expect("write config");
+    path
+}
+
+/// A child process killed (SIGKILL) on drop unless it already exited; its
+/// stderr goes to a file that is printed when a test fails.
+pub struct Proc {
+    /// The child.
+    pub child: Child,
+    /// What it is (for messages).
+    pub name: &'static str,
+    /// Its stderr.
+    pub stderr: PathBuf,
+}
+
+impl Proc {
+    /// Sends a signal by name (`INT`, `TERM`, `USR1`, …) with `kill(1)`.
+    pub fn signal(&self, sig: &str) {
+        let ok = Command::new("kill")
+            .arg(format!("-{sig}"))
+            .arg(self.child.id().to_string())
+            .status()
+            .map(|s| s.success())
+            .unwrap_or(false);
+        assert!(ok, "kill -{sig} {} failed", self.name);
+    }
+
+    /// SIGINT, then waits up to `limit` for a clean exit; returns whether it
+    /// exited successfully.
+    pub fn interrupt_and_wait(&mut self, limit: Duration) -> bool {
+        self.signal("INT");
+        let until = Instant::now() + limit;
+        while Instant::now() < until {
+            if let Ok(Some(status)) = self.child.try_wait() {
+                return status.success();
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        false
+    }
+
+    /// The captured stderr so far.
+    pub fn stderr_text(&self) -> String {
+        std::fs::read_to_string(&self.stderr).unwrap_or_default()
+    }
+}
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        if let Ok(None) = self.child.try_wait() {
+            let _ = self.child.kill();
+            let _ = self.child.wait();
+        }
+        if std::thread::panicking() {
+            let text = self.stderr_text();
+            let tail: Vec<&str> = text.lines().rev().take(40).collect();
+            eprintln!("---- {} stderr (last lines) ----", self.name);
+            for l in tail.iter().rev() {
+                eprintln!("{l}");
+            }
+        }
+    }
+}
+
+/// The SITL binary, its addresses and its stdout lines.
+pub struct Sitl {
+    /// The process.
+    pub proc: Proc,
+    /// The vehicle link address.
+    pub link: SocketAddr,
+    /// The GCS port, if asked for.
+    pub gcs: Option<SocketAddr>,
+    /// stdout lines.
+    pub lines: Receiver<String>,
+}
+
+impl Sitl {
+    /// Waits for a stdout line containing `needle`.
+    pub fn wait_for_line(&self, needle: &str, limit: Duration) -> Option<String> {
+        let until = Instant::now() + limit;
+        loop {
+            let left = until.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return None;
+            }
+            match self.lines.recv_timeout(left) {
+                Ok(l) if l.contains(needle) => return Some(l),
+                Ok(_) => {}
+                Err(_) => return None,
+            }
+        }
+    }
+}
+
+fn parse_addr(line: &str) -> Option<SocketAddr> {
+    line.rsplit("udpin:").next()?.trim().parse().ok()
+}
+
+/// Starts `dflat sitl --config CONFIG --link udpin:127.0.0.1:0 [--gcs
+/// udpin:127.0.0.1:0] --truth TRUTH` and reads back its addresses.
+pub fn spawn_sitl(dir: &Path, config: &Path, gcs: bool, truth: &Path) -> Sitl {
+    let stderr = dir.join("sitl.stderr");
+    let mut cmd = Command::new(bin());
+    cmd.arg("sitl")
+        .arg("--config")
+        .arg(config)
+        .arg("--link")
+        .arg("udpin:127.0.0.1:0")
+        .arg("--truth")
+        .arg(truth);
+    if gcs {
+        cmd.arg("--gcs").arg("udpin:127.0.0.1:0");
+    }
+    let mut child = cmd
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(std::fs::File::create(&stderr).expect("stderr file"))
+        .spawn()
+        .expect("spawn dflat sitl");
+    let stdout = child.stdout.take().expect("piped stdout");
+    let (tx, lines) = channel();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+            if tx.send(line).is_err() {
+                break;
+            }
+        }
+    });
+    let mut sitl = Sitl {
+        proc: Proc {
+            child,
+            name: "sitl",
+            stderr,
+        },
+        link: SocketAddr::from(([127, 0, 0, 1], 0)),
+        gcs: None,
+        lines,
+    };
+    let line = sitl
+        .wait_for_line("sitl listening on", Duration::from_secs(10))
+        .expect("the SITL did not print its address");
+    sitl.link = parse_addr(&line).expect("SITL address");
+    if gcs {
+        let line = sitl
+            .wait_for_line("sitl gcs on", Duration::from_secs(5))
+            .expect("the SITL did not print its GCS address");
+        sitl.gcs = Some(parse_addr(&line).expect("GCS address"));
+    }
+    sitl
+}
+
+/// Starts `dflat daemon --config CONFIG --link udpout:ADDR`.
+pub fn spawn_daemon(dir: &Path, config: &Path, sitl: SocketAddr) -> Proc {
+    let stderr = dir.join("daemon.stderr");
+    let child = Command::new(bin())
+        .arg("daemon")
+        .arg("--config")
+        .arg(config)
+        .arg("--link")
+        .arg(format!("udpout:{sitl}"))
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(std::fs::File::create(&stderr).expect("stderr file"))
+        .spawn()
+        .expect("spawn dflat daemon");
+    Proc {
+        child,
+        name: "daemon",
+        stderr,
+    }
+}
+
+/// SET_POSITION_TARGET_LOCAL_NED to the daemon (system 1, component 191):
+/// position only, LOCAL_NED.
+pub fn position_setpoint(p: [f64; 3]) -> MavMessage {
+    let mask = PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VX_IGNORE
+        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VY_IGNORE
+        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VZ_IGNORE
+        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_AX_IGNORE
+        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_AY_IGNORE
+        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_AZ_IGNORE
+        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_YAW_IGNORE
+        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE;
+    MavMessage::SET_POSITION_TARGET_LOCAL_NED(SET_POSITION_TARGET_LOCAL_NED_DATA {
+        time_boot_ms: 0,
+        x: p[0] as f32,
+        y: p[1] as f32,
+        z: p[2] as f32,
+        type_mask: mask,
+        target_system: 1,
+        target_component: 191,
+        coordinate_frame: MavFrame::MAV_FRAME_LOCAL_NED,
+        ..SET_POSITION_TARGET_LOCAL_NED_DATA::default()
+    })
+}
+
+/// Sends one message from (`sys`, `comp`) over `socket` to `to`.
+pub fn send(socket: &UdpSocket, to: SocketAddr, sys: u8, comp: u8, seq: u8, msg: &MavMessage) {
+    let frame = dflat_link::serialize_v2(&dflat_link::header(sys, comp, seq), msg).expect("encode");
+    socket.send_to(frame.as_bytes(), to).expect("send");
+}
+
+/// Distance from `p` to the polyline through `w` (3-D) \[m\].
+pub fn path_distance(w: &[[f64; 3]], p: [f64; 3]) -> f64 {
+    w.windows(2)
+        .map(|seg| {
+            let (a, b) = (seg[0], seg[1]);
+            let ab = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
+            let ap = [p[0] - a[0], p[1] - a[1], p[2] - a[2]];
+            let len2 = ab.iter().map(|x| x * x).sum::<f64>();
+            let s = if len2 > 0.0 {
+                (ap.iter().zip(&ab).map(|(x, y)| x * y).sum::<f64>() / len2).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            dist(p, [a[0] + s * ab[0], a[1] + s * ab[1], a[2] + s * ab[2]])
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// Euclidean distance \[m\].
+pub fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+}
+
+/// The `q`-quantile of `v` (sorted copy, nearest rank).
+pub fn quantile(v: &[f64], q: f64) -> f64 {
+    let mut s = v.to_vec();
+    s.sort_by(f64::total_cmp);
+    if s.is_empty() {
+        return f64::NAN;
+    }
+    s[((q * (s.len() - 1) as f64).round() as usize).min(s.len() - 1)]
+}
+
+/// What [`fly_in_process`] saw.
+pub struct Flight {
+    /// Every frame the daemon sent, in arrival order.
+    pub frames: Vec<TapFrame>,
+    /// From the first SET_ATTITUDE_TARGET to the end of observation.
+    pub streamed_for: Duration,
+    /// The in-process SITL's report (with its truth trace).
+    pub report: SitlReport,
+    /// The daemon exited cleanly on SIGINT.
+    pub clean_exit: bool,
+}
+
+impl Flight {
+    /// The SET_ATTITUDE_TARGET frames.
+    pub fn attitude_targets(
+        &self,
+    ) -> impl Iterator<Item = (&TapFrame, &dflat_link::dialect::SET_ATTITUDE_TARGET_DATA)> {
+        self.frames.iter().filter_map(|f| match &f.message {
+            MavMessage::SET_ATTITUDE_TARGET(d) => Some((f, d)),
+            _ => None,
+        })
+    }
+}
+
+/// Flies the real daemon binary against the in-process SITL with
+/// `config_text` (a short path mission), tapping every frame the daemon
+/// sends, for `fly` after its first attitude target (at most 20 s).
+pub fn fly_in_process(name: &str, config_text: &str, fly: Duration) -> Flight {
+    let dir = scratch(name);
+    let text = config_text.replace("@DIR@", &dir.display().to_string());
+    let config = write_config(&dir, &format!("{name}.toml"), &text);
+    let cfg = Config::load(&config).expect("config");
+    let (tx, tap) = channel();
+    let sim = sitl::spawn(
+        &cfg,
+        SitlOptions {
+            link: Some("udpin:127.0.0.1:0".into()),
+            tap: Some(tx),
+            record_trace: true,
+            ..SitlOptions::default()
+        },
+    )
+    .expect("sitl");
+    let mut daemon = spawn_daemon(&dir, &config, sim.local_addr());
+    let start = Instant::now();
+    let mut frames = Vec::new();
+    let mut first_target: Option<Instant> = None;
+    while start.elapsed() < Duration::from_secs(20)
+        && first_target.is_none_or(|t| t.elapsed() < fly)
+    {
+        if let Ok(f) = tap.recv_timeout(Duration::from_millis(100)) {
+            if matches!(f.message, MavMessage::SET_ATTITUDE_TARGET(_)) {
+                first_target.get_or_insert(f.at);
+            }
+            frames.push(f);
+        }
+    }
+    let streamed_for = first_target.map_or(Duration::ZERO, |t| t.elapsed());
+    let clean_exit = daemon.interrupt_and_wait(Duration::from_secs(5));
+    let report = sim.stop().expect("sitl stop");
+    frames.extend(tap.try_iter());
+    Flight {
+        frames,
+        streamed_for,
+        report,
+        clean_exit,
+    }
+}
