@@ -131,6 +131,8 @@ pub struct Pd {
     velocity: Vector3<f64>,
     /// Whether `prev` holds a measurement yet.
     started: bool,
+    /// Time [s] of the newest measurement used.
+    last_t: f64,
 }
 
 impl Pd {
@@ -173,6 +175,7 @@ impl Pd {
             prev: Vector3::zeros(),
             velocity: Vector3::zeros(),
             started: false,
+            last_t: f64::NEG_INFINITY,
         })
     }
 
@@ -212,12 +215,21 @@ impl Controller for Pd {
         if !measurement_is_finite(measurement) {
             return Err(ControlError::NonFiniteMeasurement);
         }
-        let y = measurement.position;
+        // No pose since the previous tick: extrapolate with the velocity
+        // estimate instead of reading a repeated position as a stop.
+        let stale = self.started && measurement.t <= self.last_t;
+        let y = if stale {
+            self.prev + self.velocity * self.dt
+        } else {
+            measurement.position
+        };
         let (p_ref, v_ref) = reference.closest(&y);
         if !(p_ref.iter().chain(v_ref.iter()).all(|c| c.is_finite())) {
             return Err(ControlError::NonFiniteReference);
         }
-        let velocity = if self.started {
+        let velocity = if stale {
+            self.velocity
+        } else if self.started {
             let raw = (y - self.prev) / self.dt;
             self.velocity + (raw - self.velocity) * self.alpha
         } else {
@@ -267,6 +279,9 @@ impl Controller for Pd {
         self.prev = y;
         self.velocity = velocity;
         self.started = true;
+        if !stale {
+            self.last_t = measurement.t;
+        }
         Ok(TickOutput {
             command,
             plan: [y; 4],
@@ -280,6 +295,7 @@ impl Controller for Pd {
         self.prev = Vector3::zeros();
         self.velocity = Vector3::zeros();
         self.started = false;
+        self.last_t = f64::NEG_INFINITY;
     }
 }
 
