@@ -2,6 +2,10 @@
 //! map) for horizons N ∈ {50, 100, 200, 400, 800}, planar model, 2 axes.
 //!
 //! * `df_mpc::fast_tick` — DF-MPC, no binding constraint: banded Cholesky.
+//! * `df_mpc::smooth_tick` — DF-MPC with the command-smoothness term
+//!   (half-bandwidth 4), classic window.
+//! * `df_mpc::multirate_smooth_tick` — steady-state tick with multi-rate
+//!   windows (15 Hz samples, 60 ms late) and the smoothness term.
 //! * `df_mpc::tilt_constrained_tick` — DF-MPC with a 15° tilt constraint
 //!   that binds on both axes (clarabel).
 //! * `df_mpc::qp_banded` / `df_mpc::qp_clarabel` — the same unconstrained
@@ -19,6 +23,7 @@ use dflat_control::dfmpc::{
     AxisBounds, AxisProblem, AxisSolver, ConstrainedAxisSolver, DfMpc, DfMpcSettings,
     OutputConstraints,
 };
+use dflat_control::window::MultiRateSettings;
 use dflat_control::{ControlModel, Controller, Frame, Measurement, ReferenceSource};
 use dflat_model::{PlanarModel, PlanarParams};
 use divan::{Bencher, black_box};
@@ -106,6 +111,55 @@ mod df_mpc {
         bench_tick(bencher, settings, true);
     }
 
+    /// DF-MPC tick with the command-smoothness term (half-bandwidth 4),
+    /// classic window, 2 axes (first tick from rest, as `fast_tick`).
+    #[divan::bench(args = HORIZONS)]
+    fn smooth_tick(bencher: Bencher, n: usize) {
+        let settings = DfMpcSettings {
+            horizon: n,
+            smoothness_weight: [50.0; 3],
+            ..Default::default()
+        };
+        bench_tick(bencher, settings, false);
+    }
+
+    /// Steady-state DF-MPC tick with multi-rate windows (M = 25, arrival
+    /// cost) and the smoothness term, 2 axes: a 15 Hz pose sample, 60 ms
+    /// late, every third tick, hovering at the setpoint; 200 ticks of
+    /// warm-up, then every iteration is the next tick (window shift, arrival
+    /// update, fit, 2·M F⁻¹ steps, banded solve, F).
+    #[divan::bench(args = HORIZONS)]
+    fn multirate_smooth_tick(bencher: Bencher, n: usize) {
+        let settings = DfMpcSettings {
+            horizon: n,
+            smoothness_weight: [50.0; 3],
+            multi_rate: Some(MultiRateSettings::default()),
+            ..Default::default()
+        };
+        let mut ctrl = DfMpc::new(model(), settings).unwrap();
+        let hover = Vector3::new(0.0, 0.0, -2.0);
+        let mut reference = Setpoint(hover);
+        let mut k = 0u64;
+        let mut tick = move |ctrl: &mut DfMpc, reference: &mut Setpoint| {
+            let t = k as f64 * DT;
+            if k.is_multiple_of(3) {
+                let wiggle = 0.002 * ((k % 7) as f64 - 3.0);
+                ctrl.observe(&Measurement {
+                    t: t - 0.06,
+                    position: hover + Vector3::new(wiggle, -wiggle, 0.0),
+                    yaw: 0.6,
+                });
+            }
+            k += 1;
+            ctrl.update(&Measurement { t, ..measurement() }, reference)
+                .unwrap()
+        };
+        for _ in 0..200 {
+            tick(&mut ctrl, &mut reference);
+        }
+        bencher.bench_local(|| black_box(tick(&mut ctrl, &mut reference)));
+    }
+
     fn qp_data(n: usize) -> ([[f64; 3]; 2], Vec<f64>, Vec<f64>) {
         let fixed = [[0.0, 0.01, 0.021], [0.0, -0.005, -0.011]];
         (fixed, vec![8.0; n + 1], vec![-6.0; n + 1])
@@ -123,11 +177,13 @@ mod df_mpc {
         bencher.bench_local(|| {
             let a = AxisProblem {
                 fixed: &fixed[0],
+                sent: None,
                 reference: black_box(&rx),
                 plan: &mut px,
             };
             let b = AxisProblem {
                 fixed: &fixed[1],
+                sent: None,
                 reference: black_box(&ry),
                 plan: &mut py,
             };

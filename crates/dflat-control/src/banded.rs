@@ -1,7 +1,8 @@
 //! Banded symmetric positive-definite matrices and their Cholesky factor.
 //!
-//! The unconstrained DF-MPC problem per axis is a banded SPD system (band 3,
-//! from the third difference in the cost); [`BandedCholesky`] solves it in
+//! The unconstrained DF-MPC problem per axis is a banded SPD system (band 3
+//! from the third difference in the cost, band 4 with the command-smoothness
+//! term); [`BandedCholesky`] solves it in
 //! O(n·b²) time for the factorisation and O(n·b) per solve, with all storage
 //! allocated once at construction.
 //!
@@ -239,10 +240,18 @@ impl BandedCholesky {
         if !self.factored {
             return Err(ControlError::NotPositiveDefinite);
         }
-        if self.b == 3 {
-            self.run3(&self.fwd, [&mut *x, &mut *y], false);
-            self.run3(&self.bwd, [x, y], true);
-            return Ok(());
+        match self.b {
+            3 => {
+                self.run_band::<3, 2>(&self.fwd, [&mut *x, &mut *y], false);
+                self.run_band::<3, 2>(&self.bwd, [x, y], true);
+                return Ok(());
+            }
+            4 => {
+                self.run_band::<4, 2>(&self.fwd, [&mut *x, &mut *y], false);
+                self.run_band::<4, 2>(&self.bwd, [x, y], true);
+                return Ok(());
+            }
+            _ => {}
         }
         let (n, b, w) = (self.n, self.b, self.b + 1);
         for i in 0..n {
@@ -270,8 +279,10 @@ impl BandedCholesky {
 
     /// `x ← L⁻¹·x`.
     fn forward(&self, x: &mut [f64]) {
-        if self.b == 3 {
-            return self.run3(&self.fwd, [x], false);
+        match self.b {
+            3 => return self.run_band::<3, 1>(&self.fwd, [x], false),
+            4 => return self.run_band::<4, 1>(&self.fwd, [x], false),
+            _ => {}
         }
         let (n, b, w) = (self.n, self.b, self.b + 1);
         for i in 0..n {
@@ -286,8 +297,10 @@ impl BandedCholesky {
 
     /// `x ← L⁻ᵀ·x`.
     fn backward(&self, x: &mut [f64]) {
-        if self.b == 3 {
-            return self.run3(&self.bwd, [x], true);
+        match self.b {
+            3 => return self.run_band::<3, 1>(&self.bwd, [x], true),
+            4 => return self.run_band::<4, 1>(&self.bwd, [x], true),
+            _ => {}
         }
         let (n, b, w) = (self.n, self.b, self.b + 1);
         for i in (0..n).rev() {
@@ -300,24 +313,35 @@ impl BandedCholesky {
         }
     }
 
-    // Bandwidth-3 specialisation (the DF-MPC case): the last three
-    // unknowns stay in registers, K right-hand sides interleave. Same
-    // operation order as the generic loops, so results are bit-identical.
+    // Fixed-bandwidth specialisation (B = 3: the DF-MPC; B = 4: with the
+    // command-smoothness term): the last B unknowns stay in registers, K
+    // right-hand sides interleave. Same operation order as the generic
+    // loops (oldest neighbour first), so results are bit-identical.
 
-    /// Runs the bandwidth-3 recurrence over `rows` (`[1/L_ii, f1, f2, f3]`)
+    /// Runs the bandwidth-B recurrence over `rows` (`[1/L_ii, f1, …, fB]`)
     /// in processing order (ascending, or descending when `reverse`).
-    fn run3<const K: usize>(&self, rows: &[f64], xs: [&mut [f64]; K], reverse: bool) {
+    fn run_band<const B: usize, const K: usize>(
+        &self,
+        rows: &[f64],
+        xs: [&mut [f64]; K],
+        reverse: bool,
+    ) {
+        debug_assert_eq!(self.b, B);
         let n = self.n;
         let mut xs = xs;
-        let mut state = [[0.0f64; 3]; K];
+        // state[d − 1] = the unknown d steps back (newest first).
+        let mut state = [[0.0f64; B]; K];
         for t in 0..n {
             let i = if reverse { n - 1 - t } else { t };
-            let r = &rows[4 * i..4 * i + 4];
+            let r = &rows[(B + 1) * i..(B + 1) * (i + 1)];
             for (x, st) in xs.iter_mut().zip(state.iter_mut()) {
-                let [p1, p2, p3] = *st;
-                let v = x[i] * r[0] - r[3] * p3 - r[2] * p2 - r[1] * p1;
+                let mut v = x[i] * r[0];
+                for d in (1..=B).rev() {
+                    v -= r[d] * st[d - 1];
+                }
                 x[i] = v;
-                *st = [v, p1, p2];
+                st.copy_within(0..B - 1, 1);
+                st[0] = v;
             }
         }
     }
@@ -424,7 +448,7 @@ mod tests {
                 prop_assert!((x[i] - xd[i]).abs() <= 1e-10 * (1.0 + xd[i].abs()), "i={} {} vs {}", i, x[i], xd[i]);
             }
             // Two right-hand sides at once give the same answers bit for bit.
-            // (b = 3 runs the specialised loop, others the generic one.)
+            // (b = 3, 4 run the specialised loop, others the generic one.)
             let mut y1 = rhs[..n].to_vec();
             let mut y2: Vec<f64> = rhs[..n].iter().map(|v| -2.0 * v).collect();
             f.solve2_in_place(&mut y1, &mut y2).unwrap();

@@ -47,6 +47,47 @@
 //! on ã are single-entry rows): a well-scaled sparse QP whose structure is
 //! fixed, so one solver per axis is built once and only `q` and `b` are
 //! updated per tick. A status other than `Solved` is [`ControlError::Solver`].
+//!
+//! # Command smoothness (optional)
+//!
+//! With [`DfMpcSettings::smoothness_weight`] s > 0 on an axis, the cost also
+//! weighs the change of the commanded attitude between ticks, linearised
+//! through the output-to-input map about hover. Per axis the command asks
+//! for the acceleration the attitude settles to,
+//!
+//! ```text
+//! c_j = a_j + κ·(a_{j+1} − a_j),   a_j = Δ²y_j/δt²,   κ = τ/δt
+//! ```
+//!
+//! (F linearised: `θ_cmd = (θ_j + κ·(θ_{j+1} − θ_j))/k̃`, and tilt ≈
+//! acceleration/g; for z of the spatial model κ = τ_T/δt and the thrust).
+//! The added cost is
+//!
+//! ```text
+//! Σ_{j=0..N−3} s·((c_j − c_{j−1})/g)²,   c_{−1} = acceleration the command SENT at k−1 asks for
+//! ```
+//!
+//! (≈ s·Δθ_cmd² [rad²] per tick; the first term ties the plan to the
+//! command actually sent, after saturation). In the free outputs this is
+//! `‖E·p + e‖²` with `E = T·D`, `T = κ·I + (1 − κ)·S` (S the one-step
+//! delay, D the third-difference matrix above): the Hessian becomes
+//! `q·I + Dᵀ(w·I + s'·TᵀT)·D`, half-bandwidth 4 instead of 3, still
+//! factored once and solved in O(N), the residual still evaluated by
+//! differencing. The sent command enters only the right-hand side (first
+//! free output). Linearising about hover keeps the Hessian constant; at
+//! 35° the true Δθ is ~0.67 times the linearised one (a milder weight at
+//! large tilt). Default off: the paper's problem is unchanged. The clarabel
+//! path carries the same term (band 2 in the acceleration variables).
+//!
+//! # Multi-rate windows (optional)
+//!
+//! With [`DfMpcSettings::multi_rate`] the fixed outputs `y_k, y_{k+1},
+//! y_{k+2}` come from a [`MultiRateWindow`]: timestamped pose samples
+//! (vision at 10–35 Hz, latency, dropouts) fitted by a chain of F⁻¹ through
+//! the inputs sent over the last M ticks (maths in [`crate::window`]). The
+//! shell calls [`Controller::observe`] per sample and [`Controller::update`]
+//! per tick with the tick time. Everything after the fixed outputs is as
+//! above.
 
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{
@@ -56,8 +97,9 @@ use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use crate::banded::{BandedCholesky, SymBand};
+use crate::disturbance::{DisturbanceEstimate, DisturbanceEstimator, DisturbanceSettings};
 use crate::model::ControlModel;
-use crate::window::Window;
+use crate::window::{MultiRateSettings, MultiRateWindow, Window, input_lags};
 use crate::{ControlError, Controller, Measurement, ReferenceSource, TickOutput};
 
 /// Coefficients of the third difference `Δ³y_j` on `y_j..y_{j+3}`.
@@ -137,6 +179,19 @@ pub struct DfMpcSettings {
     /// Wall-time limit for one clarabel solve [s] (`f64::INFINITY` for
     /// none). Default 0.01.
     pub solver_time_limit: f64,
+    /// Command-smoothness weight s per axis `[x, y, z]` [1/rad²] on the
+    /// squared change of the (linearised) command between ticks,
+    /// `s·((c_j − c_{j−1})/g)²` (see the module docs). Default 0 (off: the
+    /// paper's cost). Useful values are O(0.1–10) with q = 1.
+    pub smoothness_weight: [f64; 3],
+    /// Multi-rate windows: timestamped samples through
+    /// [`Controller::observe`] instead of one measurement per tick
+    /// ([`MultiRateWindow`]). `None` (default): the paper's window.
+    pub multi_rate: Option<MultiRateSettings>,
+    /// Disturbance estimation for offset-free tracking
+    /// ([`crate::disturbance`]): acceleration offset and thrust scale, used
+    /// in F⁻¹ and F. `None` (default) runs the paper's DF-MPC unchanged.
+    pub disturbance: Option<DisturbanceSettings>,
 }
 
 impl Default for DfMpcSettings {
@@ -148,6 +203,9 @@ impl Default for DfMpcSettings {
             saturation: Some(InputSaturation::default()),
             constraints: OutputConstraints::default(),
             solver_time_limit: 0.01,
+            smoothness_weight: [0.0; 3],
+            multi_rate: None,
+            disturbance: None,
         }
     }
 }
@@ -211,6 +269,19 @@ impl DfMpcSettings {
         if self.solver_time_limit.is_nan() || self.solver_time_limit <= 0.0 {
             return Err(invalid("solver_time_limit", "> 0 s (or infinity)"));
         }
+        if !self
+            .smoothness_weight
+            .iter()
+            .all(|s| s.is_finite() && *s >= 0.0)
+        {
+            return Err(invalid("smoothness_weight", "finite and >= 0 (1/rad²)"));
+        }
+        if let Some(m) = &self.multi_rate {
+            m.validate()?;
+        }
+        if let Some(d) = &self.disturbance {
+            d.validate()?;
+        }
         Ok(())
     }
 }
@@ -245,6 +316,11 @@ fn baseline(fixed: &[f64; 3], j: usize) -> f64 {
 pub struct AxisProblem<'a> {
     /// The fixed outputs `[y_0, y_1, y_2]` [m].
     pub fixed: &'a [f64; 3],
+    /// `c_{−1}` [m/s²]: the acceleration the command sent at the previous
+    /// tick asks for on this axis (used only with a smoothness weight;
+    /// `None`: the fixed window's acceleration, i.e. the first change is
+    /// free).
+    pub sent: Option<f64>,
     /// The reference `ref_0..ref_N` [m] (length N + 1).
     pub reference: &'a [f64],
     /// Output: the optimal `y*_0..y*_N` [m] (length N + 1).
@@ -264,10 +340,46 @@ struct Slot {
     work: Vec<f64>,
 }
 
+/// The command-smoothness term of one axis: weight s on
+/// `((c_j − c_{j−1})/g)²`, `c_j = a_j + κ·(a_{j+1} − a_j)` (module docs).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Smoothness {
+    /// Weight s ≥ 0 [1/rad²]; 0 turns the term off.
+    pub weight: f64,
+    /// κ = τ/δt > 0: the input lag (attitude τ, thrust τ_T) in steps.
+    pub kappa: f64,
+    /// Gravity g > 0 [m/s²]: accelerations over g are tilts [rad].
+    pub gravity: f64,
+}
+
+impl Smoothness {
+    /// Coefficients of `δt²·(c_j − c_{j−1})` on `y_{j−1}..y_{j+3}`.
+    fn stencil(&self) -> [f64; 5] {
+        let k = self.kappa;
+        [k - 1.0, 3.0 - 4.0 * k, 6.0 * k - 3.0, 1.0 - 4.0 * k, k]
+    }
+
+    fn check(&self) -> Result<(), ControlError> {
+        if !(self.weight.is_finite() && self.weight >= 0.0) {
+            return Err(invalid("smoothness_weight", "finite and >= 0 (1/rad²)"));
+        }
+        if self.weight > 0.0
+            && !(self.kappa.is_finite()
+                && self.kappa > 0.0
+                && self.gravity.is_finite()
+                && self.gravity > 0.0)
+        {
+            return Err(invalid("smoothness", "κ and g finite and > 0"));
+        }
+        Ok(())
+    }
+}
+
 /// The unconstrained 1-D DF-MPC problem on one axis, solved in O(N).
 ///
 /// Minimises `Σ_{j=0..N} q·(y_j − ref_j)² + Σ_{j=0..N−3} r·(Δ³y_j/δt³)²`
-/// over `y_0..y_N` with `y_0, y_1, y_2` fixed (relative indices: y_j is
+/// (plus the smoothness term when configured, [`Smoothness`]) over
+/// `y_0..y_N` with `y_0, y_1, y_2` fixed (relative indices: y_j is
 /// `y_{k+j}`). The Hessian is factored once here; [`AxisSolver::solve`]
 /// and [`AxisSolver::solve_pair`] allocate nothing.
 #[derive(Debug, Clone)]
@@ -276,6 +388,12 @@ pub struct AxisSolver {
     q: f64,
     /// Weight on the raw third difference, r/δt⁶.
     w: f64,
+    smoothness: Smoothness,
+    /// Weight on `(δt²·Δc)²`, s/(g²·δt⁴) (0: off).
+    s: f64,
+    /// `s/(g²·δt²)·κ`: the sent command's gain on the first free output.
+    sent_gain: f64,
+    dt: f64,
     factor: BandedCholesky,
     slots: [Slot; 2],
 }
@@ -284,10 +402,30 @@ impl AxisSolver {
     /// Builds and factors the problem for horizon N ≥ 3 [steps], tracking
     /// weight q ≥ 0 [1/m²], jerk weight r > 0 [s⁶/m²], step δt > 0 [s].
     pub fn new(horizon: usize, q: f64, r: f64, dt: f64) -> Result<Self, ControlError> {
+        Self::with_smoothness(horizon, q, r, dt, Smoothness::default())
+    }
+
+    /// As [`AxisSolver::new`], plus the command-smoothness term (half-
+    /// bandwidth 4 when its weight is > 0).
+    pub fn with_smoothness(
+        horizon: usize,
+        q: f64,
+        r: f64,
+        dt: f64,
+        smoothness: Smoothness,
+    ) -> Result<Self, ControlError> {
         Self::check_args(horizon, q, r, dt)?;
+        smoothness.check()?;
         let n = horizon - 2;
         let w = r / dt.powi(6);
-        let mut hessian = SymBand::zeros(n, BANDWIDTH);
+        let (s, sent_gain) = if smoothness.weight > 0.0 {
+            let sg = smoothness.weight / smoothness.gravity.powi(2);
+            (sg / dt.powi(4), sg / (dt * dt) * smoothness.kappa)
+        } else {
+            (0.0, 0.0)
+        };
+        let bandwidth = if s > 0.0 { BANDWIDTH + 1 } else { BANDWIDTH };
+        let mut hessian = SymBand::zeros(n, bandwidth);
         for i in 0..n {
             hessian.add(i, i, q);
         }
@@ -305,7 +443,24 @@ impl AxisSolver {
                 }
             }
         }
-        let mut factor = BandedCholesky::new(n, BANDWIDTH);
+        if s > 0.0 {
+            // Row i of E = T·D: δt²·Δc_i over y_{i−1}..y_{i+3}.
+            let e = smoothness.stencil();
+            for i in 0..n {
+                for (a, &ca) in e.iter().enumerate() {
+                    let Some(fa) = (i + a).checked_sub(4) else {
+                        continue;
+                    };
+                    for (b, &cb) in e.iter().enumerate().take(a + 1) {
+                        let Some(fb) = (i + b).checked_sub(4) else {
+                            continue;
+                        };
+                        hessian.add(fa, fb, s * ca * cb);
+                    }
+                }
+            }
+        }
+        let mut factor = BandedCholesky::new(n, bandwidth);
         factor.factor(&hessian)?;
         let slot = Slot {
             base: vec![0.0; n],
@@ -317,9 +472,31 @@ impl AxisSolver {
             horizon,
             q,
             w,
+            smoothness,
+            s,
+            sent_gain,
+            dt,
             factor,
             slots: [slot.clone(), slot],
         })
+    }
+
+    /// The smoothness term this solver carries (weight 0: none).
+    pub fn smoothness(&self) -> Smoothness {
+        self.smoothness
+    }
+
+    /// The right-hand side's shift on the first free output from the sent
+    /// command: `−s/(g²δt²)·κ·(a_0 − c_{−1})` (0 without smoothness or
+    /// without `sent`).
+    fn sent_shift(&self, fixed: &[f64; 3], sent: Option<f64>) -> f64 {
+        match sent {
+            Some(c) if self.s > 0.0 => {
+                let a0 = (fixed[2] - 2.0 * fixed[1] + fixed[0]) / (self.dt * self.dt);
+                -self.sent_gain * (a0 - c)
+            }
+            _ => 0.0,
+        }
     }
 
     /// Horizon N [steps].
@@ -333,8 +510,9 @@ impl AxisSolver {
         (self.q, self.w)
     }
 
-    /// Baseline, right-hand side `q·(ref − b)` on the free outputs, `p = rhs`.
-    fn prepare(q: f64, slot: &mut Slot, fixed: &[f64; 3], reference: &[f64]) {
+    /// Baseline, right-hand side `q·(ref − b)` on the free outputs (plus
+    /// `shift` on the first), `p = rhs`.
+    fn prepare(q: f64, slot: &mut Slot, fixed: &[f64; 3], reference: &[f64], shift: f64) {
         let d1 = fixed[1] - fixed[0];
         let d2 = fixed[2] - 2.0 * fixed[1] + fixed[0];
         let it = slot
@@ -348,6 +526,10 @@ impl AxisSolver {
             *r = q * (y_ref - *b);
             *p = *r;
         }
+        if shift != 0.0 {
+            slot.rhs[0] += shift;
+            slot.p[0] = slot.rhs[0];
+        }
     }
 
     /// `work = rhs − (q·I + w·DᵀD)·p`, evaluated by repeated differencing
@@ -355,15 +537,34 @@ impl AxisSolver {
     /// ~1e10 with outputs ~10 m would leave an absolute rounding error near
     /// 1e-4 in the residual, while differences of neighbouring samples are
     /// nearly exact, so the residual is accurate to ~ε·|rhs|.
-    fn residual(q: f64, w: f64, slot: &mut Slot) {
+    ///
+    /// With smoothness (s > 0, κ) the middle factor is `w·I + s·TᵀT`,
+    /// `T = κ·I + (1 − κ)·S`, applied to `d = D·p` as a two-tap filter and
+    /// its transpose.
+    fn residual(q: f64, w: f64, smooth: (f64, f64), slot: &mut Slot) {
+        let (s, kappa) = smooth;
         // x = w·D·p: third backward difference by three first differences,
         // fused in one pass (p before the horizon is 0).
         let (mut p1, mut e1, mut f1) = (0.0, 0.0, 0.0);
+        let scale = if s > 0.0 { 1.0 } else { w };
         for (x, &p) in slot.work.iter_mut().zip(&slot.p) {
             let e = p - p1;
             let f = e - e1;
-            *x = w * (f - f1);
+            *x = scale * (f - f1);
             (p1, e1, f1) = (p, e, f);
+        }
+        if s > 0.0 {
+            // x = (w·I + s·TᵀT)·d in place, backwards: g_f = (T·d)_f needs
+            // d_{f−1} (not yet overwritten), (Tᵀg)_f needs g_{f+1} (carried).
+            let mut g_next = 0.0;
+            for f in (0..slot.work.len()).rev() {
+                let d = slot.work[f];
+                let d_prev = if f > 0 { slot.work[f - 1] } else { 0.0 };
+                let g = d_prev + kappa * (d - d_prev);
+                let tg = g_next + kappa * (g - g_next);
+                slot.work[f] = w * d + s * tg;
+                g_next = g;
+            }
         }
         // work = rhs − q·p − Dᵀ·x: three forward differences (x beyond
         // the horizon is 0), fused with the combination, in one pass.
@@ -405,14 +606,27 @@ impl AxisSolver {
         reference: &[f64],
         plan: &mut [f64],
     ) -> Result<(), ControlError> {
-        check_lengths(self.horizon, reference, plan)?;
+        self.solve_problem(AxisProblem {
+            fixed,
+            sent: None,
+            reference,
+            plan,
+        })
+    }
+
+    /// As [`AxisSolver::solve`], with the previously sent command
+    /// ([`AxisProblem::sent`]) for the smoothness term.
+    pub fn solve_problem(&mut self, a: AxisProblem<'_>) -> Result<(), ControlError> {
+        check_lengths(self.horizon, a.reference, a.plan)?;
         let (q, w) = (self.q, self.w);
+        let smooth = (self.s, self.smoothness.kappa);
+        let shift = self.sent_shift(a.fixed, a.sent);
         let slot = &mut self.slots[0];
-        Self::prepare(q, slot, fixed, reference);
+        Self::prepare(q, slot, a.fixed, a.reference, shift);
         self.factor.solve_in_place(&mut slot.p)?;
-        Self::residual(q, w, slot);
+        Self::residual(q, w, smooth, slot);
         self.factor.solve_in_place(&mut slot.work)?;
-        Self::write_plan(slot, fixed, plan);
+        Self::write_plan(slot, a.fixed, a.plan);
         Ok(())
     }
 
@@ -427,12 +641,17 @@ impl AxisSolver {
         check_lengths(self.horizon, a.reference, a.plan)?;
         check_lengths(self.horizon, b.reference, b.plan)?;
         let (q, w) = (self.q, self.w);
+        let smooth = (self.s, self.smoothness.kappa);
+        let (shift_a, shift_b) = (
+            self.sent_shift(a.fixed, a.sent),
+            self.sent_shift(b.fixed, b.sent),
+        );
         let [sa, sb] = &mut self.slots;
-        Self::prepare(q, sa, a.fixed, a.reference);
-        Self::prepare(q, sb, b.fixed, b.reference);
+        Self::prepare(q, sa, a.fixed, a.reference, shift_a);
+        Self::prepare(q, sb, b.fixed, b.reference, shift_b);
         self.factor.solve2_in_place(&mut sa.p, &mut sb.p)?;
-        Self::residual(q, w, sa);
-        Self::residual(q, w, sb);
+        Self::residual(q, w, smooth, sa);
+        Self::residual(q, w, smooth, sb);
         self.factor.solve2_in_place(&mut sa.work, &mut sb.work)?;
         Self::write_plan(sa, a.fixed, a.plan);
         Self::write_plan(sb, b.fixed, b.plan);
@@ -497,10 +716,16 @@ impl AxisBounds {
 /// ã, speed bounds rows on Δp/δt. The sparsity is fixed at construction;
 /// each solve updates `q` and `b` only. Without bounds this is the plain DF
 /// QP handed to a generic solver (the benchmark baseline).
+///
+/// The smoothness term ([`Smoothness`]) in these variables: with
+/// `A_j = a_j − a_0 = ã_{j−1}`, `c_j − c_{j−1} = κ·ã_j + (1 − 2κ)·ã_{j−1}
+/// − (1 − κ)·ã_{j−2}` (ã before 0 is 0) plus `a_0 − c_{−1}` at j = 0: band 2
+/// in P, the sent command in q.
 pub struct ConstrainedAxisSolver {
     horizon: usize,
     dt: f64,
     q: f64,
+    smoothness: Smoothness,
     bounds: AxisBounds,
     solver: DefaultSolver<f64>,
     qvec: Vec<f64>,
@@ -554,16 +779,54 @@ impl ConstrainedAxisSolver {
         bounds: AxisBounds,
         time_limit: f64,
     ) -> Result<Self, ControlError> {
+        Self::with_smoothness(horizon, q, r, dt, bounds, time_limit, Smoothness::default())
+    }
+
+    /// As [`ConstrainedAxisSolver::new`], plus the command-smoothness term.
+    pub fn with_smoothness(
+        horizon: usize,
+        q: f64,
+        r: f64,
+        dt: f64,
+        bounds: AxisBounds,
+        time_limit: f64,
+        smoothness: Smoothness,
+    ) -> Result<Self, ControlError> {
         // Same argument checks as the fast path.
         AxisSolver::check_args(horizon, q, r, dt)?;
+        smoothness.check()?;
         if time_limit.is_nan() || time_limit <= 0.0 {
             return Err(invalid("solver_time_limit", "> 0 s (or infinity)"));
         }
         let n = horizon - 2;
         let nv = 2 * n;
         // P (upper triangle): 2q on p; on ã the jerk term
-        // (r/δt²)·Σ_j (ã_j − ã_{j−1})² (ã_{−1} = 0), doubled for ½xᵀPx.
+        // (r/δt²)·Σ_j (ã_j − ã_{j−1})² (ã_{−1} = 0), doubled for ½xᵀPx,
+        // and the smoothness term (band 2), kept as diagonals of the ã block.
         let ja = 2.0 * r / (dt * dt);
+        let mut band = vec![[0.0f64; 3]; n]; // [diag, (k−1, k), (k−2, k)] per column k
+        for (k, col) in band.iter_mut().enumerate() {
+            col[0] = if k + 1 < n { 2.0 * ja } else { ja };
+            if k > 0 {
+                col[1] = -ja;
+            }
+        }
+        let smooth = smoothness.weight > 0.0;
+        if smooth {
+            let sg = 2.0 * smoothness.weight / smoothness.gravity.powi(2);
+            let kp = smoothness.kappa;
+            let coeffs = [kp, 1.0 - 2.0 * kp, -(1.0 - kp)]; // on ã_j, ã_{j−1}, ã_{j−2}
+            for j in 0..n {
+                for (da, &ca) in coeffs.iter().enumerate() {
+                    let Some(a) = j.checked_sub(da) else { continue };
+                    for (db, &cb) in coeffs.iter().enumerate().skip(da) {
+                        let Some(b) = j.checked_sub(db) else { continue };
+                        // a ≥ b: entry (b, a) of the upper triangle.
+                        band[a][a - b] += sg * ca * cb;
+                    }
+                }
+            }
+        }
         let mut colptr = vec![0usize];
         let (mut prow, mut pval) = (Vec::new(), Vec::new());
         for c in 0..nv {
@@ -572,12 +835,16 @@ impl ConstrainedAxisSolver {
                 pval.push(2.0 * q);
             } else {
                 let k = c - n;
+                if smooth && k > 1 {
+                    prow.push(c - 2);
+                    pval.push(band[k][2]);
+                }
                 if k > 0 {
                     prow.push(c - 1);
-                    pval.push(-ja);
+                    pval.push(band[k][1]);
                 }
                 prow.push(c);
-                pval.push(if k + 1 < n { 2.0 * ja } else { ja });
+                pval.push(band[k][0]);
             }
             colptr.push(prow.len());
         }
@@ -645,6 +912,7 @@ impl ConstrainedAxisSolver {
             horizon,
             dt,
             q,
+            smoothness,
             bounds,
             solver,
             qvec,
@@ -672,6 +940,23 @@ impl ConstrainedAxisSolver {
         reference: &[f64],
         plan: &mut [f64],
     ) -> Result<(), ControlError> {
+        self.solve_problem(AxisProblem {
+            fixed,
+            sent: None,
+            reference,
+            plan,
+        })
+    }
+
+    /// As [`ConstrainedAxisSolver::solve`], with the previously sent
+    /// command ([`AxisProblem::sent`]) for the smoothness term.
+    pub fn solve_problem(&mut self, a: AxisProblem<'_>) -> Result<(), ControlError> {
+        let AxisProblem {
+            fixed,
+            sent,
+            reference,
+            plan,
+        } = a;
         check_lengths(self.horizon, reference, plan)?;
         let n = self.horizon - 2;
         for f in 0..n {
@@ -679,6 +964,14 @@ impl ConstrainedAxisSolver {
         }
         let mut m = self.m_eq;
         let dt = self.dt;
+        let sm = self.smoothness;
+        self.qvec[n] = match sent {
+            Some(c) if sm.weight > 0.0 => {
+                let a0 = (fixed[2] - 2.0 * fixed[1] + fixed[0]) / (dt * dt);
+                2.0 * sm.weight / sm.gravity.powi(2) * sm.kappa * (a0 - c)
+            }
+            _ => 0.0,
+        };
         if let Some([lo, hi]) = self.bounds.acceleration {
             let a_base = (fixed[2] - 2.0 * fixed[1] + fixed[0]) / (dt * dt);
             for _ in 1..=self.horizon - 2 {
@@ -745,8 +1038,10 @@ impl AxisSolver {
 /// One [`Controller::update`] per control step δt: window → F⁻¹ prediction
 /// of y_{k+1}, y_{k+2} → reference over the horizon → per-axis optimisation
 /// → F on y*_k..y*_{k+3} → saturation → the sent input into the window.
-/// Commands use the model's fixed yaw ψ⋆ (the measured yaw is only checked
-/// for being finite). Without binding constraints `update` allocates nothing
+/// With [`DfMpcSettings::multi_rate`] the window is a [`MultiRateWindow`]:
+/// samples come through [`Controller::observe`], `update` takes the tick
+/// time. Commands use the model's fixed yaw ψ⋆ (the measured yaw is only
+/// checked for being finite). Without binding constraints `update` allocates nothing
 /// (all workspaces are sized in [`DfMpc::new`]); clarabel's solve may.
 #[derive(Debug)]
 pub struct DfMpc {
@@ -766,6 +1061,12 @@ pub struct DfMpc {
     /// Last plan y*_k..y*_{k+N} per axis.
     plans: Vec<Vec<f64>>,
     plan_valid: bool,
+    /// Multi-rate window, when configured (else `window` is used).
+    multi: Option<MultiRateWindow>,
+    /// True when some axis has a smoothness weight.
+    smooth: bool,
+    /// Disturbance estimator, when configured.
+    estimator: Option<DisturbanceEstimator>,
 }
 
 impl DfMpc {
@@ -786,9 +1087,15 @@ impl DfMpc {
         let mut fast = Vec::with_capacity(axes);
         let mut constrained = Vec::with_capacity(axes);
         let mut bounds = Vec::with_capacity(axes);
-        for axis in 0..axes {
+        let lags = input_lags(&model);
+        for (axis, lag) in lags.iter().enumerate().take(axes) {
             let (q, r) = (settings.tracking_weight[axis], settings.jerk_weight[axis]);
-            fast.push(AxisSolver::new(n, q, r, dt)?);
+            let smoothness = Smoothness {
+                weight: settings.smoothness_weight[axis],
+                kappa: lag / dt,
+                gravity: model.gravity(),
+            };
+            fast.push(AxisSolver::with_smoothness(n, q, r, dt, smoothness)?);
             let acceleration = if axis < 2 {
                 c.max_tilt.map(|t| {
                     let a = model.gravity() * t.tan();
@@ -804,13 +1111,14 @@ impl DfMpc {
             constrained.push(if b.is_empty() {
                 None
             } else {
-                Some(ConstrainedAxisSolver::new(
+                Some(ConstrainedAxisSolver::with_smoothness(
                     n,
                     q,
                     r,
                     dt,
                     b,
                     settings.solver_time_limit,
+                    smoothness,
                 )?)
             });
             bounds.push(b);
@@ -826,6 +1134,19 @@ impl DfMpc {
             reference_axis: vec![vec![0.0; n + 1]; axes],
             plans: vec![vec![0.0; n + 1]; axes],
             plan_valid: false,
+            multi: settings
+                .multi_rate
+                .map(|m| MultiRateWindow::new(&model, m))
+                .transpose()?,
+            smooth: settings
+                .smoothness_weight
+                .iter()
+                .take(axes)
+                .any(|s| *s > 0.0),
+            estimator: settings
+                .disturbance
+                .map(|d| DisturbanceEstimator::new(model, d))
+                .transpose()?,
         })
     }
 
@@ -839,9 +1160,20 @@ impl DfMpc {
         &self.settings
     }
 
-    /// The window of past measurements and sent inputs.
+    /// The disturbance estimator, when configured.
+    pub fn disturbance_estimator(&self) -> Option<&DisturbanceEstimator> {
+        self.estimator.as_ref()
+    }
+
+    /// The window of past measurements and sent inputs (classic mode; it
+    /// stays empty in multi-rate mode).
     pub fn window(&self) -> &Window {
         &self.window
+    }
+
+    /// The multi-rate window, when configured.
+    pub fn multi_rate_window(&self) -> Option<&MultiRateWindow> {
+        self.multi.as_ref()
     }
 
     /// The full plan `y*_k..y*_{k+N}` [m] of `axis` (0 = x, 1 = y, 2 = z)
@@ -875,6 +1207,26 @@ impl DfMpc {
     }
 }
 
+/// The acceleration [m/s²] (model frame) that input `u` asks for: the
+/// model's acceleration at the attitude (and thrust) the input dynamics
+/// settle to, `k̃·(θ_cmd, φ_cmd)` (and `T_cmd`). Planar: z = 0.
+fn commanded_acceleration(
+    model: &ControlModel,
+    u: &Vector3<f64>,
+) -> Result<Vector3<f64>, ControlError> {
+    Ok(match model {
+        ControlModel::Planar(m) => {
+            let k = m.params().k;
+            let a = m.acceleration(k * u.x, k * u.y)?;
+            Vector3::new(a.x, a.y, 0.0)
+        }
+        ControlModel::Spatial(m) => {
+            let k = m.params().k;
+            m.acceleration(k * u.x, k * u.y, u.z)
+        }
+    })
+}
+
 impl Controller for DfMpc {
     fn name(&self) -> &'static str {
         "df-mpc"
@@ -886,26 +1238,47 @@ impl Controller for DfMpc {
         reference: &mut dyn ReferenceSource,
     ) -> Result<TickOutput, ControlError> {
         self.plan_valid = false;
+        if let Some(e) = &mut self.estimator {
+            e.begin_tick();
+        }
+        let d = self
+            .estimator
+            .as_ref()
+            .map_or(DisturbanceEstimate::NOMINAL, |e| e.estimate());
         let axes = self.model.axes();
-        if !(measurement
-            .position
-            .iter()
-            .take(axes)
-            .all(|v| v.is_finite())
-            && measurement.yaw.is_finite())
-        {
+        // Multi-rate mode takes only the tick time (and checks the yaw).
+        let position_ok = self.multi.is_some()
+            || measurement
+                .position
+                .iter()
+                .take(axes)
+                .all(|v| v.is_finite());
+        if !(position_ok && measurement.yaw.is_finite()) {
             return Err(ControlError::NonFiniteMeasurement);
         }
         // Work on a copy: on error nothing is recorded.
         let mut window = self.window;
-        window.push_measurement(measurement.position);
 
-        // Input-to-output map over the window: y_{k+1}, y_{k+2}.
-        let [ym2, ym1, y0] = *window.outputs();
-        let [u2, u1] = *window.inputs();
-        let y1 = self.model.next_output(&[ym2, ym1, y0], &u2)?;
-        let y2 = self.model.next_output(&[ym1, y0, y1], &u1)?;
-        let fixed = [y0, y1, y2];
+        // Input-to-output map over the window: y_{k+1}, y_{k+2}; and the
+        // input sent at k−1 (for the smoothness term).
+        let (fixed, previous_input) = if let Some(multi) = &mut self.multi {
+            let model = self.model;
+            let e = multi.estimate(measurement.t, |y, u| model.next_output_disturbed(y, u, &d))?;
+            (e.fixed, e.previous_input)
+        } else {
+            window.push_measurement(measurement.position);
+            let [ym2, ym1, y0] = *window.outputs();
+            let [u2, u1] = *window.inputs();
+            let y1 = self.model.next_output_disturbed(&[ym2, ym1, y0], &u2, &d)?;
+            let y2 = self.model.next_output_disturbed(&[ym1, y0, y1], &u1, &d)?;
+            ([y0, y1, y2], u1)
+        };
+        let y0 = fixed[0];
+        let sent_acceleration = if self.smooth {
+            Some(commanded_acceleration(&self.model, &previous_input)? + d.acceleration)
+        } else {
+            None
+        };
 
         // Reference over the horizon.
         reference.horizon(&y0, self.model.dt(), &mut self.reference);
@@ -927,29 +1300,27 @@ impl Controller for DfMpc {
                 *dst = r[axis];
             }
         }
-        let paired = self.fast[0].weights() == self.fast[1].weights();
+        let sent = |axis: usize| sent_acceleration.map(|c| c[axis]);
+        let paired = self.fast[0].weights() == self.fast[1].weights()
+            && self.fast[0].smoothness() == self.fast[1].smoothness();
         let [px, py, pz @ ..] = self.plans.as_mut_slice() else {
             unreachable!("DfMpc::new makes at least two plans")
         };
+        let ra = &self.reference_axis;
+        let problem = |axis: usize, plan| AxisProblem {
+            fixed: &fixed_axis[axis],
+            sent: sent(axis),
+            reference: &ra[axis],
+            plan,
+        };
         if paired {
-            self.fast[0].solve_pair(
-                AxisProblem {
-                    fixed: &fixed_axis[0],
-                    reference: &self.reference_axis[0],
-                    plan: px,
-                },
-                AxisProblem {
-                    fixed: &fixed_axis[1],
-                    reference: &self.reference_axis[1],
-                    plan: py,
-                },
-            )?;
+            self.fast[0].solve_pair(problem(0, px), problem(1, py))?;
         } else {
-            self.fast[0].solve(&fixed_axis[0], &self.reference_axis[0], px)?;
-            self.fast[1].solve(&fixed_axis[1], &self.reference_axis[1], py)?;
+            self.fast[0].solve_problem(problem(0, px))?;
+            self.fast[1].solve_problem(problem(1, py))?;
         }
         if let Some(plan) = pz.first_mut() {
-            self.fast[2].solve(&fixed_axis[2], &self.reference_axis[2], plan)?;
+            self.fast[2].solve_problem(problem(2, plan))?;
         }
         let mut constrained = false;
         let dt = self.model.dt();
@@ -958,11 +1329,16 @@ impl Controller for DfMpc {
             .iter_mut()
             .zip(&mut self.plans)
             .zip(&self.reference_axis);
-        for (((cs, plan), reference), fixed) in axes_data.zip(&fixed_axis) {
+        for (axis, (((cs, plan), reference), fixed)) in axes_data.zip(&fixed_axis).enumerate() {
             if let Some(cs) = cs
                 && cs.bounds().violated_by(plan, dt)
             {
-                cs.solve(fixed, reference, plan)?;
+                cs.solve_problem(AxisProblem {
+                    fixed,
+                    sent: sent(axis),
+                    reference,
+                    plan,
+                })?;
                 constrained = true;
             }
         }
@@ -974,15 +1350,28 @@ impl Controller for DfMpc {
                 p[axis] = self.plans[axis][j];
             }
         }
-        let u = self.model.input_from_outputs(&plan4)?;
+        let u = self.model.input_from_outputs_disturbed(&plan4, &d)?;
         if !u.iter().all(|v| v.is_finite()) {
             return Err(ControlError::Flat(dflat_model::FlatError::NonFinite(
                 "input",
             )));
         }
         let (sent, saturated) = self.saturate(u);
-        window.push_input(sent);
-        self.window = window;
+        if let Some(e) = &mut self.estimator {
+            // Multi-rate: the estimated y_k stands in for the measurement.
+            let y = if self.multi.is_some() {
+                &y0
+            } else {
+                &measurement.position
+            };
+            e.record(y, &sent, saturated);
+        }
+        if let Some(multi) = &mut self.multi {
+            multi.commit(&sent);
+        } else {
+            window.push_input(sent);
+            self.window = window;
+        }
         self.plan_valid = true;
         Ok(TickOutput {
             command: self.model.command(&sent),
@@ -993,9 +1382,29 @@ impl Controller for DfMpc {
         })
     }
 
+    fn multi_rate(&self) -> bool {
+        self.multi.is_some()
+    }
+
+    fn observe(&mut self, sample: &Measurement) {
+        if let Some(multi) = &mut self.multi {
+            multi.observe(sample.t, &sample.position);
+        }
+    }
+
     fn reset(&mut self) {
         self.window.reset();
+        if let Some(multi) = &mut self.multi {
+            multi.reset();
+        }
         self.plan_valid = false;
+        if let Some(e) = &mut self.estimator {
+            e.reset();
+        }
+    }
+
+    fn disturbance(&self) -> Option<crate::disturbance::DisturbanceReport> {
+        self.estimator.as_ref().map(|e| e.report())
     }
 }
 

@@ -7,10 +7,15 @@
 //! pose → window → predict (F⁻¹) → reference → optimize → map (F) → saturate → command
 //! ```
 //!
-//! * [`window::Window`] — the last R measured outputs and R−1 sent inputs.
+//! * [`window::Window`] — the last R measured outputs and R−1 sent inputs;
+//!   [`window::MultiRateWindow`] — timestamped pose samples at their own
+//!   rate (vision, with latency and dropouts) fitted through the sent
+//!   inputs (multi-rate mode, see [`Controller`]).
 //! * [`reference::Reference`] — a fixed setpoint or a path with a speed.
 //! * [`dfmpc::DfMpc`] — the discrete-flatness MPC of the paper (§V).
 //! * [`fmpc::FlatnessMpc`] and [`pd::Pd`] — the paper's baselines.
+//! * [`disturbance::DisturbanceEstimator`] — acceleration-offset and
+//!   thrust-scale estimation for offset-free DF-MPC (optional).
 //!
 //! All three implement [`Controller`], so shells choose one by configuration.
 //! Positions are local NED [m]; angles ZYX [rad]; thrust is specific
@@ -18,6 +23,7 @@
 
 pub mod banded;
 pub mod dfmpc;
+pub mod disturbance;
 pub mod fmpc;
 pub mod model;
 pub mod pd;
@@ -91,6 +97,9 @@ pub enum ControlError {
     /// The measurement holds NaN or infinite values.
     #[error("non-finite measurement")]
     NonFiniteMeasurement,
+    /// Multi-rate mode: no pose sample has been observed yet.
+    #[error("no pose sample yet")]
+    NoMeasurement,
     /// The reference holds NaN or infinite values.
     #[error("non-finite reference")]
     NonFiniteReference,
@@ -111,12 +120,40 @@ pub enum ControlError {
 }
 
 /// One interface for DF-MPC, Flatness MPC and PD.
+///
+/// Two ways to feed poses, chosen by the controller ([`Controller::multi_rate`]):
+///
+/// * **classic** (every controller): once per control step δt the shell
+///   calls [`Controller::update`] with the newest pose at or before the tick
+///   (the paper's 50 Hz stream, or vision extrapolated to the tick);
+/// * **multi-rate** (DF-MPC with `multi_rate` settings): the shell calls
+///   [`Controller::observe`] for every new pose sample, stamped with its
+///   measurement (capture) time, as it arrives; then, once per control
+///   step, [`Controller::update`] with `measurement.t` = the tick time (same
+///   clock as the samples). The tick's `position` is not used then (the
+///   samples are); `yaw` must be finite.
+///
+/// A shell may always call `observe`: controllers without multi-rate
+/// support ignore it.
 pub trait Controller: Send {
     /// Short name for logs and plots ("df-mpc", "fmpc", "pd").
     fn name(&self) -> &'static str;
+    /// True when the controller consumes timestamped samples through
+    /// [`Controller::observe`] and takes only the tick time from
+    /// [`Controller::update`]'s measurement. Default false.
+    fn multi_rate(&self) -> bool {
+        false
+    }
+    /// A raw pose sample at its measurement time `sample.t` [s] (multi-rate
+    /// mode; see the trait docs). Bad or stale samples are dropped. Default:
+    /// ignored.
+    fn observe(&mut self, sample: &Measurement) {
+        let _ = sample;
+    }
     /// One control tick at control step δt: takes the newest measurement
-    /// (at or before the tick) and the reference, returns the command and
-    /// records it as sent. On error nothing is recorded.
+    /// (at or before the tick; in multi-rate mode the tick time) and the
+    /// reference, returns the command and records it as sent. On error
+    /// nothing is recorded.
     fn update(
         &mut self,
         measurement: &Measurement,
@@ -125,6 +162,11 @@ pub trait Controller: Send {
     /// Forgets all history (window, estimates); the next update starts as
     /// the first one did.
     fn reset(&mut self);
+    /// The disturbance estimate for logs and telemetry, when the controller
+    /// runs an estimator ([`disturbance`]); `None` otherwise (the default).
+    fn disturbance(&self) -> Option<disturbance::DisturbanceReport> {
+        None
+    }
 }
 
 /// A source of reference positions over a horizon.

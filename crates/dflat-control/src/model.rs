@@ -12,11 +12,39 @@
 //! Both models have window r = [`WINDOW`] = 3: `u_k = F(y_k..y_{k+3})` and
 //! `y_{k+3} = F⁻¹(y_k..y_{k+2}, u_k)`. Everything here is pure and does not
 //! allocate.
+//!
+//! # Disturbance-aware maps
+//!
+//! [`ControlModel::next_output_disturbed`] and
+//! [`ControlModel::input_from_outputs_disturbed`] are F⁻¹ and F of the
+//! model with an estimated constant acceleration offset d \[m/s²\] (model
+//! frame) and, for the spatial model, a thrust scale κ (actual specific
+//! thrust = κ · model thrust) added to its Euler step:
+//!
+//! ```text
+//! v_{k+1} = v_k + δt·(a(θ_k, φ_k, κ·T_k) + d)
+//! ```
+//!
+//! Both maps see the outputs only through second differences `Δ²y_j` (the
+//! accelerations), so the offset is removed by shifting the outputs by a
+//! quadratic with second difference δt²·d, `ỹ_j = y_j − ½·δt²·d·j(j−1)`
+//! (`ỹ_0 = y_0`, `ỹ_1 = y_1`, `ỹ_2 = y_2 − δt²d`, `ỹ_3 = y_3 − 3δt²d`),
+//! and the thrust scale by working in effective thrust κ·T (a linear
+//! first-order lag commutes with the scale):
+//!
+//! ```text
+//! F⁻¹_d(y_0..y_2, u) = F⁻¹(ỹ_0..ỹ_2, [θ_cmd, φ_cmd, κ·T_cmd]) + 3δt²·d
+//! F_d(y_0..y_3)      = F(ỹ_0..ỹ_3) with T_cmd divided by κ
+//! ```
+//!
+//! With the nominal estimate (d = 0, κ = 1) they call the plain maps, so
+//! results are bit-identical to them.
 
 use dflat_model::{FlatError, FlatModel, Frame, PlanarModel, SpatialModel};
 use nalgebra::{Vector2, Vector3};
 
 use crate::AttitudeCommand;
+use crate::disturbance::DisturbanceEstimate;
 
 /// Window r of both control models: the input needs r + 1 = 4 consecutive
 /// outputs, the prediction r = 3 outputs and one input.
@@ -111,6 +139,109 @@ impl ControlModel {
         }
     }
 
+    /// δt²·d: the second difference \[m\] a constant acceleration offset `d`
+    /// \[m/s²\] adds to the outputs (z dropped for the planar model).
+    fn offset_curvature(&self, d: &DisturbanceEstimate) -> Vector3<f64> {
+        let dt = self.dt();
+        let mut q = d.acceleration * (dt * dt);
+        if let ControlModel::Planar(_) = self {
+            q.z = 0.0;
+        }
+        q
+    }
+
+    /// F⁻¹ with a disturbance estimate (see the module docs): `y_{k+3}` \[m\]
+    /// from `y_k, y_{k+1}, y_{k+2}` (oldest first) and `u_k` when the model's
+    /// acceleration is offset by `d.acceleration` \[m/s²\] (model frame) and,
+    /// for the spatial model, its thrust scaled by `d.thrust_scale`.
+    /// Identical to [`ControlModel::next_output`] for the nominal estimate.
+    pub fn next_output_disturbed(
+        &self,
+        y: &[Vector3<f64>; 3],
+        u: &Vector3<f64>,
+        d: &DisturbanceEstimate,
+    ) -> Result<Vector3<f64>, FlatError> {
+        if d.is_nominal() {
+            return self.next_output(y, u);
+        }
+        let q = self.offset_curvature(d);
+        let shifted = [y[0], y[1], y[2] - q];
+        let mut u_eff = *u;
+        if let ControlModel::Spatial(_) = self {
+            u_eff.z *= d.thrust_scale;
+        }
+        Ok(self.next_output(&shifted, &u_eff)? + 3.0 * q)
+    }
+
+    /// F with a disturbance estimate (see the module docs): the input
+    /// `[θ_cmd, φ_cmd, T_cmd]` that makes the disturbed model fly
+    /// `y_k..y_{k+3}` \[m\] (oldest first). Identical to
+    /// [`ControlModel::input_from_outputs`] for the nominal estimate.
+    pub fn input_from_outputs_disturbed(
+        &self,
+        y: &[Vector3<f64>; 4],
+        d: &DisturbanceEstimate,
+    ) -> Result<Vector3<f64>, FlatError> {
+        if d.is_nominal() {
+            return self.input_from_outputs(y);
+        }
+        let q = self.offset_curvature(d);
+        let shifted = [y[0], y[1], y[2] - q, y[3] - 3.0 * q];
+        let mut u = self.input_from_outputs(&shifted)?;
+        if let ControlModel::Spatial(_) = self {
+            u.z /= d.thrust_scale;
+        }
+        if u.iter().all(|v| v.is_finite()) {
+            Ok(u)
+        } else {
+            Err(FlatError::NonFinite("input"))
+        }
+    }
+
+    /// One Euler step of the model's input dynamics: the first-order
+    /// attitude loop `θ_{k+1} = θ_k + δt·(k̃·θ_cmd − θ_k)/τ` (φ likewise)
+    /// and, for the spatial model, the thrust lag
+    /// `T_{k+1} = T_k + δt·(T_cmd − T_k)/τ_T`. `s = [θ, φ, T]`, `u` the sent
+    /// input; the planar model keeps T.
+    pub fn input_state_step(&self, s: &Vector3<f64>, u: &Vector3<f64>) -> Vector3<f64> {
+        let dt = self.dt();
+        let (tau, k, thrust) = match self {
+            ControlModel::Planar(m) => (m.params().tau, m.params().k, s.z),
+            ControlModel::Spatial(m) => {
+                let p = m.params();
+                (p.tau, p.k, s.z + dt * (u.z - s.z) / p.tau_thrust)
+            }
+        };
+        Vector3::new(
+            s.x + dt * (k * u.x - s.x) / tau,
+            s.y + dt * (k * u.y - s.y) / tau,
+            thrust,
+        )
+    }
+
+    /// The model's acceleration \[m/s²\] (model frame) at the input-driven
+    /// state `s = [θ, φ, T]`, split as `a = a_g + κ·a_T` for a thrust scale
+    /// κ: returns `(a_g, a_T)`. Planar: `a_g` is the level-flight
+    /// acceleration (z = 0) and `a_T = 0` (the autopilot holds altitude);
+    /// spatial: `a_g` is gravity alone and `a_T` the thrust's share.
+    /// Errors at 90° of tilt (planar).
+    pub fn acceleration_parts(
+        &self,
+        s: &Vector3<f64>,
+    ) -> Result<(Vector3<f64>, Vector3<f64>), FlatError> {
+        match self {
+            ControlModel::Planar(m) => {
+                let a = m.acceleration(s.x, s.y)?;
+                Ok((Vector3::new(a.x, a.y, 0.0), Vector3::zeros()))
+            }
+            ControlModel::Spatial(m) => {
+                let a_g = m.acceleration(s.x, s.y, 0.0);
+                let a = m.acceleration(s.x, s.y, s.z);
+                Ok((a_g, a - a_g))
+            }
+        }
+    }
+
     /// The autopilot command for input `u = [θ_cmd, φ_cmd, T_cmd]` at the
     /// model's yaw ψ⋆.
     pub fn command(&self, u: &Vector3<f64>) -> AttitudeCommand {
@@ -149,6 +280,62 @@ mod tests {
         assert_eq!(m.hover_input(), Vector3::new(0.0, 0.0, 9.81));
         let c = m.command(&u);
         assert_eq!((c.pitch, c.roll, c.thrust), (-0.1, 0.05, 9.81));
+    }
+
+    #[test]
+    fn disturbed_maps_invert_the_disturbed_step() {
+        use dflat_model::{FlatModel, SpatialParams};
+        let sm = SpatialModel::new(SpatialParams {
+            psi: 0.4,
+            ..Default::default()
+        })
+        .unwrap();
+        let m = ControlModel::Spatial(sm);
+        let d = DisturbanceEstimate {
+            acceleration: Vector3::new(0.7, -0.3, 0.0),
+            thrust_scale: 1.25,
+        };
+        // The disturbed Euler step: thrust scaled by κ, offset d on v.
+        let step = |x: &dflat_model::spatial::SpatialState, u: &Vector3<f64>| {
+            let mut n = sm.step(x, &Vector3::new(u.x, u.y, d.thrust_scale * u.z));
+            for (i, a) in [
+                (1, d.acceleration.x),
+                (3, d.acceleration.y),
+                (5, d.acceleration.z),
+            ] {
+                n[i] += sm.dt() * a;
+            }
+            n
+        };
+        let mut x = dflat_model::spatial::SpatialState::from([
+            1.0, 0.5, -2.0, 0.2, -3.0, -0.1, 0.05, -0.03, 9.81,
+        ]);
+        let us = [
+            Vector3::new(0.1, -0.05, 8.0),
+            Vector3::new(0.12, -0.02, 8.3),
+            Vector3::new(0.08, 0.01, 7.9),
+            Vector3::new(0.05, 0.03, 8.1),
+        ];
+        let mut y = Vec::new();
+        for u in &us {
+            y.push(sm.output(&x));
+            x = step(&x, u);
+        }
+        y.push(sm.output(&x));
+        let y3 = m
+            .next_output_disturbed(&[y[0], y[1], y[2]], &us[0], &d)
+            .unwrap();
+        assert!((y3 - y[3]).norm() < 1e-12, "{y3} vs {}", y[3]);
+        let u = m
+            .input_from_outputs_disturbed(&[y[1], y[2], y[3], y[4]], &d)
+            .unwrap();
+        assert!((u - us[1]).norm() < 1e-7, "{u} vs {}", us[1]);
+        // The nominal estimate is the plain map, bit for bit.
+        let n = DisturbanceEstimate::NOMINAL;
+        assert_eq!(
+            m.next_output_disturbed(&[y[0], y[1], y[2]], &us[0], &n),
+            m.next_output(&[y[0], y[1], y[2]], &us[0])
+        );
     }
 
     #[test]

@@ -9,8 +9,10 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use clap::{Args, Subcommand};
 use dflat_sim::experiments::OutputPaths;
+use dflat_sim::experiments::mismatch::{MismatchConfig, run_mismatch, write_mismatch};
 use dflat_sim::experiments::noise_sweep::{NoiseSweepConfig, run_noise_sweep, write_noise_sweep};
 use dflat_sim::experiments::paths::{PathsConfig, run_paths, write_paths};
+use dflat_sim::experiments::vision_rate::{VisionRateConfig, run_vision_rate, write_vision_rate};
 
 /// Which study to run.
 #[derive(Debug, Subcommand)]
@@ -25,6 +27,18 @@ pub enum ExperimentCommand {
     /// extrapolated), DF-MPC (2 s) vs Flatness MPC (1.5 s) vs PD after a
     /// small weight search; plus the DSL demonstration (DF-MPC).
     Paths(PathsArgs),
+    /// Issue 6: the L path at 3–9 m/s with vision at 10/15/30 Hz (60 ms,
+    /// 2 cm): DF-MPC extrapolated (paper) vs multi-rate windows vs
+    /// multi-rate + command smoothness vs Flatness MPC vs PD; path error,
+    /// mean |Δu|, saturated share; budgets at 15 Hz. Markdown table on
+    /// stdout, JSON + plots.
+    VisionRate(VisionRateArgs),
+    /// Issue 5: steady-state error of a 10 m step under model mismatch
+    /// (wind with drag, mass +20 %, hover thrust 0.4 vs 0.5, k̃ 0.8, τ 0.3 s;
+    /// σ = 1 cm) on the spatial plant; DF-MPC with and without the
+    /// disturbance estimator vs Flatness MPC vs PD; plus the noise check
+    /// (noise-sweep error of DF with / without the estimator).
+    Mismatch(MismatchArgs),
 }
 
 /// Options shared by both studies.
@@ -79,6 +93,58 @@ pub struct PathsArgs {
     no_dsl: bool,
 }
 
+/// Options of `experiment mismatch`.
+#[derive(Debug, Args)]
+pub struct MismatchArgs {
+    #[command(flatten)]
+    common: CommonArgs,
+    /// Skip the noise check (the noise-sweep set-up flown by DF-MPC with
+    /// and without the estimator).
+    #[arg(long)]
+    no_noise_check: bool,
+    /// Position noise levels σ per axis [m], comma-separated
+    /// [default: 0, 1e-4, 1e-3, 1e-2].
+    #[arg(long, value_delimiter = ',')]
+    sigmas: Option<Vec<f64>>,
+    /// DF-MPC weights `N,q,r` (horizon [ticks], tracking [1/m²], jerk [s⁶/m²]).
+    #[arg(long, value_delimiter = ',')]
+    df_weights: Option<Vec<f64>>,
+    /// Estimator bandwidth [Hz] and fit window [ticks], `f_c,L`.
+    #[arg(long, value_delimiter = ',')]
+    estimator: Option<Vec<f64>>,
+}
+
+/// Options of `experiment vision-rate`.
+#[derive(Debug, Args)]
+pub struct VisionRateArgs {
+    /// Trials per controller, rate and speed (about 15 s in release on
+    /// two cores at the default 10).
+    #[arg(long, default_value_t = 10)]
+    trials: usize,
+    /// Desired speeds [m/s], comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "3,5,7,9")]
+    speeds: Vec<f64>,
+    /// Vision rates [Hz], comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "10,15,30")]
+    rates: Vec<f64>,
+    /// JSON results file [default: <out>/vision_rate.json].
+    #[arg(long)]
+    json: Option<PathBuf>,
+    /// Plot prefix: plots go to <prefix>_<metric>_<rate>hz.svg/.png
+    /// [default: <out>/vision_rate].
+    #[arg(long)]
+    plot: Option<PathBuf>,
+    /// Output directory.
+    #[arg(long, default_value = "docs/figures")]
+    out: PathBuf,
+    /// Base of the seed rule.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// No progress bar.
+    #[arg(long)]
+    no_progress: bool,
+}
+
 /// Runs one study, prints its table (stdout) and the files written and the
 /// wall time (stderr).
 pub fn run(command: ExperimentCommand) -> Result<()> {
@@ -99,6 +165,43 @@ pub fn run(command: ExperimentCommand) -> Result<()> {
             let result = run_noise_sweep(&config, !a.common.no_progress).context("noise sweep")?;
             print!("{}", result.table());
             write_noise_sweep(&result, &out).context("writing the noise sweep's outputs")?
+        }
+        ExperimentCommand::Mismatch(a) => {
+            let mut config = MismatchConfig {
+                trials: a.common.trials,
+                seed_base: a.common.seed,
+                noise_check: !a.no_noise_check,
+                ..MismatchConfig::default()
+            };
+            if let Some(s) = a.sigmas {
+                config.sigmas = s;
+            }
+            if let Some(w) = a.df_weights {
+                anyhow::ensure!(w.len() == 3, "--df-weights takes N,q,r");
+                config.df_weights = (w[0] as usize, w[1], w[2]);
+            }
+            if let Some(e) = a.estimator {
+                anyhow::ensure!(e.len() == 2, "--estimator takes f_c,L");
+                config.estimator.bandwidth_hz = e[0];
+                config.estimator.window = e[1] as usize;
+            }
+            let out = OutputPaths::resolve(&a.common.out, "mismatch", a.common.json, a.common.plot);
+            let result = run_mismatch(&config, !a.common.no_progress).context("mismatch study")?;
+            print!("{}", result.table());
+            write_mismatch(&result, &out).context("writing the mismatch study's outputs")?
+        }
+        ExperimentCommand::VisionRate(a) => {
+            let config = VisionRateConfig {
+                speeds: a.speeds,
+                rates: a.rates,
+                trials: a.trials,
+                seed_base: a.seed,
+                ..VisionRateConfig::default()
+            };
+            let out = OutputPaths::resolve(&a.out, "vision_rate", a.json, a.plot);
+            let result = run_vision_rate(&config, !a.no_progress).context("vision-rate study")?;
+            print!("{}", result.table());
+            write_vision_rate(&result, &out).context("writing the vision-rate study's outputs")?
         }
         ExperimentCommand::Paths(a) => {
             let mut config = if a.no_tune {

@@ -22,8 +22,10 @@
 
 mod controllers;
 mod figures;
+pub mod mismatch;
 pub mod noise_sweep;
 pub mod paths;
+pub mod vision_rate;
 
 pub use controllers::ControllerSpec;
 

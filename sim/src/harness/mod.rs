@@ -11,9 +11,14 @@
 //! One tick k at `t_k = k·δt`:
 //!
 //! 1. the sensor gives the measurement for `t_k` (`None` before the first
-//!    sample: the held command stays);
+//!    sample: the held command stays); every sample that arrived since the
+//!    last tick is handed to the controller first, with its measurement
+//!    time ([`Controller::observe`]; ignored by classic controllers);
 //! 2. the controller updates (an error is recorded and counted, and the
-//!    previous command is held — as is a non-finite command);
+//!    previous command is held — as is a non-finite command). A multi-rate
+//!    controller ([`Controller::multi_rate`]) gets the measurement stamped
+//!    with the tick time `t_k` (its poses came through `observe`); the
+//!    others get the sensor's measurement as it is;
 //! 3. the command is applied to the plant (which saturates it) and held for
 //!    `δt / plant_dt` plant steps; after each step the sensor observes the
 //!    true state.
@@ -376,12 +381,27 @@ pub fn run_trial(spec: &TrialSpec, seed: u64) -> Result<TrialResult, SimError> {
         let truth = plant.true_state();
         let measurement = sensor.measure(t);
         let new = sensor.new_samples();
+        for s in new {
+            controller.observe(&Measurement {
+                t: s.t_measured,
+                position: s.position,
+                yaw: s.yaw,
+            });
+        }
         samples.extend_from_slice(new);
         let new_samples = new.len();
+        let multi_rate = controller.multi_rate();
 
         let status = match &measurement {
             None => TickStatus::NoMeasurement,
-            Some(m) => match controller.update(m, reference.as_mut()) {
+            Some(m) => match controller.update(
+                &if multi_rate {
+                    Measurement { t, ..*m }
+                } else {
+                    *m
+                },
+                reference.as_mut(),
+            ) {
                 Ok(out) if out.command.is_finite() => {
                     command = out.command;
                     last_out = Some(out);

@@ -1,0 +1,703 @@
+//! Offset-free tracking: estimation of slowly varying disturbances from the
+//! window of measured outputs and sent inputs.
+//!
+//! The DF-MPC of the paper has no integral action: wind, drag, a wrong mass
+//! or hover thrust leave a steady-state error. The data the controller keeps
+//! anyway — measured positions and the inputs it sent — show that error
+//! directly: it is the part of the measured motion that the model does not
+//! explain from the inputs. [`DisturbanceEstimator`] measures it and
+//! [`crate::dfmpc::DfMpc`] adds it to the model used by the input-to-output
+//! map F⁻¹ (the prediction of y_{k+1}, y_{k+2} from past inputs) and the
+//! output-to-input map F (the command), see
+//! [`crate::ControlModel::next_output_disturbed`]. Pure, deterministic, all
+//! buffers sized in [`DisturbanceEstimator::new`]; no allocation per tick.
+//!
+//! # What is estimated
+//!
+//! The control model's Euler step with a constant acceleration offset d
+//! \[m/s²\] (model frame, local NED for flight) and a thrust scale κ \[-\]
+//! (actual specific thrust = κ · the model's):
+//!
+//! ```text
+//! y_{k+1} = y_k + δt·v_k,   v_{k+1} = v_k + δt·(a_g(s_k) + κ·a_T(s_k) + d)
+//! s_{k+1} = step(s_k, u_k)          s = [θ, φ, T]: the model's input dynamics
+//! ```
+//!
+//! * **planar model**: d_x, d_y (wind, drag, attitude bias); `a_T = 0`.
+//! * **spatial model**: d_x, d_y, and κ from the vertical channel (mass,
+//!   hover thrust, battery sag): κ and a vertical offset are the same thing
+//!   at hover, the scale also corrects the thrust's horizontal share when
+//!   tilted. The hover thrust is `g/κ` \[m/s²\] in the model's thrust units
+//!   ([`DisturbanceEstimate::hover_thrust`]); normalised by the autopilot's
+//!   thrust range it is PX4's hover-thrust estimate. d_z stays 0.
+//!
+//! # How: a window fit, then a low-pass
+//!
+//! The estimator runs the model's input dynamics `s_{k+1} = step(s_k, u_k)`
+//! on the *sent* inputs (a stable first-order filter: no measurement enters
+//! it, so no noise), and keeps the last L measured outputs `y^m_j` with the
+//! model's accelerations `a_j = a_g(s_j) + κ̂·a_T(s_j)`, j = 0..L−1 oldest
+//! first. Double-integrating the model accelerations from rest,
+//! `S_0 = S_1 = 0`, `S_j = δt²·Σ_{i≤j−2} (j−1−i)·a_i`, the measured
+//! positions of the disturbed model are exactly
+//!
+//! ```text
+//! y^m_j = p_0 + v_0·jδt + S_j + δ·c_j + n_j,    c_j = δt²·j(j−1)/2
+//! ```
+//!
+//! with the unknown initial position p_0 and velocity v_0, the unexplained
+//! acceleration δ and the measurement noise n_j. Per axis, the least-squares
+//! fit of (p_0, v_0, δ) to the residual `r_j = y^m_j − S_j` is linear with a
+//! fixed design matrix, so `δ̂ = Σ_j h_j·r_j` with weights h precomputed once
+//! (`Σh_j = 0`, `Σh_j·j = 0`: blind to position and velocity). Then, with
+//! `α = 1 − exp(−2π·f_c·δt)` for the bandwidth f_c \[Hz\]:
+//!
+//! ```text
+//! d̂ ← clamp(d̂ + α·(δ̂ − d̂))                      (x, y: δ̂ is the whole offset)
+//! κ̂ ← clamp(κ̂ + α·δ̂_z / mean_j(a_T,z,j))         (spatial z: δ̂_z = (κ − κ̂)·a_T,z)
+//! ```
+//!
+//! For the plant equal to the model with a constant d and κ the fit is
+//! exact whatever the inputs were, so d̂ and κ̂ converge as a first-order lag
+//! with time constant 1/(2π f_c) after the window delay; the estimate does
+//! not depend on the controller (no loop is closed through it).
+//!
+//! # Noise gain
+//!
+//! With white position noise of standard deviation σ, the fit gives
+//! `std(δ̂) = σ·√(Σ h_j²)` (about `σ·√(720/(L·T⁴))` for a window of
+//! T = L·δt seconds), and the low-pass
+//!
+//! ```text
+//! std(d̂) = σ·G,   G² = α²/(1 − β²) · Σ_{|s|<L} β^|s|·Σ_j h_j·h_{j+|s|},   β = 1 − α
+//! ```
+//!
+//! ([`DisturbanceEstimator::noise_gain`], [`DisturbanceEstimator::fit_noise_gain`]).
+//! At the defaults δt = 0.02 s, L = 50 (1 s), f_c = 0.1 Hz: `√Σh² = 3.8 s⁻²`
+//! and G = 0.36 s⁻²: σ = 1 cm gives std(d̂) = 0.0036 m/s² (0.02° of tilt)
+//! and std(κ̂) ≈ G·σ/g = 0.0004. The one-step residual `Δ²y/δt²` instead
+//! has gain `√6/δt² ≈ 6100 s⁻²` (61 m/s² at σ = 1 cm) and still ≈ 490 s⁻²
+//! after the same low-pass: 1300 times more. Other settings (G in s⁻²):
+//!
+//! | L, f_c | 0.1 Hz | 0.2 Hz | 0.5 Hz | 1 Hz |
+//! |---------|--------|--------|--------|------|
+//! | 25      | 1.05   | 2.07   | 4.92   | 8.71 |
+//! | 50      | 0.36   | 0.70   | 1.53   | 2.35 |
+//! | 100     | 0.12   | 0.23   | 0.41   | 0.53 |
+//!
+//! The unit test `noise_gain_matches_monte_carlo` checks G by simulation.
+//!
+//! # Guards
+//!
+//! * **bounded**: d̂ clamped to ±`max_acceleration` per axis, κ̂ to
+//!   `thrust_scale_range` (anti-windup: a clamped estimate recovers at once
+//!   when the disturbance drops).
+//! * **frozen while saturated**: a tick whose command was clipped updates
+//!   the buffers but not the estimate.
+//! * **pose jumps**: a measured step larger than `max_step` \[m\] between two
+//!   consecutive ticks (faster than the vehicle can fly) resets the estimate
+//!   and restarts the window (a re-initialised pose source; data across the
+//!   jump is not the vehicle's motion).
+//! * **reset** ([`DisturbanceEstimator::reset`], the controller's reset,
+//!   i.e. failsafe): everything back to the initial state.
+//! * **gaps**: a tick that did not record (controller error) restarts the
+//!   window; non-finite data or a singular attitude restarts it too.
+//! * **settling**: after a reset the input dynamics start at hover; the
+//!   window starts filling only after `5·max(τ, τ_T)` so that start is
+//!   forgotten. The first estimate comes L ticks later.
+
+use nalgebra::{Matrix3, Vector3};
+use serde::{Deserialize, Serialize};
+
+use crate::ControlError;
+use crate::model::ControlModel;
+
+/// Largest accepted fit window [control steps].
+pub const MAX_WINDOW: usize = 2000;
+/// Smallest accepted fit window [control steps].
+pub const MIN_WINDOW: usize = 10;
+
+/// Settings of [`DisturbanceEstimator`], checked by
+/// [`DisturbanceSettings::validate`].
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct DisturbanceSettings {
+    /// Bandwidth f_c of the first-order low-pass on the window fit \[Hz\]:
+    /// the estimate follows a step in the disturbance with time constant
+    /// 1/(2π·f_c) after about half the window. Default 0.1 Hz (1.6 s): at
+    /// 0.2 Hz the estimate reacts more to the phantom disturbance of an
+    /// attitude-gain or time-constant mismatch during a manoeuvre, which
+    /// slows the settling of slow DF tunings (`dflat experiment mismatch`).
+    pub bandwidth_hz: f64,
+    /// Fit window L [control steps]. Longer: less noise (∝ L^−2.5 for the
+    /// fit), more delay. Default 50 (1 s at 50 Hz).
+    pub window: usize,
+    /// Clamp on each component of the acceleration offset |d| \[m/s²\].
+    /// Default 3 (≈ 17° of tilt).
+    pub max_acceleration: f64,
+    /// Bounds \[κ_min, κ_max\] on the thrust scale (spatial model), with
+    /// κ_min ≤ 1 ≤ κ_max. Default \[0.5, 2\] (hover thrust between half and
+    /// twice the model's).
+    pub thrust_scale_range: [f64; 2],
+    /// Pose-jump threshold \[m\]: a measured step between consecutive ticks
+    /// larger than this resets the estimate. Default 1 m (50 m/s at 50 Hz).
+    pub max_step: f64,
+}
+
+impl Default for DisturbanceSettings {
+    fn default() -> Self {
+        Self {
+            bandwidth_hz: 0.1,
+            window: 50,
+            max_acceleration: 3.0,
+            thrust_scale_range: [0.5, 2.0],
+            max_step: 1.0,
+        }
+    }
+}
+
+fn invalid(field: &'static str, reason: &str) -> ControlError {
+    ControlError::InvalidSetting {
+        field,
+        reason: reason.to_string(),
+    }
+}
+
+impl DisturbanceSettings {
+    /// Checks every field; the error names the first invalid one (as
+    /// `disturbance.<field>`). The bandwidth is checked against the control
+    /// step in [`DisturbanceEstimator::new`].
+    pub fn validate(&self) -> Result<(), ControlError> {
+        if !(self.bandwidth_hz.is_finite() && self.bandwidth_hz > 0.0) {
+            return Err(invalid(
+                "disturbance.bandwidth_hz",
+                "finite and > 0 Hz (below the Nyquist rate 1/(2δt))",
+            ));
+        }
+        if !(MIN_WINDOW..=MAX_WINDOW).contains(&self.window) {
+            return Err(invalid(
+                "disturbance.window",
+                "an integer in 10..=2000 (control steps)",
+            ));
+        }
+        if !(self.max_acceleration.is_finite() && self.max_acceleration >= 0.0) {
+            return Err(invalid(
+                "disturbance.max_acceleration",
+                "finite and >= 0 m/s²",
+            ));
+        }
+        let [lo, hi] = self.thrust_scale_range;
+        if !(lo.is_finite() && hi.is_finite() && lo > 0.0 && lo <= 1.0 && hi >= 1.0) {
+            return Err(invalid(
+                "disturbance.thrust_scale_range",
+                "[κ_min, κ_max] finite with 0 < κ_min <= 1 <= κ_max",
+            ));
+        }
+        if !(self.max_step.is_finite() && self.max_step > 0.0) {
+            return Err(invalid("disturbance.max_step", "finite and > 0 m"));
+        }
+        Ok(())
+    }
+}
+
+/// The current disturbance estimate, as the disturbance-aware maps use it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DisturbanceEstimate {
+    /// Acceleration offset d \[m/s²\] in the model frame (local NED for
+    /// flight): what the vehicle accelerates beyond the model. z is 0 for
+    /// both models (the spatial model's vertical channel is κ).
+    pub acceleration: Vector3<f64>,
+    /// Thrust scale κ \[-\]: actual specific thrust per model thrust (1 for
+    /// the planar model).
+    pub thrust_scale: f64,
+}
+
+impl DisturbanceEstimate {
+    /// No disturbance: d = 0, κ = 1.
+    pub const NOMINAL: Self = Self {
+        acceleration: Vector3::new(0.0, 0.0, 0.0),
+        thrust_scale: 1.0,
+    };
+
+    /// True for exactly d = 0 and κ = 1 (the maps then run unchanged).
+    pub fn is_nominal(&self) -> bool {
+        *self == Self::NOMINAL
+    }
+
+    /// Specific thrust that holds hover \[m/s²\] in the model's thrust units:
+    /// `g/κ` for gravity `g` \[m/s²\]. Divide by the autopilot's full-scale
+    /// specific thrust for the normalised hover thrust.
+    pub fn hover_thrust(&self, g: f64) -> f64 {
+        g / self.thrust_scale
+    }
+}
+
+impl Default for DisturbanceEstimate {
+    fn default() -> Self {
+        Self::NOMINAL
+    }
+}
+
+/// What the estimator did at the last recorded tick.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum EstimatorStatus {
+    /// After a reset: the model's input dynamics are forgetting their start.
+    Settling,
+    /// The window is filling (fewer than L samples since its last restart).
+    Filling,
+    /// The estimate was updated.
+    Tracking,
+    /// The command was saturated: the estimate was held.
+    Frozen,
+}
+
+/// A snapshot of the estimator for logs and telemetry (serialisable).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct DisturbanceReport {
+    /// Acceleration offset d̂ \[m/s²\], model frame (local NED for flight).
+    pub acceleration: [f64; 3],
+    /// Thrust scale κ̂ \[-\] (actual thrust per model thrust).
+    pub thrust_scale: f64,
+    /// Hover specific thrust g/κ̂ \[m/s²\] in the model's thrust units.
+    pub hover_thrust: f64,
+    /// What the estimator did at the last recorded tick.
+    pub status: EstimatorStatus,
+    /// The estimate sits at a clamp.
+    pub clamped: bool,
+    /// Pose jumps detected since construction.
+    pub jumps: u64,
+}
+
+/// The disturbance estimator (see the module docs).
+///
+/// Protocol, once per control tick: [`DisturbanceEstimator::begin_tick`]
+/// before the controller's update, [`DisturbanceEstimator::estimate`] for
+/// the maps, then, when the tick succeeded,
+/// [`DisturbanceEstimator::record`] with the measurement and the input sent.
+#[derive(Debug, Clone)]
+pub struct DisturbanceEstimator {
+    model: ControlModel,
+    settings: DisturbanceSettings,
+    /// Low-pass coefficient α.
+    alpha: f64,
+    /// Fit weights h_j, j = 0..L−1 oldest first \[1/s²\].
+    weights: Vec<f64>,
+    /// √Σh² \[1/s²\].
+    fit_gain: f64,
+    /// std(d̂)/σ \[1/s²\].
+    noise_gain: f64,
+    /// Ticks of input dynamics needed after a reset.
+    settle_ticks: usize,
+
+    estimate: DisturbanceEstimate,
+    /// The model's input-driven state \[θ, φ, T\] at the next recorded tick.
+    state: Vector3<f64>,
+    /// Ticks recorded since the last reset (saturating).
+    settled: usize,
+    /// Ring buffers (L each), oldest at `head` once full.
+    outputs: Vec<Vector3<f64>>,
+    accel_g: Vec<Vector3<f64>>,
+    accel_t: Vec<Vector3<f64>>,
+    head: usize,
+    len: usize,
+    /// The previous recorded measurement (jump detection).
+    last: Option<Vector3<f64>>,
+    /// A tick has begun and not recorded yet.
+    open: bool,
+    status: EstimatorStatus,
+    clamped: bool,
+    jumps: u64,
+}
+
+/// The least-squares weights h (see the module docs) for a window of `l`
+/// samples at step `dt` \[s\]: δ̂ = Σ h_j r_j fits `r_j = p + v·jδt + δ·c_j`.
+fn fit_weights(l: usize, dt: f64) -> Option<Vec<f64>> {
+    // Scaled regressors [1, j/n, j(j−1)/n²] keep the normal matrix O(1).
+    let n = (l - 1) as f64;
+    let row = |j: usize| {
+        let jf = j as f64;
+        Vector3::new(1.0, jf / n, jf * (jf - 1.0) / (n * n))
+    };
+    let mut ata = Matrix3::zeros();
+    for j in 0..l {
+        let a = row(j);
+        ata += a * a.transpose();
+    }
+    let inv = ata.try_inverse()?;
+    // δ·c_j = β₂·j(j−1)/n²  ⇒  δ = 2β₂/(δt²·n²).
+    let scale = 2.0 / (dt * dt * n * n);
+    let r2 = inv.row(2).transpose();
+    Some((0..l).map(|j| scale * r2.dot(&row(j))).collect())
+}
+
+/// std(d̂)/σ of the low-passed fit (module docs) for weights `h` and α.
+fn low_pass_noise_gain(h: &[f64], alpha: f64) -> f64 {
+    let beta = 1.0 - alpha;
+    let mut var = 0.0;
+    let mut b = 1.0;
+    for s in 0..h.len() {
+        let r: f64 = h.iter().zip(&h[s..]).map(|(a, c)| a * c).sum();
+        var += if s == 0 { r } else { 2.0 * b * r };
+        b *= beta;
+    }
+    (var * alpha * alpha / (1.0 - beta * beta)).sqrt()
+}
+
+impl DisturbanceEstimator {
+    /// Builds the estimator for `model` (all allocation happens here).
+    /// Errors name an invalid setting; the bandwidth must be below the
+    /// Nyquist rate 1/(2δt).
+    pub fn new(model: ControlModel, settings: DisturbanceSettings) -> Result<Self, ControlError> {
+        settings.validate()?;
+        let dt = model.dt();
+        if settings.bandwidth_hz >= 0.5 / dt {
+            return Err(invalid(
+                "disturbance.bandwidth_hz",
+                "below the Nyquist rate 1/(2δt) Hz",
+            ));
+        }
+        let l = settings.window;
+        let weights = fit_weights(l, dt)
+            .ok_or_else(|| invalid("disturbance.window", "too short for the fit"))?;
+        let alpha = 1.0 - (-2.0 * std::f64::consts::PI * settings.bandwidth_hz * dt).exp();
+        let fit_gain = weights.iter().map(|h| h * h).sum::<f64>().sqrt();
+        let noise_gain = low_pass_noise_gain(&weights, alpha);
+        let slowest = match &model {
+            ControlModel::Planar(m) => m.params().tau,
+            ControlModel::Spatial(m) => m.params().tau.max(m.params().tau_thrust),
+        };
+        let settle_ticks = (5.0 * slowest / dt).ceil() as usize;
+        Ok(Self {
+            model,
+            settings,
+            alpha,
+            weights,
+            fit_gain,
+            noise_gain,
+            settle_ticks,
+            estimate: DisturbanceEstimate::NOMINAL,
+            state: model.hover_input(),
+            settled: 0,
+            outputs: vec![Vector3::zeros(); l],
+            accel_g: vec![Vector3::zeros(); l],
+            accel_t: vec![Vector3::zeros(); l],
+            head: 0,
+            len: 0,
+            last: None,
+            open: false,
+            status: EstimatorStatus::Settling,
+            clamped: false,
+            jumps: 0,
+        })
+    }
+
+    /// The settings.
+    pub fn settings(&self) -> &DisturbanceSettings {
+        &self.settings
+    }
+
+    /// The current estimate (d̂ \[m/s²\] model frame, κ̂).
+    pub fn estimate(&self) -> DisturbanceEstimate {
+        self.estimate
+    }
+
+    /// Hover specific thrust g/κ̂ \[m/s²\] in the model's thrust units.
+    pub fn hover_thrust(&self) -> f64 {
+        self.estimate.hover_thrust(self.model.gravity())
+    }
+
+    /// A snapshot for logs and telemetry.
+    pub fn report(&self) -> DisturbanceReport {
+        let a = self.estimate.acceleration;
+        DisturbanceReport {
+            acceleration: [a.x, a.y, a.z],
+            thrust_scale: self.estimate.thrust_scale,
+            hover_thrust: self.hover_thrust(),
+            status: self.status,
+            clamped: self.clamped,
+            jumps: self.jumps,
+        }
+    }
+
+    /// What happened at the last recorded tick.
+    pub fn status(&self) -> EstimatorStatus {
+        self.status
+    }
+
+    /// True when the last update hit a clamp (the estimate is at a bound).
+    pub fn clamped(&self) -> bool {
+        self.clamped
+    }
+
+    /// Pose jumps detected since construction (each reset the estimate).
+    pub fn jumps(&self) -> u64 {
+        self.jumps
+    }
+
+    /// Low-pass coefficient α = 1 − exp(−2π·f_c·δt) \[-\].
+    pub fn alpha(&self) -> f64 {
+        self.alpha
+    }
+
+    /// Noise gain of the window fit alone, `std(δ̂)/σ = √Σh²` \[1/s²\], for
+    /// white position noise of standard deviation σ \[m\].
+    pub fn fit_noise_gain(&self) -> f64 {
+        self.fit_gain
+    }
+
+    /// Noise gain of the estimate, `std(d̂)/σ` \[1/s²\], for white position
+    /// noise of standard deviation σ \[m\] (plant = model; module docs).
+    pub fn noise_gain(&self) -> f64 {
+        self.noise_gain
+    }
+
+    /// Marks the start of a control tick: if the previous tick began but
+    /// did not [`record`](Self::record) (a controller error; the vehicle
+    /// flew a command this estimator did not see), the window restarts.
+    pub fn begin_tick(&mut self) {
+        if self.open {
+            self.restart_window();
+        }
+        self.open = true;
+    }
+
+    /// Forgets everything (controller reset, failsafe): nominal estimate,
+    /// input dynamics at hover, empty window.
+    pub fn reset(&mut self) {
+        self.estimate = DisturbanceEstimate::NOMINAL;
+        self.state = self.model.hover_input();
+        self.settled = 0;
+        self.last = None;
+        self.open = false;
+        self.status = EstimatorStatus::Settling;
+        self.clamped = false;
+        self.restart_window();
+    }
+
+    fn restart_window(&mut self) {
+        self.head = 0;
+        self.len = 0;
+    }
+
+    /// Records one successful tick: the measured output `y` \[m\] (model
+    /// frame) at the tick, the input `u = [θ_cmd, φ_cmd, T_cmd]` sent at it,
+    /// and whether that input was clipped by saturation. Updates the
+    /// estimate when the window is full and the input was not clipped.
+    pub fn record(&mut self, y: &Vector3<f64>, u: &Vector3<f64>, saturated: bool) {
+        self.open = false;
+        let axes = self.model.axes();
+        if !(y.iter().take(axes).all(|v| v.is_finite()) && u.iter().all(|v| v.is_finite())) {
+            self.restart_window();
+            self.status = EstimatorStatus::Filling;
+            return;
+        }
+        if let Some(prev) = self.last {
+            let step = (0..axes)
+                .map(|i| (y[i] - prev[i]).powi(2))
+                .sum::<f64>()
+                .sqrt();
+            if step > self.settings.max_step {
+                self.jumps += 1;
+                self.estimate = DisturbanceEstimate::NOMINAL;
+                self.clamped = false;
+                self.restart_window();
+            }
+        }
+        self.last = Some(*y);
+
+        // The model's acceleration at this tick's input-driven state, then
+        // that state stepped with the input sent now.
+        let parts = self.model.acceleration_parts(&self.state);
+        self.state = self.model.input_state_step(&self.state, u);
+        let Ok((a_g, a_t)) = parts else {
+            self.restart_window();
+            self.status = EstimatorStatus::Filling;
+            return;
+        };
+        if self.settled < self.settle_ticks {
+            self.settled += 1;
+            self.status = EstimatorStatus::Settling;
+            return;
+        }
+
+        let l = self.settings.window;
+        let slot = (self.head + self.len) % l;
+        self.outputs[slot] = *y;
+        self.accel_g[slot] = a_g;
+        self.accel_t[slot] = a_t;
+        if self.len < l {
+            self.len += 1;
+        } else {
+            self.head = (self.head + 1) % l;
+        }
+        if self.len < l {
+            self.status = EstimatorStatus::Filling;
+            return;
+        }
+        if saturated {
+            self.status = EstimatorStatus::Frozen;
+            return;
+        }
+        self.update();
+        self.status = EstimatorStatus::Tracking;
+    }
+
+    /// The window fit and the low-pass (module docs).
+    fn update(&mut self) {
+        let l = self.settings.window;
+        let dt = self.model.dt();
+        let kappa = self.estimate.thrust_scale;
+        let y0 = self.outputs[self.head];
+        let (mut s, mut w) = (Vector3::zeros(), Vector3::<f64>::zeros());
+        let mut delta = Vector3::zeros();
+        let mut thrust_z = 0.0;
+        for (j, h) in self.weights.iter().enumerate() {
+            let i = (self.head + j) % l;
+            delta += *h * ((self.outputs[i] - y0) - s);
+            s += dt * w;
+            w += dt * (self.accel_g[i] + kappa * self.accel_t[i]);
+            thrust_z += self.accel_t[i].z;
+        }
+        thrust_z /= l as f64;
+
+        let a = self.alpha;
+        let lim = self.settings.max_acceleration;
+        let mut clamped = false;
+        let mut d = self.estimate.acceleration;
+        for i in 0..2 {
+            let v = d[i] + a * (delta[i] - d[i]);
+            d[i] = v.clamp(-lim, lim);
+            clamped |= d[i] != v;
+        }
+        let mut k = kappa;
+        if let ControlModel::Spatial(_) = self.model
+            && thrust_z.abs() > 0.5 * self.model.gravity()
+        {
+            let v = kappa + a * delta.z / thrust_z;
+            let [lo, hi] = self.settings.thrust_scale_range;
+            k = v.clamp(lo, hi);
+            clamped |= k != v;
+        }
+        if d.iter().all(|v| v.is_finite()) && k.is_finite() {
+            self.estimate = DisturbanceEstimate {
+                acceleration: d,
+                thrust_scale: k,
+            };
+        }
+        self.clamped = clamped;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use dflat_model::{PlanarModel, PlanarParams};
+
+    fn planar() -> ControlModel {
+        ControlModel::Planar(PlanarModel::new(PlanarParams::default()).unwrap())
+    }
+
+    #[test]
+    fn fit_weights_are_blind_to_position_and_velocity() {
+        let dt = 0.02;
+        let h = fit_weights(50, dt).unwrap();
+        let s0: f64 = h.iter().sum();
+        let s1: f64 = h.iter().enumerate().map(|(j, h)| h * j as f64).sum();
+        let s2: f64 = h
+            .iter()
+            .enumerate()
+            .map(|(j, h)| h * dt * dt * (j * j.saturating_sub(1)) as f64 / 2.0)
+            .sum();
+        assert!(s0.abs() < 1e-9 && s1.abs() < 1e-7, "{s0} {s1}");
+        assert!((s2 - 1.0).abs() < 1e-9, "{s2}");
+    }
+
+    #[test]
+    fn noise_gain_matches_monte_carlo() {
+        // Feed pure noise through the fit and the low-pass; compare the
+        // sample std of d̂ with the formula.
+        let est = DisturbanceEstimator::new(planar(), DisturbanceSettings::default()).unwrap();
+        let (h, alpha) = (&est.weights, est.alpha);
+        let l = h.len();
+        // xorshift + Box–Muller: deterministic, no dependency.
+        let mut state = 0x2545_F491_4F6C_DD1Du64;
+        let mut uniform = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let n = 200_000;
+        let mut noise = Vec::with_capacity(n);
+        while noise.len() < n {
+            let (u1, u2) = (uniform().max(1e-300), uniform());
+            noise.push((-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos());
+        }
+        let (mut d, mut sum2, mut count) = (0.0, 0.0, 0usize);
+        for k in l..n {
+            let delta: f64 = h.iter().zip(&noise[k - l..k]).map(|(h, y)| h * y).sum();
+            d += alpha * (delta - d);
+            if k > l + 2000 {
+                sum2 += d * d;
+                count += 1;
+            }
+        }
+        let sample = (sum2 / count as f64).sqrt();
+        let g = est.noise_gain();
+        assert!((sample / g - 1.0).abs() < 0.1, "sample {sample} vs {g}");
+        // The documented numbers for the defaults.
+        assert!(
+            (est.fit_noise_gain() - 3.8).abs() < 0.2,
+            "{}",
+            est.fit_noise_gain()
+        );
+        assert!((g - 0.364).abs() < 0.001, "{g}");
+    }
+
+    #[test]
+    fn settings_are_validated() {
+        let d = DisturbanceSettings::default();
+        assert!(d.validate().is_ok());
+        let field = |s: DisturbanceSettings| match DisturbanceEstimator::new(planar(), s) {
+            Err(ControlError::InvalidSetting { field, .. }) => field,
+            other => panic!("{other:?}"),
+        };
+        assert_eq!(
+            field(DisturbanceSettings {
+                bandwidth_hz: 0.0,
+                ..d
+            }),
+            "disturbance.bandwidth_hz"
+        );
+        assert_eq!(
+            field(DisturbanceSettings {
+                bandwidth_hz: 30.0,
+                ..d
+            }),
+            "disturbance.bandwidth_hz"
+        );
+        assert_eq!(
+            field(DisturbanceSettings { window: 3, ..d }),
+            "disturbance.window"
+        );
+        assert_eq!(
+            field(DisturbanceSettings {
+                max_acceleration: f64::NAN,
+                ..d
+            }),
+            "disturbance.max_acceleration"
+        );
+        assert_eq!(
+            field(DisturbanceSettings {
+                thrust_scale_range: [1.2, 2.0],
+                ..d
+            }),
+            "disturbance.thrust_scale_range"
+        );
+        assert_eq!(
+            field(DisturbanceSettings { max_step: 0.0, ..d }),
+            "disturbance.max_step"
+        );
+    }
+}

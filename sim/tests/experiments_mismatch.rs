@@ -1,0 +1,92 @@
+//! The mismatch study (issue 5): a reduced run (noise-free, two scenarios,
+//! one trial) shows the estimator removing the offsets that DF-MPC alone
+//! leaves, writes its JSON, table and plots, and the noise check runs.
+
+use std::path::PathBuf;
+
+use dflat_sim::experiments::OutputPaths;
+use dflat_sim::experiments::mismatch::{
+    MismatchConfig, MismatchController, run_mismatch, write_mismatch,
+};
+
+#[test]
+fn estimator_removes_wind_and_hover_thrust_offsets() {
+    let mut config = MismatchConfig {
+        trials: 1,
+        sigmas: vec![0.0],
+        noise_check: false,
+        controllers: vec![MismatchController::Df, MismatchController::DfEstimator],
+        ..MismatchConfig::default()
+    };
+    config
+        .scenarios
+        .retain(|s| s.name == "wind" || s.name == "hover");
+    assert_eq!(config.scenarios.len(), 2);
+    let result = run_mismatch(&config, false).expect("runs");
+    for scenario in ["wind", "hover"] {
+        let df = result.row(0.0, scenario, MismatchController::Df).unwrap();
+        let est = result
+            .row(0.0, scenario, MismatchController::DfEstimator)
+            .unwrap();
+        assert!(df.steady_error > 0.2, "{scenario}: DF {}", df.steady_error);
+        assert!(
+            est.steady_error < 0.05,
+            "{scenario}: DF+est {}",
+            est.steady_error
+        );
+    }
+    let hover = result
+        .row(0.0, "hover", MismatchController::DfEstimator)
+        .unwrap();
+    assert!((hover.thrust_scale - 1.25).abs() < 0.01, "{hover:?}");
+    let wind = result
+        .row(0.0, "wind", MismatchController::DfEstimator)
+        .unwrap();
+    // 3 m/s on 0.3 1/s of drag towards east (+y).
+    assert!((wind.acceleration[1] - 0.9).abs() < 0.02, "{wind:?}");
+    assert!(result.budgets.steady[0].pass);
+    let table = result.table();
+    assert!(
+        table.contains("| wind |") && table.contains("PASS"),
+        "{table}"
+    );
+
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("experiments/mismatch");
+    let out = OutputPaths::resolve(&dir, "mismatch", None, None);
+    let files = write_mismatch(&result, &out).expect("written");
+    assert_eq!(files.len(), 5, "{files:?}");
+    for f in &files {
+        assert!(std::fs::metadata(f).unwrap().len() > 0, "{}", f.display());
+    }
+}
+
+#[test]
+fn noise_check_reports_a_ratio_per_sigma() {
+    let config = MismatchConfig {
+        trials: 1,
+        sigmas: vec![0.0],
+        scenarios: Vec::new(),
+        ..MismatchConfig::default()
+    };
+    // No scenarios is invalid for the main study …
+    assert!(run_mismatch(&config, false).is_err());
+    // … so fly one scenario with one controller and the noise check.
+    let mut config = MismatchConfig {
+        trials: 1,
+        sigmas: vec![0.0],
+        controllers: vec![MismatchController::Pd],
+        ..MismatchConfig::default()
+    };
+    config.scenarios.truncate(1);
+    let result = run_mismatch(&config, false).expect("runs");
+    let check = result.noise_check.as_ref().expect("flown");
+    assert_eq!(check.rows.len(), check.sweep.sigmas.len());
+    for r in &check.rows {
+        assert!(
+            r.ratio.is_finite() && r.ratio > 0.5 && r.ratio < 2.0,
+            "{r:?}"
+        );
+    }
+    // No DF + estimator row: the steady budget has nothing to pass.
+    assert!(!result.budgets.steady[0].pass);
+}
