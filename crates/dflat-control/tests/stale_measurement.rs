@@ -73,7 +73,10 @@ fn fly(ctrl: &mut dyn Controller, every: usize) -> (f64, f64) {
 fn check(make: &dyn Fn() -> Box<dyn Controller>) {
     let (jump_every, d_every) = fly(make().as_mut(), 1);
     let (jump_half, d_half) = fly(make().as_mut(), 2);
-    assert!(d_every < 0.2 && d_half < 0.2, "not reached: {d_every} {d_half}");
+    assert!(
+        d_every < 0.2 && d_half < 0.2,
+        "not reached: {d_every} {d_half}"
+    );
     // Without the substitution a repeated pose spikes the command by tens
     // of degrees; with it the jumps stay comparable to the every-tick run.
     assert!(
