@@ -90,3 +90,54 @@ fn noise_check_reports_a_ratio_per_sigma() {
     // No DF + estimator row: the steady budget has nothing to pass.
     assert!(!result.budgets.steady[0].pass);
 }
+
+#[test]
+fn multi_rate_df_with_estimator_meets_the_budget_at_1cm() {
+    // Issue 5's noise (σ = 1 cm at 50 Hz), the thrust and wind scenarios,
+    // one trial: the classic DF diverges, the multi-rate DF keeps the
+    // offsets, with the estimator it settles within the 5 cm budget.
+    let sigma = 0.01;
+    let mut config = MismatchConfig {
+        trials: 1,
+        sigmas: vec![sigma],
+        noise_check: false,
+        controllers: vec![
+            MismatchController::DfEstimator,
+            MismatchController::DfMultiRate,
+            MismatchController::DfMultiRateEstimator,
+        ],
+        ..MismatchConfig::default()
+    };
+    config
+        .scenarios
+        .retain(|s| s.name == "wind" || s.name == "hover");
+    let result = run_mismatch(&config, false).expect("runs");
+    for scenario in ["wind", "hover"] {
+        let classic = result
+            .row(sigma, scenario, MismatchController::DfEstimator)
+            .unwrap();
+        assert!(classic.diverged > 0, "{scenario}: {classic:?}");
+        let mr = result
+            .row(sigma, scenario, MismatchController::DfMultiRate)
+            .unwrap();
+        assert!(mr.steady_error > 0.2, "{scenario}: MR {}", mr.steady_error);
+        let est = result
+            .row(sigma, scenario, MismatchController::DfMultiRateEstimator)
+            .unwrap();
+        assert_eq!(est.diverged, 0);
+        assert!(
+            est.steady_error < 0.05,
+            "{scenario}: MR+est {}",
+            est.steady_error
+        );
+    }
+    let hover = result
+        .row(sigma, "hover", MismatchController::DfMultiRateEstimator)
+        .unwrap();
+    assert!((hover.thrust_scale - 1.25).abs() < 0.01, "{hover:?}");
+    // Budget rows: classic DF + estimator fails (diverged), multi-rate passes.
+    let b = &result.budgets.steady;
+    assert_eq!(b.len(), 2);
+    assert!(!b[0].pass && b[1].pass, "{b:?}");
+    assert_eq!(b[1].controller, "df-mr-smooth+est");
+}

@@ -1038,6 +1038,10 @@ impl AxisSolver {
 /// One [`Controller::update`] per control step δt: window → F⁻¹ prediction
 /// of y_{k+1}, y_{k+2} → reference over the horizon → per-axis optimisation
 /// → F on y*_k..y*_{k+3} → saturation → the sent input into the window.
+/// A measurement whose time `t` is not newer than the last one used (a
+/// tick without a new pose) is not entered as new: y_k is then the model's
+/// own prediction, F⁻¹ over the window with the input already sent (dead
+/// reckoning; the shell's pose timeout bounds how long).
 /// With [`DfMpcSettings::multi_rate`] the window is a [`MultiRateWindow`]:
 /// samples come through [`Controller::observe`], `update` takes the tick
 /// time. Commands use the model's fixed yaw ψ⋆ (the measured yaw is only
@@ -1061,6 +1065,12 @@ pub struct DfMpc {
     /// Last plan y*_k..y*_{k+N} per axis.
     plans: Vec<Vec<f64>>,
     plan_valid: bool,
+    /// Time of the newest measurement used (classic mode) [s]; a tick whose
+    /// measurement is not newer is predicted instead (see [`DfMpc`]).
+    last_t: f64,
+    /// The previous tick's F⁻¹ prediction of this tick's output, y_{k+1}
+    /// then (classic mode) [m].
+    predicted: Vector3<f64>,
     /// Multi-rate window, when configured (else `window` is used).
     multi: Option<MultiRateWindow>,
     /// True when some axis has a smoothness weight.
@@ -1134,6 +1144,8 @@ impl DfMpc {
             reference_axis: vec![vec![0.0; n + 1]; axes],
             plans: vec![vec![0.0; n + 1]; axes],
             plan_valid: false,
+            last_t: f64::NEG_INFINITY,
+            predicted: Vector3::zeros(),
             multi: settings
                 .multi_rate
                 .map(|m| MultiRateWindow::new(&model, m))
@@ -1266,7 +1278,17 @@ impl Controller for DfMpc {
             let e = multi.estimate(measurement.t, |y, u| model.next_output_disturbed(y, u, &d))?;
             (e.fixed, e.previous_input)
         } else {
-            window.push_measurement(measurement.position);
+            // No pose since the previous tick (its time is not newer): the
+            // repeated pose would read as a stop; use the model's own
+            // prediction of y_k instead: F⁻¹ over the window with u_{k−3},
+            // computed at the previous tick as its y_{k+1} (u_{k−3} has left
+            // the window since).
+            let y_k = if !window.is_empty() && measurement.t <= self.last_t {
+                self.predicted
+            } else {
+                measurement.position
+            };
+            window.push_measurement(y_k);
             let [ym2, ym1, y0] = *window.outputs();
             let [u2, u1] = *window.inputs();
             let y1 = self.model.next_output_disturbed(&[ym2, ym1, y0], &u2, &d)?;
@@ -1358,19 +1380,22 @@ impl Controller for DfMpc {
         }
         let (sent, saturated) = self.saturate(u);
         if let Some(e) = &mut self.estimator {
-            // Multi-rate: the estimated y_k stands in for the measurement.
-            let y = if self.multi.is_some() {
-                &y0
+            if self.multi.is_some() {
+                // Multi-rate: the estimator fits the timestamped samples it
+                // got through `observe`, never the window's estimate of y_k.
+                e.record_input(measurement.t, &sent, saturated);
             } else {
-                &measurement.position
-            };
-            e.record(y, &sent, saturated);
+                // A tick without a new pose: the predicted y_k stands in.
+                e.record(&y0, &sent, saturated);
+            }
         }
         if let Some(multi) = &mut self.multi {
             multi.commit(&sent);
         } else {
             window.push_input(sent);
             self.window = window;
+            self.last_t = self.last_t.max(measurement.t);
+            self.predicted = fixed[1];
         }
         self.plan_valid = true;
         Ok(TickOutput {
@@ -1389,11 +1414,15 @@ impl Controller for DfMpc {
     fn observe(&mut self, sample: &Measurement) {
         if let Some(multi) = &mut self.multi {
             multi.observe(sample.t, &sample.position);
+            if let Some(e) = &mut self.estimator {
+                e.observe(sample.t, &sample.position);
+            }
         }
     }
 
     fn reset(&mut self) {
         self.window.reset();
+        self.last_t = f64::NEG_INFINITY;
         if let Some(multi) = &mut self.multi {
             multi.reset();
         }
