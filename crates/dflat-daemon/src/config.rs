@@ -101,6 +101,31 @@ pub struct LinkConfig {
     /// VISION_POSITION_ESTIMATE are accepted as pose (e.g. `[197]` for a
     /// visual-odometry component; each 1–255).
     pub pose_components: Vec<u8>,
+    /// Which time stamps a pose: `source` (its own timestamp —
+    /// LOCAL_POSITION_NED `time_boot_ms`, ODOMETRY / VISION_POSITION_ESTIMATE
+    /// `time_usec` — mapped to this computer's clock, see
+    /// [`crate::clock::PoseClock`]) or `arrival` (the receive time). A pose
+    /// whose timestamp is 0 falls back to its arrival time.
+    pub pose_time: PoseTime,
+    /// Sliding window of the clock-offset estimate [s] (1–600): the offset
+    /// is the minimum of `arrival − source time` over this window.
+    pub pose_clock_window_s: f64,
+    /// Known minimum latency of the pose source [ms] (0–1000): the offset
+    /// minimum is taken to be this latency, not zero (e.g. a vision
+    /// pipeline's fixed exposure-to-message delay). 0 assumes the fastest
+    /// message travels without delay.
+    pub pose_min_latency_ms: f64,
+}
+
+/// How a pose's capture time is obtained (`link.pose_time`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum PoseTime {
+    /// The pose message's own timestamp mapped to this computer's clock.
+    #[default]
+    Source,
+    /// The arrival time on this computer (latency not compensated).
+    Arrival,
 }
 
 impl Default for LinkConfig {
@@ -114,6 +139,9 @@ impl Default for LinkConfig {
             pose_source: PoseSourceKind::LocalPositionNed,
             vehicle_setpoints: true,
             pose_components: Vec::new(),
+            pose_time: PoseTime::Source,
+            pose_clock_window_s: 10.0,
+            pose_min_latency_ms: 0.0,
         }
     }
 }
@@ -210,21 +238,56 @@ pub struct ControllerConfig {
     pub horizon: usize,
     /// Horizon N [ticks] for fmpc (10–2000).
     pub fmpc_horizon: usize,
-    /// Tracking weight per axis x, y, z [1/m²] (> 0).
+    /// Tracking weight per axis x, y, z [1/m²] (> 0). Default 1 (the lab's
+    /// recommended `df-mr-smooth` set-up, `dflat experiment vision-rate`;
+    /// also the Flatness MPC's).
     pub q: [f64; 3],
     /// Jerk weight per axis x, y, z [s⁶/m²] (> 0): cost r·(Δ³y/δt³)².
+    /// Default 0.003 (`df-mr-smooth`; the paper's is 0.08).
     pub r_jerk: [f64; 3],
-    /// Flatness MPC jerk weight per axis (> 0).
+    /// Command-smoothness weight per axis x, y, z [1/rad²] (0–10000) on the
+    /// squared change of the linearised command between ticks. Default
+    /// [50, 50, 0] (`df-mr-smooth` on x, y; 0 = the paper's cost).
+    pub smoothness_weight: [f64; 3],
+    /// Multi-rate windows (df-mpc): every pose is fitted at its own capture
+    /// time through the inputs sent, instead of one pose per tick. Default
+    /// true (`df-mr-smooth`).
+    pub multi_rate: bool,
+    /// Multi-rate window M [ticks] (2–250). Default 25 (0.5 s at 50 Hz).
+    pub multi_rate_window: usize,
+    /// Standard deviation of one pose sample per axis [m] (0.0001–1), for
+    /// the multi-rate fit. Default 0.02.
+    pub sample_sigma: f64,
+    /// Flatness MPC jerk weight per axis (> 0). Default 0.01 (the library's
+    /// tuned value, `FmpcSettings`: the paper's 0.1 oscillates at N = 75).
     pub fmpc_r_jerk: [f64; 3],
-    /// PD proportional gain [1/s²] (> 0).
+    /// PD proportional gain [1/s²] (> 0). Default 2 (the library's tuned
+    /// value, `PdSettings`: settles a 10 m step in ~4.5 s, no overshoot).
     pub pd_kp: f64,
-    /// PD derivative gain [1/s] (> 0).
+    /// PD derivative gain [1/s] (> 0). Default 2.5 (`PdSettings`).
     pub pd_kd: f64,
     /// Optional bound on the planned horizontal acceleration, as a tilt
-    /// [deg] (0 = off; 1–60). Solved with clarabel when it binds.
+    /// [deg] (0 = off; 1–60). Solved with clarabel when it binds. Default
+    /// 30 (`df-mr-smooth`; below the 35° command limit).
     pub constraint_tilt_deg: f64,
     /// Optional bound on the planned speed per axis [m/s] (0 = off).
     pub constraint_speed: f64,
+    /// Disturbance estimation (df-mpc; offset-free tracking): acceleration
+    /// offsets (wind, drag) and, for the spatial model, the thrust scale
+    /// (hover thrust, mass). Default false.
+    pub disturbance: bool,
+    /// Estimator bandwidth [Hz] (0.001 to rate_hz/10). Default 0.1.
+    pub disturbance_bandwidth_hz: f64,
+    /// Estimator fit window [ticks] (10–2000). Default 50 (1 s at 50 Hz).
+    pub disturbance_window: usize,
+    /// Clamp on each acceleration-offset component [m/s²] (0–10). Default 3.
+    pub disturbance_max_acceleration: f64,
+    /// Bounds on the thrust scale (actual / model thrust), [min, max] with
+    /// 0.1 ≤ min ≤ 1 ≤ max ≤ 10. Default [0.5, 2].
+    pub disturbance_thrust_scale_range: [f64; 2],
+    /// A pose step between ticks larger than this [m] resets the estimate
+    /// (0.01–100). Default 1.
+    pub disturbance_max_step: f64,
 }
 
 impl Default for ControllerConfig {
@@ -235,12 +298,22 @@ impl Default for ControllerConfig {
             horizon: 100,
             fmpc_horizon: 75,
             q: [1.0, 1.0, 1.0],
-            r_jerk: [0.08, 0.08, 0.08],
-            fmpc_r_jerk: [0.1, 0.1, 0.1],
-            pd_kp: 1.5,
+            r_jerk: [0.003, 0.003, 0.003],
+            smoothness_weight: [50.0, 50.0, 0.0],
+            multi_rate: true,
+            multi_rate_window: 25,
+            sample_sigma: 0.02,
+            fmpc_r_jerk: [0.01, 0.01, 0.01],
+            pd_kp: 2.0,
             pd_kd: 2.5,
-            constraint_tilt_deg: 0.0,
+            constraint_tilt_deg: 30.0,
             constraint_speed: 0.0,
+            disturbance: false,
+            disturbance_bandwidth_hz: 0.1,
+            disturbance_window: 50,
+            disturbance_max_acceleration: 3.0,
+            disturbance_thrust_scale_range: [0.5, 2.0],
+            disturbance_max_step: 1.0,
         }
     }
 }
@@ -380,6 +453,15 @@ pub struct SitlConfig {
     pub mass_factor: f64,
     /// Gaussian position noise σ [m] (0–1).
     pub noise_sigma: f64,
+    /// Also send VISION_POSITION_ESTIMATE at this rate [Hz] (0 = off;
+    /// 1–100): a vision pipeline stand-in for `link.pose_source =
+    /// "vision_position_estimate"`. LOCAL_POSITION_NED goes on as well.
+    pub vision_rate_hz: f64,
+    /// Vision latency [ms] (0–500): each sample's `time_usec` is its capture
+    /// time on the SITL's clock, and it is sent this much later.
+    pub vision_latency_ms: f64,
+    /// Gaussian noise σ of the vision position [m] (0–1).
+    pub vision_noise_sigma: f64,
     /// Initial position, local NED [m].
     pub start: [f64; 3],
     /// Seconds without SET_ATTITUDE_TARGET after which the SITL holds position.
@@ -400,6 +482,9 @@ impl Default for SitlConfig {
             hover_thrust: 0.5,
             mass_factor: 1.0,
             noise_sigma: 0.0,
+            vision_rate_hz: 0.0,
+            vision_latency_ms: 60.0,
+            vision_noise_sigma: 0.02,
             start: [-20.0, -30.0, -10.0],
             command_timeout_s: 0.5,
             seed: 1,
@@ -453,6 +538,18 @@ impl Config {
                 255.0,
             )?;
         }
+        v.range(
+            "link.pose_clock_window_s",
+            l.pose_clock_window_s,
+            1.0,
+            600.0,
+        )?;
+        v.range(
+            "link.pose_min_latency_ms",
+            l.pose_min_latency_ms,
+            0.0,
+            1000.0,
+        )?;
         let ve = &self.vehicle;
         v.range("vehicle.tau", ve.tau, 0.02, 2.0)?;
         v.range("vehicle.k", ve.k, 0.2, 5.0)?;
@@ -494,6 +591,58 @@ impl Config {
             )?;
         }
         v.range("controller.constraint_speed", c.constraint_speed, 0.0, 50.0)?;
+        for i in 0..3 {
+            v.range(
+                &format!("controller.smoothness_weight[{i}]"),
+                c.smoothness_weight[i],
+                0.0,
+                1e4,
+            )?;
+        }
+        v.range(
+            "controller.multi_rate_window",
+            c.multi_rate_window as f64,
+            2.0,
+            250.0,
+        )?;
+        v.range("controller.sample_sigma", c.sample_sigma, 1e-4, 1.0)?;
+        v.range(
+            "controller.disturbance_bandwidth_hz",
+            c.disturbance_bandwidth_hz,
+            0.001,
+            c.rate_hz / 10.0,
+        )?;
+        v.range(
+            "controller.disturbance_window",
+            c.disturbance_window as f64,
+            10.0,
+            2000.0,
+        )?;
+        v.range(
+            "controller.disturbance_max_acceleration",
+            c.disturbance_max_acceleration,
+            0.0,
+            10.0,
+        )?;
+        let [kmin, kmax] = c.disturbance_thrust_scale_range;
+        v.range(
+            "controller.disturbance_thrust_scale_range[0]",
+            kmin,
+            0.1,
+            1.0,
+        )?;
+        v.range(
+            "controller.disturbance_thrust_scale_range[1]",
+            kmax,
+            1.0,
+            10.0,
+        )?;
+        v.range(
+            "controller.disturbance_max_step",
+            c.disturbance_max_step,
+            0.01,
+            100.0,
+        )?;
         let m = &self.mission;
         v.range("mission.speed", m.speed, 0.1, 20.0)?;
         v.range(
@@ -547,6 +696,11 @@ impl Config {
         v.range("sitl.hover_thrust", si.hover_thrust, 0.05, 0.95)?;
         v.range("sitl.mass_factor", si.mass_factor, 0.5, 2.0)?;
         v.range("sitl.noise_sigma", si.noise_sigma, 0.0, 1.0)?;
+        if si.vision_rate_hz != 0.0 {
+            v.range("sitl.vision_rate_hz", si.vision_rate_hz, 1.0, 100.0)?;
+        }
+        v.range("sitl.vision_latency_ms", si.vision_latency_ms, 0.0, 500.0)?;
+        v.range("sitl.vision_noise_sigma", si.vision_noise_sigma, 0.0, 1.0)?;
         v.range("sitl.command_timeout_s", si.command_timeout_s, 0.05, 10.0)?;
         for i in 0..3 {
             v.range(&format!("sitl.start[{i}]"), si.start[i], -1e4, 1e4)?;

@@ -2,9 +2,11 @@
 //! mapping the control loop runs with.
 
 use dflat_control::dfmpc::{DfMpc, DfMpcSettings, InputSaturation, OutputConstraints};
+use dflat_control::disturbance::DisturbanceSettings;
 use dflat_control::fmpc::{FlatnessMpc, FmpcSettings};
 use dflat_control::pd::{Pd, PdSettings};
 use dflat_control::reference::Reference;
+use dflat_control::window::MultiRateSettings;
 use dflat_control::{ControlError, ControlModel, Controller};
 use dflat_link::ThrustMapping;
 use dflat_model::{Frame, PlanarModel, PlanarParams, SpatialModel, SpatialParams};
@@ -57,7 +59,10 @@ pub fn thrust_mapping(cfg: &Config) -> ThrustMapping {
 }
 
 /// The controller chosen by `controller.kind`, with the configured model,
-/// weights, horizons, saturation (`vehicle.max_tilt_deg`) and constraints.
+/// weights, horizons, saturation (`vehicle.max_tilt_deg`) and constraints;
+/// for df-mpc also the smoothness weight, the multi-rate window
+/// (`controller.multi_rate`, then the shell feeds every pose through
+/// [`Controller::observe`]) and the disturbance estimator.
 pub fn build_controller(cfg: &Config) -> Result<Box<dyn Controller>, ControlError> {
     let model = control_model(cfg)?;
     let c = &cfg.controller;
@@ -81,6 +86,19 @@ pub fn build_controller(cfg: &Config) -> Result<Box<dyn Controller>, ControlErro
                     max_speed: (c.constraint_speed > 0.0).then_some(c.constraint_speed),
                     vertical_acceleration: None,
                 },
+                smoothness_weight: c.smoothness_weight,
+                multi_rate: c.multi_rate.then(|| MultiRateSettings {
+                    window: c.multi_rate_window,
+                    sample_sigma: c.sample_sigma,
+                    ..MultiRateSettings::default()
+                }),
+                disturbance: c.disturbance.then_some(DisturbanceSettings {
+                    bandwidth_hz: c.disturbance_bandwidth_hz,
+                    window: c.disturbance_window,
+                    max_acceleration: c.disturbance_max_acceleration,
+                    thrust_scale_range: c.disturbance_thrust_scale_range,
+                    max_step: c.disturbance_max_step,
+                }),
                 ..DfMpcSettings::default()
             };
             Box::new(DfMpc::new(model, settings)?)
@@ -135,15 +153,15 @@ mod tests {
     fn hover(controller: &mut dyn Controller, at: [f64; 3]) {
         let mut reference = Reference::setpoint(Vector3::from(at)).unwrap();
         for k in 0..10 {
+            let m = Measurement {
+                t: k as f64 * 0.02,
+                position: Vector3::from(at),
+                yaw: 0.0,
+            };
+            // Multi-rate controllers take the sample here, the others ignore it.
+            controller.observe(&m);
             let out = controller
-                .update(
-                    &Measurement {
-                        t: k as f64 * 0.02,
-                        position: Vector3::from(at),
-                        yaw: 0.0,
-                    },
-                    &mut reference as &mut dyn ReferenceSource,
-                )
+                .update(&m, &mut reference as &mut dyn ReferenceSource)
                 .unwrap();
             assert!(out.command.is_finite());
             assert!(out.command.pitch.abs() < 1e-9 && out.command.roll.abs() < 1e-9);

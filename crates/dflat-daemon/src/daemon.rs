@@ -15,9 +15,18 @@
 //!
 //! The control loop runs on its own OS thread and never awaits I/O: it
 //! drains the event queue, decides, solves and hands the command to the
-//! send task with `try_send`. Every tick reads the newest pose that arrived
-//! at or before its wake time. Staleness uses *arrival* times on this
-//! computer's monotonic clock (vision timestamps are not used yet).
+//! send task with `try_send`. Staleness (the pose timeout) uses *arrival*
+//! times on this computer's monotonic clock.
+//!
+//! Pose times: each pose is stamped with its capture time on this
+//! computer's clock, from its own timestamp and a clock-offset estimate
+//! ([`crate::clock`], `link.pose_time`). A multi-rate DF-MPC
+//! (`controller.multi_rate`) gets every pose through
+//! [`Controller::observe`] at its capture time and, per tick,
+//! [`Controller::update`] with the tick's wake time. The other controllers
+//! get, per tick, the newest pose with its capture time; a tick that finds
+//! no new pose passes the previous one with its old time, and the
+//! controller substitutes its own prediction.
 //!
 //! Entry points: [`run`] (used by `dflat daemon`) and [`spawn`] /
 //! [`DaemonHandle`] (in-process use: demo, tests).
@@ -42,12 +51,15 @@ use thiserror::Error;
 use tokio::sync::{mpsc, watch};
 use tracing::{debug, error, info, warn};
 
-use crate::config::{Config, ModelKind, PoseSourceKind};
+use crate::clock::PoseClock;
+use crate::config::{Config, ModelKind, PoseSourceKind, PoseTime};
 use crate::control::{build_controller, configured_path, reference_for, thrust_mapping};
+use crate::records::CsvDisturbance;
 use crate::records::{CsvRecorder, CsvReport, CsvRow, flight_stem};
 use crate::schedule::Schedule;
 use crate::summary::{
-    FlightSummary, Histogram, LinkSummary, StateTimes, peak_rss_kib, process_cpu_seconds,
+    DisturbanceSummary, FlightSummary, Histogram, LinkSummary, StateTimes, peak_rss_kib,
+    process_cpu_seconds,
 };
 use crate::supervisor::{
     FlightState, Goal, SetpointOutcome, Supervisor, SupervisorConfig, Transition,
@@ -93,6 +105,8 @@ pub enum DaemonError {
 enum Event {
     Pose {
         arrival: Instant,
+        /// The source's timestamp \[s\] on its own clock (`None`: 0 / none).
+        source_time: Option<f64>,
         position: [f64; 3],
         yaw: Option<f64>,
     },
@@ -186,6 +200,7 @@ struct ControlReport {
     state_changes: u64,
     final_state: FlightState,
     csv: Option<CsvReport>,
+    disturbance: Option<DisturbanceSummary>,
 }
 
 /// What the receive task counted.
@@ -327,6 +342,7 @@ impl DaemonHandle {
             peak_rss_kib: peak_rss_kib(),
             csv: control.csv,
             tlog,
+            disturbance: control.disturbance,
         };
         let fault = self.fault.lock().unwrap_or_else(|p| p.into_inner()).take();
         match fault {
@@ -518,6 +534,10 @@ pub async fn spawn(
         ticks: ticks.clone(),
         epoch,
         csv,
+        clock: PoseClock::new(
+            config.link.pose_clock_window_s,
+            config.link.pose_min_latency_ms / 1000.0,
+        ),
     };
     let control = std::thread::Builder::new()
         .name("dflat-control".into())
@@ -621,6 +641,7 @@ async fn receive_task(
         let event = match link.handle(&frame.header, &frame.message) {
             RxOutcome::Accepted(Inbound::Pose(p)) if p.source == pose_source => Some(Event::Pose {
                 arrival,
+                source_time: (p.time_usec > 0).then_some(p.time_usec as f64 * 1e-6),
                 position: p.position,
                 yaw: p.yaw,
             }),
@@ -756,12 +777,14 @@ struct ControlLoop {
     ticks: Arc<AtomicU64>,
     epoch: Instant,
     csv: Option<CsvRecorder>,
+    /// Capture times of the poses on this computer's clock.
+    clock: PoseClock,
 }
 
 /// Per-run mutable state of the loop (apart from the supervisor/controller).
 struct LoopState {
-    /// Newest pose: arrival, position, yaw from the pose message.
-    pose: Option<(Instant, [f64; 3], Option<f64>)>,
+    /// Newest pose (by capture time).
+    pose: Option<PoseSample>,
     /// Yaw from ATTITUDE \[rad\].
     attitude_yaw: Option<f64>,
     /// Arrival of the pose used by the previous command (latency marking).
@@ -773,6 +796,23 @@ struct LoopState {
     control_errors: u64,
     error_streak: u64,
     outbound_dropped: u64,
+    /// The disturbance estimate at the last tick the controller ran.
+    disturbance: Option<DisturbanceSummary>,
+}
+
+/// One pose as the control loop keeps it.
+#[derive(Debug, Clone, Copy)]
+struct PoseSample {
+    /// Arrival on this computer.
+    arrival: Instant,
+    /// Capture time on this computer's clock, seconds since the epoch.
+    capture: f64,
+    /// The source's own timestamp \[s\], if it has one.
+    source_time: Option<f64>,
+    /// Position, local NED \[m\].
+    position: [f64; 3],
+    /// Yaw from the pose message \[rad\], if it has one.
+    yaw: Option<f64>,
 }
 
 impl ControlLoop {
@@ -819,9 +859,9 @@ impl ControlLoop {
             control_errors: 0,
             error_streak: 0,
             outbound_dropped: 0,
+            disturbance: None,
         };
-        let fixed_yaw = self.config.vehicle.yaw_deg.to_radians();
-        let use_pose_yaw = self.config.link.pose_source != PoseSourceKind::LocalPositionNed;
+        let multi_rate = self.controller.multi_rate();
         let start = Instant::now();
         self.state
             .store(encode_state(self.supervisor.state()), Ordering::Relaxed);
@@ -853,7 +893,7 @@ impl ControlLoop {
             // 2. Decide.
             let decision = self.supervisor.tick(t);
             if decision.reset_controller {
-                self.controller.reset();
+                self.reset_controller(&ls);
                 ls.last_used_arrival = None;
             }
             if let Some(tr) = decision.transition {
@@ -868,26 +908,25 @@ impl ControlLoop {
                     .saturating_duration_since(self.epoch)
                     .as_secs_f64(),
                 state: self.supervisor.state(),
-                measured: ls.pose.map(|(_, p, _)| p),
+                measured: ls.pose.map(|p| p.position),
                 plan: None,
                 reference: None,
                 command: None,
                 solve_us: None,
                 jitter_us: u32::try_from(slot.jitter.as_micros()).unwrap_or(u32::MAX),
+                disturbance: None,
             };
             if decision.stream
-                && let (Some((arrival, position, pose_yaw)), Some(reference)) =
-                    (ls.pose, ls.reference.as_mut())
+                && let (Some(pose), Some(reference)) = (ls.pose, ls.reference.as_mut())
             {
-                let yaw = if use_pose_yaw {
-                    pose_yaw
-                } else {
-                    ls.attitude_yaw
-                };
+                let arrival = pose.arrival;
+                // Multi-rate: the samples were observed as they arrived; the
+                // tick passes its own time. Otherwise the newest pose with
+                // its capture time (not newer than the last: no new pose).
                 let measurement = Measurement {
-                    t: arrival.saturating_duration_since(self.epoch).as_secs_f64(),
-                    position: Vector3::from(position),
-                    yaw: yaw.unwrap_or(fixed_yaw),
+                    t: if multi_rate { t } else { pose.capture },
+                    position: Vector3::from(pose.position),
+                    yaw: self.yaw_of(pose.yaw, ls.attitude_yaw),
                 };
                 let t0 = Instant::now();
                 // A panicking controller is a bug, but it must not take the
@@ -902,6 +941,11 @@ impl ControlLoop {
                         "controller panicked (reset)".into(),
                     ))
                 });
+                if result.is_err() && multi_rate {
+                    // After a reset (panic) the window needs a sample again
+                    // (a repeated sample replaces the one held).
+                    self.observe(&pose, ls.attitude_yaw);
+                }
                 let solve_us = t0.elapsed().as_micros().min(u128::from(u32::MAX)) as u32;
                 solve.record(u64::from(solve_us));
                 row.solve_us = Some(solve_us);
@@ -943,6 +987,19 @@ impl ControlLoop {
                         row.reference = Some([out.reference.x, out.reference.y, out.reference.z]);
                         row.command =
                             Some([command.roll, command.pitch, command.yaw, command.thrust]);
+                        if let Some(report) = self.controller.disturbance() {
+                            let hover = self.mapping.normalized(report.hover_thrust).ok();
+                            row.disturbance = Some(CsvDisturbance {
+                                acceleration: report.acceleration,
+                                thrust_scale: report.thrust_scale,
+                                hover_thrust: hover,
+                                status: report.status,
+                            });
+                            ls.disturbance = Some(DisturbanceSummary {
+                                report,
+                                hover_thrust_normalized: hover,
+                            });
+                        }
                     }
                     Err(e) => {
                         ls.control_errors += 1;
@@ -992,6 +1049,41 @@ impl ControlLoop {
             state_changes: self.supervisor.transitions(),
             final_state: self.supervisor.state(),
             csv,
+            disturbance: ls.disturbance,
+        }
+    }
+
+    /// The yaw a measurement carries: the pose message's (ODOMETRY,
+    /// VISION_POSITION_ESTIMATE), ATTITUDE's (LOCAL_POSITION_NED), else the
+    /// configured fixed yaw.
+    fn yaw_of(&self, pose_yaw: Option<f64>, attitude_yaw: Option<f64>) -> f64 {
+        let yaw = if self.config.link.pose_source == PoseSourceKind::LocalPositionNed {
+            attitude_yaw
+        } else {
+            pose_yaw
+        };
+        yaw.unwrap_or_else(|| self.config.vehicle.yaw_deg.to_radians())
+    }
+
+    /// Hands a pose to a multi-rate controller at its capture time.
+    fn observe(&mut self, pose: &PoseSample, attitude_yaw: Option<f64>) {
+        let sample = Measurement {
+            t: pose.capture,
+            position: Vector3::from(pose.position),
+            yaw: self.yaw_of(pose.yaw, attitude_yaw),
+        };
+        self.controller.observe(&sample);
+    }
+
+    /// Resets the controller (failsafe: window and disturbance estimate
+    /// forgotten); a multi-rate controller gets the newest pose again so
+    /// that it can run at the next tick.
+    fn reset_controller(&mut self, ls: &LoopState) {
+        self.controller.reset();
+        if self.controller.multi_rate()
+            && let Some(pose) = ls.pose
+        {
+            self.observe(&pose, ls.attitude_yaw);
         }
     }
 
@@ -999,12 +1091,41 @@ impl ControlLoop {
         match event {
             Event::Pose {
                 arrival,
+                source_time,
                 position,
                 yaw,
             } => {
-                self.supervisor.on_pose(self.secs(arrival), position);
-                if ls.pose.is_none_or(|(a, _, _)| arrival >= a) {
-                    ls.pose = Some((arrival, position, yaw));
+                let arrival_s = self.secs(arrival);
+                self.supervisor.on_pose(arrival_s, position);
+                let capture = match self.config.link.pose_time {
+                    PoseTime::Source => self.clock.capture_time(arrival_s, source_time),
+                    PoseTime::Arrival => arrival_s,
+                };
+                let mut pose = PoseSample {
+                    arrival,
+                    capture,
+                    source_time,
+                    position,
+                    yaw,
+                };
+                // Every sample to a multi-rate controller (late ones too).
+                self.observe(&pose, ls.attitude_yaw);
+                // The newest for the others, by the source's own clock when
+                // both have one (a falling offset estimate may map a newer
+                // pose before the previous capture), else by capture time;
+                // its time must then be newer than the previous one's, or
+                // the controller takes the tick as one without a new pose.
+                let newer = |p: &PoseSample| match (source_time, p.source_time) {
+                    (Some(a), Some(b)) if (a - b).abs() < crate::clock::SOURCE_RESET => a > b,
+                    _ => capture > p.capture,
+                };
+                match ls.pose {
+                    None => ls.pose = Some(pose),
+                    Some(p) if newer(&p) => {
+                        pose.capture = pose.capture.max(p.capture + 1e-6);
+                        ls.pose = Some(pose);
+                    }
+                    Some(_) => {}
                 }
             }
             Event::Attitude { yaw } => ls.attitude_yaw = Some(yaw),

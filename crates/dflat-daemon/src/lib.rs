@@ -11,10 +11,13 @@
 //! * [`supervisor`] — the flight state machine (pure).
 //! * [`schedule`] — the control loop's absolute-deadline tick schedule (pure).
 //! * [`control`] — controller, reference and thrust mapping from the config.
+//! * [`clock`] — pose capture times on this computer's clock (offset
+//!   estimate from the source timestamps).
 //! * [`records`] — per-flight CSV and file names.
 //! * [`summary`] — measurements and the shutdown summary.
 //! * [`sitl`], [`demo`] — the autopilot stand-in and `dflat demo`.
 
+pub mod clock;
 pub mod config;
 pub mod control;
 pub mod daemon;

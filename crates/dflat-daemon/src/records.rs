@@ -15,6 +15,8 @@ use std::time::{SystemTime, UNIX_EPOCH};
 
 use serde::Serialize;
 
+use dflat_control::disturbance::EstimatorStatus;
+
 use crate::supervisor::FlightState;
 
 /// Queue length between the control loop and the CSV thread \[rows\]
@@ -91,12 +93,40 @@ pub struct CsvRow {
     pub solve_us: Option<u32>,
     /// Wake time − deadline \[µs\].
     pub jitter_us: u32,
+    /// The disturbance estimate after the tick, if the controller runs an
+    /// estimator and ran.
+    pub disturbance: Option<CsvDisturbance>,
+}
+
+/// The disturbance estimate as recorded per tick.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CsvDisturbance {
+    /// Acceleration offset d̂ (x, y, z) \[m/s²\], local NED.
+    pub acceleration: [f64; 3],
+    /// Thrust scale κ̂ \[-\] (actual / model thrust).
+    pub thrust_scale: f64,
+    /// Hover thrust normalised as sent to the autopilot \[0, 1\] (empty
+    /// when it cannot be mapped).
+    pub hover_thrust: Option<f64>,
+    /// Estimator status (`settling`, `filling`, `tracking`, `frozen`).
+    pub status: EstimatorStatus,
 }
 
 /// The CSV header line (no newline).
 pub const CSV_HEADER: &str = "tick,t,state,x,y,z,\
 plan0_x,plan0_y,plan0_z,plan1_x,plan1_y,plan1_z,plan2_x,plan2_y,plan2_z,plan3_x,plan3_y,plan3_z,\
-ref_x,ref_y,ref_z,roll,pitch,yaw,thrust,solve_us,jitter_us";
+ref_x,ref_y,ref_z,roll,pitch,yaw,thrust,solve_us,jitter_us,\
+dist_x,dist_y,dist_z,thrust_scale,hover_thrust,est_status";
+
+/// The estimator status as written to the CSV.
+fn status_name(s: EstimatorStatus) -> &'static str {
+    match s {
+        EstimatorStatus::Settling => "settling",
+        EstimatorStatus::Filling => "filling",
+        EstimatorStatus::Tracking => "tracking",
+        EstimatorStatus::Frozen => "frozen",
+    }
+}
 
 fn opt3<W: Write>(w: &mut W, v: Option<[f64; 3]>, precision: usize) -> io::Result<()> {
     match v {
@@ -127,7 +157,18 @@ pub fn write_row<W: Write>(w: &mut W, row: &CsvRow) -> io::Result<()> {
         Some(s) => write!(w, ",{s}")?,
         None => w.write_all(b",")?,
     }
-    writeln!(w, ",{}", row.jitter_us)
+    write!(w, ",{}", row.jitter_us)?;
+    match &row.disturbance {
+        Some(d) => {
+            let [x, y, z] = d.acceleration;
+            write!(w, ",{x:.5},{y:.5},{z:.5},{:.5},", d.thrust_scale)?;
+            if let Some(h) = d.hover_thrust {
+                write!(w, "{h:.5}")?;
+            }
+            writeln!(w, ",{}", status_name(d.status))
+        }
+        None => writeln!(w, ",,,,,,"),
+    }
 }
 
 /// Counters of a finished [`CsvRecorder`].
@@ -255,6 +296,7 @@ mod tests {
             command: Some([0.01, -0.2, 0.0, 0.5]),
             solve_us: Some(42),
             jitter_us: 120,
+            disturbance: None,
         }
     }
 
@@ -267,7 +309,7 @@ mod tests {
             line,
             "7,0.1400,TRACKING,1.0000,-2.5000,-10.0000,\
 1.0000,2.0000,3.0000,1.0000,2.0000,3.0000,1.0000,2.0000,3.0000,1.0000,2.0000,3.0000,\
-0.0000,0.0000,-10.0000,0.010000,-0.200000,0.000000,0.5000,42,120\n"
+0.0000,0.0000,-10.0000,0.010000,-0.200000,0.000000,0.5000,42,120,,,,,,\n"
         );
         let columns = CSV_HEADER.split(',').count();
         assert_eq!(line.trim_end().split(',').count(), columns);
@@ -289,7 +331,29 @@ mod tests {
         let line = String::from_utf8(out).unwrap();
         assert_eq!(line.trim_end().split(',').count(), columns);
         assert!(line.starts_with("7,0.1400,FAILSAFE,,,,"), "{line}");
-        assert!(line.ends_with(",,120\n"), "{line}");
+        assert!(line.ends_with(",,120,,,,,,\n"), "{line}");
+        // With an estimate.
+        let mut out = Vec::new();
+        let disturbance = Some(CsvDisturbance {
+            acceleration: [0.1, -0.2, 0.0],
+            thrust_scale: 1.04,
+            hover_thrust: Some(0.48),
+            status: EstimatorStatus::Tracking,
+        });
+        write_row(
+            &mut out,
+            &CsvRow {
+                disturbance,
+                ..row()
+            },
+        )
+        .unwrap();
+        let line = String::from_utf8(out).unwrap();
+        assert_eq!(line.trim_end().split(',').count(), columns);
+        assert!(
+            line.ends_with(",120,0.10000,-0.20000,0.00000,1.04000,0.48000,tracking\n"),
+            "{line}"
+        );
     }
 
     #[test]

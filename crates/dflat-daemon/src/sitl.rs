@@ -16,6 +16,11 @@
 //!   LOCAL_POSITION_NED (true position plus Gaussian noise of σ =
 //!   `sitl.noise_sigma`, true velocity) and ATTITUDE at
 //!   `sitl.telemetry_rate_hz`;
+//! * optionally (`sitl.vision_rate_hz` > 0) VISION_POSITION_ESTIMATE, a
+//!   vision pipeline stand-in: at that rate the true position plus Gaussian
+//!   noise (σ = `sitl.vision_noise_sigma`) is captured, stamped with its
+//!   capture time (`time_usec`, the SITL's clock) and sent
+//!   `sitl.vision_latency_ms` later (to the plant step's resolution);
 //! * it accepts SET_ATTITUDE_TARGET (82) from another component of its own
 //!   vehicle addressed to its system/component (or broadcast, 0): the
 //!   quaternion becomes roll/pitch/yaw, the normalised thrust the specific
@@ -200,6 +205,8 @@ pub struct SitlCounters {
     pub heartbeats_sent: u64,
     /// LOCAL_POSITION_NED sent on the vehicle link.
     pub positions_sent: u64,
+    /// VISION_POSITION_ESTIMATE sent on the vehicle link (`sitl.vision_rate_hz`).
+    pub visions_sent: u64,
     /// ATTITUDE sent on the vehicle link.
     pub attitudes_sent: u64,
     /// Frames received on the vehicle link (valid CRC).
@@ -230,6 +237,7 @@ pub struct SitlCounters {
 struct Counters {
     heartbeats_sent: AtomicU64,
     positions_sent: AtomicU64,
+    visions_sent: AtomicU64,
     attitudes_sent: AtomicU64,
     frames_received: AtomicU64,
     commands_accepted: AtomicU64,
@@ -254,6 +262,7 @@ impl Counters {
         SitlCounters {
             heartbeats_sent: g(&self.heartbeats_sent),
             positions_sent: g(&self.positions_sent),
+            visions_sent: g(&self.visions_sent),
             attitudes_sent: g(&self.attitudes_sent),
             frames_received: g(&self.frames_received),
             commands_accepted: g(&self.commands_accepted),
@@ -437,6 +446,20 @@ pub fn spawn(cfg: &Config, options: SitlOptions) -> Result<SitlHandle, SitlError
         GaussianOptions::isotropic(cfg.sitl.noise_sigma),
         cfg.sitl.seed,
     )?;
+    let vision = if cfg.sitl.vision_rate_hz > 0.0 {
+        Some(VisionStream {
+            sensor: GaussianSensor::new(
+                GaussianOptions::isotropic(cfg.sitl.vision_noise_sigma),
+                cfg.sitl.seed ^ VISION_SEED,
+            )?,
+            period: 1.0 / cfg.sitl.vision_rate_hz,
+            latency: cfg.sitl.vision_latency_ms / 1000.0,
+            next_capture: 1.0 / cfg.sitl.vision_rate_hz,
+            pending: std::collections::VecDeque::with_capacity(VISION_QUEUE),
+        })
+    } else {
+        None
+    };
 
     let truth_file = match &options.truth_csv {
         Some(path) => Some((path.clone(), create_truth_csv(path)?)),
@@ -515,6 +538,7 @@ pub fn spawn(cfg: &Config, options: SitlOptions) -> Result<SitlHandle, SitlError
         gcs_socket,
         plant,
         sensor,
+        vision,
         options: popts,
         plant_rate_hz: cfg.sitl.plant_rate_hz,
         telemetry_rate_hz: cfg.sitl.telemetry_rate_hz,
@@ -856,6 +880,25 @@ impl GcsRx {
     }
 }
 
+/// Seed offset of the vision stand-in's noise (independent of the
+/// LOCAL_POSITION_NED noise).
+const VISION_SEED: u64 = 0x5649_5349_4f4e;
+/// Vision samples in flight at most (latency × rate; older ones dropped).
+const VISION_QUEUE: usize = 256;
+
+/// The vision stand-in: captures at its rate, sends after its latency.
+struct VisionStream {
+    sensor: GaussianSensor,
+    /// Capture period \[s\].
+    period: f64,
+    /// Capture → send delay \[s\].
+    latency: f64,
+    /// SITL time of the next capture \[s\].
+    next_capture: f64,
+    /// Captured, not yet sent: (capture time \[s\], position, ZYX euler).
+    pending: std::collections::VecDeque<(f64, [f64; 3], [f64; 3])>,
+}
+
 /// The real-time plant loop: integrate, command or hold, send telemetry.
 struct PlantLoop {
     shared: Arc<Shared>,
@@ -863,6 +906,7 @@ struct PlantLoop {
     gcs_socket: Option<Arc<UdpSocket>>,
     plant: Box<dyn Plant>,
     sensor: GaussianSensor,
+    vision: Option<VisionStream>,
     options: PlantOptions,
     plant_rate_hz: f64,
     telemetry_rate_hz: f64,
@@ -950,6 +994,7 @@ impl PlantLoop {
             }
             let t = steps as f64 * dt;
             self.sensor.observe(t, &state);
+            self.vision(t, &state);
 
             if before / heartbeat_every != steps / heartbeat_every {
                 heartbeat_due = true;
@@ -1012,6 +1057,51 @@ impl PlantLoop {
 
     fn send(&self, msg: &MavMessage) -> bool {
         send_own(&self.shared, &self.socket, self.gcs_socket.as_deref(), msg)
+    }
+
+    /// The vision stand-in at SITL time `t`: capture when due, send what
+    /// has waited its latency.
+    fn vision(&mut self, t: f64, state: &PlantState) {
+        let Some(v) = &mut self.vision else {
+            return;
+        };
+        let paused = self.shared.pose_paused.load(Ordering::Relaxed);
+        if t + 1e-9 >= v.next_capture {
+            // Skip captures missed by a late step rather than bunching them.
+            while v.next_capture <= t + 1e-9 {
+                v.next_capture += v.period;
+            }
+            v.sensor.observe(t, state);
+            if !paused && let Some(m) = v.sensor.measure(t) {
+                let offset = *lock(&self.shared.pose_offset);
+                let p = [
+                    m.position.x + offset[0],
+                    m.position.y + offset[1],
+                    m.position.z + offset[2],
+                ];
+                if v.pending.len() == VISION_QUEUE {
+                    v.pending.pop_front();
+                }
+                v.pending
+                    .push_back((t, p, [state.roll, state.pitch, state.yaw]));
+            }
+        }
+        let mut due = Vec::new();
+        while let Some(&(capture, p, euler)) = v.pending.front() {
+            if capture + v.latency > t + 1e-9 {
+                break;
+            }
+            v.pending.pop_front();
+            due.push((capture, p, euler));
+        }
+        for (capture, p, euler) in due {
+            let usec = (capture * 1e6).round() as u64;
+            if let Ok(msg) = dflat_link::vision_position_estimate(usec, p, euler, 0, None)
+                && self.send(&msg)
+            {
+                bump(&self.shared.counters.visions_sent);
+            }
+        }
     }
 
     fn telemetry(&mut self, sample: &TruthSample, state: &PlantState) {

@@ -319,6 +319,21 @@ pub struct FlightSummary {
     pub csv: Option<CsvReport>,
     /// The .tlog, if written.
     pub tlog: Option<TlogReport>,
+    /// The disturbance estimate at the last tick the controller ran
+    /// (`controller.disturbance`), if the controller runs an estimator.
+    pub disturbance: Option<DisturbanceSummary>,
+}
+
+/// The disturbance estimate for the summary (see
+/// [`dflat_control::disturbance`]).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct DisturbanceSummary {
+    /// The estimator's report (acceleration offset \[m/s²\], thrust scale,
+    /// hover specific thrust \[m/s²\], status).
+    pub report: dflat_control::disturbance::DisturbanceReport,
+    /// The hover thrust as the autopilot reads it: normalised \[0, 1\]
+    /// (PX4's hover-thrust estimate), or the fixed value in `fixed` mode.
+    pub hover_thrust_normalized: Option<f64>,
 }
 
 impl fmt::Display for FlightSummary {
@@ -402,6 +417,23 @@ impl fmt::Display for FlightSummary {
                 t.path.display(),
                 t.records,
                 t.dropped
+            )?;
+        }
+        if let Some(d) = &self.disturbance {
+            let r = &d.report;
+            let hover = d
+                .hover_thrust_normalized
+                .map_or("n/a".to_owned(), |h| format!("{h:.3}"));
+            write!(
+                f,
+                "\n  disturbance   d = ({:.3}, {:.3}, {:.3}) m/s², thrust scale {:.3}, hover thrust {hover} ({:?}{}, {} pose jumps)",
+                r.acceleration[0],
+                r.acceleration[1],
+                r.acceleration[2],
+                r.thrust_scale,
+                r.status,
+                if r.clamped { ", clamped" } else { "" },
+                r.jumps
             )?;
         }
         Ok(())

@@ -1,12 +1,12 @@
 //! End to end: the spatial model (PX4-style normalised thrust) against a
 //! spatial plant streams at 50 Hz and holds altitude while flying a short L.
 //!
-//! Ignored for now: when a tick finds no pose newer than the previous one
-//! (pose and tick phases are independent; with ~1 ms between them a little
-//! jitter is enough), the daemon enters the repeated pose into the window
-//! as a new sample; the planar model answers with one saturated (±35°)
-//! command, the spatial model with a growing thrust / "free fall"
-//! oscillation that fails every other tick. Run with `--ignored` once fixed.
+//! Pose and tick phases are independent (with ~1 ms between them a little
+//! jitter is enough for a tick to find no new pose): this flight once ran
+//! away when such a tick entered the repeated pose into the window as new.
+//! Flown with the shipped defaults (multi-rate windows) and, as
+//! `..._classic_window`, with the paper's one-pose-per-tick window, where
+//! the controller predicts y_k for a tick without a new pose.
 
 mod common;
 
@@ -36,9 +36,18 @@ start = [0.0, 0.0, -10.0]
 const ALTITUDE_BOUND: f64 = 0.5;
 
 #[test]
-#[ignore = "daemon: a tick without a new pose feeds the repeated pose into the window (see module docs)"]
 fn spatial_model_streams_at_50_hz_and_holds_altitude() {
-    let flight = fly_in_process("spatial-flight", CONFIG, Duration::from_secs(6));
+    check("spatial-flight", CONFIG);
+}
+
+#[test]
+fn spatial_model_streams_at_50_hz_and_holds_altitude_classic_window() {
+    let config = format!("{CONFIG}[controller]\nmulti_rate = false\n");
+    check("spatial-flight-classic", &config);
+}
+
+fn check(name: &str, config: &str) {
+    let flight = fly_in_process(name, config, Duration::from_secs(6));
     let n = flight.attitude_targets().count();
     let expected = flight.streamed_for.as_secs_f64() * 50.0;
     let altitude_error = flight
@@ -48,7 +57,7 @@ fn spatial_model_streams_at_50_hz_and_holds_altitude() {
         .map(|s| (s.position[2] + 10.0).abs())
         .fold(0.0, f64::max);
     eprintln!(
-        "spatial: {n} attitude targets in {:?}, max altitude error {altitude_error:.3} m",
+        "{name}: {n} attitude targets in {:?}, max altitude error {altitude_error:.3} m",
         flight.streamed_for
     );
     assert!(

@@ -35,6 +35,11 @@ pub fn scratch(name: &str) -> PathBuf {
     dir
 }
 
+/// The scratch directory of `name` as [`scratch`] made it (not cleared).
+pub fn scratch_dir(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("e2e-{name}-{}", std::process::id()))
+}
+
 /// Writes a config file into `dir`.
 pub fn write_config(dir: &Path, name: &str, text: &str) -> PathBuf {
     let path = dir.join(name);
