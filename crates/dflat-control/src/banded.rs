@@ -340,7 +340,11 @@ impl BandedCholesky {
                     v -= r[d] * st[d - 1];
                 }
                 x[i] = v;
-                st.copy_within(0..B - 1, 1);
+                // Shift the register window by hand: a const-bounded loop the
+                // compiler unrolls (`copy_within` became a memmove call).
+                for d in (1..B).rev() {
+                    st[d] = st[d - 1];
+                }
                 st[0] = v;
             }
         }
