@@ -345,6 +345,9 @@ pub struct MissionConfig {
     /// Geofence half-widths around the origin [m]: setpoints outside are
     /// refused (x, y, z).
     pub geofence: [f64; 3],
+    /// Fly the path again and again (a closed path: its last waypoint must
+    /// equal its first) instead of holding its end (soak tests, patrols).
+    pub repeat: bool,
 }
 
 impl Default for MissionConfig {
@@ -359,6 +362,7 @@ impl Default for MissionConfig {
             speed: 5.0,
             path_trigger_radius: 0.5,
             geofence: [500.0, 500.0, 200.0],
+            repeat: false,
         }
     }
 }
@@ -371,6 +375,20 @@ pub struct SafetyConfig {
     pub pose_timeout_ms: f64,
     /// No autopilot HEARTBEAT for this long [ms] stops the stream (100–10000).
     pub autopilot_timeout_ms: f64,
+    /// Fastest the vehicle can move [m/s] (0.5–100): a pose further from the
+    /// previous one than this speed allows (plus `pose_jump_margin_m`) is a
+    /// pose jump → the controller and the reference re-anchor (hold there).
+    pub max_speed_mps: f64,
+    /// Noise margin of the pose-jump test [m] (0–10).
+    pub pose_jump_margin_m: f64,
+    /// After a controller failure or deadline overrun, the last good command
+    /// is held for at most this many ticks (0–50), then level hover.
+    pub hold_last_ticks: u32,
+    /// Model-consistency failsafe [m] (0 = off; else 0.05–100): when the
+    /// measured position is further than this from the position predicted
+    /// for the tick (the previous plan's y*_{k+1}) for 5 ticks in a row, the
+    /// stream stops (FAILSAFE) for 2 s.
+    pub residual_failsafe_m: f64,
 }
 
 impl Default for SafetyConfig {
@@ -378,6 +396,10 @@ impl Default for SafetyConfig {
         Self {
             pose_timeout_ms: 100.0,
             autopilot_timeout_ms: 3000.0,
+            max_speed_mps: 15.0,
+            pose_jump_margin_m: 0.5,
+            hold_last_ticks: 5,
+            residual_failsafe_m: 0.0,
         }
     }
 }
@@ -679,6 +701,13 @@ impl Config {
                 ));
             }
         }
+        if m.repeat && (m.path.len() < 3 || m.path.first() != m.path.last()) {
+            return Err(v.err(
+                "mission.repeat",
+                "true",
+                "a closed path (≥ 3 waypoints, the last equal to the first)",
+            ));
+        }
         let s = &self.safety;
         v.range("safety.pose_timeout_ms", s.pose_timeout_ms, 5.0, 2000.0)?;
         v.range(
@@ -687,6 +716,22 @@ impl Config {
             100.0,
             10000.0,
         )?;
+        v.range("safety.max_speed_mps", s.max_speed_mps, 0.5, 100.0)?;
+        v.range("safety.pose_jump_margin_m", s.pose_jump_margin_m, 0.0, 10.0)?;
+        v.range(
+            "safety.hold_last_ticks",
+            f64::from(s.hold_last_ticks),
+            0.0,
+            50.0,
+        )?;
+        if s.residual_failsafe_m != 0.0 {
+            v.range(
+                "safety.residual_failsafe_m",
+                s.residual_failsafe_m,
+                0.05,
+                100.0,
+            )?;
+        }
         let si = &self.sitl;
         v.nonempty("sitl.url", &si.url)?;
         v.range("sitl.plant_rate_hz", si.plant_rate_hz, 100.0, 2000.0)?;
@@ -796,6 +841,29 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("mission.path[1]"), "{e}");
+    }
+
+    #[test]
+    fn safety_fields_are_validated() {
+        for (text, field) in [
+            ("max_speed_mps = 0.0", "safety.max_speed_mps"),
+            ("pose_jump_margin_m = -1.0", "safety.pose_jump_margin_m"),
+            ("hold_last_ticks = 51", "safety.hold_last_ticks"),
+            ("residual_failsafe_m = 0.01", "safety.residual_failsafe_m"),
+            ("residual_failsafe_m = nan", "safety.residual_failsafe_m"),
+        ] {
+            let e = parse(&format!("[safety]\n{text}\n"))
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(field), "{text}: {e}");
+        }
+        let e = parse("[mission]\nrepeat = true\n").unwrap_err().to_string();
+        assert!(e.contains("mission.repeat"), "{e}");
+        assert!(
+            parse("[mission]\nrepeat = true\npath = [[0.0, 0.0, -5.0], [5.0, 0.0, -5.0], [0.0, 0.0, -5.0]]\n")
+                .is_ok()
+        );
+        assert!(parse("[safety]\nresidual_failsafe_m = 2.0\nhold_last_ticks = 0\n").is_ok());
     }
 
     #[test]

@@ -54,6 +54,10 @@ use tracing::{debug, error, info, warn};
 use crate::clock::PoseClock;
 use crate::config::{Config, ModelKind, PoseSourceKind, PoseTime};
 use crate::control::{build_controller, configured_path, reference_for, thrust_mapping};
+use crate::guard::{
+    CommandGuard, Fallback, FallbackKind, GuardCounts, ResidualMonitor, WatchdogCadence,
+    is_pose_jump,
+};
 use crate::records::CsvDisturbance;
 use crate::records::{CsvRecorder, CsvReport, CsvRow, flight_stem};
 use crate::schedule::Schedule;
@@ -62,7 +66,7 @@ use crate::summary::{
     process_cpu_seconds,
 };
 use crate::supervisor::{
-    FlightState, Goal, SetpointOutcome, Supervisor, SupervisorConfig, Transition,
+    Cause, FlightState, Goal, SetpointOutcome, Supervisor, SupervisorConfig, Transition,
 };
 use crate::transport::{Endpoint, RecvEvent, SendOutcome, TlogTap, Transport, TransportError};
 
@@ -74,6 +78,14 @@ const OUTBOUND_QUEUE: usize = 256;
 const REFUSAL_TEXT_INTERVAL: f64 = 1.0;
 /// How long shutdown waits for the send task to drain \[s\].
 const SEND_DRAIN_TIMEOUT: Duration = Duration::from_secs(2);
+/// How long a residual failsafe lasts before pose may re-engage \[s\].
+const RESIDUAL_FAILSAFE_LATCH: f64 = 2.0;
+
+/// `STATUS=` for systemd (no-op when not under systemd).
+fn notify_status(state: FlightState) {
+    let text = format!("state {}", state.name());
+    let _ = sd_notify::notify(&[sd_notify::NotifyState::Status(&text)]);
+}
 
 /// Why the daemon could not start or stopped with an error.
 #[derive(Debug, Error)]
@@ -109,6 +121,8 @@ enum Event {
         source_time: Option<f64>,
         position: [f64; 3],
         yaw: Option<f64>,
+        /// The estimator reset counter (ODOMETRY, VISION_POSITION_ESTIMATE).
+        reset_counter: Option<u8>,
     },
     Attitude {
         yaw: f64,
@@ -201,6 +215,7 @@ struct ControlReport {
     final_state: FlightState,
     csv: Option<CsvReport>,
     disturbance: Option<DisturbanceSummary>,
+    guards: GuardCounts,
 }
 
 /// What the receive task counted.
@@ -343,6 +358,7 @@ impl DaemonHandle {
             csv: control.csv,
             tlog,
             disturbance: control.disturbance,
+            guards: control.guards,
         };
         let fault = self.fault.lock().unwrap_or_else(|p| p.into_inner()).take();
         match fault {
@@ -511,12 +527,7 @@ pub async fn spawn(
         fault.clone(),
     ));
     let tx = tokio::spawn(send_task(transport, out_rx, own));
-    let heartbeat = tokio::spawn(heartbeat_task(
-        out_tx.clone(),
-        state.clone(),
-        ticks.clone(),
-        stop.clone(),
-    ));
+    let heartbeat = tokio::spawn(heartbeat_task(out_tx.clone(), state.clone(), stop.clone()));
 
     let loop_ctx = ControlLoop {
         supervisor: Supervisor::new(supervisor_config(&config)),
@@ -538,15 +549,23 @@ pub async fn spawn(
             config.link.pose_clock_window_s,
             config.link.pose_min_latency_ms / 1000.0,
         ),
+        guard: CommandGuard {
+            max_tilt: config.vehicle.max_tilt_deg.to_radians(),
+        },
+        fallback: Fallback::new(
+            config.safety.hold_last_ticks,
+            mapping
+                .normalized(config.vehicle.gravity)
+                .unwrap_or(config.vehicle.hover_thrust),
+            config.vehicle.yaw_deg.to_radians(),
+        ),
+        residual: ResidualMonitor::new(config.safety.residual_failsafe_m),
+        counts: GuardCounts::default(),
     };
     let control = std::thread::Builder::new()
         .name("dflat-control".into())
         .spawn(move || loop_ctx.run())
         .map_err(|e| DaemonError::Internal(format!("cannot start the control thread: {e}")))?;
-
-    if let Err(e) = sd_notify::notify(&[sd_notify::NotifyState::Ready]) {
-        debug!(error = %e, "sd_notify READY failed");
-    }
 
     Ok(DaemonHandle {
         stop,
@@ -588,6 +607,7 @@ pub fn supervisor_config(cfg: &Config) -> SupervisorConfig {
         path_ends,
         path_trigger_radius: m.path_trigger_radius,
         start_path: m.start == crate::config::MissionStart::Path,
+        repeat_path: m.repeat,
     }
 }
 
@@ -644,6 +664,7 @@ async fn receive_task(
                 source_time: (p.time_usec > 0).then_some(p.time_usec as f64 * 1e-6),
                 position: p.position,
                 yaw: p.yaw,
+                reset_counter: p.reset_counter,
             }),
             RxOutcome::Accepted(Inbound::Attitude(a)) => Some(Event::Attitude { yaw: a.yaw }),
             RxOutcome::Accepted(Inbound::Heartbeat(_)) => Some(Event::Heartbeat { arrival }),
@@ -726,17 +747,10 @@ async fn send_task(
     report
 }
 
-async fn heartbeat_task(
-    out: mpsc::Sender<Outgoing>,
-    state: Arc<AtomicU8>,
-    ticks: Arc<AtomicU64>,
-    stop: Arc<Stop>,
-) {
+async fn heartbeat_task(out: mpsc::Sender<Outgoing>, state: Arc<AtomicU8>, stop: Arc<Stop>) {
     let mut stop_rx = stop.tx.subscribe();
     let mut interval = tokio::time::interval(Duration::from_secs(1));
     interval.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
-    let watchdog = sd_notify::watchdog_enabled();
-    let mut last_ticks = 0;
     loop {
         tokio::select! {
             biased;
@@ -750,12 +764,6 @@ async fn heartbeat_task(
         {
             debug!("outbound queue full: heartbeat dropped");
         }
-        // The systemd watchdog is fed only while the control loop advances.
-        let now_ticks = ticks.load(Ordering::Relaxed);
-        if watchdog.is_some() && now_ticks != last_ticks {
-            let _ = sd_notify::notify(&[sd_notify::NotifyState::Watchdog]);
-        }
-        last_ticks = now_ticks;
     }
     let _ = out.try_send(Outgoing::plain(heartbeat_onboard(DaemonStatus::Poweroff)));
 }
@@ -779,6 +787,14 @@ struct ControlLoop {
     csv: Option<CsvRecorder>,
     /// Capture times of the poses on this computer's clock.
     clock: PoseClock,
+    /// The exit point's limits.
+    guard: CommandGuard,
+    /// Held command / level hover after a failed or late tick.
+    fallback: Fallback,
+    /// Model-consistency residual.
+    residual: ResidualMonitor,
+    /// What the guards did.
+    counts: GuardCounts,
 }
 
 /// Per-run mutable state of the loop (apart from the supervisor/controller).
@@ -798,6 +814,10 @@ struct LoopState {
     outbound_dropped: u64,
     /// The disturbance estimate at the last tick the controller ran.
     disturbance: Option<DisturbanceSummary>,
+    /// A guard event since the last CSV row (pose jump).
+    guard_note: Option<&'static str>,
+    /// The fallback in use (announced once per kind), if any.
+    fallback: Option<FallbackKind>,
 }
 
 /// One pose as the control loop keeps it.
@@ -813,6 +833,8 @@ struct PoseSample {
     position: [f64; 3],
     /// Yaw from the pose message \[rad\], if it has one.
     yaw: Option<f64>,
+    /// Estimator reset counter, if the message has one.
+    reset_counter: Option<u8>,
 }
 
 impl ControlLoop {
@@ -841,12 +863,39 @@ impl ControlLoop {
         };
         self.send(Outgoing::plain(statustext(severity, &tr.text())), ls);
         self.state.store(encode_state(tr.to), Ordering::Relaxed);
+        notify_status(tr.to);
+    }
+
+    /// Re-anchors after a pose jump to `pose`: controller window reset (a
+    /// multi-rate one gets this pose), held / predicted state forgotten,
+    /// the reference holds the new position.
+    fn re_anchor(&mut self, t: f64, pose: &PoseSample, ls: &mut LoopState) {
+        self.counts.pose_jumps += 1;
+        self.controller.reset();
+        if self.controller.multi_rate() {
+            self.observe(pose, ls.attitude_yaw);
+        }
+        self.fallback.forget();
+        self.residual.forget();
+        ls.guard_note = Some("jump");
+        warn!(position = ?pose.position, "pose jump: re-anchored");
+        match self.supervisor.re_anchor(t, pose.position) {
+            Some(tr) => self.announce(&tr, ls),
+            None => self.send(
+                Outgoing::plain(statustext(
+                    MavSeverity::MAV_SEVERITY_WARNING,
+                    "dflat: pose jump, re-anchored",
+                )),
+                ls,
+            ),
+        }
+        self.refresh_reference(ls);
     }
 
     fn run(mut self) -> ControlReport {
         let period = Duration::from_secs_f64(1.0 / self.config.controller.rate_hz);
         let mut schedule = Schedule::new(period);
-        let mut solve = Histogram::new();
+        let mut solve_hist = Histogram::new();
         let mut jitter = Histogram::new();
         let mut ls = LoopState {
             pose: None,
@@ -860,11 +909,24 @@ impl ControlLoop {
             error_streak: 0,
             outbound_dropped: 0,
             disturbance: None,
+            guard_note: None,
+            fallback: None,
         };
         let multi_rate = self.controller.multi_rate();
         let start = Instant::now();
         self.state
             .store(encode_state(self.supervisor.state()), Ordering::Relaxed);
+        // systemd: ready once this loop runs; the watchdog is fed from the
+        // loop itself (a stuck loop gets the daemon restarted). No-ops when
+        // not under systemd.
+        if let Err(e) = sd_notify::notify(&[sd_notify::NotifyState::Ready]) {
+            debug!(error = %e, "sd_notify READY failed");
+        }
+        notify_status(self.supervisor.state());
+        let mut watchdog = WatchdogCadence::new(sd_notify::watchdog_enabled());
+        if let Some(w) = &watchdog {
+            info!(interval = ?w.interval(), "systemd watchdog fed from the control loop");
+        }
 
         loop {
             let deadline = start + schedule.next_deadline();
@@ -876,6 +938,11 @@ impl ControlLoop {
                 break;
             }
             let wake = Instant::now();
+            if let Some(w) = watchdog.as_mut()
+                && w.due(wake)
+            {
+                let _ = sd_notify::notify(&[sd_notify::NotifyState::Watchdog]);
+            }
             let Some(slot) = schedule.on_wake(wake.saturating_duration_since(start)) else {
                 continue;
             };
@@ -915,8 +982,32 @@ impl ControlLoop {
                 solve_us: None,
                 jitter_us: u32::try_from(slot.jitter.as_micros()).unwrap_or(u32::MAX),
                 disturbance: None,
+                residual: None,
+                guard: ls.guard_note.take(),
             };
+            // The model-consistency residual: this tick's measurement
+            // against the previous plan's prediction for it.
             if decision.stream
+                && let Some(pose) = ls.pose
+            {
+                let (r, trip) = self.residual.measure(pose.position);
+                row.residual = r;
+                if trip
+                    && let Some(tr) = self.supervisor.force_failsafe(
+                        t,
+                        Cause::ResidualDiverged,
+                        RESIDUAL_FAILSAFE_LATCH,
+                    )
+                {
+                    self.counts.residual_failsafes += 1;
+                    warn!(residual = ?r, "model residual above the threshold: failsafe");
+                    self.reset_controller(&ls);
+                    ls.last_used_arrival = None;
+                    self.announce(&tr, &mut ls);
+                    row.guard = Some("residual");
+                }
+            }
+            if self.supervisor.state().streams()
                 && let (Some(pose), Some(reference)) = (ls.pose, ls.reference.as_mut())
             {
                 let arrival = pose.arrival;
@@ -946,12 +1037,13 @@ impl ControlLoop {
                     // (a repeated sample replaces the one held).
                     self.observe(&pose, ls.attitude_yaw);
                 }
-                let solve_us = t0.elapsed().as_micros().min(u128::from(u32::MAX)) as u32;
-                solve.record(u64::from(solve_us));
+                let solve = t0.elapsed();
+                let solve_us = solve.as_micros().min(u128::from(u32::MAX)) as u32;
+                solve_hist.record(u64::from(solve_us));
                 row.solve_us = Some(solve_us);
                 let path_done =
                     matches!(self.supervisor.goal(), Goal::Path) && reference.is_finished();
-                match result.map_err(|e| e.to_string()).and_then(|out| {
+                let produced = result.map_err(|e| e.to_string()).and_then(|out| {
                     let thrust = self
                         .mapping
                         .normalized(out.command.thrust)
@@ -962,12 +1054,85 @@ impl ControlLoop {
                         yaw: out.command.yaw,
                         thrust,
                     };
-                    let time_boot_ms = (t * 1000.0) as u64 as u32;
-                    let message = set_attitude_target(self.target, time_boot_ms, &command)
+                    let command = self
+                        .guard
+                        .check(command, &mut self.counts)
                         .map_err(|e| e.to_string())?;
-                    Ok((out, command, message))
-                }) {
-                    Ok((out, command, message)) => {
+                    Ok((out, command))
+                });
+                // The one exit point: a guarded controller command, or the
+                // fallback (held command, then level hover).
+                let (command, out) = match produced {
+                    Ok((out, command)) if solve <= period => {
+                        if ls.error_streak > 0 {
+                            info!(ticks = ls.error_streak, "controller recovered");
+                        }
+                        ls.error_streak = 0;
+                        ls.fallback = None;
+                        self.fallback.good(command);
+                        self.residual
+                            .predict([out.plan[1].x, out.plan[1].y, out.plan[1].z]);
+                        (command, Some(out))
+                    }
+                    failed => {
+                        match failed {
+                            Ok(_) => {
+                                self.counts.deadline_overruns += 1;
+                                if ls.error_streak == 0 {
+                                    warn!(solve_us, "deadline overrun: fallback command");
+                                }
+                            }
+                            Err(e) => {
+                                ls.control_errors += 1;
+                                self.counts.controller_failures += 1;
+                                if ls.error_streak == 0 {
+                                    warn!(error = %e, "controller failed: fallback command");
+                                }
+                            }
+                        }
+                        ls.error_streak += 1;
+                        self.residual.forget();
+                        let (command, kind) = self.fallback.command();
+                        let (counter, note, text) = match kind {
+                            FallbackKind::Held => (
+                                &mut self.counts.held,
+                                "held",
+                                "dflat: control failed, holding last command",
+                            ),
+                            FallbackKind::LevelHover => (
+                                &mut self.counts.level_hover,
+                                "level",
+                                "dflat: control failed, level hover",
+                            ),
+                        };
+                        *counter += 1;
+                        row.guard = Some(note);
+                        if ls.fallback != Some(kind) {
+                            ls.fallback = Some(kind);
+                            self.send(
+                                Outgoing::plain(statustext(
+                                    MavSeverity::MAV_SEVERITY_CRITICAL,
+                                    text,
+                                )),
+                                &mut ls,
+                            );
+                        }
+                        (command, None)
+                    }
+                };
+                // The fallback is finite by construction; checked all the same.
+                let time_boot_ms = (t * 1000.0) as u64 as u32;
+                let message = self
+                    .guard
+                    .check(command, &mut self.counts)
+                    .map_err(|e| e.to_string())
+                    .and_then(|c| {
+                        set_attitude_target(self.target, time_boot_ms, &c)
+                            .map(|m| (c, m))
+                            .map_err(|e| e.to_string())
+                    });
+                match message {
+                    Ok((command, message)) => {
                         let fresh = ls.last_used_arrival != Some(arrival);
                         ls.last_used_arrival = Some(arrival);
                         self.send(
@@ -979,38 +1144,35 @@ impl ControlLoop {
                             &mut ls,
                         );
                         ls.commands += 1;
-                        if ls.error_streak > 0 {
-                            info!(ticks = ls.error_streak, "controller recovered");
-                        }
-                        ls.error_streak = 0;
-                        row.plan = Some(out.plan.map(|p| [p.x, p.y, p.z]));
-                        row.reference = Some([out.reference.x, out.reference.y, out.reference.z]);
                         row.command =
                             Some([command.roll, command.pitch, command.yaw, command.thrust]);
-                        if let Some(report) = self.controller.disturbance() {
-                            let hover = self.mapping.normalized(report.hover_thrust).ok();
-                            row.disturbance = Some(CsvDisturbance {
-                                acceleration: report.acceleration,
-                                thrust_scale: report.thrust_scale,
-                                hover_thrust: hover,
-                                status: report.status,
-                            });
-                            ls.disturbance = Some(DisturbanceSummary {
-                                report,
-                                hover_thrust_normalized: hover,
-                            });
-                        }
                     }
                     Err(e) => {
-                        ls.control_errors += 1;
-                        ls.error_streak += 1;
-                        if ls.error_streak == 1 {
-                            warn!(error = %e, "controller failed: no command this tick");
-                        }
+                        error!(error = %e, "guarded command not encodable: nothing sent");
                     }
                 }
-                if path_done && let Some(tr) = self.supervisor.on_path_finished(t) {
-                    self.announce(&tr, &mut ls);
+                if let Some(out) = out {
+                    row.plan = Some(out.plan.map(|p| [p.x, p.y, p.z]));
+                    row.reference = Some([out.reference.x, out.reference.y, out.reference.z]);
+                    if let Some(report) = self.controller.disturbance() {
+                        let hover = self.mapping.normalized(report.hover_thrust).ok();
+                        row.disturbance = Some(CsvDisturbance {
+                            acceleration: report.acceleration,
+                            thrust_scale: report.thrust_scale,
+                            hover_thrust: hover,
+                            status: report.status,
+                        });
+                        ls.disturbance = Some(DisturbanceSummary {
+                            report,
+                            hover_thrust_normalized: hover,
+                        });
+                    }
+                }
+                if path_done {
+                    if let Some(tr) = self.supervisor.on_path_finished(t) {
+                        self.announce(&tr, &mut ls);
+                    }
+                    // Holding the end, or the path again (`mission.repeat`).
                     self.refresh_reference(&mut ls);
                 }
             }
@@ -1043,13 +1205,14 @@ impl ControlLoop {
             commands: ls.commands,
             control_errors: ls.control_errors,
             outbound_dropped: ls.outbound_dropped,
-            solve,
+            solve: solve_hist,
             jitter,
             time_in_state: self.supervisor.time_in_states(now),
             state_changes: self.supervisor.transitions(),
             final_state: self.supervisor.state(),
             csv,
             disturbance: ls.disturbance,
+            guards: self.counts,
         }
     }
 
@@ -1080,6 +1243,8 @@ impl ControlLoop {
     /// that it can run at the next tick.
     fn reset_controller(&mut self, ls: &LoopState) {
         self.controller.reset();
+        self.fallback.forget();
+        self.residual.forget();
         if self.controller.multi_rate()
             && let Some(pose) = ls.pose
         {
@@ -1094,6 +1259,7 @@ impl ControlLoop {
                 source_time,
                 position,
                 yaw,
+                reset_counter,
             } => {
                 let arrival_s = self.secs(arrival);
                 self.supervisor.on_pose(arrival_s, position);
@@ -1107,9 +1273,27 @@ impl ControlLoop {
                     source_time,
                     position,
                     yaw,
+                    reset_counter,
                 };
+                // A jump from the newest pose (further than the vehicle can
+                // fly in between, or an estimator reset): re-anchor below.
+                let s = &self.config.safety;
+                let jump = ls.pose.is_some_and(|p| {
+                    capture >= p.capture
+                        && is_pose_jump(
+                            p.position,
+                            position,
+                            capture - p.capture,
+                            s.max_speed_mps,
+                            1.0 / self.config.controller.rate_hz,
+                            s.pose_jump_margin_m,
+                            (p.reset_counter, reset_counter),
+                        )
+                });
                 // Every sample to a multi-rate controller (late ones too).
-                self.observe(&pose, ls.attitude_yaw);
+                if !jump {
+                    self.observe(&pose, ls.attitude_yaw);
+                }
                 // The newest for the others, by the source's own clock when
                 // both have one (a falling offset estimate may map a newer
                 // pose before the previous capture), else by capture time;
@@ -1126,6 +1310,11 @@ impl ControlLoop {
                         ls.pose = Some(pose);
                     }
                     Some(_) => {}
+                }
+                if jump {
+                    // The jumped pose is the newest one now.
+                    ls.pose = Some(pose);
+                    self.re_anchor(arrival_s, &pose, ls);
                 }
             }
             Event::Attitude { yaw } => ls.attitude_yaw = Some(yaw),

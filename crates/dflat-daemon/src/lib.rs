@@ -13,6 +13,8 @@
 //! * [`control`] — controller, reference and thrust mapping from the config.
 //! * [`clock`] — pose capture times on this computer's clock (offset
 //!   estimate from the source timestamps).
+//! * [`guard`] — the command exit guard, fallback, pose-jump and residual
+//!   checks, the systemd watchdog cadence (pure).
 //! * [`records`] — per-flight CSV and file names.
 //! * [`summary`] — measurements and the shutdown summary.
 //! * [`sitl`], [`demo`] — the autopilot stand-in and `dflat demo`.
@@ -22,6 +24,7 @@ pub mod config;
 pub mod control;
 pub mod daemon;
 pub mod demo;
+pub mod guard;
 pub mod records;
 pub mod schedule;
 pub mod sitl;

@@ -96,6 +96,12 @@ pub struct CsvRow {
     /// The disturbance estimate after the tick, if the controller runs an
     /// estimator and ran.
     pub disturbance: Option<CsvDisturbance>,
+    /// Model-consistency residual \[m\]: measured position minus the
+    /// position the previous tick's plan predicted for this one (y*_{k+1}).
+    pub residual: Option<f64>,
+    /// What the guards did this tick (`held`, `level`, `jump`, `residual`),
+    /// if anything.
+    pub guard: Option<&'static str>,
 }
 
 /// The disturbance estimate as recorded per tick.
@@ -116,7 +122,7 @@ pub struct CsvDisturbance {
 pub const CSV_HEADER: &str = "tick,t,state,x,y,z,\
 plan0_x,plan0_y,plan0_z,plan1_x,plan1_y,plan1_z,plan2_x,plan2_y,plan2_z,plan3_x,plan3_y,plan3_z,\
 ref_x,ref_y,ref_z,roll,pitch,yaw,thrust,solve_us,jitter_us,\
-dist_x,dist_y,dist_z,thrust_scale,hover_thrust,est_status";
+dist_x,dist_y,dist_z,thrust_scale,hover_thrust,est_status,residual_m,guard";
 
 /// The estimator status as written to the CSV.
 fn status_name(s: EstimatorStatus) -> &'static str {
@@ -165,10 +171,15 @@ pub fn write_row<W: Write>(w: &mut W, row: &CsvRow) -> io::Result<()> {
             if let Some(h) = d.hover_thrust {
                 write!(w, "{h:.5}")?;
             }
-            writeln!(w, ",{}", status_name(d.status))
+            write!(w, ",{}", status_name(d.status))?;
         }
-        None => writeln!(w, ",,,,,,"),
+        None => w.write_all(b",,,,,,")?,
     }
+    match row.residual {
+        Some(r) => write!(w, ",{r:.4}")?,
+        None => w.write_all(b",")?,
+    }
+    writeln!(w, ",{}", row.guard.unwrap_or(""))
 }
 
 /// Counters of a finished [`CsvRecorder`].
@@ -297,6 +308,8 @@ mod tests {
             solve_us: Some(42),
             jitter_us: 120,
             disturbance: None,
+            residual: Some(0.0123),
+            guard: None,
         }
     }
 
@@ -309,7 +322,7 @@ mod tests {
             line,
             "7,0.1400,TRACKING,1.0000,-2.5000,-10.0000,\
 1.0000,2.0000,3.0000,1.0000,2.0000,3.0000,1.0000,2.0000,3.0000,1.0000,2.0000,3.0000,\
-0.0000,0.0000,-10.0000,0.010000,-0.200000,0.000000,0.5000,42,120,,,,,,\n"
+0.0000,0.0000,-10.0000,0.010000,-0.200000,0.000000,0.5000,42,120,,,,,,,0.0123,\n"
         );
         let columns = CSV_HEADER.split(',').count();
         assert_eq!(line.trim_end().split(',').count(), columns);
@@ -324,6 +337,8 @@ mod tests {
                 reference: None,
                 command: None,
                 solve_us: None,
+                residual: None,
+                guard: Some("level"),
                 ..row()
             },
         )
@@ -331,7 +346,7 @@ mod tests {
         let line = String::from_utf8(out).unwrap();
         assert_eq!(line.trim_end().split(',').count(), columns);
         assert!(line.starts_with("7,0.1400,FAILSAFE,,,,"), "{line}");
-        assert!(line.ends_with(",,120,,,,,,\n"), "{line}");
+        assert!(line.ends_with(",,120,,,,,,,,level\n"), "{line}");
         // With an estimate.
         let mut out = Vec::new();
         let disturbance = Some(CsvDisturbance {
@@ -351,7 +366,7 @@ mod tests {
         let line = String::from_utf8(out).unwrap();
         assert_eq!(line.trim_end().split(',').count(), columns);
         assert!(
-            line.ends_with(",120,0.10000,-0.20000,0.00000,1.04000,0.48000,tracking\n"),
+            line.ends_with(",120,0.10000,-0.20000,0.00000,1.04000,0.48000,tracking,0.0123,\n"),
             "{line}"
         );
     }

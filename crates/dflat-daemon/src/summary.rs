@@ -322,6 +322,9 @@ pub struct FlightSummary {
     /// The disturbance estimate at the last tick the controller ran
     /// (`controller.disturbance`), if the controller runs an estimator.
     pub disturbance: Option<DisturbanceSummary>,
+    /// What the control loop's guards did (saturations, fallbacks, pose
+    /// jumps, residual failsafes).
+    pub guards: crate::guard::GuardCounts,
 }
 
 /// The disturbance estimate for the summary (see
@@ -400,6 +403,20 @@ impl fmt::Display for FlightSummary {
         let rss = self.peak_rss_kib.map_or("n/a".to_owned(), |r| {
             format!("{:.1} MiB", r as f64 / 1024.0)
         });
+        let g = &self.guards;
+        writeln!(
+            f,
+            "  guards        {} non-finite, {} tilt / {} thrust saturated, {} failures, {} overruns, {} held, {} level, {} pose jumps, {} residual failsafes",
+            g.non_finite,
+            g.tilt_saturated,
+            g.thrust_saturated,
+            g.controller_failures,
+            g.deadline_overruns,
+            g.held,
+            g.level_hover,
+            g.pose_jumps,
+            g.residual_failsafes
+        )?;
         write!(f, "  resources     CPU {cpu}, peak RSS {rss}")?;
         if let Some(c) = &self.csv {
             write!(

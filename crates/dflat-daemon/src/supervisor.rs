@@ -101,6 +101,10 @@ pub enum Cause {
     PoseStale,
     /// No autopilot HEARTBEAT for longer than the timeout.
     AutopilotSilent,
+    /// The pose jumped (estimator reset): re-anchored, holding there.
+    PoseJump,
+    /// The model-consistency residual stayed above its threshold.
+    ResidualDiverged,
 }
 
 impl Cause {
@@ -113,6 +117,8 @@ impl Cause {
             Cause::PathFinished => "path done",
             Cause::PoseStale => "pose stale, stream off",
             Cause::AutopilotSilent => "autopilot lost, stream off",
+            Cause::PoseJump => "pose jump, re-anchored",
+            Cause::ResidualDiverged => "model residual, stream off",
         }
     }
 }
@@ -216,6 +222,8 @@ pub struct SupervisorConfig {
     pub path_trigger_radius: f64,
     /// Start the path as soon as pose is fresh (`mission.start = "path"`).
     pub start_path: bool,
+    /// Fly the (closed) path again when it finishes (`mission.repeat`).
+    pub repeat_path: bool,
 }
 
 /// The flight state machine. Feed it events with their times; ask it at
@@ -232,6 +240,8 @@ pub struct Supervisor {
     entered_at: Option<f64>,
     time_in: [f64; 4],
     transitions: u64,
+    /// No recovery from a forced failsafe before this time.
+    latched_until: Option<f64>,
 }
 
 impl Supervisor {
@@ -248,7 +258,32 @@ impl Supervisor {
             entered_at: None,
             time_in: [0.0; 4],
             transitions: 0,
+            latched_until: None,
         }
+    }
+
+    /// The pose jumped to `position` at `t`: while streaming, the goal
+    /// becomes holding there (a path or setpoint is abandoned; a new
+    /// setpoint is needed). Returns the state change, if any; `None` when
+    /// not streaming (recovery holds the fresh pose anyway).
+    pub fn re_anchor(&mut self, t: f64, position: [f64; 3]) -> Option<Transition> {
+        if !self.state.streams() {
+            return None;
+        }
+        self.set_goal(Goal::Hold(position));
+        // The same setpoint again is a new request after a re-anchor.
+        self.last_setpoint = None;
+        Some(self.enter(FlightState::Holding, Cause::PoseJump, t))
+    }
+
+    /// Forces failsafe at `t` (residual failsafe); no recovery before
+    /// `t + latch` \[s\]. `None` when not streaming.
+    pub fn force_failsafe(&mut self, t: f64, cause: Cause, latch: f64) -> Option<Transition> {
+        if !self.state.streams() {
+            return None;
+        }
+        self.latched_until = Some(t + latch);
+        Some(self.enter(FlightState::Failsafe, cause, t))
     }
 
     /// The current state.
@@ -338,6 +373,11 @@ impl Supervisor {
             return None;
         }
         let (_, end) = self.cfg.path_ends?;
+        if self.cfg.repeat_path {
+            // The same goal again: a new generation rebuilds the reference.
+            self.generation += 1;
+            return None;
+        }
         self.set_goal(Goal::Hold(end));
         Some(self.enter(FlightState::Holding, Cause::PathFinished, t))
     }
@@ -354,6 +394,7 @@ impl Supervisor {
             .last_heartbeat
             .is_some_and(|h| t - h <= self.cfg.autopilot_timeout);
         let mut reset_controller = false;
+        let latched = self.latched_until.is_some_and(|u| t < u);
         let transition = match (self.state, pose) {
             (FlightState::WaitingForPose, Some((_, position))) if autopilot_alive => {
                 if self.cfg.start_path && self.cfg.path_ends.is_some() {
@@ -364,7 +405,7 @@ impl Supervisor {
                     Some(self.enter(FlightState::Holding, Cause::PoseFresh, t))
                 }
             }
-            (FlightState::Failsafe, Some((_, position))) if autopilot_alive => {
+            (FlightState::Failsafe, Some((_, position))) if autopilot_alive && !latched => {
                 self.set_goal(Goal::Hold(position));
                 Some(self.enter(FlightState::Holding, Cause::PoseFresh, t))
             }
@@ -436,6 +477,7 @@ mod tests {
             path_ends: Some((START, END)),
             path_trigger_radius: 0.5,
             start_path: false,
+            repeat_path: false,
         }
     }
 
@@ -519,6 +561,36 @@ mod tests {
         assert!(d.stream);
         assert_eq!(d.transition.unwrap().to, Holding);
         assert_eq!(s.goal(), Goal::Hold(here));
+    }
+
+    #[test]
+    fn pose_jump_re_anchors_and_residual_failsafe_latches() {
+        let mut s = Supervisor::new(cfg());
+        // Not streaming: nothing to re-anchor.
+        assert!(s.re_anchor(0.0, P0).is_none());
+        fly(&mut s, 0.0, 1.0, true, true);
+        assert!(matches!(
+            s.on_setpoint(1.0, END),
+            SetpointOutcome::Accepted { .. }
+        ));
+        assert_eq!(s.state(), Tracking);
+        let jumped = [6.0, 2.0, -10.0];
+        let tr = s.re_anchor(1.01, jumped).unwrap();
+        assert_eq!((tr.to, tr.cause), (Holding, Cause::PoseJump));
+        assert!(tr.text().len() <= 50, "{}", tr.text());
+        assert_eq!(s.goal(), Goal::Hold(jumped));
+        // The same setpoint again is accepted after the re-anchor.
+        assert!(matches!(
+            s.on_setpoint(1.02, END),
+            SetpointOutcome::Accepted { .. }
+        ));
+        // Residual failsafe: no recovery for 2 s although pose is fresh.
+        let tr = s.force_failsafe(1.1, Cause::ResidualDiverged, 2.0).unwrap();
+        assert_eq!(tr.to, Failsafe);
+        assert!(tr.text().len() <= 50, "{}", tr.text());
+        assert!(fly(&mut s, 1.1, 3.08, true, true).iter().all(|d| !d.stream));
+        assert!(fly(&mut s, 3.1, 3.2, true, true).iter().any(|d| d.stream));
+        assert_eq!(s.state(), Holding);
     }
 
     #[test]
@@ -615,6 +687,21 @@ mod tests {
         s.on_pose(1.0, P0);
         s.on_heartbeat(1.0);
         assert_eq!(s.tick(1.0).transition.unwrap().to, Holding);
+    }
+
+    #[test]
+    fn repeated_path_starts_again_instead_of_holding() {
+        let mut s = Supervisor::new(SupervisorConfig {
+            start_path: true,
+            repeat_path: true,
+            ..cfg()
+        });
+        fly(&mut s, 0.0, 0.2, true, true);
+        assert_eq!((s.state(), s.goal()), (Tracking, Goal::Path));
+        let g = s.goal_generation();
+        assert!(s.on_path_finished(5.0).is_none());
+        assert_eq!((s.state(), s.goal()), (Tracking, Goal::Path));
+        assert_eq!(s.goal_generation(), g + 1);
     }
 
     #[test]

@@ -144,13 +144,26 @@ fn parse_addr(line: &str) -> Option<SocketAddr> {
 /// Starts `dflat sitl --config CONFIG --link udpin:127.0.0.1:0 [--gcs
 /// udpin:127.0.0.1:0] --truth TRUTH` and reads back its addresses.
 pub fn spawn_sitl(dir: &Path, config: &Path, gcs: bool, truth: &Path) -> Sitl {
-    let stderr = dir.join("sitl.stderr");
+    spawn_sitl_on(dir, config, "udpin:127.0.0.1:0", gcs, truth, "sitl.stderr")
+}
+
+/// [`spawn_sitl`] on a given link (`udpin:HOST:PORT`, e.g. the port of a
+/// SITL that was killed), with its stderr in `dir/stderr_name`.
+pub fn spawn_sitl_on(
+    dir: &Path,
+    config: &Path,
+    link: &str,
+    gcs: bool,
+    truth: &Path,
+    stderr_name: &str,
+) -> Sitl {
+    let stderr = dir.join(stderr_name);
     let mut cmd = Command::new(bin());
     cmd.arg("sitl")
         .arg("--config")
         .arg(config)
         .arg("--link")
-        .arg("udpin:127.0.0.1:0")
+        .arg(link)
         .arg("--truth")
         .arg(truth);
     if gcs {
@@ -196,6 +209,11 @@ pub fn spawn_sitl(dir: &Path, config: &Path, gcs: bool, truth: &Path) -> Sitl {
 
 /// Starts `dflat daemon --config CONFIG --link udpout:ADDR`.
 pub fn spawn_daemon(dir: &Path, config: &Path, sitl: SocketAddr) -> Proc {
+    spawn_daemon_with(dir, config, sitl, &[])
+}
+
+/// [`spawn_daemon`] with extra arguments (e.g. `--summary-json FILE`).
+pub fn spawn_daemon_with(dir: &Path, config: &Path, sitl: SocketAddr, extra: &[&str]) -> Proc {
     let stderr = dir.join("daemon.stderr");
     let child = Command::new(bin())
         .arg("daemon")
@@ -203,6 +221,7 @@ pub fn spawn_daemon(dir: &Path, config: &Path, sitl: SocketAddr) -> Proc {
         .arg(config)
         .arg("--link")
         .arg(format!("udpout:{sitl}"))
+        .args(extra)
         .stdin(Stdio::null())
         .stdout(Stdio::null())
         .stderr(std::fs::File::create(&stderr).expect("stderr file"))
@@ -345,4 +364,114 @@ pub fn fly_in_process(name: &str, config_text: &str, fly: Duration) -> Flight {
         report,
         clean_exit,
     }
+}
+
+/// The daemon's per-flight CSV in `dir` (the newest `*.csv`) as rows of
+/// column name → field.
+pub fn read_flight_csv(dir: &Path) -> Vec<std::collections::HashMap<String, String>> {
+    let mut csvs: Vec<PathBuf> = std::fs::read_dir(dir)
+        .expect("read dir")
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| {
+            p.extension().is_some_and(|x| x == "csv")
+                && !p
+                    .file_name()
+                    .is_some_and(|n| n.to_string_lossy().starts_with("truth"))
+        })
+        .collect();
+    csvs.sort();
+    let path = csvs.pop().expect("no flight CSV");
+    let text = std::fs::read_to_string(&path).expect("read CSV");
+    let mut lines = text.lines();
+    let header: Vec<String> = lines
+        .next()
+        .expect("header")
+        .split(',')
+        .map(str::to_owned)
+        .collect();
+    lines
+        .map(|l| {
+            header
+                .iter()
+                .cloned()
+                .zip(l.split(',').map(str::to_owned))
+                .collect()
+        })
+        .collect()
+}
+
+/// A numeric CSV field (`None` when empty).
+pub fn field(row: &std::collections::HashMap<String, String>, name: &str) -> Option<f64> {
+    row.get(name)
+        .filter(|v| !v.is_empty())
+        .map(|v| v.parse().unwrap_or(f64::NAN))
+}
+
+/// Checks every command in the CSV rows: finite, tilt ≤ `max_tilt_deg`,
+/// thrust in [0, 1]. Returns the number of commands and the largest tilt [deg].
+pub fn check_csv_commands(
+    rows: &[std::collections::HashMap<String, String>],
+    max_tilt_deg: f64,
+) -> (usize, f64) {
+    let mut n = 0;
+    let mut worst: f64 = 0.0;
+    for r in rows {
+        let (Some(roll), Some(pitch), Some(yaw), Some(thrust)) = (
+            field(r, "roll"),
+            field(r, "pitch"),
+            field(r, "yaw"),
+            field(r, "thrust"),
+        ) else {
+            continue;
+        };
+        n += 1;
+        assert!(
+            [roll, pitch, yaw, thrust].iter().all(|v| v.is_finite()),
+            "non-finite command at tick {:?}",
+            r.get("tick")
+        );
+        let tilt = (roll.cos() * pitch.cos())
+            .clamp(-1.0, 1.0)
+            .acos()
+            .to_degrees();
+        worst = worst.max(tilt);
+        assert!(
+            tilt <= max_tilt_deg + 1e-3,
+            "tilt {tilt:.2}° at tick {:?}",
+            r.get("tick")
+        );
+        assert!((0.0..=1.0).contains(&thrust), "thrust {thrust}");
+    }
+    (n, worst)
+}
+
+/// Tilt of a SET_ATTITUDE_TARGET quaternion [w, x, y, z] [deg], or NaN if
+/// it is not finite.
+pub fn quaternion_tilt_deg(q: [f32; 4]) -> f64 {
+    let [w, x, y, z] = q.map(f64::from);
+    let n = (w * w + x * x + y * y + z * z).sqrt();
+    if !n.is_finite() || n == 0.0 {
+        return f64::NAN;
+    }
+    let (x, y) = (x / n, y / n);
+    (1.0 - 2.0 * (x * x + y * y))
+        .clamp(-1.0, 1.0)
+        .acos()
+        .to_degrees()
+}
+
+/// The daemon's local address from its log line `daemon started ... local=Some(ADDR)`.
+pub fn daemon_local_addr(daemon: &Proc, limit: Duration) -> Option<SocketAddr> {
+    let until = Instant::now() + limit;
+    while Instant::now() < until {
+        let text = daemon.stderr_text();
+        if let Some(rest) = text.split("local=Some(").nth(1)
+            && let Some(addr) = rest.split(')').next()
+            && let Ok(a) = addr.parse()
+        {
+            return Some(a);
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    None
 }

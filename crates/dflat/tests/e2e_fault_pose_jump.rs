@@ -1,0 +1,131 @@
+//! Fault injection, end to end: the reported pose jumps by 5 m (as an
+//! estimator reset would make it) while the daemon holds. The daemon sees a
+//! jump larger than the vehicle can fly in one tick, re-anchors (controller
+//! window reset, reference = hold at the new reported position) and holds:
+//! no tilt spike, no command beyond the tilt limit, and the true vehicle
+//! does not fly 5 m to undo the jump.
+//!
+//! The real `dflat daemon` binary against the in-process SITL, whose
+//! `set_pose_offset` hook shifts every reported position.
+
+mod common;
+
+use std::sync::mpsc::channel;
+use std::time::{Duration, Instant};
+
+use common::*;
+use dflat_daemon::config::Config;
+use dflat_daemon::sitl::{self, SitlOptions};
+use dflat_link::MavMessage;
+
+const MAX_TILT_DEG: f64 = 35.0;
+/// The jump [m] (north).
+const JUMP: f64 = 5.0;
+/// The true vehicle stays within this of where it was at the jump [m].
+const HOLD_WITHIN: f64 = 1.0;
+/// Largest tilt commanded after the jump [deg] (a spike would hit 35°).
+const TILT_AFTER_JUMP: f64 = 10.0;
+
+#[test]
+fn pose_jump_re_anchors_without_a_tilt_spike() {
+    let dir = scratch("posejump");
+    let text = format!(
+        r#"
+[mission]
+start = "hold"
+[vehicle]
+max_tilt_deg = {MAX_TILT_DEG}
+[logging]
+dir = "{}"
+tlog = false
+[sitl]
+start = [0.0, 0.0, -10.0]
+noise_sigma = 0.01
+"#,
+        dir.display()
+    );
+    let config = write_config(&dir, "posejump.toml", &text);
+    let cfg = Config::load(&config).expect("config");
+    let (tx, tap) = channel();
+    let sim = sitl::spawn(
+        &cfg,
+        SitlOptions {
+            link: Some("udpin:127.0.0.1:0".into()),
+            tap: Some(tx),
+            ..SitlOptions::default()
+        },
+    )
+    .expect("sitl");
+    let mut daemon = spawn_daemon(&dir, &config, sim.local_addr());
+
+    // Holding steadily for 2 s.
+    let until = Instant::now() + Duration::from_secs(15);
+    let mut since = None;
+    while Instant::now() < until {
+        std::thread::sleep(Duration::from_millis(50));
+        let n = tap
+            .try_iter()
+            .filter(|f| matches!(f.message, MavMessage::SET_ATTITUDE_TARGET(_)))
+            .count();
+        if n > 0 && since.get_or_insert_with(Instant::now).elapsed() > Duration::from_secs(2) {
+            break;
+        }
+    }
+    assert!(since.is_some(), "the daemon never streamed");
+    let before = sim.truth().position;
+    let jumped_at = Instant::now();
+    sim.set_pose_offset([JUMP, 0.0, 0.0]);
+    std::thread::sleep(Duration::from_secs(3));
+    let after = sim.truth().position;
+    let targets: Vec<(Instant, f64)> = tap
+        .try_iter()
+        .filter_map(|f| match &f.message {
+            MavMessage::SET_ATTITUDE_TARGET(d) => Some((f.at, quaternion_tilt_deg(d.q))),
+            _ => None,
+        })
+        .collect();
+    let worst = targets.iter().map(|t| t.1).fold(0.0, f64::max);
+    let last_second = targets
+        .iter()
+        .filter(|t| t.0 > jumped_at + Duration::from_secs(2))
+        .count();
+    let moved = dist(before, after);
+    eprintln!(
+        "after the {JUMP} m jump: largest tilt {worst:.2}°, vehicle moved {moved:.3} m, {last_second} targets in the last second"
+    );
+    assert!(targets.iter().all(|t| t.1.is_finite()), "non-finite target");
+    assert!(worst <= TILT_AFTER_JUMP, "tilt spike {worst:.1}°");
+    assert!(
+        moved <= HOLD_WITHIN,
+        "the vehicle flew {moved:.2} m after the jump"
+    );
+    assert!(last_second >= 40, "stream not steady: {last_second}");
+
+    assert!(daemon.interrupt_and_wait(Duration::from_secs(5)));
+    let report = sim.stop().expect("sitl stop");
+    assert!(!report.diverged);
+    let rows = read_flight_csv(&dir);
+    check_csv_commands(&rows, MAX_TILT_DEG);
+    let jump_rows: Vec<_> = rows
+        .iter()
+        .filter(|r| r.get("guard").is_some_and(|g| g == "jump"))
+        .collect();
+    assert_eq!(jump_rows.len(), 1, "expected exactly one re-anchor");
+    assert!(
+        daemon.stderr_text().contains("pose jump"),
+        "no pose-jump log line"
+    );
+    // After the re-anchor the reference is the new reported position.
+    let last = rows
+        .iter()
+        .rev()
+        .find(|r| field(r, "ref_x").is_some())
+        .unwrap();
+    let (rx, x) = (field(last, "ref_x").unwrap(), field(last, "x").unwrap());
+    assert!((rx - x).abs() < 0.5, "reference {rx} vs measured {x}");
+    assert!(
+        (rx - (before[0] + JUMP)).abs() < 0.5,
+        "reference {rx} not re-anchored near {}",
+        before[0] + JUMP
+    );
+}
