@@ -115,6 +115,19 @@ pub struct LinkConfig {
     /// pipeline's fixed exposure-to-message delay). 0 assumes the fastest
     /// message travels without delay.
     pub pose_min_latency_ms: f64,
+    /// MAVLink 2 signing key file; empty = signing off. Refused at start
+    /// unless mode 0600 and owned by the running user. Contents: 64 hex
+    /// digits, 32 raw bytes, or a passphrase (key = SHA-256(passphrase), as
+    /// MAVProxy's `signing setup`). See [`crate::signing`].
+    pub signing_key_file: String,
+    /// Link id in our signatures (0–255).
+    pub signing_link_id: u8,
+    /// File holding the last signing timestamp (required with a key file).
+    pub signing_timestamp_file: String,
+    /// With signing on, accept unsigned messages other than commands
+    /// (telemetry, pose) from trusted senders; badly signed or replayed
+    /// frames are always refused, unsigned setpoints always.
+    pub signing_accept_unsigned_telemetry: bool,
 }
 
 /// How a pose's capture time is obtained (`link.pose_time`).
@@ -142,6 +155,10 @@ impl Default for LinkConfig {
             pose_time: PoseTime::Source,
             pose_clock_window_s: 10.0,
             pose_min_latency_ms: 0.0,
+            signing_key_file: String::new(),
+            signing_link_id: 0,
+            signing_timestamp_file: "/var/lib/dflat/signing_timestamp".into(),
+            signing_accept_unsigned_telemetry: true,
         }
     }
 }
@@ -572,6 +589,24 @@ impl Config {
             0.0,
             1000.0,
         )?;
+        // signing_link_id: any u8 (0–255) is valid; the key file's mode and
+        // owner are checked when the daemon starts (crate::signing).
+        if !l.signing_key_file.trim().is_empty() {
+            if l.signing_timestamp_file.trim().is_empty() {
+                return Err(v.err(
+                    "link.signing_timestamp_file",
+                    "\"\"",
+                    "a file path (required when link.signing_key_file is set)",
+                ));
+            }
+            if l.signing_timestamp_file.trim() == l.signing_key_file.trim() {
+                return Err(v.err(
+                    "link.signing_timestamp_file",
+                    &format!("{:?}", l.signing_timestamp_file),
+                    "a file other than link.signing_key_file",
+                ));
+            }
+        }
         let ve = &self.vehicle;
         v.range("vehicle.tau", ve.tau, 0.02, 2.0)?;
         v.range("vehicle.k", ve.k, 0.2, 5.0)?;
@@ -864,6 +899,21 @@ mod tests {
                 .is_ok()
         );
         assert!(parse("[safety]\nresidual_failsafe_m = 2.0\nhold_last_ticks = 0\n").is_ok());
+    }
+
+    #[test]
+    fn signing_fields_are_validated() {
+        let cfg = parse("").unwrap();
+        assert!(cfg.link.signing_key_file.is_empty());
+        let err =
+            parse("[link]\nsigning_key_file = \"/etc/dflat/key\"\nsigning_timestamp_file = \"\"")
+                .unwrap_err()
+                .to_string();
+        assert!(err.contains("link.signing_timestamp_file"), "{err}");
+        let cfg =
+            parse("[link]\nsigning_key_file = \"/etc/dflat/key\"\nsigning_link_id = 3").unwrap();
+        assert_eq!(cfg.link.signing_link_id, 3);
+        assert!(parse("[link]\nsigning_link_id = 256").is_err());
     }
 
     #[test]

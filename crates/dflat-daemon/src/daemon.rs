@@ -43,8 +43,8 @@ use dflat_control::{Controller, Measurement};
 use dflat_link::dialect::MavSeverity;
 use dflat_link::{
     AttitudeCommand, DaemonStatus, Inbound, LinkRx, LinkStats, MavHeader, MavMessage, PoseSource,
-    RxOutcome, SourceFilter, Target, ThrustMapping, heartbeat_onboard, set_attitude_target,
-    statustext,
+    RxOutcome, SignatureCheck, Signing, SourceFilter, Target, ThrustMapping, heartbeat_onboard,
+    set_attitude_target, statustext, timestamp_from_system_time,
 };
 use nalgebra::Vector3;
 use thiserror::Error;
@@ -61,6 +61,7 @@ use crate::guard::{
 use crate::records::CsvDisturbance;
 use crate::records::{CsvRecorder, CsvReport, CsvRow, flight_stem};
 use crate::schedule::Schedule;
+use crate::signing::{PERSIST_INTERVAL, SigningError, TimestampStore};
 use crate::summary::{
     DisturbanceSummary, FlightSummary, Histogram, LinkSummary, StateTimes, peak_rss_kib,
     process_cpu_seconds,
@@ -107,6 +108,10 @@ pub enum DaemonError {
         /// The I/O error.
         source: std::io::Error,
     },
+    /// MAVLink signing is configured but its key or timestamp file is
+    /// refused (the message names the `[link]` field).
+    #[error("signing: {0}")]
+    Signing(#[from] SigningError),
     /// A thread could not be started or ended abnormally.
     #[error("internal: {0}")]
     Internal(String),
@@ -430,6 +435,17 @@ pub async fn spawn(
     if let Some(path) = configured_path(&config) {
         path?;
     }
+    let signing =
+        crate::signing::setup(&config.link, timestamp_from_system_time(SystemTime::now()))?;
+    if let Some((s, store)) = &signing {
+        info!(
+            link_id = s.link_id(),
+            timestamp = s.timestamp(),
+            timestamp_file = %store.path().display(),
+            accept_unsigned_telemetry = s.accept_unsigned_telemetry,
+            "MAVLink 2 signing on"
+        );
+    }
     let mapping = thrust_mapping(&config);
     mapping
         .validate()
@@ -517,16 +533,18 @@ pub async fn spawn(
         PoseSourceKind::VisionPositionEstimate => PoseSource::VisionPositionEstimate,
     };
 
+    let mut link_rx = LinkRx::new(filter);
+    link_rx.signing = signing.as_ref().map(|(s, _)| s.clone());
     let rx = tokio::spawn(receive_task(
         transport.clone(),
-        LinkRx::new(filter),
+        link_rx,
         pose_source,
         event_tx,
         out_tx.clone(),
         stop.clone(),
         fault.clone(),
     ));
-    let tx = tokio::spawn(send_task(transport, out_rx, own));
+    let tx = tokio::spawn(send_task(transport, out_rx, own, signing));
     let heartbeat = tokio::spawn(heartbeat_task(out_tx.clone(), state.clone(), stop.clone()));
 
     let loop_ctx = ControlLoop {
@@ -658,6 +676,29 @@ async fn receive_task(
         };
         let arrival = frame.arrival;
         let is_setpoint = matches!(frame.message, MavMessage::SET_POSITION_TARGET_LOCAL_NED(_));
+        if link.signing.is_some() {
+            let now = timestamp_from_system_time(SystemTime::now());
+            if let Err(check) =
+                link.authenticate(&frame.header, &frame.message, frame.signed.as_ref(), now)
+            {
+                let due =
+                    last_refusal.is_none_or(|t| t.elapsed().as_secs_f64() >= REFUSAL_TEXT_INTERVAL);
+                if is_setpoint && due {
+                    last_refusal = Some(Instant::now());
+                    let text = match check {
+                        SignatureCheck::Unsigned => "dflat: setpoint refused: unsigned",
+                        SignatureCheck::Replayed => "dflat: setpoint refused: replayed",
+                        _ => "dflat: setpoint refused: bad signature",
+                    };
+                    info!(?check, "setpoint refused by signing");
+                    let _ = out.try_send(Outgoing::plain(statustext(
+                        MavSeverity::MAV_SEVERITY_WARNING,
+                        text,
+                    )));
+                }
+                continue;
+            }
+        }
         let event = match link.handle(&frame.header, &frame.message) {
             RxOutcome::Accepted(Inbound::Pose(p)) if p.source == pose_source => Some(Event::Pose {
                 arrival,
@@ -707,8 +748,15 @@ async fn send_task(
     transport: Transport,
     mut out: mpsc::Receiver<Outgoing>,
     (system_id, component_id): (u8, u8),
+    mut signing: Option<(Signing, TimestampStore)>,
 ) -> TxReport {
     let mut report = TxReport::default();
+    let mut persisted = Instant::now();
+    let persist = |s: &Signing, store: &TimestampStore| {
+        if let Err(e) = store.store(s.timestamp()) {
+            warn!(error = %e, "cannot persist the signing timestamp");
+        }
+    };
     let mut sequence: u8 = 0;
     let mut no_peer = 0u64;
     // Ends when every sender (control thread, heartbeat, receive task) is gone.
@@ -719,7 +767,22 @@ async fn send_task(
             sequence,
         };
         sequence = sequence.wrapping_add(1);
-        match transport.send(&header, &item.message).await {
+        let sent = match signing.as_mut() {
+            Some((s, store)) => {
+                let now = timestamp_from_system_time(SystemTime::now());
+                let frame = s.sign(&header, &item.message, now);
+                if persisted.elapsed() >= PERSIST_INTERVAL {
+                    persist(s, store);
+                    persisted = Instant::now();
+                }
+                match frame {
+                    Ok(frame) => transport.send_frame(&frame).await,
+                    Err(e) => Err(e.into()),
+                }
+            }
+            None => transport.send(&header, &item.message).await,
+        };
+        match sent {
             Ok(SendOutcome::Sent(_)) => {
                 report.stats.record_sent(&item.message);
                 let us = |t: Instant| t.elapsed().as_micros().min(u128::from(u64::MAX)) as u64;
@@ -743,6 +806,9 @@ async fn send_task(
                 }
             }
         }
+    }
+    if let Some((s, store)) = &signing {
+        persist(s, store);
     }
     report
 }

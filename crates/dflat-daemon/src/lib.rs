@@ -15,6 +15,7 @@
 //!   estimate from the source timestamps).
 //! * [`guard`] — the command exit guard, fallback, pose-jump and residual
 //!   checks, the systemd watchdog cadence (pure).
+//! * [`signing`] — MAVLink 2 signing: key file, persisted timestamp.
 //! * [`records`] — per-flight CSV and file names.
 //! * [`summary`] — measurements and the shutdown summary.
 //! * [`sitl`], [`demo`] — the autopilot stand-in and `dflat demo`.
@@ -27,6 +28,7 @@ pub mod demo;
 pub mod guard;
 pub mod records;
 pub mod schedule;
+pub mod signing;
 pub mod sitl;
 pub mod summary;
 pub mod supervisor;

@@ -240,6 +240,12 @@ pub struct LinkSummary {
     pub send_errors: u64,
     /// Socket-level receive errors (e.g. ICMP port unreachable).
     pub transport_errors: u64,
+    /// Signing on: unsigned frames refused.
+    pub unsigned: u64,
+    /// Signing on: frames with a bad signature.
+    pub bad_signature: u64,
+    /// Signing on: replayed (stale-timestamp) frames.
+    pub replayed: u64,
 }
 
 impl LinkSummary {
@@ -257,12 +263,22 @@ impl LinkSummary {
             rejected: rx.rejected,
             send_errors: rx.send_errors + tx.send_errors,
             transport_errors,
+            unsigned: rx.unsigned,
+            bad_signature: rx.bad_signature,
+            replayed: rx.replayed,
         }
     }
 
     /// Sum of the inbound error counters.
     pub fn inbound_errors(&self) -> u64 {
-        self.crc_errors + self.unknown_messages + self.malformed + self.non_finite + self.rejected
+        self.crc_errors
+            + self.unknown_messages
+            + self.malformed
+            + self.non_finite
+            + self.rejected
+            + self.unsigned
+            + self.bad_signature
+            + self.replayed
     }
 }
 
@@ -384,7 +400,7 @@ impl fmt::Display for FlightSummary {
         )?;
         writeln!(
             f,
-            "  link errors   crc {} unknown {} malformed {} nonfinite {} rejected {} send {} socket {}; ignored src {} dst {}; dropped events {} outbound {}",
+            "  link errors   crc {} unknown {} malformed {} nonfinite {} rejected {} send {} socket {} unsigned {} badsig {} replayed {}; ignored src {} dst {}; dropped events {} outbound {}",
             l.crc_errors,
             l.unknown_messages,
             l.malformed,
@@ -392,6 +408,9 @@ impl fmt::Display for FlightSummary {
             l.rejected,
             l.send_errors,
             l.transport_errors,
+            l.unsigned,
+            l.bad_signature,
+            l.replayed,
             l.ignored_wrong_source,
             l.ignored_not_addressed,
             self.events_dropped,

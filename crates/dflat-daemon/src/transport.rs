@@ -42,7 +42,10 @@ use std::sync::{Arc, Mutex as StdMutex};
 use std::time::{Instant, SystemTime, UNIX_EPOCH};
 
 use dflat_link::tlog::TlogWriter;
-use dflat_link::{FrameError, FrameParser, LinkError, MAX_FRAME_LEN, MavHeader, MavMessage};
+use dflat_link::{
+    EncodedFrame, FrameError, FrameParser, LinkError, MAX_FRAME_LEN, MavHeader, MavMessage,
+    SignedFrame,
+};
 use thiserror::Error;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::tcp::{OwnedReadHalf, OwnedWriteHalf};
@@ -239,6 +242,9 @@ pub struct Received {
     /// When the bytes were read from the OS, on the monotonic clock (use it
     /// for staleness: it is the companion computer's own clock).
     pub arrival: Instant,
+    /// The frame's bytes if it carried a MAVLink 2 signature (verify with
+    /// `LinkRx::authenticate`).
+    pub signed: Option<SignedFrame>,
 }
 
 /// What [`Transport::recv`] yields.
@@ -355,6 +361,7 @@ impl RxState {
                         header: frame.header,
                         message: frame.message,
                         arrival,
+                        signed: frame.signed,
                     })));
                 }
                 Err(e) => self.pending.push_back(RecvEvent::Error(e)),
@@ -373,6 +380,7 @@ impl RxState {
                             header: frame.header,
                             message: frame.message,
                             arrival,
+                            signed: frame.signed,
                         })));
                     }
                     Err(e) => self.pending.push_back(RecvEvent::Error(e)),
@@ -508,6 +516,11 @@ impl Transport {
         msg: &MavMessage,
     ) -> Result<SendOutcome, TransportError> {
         let frame = dflat_link::serialize_v2(header, msg)?;
+        self.send_frame(&frame).await
+    }
+
+    /// Writes an already serialized (possibly signed) frame.
+    pub async fn send_frame(&self, frame: &EncodedFrame) -> Result<SendOutcome, TransportError> {
         let bytes = frame.as_bytes();
         let io_err = |op: &'static str, source| TransportError::Io {
             endpoint: self.inner.name.clone(),
@@ -530,9 +543,7 @@ impl Transport {
                 w.write_all(bytes).await.map_err(|e| io_err("send", e))?;
             }
             Io::Serial { tx, .. } => {
-                let mut raw = mavlink::MAVLinkV2MessageRaw::new();
-                raw.serialize_message(*header, msg);
-                tx.send(raw).map_err(|_| TransportError::Closed {
+                tx.send(*frame.raw()).map_err(|_| TransportError::Closed {
                     endpoint: self.inner.name.clone(),
                 })?;
             }
@@ -672,6 +683,7 @@ mod serial {
                                         header: frame.header,
                                         message: frame.message,
                                         arrival,
+                                        signed: frame.signed,
                                     })))
                                 }
                                 Err(e) => Ok(RecvEvent::Error(e)),

@@ -5,7 +5,7 @@ use mavlink::dialects::common::MavMessage;
 use mavlink::{MavHeader, Message};
 
 use crate::inbound::{Inbound, decode};
-use crate::{FrameError, LinkError, LinkStats};
+use crate::{FrameError, LinkError, LinkStats, SignatureCheck, SignedFrame, Signing};
 
 /// Trusted MAVLink ids for one endpoint (the daemon, or the SITL autopilot).
 ///
@@ -151,6 +151,9 @@ pub struct LinkRx {
     pub filter: SourceFilter,
     /// The counters.
     pub stats: LinkStats,
+    /// MAVLink 2 signing; `None` = off (everything passes
+    /// [`authenticate`](Self::authenticate)).
+    pub signing: Option<Signing>,
 }
 
 impl LinkRx {
@@ -159,7 +162,47 @@ impl LinkRx {
         Self {
             filter,
             stats: LinkStats::default(),
+            signing: None,
         }
+    }
+
+    /// Signing gate, before [`handle`](Self::handle). With signing off:
+    /// `Ok`. With signing on: a bad signature or a replayed timestamp is
+    /// refused for every message; an unsigned frame is refused if it is a
+    /// command ([`Signing::is_command`]) or `accept_unsigned_telemetry` is
+    /// off. Refusals are counted (`unsigned`, `bad_signature`, `replayed`)
+    /// and returned. `now`: the wall clock as a signing timestamp.
+    pub fn authenticate(
+        &mut self,
+        header: &MavHeader,
+        msg: &MavMessage,
+        signed: Option<&SignedFrame>,
+        now: u64,
+    ) -> Result<(), SignatureCheck> {
+        let Some(signing) = self.signing.as_mut() else {
+            return Ok(());
+        };
+        let check = signing.verify(header, signed, now);
+        let refused = match check {
+            SignatureCheck::Valid { .. } => return Ok(()),
+            SignatureCheck::Unsigned
+                if signing.accept_unsigned_telemetry && !Signing::is_command(msg) =>
+            {
+                return Ok(());
+            }
+            SignatureCheck::Unsigned => &mut self.stats.unsigned,
+            SignatureCheck::BadSignature => &mut self.stats.bad_signature,
+            SignatureCheck::Replayed => &mut self.stats.replayed,
+        };
+        *refused += 1;
+        self.stats.record_received(msg.message_id());
+        tracing::debug!(
+            sysid = header.system_id,
+            compid = header.component_id,
+            ?check,
+            "frame refused by signing"
+        );
+        Err(check)
     }
 
     /// Filters, decodes and counts one received message.

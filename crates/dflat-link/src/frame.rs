@@ -9,8 +9,9 @@
 //! corrupt payload) are skipped silently, while valid frames found there are
 //! still returned.
 //!
-//! Signed MAVLink 2 frames are framed correctly, but their signatures are
-//! not verified here. The mavlink crate's non-standard 32-bit system id flag
+//! Signed MAVLink 2 frames are framed correctly and carried in
+//! [`Frame::signed`]; their signatures are verified by
+//! [`crate::Signing::verify`] (the parser has no key). The mavlink crate's non-standard 32-bit system id flag
 //! (0x02) is refused ([`FrameError::UnsupportedFlags`]).
 
 use std::io::Write;
@@ -41,6 +42,31 @@ pub struct Frame {
     pub version: MavlinkVersion,
     /// Length of the frame in bytes (including any signature).
     pub len: usize,
+    /// The frame's bytes when it carries a MAVLink 2 signature (for
+    /// [`crate::Signing::verify`]); `None` for unsigned frames.
+    pub signed: Option<SignedFrame>,
+}
+
+/// The bytes of a signed MAVLink 2 frame, kept for signature verification
+/// (fixed buffer, no allocation).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SignedFrame(pub(crate) MAVLinkV2MessageRaw);
+
+impl SignedFrame {
+    /// The signature's link id.
+    pub fn link_id(&self) -> u8 {
+        self.0.signature_link_id()
+    }
+
+    /// The signature's 48-bit timestamp (10 µs units since 2015-01-01 UTC).
+    pub fn timestamp(&self) -> u64 {
+        self.0.signature_timestamp()
+    }
+
+    /// The frame's bytes, 0xFD marker through signature.
+    pub fn as_bytes(&self) -> &[u8] {
+        self.0.raw_bytes()
+    }
 }
 
 /// A serialized MAVLink 2 frame, held in a fixed buffer (no allocation).
@@ -57,9 +83,23 @@ impl EncodedFrame {
     pub fn message_id(&self) -> u32 {
         self.0.message_id()
     }
+
+    /// Whether the frame carries a signature.
+    pub fn is_signed(&self) -> bool {
+        self.0.incompatibility_flags() & IFLAG_SIGNED != 0
+    }
+
+    /// The mavlink crate's raw frame (for its serial writer).
+    pub fn raw(&self) -> &MAVLinkV2MessageRaw {
+        &self.0
+    }
+
+    pub(crate) fn from_raw(raw: MAVLinkV2MessageRaw) -> Self {
+        Self(raw)
+    }
 }
 
-fn check_system_id(header: &MavHeader) -> Result<(), LinkError> {
+pub(crate) fn check_system_id(header: &MavHeader) -> Result<(), LinkError> {
     if header.system_id > u32::from(u8::MAX) {
         Err(LinkError::SystemIdOutOfRange(header.system_id))
     } else {
@@ -332,12 +372,21 @@ fn examine(buf: &[u8]) -> Examined {
     } else {
         (MavlinkVersion::V1, header(buf[3], buf[4], buf[2]))
     };
+    let signed = (signature_len > 0).then(|| {
+        let mut raw = MAVLinkV2MessageRaw::new();
+        // `total` ≤ MAX_FRAME_LEN, the raw buffer's size.
+        if let (Some(dst), Some(src)) = (raw.as_mut_slice().get_mut(..total), buf.get(..total)) {
+            dst.copy_from_slice(src);
+        }
+        SignedFrame(raw)
+    });
     let result = MavMessage::parse(version, msg_id, &buf[header_len..crc_at])
         .map(|message| Frame {
             header: sender,
             message,
             version,
             len: total,
+            signed,
         })
         .map_err(|e| FrameError::from_parser_error(msg_id, &e));
     Examined::Frame { len: total, result }

@@ -23,7 +23,8 @@
 //! quaternions `[w, x, y, z]` rotating body into NED. SI units, radians.
 //!
 //! Receiving: [`LinkRx::handle`] = [`SourceFilter::check`] → [`decode`] →
-//! [`LinkStats`]. Bytes: [`FrameParser`] / [`frames`] report CRC failures
+//! [`LinkStats`]; with MAVLink 2 signing, [`LinkRx::authenticate`] first
+//! ([`Signing`]). Bytes: [`FrameParser`] / [`frames`] report CRC failures
 //! (the mavlink crate's own readers skip them silently). Logging:
 //! [`tlog::TlogWriter`].
 
@@ -33,6 +34,7 @@ mod frame;
 mod inbound;
 pub mod math;
 mod outbound;
+mod signing;
 mod stats;
 pub mod tlog;
 
@@ -46,8 +48,8 @@ pub use mavlink::{MavHeader, MavlinkVersion};
 pub use error::{ErrorCategory, FrameError, LinkError, PayloadFault, SetpointRejection};
 pub use filter::{LinkRx, RxOutcome, SourceFilter, Verdict};
 pub use frame::{
-    EncodedFrame, Frame, FrameIter, FrameParser, MAX_FRAME_LEN, frames, header, parse_frame,
-    serialize_v2, write_v2,
+    EncodedFrame, Frame, FrameIter, FrameParser, MAX_FRAME_LEN, SignedFrame, frames, header,
+    parse_frame, serialize_v2, write_v2,
 };
 pub use inbound::{
     Attitude, AttitudeTarget, Heartbeat, Inbound, Pose, PoseSource, PositionSetpoint, decode, ids,
@@ -58,6 +60,10 @@ pub use outbound::{
     STATUSTEXT_MAX_LEN, Target, attitude, heartbeat_autopilot, heartbeat_onboard,
     local_position_ned, odometry, set_attitude_target, statustext, truncate_text,
     vision_position_estimate,
+};
+pub use signing::{
+    KeyFormatError, ONE_MINUTE, SIGNING_EPOCH_UNIX_S, SignatureCheck, Signing, SigningKey,
+    TIMESTAMP_MAX, TIMESTAMP_UNITS_PER_S, restart_timestamp, timestamp_from_system_time,
 };
 pub use stats::{LinkStats, MessageCounts};
 

@@ -104,6 +104,13 @@ pub struct LinkStats {
     pub rejected: u64,
     /// Outbound messages refused by a builder or failed to write.
     pub send_errors: u64,
+    /// Signing on: unsigned frames refused (commands, or all without
+    /// `accept_unsigned_telemetry`).
+    pub unsigned: u64,
+    /// Signing on: frames signed with another key (or altered).
+    pub bad_signature: u64,
+    /// Signing on: correctly signed frames with a stale timestamp (replay).
+    pub replayed: u64,
 }
 
 impl LinkStats {
@@ -163,7 +170,14 @@ impl LinkStats {
 
     /// Sum of all inbound error counters (not the ignored ones).
     pub fn inbound_errors(&self) -> u64 {
-        self.crc_errors + self.unknown_messages + self.malformed + self.non_finite + self.rejected
+        self.crc_errors
+            + self.unknown_messages
+            + self.malformed
+            + self.non_finite
+            + self.rejected
+            + self.unsigned
+            + self.bad_signature
+            + self.replayed
     }
 
     /// One-line summary, e.g.
@@ -176,7 +190,7 @@ impl LinkStats {
         self.sent.write(&mut s);
         let _ = write!(
             s,
-            " | ignored src={} dst={} | errors crc={} unknown={} malformed={} nonfinite={} rejected={} send={}",
+            " | ignored src={} dst={} | errors crc={} unknown={} malformed={} nonfinite={} rejected={} send={} | signing unsigned={} badsig={} replayed={}",
             self.ignored_wrong_source,
             self.ignored_not_addressed,
             self.crc_errors,
@@ -185,6 +199,9 @@ impl LinkStats {
             self.non_finite,
             self.rejected,
             self.send_errors,
+            self.unsigned,
+            self.bad_signature,
+            self.replayed,
         );
         s
     }
