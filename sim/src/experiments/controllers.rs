@@ -168,10 +168,7 @@ impl ControllerSpec {
         let spec = *self;
         Ok(Arc::new(move || match spec.build() {
             Ok(c) => c,
-            Err(e) => Box::new(Unbuildable {
-                name: spec.name(),
-                message: e.to_string(),
-            }),
+            Err(e) => Box::new(Unbuildable::new(spec.name(), &e)),
         }))
     }
 }
@@ -184,9 +181,19 @@ fn planar_model() -> Result<ControlModel, ControlError> {
 }
 
 /// Stand-in for a controller whose construction failed: every tick errors.
-struct Unbuildable {
+pub(crate) struct Unbuildable {
     name: &'static str,
     message: String,
+}
+
+impl Unbuildable {
+    /// The stand-in for controller `name` that failed with `error`.
+    pub(crate) fn new(name: &'static str, error: &dyn std::fmt::Display) -> Self {
+        Self {
+            name,
+            message: error.to_string(),
+        }
+    }
 }
 
 impl Controller for Unbuildable {

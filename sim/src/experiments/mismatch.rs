@@ -91,6 +91,7 @@ use dflat_model::{PlanarModel, PlanarParams, SpatialModel, SpatialParams};
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
+use super::controllers::Unbuildable;
 use super::noise_sweep::NoiseSweepConfig;
 use super::{ControllerSpec, ExperimentError, OutputPaths, invalid, mean, std_dev, write_json};
 use crate::harness::{
@@ -519,26 +520,6 @@ impl Drop for Recording {
     }
 }
 
-/// Stand-in for a controller whose construction failed: every tick errors.
-struct Unbuildable(&'static str, String);
-
-impl Controller for Unbuildable {
-    fn name(&self) -> &'static str {
-        self.0
-    }
-    fn update(
-        &mut self,
-        _m: &Measurement,
-        _r: &mut dyn ReferenceSource,
-    ) -> Result<TickOutput, ControlError> {
-        Err(ControlError::InvalidSetting {
-            field: "controller",
-            reason: self.1.clone(),
-        })
-    }
-    fn reset(&mut self) {}
-}
-
 /// A factory building `build()` wrapped in [`Recording`] into `slot`.
 fn recording_factory(
     name: &'static str,
@@ -551,7 +532,7 @@ fn recording_factory(
             inner,
             slot: slot.clone(),
         }),
-        Err(e) => Box::new(Unbuildable(name, e.to_string())),
+        Err(e) => Box::new(Unbuildable::new(name, &e)),
     })
 }
 
@@ -1110,7 +1091,7 @@ fn run_noise_check(config: &MismatchConfig, progress: bool) -> Result<NoiseCheck
         })?;
         let factory: ControllerFactory = Arc::new(move || match build() {
             Ok(c) => c,
-            Err(e) => Box::new(Unbuildable("df-mpc", e.to_string())),
+            Err(e) => Box::new(Unbuildable::new("df-mpc", &e)),
         });
         for (i, &sigma) in sweep.sigmas.iter().enumerate() {
             let r = reference.clone();
