@@ -10,7 +10,8 @@
 //!   that binds on both axes (clarabel).
 //! * `df_mpc::qp_banded` / `df_mpc::qp_clarabel` — the same unconstrained
 //!   DF QP (both axes) solved by the banded solver and handed whole to
-//!   clarabel: the generic baseline.
+//!   clarabel: the generic baseline (`qp_clarabel` with the KKT tuning
+//!   dflat ships, `qp_clarabel_defaults` with clarabel's own).
 //!
 //! Each tick iteration resets the controller and runs the first tick from
 //! rest 10 m from the setpoint, so every iteration solves the same problem.
@@ -20,8 +21,8 @@
 #![allow(missing_docs)]
 
 use dflat_control::dfmpc::{
-    AxisBounds, AxisProblem, AxisSolver, ConstrainedAxisSolver, DfMpc, DfMpcSettings,
-    OutputConstraints,
+    AxisBounds, AxisProblem, AxisSolver, ConstrainedAxisSolver, DfMpc, DfMpcSettings, KktTuning,
+    OutputConstraints, Smoothness,
 };
 use dflat_control::window::MultiRateSettings;
 use dflat_control::{ControlModel, Controller, Frame, Measurement, ReferenceSource};
@@ -192,13 +193,13 @@ mod df_mpc {
         });
     }
 
-    /// The same unconstrained DF QP on 2 axes handed to clarabel (solve only).
-    #[divan::bench(args = HORIZONS, sample_count = 20, sample_size = 5)]
-    fn qp_clarabel(bencher: Bencher, n: usize) {
+    fn bench_qp_clarabel(bencher: Bencher, n: usize, tuning: KktTuning) {
         let s = DfMpcSettings::default();
         let (q, r) = (s.tracking_weight[0], s.jerk_weight[0]);
         let new = || {
-            ConstrainedAxisSolver::new(n, q, r, DT, AxisBounds::default(), f64::INFINITY).unwrap()
+            let (bounds, smooth) = (AxisBounds::default(), Smoothness::default());
+            ConstrainedAxisSolver::with_tuning(n, (q, r, DT), bounds, f64::INFINITY, smooth, tuning)
+                .unwrap()
         };
         let mut solvers = [new(), new()];
         let (fixed, rx, ry) = qp_data(n);
@@ -212,6 +213,19 @@ mod df_mpc {
                 .unwrap();
             black_box(plan[3])
         });
+    }
+
+    /// The same unconstrained DF QP on 2 axes handed to clarabel (solve
+    /// only), with the KKT tuning dflat ships for constrained solves.
+    #[divan::bench(args = HORIZONS, sample_count = 20, sample_size = 5)]
+    fn qp_clarabel(bencher: Bencher, n: usize) {
+        bench_qp_clarabel(bencher, n, KktTuning::SHIPPED);
+    }
+
+    /// As `qp_clarabel` with clarabel's default KKT settings.
+    #[divan::bench(args = HORIZONS, sample_count = 20, sample_size = 5)]
+    fn qp_clarabel_defaults(bencher: Bencher, n: usize) {
+        bench_qp_clarabel(bencher, n, KktTuning::CLARABEL_DEFAULTS);
     }
 }
 
