@@ -108,6 +108,9 @@ const D3: [f64; 4] = [-1.0, 3.0, -3.0, 1.0];
 const BANDWIDTH: usize = 3;
 /// Largest horizon accepted [steps].
 pub const MAX_HORIZON: usize = 100_000;
+/// Most ticks [`Controller::plan_fallback`] flies the last good plan (and
+/// at most N − 3: the plan's end).
+pub const MAX_FALLBACK_STEPS: usize = 50;
 
 // ---------------------------------------------------------------------------
 // Settings
@@ -1133,6 +1136,23 @@ pub struct DfMpc {
     smooth: bool,
     /// Disturbance estimator, when configured.
     estimator: Option<DisturbanceEstimator>,
+    /// The last good tick's plan y*_k..y*_{k+N} per axis and its
+    /// reference (model frame, m), for [`DfMpc::plan`] and
+    /// [`Controller::plan_fallback`]; swapped with `plans` / `reference`
+    /// (the next tick's workspaces) after each good tick.
+    good_plans: Vec<Vec<f64>>,
+    good_reference: Vec<Vector3<f64>>,
+    /// y_k of the last good tick (the z of planar plans) [m].
+    good_y0: Vector3<f64>,
+    /// Plan steps flown by `plan_fallback` since the last good tick
+    /// (`None`: no plan to fly).
+    fallback_step: Option<usize>,
+    /// This tick started (`update` called) and is not recorded yet.
+    pending: bool,
+    /// An earlier tick was never recorded (failed `update`, no plan
+    /// fallback): the classic window has a gap, the next recorded tick
+    /// restarts it.
+    gap: bool,
 }
 
 impl DfMpc {
@@ -1215,6 +1235,12 @@ impl DfMpc {
                 .disturbance
                 .map(|d| DisturbanceEstimator::new(model, d))
                 .transpose()?,
+            good_plans: vec![vec![0.0; n + 1]; axes],
+            good_reference: vec![Vector3::zeros(); n + 1],
+            good_y0: Vector3::zeros(),
+            fallback_step: None,
+            pending: false,
+            gap: false,
         })
     }
 
@@ -1249,7 +1275,7 @@ impl DfMpc {
     /// one or for an axis the model does not control.
     pub fn plan(&self, axis: usize) -> Option<&[f64]> {
         if self.plan_valid {
-            self.plans.get(axis).map(|p| p.as_slice())
+            self.good_plans.get(axis).map(|p| p.as_slice())
         } else {
             None
         }
@@ -1272,6 +1298,101 @@ impl DfMpc {
             out.z = u.z.clamp(s.thrust_min, s.thrust_max);
         }
         (out, out != u)
+    }
+}
+
+/// What [`DfMpc::fixed_outputs`] gives a tick.
+struct FixedOutputs {
+    /// The classic window with y_k pushed (a copy; unused in multi-rate).
+    window: Window,
+    /// `[y_k, y_{k+1}, y_{k+2}]` [m], model frame.
+    fixed: [Vector3<f64>; 3],
+    /// The input sent at k−1.
+    previous_input: Vector3<f64>,
+}
+
+impl DfMpc {
+    /// The fixed outputs `[y_k, y_{k+1}, y_{k+2}]` and the input sent at
+    /// k−1: from the multi-rate window (moved to `measurement.t`, committed
+    /// by [`DfMpc::commit`]), or from a copy of the classic window with y_k
+    /// pushed — the measurement, or the model's own prediction on a tick
+    /// without a new pose (F⁻¹ over the window with u_{k−3}, computed at the
+    /// previous tick as its y_{k+1}; u_{k−3} has left the window since) —
+    /// then F⁻¹ for y_{k+1}, y_{k+2}. The copy is returned for `commit`;
+    /// after a gap it starts from the start-up padding.
+    fn fixed_outputs(
+        &mut self,
+        measurement: &Measurement,
+        d: &DisturbanceEstimate,
+    ) -> Result<FixedOutputs, ControlError> {
+        let mut window = self.window;
+        let mut last_t = self.last_t;
+        if self.gap {
+            window.reset();
+            last_t = f64::NEG_INFINITY;
+        }
+        if let Some(multi) = &mut self.multi {
+            let model = self.model;
+            let e = multi.estimate(measurement.t, |y, u| model.next_output_disturbed(y, u, d))?;
+            return Ok(FixedOutputs {
+                window,
+                fixed: e.fixed,
+                previous_input: e.previous_input,
+            });
+        }
+        let y_k = if !window.is_empty() && measurement.t <= last_t {
+            self.predicted
+        } else {
+            measurement.position
+        };
+        window.push_measurement(y_k);
+        let [ym2, ym1, y0] = *window.outputs();
+        let [u2, u1] = *window.inputs();
+        let y1 = self.model.next_output_disturbed(&[ym2, ym1, y0], &u2, d)?;
+        let y2 = self.model.next_output_disturbed(&[ym1, y0, y1], &u1, d)?;
+        Ok(FixedOutputs {
+            window,
+            fixed: [y0, y1, y2],
+            previous_input: u1,
+        })
+    }
+
+    /// Records `sent` as this tick's input: the disturbance estimator, then
+    /// the classic window (the copy from [`DfMpc::fixed_outputs`]) and the
+    /// prediction of the next tick's output, or the multi-rate commit.
+    fn commit(
+        &mut self,
+        mut window: Window,
+        t: f64,
+        fixed: &[Vector3<f64>; 3],
+        sent: &Vector3<f64>,
+        saturated: bool,
+    ) {
+        if let Some(e) = &mut self.estimator {
+            if self.multi.is_some() {
+                // Multi-rate: the estimator fits the timestamped samples it
+                // got through `observe`, never the window's estimate of y_k.
+                e.record_input(t, sent, saturated);
+            } else {
+                // A tick without a new pose: the predicted y_k stands in.
+                e.record(&fixed[0], sent, saturated);
+            }
+        }
+        if let Some(multi) = &mut self.multi {
+            multi.commit(sent);
+        } else {
+            window.push_input(*sent);
+            self.window = window;
+            let last_t = if self.gap {
+                f64::NEG_INFINITY
+            } else {
+                self.last_t
+            };
+            self.last_t = last_t.max(t);
+            self.predicted = fixed[1];
+        }
+        self.pending = false;
+        self.gap = false;
     }
 }
 
@@ -1305,6 +1426,12 @@ impl Controller for DfMpc {
         measurement: &Measurement,
         reference: &mut dyn ReferenceSource,
     ) -> Result<TickOutput, ControlError> {
+        if self.pending {
+            // The previous tick sent something this controller did not
+            // record (failed update, no plan fallback).
+            self.gap = true;
+        }
+        self.pending = true;
         self.plan_valid = false;
         if let Some(e) = &mut self.estimator {
             e.begin_tick();
@@ -1324,33 +1451,14 @@ impl Controller for DfMpc {
         if !(position_ok && measurement.yaw.is_finite()) {
             return Err(ControlError::NonFiniteMeasurement);
         }
-        // Work on a copy: on error nothing is recorded.
-        let mut window = self.window;
-
         // Input-to-output map over the window: y_{k+1}, y_{k+2}; and the
-        // input sent at k−1 (for the smoothness term).
-        let (fixed, previous_input) = if let Some(multi) = &mut self.multi {
-            let model = self.model;
-            let e = multi.estimate(measurement.t, |y, u| model.next_output_disturbed(y, u, &d))?;
-            (e.fixed, e.previous_input)
-        } else {
-            // No pose since the previous tick (its time is not newer): the
-            // repeated pose would read as a stop; use the model's own
-            // prediction of y_k instead: F⁻¹ over the window with u_{k−3},
-            // computed at the previous tick as its y_{k+1} (u_{k−3} has left
-            // the window since).
-            let y_k = if !window.is_empty() && measurement.t <= self.last_t {
-                self.predicted
-            } else {
-                measurement.position
-            };
-            window.push_measurement(y_k);
-            let [ym2, ym1, y0] = *window.outputs();
-            let [u2, u1] = *window.inputs();
-            let y1 = self.model.next_output_disturbed(&[ym2, ym1, y0], &u2, &d)?;
-            let y2 = self.model.next_output_disturbed(&[ym1, y0, y1], &u1, &d)?;
-            ([y0, y1, y2], u1)
-        };
+        // input sent at k−1 (for the smoothness term). The window is a copy:
+        // on error nothing is recorded.
+        let FixedOutputs {
+            window,
+            fixed,
+            previous_input,
+        } = self.fixed_outputs(measurement, &d)?;
         let y0 = fixed[0];
         let sent_acceleration = if self.smooth {
             Some(commanded_acceleration(&self.model, &previous_input)? + d.acceleration)
@@ -1435,29 +1543,18 @@ impl Controller for DfMpc {
             )));
         }
         let (sent, saturated) = self.saturate(u);
-        if let Some(e) = &mut self.estimator {
-            if self.multi.is_some() {
-                // Multi-rate: the estimator fits the timestamped samples it
-                // got through `observe`, never the window's estimate of y_k.
-                e.record_input(measurement.t, &sent, saturated);
-            } else {
-                // A tick without a new pose: the predicted y_k stands in.
-                e.record(&y0, &sent, saturated);
-            }
-        }
-        if let Some(multi) = &mut self.multi {
-            multi.commit(&sent);
-        } else {
-            window.push_input(sent);
-            self.window = window;
-            self.last_t = self.last_t.max(measurement.t);
-            self.predicted = fixed[1];
-        }
+        self.commit(window, measurement.t, &fixed, &sent, saturated);
+        // Keep the plan for `plan` and `plan_fallback` (O(1): the buffers
+        // swap; the next tick overwrites the other pair in full).
+        std::mem::swap(&mut self.plans, &mut self.good_plans);
+        std::mem::swap(&mut self.reference, &mut self.good_reference);
+        self.good_y0 = y0;
+        self.fallback_step = Some(0);
         self.plan_valid = true;
         Ok(TickOutput {
             command: self.model.command(&sent),
             plan: plan4,
-            reference: self.reference[0],
+            reference: self.good_reference[0],
             saturated,
             constrained,
         })
@@ -1465,6 +1562,52 @@ impl Controller for DfMpc {
 
     fn multi_rate(&self) -> bool {
         self.multi.is_some()
+    }
+
+    /// Flies the last good plan: step s = 1, 2, … of it through F (with
+    /// the current disturbance estimate) and saturation. A non-finite
+    /// measurement is not used (classic mode: y_k is the model's
+    /// prediction, as on a tick without a new pose). `None` once
+    /// `max_steps` or [`MAX_FALLBACK_STEPS`] steps are flown, the kept plan
+    /// is used up, or the map fails.
+    fn plan_fallback(&mut self, measurement: &Measurement, max_steps: usize) -> Option<TickOutput> {
+        // Until a plan step is recorded, this tick's command is unknown.
+        self.pending = true;
+        let step = self.fallback_step.take()? + 1;
+        if step > max_steps.min(MAX_FALLBACK_STEPS) || step + 3 > self.settings.horizon {
+            return None;
+        }
+        let d = self
+            .estimator
+            .as_ref()
+            .map_or(DisturbanceEstimate::NOMINAL, |e| e.estimate());
+        let axes = self.model.axes();
+        let mut m = *measurement;
+        if self.multi.is_none() && !m.position.iter().take(axes).all(|v| v.is_finite()) {
+            m.t = f64::NEG_INFINITY;
+        }
+        let FixedOutputs { window, fixed, .. } = self.fixed_outputs(&m, &d).ok()?;
+        let plan4: [Vector3<f64>; 4] = std::array::from_fn(|j| {
+            let mut p = self.good_y0;
+            for (axis, plan) in self.good_plans.iter().enumerate() {
+                p[axis] = plan[step + j];
+            }
+            p
+        });
+        let u = self.model.input_from_outputs_disturbed(&plan4, &d).ok()?;
+        if !u.iter().all(|v| v.is_finite()) {
+            return None;
+        }
+        let (sent, saturated) = self.saturate(u);
+        self.commit(window, m.t, &fixed, &sent, saturated);
+        self.fallback_step = Some(step);
+        Some(TickOutput {
+            command: self.model.command(&sent),
+            plan: plan4,
+            reference: self.good_reference[step],
+            saturated,
+            constrained: false,
+        })
     }
 
     fn observe(&mut self, sample: &Measurement) {
@@ -1483,6 +1626,9 @@ impl Controller for DfMpc {
             multi.reset();
         }
         self.plan_valid = false;
+        self.fallback_step = None;
+        self.pending = false;
+        self.gap = false;
         if let Some(e) = &mut self.estimator {
             e.reset();
         }

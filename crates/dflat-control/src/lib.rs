@@ -162,6 +162,23 @@ pub trait Controller: Send {
     /// Forgets all history (window, estimates); the next update starts as
     /// the first one did.
     fn reset(&mut self);
+    /// The command for a tick whose [`Controller::update`] failed, or whose
+    /// result came too late to send: the last good plan shifted one step
+    /// per such consecutive tick (step s = 1, 2, … ≤ `max_steps`), mapped
+    /// to an input and saturated as `update` does, and recorded with
+    /// `measurement` as this tick's (so the window stays consistent and
+    /// the controller resumes cleanly). After a late `update` the plan is
+    /// that update's own, so the call skips the step that was missed.
+    ///
+    /// `None` when there is no plan to fly — none yet, used up, `max_steps`
+    /// reached, or a controller without one (PD, Flatness MPC: the
+    /// default). The shell then sends its own fallback (held command, level
+    /// hover); DF-MPC restarts its window at the next `update`, since it
+    /// cannot know what was sent.
+    fn plan_fallback(&mut self, measurement: &Measurement, max_steps: usize) -> Option<TickOutput> {
+        let _ = (measurement, max_steps);
+        None
+    }
     /// The disturbance estimate for logs and telemetry, when the controller
     /// runs an estimator ([`disturbance`]); `None` otherwise (the default).
     fn disturbance(&self) -> Option<disturbance::DisturbanceReport> {

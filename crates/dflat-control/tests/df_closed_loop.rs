@@ -293,7 +293,7 @@ fn df_tilt_constraint_engages_and_bounds_the_plan() {
 }
 
 #[test]
-fn df_nan_measurement_is_an_error_and_nothing_is_recorded() {
+fn df_nan_measurement_is_an_error_and_nothing_is_recorded_then_the_window_restarts() {
     let plant = planar(0.2);
     let target = Vector3::new(3.0, 1.0, 0.0);
     let mut a = DfMpc::new(ControlModel::Planar(plant), DfMpcSettings::default()).unwrap();
@@ -331,11 +331,17 @@ fn df_nan_measurement_is_an_error_and_nothing_is_recorded() {
         "a failed update must not touch the window"
     );
     assert!(a.plan(0).is_none());
+    // The shell sent something on those ticks that the controller never
+    // saw (no `plan_fallback`): the next good tick restarts the window, so
+    // it equals a fresh controller's first tick, not `b`'s next one.
     let next = m(0.03);
+    let mut fresh = DfMpc::new(ControlModel::Planar(plant), DfMpcSettings::default()).unwrap();
+    let after_gap = a.update(&next, &mut Setpoint(target)).unwrap();
     assert_eq!(
-        a.update(&next, &mut Setpoint(target)).unwrap(),
-        b.update(&next, &mut Setpoint(target)).unwrap()
+        after_gap,
+        fresh.update(&next, &mut Setpoint(target)).unwrap()
     );
+    assert_ne!(after_gap, b.update(&next, &mut Setpoint(target)).unwrap());
 }
 
 #[test]

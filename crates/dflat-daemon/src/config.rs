@@ -398,8 +398,10 @@ pub struct SafetyConfig {
     pub max_speed_mps: f64,
     /// Noise margin of the pose-jump test [m] (0–10).
     pub pose_jump_margin_m: f64,
-    /// After a controller failure or deadline overrun, the last good command
-    /// is held for at most this many ticks (0–50), then level hover.
+    /// After a controller failure or deadline overrun, DF-MPC flies its
+    /// previous plan shifted one step per tick, PD and Flatness MPC hold the
+    /// last good command, for at most this many ticks (0–50); then level
+    /// hover.
     pub hold_last_ticks: u32,
     /// Model-consistency failsafe [m] (0 = off; else 0.05–100): when the
     /// measured position is further than this from the position predicted

@@ -429,9 +429,22 @@ pub async fn spawn(
     config: Config,
     link_override: Option<String>,
 ) -> Result<DaemonHandle, DaemonError> {
+    let controller = build_controller(&config)?;
+    spawn_with_controller(config, link_override, controller).await
+}
+
+/// As [`spawn`], with a controller of the caller's own instead of the one
+/// `controller.kind` builds: the daemon's link, supervisor, guards and
+/// records around any [`Controller`] (a research controller, or a test
+/// double). Its commands use the configured thrust mapping and vehicle
+/// limits.
+pub async fn spawn_with_controller(
+    config: Config,
+    link_override: Option<String>,
+    mut controller: Box<dyn Controller>,
+) -> Result<DaemonHandle, DaemonError> {
     let url = link_override.unwrap_or_else(|| config.link.url.clone());
     let endpoint = Endpoint::parse(&url).map_err(DaemonError::Link)?;
-    let mut controller = build_controller(&config)?;
     if let Some(path) = configured_path(&config) {
         path?;
     }
@@ -1157,9 +1170,34 @@ impl ControlLoop {
                             }
                         }
                         ls.error_streak += 1;
-                        self.residual.forget();
-                        let (command, kind) = self.fallback.command();
+                        // The previous plan, one step further per failed
+                        // tick (DF-MPC; recorded in its window), guarded
+                        // like any command; else held / level hover.
+                        let planned = self
+                            .controller
+                            .plan_fallback(&measurement, self.fallback.hold_ticks as usize)
+                            .and_then(|out| {
+                                let thrust = self.mapping.normalized(out.command.thrust).ok()?;
+                                let command = AttitudeCommand {
+                                    roll: out.command.roll,
+                                    pitch: out.command.pitch,
+                                    yaw: out.command.yaw,
+                                    thrust,
+                                };
+                                let command = self.guard.check(command, &mut self.counts).ok()?;
+                                Some((command, out.plan[1]))
+                            });
+                        match planned {
+                            Some((_, next)) => self.residual.predict([next.x, next.y, next.z]),
+                            None => self.residual.forget(),
+                        }
+                        let (command, kind) = self.fallback.command(planned.map(|(c, _)| c));
                         let (counter, note, text) = match kind {
+                            FallbackKind::Plan => (
+                                &mut self.counts.plan_steps,
+                                "plan",
+                                "dflat: control failed, flying the previous plan",
+                            ),
                             FallbackKind::Held => (
                                 &mut self.counts.held,
                                 "held",

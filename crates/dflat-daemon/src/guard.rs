@@ -3,8 +3,9 @@
 //! * [`CommandGuard`] — the one exit point every attitude command passes:
 //!   no NaN / Inf leaves, tilt and thrust are saturated, violations counted.
 //! * [`Fallback`] — what to send when the controller failed or overran its
-//!   deadline: the last good command held for at most N ticks, then level
-//!   hover.
+//!   deadline: the controller's previous plan shifted one step per tick
+//!   (DF-MPC) or the last good command held (PD, Flatness MPC), for at most
+//!   N ticks, then level hover.
 //! * [`is_pose_jump`] — a pose further from the previous one than the
 //!   vehicle can fly in the time between them (or an estimator reset).
 //! * [`ResidualMonitor`] — the model-consistency residual (measured minus
@@ -29,6 +30,8 @@ pub struct GuardCounts {
     pub controller_failures: u64,
     /// Ticks whose solve overran the tick period.
     pub deadline_overruns: u64,
+    /// Ticks that sent the controller's previous plan, shifted.
+    pub plan_steps: u64,
     /// Ticks that sent the held previous command.
     pub held: u64,
     /// Ticks that sent level hover.
@@ -120,14 +123,20 @@ pub fn wrap_pi(a: f64) -> f64 {
 /// What the fallback sent.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum FallbackKind {
-    /// The last good command, held.
+    /// The controller's previous plan, shifted one step per failed tick
+    /// ([`dflat_control::Controller::plan_fallback`]).
+    Plan,
+    /// The last good command, held (controllers without a plan).
     Held,
     /// Level attitude at hover thrust.
     LevelHover,
 }
 
-/// The fallback after a failed / late tick: the last good command for at
-/// most `hold_ticks` ticks, then level hover (yaw kept) at hover thrust.
+/// The fallback after a failed / late tick: the controller's plan command
+/// when it offers one, else the last good command for at most `hold_ticks`
+/// ticks, then level hover (yaw kept) at hover thrust. Once a streak has
+/// flown the plan, it never falls back to holding the (older) last good
+/// command: a used-up plan goes straight to level hover.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Fallback {
     /// Ticks the last good command may be held.
@@ -137,6 +146,8 @@ pub struct Fallback {
     /// Yaw for level hover without any good command yet \[rad\].
     pub default_yaw: f64,
     last_good: Option<AttitudeCommand>,
+    /// Yaw of the last command sent by the controller or its plan \[rad\].
+    last_yaw: Option<f64>,
     held: u32,
 }
 
@@ -148,6 +159,7 @@ impl Fallback {
             hover_thrust,
             default_yaw,
             last_good: None,
+            last_yaw: None,
             held: 0,
         }
     }
@@ -155,17 +167,26 @@ impl Fallback {
     /// A good command was sent.
     pub fn good(&mut self, cmd: AttitudeCommand) {
         self.last_good = Some(cmd);
+        self.last_yaw = Some(cmd.yaw);
         self.held = 0;
     }
 
     /// Forgets the last good command (failsafe, re-anchor).
     pub fn forget(&mut self) {
         self.last_good = None;
+        self.last_yaw = None;
         self.held = 0;
     }
 
-    /// The command for a failed tick.
-    pub fn command(&mut self) -> (AttitudeCommand, FallbackKind) {
+    /// The command for a failed tick; `planned` is the controller's plan
+    /// command for it (already guarded), if it offered one.
+    pub fn command(&mut self, planned: Option<AttitudeCommand>) -> (AttitudeCommand, FallbackKind) {
+        if let Some(cmd) = planned {
+            self.held = self.held.saturating_add(1);
+            self.last_good = None;
+            self.last_yaw = Some(cmd.yaw);
+            return (cmd, FallbackKind::Plan);
+        }
         match self.last_good {
             Some(cmd) if self.held < self.hold_ticks => {
                 self.held += 1;
@@ -177,7 +198,7 @@ impl Fallback {
                     AttitudeCommand {
                         roll: 0.0,
                         pitch: 0.0,
-                        yaw: last.map_or(self.default_yaw, |c| c.yaw),
+                        yaw: last.map_or(self.last_yaw.unwrap_or(self.default_yaw), |c| c.yaw),
                         thrust: self.hover_thrust.clamp(0.0, 1.0),
                     },
                     FallbackKind::LevelHover,
@@ -351,19 +372,42 @@ mod tests {
     #[test]
     fn fallback_holds_then_levels() {
         let mut f = Fallback::new(3, 0.45, 0.2);
-        let (c, k) = f.command();
+        let (c, k) = f.command(None);
         assert_eq!((c, k), (cmd(0.0, 0.0, 0.2, 0.45), FallbackKind::LevelHover));
         f.good(cmd(0.1, 0.05, 1.0, 0.6));
         for _ in 0..3 {
-            assert_eq!(f.command(), (cmd(0.1, 0.05, 1.0, 0.6), FallbackKind::Held));
+            assert_eq!(
+                f.command(None),
+                (cmd(0.1, 0.05, 1.0, 0.6), FallbackKind::Held)
+            );
         }
         assert_eq!(
-            f.command(),
+            f.command(None),
             (cmd(0.0, 0.0, 1.0, 0.45), FallbackKind::LevelHover)
         );
-        assert_eq!(f.command().1, FallbackKind::LevelHover);
+        assert_eq!(f.command(None).1, FallbackKind::LevelHover);
         f.good(cmd(0.0, 0.0, 0.0, 0.5));
-        assert_eq!(f.command().1, FallbackKind::Held);
+        assert_eq!(f.command(None).1, FallbackKind::Held);
+    }
+
+    #[test]
+    fn fallback_flies_the_plan_then_levels_without_holding() {
+        let mut f = Fallback::new(5, 0.45, 0.2);
+        f.good(cmd(0.1, 0.05, 1.0, 0.6));
+        let step = |i: f64| cmd(0.1 - 0.01 * i, 0.05, 1.1, 0.6);
+        for i in 1..=3 {
+            let (c, k) = f.command(Some(step(f64::from(i))));
+            assert_eq!((c, k), (step(f64::from(i)), FallbackKind::Plan));
+        }
+        // The plan is used up: level hover at the plan's yaw, not the
+        // older last good command.
+        assert_eq!(
+            f.command(None),
+            (cmd(0.0, 0.0, 1.1, 0.45), FallbackKind::LevelHover)
+        );
+        // A good tick starts a new streak.
+        f.good(cmd(0.2, 0.0, 1.0, 0.6));
+        assert_eq!(f.command(None).1, FallbackKind::Held);
     }
 
     #[test]

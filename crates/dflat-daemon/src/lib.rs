@@ -34,5 +34,5 @@ pub mod summary;
 pub mod supervisor;
 pub mod transport;
 
-pub use daemon::{DaemonError, DaemonHandle, run, shutdown_signal, spawn};
+pub use daemon::{DaemonError, DaemonHandle, run, shutdown_signal, spawn, spawn_with_controller};
 pub use summary::FlightSummary;

@@ -99,7 +99,7 @@ pub struct CsvRow {
     /// Model-consistency residual \[m\]: measured position minus the
     /// position the previous tick's plan predicted for this one (y*_{k+1}).
     pub residual: Option<f64>,
-    /// What the guards did this tick (`held`, `level`, `jump`, `residual`),
+    /// What the guards did this tick (`plan`, `held`, `level`, `jump`, `residual`),
     /// if anything.
     pub guard: Option<&'static str>,
 }

@@ -425,12 +425,13 @@ impl fmt::Display for FlightSummary {
         let g = &self.guards;
         writeln!(
             f,
-            "  guards        {} non-finite, {} tilt / {} thrust saturated, {} failures, {} overruns, {} held, {} level, {} pose jumps, {} residual failsafes",
+            "  guards        {} non-finite, {} tilt / {} thrust saturated, {} failures, {} overruns, {} plan / {} held / {} level fallbacks, {} pose jumps, {} residual failsafes",
             g.non_finite,
             g.tilt_saturated,
             g.thrust_saturated,
             g.controller_failures,
             g.deadline_overruns,
+            g.plan_steps,
             g.held,
             g.level_hover,
             g.pose_jumps,
