@@ -509,6 +509,15 @@ pub struct SitlConfig {
     pub command_timeout_s: f64,
     /// Random seed.
     pub seed: u64,
+    /// MAVLink 2 signing key file of the SITL; empty = signing off. Same
+    /// rules as `link.signing_key_file` (mode 0600, owned by the running
+    /// user; 64 hex digits, 32 raw bytes or a passphrase), checked when the
+    /// SITL starts. With a key the SITL signs everything it sends (link id
+    /// 1, timestamps from the wall clock, nothing persisted), refuses
+    /// SET_ATTITUDE_TARGET without a valid signature and drops badly signed
+    /// or replayed frames; other unsigned messages are still accepted. See
+    /// [`crate::sitl`].
+    pub signing_key_file: String,
 }
 
 impl Default for SitlConfig {
@@ -529,6 +538,7 @@ impl Default for SitlConfig {
             start: [-20.0, -30.0, -10.0],
             command_timeout_s: 0.5,
             seed: 1,
+            signing_key_file: String::new(),
         }
     }
 }
@@ -916,6 +926,10 @@ mod tests {
             parse("[link]\nsigning_key_file = \"/etc/dflat/key\"\nsigning_link_id = 3").unwrap();
         assert_eq!(cfg.link.signing_link_id, 3);
         assert!(parse("[link]\nsigning_link_id = 256").is_err());
+        // The SITL's key: off by default; the file is checked at SITL start.
+        assert!(Config::default().sitl.signing_key_file.is_empty());
+        let cfg = parse("[sitl]\nsigning_key_file = \"/etc/dflat/sitl.key\"").unwrap();
+        assert_eq!(cfg.sitl.signing_key_file, "/etc/dflat/sitl.key");
     }
 
     #[test]

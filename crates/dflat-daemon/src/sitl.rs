@@ -28,7 +28,20 @@
 //!   plant, whose altitude the autopilot holds);
 //! * when no valid command arrived for `sitl.command_timeout_s` it holds
 //!   position on its own: an internal PD position loop on its true state,
-//!   like an autopilot's position-mode failsafe. It starts in that mode.
+//!   like an autopilot's position-mode failsafe. It starts in that mode;
+//! * optionally (`sitl.signing_key_file`, or [`SitlOptions::signing`])
+//!   MAVLink 2 signing: every frame it sends is signed (link id
+//!   [`SIGNING_LINK_ID`], timestamps from the wall clock; nothing is
+//!   persisted). On the vehicle link a SET_ATTITUDE_TARGET without a valid
+//!   signature (unsigned, another key, or a replayed timestamp) is not
+//!   applied and is counted in [`SitlCounters::commands_unauthenticated`];
+//!   unsigned SET_POSITION_TARGET_LOCAL_NED and every frame with a wrong
+//!   signature or a replayed timestamp are dropped too. Other *unsigned*
+//!   messages (HEARTBEAT, …) are still accepted, as the daemon's
+//!   `link.signing_accept_unsigned_telemetry = true` does — looser than
+//!   ArduPilot, which with signing on accepts unsigned frames only of
+//!   RADIO_STATUS or on its USB channel. A dropped frame is not routed to
+//!   the ground station either.
 //!
 //! Link: `udpin:HOST:PORT` (port 0 picks a free one, see
 //! [`SitlHandle::local_addr`]); like the mavlink crate's `udpin`, it replies
@@ -37,6 +50,8 @@
 //! MAVLink like a real autopilot: frames from the GCS go to the vehicle link
 //! (the daemon), frames from the vehicle link that are not addressed to the
 //! autopilot itself go to the GCS, and the SITL's own telemetry goes to both.
+//! Signed frames are routed as received (their bytes, signature included);
+//! the SITL does not check frames from the GCS, the daemon does.
 //!
 //! In-process hooks ([`SitlHandle`]): the true state and an optional trace,
 //! counters, the current mode, a tap of every received frame, a pose pause
@@ -54,13 +69,13 @@ use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU64, Ordering};
 use std::sync::mpsc::Sender;
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::thread::JoinHandle;
-use std::time::{Duration, Instant};
+use std::time::{Duration, Instant, SystemTime};
 
 use dflat_control::AttitudeCommand as PlantCommand;
 use dflat_link::dialect::{MavAutopilot, MavState};
 use dflat_link::{
-    Inbound, LinkRx, MavHeader, MavMessage, RxOutcome, SourceFilter, euler_from_quaternion, frames,
-    serialize_v2,
+    Frame, Inbound, LinkRx, MavHeader, MavMessage, RxOutcome, Signing, SourceFilter,
+    euler_from_quaternion, frames, serialize_v2, timestamp_from_system_time,
 };
 use dflat_sim::plant::{Plant, PlantKind, PlantOptions, PlantState, build_plant};
 use dflat_sim::sensing::{GaussianOptions, GaussianSensor, Sensor};
@@ -131,7 +146,18 @@ pub enum SitlError {
     /// A SITL thread panicked (a bug).
     #[error("the SITL {0} thread panicked")]
     Panicked(&'static str),
+    /// `sitl.signing_key_file` is refused (mode, owner, contents).
+    #[error("sitl.signing_key_file = {file}: {reason}")]
+    SigningKey {
+        /// The key file.
+        file: PathBuf,
+        /// Why, in words.
+        reason: String,
+    },
 }
+
+/// The SITL's signing link id (the daemon's default is 0).
+pub const SIGNING_LINK_ID: u8 = 1;
 
 /// What the autopilot stand-in is doing.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -217,6 +243,9 @@ pub struct SitlCounters {
     pub commands_ignored: u64,
     /// SET_ATTITUDE_TARGET trusted but invalid (non-finite, bad quaternion, type_mask).
     pub commands_rejected: u64,
+    /// Signing on: SET_ATTITUDE_TARGET refused for a missing, wrong or
+    /// replayed signature (not applied).
+    pub commands_unauthenticated: u64,
     /// Framing errors (CRC, unknown id, truncation) on either link.
     pub frame_errors: u64,
     /// Frames received from the ground station.
@@ -243,6 +272,7 @@ struct Counters {
     commands_accepted: AtomicU64,
     commands_ignored: AtomicU64,
     commands_rejected: AtomicU64,
+    commands_unauthenticated: AtomicU64,
     frame_errors: AtomicU64,
     gcs_frames_in: AtomicU64,
     gcs_frames_out: AtomicU64,
@@ -268,6 +298,7 @@ impl Counters {
             commands_accepted: g(&self.commands_accepted),
             commands_ignored: g(&self.commands_ignored),
             commands_rejected: g(&self.commands_rejected),
+            commands_unauthenticated: g(&self.commands_unauthenticated),
             frame_errors: g(&self.frame_errors),
             gcs_frames_in: g(&self.gcs_frames_in),
             gcs_frames_out: g(&self.gcs_frames_out),
@@ -301,8 +332,16 @@ pub struct SitlOptions {
     pub truth_csv: Option<PathBuf>,
     /// Keep every telemetry-rate truth sample in memory ([`SitlHandle::trace`]).
     pub record_trace: bool,
-    /// Receives a copy of every frame that arrives on the vehicle link.
+    /// Receives a copy of every frame that arrives on the vehicle link
+    /// (before the signature check).
     pub tap: Option<Sender<TapFrame>>,
+    /// MAVLink 2 signing, overriding `sitl.signing_key_file`: outgoing
+    /// frames are signed with it (its link id, timestamps ≥ its start) and
+    /// the vehicle link is verified with a copy. Its
+    /// [`accept_unsigned_telemetry`](Signing::accept_unsigned_telemetry) is
+    /// honoured (`Signing::new` leaves it off: then every unsigned frame is
+    /// dropped; from the config file it is on).
+    pub signing: Option<Signing>,
 }
 
 /// What a finished SITL run leaves.
@@ -339,6 +378,9 @@ struct Shared {
     command: Mutex<Option<(Instant, ReceivedCommand)>>,
     peers: Mutex<Peers>,
     counters: Counters,
+    /// Signing of outgoing frames (`None` = unsigned). Shared because any
+    /// thread may send the SITL's own frames.
+    signing: Option<Mutex<Signing>>,
 }
 
 /// Locks a mutex, recovering the data if a thread panicked while holding it.
@@ -358,6 +400,43 @@ impl Shared {
     fn elapsed(&self) -> f64 {
         self.start.elapsed().as_secs_f64()
     }
+
+    /// `msg` as an outgoing frame of the SITL: signed when signing is on.
+    fn encode(&self, msg: &MavMessage) -> Result<dflat_link::EncodedFrame, dflat_link::LinkError> {
+        let header = self.header();
+        match &self.signing {
+            Some(s) => {
+                let now = timestamp_from_system_time(SystemTime::now());
+                lock(s).sign(&header, msg, now)
+            }
+            None => serialize_v2(&header, msg),
+        }
+    }
+}
+
+/// The SITL's signing: [`SitlOptions::signing`], else a key from
+/// `sitl.signing_key_file` (link id [`SIGNING_LINK_ID`], starting at the
+/// wall clock, unsigned non-commands accepted), else off.
+fn sitl_signing(cfg: &Config, options: &SitlOptions) -> Result<Option<Signing>, SitlError> {
+    if let Some(s) = &options.signing {
+        return Ok(Some(s.clone()));
+    }
+    let file = cfg.sitl.signing_key_file.trim();
+    if file.is_empty() {
+        return Ok(None);
+    }
+    let key = crate::signing::load_key(Path::new(file)).map_err(|e| {
+        // load_key names the daemon's field; name the SITL's instead.
+        let crate::signing::SigningError::File { reason, .. } = e;
+        SitlError::SigningKey {
+            file: PathBuf::from(file),
+            reason,
+        }
+    })?;
+    let now = timestamp_from_system_time(SystemTime::now());
+    let mut signing = Signing::new(key, SIGNING_LINK_ID, now);
+    signing.accept_unsigned_telemetry = true;
+    Ok(Some(signing))
 }
 
 /// A running SITL: the in-process hooks. Dropping it stops the SITL.
@@ -425,6 +504,7 @@ fn plant_kind(p: SitlPlant) -> PlantKind {
 
 /// Starts the SITL: binds its sockets, starts the plant and receive threads.
 pub fn spawn(cfg: &Config, options: SitlOptions) -> Result<SitlHandle, SitlError> {
+    let signing = sitl_signing(cfg, &options)?;
     let url = options.link.as_deref().unwrap_or(&cfg.sitl.url);
     let socket = bind("link", parse_udpin("link", url)?)?;
     let local_addr = socket.local_addr().map_err(|source| SitlError::Bind {
@@ -489,6 +569,7 @@ pub fn spawn(cfg: &Config, options: SitlOptions) -> Result<SitlHandle, SitlError
         command: Mutex::new(None),
         peers: Mutex::new(Peers::default()),
         counters: Counters::default(),
+        signing: signing.clone().map(Mutex::new),
     });
 
     let socket = Arc::new(socket);
@@ -502,11 +583,15 @@ pub fn spawn(cfg: &Config, options: SitlOptions) -> Result<SitlHandle, SitlError
         gcs_system_id: cfg.link.gcs_system_id,
         ..SourceFilter::default()
     };
+    // The receive side verifies with its own copy (per-stream timestamps);
+    // the shared one signs.
+    let mut link = LinkRx::new(filter);
+    link.signing = signing;
     let rx = VehicleRx {
         shared: shared.clone(),
         socket: socket.clone(),
         gcs_socket: gcs_socket.clone(),
-        link: LinkRx::new(filter),
+        link,
         tap: options.tap.clone(),
         hover_thrust: cfg.sitl.hover_thrust,
     };
@@ -552,7 +637,13 @@ pub fn spawn(cfg: &Config, options: SitlOptions) -> Result<SitlHandle, SitlError
         spawn_thread("dflat-sitl-plant", move || sim.run()).map_err(stop_on_err)?,
     ));
 
-    tracing::info!(%local_addr, gcs = ?gcs_addr, plant = ?cfg.sitl.plant, "sitl started");
+    tracing::info!(
+        %local_addr,
+        gcs = ?gcs_addr,
+        plant = ?cfg.sitl.plant,
+        signing = shared.signing.is_some(),
+        "sitl started"
+    );
     Ok(SitlHandle {
         shared,
         local_addr,
@@ -685,14 +776,15 @@ impl Drop for SitlHandle {
     }
 }
 
-/// Sends `msg` from the SITL to the vehicle peer and the GCS peer.
+/// Sends `msg` from the SITL to the vehicle peer and the GCS peer (signed
+/// when signing is on).
 fn send_own(
     shared: &Shared,
     socket: &UdpSocket,
     gcs_socket: Option<&UdpSocket>,
     msg: &MavMessage,
 ) -> bool {
-    let frame = match serialize_v2(&shared.header(), msg) {
+    let frame = match shared.encode(msg) {
         Ok(f) => f,
         Err(_) => {
             bump(&shared.counters.send_errors);
@@ -774,12 +866,12 @@ impl VehicleRx {
                         message: frame.message.clone(),
                     });
                 }
+                if !self.authenticate(&frame) {
+                    continue;
+                }
                 self.handle(at, &frame.header, &frame.message);
-                if self.gcs_socket.is_some()
-                    && !self.addressed_to_autopilot(&frame.message)
-                    && let Ok(enc) = serialize_v2(&frame.header, &frame.message)
-                {
-                    forward.extend_from_slice(enc.as_bytes());
+                if self.gcs_socket.is_some() && !self.addressed_to_autopilot(&frame.message) {
+                    append_routed(&mut forward, &frame);
                 }
             }
             if !forward.is_empty()
@@ -794,6 +886,32 @@ impl VehicleRx {
             }
         }
         Ok(())
+    }
+
+    /// The signing gate ([`LinkRx::authenticate`]): `true` to go on with
+    /// the frame. With signing off everything passes; with signing on a
+    /// wrong signature or a replayed timestamp is refused for every
+    /// message, a missing one for commands (and for everything if the
+    /// signing's `accept_unsigned_telemetry` is off). A refused
+    /// SET_ATTITUDE_TARGET is counted in `commands_unauthenticated`.
+    fn authenticate(&mut self, frame: &Frame) -> bool {
+        if self.link.signing.is_none() {
+            return true;
+        }
+        let now = timestamp_from_system_time(SystemTime::now());
+        match self
+            .link
+            .authenticate(&frame.header, &frame.message, frame.signed.as_ref(), now)
+        {
+            Ok(()) => true,
+            Err(check) => {
+                if matches!(frame.message, MavMessage::SET_ATTITUDE_TARGET(_)) {
+                    bump(&self.shared.counters.commands_unauthenticated);
+                    tracing::debug!(?check, "sitl: command refused by signing");
+                }
+                false
+            }
+        }
     }
 
     /// True for messages addressed to this autopilot specifically (not routed on).
@@ -839,6 +957,20 @@ impl VehicleRx {
     }
 }
 
+/// Appends a received frame to a datagram being routed on: a signed frame
+/// as its bytes (re-serializing would strip the signature), an unsigned one
+/// re-serialized as MAVLink 2.
+fn append_routed(out: &mut Vec<u8>, frame: &Frame) {
+    match &frame.signed {
+        Some(signed) => out.extend_from_slice(signed.as_bytes()),
+        None => {
+            if let Ok(enc) = serialize_v2(&frame.header, &frame.message) {
+                out.extend_from_slice(enc.as_bytes());
+            }
+        }
+    }
+}
+
 /// Receives on the GCS port and routes to the vehicle link.
 struct GcsRx {
     shared: Arc<Shared>,
@@ -861,9 +993,7 @@ impl GcsRx {
                 match item {
                     Ok(f) => {
                         bump(&self.shared.counters.gcs_frames_in);
-                        if let Ok(enc) = serialize_v2(&f.header, &f.message) {
-                            forward.extend_from_slice(enc.as_bytes());
-                        }
+                        append_routed(&mut forward, &f);
                     }
                     Err(_) => bump(&self.shared.counters.frame_errors),
                 }
@@ -1272,10 +1402,11 @@ pub async fn run(
     let report = handle.stop()?;
     let c = &report.counters;
     say(&format!(
-        "sitl stopped: commands {} accepted, {} ignored, {} rejected; sent hb {} pos {} att {}; late steps {}",
+        "sitl stopped: commands {} accepted, {} ignored, {} rejected, {} unauthenticated; sent hb {} pos {} att {}; late steps {}",
         c.commands_accepted,
         c.commands_ignored,
         c.commands_rejected,
+        c.commands_unauthenticated,
         c.heartbeats_sent,
         c.positions_sent,
         c.attitudes_sent,
@@ -1552,5 +1683,218 @@ mod tests {
         assert!(seen_by(&gcs, 1), "nothing routed to the GCS");
         let c = sitl.stop().unwrap().counters;
         assert!(c.gcs_frames_in >= 2 && c.gcs_frames_out >= 1, "{c:?}");
+    }
+
+    fn key(byte: u8) -> dflat_link::SigningKey {
+        dflat_link::SigningKey::from_bytes([byte; 32])
+    }
+
+    /// Signing with `key` as `link_id`, starting at the wall clock.
+    fn signing(key: dflat_link::SigningKey, link_id: u8) -> Signing {
+        Signing::new(key, link_id, timestamp_from_system_time(SystemTime::now()))
+    }
+
+    fn sign(signing: &mut Signing, sys: u8, comp: u8, seq: u8, msg: &MavMessage) -> Vec<u8> {
+        let now = timestamp_from_system_time(SystemTime::now());
+        let f = signing
+            .sign(&dflat_link::header(sys, comp, seq), msg, now)
+            .unwrap();
+        f.as_bytes().to_vec()
+    }
+
+    /// The SITL's signing as `sitl.signing_key_file` sets it up.
+    fn sitl_signing_with(byte: u8) -> Signing {
+        let mut s = signing(key(byte), SIGNING_LINK_ID);
+        s.accept_unsigned_telemetry = true;
+        s
+    }
+
+    #[test]
+    fn with_signing_only_signed_commands_are_applied() {
+        let cfg = test_config();
+        let sitl = spawn(
+            &cfg,
+            SitlOptions {
+                signing: Some(sitl_signing_with(0x5a)),
+                ..SitlOptions::default()
+            },
+        )
+        .unwrap();
+        let to = sitl.local_addr();
+        let client = UdpSocket::bind("127.0.0.1:0").unwrap();
+        client
+            .set_read_timeout(Some(Duration::from_millis(200)))
+            .unwrap();
+        let cmd = attitude_target((1, 1), -0.2);
+        // Unsigned, and signed with another key: refused and counted.
+        let mut stranger = signing(key(0x33), 0);
+        for _ in 0..5 {
+            send(&client, to, 1, 191, &cmd);
+            let f = sign(&mut stranger, 1, 191, 0, &cmd);
+            client.send_to(&f, to).unwrap();
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        std::thread::sleep(Duration::from_millis(100));
+        let c = sitl.counters();
+        assert_eq!(c.commands_unauthenticated, 10, "{c:?}");
+        assert_eq!(c.commands_accepted, 0, "{c:?}");
+        assert_eq!(sitl.mode(), SitlMode::Hold);
+        assert!(sitl.truth().command.is_none());
+        // Signed with the SITL's key: applied.
+        let mut ours = signing(key(0x5a), 0);
+        let until = Instant::now() + Duration::from_millis(300);
+        while Instant::now() < until {
+            let f = sign(&mut ours, 1, 191, 0, &cmd);
+            client.send_to(&f, to).unwrap();
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        std::thread::sleep(Duration::from_millis(60));
+        assert_eq!(sitl.mode(), SitlMode::Offboard);
+        let c = sitl.counters();
+        assert!(c.commands_accepted >= 5, "{c:?}");
+        assert_eq!(c.commands_unauthenticated, 10, "{c:?}");
+        // A replayed signed command is refused.
+        let f = sign(&mut ours, 1, 191, 0, &cmd);
+        client.send_to(&f, to).unwrap();
+        client.send_to(&f, to).unwrap();
+        std::thread::sleep(Duration::from_millis(60));
+        let after = sitl.counters();
+        assert_eq!(
+            after.commands_accepted,
+            c.commands_accepted + 1,
+            "{after:?}"
+        );
+        assert_eq!(after.commands_unauthenticated, 11, "{after:?}");
+        // The SITL's telemetry is signed with its key, as link 1.
+        let mut verifier = signing(key(0x5a), 0);
+        let mut buf = [0u8; 2048];
+        let mut verified = 0;
+        let deadline = Instant::now() + Duration::from_millis(300);
+        while Instant::now() < deadline {
+            let Ok((n, _)) = client.recv_from(&mut buf) else {
+                continue;
+            };
+            for fr in frames(&buf[..n]).flatten() {
+                let now = timestamp_from_system_time(SystemTime::now());
+                let check = verifier.verify(&fr.header, fr.signed.as_ref(), now);
+                assert!(
+                    matches!(
+                        check,
+                        dflat_link::SignatureCheck::Valid {
+                            link_id: SIGNING_LINK_ID,
+                            ..
+                        }
+                    ),
+                    "{:?}: {check:?}",
+                    fr.message
+                );
+                verified += 1;
+            }
+        }
+        assert!(verified >= 10, "{verified} verified frames");
+        sitl.stop().unwrap();
+    }
+
+    #[test]
+    fn signed_frames_are_routed_with_their_signature() {
+        let cfg = test_config();
+        let sitl = spawn(
+            &cfg,
+            SitlOptions {
+                gcs: Some("udpin:127.0.0.1:0".into()),
+                signing: Some(sitl_signing_with(0x5a)),
+                ..SitlOptions::default()
+            },
+        )
+        .unwrap();
+        let daemon = UdpSocket::bind("127.0.0.1:0").unwrap();
+        let gcs = UdpSocket::bind("127.0.0.1:0").unwrap();
+        for s in [&daemon, &gcs] {
+            s.set_read_timeout(Some(Duration::from_millis(100)))
+                .unwrap();
+        }
+        let (link, gcs_port) = (sitl.local_addr(), sitl.gcs_addr().unwrap());
+        let hb = dflat_link::heartbeat_onboard(dflat_link::DaemonStatus::Standby);
+        let mut daemon_signing = signing(key(0x5a), 0);
+        let mut gcs_signing = signing(key(0x5a), 2);
+        let mut stranger = signing(key(0x33), 0);
+        daemon
+            .send_to(&sign(&mut daemon_signing, 1, 191, 0, &hb), link)
+            .unwrap();
+        gcs.send_to(&sign(&mut gcs_signing, 255, 190, 0, &hb), gcs_port)
+            .unwrap();
+        std::thread::sleep(Duration::from_millis(50));
+        // daemon → GCS: a wrong key (seq 7) is dropped, unsigned (8) and
+        // signed (9) heartbeats are routed, the signed one byte for byte.
+        daemon
+            .send_to(&sign(&mut stranger, 1, 191, 7, &hb), link)
+            .unwrap();
+        let unsigned_hb = serialize_v2(&dflat_link::header(1, 191, 8), &hb).unwrap();
+        daemon.send_to(unsigned_hb.as_bytes(), link).unwrap();
+        let signed_hb = sign(&mut daemon_signing, 1, 191, 9, &hb);
+        daemon.send_to(&signed_hb, link).unwrap();
+        // GCS → daemon, byte for byte.
+        let gcs_hb = sign(&mut gcs_signing, 255, 190, 1, &hb);
+        gcs.send_to(&gcs_hb, gcs_port).unwrap();
+        let collect = |s: &UdpSocket, sys: u32| {
+            let mut buf = [0u8; 4096];
+            let mut seen = Vec::new();
+            let until = Instant::now() + Duration::from_millis(400);
+            while Instant::now() < until {
+                if let Ok((n, _)) = s.recv_from(&mut buf) {
+                    seen.extend(
+                        frames(&buf[..n])
+                            .flatten()
+                            .filter(|f| f.header.system_id == sys),
+                    );
+                }
+            }
+            seen
+        };
+        let at_gcs: Vec<_> = collect(&gcs, 1)
+            .into_iter()
+            .filter(|f| f.header.component_id == 191)
+            .collect();
+        let seqs: Vec<u8> = at_gcs.iter().map(|f| f.header.sequence).collect();
+        assert!(!seqs.contains(&7), "badly signed frame routed: {seqs:?}");
+        assert!(seqs.contains(&8), "unsigned heartbeat not routed: {seqs:?}");
+        let routed = at_gcs.iter().find(|f| f.header.sequence == 9);
+        assert_eq!(
+            routed.and_then(|f| f.signed.as_ref()).map(|s| s.as_bytes()),
+            Some(&signed_hb[..]),
+            "signed heartbeat not routed unchanged"
+        );
+        let at_daemon = collect(&daemon, 255);
+        assert!(
+            at_daemon
+                .iter()
+                .any(|f| f.signed.as_ref().map(|s| s.as_bytes()) == Some(&gcs_hb[..])),
+            "GCS frame not routed unchanged: {at_daemon:?}"
+        );
+        sitl.stop().unwrap();
+    }
+
+    #[test]
+    fn sitl_key_file_is_checked_at_start() {
+        use std::os::unix::fs::PermissionsExt as _;
+        let dir = std::env::temp_dir().join(format!("dflat-sitl-key-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("key");
+        std::fs::write(&path, format!("{}\n", "5a".repeat(32))).unwrap();
+        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o644)).unwrap();
+        let mut cfg = test_config();
+        cfg.sitl.signing_key_file = path.display().to_string();
+        let err = spawn(&cfg, SitlOptions::default()).unwrap_err().to_string();
+        assert!(err.contains("sitl.signing_key_file"), "{err}");
+        assert!(
+            err.contains("0644") && err.contains(&path.display().to_string()),
+            "{err}"
+        );
+        assert!(!err.contains("link.signing_key_file"), "{err}");
+        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o600)).unwrap();
+        let sitl = spawn(&cfg, SitlOptions::default()).unwrap();
+        assert!(sitl.shared.signing.is_some());
+        sitl.stop().unwrap();
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }
