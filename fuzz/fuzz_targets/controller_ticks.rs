@@ -1,0 +1,261 @@
+//! Structured input → a controller (DF-MPC in every configuration the
+//! daemon can build, Flatness MPC, PD; planar or spatial model) driven
+//! through a sequence of ticks with arbitrary, non-finite, huge and
+//! jumping poses and setpoints, stale and out-of-order times, failed ticks
+//! answered by `plan_fallback`, resets and multi-rate samples.
+//!
+//! Checks, besides "no panic": every command a controller returns (from
+//! `update` or `plan_fallback`) is finite with |pitch|, |roll| within the
+//! 35° saturation, the spatial DF-MPC thrust within its limits, and every
+//! planned output finite on the axes the model controls (planar models pass
+//! the measured z through); a failed tick is an `Err`, never a NaN command.
+#![no_main]
+
+use dflat_control::dfmpc::{DfMpc, DfMpcSettings, OutputConstraints};
+use dflat_control::disturbance::DisturbanceSettings;
+use dflat_control::fmpc::{FlatnessMpc, FmpcSettings};
+use dflat_control::pd::{Pd, PdSettings};
+use dflat_control::window::MultiRateSettings;
+use dflat_control::{ControlModel, Controller, Frame, Measurement, ReferenceSource, TickOutput};
+use dflat_model::{PlanarModel, PlanarParams, SpatialModel, SpatialParams};
+use libfuzzer_sys::arbitrary::{self, Arbitrary};
+use libfuzzer_sys::fuzz_target;
+use nalgebra::Vector3;
+
+const DT: f64 = 0.02;
+const MAX_TILT_DEG: f64 = 35.0;
+
+/// A coordinate: mostly ordinary, sometimes hostile.
+#[derive(Debug, Clone, Copy, Arbitrary)]
+enum Coord {
+    Step(i16),
+    Jump(f32),
+    Nan,
+    Inf,
+    Huge,
+}
+
+impl Coord {
+    fn apply(self, previous: f64) -> f64 {
+        match self {
+            Coord::Step(d) => previous + f64::from(d) * 1e-4,
+            Coord::Jump(v) => f64::from(v),
+            Coord::Nan => f64::NAN,
+            Coord::Inf => f64::INFINITY,
+            Coord::Huge => 1e300,
+        }
+    }
+}
+
+#[derive(Debug, Arbitrary)]
+enum Op {
+    /// One tick with a pose (and, multi-rate, its sample) `steps` ticks on.
+    Tick {
+        position: [Coord; 3],
+        yaw: Coord,
+        steps: i8,
+    },
+    /// A pose sample between ticks (multi-rate).
+    Sample { position: [Coord; 3], age_ms: u8 },
+    /// A tick whose update fails (NaN reference), answered by the plan.
+    Fail { max_steps: u8 },
+    /// A new setpoint.
+    Target([Coord; 3]),
+    Reset,
+}
+
+#[derive(Debug, Arbitrary)]
+struct Input {
+    kind: u8,
+    spatial: bool,
+    multi_rate: bool,
+    smooth: bool,
+    tilt_bound: bool,
+    speed_bound: bool,
+    disturbance: bool,
+    horizon: u8,
+    ops: Vec<Op>,
+}
+
+struct Reference {
+    target: Vector3<f64>,
+    broken: bool,
+}
+
+impl ReferenceSource for Reference {
+    fn horizon(&mut self, _measured: &Vector3<f64>, _dt: f64, out: &mut [Vector3<f64>]) {
+        let v = if self.broken {
+            Vector3::repeat(f64::NAN)
+        } else {
+            self.target
+        };
+        out.iter_mut().for_each(|o| *o = v);
+    }
+    fn closest(&mut self, _measured: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
+        let v = if self.broken {
+            Vector3::repeat(f64::NAN)
+        } else {
+            self.target
+        };
+        (v, Vector3::zeros())
+    }
+}
+
+fn build(input: &Input) -> Option<(Box<dyn Controller>, bool)> {
+    let model = if input.spatial {
+        ControlModel::Spatial(
+            SpatialModel::new(SpatialParams {
+                dt: DT,
+                frame: Frame::Ned,
+                psi: 0.4,
+                ..Default::default()
+            })
+            .ok()?,
+        )
+    } else {
+        ControlModel::Planar(
+            PlanarModel::new(PlanarParams {
+                dt: DT,
+                frame: Frame::Ned,
+                psi: 0.4,
+                ..Default::default()
+            })
+            .ok()?,
+        )
+    };
+    let horizon = 10 + usize::from(input.horizon % 60);
+    let is_df = input.kind % 3 == 0;
+    let controller: Box<dyn Controller> = match input.kind % 3 {
+        0 => Box::new(
+            DfMpc::new(
+                model,
+                DfMpcSettings {
+                    horizon,
+                    smoothness_weight: if input.smooth { [20.0; 3] } else { [0.0; 3] },
+                    constraints: OutputConstraints {
+                        max_tilt: input.tilt_bound.then(|| 20f64.to_radians()),
+                        max_speed: input.speed_bound.then_some(3.0),
+                        vertical_acceleration: None,
+                    },
+                    multi_rate: input.multi_rate.then(|| MultiRateSettings {
+                        window: 10,
+                        ..MultiRateSettings::default()
+                    }),
+                    disturbance: input.disturbance.then(DisturbanceSettings::default),
+                    ..DfMpcSettings::default()
+                },
+            )
+            .ok()?,
+        ),
+        1 => Box::new(
+            FlatnessMpc::new(
+                model,
+                FmpcSettings {
+                    horizon,
+                    ..FmpcSettings::default()
+                },
+            )
+            .ok()?,
+        ),
+        _ => Box::new(Pd::new(model, PdSettings::default()).ok()?),
+    };
+    Some((controller, is_df && input.spatial))
+}
+
+/// `axes`: the outputs the model controls (a planar model passes the
+/// measured z through untouched, whatever it is).
+fn check(out: &TickOutput, axes: usize, spatial_df: bool) {
+    let c = out.command;
+    assert!(c.is_finite(), "non-finite command {c:?}");
+    let max = MAX_TILT_DEG.to_radians() + 1e-12;
+    assert!(c.pitch.abs() <= max && c.roll.abs() <= max, "tilt {c:?}");
+    if spatial_df {
+        let s = dflat_control::dfmpc::InputSaturation::default();
+        assert!(
+            c.thrust >= s.thrust_min - 1e-12 && c.thrust <= s.thrust_max + 1e-12,
+            "thrust {c:?}"
+        );
+    }
+    for p in &out.plan {
+        assert!(
+            p.iter().take(axes).all(|v| v.is_finite()),
+            "plan {:?}",
+            out.plan
+        );
+    }
+}
+
+fuzz_target!(|input: Input| {
+    let Some((mut controller, spatial_df)) = build(&input) else {
+        return;
+    };
+    let axes = if input.spatial { 3 } else { 2 };
+    let mut reference = Reference {
+        target: Vector3::new(3.0, -2.0, -5.0),
+        broken: false,
+    };
+    let mut t = 0.0f64;
+    let mut position = Vector3::new(0.0, 0.0, -5.0);
+    for op in input.ops.iter().take(200) {
+        match op {
+            Op::Tick {
+                position: p,
+                yaw,
+                steps,
+            } => {
+                t += f64::from(*steps) * DT;
+                for (axis, c) in p.iter().enumerate() {
+                    position[axis] = c.apply(position[axis]);
+                }
+                let m = Measurement {
+                    t,
+                    position,
+                    yaw: yaw.apply(0.4),
+                };
+                controller.observe(&m);
+                if let Ok(out) = controller.update(&m, &mut reference) {
+                    check(&out, axes, spatial_df);
+                }
+                // Keep later steps meaningful after a hostile value.
+                if !position.iter().all(|v| v.is_finite() && v.abs() < 1e6) {
+                    position = Vector3::new(0.0, 0.0, -5.0);
+                }
+            }
+            Op::Sample { position: p, age_ms } => {
+                let mut s = position;
+                for (axis, c) in p.iter().enumerate() {
+                    s[axis] = c.apply(s[axis]);
+                }
+                controller.observe(&Measurement {
+                    t: t - f64::from(*age_ms) * 1e-3,
+                    position: s,
+                    yaw: 0.4,
+                });
+            }
+            Op::Fail { max_steps } => {
+                t += DT;
+                let m = Measurement {
+                    t,
+                    position,
+                    yaw: 0.4,
+                };
+                reference.broken = true;
+                let result = controller.update(&m, &mut reference);
+                reference.broken = false;
+                assert!(result.is_err(), "a NaN reference must fail the tick");
+                if let Some(out) = controller.plan_fallback(&m, usize::from(*max_steps)) {
+                    check(&out, axes, spatial_df);
+                }
+            }
+            Op::Target(p) => {
+                for (axis, c) in p.iter().enumerate() {
+                    reference.target[axis] = c.apply(reference.target[axis]);
+                }
+                if !reference.target.iter().all(|v| v.is_finite()) {
+                    reference.target = Vector3::new(3.0, -2.0, -5.0);
+                }
+            }
+            Op::Reset => controller.reset(),
+        }
+    }
+});
