@@ -147,7 +147,9 @@ pub struct OutputConstraints {
     /// Max tilt [rad] as a bound on the horizontal acceleration per axis,
     /// `|Δ²y/δt²| ≤ g·tan(max_tilt)`. Default none.
     pub max_tilt: Option<f64>,
-    /// Max speed per axis `|Δy/δt|` [m/s]. Default none.
+    /// Max speed per axis `|Δy/δt|` [m/s]; when the window is already
+    /// faster, the plan brakes to it at 90 % of the acceleration bound
+    /// ([`AxisBounds::speed`]). Default none.
     pub max_speed: Option<f64>,
     /// Bounds `[a_min, a_max]` on the vertical acceleration `Δ²z/δt²`
     /// [m/s²] in the model frame (NED: positive down); spatial model only.
@@ -671,7 +673,11 @@ impl AxisSolver {
 pub struct AxisBounds {
     /// `[lo, hi]` on the acceleration `Δ²y_j/δt²` [m/s²], j = 1..N−2.
     pub acceleration: Option<[f64; 2]>,
-    /// `v` with `|Δy_j/δt| ≤ v` [m/s], j = 2..N−1.
+    /// `v` with `|Δy_j/δt| ≤ v` [m/s], j = 2..N−1. With an acceleration
+    /// bound too, a window already faster than v gets a funnel instead of
+    /// an infeasible problem: the bound at step j is
+    /// `max(v, |v_1| − 0.9·a·(j − 1)·δt)`, v_1 the window's speed, a the
+    /// braking bound (the plan slows at 90 % of it).
     pub speed: Option<f64>,
 }
 
@@ -990,6 +996,20 @@ impl ConstrainedAxisSolver {
         &self.bounds
     }
 
+    /// The speed funnel for a window moving faster than the speed bound:
+    /// `(|v_1|, a)` with v_1 = (y_2 − y_1)/δt [m/s] and a [m/s²] 90 % of
+    /// the acceleration bound that slows it down; the bound at step j is
+    /// then `max(v, |v_1| − a·(j − 1)·δt)`. `None` (the plain bound) when
+    /// there is no acceleration bound — the first free output can then
+    /// meet any speed — or the window is within the bound.
+    fn speed_funnel(&self, fixed: &[f64; 3]) -> Option<(f64, f64)> {
+        let v = self.bounds.speed?;
+        let [lo, hi] = self.bounds.acceleration?;
+        let v1 = (fixed[2] - fixed[1]) / self.dt;
+        let brake = if v1 > 0.0 { -lo } else { hi };
+        (v1.abs() > v).then_some((v1.abs(), 0.9 * brake))
+    }
+
     /// Solves with the bounds; arguments as [`AxisSolver::solve`]. A status
     /// other than `Solved` (infeasible bounds, time limit, numerical
     /// trouble) is [`ControlError::Solver`].
@@ -1042,10 +1062,12 @@ impl ConstrainedAxisSolver {
         if let Some(v) = self.bounds.speed {
             let d1 = fixed[1] - fixed[0];
             let d2 = fixed[2] - 2.0 * fixed[1] + fixed[0];
+            let funnel = self.speed_funnel(fixed);
             for j in 2..=self.horizon - 1 {
                 let s_base = (d1 + j as f64 * d2) / dt;
-                self.bvec[m] = v - s_base;
-                self.bvec[m + 1] = v + s_base;
+                let limit = funnel.map_or(v, |(v1, a)| v.max(v1 - a * (j - 1) as f64 * dt));
+                self.bvec[m] = limit - s_base;
+                self.bvec[m + 1] = limit + s_base;
                 m += 2;
             }
         }
@@ -1838,13 +1860,44 @@ mod tests {
     }
 
     #[test]
-    fn infeasible_bounds_are_a_solver_error() {
-        // Moving at 5 m/s with |v| ≤ 1 m/s and |a| ≤ 1 m/s²: cannot slow down in time.
+    fn faster_than_the_speed_bound_brakes_in_a_funnel() {
+        // Moving at 5 m/s with |v| ≤ 1 m/s and |a| ≤ 1 m/s²: a hard bound
+        // from the first free step would be infeasible (the window cannot
+        // slow down in one step); the funnel brakes at 0.9 m/s² instead.
+        let (v_max, a_max) = (1.0, 1.0);
+        let bounds = AxisBounds {
+            acceleration: Some([-a_max, a_max]),
+            speed: Some(v_max),
+        };
+        let n = 300; // 6 s: long enough to get down to 1 m/s
+        let mut cs = ConstrainedAxisSolver::new(n, 1.0, 0.08, DT, bounds, f64::INFINITY).unwrap();
+        let mut plan = vec![0.0; n + 1];
+        let fixed = [0.0, 0.1, 0.2];
+        cs.solve(&fixed, &vec![10.0; n + 1], &mut plan).unwrap();
+        let speed = |j: usize| (plan[j + 1] - plan[j]) / DT;
+        for j in 2..n {
+            let funnel = v_max.max(5.0 - 0.9 * a_max * (j - 1) as f64 * DT);
+            assert!(
+                speed(j).abs() <= funnel * (1.0 + 1e-6),
+                "j={j}: {}",
+                speed(j)
+            );
+            let a = (plan[j + 1] - 2.0 * plan[j] + plan[j - 1]) / (DT * DT);
+            assert!(a.abs() <= a_max * (1.0 + 1e-6), "j={j}: a = {a}");
+        }
+        // It brakes: within the bound once the funnel has closed (4.4 s).
+        assert!(speed(250).abs() <= v_max * (1.0 + 1e-6), "{}", speed(250));
+        assert!(speed(10) < 5.0 && speed(100) < speed(10));
+    }
+
+    #[test]
+    fn solver_failure_is_an_error() {
+        // A time limit no solve can meet.
         let bounds = AxisBounds {
             acceleration: Some([-1.0, 1.0]),
             speed: Some(1.0),
         };
-        let mut cs = ConstrainedAxisSolver::new(50, 1.0, 0.08, DT, bounds, f64::INFINITY).unwrap();
+        let mut cs = ConstrainedAxisSolver::new(50, 1.0, 0.08, DT, bounds, 1e-12).unwrap();
         let mut plan = vec![0.0; 51];
         let r = cs.solve(&[0.0, 0.1, 0.2], &[10.0; 51], &mut plan);
         assert!(matches!(r, Err(ControlError::Solver(_))), "{r:?}");

@@ -287,7 +287,10 @@ pub struct ControllerConfig {
     /// [deg] (0 = off; 1–60). Solved with clarabel when it binds. Default
     /// 30 (`df-mr-smooth`; below the 35° command limit).
     pub constraint_tilt_deg: f64,
-    /// Optional bound on the planned speed per axis [m/s] (0 = off).
+    /// Optional bound on the planned speed per axis [m/s] (0 = off). When
+    /// the vehicle is already faster (a gust, pose noise), the plan brakes
+    /// to it at 90 % of the tilt bound's acceleration rather than making
+    /// the QP infeasible.
     pub constraint_speed: f64,
     /// Disturbance estimation (df-mpc; offset-free tracking): acceleration
     /// offsets (wind, drag) and, for the spatial model, the thrust scale
