@@ -1601,6 +1601,26 @@ mod tests {
         .unwrap()
     }
 
+    /// A SITL of [`test_config`] with a GCS port, and two client sockets
+    /// (100 ms read timeout) to play the daemon and the ground station.
+    fn with_gcs(options: SitlOptions) -> (SitlHandle, UdpSocket, UdpSocket) {
+        let sitl = spawn(
+            &test_config(),
+            SitlOptions {
+                gcs: Some("udpin:127.0.0.1:0".into()),
+                ..options
+            },
+        )
+        .unwrap();
+        let daemon = UdpSocket::bind("127.0.0.1:0").unwrap();
+        let gcs = UdpSocket::bind("127.0.0.1:0").unwrap();
+        for s in [&daemon, &gcs] {
+            s.set_read_timeout(Some(Duration::from_millis(100)))
+                .unwrap();
+        }
+        (sitl, daemon, gcs)
+    }
+
     fn send(client: &UdpSocket, to: SocketAddr, sys: u8, comp: u8, msg: &MavMessage) {
         let f = serialize_v2(&dflat_link::header(sys, comp, 0), msg).unwrap();
         client.send_to(f.as_bytes(), to).unwrap();
@@ -1639,21 +1659,7 @@ mod tests {
 
     #[test]
     fn routes_between_gcs_and_vehicle_link() {
-        let cfg = test_config();
-        let sitl = spawn(
-            &cfg,
-            SitlOptions {
-                gcs: Some("udpin:127.0.0.1:0".into()),
-                ..SitlOptions::default()
-            },
-        )
-        .unwrap();
-        let daemon = UdpSocket::bind("127.0.0.1:0").unwrap();
-        let gcs = UdpSocket::bind("127.0.0.1:0").unwrap();
-        for s in [&daemon, &gcs] {
-            s.set_read_timeout(Some(Duration::from_millis(100)))
-                .unwrap();
-        }
+        let (sitl, daemon, gcs) = with_gcs(SitlOptions::default());
         let hb = dflat_link::heartbeat_onboard(dflat_link::DaemonStatus::Standby);
         send(&daemon, sitl.local_addr(), 1, 191, &hb);
         send(&gcs, sitl.gcs_addr().unwrap(), 255, 190, &hb);
@@ -1797,22 +1803,10 @@ mod tests {
 
     #[test]
     fn signed_frames_are_routed_with_their_signature() {
-        let cfg = test_config();
-        let sitl = spawn(
-            &cfg,
-            SitlOptions {
-                gcs: Some("udpin:127.0.0.1:0".into()),
-                signing: Some(sitl_signing_with(0x5a)),
-                ..SitlOptions::default()
-            },
-        )
-        .unwrap();
-        let daemon = UdpSocket::bind("127.0.0.1:0").unwrap();
-        let gcs = UdpSocket::bind("127.0.0.1:0").unwrap();
-        for s in [&daemon, &gcs] {
-            s.set_read_timeout(Some(Duration::from_millis(100)))
-                .unwrap();
-        }
+        let (sitl, daemon, gcs) = with_gcs(SitlOptions {
+            signing: Some(sitl_signing_with(0x5a)),
+            ..SitlOptions::default()
+        });
         let (link, gcs_port) = (sitl.local_addr(), sitl.gcs_addr().unwrap());
         let hb = dflat_link::heartbeat_onboard(dflat_link::DaemonStatus::Standby);
         let mut daemon_signing = signing(key(0x5a), 0);
