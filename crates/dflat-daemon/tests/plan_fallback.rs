@@ -1,6 +1,6 @@
-//! Controller failures in flight: the daemon flies DF-MPC's previous plan
-//! shifted one step per failed tick, then level hover, and recovers to
-//! tracking. The shipped SITL configuration (multi-rate DF-MPC) flies the
+//! Controller failures and overruns in flight: the daemon flies DF-MPC's
+//! previous plan shifted one step per failed or late tick, then level
+//! hover, and recovers to tracking. The shipped SITL configuration (multi-rate DF-MPC) flies the
 //! demo's L path at 5 m/s against the built-in SITL, in-process, with the
 //! controller wrapped so that its update fails on chosen ticks.
 
@@ -14,11 +14,13 @@ use dflat_daemon::demo::{DemoOptions, demo_config};
 use dflat_daemon::sitl::{self, SitlOptions};
 use nalgebra::Vector3;
 
-/// Fails `update` on the ticks (counted from the first update) in `fail`.
+/// Fails `update` on the ticks (counted from the first update) in `fail`,
+/// and takes 30 ms (more than the 20 ms tick) on those in `slow`.
 struct Flaky {
     inner: Box<dyn Controller>,
     tick: usize,
     fail: Vec<Range<usize>>,
+    slow: Range<usize>,
 }
 
 impl Controller for Flaky {
@@ -43,6 +45,9 @@ impl Controller for Flaky {
                 "injected failure at tick {k}"
             )));
         }
+        if self.slow.contains(&k) {
+            std::thread::sleep(Duration::from_millis(30));
+        }
         self.inner.update(measurement, reference)
     }
     fn plan_fallback(&mut self, measurement: &Measurement, max_steps: usize) -> Option<TickOutput> {
@@ -57,7 +62,7 @@ impl Controller for Flaky {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn failed_ticks_fly_the_previous_plan_then_level_hover_and_recover() {
+async fn failed_and_late_ticks_fly_the_previous_plan_then_level_hover_and_recover() {
     let out = std::env::temp_dir().join(format!("dflat-plan-fallback-{}", std::process::id()));
     let mut cfg = demo_config(&DemoOptions {
         speed: 5.0,
@@ -69,9 +74,11 @@ async fn failed_ticks_fly_the_previous_plan_then_level_hover_and_recover() {
     let hold = cfg.safety.hold_last_ticks as usize;
     assert_eq!(hold, 5, "the shipped default this test is written for");
     // 4 failed ticks (< hold: all flown on the plan), then 11 (5 on the
-    // plan, 6 level hover).
+    // plan, 6 level hover), then 3 late ones (each flies step 1 of its own
+    // late plan).
     let fail = vec![150..154, 300..311];
     let failures: usize = fail.iter().map(|r| r.len()).sum();
+    let slow = 400..403;
 
     let sitl = sitl::spawn(
         &cfg,
@@ -86,6 +93,7 @@ async fn failed_ticks_fly_the_previous_plan_then_level_hover_and_recover() {
         inner: build_controller(&cfg).unwrap(),
         tick: 0,
         fail,
+        slow: slow.clone(),
     };
     let daemon = dflat_daemon::spawn_with_controller(cfg.clone(), Some(link), Box::new(controller))
         .await
@@ -113,8 +121,9 @@ async fn failed_ticks_fly_the_previous_plan_then_level_hover_and_recover() {
     let g = summary.guards;
     assert_eq!(g.controller_failures, failures as u64, "{g:?}");
     assert_eq!(g.held, 0, "DF-MPC never holds a stale command: {g:?}");
-    // Overruns on a loaded machine would add plan steps / level hover.
-    assert!(g.plan_steps >= 4 + hold as u64, "{g:?}");
+    assert!(g.deadline_overruns >= slow.len() as u64, "{g:?}");
+    // More overruns on a loaded machine would add plan steps.
+    assert!(g.plan_steps >= 4 + hold as u64 + slow.len() as u64, "{g:?}");
     assert!(g.level_hover >= (11 - hold) as u64, "{g:?}");
     assert_eq!(
         g.plan_steps + g.level_hover,
