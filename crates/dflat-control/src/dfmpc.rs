@@ -682,6 +682,43 @@ pub struct AxisBounds {
 }
 
 impl AxisBounds {
+    /// The speed funnel for a window moving faster than the speed bound:
+    /// `(|v_1|, a)` with v_1 = (y_2 − y_1)/δt [m/s] and a [m/s²] 90 % of
+    /// the acceleration bound that slows it down; the bound at step j is
+    /// then `max(v, |v_1| − a·(j − 1)·δt)`. `None` (the plain bound) when
+    /// there is no acceleration bound — the first free output can then
+    /// meet any speed — or the window is within the bound.
+    fn speed_funnel(&self, fixed: &[f64; 3], dt: f64) -> Option<(f64, f64)> {
+        let v = self.speed?;
+        let [lo, hi] = self.acceleration?;
+        let v1 = (fixed[2] - fixed[1]) / dt;
+        let brake = if v1 > 0.0 { -lo } else { hi };
+        (v1.abs() > v).then_some((v1.abs(), 0.9 * brake))
+    }
+
+    /// The bounds `(lo, hi)` of each constraint row for this window, in row
+    /// order — the acceleration rows `Δ²p_j/δt²`, j = 1..N−2, then the speed
+    /// rows `Δp_j/δt`, j = 2..N−1, on the deviation p from the baseline
+    /// (so the baseline's own acceleration and speed are subtracted).
+    fn row_bounds(&self, horizon: usize, fixed: &[f64; 3], dt: f64, mut out: impl FnMut(f64, f64)) {
+        let d1 = fixed[1] - fixed[0];
+        let d2 = fixed[2] - 2.0 * fixed[1] + fixed[0];
+        if let Some([lo, hi]) = self.acceleration {
+            let a_base = d2 / (dt * dt);
+            for _ in 1..=horizon - 2 {
+                out(lo - a_base, hi - a_base);
+            }
+        }
+        if let Some(v) = self.speed {
+            let funnel = self.speed_funnel(fixed, dt);
+            for j in 2..=horizon - 1 {
+                let s_base = (d1 + j as f64 * d2) / dt;
+                let limit = funnel.map_or(v, |(v1, a)| v.max(v1 - a * (j - 1) as f64 * dt));
+                out(-limit - s_base, limit - s_base);
+            }
+        }
+    }
+
     /// True when no bound is set.
     pub fn is_empty(&self) -> bool {
         self.acceleration.is_none() && self.speed.is_none()
@@ -998,20 +1035,6 @@ impl ConstrainedAxisSolver {
         &self.bounds
     }
 
-    /// The speed funnel for a window moving faster than the speed bound:
-    /// `(|v_1|, a)` with v_1 = (y_2 − y_1)/δt [m/s] and a [m/s²] 90 % of
-    /// the acceleration bound that slows it down; the bound at step j is
-    /// then `max(v, |v_1| − a·(j − 1)·δt)`. `None` (the plain bound) when
-    /// there is no acceleration bound — the first free output can then
-    /// meet any speed — or the window is within the bound.
-    fn speed_funnel(&self, fixed: &[f64; 3]) -> Option<(f64, f64)> {
-        let v = self.bounds.speed?;
-        let [lo, hi] = self.bounds.acceleration?;
-        let v1 = (fixed[2] - fixed[1]) / self.dt;
-        let brake = if v1 > 0.0 { -lo } else { hi };
-        (v1.abs() > v).then_some((v1.abs(), 0.9 * brake))
-    }
-
     /// Solves with the bounds; arguments as [`AxisSolver::solve`]. A status
     /// other than `Solved` (infeasible bounds, time limit, numerical
     /// trouble) is [`ControlError::Solver`].
@@ -1043,7 +1066,6 @@ impl ConstrainedAxisSolver {
         for f in 0..n {
             self.qvec[f] = 2.0 * self.q * (baseline(fixed, f + 3) - reference[f + 3]);
         }
-        let mut m = self.m_eq;
         let dt = self.dt;
         let sm = self.smoothness;
         self.qvec[n] = match sent {
@@ -1053,26 +1075,14 @@ impl ConstrainedAxisSolver {
             }
             _ => 0.0,
         };
-        if let Some([lo, hi]) = self.bounds.acceleration {
-            let a_base = (fixed[2] - 2.0 * fixed[1] + fixed[0]) / (dt * dt);
-            for _ in 1..=self.horizon - 2 {
-                self.bvec[m] = hi - a_base;
-                self.bvec[m + 1] = a_base - lo;
-                m += 2;
-            }
-        }
-        if let Some(v) = self.bounds.speed {
-            let d1 = fixed[1] - fixed[0];
-            let d2 = fixed[2] - 2.0 * fixed[1] + fixed[0];
-            let funnel = self.speed_funnel(fixed);
-            for j in 2..=self.horizon - 1 {
-                let s_base = (d1 + j as f64 * d2) / dt;
-                let limit = funnel.map_or(v, |(v1, a)| v.max(v1 - a * (j - 1) as f64 * dt));
-                self.bvec[m] = limit - s_base;
-                self.bvec[m + 1] = limit + s_base;
-                m += 2;
-            }
-        }
+        // Rows `±row ≤ b`: the upper bound, then minus the lower.
+        let mut m = self.m_eq;
+        let bvec = &mut self.bvec;
+        self.bounds.row_bounds(self.horizon, fixed, dt, |lo, hi| {
+            bvec[m] = hi;
+            bvec[m + 1] = -lo;
+            m += 2;
+        });
         self.solver
             .update_q(&self.qvec)
             .and_then(|()| self.solver.update_b(&self.bvec))
@@ -1797,11 +1807,12 @@ mod tests {
 
     proptest::proptest! {
         #![proptest_config(proptest::test_runner::Config::with_cases(48))]
-        /// The shipped KKT tuning (static regularisation 1e-12, refinement
-        /// 1e-10) gives the plan of clarabel's default settings on random
-        /// constrained instances, with and without the smoothness term: the
-        /// first planned jerk (what the command depends on) to 1e-6
-        /// relative and every output to 1e-6 m, and the bounds hold.
+        /// The shipped KKT tuning ([`KktTuning::SHIPPED`]) gives the plan of
+        /// clarabel's default settings on random constrained instances —
+        /// with and without the smoothness term, windows faster than the
+        /// speed bound (funnel) included: the first planned jerk (what the
+        /// command depends on) to 1e-6 relative and every output to 1e-6 m;
+        /// the acceleration bounds hold.
         #[test]
         fn shipped_kkt_tuning_matches_clarabel_defaults(
             horizon in 20usize..=200,
@@ -1810,7 +1821,7 @@ mod tests {
             a_max in 1.0f64..5.0,
             speed in proptest::option::of(2.0f64..8.0),
             y0 in -5.0f64..5.0,
-            v0_frac in -0.8f64..0.8,
+            v0_frac in -1.5f64..1.5,
             a0_frac in -0.8f64..0.8,
             target in -20.0f64..20.0,
             slope in -3.0f64..3.0,
@@ -1857,7 +1868,9 @@ mod tests {
             for (j, (g, w)) in got.iter().zip(&want).enumerate() {
                 proptest::prop_assert!((g - w).abs() <= 1e-6, "y_{j}: {g} vs {w}");
             }
-            proptest::prop_assert!(!bounds.violated_by(&got, DT));
+            // The funnel relaxes the speed bound near the start.
+            let check = AxisBounds { speed: None, ..bounds };
+            proptest::prop_assert!(!check.violated_by(&got, DT));
         }
     }
 
