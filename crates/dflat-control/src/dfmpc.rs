@@ -1601,7 +1601,9 @@ impl Controller for DfMpc {
     /// Flies the last good plan: step s = 1, 2, … of it through F (with
     /// the current disturbance estimate) and saturation. A non-finite
     /// measurement is not used (classic mode: y_k is the model's
-    /// prediction, as on a tick without a new pose). `None` once
+    /// prediction, as on a tick without a new pose). In multi-rate mode a
+    /// tick time not after the last committed tick (a late update's tick)
+    /// is taken as the step after it. `None` once
     /// `max_steps` or [`MAX_FALLBACK_STEPS`] steps are flown, the kept plan
     /// is used up, or the map fails.
     fn plan_fallback(&mut self, measurement: &Measurement, max_steps: usize) -> Option<TickOutput> {
@@ -1617,8 +1619,21 @@ impl Controller for DfMpc {
             .map_or(DisturbanceEstimate::NOMINAL, |e| e.estimate());
         let axes = self.model.axes();
         let mut m = *measurement;
-        if self.multi.is_none() && !m.position.iter().take(axes).all(|v| v.is_finite()) {
-            m.t = f64::NEG_INFINITY;
+        match &self.multi {
+            // A tick already committed at this time (the shell could not
+            // use a late update's result): this is the step after it.
+            Some(multi) => {
+                if let Some(last) = multi.last_tick()
+                    && (m.t.is_nan() || m.t <= last)
+                {
+                    m.t = last + self.model.dt();
+                }
+            }
+            None => {
+                if !m.position.iter().take(axes).all(|v| v.is_finite()) {
+                    m.t = f64::NEG_INFINITY;
+                }
+            }
         }
         let FixedOutputs { window, fixed, .. } = self.fixed_outputs(&m, &d).ok()?;
         let plan4: [Vector3<f64>; 4] = std::array::from_fn(|j| {

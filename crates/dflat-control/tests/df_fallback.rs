@@ -230,7 +230,16 @@ fn plan_fallback_in_multi_rate_mode() {
     let second = ctrl.plan_fallback(&sample(6.0 * DT), 10).unwrap();
     assert!(first.command.is_finite() && second.command.is_finite());
     assert_ne!(first.plan, second.plan, "one plan step per tick");
+    let last = |c: &DfMpc| c.multi_rate_window().unwrap().last_tick().unwrap();
+    assert!((last(&ctrl) - 6.0 * DT).abs() < 1e-12);
     // Back to normal ticks.
     ctrl.observe(&sample(7.0 * DT));
     assert!(ctrl.update(&sample(7.0 * DT), &mut reference).is_ok());
+    // A late update (the shell flies its plan instead, at the same tick
+    // time): the fallback is the step after it, on the window's clock too.
+    assert!(ctrl.plan_fallback(&sample(7.0 * DT), 10).is_some());
+    assert!((last(&ctrl) - 8.0 * DT).abs() < 1e-12, "{}", last(&ctrl));
+    ctrl.observe(&sample(9.0 * DT));
+    assert!(ctrl.update(&sample(9.0 * DT), &mut reference).is_ok());
+    assert!((last(&ctrl) - 9.0 * DT).abs() < 1e-12);
 }
