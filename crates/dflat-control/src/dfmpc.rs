@@ -99,6 +99,7 @@ use serde::{Deserialize, Serialize};
 use crate::banded::{BandedCholesky, SymBand};
 use crate::disturbance::{DisturbanceEstimate, DisturbanceEstimator, DisturbanceSettings};
 use crate::model::ControlModel;
+use crate::stage_qp::StageQp;
 use crate::window::{MultiRateSettings, MultiRateWindow, Window, input_lags};
 use crate::{ControlError, Controller, Measurement, ReferenceSource, TickOutput};
 
@@ -830,6 +831,37 @@ impl KktTuning {
     };
 }
 
+/// The ã block of the doubled Hessian `P` (objective `½xᵀPx`) in the
+/// variables of [`ConstrainedAxisSolver`]: the jerk term `(r/δt²)·Σ_j
+/// (ã_j − ã_{j−1})²` (ã_{−1} = 0) and the smoothness term (band 2), as
+/// `[diagonal, (k−1, k), (k−2, k)]` per column k.
+fn accel_block(n: usize, r: f64, dt: f64, smoothness: &Smoothness) -> Vec<[f64; 3]> {
+    let ja = 2.0 * r / (dt * dt);
+    let mut band = vec![[0.0f64; 3]; n];
+    for (k, col) in band.iter_mut().enumerate() {
+        col[0] = if k + 1 < n { 2.0 * ja } else { ja };
+        if k > 0 {
+            col[1] = -ja;
+        }
+    }
+    if smoothness.weight > 0.0 {
+        let sg = 2.0 * smoothness.weight / smoothness.gravity.powi(2);
+        let kp = smoothness.kappa;
+        let coeffs = [kp, 1.0 - 2.0 * kp, -(1.0 - kp)]; // on ã_j, ã_{j−1}, ã_{j−2}
+        for j in 0..n {
+            for (da, &ca) in coeffs.iter().enumerate() {
+                let Some(a) = j.checked_sub(da) else { continue };
+                for (db, &cb) in coeffs.iter().enumerate().skip(da) {
+                    let Some(b) = j.checked_sub(db) else { continue };
+                    // a ≥ b: entry (b, a) of the upper triangle.
+                    band[a][a - b] += sg * ca * cb;
+                }
+            }
+        }
+    }
+    band
+}
+
 /// Row-builder for the sparse constraint matrix (column-wise triplets).
 struct Triplets {
     rows: Vec<usize>,
@@ -906,33 +938,9 @@ impl ConstrainedAxisSolver {
         }
         let n = horizon - 2;
         let nv = 2 * n;
-        // P (upper triangle): 2q on p; on ã the jerk term
-        // (r/δt²)·Σ_j (ã_j − ã_{j−1})² (ã_{−1} = 0), doubled for ½xᵀPx,
-        // and the smoothness term (band 2), kept as diagonals of the ã block.
-        let ja = 2.0 * r / (dt * dt);
-        let mut band = vec![[0.0f64; 3]; n]; // [diag, (k−1, k), (k−2, k)] per column k
-        for (k, col) in band.iter_mut().enumerate() {
-            col[0] = if k + 1 < n { 2.0 * ja } else { ja };
-            if k > 0 {
-                col[1] = -ja;
-            }
-        }
+        // P (upper triangle): 2q on p; on ã the jerk and smoothness terms.
+        let band = accel_block(n, r, dt, &smoothness);
         let smooth = smoothness.weight > 0.0;
-        if smooth {
-            let sg = 2.0 * smoothness.weight / smoothness.gravity.powi(2);
-            let kp = smoothness.kappa;
-            let coeffs = [kp, 1.0 - 2.0 * kp, -(1.0 - kp)]; // on ã_j, ã_{j−1}, ã_{j−2}
-            for j in 0..n {
-                for (da, &ca) in coeffs.iter().enumerate() {
-                    let Some(a) = j.checked_sub(da) else { continue };
-                    for (db, &cb) in coeffs.iter().enumerate().skip(da) {
-                        let Some(b) = j.checked_sub(db) else { continue };
-                        // a ≥ b: entry (b, a) of the upper triangle.
-                        band[a][a - b] += sg * ca * cb;
-                    }
-                }
-            }
-        }
         let mut colptr = vec![0usize];
         let (mut prow, mut pval) = (Vec::new(), Vec::new());
         for c in 0..nv {
@@ -1096,6 +1104,125 @@ impl ConstrainedAxisSolver {
         plan[..3].copy_from_slice(fixed);
         for f in 0..n {
             plan[f + 3] = baseline(fixed, f + 3) + x[f];
+        }
+        if plan.iter().any(|v| !v.is_finite()) {
+            return Err(ControlError::Solver("non-finite solution".to_string()));
+        }
+        Ok(())
+    }
+}
+
+// ---------------------------------------------------------------------------
+// The 1-D problem: constrained (banded interior point)
+// ---------------------------------------------------------------------------
+
+/// The 1-D DF-MPC problem with inequality bounds, solved by the banded
+/// interior-point method of [`crate::stage_qp`]: clarabel's variables and
+/// cost ([`ConstrainedAxisSolver`]), the KKT system ordered by stage, so
+/// O(N) per iteration. It starts from the unconstrained optimum (computed
+/// here with the fast path). [`DfMpc`] uses it first and falls back to
+/// clarabel when it does not converge.
+#[derive(Debug, Clone)]
+pub struct BoundedAxisSolver {
+    fast: AxisSolver,
+    bounds: AxisBounds,
+    qp: StageQp,
+    c_p: Vec<f64>,
+    lo: Vec<f64>,
+    hi: Vec<f64>,
+    p: Vec<f64>,
+    iterations: usize,
+}
+
+impl BoundedAxisSolver {
+    /// Builds the solver for horizon N, weights `(q, r, δt)` as
+    /// [`AxisSolver::with_smoothness`], the bounds and the smoothness term.
+    pub fn new(
+        horizon: usize,
+        (q, r, dt): (f64, f64, f64),
+        bounds: AxisBounds,
+        smoothness: Smoothness,
+    ) -> Result<Self, ControlError> {
+        let fast = AxisSolver::with_smoothness(horizon, q, r, dt, smoothness)?;
+        let n = horizon - 2;
+        let accel = accel_block(n, r, dt, &smoothness);
+        let qp = StageQp::new(
+            n,
+            q,
+            dt,
+            &accel,
+            bounds.acceleration.is_some(),
+            bounds.speed.is_some(),
+        );
+        let m = qp.rows();
+        Ok(Self {
+            fast,
+            bounds,
+            qp,
+            c_p: vec![0.0; n],
+            lo: vec![0.0; m],
+            hi: vec![0.0; m],
+            p: vec![0.0; n],
+            iterations: 0,
+        })
+    }
+
+    /// The bounds this solver enforces.
+    pub fn bounds(&self) -> &AxisBounds {
+        &self.bounds
+    }
+
+    /// Interior-point iterations of the last solve.
+    pub fn iterations(&self) -> usize {
+        self.iterations
+    }
+
+    /// Solves with the bounds; arguments as [`AxisSolver::solve_problem`].
+    /// Errors: those of the fast path, and [`ControlError::Solver`] when
+    /// the interior-point method does not converge (infeasible bounds,
+    /// numerical trouble).
+    pub fn solve_problem(&mut self, a: AxisProblem<'_>) -> Result<(), ControlError> {
+        let AxisProblem {
+            fixed,
+            sent,
+            reference,
+            plan,
+        } = a;
+        self.fast.solve_problem(AxisProblem {
+            fixed,
+            sent,
+            reference,
+            plan: &mut *plan,
+        })?;
+        let dt = self.fast.dt;
+        let q = self.fast.q;
+        let n = self.p.len();
+        for f in 0..n {
+            let b = baseline(fixed, f + 3);
+            self.c_p[f] = 2.0 * q * (b - reference[f + 3]);
+            self.p[f] = plan[f + 3] - b;
+        }
+        let sm = self.fast.smoothness;
+        let c_a0 = match sent {
+            Some(c) if sm.weight > 0.0 => {
+                let a0 = (fixed[2] - 2.0 * fixed[1] + fixed[0]) / (dt * dt);
+                2.0 * sm.weight / sm.gravity.powi(2) * sm.kappa * (a0 - c)
+            }
+            _ => 0.0,
+        };
+        let (lo, hi) = (&mut self.lo, &mut self.hi);
+        let mut i = 0;
+        self.bounds
+            .row_bounds(self.fast.horizon, fixed, dt, |l, h| {
+                lo[i] = l;
+                hi[i] = h;
+                i += 1;
+            });
+        self.iterations = self
+            .qp
+            .solve(&self.c_p, c_a0, &self.lo, &self.hi, &mut self.p)?;
+        for f in 0..n {
+            plan[f + 3] = baseline(fixed, f + 3) + self.p[f];
         }
         if plan.iter().any(|v| !v.is_finite()) {
             return Err(ControlError::Solver("non-finite solution".to_string()));
@@ -1874,18 +2001,28 @@ mod tests {
                     fixed: &fixed, sent, reference: &reference, plan: &mut got,
                 })
                 .unwrap();
+            let mut banded = BoundedAxisSolver::new(horizon, (q, r, DT), bounds, smoothness).unwrap();
+            let mut got_banded = vec![0.0; horizon + 1];
+            banded
+                .solve_problem(AxisProblem {
+                    fixed: &fixed, sent, reference: &reference, plan: &mut got_banded,
+                })
+                .unwrap();
             let jerk = |p: &[f64]| (p[3] - 3.0 * p[2] + 3.0 * p[1] - p[0]) / DT.powi(3);
-            let (jg, jw) = (jerk(&got), jerk(&want));
-            proptest::prop_assert!(
-                (jg - jw).abs() <= 1e-6 * jw.abs().max(1.0),
-                "first jerk {jg} vs {jw}"
-            );
-            for (j, (g, w)) in got.iter().zip(&want).enumerate() {
-                proptest::prop_assert!((g - w).abs() <= 1e-6, "y_{j}: {g} vs {w}");
+            let jw = jerk(&want);
+            for (name, got) in [("clarabel shipped", &got), ("banded", &got_banded)] {
+                let jg = jerk(got);
+                proptest::prop_assert!(
+                    (jg - jw).abs() <= 1e-6 * jw.abs().max(1.0),
+                    "{name}: first jerk {jg} vs {jw}"
+                );
+                for (j, (g, w)) in got.iter().zip(&want).enumerate() {
+                    proptest::prop_assert!((g - w).abs() <= 1e-6, "{name}: y_{j}: {g} vs {w}");
+                }
+                // The funnel relaxes the speed bound near the start.
+                let check = AxisBounds { speed: None, ..bounds };
+                proptest::prop_assert!(!check.violated_by(got, DT), "{name}");
             }
-            // The funnel relaxes the speed bound near the start.
-            let check = AxisBounds { speed: None, ..bounds };
-            proptest::prop_assert!(!check.violated_by(&got, DT));
         }
     }
 

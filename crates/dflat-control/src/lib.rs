@@ -28,6 +28,7 @@ pub mod fmpc;
 pub mod model;
 pub mod pd;
 pub mod reference;
+pub mod stage_qp;
 pub mod window;
 
 pub use model::ControlModel;
