@@ -102,10 +102,14 @@ impl BandedLdl {
     /// Solves `L·D·Lᵀ·x = rhs` in place.
     pub fn solve(&self, x: &mut [f64]) {
         let (n, b) = (self.n, self.b);
+        assert!(x.len() == n, "length mismatch");
         for i in 0..n {
+            let row = &self.l[i * b..(i + 1) * b];
+            let m = i.min(b);
             let mut s = x[i];
-            for k in i.saturating_sub(b)..i {
-                s -= self.l[i * b + (i - k) - 1] * x[k];
+            // row[d − 1] = L[i][i − d], d = 1..=m.
+            for (d, l) in row[..m].iter().enumerate() {
+                s -= l * x[i - 1 - d];
             }
             x[i] = s;
         }
@@ -114,8 +118,9 @@ impl BandedLdl {
         }
         for i in (0..n).rev() {
             let mut s = x[i];
-            for k in (i + 1)..(i + b + 1).min(n) {
-                s -= self.l[k * b + (k - i) - 1] * x[k];
+            let m = b.min(n - 1 - i);
+            for d in 1..=m {
+                s -= self.l[(i + d) * b + d - 1] * x[i + d];
             }
             x[i] = s;
         }
@@ -365,7 +370,15 @@ impl StageQp {
                 return Err(ControlError::Solver("stage QP: non-finite iterate".into()));
             }
             let a_scale = 1.0 + (0..n).fold(0.0f64, |a, f| a.max(self.v[a_at(f)].abs()));
-            if std::env::var("QPDBG").is_ok() { eprintln!("it {iteration} rd {:e} req {:e} rp {:e} gap {:e}", rd / c_scale, req / a_scale, rp / b_scale, gap / (1.0 + objective.abs())); }
+            if std::env::var("QPDBG").is_ok() {
+                eprintln!(
+                    "it {iteration} rd {:e} req {:e} rp {:e} gap {:e}",
+                    rd / c_scale,
+                    req / a_scale,
+                    rp / b_scale,
+                    gap / (1.0 + objective.abs())
+                );
+            }
             if rd <= 10.0 * TOLERANCE * c_scale
                 && req <= TOLERANCE * a_scale
                 && rp <= TOLERANCE * b_scale
@@ -443,19 +456,21 @@ impl StageQp {
         }
         self.dv.copy_from_slice(&self.rhs);
         self.ldl.solve(&mut self.dv);
-        // Refinement: tmp = rhs − K₀·dv with K₀ = K without ε.
-        self.kkt.mul_vec(&self.dv, &mut self.tmp);
-        for f in 0..self.n {
-            self.tmp[p_at(f)] -= REGULARISATION * self.dv[p_at(f)];
-            self.tmp[a_at(f)] -= REGULARISATION * self.dv[a_at(f)];
-            self.tmp[l_at(f)] += REGULARISATION * self.dv[l_at(f)];
-        }
-        for (t, r) in self.tmp.iter_mut().zip(&self.rhs) {
-            *t = r - *t;
-        }
-        self.ldl.solve(&mut self.tmp);
-        for (d, t) in self.dv.iter_mut().zip(&self.tmp) {
-            *d += t;
+        if std::env::var("REFINE").is_ok() {
+            // Refinement: tmp = rhs − K₀·dv with K₀ = K without ε.
+            self.kkt.mul_vec(&self.dv, &mut self.tmp);
+            for f in 0..self.n {
+                self.tmp[p_at(f)] -= REGULARISATION * self.dv[p_at(f)];
+                self.tmp[a_at(f)] -= REGULARISATION * self.dv[a_at(f)];
+                self.tmp[l_at(f)] += REGULARISATION * self.dv[l_at(f)];
+            }
+            for (t, r) in self.tmp.iter_mut().zip(&self.rhs) {
+                *t = r - *t;
+            }
+            self.ldl.solve(&mut self.tmp);
+            for (d, t) in self.dv.iter_mut().zip(&self.tmp) {
+                *d += t;
+            }
         }
         for (row, st) in self.rows.iter().zip(self.state.iter_mut()) {
             let (rcu, rcl) = rc(st);
