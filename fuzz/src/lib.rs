@@ -20,7 +20,7 @@ use dflat_link::{
     SourceFilter, frames,
 };
 
-/// Control period [s] of the synthetic tick.
+/// Control period \[s\] of the synthetic tick.
 pub const DT: f64 = 0.02;
 
 /// A daemon configuration picked by the bits of `flags`.
@@ -64,7 +64,7 @@ pub struct Harness {
     pub supervisor: Supervisor,
     clock: PoseClock,
     geofence: [f64; 3],
-    /// Synthetic monotonic time [s].
+    /// Synthetic monotonic time \[s\].
     pub now: f64,
     next_tick: f64,
     handled: u64,
@@ -113,7 +113,7 @@ impl Harness {
         }
     }
 
-    /// Advances the synthetic clock by `dt` [s], ticking at 50 Hz on the way.
+    /// Advances the synthetic clock by `dt` \[s\], ticking at 50 Hz on the way.
     pub fn advance(&mut self, dt: f64) {
         assert!(dt.is_finite() && dt >= 0.0);
         self.now += dt;

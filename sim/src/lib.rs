@@ -2,7 +2,7 @@
 //!
 //! Plants, sensor models, a closed-loop harness and plot helpers for the
 //! controllers of `dflat-control`. Everything here is pure and deterministic
-//! from seeds: no wall clock, no global RNG. Time is simulated time [s].
+//! from seeds: no wall clock, no global RNG. Time is simulated time \[s\].
 //!
 //! * [`plant`] — vehicle stand-ins integrated with RK4 at 200 Hz (default),
 //!   the command held between 50 Hz controller ticks: a planar plant with
@@ -21,8 +21,8 @@
 //! * [`experiments`] — the paper's studies (noise sweep, L-path comparison,
 //!   DSL demonstration): pure runs returning results, JSON and plot writers.
 //!
-//! Conventions (see `DESIGN.md`): local NED [m], body FRD, ZYX Euler angles
-//! [rad], specific thrust [m/s²] (thrust / mass), SI units throughout.
+//! Conventions (see `DESIGN.md`): local NED \[m\], body FRD, ZYX Euler angles
+//! \[rad\], specific thrust [m/s²] (thrust / mass), SI units throughout.
 
 pub mod experiments;
 pub mod harness;

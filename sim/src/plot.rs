@@ -78,7 +78,7 @@ pub fn controller_color(name: &str, index: usize) -> RGBColor {
     }
 }
 
-/// NED positions as map points `(east, north)` [m], for path plots with
+/// NED positions as map points `(east, north)` \[m\], for path plots with
 /// north up.
 pub fn north_up(points: &[Vector3<f64>]) -> Vec<(f64, f64)> {
     points.iter().map(|p| (p.y, p.x)).collect()
@@ -124,7 +124,7 @@ pub struct LinePlot {
     pub log_y: bool,
     /// The series.
     pub series: Vec<Series>,
-    /// Image size [px].
+    /// Image size \[px\].
     pub size: (u32, u32),
 }
 
@@ -152,15 +152,15 @@ impl LinePlot {
 pub struct PathPlot {
     /// Title above the chart.
     pub title: String,
-    /// x-axis label (e.g. "east [m]").
+    /// x-axis label (e.g. "east \[m\]").
     pub x_label: String,
-    /// y-axis label (e.g. "north [m]").
+    /// y-axis label (e.g. "north \[m\]").
     pub y_label: String,
     /// The reference path (drawn black, legend "reference").
     pub reference: Vec<(f64, f64)>,
     /// The flown paths.
     pub series: Vec<Series>,
-    /// Image size [px].
+    /// Image size \[px\].
     pub size: (u32, u32),
 }
 
@@ -200,7 +200,7 @@ pub struct BoxPlot {
     pub title: String,
     /// x-axis label (e.g. "desired speed [m/s]").
     pub x_label: String,
-    /// y-axis label (e.g. "path error [m]").
+    /// y-axis label (e.g. "path error \[m\]").
     pub y_label: String,
     /// Category names, left to right.
     pub categories: Vec<String>,
@@ -208,7 +208,7 @@ pub struct BoxPlot {
     pub series: Vec<BoxSeries>,
     /// Logarithmic y axis (values ≤ 0 are dropped).
     pub log_y: bool,
-    /// Image size [px].
+    /// Image size \[px\].
     pub size: (u32, u32),
 }
 

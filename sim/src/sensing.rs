@@ -38,26 +38,26 @@ use crate::rng::{STREAM_SENSOR, normal, stream};
 /// One pose sample as produced by the sensor.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PoseSample {
-    /// Time the pose describes (capture time) [s].
+    /// Time the pose describes (capture time) \[s\].
     pub t_measured: f64,
-    /// Time the sample reaches the controller [s] (≥ `t_measured`).
+    /// Time the sample reaches the controller \[s\] (≥ `t_measured`).
     pub t_arrival: f64,
-    /// Measured position, local NED [m].
+    /// Measured position, local NED \[m\].
     pub position: Vector3<f64>,
-    /// Measured yaw ψ [rad].
+    /// Measured yaw ψ \[rad\].
     pub yaw: f64,
 }
 
 /// A position sensor between plant and controller.
 pub trait Sensor: Send {
-    /// Starts over at time `t0` [s] with the vehicle in `truth`, assumed to
+    /// Starts over at time `t0` \[s\] with the vehicle in `truth`, assumed to
     /// have moved at constant velocity before `t0` (so a delayed sensor has
     /// samples from the start).
     fn reset(&mut self, t0: f64, truth: &PlantState);
-    /// Feeds the true state at time `t` [s] (after every plant step, with
+    /// Feeds the true state at time `t` \[s\] (after every plant step, with
     /// increasing `t`).
     fn observe(&mut self, t: f64, truth: &PlantState);
-    /// The measurement for the control tick at time `t` [s] (call after
+    /// The measurement for the control tick at time `t` \[s\] (call after
     /// `observe` at `t`); `None` while no sample has arrived.
     fn measure(&mut self, t: f64) -> Option<Measurement>;
     /// The samples that arrived at the last [`Sensor::measure`] call (since
@@ -102,14 +102,14 @@ pub fn build_sensor(spec: &SensorSpec, seed: u64) -> Result<Box<dyn Sensor>, Sim
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct GaussianOptions {
-    /// Noise standard deviation per NED axis [m].
+    /// Noise standard deviation per NED axis \[m\].
     pub sigma: [f64; 3],
-    /// Yaw noise standard deviation [rad].
+    /// Yaw noise standard deviation \[rad\].
     pub yaw_sigma: f64,
 }
 
 impl GaussianOptions {
-    /// The paper's §VI noise: σ [m] on x (north) only.
+    /// The paper's §VI noise: σ \[m\] on x (north) only.
     pub fn x_only(sigma: f64) -> Self {
         Self {
             sigma: [sigma, 0.0, 0.0],
@@ -117,7 +117,7 @@ impl GaussianOptions {
         }
     }
 
-    /// σ [m] on all three axes.
+    /// σ \[m\] on all three axes.
     pub fn isotropic(sigma: f64) -> Self {
         Self {
             sigma: [sigma; 3],
@@ -222,23 +222,23 @@ pub enum VisionMode {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct VisionOptions {
-    /// Nominal sample rate [Hz].
+    /// Nominal sample rate \[Hz\].
     pub rate_hz: f64,
-    /// Latency from capture to arrival [s].
+    /// Latency from capture to arrival \[s\].
     pub latency: f64,
-    /// Standard deviation of a Gaussian latency jitter [s]; arrivals stay in
+    /// Standard deviation of a Gaussian latency jitter \[s\]; arrivals stay in
     /// capture order and never precede the capture.
     pub latency_jitter: f64,
-    /// Position noise standard deviation per axis [m].
+    /// Position noise standard deviation per axis \[m\].
     pub sigma: f64,
-    /// Yaw noise standard deviation [rad].
+    /// Yaw noise standard deviation \[rad\].
     pub yaw_sigma: f64,
     /// Long-run share of dropped samples [0, 1).
     pub dropout: f64,
-    /// Mean length of a dropout burst [samples] (≥ 1; 1 = independent
+    /// Mean length of a dropout burst \[samples\] (≥ 1; 1 = independent
     /// dropouts, > 1 = a two-state Markov chain with the same long-run share).
     pub burst_len: f64,
-    /// Capture times jitter uniformly in ±`timing_jitter` [s] about the
+    /// Capture times jitter uniformly in ±`timing_jitter` \[s\] about the
     /// nominal grid (< half the period).
     pub timing_jitter: f64,
     /// Per-tick measurement model.

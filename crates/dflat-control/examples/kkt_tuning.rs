@@ -11,7 +11,7 @@ const DT: f64 = 0.02;
 const G: f64 = 9.81;
 const REPS: usize = 200;
 
-/// One problem: horizon, q, r, smoothness weight, tilt bound [deg], fixed
+/// One problem: horizon, q, r, smoothness weight, tilt bound \[deg\], fixed
 /// window, setpoint.
 struct Case {
     name: &'static str,

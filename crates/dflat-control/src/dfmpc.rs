@@ -67,7 +67,7 @@
 //! Σ_{j=0..N−3} s·((c_j − c_{j−1})/g)²,   c_{−1} = acceleration the command SENT at k−1 asks for
 //! ```
 //!
-//! (≈ s·Δθ_cmd² [rad²] per tick; the first term ties the plan to the
+//! (≈ s·Δθ_cmd² \[rad²\] per tick; the first term ties the plan to the
 //! command actually sent, after saturation). In the free outputs this is
 //! `‖E·p + e‖²` with `E = T·D`, `T = κ·I + (1 − κ)·S` (S the one-step
 //! delay, D the third-difference matrix above): the Hessian becomes
@@ -107,7 +107,7 @@ use crate::{ControlError, Controller, Measurement, ReferenceSource, TickOutput};
 const D3: [f64; 4] = [-1.0, 3.0, -3.0, 1.0];
 /// Half-bandwidth of the fast-path Hessian.
 const BANDWIDTH: usize = 3;
-/// Largest horizon accepted [steps].
+/// Largest horizon accepted \[steps\].
 pub const MAX_HORIZON: usize = 100_000;
 /// Most ticks [`Controller::plan_fallback`] flies the last good plan (and
 /// at most N − 3: the plan's end).
@@ -121,7 +121,7 @@ pub const MAX_FALLBACK_STEPS: usize = 50;
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct InputSaturation {
-    /// Largest |pitch| and |roll| command [rad], each clipped separately.
+    /// Largest |pitch| and |roll| command \[rad\], each clipped separately.
     /// Default 35° (the DJI SDK limit).
     pub max_tilt: f64,
     /// Smallest specific thrust command [m/s²] (spatial model only). Default 2.
@@ -145,7 +145,7 @@ impl Default for InputSaturation {
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct OutputConstraints {
-    /// Max tilt [rad] as a bound on the horizontal acceleration per axis,
+    /// Max tilt \[rad\] as a bound on the horizontal acceleration per axis,
     /// `|Δ²y/δt²| ≤ g·tan(max_tilt)`. Default none.
     pub max_tilt: Option<f64>,
     /// Max speed per axis `|Δy/δt|` [m/s]; when the window is already
@@ -182,7 +182,7 @@ pub struct DfMpcSettings {
     pub saturation: Option<InputSaturation>,
     /// Optional inequality constraints on the plan. Default none.
     pub constraints: OutputConstraints,
-    /// Wall-time limit for one clarabel solve [s] (`f64::INFINITY` for
+    /// Wall-time limit for one clarabel solve \[s\] (`f64::INFINITY` for
     /// none). Default 0.01.
     pub solver_time_limit: f64,
     /// Command-smoothness weight s per axis `[x, y, z]` [1/rad²] on the
@@ -317,26 +317,26 @@ fn baseline(fixed: &[f64; 3], j: usize) -> f64 {
 }
 
 /// One axis's data for [`AxisSolver::solve_pair`]: `fixed` = `[y_0, y_1,
-/// y_2]` [m], `reference` = `ref_0..ref_N` [m], `plan` receives `y*_0..y*_N`.
+/// y_2]` \[m\], `reference` = `ref_0..ref_N` \[m\], `plan` receives `y*_0..y*_N`.
 #[derive(Debug)]
 pub struct AxisProblem<'a> {
-    /// The fixed outputs `[y_0, y_1, y_2]` [m].
+    /// The fixed outputs `[y_0, y_1, y_2]` \[m\].
     pub fixed: &'a [f64; 3],
     /// `c_{−1}` [m/s²]: the acceleration the command sent at the previous
     /// tick asks for on this axis (used only with a smoothness weight;
     /// `None`: the fixed window's acceleration, i.e. the first change is
     /// free).
     pub sent: Option<f64>,
-    /// The reference `ref_0..ref_N` [m] (length N + 1).
+    /// The reference `ref_0..ref_N` \[m\] (length N + 1).
     pub reference: &'a [f64],
-    /// Output: the optimal `y*_0..y*_N` [m] (length N + 1).
+    /// Output: the optimal `y*_0..y*_N` \[m\] (length N + 1).
     pub plan: &'a mut [f64],
 }
 
 /// Per-right-hand-side workspace of [`AxisSolver`].
 #[derive(Debug, Clone)]
 struct Slot {
-    /// Baseline b_3..b_N [m].
+    /// Baseline b_3..b_N \[m\].
     base: Vec<f64>,
     /// q·(ref − b) on the free outputs.
     rhs: Vec<f64>,
@@ -354,7 +354,7 @@ pub struct Smoothness {
     pub weight: f64,
     /// κ = τ/δt > 0: the input lag (attitude τ, thrust τ_T) in steps.
     pub kappa: f64,
-    /// Gravity g > 0 [m/s²]: accelerations over g are tilts [rad].
+    /// Gravity g > 0 [m/s²]: accelerations over g are tilts \[rad\].
     pub gravity: f64,
 }
 
@@ -405,8 +405,8 @@ pub struct AxisSolver {
 }
 
 impl AxisSolver {
-    /// Builds and factors the problem for horizon N ≥ 3 [steps], tracking
-    /// weight q ≥ 0 [1/m²], jerk weight r > 0 [s⁶/m²], step δt > 0 [s].
+    /// Builds and factors the problem for horizon N ≥ 3 \[steps\], tracking
+    /// weight q ≥ 0 [1/m²], jerk weight r > 0 [s⁶/m²], step δt > 0 \[s\].
     pub fn new(horizon: usize, q: f64, r: f64, dt: f64) -> Result<Self, ControlError> {
         Self::with_smoothness(horizon, q, r, dt, Smoothness::default())
     }
@@ -505,7 +505,7 @@ impl AxisSolver {
         }
     }
 
-    /// Horizon N [steps].
+    /// Horizon N \[steps\].
     pub fn horizon(&self) -> usize {
         self.horizon
     }
@@ -599,8 +599,8 @@ impl AxisSolver {
         }
     }
 
-    /// Solves for the optimal outputs. `fixed` = `[y_0, y_1, y_2]` [m],
-    /// `reference` = `ref_0..ref_N` [m] (length N + 1); writes `y*_0..y*_N`
+    /// Solves for the optimal outputs. `fixed` = `[y_0, y_1, y_2]` \[m\],
+    /// `reference` = `ref_0..ref_N` \[m\] (length N + 1); writes `y*_0..y*_N`
     /// into `plan` (length N + 1). Errors name a wrong length.
     ///
     /// One banded solve for the deviation from the baseline, then one step
@@ -725,7 +725,7 @@ impl AxisBounds {
         self.acceleration.is_none() && self.speed.is_none()
     }
 
-    /// True when `plan` (`y_0..y_N` [m], step δt [s]) violates a bound by
+    /// True when `plan` (`y_0..y_N` \[m\], step δt \[s\]) violates a bound by
     /// more than a relative 1e-6 (absolute 1e-9 near zero bounds).
     pub fn violated_by(&self, plan: &[f64], dt: f64) -> bool {
         let tol = |b: f64| 1e-6 * b.abs() + 1e-9;
@@ -887,7 +887,7 @@ impl Triplets {
 
 impl ConstrainedAxisSolver {
     /// Builds the solver once for horizon N, weights q ≥ 0 [1/m²], r > 0
-    /// [s⁶/m²], step δt [s], bounds and clarabel time limit [s].
+    /// [s⁶/m²], step δt \[s\], bounds and clarabel time limit \[s\].
     pub fn new(
         horizon: usize,
         q: f64,
@@ -1033,7 +1033,7 @@ impl ConstrainedAxisSolver {
         })
     }
 
-    /// Horizon N [steps].
+    /// Horizon N \[steps\].
     pub fn horizon(&self) -> usize {
         self.horizon
     }
@@ -1285,11 +1285,11 @@ pub struct DfMpc {
     /// Last plan y*_k..y*_{k+N} per axis.
     plans: Vec<Vec<f64>>,
     plan_valid: bool,
-    /// Time of the newest measurement used (classic mode) [s]; a tick whose
+    /// Time of the newest measurement used (classic mode) \[s\]; a tick whose
     /// measurement is not newer is predicted instead (see [`DfMpc`]).
     last_t: f64,
     /// The previous tick's F⁻¹ prediction of this tick's output, y_{k+1}
-    /// then (classic mode) [m].
+    /// then (classic mode) \[m\].
     predicted: Vector3<f64>,
     /// Multi-rate window, when configured (else `window` is used).
     multi: Option<MultiRateWindow>,
@@ -1303,7 +1303,7 @@ pub struct DfMpc {
     /// (the next tick's workspaces) after each good tick.
     good_plans: Vec<Vec<f64>>,
     good_reference: Vec<Vector3<f64>>,
-    /// y_k of the last good tick (the z of planar plans) [m].
+    /// y_k of the last good tick (the z of planar plans) \[m\].
     good_y0: Vector3<f64>,
     /// Plan steps flown by `plan_fallback` since the last good tick
     /// (`None`: no plan to fly).
@@ -1431,7 +1431,7 @@ impl DfMpc {
         self.multi.as_ref()
     }
 
-    /// The full plan `y*_k..y*_{k+N}` [m] of `axis` (0 = x, 1 = y, 2 = z)
+    /// The full plan `y*_k..y*_{k+N}` \[m\] of `axis` (0 = x, 1 = y, 2 = z)
     /// from the last successful update; `None` before one, after a failed
     /// one or for an axis the model does not control.
     pub fn plan(&self, axis: usize) -> Option<&[f64]> {
@@ -1466,7 +1466,7 @@ impl DfMpc {
 struct FixedOutputs {
     /// The classic window with y_k pushed (a copy; unused in multi-rate).
     window: Window,
-    /// `[y_k, y_{k+1}, y_{k+2}]` [m], model frame.
+    /// `[y_k, y_{k+1}, y_{k+2}]` \[m\], model frame.
     fixed: [Vector3<f64>; 3],
     /// The input sent at k−1.
     previous_input: Vector3<f64>,

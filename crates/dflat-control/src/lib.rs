@@ -18,7 +18,7 @@
 //!   thrust-scale estimation for offset-free DF-MPC (optional).
 //!
 //! All three implement [`Controller`], so shells choose one by configuration.
-//! Positions are local NED [m]; angles ZYX [rad]; thrust is specific
+//! Positions are local NED \[m\]; angles ZYX \[rad\]; thrust is specific
 //! collective thrust [m/s²] (thrust / mass).
 
 pub mod banded;
@@ -41,22 +41,22 @@ pub use dflat_model::{FlatError, Frame};
 /// One pose measurement as the controller sees it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Measurement {
-    /// Time of the measurement [s] (the shell's clock; only differences matter).
+    /// Time of the measurement \[s\] (the shell's clock; only differences matter).
     pub t: f64,
-    /// Position, local NED [m] (z unused by planar models).
+    /// Position, local NED \[m\] (z unused by planar models).
     pub position: Vector3<f64>,
-    /// Yaw ψ [rad].
+    /// Yaw ψ \[rad\].
     pub yaw: f64,
 }
 
 /// The attitude and thrust command for the autopilot at one tick.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct AttitudeCommand {
-    /// Pitch θ [rad], ZYX, FRD (nose down negative).
+    /// Pitch θ \[rad\], ZYX, FRD (nose down negative).
     pub pitch: f64,
-    /// Roll φ [rad], ZYX, FRD (right wing down positive).
+    /// Roll φ \[rad\], ZYX, FRD (right wing down positive).
     pub roll: f64,
-    /// Yaw ψ [rad].
+    /// Yaw ψ \[rad\].
     pub yaw: f64,
     /// Specific collective thrust [m/s²]; the planar model commands hover (g).
     pub thrust: f64,
@@ -145,7 +145,7 @@ pub trait Controller: Send {
     fn multi_rate(&self) -> bool {
         false
     }
-    /// A raw pose sample at its measurement time `sample.t` [s] (multi-rate
+    /// A raw pose sample at its measurement time `sample.t` \[s\] (multi-rate
     /// mode; see the trait docs). Bad or stale samples are dropped. Default:
     /// ignored.
     fn observe(&mut self, sample: &Measurement) {
@@ -190,7 +190,7 @@ pub trait Controller: Send {
 /// A source of reference positions over a horizon.
 pub trait ReferenceSource {
     /// Fills `out[j]` with the reference position at tick k+j, j = 0..out.len(),
-    /// given the measured position at tick k and the control step δt [s].
+    /// given the measured position at tick k and the control step δt \[s\].
     fn horizon(&mut self, measured: &Vector3<f64>, dt: f64, out: &mut [Vector3<f64>]);
     /// Closest reference point to `measured` and the reference velocity
     /// there [m/s] (for non-predictive controllers).

@@ -4,7 +4,7 @@
 //! models, so the window, the prediction and the optimisation do not care
 //! which one flies:
 //!
-//! * outputs are `Vector3` positions `[x, y, z]` [m] in the model's frame
+//! * outputs are `Vector3` positions `[x, y, z]` \[m\] in the model's frame
 //!   (local NED for flight; the planar model ignores z and carries it along),
 //! * inputs are `Vector3` `[θ_cmd, φ_cmd, T_cmd]` (rad, rad, m/s² specific
 //!   thrust); the planar model's thrust is always hover, `T_cmd = g`.
@@ -72,7 +72,7 @@ impl ControlModel {
         }
     }
 
-    /// Control step δt [s].
+    /// Control step δt \[s\].
     pub fn dt(&self) -> f64 {
         match self {
             ControlModel::Planar(m) => m.dt(),
@@ -80,7 +80,7 @@ impl ControlModel {
         }
     }
 
-    /// The model's fixed yaw ψ⋆ [rad].
+    /// The model's fixed yaw ψ⋆ \[rad\].
     pub fn yaw(&self) -> f64 {
         match self {
             ControlModel::Planar(m) => m.params().psi,

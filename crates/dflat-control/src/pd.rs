@@ -131,7 +131,7 @@ pub struct Pd {
     velocity: Vector3<f64>,
     /// Whether `prev` holds a measurement yet.
     started: bool,
-    /// Time [s] of the newest measurement used.
+    /// Time \[s\] of the newest measurement used.
     last_t: f64,
 }
 

@@ -115,7 +115,7 @@ pub const INPUTS: usize = 2;
 /// The last r measured outputs and r − 1 sent inputs, with start-up padding.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Window {
-    /// `[y^m_{k−2}, y^m_{k−1}, y^m_k]`, positions [m] in the model frame.
+    /// `[y^m_{k−2}, y^m_{k−1}, y^m_k]`, positions \[m\] in the model frame.
     outputs: [Vector3<f64>; OUTPUTS],
     /// `[u_{k−2}, u_{k−1}]`, inputs `[θ_cmd, φ_cmd, T_cmd]` (rad, rad, m/s²).
     inputs: [Vector3<f64>; INPUTS],
@@ -137,7 +137,7 @@ impl Window {
         }
     }
 
-    /// Pushes the newest measured output `y^m_k` [m]. The first one after
+    /// Pushes the newest measured output `y^m_k` \[m\]. The first one after
     /// construction or [`Window::reset`] fills every output slot.
     pub fn push_measurement(&mut self, y: Vector3<f64>) {
         if self.measurements == 0 {
@@ -205,7 +205,7 @@ pub const SAMPLE_CAPACITY: usize = 128;
 /// Sample times within this many control steps of a tick count as on it.
 const SNAP: f64 = 1e-9;
 /// "No information" standard deviations of the arrival cost: position
-/// [m], velocity [m/s], acceleration [m/s²] (also the cap of its growth).
+/// \[m\], velocity [m/s], acceleration [m/s²] (also the cap of its growth).
 const UNKNOWN_SIGMA: [f64; 3] = [100.0, 10.0, 10.0];
 
 /// Settings of the multi-rate window ([`MultiRateWindow`]); part of
@@ -218,10 +218,10 @@ pub struct MultiRateSettings {
     /// Default 25 (0.5 s at 50 Hz: three or more samples at 10 Hz with
     /// 60 ms latency).
     pub window: usize,
-    /// Standard deviation of one pose sample per axis [m]. Default 0.02.
+    /// Standard deviation of one pose sample per axis \[m\]. Default 0.02.
     pub sample_sigma: f64,
     /// Random-walk process noise per control step of the window start's
-    /// position [m], velocity [m/s] and acceleration [m/s²]: what the model
+    /// position \[m\], velocity [m/s] and acceleration [m/s²]: what the model
     /// is allowed not to explain. Smaller is smoother, larger follows
     /// unmodelled motion faster. All `f64::INFINITY`: no arrival cost (the
     /// window alone). Default `[0.001, 0.01, 0.1]` (in the lab's L-path
@@ -266,9 +266,9 @@ impl MultiRateSettings {
 /// One pose sample in the multi-rate window.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PoseSample {
-    /// Measurement (capture) time [s], on the clock of the tick times.
+    /// Measurement (capture) time \[s\], on the clock of the tick times.
     pub t: f64,
-    /// Position [m] in the model frame.
+    /// Position \[m\] in the model frame.
     pub position: Vector3<f64>,
 }
 
@@ -285,7 +285,7 @@ pub struct MultiRateStats {
     pub blind_ticks: u64,
 }
 
-/// The time constants [s] of the model's input dynamics per axis
+/// The time constants \[s\] of the model's input dynamics per axis
 /// `[x, y, z]`: attitude τ for x, y; thrust τ_T for z (spatial; planar: τ).
 pub(crate) fn input_lags(model: &ControlModel) -> [f64; 3] {
     match model {
@@ -301,7 +301,7 @@ pub(crate) fn input_lags(model: &ControlModel) -> [f64; 3] {
 /// [`MultiRateWindow::estimate`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct MultiRateEstimate {
-    /// `[y_k, y_{k+1}, y_{k+2}]` [m]: the fixed outputs of the optimisation.
+    /// `[y_k, y_{k+1}, y_{k+2}]` \[m\]: the fixed outputs of the optimisation.
     pub fixed: [Vector3<f64>; 3],
     /// The input sent at the previous tick, `u_{k−1}` (hover before any).
     pub previous_input: Vector3<f64>,
@@ -316,7 +316,7 @@ type M3 = [[f64; 3]; 3];
 /// of the (c, d, h) deviation per axis.
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Arrival {
-    /// Mean of `y_s, y_{s+1}, y_{s+2}` [m].
+    /// Mean of `y_s, y_{s+1}, y_{s+2}` \[m\].
     mean: [Vector3<f64>; 3],
     /// Covariance of (c, d, h) per axis [m², (m/step)², (m/step²)²].
     cov: [M3; 3],
@@ -357,7 +357,7 @@ pub struct MultiRateWindow {
     next_arrival: Arrival,
     /// Scratch chain for the arrival cost (M + 3).
     chain: Vec<Vector3<f64>>,
-    /// Time of the last committed tick [s].
+    /// Time of the last committed tick \[s\].
     last_tick: Option<f64>,
     /// Time of the tick estimated last (committed by `commit`).
     pending_tick: Option<f64>,
@@ -432,7 +432,7 @@ impl MultiRateWindow {
         &self.samples
     }
 
-    /// The estimated outputs `y_{k−M} … y_{k+2}` [m] of the last committed
+    /// The estimated outputs `y_{k−M} … y_{k+2}` \[m\] of the last committed
     /// tick k, oldest first; empty before the first.
     pub fn trajectory(&self) -> &[Vector3<f64>] {
         if self.last_tick.is_some() {
@@ -448,7 +448,7 @@ impl MultiRateWindow {
         &self.inputs
     }
 
-    /// Standard deviations of the arrival cost's position [m] and velocity
+    /// Standard deviations of the arrival cost's position \[m\] and velocity
     /// [m/s] at the window start, per axis `[x, y, z]` (planar: z is 0).
     pub fn arrival_sigma(&self) -> [[f64; 2]; 3] {
         let mut out = [[0.0; 2]; 3];
@@ -459,7 +459,7 @@ impl MultiRateWindow {
         out
     }
 
-    /// Time [s] of the last committed tick.
+    /// Time \[s\] of the last committed tick.
     pub fn last_tick(&self) -> Option<f64> {
         self.last_tick
     }
@@ -474,8 +474,8 @@ impl MultiRateWindow {
         self.stats = MultiRateStats::default();
     }
 
-    /// Adds one pose sample taken at time `t` [s] (the clock of the tick
-    /// times) at `position` [m] (model frame). Returns false, and keeps
+    /// Adds one pose sample taken at time `t` \[s\] (the clock of the tick
+    /// times) at `position` \[m\] (model frame). Returns false, and keeps
     /// nothing, for a non-finite sample or one older than the window of the
     /// last tick. A sample at the time of a held one replaces it (a repeated
     /// message); samples may arrive out of order.
@@ -511,7 +511,7 @@ impl MultiRateWindow {
         true
     }
 
-    /// The fixed outputs at the tick at time `t` [s], through
+    /// The fixed outputs at the tick at time `t` \[s\], through
     /// `next_output` (F⁻¹, possibly with a disturbance estimate): moves the
     /// window to `t` (a gap of several steps repeats the last input, as the
     /// shell holds it; a gap beyond the window counts as M steps), absorbs

@@ -309,7 +309,7 @@ fn estimate_resets_on_pose_jump_and_gap() {
 }
 
 /// Flies DF-MPC on the planar model's own step with a constant offset;
-/// returns the mean position error over the last 5 s [m] and the controller.
+/// returns the mean position error over the last 5 s \[m\] and the controller.
 fn planar_closed_loop(d: Vector2<f64>, estimator: Option<DisturbanceSettings>) -> (f64, DfMpc) {
     let m = planar_model();
     let settings = DfMpcSettings {
@@ -364,7 +364,7 @@ fn df_with_estimator_removes_wind_offset_in_closed_loop() {
 }
 
 /// DF-MPC on the spatial model's own step with the vehicle's thrust scaled
-/// by `kappa`; returns the mean |z error| over the last 5 s [m] and the
+/// by `kappa`; returns the mean |z error| over the last 5 s \[m\] and the
 /// controller.
 fn spatial_closed_loop(kappa: f64, estimator: Option<DisturbanceSettings>) -> (f64, DfMpc) {
     let m = spatial_model();

@@ -60,7 +60,7 @@ enum Shell {
 /// Flies 5 m north-east with `update` failing on ticks 60–63 (tick 62:
 /// also a NaN pose). Returns the largest error of the controller's
 /// one-step prediction `plan[1]` against the plant on the 10 good ticks
-/// after the failures [m], and checks every fallback command against the
+/// after the failures \[m\], and checks every fallback command against the
 /// last good plan.
 fn fly(shell: Shell) -> f64 {
     let plant = plant();

@@ -230,7 +230,7 @@ struct Run {
     commands: Vec<Vector2<f64>>,
 }
 
-/// Flies `ticks` with vision at `rate`, optionally blind in `blind` [s].
+/// Flies `ticks` with vision at `rate`, optionally blind in `blind` \[s\].
 fn fly(
     ctrl: &mut DfMpc,
     reference: &mut dyn ReferenceSource,

@@ -50,8 +50,8 @@ fn model() -> (PlanarModel, ControlModel) {
 
 /// Flies 4 s towards a 3 m setpoint; a new pose arrives at the ticks where
 /// `fresh(k)` (the others repeat the last one with its old time). Returns
-/// the largest tick-to-tick change of the pitch command [rad] and the final
-/// distance to the setpoint [m].
+/// the largest tick-to-tick change of the pitch command \[rad\] and the final
+/// distance to the setpoint \[m\].
 fn fly(ctrl: &mut dyn Controller, fresh: &dyn Fn(usize) -> bool) -> (f64, f64) {
     let (m, _) = model();
     let mut x = nalgebra::SVector::<f64, 6>::zeros();

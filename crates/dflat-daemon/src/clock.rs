@@ -44,7 +44,7 @@
 
 use std::collections::VecDeque;
 
-/// A source clock that jumps back by more than this [s] restarts the estimate.
+/// A source clock that jumps back by more than this \[s\] restarts the estimate.
 pub const SOURCE_RESET: f64 = 1.0;
 /// Entries the sliding minimum keeps at most (a window of 10 s at 200 Hz
 /// needs 2000 only when the offset grows monotonically).
@@ -55,14 +55,14 @@ pub const CAPACITY: usize = 4096;
 pub struct PoseClock {
     window: f64,
     min_latency: f64,
-    /// (arrival [s], arrival − source [s]), offsets increasing front to back.
+    /// (arrival \[s\], arrival − source \[s\]), offsets increasing front to back.
     minima: VecDeque<(f64, f64)>,
     last_source: Option<f64>,
 }
 
 impl PoseClock {
-    /// An estimator over a sliding `window` [s] with a known minimum
-    /// latency `min_latency` [s] (0: assume none).
+    /// An estimator over a sliding `window` \[s\] with a known minimum
+    /// latency `min_latency` \[s\] (0: assume none).
     pub fn new(window: f64, min_latency: f64) -> Self {
         Self {
             window: if window.is_finite() && window > 0.0 {
@@ -86,13 +86,13 @@ impl PoseClock {
         self.last_source = None;
     }
 
-    /// The current offset estimate `min(arrival − source)` [s], if any.
+    /// The current offset estimate `min(arrival − source)` \[s\], if any.
     pub fn offset(&self) -> Option<f64> {
         self.minima.front().map(|&(_, o)| o)
     }
 
-    /// The capture time on this computer's clock [s] of a pose that arrived
-    /// at `arrival` [s] with source timestamp `source` [s] (`None`: no
+    /// The capture time on this computer's clock \[s\] of a pose that arrived
+    /// at `arrival` \[s\] with source timestamp `source` \[s\] (`None`: no
     /// timestamp, the arrival time is returned). Non-finite inputs return
     /// the arrival time and leave the estimate unchanged.
     pub fn capture_time(&mut self, arrival: f64, source: Option<f64>) -> f64 {

@@ -107,10 +107,10 @@ pub struct LinkConfig {
     /// [`crate::clock::PoseClock`]) or `arrival` (the receive time). A pose
     /// whose timestamp is 0 falls back to its arrival time.
     pub pose_time: PoseTime,
-    /// Sliding window of the clock-offset estimate [s] (1–600): the offset
+    /// Sliding window of the clock-offset estimate \[s\] (1–600): the offset
     /// is the minimum of `arrival − source time` over this window.
     pub pose_clock_window_s: f64,
-    /// Known minimum latency of the pose source [ms] (0–1000): the offset
+    /// Known minimum latency of the pose source \[ms\] (0–1000): the offset
     /// minimum is taken to be this latency, not zero (e.g. a vision
     /// pipeline's fixed exposure-to-message delay). 0 assumes the fastest
     /// message travels without delay.
@@ -193,17 +193,17 @@ pub enum ThrustMode {
 pub struct VehicleConfig {
     /// `planar` or `spatial`.
     pub model: ModelKind,
-    /// Attitude time constant τ [s] of the autopilot's attitude loop (0.02–2).
+    /// Attitude time constant τ \[s\] of the autopilot's attitude loop (0.02–2).
     pub tau: f64,
     /// Attitude gain k̃ [-] (0.2–5).
     pub k: f64,
-    /// Thrust time constant τ_T [s] (spatial model; 0.005–1).
+    /// Thrust time constant τ_T \[s\] (spatial model; 0.005–1).
     pub tau_thrust: f64,
     /// Gravity [m/s²] (9–10.5).
     pub gravity: f64,
-    /// Fixed yaw ψ⋆ [deg] (−180–180).
+    /// Fixed yaw ψ⋆ \[deg\] (−180–180).
     pub yaw_deg: f64,
-    /// Maximum commanded pitch/roll [deg] (1–60).
+    /// Maximum commanded pitch/roll \[deg\] (1–60).
     pub max_tilt_deg: f64,
     /// `fixed` or `normalized`.
     pub thrust_mode: ThrustMode,
@@ -249,11 +249,11 @@ pub enum ControllerKind {
 pub struct ControllerConfig {
     /// `df-mpc`, `fmpc` or `pd`.
     pub kind: ControllerKind,
-    /// Control rate [Hz] (10–200); the model step is its inverse.
+    /// Control rate \[Hz\] (10–200); the model step is its inverse.
     pub rate_hz: f64,
-    /// Horizon N [ticks] for df-mpc (10–2000).
+    /// Horizon N \[ticks\] for df-mpc (10–2000).
     pub horizon: usize,
-    /// Horizon N [ticks] for fmpc (10–2000).
+    /// Horizon N \[ticks\] for fmpc (10–2000).
     pub fmpc_horizon: usize,
     /// Tracking weight per axis x, y, z [1/m²] (> 0). Default 1 (the lab's
     /// recommended `df-mr-smooth` set-up, `dflat experiment vision-rate`;
@@ -270,9 +270,9 @@ pub struct ControllerConfig {
     /// time through the inputs sent, instead of one pose per tick. Default
     /// true (`df-mr-smooth`).
     pub multi_rate: bool,
-    /// Multi-rate window M [ticks] (2–250). Default 25 (0.5 s at 50 Hz).
+    /// Multi-rate window M \[ticks\] (2–250). Default 25 (0.5 s at 50 Hz).
     pub multi_rate_window: usize,
-    /// Standard deviation of one pose sample per axis [m] (0.0001–1), for
+    /// Standard deviation of one pose sample per axis \[m\] (0.0001–1), for
     /// the multi-rate fit. Default 0.02.
     pub sample_sigma: f64,
     /// Flatness MPC jerk weight per axis (> 0). Default 0.01 (the library's
@@ -284,7 +284,7 @@ pub struct ControllerConfig {
     /// PD derivative gain [1/s] (> 0). Default 2.5 (`PdSettings`).
     pub pd_kd: f64,
     /// Optional bound on the planned horizontal acceleration, as a tilt
-    /// [deg] (0 = off; 1–60). Solved with clarabel when it binds. Default
+    /// \[deg\] (0 = off; 1–60). Solved with clarabel when it binds. Default
     /// 30 (`df-mr-smooth`; below the 35° command limit).
     pub constraint_tilt_deg: f64,
     /// Optional bound on the planned speed per axis [m/s] (0 = off). When
@@ -296,16 +296,16 @@ pub struct ControllerConfig {
     /// offsets (wind, drag) and, for the spatial model, the thrust scale
     /// (hover thrust, mass). Default false.
     pub disturbance: bool,
-    /// Estimator bandwidth [Hz] (0.001 to rate_hz/10). Default 0.1.
+    /// Estimator bandwidth \[Hz\] (0.001 to rate_hz/10). Default 0.1.
     pub disturbance_bandwidth_hz: f64,
-    /// Estimator fit window [ticks] (10–2000). Default 50 (1 s at 50 Hz).
+    /// Estimator fit window \[ticks\] (10–2000). Default 50 (1 s at 50 Hz).
     pub disturbance_window: usize,
     /// Clamp on each acceleration-offset component [m/s²] (0–10). Default 3.
     pub disturbance_max_acceleration: f64,
     /// Bounds on the thrust scale (actual / model thrust), [min, max] with
     /// 0.1 ≤ min ≤ 1 ≤ max ≤ 10. Default [0.5, 2].
     pub disturbance_thrust_scale_range: [f64; 2],
-    /// A pose step between ticks larger than this [m] resets the estimate
+    /// A pose step between ticks larger than this \[m\] resets the estimate
     /// (0.01–100). Default 1.
     pub disturbance_max_step: f64,
 }
@@ -355,14 +355,14 @@ pub enum MissionStart {
 pub struct MissionConfig {
     /// `hold` or `path`.
     pub start: MissionStart,
-    /// Waypoints, local NED [m] (x north, y east, z down), ≥ 2 when used.
+    /// Waypoints, local NED \[m\] (x north, y east, z down), ≥ 2 when used.
     pub path: Vec<[f64; 3]>,
     /// Desired speed along the path [m/s] (0.1–20).
     pub speed: f64,
     /// A SET_POSITION_TARGET_LOCAL_NED whose position equals the first
-    /// waypoint within this distance [m] starts the path (0 = never).
+    /// waypoint within this distance \[m\] starts the path (0 = never).
     pub path_trigger_radius: f64,
-    /// Geofence half-widths around the origin [m]: setpoints outside are
+    /// Geofence half-widths around the origin \[m\]: setpoints outside are
     /// refused (x, y, z).
     pub geofence: [f64; 3],
     /// Fly the path again and again (a closed path: its last waypoint must
@@ -391,22 +391,22 @@ impl Default for MissionConfig {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SafetyConfig {
-    /// Pose older than this [ms] stops the attitude stream (5–2000).
+    /// Pose older than this \[ms\] stops the attitude stream (5–2000).
     pub pose_timeout_ms: f64,
-    /// No autopilot HEARTBEAT for this long [ms] stops the stream (100–10000).
+    /// No autopilot HEARTBEAT for this long \[ms\] stops the stream (100–10000).
     pub autopilot_timeout_ms: f64,
     /// Fastest the vehicle can move [m/s] (0.5–100): a pose further from the
     /// previous one than this speed allows (plus `pose_jump_margin_m`) is a
     /// pose jump → the controller and the reference re-anchor (hold there).
     pub max_speed_mps: f64,
-    /// Noise margin of the pose-jump test [m] (0–10).
+    /// Noise margin of the pose-jump test \[m\] (0–10).
     pub pose_jump_margin_m: f64,
     /// After a controller failure or deadline overrun, DF-MPC flies its
     /// previous plan shifted one step per tick, PD and Flatness MPC hold the
     /// last good command, for at most this many ticks (0–50); then level
     /// hover.
     pub hold_last_ticks: u32,
-    /// Model-consistency failsafe [m] (0 = off; else 0.05–100): when the
+    /// Model-consistency failsafe \[m\] (0 = off; else 0.05–100): when the
     /// measured position is further than this from the position predicted
     /// for the tick (the previous plan's y*_{k+1}) for 5 ticks in a row, the
     /// stream stops (FAILSAFE) for 2 s.
@@ -483,11 +483,11 @@ pub struct SitlConfig {
     pub url: String,
     /// Plant kind.
     pub plant: SitlPlant,
-    /// Plant integration rate [Hz] (100–2000).
+    /// Plant integration rate \[Hz\] (100–2000).
     pub plant_rate_hz: f64,
-    /// Rate of LOCAL_POSITION_NED / ATTITUDE out [Hz] (1–200).
+    /// Rate of LOCAL_POSITION_NED / ATTITUDE out \[Hz\] (1–200).
     pub telemetry_rate_hz: f64,
-    /// Plant attitude time constant [s] (may differ from the model's).
+    /// Plant attitude time constant \[s\] (may differ from the model's).
     pub tau: f64,
     /// Plant attitude gain [-].
     pub k: f64,
@@ -495,18 +495,18 @@ pub struct SitlConfig {
     pub hover_thrust: f64,
     /// Plant mass factor relative to nominal (0.5–2).
     pub mass_factor: f64,
-    /// Gaussian position noise σ [m] (0–1).
+    /// Gaussian position noise σ \[m\] (0–1).
     pub noise_sigma: f64,
-    /// Also send VISION_POSITION_ESTIMATE at this rate [Hz] (0 = off;
+    /// Also send VISION_POSITION_ESTIMATE at this rate \[Hz\] (0 = off;
     /// 1–100): a vision pipeline stand-in for `link.pose_source =
     /// "vision_position_estimate"`. LOCAL_POSITION_NED goes on as well.
     pub vision_rate_hz: f64,
-    /// Vision latency [ms] (0–500): each sample's `time_usec` is its capture
+    /// Vision latency \[ms\] (0–500): each sample's `time_usec` is its capture
     /// time on the SITL's clock, and it is sent this much later.
     pub vision_latency_ms: f64,
-    /// Gaussian noise σ of the vision position [m] (0–1).
+    /// Gaussian noise σ of the vision position \[m\] (0–1).
     pub vision_noise_sigma: f64,
-    /// Initial position, local NED [m].
+    /// Initial position, local NED \[m\].
     pub start: [f64; 3],
     /// Seconds without SET_ATTITUDE_TARGET after which the SITL holds position.
     pub command_timeout_s: f64,

@@ -87,7 +87,7 @@ use crate::transport::Endpoint;
 
 /// Gravity of the simulated world [m/s²].
 pub const GRAVITY: f64 = 9.81;
-/// The autopilot's pitch/roll command saturation [deg].
+/// The autopilot's pitch/roll command saturation \[deg\].
 pub const TILT_LIMIT_DEG: f64 = 35.0;
 /// PX4 custom mode of main mode OFFBOARD (6 << 16), reported while commanded.
 pub const PX4_MODE_OFFBOARD: u32 = 6 << 16;
@@ -101,7 +101,7 @@ const HOLD_KD: f64 = 1.6;
 /// Vertical gains of the hold loop (spatial and full plants).
 const HOLD_KP_Z: f64 = 2.0;
 const HOLD_KD_Z: f64 = 2.5;
-/// Tilt the hold loop asks for at most [deg].
+/// Tilt the hold loop asks for at most \[deg\].
 const HOLD_MAX_TILT_DEG: f64 = 20.0;
 /// Read timeout of the receive threads: how fast they notice a stop.
 const RX_POLL: Duration = Duration::from_millis(50);

@@ -481,7 +481,7 @@ mod tests {
         }
     }
 
-    /// Feeds poses and heartbeats at 50 Hz from `from` to `to` [s] and ticks
+    /// Feeds poses and heartbeats at 50 Hz from `from` to `to` \[s\] and ticks
     /// at 50 Hz, returning the decisions.
     fn fly(s: &mut Supervisor, from: f64, to: f64, pose: bool, hb: bool) -> Vec<TickDecision> {
         let mut out = Vec::new();

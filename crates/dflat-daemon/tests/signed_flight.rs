@@ -114,7 +114,7 @@ fn link_to(sitl: &sitl::SitlHandle) -> String {
     format!("udpout:127.0.0.1:{}", sitl.local_addr().port())
 }
 
-/// Largest distance of the true position from the start over the run [m].
+/// Largest distance of the true position from the start over the run \[m\].
 fn max_displacement(cfg: &Config, report: &SitlReport) -> f64 {
     let start = Vector3::from(cfg.sitl.start);
     report

@@ -23,7 +23,7 @@ use thiserror::Error;
 use crate::LinkError;
 use crate::frame::{EncodedFrame, SignedFrame, check_system_id};
 
-/// 2015-01-01 00:00:00 UTC as a UNIX time [s]: the signing epoch.
+/// 2015-01-01 00:00:00 UTC as a UNIX time \[s\]: the signing epoch.
 pub const SIGNING_EPOCH_UNIX_S: u64 = 1_420_070_400;
 /// Signing timestamp units per second (one unit = 10 µs).
 pub const TIMESTAMP_UNITS_PER_S: u64 = 100_000;

@@ -17,7 +17,7 @@ use common::*;
 use dflat_link::MavMessage;
 use dflat_link::dialect::{MavAutopilot, MavType};
 
-/// Flight time observed per model after the first command [s].
+/// Flight time observed per model after the first command \[s\].
 const FLY: Duration = Duration::from_secs(6);
 
 const MISSION: &str = r#"

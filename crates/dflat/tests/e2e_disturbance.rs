@@ -38,9 +38,9 @@ start = [0.0, 0.0, -10.0]
 "#;
 
 const SETPOINT: [f64; 3] = [10.0, 0.0, -10.0];
-/// Largest error per axis over the last [`WINDOW`] of the flight [m].
+/// Largest error per axis over the last [`WINDOW`] of the flight \[m\].
 const BOUND: f64 = 0.3;
-/// The settled window at the end of the flight [s].
+/// The settled window at the end of the flight \[s\].
 const WINDOW: f64 = 2.0;
 
 fn fly_and_check(name: &str, config: &str) -> [f64; 3] {

@@ -19,11 +19,11 @@ use dflat_daemon::sitl::{self, SitlOptions};
 use dflat_link::MavMessage;
 
 const MAX_TILT_DEG: f64 = 35.0;
-/// The jump [m] (north).
+/// The jump \[m\] (north).
 const JUMP: f64 = 5.0;
-/// The true vehicle stays within this of where it was at the jump [m].
+/// The true vehicle stays within this of where it was at the jump \[m\].
 const HOLD_WITHIN: f64 = 1.0;
-/// Largest tilt commanded after the jump [deg] (a spike would hit 35°).
+/// Largest tilt commanded after the jump \[deg\] (a spike would hit 35°).
 const TILT_AFTER_JUMP: f64 = 10.0;
 
 #[test]

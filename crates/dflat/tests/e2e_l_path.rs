@@ -16,7 +16,7 @@ use dflat_daemon::sitl::read_truth_csv;
 const PATH: [[f64; 3]; 3] = [[0.0, 0.0, -10.0], [15.0, 0.0, -10.0], [15.0, 10.0, -10.0]];
 /// Speed along it [m/s].
 const SPEED: f64 = 3.0;
-/// Bounds on the true path error [m]. Measured (dev profile, 2 cores,
+/// Bounds on the true path error \[m\]. Measured (dev profile, 2 cores,
 /// noise-free pose, shipped defaults: multi-rate DF-MPC, q = 1, r = 0.003,
 /// s = 50, 30° plan tilt): median 0.007 m, p95 0.13 m, max 0.38 m (at the
 /// corner; the paper's r = 0.08 without them gave 0.043 / 0.34 / 0.62 m);
@@ -24,7 +24,7 @@ const SPEED: f64 = 3.0;
 const MEDIAN_BOUND: f64 = 0.15;
 const P95_BOUND: f64 = 0.6;
 const MAX_BOUND: f64 = 1.0;
-/// The end counts as reached within this distance [m].
+/// The end counts as reached within this distance \[m\].
 const ARRIVAL: f64 = 0.5;
 
 #[test]

@@ -17,14 +17,14 @@ use common::*;
 use dflat_daemon::sitl::read_truth_csv;
 use dflat_link::MavMessage;
 
-/// The step [m] (north).
+/// The step \[m\] (north).
 const STEP: f64 = 10.0;
-/// Settling band [m] around the setpoint (true position, 3-D).
+/// Settling band \[m\] around the setpoint (true position, 3-D).
 const BAND: f64 = 0.3;
 /// Time after the setpoint by which the vehicle must be in the band and stay
-/// there until the end [s]. Measured: about 5.5 s.
+/// there until the end \[s\]. Measured: about 5.5 s.
 const SETTLE_BY: f64 = 8.0;
-/// Total time observed after the setpoint [s].
+/// Total time observed after the setpoint \[s\].
 const OBSERVE: f64 = 10.0;
 
 #[test]

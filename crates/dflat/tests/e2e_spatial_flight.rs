@@ -32,7 +32,7 @@ hover_thrust = 0.5
 start = [0.0, 0.0, -10.0]
 "#;
 
-/// Largest altitude error allowed while flying [m].
+/// Largest altitude error allowed while flying \[m\].
 const ALTITUDE_BOUND: f64 = 0.5;
 
 #[test]

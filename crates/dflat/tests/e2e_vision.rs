@@ -34,14 +34,14 @@ vision_noise_sigma = 0.02
 "#;
 
 const PATH: [[f64; 3]; 3] = [[0.0, 0.0, -10.0], [15.0, 0.0, -10.0], [15.0, 10.0, -10.0]];
-/// Bounds on the true path error [m] (median, p95, max) and on the mean
-/// tick-to-tick change of the pitch/roll command [deg]. Measured: see the
+/// Bounds on the true path error \[m\] (median, p95, max) and on the mean
+/// tick-to-tick change of the pitch/roll command \[deg\]. Measured: see the
 /// report printed by the test.
 const MEDIAN_BOUND: f64 = 0.2;
 const P95_BOUND: f64 = 0.6;
 const MAX_BOUND: f64 = 1.0;
 const MEAN_STEP_BOUND_DEG: f64 = 3.0;
-/// The end of the path must be reached within this distance [m].
+/// The end of the path must be reached within this distance \[m\].
 const ARRIVAL: f64 = 0.5;
 
 #[test]

@@ -676,7 +676,7 @@ pub struct Budgets {
 }
 
 /// One error trace for the plot: scenario name, controller, and
-/// `(t [s], true position − setpoint [m] NED)` samples.
+/// `(t \[s\], true position − setpoint \[m\] NED)` samples.
 pub type ErrorTrace = (String, MismatchController, Vec<(f64, [f64; 3])>);
 
 /// Everything the study produced (its JSON).
@@ -695,7 +695,7 @@ pub struct MismatchResult {
     /// The budgets.
     pub budgets: Budgets,
     /// Error traces for the plot: per (scenario, controller), trial 0 at the
-    /// last σ (issue 5's 1 cm by default), `(t [s], true position − setpoint [m] NED)` at 10 Hz.
+    /// last σ (issue 5's 1 cm by default), `(t \[s\], true position − setpoint \[m\] NED)` at 10 Hz.
     #[serde(skip)]
     pub traces: Vec<ErrorTrace>,
 }

@@ -93,7 +93,7 @@ use crate::sensing::{SensorSpec, VisionMode, VisionOptions};
 pub enum VisionController {
     /// DF-MPC ([`DfMpc`]), command clipped at ±`max_tilt_deg`.
     DfMpc {
-        /// Horizon N [steps].
+        /// Horizon N \[steps\].
         horizon: usize,
         /// Tracking weight q (x and y) [1/m²].
         q: f64,
@@ -103,10 +103,10 @@ pub enum VisionController {
         smoothness: f64,
         /// Multi-rate windows (raw samples); `None`: the extrapolated stream.
         multi_rate: Option<MultiRateSettings>,
-        /// Tilt constraint on the plan [deg] (`|Δ²y/δt²| ≤ g·tan` per
+        /// Tilt constraint on the plan \[deg\] (`|Δ²y/δt²| ≤ g·tan` per
         /// axis, clarabel when it binds); `None`: unconstrained.
         plan_tilt_deg: Option<f64>,
-        /// Command saturation [deg].
+        /// Command saturation \[deg\].
         max_tilt_deg: f64,
     },
     /// A baseline of the paths study (Flatness MPC or PD), extrapolated stream.
@@ -257,29 +257,29 @@ impl VisionController {
 pub struct VisionRateConfig {
     /// Desired speeds [m/s].
     pub speeds: Vec<f64>,
-    /// Vision rates [Hz].
+    /// Vision rates \[Hz\].
     pub rates: Vec<f64>,
     /// Trials per (controller, rate, speed).
     pub trials: usize,
-    /// Vision latency [s].
+    /// Vision latency \[s\].
     pub latency: f64,
-    /// Vision noise per axis [m].
+    /// Vision noise per axis \[m\].
     pub sigma: f64,
-    /// Capture-time jitter (uniform ±) [s].
+    /// Capture-time jitter (uniform ±) \[s\].
     pub timing_jitter: f64,
-    /// Altitude of the L path, NED z [m].
+    /// Altitude of the L path, NED z \[m\].
     pub altitude: f64,
-    /// Time flown after arrival [s].
+    /// Time flown after arrival \[s\].
     pub settle: f64,
-    /// Arrival radius [m].
+    /// Arrival radius \[m\].
     pub arrival_radius: f64,
-    /// A trial also ends at length/speed + this [s].
+    /// A trial also ends at length/speed + this \[s\].
     pub timeout_margin: f64,
-    /// Hard cap on a trial's length [s] (tests shorten runs).
+    /// Hard cap on a trial's length \[s\] (tests shorten runs).
     pub max_duration: Option<f64>,
-    /// Path error beyond which a trial counts as diverged [m].
+    /// Path error beyond which a trial counts as diverged \[m\].
     pub divergence_bound: f64,
-    /// Plant attitude saturation [deg].
+    /// Plant attitude saturation \[deg\].
     pub tilt_limit_deg: f64,
     /// Base of the seed rule.
     pub seed_base: u64,
@@ -435,19 +435,19 @@ impl VisionRateConfig {
 pub struct VisionRateRow {
     /// The controller's key ([`VisionController::key`]).
     pub controller: String,
-    /// Vision rate [Hz].
+    /// Vision rate \[Hz\].
     pub rate: f64,
     /// Desired speed [m/s].
     pub speed: f64,
     /// Trials aggregated.
     pub trials: usize,
-    /// Path error over the pooled ticks of all trials [m].
+    /// Path error over the pooled ticks of all trials \[m\].
     pub path_error: Option<ErrorStats>,
-    /// Mean over trials of the mean |Δu| per tick [deg].
+    /// Mean over trials of the mean |Δu| per tick \[deg\].
     pub smoothness_deg: f64,
     /// Mean over trials of the share of saturated ticks [0, 1].
     pub saturation_share: f64,
-    /// Largest tilt over the trials [deg].
+    /// Largest tilt over the trials \[deg\].
     pub max_tilt_deg: f64,
     /// Trials that diverged.
     pub diverged: usize,
@@ -466,9 +466,9 @@ pub struct BudgetCheck {
     pub smoothness_deg: f64,
     /// Saturated share [0, 1] (budget ≤ 0.10).
     pub saturation_share: f64,
-    /// p95 path error [m].
+    /// p95 path error \[m\].
     pub p95: f64,
-    /// The paper DF's p95 at the same speed [m] (budget: p95 ≤ 1.1× this).
+    /// The paper DF's p95 at the same speed \[m\] (budget: p95 ≤ 1.1× this).
     pub paper_p95: f64,
     /// All three budgets hold.
     pub met: bool,
@@ -487,7 +487,7 @@ pub struct VisionRateResult {
     pub budgets: Vec<BudgetCheck>,
 }
 
-/// The rate at which the budgets are checked [Hz].
+/// The rate at which the budgets are checked \[Hz\].
 pub const BUDGET_RATE: f64 = 15.0;
 
 impl VisionRateResult {

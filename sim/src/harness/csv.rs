@@ -29,7 +29,7 @@ fn push(line: &mut String, values: &[f64]) {
 
 impl TrialResult {
     /// Writes the per-tick log as CSV (header [`TICKS_HEADER`]). Positions
-    /// local NED [m], angles [rad], thrust [m/s²].
+    /// local NED \[m\], angles \[rad\], thrust [m/s²].
     pub fn write_ticks_csv(&self, mut w: impl Write) -> io::Result<()> {
         writeln!(w, "{TICKS_HEADER}")?;
         let mut line = String::with_capacity(1024);

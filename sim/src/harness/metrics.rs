@@ -11,7 +11,7 @@
 //!   position to the reference path; median, 95th percentile (linear
 //!   interpolation between order statistics), max, mean.
 //! * **max tilt**: the largest angle of the thrust axis from vertical,
-//!   `acos(cosθ·cosφ)`, over the plant-rate trace [deg].
+//!   `acos(cosθ·cosφ)`, over the plant-rate trace \[deg\].
 //! * **command smoothness**: mean over ticks k ≥ 1 of the Euclidean norm
 //!   `√(Δθ_cmd² + Δφ_cmd²)` of the change in the command sent to the plant
 //!   [deg per tick]; the per-axis alternative `max(|Δθ|, |Δφ|)` is reported
@@ -23,7 +23,7 @@ use serde::{Deserialize, Serialize};
 
 use super::{FixedTarget, PlantSample, TickRecord, TickStatus};
 
-/// Order statistics of an error sample [m].
+/// Order statistics of an error sample \[m\].
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct ErrorStats {
     /// Number of values.
@@ -71,7 +71,7 @@ pub fn quantile(sorted: &[f64], q: f64) -> f64 {
     }
 }
 
-/// Fixed-target errors over a plant-rate trace: `(mae, rms, mae_after)` [m]
+/// Fixed-target errors over a plant-rate trace: `(mae, rms, mae_after)` \[m\]
 /// as defined in the module docs; None where no sample falls in the window.
 pub fn fixed_target_error(
     trace: &[PlantSample],
@@ -102,7 +102,7 @@ pub fn path_error_stats(ticks: &[TickRecord]) -> Option<ErrorStats> {
     ErrorStats::from_values(ticks.iter().map(|r| r.path_error))
 }
 
-/// Largest tilt of the thrust axis from vertical over the trace [deg]
+/// Largest tilt of the thrust axis from vertical over the trace \[deg\]
 /// (0 for an empty trace; non-finite samples are skipped).
 pub fn max_tilt_deg(trace: &[PlantSample]) -> f64 {
     trace
@@ -146,23 +146,23 @@ pub fn saturation_share(ticks: &[TickRecord]) -> f64 {
 /// Summary metrics of one trial (see the module docs for definitions).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Metrics {
-    /// Simulated time flown [s] (ticks · δt).
+    /// Simulated time flown \[s\] (ticks · δt).
     pub duration: f64,
     /// Number of control ticks.
     pub ticks: usize,
-    /// Mean fixed-target error [m] (None without a target).
+    /// Mean fixed-target error \[m\] (None without a target).
     pub mae: Option<f64>,
-    /// RMS fixed-target error [m].
+    /// RMS fixed-target error \[m\].
     pub rms: Option<f64>,
-    /// Mean fixed-target error after `FixedTarget::after` [m].
+    /// Mean fixed-target error after `FixedTarget::after` \[m\].
     pub mae_after: Option<f64>,
-    /// Path-error statistics [m] (None without a path distance).
+    /// Path-error statistics \[m\] (None without a path distance).
     pub path_error: Option<ErrorStats>,
-    /// Largest tilt [deg].
+    /// Largest tilt \[deg\].
     pub max_tilt_deg: f64,
-    /// Mean Euclidean change of the (pitch, roll) command per tick [deg].
+    /// Mean Euclidean change of the (pitch, roll) command per tick \[deg\].
     pub smoothness_deg: f64,
-    /// Mean per-axis max change of the (pitch, roll) command per tick [deg].
+    /// Mean per-axis max change of the (pitch, roll) command per tick \[deg\].
     pub smoothness_axis_max_deg: f64,
     /// Share of ticks at saturation [0, 1].
     pub saturation_share: f64,
@@ -172,7 +172,7 @@ pub struct Metrics {
     pub no_measurement_ticks: usize,
     /// The error bound was exceeded or the state went non-finite.
     pub diverged: bool,
-    /// Time of the first diverged tick [s].
+    /// Time of the first diverged tick \[s\].
     pub diverged_at: Option<f64>,
 }
 

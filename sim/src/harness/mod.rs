@@ -52,7 +52,7 @@ use crate::sensing::{PoseSample, SensorSpec, build_sensor};
 pub type ControllerFactory = Arc<dyn Fn() -> Box<dyn Controller> + Send + Sync>;
 /// Builds a fresh reference source for a trial (called once per trial).
 pub type ReferenceFactory = Arc<dyn Fn() -> Box<dyn ReferenceSource + Send> + Send + Sync>;
-/// Distance [m] of a position (local NED [m]) to the reference path.
+/// Distance \[m\] of a position (local NED \[m\]) to the reference path.
 pub type PathDistance = Arc<dyn Fn(&Vector3<f64>) -> f64 + Send + Sync>;
 
 /// When a trial ends.
@@ -61,15 +61,15 @@ pub enum StopCondition {
     /// After this many seconds of simulated time: ticks at `t ∈ [0, T)`.
     Duration(f64),
     /// `settle` seconds after the true position first comes within `radius`
-    /// [m] of `end` (local NED [m], all three axes), or at `max_duration` [s].
+    /// \[m\] of `end` (local NED \[m\], all three axes), or at `max_duration` \[s\].
     PathEnd {
-        /// The path's last point, local NED [m].
+        /// The path's last point, local NED \[m\].
         end: Vector3<f64>,
-        /// Arrival radius [m].
+        /// Arrival radius \[m\].
         radius: f64,
-        /// Time flown after arrival [s].
+        /// Time flown after arrival \[s\].
         settle: f64,
-        /// Upper bound on the trial length [s].
+        /// Upper bound on the trial length \[s\].
         max_duration: f64,
     },
 }
@@ -77,11 +77,11 @@ pub enum StopCondition {
 /// A fixed reference point for the output-error metrics (paper §VI).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FixedTarget {
-    /// The reference position, local NED [m].
+    /// The reference position, local NED \[m\].
     pub target: Vector3<f64>,
     /// Which NED axes count (the paper's 1-D set-up: x only).
     pub axes: [bool; 3],
-    /// Start of the late window for `mae_after` [s] (the reference trace: 5 s).
+    /// Start of the late window for `mae_after` \[s\] (the reference trace: 5 s).
     pub after: f64,
 }
 
@@ -110,7 +110,7 @@ pub struct TrialSpec {
     pub initial: PlantState,
     /// What the controller sees.
     pub sensor: SensorSpec,
-    /// Control step δt [s]; a multiple of `plant_options.plant_dt`.
+    /// Control step δt \[s\]; a multiple of `plant_options.plant_dt`.
     pub ctrl_dt: f64,
     /// When the trial ends.
     pub stop: StopCondition,
@@ -118,7 +118,7 @@ pub struct TrialSpec {
     pub target: Option<FixedTarget>,
     /// Distance to the reference path, for the path error (None: not computed).
     pub path_distance: Option<PathDistance>,
-    /// Divergence bound [m] on the position error (path distance if given,
+    /// Divergence bound \[m\] on the position error (path distance if given,
     /// else the fixed-target error, else the distance to y_ref,k).
     pub divergence_bound: f64,
     /// End the trial at the first diverged tick.
@@ -241,12 +241,12 @@ impl TickStatus {
     }
 }
 
-/// The log of one control tick. Positions local NED [m], angles ZYX [rad].
+/// The log of one control tick. Positions local NED \[m\], angles ZYX \[rad\].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TickRecord {
     /// Tick index k.
     pub k: usize,
-    /// Tick time `k·δt` [s].
+    /// Tick time `k·δt` \[s\].
     pub t: f64,
     /// True state at the tick, before the command acts.
     pub truth: PlantState,
@@ -271,7 +271,7 @@ pub struct TickRecord {
     pub constrained: bool,
     /// Outcome of the controller update.
     pub status: TickStatus,
-    /// Distance of the true position to the reference path [m] (NaN without
+    /// Distance of the true position to the reference path \[m\] (NaN without
     /// [`TrialSpec::path_distance`]).
     pub path_error: f64,
 }
@@ -279,20 +279,20 @@ pub struct TickRecord {
 /// The true state at the start of one plant step.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PlantSample {
-    /// Time [s].
+    /// Time \[s\].
     pub t: f64,
-    /// Position, local NED [m].
+    /// Position, local NED \[m\].
     pub position: Vector3<f64>,
     /// Velocity, local NED [m/s].
     pub velocity: Vector3<f64>,
-    /// Roll φ [rad].
+    /// Roll φ \[rad\].
     pub roll: f64,
-    /// Pitch θ [rad].
+    /// Pitch θ \[rad\].
     pub pitch: f64,
 }
 
 impl PlantSample {
-    /// Tilt of the thrust axis from vertical [rad].
+    /// Tilt of the thrust axis from vertical \[rad\].
     pub fn tilt(&self) -> f64 {
         (self.pitch.cos() * self.roll.cos()).clamp(-1.0, 1.0).acos()
     }
@@ -321,7 +321,7 @@ pub struct TrialResult {
     pub controller: String,
     /// The seed.
     pub seed: u64,
-    /// Control step δt [s].
+    /// Control step δt \[s\].
     pub ctrl_dt: f64,
     /// One record per control tick.
     pub ticks: Vec<TickRecord>,
@@ -544,7 +544,7 @@ pub fn run_trials(
     out
 }
 
-/// Distance [m] from `p` to the polyline through `vertices` (local NED [m]);
+/// Distance \[m\] from `p` to the polyline through `vertices` (local NED \[m\]);
 /// with `horizontal` only north/east count. A single vertex is a point;
 /// no vertices give NaN.
 pub fn polyline_distance(vertices: &[Vector3<f64>], p: &Vector3<f64>, horizontal: bool) -> f64 {

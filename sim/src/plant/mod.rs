@@ -44,20 +44,20 @@ use crate::error::{check_positive, check_range};
 
 /// The common view of a plant's true state.
 ///
-/// Position and velocity are local NED [m], [m/s]; angles ZYX [rad]; body
+/// Position and velocity are local NED \[m\], [m/s]; angles ZYX \[rad\]; body
 /// rates FRD [rad/s]; `thrust` is the *actual* specific collective thrust
 /// [m/s²] (thrust / true mass) acting on the vehicle.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PlantState {
-    /// Position, local NED [m].
+    /// Position, local NED \[m\].
     pub position: Vector3<f64>,
     /// Velocity, local NED [m/s].
     pub velocity: Vector3<f64>,
-    /// Roll φ [rad] (ZYX).
+    /// Roll φ \[rad\] (ZYX).
     pub roll: f64,
-    /// Pitch θ [rad] (ZYX).
+    /// Pitch θ \[rad\] (ZYX).
     pub pitch: f64,
-    /// Yaw ψ [rad] (ZYX).
+    /// Yaw ψ \[rad\] (ZYX).
     pub yaw: f64,
     /// Body rates p, q, r, FRD [rad/s] (zero for the first-order plants,
     /// which do not model them).
@@ -67,7 +67,7 @@ pub struct PlantState {
 }
 
 impl PlantState {
-    /// Level hover at rest at `position` (NED [m]) with yaw 0 under gravity
+    /// Level hover at rest at `position` (NED \[m\]) with yaw 0 under gravity
     /// `g` [m/s²].
     pub fn hover(position: Vector3<f64>, g: f64) -> Self {
         Self {
@@ -81,7 +81,7 @@ impl PlantState {
         }
     }
 
-    /// Tilt of the thrust axis from vertical [rad]: `acos(cosθ·cosφ)`.
+    /// Tilt of the thrust axis from vertical \[rad\]: `acos(cosθ·cosφ)`.
     pub fn tilt(&self) -> f64 {
         (self.pitch.cos() * self.roll.cos()).clamp(-1.0, 1.0).acos()
     }
@@ -121,20 +121,20 @@ pub trait Plant: Send {
     /// [`Plant::applied_command`]); a command with non-finite fields is
     /// ignored and the previous one kept.
     fn apply(&mut self, command: &AttitudeCommand);
-    /// Integrates the dynamics for `dt` [s] in equal steps of at most
+    /// Integrates the dynamics for `dt` \[s\] in equal steps of at most
     /// [`PlantOptions::plant_dt`]. Non-positive or non-finite `dt` does nothing.
     fn advance(&mut self, dt: f64);
-    /// Position, local NED [m].
+    /// Position, local NED \[m\].
     fn position(&self) -> Vector3<f64>;
     /// Velocity, local NED [m/s].
     fn velocity(&self) -> Vector3<f64>;
-    /// Attitude (roll φ, pitch θ, yaw ψ) [rad], ZYX.
+    /// Attitude (roll φ, pitch θ, yaw ψ) \[rad\], ZYX.
     fn attitude(&self) -> (f64, f64, f64);
     /// The common view of the true state.
     fn true_state(&self) -> PlantState;
     /// The plant's raw state vector (layout documented on each plant).
     fn state_vector(&self) -> Vec<f64>;
-    /// Simulated time since [`Plant::reset`] [s].
+    /// Simulated time since [`Plant::reset`] \[s\].
     fn time(&self) -> f64;
     /// The command after the autopilot's saturation, as held now.
     fn applied_command(&self) -> AttitudeCommand;
@@ -173,24 +173,24 @@ pub enum Integrator {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct PlantOptions {
-    /// Integration step [s] (0.005 = 200 Hz).
+    /// Integration step \[s\] (0.005 = 200 Hz).
     pub plant_dt: f64,
     /// Integrator.
     pub integrator: Integrator,
     /// Gravity [m/s²].
     pub g: f64,
-    /// Saturation of the pitch and roll commands, each [rad] (35° default).
+    /// Saturation of the pitch and roll commands, each \[rad\] (35° default).
     pub tilt_limit: f64,
     /// Lower saturation of the specific-thrust command [m/s²].
     pub thrust_min: f64,
     /// Upper saturation of the specific-thrust command [m/s²].
     pub thrust_max: f64,
-    /// Plant attitude time constant τ [s] (first-order plants).
+    /// Plant attitude time constant τ \[s\] (first-order plants).
     pub attitude_tau: f64,
     /// Plant attitude gain k̃ [-]: the attitude settles at k̃·command (all
     /// plants; the rigid body scales its pitch/roll setpoints by it).
     pub attitude_gain: f64,
-    /// Thrust time constant τ_T [s] (spatial: thrust lag; rigid body: motor lag).
+    /// Thrust time constant τ_T \[s\] (spatial: thrust lag; rigid body: motor lag).
     pub thrust_tau: f64,
     /// Thrust gain [-]: actual thrust per commanded thrust, at nominal mass.
     pub thrust_gain: f64,
@@ -203,7 +203,7 @@ pub struct PlantOptions {
     pub wind: [f64; 3],
     /// Gust standard deviation per NED axis [m/s] (0 = no gusts).
     pub gust_std: [f64; 3],
-    /// Gust correlation time [s] (Dryden's L/V).
+    /// Gust correlation time \[s\] (Dryden's L/V).
     pub gust_tau: f64,
     /// Rigid-body parameters and autopilot gains.
     pub rigid: RigidBodyOptions,
@@ -288,7 +288,7 @@ impl PlantOptions {
         (out, clipped)
     }
 
-    /// Number of equal integration steps for a span `dt` [s] and their length.
+    /// Number of equal integration steps for a span `dt` \[s\] and their length.
     pub(crate) fn substeps(&self, dt: f64) -> (usize, f64) {
         let n = (dt / self.plant_dt - 1e-9).ceil().max(1.0) as usize;
         (n, dt / n as f64)
@@ -306,7 +306,7 @@ impl PlantOptions {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct RigidBodyOptions {
-    /// Nominal mass [kg] (the autopilot's; the true mass is `mass · mass_factor`).
+    /// Nominal mass \[kg\] (the autopilot's; the true mass is `mass · mass_factor`).
     pub mass: f64,
     /// Nominal principal inertia [Ixx, Iyy, Izz] [kg·m²].
     pub inertia: [f64; 3],
@@ -376,7 +376,7 @@ pub fn build_plant(
     })
 }
 
-/// One integration step of `ẋ = f(x)` over `h` [s].
+/// One integration step of `ẋ = f(x)` over `h` \[s\].
 pub(crate) fn integrate<const N: usize>(
     method: Integrator,
     x: &SVector<f64, N>,

@@ -20,7 +20,7 @@ const N: usize = 19;
 /// State vector (length 19):
 /// `[x, ẋ, y, ẏ, z, ż, θ, φ, ψ, p, q, r]` (NED m, m/s, ZYX rad, FRD rad/s —
 /// the paper's order), then the actual specific thrust T [m/s²], the three
-/// rate integrators [rad], the three rate-filter states [rad/s].
+/// rate integrators \[rad\], the three rate-filter states [rad/s].
 ///
 /// ```text
 /// v̇ = g·e3 − T·R·e3 − c·(v − w)
@@ -142,7 +142,7 @@ impl RigidBodyPlant {
         d
     }
 
-    /// Nominal mass [kg] (the autopilot's); the true mass is this times
+    /// Nominal mass \[kg\] (the autopilot's); the true mass is this times
     /// [`PlantOptions::mass_factor`].
     pub fn nominal_mass(&self) -> f64 {
         self.options.rigid.mass

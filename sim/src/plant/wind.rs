@@ -25,7 +25,7 @@ pub struct Wind {
 
 impl Wind {
     /// Mean wind `mean` [m/s], gust std `std` [m/s] per axis, correlation
-    /// time `tau` [s] (> 0), gusts seeded by `seed`. The gust starts at a draw
+    /// time `tau` \[s\] (> 0), gusts seeded by `seed`. The gust starts at a draw
     /// from its stationary distribution.
     pub fn new(mean: [f64; 3], std: [f64; 3], tau: f64, seed: u64) -> Self {
         let mut w = Self {
@@ -51,7 +51,7 @@ impl Wind {
         }
     }
 
-    /// Advances the gust by `h` [s].
+    /// Advances the gust by `h` \[s\].
     pub fn step(&mut self, h: f64) {
         let a = (-h / self.tau).exp();
         let b = (1.0 - a * a).max(0.0).sqrt();

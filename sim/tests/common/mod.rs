@@ -14,7 +14,7 @@ use nalgebra::Vector3;
 /// Gravity [m/s²].
 pub const G: f64 = 9.81;
 
-/// A fixed reference point (local NED [m]).
+/// A fixed reference point (local NED \[m\]).
 #[derive(Debug, Clone, Copy)]
 pub struct FixedRef(pub Vector3<f64>);
 

@@ -408,7 +408,7 @@ pub fn field(row: &std::collections::HashMap<String, String>, name: &str) -> Opt
 }
 
 /// Checks every command in the CSV rows: finite, tilt ≤ `max_tilt_deg`,
-/// thrust in [0, 1]. Returns the number of commands and the largest tilt [deg].
+/// thrust in [0, 1]. Returns the number of commands and the largest tilt \[deg\].
 pub fn check_csv_commands(
     rows: &[std::collections::HashMap<String, String>],
     max_tilt_deg: f64,
@@ -445,7 +445,7 @@ pub fn check_csv_commands(
     (n, worst)
 }
 
-/// Tilt of a SET_ATTITUDE_TARGET quaternion [w, x, y, z] [deg], or NaN if
+/// Tilt of a SET_ATTITUDE_TARGET quaternion [w, x, y, z] \[deg\], or NaN if
 /// it is not finite.
 pub fn quaternion_tilt_deg(q: [f32; 4]) -> f64 {
     let [w, x, y, z] = q.map(f64::from);
