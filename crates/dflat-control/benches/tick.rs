@@ -7,7 +7,8 @@
 //! * `df_mpc::multirate_smooth_tick` — steady-state tick with multi-rate
 //!   windows (15 Hz samples, 60 ms late) and the smoothness term.
 //! * `df_mpc::tilt_constrained_tick` — DF-MPC with a 15° tilt constraint
-//!   that binds on both axes (clarabel).
+//!   that binds on both axes (banded interior point, the default);
+//!   `tilt_constrained_tick_clarabel` the same solved by clarabel.
 //! * `df_mpc::qp_banded` / `df_mpc::qp_clarabel` — the same unconstrained
 //!   DF QP (both axes) solved by the banded solver and handed whole to
 //!   clarabel: the generic baseline (`qp_clarabel` with the KKT tuning
@@ -22,7 +23,7 @@
 
 use dflat_control::dfmpc::{
     AxisBounds, AxisProblem, AxisSolver, ConstrainedAxisSolver, DfMpc, DfMpcSettings, KktTuning,
-    OutputConstraints, Smoothness,
+    OutputConstraints, QpSolver, Smoothness,
 };
 use dflat_control::window::MultiRateSettings;
 use dflat_control::{ControlModel, Controller, Frame, Measurement, ReferenceSource};
@@ -97,19 +98,30 @@ mod df_mpc {
         bench_tick(bencher, settings, false);
     }
 
-    /// DF-MPC tick with a binding 15° tilt constraint (clarabel), 2 axes.
-    #[divan::bench(args = HORIZONS, sample_count = 20, sample_size = 5)]
-    fn tilt_constrained_tick(bencher: Bencher, n: usize) {
-        let settings = DfMpcSettings {
+    fn tilt_constrained(n: usize, qp_solver: QpSolver) -> DfMpcSettings {
+        DfMpcSettings {
             horizon: n,
             constraints: OutputConstraints {
                 max_tilt: Some(15f64.to_radians()),
                 ..Default::default()
             },
+            qp_solver,
             solver_time_limit: f64::INFINITY,
             ..Default::default()
-        };
-        bench_tick(bencher, settings, true);
+        }
+    }
+
+    /// DF-MPC tick with a binding 15° tilt constraint, 2 axes: the banded
+    /// interior point (the default).
+    #[divan::bench(args = HORIZONS, sample_count = 20, sample_size = 5)]
+    fn tilt_constrained_tick(bencher: Bencher, n: usize) {
+        bench_tick(bencher, tilt_constrained(n, QpSolver::Banded), true);
+    }
+
+    /// As `tilt_constrained_tick`, solved by clarabel.
+    #[divan::bench(args = HORIZONS, sample_count = 20, sample_size = 5)]
+    fn tilt_constrained_tick_clarabel(bencher: Bencher, n: usize) {
+        bench_tick(bencher, tilt_constrained(n, QpSolver::Clarabel), true);
     }
 
     /// DF-MPC tick with the command-smoothness term (half-bandwidth 4),

@@ -81,6 +81,47 @@ fn main() {
         ),
     ];
     println!("median of {REPS} solves [µs] (first planned jerk [m/s³])");
+    print!("{:<24}", "banded interior point");
+    for c in &CASES {
+        let smooth = Smoothness {
+            weight: c.smoothness,
+            kappa: 0.2 / DT,
+            gravity: G,
+        };
+        let a = G * c.tilt_deg.to_radians().tan();
+        let bounds = AxisBounds {
+            acceleration: Some([-a, a]),
+            speed: None,
+        };
+        let mut solver =
+            dflat_control::dfmpc::BoundedAxisSolver::new(c.horizon, (c.q, c.r, DT), bounds, smooth)
+                .unwrap();
+        let reference = vec![c.target; c.horizon + 1];
+        let mut plan = vec![0.0; c.horizon + 1];
+        let mut times: Vec<f64> = (0..REPS)
+            .map(|_| {
+                let t0 = std::time::Instant::now();
+                solver
+                    .solve_problem(AxisProblem {
+                        fixed: &c.fixed,
+                        sent: Some(0.0),
+                        reference: &reference,
+                        plan: &mut plan,
+                    })
+                    .expect("solves");
+                t0.elapsed().as_secs_f64() * 1e6
+            })
+            .collect();
+        times.sort_by(f64::total_cmp);
+        let jerk = (plan[3] - 3.0 * plan[2] + 3.0 * plan[1] - plan[0]) / DT.powi(3);
+        print!(
+            " | {}: {:4.0} ({jerk:.10e}) it {}",
+            c.name,
+            times[REPS / 2],
+            solver.iterations()
+        );
+    }
+    println!();
     for (label, tuning) in tunings {
         print!("{label:<24}");
         for c in &CASES {

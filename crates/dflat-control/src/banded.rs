@@ -88,6 +88,11 @@ impl SymBand {
         self.lower[k] += v;
     }
 
+    /// The lower band, row-major: `(i, i − d)` at `i·(b + 1) + d`.
+    pub(crate) fn lower(&self) -> &[f64] {
+        &self.lower
+    }
+
     /// Sets every entry to zero.
     pub fn fill_zero(&mut self) {
         self.lower.iter_mut().for_each(|v| *v = 0.0);

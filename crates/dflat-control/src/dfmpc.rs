@@ -41,12 +41,18 @@
 //! This fast path allocates nothing.
 //!
 //! When inequality constraints are configured and the fast plan violates
-//! one, the axis is re-solved with clarabel ([`ConstrainedAxisSolver`]) in
-//! the same deviation variables plus the planned accelerations (cost
-//! `q·(b + p − y_ref)² + r·(Δã/δt)²`, equality rows tie ã to Δ²p/δt², bounds
-//! on ã are single-entry rows): a well-scaled sparse QP whose structure is
-//! fixed, so one solver per axis is built once and only `q` and `b` are
-//! updated per tick. A status other than `Solved` is [`ControlError::Solver`].
+//! one, the axis is re-solved in the same deviation variables plus the
+//! planned accelerations (cost `q·(b + p − y_ref)² + r·(Δã/δt)²`, equality
+//! rows tie ã to Δ²p/δt², bounds on ã are single-entry rows): a
+//! well-scaled QP (the raw one in p alone has a Hessian condition number
+//! near 1e10). By default ([`QpSolver::Banded`]) with a primal-dual
+//! interior-point method on its KKT system ordered by stage, which is
+//! banded ([`crate::stage_qp`], [`BoundedAxisSolver`]): O(N) per iteration,
+//! about twice as fast as clarabel here. If it does not converge, clarabel
+//! ([`ConstrainedAxisSolver`]) solves the same QP: its structure is fixed,
+//! so one solver per axis is built once and only `q` and `b` are updated
+//! per tick. A clarabel status other than `Solved` is
+//! [`ControlError::Solver`].
 //!
 //! # Command smoothness (optional)
 //!
@@ -99,6 +105,7 @@ use serde::{Deserialize, Serialize};
 use crate::banded::{BandedCholesky, SymBand};
 use crate::disturbance::{DisturbanceEstimate, DisturbanceEstimator, DisturbanceSettings};
 use crate::model::ControlModel;
+use crate::stage_qp::StageQp;
 use crate::window::{MultiRateSettings, MultiRateWindow, Window, input_lags};
 use crate::{ControlError, Controller, Measurement, ReferenceSource, TickOutput};
 
@@ -164,6 +171,19 @@ impl OutputConstraints {
     }
 }
 
+/// Which solver handles an axis whose fast plan violates a bound.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum QpSolver {
+    /// The banded interior-point method ([`BoundedAxisSolver`], O(N) per
+    /// iteration), with clarabel as the fallback when it does not
+    /// converge. Default.
+    #[default]
+    Banded,
+    /// Clarabel alone ([`ConstrainedAxisSolver`]).
+    Clarabel,
+}
+
 /// Settings of [`DfMpc`], checked by [`DfMpcSettings::validate`].
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -181,6 +201,9 @@ pub struct DfMpcSettings {
     pub saturation: Option<InputSaturation>,
     /// Optional inequality constraints on the plan. Default none.
     pub constraints: OutputConstraints,
+    /// The solver for a plan that violates a constraint. Default
+    /// [`QpSolver::Banded`].
+    pub qp_solver: QpSolver,
     /// Wall-time limit for one clarabel solve \[s\] (`f64::INFINITY` for
     /// none). Default 0.01.
     pub solver_time_limit: f64,
@@ -207,6 +230,7 @@ impl Default for DfMpcSettings {
             jerk_weight: [0.01; 3],
             saturation: Some(InputSaturation::default()),
             constraints: OutputConstraints::default(),
+            qp_solver: QpSolver::Banded,
             solver_time_limit: 0.01,
             smoothness_weight: [0.0; 3],
             multi_rate: None,
@@ -830,6 +854,37 @@ impl KktTuning {
     };
 }
 
+/// The ã block of the doubled Hessian `P` (objective `½xᵀPx`) in the
+/// variables of [`ConstrainedAxisSolver`]: the jerk term `(r/δt²)·Σ_j
+/// (ã_j − ã_{j−1})²` (ã_{−1} = 0) and the smoothness term (band 2), as
+/// `[diagonal, (k−1, k), (k−2, k)]` per column k.
+fn accel_block(n: usize, r: f64, dt: f64, smoothness: &Smoothness) -> Vec<[f64; 3]> {
+    let ja = 2.0 * r / (dt * dt);
+    let mut band = vec![[0.0f64; 3]; n];
+    for (k, col) in band.iter_mut().enumerate() {
+        col[0] = if k + 1 < n { 2.0 * ja } else { ja };
+        if k > 0 {
+            col[1] = -ja;
+        }
+    }
+    if smoothness.weight > 0.0 {
+        let sg = 2.0 * smoothness.weight / smoothness.gravity.powi(2);
+        let kp = smoothness.kappa;
+        let coeffs = [kp, 1.0 - 2.0 * kp, -(1.0 - kp)]; // on ã_j, ã_{j−1}, ã_{j−2}
+        for j in 0..n {
+            for (da, &ca) in coeffs.iter().enumerate() {
+                let Some(a) = j.checked_sub(da) else { continue };
+                for (db, &cb) in coeffs.iter().enumerate().skip(da) {
+                    let Some(b) = j.checked_sub(db) else { continue };
+                    // a ≥ b: entry (b, a) of the upper triangle.
+                    band[a][a - b] += sg * ca * cb;
+                }
+            }
+        }
+    }
+    band
+}
+
 /// Row-builder for the sparse constraint matrix (column-wise triplets).
 struct Triplets {
     rows: Vec<usize>,
@@ -906,33 +961,9 @@ impl ConstrainedAxisSolver {
         }
         let n = horizon - 2;
         let nv = 2 * n;
-        // P (upper triangle): 2q on p; on ã the jerk term
-        // (r/δt²)·Σ_j (ã_j − ã_{j−1})² (ã_{−1} = 0), doubled for ½xᵀPx,
-        // and the smoothness term (band 2), kept as diagonals of the ã block.
-        let ja = 2.0 * r / (dt * dt);
-        let mut band = vec![[0.0f64; 3]; n]; // [diag, (k−1, k), (k−2, k)] per column k
-        for (k, col) in band.iter_mut().enumerate() {
-            col[0] = if k + 1 < n { 2.0 * ja } else { ja };
-            if k > 0 {
-                col[1] = -ja;
-            }
-        }
+        // P (upper triangle): 2q on p; on ã the jerk and smoothness terms.
+        let band = accel_block(n, r, dt, &smoothness);
         let smooth = smoothness.weight > 0.0;
-        if smooth {
-            let sg = 2.0 * smoothness.weight / smoothness.gravity.powi(2);
-            let kp = smoothness.kappa;
-            let coeffs = [kp, 1.0 - 2.0 * kp, -(1.0 - kp)]; // on ã_j, ã_{j−1}, ã_{j−2}
-            for j in 0..n {
-                for (da, &ca) in coeffs.iter().enumerate() {
-                    let Some(a) = j.checked_sub(da) else { continue };
-                    for (db, &cb) in coeffs.iter().enumerate().skip(da) {
-                        let Some(b) = j.checked_sub(db) else { continue };
-                        // a ≥ b: entry (b, a) of the upper triangle.
-                        band[a][a - b] += sg * ca * cb;
-                    }
-                }
-            }
-        }
         let mut colptr = vec![0usize];
         let (mut prow, mut pval) = (Vec::new(), Vec::new());
         for c in 0..nv {
@@ -1104,6 +1135,125 @@ impl ConstrainedAxisSolver {
     }
 }
 
+// ---------------------------------------------------------------------------
+// The 1-D problem: constrained (banded interior point)
+// ---------------------------------------------------------------------------
+
+/// The 1-D DF-MPC problem with inequality bounds, solved by the banded
+/// interior-point method of [`crate::stage_qp`]: clarabel's variables and
+/// cost ([`ConstrainedAxisSolver`]), the KKT system ordered by stage, so
+/// O(N) per iteration. It starts from the unconstrained optimum (computed
+/// here with the fast path). [`DfMpc`] uses it first and falls back to
+/// clarabel when it does not converge.
+#[derive(Debug, Clone)]
+pub struct BoundedAxisSolver {
+    fast: AxisSolver,
+    bounds: AxisBounds,
+    qp: StageQp,
+    c_p: Vec<f64>,
+    lo: Vec<f64>,
+    hi: Vec<f64>,
+    p: Vec<f64>,
+    iterations: usize,
+}
+
+impl BoundedAxisSolver {
+    /// Builds the solver for horizon N, weights `(q, r, δt)` as
+    /// [`AxisSolver::with_smoothness`], the bounds and the smoothness term.
+    pub fn new(
+        horizon: usize,
+        (q, r, dt): (f64, f64, f64),
+        bounds: AxisBounds,
+        smoothness: Smoothness,
+    ) -> Result<Self, ControlError> {
+        let fast = AxisSolver::with_smoothness(horizon, q, r, dt, smoothness)?;
+        let n = horizon - 2;
+        let accel = accel_block(n, r, dt, &smoothness);
+        let qp = StageQp::new(
+            n,
+            q,
+            dt,
+            &accel,
+            bounds.acceleration.is_some(),
+            bounds.speed.is_some(),
+        );
+        let m = qp.rows();
+        Ok(Self {
+            fast,
+            bounds,
+            qp,
+            c_p: vec![0.0; n],
+            lo: vec![0.0; m],
+            hi: vec![0.0; m],
+            p: vec![0.0; n],
+            iterations: 0,
+        })
+    }
+
+    /// The bounds this solver enforces.
+    pub fn bounds(&self) -> &AxisBounds {
+        &self.bounds
+    }
+
+    /// Interior-point iterations of the last solve.
+    pub fn iterations(&self) -> usize {
+        self.iterations
+    }
+
+    /// Solves with the bounds; arguments as [`AxisSolver::solve_problem`].
+    /// Errors: those of the fast path, and [`ControlError::Solver`] when
+    /// the interior-point method does not converge (infeasible bounds,
+    /// numerical trouble).
+    pub fn solve_problem(&mut self, a: AxisProblem<'_>) -> Result<(), ControlError> {
+        let AxisProblem {
+            fixed,
+            sent,
+            reference,
+            plan,
+        } = a;
+        self.fast.solve_problem(AxisProblem {
+            fixed,
+            sent,
+            reference,
+            plan: &mut *plan,
+        })?;
+        let dt = self.fast.dt;
+        let q = self.fast.q;
+        let n = self.p.len();
+        for f in 0..n {
+            let b = baseline(fixed, f + 3);
+            self.c_p[f] = 2.0 * q * (b - reference[f + 3]);
+            self.p[f] = plan[f + 3] - b;
+        }
+        let sm = self.fast.smoothness;
+        let c_a0 = match sent {
+            Some(c) if sm.weight > 0.0 => {
+                let a0 = (fixed[2] - 2.0 * fixed[1] + fixed[0]) / (dt * dt);
+                2.0 * sm.weight / sm.gravity.powi(2) * sm.kappa * (a0 - c)
+            }
+            _ => 0.0,
+        };
+        let (lo, hi) = (&mut self.lo, &mut self.hi);
+        let mut i = 0;
+        self.bounds
+            .row_bounds(self.fast.horizon, fixed, dt, |l, h| {
+                lo[i] = l;
+                hi[i] = h;
+                i += 1;
+            });
+        self.iterations = self
+            .qp
+            .solve(&self.c_p, c_a0, &self.lo, &self.hi, &mut self.p)?;
+        for f in 0..n {
+            plan[f + 3] = baseline(fixed, f + 3) + self.p[f];
+        }
+        if plan.iter().any(|v| !v.is_finite()) {
+            return Err(ControlError::Solver("non-finite solution".to_string()));
+        }
+        Ok(())
+    }
+}
+
 impl AxisSolver {
     fn check_args(horizon: usize, q: f64, r: f64, dt: f64) -> Result<(), ControlError> {
         if !(3..=MAX_HORIZON).contains(&horizon) {
@@ -1149,6 +1299,9 @@ pub struct DfMpc {
     fast: Vec<AxisSolver>,
     /// Clarabel solver per axis that has bounds.
     constrained: Vec<Option<ConstrainedAxisSolver>>,
+    /// Banded interior-point solver per axis that has bounds (tried before
+    /// clarabel, with [`QpSolver::Banded`]).
+    bounded: Vec<Option<BoundedAxisSolver>>,
     /// Bounds per axis (empty when none).
     bounds: Vec<AxisBounds>,
     /// Reference y_ref,k..y_ref,k+N (model frame, m).
@@ -1206,6 +1359,7 @@ impl DfMpc {
         let n = settings.horizon;
         let mut fast = Vec::with_capacity(axes);
         let mut constrained = Vec::with_capacity(axes);
+        let mut bounded = Vec::with_capacity(axes);
         let mut bounds = Vec::with_capacity(axes);
         let lags = input_lags(&model);
         for (axis, lag) in lags.iter().enumerate().take(axes) {
@@ -1241,6 +1395,11 @@ impl DfMpc {
                     smoothness,
                 )?)
             });
+            bounded.push(if b.is_empty() || settings.qp_solver != QpSolver::Banded {
+                None
+            } else {
+                Some(BoundedAxisSolver::new(n, (q, r, dt), b, smoothness)?)
+            });
             bounds.push(b);
         }
         Ok(Self {
@@ -1249,6 +1408,7 @@ impl DfMpc {
             window: Window::new(model.hover_input()),
             fast,
             constrained,
+            bounded,
             bounds,
             reference: vec![Vector3::zeros(); n + 1],
             reference_axis: vec![vec![0.0; n + 1]; axes],
@@ -1547,18 +1707,35 @@ impl Controller for DfMpc {
         let axes_data = self
             .constrained
             .iter_mut()
+            .zip(&mut self.bounded)
             .zip(&mut self.plans)
             .zip(&self.reference_axis);
-        for (axis, (((cs, plan), reference), fixed)) in axes_data.zip(&fixed_axis).enumerate() {
+        for (axis, ((((cs, bs), plan), reference), fixed)) in axes_data.zip(&fixed_axis).enumerate()
+        {
             if let Some(cs) = cs
                 && cs.bounds().violated_by(plan, dt)
             {
-                cs.solve_problem(AxisProblem {
-                    fixed,
-                    sent: sent(axis),
-                    reference,
-                    plan,
-                })?;
+                // The banded solver first; clarabel when it does not
+                // converge (its own failure is the tick's).
+                let banded = match bs {
+                    Some(bs) => bs
+                        .solve_problem(AxisProblem {
+                            fixed,
+                            sent: sent(axis),
+                            reference,
+                            plan: &mut *plan,
+                        })
+                        .is_ok(),
+                    None => false,
+                };
+                if !banded {
+                    cs.solve_problem(AxisProblem {
+                        fixed,
+                        sent: sent(axis),
+                        reference,
+                        plan,
+                    })?;
+                }
                 constrained = true;
             }
         }
@@ -1820,14 +1997,56 @@ mod tests {
         assert!(amax > 0.99 * a_max, "{amax}");
     }
 
+    /// Clarabel's objective `½xᵀPx + cᵀx` ([`ConstrainedAxisSolver`]) of a
+    /// plan: p its deviation from the baseline, ã = Δ²p/δt².
+    fn qp_objective(
+        horizon: usize,
+        (q, r, dt): (f64, f64, f64),
+        smoothness: &Smoothness,
+        fixed: &[f64; 3],
+        sent: Option<f64>,
+        reference: &[f64],
+        plan: &[f64],
+    ) -> f64 {
+        let n = horizon - 2;
+        let p: Vec<f64> = (0..n)
+            .map(|f| plan[f + 3] - baseline(fixed, f + 3))
+            .collect();
+        let at = |f: isize| if f < 0 { 0.0 } else { p[f as usize] };
+        let a: Vec<f64> = (0..n as isize)
+            .map(|f| (at(f) - 2.0 * at(f - 1) + at(f - 2)) / (dt * dt))
+            .collect();
+        let band = accel_block(n, r, dt, smoothness);
+        let mut obj = 0.0;
+        for f in 0..n {
+            obj += q * p[f] * p[f] + 2.0 * q * (baseline(fixed, f + 3) - reference[f + 3]) * p[f];
+            obj += 0.5 * band[f][0] * a[f] * a[f];
+            if f >= 1 {
+                obj += band[f][1] * a[f - 1] * a[f];
+            }
+            if f >= 2 {
+                obj += band[f][2] * a[f - 2] * a[f];
+            }
+        }
+        if let Some(c) = sent
+            && smoothness.weight > 0.0
+        {
+            let a0 = (fixed[2] - 2.0 * fixed[1] + fixed[0]) / (dt * dt);
+            let g2 = smoothness.gravity.powi(2);
+            obj += 2.0 * smoothness.weight / g2 * smoothness.kappa * (a0 - c) * a[0];
+        }
+        obj
+    }
+
     proptest::proptest! {
-        #![proptest_config(proptest::test_runner::Config::with_cases(48))]
-        /// The shipped KKT tuning ([`KktTuning::SHIPPED`]) gives the plan of
-        /// clarabel's default settings on random constrained instances —
-        /// with and without the smoothness term, windows faster than the
-        /// speed bound (funnel) included: the first planned jerk (what the
-        /// command depends on) to 1e-6 relative and every output to 1e-6 m;
-        /// the acceleration bounds hold.
+        #![proptest_config(proptest::test_runner::Config::with_cases(256))]
+        /// Clarabel with the shipped KKT tuning ([`KktTuning::SHIPPED`]) and
+        /// the banded interior point ([`BoundedAxisSolver`]) both give the
+        /// plan of clarabel's default settings on random constrained
+        /// instances — with and without the smoothness term, windows faster
+        /// than the speed bound (funnel) included — to the tolerances
+        /// below; the acceleration bounds hold. 256 cases per run
+        /// (`PROPTEST_CASES=2000` for more: five such runs passed).
         #[test]
         fn shipped_kkt_tuning_matches_clarabel_defaults(
             horizon in 20usize..=200,
@@ -1874,18 +2093,52 @@ mod tests {
                     fixed: &fixed, sent, reference: &reference, plan: &mut got,
                 })
                 .unwrap();
+            let mut banded = BoundedAxisSolver::new(horizon, (q, r, DT), bounds, smoothness).unwrap();
+            let mut got_banded = vec![0.0; horizon + 1];
+            banded
+                .solve_problem(AxisProblem {
+                    fixed: &fixed, sent, reference: &reference, plan: &mut got_banded,
+                })
+                .unwrap();
             let jerk = |p: &[f64]| (p[3] - 3.0 * p[2] + 3.0 * p[1] - p[0]) / DT.powi(3);
-            let (jg, jw) = (jerk(&got), jerk(&want));
+            let jw = jerk(&want);
+            // Both stop at ~1e-8 relative gaps, so outputs far out in the
+            // horizon (flat directions of the cost) may differ by µm even
+            // between the two clarabel tunings (1e-5 m over 2000 cases),
+            // more for the independent banded interior point: it is held to
+            // a cost no higher than clarabel's (1e-7 relative, the gap it
+            // accepts from a stalled iterate: the measure of a QP solution), the first jerk to 1e-3 relative (near a
+            // bound the cost can be flat in it too: 2000 cases showed 1.1e-4,
+            // 0.035° of command at −269 m/s³), the first ten outputs to
+            // 1e-5 m.
+            let objective = |plan: &[f64]| {
+                qp_objective(horizon, (q, r, DT), &smoothness, &fixed, sent, &reference, plan)
+            };
+            let (ow, ob) = (objective(&want), objective(&got_banded));
             proptest::prop_assert!(
-                (jg - jw).abs() <= 1e-6 * jw.abs().max(1.0),
-                "first jerk {jg} vs {jw}"
+                ob <= ow + 1e-7 * (1.0 + ow.abs()),
+                "banded cost {ob} above clarabel's {ow}"
             );
-            for (j, (g, w)) in got.iter().zip(&want).enumerate() {
-                proptest::prop_assert!((g - w).abs() <= 1e-6, "y_{j}: {g} vs {w}");
+            // (name, plan, first-jerk tolerance (relative), tolerance on
+            // the first ten outputs, on the rest [m]).
+            let cases = [
+                ("clarabel shipped", &got, 1e-6, 1e-6, 1e-5),
+                ("banded", &got_banded, 1e-3, 1e-5, 1e-3),
+            ];
+            for (name, got, jerk_tol, near_tol, far_tol) in cases {
+                let jg = jerk(got);
+                proptest::prop_assert!(
+                    (jg - jw).abs() <= jerk_tol * jw.abs().max(1.0),
+                    "{name}: first jerk {jg} vs {jw}"
+                );
+                for (j, (g, w)) in got.iter().zip(&want).enumerate() {
+                    let tol = if j <= 10 { near_tol } else { far_tol };
+                    proptest::prop_assert!((g - w).abs() <= tol, "{name}: y_{j}: {g} vs {w}");
+                }
+                // The funnel relaxes the speed bound near the start.
+                let check = AxisBounds { speed: None, ..bounds };
+                proptest::prop_assert!(!check.violated_by(got, DT), "{name}");
             }
-            // The funnel relaxes the speed bound near the start.
-            let check = AxisBounds { speed: None, ..bounds };
-            proptest::prop_assert!(!check.violated_by(&got, DT));
         }
     }
 

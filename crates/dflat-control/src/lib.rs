@@ -28,6 +28,7 @@ pub mod fmpc;
 pub mod model;
 pub mod pd;
 pub mod reference;
+pub mod stage_qp;
 pub mod window;
 
 pub use model::ControlModel;
@@ -83,7 +84,8 @@ pub struct TickOutput {
     pub reference: Vector3<f64>,
     /// True when the command was clipped by input saturation.
     pub saturated: bool,
-    /// True when the inequality-constrained QP (clarabel) was solved.
+    /// True when a bound was violated by the unconstrained plan and the
+    /// inequality-constrained QP was solved.
     pub constrained: bool,
 }
 
@@ -103,7 +105,7 @@ pub enum ControlError {
     /// The reference holds NaN or infinite values.
     #[error("non-finite reference")]
     NonFiniteReference,
-    /// The constrained QP did not solve (status from clarabel).
+    /// The constrained QP did not solve (the solver's status).
     #[error("QP solver failed: {0}")]
     Solver(String),
     /// The banded system was not positive definite (bad weights).

@@ -7,6 +7,7 @@
 
 use std::path::{Path, PathBuf};
 
+use dflat_control::dfmpc::QpSolver;
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
@@ -292,6 +293,10 @@ pub struct ControllerConfig {
     /// to it at 90 % of the tilt bound's acceleration rather than making
     /// the QP infeasible.
     pub constraint_speed: f64,
+    /// Solver of the constrained QP (df-mpc): "banded" — a banded
+    /// interior-point method, O(N) per iteration, with clarabel as the
+    /// fallback — or "clarabel" alone. Default "banded".
+    pub qp_solver: QpSolver,
     /// Disturbance estimation (df-mpc; offset-free tracking): acceleration
     /// offsets (wind, drag) and, for the spatial model, the thrust scale
     /// (hover thrust, mass). Default false.
@@ -328,6 +333,7 @@ impl Default for ControllerConfig {
             pd_kd: 2.5,
             constraint_tilt_deg: 30.0,
             constraint_speed: 0.0,
+            qp_solver: QpSolver::Banded,
             disturbance: false,
             disturbance_bandwidth_hz: 0.1,
             disturbance_window: 50,

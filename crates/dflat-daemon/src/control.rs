@@ -86,6 +86,7 @@ pub fn build_controller(cfg: &Config) -> Result<Box<dyn Controller>, ControlErro
                     max_speed: (c.constraint_speed > 0.0).then_some(c.constraint_speed),
                     vertical_acceleration: None,
                 },
+                qp_solver: c.qp_solver,
                 smoothness_weight: c.smoothness_weight,
                 multi_rate: c.multi_rate.then(|| MultiRateSettings {
                     window: c.multi_rate_window,

@@ -78,7 +78,7 @@
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 
-use dflat_control::dfmpc::{DfMpc, DfMpcSettings, InputSaturation, OutputConstraints};
+use dflat_control::dfmpc::{DfMpc, DfMpcSettings, InputSaturation, OutputConstraints, QpSolver};
 use dflat_control::disturbance::{DisturbanceReport, DisturbanceSettings};
 use dflat_control::fmpc::{FlatnessMpc, FmpcSettings};
 use dflat_control::pd::{Pd, PdSettings};
@@ -241,6 +241,7 @@ impl MultiRateDf {
                 thrust_max,
                 ..InputSaturation::default()
             }),
+            qp_solver: QpSolver::default(),
             // The lab is deterministic: no wall-clock limit.
             solver_time_limit: f64::INFINITY,
             disturbance,
