@@ -838,7 +838,7 @@ impl KktTuning {
     /// defaults on all four (1e-12 is faster still without smoothness but
     /// slower than the defaults with it). The first planned jerk agrees
     /// with the defaults' to the 10 digits printed; the test
-    /// `shipped_kkt_tuning_matches_clarabel_defaults` checks 1e-6 on random
+    /// `constrained_solvers_match_clarabel_defaults` checks 1e-6 on random
     /// instances.
     pub const SHIPPED: Self = Self {
         static_regularization: 1e-10,
@@ -2048,7 +2048,7 @@ mod tests {
         /// below; the acceleration bounds hold. 256 cases per run
         /// (`PROPTEST_CASES=2000` for more: five such runs passed).
         #[test]
-        fn shipped_kkt_tuning_matches_clarabel_defaults(
+        fn constrained_solvers_match_clarabel_defaults(
             horizon in 20usize..=200,
             q in 0.5f64..10.0,
             r in 1e-3f64..0.1,
