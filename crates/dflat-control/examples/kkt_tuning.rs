@@ -1,11 +1,13 @@
-//! Times clarabel's constrained DF solve (one axis, bounds binding) under
-//! a few KKT tunings on four problem types, and prints the first planned
-//! jerk of each so their accuracy can be compared. The data behind
-//! `KktTuning::SHIPPED`.
+//! Times the constrained DF solve (one axis, bounds binding) on four
+//! problem types: the banded interior point (the default) and clarabel
+//! under a few KKT tunings, with the first planned jerk of each so their
+//! accuracy can be compared. The data behind `KktTuning::SHIPPED`.
 //!
 //! Run: `cargo run --release -p dflat-control --example kkt_tuning`.
 
-use dflat_control::dfmpc::{AxisBounds, AxisProblem, ConstrainedAxisSolver, KktTuning, Smoothness};
+use dflat_control::dfmpc::{
+    AxisBounds, AxisProblem, BoundedAxisSolver, ConstrainedAxisSolver, KktTuning, Smoothness,
+};
 
 const DT: f64 = 0.02;
 const G: f64 = 9.81;
@@ -67,12 +69,49 @@ const CASES: [Case; 4] = [
     },
 ];
 
+/// A case's smoothness term and bounds.
+fn problem(c: &Case) -> (Smoothness, AxisBounds) {
+    let a = G * c.tilt_deg.to_radians().tan();
+    (
+        Smoothness {
+            weight: c.smoothness,
+            kappa: 0.2 / DT,
+            gravity: G,
+        },
+        AxisBounds {
+            acceleration: Some([-a, a]),
+            speed: None,
+        },
+    )
+}
+
+/// Median time of `REPS` solves [µs] and the first planned jerk [m/s³].
+fn time_solves(c: &Case, mut solve: impl FnMut(AxisProblem<'_>)) -> (f64, f64) {
+    let reference = vec![c.target; c.horizon + 1];
+    let mut plan = vec![0.0; c.horizon + 1];
+    let mut times: Vec<f64> = (0..REPS)
+        .map(|_| {
+            let t0 = std::time::Instant::now();
+            solve(AxisProblem {
+                fixed: &c.fixed,
+                sent: Some(0.0),
+                reference: &reference,
+                plan: &mut plan,
+            });
+            t0.elapsed().as_secs_f64() * 1e6
+        })
+        .collect();
+    times.sort_by(f64::total_cmp);
+    let jerk = (plan[3] - 3.0 * plan[2] + 3.0 * plan[1] - plan[0]) / DT.powi(3);
+    (times[REPS / 2], jerk)
+}
+
 fn main() {
     let tunings = [
         ("clarabel defaults", KktTuning::CLARABEL_DEFAULTS),
-        ("shipped", KktTuning::SHIPPED),
+        ("clarabel shipped", KktTuning::SHIPPED),
         (
-            "reg 1e-12, refine 1e-10",
+            "clarabel 1e-12, 1e-10",
             KktTuning {
                 static_regularization: 1e-12,
                 refinement_reltol: 1e-10,
@@ -83,58 +122,18 @@ fn main() {
     println!("median of {REPS} solves [µs] (first planned jerk [m/s³])");
     print!("{:<24}", "banded interior point");
     for c in &CASES {
-        let smooth = Smoothness {
-            weight: c.smoothness,
-            kappa: 0.2 / DT,
-            gravity: G,
-        };
-        let a = G * c.tilt_deg.to_radians().tan();
-        let bounds = AxisBounds {
-            acceleration: Some([-a, a]),
-            speed: None,
-        };
-        let mut solver =
-            dflat_control::dfmpc::BoundedAxisSolver::new(c.horizon, (c.q, c.r, DT), bounds, smooth)
-                .unwrap();
-        let reference = vec![c.target; c.horizon + 1];
-        let mut plan = vec![0.0; c.horizon + 1];
-        let mut times: Vec<f64> = (0..REPS)
-            .map(|_| {
-                let t0 = std::time::Instant::now();
-                solver
-                    .solve_problem(AxisProblem {
-                        fixed: &c.fixed,
-                        sent: Some(0.0),
-                        reference: &reference,
-                        plan: &mut plan,
-                    })
-                    .expect("solves");
-                t0.elapsed().as_secs_f64() * 1e6
-            })
-            .collect();
-        times.sort_by(f64::total_cmp);
-        let jerk = (plan[3] - 3.0 * plan[2] + 3.0 * plan[1] - plan[0]) / DT.powi(3);
-        print!(
-            " | {}: {:4.0} ({jerk:.10e}) it {}",
-            c.name,
-            times[REPS / 2],
-            solver.iterations()
-        );
+        let (smooth, bounds) = problem(c);
+        let mut solver = BoundedAxisSolver::new(c.horizon, (c.q, c.r, DT), bounds, smooth)
+            .expect("valid problem");
+        let (us, jerk) = time_solves(c, |p| solver.solve_problem(p).expect("solves"));
+        let it = solver.iterations();
+        print!(" | {}: {us:4.0} ({jerk:.10e}) {it} it", c.name);
     }
     println!();
     for (label, tuning) in tunings {
         print!("{label:<24}");
         for c in &CASES {
-            let smooth = Smoothness {
-                weight: c.smoothness,
-                kappa: 0.2 / DT,
-                gravity: G,
-            };
-            let a = G * c.tilt_deg.to_radians().tan();
-            let bounds = AxisBounds {
-                acceleration: Some([-a, a]),
-                speed: None,
-            };
+            let (smooth, bounds) = problem(c);
             let weights = (c.q, c.r, DT);
             let mut solver = ConstrainedAxisSolver::with_tuning(
                 c.horizon,
@@ -145,25 +144,8 @@ fn main() {
                 tuning,
             )
             .expect("valid problem");
-            let reference = vec![c.target; c.horizon + 1];
-            let mut plan = vec![0.0; c.horizon + 1];
-            let mut times: Vec<f64> = (0..REPS)
-                .map(|_| {
-                    let t0 = std::time::Instant::now();
-                    solver
-                        .solve_problem(AxisProblem {
-                            fixed: &c.fixed,
-                            sent: Some(0.0),
-                            reference: &reference,
-                            plan: &mut plan,
-                        })
-                        .expect("solves");
-                    t0.elapsed().as_secs_f64() * 1e6
-                })
-                .collect();
-            times.sort_by(f64::total_cmp);
-            let jerk = (plan[3] - 3.0 * plan[2] + 3.0 * plan[1] - plan[0]) / DT.powi(3);
-            print!(" | {}: {:4.0} ({jerk:.10e})", c.name, times[REPS / 2]);
+            let (us, jerk) = time_solves(c, |p| solver.solve_problem(p).expect("solves"));
+            print!(" | {}: {us:4.0} ({jerk:.10e})", c.name);
         }
         println!();
     }
