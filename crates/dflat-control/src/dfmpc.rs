@@ -48,8 +48,9 @@
 //! near 1e10). By default ([`QpSolver::Banded`]) with a primal-dual
 //! interior-point method on its KKT system ordered by stage, which is
 //! banded ([`crate::stage_qp`], [`BoundedAxisSolver`]): O(N) per iteration,
-//! 2–3× faster than clarabel here (`examples/kkt_tuning.rs`). If it does not converge, clarabel
-//! ([`ConstrainedAxisSolver`]) solves the same QP: its structure is fixed,
+//! 2–3× faster than clarabel here (`examples/kkt_tuning.rs`). If it does
+//! not converge, clarabel ([`ConstrainedAxisSolver`]) solves the same QP:
+//! its structure is fixed,
 //! so one solver per axis is built once and only `q` and `b` are updated
 //! per tick. A clarabel status other than `Solved` is
 //! [`ControlError::Solver`].
