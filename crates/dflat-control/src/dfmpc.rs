@@ -1705,6 +1705,7 @@ impl Controller for DfMpc {
             self.fast[2].solve_problem(problem(2, plan))?;
         }
         let mut constrained = false;
+        let mut qp_fallback = false;
         let dt = self.model.dt();
         let axes_data = self
             .constrained
@@ -1719,6 +1720,7 @@ impl Controller for DfMpc {
             {
                 // The banded solver first; clarabel when it does not
                 // converge (its own failure is the tick's).
+                let has_banded = bs.is_some();
                 let banded = match bs {
                     Some(bs) => bs
                         .solve_problem(AxisProblem {
@@ -1731,6 +1733,7 @@ impl Controller for DfMpc {
                     None => false,
                 };
                 if !banded {
+                    qp_fallback |= has_banded;
                     cs.solve_problem(AxisProblem {
                         fixed,
                         sent: sent(axis),
@@ -1770,6 +1773,7 @@ impl Controller for DfMpc {
             reference: self.good_reference[0],
             saturated,
             constrained,
+            qp_fallback,
         })
     }
 
@@ -1835,6 +1839,7 @@ impl Controller for DfMpc {
             reference: self.good_reference[step],
             saturated,
             constrained: false,
+            qp_fallback: false,
         })
     }
 
@@ -2288,6 +2293,57 @@ mod tests {
                 ..d
             }),
             "solver_time_limit"
+        );
+    }
+
+    #[test]
+    fn banded_failure_falls_back_to_clarabel_and_says_so() {
+        let model = || {
+            ControlModel::Planar(
+                dflat_model::PlanarModel::new(dflat_model::PlanarParams::default()).unwrap(),
+            )
+        };
+        let settings = |qp_solver| DfMpcSettings {
+            constraints: OutputConstraints {
+                max_tilt: Some(20f64.to_radians()),
+                ..Default::default()
+            },
+            qp_solver,
+            solver_time_limit: f64::INFINITY,
+            ..Default::default()
+        };
+        let mut banded = DfMpc::new(model(), settings(QpSolver::Banded)).unwrap();
+        let mut broken = DfMpc::new(model(), settings(QpSolver::Banded)).unwrap();
+        let mut clarabel = DfMpc::new(model(), settings(QpSolver::Clarabel)).unwrap();
+        // A banded solver built for another horizon refuses every problem
+        // of this controller (length check): the axis goes to clarabel.
+        let bounds = AxisBounds {
+            acceleration: Some([-1.0, 1.0]),
+            speed: None,
+        };
+        for b in &mut broken.bounded {
+            *b = Some(
+                BoundedAxisSolver::new(10, (1.0, 0.08, DT), bounds, Smoothness::default()).unwrap(),
+            );
+        }
+        let m = Measurement {
+            t: 0.0,
+            position: Vector3::zeros(),
+            yaw: 0.0,
+        };
+        let target = Vector3::new(10.0, -10.0, 0.0);
+        let tick = |c: &mut DfMpc| {
+            let mut r = crate::reference::Reference::setpoint(target).unwrap();
+            c.update(&m, &mut r).unwrap()
+        };
+        let (a, b, c) = (tick(&mut banded), tick(&mut broken), tick(&mut clarabel));
+        assert!(a.constrained && b.constrained && c.constrained);
+        assert!(!a.qp_fallback && b.qp_fallback && !c.qp_fallback);
+        // The fallback's command is clarabel's.
+        assert_eq!(b.command, c.command);
+        assert!(
+            (a.command.pitch - c.command.pitch).abs() < 1e-4,
+            "{a:?} {c:?}"
         );
     }
 }

@@ -391,6 +391,7 @@ impl Controller for FlatnessMpc {
             reference: self.refs[0],
             saturated,
             constrained: false,
+            qp_fallback: false,
         })
     }
 

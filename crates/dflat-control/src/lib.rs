@@ -87,6 +87,10 @@ pub struct TickOutput {
     /// True when a bound was violated by the unconstrained plan and the
     /// inequality-constrained QP was solved.
     pub constrained: bool,
+    /// True when the banded constrained solver did not converge on some
+    /// axis and clarabel solved it instead (DF-MPC with
+    /// `QpSolver::Banded`; see `DfMpcSettings::qp_solver`).
+    pub qp_fallback: bool,
 }
 
 /// Why a controller tick failed. The shell decides what to do (hold the

@@ -288,6 +288,7 @@ impl Controller for Pd {
             reference: p_ref,
             saturated,
             constrained: false,
+            qp_fallback: false,
         })
     }
 

@@ -63,8 +63,8 @@ use crate::records::{CsvRecorder, CsvReport, CsvRow, flight_stem};
 use crate::schedule::Schedule;
 use crate::signing::{PERSIST_INTERVAL, SigningError, TimestampStore};
 use crate::summary::{
-    DisturbanceSummary, FlightSummary, Histogram, LinkSummary, StateTimes, peak_rss_kib,
-    process_cpu_seconds,
+    DisturbanceSummary, FlightSummary, Histogram, LinkSummary, SolveCounts, StateTimes,
+    peak_rss_kib, process_cpu_seconds,
 };
 use crate::supervisor::{
     Cause, FlightState, Goal, SetpointOutcome, Supervisor, SupervisorConfig, Transition,
@@ -221,6 +221,7 @@ struct ControlReport {
     csv: Option<CsvReport>,
     disturbance: Option<DisturbanceSummary>,
     guards: GuardCounts,
+    solves: SolveCounts,
 }
 
 /// What the receive task counted.
@@ -364,6 +365,7 @@ impl DaemonHandle {
             tlog,
             disturbance: control.disturbance,
             guards: control.guards,
+            solves: control.solves,
         };
         let fault = self.fault.lock().unwrap_or_else(|p| p.into_inner()).take();
         match fault {
@@ -897,6 +899,8 @@ struct LoopState {
     guard_note: Option<&'static str>,
     /// The fallback in use (announced once per kind), if any.
     fallback: Option<FallbackKind>,
+    /// Flags of the controller's successful ticks.
+    solves: SolveCounts,
 }
 
 /// One pose as the control loop keeps it.
@@ -990,6 +994,7 @@ impl ControlLoop {
             disturbance: None,
             guard_note: None,
             fallback: None,
+            solves: SolveCounts::default(),
         };
         let multi_rate = self.controller.multi_rate();
         let start = Instant::now();
@@ -1148,6 +1153,7 @@ impl ControlLoop {
                         }
                         ls.error_streak = 0;
                         ls.fallback = None;
+                        ls.solves.record(&out);
                         self.fallback.good(command);
                         self.residual
                             .predict([out.plan[1].x, out.plan[1].y, out.plan[1].z]);
@@ -1317,6 +1323,7 @@ impl ControlLoop {
             csv,
             disturbance: ls.disturbance,
             guards: self.counts,
+            solves: ls.solves,
         }
     }
 

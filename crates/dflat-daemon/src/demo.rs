@@ -184,6 +184,11 @@ impl DemoOutcome {
             }
         }
         let _ = writeln!(s, "  solve time                  {}", d.solve_us);
+        let _ = writeln!(
+            s,
+            "  constrained ticks           {} ({} by clarabel after the banded solver), {} saturated",
+            d.solves.constrained, d.solves.qp_fallbacks, d.solves.saturated
+        );
         let _ = writeln!(s, "  tick jitter                 {}", d.jitter_us);
         let _ = writeln!(
             s,
@@ -213,13 +218,14 @@ impl DemoOutcome {
         );
         let _ = writeln!(
             s,
-            "  sitl                        sent pose {}, attitude {}, heartbeat {}; commands {} accepted, {} ignored, {} rejected; late plant steps {}",
+            "  sitl                        sent pose {}, attitude {}, heartbeat {}; commands {} accepted, {} ignored, {} rejected, {} unauthenticated; late plant steps {}",
             c.positions_sent,
             c.attitudes_sent,
             c.heartbeats_sent,
             c.commands_accepted,
             c.commands_ignored,
             c.commands_rejected,
+            c.commands_unauthenticated,
             c.late_steps
         );
         let cpu = d

@@ -341,6 +341,34 @@ pub struct FlightSummary {
     /// What the control loop's guards did (saturations, fallbacks, pose
     /// jumps, residual failsafes).
     pub guards: crate::guard::GuardCounts,
+    /// What the controller's successful ticks reported (constrained
+    /// solves, solver fallbacks, input saturation).
+    pub solves: SolveCounts,
+}
+
+/// Counts over the controller's successful ticks, from
+/// [`dflat_control::TickOutput`]'s flags.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+pub struct SolveCounts {
+    /// Ticks whose unconstrained plan violated a bound, so the
+    /// inequality-constrained QP was solved (DF-MPC with constraints).
+    pub constrained: u64,
+    /// Of those, ticks on which the banded constrained solver did not
+    /// converge and clarabel solved instead (`controller.qp_solver =
+    /// "banded"`). More than a few per flight is worth a look.
+    pub qp_fallbacks: u64,
+    /// Ticks whose command the controller clipped by its input saturation
+    /// (before the guard's own tilt / thrust caps).
+    pub saturated: u64,
+}
+
+impl SolveCounts {
+    /// Counts one successful tick.
+    pub fn record(&mut self, out: &dflat_control::TickOutput) {
+        self.constrained += u64::from(out.constrained);
+        self.qp_fallbacks += u64::from(out.qp_fallback);
+        self.saturated += u64::from(out.saturated);
+    }
 }
 
 /// The disturbance estimate for the summary (see
@@ -436,6 +464,12 @@ impl fmt::Display for FlightSummary {
             g.level_hover,
             g.pose_jumps,
             g.residual_failsafes
+        )?;
+        let s = &self.solves;
+        writeln!(
+            f,
+            "  solves        {} constrained ({} by clarabel after the banded solver), {} saturated by the controller",
+            s.constrained, s.qp_fallbacks, s.saturated
         )?;
         write!(f, "  resources     CPU {cpu}, peak RSS {rss}")?;
         if let Some(c) = &self.csv {

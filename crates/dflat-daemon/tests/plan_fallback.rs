@@ -131,6 +131,15 @@ async fn failed_and_late_ticks_fly_the_previous_plan_then_level_hover_and_recove
         "every failed or late tick sent exactly one fallback: {g:?}"
     );
     assert_eq!(g.non_finite, 0);
+    // The 30° plan-tilt bound binds at the start and the corner; the
+    // summary counts those ticks (successful ones only).
+    let s = summary.solves;
+    assert!(s.constrained > 0, "{s:?}");
+    assert!(s.qp_fallbacks <= s.constrained, "{s:?}");
+    assert!(
+        s.constrained + g.controller_failures + g.deadline_overruns <= summary.ticks,
+        "{s:?}"
+    );
     assert_eq!(report.counters.commands_rejected, 0);
     assert!(!report.diverged);
     assert!(
@@ -149,7 +158,7 @@ async fn failed_and_late_ticks_fly_the_previous_plan_then_level_hover_and_recove
         .map(|w| (w[1].roll - w[0].roll).hypot(w[1].pitch - w[0].pitch))
         .fold(0.0f64, f64::max);
     eprintln!(
-        "guards {g:?}; largest command change between telemetry samples {:.2}°",
+        "guards {g:?}; solves {s:?}; largest command change between telemetry samples {:.2}°",
         step.to_degrees()
     );
 }

@@ -85,6 +85,7 @@ impl Controller for TestPd {
             reference: r[0],
             saturated: pitch != pitch_raw || roll != roll_raw,
             constrained: false,
+            qp_fallback: false,
         })
     }
 
@@ -139,6 +140,7 @@ impl Controller for Constant {
             reference: m.position,
             saturated: false,
             constrained: false,
+            qp_fallback: false,
         })
     }
     fn reset(&mut self) {}
