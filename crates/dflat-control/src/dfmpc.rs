@@ -108,7 +108,9 @@ use crate::disturbance::{DisturbanceEstimate, DisturbanceEstimator, DisturbanceS
 use crate::model::ControlModel;
 use crate::stage_qp::StageQp;
 use crate::window::{MultiRateSettings, MultiRateWindow, Window, input_lags};
-use crate::{ControlError, Controller, Measurement, ReferenceSource, TickOutput};
+use crate::{
+    ControlError, Controller, Measurement, ReferenceSource, TickOutput, TiltLimit, limit_tilt,
+};
 
 /// Coefficients of the third difference `Δ³y_j` on `y_j..y_{j+3}`.
 const D3: [f64; 4] = [-1.0, 3.0, -3.0, 1.0];
@@ -128,9 +130,12 @@ pub const MAX_FALLBACK_STEPS: usize = 50;
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct InputSaturation {
-    /// Largest |pitch| and |roll| command \[rad\], each clipped separately.
-    /// Default 35° (the DJI SDK limit).
+    /// Tilt limit of the pitch / roll command \[rad\], applied as
+    /// `tilt_limit` says. Default 35° (the DJI SDK limit).
     pub max_tilt: f64,
+    /// How `max_tilt` applies: each channel clipped (default, the paper) or
+    /// the combined tilt bounded ([`TiltLimit::Cone`], the daemon).
+    pub tilt_limit: TiltLimit,
     /// Smallest specific thrust command [m/s²] (spatial model only). Default 2.
     pub thrust_min: f64,
     /// Largest specific thrust command [m/s²] (spatial model only). Default 20.
@@ -141,6 +146,7 @@ impl Default for InputSaturation {
     fn default() -> Self {
         Self {
             max_tilt: 35f64.to_radians(),
+            tilt_limit: TiltLimit::PerAxis,
             thrust_min: 2.0,
             thrust_max: 20.0,
         }
@@ -1488,8 +1494,7 @@ impl DfMpc {
             return (u, false);
         };
         let mut out = u;
-        out.x = u.x.clamp(-s.max_tilt, s.max_tilt);
-        out.y = u.y.clamp(-s.max_tilt, s.max_tilt);
+        (out.x, out.y, _) = limit_tilt(u.x, u.y, s.max_tilt, s.tilt_limit);
         if matches!(self.model, ControlModel::Spatial(_)) {
             out.z = u.z.clamp(s.thrust_min, s.thrust_max);
         }

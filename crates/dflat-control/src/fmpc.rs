@@ -32,7 +32,7 @@ use nalgebra::{DMatrix, Vector3};
 
 use crate::{
     AttitudeCommand, ControlError, ControlModel, Controller, Measurement, ReferenceSource,
-    TickOutput,
+    TickOutput, TiltLimit, limit_tilt,
 };
 
 /// Largest accepted horizon N \[steps\] (the Hessian is factored densely in
@@ -58,6 +58,8 @@ pub struct FmpcSettings {
     /// Saturation of the pitch and roll commands \[rad\], in (0, π/2);
     /// `None` disables it (replays). Default 35°.
     pub max_tilt: Option<f64>,
+    /// How `max_tilt` applies (default [`TiltLimit::PerAxis`], the paper).
+    pub tilt_limit: TiltLimit,
 }
 
 impl Default for FmpcSettings {
@@ -67,6 +69,7 @@ impl Default for FmpcSettings {
             q: [1.0; 3],
             r: [0.01; 3],
             max_tilt: Some(35f64.to_radians()),
+            tilt_limit: TiltLimit::PerAxis,
         }
     }
 }
@@ -193,13 +196,22 @@ fn frame_vertical_rate(frame: Frame, jerk_z: f64) -> f64 {
 }
 
 /// Clamps `x` to ±`limit` (when given), recording whether it clipped.
-pub(crate) fn clamp_tilt(x: f64, limit: Option<f64>, saturated: &mut bool) -> f64 {
+/// `(pitch, roll)` \[rad\] under the tilt limit (none: unchanged);
+/// sets `saturated` when it changed them.
+pub(crate) fn limit_pair(
+    pitch: f64,
+    roll: f64,
+    limit: Option<f64>,
+    mode: TiltLimit,
+    saturated: &mut bool,
+) -> (f64, f64) {
     match limit {
-        Some(l) if x.abs() > l => {
-            *saturated = true;
-            x.clamp(-l, l)
+        Some(l) => {
+            let (p, r, hit) = limit_tilt(pitch, roll, l, mode);
+            *saturated |= hit;
+            (p, r)
         }
-        _ => x,
+        None => (pitch, roll),
     }
 }
 
@@ -326,6 +338,7 @@ impl Controller for FlatnessMpc {
         }
 
         let limit = self.settings.max_tilt;
+        let mode = self.settings.tilt_limit;
         let mut saturated = false;
         let command = match &self.model {
             ControlModel::Planar(m) => {
@@ -333,9 +346,16 @@ impl Controller for FlatnessMpc {
                 let s = p.frame.horizontal_sign() / p.g;
                 let [theta, phi, theta_dot, phi_dot] =
                     attitude_with_rates(s * z[0][2], s * z[1][2], s * v[0][0], s * v[1][0], p.psi);
+                let (pitch, roll) = limit_pair(
+                    (theta + p.tau * theta_dot) / p.k,
+                    (phi + p.tau * phi_dot) / p.k,
+                    limit,
+                    mode,
+                    &mut saturated,
+                );
                 AttitudeCommand {
-                    pitch: clamp_tilt((theta + p.tau * theta_dot) / p.k, limit, &mut saturated),
-                    roll: clamp_tilt((phi + p.tau * phi_dot) / p.k, limit, &mut saturated),
+                    pitch,
+                    roll,
                     yaw: p.psi,
                     thrust: p.g,
                 }
@@ -347,22 +367,22 @@ impl Controller for FlatnessMpc {
                 let [theta, phi, thrust, theta_dot, phi_dot, thrust_dot] =
                     spatial_attitude_with_rates(p.frame, p.g, p.psi, acc, jerk)?;
                 let mut tilt_saturated = false;
-                let pitch = clamp_tilt(
+                let (pitch, roll) = limit_pair(
                     (theta + p.tau * theta_dot) / p.k,
+                    (phi + p.tau * phi_dot) / p.k,
                     limit,
+                    mode,
                     &mut tilt_saturated,
                 );
-                let roll = clamp_tilt((phi + p.tau * phi_dot) / p.k, limit, &mut tilt_saturated);
-                let flat_tilt_beyond = limit.is_some_and(|l| theta.abs() > l || phi.abs() > l);
+                let mut flat_tilt_beyond = false;
+                let (theta_l, phi_l) = limit_pair(theta, phi, limit, mode, &mut flat_tilt_beyond);
                 let mut thrust_cmd = if flat_tilt_beyond {
                     // The flat attitude itself is beyond the limit: vertical
                     // priority, keep the vertical thrust t_z + τ_T ṫ_z at the
-                    // clipped attitude (so saturation does not climb or sink).
-                    let l = limit.unwrap_or(std::f64::consts::FRAC_PI_2);
+                    // limited attitude (so saturation does not climb or sink).
                     let t_z = thrust * theta.cos() * phi.cos();
                     let t_z_dot = frame_vertical_rate(p.frame, jerk[2]);
-                    (t_z + p.tau_thrust * t_z_dot)
-                        / (theta.clamp(-l, l).cos() * phi.clamp(-l, l).cos())
+                    (t_z + p.tau_thrust * t_z_dot) / (theta_l.cos() * phi_l.cos())
                 } else {
                     thrust + p.tau_thrust * thrust_dot
                 };

@@ -29,9 +29,11 @@ pub mod model;
 pub mod pd;
 pub mod reference;
 pub mod stage_qp;
+pub mod tilt;
 pub mod window;
 
 pub use model::ControlModel;
+pub use tilt::{TiltLimit, limit_tilt};
 
 use nalgebra::Vector3;
 use thiserror::Error;

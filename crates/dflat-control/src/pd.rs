@@ -13,7 +13,8 @@ use dflat_model::attitude::thrust_pitch_roll;
 use dflat_model::{FlatError, Frame};
 use nalgebra::{Vector2, Vector3};
 
-use crate::fmpc::{clamp_tilt, measurement_is_finite};
+use crate::TiltLimit;
+use crate::fmpc::{limit_pair, measurement_is_finite};
 use crate::{
     AttitudeCommand, ControlError, ControlModel, Controller, Measurement, ReferenceSource,
     TickOutput,
@@ -45,6 +46,8 @@ pub struct PdSettings {
     /// Saturation of the pitch and roll commands \[rad\], in (0, π/2).
     /// Default 35°.
     pub max_tilt: f64,
+    /// How `max_tilt` applies (default [`TiltLimit::PerAxis`], the paper).
+    pub tilt_limit: TiltLimit,
 }
 
 impl Default for PdSettings {
@@ -57,6 +60,7 @@ impl Default for PdSettings {
             max_vertical_acceleration: 4.0,
             velocity_cutoff_hz: None,
             max_tilt,
+            tilt_limit: TiltLimit::PerAxis,
         }
     }
 }
@@ -248,9 +252,11 @@ impl Controller for Pd {
             ControlModel::Planar(m) => {
                 let p = m.params();
                 let (theta, phi) = m.attitude(&Vector2::new(a.x, a.y));
+                let (pitch, roll) =
+                    limit_pair(theta / p.k, phi / p.k, limit, s.tilt_limit, &mut saturated);
                 AttitudeCommand {
-                    pitch: clamp_tilt(theta / p.k, limit, &mut saturated),
-                    roll: clamp_tilt(phi / p.k, limit, &mut saturated),
+                    pitch,
+                    roll,
                     yaw: p.psi,
                     thrust: p.g,
                 }
@@ -264,9 +270,11 @@ impl Controller for Pd {
                 }
                 let t = spatial_thrust_vector(p.frame, p.g, &a);
                 let (thrust, theta, phi) = thrust_pitch_roll(t, p.psi)?;
+                let (pitch, roll) =
+                    limit_pair(theta / p.k, phi / p.k, limit, s.tilt_limit, &mut saturated);
                 AttitudeCommand {
-                    pitch: clamp_tilt(theta / p.k, limit, &mut saturated),
-                    roll: clamp_tilt(phi / p.k, limit, &mut saturated),
+                    pitch,
+                    roll,
                     yaw: p.psi,
                     thrust,
                 }

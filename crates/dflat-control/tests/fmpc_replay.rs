@@ -54,6 +54,7 @@ fn replay(trace: &Value, run: &str) -> f64 {
         q: [q; 3],
         r: [r; 3],
         max_tilt: None,
+        ..FmpcSettings::default()
     };
     let mut fmpc = FlatnessMpc::new(ControlModel::Planar(model), settings).unwrap();
     let x_ref = num(&setup["x_ref"], "setup.x_ref");

@@ -204,7 +204,9 @@ pub struct VehicleConfig {
     pub gravity: f64,
     /// Fixed yaw ψ⋆ \[deg\] (−180–180).
     pub yaw_deg: f64,
-    /// Maximum commanded pitch/roll \[deg\] (1–60).
+    /// Maximum commanded tilt (angle of body z from the vertical) \[deg\]
+    /// (1–60); the controllers and the exit guard scale pitch and roll
+    /// together to respect it.
     pub max_tilt_deg: f64,
     /// `fixed` or `normalized`.
     pub thrust_mode: ThrustMode,

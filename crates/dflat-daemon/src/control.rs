@@ -7,7 +7,7 @@ use dflat_control::fmpc::{FlatnessMpc, FmpcSettings};
 use dflat_control::pd::{Pd, PdSettings};
 use dflat_control::reference::Reference;
 use dflat_control::window::MultiRateSettings;
-use dflat_control::{ControlError, ControlModel, Controller};
+use dflat_control::{ControlError, ControlModel, Controller, TiltLimit};
 use dflat_link::ThrustMapping;
 use dflat_model::{Frame, PlanarModel, PlanarParams, SpatialModel, SpatialParams};
 use nalgebra::Vector3;
@@ -59,7 +59,9 @@ pub fn thrust_mapping(cfg: &Config) -> ThrustMapping {
 }
 
 /// The controller chosen by `controller.kind`, with the configured model,
-/// weights, horizons, saturation (`vehicle.max_tilt_deg`) and constraints;
+/// weights, horizons, saturation (`vehicle.max_tilt_deg` as a bound on the
+/// combined tilt, [`TiltLimit::Cone`], as the exit guard applies it) and
+/// constraints;
 /// for df-mpc also the smoothness weight, the multi-rate window
 /// (`controller.multi_rate`, then the shell feeds every pose through
 /// [`Controller::observe`]) and the disturbance estimator.
@@ -76,6 +78,8 @@ pub fn build_controller(cfg: &Config) -> Result<Box<dyn Controller>, ControlErro
                 jerk_weight: c.r_jerk,
                 saturation: Some(InputSaturation {
                     max_tilt,
+                    // As the exit guard bounds it: the window records what is sent.
+                    tilt_limit: TiltLimit::Cone,
                     thrust_min: THRUST_MIN,
                     // Normalised thrust 1 is g / hover_thrust.
                     thrust_max: (v.gravity / v.hover_thrust).max(THRUST_MIN + 1.0),
@@ -111,6 +115,7 @@ pub fn build_controller(cfg: &Config) -> Result<Box<dyn Controller>, ControlErro
                 q: c.q,
                 r: c.fmpc_r_jerk,
                 max_tilt: Some(max_tilt),
+                tilt_limit: TiltLimit::Cone,
             },
         )?),
         ControllerKind::Pd => Box::new(Pd::new(
@@ -122,6 +127,7 @@ pub fn build_controller(cfg: &Config) -> Result<Box<dyn Controller>, ControlErro
                 max_vertical_acceleration: PD_MAX_VERTICAL_ACCELERATION.min(0.9 * v.gravity),
                 velocity_cutoff_hz: None,
                 max_tilt,
+                tilt_limit: TiltLimit::Cone,
             },
         )?),
     })

@@ -14,6 +14,7 @@
 
 use std::time::{Duration, Instant};
 
+use dflat_control::{TiltLimit, limit_tilt};
 use dflat_link::AttitudeCommand;
 use serde::Serialize;
 
@@ -49,7 +50,7 @@ pub struct NonFinite;
 
 /// Tilt of a roll / pitch pair: the angle between body z and vertical \[rad\].
 pub fn tilt(roll: f64, pitch: f64) -> f64 {
-    (roll.cos() * pitch.cos()).clamp(-1.0, 1.0).acos()
+    dflat_control::tilt::tilt(pitch, roll)
 }
 
 /// The exit point's limits.
@@ -62,7 +63,9 @@ pub struct CommandGuard {
 impl CommandGuard {
     /// Checks and saturates `cmd` (normalised thrust): `Err` if any field is
     /// NaN / infinite; otherwise roll and pitch scaled together so that the
-    /// tilt is at most `max_tilt`, yaw wrapped to (−π, π], thrust clamped
+    /// tilt is at most `max_tilt` ([`limit_tilt`], direction kept — the
+    /// daemon's controllers apply the same bound, so this changes nothing
+    /// they send unless `vehicle.max_tilt_deg` and theirs differ), yaw wrapped to (−π, π], thrust clamped
     /// into [0, 1]. Counts what it changed.
     pub fn check(
         &self,
@@ -70,8 +73,8 @@ impl CommandGuard {
         counts: &mut GuardCounts,
     ) -> Result<AttitudeCommand, NonFinite> {
         let AttitudeCommand {
-            mut roll,
-            mut pitch,
+            roll,
+            pitch,
             yaw,
             thrust,
         } = cmd;
@@ -79,25 +82,9 @@ impl CommandGuard {
             counts.non_finite += 1;
             return Err(NonFinite);
         }
-        let max = self.max_tilt;
-        if tilt(roll, pitch) > max {
+        let (pitch, roll, limited) = limit_tilt(pitch, roll, self.max_tilt, TiltLimit::Cone);
+        if limited {
             counts.tilt_saturated += 1;
-            // Each axis within max first (then the scaling below converges).
-            roll = roll.clamp(-max, max);
-            pitch = pitch.clamp(-max, max);
-            for _ in 0..16 {
-                let t = tilt(roll, pitch);
-                if t <= max {
-                    break;
-                }
-                let s = max / t * (1.0 - 1e-9);
-                roll *= s;
-                pitch *= s;
-            }
-            if tilt(roll, pitch) > max {
-                roll = 0.0;
-                pitch = 0.0;
-            }
         }
         let thrust_c = thrust.clamp(0.0, 1.0);
         if thrust_c != thrust {

@@ -131,6 +131,9 @@ async fn failed_and_late_ticks_fly_the_previous_plan_then_level_hover_and_recove
         "every failed or late tick sent exactly one fallback: {g:?}"
     );
     assert_eq!(g.non_finite, 0);
+    // The controller bounds the combined tilt as the guard does, so the
+    // guard never cuts a command the controller's window recorded.
+    assert_eq!(g.tilt_saturated, 0, "{g:?}");
     // The 30° plan-tilt bound binds at the start and the corner; the
     // summary counts those ticks (successful ones only).
     let s = summary.solves;

@@ -6,7 +6,7 @@ use dflat_control::dfmpc::{DfMpc, DfMpcSettings, InputSaturation};
 use dflat_control::fmpc::{FlatnessMpc, FmpcSettings};
 use dflat_control::pd::{Pd, PdSettings};
 use dflat_control::{
-    ControlError, ControlModel, Controller, Measurement, ReferenceSource, TickOutput,
+    ControlError, ControlModel, Controller, Measurement, ReferenceSource, TickOutput, TiltLimit,
 };
 use dflat_model::{PlanarModel, PlanarParams};
 use serde::{Deserialize, Serialize};
@@ -132,6 +132,8 @@ impl ControllerSpec {
                         q: [q; 3],
                         r: [r; 3],
                         max_tilt: Some(max_tilt_deg.to_radians()),
+                        // The lab's plants clip each channel the same way.
+                        tilt_limit: TiltLimit::PerAxis,
                     },
                 )
                 .map_err(wrap)?,
