@@ -6,17 +6,20 @@
 //!
 //! Checks, besides "no panic": every command a controller returns (from
 //! `update` or `plan_fallback`) is finite with |pitch|, |roll| within the
-//! 35° saturation, the spatial DF-MPC thrust within its limits, and every
+//! 35° saturation (with the cone, bit 7 of `kind`, the combined tilt too),
+//! the spatial DF-MPC thrust within its limits, and every
 //! planned output finite on the axes the model controls (planar models pass
 //! the measured z through); a failed tick is an `Err`, never a NaN command.
 #![no_main]
 
-use dflat_control::dfmpc::{DfMpc, DfMpcSettings, OutputConstraints};
+use dflat_control::dfmpc::{DfMpc, DfMpcSettings, InputSaturation, OutputConstraints};
 use dflat_control::disturbance::DisturbanceSettings;
 use dflat_control::fmpc::{FlatnessMpc, FmpcSettings};
 use dflat_control::pd::{Pd, PdSettings};
 use dflat_control::window::MultiRateSettings;
-use dflat_control::{ControlModel, Controller, Frame, Measurement, ReferenceSource, TickOutput};
+use dflat_control::{
+    ControlModel, Controller, Frame, Measurement, ReferenceSource, TickOutput, TiltLimit,
+};
 use dflat_model::{PlanarModel, PlanarParams, SpatialModel, SpatialParams};
 use libfuzzer_sys::arbitrary::{self, Arbitrary};
 use libfuzzer_sys::fuzz_target;
@@ -101,7 +104,15 @@ impl ReferenceSource for Reference {
     }
 }
 
-fn build(input: &Input) -> Option<(Box<dyn Controller>, bool)> {
+/// The controller, whether it is a spatial DF-MPC, and whether its tilt
+/// limit is the cone (bit 7 of `kind`; else per channel).
+fn build(input: &Input) -> Option<(Box<dyn Controller>, bool, bool)> {
+    let cone = input.kind & 0x80 != 0;
+    let tilt_limit = if cone {
+        TiltLimit::Cone
+    } else {
+        TiltLimit::PerAxis
+    };
     let model = if input.spatial {
         ControlModel::Spatial(
             SpatialModel::new(SpatialParams {
@@ -142,6 +153,10 @@ fn build(input: &Input) -> Option<(Box<dyn Controller>, bool)> {
                         ..MultiRateSettings::default()
                     }),
                     disturbance: input.disturbance.then(DisturbanceSettings::default),
+                    saturation: Some(InputSaturation {
+                        tilt_limit,
+                        ..InputSaturation::default()
+                    }),
                     ..DfMpcSettings::default()
                 },
             )
@@ -152,23 +167,37 @@ fn build(input: &Input) -> Option<(Box<dyn Controller>, bool)> {
                 model,
                 FmpcSettings {
                     horizon,
+                    tilt_limit,
                     ..FmpcSettings::default()
                 },
             )
             .ok()?,
         ),
-        _ => Box::new(Pd::new(model, PdSettings::default()).ok()?),
+        _ => Box::new(
+            Pd::new(
+                model,
+                PdSettings {
+                    tilt_limit,
+                    ..PdSettings::default()
+                },
+            )
+            .ok()?,
+        ),
     };
-    Some((controller, is_df && input.spatial))
+    Some((controller, is_df && input.spatial, cone))
 }
 
 /// `axes`: the outputs the model controls (a planar model passes the
 /// measured z through untouched, whatever it is).
-fn check(out: &TickOutput, axes: usize, spatial_df: bool) {
+fn check(out: &TickOutput, axes: usize, spatial_df: bool, cone: bool) {
     let c = out.command;
     assert!(c.is_finite(), "non-finite command {c:?}");
     let max = MAX_TILT_DEG.to_radians() + 1e-12;
     assert!(c.pitch.abs() <= max && c.roll.abs() <= max, "tilt {c:?}");
+    if cone {
+        let t = dflat_control::tilt::tilt(c.pitch, c.roll);
+        assert!(t <= max, "combined tilt {t} rad: {c:?}");
+    }
     if spatial_df {
         let s = dflat_control::dfmpc::InputSaturation::default();
         assert!(
@@ -186,7 +215,7 @@ fn check(out: &TickOutput, axes: usize, spatial_df: bool) {
 }
 
 fuzz_target!(|input: Input| {
-    let Some((mut controller, spatial_df)) = build(&input) else {
+    let Some((mut controller, spatial_df, cone)) = build(&input) else {
         return;
     };
     let axes = if input.spatial { 3 } else { 2 };
@@ -214,7 +243,7 @@ fuzz_target!(|input: Input| {
                 };
                 controller.observe(&m);
                 if let Ok(out) = controller.update(&m, &mut reference) {
-                    check(&out, axes, spatial_df);
+                    check(&out, axes, spatial_df, cone);
                 }
                 // Keep later steps meaningful after a hostile value.
                 if !position.iter().all(|v| v.is_finite() && v.abs() < 1e6) {
@@ -244,7 +273,7 @@ fuzz_target!(|input: Input| {
                 reference.broken = false;
                 assert!(result.is_err(), "a NaN reference must fail the tick");
                 if let Some(out) = controller.plan_fallback(&m, usize::from(*max_steps)) {
-                    check(&out, axes, spatial_df);
+                    check(&out, axes, spatial_df, cone);
                 }
             }
             Op::Target(p) => {

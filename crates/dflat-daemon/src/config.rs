@@ -287,8 +287,10 @@ pub struct ControllerConfig {
     /// PD derivative gain [1/s] (> 0). Default 2.5 (`PdSettings`).
     pub pd_kd: f64,
     /// Optional bound on the planned horizontal acceleration, as a tilt
-    /// \[deg\] (0 = off; 1–60). Solved with clarabel when it binds. Default
-    /// 30 (`df-mr-smooth`; below the 35° command limit).
+    /// \[deg\] (0 = off; 1–60), on each horizontal axis separately (a box:
+    /// the combined planned tilt can exceed it by up to √2 in tan). The
+    /// constrained QP (`qp_solver`) runs only on ticks whose plan violates
+    /// it. Default 30 (`df-mr-smooth`; below the 35° command limit).
     pub constraint_tilt_deg: f64,
     /// Optional bound on the planned speed per axis [m/s] (0 = off). When
     /// the vehicle is already faster (a gust, pose noise), the plan brakes
