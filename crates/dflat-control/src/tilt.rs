@@ -10,7 +10,7 @@
 //! pitch and roll are scaled together (direction kept) until the tilt is
 //! within the limit, and what the window records is what leaves.
 
-use std::f64::consts::PI;
+use std::f64::consts::{FRAC_PI_2, PI};
 
 use serde::{Deserialize, Serialize};
 
@@ -39,7 +39,9 @@ pub fn tilt(pitch: f64, roll: f64) -> f64 {
 ///
 /// [`TiltLimit::Cone`]: the pair scaled by one factor s ∈ (0, 1) so the
 /// tilt is at most `max` and within 1e-9 relative of it (fixed-point
-/// steps s ← s·max/tilt, bisection on s when those do not settle).
+/// steps s ← s·max/tilt, bisection on s when those do not settle); a
+/// channel beyond ±90° (not a tilt: cos is periodic) is clipped to ±`max`
+/// first. Either way |pitch|, |roll| ≤ tilt ≤ `max` afterwards.
 pub fn limit_tilt(pitch: f64, roll: f64, max: f64, mode: TiltLimit) -> (f64, f64, bool) {
     match mode {
         TiltLimit::PerAxis => {
@@ -47,15 +49,21 @@ pub fn limit_tilt(pitch: f64, roll: f64, max: f64, mode: TiltLimit) -> (f64, f64
             (p, r, p != pitch || r != roll)
         }
         TiltLimit::Cone => {
-            if !(pitch.is_finite() && roll.is_finite()) || tilt(pitch, roll) <= max {
+            if !(pitch.is_finite() && roll.is_finite()) {
                 return (pitch, roll, false);
             }
-            // Beyond ±π a channel's angle is not a tilt: bring it in first.
-            let (p0, r0) = if pitch.abs() <= PI && roll.abs() <= PI {
+            // Beyond ±90° a channel's angle is no longer a tilt in the
+            // cone's sense (θ = φ = π is upright, and so is 2π): such a
+            // pair is clipped per channel first, then limited as a tilt.
+            let (p0, r0) = if pitch.abs() <= FRAC_PI_2 && roll.abs() <= FRAC_PI_2 {
                 (pitch, roll)
             } else {
                 (pitch.clamp(-max, max), roll.clamp(-max, max))
             };
+            let clipped = (p0, r0) != (pitch, roll);
+            if tilt(p0, r0) <= max {
+                return (p0, r0, clipped);
+            }
             let f = |s: f64| tilt(s * p0, s * r0);
             // Fixed point s ← s·max/tilt: two or three steps below 90°.
             let mut s = 1.0;
@@ -66,8 +74,8 @@ pub fn limit_tilt(pitch: f64, roll: f64, max: f64, mode: TiltLimit) -> (f64, f64
                 }
                 s *= max / t * (1.0 - 1e-9);
             }
-            // Beyond 90° the tilt along the ray need not be monotone:
-            // bisect between s = 0 (level, inside) and s = 1 (outside).
+            // Not settled (it should: within ±90° per channel the tilt grows
+            // along the ray): bisect between s = 0 (level) and s = 1.
             let (mut lo, mut hi) = (0.0, 1.0);
             for _ in 0..64 {
                 let mid = 0.5 * (lo + hi);
@@ -101,22 +109,32 @@ mod tests {
     proptest! {
         #[test]
         fn cone_bounds_the_tilt_and_keeps_the_direction(
-            pitch in -3.5f64..3.5,
-            roll in -3.5f64..3.5,
+            pitch in prop_oneof![-1.6f64..1.6, -40.0f64..40.0],
+            roll in prop_oneof![-1.6f64..1.6, -40.0f64..40.0],
             max_deg in 1.0f64..89.0,
         ) {
             let max = max_deg.to_radians();
             let (p, r, hit) = limit_tilt(pitch, roll, max, TiltLimit::Cone);
             prop_assert!(tilt(p, r) <= max);
+            prop_assert!(p.abs() <= max && r.abs() <= max, "{p} {r}");
+            let in_range = pitch.abs() <= FRAC_PI_2 && roll.abs() <= FRAC_PI_2;
             if !hit {
                 prop_assert_eq!((p, r), (pitch, roll));
-                prop_assert!(tilt(pitch, roll) <= max);
-            } else if pitch.abs() <= PI && roll.abs() <= PI {
+            } else if in_range {
                 // Same direction, on the cone's edge (to 1e-6 rad).
                 prop_assert!((p * roll - r * pitch).abs() <= 1e-12 * (1.0 + pitch.abs() + roll.abs()));
                 prop_assert!(p * pitch >= 0.0 && r * roll >= 0.0);
                 prop_assert!(tilt(p, r) > max - 1e-6, "{} vs {}", tilt(p, r), max);
             }
+        }
+
+        #[test]
+        fn multiples_of_a_turn_are_not_level(k in 1i32..8, max_deg in 1.0f64..89.0) {
+            // cos is periodic: θ = φ = kπ has "tilt" 0 by the formula.
+            let a = f64::from(k) * PI;
+            let max = max_deg.to_radians();
+            let (p, r, hit) = limit_tilt(a, -a, max, TiltLimit::Cone);
+            prop_assert!(hit && p.abs() <= max && r.abs() <= max, "{p} {r}");
         }
 
         #[test]
