@@ -354,6 +354,16 @@ mod tests {
         }
         assert!(worst <= 20f64.to_radians() + 1e-12, "{worst}");
         assert!(n.tilt_saturated > 100 && n.thrust_saturated > 0);
+        // Whole turns have cos = 1 ("level" by the tilt formula): still cut.
+        for a in [
+            std::f64::consts::PI,
+            2.0 * std::f64::consts::PI,
+            5.0 * std::f64::consts::PI,
+        ] {
+            let c = g.check(cmd(a, -a, 0.0, 0.5), &mut n).unwrap();
+            let max = 20f64.to_radians();
+            assert!(c.roll.abs() <= max && c.pitch.abs() <= max, "{c:?}");
+        }
     }
 
     #[test]
