@@ -10,7 +10,7 @@
 //! pitch and roll are scaled together (direction kept) until the tilt is
 //! within the limit, and what the window records is what leaves.
 
-use std::f64::consts::{FRAC_PI_2, PI};
+use std::f64::consts::FRAC_PI_2;
 
 use serde::{Deserialize, Serialize};
 
@@ -94,6 +94,7 @@ pub fn limit_tilt(pitch: f64, roll: f64, max: f64, mode: TiltLimit) -> (f64, f64
 mod tests {
     use super::*;
     use proptest::prelude::*;
+    use std::f64::consts::PI;
 
     #[test]
     fn per_axis_lets_the_combined_tilt_exceed_the_limit() {
