@@ -2,6 +2,10 @@
 //!
 //! Argument parsing only: the studies live in `dflat_sim::experiments`
 //! (pure runs returning results, and writers for the JSON and plots).
+// The doc comments below are clap's --help text: `[m]`, `[s]`, `[link]`
+// are units and TOML sections there, `<out>` a placeholder: not rustdoc
+// links or HTML.
+#![allow(rustdoc::broken_intra_doc_links, rustdoc::invalid_html_tags)]
 
 use std::path::PathBuf;
 use std::time::Instant;

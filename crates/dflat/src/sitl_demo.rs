@@ -1,5 +1,9 @@
 //! `dflat sitl` and `dflat demo`: thin CLI shells over
 //! `dflat_daemon::sitl` and `dflat_daemon::demo`.
+// The doc comments below are clap's --help text: `[m]`, `[s]`, `[link]`
+// are units and TOML sections there, `<out>` a placeholder: not rustdoc
+// links or HTML.
+#![allow(rustdoc::broken_intra_doc_links, rustdoc::invalid_html_tags)]
 
 use std::path::PathBuf;
 
