@@ -195,7 +195,6 @@ fn frame_vertical_rate(frame: Frame, jerk_z: f64) -> f64 {
     frame.horizontal_sign() * jerk_z
 }
 
-/// Clamps `x` to ±`limit` (when given), recording whether it clipped.
 /// `(pitch, roll)` \[rad\] under the tilt limit (none: unchanged);
 /// sets `saturated` when it changed them.
 pub(crate) fn limit_pair(

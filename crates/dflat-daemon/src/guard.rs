@@ -48,11 +48,6 @@ pub struct GuardCounts {
 #[error("command not finite")]
 pub struct NonFinite;
 
-/// Tilt of a roll / pitch pair: the angle between body z and vertical \[rad\].
-pub fn tilt(roll: f64, pitch: f64) -> f64 {
-    dflat_control::tilt::tilt(pitch, roll)
-}
-
 /// The exit point's limits.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CommandGuard {
@@ -65,8 +60,9 @@ impl CommandGuard {
     /// NaN / infinite; otherwise roll and pitch scaled together so that the
     /// tilt is at most `max_tilt` ([`limit_tilt`], direction kept — the
     /// daemon's controllers apply the same bound, so this changes nothing
-    /// they send unless `vehicle.max_tilt_deg` and theirs differ), yaw wrapped to (−π, π], thrust clamped
-    /// into [0, 1]. Counts what it changed.
+    /// they send unless `vehicle.max_tilt_deg` and theirs differ), yaw
+    /// wrapped to (−π, π], thrust clamped into [0, 1]. Counts what it
+    /// changed.
     pub fn check(
         &self,
         cmd: AttitudeCommand,
@@ -348,7 +344,7 @@ mod tests {
             let a = i as f64 * 0.1;
             let (r, p) = (1.4 * a.sin(), 1.5 * (1.7 * a).cos());
             let c = g.check(cmd(r, p, 7.0, 1.5 - a * 0.01), &mut n).unwrap();
-            worst = worst.max(tilt(c.roll, c.pitch));
+            worst = worst.max(dflat_control::tilt::tilt(c.pitch, c.roll));
             assert!((0.0..=1.0).contains(&c.thrust));
             assert!(c.yaw.abs() <= std::f64::consts::PI);
         }

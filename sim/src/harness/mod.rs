@@ -294,7 +294,7 @@ pub struct PlantSample {
 impl PlantSample {
     /// Tilt of the thrust axis from vertical \[rad\].
     pub fn tilt(&self) -> f64 {
-        (self.pitch.cos() * self.roll.cos()).clamp(-1.0, 1.0).acos()
+        dflat_control::tilt::tilt(self.pitch, self.roll)
     }
 }
 

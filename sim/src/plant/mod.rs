@@ -83,7 +83,7 @@ impl PlantState {
 
     /// Tilt of the thrust axis from vertical \[rad\]: `acos(cosθ·cosφ)`.
     pub fn tilt(&self) -> f64 {
-        (self.pitch.cos() * self.roll.cos()).clamp(-1.0, 1.0).acos()
+        dflat_control::tilt::tilt(self.pitch, self.roll)
     }
 
     /// True when every field is finite.
