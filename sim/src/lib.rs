@@ -1,7 +1,7 @@
 //! # dflat-sim — dflat's simulation lab
 //!
 //! Plants, sensor models, a closed-loop harness and plot helpers for the
-//! controllers of `dflat-control`. Everything here is pure and deterministic
+//! controllers of `dflat-control`, and the SITL. Everything but [`sitl`] is pure and deterministic
 //! from seeds: no wall clock, no global RNG. Time is simulated time \[s\].
 //!
 //! * [`plant`] — vehicle stand-ins integrated with RK4 at 200 Hz (default),
@@ -18,6 +18,9 @@
 //!   seed regardless of thread count), per-tick logs (CSV) and metrics.
 //! * [`plot`] — plotters wrappers (SVG + PNG, vendored font): line plots,
 //!   x-y path plots, grouped box plots, in the paper's colours.
+//! * [`sitl`] — the SITL autopilot stand-in: a real-time plant behind a
+//!   MAVLink link (std threads, the wall clock), the plant process of
+//!   `dflat sitl` and `dflat demo`. The one part of the lab that does I/O.
 //! * [`experiments`] — the paper's studies (noise sweep, L-path comparison,
 //!   DSL demonstration): pure runs returning results, JSON and plot writers.
 //!
@@ -29,6 +32,7 @@ pub mod harness;
 pub mod plant;
 pub mod plot;
 pub mod sensing;
+pub mod sitl;
 
 mod error;
 mod rng;

@@ -60,8 +60,12 @@ pub struct Config {
     pub safety: SafetyConfig,
     /// Logs and flight records.
     pub logging: LoggingConfig,
-    /// The SITL autopilot stand-in (read by `dflat sitl` and `dflat demo` only).
-    pub sitl: SitlConfig,
+    /// The SITL autopilot stand-in's `[sitl]` table, kept unparsed: the
+    /// daemon does not read it (the SITL lives in `dflat-sim`, which parses
+    /// and validates it for `dflat sitl`, `dflat demo` and `dflat
+    /// check-config`), so one file can configure both.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sitl: Option<toml::Table>,
 }
 
 /// Which MAVLink message carries the pose the controller uses.
@@ -472,90 +476,6 @@ pub enum LogFormat {
     Json,
 }
 
-/// The SITL's plant.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
-#[serde(rename_all = "snake_case")]
-pub enum SitlPlant {
-    /// Planar plant; altitude held.
-    #[default]
-    Planar,
-    /// Spatial plant with collective thrust.
-    Spatial,
-    /// Full rigid body with an inner attitude controller.
-    Full,
-}
-
-/// `[sitl]`: the autopilot stand-in.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct SitlConfig {
-    /// Where the SITL listens (`udpin:HOST:PORT`).
-    pub url: String,
-    /// Plant kind.
-    pub plant: SitlPlant,
-    /// Plant integration rate \[Hz\] (100–2000).
-    pub plant_rate_hz: f64,
-    /// Rate of LOCAL_POSITION_NED / ATTITUDE out \[Hz\] (1–200).
-    pub telemetry_rate_hz: f64,
-    /// Plant attitude time constant \[s\] (may differ from the model's).
-    pub tau: f64,
-    /// Plant attitude gain [-].
-    pub k: f64,
-    /// Plant hover thrust (normalised 0–1) — spatial/full plants.
-    pub hover_thrust: f64,
-    /// Plant mass factor relative to nominal (0.5–2).
-    pub mass_factor: f64,
-    /// Gaussian position noise σ \[m\] (0–1).
-    pub noise_sigma: f64,
-    /// Also send VISION_POSITION_ESTIMATE at this rate \[Hz\] (0 = off;
-    /// 1–100): a vision pipeline stand-in for `link.pose_source =
-    /// "vision_position_estimate"`. LOCAL_POSITION_NED goes on as well.
-    pub vision_rate_hz: f64,
-    /// Vision latency \[ms\] (0–500): each sample's `time_usec` is its capture
-    /// time on the SITL's clock, and it is sent this much later.
-    pub vision_latency_ms: f64,
-    /// Gaussian noise σ of the vision position \[m\] (0–1).
-    pub vision_noise_sigma: f64,
-    /// Initial position, local NED \[m\].
-    pub start: [f64; 3],
-    /// Seconds without SET_ATTITUDE_TARGET after which the SITL holds position.
-    pub command_timeout_s: f64,
-    /// Random seed.
-    pub seed: u64,
-    /// MAVLink 2 signing key file of the SITL; empty = signing off. Same
-    /// rules as `link.signing_key_file` (mode 0600, owned by the running
-    /// user; 64 hex digits, 32 raw bytes or a passphrase), checked when the
-    /// SITL starts. With a key the SITL signs everything it sends (link id
-    /// 1, timestamps from the wall clock, nothing persisted), refuses
-    /// SET_ATTITUDE_TARGET without a valid signature and drops badly signed
-    /// or replayed frames; other unsigned messages are still accepted. See
-    /// [`crate::sitl`].
-    pub signing_key_file: String,
-}
-
-impl Default for SitlConfig {
-    fn default() -> Self {
-        Self {
-            url: "udpin:127.0.0.1:14540".into(),
-            plant: SitlPlant::Planar,
-            plant_rate_hz: 200.0,
-            telemetry_rate_hz: 50.0,
-            tau: 0.2,
-            k: 1.0,
-            hover_thrust: 0.5,
-            mass_factor: 1.0,
-            noise_sigma: 0.0,
-            vision_rate_hz: 0.0,
-            vision_latency_ms: 60.0,
-            vision_noise_sigma: 0.02,
-            start: [-20.0, -30.0, -10.0],
-            command_timeout_s: 0.5,
-            seed: 1,
-            signing_key_file: String::new(),
-        }
-    }
-}
-
 impl Config {
     /// Reads, parses and validates a file.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
@@ -792,24 +712,6 @@ impl Config {
                 100.0,
             )?;
         }
-        let si = &self.sitl;
-        v.nonempty("sitl.url", &si.url)?;
-        v.range("sitl.plant_rate_hz", si.plant_rate_hz, 100.0, 2000.0)?;
-        v.range("sitl.telemetry_rate_hz", si.telemetry_rate_hz, 1.0, 200.0)?;
-        v.range("sitl.tau", si.tau, 0.02, 2.0)?;
-        v.range("sitl.k", si.k, 0.2, 5.0)?;
-        v.range("sitl.hover_thrust", si.hover_thrust, 0.05, 0.95)?;
-        v.range("sitl.mass_factor", si.mass_factor, 0.5, 2.0)?;
-        v.range("sitl.noise_sigma", si.noise_sigma, 0.0, 1.0)?;
-        if si.vision_rate_hz != 0.0 {
-            v.range("sitl.vision_rate_hz", si.vision_rate_hz, 1.0, 100.0)?;
-        }
-        v.range("sitl.vision_latency_ms", si.vision_latency_ms, 0.0, 500.0)?;
-        v.range("sitl.vision_noise_sigma", si.vision_noise_sigma, 0.0, 1.0)?;
-        v.range("sitl.command_timeout_s", si.command_timeout_s, 0.05, 10.0)?;
-        for i in 0..3 {
-            v.range(&format!("sitl.start[{i}]"), si.start[i], -1e4, 1e4)?;
-        }
         Ok(())
     }
 }
@@ -939,10 +841,15 @@ mod tests {
             parse("[link]\nsigning_key_file = \"/etc/dflat/key\"\nsigning_link_id = 3").unwrap();
         assert_eq!(cfg.link.signing_link_id, 3);
         assert!(parse("[link]\nsigning_link_id = 256").is_err());
-        // The SITL's key: off by default; the file is checked at SITL start.
-        assert!(Config::default().sitl.signing_key_file.is_empty());
+        // The SITL's table is the SITL's: kept as written, not validated here.
+        assert!(Config::default().sitl.is_none());
         let cfg = parse("[sitl]\nsigning_key_file = \"/etc/dflat/sitl.key\"").unwrap();
-        assert_eq!(cfg.sitl.signing_key_file, "/etc/dflat/sitl.key");
+        let sitl = cfg.sitl.as_ref().unwrap();
+        assert_eq!(
+            sitl["signing_key_file"].as_str(),
+            Some("/etc/dflat/sitl.key")
+        );
+        assert_eq!(parse(&cfg.to_toml()).unwrap(), cfg);
     }
 
     #[test]

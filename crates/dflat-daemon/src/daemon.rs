@@ -69,7 +69,7 @@ use crate::summary::{
 use crate::supervisor::{
     Cause, FlightState, Goal, SetpointOutcome, Supervisor, SupervisorConfig, Transition,
 };
-use crate::transport::{Endpoint, RecvEvent, SendOutcome, TlogTap, Transport, TransportError};
+use dflat_link::transport::{Endpoint, RecvEvent, SendOutcome, TlogTap, Transport, TransportError};
 
 /// Capacity of the receive task → control thread queue \[events\].
 const EVENT_QUEUE: usize = 1024;

@@ -1,12 +1,13 @@
 //! # dflat-daemon — the flight-control daemon's runtime
 //!
 //! The imperative shell around `dflat-control`: configuration, MAVLink link
-//! tasks, the 50 Hz control loop, failsafe state machine, telemetry and the
-//! SITL autopilot stand-in.
+//! tasks, the 50 Hz control loop, failsafe state machine and telemetry. It
+//! depends on the pure core (`dflat-model`, `dflat-control`) and the link
+//! (`dflat-link`) only: no lab, no plotting, no random numbers. The SITL
+//! autopilot stand-in lives in `dflat-sim`; `dflat demo` composes both in the
+//! binary crate.
 //!
 //! * [`config`] — the TOML schema, defaults and validation.
-//! * [`transport`] — MAVLink I/O (UDP, TCP, serial) with counted framing
-//!   errors and a `.tlog` tap; shared by the daemon and the SITL.
 //! * [`daemon`] — `dflat daemon`: [`daemon::run`], [`daemon::spawn`].
 //! * [`supervisor`] — the flight state machine (pure).
 //! * [`schedule`] — the control loop's absolute-deadline tick schedule (pure).
@@ -18,21 +19,17 @@
 //! * [`signing`] — MAVLink 2 signing: key file, persisted timestamp.
 //! * [`records`] — per-flight CSV and file names.
 //! * [`summary`] — measurements and the shutdown summary.
-//! * [`sitl`], [`demo`] — the autopilot stand-in and `dflat demo`.
 
 pub mod clock;
 pub mod config;
 pub mod control;
 pub mod daemon;
-pub mod demo;
 pub mod guard;
 pub mod records;
 pub mod schedule;
 pub mod signing;
-pub mod sitl;
 pub mod summary;
 pub mod supervisor;
-pub mod transport;
 
 pub use daemon::{DaemonError, DaemonHandle, run, shutdown_signal, spawn, spawn_with_controller};
 pub use summary::FlightSummary;

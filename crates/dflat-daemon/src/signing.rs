@@ -50,44 +50,11 @@ fn refuse(field: &'static str, path: &Path, reason: impl Into<String>) -> Signin
 const KEY_FIELD: &str = "link.signing_key_file";
 const TS_FIELD: &str = "link.signing_timestamp_file";
 
-/// The effective user id of this process (from `/proc/self/status`;
-/// `None` where unavailable).
-fn effective_uid() -> Option<u32> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find(|l| l.starts_with("Uid:"))?;
-    line.split_whitespace().nth(2)?.parse().ok()
-}
-
-/// Reads the key file, refusing it unless it is a regular file with mode
-/// 0600 owned by the running user.
+/// Reads the key file named by `link.signing_key_file`, refusing it unless
+/// it is a regular file with mode 0600 owned by the running user
+/// ([`dflat_link::load_key_file`]).
 pub fn load_key(path: &Path) -> Result<SigningKey, SigningError> {
-    use std::os::unix::fs::MetadataExt as _;
-    let meta = std::fs::metadata(path).map_err(|e| refuse(KEY_FIELD, path, e.to_string()))?;
-    if !meta.is_file() {
-        return Err(refuse(KEY_FIELD, path, "not a regular file"));
-    }
-    let mode = meta.mode() & 0o7777;
-    if mode != 0o600 {
-        return Err(refuse(
-            KEY_FIELD,
-            path,
-            format!("mode {mode:04o} refused: the key file must be mode 0600 (chmod 600)"),
-        ));
-    }
-    if let Some(uid) = effective_uid()
-        && meta.uid() != uid
-    {
-        return Err(refuse(
-            KEY_FIELD,
-            path,
-            format!(
-                "owned by uid {}, not by the running user (uid {uid})",
-                meta.uid()
-            ),
-        ));
-    }
-    let bytes = std::fs::read(path).map_err(|e| refuse(KEY_FIELD, path, e.to_string()))?;
-    SigningKey::parse(&bytes).map_err(|e| refuse(KEY_FIELD, path, e.to_string()))
+    dflat_link::load_key_file(path).map_err(|e| refuse(KEY_FIELD, path, e.reason))
 }
 
 /// The persisted signing timestamp.

@@ -7,7 +7,7 @@ use serde::Serialize;
 
 use crate::records::CsvReport;
 use crate::supervisor::FlightState;
-use crate::transport::TlogReport;
+use dflat_link::transport::TlogReport;
 
 /// Resolution boundary of [`Histogram`]: 1 µs bins below, 100 µs above \[µs\].
 const FINE_LIMIT: u64 = 10_000;

@@ -12,7 +12,7 @@ use std::path::Path;
 
 use dflat_daemon::config::{
     Config, ConfigError, ControllerKind, LogFormat, MissionStart, ModelKind, PoseSourceKind,
-    PoseTime, SitlPlant, ThrustMode,
+    PoseTime, ThrustMode,
 };
 use proptest::prelude::*;
 
@@ -280,45 +280,6 @@ const FIELDS: &[(&str, Kind, f64, f64, Set)] = &[
         10000.0,
         |c, v| c.safety.autopilot_timeout_ms = v,
     ),
-    ("sitl.plant_rate_hz", Kind::Float, 100.0, 2000.0, |c, v| {
-        c.sitl.plant_rate_hz = v
-    }),
-    ("sitl.telemetry_rate_hz", Kind::Float, 1.0, 200.0, |c, v| {
-        c.sitl.telemetry_rate_hz = v
-    }),
-    ("sitl.tau", Kind::Float, 0.02, 2.0, |c, v| c.sitl.tau = v),
-    ("sitl.k", Kind::Float, 0.2, 5.0, |c, v| c.sitl.k = v),
-    ("sitl.hover_thrust", Kind::Float, 0.05, 0.95, |c, v| {
-        c.sitl.hover_thrust = v
-    }),
-    ("sitl.mass_factor", Kind::Float, 0.5, 2.0, |c, v| {
-        c.sitl.mass_factor = v
-    }),
-    ("sitl.noise_sigma", Kind::Float, 0.0, 1.0, |c, v| {
-        c.sitl.noise_sigma = v
-    }),
-    (
-        "sitl.vision_rate_hz",
-        Kind::FloatOrOff,
-        1.0,
-        100.0,
-        |c, v| c.sitl.vision_rate_hz = v,
-    ),
-    ("sitl.vision_latency_ms", Kind::Float, 0.0, 500.0, |c, v| {
-        c.sitl.vision_latency_ms = v
-    }),
-    ("sitl.vision_noise_sigma", Kind::Float, 0.0, 1.0, |c, v| {
-        c.sitl.vision_noise_sigma = v
-    }),
-    ("sitl.command_timeout_s", Kind::Float, 0.05, 10.0, |c, v| {
-        c.sitl.command_timeout_s = v
-    }),
-    ("sitl.start[0]", Kind::Float, -1e4, 1e4, |c, v| {
-        c.sitl.start[0] = v
-    }),
-    ("sitl.start[2]", Kind::Float, -1e4, 1e4, |c, v| {
-        c.sitl.start[2] = v
-    }),
 ];
 
 /// False where the table's `hi` is not the validator's limit.
@@ -356,7 +317,7 @@ fn valid_config() -> impl Strategy<Value = Config> {
         any::<u64>(),
     );
     (numbers, enums, path, strings).prop_map(
-        |(u, (pose, pose_time, kind, spatial, start_path, plant, flags), path, strings)| {
+        |(u, (pose, pose_time, kind, spatial, start_path, _plant, flags), path, strings)| {
             let (url, dir, pose_components, seed) = strings;
             let mut c = Config::default();
             for ((_, k, lo, hi, set), u) in FIELDS.iter().zip(&u) {
@@ -414,9 +375,6 @@ fn valid_config() -> impl Strategy<Value = Config> {
             } else {
                 LogFormat::Json
             };
-            c.sitl.plant =
-                [SitlPlant::Planar, SitlPlant::Spatial, SitlPlant::Full][usize::from(plant)];
-            c.sitl.seed = seed;
             c
         },
     )

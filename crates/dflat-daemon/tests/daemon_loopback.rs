@@ -10,10 +10,10 @@ use std::time::{Duration, Instant};
 
 use dflat_daemon::config::{Config, MissionStart};
 use dflat_daemon::supervisor::FlightState;
-use dflat_daemon::transport::{Endpoint, RecvEvent, Transport};
 use dflat_link::dialect::{
     MavAutopilot, MavFrame, MavState, PositionTargetTypemask, SET_POSITION_TARGET_LOCAL_NED_DATA,
 };
+use dflat_link::transport::{Endpoint, RecvEvent, Transport};
 use dflat_link::{
     ATTITUDE_TARGET_MASK, MavHeader, MavMessage, attitude, header, heartbeat_autopilot,
     local_position_ned,

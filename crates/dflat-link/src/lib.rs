@@ -2,7 +2,9 @@
 //!
 //! Pure conversions between dflat's typed messages and the `mavlink` crate
 //! (0.21, `common` dialect, MAVLink 2), plus small stateful helpers. No
-//! sockets, no async, no clock: the daemon owns I/O and time.
+//! clock in the message code: the daemon owns time. [`transport`] is the one
+//! piece of I/O here (UDP, TCP, serial, the .tlog tap), shared by the daemon
+//! and the SITL.
 //!
 //! | direction | message | here |
 //! |---|---|---|
@@ -37,6 +39,7 @@ mod outbound;
 mod signing;
 mod stats;
 pub mod tlog;
+pub mod transport;
 
 /// The mavlink crate this contract is built on (same version for all users).
 pub use mavlink;
@@ -62,8 +65,9 @@ pub use outbound::{
     vision_position_estimate,
 };
 pub use signing::{
-    KeyFormatError, ONE_MINUTE, SIGNING_EPOCH_UNIX_S, SignatureCheck, Signing, SigningKey,
-    TIMESTAMP_MAX, TIMESTAMP_UNITS_PER_S, restart_timestamp, timestamp_from_system_time,
+    KeyFileError, KeyFormatError, ONE_MINUTE, SIGNING_EPOCH_UNIX_S, SignatureCheck, Signing,
+    SigningKey, TIMESTAMP_MAX, TIMESTAMP_UNITS_PER_S, load_key_file, restart_timestamp,
+    timestamp_from_system_time,
 };
 pub use stats::{LinkStats, MessageCounts};
 

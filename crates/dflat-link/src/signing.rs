@@ -261,6 +261,55 @@ impl Signing {
     }
 }
 
+/// A signing key file that is refused, with the reason in words.
+#[derive(Debug, Clone, PartialEq, Eq, Error)]
+#[error("{path}: {reason}")]
+pub struct KeyFileError {
+    /// The file.
+    pub path: std::path::PathBuf,
+    /// Why it is refused.
+    pub reason: String,
+}
+
+/// The effective user id of this process (from `/proc/self/status`;
+/// `None` where unavailable).
+fn effective_uid() -> Option<u32> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("Uid:"))?;
+    line.split_whitespace().nth(2)?.parse().ok()
+}
+
+/// Reads a signing key file (64 hex digits, 32 raw bytes or a passphrase,
+/// see [`SigningKey::parse`]), refusing it unless it is a regular file with
+/// mode 0600 owned by the running user. Used by the daemon and the SITL.
+pub fn load_key_file(path: &std::path::Path) -> Result<SigningKey, KeyFileError> {
+    use std::os::unix::fs::MetadataExt as _;
+    let refuse = |reason: String| KeyFileError {
+        path: path.to_owned(),
+        reason,
+    };
+    let meta = std::fs::metadata(path).map_err(|e| refuse(e.to_string()))?;
+    if !meta.is_file() {
+        return Err(refuse("not a regular file".into()));
+    }
+    let mode = meta.mode() & 0o7777;
+    if mode != 0o600 {
+        return Err(refuse(format!(
+            "mode {mode:04o} refused: the key file must be mode 0600 (chmod 600)"
+        )));
+    }
+    if let Some(uid) = effective_uid()
+        && meta.uid() != uid
+    {
+        return Err(refuse(format!(
+            "owned by uid {}, not by the running user (uid {uid})",
+            meta.uid()
+        )));
+    }
+    let bytes = std::fs::read(path).map_err(|e| refuse(e.to_string()))?;
+    SigningKey::parse(&bytes).map_err(|e| refuse(e.to_string()))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

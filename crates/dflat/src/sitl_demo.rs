@@ -1,5 +1,5 @@
 //! `dflat sitl` and `dflat demo`: thin CLI shells over
-//! `dflat_daemon::sitl` and `dflat_daemon::demo`.
+//! `dflat_sim::sitl` and [`crate::demo`].
 // The doc comments below are clap's --help text: `[m]`, `[s]`, `[link]`
 // are units and TOML sections there, `<out>` a placeholder: not rustdoc
 // links or HTML.
@@ -9,8 +9,12 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
 use clap::Args;
-use dflat_daemon::config::Config;
-use dflat_daemon::{demo, sitl};
+use std::io::Write as _;
+use std::time::Duration;
+
+use dflat_sim::sitl::{self, SitlSettings};
+
+use crate::demo;
 
 /// `dflat sitl` arguments.
 #[derive(Debug, Args)]
@@ -67,14 +71,17 @@ fn runtime() -> Result<tokio::runtime::Runtime> {
 /// Runs `dflat sitl` until SIGINT / SIGTERM.
 pub fn run_sitl(args: SitlArgs) -> Result<()> {
     init_logs("info");
-    let cfg = Config::load(&args.config)?;
+    // The daemon's tables are not the SITL's business, but a file both read
+    // must be valid for both.
+    dflat_daemon::config::Config::load(&args.config)?;
+    let cfg = SitlSettings::load(&args.config)?;
     let options = sitl::SitlOptions {
         link: args.link,
         gcs: args.gcs,
         truth_csv: args.truth,
         ..sitl::SitlOptions::default()
     };
-    let report = runtime()?.block_on(sitl::run(&cfg, options, dflat_daemon::shutdown_signal()))?;
+    let report = runtime()?.block_on(run_until(&cfg, options, dflat_daemon::shutdown_signal()))?;
     if report.diverged {
         bail!("the SITL plant diverged (non-finite state)");
     }
@@ -95,4 +102,116 @@ pub fn run_demo(args: DemoArgs) -> Result<()> {
         bail!("demo flight failed: {failure}");
     }
     Ok(())
+}
+
+/// Runs the SITL until `shutdown` resolves.
+///
+/// Prints `sitl listening on udpin:ADDR` (and `sitl gcs on udpin:ADDR`)
+/// first, then one line per mode change (`sitl mode offboard` / `sitl mode
+/// hold`) and per pose pause / resume, flushing stdout each time so a parent
+/// process can follow. On Unix, SIGUSR1 pauses the pose stream and SIGUSR2
+/// resumes it.
+async fn run_until(
+    cfg: &SitlSettings,
+    options: sitl::SitlOptions,
+    shutdown: impl std::future::Future<Output = ()>,
+) -> Result<sitl::SitlReport, sitl::SitlError> {
+    let handle = sitl::spawn(cfg, options)?;
+    say(&format!("sitl listening on udpin:{}", handle.local_addr()));
+    if let Some(g) = handle.gcs_addr() {
+        say(&format!("sitl gcs on udpin:{g}"));
+    }
+    let mut signals = PoseSignals::new();
+    let mut tick = tokio::time::interval(Duration::from_millis(20));
+    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+    let mut mode = handle.mode();
+    tokio::pin!(shutdown);
+    loop {
+        tokio::select! {
+            () = &mut shutdown => break,
+            pause = signals.next() => {
+                if pause {
+                    handle.pause_pose();
+                    say("sitl pose paused");
+                } else {
+                    handle.resume_pose();
+                    say("sitl pose resumed");
+                }
+            }
+            _ = tick.tick() => {
+                let m = handle.mode();
+                if m != mode {
+                    mode = m;
+                    say(&format!("sitl mode {}", m.as_str()));
+                }
+            }
+        }
+    }
+    let report = handle.stop()?;
+    let c = &report.counters;
+    say(&format!(
+        "sitl stopped: commands {} accepted, {} ignored, {} rejected, {} unauthenticated; sent hb {} pos {} att {}; late steps {}",
+        c.commands_accepted,
+        c.commands_ignored,
+        c.commands_rejected,
+        c.commands_unauthenticated,
+        c.heartbeats_sent,
+        c.positions_sent,
+        c.attitudes_sent,
+        c.late_steps
+    ));
+    Ok(report)
+}
+
+fn say(line: &str) {
+    let mut out = std::io::stdout().lock();
+    // stdout closed: nobody is listening, which is not the SITL's problem.
+    let _ = writeln!(out, "{line}");
+    let _ = out.flush();
+}
+
+/// SIGUSR1 (pause → `true`) and SIGUSR2 (resume → `false`); never fires
+/// where they do not exist.
+struct PoseSignals {
+    #[cfg(unix)]
+    usr1: Option<tokio::signal::unix::Signal>,
+    #[cfg(unix)]
+    usr2: Option<tokio::signal::unix::Signal>,
+}
+
+impl PoseSignals {
+    fn new() -> Self {
+        #[cfg(unix)]
+        {
+            use tokio::signal::unix::{SignalKind, signal};
+            Self {
+                usr1: signal(SignalKind::user_defined1()).ok(),
+                usr2: signal(SignalKind::user_defined2()).ok(),
+            }
+        }
+        #[cfg(not(unix))]
+        Self {}
+    }
+
+    async fn next(&mut self) -> bool {
+        #[cfg(unix)]
+        {
+            async fn recv(s: &mut Option<tokio::signal::unix::Signal>) {
+                match s {
+                    Some(s) => {
+                        if s.recv().await.is_none() {
+                            std::future::pending::<()>().await;
+                        }
+                    }
+                    None => std::future::pending::<()>().await,
+                }
+            }
+            tokio::select! {
+                () = recv(&mut self.usr1) => true,
+                () = recv(&mut self.usr2) => false,
+            }
+        }
+        #[cfg(not(unix))]
+        std::future::pending::<bool>().await
+    }
 }

@@ -12,6 +12,7 @@
 //!
 //! The real `dflat daemon` binary against the in-process SITL.
 
+#[path = "support/mod.rs"]
 mod common;
 
 use std::net::UdpSocket;
@@ -20,9 +21,9 @@ use std::time::{Duration, Instant};
 
 use common::*;
 use dflat_daemon::config::Config;
-use dflat_daemon::sitl::{self, SitlOptions};
 use dflat_link::MavMessage;
 use dflat_link::dialect::LOCAL_POSITION_NED_DATA;
+use dflat_sim::sitl::{self, SitlOptions};
 
 const MAX_TILT_DEG: f64 = 35.0;
 /// Messages per second of the flood.
@@ -57,10 +58,10 @@ noise_sigma = 0.01
     );
     let config = write_config(&dir, "flood.toml", &text);
     let summary_path = dir.join("summary.json");
-    let cfg = Config::load(&config).expect("config");
+    Config::load(&config).expect("daemon config");
     let (tx, tap) = channel();
     let sim = sitl::spawn(
-        &cfg,
+        &dflat_sim::sitl::SitlSettings::load(&config).expect("sitl config"),
         SitlOptions {
             link: Some("udpin:127.0.0.1:0".into()),
             tap: Some(tx),

@@ -41,8 +41,8 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex as StdMutex};
 use std::time::{Instant, SystemTime, UNIX_EPOCH};
 
-use dflat_link::tlog::TlogWriter;
-use dflat_link::{
+use crate::tlog::TlogWriter;
+use crate::{
     EncodedFrame, FrameError, FrameParser, LinkError, MAX_FRAME_LEN, MavHeader, MavMessage,
     SignedFrame,
 };
@@ -515,7 +515,7 @@ impl Transport {
         header: &MavHeader,
         msg: &MavMessage,
     ) -> Result<SendOutcome, TransportError> {
-        let frame = dflat_link::serialize_v2(header, msg)?;
+        let frame = crate::serialize_v2(header, msg)?;
         self.send_frame(&frame).await
     }
 
@@ -631,7 +631,7 @@ mod serial {
 
     use std::time::{Duration, Instant};
 
-    use dflat_link::FrameError;
+    use crate::FrameError;
     use mavlink::error::MessageReadError;
     use mavlink::{Connectable, MAVLinkMessageRaw, MavConnection, SerialConfig};
     use tokio::sync::{Mutex, mpsc};
@@ -645,7 +645,7 @@ mod serial {
         tap: Option<TlogTap>,
     ) -> Result<Io, TransportError> {
         let config = SerialConfig::new(path.to_owned(), baud).timeout(Duration::from_millis(100));
-        let conn = tokio::task::spawn_blocking(move || config.connect::<dflat_link::MavMessage>())
+        let conn = tokio::task::spawn_blocking(move || config.connect::<crate::MavMessage>())
             .await
             .map_err(|e| TransportError::Io {
                 endpoint: name.to_owned(),
@@ -674,7 +674,7 @@ mod serial {
                                 MAVLinkMessageRaw::V1(r) => r.raw_bytes(),
                                 MAVLinkMessageRaw::V2(r) => r.raw_bytes(),
                             };
-                            match dflat_link::parse_frame(bytes) {
+                            match crate::parse_frame(bytes) {
                                 Ok(frame) => {
                                     if let Some(tap) = &tap {
                                         tap.record(unix_time_us(), bytes);
@@ -874,7 +874,7 @@ impl TlogTap {
 
     /// Serializes `msg` (MAVLink 2) and queues it like [`record`](Self::record).
     pub fn record_message(&self, ts_us: u64, header: &MavHeader, msg: &MavMessage) {
-        match dflat_link::serialize_v2(header, msg) {
+        match crate::serialize_v2(header, msg) {
             Ok(frame) => self.record(ts_us, frame.as_bytes()),
             Err(_) => {
                 self.dropped.fetch_add(1, Ordering::Relaxed);
@@ -909,12 +909,12 @@ impl TlogTap {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use dflat_link::tlog::TlogReader;
-    use dflat_link::{DaemonStatus, heartbeat_onboard};
+    use crate::tlog::TlogReader;
+    use crate::{DaemonStatus, heartbeat_onboard};
     use std::time::Duration;
 
     fn hdr(sys: u8, comp: u8, seq: u8) -> MavHeader {
-        dflat_link::header(sys, comp, seq)
+        crate::header(sys, comp, seq)
     }
 
     #[test]
@@ -1023,7 +1023,7 @@ mod tests {
         let addr = server.local_addr().unwrap();
         let raw = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
         let hb = heartbeat_onboard(DaemonStatus::Standby);
-        let good = dflat_link::serialize_v2(&hdr(1, 1, 0), &hb).unwrap();
+        let good = crate::serialize_v2(&hdr(1, 1, 0), &hb).unwrap();
         let mut bad = good.as_bytes().to_vec();
         let n = bad.len();
         bad[n - 1] ^= 0xff; // corrupt the CRC
@@ -1056,7 +1056,7 @@ mod tests {
         let (mut sock, _) = listener.accept().await.unwrap();
         let client = client_task.await.unwrap();
         let hb = heartbeat_onboard(DaemonStatus::Active);
-        let frame = dflat_link::serialize_v2(&hdr(1, 1, 9), &hb).unwrap();
+        let frame = crate::serialize_v2(&hdr(1, 1, 9), &hb).unwrap();
         let bytes = frame.as_bytes();
         sock.write_all(&bytes[..5]).await.unwrap();
         sock.flush().await.unwrap();
@@ -1067,7 +1067,7 @@ mod tests {
         client.send(&hdr(1, 191, 1), &hb).await.unwrap();
         let mut buf = vec![0u8; bytes.len()];
         sock.read_exact(&mut buf).await.unwrap();
-        assert_eq!(dflat_link::parse_frame(&buf).unwrap().message, hb);
+        assert_eq!(crate::parse_frame(&buf).unwrap().message, hb);
         drop(sock);
         let end = tokio::time::timeout(Duration::from_secs(2), client.recv())
             .await
@@ -1115,7 +1115,7 @@ mod tests {
     }
 
     fn good_bytes() -> Vec<u8> {
-        dflat_link::serialize_v2(&hdr(1, 1, 0), &heartbeat_onboard(DaemonStatus::Boot))
+        crate::serialize_v2(&hdr(1, 1, 0), &heartbeat_onboard(DaemonStatus::Boot))
             .unwrap()
             .as_bytes()
             .to_vec()

@@ -4,9 +4,9 @@
 //! looks like to the daemon, built from the lab's plants and sensing:
 //!
 //! * a plant thread integrates one of `dflat-sim`'s plants
-//!   ([`PlanarPlant`](dflat_sim::plant::PlanarPlant),
-//!   [`SpatialPlant`](dflat_sim::plant::SpatialPlant),
-//!   [`RigidBodyPlant`](dflat_sim::plant::RigidBodyPlant), chosen by
+//!   ([`PlanarPlant`](crate::plant::PlanarPlant),
+//!   [`SpatialPlant`](crate::plant::SpatialPlant),
+//!   [`RigidBodyPlant`](crate::plant::RigidBodyPlant), chosen by
 //!   `sitl.plant`) in real time at `sitl.plant_rate_hz`, with the plant
 //!   parameters of `[sitl]` (τ, k̃, hover thrust, mass factor — they may
 //!   differ from the controller's `[vehicle]` model) and the autopilot's
@@ -71,19 +71,21 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant, SystemTime};
 
+use crate::plant::{Plant, PlantKind, PlantOptions, PlantState, build_plant};
+use crate::sensing::{GaussianOptions, GaussianSensor, Sensor};
 use dflat_control::AttitudeCommand as PlantCommand;
 use dflat_link::dialect::{MavAutopilot, MavState};
 use dflat_link::{
     Frame, Inbound, LinkRx, MavHeader, MavMessage, RxOutcome, Signing, SourceFilter,
     euler_from_quaternion, frames, serialize_v2, timestamp_from_system_time,
 };
-use dflat_sim::plant::{Plant, PlantKind, PlantOptions, PlantState, build_plant};
-use dflat_sim::sensing::{GaussianOptions, GaussianSensor, Sensor};
 use nalgebra::Vector3;
 use thiserror::Error;
 
-use crate::config::{Config, SitlPlant};
-use crate::transport::Endpoint;
+use dflat_link::transport::Endpoint;
+
+mod config;
+pub use config::{SitlConfig, SitlConfigError, SitlIds, SitlPlant, SitlSettings};
 
 /// Gravity of the simulated world [m/s²].
 pub const GRAVITY: f64 = 9.81;
@@ -131,7 +133,7 @@ pub enum SitlError {
     },
     /// The plant options were refused by the lab.
     #[error("sitl plant: {0}")]
-    Plant(#[from] dflat_sim::SimError),
+    Plant(#[from] crate::SimError),
     /// The truth CSV could not be created or written.
     #[error("truth CSV {file}: {source}")]
     Truth {
@@ -417,7 +419,7 @@ impl Shared {
 /// The SITL's signing: [`SitlOptions::signing`], else a key from
 /// `sitl.signing_key_file` (link id [`SIGNING_LINK_ID`], starting at the
 /// wall clock, unsigned non-commands accepted), else off.
-fn sitl_signing(cfg: &Config, options: &SitlOptions) -> Result<Option<Signing>, SitlError> {
+fn sitl_signing(cfg: &SitlSettings, options: &SitlOptions) -> Result<Option<Signing>, SitlError> {
     if let Some(s) = &options.signing {
         return Ok(Some(s.clone()));
     }
@@ -425,13 +427,9 @@ fn sitl_signing(cfg: &Config, options: &SitlOptions) -> Result<Option<Signing>, 
     if file.is_empty() {
         return Ok(None);
     }
-    let key = crate::signing::load_key(Path::new(file)).map_err(|e| {
-        // load_key names the daemon's field; name the SITL's instead.
-        let crate::signing::SigningError::File { reason, .. } = e;
-        SitlError::SigningKey {
-            file: PathBuf::from(file),
-            reason,
-        }
+    let key = dflat_link::load_key_file(Path::new(file)).map_err(|e| SitlError::SigningKey {
+        file: PathBuf::from(file),
+        reason: e.reason,
     })?;
     let now = timestamp_from_system_time(SystemTime::now());
     let mut signing = Signing::new(key, SIGNING_LINK_ID, now);
@@ -481,7 +479,7 @@ fn bind(what: &'static str, addr: SocketAddr) -> Result<UdpSocket, SitlError> {
 
 /// The plant options of `[sitl]`: 1/`plant_rate_hz` step, τ, k̃, mass
 /// factor, ±35° saturation, g = 9.81 m/s².
-pub fn plant_options(cfg: &Config) -> PlantOptions {
+pub fn plant_options(cfg: &SitlSettings) -> PlantOptions {
     let s = &cfg.sitl;
     PlantOptions {
         plant_dt: 1.0 / s.plant_rate_hz,
@@ -503,7 +501,7 @@ fn plant_kind(p: SitlPlant) -> PlantKind {
 }
 
 /// Starts the SITL: binds its sockets, starts the plant and receive threads.
-pub fn spawn(cfg: &Config, options: SitlOptions) -> Result<SitlHandle, SitlError> {
+pub fn spawn(cfg: &SitlSettings, options: SitlOptions) -> Result<SitlHandle, SitlError> {
     let signing = sitl_signing(cfg, &options)?;
     let url = options.link.as_deref().unwrap_or(&cfg.sitl.url);
     let socket = bind("link", parse_udpin("link", url)?)?;
@@ -561,8 +559,8 @@ pub fn spawn(cfg: &Config, options: SitlOptions) -> Result<SitlHandle, SitlError
         diverged: AtomicBool::new(false),
         mode: AtomicU8::new(0),
         seq: AtomicU8::new(0),
-        system_id: cfg.link.system_id,
-        component_id: cfg.link.autopilot_component,
+        system_id: cfg.ids.system_id,
+        component_id: cfg.ids.autopilot_component,
         pose_offset: Mutex::new([0.0; 3]),
         truth: Mutex::new(first),
         trace: Mutex::new(Vec::new()),
@@ -577,10 +575,10 @@ pub fn spawn(cfg: &Config, options: SitlOptions) -> Result<SitlHandle, SitlError
     let mut threads = Vec::new();
 
     let filter = SourceFilter {
-        vehicle_system_id: cfg.link.system_id,
-        autopilot_component_id: cfg.link.autopilot_component,
-        own_component_id: cfg.link.autopilot_component,
-        gcs_system_id: cfg.link.gcs_system_id,
+        vehicle_system_id: cfg.ids.system_id,
+        autopilot_component_id: cfg.ids.autopilot_component,
+        own_component_id: cfg.ids.autopilot_component,
+        gcs_system_id: cfg.ids.gcs_system_id,
         ..SourceFilter::default()
     };
     // The receive side verifies with its own copy (per-stream timestamps);
@@ -916,7 +914,7 @@ impl VehicleRx {
 
     /// True for messages addressed to this autopilot specifically (not routed on).
     fn addressed_to_autopilot(&self, msg: &MavMessage) -> bool {
-        use mavlink::Message as _;
+        use dflat_link::mavlink::Message as _;
         msg.target_system_id() == Some(self.shared.system_id)
             && msg.target_component_id() == Some(self.shared.component_id)
     }
@@ -1356,118 +1354,6 @@ pub fn read_truth_csv(path: &Path) -> std::io::Result<Vec<TruthRow>> {
         .collect())
 }
 
-/// Runs the SITL until `shutdown` resolves (`dflat sitl`).
-///
-/// Prints `sitl listening on udpin:ADDR` (and `sitl gcs on udpin:ADDR`)
-/// first, then one line per mode change (`sitl mode offboard` / `sitl mode
-/// hold`) and per pose pause / resume, flushing stdout each time so a parent
-/// process can follow. On Unix, SIGUSR1 pauses the pose stream and SIGUSR2
-/// resumes it.
-pub async fn run(
-    cfg: &Config,
-    options: SitlOptions,
-    shutdown: impl std::future::Future<Output = ()>,
-) -> Result<SitlReport, SitlError> {
-    let handle = spawn(cfg, options)?;
-    say(&format!("sitl listening on udpin:{}", handle.local_addr()));
-    if let Some(g) = handle.gcs_addr() {
-        say(&format!("sitl gcs on udpin:{g}"));
-    }
-    let mut signals = PoseSignals::new();
-    let mut tick = tokio::time::interval(Duration::from_millis(20));
-    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
-    let mut mode = handle.mode();
-    tokio::pin!(shutdown);
-    loop {
-        tokio::select! {
-            () = &mut shutdown => break,
-            pause = signals.next() => {
-                if pause {
-                    handle.pause_pose();
-                    say("sitl pose paused");
-                } else {
-                    handle.resume_pose();
-                    say("sitl pose resumed");
-                }
-            }
-            _ = tick.tick() => {
-                let m = handle.mode();
-                if m != mode {
-                    mode = m;
-                    say(&format!("sitl mode {}", m.as_str()));
-                }
-            }
-        }
-    }
-    let report = handle.stop()?;
-    let c = &report.counters;
-    say(&format!(
-        "sitl stopped: commands {} accepted, {} ignored, {} rejected, {} unauthenticated; sent hb {} pos {} att {}; late steps {}",
-        c.commands_accepted,
-        c.commands_ignored,
-        c.commands_rejected,
-        c.commands_unauthenticated,
-        c.heartbeats_sent,
-        c.positions_sent,
-        c.attitudes_sent,
-        c.late_steps
-    ));
-    Ok(report)
-}
-
-fn say(line: &str) {
-    let mut out = std::io::stdout().lock();
-    // stdout closed: nobody is listening, which is not the SITL's problem.
-    let _ = writeln!(out, "{line}");
-    let _ = out.flush();
-}
-
-/// SIGUSR1 (pause → `true`) and SIGUSR2 (resume → `false`); never fires
-/// where they do not exist.
-struct PoseSignals {
-    #[cfg(unix)]
-    usr1: Option<tokio::signal::unix::Signal>,
-    #[cfg(unix)]
-    usr2: Option<tokio::signal::unix::Signal>,
-}
-
-impl PoseSignals {
-    fn new() -> Self {
-        #[cfg(unix)]
-        {
-            use tokio::signal::unix::{SignalKind, signal};
-            Self {
-                usr1: signal(SignalKind::user_defined1()).ok(),
-                usr2: signal(SignalKind::user_defined2()).ok(),
-            }
-        }
-        #[cfg(not(unix))]
-        Self {}
-    }
-
-    async fn next(&mut self) -> bool {
-        #[cfg(unix)]
-        {
-            async fn recv(s: &mut Option<tokio::signal::unix::Signal>) {
-                match s {
-                    Some(s) => {
-                        if s.recv().await.is_none() {
-                            std::future::pending::<()>().await;
-                        }
-                    }
-                    None => std::future::pending::<()>().await,
-                }
-            }
-            tokio::select! {
-                () = recv(&mut self.usr1) => true,
-                () = recv(&mut self.usr2) => false,
-            }
-        }
-        #[cfg(not(unix))]
-        std::future::pending::<bool>().await
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1512,8 +1398,8 @@ mod tests {
         let _ = std::fs::remove_dir_all(&dir);
     }
 
-    fn test_config() -> Config {
-        let mut cfg = Config::default();
+    fn test_config() -> SitlSettings {
+        let mut cfg = SitlSettings::default();
         cfg.sitl.url = "udpin:127.0.0.1:0".into();
         cfg.sitl.start = [0.0, 0.0, -10.0];
         cfg

@@ -2,6 +2,7 @@
 //! HEARTBEAT / LOCAL_POSITION_NED / ATTITUDE to whoever spoke to it, and
 //! SIGUSR1 / SIGUSR2 pause / resume the pose stream (HEARTBEAT goes on).
 
+#[path = "support/mod.rs"]
 mod common;
 
 use std::net::UdpSocket;
@@ -82,7 +83,7 @@ fn sitl_streams_telemetry_and_signals_pause_the_pose() {
         sitl.proc.interrupt_and_wait(Duration::from_secs(5)),
         "SITL did not exit cleanly"
     );
-    let rows = dflat_daemon::sitl::read_truth_csv(&truth).unwrap();
+    let rows = dflat_sim::sitl::read_truth_csv(&truth).unwrap();
     assert!(rows.len() > 100, "{} truth rows", rows.len());
     assert!(
         rows.iter()

@@ -7,6 +7,7 @@
 //!
 //! Real processes over loopback: `dflat sitl` twice, `dflat daemon`.
 
+#[path = "support/mod.rs"]
 mod common;
 
 use std::time::{Duration, Instant};

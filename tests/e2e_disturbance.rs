@@ -10,6 +10,7 @@
 //! within 0.3 m of the setpoint in all three axes, and the per-flight CSV
 //! must carry the estimate.
 
+#[path = "support/mod.rs"]
 mod common;
 
 use std::time::Duration;

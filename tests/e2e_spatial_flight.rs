@@ -8,6 +8,7 @@
 //! `..._classic_window`, with the paper's one-pose-per-tick window, where
 //! the controller predicts y_k for a tick without a new pose.
 
+#[path = "support/mod.rs"]
 mod common;
 
 use std::time::Duration;

@@ -8,14 +8,15 @@
 //! daemon through it, and the daemon's HEARTBEAT / STATUSTEXT reach the GCS.
 //! Settling is judged on the SITL's truth CSV, not on the (noisy) pose.
 
+#[path = "support/mod.rs"]
 mod common;
 
 use std::net::UdpSocket;
 use std::time::{Duration, Instant};
 
 use common::*;
-use dflat_daemon::sitl::read_truth_csv;
 use dflat_link::MavMessage;
+use dflat_sim::sitl::read_truth_csv;
 
 /// The step \[m\] (north).
 const STEP: f64 = 10.0;

@@ -7,6 +7,7 @@
 
 #![cfg(unix)]
 
+#[path = "support/mod.rs"]
 mod common;
 
 use std::os::unix::net::UnixDatagram;
@@ -15,7 +16,7 @@ use std::time::{Duration, Instant};
 
 use common::*;
 use dflat_daemon::config::Config;
-use dflat_daemon::sitl::{self, SitlOptions};
+use dflat_sim::sitl::{self, SitlOptions};
 
 /// `WATCHDOG_USEC` given to the daemon: 400 ms → one WATCHDOG=1 per 100 ms.
 const WATCHDOG_USEC: u64 = 400_000;
@@ -28,9 +29,9 @@ fn ready_status_watchdog_and_stopping_reach_the_notify_socket() {
         dir.display()
     );
     let config = write_config(&dir, "sdnotify.toml", &text);
-    let cfg = Config::load(&config).expect("config");
+    Config::load(&config).expect("daemon config");
     let sim = sitl::spawn(
-        &cfg,
+        &dflat_sim::sitl::SitlSettings::load(&config).expect("sitl config"),
         SitlOptions {
             link: Some("udpin:127.0.0.1:0".into()),
             ..SitlOptions::default()

@@ -7,11 +7,11 @@
 use std::ops::Range;
 use std::time::{Duration, Instant};
 
+use dflat::demo::{DemoOptions, demo_config};
 use dflat_control::disturbance::DisturbanceReport;
 use dflat_control::{ControlError, Controller, Measurement, ReferenceSource, TickOutput};
 use dflat_daemon::control::build_controller;
-use dflat_daemon::demo::{DemoOptions, demo_config};
-use dflat_daemon::sitl::{self, SitlOptions};
+use dflat_sim::sitl::{self, SitlOptions};
 use nalgebra::Vector3;
 
 /// Fails `update` on the ticks (counted from the first update) in `fail`,
@@ -64,7 +64,7 @@ impl Controller for Flaky {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn failed_and_late_ticks_fly_the_previous_plan_then_level_hover_and_recover() {
     let out = std::env::temp_dir().join(format!("dflat-plan-fallback-{}", std::process::id()));
-    let mut cfg = demo_config(&DemoOptions {
+    let (mut cfg, plant) = demo_config(&DemoOptions {
         speed: 5.0,
         out: out.clone(),
         seconds: None,
@@ -81,7 +81,7 @@ async fn failed_and_late_ticks_fly_the_previous_plan_then_level_hover_and_recove
     let slow = 400..403;
 
     let sitl = sitl::spawn(
-        &cfg,
+        &plant,
         SitlOptions {
             record_trace: true,
             ..SitlOptions::default()

@@ -2,9 +2,10 @@
 //! attitude targets within 200 ms, and resumes when pose returns.
 //!
 //! The real `dflat daemon` binary against the SITL run in-process
-//! (`dflat_daemon::sitl`), whose hooks pause / resume the pose stream and
+//! (`dflat_sim::sitl`), whose hooks pause / resume the pose stream and
 //! tap every frame the daemon sends, with its arrival time.
 
+#[path = "support/mod.rs"]
 mod common;
 
 use std::sync::mpsc::{Receiver, channel};
@@ -12,8 +13,8 @@ use std::time::{Duration, Instant};
 
 use common::*;
 use dflat_daemon::config::Config;
-use dflat_daemon::sitl::{self, SitlOptions, TapFrame};
 use dflat_link::MavMessage;
+use dflat_sim::sitl::{self, SitlOptions, TapFrame};
 
 /// The daemon must fall silent within this time after the pose stops.
 const STOP_WITHIN: Duration = Duration::from_millis(200);
@@ -43,10 +44,10 @@ start = [0.0, 0.0, -10.0]
         dir.display()
     );
     let config = write_config(&dir, "poseloss.toml", &text);
-    let cfg = Config::load(&config).expect("config");
+    Config::load(&config).expect("daemon config");
     let (tx, tap) = channel();
     let sim = sitl::spawn(
-        &cfg,
+        &dflat_sim::sitl::SitlSettings::load(&config).expect("sitl config"),
         SitlOptions {
             link: Some("udpin:127.0.0.1:0".into()),
             tap: Some(tx),

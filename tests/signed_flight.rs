@@ -21,14 +21,14 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant, SystemTime};
 
+use dflat::demo::{DemoOptions, demo_config};
 use dflat_daemon::config::Config;
-use dflat_daemon::demo::{DemoOptions, demo_config};
-use dflat_daemon::sitl::{self, SitlOptions, SitlReport};
 use dflat_daemon::supervisor::FlightState;
 use dflat_link::{
     SignatureCheck, Signing, SigningKey, TIMESTAMP_UNITS_PER_S, frames, header, heartbeat_onboard,
     timestamp_from_system_time,
 };
+use dflat_sim::sitl::{self, SitlOptions, SitlReport, SitlSettings};
 use nalgebra::Vector3;
 
 /// One flight at a time: each runs a real-time plant and a 50 Hz control
@@ -82,23 +82,23 @@ impl Drop for Scratch {
 
 /// The demo's configuration (L path at 5 m/s, SITL on a free port, no
 /// records) with the SITL's key and, if given, the daemon's.
-fn config(scratch: &Scratch, daemon_key: Option<u8>, sitl_key: u8) -> Config {
-    let mut cfg = demo_config(&DemoOptions {
+fn config(scratch: &Scratch, daemon_key: Option<u8>, sitl_key: u8) -> (Config, SitlSettings) {
+    let (mut cfg, mut plant) = demo_config(&DemoOptions {
         speed: 5.0,
         out: scratch.dir.clone(),
         seconds: None,
     })
     .unwrap();
     cfg.logging.dir = String::new();
-    cfg.sitl.signing_key_file = scratch.key_file(sitl_key);
+    plant.sitl.signing_key_file = scratch.key_file(sitl_key);
     if let Some(k) = daemon_key {
         cfg.link.signing_key_file = scratch.key_file(k);
         cfg.link.signing_timestamp_file = scratch.timestamp_file().display().to_string();
     }
-    cfg
+    (cfg, plant)
 }
 
-fn spawn_sitl(cfg: &Config, gcs: bool) -> sitl::SitlHandle {
+fn spawn_sitl(cfg: &SitlSettings, gcs: bool) -> sitl::SitlHandle {
     sitl::spawn(
         cfg,
         SitlOptions {
@@ -115,7 +115,7 @@ fn link_to(sitl: &sitl::SitlHandle) -> String {
 }
 
 /// Largest distance of the true position from the start over the run \[m\].
-fn max_displacement(cfg: &Config, report: &SitlReport) -> f64 {
+fn max_displacement(cfg: &SitlSettings, report: &SitlReport) -> f64 {
     let start = Vector3::from(cfg.sitl.start);
     report
         .trace
@@ -191,8 +191,8 @@ impl Gcs {
 async fn signed_flight_completes() {
     let _serial = SERIAL.lock().await;
     let scratch = Scratch::new("completes");
-    let cfg = config(&scratch, Some(KEY), KEY);
-    let sitl = spawn_sitl(&cfg, true);
+    let (cfg, plant) = config(&scratch, Some(KEY), KEY);
+    let sitl = spawn_sitl(&plant, true);
     let gcs = Gcs::spawn(sitl.gcs_addr().unwrap(), KEY);
     let start_timestamp = now();
     let started = Instant::now();
@@ -284,8 +284,8 @@ async fn signed_flight_completes() {
 async fn unsigned_daemon_cannot_fly_a_signed_sitl() {
     let _serial = SERIAL.lock().await;
     let scratch = Scratch::new("unsigned-daemon");
-    let cfg = config(&scratch, None, KEY);
-    let sitl = spawn_sitl(&cfg, false);
+    let (cfg, plant) = config(&scratch, None, KEY);
+    let sitl = spawn_sitl(&plant, false);
     let daemon = dflat_daemon::spawn(cfg.clone(), Some(link_to(&sitl)))
         .await
         .unwrap();
@@ -304,7 +304,7 @@ async fn unsigned_daemon_cannot_fly_a_signed_sitl() {
 
     let c = report.counters;
     let l = summary.link_stats;
-    let moved = max_displacement(&cfg, &report);
+    let moved = max_displacement(&plant, &report);
     eprintln!(
         "unsigned daemon: state {engaged:?}, sent {} attitude targets; sitl {} accepted, {} unauthenticated; \
          largest displacement {moved:.4} m",
@@ -327,8 +327,8 @@ async fn unsigned_daemon_cannot_fly_a_signed_sitl() {
 async fn wrong_key_is_refused_both_ways() {
     let _serial = SERIAL.lock().await;
     let scratch = Scratch::new("wrong-key");
-    let cfg = config(&scratch, Some(OTHER_KEY), KEY);
-    let sitl = spawn_sitl(&cfg, true);
+    let (cfg, plant) = config(&scratch, Some(OTHER_KEY), KEY);
+    let sitl = spawn_sitl(&plant, true);
     let gcs = Gcs::spawn(sitl.gcs_addr().unwrap(), KEY);
     let daemon = dflat_daemon::spawn(cfg.clone(), Some(link_to(&sitl)))
         .await
@@ -383,5 +383,5 @@ async fn wrong_key_is_refused_both_ways() {
     assert!(c.frames_received >= 2, "{c:?}");
     assert_eq!(seen.daemon, [0, 0], "{seen:?}");
     assert!(seen.autopilot[0] > 50 && seen.autopilot[1] == 0, "{seen:?}");
-    assert!(max_displacement(&cfg, &report) < 0.2);
+    assert!(max_displacement(&plant, &report) < 0.2);
 }

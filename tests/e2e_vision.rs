@@ -8,6 +8,7 @@
 //! it. Every SET_ATTITUDE_TARGET must be valid and the true path error
 //! within the stated bounds.
 
+#[path = "support/mod.rs"]
 mod common;
 
 use std::time::Duration;

@@ -5,12 +5,13 @@
 //! path error is the distance of the SITL's *true* position (truth CSV) to
 //! the polyline, from the first command until the vehicle reaches the end.
 
+#[path = "support/mod.rs"]
 mod common;
 
 use std::time::{Duration, Instant};
 
 use common::*;
-use dflat_daemon::sitl::read_truth_csv;
+use dflat_sim::sitl::read_truth_csv;
 
 /// The short L: 15 m north, then 10 m east, at z = −10 m.
 const PATH: [[f64; 3]; 3] = [[0.0, 0.0, -10.0], [15.0, 0.0, -10.0], [15.0, 10.0, -10.0]];

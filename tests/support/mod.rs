@@ -17,13 +17,13 @@ use std::sync::mpsc::{Receiver, channel};
 use std::time::{Duration, Instant};
 
 use dflat_daemon::config::Config;
-use dflat_daemon::sitl::{self, SitlOptions, SitlReport, TapFrame};
 use dflat_link::MavMessage;
 use dflat_link::dialect::{MavFrame, PositionTargetTypemask, SET_POSITION_TARGET_LOCAL_NED_DATA};
+use dflat_sim::sitl::{self, SitlOptions, SitlReport, TapFrame};
 
 /// The binary under test.
 pub fn bin() -> &'static str {
-    env!("CARGO_BIN_EXE_dflat")
+    env!("CARGO_BIN_EXE_dflat-under-test")
 }
 
 /// A fresh scratch directory for one test.
@@ -328,10 +328,10 @@ pub fn fly_in_process(name: &str, config_text: &str, fly: Duration) -> Flight {
     let dir = scratch(name);
     let text = config_text.replace("@DIR@", &dir.display().to_string());
     let config = write_config(&dir, &format!("{name}.toml"), &text);
-    let cfg = Config::load(&config).expect("config");
+    Config::load(&config).expect("daemon config");
     let (tx, tap) = channel();
     let sim = sitl::spawn(
-        &cfg,
+        &dflat_sim::sitl::SitlSettings::load(&config).expect("sitl config"),
         SitlOptions {
             link: Some("udpin:127.0.0.1:0".into()),
             tap: Some(tx),

@@ -5,10 +5,10 @@
 //! directory; its controller and vehicle sections are those of
 //! `config/default.toml`):
 //!
-//! 1. start the SITL ([`crate::sitl`]) on `udpin:127.0.0.1:0` and read back
+//! 1. start the SITL ([`dflat_sim::sitl`]) on `udpin:127.0.0.1:0` and read back
 //!    its port; the vehicle starts at the first waypoint of the L path
 //!    (−20, −30) → (0, −30) → (0, 0) at z = −10 m;
-//! 2. start the daemon ([`crate::run`]) with `--link
+//! 2. start the daemon ([`dflat_daemon::run`]) with `--link
 //!    udpout:127.0.0.1:PORT`; its mission flies the path at `--speed` as
 //!    soon as pose is fresh;
 //! 3. follow the SITL's true state until the vehicle is within
@@ -29,10 +29,13 @@ use dflat_sim::plot::{DF_RED, PathPlot, Series, north_up, write_path_plot};
 use nalgebra::Vector3;
 use thiserror::Error;
 
-use crate::DaemonError;
-use crate::config::{Config, ConfigError, MissionStart};
-use crate::sitl::{self, SitlCounters, SitlError, SitlHandle, SitlOptions, TruthSample};
-use crate::summary::FlightSummary;
+use dflat_daemon::DaemonError;
+use dflat_daemon::FlightSummary;
+use dflat_daemon::config::{Config, ConfigError, MissionStart};
+use dflat_sim::sitl::{
+    self, SitlConfigError, SitlCounters, SitlError, SitlHandle, SitlOptions, SitlSettings,
+    TruthSample,
+};
 
 /// The shipped SITL configuration (daemon + SITL on loopback).
 pub const SITL_TOML: &str = include_str!("../../../config/sitl.toml");
@@ -56,6 +59,9 @@ pub enum DemoError {
     /// out of range.
     #[error(transparent)]
     Config(#[from] ConfigError),
+    /// The embedded `[sitl]` table did not validate (a bug).
+    #[error(transparent)]
+    SitlConfig(#[from] SitlConfigError),
     /// The SITL failed.
     #[error(transparent)]
     Sitl(#[from] SitlError),
@@ -102,8 +108,10 @@ impl Default for DemoOptions {
 /// The result of a demo flight.
 #[derive(Debug, Clone)]
 pub struct DemoOutcome {
-    /// The configuration flown.
+    /// The daemon's configuration flown.
     pub config: Config,
+    /// The SITL's configuration.
+    pub sitl_config: SitlSettings,
     /// Distance of the *true* position to the path \[m\], from the first
     /// command to the end of the flight.
     pub path_error: Option<ErrorStats>,
@@ -159,7 +167,7 @@ impl DemoOutcome {
         let _ = writeln!(
             s,
             "dflat demo: {} on the L path at {} m/s, SITL {:?} plant, in one process on loopback",
-            d.controller, m.speed, self.config.sitl.plant
+            d.controller, m.speed, self.sitl_config.sitl.plant
         );
         match (&self.path_error, self.path_time_s) {
             (Some(e), t) => {
@@ -259,15 +267,16 @@ impl DemoOutcome {
 
 /// The demo's configuration: `config/sitl.toml` with the speed and the
 /// output directory applied, the SITL on a free port.
-pub fn demo_config(options: &DemoOptions) -> Result<Config, ConfigError> {
+pub fn demo_config(options: &DemoOptions) -> Result<(Config, SitlSettings), DemoError> {
     let file = Path::new("config/sitl.toml (embedded)");
     let mut cfg = Config::parse(SITL_TOML, file)?;
     cfg.mission.speed = options.speed;
     cfg.mission.start = MissionStart::Path;
-    cfg.sitl.url = "udpin:127.0.0.1:0".into();
     cfg.logging.dir = options.out.join("flights").display().to_string();
     cfg.validate(file)?;
-    Ok(cfg)
+    let mut sitl = SitlSettings::parse(SITL_TOML, file)?;
+    sitl.sitl.url = "udpin:127.0.0.1:0".into();
+    Ok((cfg, sitl))
 }
 
 fn waypoints(cfg: &Config) -> Vec<Vector3<f64>> {
@@ -280,7 +289,7 @@ fn path_length(w: &[Vector3<f64>]) -> f64 {
 
 /// Runs the demo flight (see the module docs).
 pub async fn run(options: &DemoOptions) -> Result<DemoOutcome, DemoError> {
-    let cfg = demo_config(options)?;
+    let (cfg, sitl_cfg) = demo_config(options)?;
     std::fs::create_dir_all(&options.out).map_err(|source| DemoError::OutDir {
         dir: options.out.clone(),
         source,
@@ -292,7 +301,7 @@ pub async fn run(options: &DemoOptions) -> Result<DemoOutcome, DemoError> {
         .unwrap_or(path_length(&wps) / cfg.mission.speed + TIME_MARGIN_S);
 
     let sitl = sitl::spawn(
-        &cfg,
+        &sitl_cfg,
         SitlOptions {
             truth_csv: Some(truth_csv.clone()),
             record_trace: true,
@@ -307,7 +316,7 @@ pub async fn run(options: &DemoOptions) -> Result<DemoOutcome, DemoError> {
             // A dropped sender also means "stop".
             let _ = stop_rx.await;
         };
-        crate::run(daemon_cfg, Some(link), shutdown).await
+        dflat_daemon::run(daemon_cfg, Some(link), shutdown).await
     });
 
     let started = Instant::now();
@@ -356,6 +365,7 @@ pub async fn run(options: &DemoOptions) -> Result<DemoOutcome, DemoError> {
 
     Ok(DemoOutcome {
         config: cfg,
+        sitl_config: sitl_cfg,
         path_error,
         completed: arrival.is_some(),
         path_time_s,
@@ -405,7 +415,7 @@ mod tests {
 
     #[test]
     fn embedded_configs_parse_and_match_the_defaults() {
-        let cfg = demo_config(&DemoOptions::default()).unwrap();
+        let (cfg, sitl) = demo_config(&DemoOptions::default()).unwrap();
         let default = Config::parse(DEFAULT_TOML, Path::new("default.toml")).unwrap();
         assert_eq!(cfg.vehicle, default.vehicle, "sitl.toml [vehicle] drifted");
         assert_eq!(
@@ -415,7 +425,7 @@ mod tests {
         assert_eq!(cfg.safety, default.safety);
         assert_eq!(cfg.mission.path, default.mission.path);
         assert_eq!(
-            cfg.sitl.start, cfg.mission.path[0],
+            sitl.sitl.start, cfg.mission.path[0],
             "SITL starts at the path start"
         );
         assert_eq!(cfg.mission.start, MissionStart::Path);
@@ -423,7 +433,7 @@ mod tests {
 
     #[test]
     fn l_path_is_fifty_metres() {
-        let cfg = demo_config(&DemoOptions::default()).unwrap();
+        let (cfg, _) = demo_config(&DemoOptions::default()).unwrap();
         assert!((path_length(&waypoints(&cfg)) - 50.0).abs() < 1e-12);
     }
 }

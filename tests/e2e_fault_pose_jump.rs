@@ -8,6 +8,7 @@
 //! The real `dflat daemon` binary against the in-process SITL, whose
 //! `set_pose_offset` hook shifts every reported position.
 
+#[path = "support/mod.rs"]
 mod common;
 
 use std::sync::mpsc::channel;
@@ -15,8 +16,8 @@ use std::time::{Duration, Instant};
 
 use common::*;
 use dflat_daemon::config::Config;
-use dflat_daemon::sitl::{self, SitlOptions};
 use dflat_link::MavMessage;
+use dflat_sim::sitl::{self, SitlOptions};
 
 const MAX_TILT_DEG: f64 = 35.0;
 /// The jump \[m\] (north).
@@ -45,10 +46,10 @@ noise_sigma = 0.01
         dir.display()
     );
     let config = write_config(&dir, "posejump.toml", &text);
-    let cfg = Config::load(&config).expect("config");
+    Config::load(&config).expect("daemon config");
     let (tx, tap) = channel();
     let sim = sitl::spawn(
-        &cfg,
+        &dflat_sim::sitl::SitlSettings::load(&config).expect("sitl config"),
         SitlOptions {
             link: Some("udpin:127.0.0.1:0".into()),
             tap: Some(tx),

@@ -4,10 +4,11 @@
 use std::path::Path;
 use std::process::Command;
 
-use dflat_daemon::config::{Config, ModelKind, SitlPlant, ThrustMode};
+use dflat_daemon::config::{Config, ModelKind, ThrustMode};
+use dflat_sim::sitl::{SitlPlant, SitlSettings};
 
 fn config_dir() -> &'static Path {
-    Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../config"))
+    Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../config"))
 }
 
 #[test]
@@ -17,7 +18,7 @@ fn every_file_in_config_parses() {
         let path = entry.unwrap().path();
         if path.extension().is_some_and(|e| e == "toml") {
             Config::load(&path).unwrap_or_else(|e| panic!("{e}"));
-            let out = Command::new(env!("CARGO_BIN_EXE_dflat"))
+            let out = Command::new(env!("CARGO_BIN_EXE_dflat-under-test"))
                 .arg("check-config")
                 .arg(&path)
                 .output()
@@ -38,11 +39,12 @@ fn every_file_in_config_parses() {
 fn shipped_configs_say_what_they_promise() {
     let load = |name: &str| Config::load(&config_dir().join(name)).unwrap();
     let sitl = load("sitl.toml");
-    assert_eq!(sitl.sitl.plant, SitlPlant::Planar);
-    assert_eq!(sitl.sitl.start, sitl.mission.path[0]);
+    let plant = SitlSettings::load(&config_dir().join("sitl.toml")).unwrap();
+    assert_eq!(plant.sitl.plant, SitlPlant::Planar);
+    assert_eq!(plant.sitl.start, sitl.mission.path[0]);
     assert!(sitl.link.url.starts_with("udpout:127.0.0.1:"));
     assert_eq!(
-        sitl.sitl.url.trim_start_matches("udpin:"),
+        plant.sitl.url.trim_start_matches("udpin:"),
         sitl.link.url.trim_start_matches("udpout:")
     );
     let px4 = load("px4.toml");

@@ -1,0 +1,147 @@
+//! The command line: parsing and dispatch of `dflat`'s subcommands.
+
+use std::path::PathBuf;
+
+use anyhow::Result;
+use clap::{Parser, Subcommand};
+
+/// Discrete-flatness MPC flight control for multirotors (MAVLink).
+#[derive(Debug, Parser)]
+#[command(name = "dflat", version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Validate a configuration file and print the effective configuration.
+    CheckConfig {
+        /// The TOML file.
+        file: PathBuf,
+    },
+    /// Run one of the paper's studies in the simulation lab (JSON + plots).
+    #[cfg(feature = "lab")]
+    Experiment {
+        /// The study.
+        #[command(subcommand)]
+        which: crate::experiment::ExperimentCommand,
+    },
+    /// The autopilot stand-in: a real-time plant behind MAVLink (udpin);
+    /// SIGUSR1 / SIGUSR2 pause / resume its pose stream.
+    #[cfg(feature = "lab")]
+    Sitl(crate::sitl_demo::SitlArgs),
+    /// Fly the L path with the SITL and the daemon on loopback (shipped
+    /// defaults); print the summary and draw the flown path.
+    #[cfg(feature = "lab")]
+    Demo(crate::sitl_demo::DemoArgs),
+    /// The flight-control daemon (systemd runs this): pose and setpoints in,
+    /// attitude commands out, until SIGINT / SIGTERM; prints a summary.
+    Daemon(DaemonArgs),
+}
+
+/// Arguments of `dflat daemon`.
+#[derive(Debug, clap::Args)]
+struct DaemonArgs {
+    /// The TOML configuration file.
+    #[arg(long)]
+    config: PathBuf,
+    /// Connection string replacing `link.url` (`udpout:HOST:PORT`,
+    /// `udpin:HOST:PORT`, `tcpout:HOST:PORT`, `serial:PATH:BAUD`).
+    #[arg(long)]
+    link: Option<String>,
+    /// Also write the shutdown summary as JSON to this file.
+    #[arg(long)]
+    summary_json: Option<PathBuf>,
+    /// Log JSON lines on stderr (overrides `logging.format`).
+    #[arg(long)]
+    log_json: bool,
+}
+
+/// `dflat`'s `main`: parses the command line, runs the subcommand, prints
+/// an error and exits with 2 when it fails.
+pub fn main() -> std::process::ExitCode {
+    let cli = Cli::parse();
+    match run(cli) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::from(2)
+        }
+    }
+}
+
+fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        Command::CheckConfig { file } => {
+            #[allow(unused_mut)]
+            let mut cfg = dflat_daemon::config::Config::load(&file)?;
+            #[cfg(feature = "lab")]
+            {
+                // The [sitl] table is the SITL's: validate it and print it
+                // with its defaults filled in.
+                let sitl = dflat_sim::sitl::SitlSettings::load(&file)?;
+                cfg.sitl = None;
+                print!("{}\n{}", cfg.to_toml(), sitl.to_toml());
+            }
+            #[cfg(not(feature = "lab"))]
+            print!("{}", cfg.to_toml());
+            Ok(())
+        }
+        #[cfg(feature = "lab")]
+        Command::Experiment { which } => crate::experiment::run(which),
+        #[cfg(feature = "lab")]
+        Command::Sitl(args) => crate::sitl_demo::run_sitl(args),
+        #[cfg(feature = "lab")]
+        Command::Demo(args) => crate::sitl_demo::run_demo(args),
+        Command::Daemon(args) => run_daemon(args),
+    }
+}
+
+/// Installs the tracing subscriber on stderr: filter from `RUST_LOG`
+/// (default `default_filter`, e.g. `info`), text or JSON lines. A second
+/// call is a no-op.
+fn init_logging(default_filter: &str, json: bool) {
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default_filter));
+    let builder = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+        .with_writer(std::io::stderr);
+    // Err only if a subscriber is already installed.
+    let _ = if json {
+        builder.json().try_init()
+    } else {
+        builder.try_init()
+    };
+}
+
+/// `dflat daemon`: runs until SIGINT / SIGTERM, prints the summary.
+fn run_daemon(args: DaemonArgs) -> Result<()> {
+    use anyhow::Context as _;
+    use dflat_daemon::config::{Config, LogFormat};
+
+    let cfg = Config::load(&args.config)?;
+    init_logging(
+        "info",
+        args.log_json || cfg.logging.format == LogFormat::Json,
+    );
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .thread_name("dflat-io")
+        .enable_all()
+        .build()
+        .context("cannot start the async runtime")?;
+    let summary = runtime.block_on(dflat_daemon::run(
+        cfg,
+        args.link,
+        dflat_daemon::shutdown_signal(),
+    ))?;
+    println!("{summary}");
+    if let Some(path) = args.summary_json {
+        let json = serde_json::to_string_pretty(&summary).context("summary as JSON")?;
+        std::fs::write(&path, json + "\n")
+            .with_context(|| format!("cannot write {}", path.display()))?;
+    }
+    Ok(())
+}

@@ -1,0 +1,307 @@
+//! The SITL's configuration: its own `[sitl]` table and the MAVLink ids of
+//! `[link]`, read from the same TOML file as the daemon's configuration.
+//!
+//! The daemon keeps `[sitl]` unparsed (it does not depend on the lab); this
+//! module parses and validates it. Errors name the file, the field (dotted
+//! path) and the allowed range.
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+
+/// A SITL configuration that could not be read or is out of range.
+#[derive(Debug, Error)]
+pub enum SitlConfigError {
+    /// The file could not be read.
+    #[error("{file}: cannot read: {source}")]
+    Read {
+        /// The file.
+        file: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// The TOML did not parse or a field has the wrong type or name.
+    #[error("{file}: {message}")]
+    Parse {
+        /// The file.
+        file: PathBuf,
+        /// The parser's message (names the field and the line).
+        message: String,
+    },
+    /// A field is out of its allowed range.
+    #[error("{file}: field `{field}` = {value}: allowed {allowed}")]
+    Range {
+        /// The file.
+        file: PathBuf,
+        /// Dotted path of the field.
+        field: String,
+        /// The value found.
+        value: String,
+        /// The allowed range, in words.
+        allowed: String,
+    },
+}
+
+/// The MAVLink ids the SITL takes from `[link]` (the same fields the daemon
+/// reads): it is component `autopilot_component` of system `system_id`, and
+/// routes a ground station of system `gcs_system_id`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct SitlIds {
+    /// Vehicle system id (1–255).
+    pub system_id: u8,
+    /// The autopilot's component id (1–255): the SITL's own.
+    pub autopilot_component: u8,
+    /// The ground station's system id (1–255).
+    pub gcs_system_id: u8,
+}
+
+impl Default for SitlIds {
+    fn default() -> Self {
+        Self {
+            system_id: 1,
+            autopilot_component: 1,
+            gcs_system_id: 255,
+        }
+    }
+}
+
+/// Everything the SITL reads from a configuration file.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct SitlSettings {
+    /// `[sitl]`.
+    pub sitl: SitlConfig,
+    /// From `[link]`.
+    pub ids: SitlIds,
+}
+
+impl SitlSettings {
+    /// Reads, parses and validates a file.
+    pub fn load(path: &Path) -> Result<Self, SitlConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| SitlConfigError::Read {
+            file: path.to_owned(),
+            source,
+        })?;
+        Self::parse(&text, path)
+    }
+
+    /// Parses and validates TOML text (a whole dflat configuration; every
+    /// table but `[sitl]` and the ids of `[link]` is ignored here); `file` is
+    /// used in error messages.
+    pub fn parse(text: &str, file: &Path) -> Result<Self, SitlConfigError> {
+        let parse_err = |message: String| SitlConfigError::Parse {
+            file: file.to_owned(),
+            message: message.trim_end().to_owned(),
+        };
+        let table: toml::Table = toml::from_str(text).map_err(|e| parse_err(e.to_string()))?;
+        let sitl = match table.get("sitl") {
+            Some(v) => {
+                SitlConfig::deserialize(v.clone()).map_err(|e| parse_err(format!("[sitl]: {e}")))?
+            }
+            None => SitlConfig::default(),
+        };
+        let mut ids = SitlIds::default();
+        if let Some(link) = table.get("link").and_then(|l| l.as_table()) {
+            for (name, slot) in [
+                ("system_id", &mut ids.system_id),
+                ("autopilot_component", &mut ids.autopilot_component),
+                ("gcs_system_id", &mut ids.gcs_system_id),
+            ] {
+                if let Some(v) = link.get(name) {
+                    let n = v
+                        .as_integer()
+                        .filter(|n| (1..=255).contains(n))
+                        .ok_or_else(|| SitlConfigError::Range {
+                            file: file.to_owned(),
+                            field: format!("link.{name}"),
+                            value: v.to_string(),
+                            allowed: "1 to 255".into(),
+                        })?;
+                    *slot = n as u8;
+                }
+            }
+        }
+        let settings = Self { sitl, ids };
+        settings.sitl.validate(file)?;
+        Ok(settings)
+    }
+
+    /// The effective `[sitl]` table as TOML.
+    pub fn to_toml(&self) -> String {
+        #[derive(Serialize)]
+        struct Wrap<'a> {
+            sitl: &'a SitlConfig,
+        }
+        toml::to_string_pretty(&Wrap { sitl: &self.sitl })
+            .unwrap_or_else(|e| format!("# cannot print: {e}"))
+    }
+}
+
+/// The SITL's plant.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum SitlPlant {
+    /// Planar plant; altitude held.
+    #[default]
+    Planar,
+    /// Spatial plant with collective thrust.
+    Spatial,
+    /// Full rigid body with an inner attitude controller.
+    Full,
+}
+
+/// `[sitl]`: the autopilot stand-in.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SitlConfig {
+    /// Where the SITL listens (`udpin:HOST:PORT`).
+    pub url: String,
+    /// Plant kind.
+    pub plant: SitlPlant,
+    /// Plant integration rate \[Hz\] (100–2000).
+    pub plant_rate_hz: f64,
+    /// Rate of LOCAL_POSITION_NED / ATTITUDE out \[Hz\] (1–200).
+    pub telemetry_rate_hz: f64,
+    /// Plant attitude time constant \[s\] (may differ from the model's).
+    pub tau: f64,
+    /// Plant attitude gain [-].
+    pub k: f64,
+    /// Plant hover thrust (normalised 0–1) — spatial/full plants.
+    pub hover_thrust: f64,
+    /// Plant mass factor relative to nominal (0.5–2).
+    pub mass_factor: f64,
+    /// Gaussian position noise σ \[m\] (0–1).
+    pub noise_sigma: f64,
+    /// Also send VISION_POSITION_ESTIMATE at this rate \[Hz\] (0 = off;
+    /// 1–100): a vision pipeline stand-in for `link.pose_source =
+    /// "vision_position_estimate"`. LOCAL_POSITION_NED goes on as well.
+    pub vision_rate_hz: f64,
+    /// Vision latency \[ms\] (0–500): each sample's `time_usec` is its capture
+    /// time on the SITL's clock, and it is sent this much later.
+    pub vision_latency_ms: f64,
+    /// Gaussian noise σ of the vision position \[m\] (0–1).
+    pub vision_noise_sigma: f64,
+    /// Initial position, local NED \[m\].
+    pub start: [f64; 3],
+    /// Seconds without SET_ATTITUDE_TARGET after which the SITL holds position.
+    pub command_timeout_s: f64,
+    /// Random seed.
+    pub seed: u64,
+    /// MAVLink 2 signing key file of the SITL; empty = signing off. Same
+    /// rules as `link.signing_key_file` (mode 0600, owned by the running
+    /// user; 64 hex digits, 32 raw bytes or a passphrase), checked when the
+    /// SITL starts. With a key the SITL signs everything it sends (link id
+    /// 1, timestamps from the wall clock, nothing persisted), refuses
+    /// SET_ATTITUDE_TARGET without a valid signature and drops badly signed
+    /// or replayed frames; other unsigned messages are still accepted. See
+    /// [`crate::sitl`].
+    pub signing_key_file: String,
+}
+
+impl Default for SitlConfig {
+    fn default() -> Self {
+        Self {
+            url: "udpin:127.0.0.1:14540".into(),
+            plant: SitlPlant::Planar,
+            plant_rate_hz: 200.0,
+            telemetry_rate_hz: 50.0,
+            tau: 0.2,
+            k: 1.0,
+            hover_thrust: 0.5,
+            mass_factor: 1.0,
+            noise_sigma: 0.0,
+            vision_rate_hz: 0.0,
+            vision_latency_ms: 60.0,
+            vision_noise_sigma: 0.02,
+            start: [-20.0, -30.0, -10.0],
+            command_timeout_s: 0.5,
+            seed: 1,
+            signing_key_file: String::new(),
+        }
+    }
+}
+
+impl SitlConfig {
+    /// Checks every range; the error names the first offending field.
+    pub fn validate(&self, file: &Path) -> Result<(), SitlConfigError> {
+        let err = |field: &str, value: String, allowed: String| SitlConfigError::Range {
+            file: file.to_owned(),
+            field: field.to_owned(),
+            value,
+            allowed,
+        };
+        let range = |field: &str, x: f64, lo: f64, hi: f64| {
+            if x.is_finite() && x >= lo && x <= hi {
+                Ok(())
+            } else {
+                Err(err(field, x.to_string(), format!("{lo} to {hi}")))
+            }
+        };
+        let si = self;
+        if si.url.trim().is_empty() {
+            return Err(err(
+                "sitl.url",
+                "\"\"".into(),
+                "a non-empty connection string".into(),
+            ));
+        }
+        range("sitl.plant_rate_hz", si.plant_rate_hz, 100.0, 2000.0)?;
+        range("sitl.telemetry_rate_hz", si.telemetry_rate_hz, 1.0, 200.0)?;
+        range("sitl.tau", si.tau, 0.02, 2.0)?;
+        range("sitl.k", si.k, 0.2, 5.0)?;
+        range("sitl.hover_thrust", si.hover_thrust, 0.05, 0.95)?;
+        range("sitl.mass_factor", si.mass_factor, 0.5, 2.0)?;
+        range("sitl.noise_sigma", si.noise_sigma, 0.0, 1.0)?;
+        if si.vision_rate_hz != 0.0 {
+            range("sitl.vision_rate_hz", si.vision_rate_hz, 1.0, 100.0)?;
+        }
+        range("sitl.vision_latency_ms", si.vision_latency_ms, 0.0, 500.0)?;
+        range("sitl.vision_noise_sigma", si.vision_noise_sigma, 0.0, 1.0)?;
+        range("sitl.command_timeout_s", si.command_timeout_s, 0.05, 10.0)?;
+        for i in 0..3 {
+            range(&format!("sitl.start[{i}]"), si.start[i], -1e4, 1e4)?;
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<SitlSettings, SitlConfigError> {
+        SitlSettings::parse(text, Path::new("test.toml"))
+    }
+
+    #[test]
+    fn defaults_ids_and_other_tables_ignored() {
+        let s = parse("[vehicle]\ntau = 0.3\n[link]\nsystem_id = 7\nurl = \"udpout:x:1\"").unwrap();
+        assert_eq!(s.ids.system_id, 7);
+        assert_eq!(s.ids.autopilot_component, 1);
+        assert_eq!(s.sitl, SitlConfig::default());
+    }
+
+    #[test]
+    fn fields_are_checked_and_named() {
+        let err = parse("[sitl]\ntau = 9.0").unwrap_err().to_string();
+        assert!(
+            err.contains("sitl.tau") && err.contains("0.02 to 2"),
+            "{err}"
+        );
+        let err = parse("[sitl]\nbogus = 1").unwrap_err().to_string();
+        assert!(err.contains("bogus"), "{err}");
+        let err = parse("[link]\nsystem_id = 0").unwrap_err().to_string();
+        assert!(err.contains("link.system_id"), "{err}");
+        let s = parse("[sitl]\nsigning_key_file = \"/etc/dflat/sitl.key\"").unwrap();
+        assert_eq!(s.sitl.signing_key_file, "/etc/dflat/sitl.key");
+    }
+
+    #[test]
+    fn effective_table_round_trips() {
+        let mut s = SitlSettings::default();
+        s.sitl.tau = 0.35;
+        s.sitl.start = [1.0, 2.0, -3.0];
+        assert_eq!(parse(&s.to_toml()).unwrap(), s);
+    }
+}
