@@ -3,13 +3,17 @@
 #
 #   sudo deploy/install.sh [path/to/dflat] [path/to/config.toml]
 #
-# Defaults: target/release/dflat and config/default.toml. An existing
+# Defaults: target/onboard/dflat (the onboard build without the simulation
+# lab: scripts/build-onboard.sh) and config/default.toml. An existing
 # /etc/dflat/dflat.toml is kept (the new one is written beside it as
 # dflat.toml.new). Run from the repository root.
 set -euo pipefail
-bin=${1:-target/release/dflat}
+bin=${1:-target/onboard/dflat}
 cfg=${2:-config/default.toml}
-[ -x "$bin" ] || { echo "install.sh: $bin not found; run: cargo build --release" >&2; exit 1; }
+[ -x "$bin" ] || { echo "install.sh: $bin not found; run: scripts/build-onboard.sh" >&2; exit 1; }
+if "$bin" --help | grep -qE '^ +demo '; then
+  echo "install.sh: note: $bin is the full build (with the lab); the onboard one is scripts/build-onboard.sh -> target/onboard/dflat" >&2
+fi
 [ -f "$cfg" ] || { echo "install.sh: $cfg not found" >&2; exit 1; }
 "$bin" check-config "$cfg" >/dev/null
 
