@@ -17,6 +17,8 @@
 //! * [`guard`] — the command exit guard, fallback, pose-jump and residual
 //!   checks, the systemd watchdog cadence (pure).
 //! * [`signing`] — MAVLink 2 signing: key file, persisted timestamp.
+//! * [`realtime`] — SCHED_FIFO, CPU affinity and locked memory for the
+//!   control thread (optional, safe APIs).
 //! * [`records`] — per-flight CSV and file names.
 //! * [`summary`] — measurements and the shutdown summary.
 
@@ -25,6 +27,7 @@ pub mod config;
 pub mod control;
 pub mod daemon;
 pub mod guard;
+pub mod realtime;
 pub mod records;
 pub mod schedule;
 pub mod signing;
