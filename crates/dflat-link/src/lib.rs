@@ -35,6 +35,7 @@ mod filter;
 mod frame;
 mod inbound;
 pub mod math;
+pub mod modes;
 mod outbound;
 mod signing;
 mod stats;
@@ -58,6 +59,7 @@ pub use inbound::{
     Attitude, AttitudeTarget, Heartbeat, Inbound, Pose, PoseSource, PositionSetpoint, decode, ids,
 };
 pub use math::{ThrustMapping, euler_from_quaternion, quaternion_from_euler};
+pub use modes::{AutopilotFamily, AutopilotMode};
 pub use outbound::{
     ATTITUDE_TARGET_MASK, AttitudeCommand, DaemonStatus, HEARTBEAT_MAVLINK_VERSION, Outbound,
     STATUSTEXT_MAX_LEN, Target, attitude, heartbeat_autopilot, heartbeat_onboard,
