@@ -7,6 +7,7 @@
 //! autopilot stand-in lives in `dflat-sim`; `dflat demo` composes both in the
 //! binary crate.
 //!
+//! * [`commands`] — the command protocol: COMMAND_ACK, REQUEST_MESSAGE (pure).
 //! * [`config`] — the TOML schema, defaults and validation.
 //! * [`daemon`] — `dflat daemon`: [`daemon::run`], [`daemon::spawn`].
 //! * [`supervisor`] — the flight state machine (pure).
@@ -23,6 +24,7 @@
 //! * [`summary`] — measurements and the shutdown summary.
 
 pub mod clock;
+pub mod commands;
 pub mod config;
 pub mod control;
 pub mod daemon;
