@@ -21,9 +21,9 @@
 
 #![allow(missing_docs)]
 
-use dflat_control::dfmpc::{
-    AxisBounds, AxisProblem, AxisSolver, ConstrainedAxisSolver, DfMpc, DfMpcSettings, KktTuning,
-    OutputConstraints, QpSolver, Smoothness,
+use dflat_control::dfmpc::{DfMpc, DfMpcSettings, OutputConstraints, QpSolver};
+use dflat_control::optimise::{
+    AxisBounds, AxisProblem, ClarabelSolver, FastBandedSolver, KktTuning, Smoothness,
 };
 use dflat_control::window::MultiRateSettings;
 use dflat_control::{ControlModel, Controller, Frame, Measurement, ReferenceSource};
@@ -184,7 +184,7 @@ mod df_mpc {
     fn qp_banded(bencher: Bencher, n: usize) {
         let s = DfMpcSettings::default();
         let (q, r) = (s.tracking_weight[0], s.jerk_weight[0]);
-        let mut solver = AxisSolver::new(n, q, r, DT).unwrap();
+        let mut solver = FastBandedSolver::new(n, q, r, DT).unwrap();
         let (fixed, rx, ry) = qp_data(n);
         let (mut px, mut py) = (vec![0.0; n + 1], vec![0.0; n + 1]);
         bencher.bench_local(|| {
@@ -210,7 +210,7 @@ mod df_mpc {
         let (q, r) = (s.tracking_weight[0], s.jerk_weight[0]);
         let new = || {
             let (bounds, smooth) = (AxisBounds::default(), Smoothness::default());
-            ConstrainedAxisSolver::with_tuning(n, (q, r, DT), bounds, f64::INFINITY, smooth, tuning)
+            ClarabelSolver::with_tuning(n, (q, r, DT), bounds, f64::INFINITY, smooth, tuning)
                 .unwrap()
         };
         let mut solvers = [new(), new()];

@@ -5,8 +5,8 @@
 //!
 //! Run: `cargo run --release -p dflat-control --example kkt_tuning`.
 
-use dflat_control::dfmpc::{
-    AxisBounds, AxisProblem, BoundedAxisSolver, ConstrainedAxisSolver, KktTuning, Smoothness,
+use dflat_control::optimise::{
+    AxisBounds, AxisProblem, BandedInteriorPointSolver, ClarabelSolver, KktTuning, Smoothness,
 };
 
 const DT: f64 = 0.02;
@@ -123,7 +123,7 @@ fn main() {
     print!("{:<24}", "banded interior point");
     for c in &CASES {
         let (smooth, bounds) = problem(c);
-        let mut solver = BoundedAxisSolver::new(c.horizon, (c.q, c.r, DT), bounds, smooth)
+        let mut solver = BandedInteriorPointSolver::new(c.horizon, (c.q, c.r, DT), bounds, smooth)
             .expect("valid problem");
         let (us, jerk) = time_solves(c, |p| solver.solve_problem(p).expect("solves"));
         let it = solver.iterations();
@@ -135,7 +135,7 @@ fn main() {
         for c in &CASES {
             let (smooth, bounds) = problem(c);
             let weights = (c.q, c.r, DT);
-            let mut solver = ConstrainedAxisSolver::with_tuning(
+            let mut solver = ClarabelSolver::with_tuning(
                 c.horizon,
                 weights,
                 bounds,

@@ -21,14 +21,13 @@
 //! Positions are local NED \[m\]; angles ZYX \[rad\]; thrust is specific
 //! collective thrust [m/s²] (thrust / mass).
 
-pub mod banded;
 pub mod dfmpc;
 pub mod disturbance;
 pub mod fmpc;
 pub mod model;
+pub mod optimise;
 pub mod pd;
 pub mod reference;
-pub mod stage_qp;
 pub mod tilt;
 pub mod window;
 

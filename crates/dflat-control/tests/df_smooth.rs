@@ -3,8 +3,9 @@
 //! definition, clarabel against the fast path, and its effect in closed
 //! loop on noisy positions.
 
-use dflat_control::dfmpc::{
-    AxisBounds, AxisProblem, AxisSolver, ConstrainedAxisSolver, DfMpc, DfMpcSettings, Smoothness,
+use dflat_control::dfmpc::{DfMpc, DfMpcSettings};
+use dflat_control::optimise::{
+    AxisBounds, AxisProblem, ClarabelSolver, FastBandedSolver, Smoothness,
 };
 use dflat_control::{ControlError, ControlModel, Controller, Frame, Measurement, ReferenceSource};
 use dflat_model::{FlatModel, PlanarModel, PlanarParams};
@@ -123,7 +124,7 @@ fn smooth_fast_path_matches_dense_optimum() {
         (0.3, [-2.0, -2.0, -1.99], -6.0),
     ] {
         let sm = smoothness(weight);
-        let mut solver = AxisSolver::with_smoothness(n, 1.0, 0.01, DT, sm).unwrap();
+        let mut solver = FastBandedSolver::with_smoothness(n, 1.0, 0.01, DT, sm).unwrap();
         let mut plan = vec![0.0; n + 1];
         solver
             .solve_problem(AxisProblem {
@@ -163,8 +164,8 @@ fn zero_smoothness_is_the_plain_problem() {
     let n = 100;
     let reference = vec![10.0; n + 1];
     let fixed = [0.5, 0.52, 0.55];
-    let mut plain = AxisSolver::new(n, 5.0, 0.01, DT).unwrap();
-    let mut zero = AxisSolver::with_smoothness(n, 5.0, 0.01, DT, smoothness(0.0)).unwrap();
+    let mut plain = FastBandedSolver::new(n, 5.0, 0.01, DT).unwrap();
+    let mut zero = FastBandedSolver::with_smoothness(n, 5.0, 0.01, DT, smoothness(0.0)).unwrap();
     let (mut a, mut b) = (vec![0.0; n + 1], vec![0.0; n + 1]);
     plain.solve(&fixed, &reference, &mut a).unwrap();
     zero.solve_problem(AxisProblem {
@@ -197,17 +198,10 @@ fn smooth_clarabel_agrees_with_fast_path() {
             plan,
         }
     }
-    let mut fast = AxisSolver::with_smoothness(n, 1.0, 0.08, DT, sm).unwrap();
-    let mut generic = ConstrainedAxisSolver::with_smoothness(
-        n,
-        1.0,
-        0.08,
-        DT,
-        AxisBounds::default(),
-        f64::INFINITY,
-        sm,
-    )
-    .unwrap();
+    let mut fast = FastBandedSolver::with_smoothness(n, 1.0, 0.08, DT, sm).unwrap();
+    let mut generic =
+        ClarabelSolver::with_smoothness(n, 1.0, 0.08, DT, AxisBounds::default(), f64::INFINITY, sm)
+            .unwrap();
     let (mut a, mut b) = (vec![0.0; n + 1], vec![0.0; n + 1]);
     fast.solve_problem(problem(&fixed, &reference, &mut a))
         .unwrap();
@@ -227,8 +221,7 @@ fn smooth_clarabel_agrees_with_fast_path() {
         speed: None,
     };
     let mut bounded =
-        ConstrainedAxisSolver::with_smoothness(n, 1.0, 0.08, DT, bounds, f64::INFINITY, sm)
-            .unwrap();
+        ClarabelSolver::with_smoothness(n, 1.0, 0.08, DT, bounds, f64::INFINITY, sm).unwrap();
     assert!(bounds.violated_by(&a, DT));
     bounded
         .solve_problem(problem(&fixed, &reference, &mut b))

@@ -2,7 +2,7 @@
 //! interior-point method on its KKT system ordered by stage: banded, so one
 //! iteration is O(N).
 //!
-//! Variables as in [`crate::dfmpc::ConstrainedAxisSolver`] (clarabel): per
+//! Variables as in [`crate::dfmpc::ClarabelSolver`] (clarabel): per
 //! free output f = 0..n−1 the deviation `p_f` from the zero-jerk baseline
 //! and the planned acceleration relative to the fixed one `ã_f`, tied by
 //! the equality `Δ²p_f/δt² − ã_f = 0` (multiplier `λ_f`); cost `½xᵀPx +
@@ -28,8 +28,10 @@
 //!
 //! All storage is allocated in [`StageQp::new`].
 
+use super::banded::SymBand;
+use super::smoothness::{accel_block, sent_linear_term};
+use super::{AxisBounds, AxisProblem, FastBandedSolver, Smoothness, baseline};
 use crate::ControlError;
-use crate::banded::SymBand;
 
 /// Iteration limit.
 pub const MAX_ITERATIONS: usize = 40;
@@ -558,5 +560,114 @@ mod tests {
         singular.set(1, 0, 1.0);
         singular.set(1, 1, 1.0);
         assert!(BandedLdl::new(2, 1).factor(&singular).is_err());
+    }
+}
+
+/// The 1-D DF-MPC problem with inequality bounds, solved by the banded
+/// interior-point method of [`StageQp`]: clarabel's variables and
+/// cost ([`ClarabelSolver`]), the KKT system ordered by stage, so
+/// O(N) per iteration. It starts from the unconstrained optimum (computed
+/// here with the fast path). [`DfMpc`] uses it first and falls back to
+/// clarabel when it does not converge.
+#[derive(Debug, Clone)]
+pub struct BandedInteriorPointSolver {
+    fast: FastBandedSolver,
+    bounds: AxisBounds,
+    qp: StageQp,
+    c_p: Vec<f64>,
+    lo: Vec<f64>,
+    hi: Vec<f64>,
+    p: Vec<f64>,
+    iterations: usize,
+}
+
+impl BandedInteriorPointSolver {
+    /// Builds the solver for horizon N, weights `(q, r, δt)` as
+    /// [`FastBandedSolver::with_smoothness`], the bounds and the smoothness term.
+    pub fn new(
+        horizon: usize,
+        (q, r, dt): (f64, f64, f64),
+        bounds: AxisBounds,
+        smoothness: Smoothness,
+    ) -> Result<Self, ControlError> {
+        let fast = FastBandedSolver::with_smoothness(horizon, q, r, dt, smoothness)?;
+        let n = horizon - 2;
+        let accel = accel_block(n, r, dt, &smoothness);
+        let qp = StageQp::new(
+            n,
+            q,
+            dt,
+            &accel,
+            bounds.acceleration.is_some(),
+            bounds.speed.is_some(),
+        );
+        let m = qp.rows();
+        Ok(Self {
+            fast,
+            bounds,
+            qp,
+            c_p: vec![0.0; n],
+            lo: vec![0.0; m],
+            hi: vec![0.0; m],
+            p: vec![0.0; n],
+            iterations: 0,
+        })
+    }
+
+    /// The bounds this solver enforces.
+    pub fn bounds(&self) -> &AxisBounds {
+        &self.bounds
+    }
+
+    /// Interior-point iterations of the last solve.
+    pub fn iterations(&self) -> usize {
+        self.iterations
+    }
+
+    /// Solves with the bounds; arguments as [`FastBandedSolver::solve_problem`].
+    /// Errors: those of the fast path, and [`ControlError::Solver`] when
+    /// the interior-point method does not converge (infeasible bounds,
+    /// numerical trouble).
+    pub fn solve_problem(&mut self, a: AxisProblem<'_>) -> Result<(), ControlError> {
+        let AxisProblem {
+            fixed,
+            sent,
+            reference,
+            plan,
+        } = a;
+        self.fast.solve_problem(AxisProblem {
+            fixed,
+            sent,
+            reference,
+            plan: &mut *plan,
+        })?;
+        let dt = self.fast.dt;
+        let q = self.fast.q;
+        let n = self.p.len();
+        for f in 0..n {
+            let b = baseline(fixed, f + 3);
+            self.c_p[f] = 2.0 * q * (b - reference[f + 3]);
+            self.p[f] = plan[f + 3] - b;
+        }
+        let sm = self.fast.smoothness;
+        let c_a0 = sent_linear_term(&sm, fixed, sent, dt);
+        let (lo, hi) = (&mut self.lo, &mut self.hi);
+        let mut i = 0;
+        self.bounds
+            .row_bounds(self.fast.horizon, fixed, dt, |l, h| {
+                lo[i] = l;
+                hi[i] = h;
+                i += 1;
+            });
+        self.iterations = self
+            .qp
+            .solve(&self.c_p, c_a0, &self.lo, &self.hi, &mut self.p)?;
+        for f in 0..n {
+            plan[f + 3] = baseline(fixed, f + 3) + self.p[f];
+        }
+        if plan.iter().any(|v| !v.is_finite()) {
+            return Err(ControlError::Solver("non-finite solution".to_string()));
+        }
+        Ok(())
     }
 }

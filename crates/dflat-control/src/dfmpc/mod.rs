@@ -1,0 +1,655 @@
+//! The discrete-flatness MPC (DF-MPC) of *Fly Out The Window*, §IV-C and §V.
+//!
+//! # The problem solved at tick k
+//!
+//! Per position axis (x, y; and z for the spatial model), over the output
+//! trajectory `y_k..y_{k+N}` (horizon N, control step δt):
+//!
+//! ```text
+//! minimise   Σ_{j=0..N} q·(y_{k+j} − y_ref,{k+j})²  +  Σ_{j=0..N−3} r·(Δ³y_{k+j}/δt³)²
+//!            Δ³y_j = y_{j+3} − 3y_{j+2} + 3y_{j+1} − y_j          (jerk × δt³)
+//! subject to y_k = y^m_k                                 (newest measurement)
+//!            y_{k+1}, y_{k+2} = F⁻¹ chained over the window (paper eq. input_to_output)
+//!            and, when configured (all optional):
+//!            |Δ²y_j/δt²| ≤ g·tan(tilt_max)     j = 1..N−2, horizontal axes
+//!            a_min ≤ Δ²z_j/δt² ≤ a_max          j = 1..N−2, vertical axis (spatial)
+//!            |Δy_j/δt| ≤ v_max                   j = 2..N−1, every axis
+//! ```
+//!
+//! The paper weights the raw third difference with R; here r weights the
+//! jerk, `R = r/δt⁶` (the paper's R = 1.25e9 at δt = 0.02 s is r = 0.08), so
+//! weights are O(0.01–1). Then `u_k = F(y*_k..y*_{k+3})`, saturated, is sent
+//! and recorded in the [`Window`].
+//!
+//! # Multi-rate windows (optional)
+//!
+//! With [`DfMpcSettings::multi_rate`] the fixed outputs `y_k, y_{k+1},
+//! y_{k+2}` come from a [`MultiRateWindow`]: timestamped pose samples
+//! (vision at 10–35 Hz, latency, dropouts) fitted by a chain of F⁻¹ through
+//! the inputs sent over the last M ticks (maths in [`crate::window`]). The
+//! shell calls [`Controller::observe`] per sample and [`Controller::update`]
+//! per tick with the tick time. Everything after the fixed outputs is as
+//! above.
+
+mod settings;
+#[cfg(test)]
+mod tests;
+
+pub use settings::{DfMpcSettings, InputSaturation, OutputConstraints, QpSolver};
+
+use nalgebra::Vector3;
+
+use crate::disturbance::{DisturbanceEstimate, DisturbanceEstimator};
+use crate::model::ControlModel;
+use crate::optimise::{
+    AxisBounds, AxisProblem, BandedInteriorPointSolver, ClarabelSolver, FastBandedSolver,
+    Smoothness, invalid,
+};
+use crate::window::{MultiRateWindow, Window, input_lags};
+use crate::{ControlError, Controller, Measurement, ReferenceSource, TickOutput, limit_tilt};
+
+/// Most ticks [`Controller::plan_fallback`] flies the last good plan (and
+/// at most N − 3: the plan's end).
+pub const MAX_FALLBACK_STEPS: usize = 50;
+
+// ---------------------------------------------------------------------------
+// The controller
+// ---------------------------------------------------------------------------
+
+/// The discrete-flatness MPC controller (see the module docs).
+///
+/// One [`Controller::update`] per control step δt: window → F⁻¹ prediction
+/// of y_{k+1}, y_{k+2} → reference over the horizon → per-axis optimisation
+/// → F on y*_k..y*_{k+3} → saturation → the sent input into the window.
+/// A measurement whose time `t` is not newer than the last one used (a
+/// tick without a new pose) is not entered as new: y_k is then the model's
+/// own prediction, F⁻¹ over the window with the input already sent (dead
+/// reckoning; the shell's pose timeout bounds how long).
+/// With [`DfMpcSettings::multi_rate`] the window is a [`MultiRateWindow`]:
+/// samples come through [`Controller::observe`], `update` takes the tick
+/// time. Commands use the model's fixed yaw ψ⋆ (the measured yaw is only
+/// checked for being finite). Without binding constraints `update` allocates nothing
+/// (all workspaces are sized in [`DfMpc::new`]); clarabel's solve may.
+#[derive(Debug)]
+pub struct DfMpc {
+    model: ControlModel,
+    settings: DfMpcSettings,
+    window: Window,
+    /// Fast-path solver per controlled axis.
+    fast: Vec<FastBandedSolver>,
+    /// Clarabel solver per axis that has bounds.
+    constrained: Vec<Option<ClarabelSolver>>,
+    /// Banded interior-point solver per axis that has bounds (tried before
+    /// clarabel, with [`QpSolver::Banded`]).
+    bounded: Vec<Option<BandedInteriorPointSolver>>,
+    /// Bounds per axis (empty when none).
+    bounds: Vec<AxisBounds>,
+    /// Reference y_ref,k..y_ref,k+N (model frame, m).
+    reference: Vec<Vector3<f64>>,
+    /// The reference split per axis.
+    reference_axis: Vec<Vec<f64>>,
+    /// Last plan y*_k..y*_{k+N} per axis.
+    plans: Vec<Vec<f64>>,
+    plan_valid: bool,
+    /// Time of the newest measurement used (classic mode) \[s\]; a tick whose
+    /// measurement is not newer is predicted instead (see [`DfMpc`]).
+    last_t: f64,
+    /// The previous tick's F⁻¹ prediction of this tick's output, y_{k+1}
+    /// then (classic mode) \[m\].
+    predicted: Vector3<f64>,
+    /// Multi-rate window, when configured (else `window` is used).
+    multi: Option<MultiRateWindow>,
+    /// True when some axis has a smoothness weight.
+    smooth: bool,
+    /// Disturbance estimator, when configured.
+    estimator: Option<DisturbanceEstimator>,
+    /// The last good tick's plan y*_k..y*_{k+N} per axis and its
+    /// reference (model frame, m), for [`DfMpc::plan`] and
+    /// [`Controller::plan_fallback`]; swapped with `plans` / `reference`
+    /// (the next tick's workspaces) after each good tick.
+    good_plans: Vec<Vec<f64>>,
+    good_reference: Vec<Vector3<f64>>,
+    /// y_k of the last good tick (the z of planar plans) \[m\].
+    good_y0: Vector3<f64>,
+    /// Plan steps flown by `plan_fallback` since the last good tick
+    /// (`None`: no plan to fly).
+    fallback_step: Option<usize>,
+    /// This tick started (`update` called) and is not recorded yet.
+    pending: bool,
+    /// An earlier tick was never recorded (failed `update`, no plan
+    /// fallback): the classic window has a gap, the next recorded tick
+    /// restarts it.
+    gap: bool,
+}
+
+impl DfMpc {
+    /// Builds the controller: validates the settings, factors the fast-path
+    /// Hessians and builds the clarabel solvers (all allocation happens here).
+    pub fn new(model: ControlModel, settings: DfMpcSettings) -> Result<Self, ControlError> {
+        settings.validate()?;
+        let axes = model.axes();
+        let c = &settings.constraints;
+        if axes < 3 && c.vertical_acceleration.is_some() {
+            return Err(invalid(
+                "constraints.vertical_acceleration",
+                "needs the spatial model (the planar model does not control z)",
+            ));
+        }
+        let dt = model.dt();
+        let n = settings.horizon;
+        let mut fast = Vec::with_capacity(axes);
+        let mut constrained = Vec::with_capacity(axes);
+        let mut bounded = Vec::with_capacity(axes);
+        let mut bounds = Vec::with_capacity(axes);
+        let lags = input_lags(&model);
+        for (axis, lag) in lags.iter().enumerate().take(axes) {
+            let (q, r) = (settings.tracking_weight[axis], settings.jerk_weight[axis]);
+            let smoothness = Smoothness {
+                weight: settings.smoothness_weight[axis],
+                kappa: lag / dt,
+                gravity: model.gravity(),
+            };
+            fast.push(FastBandedSolver::with_smoothness(n, q, r, dt, smoothness)?);
+            let acceleration = if axis < 2 {
+                c.max_tilt.map(|t| {
+                    let a = model.gravity() * t.tan();
+                    [-a, a]
+                })
+            } else {
+                c.vertical_acceleration
+            };
+            let b = AxisBounds {
+                acceleration,
+                speed: c.max_speed,
+            };
+            constrained.push(if b.is_empty() {
+                None
+            } else {
+                Some(ClarabelSolver::with_smoothness(
+                    n,
+                    q,
+                    r,
+                    dt,
+                    b,
+                    settings.solver_time_limit,
+                    smoothness,
+                )?)
+            });
+            bounded.push(if b.is_empty() || settings.qp_solver != QpSolver::Banded {
+                None
+            } else {
+                Some(BandedInteriorPointSolver::new(
+                    n,
+                    (q, r, dt),
+                    b,
+                    smoothness,
+                )?)
+            });
+            bounds.push(b);
+        }
+        Ok(Self {
+            model,
+            settings,
+            window: Window::new(model.hover_input()),
+            fast,
+            constrained,
+            bounded,
+            bounds,
+            reference: vec![Vector3::zeros(); n + 1],
+            reference_axis: vec![vec![0.0; n + 1]; axes],
+            plans: vec![vec![0.0; n + 1]; axes],
+            plan_valid: false,
+            last_t: f64::NEG_INFINITY,
+            predicted: Vector3::zeros(),
+            multi: settings
+                .multi_rate
+                .map(|m| MultiRateWindow::new(&model, m))
+                .transpose()?,
+            smooth: settings
+                .smoothness_weight
+                .iter()
+                .take(axes)
+                .any(|s| *s > 0.0),
+            estimator: settings
+                .disturbance
+                .map(|d| DisturbanceEstimator::new(model, d))
+                .transpose()?,
+            good_plans: vec![vec![0.0; n + 1]; axes],
+            good_reference: vec![Vector3::zeros(); n + 1],
+            good_y0: Vector3::zeros(),
+            fallback_step: None,
+            pending: false,
+            gap: false,
+        })
+    }
+
+    /// The model.
+    pub fn model(&self) -> &ControlModel {
+        &self.model
+    }
+
+    /// The settings.
+    pub fn settings(&self) -> &DfMpcSettings {
+        &self.settings
+    }
+
+    /// The disturbance estimator, when configured.
+    pub fn disturbance_estimator(&self) -> Option<&DisturbanceEstimator> {
+        self.estimator.as_ref()
+    }
+
+    /// The window of past measurements and sent inputs (classic mode; it
+    /// stays empty in multi-rate mode).
+    pub fn window(&self) -> &Window {
+        &self.window
+    }
+
+    /// The multi-rate window, when configured.
+    pub fn multi_rate_window(&self) -> Option<&MultiRateWindow> {
+        self.multi.as_ref()
+    }
+
+    /// The full plan `y*_k..y*_{k+N}` \[m\] of `axis` (0 = x, 1 = y, 2 = z)
+    /// from the last successful update; `None` before one, after a failed
+    /// one or for an axis the model does not control.
+    pub fn plan(&self, axis: usize) -> Option<&[f64]> {
+        if self.plan_valid {
+            self.good_plans.get(axis).map(|p| p.as_slice())
+        } else {
+            None
+        }
+    }
+
+    /// The per-axis bounds derived from the constraints (x, y, z order).
+    pub fn bounds(&self, axis: usize) -> Option<&AxisBounds> {
+        self.bounds.get(axis)
+    }
+
+    /// Clips `u` to the input saturation; returns it and whether it clipped.
+    fn saturate(&self, u: Vector3<f64>) -> (Vector3<f64>, bool) {
+        let Some(s) = &self.settings.saturation else {
+            return (u, false);
+        };
+        let mut out = u;
+        (out.x, out.y, _) = limit_tilt(u.x, u.y, s.max_tilt, s.tilt_limit);
+        if matches!(self.model, ControlModel::Spatial(_)) {
+            out.z = u.z.clamp(s.thrust_min, s.thrust_max);
+        }
+        (out, out != u)
+    }
+}
+
+/// What [`DfMpc::fixed_outputs`] gives a tick.
+struct FixedOutputs {
+    /// The classic window with y_k pushed (a copy; unused in multi-rate).
+    window: Window,
+    /// `[y_k, y_{k+1}, y_{k+2}]` \[m\], model frame.
+    fixed: [Vector3<f64>; 3],
+    /// The input sent at k−1.
+    previous_input: Vector3<f64>,
+}
+
+impl DfMpc {
+    /// The fixed outputs `[y_k, y_{k+1}, y_{k+2}]` and the input sent at
+    /// k−1: from the multi-rate window (moved to `measurement.t`, committed
+    /// by [`DfMpc::commit`]), or from a copy of the classic window with y_k
+    /// pushed — the measurement, or the model's own prediction on a tick
+    /// without a new pose (F⁻¹ over the window with u_{k−3}, computed at the
+    /// previous tick as its y_{k+1}; u_{k−3} has left the window since) —
+    /// then F⁻¹ for y_{k+1}, y_{k+2}. The copy is returned for `commit`;
+    /// after a gap it starts from the start-up padding.
+    fn fixed_outputs(
+        &mut self,
+        measurement: &Measurement,
+        d: &DisturbanceEstimate,
+    ) -> Result<FixedOutputs, ControlError> {
+        let mut window = self.window;
+        let mut last_t = self.last_t;
+        if self.gap {
+            window.reset();
+            last_t = f64::NEG_INFINITY;
+        }
+        if let Some(multi) = &mut self.multi {
+            let model = self.model;
+            let e = multi.estimate(measurement.t, |y, u| model.next_output_disturbed(y, u, d))?;
+            return Ok(FixedOutputs {
+                window,
+                fixed: e.fixed,
+                previous_input: e.previous_input,
+            });
+        }
+        let y_k = if !window.is_empty() && measurement.t <= last_t {
+            self.predicted
+        } else {
+            measurement.position
+        };
+        window.push_measurement(y_k);
+        let [ym2, ym1, y0] = *window.outputs();
+        let [u2, u1] = *window.inputs();
+        let y1 = self.model.next_output_disturbed(&[ym2, ym1, y0], &u2, d)?;
+        let y2 = self.model.next_output_disturbed(&[ym1, y0, y1], &u1, d)?;
+        Ok(FixedOutputs {
+            window,
+            fixed: [y0, y1, y2],
+            previous_input: u1,
+        })
+    }
+
+    /// Records `sent` as this tick's input: the disturbance estimator, then
+    /// the classic window (the copy from [`DfMpc::fixed_outputs`]) and the
+    /// prediction of the next tick's output, or the multi-rate commit.
+    fn commit(
+        &mut self,
+        mut window: Window,
+        t: f64,
+        fixed: &[Vector3<f64>; 3],
+        sent: &Vector3<f64>,
+        saturated: bool,
+    ) {
+        if let Some(e) = &mut self.estimator {
+            if self.multi.is_some() {
+                // Multi-rate: the estimator fits the timestamped samples it
+                // got through `observe`, never the window's estimate of y_k.
+                e.record_input(t, sent, saturated);
+            } else {
+                // A tick without a new pose: the predicted y_k stands in.
+                e.record(&fixed[0], sent, saturated);
+            }
+        }
+        if let Some(multi) = &mut self.multi {
+            multi.commit(sent);
+        } else {
+            window.push_input(*sent);
+            self.window = window;
+            let last_t = if self.gap {
+                f64::NEG_INFINITY
+            } else {
+                self.last_t
+            };
+            self.last_t = last_t.max(t);
+            self.predicted = fixed[1];
+        }
+        self.pending = false;
+        self.gap = false;
+    }
+}
+
+/// The acceleration [m/s²] (model frame) that input `u` asks for: the
+/// model's acceleration at the attitude (and thrust) the input dynamics
+/// settle to, `k̃·(θ_cmd, φ_cmd)` (and `T_cmd`). Planar: z = 0.
+fn commanded_acceleration(
+    model: &ControlModel,
+    u: &Vector3<f64>,
+) -> Result<Vector3<f64>, ControlError> {
+    Ok(match model {
+        ControlModel::Planar(m) => {
+            let k = m.params().k;
+            let a = m.acceleration(k * u.x, k * u.y)?;
+            Vector3::new(a.x, a.y, 0.0)
+        }
+        ControlModel::Spatial(m) => {
+            let k = m.params().k;
+            m.acceleration(k * u.x, k * u.y, u.z)
+        }
+    })
+}
+
+impl Controller for DfMpc {
+    fn name(&self) -> &'static str {
+        "df-mpc"
+    }
+
+    fn update(
+        &mut self,
+        measurement: &Measurement,
+        reference: &mut dyn ReferenceSource,
+    ) -> Result<TickOutput, ControlError> {
+        if self.pending {
+            // The previous tick sent something this controller did not
+            // record (failed update, no plan fallback).
+            self.gap = true;
+        }
+        self.pending = true;
+        self.plan_valid = false;
+        if let Some(e) = &mut self.estimator {
+            e.begin_tick();
+        }
+        let d = self
+            .estimator
+            .as_ref()
+            .map_or(DisturbanceEstimate::NOMINAL, |e| e.estimate());
+        let axes = self.model.axes();
+        // Multi-rate mode takes only the tick time (and checks the yaw).
+        let position_ok = self.multi.is_some()
+            || measurement
+                .position
+                .iter()
+                .take(axes)
+                .all(|v| v.is_finite());
+        if !(position_ok && measurement.yaw.is_finite()) {
+            return Err(ControlError::NonFiniteMeasurement);
+        }
+        // Input-to-output map over the window: y_{k+1}, y_{k+2}; and the
+        // input sent at k−1 (for the smoothness term). The window is a copy:
+        // on error nothing is recorded.
+        let FixedOutputs {
+            window,
+            fixed,
+            previous_input,
+        } = self.fixed_outputs(measurement, &d)?;
+        let y0 = fixed[0];
+        let sent_acceleration = if self.smooth {
+            Some(commanded_acceleration(&self.model, &previous_input)? + d.acceleration)
+        } else {
+            None
+        };
+
+        // Reference over the horizon.
+        reference.horizon(&y0, self.model.dt(), &mut self.reference);
+        if !self
+            .reference
+            .iter()
+            .all(|r| r.iter().take(axes).all(|v| v.is_finite()))
+        {
+            return Err(ControlError::NonFiniteReference);
+        }
+
+        // Output trajectory optimisation, per axis: the fast path first
+        // (x and y together when they share weights), then clarabel for an
+        // axis whose fast plan violates a configured bound.
+        let mut fixed_axis = [[0.0; 3]; 3];
+        for axis in 0..axes {
+            fixed_axis[axis] = [fixed[0][axis], fixed[1][axis], fixed[2][axis]];
+            for (dst, r) in self.reference_axis[axis].iter_mut().zip(&self.reference) {
+                *dst = r[axis];
+            }
+        }
+        let sent = |axis: usize| sent_acceleration.map(|c| c[axis]);
+        let paired = self.fast[0].weights() == self.fast[1].weights()
+            && self.fast[0].smoothness() == self.fast[1].smoothness();
+        let [px, py, pz @ ..] = self.plans.as_mut_slice() else {
+            unreachable!("DfMpc::new makes at least two plans")
+        };
+        let ra = &self.reference_axis;
+        let problem = |axis: usize, plan| AxisProblem {
+            fixed: &fixed_axis[axis],
+            sent: sent(axis),
+            reference: &ra[axis],
+            plan,
+        };
+        if paired {
+            self.fast[0].solve_pair(problem(0, px), problem(1, py))?;
+        } else {
+            self.fast[0].solve_problem(problem(0, px))?;
+            self.fast[1].solve_problem(problem(1, py))?;
+        }
+        if let Some(plan) = pz.first_mut() {
+            self.fast[2].solve_problem(problem(2, plan))?;
+        }
+        let mut constrained = false;
+        let mut qp_fallback = false;
+        let dt = self.model.dt();
+        let axes_data = self
+            .constrained
+            .iter_mut()
+            .zip(&mut self.bounded)
+            .zip(&mut self.plans)
+            .zip(&self.reference_axis);
+        for (axis, ((((cs, bs), plan), reference), fixed)) in axes_data.zip(&fixed_axis).enumerate()
+        {
+            if let Some(cs) = cs
+                && cs.bounds().violated_by(plan, dt)
+            {
+                // The banded solver first; clarabel when it does not
+                // converge (its own failure is the tick's).
+                let has_banded = bs.is_some();
+                let banded = match bs {
+                    Some(bs) => bs
+                        .solve_problem(AxisProblem {
+                            fixed,
+                            sent: sent(axis),
+                            reference,
+                            plan: &mut *plan,
+                        })
+                        .is_ok(),
+                    None => false,
+                };
+                if !banded {
+                    qp_fallback |= has_banded;
+                    cs.solve_problem(AxisProblem {
+                        fixed,
+                        sent: sent(axis),
+                        reference,
+                        plan,
+                    })?;
+                }
+                constrained = true;
+            }
+        }
+
+        // Output-to-input map on y*_k..y*_{k+3}.
+        let mut plan4 = [y0; 4];
+        for (j, p) in plan4.iter_mut().enumerate() {
+            for axis in 0..axes {
+                p[axis] = self.plans[axis][j];
+            }
+        }
+        let u = self.model.input_from_outputs_disturbed(&plan4, &d)?;
+        if !u.iter().all(|v| v.is_finite()) {
+            return Err(ControlError::Flat(dflat_model::FlatError::NonFinite(
+                "input",
+            )));
+        }
+        let (sent, saturated) = self.saturate(u);
+        self.commit(window, measurement.t, &fixed, &sent, saturated);
+        // Keep the plan for `plan` and `plan_fallback` (O(1): the buffers
+        // swap; the next tick overwrites the other pair in full).
+        std::mem::swap(&mut self.plans, &mut self.good_plans);
+        std::mem::swap(&mut self.reference, &mut self.good_reference);
+        self.good_y0 = y0;
+        self.fallback_step = Some(0);
+        self.plan_valid = true;
+        Ok(TickOutput {
+            command: self.model.command(&sent),
+            plan: plan4,
+            reference: self.good_reference[0],
+            saturated,
+            constrained,
+            qp_fallback,
+        })
+    }
+
+    fn multi_rate(&self) -> bool {
+        self.multi.is_some()
+    }
+
+    /// Flies the last good plan: step s = 1, 2, … of it through F (with
+    /// the current disturbance estimate) and saturation. A non-finite
+    /// measurement is not used (classic mode: y_k is the model's
+    /// prediction, as on a tick without a new pose). In multi-rate mode a
+    /// tick time not after the last committed tick (a late update's tick)
+    /// is taken as the step after it. `None` once
+    /// `max_steps` or [`MAX_FALLBACK_STEPS`] steps are flown, the kept plan
+    /// is used up, or the map fails.
+    fn plan_fallback(&mut self, measurement: &Measurement, max_steps: usize) -> Option<TickOutput> {
+        // Until a plan step is recorded, this tick's command is unknown.
+        self.pending = true;
+        let step = self.fallback_step.take()? + 1;
+        if step > max_steps.min(MAX_FALLBACK_STEPS) || step + 3 > self.settings.horizon {
+            return None;
+        }
+        let d = self
+            .estimator
+            .as_ref()
+            .map_or(DisturbanceEstimate::NOMINAL, |e| e.estimate());
+        let axes = self.model.axes();
+        let mut m = *measurement;
+        match &self.multi {
+            // A tick already committed at this time (the shell could not
+            // use a late update's result): this is the step after it.
+            Some(multi) => {
+                if let Some(last) = multi.last_tick()
+                    && (m.t.is_nan() || m.t <= last)
+                {
+                    m.t = last + self.model.dt();
+                }
+            }
+            None => {
+                if !m.position.iter().take(axes).all(|v| v.is_finite()) {
+                    m.t = f64::NEG_INFINITY;
+                }
+            }
+        }
+        let FixedOutputs { window, fixed, .. } = self.fixed_outputs(&m, &d).ok()?;
+        let plan4: [Vector3<f64>; 4] = std::array::from_fn(|j| {
+            let mut p = self.good_y0;
+            for (axis, plan) in self.good_plans.iter().enumerate() {
+                p[axis] = plan[step + j];
+            }
+            p
+        });
+        let u = self.model.input_from_outputs_disturbed(&plan4, &d).ok()?;
+        if !u.iter().all(|v| v.is_finite()) {
+            return None;
+        }
+        let (sent, saturated) = self.saturate(u);
+        self.commit(window, m.t, &fixed, &sent, saturated);
+        self.fallback_step = Some(step);
+        Some(TickOutput {
+            command: self.model.command(&sent),
+            plan: plan4,
+            reference: self.good_reference[step],
+            saturated,
+            constrained: false,
+            qp_fallback: false,
+        })
+    }
+
+    fn observe(&mut self, sample: &Measurement) {
+        if let Some(multi) = &mut self.multi {
+            multi.observe(sample.t, &sample.position);
+            if let Some(e) = &mut self.estimator {
+                e.observe(sample.t, &sample.position);
+            }
+        }
+    }
+
+    fn reset(&mut self) {
+        self.window.reset();
+        self.last_t = f64::NEG_INFINITY;
+        if let Some(multi) = &mut self.multi {
+            multi.reset();
+        }
+        self.plan_valid = false;
+        self.fallback_step = None;
+        self.pending = false;
+        self.gap = false;
+        if let Some(e) = &mut self.estimator {
+            e.reset();
+        }
+    }
+
+    fn disturbance(&self) -> Option<crate::disturbance::DisturbanceReport> {
+        self.estimator.as_ref().map(|e| e.report())
+    }
+}

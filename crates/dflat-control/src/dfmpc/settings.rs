@@ -1,0 +1,189 @@
+//! DF-MPC's settings: weights, horizon, saturation, constraints, solver
+//! choice, multi-rate window and disturbance estimator; one `validate`.
+
+use serde::{Deserialize, Serialize};
+
+use crate::disturbance::DisturbanceSettings;
+use crate::optimise::{check_problem, invalid};
+use crate::window::MultiRateSettings;
+use crate::{ControlError, TiltLimit};
+
+// ---------------------------------------------------------------------------
+// Settings
+// ---------------------------------------------------------------------------
+
+/// Input saturation applied to the command after the output-to-input map.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct InputSaturation {
+    /// Tilt limit of the pitch / roll command \[rad\], applied as
+    /// `tilt_limit` says. Default 35° (the DJI SDK limit).
+    pub max_tilt: f64,
+    /// How `max_tilt` applies: each channel clipped (default, the paper) or
+    /// the combined tilt bounded ([`TiltLimit::Cone`], the daemon).
+    pub tilt_limit: TiltLimit,
+    /// Smallest specific thrust command [m/s²] (spatial model only). Default 2.
+    pub thrust_min: f64,
+    /// Largest specific thrust command [m/s²] (spatial model only). Default 20.
+    pub thrust_max: f64,
+}
+
+impl Default for InputSaturation {
+    fn default() -> Self {
+        Self {
+            max_tilt: 35f64.to_radians(),
+            tilt_limit: TiltLimit::PerAxis,
+            thrust_min: 2.0,
+            thrust_max: 20.0,
+        }
+    }
+}
+
+/// Optional inequality constraints on the planned outputs (solved with
+/// clarabel when the unconstrained plan violates them).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct OutputConstraints {
+    /// Max tilt \[rad\] as a bound on the horizontal acceleration per axis,
+    /// `|Δ²y/δt²| ≤ g·tan(max_tilt)`. Default none.
+    pub max_tilt: Option<f64>,
+    /// Max speed per axis `|Δy/δt|` [m/s]; when the window is already
+    /// faster, the plan brakes to it at 90 % of the acceleration bound
+    /// ([`AxisBounds::speed`]). Default none.
+    pub max_speed: Option<f64>,
+    /// Bounds `[a_min, a_max]` on the vertical acceleration `Δ²z/δt²`
+    /// [m/s²] in the model frame (NED: positive down); spatial model only.
+    /// Default none.
+    pub vertical_acceleration: Option<[f64; 2]>,
+}
+
+impl OutputConstraints {
+    /// True when at least one constraint is configured.
+    pub fn any(&self) -> bool {
+        self.max_tilt.is_some() || self.max_speed.is_some() || self.vertical_acceleration.is_some()
+    }
+}
+
+/// Which solver handles an axis whose fast plan violates a bound.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum QpSolver {
+    /// The banded interior-point method ([`BandedInteriorPointSolver`], O(N) per
+    /// iteration), with clarabel as the fallback when it does not
+    /// converge. Default.
+    #[default]
+    Banded,
+    /// Clarabel alone ([`ClarabelSolver`]).
+    Clarabel,
+}
+
+/// Settings of [`DfMpc`], checked by [`DfMpcSettings::validate`].
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct DfMpcSettings {
+    /// Horizon N [control steps]: outputs y_k..y_{k+N}. Default 100 (2 s at 50 Hz).
+    pub horizon: usize,
+    /// Tracking weight q per axis `[x, y, z]` [1/m²]. Default 5.
+    pub tracking_weight: [f64; 3],
+    /// Jerk weight r per axis `[x, y, z]` [s⁶/m²] on `(Δ³y/δt³)²`.
+    /// Default 0.01. Only r/q shapes the plan: the default 0.002 s⁶ settles
+    /// a 10 m step to 1 cm in ~6 s at 35° saturation; the paper's (q = 1,
+    /// r = 0.08, N = 200) is slower, with ~5 % overshoot.
+    pub jerk_weight: [f64; 3],
+    /// Input saturation; `None` sends F's output unclipped. Default on.
+    pub saturation: Option<InputSaturation>,
+    /// Optional inequality constraints on the plan. Default none.
+    pub constraints: OutputConstraints,
+    /// The solver for a plan that violates a constraint. Default
+    /// [`QpSolver::Banded`].
+    pub qp_solver: QpSolver,
+    /// Wall-time limit for one clarabel solve \[s\] (`f64::INFINITY` for
+    /// none). Default 0.01.
+    pub solver_time_limit: f64,
+    /// Command-smoothness weight s per axis `[x, y, z]` [1/rad²] on the
+    /// squared change of the (linearised) command between ticks,
+    /// `s·((c_j − c_{j−1})/g)²` (see the module docs). Default 0 (off: the
+    /// paper's cost). Useful values are O(0.1–10) with q = 1.
+    pub smoothness_weight: [f64; 3],
+    /// Multi-rate windows: timestamped samples through
+    /// [`Controller::observe`] instead of one measurement per tick
+    /// ([`MultiRateWindow`]). `None` (default): the paper's window.
+    pub multi_rate: Option<MultiRateSettings>,
+    /// Disturbance estimation for offset-free tracking
+    /// ([`crate::disturbance`]): acceleration offset and thrust scale, used
+    /// in F⁻¹ and F. `None` (default) runs the paper's DF-MPC unchanged.
+    pub disturbance: Option<DisturbanceSettings>,
+}
+
+impl Default for DfMpcSettings {
+    fn default() -> Self {
+        Self {
+            horizon: 100,
+            tracking_weight: [5.0; 3],
+            jerk_weight: [0.01; 3],
+            saturation: Some(InputSaturation::default()),
+            constraints: OutputConstraints::default(),
+            qp_solver: QpSolver::Banded,
+            solver_time_limit: 0.01,
+            smoothness_weight: [0.0; 3],
+            multi_rate: None,
+            disturbance: None,
+        }
+    }
+}
+
+fn tilt_ok(v: f64) -> bool {
+    v.is_finite() && v > 0.0 && v < std::f64::consts::FRAC_PI_2
+}
+
+impl DfMpcSettings {
+    /// Checks every field; the error names the first invalid one.
+    pub fn validate(&self) -> Result<(), ControlError> {
+        check_problem(
+            self.horizon,
+            &self.tracking_weight,
+            &self.jerk_weight,
+            &self.smoothness_weight,
+            None,
+        )?;
+        if let Some(s) = &self.saturation {
+            if !tilt_ok(s.max_tilt) {
+                return Err(invalid("saturation.max_tilt", "in (0, π/2) rad"));
+            }
+            if !(s.thrust_min.is_finite() && s.thrust_min >= 0.0) {
+                return Err(invalid("saturation.thrust_min", "finite and >= 0 (m/s²)"));
+            }
+            if !(s.thrust_max.is_finite() && s.thrust_max > s.thrust_min) {
+                return Err(invalid(
+                    "saturation.thrust_max",
+                    "finite and > thrust_min (m/s²)",
+                ));
+            }
+        }
+        let c = &self.constraints;
+        if c.max_tilt.is_some_and(|t| !tilt_ok(t)) {
+            return Err(invalid("constraints.max_tilt", "in (0, π/2) rad"));
+        }
+        if c.max_speed.is_some_and(|v| !(v.is_finite() && v > 0.0)) {
+            return Err(invalid("constraints.max_speed", "finite and > 0 (m/s)"));
+        }
+        if let Some([lo, hi]) = c.vertical_acceleration
+            && !(lo.is_finite() && hi.is_finite() && lo < 0.0 && hi > 0.0)
+        {
+            return Err(invalid(
+                "constraints.vertical_acceleration",
+                "[a_min, a_max] finite with a_min < 0 < a_max (m/s²)",
+            ));
+        }
+        if self.solver_time_limit.is_nan() || self.solver_time_limit <= 0.0 {
+            return Err(invalid("solver_time_limit", "> 0 s (or infinity)"));
+        }
+        if let Some(m) = &self.multi_rate {
+            m.validate()?;
+        }
+        if let Some(d) = &self.disturbance {
+            d.validate()?;
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,90 @@
+//! Inequality bounds on one axis's planned outputs: acceleration (the tilt
+//! bound, or the vertical acceleration), speed, and the braking funnel.
+
+/// Inequality bounds on one axis's planned outputs.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct AxisBounds {
+    /// `[lo, hi]` on the acceleration `Δ²y_j/δt²` [m/s²], j = 1..N−2.
+    pub acceleration: Option<[f64; 2]>,
+    /// `v` with `|Δy_j/δt| ≤ v` [m/s], j = 2..N−1. With an acceleration
+    /// bound too, a window already faster than v gets a funnel instead of
+    /// an infeasible problem: the bound at step j is
+    /// `max(v, |v_1| − 0.9·a·(j − 1)·δt)`, v_1 the window's speed, a the
+    /// braking bound (the plan slows at 90 % of it).
+    pub speed: Option<f64>,
+}
+
+impl AxisBounds {
+    /// The speed funnel for a window moving faster than the speed bound:
+    /// `(|v_1|, a)` with v_1 = (y_2 − y_1)/δt [m/s] and a [m/s²] 90 % of
+    /// the acceleration bound that slows it down; the bound at step j is
+    /// then `max(v, |v_1| − a·(j − 1)·δt)`. `None` (the plain bound) when
+    /// there is no acceleration bound — the first free output can then
+    /// meet any speed — or the window is within the bound.
+    pub(crate) fn speed_funnel(&self, fixed: &[f64; 3], dt: f64) -> Option<(f64, f64)> {
+        let v = self.speed?;
+        let [lo, hi] = self.acceleration?;
+        let v1 = (fixed[2] - fixed[1]) / dt;
+        let brake = if v1 > 0.0 { -lo } else { hi };
+        (v1.abs() > v).then_some((v1.abs(), 0.9 * brake))
+    }
+
+    /// The bounds `(lo, hi)` of each constraint row for this window, in row
+    /// order — the acceleration rows `Δ²p_j/δt²`, j = 1..N−2, then the speed
+    /// rows `Δp_j/δt`, j = 2..N−1, on the deviation p from the baseline
+    /// (so the baseline's own acceleration and speed are subtracted).
+    pub(crate) fn row_bounds(
+        &self,
+        horizon: usize,
+        fixed: &[f64; 3],
+        dt: f64,
+        mut out: impl FnMut(f64, f64),
+    ) {
+        let d1 = fixed[1] - fixed[0];
+        let d2 = fixed[2] - 2.0 * fixed[1] + fixed[0];
+        if let Some([lo, hi]) = self.acceleration {
+            let a_base = d2 / (dt * dt);
+            for _ in 1..=horizon - 2 {
+                out(lo - a_base, hi - a_base);
+            }
+        }
+        if let Some(v) = self.speed {
+            let funnel = self.speed_funnel(fixed, dt);
+            for j in 2..=horizon - 1 {
+                let s_base = (d1 + j as f64 * d2) / dt;
+                let limit = funnel.map_or(v, |(v1, a)| v.max(v1 - a * (j - 1) as f64 * dt));
+                out(-limit - s_base, limit - s_base);
+            }
+        }
+    }
+
+    /// True when no bound is set.
+    pub fn is_empty(&self) -> bool {
+        self.acceleration.is_none() && self.speed.is_none()
+    }
+
+    /// True when `plan` (`y_0..y_N` \[m\], step δt \[s\]) violates a bound by
+    /// more than a relative 1e-6 (absolute 1e-9 near zero bounds).
+    pub fn violated_by(&self, plan: &[f64], dt: f64) -> bool {
+        let tol = |b: f64| 1e-6 * b.abs() + 1e-9;
+        let n = plan.len();
+        if let Some([lo, hi]) = self.acceleration {
+            let dt2 = dt * dt;
+            for j in 1..n.saturating_sub(2) {
+                let a = (plan[j + 2] - 2.0 * plan[j + 1] + plan[j]) / dt2;
+                if a > hi + tol(hi) || a < lo - tol(lo) {
+                    return true;
+                }
+            }
+        }
+        if let Some(v) = self.speed {
+            for j in 2..n.saturating_sub(1) {
+                let s = (plan[j + 1] - plan[j]) / dt;
+                if s.abs() > v + tol(v) {
+                    return true;
+                }
+            }
+        }
+        false
+    }
+}
