@@ -149,7 +149,7 @@ fn build(input: &Input) -> Option<(Box<dyn Controller>, bool, bool)> {
                         vertical_acceleration: None,
                     },
                     multi_rate: input.multi_rate.then(|| MultiRateSettings {
-                        window: 10,
+                        fit_span: 10,
                         ..MultiRateSettings::default()
                     }),
                     disturbance: input.disturbance.then(DisturbanceSettings::default),

@@ -148,6 +148,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::ControlError;
 use crate::model::ControlModel;
+/// The estimate's type lives with the maps that use it ([`crate::model`]).
+pub use crate::model::DisturbanceEstimate;
 
 /// Largest accepted fit window [control steps].
 pub const MAX_WINDOW: usize = 2000;
@@ -169,9 +171,11 @@ pub struct DisturbanceSettings {
     /// attitude-gain or time-constant mismatch during a manoeuvre, which
     /// slows the settling of slow DF tunings (`dflat experiment mismatch`).
     pub bandwidth_hz: f64,
-    /// Fit window L [control steps]. Longer: less noise (∝ L^−2.5 for the
-    /// fit), more delay. Default 50 (1 s at 50 Hz).
-    pub window: usize,
+    /// Fit span L [control steps]. Longer: less noise (∝ L^−2.5 for the
+    /// fit), more delay. Default 50 (1 s at 50 Hz). Serialized as `window`
+    /// (the lab's JSON).
+    #[serde(rename = "window")]
+    pub fit_span: usize,
     /// Clamp on each component of the acceleration offset |d| \[m/s²\].
     /// Default 3 (≈ 17° of tilt).
     pub max_acceleration: f64,
@@ -188,7 +192,7 @@ impl Default for DisturbanceSettings {
     fn default() -> Self {
         Self {
             bandwidth_hz: 0.1,
-            window: 50,
+            fit_span: 50,
             max_acceleration: 3.0,
             thrust_scale_range: [0.5, 2.0],
             max_step: 1.0,
@@ -214,9 +218,9 @@ impl DisturbanceSettings {
                 "finite and > 0 Hz (below the Nyquist rate 1/(2δt))",
             ));
         }
-        if !(MIN_WINDOW..=MAX_WINDOW).contains(&self.window) {
+        if !(MIN_WINDOW..=MAX_WINDOW).contains(&self.fit_span) {
             return Err(invalid(
-                "disturbance.window",
+                "disturbance.fit_span",
                 "an integer in 10..=2000 (control steps)",
             ));
         }
@@ -237,44 +241,6 @@ impl DisturbanceSettings {
             return Err(invalid("disturbance.max_step", "finite and > 0 m"));
         }
         Ok(())
-    }
-}
-
-/// The current disturbance estimate, as the disturbance-aware maps use it.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct DisturbanceEstimate {
-    /// Acceleration offset d \[m/s²\] in the model frame (local NED for
-    /// flight): what the vehicle accelerates beyond the model. z is 0 for
-    /// both models (the spatial model's vertical channel is κ).
-    pub acceleration: Vector3<f64>,
-    /// Thrust scale κ \[-\]: actual specific thrust per model thrust (1 for
-    /// the planar model).
-    pub thrust_scale: f64,
-}
-
-impl DisturbanceEstimate {
-    /// No disturbance: d = 0, κ = 1.
-    pub const NOMINAL: Self = Self {
-        acceleration: Vector3::new(0.0, 0.0, 0.0),
-        thrust_scale: 1.0,
-    };
-
-    /// True for exactly d = 0 and κ = 1 (the maps then run unchanged).
-    pub fn is_nominal(&self) -> bool {
-        *self == Self::NOMINAL
-    }
-
-    /// Specific thrust that holds hover \[m/s²\] in the model's thrust units:
-    /// `g/κ` for gravity `g` \[m/s²\]. Divide by the autopilot's full-scale
-    /// specific thrust for the normalised hover thrust.
-    pub fn hover_thrust(&self, g: f64) -> f64 {
-        g / self.thrust_scale
-    }
-}
-
-impl Default for DisturbanceEstimate {
-    fn default() -> Self {
-        Self::NOMINAL
     }
 }
 
@@ -417,9 +383,9 @@ impl DisturbanceEstimator {
                 "below the Nyquist rate 1/(2δt) Hz",
             ));
         }
-        let l = settings.window;
+        let l = settings.fit_span;
         let weights = fit_weights(l, dt)
-            .ok_or_else(|| invalid("disturbance.window", "too short for the fit"))?;
+            .ok_or_else(|| invalid("disturbance.fit_span", "too short for the fit"))?;
         let alpha = 1.0 - (-2.0 * std::f64::consts::PI * settings.bandwidth_hz * dt).exp();
         let fit_gain = weights.iter().map(|h| h * h).sum::<f64>().sqrt();
         let noise_gain = low_pass_noise_gain(&weights, alpha);
@@ -681,7 +647,7 @@ impl DisturbanceEstimator {
             return;
         }
 
-        let l = self.settings.window;
+        let l = self.settings.fit_span;
         let slot = (self.head + self.len) % l;
         self.outputs[slot] = *y;
         self.tick_times[slot] = t;
@@ -718,7 +684,7 @@ impl DisturbanceEstimator {
     /// Classic mode: δ̂ from the measured outputs at the window's ticks with
     /// the precomputed weights h (module docs).
     fn tick_fit(&self) -> Vector3<f64> {
-        let l = self.settings.window;
+        let l = self.settings.fit_span;
         let dt = self.model.dt();
         let kappa = self.estimate.thrust_scale;
         let y0 = self.outputs[self.head];
@@ -737,7 +703,7 @@ impl DisturbanceEstimator {
     /// of tick times (module docs); `None` when they do not determine it
     /// (fewer than three, or none in the first or the last third).
     fn sample_fit(&mut self) -> Option<Vector3<f64>> {
-        let l = self.settings.window;
+        let l = self.settings.fit_span;
         let dt = self.model.dt();
         let kappa = self.estimate.thrust_scale;
         let (mut s, mut w) = (Vector3::zeros(), Vector3::<f64>::zeros());
@@ -791,7 +757,7 @@ impl DisturbanceEstimator {
 
     /// The window fit and the low-pass (module docs).
     fn update(&mut self, delta: &Vector3<f64>) {
-        let l = self.settings.window;
+        let l = self.settings.fit_span;
         let kappa = self.estimate.thrust_scale;
         let thrust_z = self.accel_t.iter().map(|a| a.z).sum::<f64>() / l as f64;
 
@@ -912,8 +878,8 @@ mod tests {
             "disturbance.bandwidth_hz"
         );
         assert_eq!(
-            field(DisturbanceSettings { window: 3, ..d }),
-            "disturbance.window"
+            field(DisturbanceSettings { fit_span: 3, ..d }),
+            "disturbance.fit_span"
         );
         assert_eq!(
             field(DisturbanceSettings {

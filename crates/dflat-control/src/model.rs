@@ -44,7 +44,6 @@ use dflat_model::{FlatError, FlatModel, Frame, PlanarModel, SpatialModel};
 use nalgebra::{Vector2, Vector3};
 
 use crate::AttitudeCommand;
-use crate::disturbance::DisturbanceEstimate;
 
 /// Window r of both control models: the input needs r + 1 = 4 consecutive
 /// outputs, the prediction r = 3 outputs and one input.
@@ -251,6 +250,44 @@ impl ControlModel {
             yaw: self.yaw(),
             thrust: u.z,
         }
+    }
+}
+
+/// The current disturbance estimate, as the disturbance-aware maps use it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DisturbanceEstimate {
+    /// Acceleration offset d \[m/s²\] in the model frame (local NED for
+    /// flight): what the vehicle accelerates beyond the model. z is 0 for
+    /// both models (the spatial model's vertical channel is κ).
+    pub acceleration: Vector3<f64>,
+    /// Thrust scale κ \[-\]: actual specific thrust per model thrust (1 for
+    /// the planar model).
+    pub thrust_scale: f64,
+}
+
+impl DisturbanceEstimate {
+    /// No disturbance: d = 0, κ = 1.
+    pub const NOMINAL: Self = Self {
+        acceleration: Vector3::new(0.0, 0.0, 0.0),
+        thrust_scale: 1.0,
+    };
+
+    /// True for exactly d = 0 and κ = 1 (the maps then run unchanged).
+    pub fn is_nominal(&self) -> bool {
+        *self == Self::NOMINAL
+    }
+
+    /// Specific thrust that holds hover \[m/s²\] in the model's thrust units:
+    /// `g/κ` for gravity `g` \[m/s²\]. Divide by the autopilot's full-scale
+    /// specific thrust for the normalised hover thrust.
+    pub fn hover_thrust(&self, g: f64) -> f64 {
+        g / self.thrust_scale
+    }
+}
+
+impl Default for DisturbanceEstimate {
+    fn default() -> Self {
+        Self::NOMINAL
     }
 }
 

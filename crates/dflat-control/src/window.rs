@@ -213,11 +213,12 @@ const UNKNOWN_SIGMA: [f64; 3] = [100.0, 10.0, 10.0];
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct MultiRateSettings {
-    /// Window M [control steps]: samples captured in the last M steps are
+    /// Fit span M [control steps]: samples captured in the last M steps are
     /// fitted, older ones live on in the arrival cost (2 ..= [`MAX_WINDOW`]).
     /// Default 25 (0.5 s at 50 Hz: three or more samples at 10 Hz with
-    /// 60 ms latency).
-    pub window: usize,
+    /// 60 ms latency). Serialized as `window` (the lab's JSON).
+    #[serde(rename = "window")]
+    pub fit_span: usize,
     /// Standard deviation of one pose sample per axis \[m\]. Default 0.02.
     pub sample_sigma: f64,
     /// Random-walk process noise per control step of the window start's
@@ -233,7 +234,7 @@ pub struct MultiRateSettings {
 impl Default for MultiRateSettings {
     fn default() -> Self {
         Self {
-            window: 25,
+            fit_span: 25,
             sample_sigma: 0.02,
             process_sigma: [0.001, 0.01, 0.1],
         }
@@ -247,8 +248,8 @@ impl MultiRateSettings {
             field,
             reason: reason.to_string(),
         };
-        if !(2..=MAX_WINDOW).contains(&self.window) {
-            return Err(bad("multi_rate.window", "an integer in 2..=250 (steps)"));
+        if !(2..=MAX_WINDOW).contains(&self.fit_span) {
+            return Err(bad("multi_rate.fit_span", "an integer in 2..=250 (steps)"));
         }
         if !(self.sample_sigma.is_finite() && self.sample_sigma > 0.0) {
             return Err(bad("multi_rate.sample_sigma", "finite and > 0 (m)"));
@@ -368,7 +369,7 @@ impl MultiRateWindow {
     /// An empty window for `model` (allocates all buffers once).
     pub fn new(model: &ControlModel, settings: MultiRateSettings) -> Result<Self, ControlError> {
         settings.validate()?;
-        let m = settings.window;
+        let m = settings.fit_span;
         let dt = model.dt();
         let mut gains = vec![[0.0; 3]; m + 3];
         for (axis, lag) in input_lags(model).iter().enumerate() {
@@ -481,7 +482,7 @@ impl MultiRateWindow {
     /// message); samples may arrive out of order.
     pub fn observe(&mut self, t: f64, position: &Vector3<f64>) -> bool {
         let finite = t.is_finite() && position.iter().take(self.axes).all(|v| v.is_finite());
-        let horizon = self.settings.window as f64 * self.dt;
+        let horizon = self.settings.fit_span as f64 * self.dt;
         let too_old = self
             .last_tick
             .is_some_and(|tl| t < tl - horizon - SNAP * self.dt);
@@ -526,7 +527,7 @@ impl MultiRateWindow {
             return Err(ControlError::NonFiniteMeasurement);
         }
         self.pending_tick = None;
-        let m = self.settings.window;
+        let m = self.settings.fit_span;
         let dt = self.dt;
         let start = t - m as f64 * dt;
 
@@ -642,7 +643,7 @@ impl MultiRateWindow {
             return Ok(());
         };
         let sigma2 = self.settings.sample_sigma.powi(2);
-        let held = self.inputs[self.settings.window];
+        let held = self.inputs[self.settings.fit_span];
         let chain = &mut self.chain[..n + 3];
         chain[..3].copy_from_slice(&self.arrival.mean);
         for j in 0..n {
@@ -734,7 +735,7 @@ impl MultiRateWindow {
     /// the window plus the arrival cost; corrects the first three outputs.
     /// Returns the number of samples fitted.
     fn fit(&mut self, start: f64) -> usize {
-        let m = self.settings.window;
+        let m = self.settings.fit_span;
         let w = self.settings.sample_sigma.powi(-2);
         let mut normal = [[[0.0; 3]; 3]; 3];
         let mut rhs = [[0.0; 3]; 3];
@@ -798,7 +799,7 @@ impl MultiRateWindow {
             return;
         };
         std::mem::swap(&mut self.trajectory, &mut self.next_trajectory);
-        let m = self.settings.window;
+        let m = self.settings.fit_span;
         self.inputs[..m].copy_from_slice(&self.next_inputs);
         self.inputs[m] = *u;
         self.arrival = self.next_arrival;

@@ -256,7 +256,7 @@ fn estimate_is_clamped_under_huge_disturbance_and_recovers() {
     // No wind-up: with the disturbance gone the estimate leaves the bound
     // as soon as the window holds only new data, then converges as the
     // low-pass from at most the bound.
-    let window = settings.window;
+    let window = settings.fit_span;
     plant.run(&mut est, Vector2::zeros(), window + 300, 1);
     let e = est.estimate().acceleration;
     let bound = lim * (1.0 - est.alpha()).powi(300) + 1e-9;

@@ -100,7 +100,7 @@ fn tick(k: usize) -> Measurement {
 #[test]
 fn multirate_reproduces_classic_every_tick_without_latency() {
     let exact = MultiRateSettings {
-        window: 2,
+        fit_span: 2,
         sample_sigma: 0.02,
         process_sigma: [f64::INFINITY; 3],
     };
@@ -435,8 +435,8 @@ fn multirate_settings_are_validated() {
     };
     let d = MultiRateSettings::default();
     assert_eq!(
-        field(MultiRateSettings { window: 1, ..d }),
-        "multi_rate.window"
+        field(MultiRateSettings { fit_span: 1, ..d }),
+        "multi_rate.fit_span"
     );
     assert_eq!(
         field(MultiRateSettings {
@@ -455,7 +455,7 @@ fn multirate_settings_are_validated() {
     let e = DfMpc::new(
         model,
         DfMpcSettings {
-            multi_rate: Some(MultiRateSettings { window: 0, ..d }),
+            multi_rate: Some(MultiRateSettings { fit_span: 0, ..d }),
             ..Default::default()
         },
     )
@@ -463,7 +463,7 @@ fn multirate_settings_are_validated() {
     assert!(matches!(
         e,
         ControlError::InvalidSetting {
-            field: "multi_rate.window",
+            field: "multi_rate.fit_span",
             ..
         }
     ));

@@ -93,13 +93,13 @@ pub fn build_controller(cfg: &Config) -> Result<Box<dyn Controller>, ControlErro
                 qp_solver: c.qp_solver,
                 smoothness_weight: c.smoothness_weight,
                 multi_rate: c.multi_rate.then(|| MultiRateSettings {
-                    window: c.multi_rate_window,
+                    fit_span: c.multi_rate_window,
                     sample_sigma: c.sample_sigma,
                     ..MultiRateSettings::default()
                 }),
                 disturbance: c.disturbance.then_some(DisturbanceSettings {
                     bandwidth_hz: c.disturbance_bandwidth_hz,
-                    window: c.disturbance_window,
+                    fit_span: c.disturbance_window,
                     max_acceleration: c.disturbance_max_acceleration,
                     thrust_scale_range: c.disturbance_thrust_scale_range,
                     max_step: c.disturbance_max_step,

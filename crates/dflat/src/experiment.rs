@@ -187,7 +187,7 @@ pub fn run(command: ExperimentCommand) -> Result<()> {
             if let Some(e) = a.estimator {
                 anyhow::ensure!(e.len() == 2, "--estimator takes f_c,L");
                 config.estimator.bandwidth_hz = e[0];
-                config.estimator.window = e[1] as usize;
+                config.estimator.fit_span = e[1] as usize;
             }
             let out = OutputPaths::resolve(&a.common.out, "mismatch", a.common.json, a.common.plot);
             let result = run_mismatch(&config, !a.common.no_progress).context("mismatch study")?;

@@ -739,13 +739,13 @@ impl MismatchResult {
             c.df_weights.1,
             c.df_weights.2,
             c.estimator.bandwidth_hz,
-            c.estimator.window,
+            c.estimator.fit_span,
             c.df_multi_rate.horizon,
             c.df_multi_rate.q,
             c.df_multi_rate.r,
             c.df_multi_rate.smoothness,
             c.df_multi_rate.plan_tilt_deg,
-            c.df_multi_rate.window.window
+            c.df_multi_rate.window.fit_span
         );
         for &sigma in &c.sigmas {
             s += &format!("\n**σ = {} mm**\n\n| scenario |", sigma * 1000.0);

@@ -74,57 +74,116 @@ pub const MAX_FALLBACK_STEPS: usize = 50;
 pub struct DfMpc {
     model: ControlModel,
     settings: DfMpcSettings,
+    /// The flatness window (classic mode): the last R measured outputs and
+    /// R − 1 sent inputs.
     window: Window,
-    /// Fast-path solver per controlled axis.
-    fast: Vec<FastBandedSolver>,
-    /// Clarabel solver per axis that has bounds.
-    constrained: Vec<Option<ClarabelSolver>>,
-    /// Banded interior-point solver per axis that has bounds (tried before
-    /// clarabel, with [`QpSolver::Banded`]).
-    bounded: Vec<Option<BandedInteriorPointSolver>>,
-    /// Bounds per axis (empty when none).
-    bounds: Vec<AxisBounds>,
-    /// Reference y_ref,k..y_ref,k+N (model frame, m).
+    /// The multi-rate window, when configured (then `window` stays empty).
+    multi: Option<MultiRateWindow>,
+    /// Disturbance estimator, when configured.
+    estimator: Option<DisturbanceEstimator>,
+    /// One optimisation pipeline per controlled axis (x, y; z spatial).
+    axes: Vec<AxisPipeline>,
+    /// Reference y_ref,k..y_ref,k+N (model frame, m) of this tick, and of
+    /// the last good tick (swapped after each good tick).
     reference: Vec<Vector3<f64>>,
-    /// The reference split per axis.
-    reference_axis: Vec<Vec<f64>>,
-    /// Last plan y*_k..y*_{k+N} per axis.
-    plans: Vec<Vec<f64>>,
-    plan_valid: bool,
+    good_reference: Vec<Vector3<f64>>,
+    /// y_k of the last good tick (the z of planar plans) \[m\].
+    good_y0: Vector3<f64>,
     /// Time of the newest measurement used (classic mode) \[s\]; a tick whose
     /// measurement is not newer is predicted instead (see [`DfMpc`]).
     last_t: f64,
     /// The previous tick's F⁻¹ prediction of this tick's output, y_{k+1}
     /// then (classic mode) \[m\].
     predicted: Vector3<f64>,
-    /// Multi-rate window, when configured (else `window` is used).
-    multi: Option<MultiRateWindow>,
     /// True when some axis has a smoothness weight.
     smooth: bool,
-    /// Disturbance estimator, when configured.
-    estimator: Option<DisturbanceEstimator>,
-    /// The last good tick's plan y*_k..y*_{k+N} per axis and its
-    /// reference (model frame, m), for [`DfMpc::plan`] and
-    /// [`Controller::plan_fallback`]; swapped with `plans` / `reference`
-    /// (the next tick's workspaces) after each good tick.
-    good_plans: Vec<Vec<f64>>,
-    good_reference: Vec<Vector3<f64>>,
-    /// y_k of the last good tick (the z of planar plans) \[m\].
-    good_y0: Vector3<f64>,
-    /// Plan steps flown by `plan_fallback` since the last good tick
-    /// (`None`: no plan to fly).
-    fallback_step: Option<usize>,
-    /// This tick started (`update` called) and is not recorded yet.
-    pending: bool,
+    /// What plan there is to fly.
+    plan: PlanState,
+    /// Whether the sent inputs are all recorded.
+    record: RecordState,
+}
+
+/// One axis's optimisation: the fast path, the bounded solvers when the
+/// axis has bounds, and its reference and plan buffers.
+#[derive(Debug)]
+struct AxisPipeline {
+    /// The unconstrained problem (the fast path).
+    fast: FastBandedSolver,
+    /// The problem with this axis's bounds, when it has any.
+    bounded: Option<BoundedQp>,
+    /// The bounds (empty when none).
+    bounds: AxisBounds,
+    /// This tick's reference on this axis, y_ref,k..y_ref,k+N \[m\].
+    reference: Vec<f64>,
+    /// This tick's plan y*_k..y*_{k+N} \[m\] (a workspace until it is good).
+    plan: Vec<f64>,
+    /// The last good tick's plan \[m\] (swapped with `plan`).
+    good_plan: Vec<f64>,
+}
+
+/// The bounded QP of one axis: the banded interior point first (with
+/// [`QpSolver::Banded`]), clarabel when it does not converge.
+#[derive(Debug)]
+struct BoundedQp {
+    interior_point: Option<BandedInteriorPointSolver>,
+    clarabel: ClarabelSolver,
+}
+
+/// What [`DfMpc::optimise`] reports of a tick's solve.
+#[derive(Debug, Clone, Copy, Default)]
+struct SolveReport {
+    /// A bound was binding on some axis (a bounded solver ran).
+    constrained: bool,
+    /// Clarabel solved an axis the interior point did not.
+    qp_fallback: bool,
+}
+
+/// The plan DF-MPC can fly without a new solve ([`Controller::plan_fallback`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum PlanState {
+    /// None: before the first good tick, after a reset, or once the kept
+    /// plan is used up or could not be mapped.
+    Empty,
+    /// The last `update` succeeded: its plan is current ([`DfMpc::plan`]);
+    /// `flown` steps of it flown since by `plan_fallback` (late ticks).
+    Fresh {
+        /// Plan steps flown.
+        flown: usize,
+    },
+    /// An `update` failed (or is under way) after a good one: the last good
+    /// plan is kept; `flown` steps of it flown by `plan_fallback`.
+    Kept {
+        /// Plan steps flown.
+        flown: usize,
+    },
+}
+
+impl PlanState {
+    /// Plan steps flown since the last good tick, if there is a plan.
+    fn flown(self) -> Option<usize> {
+        match self {
+            Self::Empty => None,
+            Self::Fresh { flown } | Self::Kept { flown } => Some(flown),
+        }
+    }
+}
+
+/// Whether every command this controller produced was recorded.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum RecordState {
+    /// Every tick's command is in the window.
+    Recorded,
+    /// This tick started and its command is not recorded yet.
+    Pending,
     /// An earlier tick was never recorded (failed `update`, no plan
-    /// fallback): the classic window has a gap, the next recorded tick
-    /// restarts it.
-    gap: bool,
+    /// fallback) and this one is pending: the classic window has a gap and
+    /// restarts from its start-up padding at the next recorded tick.
+    PendingAfterGap,
 }
 
 impl DfMpc {
     /// Builds the controller: validates the settings, factors the fast-path
-    /// Hessians and builds the clarabel solvers (all allocation happens here).
+    /// Hessians and builds the bounded solvers (all allocation happens here).
     pub fn new(model: ControlModel, settings: DfMpcSettings) -> Result<Self, ControlError> {
         settings.validate()?;
         let axes = model.axes();
@@ -137,11 +196,8 @@ impl DfMpc {
         }
         let dt = model.dt();
         let n = settings.horizon;
-        let mut fast = Vec::with_capacity(axes);
-        let mut constrained = Vec::with_capacity(axes);
-        let mut bounded = Vec::with_capacity(axes);
-        let mut bounds = Vec::with_capacity(axes);
         let lags = input_lags(&model);
+        let mut pipelines = Vec::with_capacity(axes);
         for (axis, lag) in lags.iter().enumerate().take(axes) {
             let (q, r) = (settings.tracking_weight[axis], settings.jerk_weight[axis]);
             let smoothness = Smoothness {
@@ -149,7 +205,6 @@ impl DfMpc {
                 kappa: lag / dt,
                 gravity: model.gravity(),
             };
-            fast.push(FastBandedSolver::with_smoothness(n, q, r, dt, smoothness)?);
             let acceleration = if axis < 2 {
                 c.max_tilt.map(|t| {
                     let a = model.gravity() * t.tan();
@@ -158,68 +213,69 @@ impl DfMpc {
             } else {
                 c.vertical_acceleration
             };
-            let b = AxisBounds {
+            let bounds = AxisBounds {
                 acceleration,
                 speed: c.max_speed,
             };
-            constrained.push(if b.is_empty() {
+            let bounded = if bounds.is_empty() {
                 None
             } else {
-                Some(ClarabelSolver::with_smoothness(
-                    n,
-                    q,
-                    r,
-                    dt,
-                    b,
-                    settings.solver_time_limit,
-                    smoothness,
-                )?)
+                Some(BoundedQp {
+                    interior_point: if settings.qp_solver == QpSolver::Banded {
+                        Some(BandedInteriorPointSolver::new(
+                            n,
+                            (q, r, dt),
+                            bounds,
+                            smoothness,
+                        )?)
+                    } else {
+                        None
+                    },
+                    clarabel: ClarabelSolver::with_smoothness(
+                        n,
+                        q,
+                        r,
+                        dt,
+                        bounds,
+                        settings.solver_time_limit,
+                        smoothness,
+                    )?,
+                })
+            };
+            pipelines.push(AxisPipeline {
+                fast: FastBandedSolver::with_smoothness(n, q, r, dt, smoothness)?,
+                bounded,
+                bounds,
+                reference: vec![0.0; n + 1],
+                plan: vec![0.0; n + 1],
+                good_plan: vec![0.0; n + 1],
             });
-            bounded.push(if b.is_empty() || settings.qp_solver != QpSolver::Banded {
-                None
-            } else {
-                Some(BandedInteriorPointSolver::new(
-                    n,
-                    (q, r, dt),
-                    b,
-                    smoothness,
-                )?)
-            });
-            bounds.push(b);
         }
         Ok(Self {
             model,
             settings,
             window: Window::new(model.hover_input()),
-            fast,
-            constrained,
-            bounded,
-            bounds,
-            reference: vec![Vector3::zeros(); n + 1],
-            reference_axis: vec![vec![0.0; n + 1]; axes],
-            plans: vec![vec![0.0; n + 1]; axes],
-            plan_valid: false,
-            last_t: f64::NEG_INFINITY,
-            predicted: Vector3::zeros(),
             multi: settings
                 .multi_rate
                 .map(|m| MultiRateWindow::new(&model, m))
                 .transpose()?,
+            estimator: settings
+                .disturbance
+                .map(|d| DisturbanceEstimator::new(model, d))
+                .transpose()?,
+            axes: pipelines,
+            reference: vec![Vector3::zeros(); n + 1],
+            good_reference: vec![Vector3::zeros(); n + 1],
+            good_y0: Vector3::zeros(),
+            last_t: f64::NEG_INFINITY,
+            predicted: Vector3::zeros(),
             smooth: settings
                 .smoothness_weight
                 .iter()
                 .take(axes)
                 .any(|s| *s > 0.0),
-            estimator: settings
-                .disturbance
-                .map(|d| DisturbanceEstimator::new(model, d))
-                .transpose()?,
-            good_plans: vec![vec![0.0; n + 1]; axes],
-            good_reference: vec![Vector3::zeros(); n + 1],
-            good_y0: Vector3::zeros(),
-            fallback_step: None,
-            pending: false,
-            gap: false,
+            plan: PlanState::Empty,
+            record: RecordState::Recorded,
         })
     }
 
@@ -250,19 +306,18 @@ impl DfMpc {
     }
 
     /// The full plan `y*_k..y*_{k+N}` \[m\] of `axis` (0 = x, 1 = y, 2 = z)
-    /// from the last successful update; `None` before one, after a failed
-    /// one or for an axis the model does not control.
+    /// from the last update when it succeeded; `None` before one, after a
+    /// failed one or for an axis the model does not control.
     pub fn plan(&self, axis: usize) -> Option<&[f64]> {
-        if self.plan_valid {
-            self.good_plans.get(axis).map(|p| p.as_slice())
-        } else {
-            None
+        match self.plan {
+            PlanState::Fresh { .. } => self.axes.get(axis).map(|a| a.good_plan.as_slice()),
+            _ => None,
         }
     }
 
     /// The per-axis bounds derived from the constraints (x, y, z order).
     pub fn bounds(&self, axis: usize) -> Option<&AxisBounds> {
-        self.bounds.get(axis)
+        self.axes.get(axis).map(|a| &a.bounds)
     }
 
     /// Clips `u` to the input saturation; returns it and whether it clipped.
@@ -276,6 +331,157 @@ impl DfMpc {
             out.z = u.z.clamp(s.thrust_min, s.thrust_max);
         }
         (out, out != u)
+    }
+
+    /// The disturbance estimate this tick uses (nominal without an
+    /// estimator).
+    fn disturbance_estimate(&self) -> DisturbanceEstimate {
+        self.estimator
+            .as_ref()
+            .map_or(DisturbanceEstimate::NOMINAL, |e| e.estimate())
+    }
+
+    /// Step 3: the reference over the horizon from y_k, split per axis.
+    fn build_reference(
+        &mut self,
+        y0: &Vector3<f64>,
+        reference: &mut dyn ReferenceSource,
+    ) -> Result<(), ControlError> {
+        let axes = self.axes.len();
+        reference.horizon(y0, self.model.dt(), &mut self.reference);
+        if !self
+            .reference
+            .iter()
+            .all(|r| r.iter().take(axes).all(|v| v.is_finite()))
+        {
+            return Err(ControlError::NonFiniteReference);
+        }
+        for (axis, pipeline) in self.axes.iter_mut().enumerate() {
+            for (dst, r) in pipeline.reference.iter_mut().zip(&self.reference) {
+                *dst = r[axis];
+            }
+        }
+        Ok(())
+    }
+
+    /// Step 4: output trajectory optimisation, per axis — the fast path
+    /// first (x and y together when they share weights), then the bounded
+    /// QP for an axis whose fast plan violates a configured bound.
+    /// `sent_acceleration`: what the command sent at k−1 asks for (with a
+    /// smoothness weight).
+    fn optimise(
+        &mut self,
+        fixed: &[Vector3<f64>; 3],
+        sent_acceleration: Option<Vector3<f64>>,
+    ) -> Result<SolveReport, ControlError> {
+        let mut fixed_axis = [[0.0; 3]; 3];
+        for (axis, f) in fixed_axis.iter_mut().enumerate().take(self.axes.len()) {
+            *f = [fixed[0][axis], fixed[1][axis], fixed[2][axis]];
+        }
+        let sent = |axis: usize| sent_acceleration.map(|c| c[axis]);
+        let [ax, ay, rest @ ..] = self.axes.as_mut_slice() else {
+            unreachable!("DfMpc::new makes at least two axes")
+        };
+        let paired =
+            ax.fast.weights() == ay.fast.weights() && ax.fast.smoothness() == ay.fast.smoothness();
+        if paired {
+            ax.fast.solve_pair(
+                AxisProblem {
+                    fixed: &fixed_axis[0],
+                    sent: sent(0),
+                    reference: &ax.reference,
+                    plan: &mut ax.plan,
+                },
+                AxisProblem {
+                    fixed: &fixed_axis[1],
+                    sent: sent(1),
+                    reference: &ay.reference,
+                    plan: &mut ay.plan,
+                },
+            )?;
+        } else {
+            for (axis, p) in [(0, &mut *ax), (1, &mut *ay)] {
+                p.fast.solve_problem(AxisProblem {
+                    fixed: &fixed_axis[axis],
+                    sent: sent(axis),
+                    reference: &p.reference,
+                    plan: &mut p.plan,
+                })?;
+            }
+        }
+        if let Some(az) = rest.first_mut() {
+            az.fast.solve_problem(AxisProblem {
+                fixed: &fixed_axis[2],
+                sent: sent(2),
+                reference: &az.reference,
+                plan: &mut az.plan,
+            })?;
+        }
+        let mut report = SolveReport::default();
+        let dt = self.model.dt();
+        for (axis, p) in self.axes.iter_mut().enumerate() {
+            let Some(qp) = &mut p.bounded else { continue };
+            if !qp.clarabel.bounds().violated_by(&p.plan, dt) {
+                continue;
+            }
+            // The banded interior point first; clarabel when it does not
+            // converge (its own failure is the tick's).
+            let solved = match &mut qp.interior_point {
+                Some(ip) => ip
+                    .solve_problem(AxisProblem {
+                        fixed: &fixed_axis[axis],
+                        sent: sent(axis),
+                        reference: &p.reference,
+                        plan: &mut p.plan,
+                    })
+                    .is_ok(),
+                None => false,
+            };
+            if !solved {
+                report.qp_fallback |= qp.interior_point.is_some();
+                qp.clarabel.solve_problem(AxisProblem {
+                    fixed: &fixed_axis[axis],
+                    sent: sent(axis),
+                    reference: &p.reference,
+                    plan: &mut p.plan,
+                })?;
+            }
+            report.constrained = true;
+        }
+        Ok(report)
+    }
+
+    /// Step 5: the output-to-input map F on y*_k..y*_{k+3} of this tick's
+    /// plan; returns the four outputs and the input.
+    fn map_through_f(
+        &self,
+        y0: Vector3<f64>,
+        d: &DisturbanceEstimate,
+    ) -> Result<([Vector3<f64>; 4], Vector3<f64>), ControlError> {
+        let mut plan4 = [y0; 4];
+        for (j, p) in plan4.iter_mut().enumerate() {
+            for (axis, pipeline) in self.axes.iter().enumerate() {
+                p[axis] = pipeline.plan[j];
+            }
+        }
+        let u = self.model.input_from_outputs_disturbed(&plan4, d)?;
+        if !u.iter().all(|v| v.is_finite()) {
+            return Err(ControlError::Flat(dflat_model::FlatError::NonFinite(
+                "input",
+            )));
+        }
+        Ok((plan4, u))
+    }
+
+    /// Keeps this tick's plan and reference as the good ones (O(1): the
+    /// buffers swap; the next tick overwrites the other pair in full).
+    fn keep_plan(&mut self, y0: Vector3<f64>) {
+        for p in &mut self.axes {
+            std::mem::swap(&mut p.plan, &mut p.good_plan);
+        }
+        std::mem::swap(&mut self.reference, &mut self.good_reference);
+        self.good_y0 = y0;
+        self.plan = PlanState::Fresh { flown: 0 };
     }
 }
 
@@ -305,7 +511,7 @@ impl DfMpc {
     ) -> Result<FixedOutputs, ControlError> {
         let mut window = self.window;
         let mut last_t = self.last_t;
-        if self.gap {
+        if self.record == RecordState::PendingAfterGap {
             window.reset();
             last_t = f64::NEG_INFINITY;
         }
@@ -361,7 +567,7 @@ impl DfMpc {
         } else {
             window.push_input(*sent);
             self.window = window;
-            let last_t = if self.gap {
+            let last_t = if self.record == RecordState::PendingAfterGap {
                 f64::NEG_INFINITY
             } else {
                 self.last_t
@@ -369,8 +575,7 @@ impl DfMpc {
             self.last_t = last_t.max(t);
             self.predicted = fixed[1];
         }
-        self.pending = false;
-        self.gap = false;
+        self.record = RecordState::Recorded;
     }
 }
 
@@ -404,20 +609,19 @@ impl Controller for DfMpc {
         measurement: &Measurement,
         reference: &mut dyn ReferenceSource,
     ) -> Result<TickOutput, ControlError> {
-        if self.pending {
-            // The previous tick sent something this controller did not
-            // record (failed update, no plan fallback).
-            self.gap = true;
+        // A previous tick sent something this controller did not record
+        // (failed update, no plan fallback): the window has a gap.
+        self.record = match self.record {
+            RecordState::Recorded => RecordState::Pending,
+            RecordState::Pending | RecordState::PendingAfterGap => RecordState::PendingAfterGap,
+        };
+        if let PlanState::Fresh { flown } = self.plan {
+            self.plan = PlanState::Kept { flown };
         }
-        self.pending = true;
-        self.plan_valid = false;
         if let Some(e) = &mut self.estimator {
             e.begin_tick();
         }
-        let d = self
-            .estimator
-            .as_ref()
-            .map_or(DisturbanceEstimate::NOMINAL, |e| e.estimate());
+        let d = self.disturbance_estimate();
         let axes = self.model.axes();
         // Multi-rate mode takes only the tick time (and checks the yaw).
         let position_ok = self.multi.is_some()
@@ -429,9 +633,9 @@ impl Controller for DfMpc {
         if !(position_ok && measurement.yaw.is_finite()) {
             return Err(ControlError::NonFiniteMeasurement);
         }
-        // Input-to-output map over the window: y_{k+1}, y_{k+2}; and the
-        // input sent at k−1 (for the smoothness term). The window is a copy:
-        // on error nothing is recorded.
+        // 1–2. The window and the input-to-output map F⁻¹ over it: y_k,
+        // y_{k+1}, y_{k+2}, and the input sent at k−1 (for the smoothness
+        // term). The window is a copy: on error nothing is recorded.
         let FixedOutputs {
             window,
             fixed,
@@ -443,119 +647,23 @@ impl Controller for DfMpc {
         } else {
             None
         };
-
-        // Reference over the horizon.
-        reference.horizon(&y0, self.model.dt(), &mut self.reference);
-        if !self
-            .reference
-            .iter()
-            .all(|r| r.iter().take(axes).all(|v| v.is_finite()))
-        {
-            return Err(ControlError::NonFiniteReference);
-        }
-
-        // Output trajectory optimisation, per axis: the fast path first
-        // (x and y together when they share weights), then clarabel for an
-        // axis whose fast plan violates a configured bound.
-        let mut fixed_axis = [[0.0; 3]; 3];
-        for axis in 0..axes {
-            fixed_axis[axis] = [fixed[0][axis], fixed[1][axis], fixed[2][axis]];
-            for (dst, r) in self.reference_axis[axis].iter_mut().zip(&self.reference) {
-                *dst = r[axis];
-            }
-        }
-        let sent = |axis: usize| sent_acceleration.map(|c| c[axis]);
-        let paired = self.fast[0].weights() == self.fast[1].weights()
-            && self.fast[0].smoothness() == self.fast[1].smoothness();
-        let [px, py, pz @ ..] = self.plans.as_mut_slice() else {
-            unreachable!("DfMpc::new makes at least two plans")
-        };
-        let ra = &self.reference_axis;
-        let problem = |axis: usize, plan| AxisProblem {
-            fixed: &fixed_axis[axis],
-            sent: sent(axis),
-            reference: &ra[axis],
-            plan,
-        };
-        if paired {
-            self.fast[0].solve_pair(problem(0, px), problem(1, py))?;
-        } else {
-            self.fast[0].solve_problem(problem(0, px))?;
-            self.fast[1].solve_problem(problem(1, py))?;
-        }
-        if let Some(plan) = pz.first_mut() {
-            self.fast[2].solve_problem(problem(2, plan))?;
-        }
-        let mut constrained = false;
-        let mut qp_fallback = false;
-        let dt = self.model.dt();
-        let axes_data = self
-            .constrained
-            .iter_mut()
-            .zip(&mut self.bounded)
-            .zip(&mut self.plans)
-            .zip(&self.reference_axis);
-        for (axis, ((((cs, bs), plan), reference), fixed)) in axes_data.zip(&fixed_axis).enumerate()
-        {
-            if let Some(cs) = cs
-                && cs.bounds().violated_by(plan, dt)
-            {
-                // The banded solver first; clarabel when it does not
-                // converge (its own failure is the tick's).
-                let has_banded = bs.is_some();
-                let banded = match bs {
-                    Some(bs) => bs
-                        .solve_problem(AxisProblem {
-                            fixed,
-                            sent: sent(axis),
-                            reference,
-                            plan: &mut *plan,
-                        })
-                        .is_ok(),
-                    None => false,
-                };
-                if !banded {
-                    qp_fallback |= has_banded;
-                    cs.solve_problem(AxisProblem {
-                        fixed,
-                        sent: sent(axis),
-                        reference,
-                        plan,
-                    })?;
-                }
-                constrained = true;
-            }
-        }
-
-        // Output-to-input map on y*_k..y*_{k+3}.
-        let mut plan4 = [y0; 4];
-        for (j, p) in plan4.iter_mut().enumerate() {
-            for axis in 0..axes {
-                p[axis] = self.plans[axis][j];
-            }
-        }
-        let u = self.model.input_from_outputs_disturbed(&plan4, &d)?;
-        if !u.iter().all(|v| v.is_finite()) {
-            return Err(ControlError::Flat(dflat_model::FlatError::NonFinite(
-                "input",
-            )));
-        }
+        // 3. The reference over the horizon.
+        self.build_reference(&y0, reference)?;
+        // 4. Output trajectory optimisation.
+        let solve = self.optimise(&fixed, sent_acceleration)?;
+        // 5. The output-to-input map F on y*_k..y*_{k+3}.
+        let (plan4, u) = self.map_through_f(y0, &d)?;
+        // 6. Saturation; the sent input into the window.
         let (sent, saturated) = self.saturate(u);
         self.commit(window, measurement.t, &fixed, &sent, saturated);
-        // Keep the plan for `plan` and `plan_fallback` (O(1): the buffers
-        // swap; the next tick overwrites the other pair in full).
-        std::mem::swap(&mut self.plans, &mut self.good_plans);
-        std::mem::swap(&mut self.reference, &mut self.good_reference);
-        self.good_y0 = y0;
-        self.fallback_step = Some(0);
-        self.plan_valid = true;
+        self.keep_plan(y0);
         Ok(TickOutput {
             command: self.model.command(&sent),
             plan: plan4,
             reference: self.good_reference[0],
             saturated,
-            constrained,
-            qp_fallback,
+            constrained: solve.constrained,
+            qp_fallback: solve.qp_fallback,
         })
     }
 
@@ -573,15 +681,17 @@ impl Controller for DfMpc {
     /// is used up, or the map fails.
     fn plan_fallback(&mut self, measurement: &Measurement, max_steps: usize) -> Option<TickOutput> {
         // Until a plan step is recorded, this tick's command is unknown.
-        self.pending = true;
-        let step = self.fallback_step.take()? + 1;
+        if self.record == RecordState::Recorded {
+            self.record = RecordState::Pending;
+        }
+        let previous = self.plan;
+        // Used up or unmappable unless this step is flown.
+        self.plan = PlanState::Empty;
+        let step = previous.flown()? + 1;
         if step > max_steps.min(MAX_FALLBACK_STEPS) || step + 3 > self.settings.horizon {
             return None;
         }
-        let d = self
-            .estimator
-            .as_ref()
-            .map_or(DisturbanceEstimate::NOMINAL, |e| e.estimate());
+        let d = self.disturbance_estimate();
         let axes = self.model.axes();
         let mut m = *measurement;
         match &self.multi {
@@ -603,8 +713,8 @@ impl Controller for DfMpc {
         let FixedOutputs { window, fixed, .. } = self.fixed_outputs(&m, &d).ok()?;
         let plan4: [Vector3<f64>; 4] = std::array::from_fn(|j| {
             let mut p = self.good_y0;
-            for (axis, plan) in self.good_plans.iter().enumerate() {
-                p[axis] = plan[step + j];
+            for (axis, pipeline) in self.axes.iter().enumerate() {
+                p[axis] = pipeline.good_plan[step + j];
             }
             p
         });
@@ -614,7 +724,10 @@ impl Controller for DfMpc {
         }
         let (sent, saturated) = self.saturate(u);
         self.commit(window, m.t, &fixed, &sent, saturated);
-        self.fallback_step = Some(step);
+        self.plan = match previous {
+            PlanState::Fresh { .. } => PlanState::Fresh { flown: step },
+            _ => PlanState::Kept { flown: step },
+        };
         Some(TickOutput {
             command: self.model.command(&sent),
             plan: plan4,
@@ -640,10 +753,8 @@ impl Controller for DfMpc {
         if let Some(multi) = &mut self.multi {
             multi.reset();
         }
-        self.plan_valid = false;
-        self.fallback_step = None;
-        self.pending = false;
-        self.gap = false;
+        self.plan = PlanState::Empty;
+        self.record = RecordState::Recorded;
         if let Some(e) = &mut self.estimator {
             e.reset();
         }

@@ -448,8 +448,9 @@ fn banded_failure_falls_back_to_clarabel_and_says_so() {
         acceleration: Some([-1.0, 1.0]),
         speed: None,
     };
-    for b in &mut broken.bounded {
-        *b = Some(
+    for p in &mut broken.axes {
+        let qp = p.bounded.as_mut().expect("the axis has bounds");
+        qp.interior_point = Some(
             BandedInteriorPointSolver::new(10, (1.0, 0.08, DT), bounds, Smoothness::default())
                 .unwrap(),
         );
