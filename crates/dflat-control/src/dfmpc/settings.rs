@@ -49,7 +49,7 @@ pub struct OutputConstraints {
     pub max_tilt: Option<f64>,
     /// Max speed per axis `|Δy/δt|` [m/s]; when the window is already
     /// faster, the plan brakes to it at 90 % of the acceleration bound
-    /// ([`AxisBounds::speed`]). Default none.
+    /// ([`AxisBounds::speed`](crate::optimise::AxisBounds::speed)). Default none.
     pub max_speed: Option<f64>,
     /// Bounds `[a_min, a_max]` on the vertical acceleration `Δ²z/δt²`
     /// [m/s²] in the model frame (NED: positive down); spatial model only.
@@ -68,16 +68,16 @@ impl OutputConstraints {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum QpSolver {
-    /// The banded interior-point method ([`BandedInteriorPointSolver`], O(N) per
+    /// The banded interior-point method ([`BandedInteriorPointSolver`](crate::optimise::BandedInteriorPointSolver), O(N) per
     /// iteration), with clarabel as the fallback when it does not
     /// converge. Default.
     #[default]
     Banded,
-    /// Clarabel alone ([`ClarabelSolver`]).
+    /// Clarabel alone ([`ClarabelSolver`](crate::optimise::ClarabelSolver)).
     Clarabel,
 }
 
-/// Settings of [`DfMpc`], checked by [`DfMpcSettings::validate`].
+/// Settings of [`DfMpc`](super::DfMpc), checked by [`DfMpcSettings::validate`].
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct DfMpcSettings {
@@ -106,8 +106,8 @@ pub struct DfMpcSettings {
     /// paper's cost). Useful values are O(0.1–10) with q = 1.
     pub smoothness_weight: [f64; 3],
     /// Multi-rate windows: timestamped samples through
-    /// [`Controller::observe`] instead of one measurement per tick
-    /// ([`MultiRateWindow`]). `None` (default): the paper's window.
+    /// [`Controller::observe`](crate::Controller::observe) instead of one measurement per tick
+    /// ([`MultiRateWindow`](crate::window::MultiRateWindow)). `None` (default): the paper's window.
     pub multi_rate: Option<MultiRateSettings>,
     /// Disturbance estimation for offset-free tracking
     /// ([`crate::disturbance`]): acceleration offset and thrust scale, used

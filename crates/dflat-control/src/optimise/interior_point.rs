@@ -2,7 +2,7 @@
 //! interior-point method on its KKT system ordered by stage: banded, so one
 //! iteration is O(N).
 //!
-//! Variables as in [`crate::dfmpc::ClarabelSolver`] (clarabel): per
+//! Variables as in [`ClarabelSolver`](super::ClarabelSolver) (clarabel): per
 //! free output f = 0..n−1 the deviation `p_f` from the zero-jerk baseline
 //! and the planned acceleration relative to the fixed one `ã_f`, tied by
 //! the equality `Δ²p_f/δt² − ã_f = 0` (multiplier `λ_f`); cost `½xᵀPx +
@@ -565,9 +565,9 @@ mod tests {
 
 /// The 1-D DF-MPC problem with inequality bounds, solved by the banded
 /// interior-point method of [`StageQp`]: clarabel's variables and
-/// cost ([`ClarabelSolver`]), the KKT system ordered by stage, so
+/// cost ([`ClarabelSolver`](super::ClarabelSolver)), the KKT system ordered by stage, so
 /// O(N) per iteration. It starts from the unconstrained optimum (computed
-/// here with the fast path). [`DfMpc`] uses it first and falls back to
+/// here with the fast path). [`DfMpc`](crate::dfmpc::DfMpc) uses it first and falls back to
 /// clarabel when it does not converge.
 #[derive(Debug, Clone)]
 pub struct BandedInteriorPointSolver {

@@ -25,7 +25,7 @@
 //! planned accelerations (cost `q·(b + p − y_ref)² + r·(Δã/δt)²`, equality
 //! rows tie ã to Δ²p/δt², bounds on ã are single-entry rows): a
 //! well-scaled QP (the raw one in p alone has a Hessian condition number
-//! near 1e10). By default ([`QpSolver::Banded`]) with a primal-dual
+//! near 1e10). By default ([`QpSolver::Banded`](crate::dfmpc::QpSolver::Banded)) with a primal-dual
 //! interior-point method on its KKT system ordered by stage, which is
 //! banded ([`BandedInteriorPointSolver`]): O(N) per iteration,
 //! 2–3× faster than clarabel here (`examples/kkt_tuning.rs`). If it does
@@ -37,7 +37,7 @@
 //!
 //! # Command smoothness (optional)
 //!
-//! With [`DfMpcSettings::smoothness_weight`] s > 0 on an axis, the cost also
+//! With [`DfMpcSettings::smoothness_weight`](crate::dfmpc::DfMpcSettings::smoothness_weight) s > 0 on an axis, the cost also
 //! weighs the change of the commanded attitude between ticks, linearised
 //! through the output-to-input map about hover. Per axis the command asks
 //! for the acceleration the attitude settles to,
