@@ -56,7 +56,7 @@
 //! In-process hooks ([`SitlHandle`]): the true state and an optional trace,
 //! counters, the current mode, a tap of every received frame, a pose pause
 //! switch (the pose stream stops, HEARTBEAT goes on) and a pose offset (an
-//! estimator jump as the daemon sees it). `dflat sitl` ([`run`]) maps
+//! estimator jump as the daemon sees it). `dflat sitl` (the binary crate's shell) maps
 //! SIGUSR1 / SIGUSR2 to pause / resume and prints its bound addresses and
 //! mode changes on stdout.
 
