@@ -2,22 +2,21 @@
 //! sockets or threads.
 //!
 //! bytes → [`FrameParser`] (fed in chunks, like a serial/TCP stream) →
-//! [`LinkRx`] (source filter, decode, counters) → the daemon's event mapping
-//! (`receive_task` in `dflat-daemon/src/daemon.rs`) → [`Supervisor`] and
-//! [`PoseClock`] (`ControlLoop::apply`), with a 50 Hz [`Supervisor::tick`] on
-//! a synthetic clock. The controller itself is not run (it is private to the
-//! control thread and a solve costs milliseconds); the supervisor's goal is
-//! checked instead.
+//! [`LinkRx`] (source filter, decode, counters) → the daemon's own event
+//! mapping ([`event_from`]) → the daemon's pure control step
+//! ([`ControlCore::apply`] per event, [`ControlCore::step`] at 50 Hz on a
+//! synthetic clock) with the configured controller: the same code the
+//! control thread runs, not a copy. Every command it produces is checked
+//! finite and within the tilt limit; the supervisor's goal is checked too.
 //!
 //! Every invariant is an `assert!`: a violation is a crash libFuzzer keeps.
 
-use dflat_daemon::clock::PoseClock;
 use dflat_daemon::config::{Config, MissionStart, PoseSourceKind, PoseTime};
-use dflat_daemon::daemon::supervisor_config;
-use dflat_daemon::supervisor::{FlightState, Goal, SetpointOutcome, Supervisor};
+use dflat_daemon::control::{build_controller, thrust_mapping};
+use dflat_daemon::supervisor::{FlightState, Goal};
+use dflat_daemon::tick::{ControlCore, TickTime, event_from, pose_source, source_filter};
 use dflat_link::{
-    Frame, FrameError, FrameParser, Inbound, LinkRx, MAX_FRAME_LEN, PoseSource, RxOutcome,
-    SourceFilter, frames,
+    Frame, FrameError, FrameParser, Inbound, LinkRx, MAX_FRAME_LEN, PoseSource, RxOutcome, frames,
 };
 
 /// Control period \[s\] of the synthetic tick.
@@ -59,11 +58,11 @@ pub struct Harness {
     /// Filter, decoder and counters.
     pub link: LinkRx,
     pose_source: PoseSource,
-    pose_time: PoseTime,
-    /// The flight state machine.
-    pub supervisor: Supervisor,
-    clock: PoseClock,
+    /// The daemon's control step (supervisor, pose clock, controller, guard).
+    pub core: ControlCore,
     geofence: [f64; 3],
+    max_tilt: f64,
+    tick: u64,
     /// Synthetic monotonic time \[s\].
     pub now: f64,
     next_tick: f64,
@@ -80,29 +79,18 @@ impl Harness {
     /// `dflat_daemon::daemon::spawn` builds it.
     pub fn new(cfg: &Config) -> Self {
         let l = &cfg.link;
-        let mut filter = SourceFilter {
-            vehicle_system_id: l.system_id,
-            autopilot_component_id: l.autopilot_component,
-            own_component_id: l.component_id,
-            gcs_system_id: l.gcs_system_id,
-            setpoint_components: Vec::new(),
-            pose_components: l.pose_components.clone(),
-        };
-        if l.vehicle_setpoints {
-            filter.setpoint_components = (1..=255u8).filter(|c| *c != l.component_id).collect();
-        }
         Self {
             parser: FrameParser::new(),
-            link: LinkRx::new(filter),
-            pose_source: match l.pose_source {
-                PoseSourceKind::LocalPositionNed => PoseSource::LocalPositionNed,
-                PoseSourceKind::Odometry => PoseSource::Odometry,
-                PoseSourceKind::VisionPositionEstimate => PoseSource::VisionPositionEstimate,
-            },
-            pose_time: l.pose_time,
-            supervisor: Supervisor::new(supervisor_config(cfg)),
-            clock: PoseClock::new(l.pose_clock_window_s, l.pose_min_latency_ms / 1000.0),
+            link: LinkRx::new(source_filter(l)),
+            pose_source: pose_source(l.pose_source),
+            core: ControlCore::new(
+                cfg,
+                build_controller(cfg).expect("harness config builds"),
+                thrust_mapping(cfg),
+            ),
             geofence: cfg.mission.geofence,
+            max_tilt: cfg.vehicle.max_tilt_deg.to_radians(),
+            tick: 0,
             now: 0.0,
             next_tick: 0.0,
             handled: 0,
@@ -113,21 +101,38 @@ impl Harness {
         }
     }
 
-    /// Advances the synthetic clock by `dt` \[s\], ticking at 50 Hz on the way.
+    /// Advances the synthetic clock by `dt` \[s\], running the control
+    /// step at 50 Hz on the way (solves take no synthetic time).
     pub fn advance(&mut self, dt: f64) {
         assert!(dt.is_finite() && dt >= 0.0);
         self.now += dt;
         while self.next_tick <= self.now {
             let t = self.next_tick;
-            let d = self.supervisor.tick(t);
-            assert_eq!(d.stream, self.supervisor.state().streams());
-            if let Some(tr) = d.transition {
+            let time = TickTime {
+                tick: self.tick,
+                t,
+                scheduled: t,
+                jitter_us: 0,
+            };
+            let out = self.core.step(&time, std::iter::empty(), &mut || t);
+            assert_eq!(out.row.state, self.core.state());
+            for tr in &out.transitions {
                 assert!(tr.text().len() <= 50, "{}", tr.text());
-                assert_eq!(tr.to, self.supervisor.state());
-                assert_eq!(d.reset_controller, tr.to == FlightState::Failsafe);
-            } else {
-                assert!(!d.reset_controller);
             }
+            if let Some(sent) = &out.command {
+                let c = sent.command;
+                assert!(self.core.state().streams(), "a command outside streaming");
+                assert!(
+                    [c.roll, c.pitch, c.yaw, c.thrust].iter().all(|v| v.is_finite()),
+                    "{c:?}"
+                );
+                assert!(
+                    dflat_control::tilt::tilt(c.pitch, c.roll) <= self.max_tilt + 1e-9,
+                    "{c:?}"
+                );
+                assert!((0.0..=1.0).contains(&c.thrust), "{c:?}");
+            }
+            self.tick += 1;
             self.next_tick += DT;
         }
         self.check_supervisor();
@@ -194,45 +199,16 @@ impl Harness {
         self.check_supervisor();
     }
 
-    /// `receive_task`'s event mapping followed by `ControlLoop::apply`.
+    /// The receive task's event mapping, then the control step's `apply`.
     fn apply(&mut self, inbound: Inbound, arrival: f64) {
-        match inbound {
-            Inbound::Pose(p) if p.source == self.pose_source => {
-                let source_time = (p.time_usec > 0).then_some(p.time_usec as f64 * 1e-6);
-                self.supervisor.on_pose(arrival, p.position);
-                let capture = match self.pose_time {
-                    PoseTime::Source => self.clock.capture_time(arrival, source_time),
-                    PoseTime::Arrival => arrival,
-                };
-                assert!(capture.is_finite(), "capture time {capture}");
-            }
-            Inbound::Heartbeat(_) => self.supervisor.on_heartbeat(arrival),
-            Inbound::PositionSetpoint(s) => {
-                match self.supervisor.on_setpoint(arrival, s.position) {
-                    SetpointOutcome::Accepted { goal, transition } => {
-                        assert_eq!(goal, self.supervisor.goal());
-                        if let Some(tr) = transition {
-                            assert_eq!(tr.to, FlightState::Tracking);
-                        }
-                    }
-                    SetpointOutcome::Unchanged => {}
-                    SetpointOutcome::Refused(r) => {
-                        assert!(r.text().len() <= 50, "{}", r.text());
-                    }
-                }
-            }
-            // The path "finishes" on any other message id divisible by 7,
-            // so that transition is reachable too.
-            Inbound::Other(id) if id % 7 == 0 => {
-                let _ = self.supervisor.on_path_finished(arrival);
-            }
-            _ => {}
+        if let Some(event) = event_from(&inbound, self.pose_source, arrival) {
+            self.core.apply(event);
         }
     }
 
     /// The supervisor never holds or tracks a non-finite or fenced-out goal.
     fn check_supervisor(&self) {
-        let s = &self.supervisor;
+        let s = self.core.supervisor();
         match (s.state(), s.goal()) {
             (FlightState::WaitingForPose, Goal::None) => {}
             (FlightState::WaitingForPose, g) => panic!("waiting with goal {g:?}"),
@@ -379,8 +355,8 @@ mod tests {
             &include_bytes!("../seeds/decode_bytes/vpe")[..],
         ] {
             let h = run(seed);
-            assert_eq!(h.supervisor.state(), FlightState::Tracking);
-            assert_eq!(h.supervisor.goal(), Goal::Setpoint([5.0, 1.0, -10.0]));
+            assert_eq!(h.core.state(), FlightState::Tracking);
+            assert_eq!(h.core.supervisor().goal(), Goal::Setpoint([5.0, 1.0, -10.0]));
         }
     }
 }

@@ -35,6 +35,7 @@ pub mod schedule;
 pub mod signing;
 pub mod summary;
 pub mod supervisor;
+pub mod tick;
 
 pub use daemon::{DaemonError, DaemonHandle, run, shutdown_signal, spawn, spawn_with_controller};
 pub use summary::FlightSummary;

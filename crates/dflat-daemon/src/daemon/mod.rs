@@ -1,0 +1,595 @@
+//! The flight-control daemon: link tasks, the control thread, shutdown.
+//!
+//! ```text
+//!             ┌──────── receive task ────────┐  events (bounded)  ┌──── control thread ─────┐
+//! transport ──┤ frame → LinkRx (filter,      ├───────────────────►│ absolute deadlines      │
+//!             │ decode, count) → pose / hb / │                    │ supervisor → controller │
+//!             │ attitude / setpoint          │                    │ → SET_ATTITUDE_TARGET   │
+//!             └──────────────────────────────┘                    │ CSV row → csv thread    │
+//!                                                                 └───────────┬─────────────┘
+//!             ┌──────── send task ───────────┐   outbound (bounded)           │
+//! transport ◄─┤ header + sequence, send,     │◄───────────────────────────────┴── heartbeat task (1 Hz)
+//!             │ count, pose→command latency  │
+//!             └──────────────────────────────┘
+//! ```
+//!
+//! The control loop runs on its own OS thread and never awaits I/O: it
+//! drains the event queue, decides, solves and hands the command to the
+//! send task with `try_send`. Staleness (the pose timeout) uses *arrival*
+//! times on this computer's monotonic clock.
+//!
+//! Pose times: each pose is stamped with its capture time on this
+//! computer's clock, from its own timestamp and a clock-offset estimate
+//! ([`crate::clock`], `link.pose_time`). A multi-rate DF-MPC
+//! (`controller.multi_rate`) gets every pose through
+//! [`Controller::observe`] at its capture time and, per tick,
+//! [`Controller::update`] with the tick's wake time. The other controllers
+//! get, per tick, the newest pose with its capture time; a tick that finds
+//! no new pose passes the previous one with its old time, and the
+//! controller substitutes its own prediction.
+//!
+//! Entry points: [`run`] (used by `dflat daemon`) and [`spawn`] /
+//! [`DaemonHandle`] (in-process use: demo, tests).
+
+mod control_loop;
+mod link_tasks;
+
+use std::future::Future;
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU64, Ordering};
+use std::time::{Duration, Instant, SystemTime};
+
+use dflat_control::Controller;
+use dflat_link::transport::{Endpoint, TlogTap, Transport, TransportError};
+use dflat_link::{DaemonStatus, LinkRx, LinkStats, MavMessage, timestamp_from_system_time};
+use thiserror::Error;
+use tokio::sync::{mpsc, watch};
+use tracing::{error, info, warn};
+
+use crate::config::{Config, ModelKind};
+use crate::control::{build_controller, configured_path, thrust_mapping};
+use crate::guard::GuardCounts;
+use crate::records::{CsvRecorder, CsvReport, flight_stem};
+use crate::signing::SigningError;
+use crate::summary::{
+    DisturbanceSummary, FlightSummary, Histogram, LinkSummary, SolveCounts, StateTimes,
+    peak_rss_kib, process_cpu_seconds,
+};
+use crate::supervisor::FlightState;
+pub use crate::tick::supervisor_config;
+use crate::tick::{ControlCore, Event, pose_source, source_filter};
+pub use link_tasks::setpoint_refusal_text;
+
+/// Capacity of the receive task → control thread queue \[events\].
+const EVENT_QUEUE: usize = 1024;
+/// Capacity of the outbound queue to the send task \[messages\].
+const OUTBOUND_QUEUE: usize = 256;
+/// How long shutdown waits for the send task to drain \[s\].
+const SEND_DRAIN_TIMEOUT: Duration = Duration::from_secs(2);
+
+/// `STATUS=` for systemd (no-op when not under systemd).
+fn notify_status(state: FlightState) {
+    let text = format!("state {}", state.name());
+    let _ = sd_notify::notify(&[sd_notify::NotifyState::Status(&text)]);
+}
+
+/// Why the daemon could not start or stopped with an error.
+#[derive(Debug, Error)]
+pub enum DaemonError {
+    /// The connection string is invalid, or the link could not be opened.
+    #[error("link: {0}")]
+    Link(#[source] TransportError),
+    /// The link failed during the flight (TCP closed, serial port gone).
+    #[error("link lost: {0}")]
+    LinkLost(#[source] TransportError),
+    /// The controller or the path could not be built from the configuration.
+    #[error("controller: {0}")]
+    Controller(#[from] dflat_control::ControlError),
+    /// The records directory or files could not be created.
+    #[error("records: {path}: {source}")]
+    Records {
+        /// The directory or file.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// MAVLink signing is configured but its key or timestamp file is
+    /// refused (the message names the `[link]` field).
+    #[error("signing: {0}")]
+    Signing(#[from] SigningError),
+    /// A thread could not be started or ended abnormally.
+    #[error("internal: {0}")]
+    Internal(String),
+}
+
+/// A message for the send task. For attitude commands, `tick` is the
+/// tick's wake time and `pose_arrival` the arrival of its pose if that
+/// arrived since the previous command (for the latency figures).
+#[derive(Debug)]
+struct Outgoing {
+    message: MavMessage,
+    tick: Option<Instant>,
+    pose_arrival: Option<Instant>,
+}
+
+impl Outgoing {
+    fn plain(message: MavMessage) -> Self {
+        Self {
+            message,
+            tick: None,
+            pose_arrival: None,
+        }
+    }
+}
+
+/// Published daemon state (for HEARTBEAT and [`DaemonHandle::state`]).
+const ST_BOOT: u8 = 0;
+const ST_SHUTDOWN: u8 = 5;
+
+fn encode_state(s: FlightState) -> u8 {
+    s.index() as u8 + 1
+}
+
+fn decode_state(v: u8) -> Option<FlightState> {
+    match v {
+        1..=4 => Some(FlightState::ALL[usize::from(v - 1)]),
+        _ => None,
+    }
+}
+
+fn daemon_status(v: u8) -> DaemonStatus {
+    match decode_state(v) {
+        None if v == ST_BOOT => DaemonStatus::Boot,
+        None => DaemonStatus::Poweroff,
+        Some(FlightState::WaitingForPose) => DaemonStatus::Standby,
+        Some(FlightState::Holding | FlightState::Tracking) => DaemonStatus::Active,
+        Some(FlightState::Failsafe) => DaemonStatus::Critical,
+    }
+}
+
+/// Stop request shared by all parts: a flag for the control thread and a
+/// watch for the tasks.
+#[derive(Debug)]
+struct Stop {
+    flag: AtomicBool,
+    tx: watch::Sender<bool>,
+}
+
+impl Stop {
+    fn request(&self) {
+        self.flag.store(true, Ordering::SeqCst);
+        self.tx.send_replace(true);
+    }
+
+    fn requested(&self) -> bool {
+        self.flag.load(Ordering::SeqCst)
+    }
+}
+
+/// What the control thread measured.
+#[derive(Debug)]
+struct ControlReport {
+    ticks: u64,
+    missed: u64,
+    commands: u64,
+    control_errors: u64,
+    outbound_dropped: u64,
+    solve: Histogram,
+    jitter: Histogram,
+    time_in_state: [f64; 4],
+    state_changes: u64,
+    final_state: FlightState,
+    csv: Option<CsvReport>,
+    disturbance: Option<DisturbanceSummary>,
+    guards: GuardCounts,
+    solves: SolveCounts,
+}
+
+/// What the receive task counted.
+#[derive(Debug, Default)]
+struct RxReport {
+    stats: LinkStats,
+    transport_errors: u64,
+    events_dropped: u64,
+}
+
+/// What the send task counted.
+#[derive(Debug, Default)]
+struct TxReport {
+    stats: LinkStats,
+    latency: Histogram,
+    tick_to_send: Histogram,
+}
+
+/// A running daemon (see [`spawn`]).
+#[derive(Debug)]
+pub struct DaemonHandle {
+    stop: Arc<Stop>,
+    stop_rx: watch::Receiver<bool>,
+    state: Arc<AtomicU8>,
+    ticks: Arc<AtomicU64>,
+    local_addr: Option<SocketAddr>,
+    fault: Arc<std::sync::Mutex<Option<TransportError>>>,
+    parts: Parts,
+}
+
+#[derive(Debug)]
+struct Parts {
+    link: String,
+    controller: String,
+    model: String,
+    rate_hz: f64,
+    started: Instant,
+    cpu_at_start: Option<f64>,
+    tap: Option<TlogTap>,
+    control: std::thread::JoinHandle<ControlReport>,
+    rx: tokio::task::JoinHandle<RxReport>,
+    tx: tokio::task::JoinHandle<TxReport>,
+    heartbeat: tokio::task::JoinHandle<()>,
+}
+
+impl DaemonHandle {
+    /// The flight state, or `None` before the first tick and after shutdown.
+    pub fn state(&self) -> Option<FlightState> {
+        decode_state(self.state.load(Ordering::Relaxed))
+    }
+
+    /// Control ticks run so far.
+    pub fn ticks(&self) -> u64 {
+        self.ticks.load(Ordering::Relaxed)
+    }
+
+    /// The daemon's local socket address (UDP/TCP links).
+    pub fn local_addr(&self) -> Option<SocketAddr> {
+        self.local_addr
+    }
+
+    /// Asks the daemon to stop (idempotent); then [`join`](Self::join) it.
+    pub fn shutdown(&self) {
+        self.stop.request();
+    }
+
+    /// Resolves once a stop was requested — by [`shutdown`](Self::shutdown)
+    /// or by the daemon itself when its link failed.
+    pub async fn stopped(&self) {
+        let mut rx = self.stop_rx.clone();
+        // An error means the sender is gone, which only happens at teardown.
+        let _ = rx.wait_for(|stop| *stop).await;
+    }
+
+    /// Stops the daemon (if not yet stopped), waits for all parts, flushes
+    /// the records and returns the summary. Errors if the link failed.
+    pub async fn join(self) -> Result<FlightSummary, DaemonError> {
+        self.stop.request();
+        let Parts {
+            link,
+            controller,
+            model,
+            rate_hz,
+            started,
+            cpu_at_start,
+            tap,
+            control,
+            rx,
+            tx,
+            heartbeat,
+        } = self.parts;
+        let control = tokio::task::spawn_blocking(move || control.join())
+            .await
+            .map_err(|e| DaemonError::Internal(format!("control thread join: {e}")))?
+            .map_err(|_| DaemonError::Internal("control thread panicked".into()))?;
+        let join_err = |what: &str, e: tokio::task::JoinError| {
+            DaemonError::Internal(format!("{what} task: {e}"))
+        };
+        heartbeat.await.map_err(|e| join_err("heartbeat", e))?;
+        let rx = rx.await.map_err(|e| join_err("receive", e))?;
+        let tx = match tokio::time::timeout(SEND_DRAIN_TIMEOUT, tx).await {
+            Ok(r) => r.map_err(|e| join_err("send", e))?,
+            Err(_) => {
+                warn!("send task did not drain within {SEND_DRAIN_TIMEOUT:?}");
+                TxReport::default()
+            }
+        };
+        let tlog = match &tap {
+            Some(tap) => tap.close().await,
+            None => None,
+        };
+        let duration_s = started.elapsed().as_secs_f64();
+        let cpu_percent = match (cpu_at_start, process_cpu_seconds()) {
+            (Some(a), Some(b)) if duration_s > 0.0 => Some(100.0 * (b - a) / duration_s),
+            _ => None,
+        };
+        self.state.store(ST_SHUTDOWN, Ordering::Relaxed);
+        let summary = FlightSummary {
+            link,
+            controller,
+            model,
+            rate_hz,
+            duration_s,
+            ticks: control.ticks,
+            missed_ticks: control.missed,
+            commands: control.commands,
+            control_errors: control.control_errors,
+            solve_us: control.solve.percentiles(),
+            jitter_us: control.jitter.percentiles(),
+            latency_us: tx.latency.percentiles(),
+            tick_to_send_us: tx.tick_to_send.percentiles(),
+            link_stats: LinkSummary::new(&rx.stats, &tx.stats, rx.transport_errors),
+            events_dropped: rx.events_dropped,
+            outbound_dropped: control.outbound_dropped,
+            time_in_state_s: StateTimes::from_array(control.time_in_state),
+            state_changes: control.state_changes,
+            final_state: control.final_state,
+            cpu_percent,
+            peak_rss_kib: peak_rss_kib(),
+            csv: control.csv,
+            tlog,
+            disturbance: control.disturbance,
+            guards: control.guards,
+            solves: control.solves,
+        };
+        let fault = self.fault.lock().unwrap_or_else(|p| p.into_inner()).take();
+        match fault {
+            Some(e) => Err(DaemonError::LinkLost(e)),
+            None => Ok(summary),
+        }
+    }
+}
+
+/// Runs the daemon until `shutdown` resolves (or the link fails), then
+/// stops streaming, flushes the records and returns the summary.
+///
+/// `link_override` replaces `link.url`. Needs a tokio runtime with the
+/// `time` and `net` drivers; the control loop runs on its own OS thread.
+pub async fn run(
+    config: Config,
+    link_override: Option<String>,
+    shutdown: impl Future<Output = ()>,
+) -> Result<FlightSummary, DaemonError> {
+    let handle = spawn(config, link_override).await?;
+    tokio::select! {
+        () = shutdown => info!("shutdown requested"),
+        () = handle.stopped() => {}
+    }
+    let _ = sd_notify::notify(&[sd_notify::NotifyState::Stopping]);
+    handle.join().await
+}
+
+/// Resolves on SIGINT or SIGTERM (Ctrl-C only on non-Unix systems). If the
+/// handlers cannot be installed, logs it and never resolves.
+pub async fn shutdown_signal() {
+    #[cfg(unix)]
+    {
+        use tokio::signal::unix::{SignalKind, signal};
+        match (
+            signal(SignalKind::interrupt()),
+            signal(SignalKind::terminate()),
+        ) {
+            (Ok(mut int), Ok(mut term)) => {
+                tokio::select! {
+                    _ = int.recv() => info!("SIGINT"),
+                    _ = term.recv() => info!("SIGTERM"),
+                }
+            }
+            (Err(e), _) | (_, Err(e)) => {
+                error!(error = %e, "cannot install signal handlers");
+                std::future::pending::<()>().await;
+            }
+        }
+    }
+    #[cfg(not(unix))]
+    {
+        if let Err(e) = tokio::signal::ctrl_c().await {
+            error!(error = %e, "cannot install the Ctrl-C handler");
+            std::future::pending::<()>().await;
+        }
+    }
+}
+
+/// Opens the link, creates the records and starts all parts. Returns once
+/// the daemon is running (state `WaitingForPose` after the first tick).
+pub async fn spawn(
+    config: Config,
+    link_override: Option<String>,
+) -> Result<DaemonHandle, DaemonError> {
+    let controller = build_controller(&config)?;
+    spawn_with_controller(config, link_override, controller).await
+}
+
+/// As [`spawn`], with a controller of the caller's own instead of the one
+/// `controller.kind` builds: the daemon's link, supervisor, guards and
+/// records around any [`Controller`] (a research controller, or a test
+/// double). Its commands use the configured thrust mapping and vehicle
+/// limits.
+pub async fn spawn_with_controller(
+    config: Config,
+    link_override: Option<String>,
+    controller: Box<dyn Controller>,
+) -> Result<DaemonHandle, DaemonError> {
+    let url = link_override.unwrap_or_else(|| config.link.url.clone());
+    let endpoint = Endpoint::parse(&url).map_err(DaemonError::Link)?;
+    if let Some(path) = configured_path(&config) {
+        path?;
+    }
+    let signing =
+        crate::signing::setup(&config.link, timestamp_from_system_time(SystemTime::now()))?;
+    if let Some((s, store)) = &signing {
+        info!(
+            link_id = s.link_id(),
+            timestamp = s.timestamp(),
+            timestamp_file = %store.path().display(),
+            accept_unsigned_telemetry = s.accept_unsigned_telemetry,
+            "MAVLink 2 signing on"
+        );
+    }
+    let mapping = thrust_mapping(&config);
+    mapping
+        .validate()
+        .map_err(|e| DaemonError::Internal(format!("thrust mapping: {e}")))?;
+
+    // Records.
+    let started_wall = SystemTime::now();
+    let (csv, tap) = if config.logging.dir.trim().is_empty() {
+        (None, None)
+    } else {
+        let dir = PathBuf::from(&config.logging.dir);
+        std::fs::create_dir_all(&dir).map_err(|source| DaemonError::Records {
+            path: dir.clone(),
+            source,
+        })?;
+        let stem = flight_stem(&dir, started_wall);
+        let csv = if config.logging.csv {
+            let path = stem.with_extension("csv");
+            Some(
+                CsvRecorder::create(&path)
+                    .map_err(|source| DaemonError::Records { path, source })?,
+            )
+        } else {
+            None
+        };
+        let tap = if config.logging.tlog {
+            let path = stem.with_extension("tlog");
+            Some(TlogTap::create(&path).map_err(|e| match e {
+                TransportError::Io { source, .. } => DaemonError::Records { path, source },
+                other => DaemonError::Internal(other.to_string()),
+            })?)
+        } else {
+            None
+        };
+        (csv, tap)
+    };
+
+    let controller_name = controller.name().to_owned();
+    let transport = Transport::open_with_tap(&endpoint, tap.clone())
+        .await
+        .map_err(DaemonError::Link)?;
+    let local_addr = transport.local_addr();
+    info!(
+        link = %endpoint,
+        local = ?local_addr,
+        controller = controller.name(),
+        model = ?config.vehicle.model,
+        rate_hz = config.controller.rate_hz,
+        "daemon started"
+    );
+
+    let (stop_tx, stop_rx) = watch::channel(false);
+    let stop = Arc::new(Stop {
+        flag: AtomicBool::new(false),
+        tx: stop_tx,
+    });
+    let state = Arc::new(AtomicU8::new(ST_BOOT));
+    let ticks = Arc::new(AtomicU64::new(0));
+    let fault = Arc::new(std::sync::Mutex::new(None));
+    let epoch = Instant::now();
+    let cpu_at_start = process_cpu_seconds();
+
+    let (event_tx, event_rx) = std::sync::mpsc::sync_channel::<Event>(EVENT_QUEUE);
+    let (out_tx, out_rx) = mpsc::channel::<Outgoing>(OUTBOUND_QUEUE);
+
+    let own = (config.link.system_id, config.link.component_id);
+    let mut link_rx = LinkRx::new(source_filter(&config.link));
+    link_rx.signing = signing.as_ref().map(|(s, _)| s.clone());
+    let rx_ctx = link_tasks::RxContext {
+        epoch,
+        pose_source: pose_source(config.link.pose_source),
+        own,
+        autopilot_component: config.link.autopilot_component,
+        yaw: config.vehicle.yaw_deg.to_radians(),
+        state: state.clone(),
+    };
+    let rx = tokio::spawn(link_tasks::receive_task(
+        transport.clone(),
+        link_rx,
+        rx_ctx,
+        event_tx,
+        out_tx.clone(),
+        stop.clone(),
+        fault.clone(),
+    ));
+    let tx = tokio::spawn(link_tasks::send_task(transport, out_rx, own, signing));
+    let heartbeat = tokio::spawn(link_tasks::heartbeat_task(
+        out_tx.clone(),
+        state.clone(),
+        stop.clone(),
+    ));
+
+    let loop_ctx = control_loop::ControlLoop {
+        core: ControlCore::new(&config, controller, mapping),
+        events: event_rx,
+        out: out_tx,
+        stop: stop.clone(),
+        state: state.clone(),
+        ticks: ticks.clone(),
+        epoch,
+        csv,
+        period: Duration::from_secs_f64(1.0 / config.controller.rate_hz),
+    };
+    let control = std::thread::Builder::new()
+        .name("dflat-control".into())
+        .spawn(move || loop_ctx.run())
+        .map_err(|e| DaemonError::Internal(format!("cannot start the control thread: {e}")))?;
+
+    Ok(DaemonHandle {
+        stop,
+        stop_rx,
+        state,
+        ticks,
+        local_addr,
+        fault,
+        parts: Parts {
+            link: endpoint.to_string(),
+            controller: controller_name,
+            model: match config.vehicle.model {
+                ModelKind::Planar => "planar".into(),
+                ModelKind::Spatial => "spatial".into(),
+            },
+            rate_hz: config.controller.rate_hz,
+            started: epoch,
+            cpu_at_start,
+            tap,
+            control,
+            rx,
+            tx,
+            heartbeat,
+        },
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn state_codes_round_trip() {
+        for s in FlightState::ALL {
+            assert_eq!(decode_state(encode_state(s)), Some(s));
+        }
+        assert_eq!(decode_state(ST_BOOT), None);
+        assert_eq!(decode_state(ST_SHUTDOWN), None);
+        assert_eq!(daemon_status(ST_BOOT), DaemonStatus::Boot);
+        assert_eq!(daemon_status(ST_SHUTDOWN), DaemonStatus::Poweroff);
+        assert_eq!(
+            daemon_status(encode_state(FlightState::Failsafe)),
+            DaemonStatus::Critical
+        );
+        assert_eq!(
+            daemon_status(encode_state(FlightState::Tracking)),
+            DaemonStatus::Active
+        );
+    }
+
+    #[test]
+    fn supervisor_config_from_defaults() {
+        let c = supervisor_config(&Config::default());
+        assert_eq!(c.pose_timeout, 0.1);
+        assert_eq!(c.autopilot_timeout, 3.0);
+        assert_eq!(
+            c.path_ends,
+            Some(([-20.0, -30.0, -10.0], [0.0, 0.0, -10.0]))
+        );
+        assert!(!c.start_path);
+    }
+}

@@ -1,0 +1,831 @@
+//! The control tick as one pure step: events and time in; the command,
+//! STATUSTEXTs, state changes and the CSV record out.
+//!
+//! [`ControlCore`] holds everything the control thread decides with — the
+//! supervisor, the controller, the pose clock, the guard, the fallback and
+//! the residual monitor — and nothing that does I/O. The control thread
+//! ([`crate::daemon`]) is a thin shell around it: it sleeps to the tick's
+//! deadline, drains the event queue, calls [`ControlCore::step`], sends
+//! what the step returns and hands the record to the CSV thread. The fuzz
+//! target and the tests drive the same step on a synthetic clock.
+//!
+//! Time enters as arguments: event arrival and tick times in seconds since
+//! the daemon's epoch, and a stopwatch (monotonic seconds) the step reads
+//! around the controller's solve to detect a deadline overrun.
+//!
+//! The exit path is written once ([`ControlCore::guarded`]): controller
+//! output → thrust mapping → [`CommandGuard`] → command. A good tick's
+//! command, a plan-fallback step and the held / level-hover fallback all
+//! pass through it exactly once, so each guard counter counts a command at
+//! most once.
+
+use dflat_control::reference::Reference;
+use dflat_control::{Controller, Measurement};
+use dflat_link::dialect::MavSeverity;
+use dflat_link::{
+    AttitudeCommand, Inbound, MavMessage, PoseSource, SourceFilter, Target, ThrustMapping,
+    set_attitude_target, statustext,
+};
+use nalgebra::Vector3;
+use tracing::{debug, error, info, warn};
+
+use crate::clock::PoseClock;
+use crate::config::{Config, LinkConfig, PoseSourceKind, PoseTime};
+use crate::control::reference_for;
+use crate::guard::{
+    CommandGuard, Fallback, FallbackKind, GuardCounts, ResidualMonitor, is_pose_jump,
+};
+use crate::records::{CsvDisturbance, CsvRow};
+use crate::summary::{DisturbanceSummary, SolveCounts};
+use crate::supervisor::{
+    Cause, FlightState, Goal, SetpointOutcome, Supervisor, SupervisorConfig, Transition,
+};
+
+/// Smallest interval between two "setpoint refused" STATUSTEXTs \[s\].
+pub const REFUSAL_TEXT_INTERVAL: f64 = 1.0;
+/// How long a residual failsafe lasts before pose may re-engage \[s\].
+const RESIDUAL_FAILSAFE_LATCH: f64 = 2.0;
+
+/// An inbound fact for the control thread, stamped with its arrival time
+/// \[s\] since the daemon's epoch (this computer's monotonic clock).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Event {
+    /// A pose from the configured pose source.
+    Pose {
+        /// Arrival \[s\].
+        arrival: f64,
+        /// The source's timestamp \[s\] on its own clock (`None`: 0 / none).
+        source_time: Option<f64>,
+        /// Position, local NED \[m\].
+        position: [f64; 3],
+        /// Yaw from the pose message \[rad\], if it has one.
+        yaw: Option<f64>,
+        /// The estimator reset counter (ODOMETRY, VISION_POSITION_ESTIMATE).
+        reset_counter: Option<u8>,
+    },
+    /// ATTITUDE: the autopilot's yaw \[rad\].
+    Attitude {
+        /// Yaw \[rad\].
+        yaw: f64,
+    },
+    /// The autopilot's HEARTBEAT.
+    Heartbeat {
+        /// Arrival \[s\].
+        arrival: f64,
+    },
+    /// An accepted position setpoint.
+    Setpoint {
+        /// Arrival \[s\].
+        arrival: f64,
+        /// Position, local NED \[m\].
+        position: [f64; 3],
+    },
+}
+
+/// The event a decoded, accepted message is for the control thread (`None`:
+/// not one it acts on). `arrival` \[s\] since the daemon's epoch.
+pub fn event_from(inbound: &Inbound, pose_source: PoseSource, arrival: f64) -> Option<Event> {
+    match inbound {
+        Inbound::Pose(p) if p.source == pose_source => Some(Event::Pose {
+            arrival,
+            source_time: (p.time_usec > 0).then_some(p.time_usec as f64 * 1e-6),
+            position: p.position,
+            yaw: p.yaw,
+            reset_counter: p.reset_counter,
+        }),
+        Inbound::Attitude(a) => Some(Event::Attitude { yaw: a.yaw }),
+        Inbound::Heartbeat(_) => Some(Event::Heartbeat { arrival }),
+        Inbound::PositionSetpoint(s) => Some(Event::Setpoint {
+            arrival,
+            position: s.position,
+        }),
+        _ => None,
+    }
+}
+
+/// The receive path's source filter from `[link]`: the autopilot and the
+/// ground station by id, setpoints from every other component of the
+/// vehicle with `link.vehicle_setpoints`, pose from `link.pose_components`.
+pub fn source_filter(link: &LinkConfig) -> SourceFilter {
+    let mut filter = SourceFilter {
+        vehicle_system_id: link.system_id,
+        autopilot_component_id: link.autopilot_component,
+        own_component_id: link.component_id,
+        gcs_system_id: link.gcs_system_id,
+        setpoint_components: Vec::new(),
+        pose_components: link.pose_components.clone(),
+    };
+    if link.vehicle_setpoints {
+        filter.setpoint_components = (1..=255u8).filter(|c| *c != link.component_id).collect();
+    }
+    filter
+}
+
+/// The pose message `link.pose_source` names.
+pub fn pose_source(kind: PoseSourceKind) -> PoseSource {
+    match kind {
+        PoseSourceKind::LocalPositionNed => PoseSource::LocalPositionNed,
+        PoseSourceKind::Odometry => PoseSource::Odometry,
+        PoseSourceKind::VisionPositionEstimate => PoseSource::VisionPositionEstimate,
+    }
+}
+
+/// The supervisor's parameters from the configuration.
+pub fn supervisor_config(cfg: &Config) -> SupervisorConfig {
+    let m = &cfg.mission;
+    let path_ends = match (m.path.first(), m.path.last()) {
+        (Some(a), Some(b)) if m.path.len() >= 2 => Some((*a, *b)),
+        _ => None,
+    };
+    SupervisorConfig {
+        pose_timeout: cfg.safety.pose_timeout_ms / 1000.0,
+        autopilot_timeout: cfg.safety.autopilot_timeout_ms / 1000.0,
+        geofence: m.geofence,
+        path_ends,
+        path_trigger_radius: m.path_trigger_radius,
+        start_path: m.start == crate::config::MissionStart::Path,
+        repeat_path: m.repeat,
+    }
+}
+
+/// One pose as the control core keeps it.
+#[derive(Debug, Clone, Copy)]
+struct PoseSample {
+    /// Arrival on this computer \[s\].
+    arrival: f64,
+    /// Capture time on this computer's clock \[s\].
+    capture: f64,
+    /// The source's own timestamp \[s\], if it has one.
+    source_time: Option<f64>,
+    /// Position, local NED \[m\].
+    position: [f64; 3],
+    /// Yaw from the pose message \[rad\], if it has one.
+    yaw: Option<f64>,
+    /// Estimator reset counter, if the message has one.
+    reset_counter: Option<u8>,
+}
+
+/// The time of one tick.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TickTime {
+    /// Tick number since start.
+    pub tick: u64,
+    /// Wake time \[s\] since the epoch (the tick's time for the controller
+    /// and the supervisor).
+    pub t: f64,
+    /// The scheduled time \[s\] (wake − jitter), for the record.
+    pub scheduled: f64,
+    /// Wake-up lateness \[µs\].
+    pub jitter_us: u32,
+}
+
+/// The command a tick sends.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SentCommand {
+    /// SET_ATTITUDE_TARGET, ready to send.
+    pub message: MavMessage,
+    /// The guarded command in it.
+    pub command: AttitudeCommand,
+    /// Arrival \[s\] of the pose it used, when that pose is new since the
+    /// previous command (for the pose → command latency).
+    pub pose_arrival: Option<f64>,
+}
+
+/// What one step produced.
+#[derive(Debug, Clone)]
+pub struct StepOutput {
+    /// SET_ATTITUDE_TARGET to send (`None`: not streaming).
+    pub command: Option<SentCommand>,
+    /// STATUSTEXTs to send, in order.
+    pub texts: Vec<MavMessage>,
+    /// State changes, in order (for the published state and systemd).
+    pub transitions: Vec<Transition>,
+    /// The tick's CSV row.
+    pub row: CsvRow,
+    /// Controller solve time \[µs\] (when it ran).
+    pub solve_us: Option<u32>,
+}
+
+/// Counters of the core over the run.
+#[derive(Debug, Clone, Default)]
+pub struct CoreCounts {
+    /// Commands produced.
+    pub commands: u64,
+    /// Ticks the controller failed (error or panic).
+    pub control_errors: u64,
+    /// The disturbance estimate at the last tick the controller ran.
+    pub disturbance: Option<DisturbanceSummary>,
+    /// Flags of the controller's successful ticks.
+    pub solves: SolveCounts,
+    /// What the guards did.
+    pub guards: GuardCounts,
+}
+
+/// Everything the control thread decides with (see the module docs).
+pub struct ControlCore {
+    supervisor: Supervisor,
+    controller: Box<dyn Controller>,
+    mapping: ThrustMapping,
+    target: Target,
+    config: Config,
+    period: f64,
+    multi_rate: bool,
+    clock: PoseClock,
+    guard: CommandGuard,
+    fallback: Fallback,
+    residual: ResidualMonitor,
+    // Per-run state.
+    pose: Option<PoseSample>,
+    attitude_yaw: Option<f64>,
+    last_used_arrival: Option<f64>,
+    reference: Option<Reference>,
+    reference_generation: u64,
+    last_refusal_text: Option<f64>,
+    error_streak: u64,
+    guard_note: Option<&'static str>,
+    fallback_kind: Option<FallbackKind>,
+    counts: CoreCounts,
+    /// Outputs produced between steps (by [`ControlCore::apply`]).
+    pending_texts: Vec<MavMessage>,
+    pending_transitions: Vec<Transition>,
+}
+
+impl std::fmt::Debug for ControlCore {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ControlCore")
+            .field("state", &self.supervisor.state())
+            .field("controller", &self.controller.name())
+            .finish_non_exhaustive()
+    }
+}
+
+impl ControlCore {
+    /// The core for `config` around `controller` (reset here), commands
+    /// mapped with `mapping`.
+    pub fn new(
+        config: &Config,
+        mut controller: Box<dyn Controller>,
+        mapping: ThrustMapping,
+    ) -> Self {
+        controller.reset();
+        let supervisor = Supervisor::new(supervisor_config(config));
+        let reference_generation = supervisor.goal_generation();
+        Self {
+            multi_rate: controller.multi_rate(),
+            supervisor,
+            controller,
+            mapping,
+            target: Target {
+                system: config.link.system_id,
+                component: config.link.autopilot_component,
+            },
+            period: 1.0 / config.controller.rate_hz,
+            clock: PoseClock::new(
+                config.link.pose_clock_window_s,
+                config.link.pose_min_latency_ms / 1000.0,
+            ),
+            guard: CommandGuard {
+                max_tilt: config.vehicle.max_tilt_deg.to_radians(),
+            },
+            fallback: Fallback::new(
+                config.safety.hold_last_ticks,
+                mapping
+                    .normalized(config.vehicle.gravity)
+                    .unwrap_or(config.vehicle.hover_thrust),
+                config.vehicle.yaw_deg.to_radians(),
+            ),
+            residual: ResidualMonitor::new(config.safety.residual_failsafe_m),
+            config: config.clone(),
+            pose: None,
+            attitude_yaw: None,
+            last_used_arrival: None,
+            reference: None,
+            reference_generation,
+            last_refusal_text: None,
+            error_streak: 0,
+            guard_note: None,
+            fallback_kind: None,
+            counts: CoreCounts::default(),
+            pending_texts: Vec::new(),
+            pending_transitions: Vec::new(),
+        }
+    }
+
+    /// The flight state.
+    pub fn state(&self) -> FlightState {
+        self.supervisor.state()
+    }
+
+    /// The supervisor (time in states, transitions).
+    pub fn supervisor(&self) -> &Supervisor {
+        &self.supervisor
+    }
+
+    /// The controller's name.
+    pub fn controller_name(&self) -> &'static str {
+        self.controller.name()
+    }
+
+    /// The counters so far.
+    pub fn counts(&self) -> &CoreCounts {
+        &self.counts
+    }
+
+    /// One control tick at `time`: the events since the previous tick are
+    /// applied in order, the supervisor decides, the controller runs when
+    /// the state streams, and the command goes through the guard once.
+    /// `stopwatch` returns monotonic seconds; it is read around the solve
+    /// (an overrun of the tick period sends the fallback instead).
+    pub fn step(
+        &mut self,
+        time: &TickTime,
+        events: impl IntoIterator<Item = Event>,
+        stopwatch: &mut dyn FnMut() -> f64,
+    ) -> StepOutput {
+        let t = time.t;
+        // 1. Inbound facts up to now.
+        for event in events {
+            self.apply(event);
+        }
+        // 2. Decide.
+        let decision = self.supervisor.tick(t);
+        if decision.reset_controller {
+            self.reset_controller();
+            self.last_used_arrival = None;
+        }
+        if let Some(tr) = decision.transition {
+            self.announce(tr);
+        }
+        self.refresh_reference();
+
+        // 3. Control.
+        let mut row = CsvRow {
+            tick: time.tick,
+            t: time.scheduled,
+            state: self.supervisor.state(),
+            measured: self.pose.map(|p| p.position),
+            plan: None,
+            reference: None,
+            command: None,
+            solve_us: None,
+            jitter_us: time.jitter_us,
+            disturbance: None,
+            residual: None,
+            guard: self.guard_note.take(),
+        };
+        // The model-consistency residual: this tick's measurement against
+        // the previous plan's prediction for it.
+        if decision.stream
+            && let Some(pose) = self.pose
+        {
+            let (r, trip) = self.residual.measure(pose.position);
+            row.residual = r;
+            if trip
+                && let Some(tr) = self.supervisor.force_failsafe(
+                    t,
+                    Cause::ResidualDiverged,
+                    RESIDUAL_FAILSAFE_LATCH,
+                )
+            {
+                self.counts.guards.residual_failsafes += 1;
+                warn!(residual = ?r, "model residual above the threshold: failsafe");
+                self.reset_controller();
+                self.last_used_arrival = None;
+                self.announce(tr);
+                row.guard = Some("residual");
+            }
+        }
+        let mut command = None;
+        let mut solve_us = None;
+        if self.supervisor.state().streams()
+            && let Some(pose) = self.pose
+            && self.reference.is_some()
+        {
+            let (sent, us) = self.control(t, pose, stopwatch, &mut row);
+            command = sent;
+            solve_us = Some(us);
+        }
+        row.state = self.supervisor.state();
+        StepOutput {
+            command,
+            texts: std::mem::take(&mut self.pending_texts),
+            transitions: std::mem::take(&mut self.pending_transitions),
+            row,
+            solve_us,
+        }
+    }
+
+    /// Runs the controller on `pose` and produces the tick's command (or
+    /// none when it cannot be encoded); returns it and the solve time.
+    fn control(
+        &mut self,
+        t: f64,
+        pose: PoseSample,
+        stopwatch: &mut dyn FnMut() -> f64,
+        row: &mut CsvRow,
+    ) -> (Option<SentCommand>, u32) {
+        let multi_rate = self.multi_rate;
+        // Multi-rate: the samples were observed as they arrived; the tick
+        // passes its own time. Otherwise the newest pose with its capture
+        // time (not newer than the last: no new pose).
+        let measurement = Measurement {
+            t: if multi_rate { t } else { pose.capture },
+            position: Vector3::from(pose.position),
+            yaw: self.yaw_of(pose.yaw, self.attitude_yaw),
+        };
+        let t0 = stopwatch();
+        // A panicking controller is a bug, but it must not take the loop
+        // down with it: treat it as a failed tick and reset.
+        let controller = &mut self.controller;
+        let Some(reference) = self.reference.as_mut() else {
+            unreachable!("control() runs with a reference")
+        };
+        let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            controller.update(&measurement, reference)
+        }))
+        .unwrap_or_else(|_| {
+            controller.reset();
+            Err(dflat_control::ControlError::Solver(
+                "controller panicked (reset)".into(),
+            ))
+        });
+        if result.is_err() && multi_rate {
+            // After a reset (panic) the window needs a sample again (a
+            // repeated sample replaces the one held).
+            self.observe(&pose);
+        }
+        let solve = (stopwatch() - t0).max(0.0);
+        let solve_us = (solve * 1e6).min(f64::from(u32::MAX)) as u32;
+        row.solve_us = Some(solve_us);
+        let path_done = matches!(self.supervisor.goal(), Goal::Path)
+            && self.reference.as_ref().is_some_and(|r| r.is_finished());
+        let produced = result
+            .map_err(|e| e.to_string())
+            .and_then(|out| self.guarded(&out.command).map(|c| (out, c)));
+        // The one exit point: a guarded controller command, or the fallback
+        // (the previous plan, the held command, then level hover).
+        let (command, out) = match produced {
+            Ok((out, command)) if solve <= self.period => {
+                if self.error_streak > 0 {
+                    info!(ticks = self.error_streak, "controller recovered");
+                }
+                self.error_streak = 0;
+                self.fallback_kind = None;
+                self.counts.solves.record(&out);
+                self.fallback.good(command);
+                self.residual
+                    .predict([out.plan[1].x, out.plan[1].y, out.plan[1].z]);
+                (command, Some(out))
+            }
+            failed => (
+                self.fallback_command(&measurement, failed, solve_us, row),
+                None,
+            ),
+        };
+        let time_boot_ms = (t * 1000.0) as u64 as u32;
+        // Every path above is guarded (or is the fallback's own finite
+        // hover); the encoder refuses a non-finite field all the same.
+        let sent = match set_attitude_target(self.target, time_boot_ms, &command) {
+            Ok(message) => {
+                let fresh = self.last_used_arrival != Some(pose.arrival);
+                self.last_used_arrival = Some(pose.arrival);
+                self.counts.commands += 1;
+                row.command = Some([command.roll, command.pitch, command.yaw, command.thrust]);
+                Some(SentCommand {
+                    message,
+                    command,
+                    pose_arrival: fresh.then_some(pose.arrival),
+                })
+            }
+            Err(e) => {
+                error!(error = %e, "guarded command not encodable: nothing sent");
+                None
+            }
+        };
+        if let Some(out) = out {
+            row.plan = Some(out.plan.map(|p| [p.x, p.y, p.z]));
+            row.reference = Some([out.reference.x, out.reference.y, out.reference.z]);
+            if let Some(report) = self.controller.disturbance() {
+                let hover = self.mapping.normalized(report.hover_thrust).ok();
+                row.disturbance = Some(CsvDisturbance {
+                    acceleration: report.acceleration,
+                    thrust_scale: report.thrust_scale,
+                    hover_thrust: hover,
+                    status: report.status,
+                });
+                self.counts.disturbance = Some(DisturbanceSummary {
+                    report,
+                    hover_thrust_normalized: hover,
+                });
+            }
+        }
+        if path_done {
+            if let Some(tr) = self.supervisor.on_path_finished(t) {
+                self.announce(tr);
+            }
+            // Holding the end, or the path again (`mission.repeat`).
+            self.refresh_reference();
+        }
+        (sent, solve_us)
+    }
+
+    /// The exit path, once per command: the controller's command with its
+    /// thrust mapped to [0, 1] units and through the [`CommandGuard`].
+    fn guarded(
+        &mut self,
+        command: &dflat_control::AttitudeCommand,
+    ) -> Result<AttitudeCommand, String> {
+        let thrust = self
+            .mapping
+            .normalized(command.thrust)
+            .map_err(|e| e.to_string())?;
+        self.guard
+            .check(
+                AttitudeCommand {
+                    roll: command.roll,
+                    pitch: command.pitch,
+                    yaw: command.yaw,
+                    thrust,
+                },
+                &mut self.counts.guards,
+            )
+            .map_err(|e| e.to_string())
+    }
+
+    /// A failed or late tick's command: the previous plan one step further
+    /// (DF-MPC; recorded in its window), guarded like any command; else the
+    /// held command, then level hover. Counts and announces the kind.
+    fn fallback_command(
+        &mut self,
+        measurement: &Measurement,
+        failed: Result<(dflat_control::TickOutput, AttitudeCommand), String>,
+        solve_us: u32,
+        row: &mut CsvRow,
+    ) -> AttitudeCommand {
+        match failed {
+            Ok(_) => {
+                self.counts.guards.deadline_overruns += 1;
+                if self.error_streak == 0 {
+                    warn!(solve_us, "deadline overrun: fallback command");
+                }
+            }
+            Err(e) => {
+                self.counts.control_errors += 1;
+                self.counts.guards.controller_failures += 1;
+                if self.error_streak == 0 {
+                    warn!(error = %e, "controller failed: fallback command");
+                }
+            }
+        }
+        self.error_streak += 1;
+        let planned = self
+            .controller
+            .plan_fallback(measurement, self.fallback.hold_ticks as usize)
+            .and_then(|out| {
+                let command = self.guarded(&out.command).ok()?;
+                Some((command, out.plan[1]))
+            });
+        match planned {
+            Some((_, next)) => self.residual.predict([next.x, next.y, next.z]),
+            None => self.residual.forget(),
+        }
+        let (command, kind) = self.fallback.command(planned.map(|(c, _)| c));
+        let (counter, note, text) = match kind {
+            FallbackKind::Plan => (
+                &mut self.counts.guards.plan_steps,
+                "plan",
+                "dflat: control failed, flying the previous plan",
+            ),
+            FallbackKind::Held => (
+                &mut self.counts.guards.held,
+                "held",
+                "dflat: control failed, holding last command",
+            ),
+            FallbackKind::LevelHover => (
+                &mut self.counts.guards.level_hover,
+                "level",
+                "dflat: control failed, level hover",
+            ),
+        };
+        *counter += 1;
+        row.guard = Some(note);
+        if self.fallback_kind != Some(kind) {
+            self.fallback_kind = Some(kind);
+            self.text(MavSeverity::MAV_SEVERITY_CRITICAL, text);
+        }
+        command
+    }
+
+    fn text(&mut self, severity: MavSeverity, text: &str) {
+        self.pending_texts.push(statustext(severity, text));
+    }
+
+    fn announce(&mut self, tr: Transition) {
+        info!(
+            from = tr.from.name(),
+            to = tr.to.name(),
+            cause = ?tr.cause,
+            t = tr.at,
+            "state change"
+        );
+        let severity = if tr.is_failsafe() {
+            MavSeverity::MAV_SEVERITY_CRITICAL
+        } else {
+            MavSeverity::MAV_SEVERITY_INFO
+        };
+        self.text(severity, &tr.text());
+        self.pending_transitions.push(tr);
+    }
+
+    /// Re-anchors after a pose jump to `pose`: controller window reset (a
+    /// multi-rate one gets this pose), held / predicted state forgotten,
+    /// the reference holds the new position.
+    fn re_anchor(&mut self, t: f64, pose: &PoseSample) {
+        self.counts.guards.pose_jumps += 1;
+        self.controller.reset();
+        if self.multi_rate {
+            self.observe(pose);
+        }
+        self.fallback.forget();
+        self.residual.forget();
+        self.guard_note = Some("jump");
+        warn!(position = ?pose.position, "pose jump: re-anchored");
+        match self.supervisor.re_anchor(t, pose.position) {
+            Some(tr) => self.announce(tr),
+            None => self.text(
+                MavSeverity::MAV_SEVERITY_WARNING,
+                "dflat: pose jump, re-anchored",
+            ),
+        }
+        self.refresh_reference();
+    }
+
+    /// The yaw a measurement carries: the pose message's (ODOMETRY,
+    /// VISION_POSITION_ESTIMATE), ATTITUDE's (LOCAL_POSITION_NED), else the
+    /// configured fixed yaw.
+    fn yaw_of(&self, pose_yaw: Option<f64>, attitude_yaw: Option<f64>) -> f64 {
+        let yaw = if self.config.link.pose_source == PoseSourceKind::LocalPositionNed {
+            attitude_yaw
+        } else {
+            pose_yaw
+        };
+        yaw.unwrap_or_else(|| self.config.vehicle.yaw_deg.to_radians())
+    }
+
+    /// Hands a pose to a multi-rate controller at its capture time.
+    fn observe(&mut self, pose: &PoseSample) {
+        let sample = Measurement {
+            t: pose.capture,
+            position: Vector3::from(pose.position),
+            yaw: self.yaw_of(pose.yaw, self.attitude_yaw),
+        };
+        self.controller.observe(&sample);
+    }
+
+    /// Resets the controller (failsafe: window and disturbance estimate
+    /// forgotten); a multi-rate controller gets the newest pose again so
+    /// that it can run at the next tick.
+    fn reset_controller(&mut self) {
+        self.controller.reset();
+        self.fallback.forget();
+        self.residual.forget();
+        if self.multi_rate
+            && let Some(pose) = self.pose
+        {
+            self.observe(&pose);
+        }
+    }
+
+    /// Applies one inbound fact (pose clock, jump check, supervisor).
+    pub fn apply(&mut self, event: Event) {
+        match event {
+            Event::Pose {
+                arrival,
+                source_time,
+                position,
+                yaw,
+                reset_counter,
+            } => self.apply_pose(arrival, source_time, position, yaw, reset_counter),
+            Event::Attitude { yaw } => self.attitude_yaw = Some(yaw),
+            Event::Heartbeat { arrival } => self.supervisor.on_heartbeat(arrival),
+            Event::Setpoint { arrival, position } => {
+                let t = arrival;
+                match self.supervisor.on_setpoint(t, position) {
+                    SetpointOutcome::Accepted { goal, transition } => {
+                        debug!(?goal, "setpoint accepted");
+                        if let Some(tr) = transition {
+                            self.announce(tr);
+                        }
+                        self.refresh_reference();
+                    }
+                    SetpointOutcome::Unchanged => {}
+                    SetpointOutcome::Refused(refusal) => {
+                        let due = self
+                            .last_refusal_text
+                            .is_none_or(|last| t - last >= REFUSAL_TEXT_INTERVAL);
+                        if due {
+                            self.last_refusal_text = Some(t);
+                            info!(?refusal, "setpoint refused");
+                            self.text(MavSeverity::MAV_SEVERITY_WARNING, &refusal.text());
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    fn apply_pose(
+        &mut self,
+        arrival: f64,
+        source_time: Option<f64>,
+        position: [f64; 3],
+        yaw: Option<f64>,
+        reset_counter: Option<u8>,
+    ) {
+        self.supervisor.on_pose(arrival, position);
+        let capture = match self.config.link.pose_time {
+            PoseTime::Source => self.clock.capture_time(arrival, source_time),
+            PoseTime::Arrival => arrival,
+        };
+        let mut pose = PoseSample {
+            arrival,
+            capture,
+            source_time,
+            position,
+            yaw,
+            reset_counter,
+        };
+        // A jump from the newest pose (further than the vehicle can fly in
+        // between, or an estimator reset): re-anchor below.
+        let s = &self.config.safety;
+        let jump = self.pose.is_some_and(|p| {
+            capture >= p.capture
+                && is_pose_jump(
+                    p.position,
+                    position,
+                    capture - p.capture,
+                    s.max_speed_mps,
+                    self.period,
+                    s.pose_jump_margin_m,
+                    (p.reset_counter, reset_counter),
+                )
+        });
+        // Every sample to a multi-rate controller (late ones too).
+        if !jump {
+            self.observe(&pose);
+        }
+        // The newest for the others, by the source's own clock when both
+        // have one (a falling offset estimate may map a newer pose before
+        // the previous capture), else by capture time; its time must then
+        // be newer than the previous one's, or the controller takes the
+        // tick as one without a new pose.
+        let newer = |p: &PoseSample| match (source_time, p.source_time) {
+            (Some(a), Some(b)) if (a - b).abs() < crate::clock::SOURCE_RESET => a > b,
+            _ => capture > p.capture,
+        };
+        match self.pose {
+            None => self.pose = Some(pose),
+            Some(p) if newer(&p) => {
+                pose.capture = pose.capture.max(p.capture + 1e-6);
+                self.pose = Some(pose);
+            }
+            Some(_) => {}
+        }
+        if jump {
+            // The jumped pose is the newest one now.
+            self.pose = Some(pose);
+            self.re_anchor(arrival, &pose);
+        }
+    }
+
+    /// Rebuilds the reference when the supervisor's goal changed.
+    fn refresh_reference(&mut self) {
+        let generation = self.supervisor.goal_generation();
+        if generation == self.reference_generation {
+            return;
+        }
+        self.reference_generation = generation;
+        self.reference = match reference_for(&self.config, self.supervisor.goal()) {
+            Some(Ok(r)) => Some(r),
+            Some(Err(e)) => {
+                // Validated at start; a setpoint is checked finite. Keep
+                // flying the previous reference rather than none.
+                error!(error = %e, "cannot build the reference; keeping the previous one");
+                self.reference.take()
+            }
+            None => None,
+        };
+    }
+
+    /// The shutdown text and whatever the last events left to say.
+    pub fn shutdown_texts(&mut self) -> Vec<MavMessage> {
+        self.text(
+            MavSeverity::MAV_SEVERITY_NOTICE,
+            "dflat: shutdown, attitude stream off",
+        );
+        std::mem::take(&mut self.pending_texts)
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,257 @@
+//! The pure step on a synthetic clock, with a scripted controller.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use dflat_control::{
+    AttitudeCommand as ControlCommand, ControlError, Controller, Measurement, ReferenceSource,
+    TickOutput,
+};
+
+use super::*;
+use crate::control::thrust_mapping;
+
+const DT: f64 = 0.02;
+const G: f64 = 9.81;
+
+/// What the scripted controller returns on a tick.
+#[derive(Debug, Clone, Copy)]
+enum Script {
+    /// This command (roll, pitch in rad).
+    Command(f64, f64),
+    /// This command with a NaN pitch.
+    Nan,
+    /// A solver failure.
+    Fail,
+}
+
+/// A controller that replays a script and counts its calls.
+struct Scripted {
+    script: Vec<Script>,
+    tick: usize,
+    updates: Arc<AtomicUsize>,
+}
+
+impl Controller for Scripted {
+    fn name(&self) -> &'static str {
+        "scripted"
+    }
+
+    fn update(
+        &mut self,
+        m: &Measurement,
+        _reference: &mut dyn ReferenceSource,
+    ) -> Result<TickOutput, ControlError> {
+        self.updates.fetch_add(1, Ordering::Relaxed);
+        let step = self.script[self.tick.min(self.script.len() - 1)];
+        self.tick += 1;
+        let (roll, pitch) = match step {
+            Script::Command(r, p) => (r, p),
+            Script::Nan => (0.0, f64::NAN),
+            Script::Fail => return Err(ControlError::Solver("scripted failure".into())),
+        };
+        Ok(TickOutput {
+            command: ControlCommand {
+                pitch,
+                roll,
+                yaw: 0.0,
+                thrust: G,
+            },
+            plan: [m.position; 4],
+            reference: m.position,
+            saturated: false,
+            constrained: false,
+            qp_fallback: false,
+        })
+    }
+
+    fn reset(&mut self) {}
+}
+
+fn core(script: Vec<Script>) -> (ControlCore, Arc<AtomicUsize>) {
+    let cfg = Config::default();
+    let updates = Arc::new(AtomicUsize::new(0));
+    let controller = Scripted {
+        script,
+        tick: 0,
+        updates: updates.clone(),
+    };
+    let mapping = thrust_mapping(&cfg);
+    (
+        ControlCore::new(&cfg, Box::new(controller), mapping),
+        updates,
+    )
+}
+
+/// Runs `ticks` ticks from t = 0 with a fresh pose and an autopilot
+/// heartbeat before each; returns every step's output.
+fn fly(core: &mut ControlCore, ticks: u64) -> Vec<StepOutput> {
+    let mut clock = 0.0;
+    (0..ticks)
+        .map(|k| {
+            let t = k as f64 * DT;
+            let events = [
+                Event::Heartbeat { arrival: t - 0.001 },
+                Event::Pose {
+                    arrival: t - 0.001,
+                    source_time: None,
+                    position: [0.0, 0.0, -10.0],
+                    yaw: Some(0.0),
+                    reset_counter: None,
+                },
+            ];
+            let time = TickTime {
+                tick: k,
+                t,
+                scheduled: t,
+                jitter_us: 0,
+            };
+            core.step(&time, events, &mut || {
+                clock += 1e-4;
+                clock
+            })
+        })
+        .collect()
+}
+
+#[test]
+fn a_good_tick_sends_the_guarded_command_and_records_it() {
+    let (mut core, updates) = core(vec![Script::Command(0.1, -0.05)]);
+    let out = fly(&mut core, 5);
+    assert!(
+        out[0].transitions.iter().any(|t| t.to.streams()),
+        "streams at once with pose"
+    );
+    let last = out.last().unwrap();
+    let sent = last.command.as_ref().expect("a command");
+    assert_eq!(sent.command.roll, 0.1);
+    assert_eq!(sent.command.pitch, -0.05);
+    assert!(
+        (sent.command.thrust - 0.5).abs() < 1e-12,
+        "hover = 0.5 normalised"
+    );
+    assert_eq!(
+        last.row.command,
+        Some([0.1, -0.05, 0.0, sent.command.thrust])
+    );
+    assert!(last.row.solve_us.is_some());
+    assert_eq!(updates.load(Ordering::Relaxed), 5);
+    assert_eq!(core.counts().commands, 5);
+    assert!(matches!(sent.message, MavMessage::SET_ATTITUDE_TARGET(_)));
+}
+
+#[test]
+fn the_guard_counts_each_command_once() {
+    // 40° of roll against the 35° vehicle limit: cut on every tick.
+    let (mut core, _) = core(vec![Script::Command(40f64.to_radians(), 0.0)]);
+    let out = fly(&mut core, 10);
+    let sent = out.iter().filter(|o| o.command.is_some()).count() as u64;
+    assert_eq!(sent, 10);
+    assert_eq!(
+        core.counts().guards.tilt_saturated,
+        sent,
+        "once per command"
+    );
+    for o in &out {
+        let c = o.command.as_ref().unwrap().command;
+        assert!(dflat_control::tilt::tilt(c.pitch, c.roll) <= 35f64.to_radians() + 1e-9);
+    }
+}
+
+#[test]
+fn a_nan_never_leaves_the_step_and_the_fallback_flies() {
+    let mut script = vec![Script::Command(0.02, 0.0); 3];
+    script.extend([Script::Nan, Script::Fail, Script::Nan]);
+    script.extend(vec![Script::Command(0.02, 0.0); 4]);
+    let (mut core, _) = core(script);
+    let out = fly(&mut core, 10);
+    for o in &out {
+        if let Some(s) = &o.command {
+            let c = s.command;
+            assert!(
+                [c.roll, c.pitch, c.yaw, c.thrust]
+                    .iter()
+                    .all(|v| v.is_finite())
+            );
+        }
+    }
+    // Ticks 3–5 failed: the held command, said once.
+    for o in &out[3..6] {
+        assert_eq!(o.row.guard, Some("held"));
+        assert_eq!(o.command.as_ref().unwrap().command.roll, 0.02);
+    }
+    let texts: usize = out[3..6].iter().map(|o| o.texts.len()).sum();
+    assert_eq!(texts, 1, "the fallback kind is announced once");
+    assert_eq!(core.counts().guards.non_finite, 2);
+    assert_eq!(core.counts().guards.controller_failures, 3);
+    assert_eq!(core.counts().guards.held, 3);
+    assert_eq!(out[6].row.guard, None, "recovered");
+}
+
+#[test]
+fn an_overrun_sends_the_fallback() {
+    let (mut core, _) = core(vec![Script::Command(0.02, 0.0)]);
+    fly(&mut core, 3);
+    // A stopwatch whose solve takes 30 ms (> 20 ms period).
+    let mut clock = 0.0;
+    let time = TickTime {
+        tick: 3,
+        t: 0.06,
+        scheduled: 0.06,
+        jitter_us: 0,
+    };
+    let events = [Event::Pose {
+        arrival: 0.059,
+        source_time: None,
+        position: [0.0, 0.0, -10.0],
+        yaw: Some(0.0),
+        reset_counter: None,
+    }];
+    let out = core.step(&time, events, &mut || {
+        clock += 0.03;
+        clock
+    });
+    assert_eq!(core.counts().guards.deadline_overruns, 1);
+    assert_eq!(out.row.guard, Some("held"));
+    assert!(out.command.is_some());
+}
+
+#[test]
+fn without_pose_nothing_is_sent() {
+    let (mut core, updates) = core(vec![Script::Command(0.0, 0.0)]);
+    let time = TickTime {
+        tick: 0,
+        t: 0.0,
+        scheduled: 0.0,
+        jitter_us: 0,
+    };
+    let out = core.step(&time, [Event::Heartbeat { arrival: 0.0 }], &mut || 0.0);
+    assert!(out.command.is_none());
+    assert_eq!(updates.load(Ordering::Relaxed), 0);
+    assert_eq!(out.row.tick, 0);
+}
+
+#[test]
+fn events_map_from_inbound_messages() {
+    use dflat_link::Pose;
+    let pose = Inbound::Pose(Pose {
+        source: PoseSource::LocalPositionNed,
+        time_usec: 2_000_000,
+        position: [1.0, 2.0, -3.0],
+        yaw: None,
+        reset_counter: None,
+    });
+    assert_eq!(
+        event_from(&pose, PoseSource::LocalPositionNed, 5.0),
+        Some(Event::Pose {
+            arrival: 5.0,
+            source_time: Some(2.0),
+            position: [1.0, 2.0, -3.0],
+            yaw: None,
+            reset_counter: None,
+        })
+    );
+    assert_eq!(event_from(&pose, PoseSource::Odometry, 5.0), None);
+    let attitude = Inbound::Other(30);
+    assert_eq!(event_from(&attitude, PoseSource::Odometry, 1.5), None);
+}
