@@ -233,7 +233,7 @@ fn without_pose_nothing_is_sent() {
 
 #[test]
 fn events_map_from_inbound_messages() {
-    use dflat_link::Pose;
+    use dflat_link::{Inbound, Pose, PoseSource};
     let pose = Inbound::Pose(Pose {
         source: PoseSource::LocalPositionNed,
         time_usec: 2_000_000,

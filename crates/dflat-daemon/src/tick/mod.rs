@@ -23,130 +23,28 @@ use dflat_control::reference::Reference;
 use dflat_control::{Controller, Measurement};
 use dflat_link::dialect::MavSeverity;
 use dflat_link::{
-    AttitudeCommand, Inbound, MavMessage, PoseSource, SourceFilter, Target, ThrustMapping,
-    set_attitude_target, statustext,
+    AttitudeCommand, MavMessage, Target, ThrustMapping, set_attitude_target, statustext,
 };
 use nalgebra::Vector3;
 use tracing::{debug, error, info, warn};
 
 use crate::clock::PoseClock;
-use crate::config::{Config, LinkConfig, PoseSourceKind, PoseTime};
+use crate::config::{Config, PoseSourceKind, PoseTime};
 use crate::control::reference_for;
 use crate::guard::{
     CommandGuard, Fallback, FallbackKind, GuardCounts, ResidualMonitor, is_pose_jump,
 };
 use crate::records::{CsvDisturbance, CsvRow};
 use crate::summary::{DisturbanceSummary, SolveCounts};
-use crate::supervisor::{
-    Cause, FlightState, Goal, SetpointOutcome, Supervisor, SupervisorConfig, Transition,
-};
+use crate::supervisor::{Cause, FlightState, Goal, SetpointOutcome, Supervisor, Transition};
+
+mod inputs;
+pub use inputs::{Event, event_from, pose_source, source_filter, supervisor_config};
 
 /// Smallest interval between two "setpoint refused" STATUSTEXTs \[s\].
 pub const REFUSAL_TEXT_INTERVAL: f64 = 1.0;
 /// How long a residual failsafe lasts before pose may re-engage \[s\].
 const RESIDUAL_FAILSAFE_LATCH: f64 = 2.0;
-
-/// An inbound fact for the control thread, stamped with its arrival time
-/// \[s\] since the daemon's epoch (this computer's monotonic clock).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Event {
-    /// A pose from the configured pose source.
-    Pose {
-        /// Arrival \[s\].
-        arrival: f64,
-        /// The source's timestamp \[s\] on its own clock (`None`: 0 / none).
-        source_time: Option<f64>,
-        /// Position, local NED \[m\].
-        position: [f64; 3],
-        /// Yaw from the pose message \[rad\], if it has one.
-        yaw: Option<f64>,
-        /// The estimator reset counter (ODOMETRY, VISION_POSITION_ESTIMATE).
-        reset_counter: Option<u8>,
-    },
-    /// ATTITUDE: the autopilot's yaw \[rad\].
-    Attitude {
-        /// Yaw \[rad\].
-        yaw: f64,
-    },
-    /// The autopilot's HEARTBEAT.
-    Heartbeat {
-        /// Arrival \[s\].
-        arrival: f64,
-    },
-    /// An accepted position setpoint.
-    Setpoint {
-        /// Arrival \[s\].
-        arrival: f64,
-        /// Position, local NED \[m\].
-        position: [f64; 3],
-    },
-}
-
-/// The event a decoded, accepted message is for the control thread (`None`:
-/// not one it acts on). `arrival` \[s\] since the daemon's epoch.
-pub fn event_from(inbound: &Inbound, pose_source: PoseSource, arrival: f64) -> Option<Event> {
-    match inbound {
-        Inbound::Pose(p) if p.source == pose_source => Some(Event::Pose {
-            arrival,
-            source_time: (p.time_usec > 0).then_some(p.time_usec as f64 * 1e-6),
-            position: p.position,
-            yaw: p.yaw,
-            reset_counter: p.reset_counter,
-        }),
-        Inbound::Attitude(a) => Some(Event::Attitude { yaw: a.yaw }),
-        Inbound::Heartbeat(_) => Some(Event::Heartbeat { arrival }),
-        Inbound::PositionSetpoint(s) => Some(Event::Setpoint {
-            arrival,
-            position: s.position,
-        }),
-        _ => None,
-    }
-}
-
-/// The receive path's source filter from `[link]`: the autopilot and the
-/// ground station by id, setpoints from every other component of the
-/// vehicle with `link.vehicle_setpoints`, pose from `link.pose_components`.
-pub fn source_filter(link: &LinkConfig) -> SourceFilter {
-    let mut filter = SourceFilter {
-        vehicle_system_id: link.system_id,
-        autopilot_component_id: link.autopilot_component,
-        own_component_id: link.component_id,
-        gcs_system_id: link.gcs_system_id,
-        setpoint_components: Vec::new(),
-        pose_components: link.pose_components.clone(),
-    };
-    if link.vehicle_setpoints {
-        filter.setpoint_components = (1..=255u8).filter(|c| *c != link.component_id).collect();
-    }
-    filter
-}
-
-/// The pose message `link.pose_source` names.
-pub fn pose_source(kind: PoseSourceKind) -> PoseSource {
-    match kind {
-        PoseSourceKind::LocalPositionNed => PoseSource::LocalPositionNed,
-        PoseSourceKind::Odometry => PoseSource::Odometry,
-        PoseSourceKind::VisionPositionEstimate => PoseSource::VisionPositionEstimate,
-    }
-}
-
-/// The supervisor's parameters from the configuration.
-pub fn supervisor_config(cfg: &Config) -> SupervisorConfig {
-    let m = &cfg.mission;
-    let path_ends = match (m.path.first(), m.path.last()) {
-        (Some(a), Some(b)) if m.path.len() >= 2 => Some((*a, *b)),
-        _ => None,
-    };
-    SupervisorConfig {
-        pose_timeout: cfg.safety.pose_timeout_ms / 1000.0,
-        autopilot_timeout: cfg.safety.autopilot_timeout_ms / 1000.0,
-        geofence: m.geofence,
-        path_ends,
-        path_trigger_radius: m.path_trigger_radius,
-        start_path: m.start == crate::config::MissionStart::Path,
-        repeat_path: m.repeat,
-    }
-}
 
 /// One pose as the control core keeps it.
 #[derive(Debug, Clone, Copy)]

@@ -1,0 +1,260 @@
+//! [`Config::validate`]: every range, the first offending field named.
+
+use std::path::Path;
+
+use super::*;
+
+impl Config {
+    /// Checks every range; the error names the first offending field.
+    pub fn validate(&self, file: &Path) -> Result<(), ConfigError> {
+        let mut v = Validator { file };
+        let l = &self.link;
+        v.nonempty("link.url", &l.url)?;
+        for (name, id) in [
+            ("link.system_id", l.system_id),
+            ("link.autopilot_component", l.autopilot_component),
+            ("link.component_id", l.component_id),
+            ("link.gcs_system_id", l.gcs_system_id),
+        ] {
+            v.range(name, f64::from(id), 1.0, 255.0)?;
+        }
+        for (i, c) in l.pose_components.iter().enumerate() {
+            v.range(
+                &format!("link.pose_components[{i}]"),
+                f64::from(*c),
+                1.0,
+                255.0,
+            )?;
+        }
+        v.range(
+            "link.pose_clock_window_s",
+            l.pose_clock_window_s,
+            1.0,
+            600.0,
+        )?;
+        v.range(
+            "link.pose_min_latency_ms",
+            l.pose_min_latency_ms,
+            0.0,
+            1000.0,
+        )?;
+        // signing_link_id: any u8 (0–255) is valid; the key file's mode and
+        // owner are checked when the daemon starts (crate::signing).
+        if !l.signing_key_file.trim().is_empty() {
+            if l.signing_timestamp_file.trim().is_empty() {
+                return Err(v.err(
+                    "link.signing_timestamp_file",
+                    "\"\"",
+                    "a file path (required when link.signing_key_file is set)",
+                ));
+            }
+            if l.signing_timestamp_file.trim() == l.signing_key_file.trim() {
+                return Err(v.err(
+                    "link.signing_timestamp_file",
+                    &format!("{:?}", l.signing_timestamp_file),
+                    "a file other than link.signing_key_file",
+                ));
+            }
+        }
+        let ve = &self.vehicle;
+        v.range("vehicle.tau", ve.tau, 0.02, 2.0)?;
+        v.range("vehicle.k", ve.k, 0.2, 5.0)?;
+        v.range("vehicle.tau_thrust", ve.tau_thrust, 0.005, 1.0)?;
+        v.range("vehicle.gravity", ve.gravity, 9.0, 10.5)?;
+        v.range("vehicle.yaw_deg", ve.yaw_deg, -180.0, 180.0)?;
+        v.range("vehicle.max_tilt_deg", ve.max_tilt_deg, 1.0, 60.0)?;
+        v.range("vehicle.thrust_value", ve.thrust_value, 0.0, 1.0)?;
+        v.range("vehicle.hover_thrust", ve.hover_thrust, 0.05, 0.95)?;
+        if ve.model == ModelKind::Spatial && ve.thrust_mode == ThrustMode::Fixed {
+            return Err(v.err(
+                "vehicle.thrust_mode",
+                "\"fixed\"",
+                "\"normalized\" with model = \"spatial\" (the spatial model commands thrust)",
+            ));
+        }
+        let c = &self.controller;
+        v.range("controller.rate_hz", c.rate_hz, 10.0, 200.0)?;
+        v.range("controller.horizon", c.horizon as f64, 10.0, 2000.0)?;
+        v.range(
+            "controller.fmpc_horizon",
+            c.fmpc_horizon as f64,
+            10.0,
+            2000.0,
+        )?;
+        for i in 0..3 {
+            v.positive(&format!("controller.q[{i}]"), c.q[i])?;
+            v.positive(&format!("controller.r_jerk[{i}]"), c.r_jerk[i])?;
+            v.positive(&format!("controller.fmpc_r_jerk[{i}]"), c.fmpc_r_jerk[i])?;
+        }
+        v.positive("controller.pd_kp", c.pd_kp)?;
+        v.positive("controller.pd_kd", c.pd_kd)?;
+        if c.constraint_tilt_deg != 0.0 {
+            v.range(
+                "controller.constraint_tilt_deg",
+                c.constraint_tilt_deg,
+                1.0,
+                60.0,
+            )?;
+        }
+        v.range("controller.constraint_speed", c.constraint_speed, 0.0, 50.0)?;
+        for i in 0..3 {
+            v.range(
+                &format!("controller.smoothness_weight[{i}]"),
+                c.smoothness_weight[i],
+                0.0,
+                1e4,
+            )?;
+        }
+        v.range(
+            "controller.multi_rate_window",
+            c.multi_rate_window as f64,
+            2.0,
+            250.0,
+        )?;
+        v.range("controller.sample_sigma", c.sample_sigma, 1e-4, 1.0)?;
+        v.range(
+            "controller.disturbance_bandwidth_hz",
+            c.disturbance_bandwidth_hz,
+            0.001,
+            c.rate_hz / 10.0,
+        )?;
+        v.range(
+            "controller.disturbance_window",
+            c.disturbance_window as f64,
+            10.0,
+            2000.0,
+        )?;
+        v.range(
+            "controller.disturbance_max_acceleration",
+            c.disturbance_max_acceleration,
+            0.0,
+            10.0,
+        )?;
+        let [kmin, kmax] = c.disturbance_thrust_scale_range;
+        v.range(
+            "controller.disturbance_thrust_scale_range[0]",
+            kmin,
+            0.1,
+            1.0,
+        )?;
+        v.range(
+            "controller.disturbance_thrust_scale_range[1]",
+            kmax,
+            1.0,
+            10.0,
+        )?;
+        v.range(
+            "controller.disturbance_max_step",
+            c.disturbance_max_step,
+            0.01,
+            100.0,
+        )?;
+        let m = &self.mission;
+        v.range("mission.speed", m.speed, 0.1, 20.0)?;
+        v.range(
+            "mission.path_trigger_radius",
+            m.path_trigger_radius,
+            0.0,
+            100.0,
+        )?;
+        for i in 0..3 {
+            v.positive(&format!("mission.geofence[{i}]"), m.geofence[i])?;
+        }
+        if m.start == MissionStart::Path && m.path.len() < 2 {
+            return Err(v.err(
+                "mission.path",
+                &format!("{} waypoints", m.path.len()),
+                "at least 2 waypoints when mission.start = \"path\"",
+            ));
+        }
+        for (i, w) in m.path.iter().enumerate() {
+            for (j, x) in w.iter().enumerate() {
+                if !x.is_finite() || x.abs() > m.geofence[j] {
+                    return Err(v.err(
+                        &format!("mission.path[{i}][{j}]"),
+                        &x.to_string(),
+                        &format!("finite and inside the geofence ±{}", m.geofence[j]),
+                    ));
+                }
+            }
+            if i > 0 && *w == m.path[i - 1] {
+                return Err(v.err(
+                    &format!("mission.path[{i}]"),
+                    &format!("{w:?}"),
+                    "distinct from the previous waypoint",
+                ));
+            }
+        }
+        if m.repeat && (m.path.len() < 3 || m.path.first() != m.path.last()) {
+            return Err(v.err(
+                "mission.repeat",
+                "true",
+                "a closed path (≥ 3 waypoints, the last equal to the first)",
+            ));
+        }
+        let s = &self.safety;
+        v.range("safety.pose_timeout_ms", s.pose_timeout_ms, 5.0, 2000.0)?;
+        v.range(
+            "safety.autopilot_timeout_ms",
+            s.autopilot_timeout_ms,
+            100.0,
+            10000.0,
+        )?;
+        v.range("safety.max_speed_mps", s.max_speed_mps, 0.5, 100.0)?;
+        v.range("safety.pose_jump_margin_m", s.pose_jump_margin_m, 0.0, 10.0)?;
+        v.range(
+            "safety.hold_last_ticks",
+            f64::from(s.hold_last_ticks),
+            0.0,
+            50.0,
+        )?;
+        if s.residual_failsafe_m != 0.0 {
+            v.range(
+                "safety.residual_failsafe_m",
+                s.residual_failsafe_m,
+                0.05,
+                100.0,
+            )?;
+        }
+        Ok(())
+    }
+}
+
+struct Validator<'a> {
+    file: &'a Path,
+}
+
+impl Validator<'_> {
+    fn err(&self, field: &str, value: &str, allowed: &str) -> ConfigError {
+        ConfigError::Range {
+            file: self.file.to_owned(),
+            field: field.to_owned(),
+            value: value.to_owned(),
+            allowed: allowed.to_owned(),
+        }
+    }
+
+    fn range(&mut self, field: &str, x: f64, lo: f64, hi: f64) -> Result<(), ConfigError> {
+        if x.is_finite() && x >= lo && x <= hi {
+            Ok(())
+        } else {
+            Err(self.err(field, &x.to_string(), &format!("{lo} to {hi}")))
+        }
+    }
+
+    fn positive(&mut self, field: &str, x: f64) -> Result<(), ConfigError> {
+        if x.is_finite() && x > 0.0 {
+            Ok(())
+        } else {
+            Err(self.err(field, &x.to_string(), "finite and > 0"))
+        }
+    }
+
+    fn nonempty(&mut self, field: &str, s: &str) -> Result<(), ConfigError> {
+        if s.trim().is_empty() {
+            Err(self.err(field, "\"\"", "a non-empty connection string"))
+        } else {
+            Ok(())
+        }
+    }
+}
