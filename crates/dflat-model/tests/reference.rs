@@ -19,7 +19,11 @@ use std::path::PathBuf;
 
 use dflat_model::full::{FullInput, FullOutput, FullState};
 use dflat_model::planar::{PlanarInput, PlanarOutput, PlanarState};
-use dflat_model::{FlatError, FlatModel, Frame, FullModel, FullParams, PlanarModel, PlanarParams};
+use dflat_model::spatial::{SpatialInput, SpatialOutput, SpatialState};
+use dflat_model::{
+    FlatError, FlatModel, Frame, FullModel, FullParams, PlanarModel, PlanarParams, SpatialModel,
+    SpatialParams,
+};
 use serde::Deserialize;
 
 #[derive(Deserialize)]
@@ -43,6 +47,28 @@ struct PlanarJsonParams {
     dt: f64,
     tau: f64,
     k: f64,
+    g: f64,
+    psi: f64,
+    frame: String,
+}
+
+#[derive(Deserialize)]
+struct SpatialVector {
+    params: SpatialJsonParams,
+    outputs: Vec<[f64; 3]>,
+    state: [f64; 9],
+    input: [f64; 3],
+    next_output: Option<[f64; 3]>,
+    next_state: [f64; 9],
+    float64_roundoff: f64,
+}
+
+#[derive(Deserialize)]
+struct SpatialJsonParams {
+    dt: f64,
+    tau: f64,
+    k: f64,
+    tau_t: f64,
     g: f64,
     psi: f64,
     frame: String,
@@ -199,6 +225,51 @@ fn full_matches_reference_vectors() {
     }
     println!(
         "full: worst error / bound = {worst:.3e} over {} vectors",
+        vectors.len()
+    );
+}
+
+/// The spatial model — the one dflat flies with PX4 — against its own
+/// independently derived vectors (same format and rule as the planar ones;
+/// both frames are in the file).
+#[test]
+fn spatial_matches_reference_vectors() {
+    let vectors: Vec<SpatialVector> = load("vectors_spatial.json");
+    assert!(vectors.len() >= 50, "{} vectors", vectors.len());
+    let frames: std::collections::HashSet<&str> =
+        vectors.iter().map(|v| v.params.frame.as_str()).collect();
+    assert!(frames.contains("ned") && frames.contains("zup"), "{frames:?}");
+    let mut worst: f64 = 0.0;
+    for (i, v) in vectors.iter().enumerate() {
+        let p = &v.params;
+        let m = SpatialModel::new(SpatialParams {
+            dt: p.dt,
+            tau: p.tau,
+            k: p.k,
+            tau_thrust: p.tau_t,
+            g: p.g,
+            psi: p.psi,
+            frame: frame(&p.frame),
+        })
+        .expect("reference parameters are valid");
+        let rtol = (10.0 * v.float64_roundoff).max(1e-9);
+        let y: Vec<SpatialOutput> = v.outputs.iter().map(|o| SpatialOutput::from(*o)).collect();
+        assert_eq!(y.len(), 4, "vector {i}: spatial vectors hold y_k..y_k+3");
+        let u_ref = SpatialInput::from(v.input);
+        let x_ref = SpatialState::from(v.state);
+
+        let x = m.state_from_outputs(&y[..3]).expect("Λ");
+        worst = worst.max(check(i, "state", x.as_slice(), &v.state, rtol));
+        let u = m.input_from_outputs(&y).expect("F");
+        worst = worst.max(check(i, "input", u.as_slice(), &v.input, rtol));
+        let next = v.next_output.expect("spatial vectors have a next_output");
+        let y3 = m.next_output(&y[..3], &u_ref).expect("F⁻¹");
+        worst = worst.max(check(i, "next_output", y3.as_slice(), &next, rtol));
+        let x1 = m.step(&x_ref, &u_ref);
+        worst = worst.max(check(i, "next_state", x1.as_slice(), &v.next_state, rtol));
+    }
+    println!(
+        "spatial: worst error / bound = {worst:.3e} over {} vectors",
         vectors.len()
     );
 }
