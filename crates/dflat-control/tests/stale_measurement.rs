@@ -53,6 +53,17 @@ fn model() -> (PlanarModel, ControlModel) {
 /// the largest tick-to-tick change of the pitch command \[rad\] and the final
 /// distance to the setpoint \[m\].
 fn fly(ctrl: &mut dyn Controller, fresh: &dyn Fn(usize) -> bool) -> (f64, f64) {
+    fly_stamped(ctrl, fresh, false)
+}
+
+/// As [`fly`]; with `restamp` a tick without a new pose passes the old
+/// position with the tick's own time — the naive shell, which the
+/// controller cannot tell from a pose that did not move.
+fn fly_stamped(
+    ctrl: &mut dyn Controller,
+    fresh: &dyn Fn(usize) -> bool,
+    restamp: bool,
+) -> (f64, f64) {
     let (m, _) = model();
     let mut x = nalgebra::SVector::<f64, 6>::zeros();
     let mut reference = Setpoint(Vector3::new(3.0, -2.0, 0.0));
@@ -70,6 +81,8 @@ fn fly(ctrl: &mut dyn Controller, fresh: &dyn Fn(usize) -> bool) -> (f64, f64) {
                 position: Vector3::new(x[0], x[2], 0.0),
                 yaw: 0.3,
             };
+        } else if restamp {
+            last.t = k as f64 * DT;
         }
         let out = ctrl.update(&last, &mut reference).unwrap();
         if let Some(p) = prev_pitch {
@@ -132,5 +145,24 @@ fn df_mpc_predicts_through_ticks_without_pose() {
             Box::new(DfMpc::new(model().1, settings).unwrap()) as Box<dyn Controller>
         },
         &isolated_gaps,
+    );
+}
+
+/// Negative control: the same flight with the stale pose re-stamped as new
+/// (what a shell without the "not newer" rule would pass) reads every gap
+/// as a stop, and the command spikes far beyond the substituted run's.
+#[test]
+fn df_mpc_without_the_substitution_spikes_the_command() {
+    let make = || DfMpc::new(model().1, DfMpcSettings::default()).unwrap();
+    let (jump_every, _) = fly(&mut make(), &|_| true);
+    let (jump_substituted, _) = fly(&mut make(), &isolated_gaps);
+    let (jump_naive, _) = fly_stamped(&mut make(), &isolated_gaps, true);
+    println!(
+        "largest pitch step: every tick {jump_every:.4} rad, gaps substituted \
+         {jump_substituted:.4} rad, gaps re-stamped {jump_naive:.4} rad"
+    );
+    assert!(
+        jump_naive > 3.0 * jump_substituted && jump_naive > 2.0 * jump_every + 0.02,
+        "naive {jump_naive} vs substituted {jump_substituted} vs every tick {jump_every}"
     );
 }
