@@ -6,7 +6,7 @@ use std::path::PathBuf;
 
 use dflat_sim::experiments::OutputPaths;
 use dflat_sim::experiments::mismatch::{
-    MismatchConfig, MismatchController, run_mismatch, write_mismatch,
+    MismatchConfig, MismatchController, NOISE_RATIO_BUDGET, run_mismatch, write_mismatch,
 };
 
 #[test]
@@ -60,8 +60,13 @@ fn estimator_removes_wind_and_hover_thrust_offsets() {
     }
 }
 
+/// The noise check at its stated budget: over the noise sweep's σ (0 …
+/// 1 cm), DF-MPC with the estimator within 10 % of DF-MPC without it, for
+/// the classic and the multi-rate window (full run: ≤ 1.003,
+/// docs/figures/mismatch.json). The main study is one PD scenario at σ = 0
+/// only to keep the run short; the check flies DF on its own.
 #[test]
-fn noise_check_reports_a_ratio_per_sigma() {
+fn noise_check_meets_its_budget_with_df() {
     let config = MismatchConfig {
         trials: 1,
         sigmas: vec![0.0],
@@ -81,12 +86,23 @@ fn noise_check_reports_a_ratio_per_sigma() {
     let result = run_mismatch(&config, false).expect("runs");
     let check = result.noise_check.as_ref().expect("flown");
     assert_eq!(check.rows.len(), check.sweep.sigmas.len());
+    assert!(
+        check.sweep.sigmas.iter().any(|s| *s >= 1e-2),
+        "{:?}",
+        check.sweep.sigmas
+    );
     for r in &check.rows {
+        assert!(r.df_error > 0.0 && r.mr_error > 0.0, "{r:?}");
         assert!(
-            r.ratio.is_finite() && r.ratio > 0.5 && r.ratio < 2.0,
-            "{r:?}"
+            r.ratio <= NOISE_RATIO_BUDGET && r.ratio >= 0.9,
+            "classic DF: {r:?}"
+        );
+        assert!(
+            r.mr_ratio <= NOISE_RATIO_BUDGET && r.mr_ratio >= 0.9,
+            "multi-rate DF: {r:?}"
         );
     }
+    assert_eq!(result.budgets.noise_pass, Some(true));
     // No DF + estimator row: the steady budget has nothing to pass.
     assert!(!result.budgets.steady[0].pass);
 }

@@ -238,7 +238,10 @@ fn spatial_matches_reference_vectors() {
     assert!(vectors.len() >= 50, "{} vectors", vectors.len());
     let frames: std::collections::HashSet<&str> =
         vectors.iter().map(|v| v.params.frame.as_str()).collect();
-    assert!(frames.contains("ned") && frames.contains("zup"), "{frames:?}");
+    assert!(
+        frames.contains("ned") && frames.contains("zup"),
+        "{frames:?}"
+    );
     let mut worst: f64 = 0.0;
     for (i, v) in vectors.iter().enumerate() {
         let p = &v.params;
