@@ -17,14 +17,16 @@ use dflat_sim::sitl::read_truth_csv;
 const PATH: [[f64; 3]; 3] = [[0.0, 0.0, -10.0], [15.0, 0.0, -10.0], [15.0, 10.0, -10.0]];
 /// Speed along it [m/s].
 const SPEED: f64 = 3.0;
-/// Bounds on the true path error \[m\]. Measured (dev profile, 2 cores,
-/// noise-free pose, shipped defaults: multi-rate DF-MPC, q = 1, r = 0.003,
-/// s = 50, 30° plan tilt): median 0.007 m, p95 0.13 m, max 0.38 m (at the
-/// corner; the paper's r = 0.08 without them gave 0.043 / 0.34 / 0.62 m);
-/// bounds with margin.
-const MEDIAN_BOUND: f64 = 0.15;
-const P95_BOUND: f64 = 0.6;
-const MAX_BOUND: f64 = 1.0;
+/// Bounds on the true path error \[m\], with 1 cm position noise (the
+/// shipped tuning: multi-rate DF-MPC, q = 1, r = 0.003, s = 50, 30° plan
+/// tilt). Measured (dev profile, 2-core shared VM, 3 runs, 2026-11-24):
+/// median 0.007 m, p95 0.134 m, max 0.379 m — the corner dominates the
+/// tail; at σ = 0 the figures are the same to the millimetre, at σ = 5 cm
+/// the median is 0.019 m. Bounds: 3× the median, 2× the p95, 1.6× the max
+/// (a loaded CI machine delays ticks; the corner error grows with it).
+const MEDIAN_BOUND: f64 = 0.02;
+const P95_BOUND: f64 = 0.27;
+const MAX_BOUND: f64 = 0.6;
 /// The end counts as reached within this distance \[m\].
 const ARRIVAL: f64 = 0.5;
 
@@ -46,9 +48,8 @@ tlog = false
 [sitl]
 plant = "planar"
 start = [0.0, 0.0, -10.0]
-# Noise-free pose: with σ = 1 cm the default DF-MPC tuning loses most of
-# its tracking (as in the lab's noise sweep), which is not under test here.
-noise_sigma = 0.0
+# The shipped tuning with realistic sensing: 1 cm position noise.
+noise_sigma = 0.01
 "#,
             dir.display()
         ),

@@ -483,8 +483,12 @@ proptest! {
         match parse(&text) {
             Ok(cfg) => {
                 // Whatever was accepted is valid and prints back to itself.
+                // Compared as printed text: the `[sitl]` table is kept
+                // unparsed by the daemon (the SITL validates it), so it may
+                // hold a NaN, which is never equal to itself as a value.
                 prop_assert!(cfg.validate(Path::new(FILE)).is_ok());
-                prop_assert_eq!(parse(&cfg.to_toml()).unwrap(), cfg);
+                let printed = cfg.to_toml();
+                prop_assert_eq!(parse(&printed).unwrap().to_toml(), printed);
             }
             Err(e) => {
                 let msg = e.to_string();
