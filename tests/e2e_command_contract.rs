@@ -74,9 +74,13 @@ fn check_contract(name: &str, flight: &Flight) -> Vec<f64> {
                 thrusts.push(thrust);
                 let [roll, pitch, _] = dflat_link::euler_from_quaternion(q);
                 let limit = 35.01f64.to_radians();
+                // The contract bounds the combined tilt (the cone), not
+                // roll and pitch separately (that would let 48° pass).
+                let tilt = dflat_control::tilt::tilt(pitch, roll);
                 assert!(
-                    roll.abs() <= limit && pitch.abs() <= limit,
-                    "{name}: tilt roll {roll} pitch {pitch}"
+                    tilt <= limit,
+                    "{name}: tilt {:.2}° (roll {roll} pitch {pitch})",
+                    tilt.to_degrees()
                 );
             }
             MavMessage::HEARTBEAT(d) => {

@@ -71,9 +71,12 @@ fn vision_at_15_hz_flies_the_short_l_with_valid_commands() {
             d.thrust
         );
         let [roll, pitch, _] = dflat_link::euler_from_quaternion(q);
+        // The combined tilt (the cone the guard applies).
+        let tilt = dflat_control::tilt::tilt(pitch, roll);
         assert!(
-            roll.abs() <= 35.001f64.to_radians() && pitch.abs() <= 35.001f64.to_radians(),
-            "tilt roll {roll} pitch {pitch}"
+            tilt <= 35.001f64.to_radians(),
+            "tilt {:.2}° (roll {roll} pitch {pitch})",
+            tilt.to_degrees()
         );
         tilts.push((roll, pitch));
     }
