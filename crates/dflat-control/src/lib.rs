@@ -186,6 +186,18 @@ pub trait Controller: Send {
         let _ = (measurement, max_steps);
         None
     }
+    /// Standby: the command this controller produced last (its last
+    /// [`Controller::update`] or [`Controller::plan_fallback`]) was not
+    /// what the autopilot applied — it flew its own position mode — and
+    /// `applied` `[θ_cmd, φ_cmd, T_cmd]` (model input units: rad, rad,
+    /// specific thrust m/s²) is the input that explains what the vehicle
+    /// did (from its measured attitude, [`ControlModel::input_from_attitude`]).
+    /// Replaces the recorded input, so the window stays true. Non-finite
+    /// values are ignored. Default: nothing (controllers without a window
+    /// of inputs).
+    fn correct_last_input(&mut self, applied: &Vector3<f64>) {
+        let _ = applied;
+    }
     /// The disturbance estimate for logs and telemetry, when the controller
     /// runs an estimator ([`disturbance`]); `None` otherwise (the default).
     fn disturbance(&self) -> Option<disturbance::DisturbanceReport> {

@@ -218,6 +218,25 @@ impl ControlModel {
         )
     }
 
+    /// The inverse of [`ControlModel::input_state_step`]'s attitude part:
+    /// the commanded `(θ_cmd, φ_cmd)` \[rad\] that takes the measured
+    /// attitude `before = (θ, φ)` to `after` in one step δt,
+    /// `θ_cmd = (θ_k + τ·(θ_{k+1} − θ_k)/δt) / k̃` (φ likewise). This is what
+    /// F does for the pitch command from the outputs, here from a measured
+    /// attitude (ATTITUDE): the input that explains what the vehicle did
+    /// when the autopilot flew its own commands (standby).
+    pub fn input_from_attitude(&self, before: [f64; 2], after: [f64; 2]) -> [f64; 2] {
+        let (tau, k) = match self {
+            ControlModel::Planar(m) => (m.params().tau, m.params().k),
+            ControlModel::Spatial(m) => (m.params().tau, m.params().k),
+        };
+        let r = tau / self.dt();
+        [
+            (before[0] + r * (after[0] - before[0])) / k,
+            (before[1] + r * (after[1] - before[1])) / k,
+        ]
+    }
+
     /// The model's acceleration \[m/s²\] (model frame) at the input-driven
     /// state `s = [θ, φ, T]`, split as `a = a_g + κ·a_T` for a thrust scale
     /// κ: returns `(a_g, a_T)`. Planar: `a_g` is the level-flight

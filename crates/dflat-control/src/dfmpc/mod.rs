@@ -738,6 +738,24 @@ impl Controller for DfMpc {
         })
     }
 
+    /// Replaces the input recorded last (classic or multi-rate window, and
+    /// the disturbance estimator's input state) with `applied`. The kept
+    /// plan was made for the input sent, so the plan fallback is dropped.
+    fn correct_last_input(&mut self, applied: &Vector3<f64>) {
+        if !applied.iter().all(|v| v.is_finite()) || self.record != RecordState::Recorded {
+            return;
+        }
+        if let Some(multi) = &mut self.multi {
+            multi.replace_last_input(applied);
+        } else {
+            self.window.replace_last_input(*applied);
+        }
+        if let Some(e) = &mut self.estimator {
+            e.correct_last_input(applied);
+        }
+        self.plan = PlanState::Empty;
+    }
+
     fn observe(&mut self, sample: &Measurement) {
         if let Some(multi) = &mut self.multi {
             multi.observe(sample.t, &sample.position);

@@ -302,6 +302,9 @@ pub struct DisturbanceEstimator {
     estimate: DisturbanceEstimate,
     /// The model's input-driven state \[θ, φ, T\] at the next recorded tick.
     state: Vector3<f64>,
+    /// `state` before the last recorded input was applied (for
+    /// [`DisturbanceEstimator::correct_last_input`]).
+    state_before_last: Vector3<f64>,
     /// Ticks recorded since the last reset (saturating).
     settled: usize,
     /// Ring buffers (L each), oldest at `head` once full.
@@ -404,6 +407,7 @@ impl DisturbanceEstimator {
             settle_ticks,
             estimate: DisturbanceEstimate::NOMINAL,
             state: model.hover_input(),
+            state_before_last: model.hover_input(),
             settled: 0,
             outputs: vec![Vector3::zeros(); l],
             accel_g: vec![Vector3::zeros(); l],
@@ -486,6 +490,18 @@ impl DisturbanceEstimator {
         self.noise_gain
     }
 
+    /// The last recorded input was not the one applied (standby): the
+    /// estimator's input-driven state is re-stepped with `u`, the input
+    /// that explains the measured attitude. Non-finite `u` is ignored.
+    pub fn correct_last_input(&mut self, u: &Vector3<f64>) {
+        if u.iter().all(|v| v.is_finite()) {
+            self.state = self.model.input_state_step(&self.state_before_last, u);
+            if let Some((t, _)) = self.last_tick {
+                self.last_tick = Some((t, *u));
+            }
+        }
+    }
+
     /// Marks the start of a control tick: if the previous tick began but
     /// did not [`record`](Self::record) (a controller error; the vehicle
     /// flew a command this estimator did not see), the window restarts.
@@ -501,6 +517,7 @@ impl DisturbanceEstimator {
     pub fn reset(&mut self) {
         self.estimate = DisturbanceEstimate::NOMINAL;
         self.state = self.model.hover_input();
+        self.state_before_last = self.state;
         self.settled = 0;
         self.last = None;
         self.last_sample = None;
@@ -635,6 +652,7 @@ impl DisturbanceEstimator {
     /// now, the window buffers, and the update.
     fn push_tick(&mut self, y: &Vector3<f64>, t: f64, u: &Vector3<f64>, saturated: bool) {
         let parts = self.model.acceleration_parts(&self.state);
+        self.state_before_last = self.state;
         self.state = self.model.input_state_step(&self.state, u);
         let Ok((a_g, a_t)) = parts else {
             self.restart_window();

@@ -157,6 +157,12 @@ impl Window {
         self.inputs[INPUTS - 1] = u;
     }
 
+    /// Replaces the newest input (the one pushed last) with `u`: the input
+    /// actually applied when it differs from the one sent (standby).
+    pub fn replace_last_input(&mut self, u: Vector3<f64>) {
+        self.inputs[INPUTS - 1] = u;
+    }
+
     /// Forgets all history: the next measurement starts the padding again.
     pub fn reset(&mut self) {
         self.outputs = [Vector3::zeros(); OUTPUTS];

@@ -603,6 +603,16 @@ impl MultiRateWindow {
         fitted
     }
 
+    /// Replaces the input of the last committed tick with `u` (the input
+    /// actually applied, when it was not the one sent: standby). Before a
+    /// commit it does nothing.
+    pub fn replace_last_input(&mut self, u: &Vector3<f64>) {
+        if self.last_tick.is_some() {
+            let m = self.settings.fit_span;
+            self.inputs[m] = *u;
+        }
+    }
+
     /// Records the input `u` sent at the tick last estimated and makes that
     /// estimate the window's: forgets the samples now in the arrival cost.
     /// Without a pending estimate it does nothing.
