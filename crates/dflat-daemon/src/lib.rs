@@ -29,6 +29,7 @@ pub mod config;
 pub mod control;
 pub mod daemon;
 pub mod guard;
+pub mod motion;
 pub mod realtime;
 pub mod records;
 pub mod schedule;

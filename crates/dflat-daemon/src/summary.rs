@@ -153,6 +153,8 @@ impl fmt::Display for Percentiles {
 pub struct StateTimes {
     /// WaitingForPose \[s\].
     pub waiting_for_pose: f64,
+    /// Standby (streaming, the autopilot in its own mode) \[s\].
+    pub standby: f64,
     /// Holding \[s\].
     pub holding: f64,
     /// Tracking \[s\].
@@ -163,9 +165,10 @@ pub struct StateTimes {
 
 impl StateTimes {
     /// From an array indexed by [`FlightState::index`].
-    pub fn from_array(t: [f64; 4]) -> Self {
+    pub fn from_array(t: [f64; 5]) -> Self {
         Self {
             waiting_for_pose: t[FlightState::WaitingForPose.index()],
+            standby: t[FlightState::Standby.index()],
             holding: t[FlightState::Holding.index()],
             tracking: t[FlightState::Tracking.index()],
             failsafe: t[FlightState::Failsafe.index()],
@@ -325,6 +328,12 @@ pub struct FlightSummary {
     pub time_in_state_s: StateTimes,
     /// Number of state changes.
     pub state_changes: u64,
+    /// Engagements: the autopilot started applying our commands (standby
+    /// → holding, braking).
+    pub engagements: u64,
+    /// Disengagements: the autopilot stopped applying them (pilot
+    /// override, mode change, disarm) while engaged.
+    pub disengagements: u64,
     /// State at shutdown.
     pub final_state: FlightState,
     /// Process CPU time (user + system) over wall time \[%\] (100 = one core).
@@ -403,12 +412,15 @@ impl fmt::Display for FlightSummary {
         let t = &self.time_in_state_s;
         writeln!(
             f,
-            "  states        waiting {:.1} s, holding {:.1} s, tracking {:.1} s, failsafe {:.1} s ({} changes, final {})",
+            "  states        waiting {:.1} s, standby {:.1} s, holding {:.1} s, tracking {:.1} s, failsafe {:.1} s ({} changes, {} engagements, {} disengagements, final {})",
             t.waiting_for_pose,
+            t.standby,
             t.holding,
             t.tracking,
             t.failsafe,
             self.state_changes,
+            self.engagements,
+            self.disengagements,
             self.final_state.name()
         )?;
         writeln!(

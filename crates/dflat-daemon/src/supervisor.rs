@@ -1,14 +1,37 @@
 //! The daemon's flight state machine, as a pure struct.
 //!
 //! ```text
-//!              fresh pose + autopilot alive
-//! WaitingForPose ───────────────────────────► Holding ──setpoint──► Tracking
-//!        │ (mission.start = "path")              ▲  ◄──path finished──┘
-//!        └───────────────────────────────────────┼──────────────────► Tracking
-//!                                                │
-//!        stale pose / silent autopilot           │ fresh pose + autopilot alive
-//! Holding, Tracking ──────────────────► Failsafe ┘ (hold where it is now)
+//!                 fresh pose + autopilot alive
+//! WaitingForPose ─────────────────────────────► Standby ◄─────────────┐
+//!                                                 │  pilot switches     │ pilot takes
+//!                                                 │  to OFFBOARD /      │ over (mode
+//!                                                 ▼  GUIDED_NOGPS       │ change)
+//!                                   Holding (braking to the stop point) ─┤
+//!                    braked: resume │  ▲ path finished                   │
+//!                  path / setpoint  ▼  │                                 │
+//!                                   Tracking ────────────────────────────┘
+//!
+//!        stale pose / silent autopilot                 fresh pose + autopilot alive
+//! Standby, Holding, Tracking ──────────────► Failsafe ─────────────────► Standby / Holding
 //! ```
+//!
+//! **Streaming and engaged.** Standby, Holding and Tracking stream
+//! SET_ATTITUDE_TARGET; only Holding and Tracking are *engaged*: the
+//! autopilot applies the commands (its HEARTBEAT says armed and PX4
+//! OFFBOARD / ArduPilot GUIDED_NOGPS or GUIDED, or `link.engagement =
+//! "always"`). In Standby the autopilot flies its own mode (the pilot in
+//! POSCTL / LOITER); the stream goes on because the autopilot needs it to
+//! allow the switch, and what it carries would be harmless if applied:
+//! the goal is the point where the vehicle would stop braking, following
+//! the vehicle ([`Supervisor::set_motion`]).
+//!
+//! **Engagement is bumpless.** At the switch the goal freezes at the stop
+//! point of the vehicle's motion then (braking at `brake_acceleration`,
+//! never back to an older hold point); once braked (slower than
+//! [`BRAKED_SPEED`], or after the braking time plus [`BRAKE_SETTLE`]) the
+//! mission resumes (`mission.on_engage`): the goal flown before the
+//! override — the path from its closest point, the setpoint — or holding.
+//! A setpoint accepted in standby is flown after braking either way.
 //!
 //! Time enters as arguments: seconds on the daemon's monotonic clock (any
 //! origin; only differences matter). Pose and heartbeat times are *arrival*
@@ -21,12 +44,23 @@
 
 use serde::Serialize;
 
+use crate::motion::Motion;
+
+/// Slower than this \[m/s\] after an engagement counts as braked.
+pub const BRAKED_SPEED: f64 = 0.3;
+/// Braking is over at the latest this long \[s\] after the time the
+/// braking deceleration needs.
+pub const BRAKE_SETTLE: f64 = 2.0;
+
 /// The daemon's state.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum FlightState {
     /// No fresh pose (or no autopilot heartbeat) yet; not streaming.
     WaitingForPose,
+    /// Streaming, not engaged: the autopilot flies its own mode; the goal
+    /// follows the vehicle's stop point.
+    Standby,
     /// Holding a fixed position; streaming.
     Holding,
     /// Flying to a setpoint or along the path; streaming.
@@ -37,20 +71,22 @@ pub enum FlightState {
 
 impl FlightState {
     /// All states, in the order of [`FlightState::index`].
-    pub const ALL: [FlightState; 4] = [
+    pub const ALL: [FlightState; 5] = [
         FlightState::WaitingForPose,
         FlightState::Holding,
         FlightState::Tracking,
         FlightState::Failsafe,
+        FlightState::Standby,
     ];
 
-    /// Position in [`FlightState::ALL`] (0–3).
+    /// Position in [`FlightState::ALL`] (0–4).
     pub fn index(self) -> usize {
         match self {
             FlightState::WaitingForPose => 0,
             FlightState::Holding => 1,
             FlightState::Tracking => 2,
             FlightState::Failsafe => 3,
+            FlightState::Standby => 4,
         }
     }
 
@@ -58,6 +94,7 @@ impl FlightState {
     pub fn name(self) -> &'static str {
         match self {
             FlightState::WaitingForPose => "WAITING",
+            FlightState::Standby => "STANDBY",
             FlightState::Holding => "HOLDING",
             FlightState::Tracking => "TRACKING",
             FlightState::Failsafe => "FAILSAFE",
@@ -66,6 +103,14 @@ impl FlightState {
 
     /// True in the states that stream SET_ATTITUDE_TARGET.
     pub fn streams(self) -> bool {
+        matches!(
+            self,
+            FlightState::Standby | FlightState::Holding | FlightState::Tracking
+        )
+    }
+
+    /// True in the states whose commands the autopilot applies.
+    pub fn engaged(self) -> bool {
         matches!(self, FlightState::Holding | FlightState::Tracking)
     }
 }
@@ -105,6 +150,13 @@ pub enum Cause {
     PoseJump,
     /// The model-consistency residual stayed above its threshold.
     ResidualDiverged,
+    /// The autopilot applies our commands now (pilot switched to OFFBOARD
+    /// / GUIDED_NOGPS): braking to the stop point.
+    Engaged,
+    /// The autopilot left its offboard mode (pilot override, disarm).
+    PilotControl,
+    /// Braked after an engagement: the mission resumes.
+    Resume,
 }
 
 impl Cause {
@@ -119,6 +171,9 @@ impl Cause {
             Cause::AutopilotSilent => "autopilot lost, stream off",
             Cause::PoseJump => "pose jump, re-anchored",
             Cause::ResidualDiverged => "model residual, stream off",
+            Cause::Engaged => "engaged, braking",
+            Cause::PilotControl => "pilot has control",
+            Cause::Resume => "braked, resuming",
         }
     }
 }
@@ -224,6 +279,21 @@ pub struct SupervisorConfig {
     pub start_path: bool,
     /// Fly the (closed) path again when it finishes (`mission.repeat`).
     pub repeat_path: bool,
+    /// Every streamed command counts as applied (`link.engagement =
+    /// "always"`): no standby.
+    pub always_engaged: bool,
+    /// After braking, resume the goal flown before (`mission.on_engage =
+    /// "resume"`); else hold.
+    pub resume_on_engage: bool,
+    /// Braking deceleration at engagement \[m/s²\] (> 0).
+    pub brake_acceleration: f64,
+}
+
+/// Braking after an engagement.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Braking {
+    /// Over at the latest at this time \[s\].
+    until: f64,
 }
 
 /// The flight state machine. Feed it events with their times; ask it at
@@ -238,10 +308,21 @@ pub struct Supervisor {
     last_heartbeat: Option<f64>,
     last_setpoint: Option<[f64; 3]>,
     entered_at: Option<f64>,
-    time_in: [f64; 4],
+    time_in: [f64; 5],
     transitions: u64,
     /// No recovery from a forced failsafe before this time.
     latched_until: Option<f64>,
+    /// The autopilot applies our commands (its last HEARTBEAT).
+    autopilot_engaged: bool,
+    /// The vehicle's motion (for the stop point).
+    motion: Option<Motion>,
+    /// Braking after an engagement.
+    braking: Option<Braking>,
+    /// What to fly once braked (the mission goal across an override).
+    pending: Goal,
+    /// Engagements and disengagements so far.
+    engagements: u64,
+    disengagements: u64,
 }
 
 impl Supervisor {
@@ -256,10 +337,85 @@ impl Supervisor {
             last_heartbeat: None,
             last_setpoint: None,
             entered_at: None,
-            time_in: [0.0; 4],
+            time_in: [0.0; 5],
             transitions: 0,
             latched_until: None,
+            autopilot_engaged: false,
+            motion: None,
+            braking: None,
+            pending: Goal::None,
+            engagements: 0,
+            disengagements: 0,
         }
+    }
+
+    /// The autopilot's mode at `t`: `applies` when it applies our commands
+    /// (armed, offboard mode). The state follows at the next tick.
+    pub fn on_mode(&mut self, applies: bool) {
+        self.autopilot_engaged = applies;
+    }
+
+    /// True when the autopilot applies our commands (as last reported, or
+    /// always with `always_engaged`).
+    pub fn autopilot_engaged(&self) -> bool {
+        self.cfg.always_engaged || self.autopilot_engaged
+    }
+
+    /// The vehicle's motion now (from the pose stream), for the standby
+    /// goal and the stop point at engagement; `None` forgets it.
+    pub fn set_motion(&mut self, motion: Option<Motion>) {
+        self.motion = motion;
+    }
+
+    /// Engagements (standby → engaged) and disengagements so far.
+    pub fn engagement_counts(&self) -> (u64, u64) {
+        (self.engagements, self.disengagements)
+    }
+
+    /// True while braking after an engagement.
+    pub fn braking(&self) -> bool {
+        self.braking.is_some()
+    }
+
+    /// The goal flown once braked, or after the next engagement.
+    pub fn pending_goal(&self) -> Goal {
+        self.pending
+    }
+
+    /// Where the vehicle would stop: the motion's stop point, else the
+    /// newest pose.
+    fn stop_point(&self) -> Option<[f64; 3]> {
+        match self.motion {
+            Some(m) => Some(m.stop_point(self.cfg.brake_acceleration)),
+            None => self.last_pose.map(|(_, p)| p),
+        }
+    }
+
+    /// Standby: the goal follows the vehicle's stop point.
+    fn follow(&mut self) {
+        if let Some(p) = self.stop_point() {
+            self.set_goal(Goal::Hold(p));
+        }
+    }
+
+    /// Engaged at `t`: brake to the stop point of the motion now.
+    fn engage(&mut self, t: f64, cause: Cause) -> Transition {
+        let stop = self.stop_point();
+        if let Some(p) = stop {
+            self.set_goal(Goal::Hold(p));
+        }
+        let speed = self.motion.map_or(0.0, |m| m.speed());
+        self.braking = Some(Braking {
+            until: t + speed / self.cfg.brake_acceleration + BRAKE_SETTLE,
+        });
+        self.engagements += 1;
+        self.enter(FlightState::Holding, cause, t)
+    }
+
+    /// Braking is over: slow enough, or out of time.
+    fn braked(&self, t: f64) -> bool {
+        self.braking
+            .is_some_and(|b| t >= b.until || self.motion.is_some_and(|m| m.speed() < BRAKED_SPEED))
     }
 
     /// The pose jumped to `position` at `t`: while streaming, the goal
@@ -267,10 +423,13 @@ impl Supervisor {
     /// setpoint is needed). Returns the state change, if any; `None` when
     /// not streaming (recovery holds the fresh pose anyway).
     pub fn re_anchor(&mut self, t: f64, position: [f64; 3]) -> Option<Transition> {
-        if !self.state.streams() {
+        if !self.state.engaged() {
+            // Standby: the goal follows the vehicle anyway.
             return None;
         }
         self.set_goal(Goal::Hold(position));
+        self.braking = None;
+        self.pending = Goal::None;
         // The same setpoint again is a new request after a re-anchor.
         self.last_setpoint = None;
         Some(self.enter(FlightState::Holding, Cause::PoseJump, t))
@@ -307,7 +466,7 @@ impl Supervisor {
     }
 
     /// Seconds spent in each state up to `now`, indexed by [`FlightState::index`].
-    pub fn time_in_states(&self, now: f64) -> [f64; 4] {
+    pub fn time_in_states(&self, now: f64) -> [f64; 5] {
         let mut t = self.time_in;
         if let Some(since) = self.entered_at {
             t[self.state.index()] += (now - since).max(0.0);
@@ -358,6 +517,16 @@ impl Supervisor {
         } else {
             (Goal::Setpoint(position), Cause::Setpoint)
         };
+        if self.state == FlightState::Standby {
+            // Flown after the next engagement (once braked).
+            self.pending = goal;
+            return SetpointOutcome::Accepted {
+                goal,
+                transition: None,
+            };
+        }
+        self.braking = None;
+        self.pending = goal;
         self.set_goal(goal);
         let transition = if self.state == FlightState::Tracking {
             None
@@ -379,6 +548,7 @@ impl Supervisor {
             return None;
         }
         self.set_goal(Goal::Hold(end));
+        self.pending = Goal::None;
         Some(self.enter(FlightState::Holding, Cause::PathFinished, t))
     }
 
@@ -395,24 +565,24 @@ impl Supervisor {
             .is_some_and(|h| t - h <= self.cfg.autopilot_timeout);
         let mut reset_controller = false;
         let latched = self.latched_until.is_some_and(|u| t < u);
+        let engaged = self.autopilot_engaged();
         let transition = match (self.state, pose) {
-            (FlightState::WaitingForPose, Some((_, position))) if autopilot_alive => {
+            (FlightState::WaitingForPose, Some(_)) if autopilot_alive => {
                 if self.cfg.start_path && self.cfg.path_ends.is_some() {
-                    self.set_goal(Goal::Path);
-                    Some(self.enter(FlightState::Tracking, Cause::MissionStart, t))
-                } else {
-                    self.set_goal(Goal::Hold(position));
-                    Some(self.enter(FlightState::Holding, Cause::PoseFresh, t))
+                    self.pending = Goal::Path;
                 }
+                Some(self.start_streaming(t, engaged))
             }
-            (FlightState::Failsafe, Some((_, position))) if autopilot_alive && !latched => {
-                self.set_goal(Goal::Hold(position));
-                Some(self.enter(FlightState::Holding, Cause::PoseFresh, t))
+            (FlightState::Failsafe, Some(_)) if autopilot_alive && !latched => {
+                // A failsafe abandons the mission: hold (or stand by).
+                self.pending = Goal::None;
+                Some(self.start_streaming(t, engaged))
             }
-            (FlightState::Holding | FlightState::Tracking, _)
+            (FlightState::Standby | FlightState::Holding | FlightState::Tracking, _)
                 if pose.is_none() || !autopilot_alive =>
             {
                 reset_controller = true;
+                self.braking = None;
                 let cause = if pose.is_none() {
                     Cause::PoseStale
                 } else {
@@ -420,12 +590,56 @@ impl Supervisor {
                 };
                 Some(self.enter(FlightState::Failsafe, cause, t))
             }
+            (FlightState::Standby, _) if engaged => Some(self.engage(t, Cause::Engaged)),
+            (FlightState::Standby, _) => {
+                self.follow();
+                None
+            }
+            (FlightState::Holding | FlightState::Tracking, _) if !engaged => {
+                // Pilot override: the mission goal is kept for the hand-back.
+                self.pending = match self.goal {
+                    g @ (Goal::Path | Goal::Setpoint(_)) if self.cfg.resume_on_engage => g,
+                    _ if self.braking.is_some() && self.cfg.resume_on_engage => self.pending,
+                    _ => Goal::None,
+                };
+                self.braking = None;
+                self.disengagements += 1;
+                self.follow();
+                Some(self.enter(FlightState::Standby, Cause::PilotControl, t))
+            }
+            (FlightState::Holding, _) if self.braked(t) => {
+                self.braking = None;
+                match self.pending {
+                    g @ (Goal::Path | Goal::Setpoint(_)) => {
+                        self.set_goal(g);
+                        let cause =
+                            if g == Goal::Path && self.cfg.start_path && self.engagements == 1 {
+                                Cause::MissionStart
+                            } else {
+                                Cause::Resume
+                            };
+                        Some(self.enter(FlightState::Tracking, cause, t))
+                    }
+                    _ => None,
+                }
+            }
             _ => None,
         };
         TickDecision {
             stream: self.state.streams(),
             reset_controller,
             transition,
+        }
+    }
+
+    /// Pose fresh and the autopilot alive at `t`: engaged (brake, then the
+    /// pending goal) or standby.
+    fn start_streaming(&mut self, t: f64, engaged: bool) -> Transition {
+        if engaged {
+            self.engage(t, Cause::PoseFresh)
+        } else {
+            self.follow();
+            self.enter(FlightState::Standby, Cause::PoseFresh, t)
         }
     }
 
@@ -478,7 +692,27 @@ mod tests {
             path_trigger_radius: 0.5,
             start_path: false,
             repeat_path: false,
+            // The tests below predate engagement: every command applied.
+            always_engaged: true,
+            resume_on_engage: true,
+            brake_acceleration: 4.0,
         }
+    }
+
+    /// Engagement read from the autopilot's mode.
+    fn cfg_mode() -> SupervisorConfig {
+        SupervisorConfig {
+            always_engaged: false,
+            ..cfg()
+        }
+    }
+
+    fn moving(t: f64, x: f64, vx: f64) -> Option<Motion> {
+        Some(Motion {
+            t,
+            position: [x, 0.0, -10.0],
+            velocity: [vx, 0.0, 0.0],
+        })
     }
 
     /// Feeds poses and heartbeats at 50 Hz from `from` to `to` \[s\] and ticks
@@ -489,6 +723,7 @@ mod tests {
         while t < to - 1e-9 {
             if pose {
                 s.on_pose(t, P0);
+                s.set_motion(moving(t, P0[0], 0.0));
             }
             if hb {
                 s.on_heartbeat(t);
@@ -557,6 +792,8 @@ mod tests {
         // Pose resumes at a new place: hold there.
         let here = [5.0, 5.0, -10.0];
         s.on_pose(2.0, here);
+        // One pose after the gap: no motion yet (as the core reports it).
+        s.set_motion(None);
         let d = s.tick(2.005);
         assert!(d.stream);
         assert_eq!(d.transition.unwrap().to, Holding);
@@ -673,20 +910,147 @@ mod tests {
         s.tick(0.0);
         s.on_pose(0.5, P0);
         s.on_heartbeat(0.5);
+        // At rest: engaged (holding) at once, the path at the next tick.
+        s.set_motion(moving(0.5, P0[0], 0.0));
         let tr = s.tick(0.5).transition.unwrap();
+        assert_eq!((tr.to, tr.cause), (Holding, Cause::PoseFresh));
+        assert_eq!(s.pending_goal(), Goal::Path);
+        let tr = s.tick(0.52).transition.unwrap();
         assert_eq!((tr.to, tr.cause), (Tracking, Cause::MissionStart));
         assert_eq!(s.goal(), Goal::Path);
         let tr = s.tick(0.7).transition.unwrap(); // pose 0.2 s old
         assert_eq!(tr.to, Failsafe);
         let t = s.time_in_states(1.0);
         assert!((t[WaitingForPose.index()] - 0.5).abs() < 1e-12);
-        assert!((t[Tracking.index()] - 0.2).abs() < 1e-12);
+        assert!((t[Holding.index()] - 0.02).abs() < 1e-12);
+        assert!((t[Tracking.index()] - 0.18).abs() < 1e-12);
         assert!((t[Failsafe.index()] - 0.3).abs() < 1e-12);
-        assert_eq!(s.transitions(), 2);
+        assert_eq!(s.transitions(), 3);
         // Recovery holds (does not restart the path).
         s.on_pose(1.0, P0);
         s.on_heartbeat(1.0);
         assert_eq!(s.tick(1.0).transition.unwrap().to, Holding);
+    }
+
+    #[test]
+    fn standby_follows_the_stop_point_until_the_autopilot_applies_commands() {
+        let mut s = Supervisor::new(SupervisorConfig {
+            start_path: true,
+            ..cfg_mode()
+        });
+        s.on_heartbeat(0.0);
+        s.on_mode(false);
+        // The pilot flies north at 2 m/s: standby, the goal 0.5 m ahead
+        // (v² / 2a = 4 / 8) and following.
+        for k in 0..10 {
+            let t = k as f64 * 0.02;
+            s.on_pose(t, [2.0 * t, 0.0, -10.0]);
+            s.set_motion(moving(t, 2.0 * t, 2.0));
+            let d = s.tick(t);
+            assert!(d.stream, "standby streams");
+            assert_eq!(s.state(), Standby);
+            assert_eq!(s.goal(), Goal::Hold([2.0 * t + 0.5, 0.0, -10.0]));
+        }
+        assert_eq!(s.pending_goal(), Goal::Path);
+        // A setpoint in standby is kept for after the engagement.
+        let sp = [3.0, 1.0, -10.0];
+        assert!(matches!(
+            s.on_setpoint(0.19, sp),
+            SetpointOutcome::Accepted {
+                transition: None,
+                ..
+            }
+        ));
+        assert_eq!(s.state(), Standby);
+        assert_eq!(s.pending_goal(), Goal::Setpoint(sp));
+        // The pilot switches to OFFBOARD at x = 0.4 m: brake to 0.9 m.
+        s.on_mode(true);
+        s.on_pose(0.2, [0.4, 0.0, -10.0]);
+        s.set_motion(moving(0.2, 0.4, 2.0));
+        let tr = s.tick(0.2).transition.unwrap();
+        assert_eq!((tr.to, tr.cause), (Holding, Cause::Engaged));
+        assert_eq!(s.goal(), Goal::Hold([0.9, 0.0, -10.0]));
+        assert!(s.braking());
+        // Still fast: the goal stays; slow: the setpoint is flown.
+        s.on_pose(0.4, [0.8, 0.0, -10.0]);
+        s.set_motion(moving(0.4, 0.8, 1.0));
+        assert!(s.tick(0.4).transition.is_none());
+        assert_eq!(s.goal(), Goal::Hold([0.9, 0.0, -10.0]));
+        s.on_pose(0.7, [0.9, 0.0, -10.0]);
+        s.set_motion(moving(0.7, 0.9, 0.1));
+        let tr = s.tick(0.7).transition.unwrap();
+        assert_eq!((tr.to, tr.cause), (Tracking, Cause::Resume));
+        assert_eq!(s.goal(), Goal::Setpoint(sp));
+        // Pilot override: standby at once, the setpoint kept for later.
+        s.on_mode(false);
+        s.on_pose(0.72, [1.0, 0.0, -10.0]);
+        s.set_motion(moving(0.72, 1.0, 0.0));
+        let tr = s.tick(0.72).transition.unwrap();
+        assert_eq!((tr.to, tr.cause), (Standby, Cause::PilotControl));
+        assert_eq!(s.pending_goal(), Goal::Setpoint(sp));
+        assert_eq!(s.goal(), Goal::Hold([1.0, 0.0, -10.0]));
+        // Hand-back at rest: holding, then the setpoint again.
+        s.on_mode(true);
+        s.on_pose(0.74, [1.0, 0.0, -10.0]);
+        assert_eq!(s.tick(0.74).transition.unwrap().to, Holding);
+        s.on_pose(0.76, [1.0, 0.0, -10.0]);
+        assert_eq!(s.tick(0.76).transition.unwrap().to, Tracking);
+        assert_eq!(s.goal(), Goal::Setpoint(sp));
+        assert_eq!(s.engagement_counts(), (2, 1));
+        let t = s.time_in_states(0.76);
+        assert!((t[Standby.index()] - (0.2 + 0.02)).abs() < 1e-9, "{t:?}");
+    }
+
+    #[test]
+    fn hold_on_engage_forgets_the_goal_before_the_override() {
+        let mut s = Supervisor::new(SupervisorConfig {
+            start_path: true,
+            resume_on_engage: false,
+            ..cfg_mode()
+        });
+        s.on_heartbeat(0.0);
+        s.on_mode(true);
+        s.on_pose(0.0, P0);
+        s.set_motion(moving(0.0, P0[0], 0.0));
+        assert_eq!(s.tick(0.0).transition.unwrap().to, Holding);
+        // The mission start flies the path at the first engagement.
+        assert_eq!(s.tick(0.02).transition.unwrap().to, Tracking);
+        assert_eq!(s.goal(), Goal::Path);
+        s.on_mode(false);
+        assert_eq!(s.tick(0.04).transition.unwrap().to, Standby);
+        assert_eq!(s.pending_goal(), Goal::None);
+        s.on_mode(true);
+        assert_eq!(s.tick(0.06).transition.unwrap().to, Holding);
+        // Braked, nothing to resume: holding where it stopped.
+        assert!(s.tick(0.08).transition.is_none());
+        assert_eq!(s.state(), Holding);
+        assert!(!s.braking());
+        // (The motion's position: x of P0, y = 0.)
+        assert_eq!(s.goal(), Goal::Hold([P0[0], 0.0, -10.0]));
+    }
+
+    #[test]
+    fn braking_ends_after_its_time_even_if_never_slow() {
+        let mut s = Supervisor::new(SupervisorConfig {
+            start_path: true,
+            ..cfg()
+        });
+        s.on_heartbeat(0.0);
+        s.on_pose(0.0, P0);
+        // 2 m/s at a = 4 m/s²: 0.5 s of braking, + BRAKE_SETTLE.
+        s.set_motion(moving(0.0, P0[0], 2.0));
+        assert_eq!(s.tick(0.0).transition.unwrap().to, Holding);
+        let end = 0.5 + BRAKE_SETTLE;
+        let mut t = 0.02;
+        while t < end - 0.01 {
+            s.on_pose(t, P0);
+            s.on_heartbeat(t);
+            assert!(s.tick(t).transition.is_none(), "at {t}");
+            t += 0.02;
+        }
+        s.on_pose(end, P0);
+        s.on_heartbeat(end);
+        assert_eq!(s.tick(end + 0.001).transition.unwrap().to, Tracking);
     }
 
     #[test]

@@ -70,10 +70,12 @@ impl FakeAutopilot {
                     let ms = started.elapsed().as_millis() as u32;
                     let hdr = header(1, 1, k as u8);
                     if k.is_multiple_of(50) {
+                        // Armed in OFFBOARD: the commands are applied
+                        // (engaged at once; standby is tested elsewhere).
                         let hb = heartbeat_autopilot(
                             MavAutopilot::MAV_AUTOPILOT_PX4,
                             true,
-                            0,
+                            6 << 16,
                             MavState::MAV_STATE_ACTIVE,
                         );
                         let _ = link.send(&hdr, &hb).await;

@@ -10,6 +10,8 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
+use super::pilot::{PilotAction, SitlEngage};
+
 /// A SITL configuration that could not be read or is out of range.
 #[derive(Debug, Error)]
 pub enum SitlConfigError {
@@ -151,6 +153,20 @@ pub enum SitlPlant {
     Full,
 }
 
+/// `sitl.autopilot`: which autopilot the SITL plays (HEARTBEAT `autopilot`
+/// field and mode numbers).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum SitlAutopilot {
+    /// PX4: MAV_AUTOPILOT_PX4, POSCTL (main mode 3) / OFFBOARD (6).
+    #[default]
+    Px4,
+    /// ArduPilot Copter: MAV_AUTOPILOT_ARDUPILOTMEGA, LOITER (5) /
+    /// GUIDED_NOGPS (20). The planar plant only (altitude held: thrust 0.5
+    /// is a climb rate of 0, as ArduPilot reads it by default).
+    Ardupilot,
+}
+
 /// `[sitl]`: the autopilot stand-in.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -197,6 +213,16 @@ pub struct SitlConfig {
     /// or replayed frames; other unsigned messages are still accepted. See
     /// [`crate::sitl`].
     pub signing_key_file: String,
+    /// The autopilot played: `px4` or `ardupilot` (see [`SitlAutopilot`]).
+    pub autopilot: SitlAutopilot,
+    /// Who switches to offboard: `auto` (whenever the stream is alive and
+    /// the pilot has not taken over) or `pilot` (only `[[sitl.pilot]]` and
+    /// the in-process hook). See [`super::pilot`].
+    pub engage: SitlEngage,
+    /// Scripted pilot actions: `[[sitl.pilot]]` tables with `at_s`,
+    /// optional `mode` (`position` / `offboard`) and optional `velocity`
+    /// (stick, local NED m/s, flown in position mode).
+    pub pilot: Vec<PilotAction>,
 }
 
 impl Default for SitlConfig {
@@ -218,6 +244,9 @@ impl Default for SitlConfig {
             command_timeout_s: 0.5,
             seed: 1,
             signing_key_file: String::new(),
+            autopilot: SitlAutopilot::Px4,
+            engage: SitlEngage::Auto,
+            pilot: Vec::new(),
         }
     }
 }
@@ -261,6 +290,21 @@ impl SitlConfig {
         range("sitl.command_timeout_s", si.command_timeout_s, 0.05, 10.0)?;
         for i in 0..3 {
             range(&format!("sitl.start[{i}]"), si.start[i], -1e4, 1e4)?;
+        }
+        if si.autopilot == SitlAutopilot::Ardupilot && si.plant != SitlPlant::Planar {
+            return Err(err(
+                "sitl.autopilot",
+                "\"ardupilot\"".into(),
+                "\"ardupilot\" with sitl.plant = \"planar\" only (thrust is a climb rate)".into(),
+            ));
+        }
+        for (i, a) in si.pilot.iter().enumerate() {
+            range(&format!("sitl.pilot[{i}].at_s"), a.at_s, 0.0, 3600.0)?;
+            if let Some(v) = a.velocity {
+                for (j, x) in v.iter().enumerate() {
+                    range(&format!("sitl.pilot[{i}].velocity[{j}]"), *x, -20.0, 20.0)?;
+                }
+            }
         }
         Ok(())
     }

@@ -85,7 +85,9 @@ use thiserror::Error;
 use dflat_link::transport::Endpoint;
 
 mod config;
-pub use config::{SitlConfig, SitlConfigError, SitlIds, SitlPlant, SitlSettings};
+pub mod pilot;
+pub use config::{SitlAutopilot, SitlConfig, SitlConfigError, SitlIds, SitlPlant, SitlSettings};
+pub use pilot::{ModeMachine, PilotAction, PilotMode, SitlEngage};
 
 /// Gravity of the simulated world [m/s²].
 pub const GRAVITY: f64 = 9.81;
@@ -95,6 +97,13 @@ pub const TILT_LIMIT_DEG: f64 = 35.0;
 pub const PX4_MODE_OFFBOARD: u32 = 6 << 16;
 /// PX4 custom mode of main mode POSCTL (3 << 16), reported while holding.
 pub const PX4_MODE_POSCTL: u32 = 3 << 16;
+/// ArduPilot Copter LOITER, reported in position mode.
+pub const ARDUPILOT_MODE_LOITER: u32 = 5;
+/// ArduPilot Copter GUIDED_NOGPS, reported in offboard mode.
+pub const ARDUPILOT_MODE_GUIDED_NOGPS: u32 = 20;
+/// Deceleration the position mode brakes at when it takes over \[m/s²\]
+/// (its stop point is held, not the point where it took over).
+const HOLD_BRAKE: f64 = 2.5;
 
 /// Horizontal gains of the hold loop: `a = KP·(p_hold − p) − KD·v`. With the
 /// 0.2 s attitude lag the closed loop is well damped (≈ 1 rad/s).
@@ -179,11 +188,14 @@ impl SitlMode {
         }
     }
 
-    /// HEARTBEAT `custom_mode` (PX4 encoding).
-    pub fn custom_mode(self) -> u32 {
-        match self {
-            SitlMode::Hold => PX4_MODE_POSCTL,
-            SitlMode::Offboard => PX4_MODE_OFFBOARD,
+    /// HEARTBEAT `custom_mode` as `autopilot` reports it: PX4 POSCTL /
+    /// OFFBOARD, ArduPilot LOITER (5) / GUIDED_NOGPS (20).
+    pub fn custom_mode(self, autopilot: SitlAutopilot) -> u32 {
+        match (autopilot, self) {
+            (SitlAutopilot::Px4, SitlMode::Hold) => PX4_MODE_POSCTL,
+            (SitlAutopilot::Px4, SitlMode::Offboard) => PX4_MODE_OFFBOARD,
+            (SitlAutopilot::Ardupilot, SitlMode::Hold) => ARDUPILOT_MODE_LOITER,
+            (SitlAutopilot::Ardupilot, SitlMode::Offboard) => ARDUPILOT_MODE_GUIDED_NOGPS,
         }
     }
 
@@ -256,6 +268,10 @@ pub struct SitlCounters {
     pub gcs_frames_out: u64,
     /// Entries into the hold mode after commanded flight.
     pub hold_entries: u64,
+    /// Mode changes (position ⇄ offboard).
+    pub mode_changes: u64,
+    /// Requests for offboard refused because no stream was alive.
+    pub offboard_refused: u64,
     /// Plant integration steps.
     pub plant_steps: u64,
     /// Plant steps that ran late (the thread missed its deadline).
@@ -279,6 +295,8 @@ struct Counters {
     gcs_frames_in: AtomicU64,
     gcs_frames_out: AtomicU64,
     hold_entries: AtomicU64,
+    mode_changes: AtomicU64,
+    offboard_refused: AtomicU64,
     plant_steps: AtomicU64,
     late_steps: AtomicU64,
     send_errors: AtomicU64,
@@ -305,6 +323,8 @@ impl Counters {
             gcs_frames_in: g(&self.gcs_frames_in),
             gcs_frames_out: g(&self.gcs_frames_out),
             hold_entries: g(&self.hold_entries),
+            mode_changes: g(&self.mode_changes),
+            offboard_refused: g(&self.offboard_refused),
             plant_steps: g(&self.plant_steps),
             late_steps: g(&self.late_steps),
             send_errors: g(&self.send_errors),
@@ -378,6 +398,10 @@ struct Shared {
     truth: Mutex<TruthSample>,
     trace: Mutex<Vec<TruthSample>>,
     command: Mutex<Option<(Instant, ReceivedCommand)>>,
+    /// A mode request from the in-process hook, taken by the plant loop.
+    mode_request: Mutex<Option<SitlMode>>,
+    /// A stick velocity from the in-process hook, taken by the plant loop.
+    pilot_velocity: Mutex<Option<[f64; 3]>>,
     peers: Mutex<Peers>,
     counters: Counters,
     /// Signing of outgoing frames (`None` = unsigned). Shared because any
@@ -565,6 +589,8 @@ pub fn spawn(cfg: &SitlSettings, options: SitlOptions) -> Result<SitlHandle, Sit
         truth: Mutex::new(first),
         trace: Mutex::new(Vec::new()),
         command: Mutex::new(None),
+        mode_request: Mutex::new(None),
+        pilot_velocity: Mutex::new(None),
         peers: Mutex::new(Peers::default()),
         counters: Counters::default(),
         signing: signing.clone().map(Mutex::new),
@@ -627,6 +653,8 @@ pub fn spawn(cfg: &SitlSettings, options: SitlOptions) -> Result<SitlHandle, Sit
         telemetry_rate_hz: cfg.sitl.telemetry_rate_hz,
         command_timeout: Duration::from_secs_f64(cfg.sitl.command_timeout_s),
         hover_thrust: cfg.sitl.hover_thrust,
+        autopilot: cfg.sitl.autopilot,
+        modes: ModeMachine::new(cfg.sitl.engage, cfg.sitl.pilot.clone()),
         record_trace: options.record_trace,
         truth_file,
     };
@@ -711,6 +739,19 @@ impl SitlHandle {
     /// Seconds since the SITL started (its `time_boot_ms` clock).
     pub fn elapsed(&self) -> f64 {
         self.shared.elapsed()
+    }
+
+    /// The pilot switches modes at the next plant step: to position mode
+    /// (an override) or to offboard (engage / hand back; refused without a
+    /// live stream, [`SitlCounters::offboard_refused`]).
+    pub fn request_mode(&self, mode: SitlMode) {
+        *lock(&self.shared.mode_request) = Some(mode);
+    }
+
+    /// The pilot's stick: fly at `velocity` (local NED \[m/s\]) in position
+    /// mode from the next plant step (`[0, 0, 0]`: brake and hold).
+    pub fn set_pilot_velocity(&self, velocity: [f64; 3]) {
+        *lock(&self.shared.pilot_velocity) = Some(velocity);
     }
 
     /// Stops the pose stream (LOCAL_POSITION_NED and ATTITUDE); HEARTBEAT
@@ -1040,6 +1081,8 @@ struct PlantLoop {
     telemetry_rate_hz: f64,
     command_timeout: Duration,
     hover_thrust: f64,
+    autopilot: SitlAutopilot,
+    modes: ModeMachine,
     record_trace: bool,
     truth_file: Option<(PathBuf, BufWriter<File>)>,
 }
@@ -1079,26 +1122,47 @@ impl PlantLoop {
             }
             let before = steps;
 
-            // Command or hold.
-            let fresh = (*lock(&self.shared.command))
+            // The mode (pilot, stream), then the command or the hold.
+            let received = (*lock(&self.shared.command))
                 .filter(|(at, _)| at.elapsed() < self.command_timeout)
                 .map(|(_, c)| c);
-            let command = match fresh {
-                Some(c) => {
-                    if mode != SitlMode::Offboard {
-                        mode = SitlMode::Offboard;
-                        tracing::info!("sitl: offboard (commands received)");
-                    }
-                    self.plant_command(&c)
+            if let Some(v) = lock(&self.shared.pilot_velocity).take() {
+                self.modes.set_velocity(v);
+            }
+            let request = lock(&self.shared.mode_request).take();
+            let elapsed_t = steps as f64 * dt;
+            let step = self.modes.step(elapsed_t, received.is_some(), request);
+            if step.refused {
+                bump(&self.shared.counters.offboard_refused);
+                tracing::warn!("sitl: offboard refused, no setpoint stream");
+                let text = dflat_link::statustext(
+                    dflat_link::dialect::MavSeverity::MAV_SEVERITY_WARNING,
+                    "SITL: offboard refused, no setpoint stream",
+                );
+                self.send(&text);
+            }
+            if step.changed {
+                mode = self.modes.mode();
+                bump(&self.shared.counters.mode_changes);
+                heartbeat_due = true;
+                if mode == SitlMode::Hold {
+                    // Brake and hold where the vehicle stops.
+                    let s = self.plant.true_state();
+                    let v = s.velocity;
+                    hold_target = s.position + v * (v.norm() / (2.0 * HOLD_BRAKE));
+                    bump(&self.shared.counters.hold_entries);
+                    tracing::info!(stream = received.is_some(), "sitl: position mode");
+                } else {
+                    tracing::info!("sitl: offboard");
                 }
+            }
+            let fresh = received.filter(|_| mode == SitlMode::Offboard);
+            let command = match fresh {
+                Some(c) => self.plant_command(&c),
                 None => {
-                    if mode != SitlMode::Hold {
-                        mode = SitlMode::Hold;
-                        hold_target = self.plant.position();
-                        bump(&self.shared.counters.hold_entries);
-                        tracing::info!("sitl: command timeout, holding position");
-                    }
-                    self.hold_command(&hold_target)
+                    let v = Vector3::from(self.modes.velocity());
+                    hold_target += v * (n as f64 * dt);
+                    self.hold_command(&hold_target, &v)
                 }
             };
             self.shared
@@ -1128,16 +1192,22 @@ impl PlantLoop {
                 heartbeat_due = true;
             }
             if heartbeat_due {
+                let autopilot = match self.autopilot {
+                    SitlAutopilot::Px4 => MavAutopilot::MAV_AUTOPILOT_PX4,
+                    SitlAutopilot::Ardupilot => MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
+                };
                 let hb = dflat_link::heartbeat_autopilot(
-                    MavAutopilot::MAV_AUTOPILOT_PX4,
+                    autopilot,
                     true,
-                    mode.custom_mode(),
+                    mode.custom_mode(self.autopilot),
                     MavState::MAV_STATE_ACTIVE,
                 );
                 if self.send(&hb) {
                     bump(&self.shared.counters.heartbeats_sent);
-                    heartbeat_due = false;
                 }
+                // Due once per slot, whoever listens: a ground station
+                // alone on the GCS port gets 1 Hz, not the plant rate.
+                heartbeat_due = false;
             }
             if before / telemetry_every != steps / telemetry_every {
                 let sample = TruthSample {
@@ -1265,20 +1335,26 @@ impl PlantLoop {
         }
     }
 
-    fn hold_command(&self, target: &Vector3<f64>) -> PlantCommand {
-        hold_law(&self.options, &self.plant.true_state(), target)
+    fn hold_command(&self, target: &Vector3<f64>, velocity: &Vector3<f64>) -> PlantCommand {
+        hold_law(&self.options, &self.plant.true_state(), target, velocity)
     }
 }
 
-/// The autopilot's own position hold: PD on the true state → tilt and
+/// The autopilot's own position hold (position mode): PD on the true
+/// state towards `target` moving at the pilot's `velocity` → tilt and
 /// thrust (the autopilot knows its own hover thrust and mass).
-fn hold_law(options: &PlantOptions, s: &PlantState, target: &Vector3<f64>) -> PlantCommand {
+fn hold_law(
+    options: &PlantOptions,
+    s: &PlantState,
+    target: &Vector3<f64>,
+    velocity: &Vector3<f64>,
+) -> PlantCommand {
     let e = target - s.position;
     let max_a = GRAVITY * HOLD_MAX_TILT_DEG.to_radians().tan();
     let limit = |a: f64| a.clamp(-max_a, max_a);
-    let ax = limit(HOLD_KP * e.x - HOLD_KD * s.velocity.x);
-    let ay = limit(HOLD_KP * e.y - HOLD_KD * s.velocity.y);
-    let az = limit(HOLD_KP_Z * e.z - HOLD_KD_Z * s.velocity.z);
+    let ax = limit(HOLD_KP * e.x + HOLD_KD * (velocity.x - s.velocity.x));
+    let ay = limit(HOLD_KP * e.y + HOLD_KD * (velocity.y - s.velocity.y));
+    let az = limit(HOLD_KP_Z * e.z + HOLD_KD_Z * (velocity.z - s.velocity.z));
     // Into the yaw frame: forward / right accelerations.
     let (sy, cy) = s.yaw.sin_cos();
     let a_fwd = cy * ax + sy * ay;
@@ -1457,7 +1533,7 @@ mod tests {
             plant.reset(&s);
             let target = Vector3::new(0.0, 0.0, -10.0);
             for _ in 0..(20.0 / popts.plant_dt) as usize {
-                let c = hold_law(&popts, &plant.true_state(), &target);
+                let c = hold_law(&popts, &plant.true_state(), &target, &Vector3::zeros());
                 plant.apply(&c);
                 plant.advance(popts.plant_dt);
             }

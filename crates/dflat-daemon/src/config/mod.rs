@@ -133,6 +133,40 @@ pub struct LinkConfig {
     /// (telemetry, pose) from trusted senders; badly signed or replayed
     /// frames are always refused, unsigned setpoints always.
     pub signing_accept_unsigned_telemetry: bool,
+    /// How the autopilot's HEARTBEAT `custom_mode` is read: `auto` (from
+    /// its `autopilot` field: MAV_AUTOPILOT_PX4 or _ARDUPILOTMEGA), `px4`
+    /// or `ardupilot` (override, for a bridge that reports another type).
+    pub autopilot: AutopilotKind,
+    /// When the autopilot applies our commands: `mode` (engaged only while
+    /// its HEARTBEAT says armed and PX4 OFFBOARD / ArduPilot GUIDED_NOGPS
+    /// or GUIDED; standby otherwise) or `always` (every streamed command is
+    /// taken as applied — for an autopilot whose modes dflat cannot read;
+    /// no standby, no bumpless engagement).
+    pub engagement: Engagement,
+}
+
+/// `link.autopilot`: how the autopilot's mode is read.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum AutopilotKind {
+    /// From the HEARTBEAT's `autopilot` field.
+    #[default]
+    Auto,
+    /// PX4 (main mode in `custom_mode` bits 16–23).
+    Px4,
+    /// ArduPilot Copter (mode number in `custom_mode`).
+    Ardupilot,
+}
+
+/// `link.engagement`: when streamed commands count as applied.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum Engagement {
+    /// From the autopilot's HEARTBEAT: armed and in its offboard mode.
+    #[default]
+    Mode,
+    /// Always (no mode is read).
+    Always,
 }
 
 /// How a pose's capture time is obtained (`link.pose_time`).
@@ -164,6 +198,8 @@ impl Default for LinkConfig {
             signing_link_id: 0,
             signing_timestamp_file: "/var/lib/dflat/signing_timestamp".into(),
             signing_accept_unsigned_telemetry: true,
+            autopilot: AutopilotKind::Auto,
+            engagement: Engagement::Mode,
         }
     }
 }
@@ -382,6 +418,30 @@ pub struct MissionConfig {
     /// Fly the path again and again (a closed path: its last waypoint must
     /// equal its first) instead of holding its end (soak tests, patrols).
     pub repeat: bool,
+    /// What follows an engagement (the pilot switched to OFFBOARD /
+    /// GUIDED_NOGPS, or handed back after an override), once the vehicle
+    /// has braked to a stop where it was engaged: `resume` (the goal
+    /// before: the path from its closest point, the last setpoint) or
+    /// `hold` (hold the stop point until a new setpoint). A setpoint
+    /// accepted during standby is flown in both cases, and
+    /// `mission.start = "path"` starts the path at the first engagement.
+    pub on_engage: OnEngage,
+    /// Braking deceleration at engagement as a fraction of the plan's tilt
+    /// bound (0.1–1): the vehicle stops at `p + v·|v| / (2·a)`,
+    /// `a = brake_fraction · g · tan(controller.constraint_tilt_deg, or
+    /// vehicle.max_tilt_deg without one)`.
+    pub brake_fraction: f64,
+}
+
+/// `mission.on_engage`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum OnEngage {
+    /// Resume the goal flown before (path from its closest point, setpoint).
+    #[default]
+    Resume,
+    /// Hold where the vehicle stopped until a new setpoint.
+    Hold,
 }
 
 impl Default for MissionConfig {
@@ -397,6 +457,8 @@ impl Default for MissionConfig {
             path_trigger_radius: 0.5,
             geofence: [500.0, 500.0, 200.0],
             repeat: false,
+            on_engage: OnEngage::Resume,
+            brake_fraction: 0.7,
         }
     }
 }

@@ -151,6 +151,7 @@ impl Config {
         )?;
         let m = &self.mission;
         v.range("mission.speed", m.speed, 0.1, 20.0)?;
+        v.range("mission.brake_fraction", m.brake_fraction, 0.1, 1.0)?;
         v.range(
             "mission.path_trigger_radius",
             m.path_trigger_radius,

@@ -155,6 +155,8 @@ impl ControlLoop {
             jitter,
             time_in_state: supervisor.time_in_states(now),
             state_changes: supervisor.transitions(),
+            engagements: supervisor.engagement_counts().0,
+            disengagements: supervisor.engagement_counts().1,
             final_state: supervisor.state(),
             csv,
             disturbance: counts.disturbance,

@@ -126,7 +126,7 @@ impl Outgoing {
 
 /// Published daemon state (for HEARTBEAT and [`DaemonHandle::state`]).
 const ST_BOOT: u8 = 0;
-const ST_SHUTDOWN: u8 = 5;
+const ST_SHUTDOWN: u8 = 6;
 
 fn encode_state(s: FlightState) -> u8 {
     s.index() as u8 + 1
@@ -134,7 +134,7 @@ fn encode_state(s: FlightState) -> u8 {
 
 fn decode_state(v: u8) -> Option<FlightState> {
     match v {
-        1..=4 => Some(FlightState::ALL[usize::from(v - 1)]),
+        1..=5 => Some(FlightState::ALL[usize::from(v - 1)]),
         _ => None,
     }
 }
@@ -143,7 +143,7 @@ fn daemon_status(v: u8) -> DaemonStatus {
     match decode_state(v) {
         None if v == ST_BOOT => DaemonStatus::Boot,
         None => DaemonStatus::Poweroff,
-        Some(FlightState::WaitingForPose) => DaemonStatus::Standby,
+        Some(FlightState::WaitingForPose | FlightState::Standby) => DaemonStatus::Standby,
         Some(FlightState::Holding | FlightState::Tracking) => DaemonStatus::Active,
         Some(FlightState::Failsafe) => DaemonStatus::Critical,
     }
@@ -178,8 +178,10 @@ struct ControlReport {
     outbound_dropped: u64,
     solve: Histogram,
     jitter: Histogram,
-    time_in_state: [f64; 4],
+    time_in_state: [f64; 5],
     state_changes: u64,
+    engagements: u64,
+    disengagements: u64,
     final_state: FlightState,
     csv: Option<CsvReport>,
     disturbance: Option<DisturbanceSummary>,
@@ -321,6 +323,8 @@ impl DaemonHandle {
             outbound_dropped: control.outbound_dropped,
             time_in_state_s: StateTimes::from_array(control.time_in_state),
             state_changes: control.state_changes,
+            engagements: control.engagements,
+            disengagements: control.disengagements,
             final_state: control.final_state,
             cpu_percent,
             peak_rss_kib: peak_rss_kib(),

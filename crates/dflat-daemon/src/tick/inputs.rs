@@ -2,7 +2,7 @@
 //! the receive path built from the configuration (source filter, pose
 //! source, supervisor parameters) — shared by the daemon and the fuzzer.
 
-use dflat_link::{Inbound, PoseSource, SourceFilter};
+use dflat_link::{AutopilotFamily, AutopilotMode, Inbound, PoseSource, SourceFilter};
 
 use crate::config::{Config, LinkConfig, PoseSourceKind};
 use crate::supervisor::SupervisorConfig;
@@ -24,15 +24,25 @@ pub enum Event {
         /// The estimator reset counter (ODOMETRY, VISION_POSITION_ESTIMATE).
         reset_counter: Option<u8>,
     },
-    /// ATTITUDE: the autopilot's yaw \[rad\].
+    /// ATTITUDE: the autopilot's attitude estimate (ZYX Euler, FRD body in
+    /// NED).
     Attitude {
-        /// Yaw \[rad\].
+        /// Arrival \[s\].
+        arrival: f64,
+        /// Roll φ \[rad\].
+        roll: f64,
+        /// Pitch θ \[rad\].
+        pitch: f64,
+        /// Yaw ψ \[rad\].
         yaw: f64,
     },
     /// The autopilot's HEARTBEAT.
     Heartbeat {
         /// Arrival \[s\].
         arrival: f64,
+        /// Its mode and arming state, the family read from its `autopilot`
+        /// field (`link.autopilot` may override it: [`crate::tick`]).
+        mode: AutopilotMode,
     },
     /// An accepted position setpoint.
     Setpoint {
@@ -54,8 +64,20 @@ pub fn event_from(inbound: &Inbound, pose_source: PoseSource, arrival: f64) -> O
             yaw: p.yaw,
             reset_counter: p.reset_counter,
         }),
-        Inbound::Attitude(a) => Some(Event::Attitude { yaw: a.yaw }),
-        Inbound::Heartbeat(_) => Some(Event::Heartbeat { arrival }),
+        Inbound::Attitude(a) => Some(Event::Attitude {
+            arrival,
+            roll: a.roll,
+            pitch: a.pitch,
+            yaw: a.yaw,
+        }),
+        Inbound::Heartbeat(h) => Some(Event::Heartbeat {
+            arrival,
+            mode: AutopilotMode {
+                family: AutopilotFamily::from_mav_autopilot(h.autopilot),
+                custom_mode: h.custom_mode,
+                armed: h.armed,
+            },
+        }),
         Inbound::PositionSetpoint(s) => Some(Event::Setpoint {
             arrival,
             position: s.position,
@@ -106,5 +128,22 @@ pub fn supervisor_config(cfg: &Config) -> SupervisorConfig {
         path_trigger_radius: m.path_trigger_radius,
         start_path: m.start == crate::config::MissionStart::Path,
         repeat_path: m.repeat,
+        always_engaged: cfg.link.engagement == crate::config::Engagement::Always,
+        resume_on_engage: m.on_engage == crate::config::OnEngage::Resume,
+        brake_acceleration: brake_acceleration(cfg),
     }
+}
+
+/// Braking deceleration at engagement \[m/s²\]: `mission.brake_fraction`
+/// of the acceleration at the plan's tilt bound
+/// (`controller.constraint_tilt_deg`, else `vehicle.max_tilt_deg`).
+pub fn brake_acceleration(cfg: &Config) -> f64 {
+    let tilt = if cfg.controller.constraint_tilt_deg > 0.0 {
+        cfg.controller
+            .constraint_tilt_deg
+            .min(cfg.vehicle.max_tilt_deg)
+    } else {
+        cfg.vehicle.max_tilt_deg
+    };
+    cfg.mission.brake_fraction * cfg.vehicle.gravity * tilt.to_radians().tan()
 }

@@ -20,26 +20,30 @@
 //! most once.
 
 use dflat_control::reference::Reference;
-use dflat_control::{Controller, Measurement};
+use dflat_control::{ControlModel, Controller, Measurement};
 use dflat_link::dialect::MavSeverity;
 use dflat_link::{
-    AttitudeCommand, MavMessage, Target, ThrustMapping, set_attitude_target, statustext,
+    AttitudeCommand, AutopilotFamily, AutopilotMode, MavMessage, Target, ThrustMapping,
+    set_attitude_target, statustext,
 };
 use nalgebra::Vector3;
 use tracing::{debug, error, info, warn};
 
 use crate::clock::PoseClock;
-use crate::config::{Config, PoseSourceKind, PoseTime};
-use crate::control::reference_for;
+use crate::config::{AutopilotKind, Config, PoseSourceKind, PoseTime};
+use crate::control::{control_model, reference_for};
 use crate::guard::{
     CommandGuard, Fallback, FallbackKind, GuardCounts, ResidualMonitor, is_pose_jump,
 };
+use crate::motion::MotionEstimator;
 use crate::records::{CsvDisturbance, CsvRow};
 use crate::summary::{DisturbanceSummary, SolveCounts};
 use crate::supervisor::{Cause, FlightState, Goal, SetpointOutcome, Supervisor, Transition};
 
 mod inputs;
-pub use inputs::{Event, event_from, pose_source, source_filter, supervisor_config};
+pub use inputs::{
+    Event, brake_acceleration, event_from, pose_source, source_filter, supervisor_config,
+};
 
 /// Smallest interval between two "setpoint refused" STATUSTEXTs \[s\].
 pub const REFUSAL_TEXT_INTERVAL: f64 = 1.0;
@@ -132,9 +136,22 @@ pub struct ControlCore {
     guard: CommandGuard,
     fallback: Fallback,
     residual: ResidualMonitor,
+    /// The controller's model, for the input that explains a measured
+    /// attitude in standby (`None`: the configuration's model is invalid;
+    /// validated configurations always have one).
+    model: Option<ControlModel>,
     // Per-run state.
     pose: Option<PoseSample>,
     attitude_yaw: Option<f64>,
+    /// Newest ATTITUDE (pitch, roll) \[rad\].
+    attitude: Option<[f64; 2]>,
+    /// The attitude at the previous tick, when that tick's command was
+    /// sent in standby (corrected from the attitude at this tick).
+    standby_attitude: Option<[f64; 2]>,
+    /// The autopilot's mode as last reported.
+    mode: Option<AutopilotMode>,
+    /// The vehicle's motion from the poses (engagement's stop point).
+    motion: MotionEstimator,
     last_used_arrival: Option<f64>,
     reference: Option<Reference>,
     reference_generation: u64,
@@ -193,9 +210,14 @@ impl ControlCore {
                 config.vehicle.yaw_deg.to_radians(),
             ),
             residual: ResidualMonitor::new(config.safety.residual_failsafe_m),
+            model: control_model(config).ok(),
             config: config.clone(),
             pose: None,
             attitude_yaw: None,
+            attitude: None,
+            standby_attitude: None,
+            mode: None,
+            motion: MotionEstimator::new(),
             last_used_arrival: None,
             reference: None,
             reference_generation,
@@ -246,6 +268,7 @@ impl ControlCore {
             self.apply(event);
         }
         // 2. Decide.
+        self.supervisor.set_motion(self.motion.estimate());
         let decision = self.supervisor.tick(t);
         if decision.reset_controller {
             self.reset_controller();
@@ -273,7 +296,10 @@ impl ControlCore {
         };
         // The model-consistency residual: this tick's measurement against
         // the previous plan's prediction for it.
-        if decision.stream
+        if !self.supervisor.state().engaged() {
+            // Standby: the plan is not flown, so it predicts nothing.
+            self.residual.forget();
+        } else if decision.stream
             && let Some(pose) = self.pose
         {
             let (r, trip) = self.residual.measure(pose.position);
@@ -331,6 +357,10 @@ impl ControlCore {
             position: Vector3::from(pose.position),
             yaw: self.yaw_of(pose.yaw, self.attitude_yaw),
         };
+        // Standby: the tick before sent a command the autopilot did not
+        // apply; record the input its attitude shows instead, before this
+        // tick's update uses the window.
+        self.correct_standby_input();
         let t0 = stopwatch();
         // A panicking controller is a bug, but it must not take the loop
         // down with it: treat it as a failed tick and reset.
@@ -379,6 +409,13 @@ impl ControlCore {
                 self.fallback_command(&measurement, failed, solve_us, row),
                 None,
             ),
+        };
+        // This tick's command is not applied in standby: correct it at the
+        // next tick from the attitude then.
+        self.standby_attitude = if self.supervisor.state() == FlightState::Standby {
+            self.attitude
+        } else {
+            None
         };
         let time_boot_ms = (t * 1000.0) as u64 as u32;
         // Every path above is guarded (or is the fallback's own finite
@@ -594,6 +631,49 @@ impl ControlCore {
         }
     }
 
+    /// The input that explains the attitude change since the previous
+    /// (standby) tick replaces the one recorded then
+    /// ([`Controller::correct_last_input`]). Thrust: the hover thrust
+    /// (the autopilot's position mode holds altitude), with the disturbance
+    /// estimate's thrust scale when there is one.
+    fn correct_standby_input(&mut self) {
+        let (Some(before), Some(now), Some(model)) =
+            (self.standby_attitude.take(), self.attitude, self.model)
+        else {
+            return;
+        };
+        let [pitch, roll] = model.input_from_attitude(before, now);
+        let thrust = self
+            .controller
+            .disturbance()
+            .map_or(model.gravity(), |d| d.hover_thrust);
+        self.controller
+            .correct_last_input(&Vector3::new(pitch, roll, thrust));
+    }
+
+    /// The autopilot's HEARTBEAT mode (family per `link.autopilot`): the
+    /// supervisor learns whether our commands are applied; a change is
+    /// logged and said once.
+    fn apply_mode(&mut self, mut mode: AutopilotMode) {
+        mode.family = match self.config.link.autopilot {
+            AutopilotKind::Auto => mode.family,
+            AutopilotKind::Px4 => AutopilotFamily::Px4,
+            AutopilotKind::Ardupilot => AutopilotFamily::ArduPilot,
+        };
+        self.supervisor.on_mode(mode.applies_commands());
+        if self.mode != Some(mode) {
+            info!(mode = %mode, applies = mode.applies_commands(), "autopilot mode");
+            let text = format!("dflat: autopilot {mode}");
+            self.text(MavSeverity::MAV_SEVERITY_INFO, &text);
+            self.mode = Some(mode);
+        }
+    }
+
+    /// The autopilot's mode as last reported.
+    pub fn autopilot_mode(&self) -> Option<AutopilotMode> {
+        self.mode
+    }
+
     /// Applies one inbound fact (pose clock, jump check, supervisor).
     pub fn apply(&mut self, event: Event) {
         match event {
@@ -604,8 +684,18 @@ impl ControlCore {
                 yaw,
                 reset_counter,
             } => self.apply_pose(arrival, source_time, position, yaw, reset_counter),
-            Event::Attitude { yaw } => self.attitude_yaw = Some(yaw),
-            Event::Heartbeat { arrival } => self.supervisor.on_heartbeat(arrival),
+            Event::Attitude {
+                roll, pitch, yaw, ..
+            } => {
+                self.attitude_yaw = Some(yaw);
+                if roll.is_finite() && pitch.is_finite() {
+                    self.attitude = Some([pitch, roll]);
+                }
+            }
+            Event::Heartbeat { arrival, mode } => {
+                self.supervisor.on_heartbeat(arrival);
+                self.apply_mode(mode);
+            }
             Event::Setpoint { arrival, position } => {
                 let t = arrival;
                 match self.supervisor.on_setpoint(t, position) {
@@ -671,6 +761,10 @@ impl ControlCore {
         // Every sample to a multi-rate controller (late ones too).
         if !jump {
             self.observe(&pose);
+            self.motion.push(capture, position);
+        } else {
+            self.motion.reset();
+            self.motion.push(capture, position);
         }
         // The newest for the others, by the source's own clock when both
         // have one (a falling offset estimate may map a newer pose before

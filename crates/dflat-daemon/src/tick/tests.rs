@@ -11,6 +11,13 @@ use dflat_control::{
 use super::*;
 use crate::control::thrust_mapping;
 
+/// PX4 in OFFBOARD, armed: the autopilot applies the commands.
+const OFFBOARD: dflat_link::AutopilotMode = dflat_link::AutopilotMode {
+    family: dflat_link::AutopilotFamily::Px4,
+    custom_mode: 6 << 16,
+    armed: true,
+};
+
 const DT: f64 = 0.02;
 const G: f64 = 9.81;
 
@@ -91,7 +98,10 @@ fn fly(core: &mut ControlCore, ticks: u64) -> Vec<StepOutput> {
         .map(|k| {
             let t = k as f64 * DT;
             let events = [
-                Event::Heartbeat { arrival: t - 0.001 },
+                Event::Heartbeat {
+                    arrival: t - 0.001,
+                    mode: OFFBOARD,
+                },
                 Event::Pose {
                     arrival: t - 0.001,
                     source_time: None,
@@ -225,7 +235,14 @@ fn without_pose_nothing_is_sent() {
         scheduled: 0.0,
         jitter_us: 0,
     };
-    let out = core.step(&time, [Event::Heartbeat { arrival: 0.0 }], &mut || 0.0);
+    let out = core.step(
+        &time,
+        [Event::Heartbeat {
+            arrival: 0.0,
+            mode: OFFBOARD,
+        }],
+        &mut || 0.0,
+    );
     assert!(out.command.is_none());
     assert_eq!(updates.load(Ordering::Relaxed), 0);
     assert_eq!(out.row.tick, 0);
