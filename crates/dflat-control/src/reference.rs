@@ -1,5 +1,8 @@
 //! Reference generation (paper §VII-C): a fixed setpoint, or a path of
-//! straight segments between waypoints flown at a desired speed.
+//! straight segments between waypoints flown at a desired speed; and (ours)
+//! a stop: braking at constant deceleration along the current velocity,
+//! for the moment the autopilot hands control to the controller while the
+//! vehicle moves ([`Reference::braking`]).
 //!
 //! For a path, the reference at tick k is the point of the path closest to
 //! the measured position, `y_ref,k = y_closest`; the reference over the
@@ -37,6 +40,69 @@ pub struct Reference {
 enum Kind {
     Setpoint(Vector3<f64>),
     Path(Path),
+    Brake(Brake),
+}
+
+/// A straight stop at constant deceleration, with its monotone progress.
+#[derive(Debug, Clone, PartialEq)]
+struct Brake {
+    /// Where the braking starts, NED \[m\].
+    start: Vector3<f64>,
+    /// Unit direction of the motion.
+    dir: Vector3<f64>,
+    /// Speed at the start [m/s] (> 0).
+    speed: f64,
+    /// Deceleration [m/s²] (> 0).
+    decel: f64,
+    /// Distance coasted at the initial speed before the deceleration
+    /// starts (`speed · lag`: the attitude loop's response) \[m\].
+    coast: f64,
+    /// Stopping distance `coast + speed² / (2·decel)` \[m\]; moves on with
+    /// a vehicle that overshoots it (never back).
+    length: f64,
+    /// Distance of the current closest point from the start \[m\].
+    progress: f64,
+}
+
+impl Brake {
+    fn point(&self, s: f64) -> Vector3<f64> {
+        self.start + self.dir * s.clamp(0.0, self.length)
+    }
+
+    /// Speed on the braking profile at distance `s` [m/s].
+    fn speed_at(&self, s: f64) -> f64 {
+        if s < self.coast {
+            return self.speed;
+        }
+        (self.speed * self.speed - 2.0 * self.decel * (s - self.coast))
+            .max(0.0)
+            .sqrt()
+    }
+
+    /// Distance along the profile `tau` \[s\] after passing `s`.
+    fn advance(&self, s: f64, tau: f64) -> f64 {
+        let coast_left = if self.speed > 0.0 {
+            ((self.coast - s) / self.speed).max(0.0)
+        } else {
+            0.0
+        };
+        if tau <= coast_left {
+            return s + self.speed * tau;
+        }
+        let s0 = s.max(self.coast);
+        let v = self.speed_at(s0);
+        let t = (tau - coast_left).min(v / self.decel);
+        (s0 + v * t - 0.5 * self.decel * t * t).min(self.length)
+    }
+
+    fn update(&mut self, q: &Vector3<f64>) {
+        if is_finite3(q) {
+            let s = (q - self.start).dot(&self.dir);
+            // Past the stop point: the stop moves on with the vehicle.
+            self.length = self.length.max(s);
+            self.progress = s.clamp(self.progress, self.length);
+        }
+    }
 }
 
 /// A polyline flown at constant speed, with its monotone progress.
@@ -56,6 +122,40 @@ struct Path {
     progress: f64,
     /// Segment holding `progress` (a corner belongs to the next segment).
     seg: usize,
+    /// The speed ramp at the start, if any ([`Reference::with_ramp`]).
+    ramp: Option<Ramp>,
+}
+
+/// A smooth start: the reference speed rises from `v0` to the path speed
+/// as `v(τ) = v0 + (V − v0)·(1 − cos(πτ/T))/2` over `T` (zero acceleration
+/// at both ends, peak acceleration `π(V − v0)/(2T)`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Ramp {
+    /// Speed at the start [m/s].
+    v0: f64,
+    /// Duration \[s\].
+    duration: f64,
+    /// Time since the start \[s\] (one control step per horizon call).
+    elapsed: f64,
+}
+
+impl Ramp {
+    /// Speed at time `tau` \[s\] since the start, for path speed `speed`.
+    fn speed(&self, speed: f64, tau: f64) -> f64 {
+        if tau >= self.duration {
+            return speed;
+        }
+        let x = std::f64::consts::PI * tau.max(0.0) / self.duration;
+        self.v0 + (speed - self.v0) * 0.5 * (1.0 - x.cos())
+    }
+
+    /// Distance covered from time 0 to `tau` \[s\].
+    fn distance(&self, speed: f64, tau: f64) -> f64 {
+        let t = tau.clamp(0.0, self.duration);
+        let k = std::f64::consts::PI / self.duration;
+        let ramp = self.v0 * t + (speed - self.v0) * 0.5 * (t - (k * t).sin() / k);
+        ramp + speed * (tau - self.duration).max(0.0)
+    }
 }
 
 fn invalid(field: &'static str, reason: impl Into<String>) -> ControlError {
@@ -132,8 +232,105 @@ impl Reference {
                 lookahead: MIN_LOOKAHEAD.max(LOOKAHEAD_TIME * speed),
                 progress: 0.0,
                 seg: 0,
+                ramp: None,
             }),
         })
+    }
+
+    /// A stop: from `start` (NED \[m\]) moving at `velocity` (NED [m/s]),
+    /// coasting for `lag` \[s\] (the attitude loop's response: a vehicle
+    /// cannot decelerate before it tilts) and then braking at `decel`
+    /// [m/s²] along the velocity until it stops at
+    /// `start + v·lag + v·|v| / (2·decel)`, then holding there. Like a
+    /// path, the reference at tick k is the closest point of the stop line
+    /// to the measured position (never backwards), and the horizon follows
+    /// the profile from there, so a vehicle that brakes late is asked to
+    /// brake harder; one that overshoots the stop point moves the stop on
+    /// with it instead of being flown back. A (near) zero velocity is a
+    /// setpoint at `start`. Errors on non-finite input, a deceleration
+    /// that is not > 0 or a negative lag.
+    pub fn braking(
+        start: Vector3<f64>,
+        velocity: Vector3<f64>,
+        decel: f64,
+        lag: f64,
+    ) -> Result<Self, ControlError> {
+        if !is_finite3(&start) || !is_finite3(&velocity) {
+            return Err(invalid("braking", "start and velocity must be finite"));
+        }
+        if !(decel.is_finite() && decel > 0.0) {
+            return Err(invalid(
+                "braking",
+                format!("deceleration must be finite and > 0 m/s², got {decel}"),
+            ));
+        }
+        if !(lag.is_finite() && lag >= 0.0) {
+            return Err(invalid(
+                "braking",
+                format!("lag must be finite and ≥ 0 s, got {lag}"),
+            ));
+        }
+        let speed = velocity.norm();
+        if speed < 1e-6 {
+            return Self::setpoint(start);
+        }
+        Ok(Self {
+            kind: Kind::Brake(Brake {
+                start,
+                dir: velocity / speed,
+                speed,
+                decel,
+                coast: speed * lag,
+                length: speed * lag + speed * speed / (2.0 * decel),
+                progress: 0.0,
+            }),
+        })
+    }
+
+    /// A smooth start for a path: the reference speed rises from `v0`
+    /// [m/s] (the vehicle's speed; clamped to \[0, speed\]) to the path
+    /// speed with a peak acceleration `accel` [m/s²] (finite, > 0), with no
+    /// step in the reference acceleration — so a path started or resumed
+    /// from rest does not ask for the tilt limit in one tick. No effect on
+    /// a setpoint or a stop.
+    pub fn with_ramp(mut self, v0: f64, accel: f64) -> Result<Self, ControlError> {
+        if !(accel.is_finite() && accel > 0.0 && v0.is_finite()) {
+            return Err(invalid(
+                "ramp",
+                format!("need finite v0 and accel > 0, got v0 = {v0}, accel = {accel} m/s²"),
+            ));
+        }
+        if let Kind::Path(p) = &mut self.kind {
+            let v0 = v0.clamp(0.0, p.speed);
+            let duration = std::f64::consts::PI * (p.speed - v0) / (2.0 * accel);
+            p.ramp = (duration > 0.0).then_some(Ramp {
+                v0,
+                duration,
+                elapsed: 0.0,
+            });
+        }
+        Ok(self)
+    }
+
+    /// Moves a path's progress to the point of the *whole* path closest to
+    /// `q` (NED \[m\]; the earliest on a tie), e.g. to resume a path from
+    /// where the vehicle is after a pilot override. No effect on a
+    /// setpoint, a stop, or a non-finite `q`.
+    pub fn seek(&mut self, q: &Vector3<f64>) {
+        if !is_finite3(q) {
+            return;
+        }
+        if let Kind::Path(p) = &mut self.kind {
+            let mut best = (0.0, f64::INFINITY);
+            for i in 0..p.segments() {
+                let (s, d2) = p.project(i, q, p.cum[i], p.cum[i + 1]);
+                if d2 < best.1 {
+                    best = (s, d2);
+                }
+            }
+            p.progress = best.0;
+            p.seg = p.segment_from(0, p.progress);
+        }
     }
 
     /// Sets the look-ahead of the closest-point search \[m\] (arc length
@@ -157,31 +354,36 @@ impl Reference {
         match &self.kind {
             Kind::Setpoint(_) => 0.0,
             Kind::Path(p) => p.progress,
+            Kind::Brake(b) => b.progress,
         }
     }
 
-    /// Total length of the path \[m\]; 0 for a setpoint.
+    /// Total length of the path \[m\]; 0 for a setpoint; the stopping
+    /// distance of a stop.
     pub fn path_length(&self) -> f64 {
         match &self.kind {
             Kind::Setpoint(_) => 0.0,
             Kind::Path(p) => p.length(),
+            Kind::Brake(b) => b.length,
         }
     }
 
     /// True once the closest point has reached the path end. A setpoint is
-    /// held forever and never finishes.
+    /// held forever and never finishes, nor does a stop (it holds its end).
     pub fn is_finished(&self) -> bool {
         match &self.kind {
-            Kind::Setpoint(_) => false,
+            Kind::Setpoint(_) | Kind::Brake(_) => false,
             Kind::Path(p) => p.progress >= p.length() - 1e-9 * p.length().max(1.0),
         }
     }
 
-    /// Desired speed along the path [m/s]; 0 for a setpoint.
+    /// Desired speed along the path [m/s]; 0 for a setpoint; the initial
+    /// speed of a stop.
     pub fn speed(&self) -> f64 {
         match &self.kind {
             Kind::Setpoint(_) => 0.0,
             Kind::Path(p) => p.speed,
+            Kind::Brake(b) => b.speed,
         }
     }
 
@@ -192,6 +394,10 @@ impl Reference {
     pub fn distance_to_path(&self, point: &Vector3<f64>) -> f64 {
         match &self.kind {
             Kind::Setpoint(p) => (point - p).norm(),
+            Kind::Brake(b) => {
+                let s = (point - b.start).dot(&b.dir);
+                (point - b.point(s)).norm()
+            }
             Kind::Path(p) => (0..p.dirs.len())
                 .map(|i| {
                     let (_, d2) = p.project(i, point, p.cum[i], p.cum[i + 1]);
@@ -204,9 +410,16 @@ impl Reference {
 
     /// Restarts the progress at the path start (a setpoint is unchanged).
     pub fn reset(&mut self) {
-        if let Kind::Path(p) = &mut self.kind {
-            p.progress = 0.0;
-            p.seg = 0;
+        match &mut self.kind {
+            Kind::Path(p) => {
+                p.progress = 0.0;
+                p.seg = 0;
+                if let Some(r) = &mut p.ramp {
+                    r.elapsed = 0.0;
+                }
+            }
+            Kind::Brake(b) => b.progress = 0.0,
+            Kind::Setpoint(_) => {}
         }
     }
 }
@@ -276,10 +489,14 @@ impl Path {
 
     fn closest(&self) -> (Vector3<f64>, Vector3<f64>) {
         let p = self.point_on(self.seg, self.progress);
+        let speed = match self.ramp {
+            Some(r) => r.speed(self.speed, r.elapsed),
+            None => self.speed,
+        };
         let v = if self.progress >= self.length() {
             Vector3::zeros()
         } else {
-            self.dirs[self.seg] * self.speed
+            self.dirs[self.seg] * speed
         };
         (p, v)
     }
@@ -292,18 +509,33 @@ impl ReferenceSource for Reference {
     fn horizon(&mut self, measured: &Vector3<f64>, dt: f64, out: &mut [Vector3<f64>]) {
         match &mut self.kind {
             Kind::Setpoint(p) => out.fill(*p),
+            Kind::Brake(b) => {
+                b.update(measured);
+                let dt = if dt.is_finite() && dt > 0.0 { dt } else { 0.0 };
+                for (j, o) in out.iter_mut().enumerate() {
+                    *o = b.point(b.advance(b.progress, j as f64 * dt));
+                }
+            }
             Kind::Path(path) => {
                 path.update(measured);
-                let step = if dt.is_finite() && dt > 0.0 {
-                    dt * path.speed
-                } else {
-                    0.0
+                let dt = if dt.is_finite() && dt > 0.0 { dt } else { 0.0 };
+                let (speed, ramp) = (path.speed, path.ramp);
+                // Distance j steps ahead: constant speed, or the ramp's.
+                let ahead = |j: usize| match ramp {
+                    Some(r) => {
+                        r.distance(speed, r.elapsed + j as f64 * dt) - r.distance(speed, r.elapsed)
+                    }
+                    None => j as f64 * dt * speed,
                 };
                 let mut seg = path.seg;
                 for (j, o) in out.iter_mut().enumerate() {
-                    let s = (path.progress + j as f64 * step).min(path.length());
+                    let s = (path.progress + ahead(j)).min(path.length());
                     seg = path.segment_from(seg, s);
                     *o = path.point_on(seg, s);
+                }
+                // One control step per call.
+                if let Some(r) = &mut path.ramp {
+                    r.elapsed += dt;
                 }
             }
         }
@@ -318,6 +550,10 @@ impl ReferenceSource for Reference {
             Kind::Path(path) => {
                 path.update(measured);
                 path.closest()
+            }
+            Kind::Brake(b) => {
+                b.update(measured);
+                (b.point(b.progress), b.dir * b.speed_at(b.progress))
             }
         }
     }

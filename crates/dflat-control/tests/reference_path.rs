@@ -276,3 +276,158 @@ fn reference_validation_names_the_field() {
     // A closed path (end = start, not consecutive) is fine.
     assert!(Reference::path(&[a, b, v(1.0, 1.0, 0.0), a], 1.0).is_ok());
 }
+
+#[test]
+fn braking_follows_the_deceleration_profile_to_the_stop_point() {
+    // 2 m/s north at 4 m/s²: stops 0.5 m on, after 0.5 s.
+    let start = v(1.0, 2.0, -10.0);
+    let mut r = Reference::braking(start, v(2.0, 0.0, 0.0), 4.0, 0.0).unwrap();
+    assert!((r.path_length() - 0.5).abs() < 1e-12);
+    assert!(!r.is_finished());
+    let mut out = [Vector3::zeros(); 40];
+    r.horizon(&start, DT, &mut out);
+    assert_eq!(out[0], start);
+    for (j, o) in out.iter().enumerate() {
+        let t = (j as f64 * DT).min(0.5);
+        let s = 2.0 * t - 0.5 * 4.0 * t * t;
+        assert!(close(o, &v(1.0 + s, 2.0, -10.0), 1e-12), "step {j}: {o:?}");
+    }
+    assert!(close(&out[39], &v(1.5, 2.0, -10.0), 1e-12));
+    // The reference velocity at the closest point is the profile's.
+    let (p, vel) = r.closest(&v(1.375, 2.3, -10.0));
+    assert!(close(&p, &v(1.375, 2.0, -10.0), 1e-12));
+    assert!(close(&vel, &v(1.0, 0.0, 0.0), 1e-12), "{vel:?}");
+    // Never backwards; at the end it holds the stop point.
+    let (p, _) = r.closest(&v(0.0, 2.0, -10.0));
+    assert!(close(&p, &v(1.375, 2.0, -10.0), 1e-12));
+    r.horizon(&v(1.5, 2.1, -10.0), DT, &mut out);
+    assert!(out.iter().all(|o| close(o, &v(1.5, 2.0, -10.0), 1e-12)));
+    assert!((r.progress() - 0.5).abs() < 1e-12);
+    assert!((r.distance_to_path(&v(1.2, 3.0, -10.0)) - 1.0).abs() < 1e-12);
+    // A vehicle past the stop point moves the stop on: not flown back.
+    r.horizon(&v(1.7, 2.0, -10.0), DT, &mut out);
+    assert!(out.iter().all(|o| close(o, &v(1.7, 2.0, -10.0), 1e-12)));
+    assert!((r.path_length() - 0.7).abs() < 1e-12);
+}
+
+#[test]
+fn braking_coasts_for_the_lag_first() {
+    // 2 m/s, 0.2 s of lag (0.4 m), then 4 m/s² (0.5 m): 0.9 m.
+    let start = v(0.0, 0.0, -10.0);
+    let mut r = Reference::braking(start, v(0.0, -2.0, 0.0), 4.0, 0.2).unwrap();
+    assert!((r.path_length() - 0.9).abs() < 1e-12);
+    let mut out = [Vector3::zeros(); 60];
+    r.horizon(&start, DT, &mut out);
+    for (j, o) in out.iter().enumerate() {
+        let t = j as f64 * DT;
+        let s = if t <= 0.2 {
+            2.0 * t
+        } else {
+            let tb = (t - 0.2).min(0.5);
+            0.4 + 2.0 * tb - 2.0 * tb * tb
+        };
+        assert!(
+            close(o, &v(0.0, -s, -10.0), 1e-12),
+            "step {j}: {o:?} vs {s}"
+        );
+    }
+    // From the middle of the coast: the rest of it (0.05 s), then the
+    // braking: 0.1 s on, 0.4 + 2·0.05 − 2·0.05² = 0.495 m.
+    r.horizon(&v(0.0, -0.3, -10.0), DT, &mut out);
+    assert!(
+        close(&out[5], &v(0.0, -0.495, -10.0), 1e-12),
+        "{:?}",
+        out[5]
+    );
+    let (_, vel) = r.closest(&v(0.0, -0.65, -10.0));
+    // 0.25 m into the braking: v² = 4 − 2·4·0.25 = 2.
+    assert!(close(&vel, &v(0.0, -(2f64.sqrt()), 0.0), 1e-12), "{vel:?}");
+}
+
+#[test]
+fn braking_at_rest_is_a_setpoint_and_bad_input_is_refused() {
+    let p = v(1.0, 2.0, -3.0);
+    let r = Reference::braking(p, Vector3::zeros(), 4.0, 0.2).unwrap();
+    assert_eq!(r, Reference::setpoint(p).unwrap());
+    for (start, vel, a, lag) in [
+        (v(f64::NAN, 0.0, 0.0), v(1.0, 0.0, 0.0), 4.0, 0.0),
+        (p, v(1.0, f64::INFINITY, 0.0), 4.0, 0.0),
+        (p, v(1.0, 0.0, 0.0), 0.0, 0.0),
+        (p, v(1.0, 0.0, 0.0), f64::NAN, 0.0),
+        (p, v(1.0, 0.0, 0.0), 4.0, -0.1),
+    ] {
+        assert_eq!(
+            field_of(Reference::braking(start, vel, a, lag).unwrap_err()),
+            "braking"
+        );
+    }
+}
+
+#[test]
+fn a_ramped_path_starts_without_a_step_in_acceleration() {
+    // 5 m/s with a 2.5 m/s² peak: T = π·5/(2·2.5) = π s.
+    let w = [v(0.0, 0.0, -10.0), v(100.0, 0.0, -10.0)];
+    let mut r = Reference::path(&w, 5.0)
+        .unwrap()
+        .with_ramp(0.0, 2.5)
+        .unwrap();
+    let mut out = [Vector3::zeros(); 400];
+    r.horizon(&w[0], DT, &mut out);
+    // Second differences: the reference acceleration, starting at 0,
+    // never above the peak, and 0 once at speed.
+    let acc: Vec<f64> = out
+        .windows(3)
+        .map(|t| (t[2].x - 2.0 * t[1].x + t[0].x) / (DT * DT))
+        .collect();
+    assert!(acc[0].abs() < 0.05, "{}", acc[0]);
+    assert!(acc.iter().all(|a| *a <= 2.5 + 1e-6 && *a >= -1e-6));
+    assert!(acc[200..].iter().all(|a| a.abs() < 1e-6));
+    // After the ramp: 5 m/s, having covered V·T/2.
+    let t_end = std::f64::consts::PI;
+    let j = (t_end / DT).ceil() as usize + 1;
+    let speed = (out[j + 1].x - out[j].x) / DT;
+    assert!((speed - 5.0).abs() < 1e-9, "{speed}");
+    let ramp_dist = 5.0 * t_end / 2.0;
+    let expected = ramp_dist + 5.0 * (j as f64 * DT - t_end);
+    assert!(
+        (out[j].x - expected).abs() < 1e-9,
+        "{} vs {expected}",
+        out[j].x
+    );
+    // Time goes on per call: the reference velocity rises.
+    let (_, v0) = r.closest(&w[0]);
+    assert!(v0.x > 0.0 && v0.x < 0.01, "{v0:?}");
+    for _ in 0..200 {
+        r.horizon(&w[0], DT, &mut out);
+    }
+    let (_, v1) = r.closest(&w[0]);
+    assert!((v1.x - 5.0).abs() < 1e-9, "{v1:?}");
+    assert!(
+        Reference::path(&w, 5.0)
+            .unwrap()
+            .with_ramp(0.0, 0.0)
+            .is_err()
+    );
+}
+
+#[test]
+fn seek_resumes_from_the_closest_point_of_the_whole_path() {
+    let w = [
+        v(-20.0, -30.0, -10.0),
+        v(0.0, -30.0, -10.0),
+        v(0.0, 0.0, -10.0),
+    ];
+    let mut r = Reference::path(&w, 5.0).unwrap();
+    // 1.7 m past the corner, a little east: on the second leg.
+    r.seek(&v(1.7, -29.6, -10.0));
+    assert!((r.progress() - 20.4).abs() < 1e-9, "{}", r.progress());
+    let (p, vel) = r.closest(&v(1.7, -29.6, -10.0));
+    assert!(close(&p, &v(0.0, -29.6, -10.0), 1e-9));
+    assert!(close(&vel, &v(0.0, 5.0, 0.0), 1e-9));
+    // Without seek the search looks 5 m ahead of the start only.
+    let mut fresh = Reference::path(&w, 5.0).unwrap();
+    let (p, _) = fresh.closest(&v(1.7, -29.6, -10.0));
+    assert!(p.x < -14.0, "{p:?}");
+    r.seek(&v(f64::NAN, 0.0, 0.0));
+    assert!((r.progress() - 20.4).abs() < 1e-9);
+}

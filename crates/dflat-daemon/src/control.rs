@@ -139,7 +139,13 @@ pub fn configured_path(cfg: &Config) -> Option<Result<Reference, ControlError>> 
     let m = &cfg.mission;
     (m.path.len() >= 2).then(|| {
         let points: Vec<Vector3<f64>> = m.path.iter().map(|p| Vector3::from(*p)).collect();
-        Reference::path(&points, m.speed)
+        let path = Reference::path(&points, m.speed)?;
+        if m.start_acceleration > 0.0 {
+            // From rest (a path starts or resumes after braking).
+            path.with_ramp(0.0, m.start_acceleration)
+        } else {
+            Ok(path)
+        }
     })
 }
 
@@ -149,6 +155,15 @@ pub fn reference_for(cfg: &Config, goal: Goal) -> Option<Result<Reference, Contr
         Goal::None => None,
         Goal::Hold(p) | Goal::Setpoint(p) => Some(Reference::setpoint(Vector3::from(p))),
         Goal::Path => configured_path(cfg),
+        Goal::Brake { from, velocity } => Some(Reference::braking(
+            Vector3::from(from),
+            Vector3::from(velocity),
+            crate::tick::brake_acceleration(cfg),
+            // The attitude loop's response: half its time constant before
+            // the deceleration builds up (a first-order lag reaches half
+            // its step at 0.69 τ; the plan ramps the tilt in meanwhile).
+            0.5 * cfg.vehicle.tau,
+        )),
     }
 }
 

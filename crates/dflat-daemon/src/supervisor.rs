@@ -126,6 +126,15 @@ pub enum Goal {
     Setpoint([f64; 3]),
     /// Fly the configured path, then hold its end.
     Path,
+    /// Brake from `from` (local NED \[m\]) moving at `velocity` (local NED
+    /// [m/s]) to a stop at the braking deceleration, then hold there
+    /// (standby and engagement; `dflat_control::reference::Reference::braking`).
+    Brake {
+        /// Where the braking starts \[m\].
+        from: [f64; 3],
+        /// Velocity there [m/s].
+        velocity: [f64; 3],
+    },
 }
 
 /// Why the state changed.
@@ -320,6 +329,9 @@ pub struct Supervisor {
     braking: Option<Braking>,
     /// What to fly once braked (the mission goal across an override).
     pending: Goal,
+    /// The path goal is a resumption: fly it from the vehicle's closest
+    /// point of the whole path, not from its start.
+    path_resumed: bool,
     /// Engagements and disengagements so far.
     engagements: u64,
     disengagements: u64,
@@ -344,6 +356,7 @@ impl Supervisor {
             motion: None,
             braking: None,
             pending: Goal::None,
+            path_resumed: false,
             engagements: 0,
             disengagements: 0,
         }
@@ -382,27 +395,30 @@ impl Supervisor {
         self.pending
     }
 
-    /// Where the vehicle would stop: the motion's stop point, else the
-    /// newest pose.
-    fn stop_point(&self) -> Option<[f64; 3]> {
+    /// A stop from the vehicle's motion now; holding where it is when at
+    /// rest (or the newest pose without a motion estimate).
+    fn stop_goal(&self) -> Option<Goal> {
         match self.motion {
-            Some(m) => Some(m.stop_point(self.cfg.brake_acceleration)),
-            None => self.last_pose.map(|(_, p)| p),
+            Some(m) if m.speed() > 0.0 => Some(Goal::Brake {
+                from: m.position,
+                velocity: m.velocity,
+            }),
+            Some(m) => Some(Goal::Hold(m.position)),
+            None => self.last_pose.map(|(_, p)| Goal::Hold(p)),
         }
     }
 
-    /// Standby: the goal follows the vehicle's stop point.
+    /// Standby: the goal is a stop from wherever the vehicle is.
     fn follow(&mut self) {
-        if let Some(p) = self.stop_point() {
-            self.set_goal(Goal::Hold(p));
+        if let Some(g) = self.stop_goal() {
+            self.set_goal(g);
         }
     }
 
-    /// Engaged at `t`: brake to the stop point of the motion now.
+    /// Engaged at `t`: brake from the motion now, and hold the stop point.
     fn engage(&mut self, t: f64, cause: Cause) -> Transition {
-        let stop = self.stop_point();
-        if let Some(p) = stop {
-            self.set_goal(Goal::Hold(p));
+        if let Some(g) = self.stop_goal() {
+            self.set_goal(g);
         }
         let speed = self.motion.map_or(0.0, |m| m.speed());
         self.braking = Some(Braking {
@@ -618,6 +634,7 @@ impl Supervisor {
                             } else {
                                 Cause::Resume
                             };
+                        self.path_resumed = cause == Cause::Resume;
                         Some(self.enter(FlightState::Tracking, cause, t))
                     }
                     _ => None,
@@ -643,8 +660,16 @@ impl Supervisor {
         }
     }
 
+    /// True when the current path goal resumes the path after an override
+    /// (the reference then starts from the vehicle's closest point of the
+    /// whole path).
+    pub fn path_resumed(&self) -> bool {
+        self.path_resumed && self.goal == Goal::Path
+    }
+
     fn set_goal(&mut self, goal: Goal) {
         if goal != self.goal {
+            self.path_resumed = false;
             self.goal = goal;
             self.generation += 1;
         }
@@ -940,8 +965,8 @@ mod tests {
         });
         s.on_heartbeat(0.0);
         s.on_mode(false);
-        // The pilot flies north at 2 m/s: standby, the goal 0.5 m ahead
-        // (v² / 2a = 4 / 8) and following.
+        // The pilot flies north at 2 m/s: standby, the goal a stop from
+        // wherever the vehicle is.
         for k in 0..10 {
             let t = k as f64 * 0.02;
             s.on_pose(t, [2.0 * t, 0.0, -10.0]);
@@ -949,7 +974,13 @@ mod tests {
             let d = s.tick(t);
             assert!(d.stream, "standby streams");
             assert_eq!(s.state(), Standby);
-            assert_eq!(s.goal(), Goal::Hold([2.0 * t + 0.5, 0.0, -10.0]));
+            assert_eq!(
+                s.goal(),
+                Goal::Brake {
+                    from: [2.0 * t, 0.0, -10.0],
+                    velocity: [2.0, 0.0, 0.0]
+                }
+            );
         }
         assert_eq!(s.pending_goal(), Goal::Path);
         // A setpoint in standby is kept for after the engagement.
@@ -963,19 +994,23 @@ mod tests {
         ));
         assert_eq!(s.state(), Standby);
         assert_eq!(s.pending_goal(), Goal::Setpoint(sp));
-        // The pilot switches to OFFBOARD at x = 0.4 m: brake to 0.9 m.
+        // The pilot switches to OFFBOARD at x = 0.4 m: brake from there.
         s.on_mode(true);
         s.on_pose(0.2, [0.4, 0.0, -10.0]);
         s.set_motion(moving(0.2, 0.4, 2.0));
         let tr = s.tick(0.2).transition.unwrap();
         assert_eq!((tr.to, tr.cause), (Holding, Cause::Engaged));
-        assert_eq!(s.goal(), Goal::Hold([0.9, 0.0, -10.0]));
+        let brake = Goal::Brake {
+            from: [0.4, 0.0, -10.0],
+            velocity: [2.0, 0.0, 0.0],
+        };
+        assert_eq!(s.goal(), brake);
         assert!(s.braking());
         // Still fast: the goal stays; slow: the setpoint is flown.
         s.on_pose(0.4, [0.8, 0.0, -10.0]);
         s.set_motion(moving(0.4, 0.8, 1.0));
         assert!(s.tick(0.4).transition.is_none());
-        assert_eq!(s.goal(), Goal::Hold([0.9, 0.0, -10.0]));
+        assert_eq!(s.goal(), brake, "frozen at the engagement");
         s.on_pose(0.7, [0.9, 0.0, -10.0]);
         s.set_motion(moving(0.7, 0.9, 0.1));
         let tr = s.tick(0.7).transition.unwrap();

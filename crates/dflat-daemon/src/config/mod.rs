@@ -431,6 +431,11 @@ pub struct MissionConfig {
     /// `a = brake_fraction · g · tan(controller.constraint_tilt_deg, or
     /// vehicle.max_tilt_deg without one)`.
     pub brake_fraction: f64,
+    /// Peak acceleration of the path's speed ramp \[m/s²\] (0 = none, or
+    /// 0.5–10): a path starts (and resumes) from rest with its reference
+    /// speed rising smoothly to `speed`, no step in the reference
+    /// acceleration — without it the first tick asks for the tilt limit.
+    pub start_acceleration: f64,
 }
 
 /// `mission.on_engage`.
@@ -458,7 +463,8 @@ impl Default for MissionConfig {
             geofence: [500.0, 500.0, 200.0],
             repeat: false,
             on_engage: OnEngage::Resume,
-            brake_fraction: 0.7,
+            brake_fraction: 1.0,
+            start_acceleration: 3.0,
         }
     }
 }

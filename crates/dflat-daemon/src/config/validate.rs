@@ -152,6 +152,14 @@ impl Config {
         let m = &self.mission;
         v.range("mission.speed", m.speed, 0.1, 20.0)?;
         v.range("mission.brake_fraction", m.brake_fraction, 0.1, 1.0)?;
+        if m.start_acceleration != 0.0 {
+            v.range(
+                "mission.start_acceleration",
+                m.start_acceleration,
+                0.5,
+                10.0,
+            )?;
+        }
         v.range(
             "mission.path_trigger_radius",
             m.path_trigger_radius,

@@ -798,7 +798,14 @@ impl ControlCore {
         }
         self.reference_generation = generation;
         self.reference = match reference_for(&self.config, self.supervisor.goal()) {
-            Some(Ok(r)) => Some(r),
+            Some(Ok(mut r)) => {
+                if self.supervisor.path_resumed()
+                    && let Some(p) = self.pose
+                {
+                    r.seek(&Vector3::from(p.position));
+                }
+                Some(r)
+            }
             Some(Err(e)) => {
                 // Validated at start; a setpoint is checked finite. Keep
                 // flying the previous reference rather than none.
