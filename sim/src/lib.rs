@@ -28,7 +28,9 @@
 //! \[rad\], specific thrust [m/s²] (thrust / mass), SI units throughout.
 
 pub mod experiments;
+pub mod flightlog;
 pub mod harness;
+pub mod identify;
 pub mod plant;
 pub mod plot;
 pub mod sensing;

@@ -102,6 +102,13 @@ pub struct CsvRow {
     /// What the guards did this tick (`plan`, `held`, `level`, `jump`, `residual`),
     /// if anything.
     pub guard: Option<&'static str>,
+    /// Age of the newest pose at the tick \[ms\]: tick time minus its
+    /// capture time (empty before the first pose). Last column.
+    pub pose_age_ms: Option<f64>,
+    /// The tick's time \[s\] since the daemon started, exactly as the
+    /// controller used it (wake time, shortest round-trip decimal), for an
+    /// offline re-run (`dflat replay`). Last column.
+    pub wake: f64,
 }
 
 /// The disturbance estimate as recorded per tick.
@@ -122,7 +129,7 @@ pub struct CsvDisturbance {
 pub const CSV_HEADER: &str = "tick,t,state,x,y,z,\
 plan0_x,plan0_y,plan0_z,plan1_x,plan1_y,plan1_z,plan2_x,plan2_y,plan2_z,plan3_x,plan3_y,plan3_z,\
 ref_x,ref_y,ref_z,roll,pitch,yaw,thrust,solve_us,jitter_us,\
-dist_x,dist_y,dist_z,thrust_scale,hover_thrust,est_status,residual_m,guard";
+dist_x,dist_y,dist_z,thrust_scale,hover_thrust,est_status,residual_m,guard,pose_age_ms,t_wake";
 
 /// The estimator status as written to the CSV.
 fn status_name(s: EstimatorStatus) -> &'static str {
@@ -179,7 +186,12 @@ pub fn write_row<W: Write>(w: &mut W, row: &CsvRow) -> io::Result<()> {
         Some(r) => write!(w, ",{r:.4}")?,
         None => w.write_all(b",")?,
     }
-    writeln!(w, ",{}", row.guard.unwrap_or(""))
+    write!(w, ",{}", row.guard.unwrap_or(""))?;
+    match row.pose_age_ms {
+        Some(a) => write!(w, ",{a:.3}")?,
+        None => w.write_all(b",")?,
+    }
+    writeln!(w, ",{}", row.wake)
 }
 
 /// Counters of a finished [`CsvRecorder`].
@@ -310,6 +322,8 @@ mod tests {
             disturbance: None,
             residual: Some(0.0123),
             guard: None,
+            pose_age_ms: Some(4.25),
+            wake: 0.140_123_456_789,
         }
     }
 
@@ -322,7 +336,7 @@ mod tests {
             line,
             "7,0.1400,TRACKING,1.0000,-2.5000,-10.0000,\
 1.0000,2.0000,3.0000,1.0000,2.0000,3.0000,1.0000,2.0000,3.0000,1.0000,2.0000,3.0000,\
-0.0000,0.0000,-10.0000,0.010000,-0.200000,0.000000,0.5000,42,120,,,,,,,0.0123,\n"
+0.0000,0.0000,-10.0000,0.010000,-0.200000,0.000000,0.5000,42,120,,,,,,,0.0123,,4.250,0.140123456789\n"
         );
         let columns = CSV_HEADER.split(',').count();
         assert_eq!(line.trim_end().split(',').count(), columns);
@@ -339,6 +353,7 @@ mod tests {
                 solve_us: None,
                 residual: None,
                 guard: Some("level"),
+                pose_age_ms: None,
                 ..row()
             },
         )
@@ -346,7 +361,10 @@ mod tests {
         let line = String::from_utf8(out).unwrap();
         assert_eq!(line.trim_end().split(',').count(), columns);
         assert!(line.starts_with("7,0.1400,FAILSAFE,,,,"), "{line}");
-        assert!(line.ends_with(",,120,,,,,,,,level\n"), "{line}");
+        assert!(
+            line.ends_with(",,120,,,,,,,,level,,0.140123456789\n"),
+            "{line}"
+        );
         // With an estimate.
         let mut out = Vec::new();
         let disturbance = Some(CsvDisturbance {
@@ -366,7 +384,7 @@ mod tests {
         let line = String::from_utf8(out).unwrap();
         assert_eq!(line.trim_end().split(',').count(), columns);
         assert!(
-            line.ends_with(",120,0.10000,-0.20000,0.00000,1.04000,0.48000,tracking,0.0123,\n"),
+            line.ends_with(",120,0.10000,-0.20000,0.00000,1.04000,0.48000,tracking,0.0123,,4.250,0.140123456789\n"),
             "{line}"
         );
     }

@@ -35,6 +35,17 @@ enum Command {
     /// defaults); print the summary and draw the flown path.
     #[cfg(feature = "lab")]
     Demo(crate::sitl_demo::DemoArgs),
+    /// Identify the vehicle from a flight's .tlog: attitude τ, k̃ and delay,
+    /// hover thrust and τ_T, with intervals; writes a `[vehicle]` snippet.
+    #[cfg(feature = "lab")]
+    Identify(crate::tuning::IdentifyArgs),
+    /// A flight's report as one self-contained HTML page (inline SVG).
+    #[cfg(feature = "lab")]
+    Review(crate::tuning::review::ReviewArgs),
+    /// Re-run the controller offline on a flight's logged poses, setpoints
+    /// and timing, with its own or another configuration.
+    #[cfg(feature = "lab")]
+    Replay(crate::tuning::replay::ReplayArgs),
     /// The flight-control daemon (systemd runs this): pose and setpoints in,
     /// attitude commands out, until SIGINT / SIGTERM; prints a summary.
     Daemon(DaemonArgs),
@@ -94,6 +105,12 @@ fn run(cli: Cli) -> Result<()> {
         Command::Sitl(args) => crate::sitl_demo::run_sitl(args),
         #[cfg(feature = "lab")]
         Command::Demo(args) => crate::sitl_demo::run_demo(args),
+        #[cfg(feature = "lab")]
+        Command::Identify(args) => crate::tuning::run_identify(args),
+        #[cfg(feature = "lab")]
+        Command::Review(args) => crate::tuning::review::run(args),
+        #[cfg(feature = "lab")]
+        Command::Replay(args) => crate::tuning::replay::run(args),
         Command::Daemon(args) => run_daemon(args),
     }
 }

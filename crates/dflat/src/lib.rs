@@ -20,5 +20,7 @@ pub mod demo;
 mod experiment;
 #[cfg(feature = "lab")]
 mod sitl_demo;
+#[cfg(feature = "lab")]
+pub mod tuning;
 
 pub use cli::main;

@@ -25,11 +25,13 @@
 //! each clipped to ±[`PlantOptions::tilt_limit`], 35° by default — the DJI
 //! onboard SDK's limit — thrust to `[thrust_min, thrust_max]`).
 
+mod delay;
 mod planar;
 mod rigid;
 mod spatial;
 mod wind;
 
+pub use delay::DelayedPlant;
 pub use planar::PlanarPlant;
 pub use rigid::RigidBodyPlant;
 pub use spatial::SpatialPlant;
@@ -207,6 +209,10 @@ pub struct PlantOptions {
     pub gust_tau: f64,
     /// Rigid-body parameters and autopilot gains.
     pub rigid: RigidBodyOptions,
+    /// Pure delay \[s\] between a command and its application by the
+    /// autopilot (0 = none): [`build_plant`] then wraps the plant in a
+    /// [`DelayedPlant`].
+    pub command_delay: f64,
 }
 
 impl Default for PlantOptions {
@@ -228,6 +234,7 @@ impl Default for PlantOptions {
             gust_std: [0.0; 3],
             gust_tau: 1.0,
             rigid: RigidBodyOptions::default(),
+            command_delay: 0.0,
         }
     }
 }
@@ -265,6 +272,7 @@ impl PlantOptions {
             check_range("gust_std", s, 0.0, 1e3, "0 ..= 1000 m/s")?;
         }
         check_positive("gust_tau", self.gust_tau)?;
+        check_range("command_delay", self.command_delay, 0.0, 2.0, "0 ..= 2 s")?;
         self.rigid.validate()
     }
 
@@ -369,10 +377,15 @@ pub fn build_plant(
     options: &PlantOptions,
     seed: u64,
 ) -> Result<Box<dyn Plant>, SimError> {
-    Ok(match kind {
+    let plant: Box<dyn Plant> = match kind {
         PlantKind::Planar => Box::new(PlanarPlant::new(options.clone(), seed)?),
         PlantKind::Spatial => Box::new(SpatialPlant::new(options.clone(), seed)?),
         PlantKind::RigidBody => Box::new(RigidBodyPlant::new(options.clone(), seed)?),
+    };
+    Ok(if options.command_delay > 0.0 {
+        Box::new(DelayedPlant::new(plant, options.command_delay))
+    } else {
+        plant
     })
 }
 

@@ -185,6 +185,12 @@ pub struct SitlConfig {
     pub k: f64,
     /// Plant hover thrust (normalised 0–1) — spatial/full plants.
     pub hover_thrust: f64,
+    /// Plant thrust time constant τ_T \[s\] (0.005–1) — spatial plant's
+    /// thrust lag, the rigid body's motor lag.
+    pub tau_thrust: f64,
+    /// Pure delay \[ms\] (0–500) between a received command and its
+    /// application by the plant (the autopilot's and actuators' latency).
+    pub command_delay_ms: f64,
     /// Plant mass factor relative to nominal (0.5–2).
     pub mass_factor: f64,
     /// Gaussian position noise σ \[m\] (0–1).
@@ -235,6 +241,8 @@ impl Default for SitlConfig {
             tau: 0.2,
             k: 1.0,
             hover_thrust: 0.5,
+            tau_thrust: 0.04,
+            command_delay_ms: 0.0,
             mass_factor: 1.0,
             noise_sigma: 0.0,
             vision_rate_hz: 0.0,
@@ -280,6 +288,8 @@ impl SitlConfig {
         range("sitl.tau", si.tau, 0.02, 2.0)?;
         range("sitl.k", si.k, 0.2, 5.0)?;
         range("sitl.hover_thrust", si.hover_thrust, 0.05, 0.95)?;
+        range("sitl.tau_thrust", si.tau_thrust, 0.005, 1.0)?;
+        range("sitl.command_delay_ms", si.command_delay_ms, 0.0, 500.0)?;
         range("sitl.mass_factor", si.mass_factor, 0.5, 2.0)?;
         range("sitl.noise_sigma", si.noise_sigma, 0.0, 1.0)?;
         if si.vision_rate_hz != 0.0 {

@@ -501,8 +501,8 @@ fn bind(what: &'static str, addr: SocketAddr) -> Result<UdpSocket, SitlError> {
     Ok(socket)
 }
 
-/// The plant options of `[sitl]`: 1/`plant_rate_hz` step, τ, k̃, mass
-/// factor, ±35° saturation, g = 9.81 m/s².
+/// The plant options of `[sitl]`: 1/`plant_rate_hz` step, τ, k̃, τ_T, the
+/// command delay, mass factor, ±35° saturation, g = 9.81 m/s².
 pub fn plant_options(cfg: &SitlSettings) -> PlantOptions {
     let s = &cfg.sitl;
     PlantOptions {
@@ -511,6 +511,8 @@ pub fn plant_options(cfg: &SitlSettings) -> PlantOptions {
         tilt_limit: TILT_LIMIT_DEG.to_radians(),
         attitude_tau: s.tau,
         attitude_gain: s.k,
+        thrust_tau: s.tau_thrust,
+        command_delay: s.command_delay_ms / 1000.0,
         mass_factor: s.mass_factor,
         ..PlantOptions::default()
     }

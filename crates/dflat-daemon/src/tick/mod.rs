@@ -293,6 +293,8 @@ impl ControlCore {
             disturbance: None,
             residual: None,
             guard: self.guard_note.take(),
+            pose_age_ms: self.pose.map(|p| (t - p.capture) * 1e3),
+            wake: t,
         };
         // The model-consistency residual: this tick's measurement against
         // the previous plan's prediction for it.

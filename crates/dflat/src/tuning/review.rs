@@ -1,0 +1,425 @@
+//! `dflat review`: a flight's report as one self-contained HTML page
+//! (inline SVG, no scripts, opens offline): summary numbers at the top,
+//! then the flown path over the reference, the tracking error, commanded
+//! against measured attitude, thrust, solve time and tick jitter, pose
+//! age and the disturbance estimate, with state changes and guard events
+//! marked on every time axis.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context as _, Result};
+
+use super::svg::{Chart, Marker, Series, esc};
+use dflat_sim::flightlog::{FlightCsv, FlightLog};
+
+/// Arguments of `dflat review`.
+#[derive(Debug, clap::Args)]
+pub struct ReviewArgs {
+    /// The flight's `.csv` (its `.tlog` beside it adds the measured
+    /// attitude and the STATUSTEXTs).
+    pub flight: PathBuf,
+    /// The HTML file to write (default `<flight>.html`).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+/// Commands of an offline re-run, drawn over the flown ones.
+#[derive(Debug, Clone, Default)]
+pub struct Overlay {
+    /// What it is (e.g. `replay with tuned.toml`).
+    pub label: String,
+    /// Tick times \[s\] (the CSV's `t`).
+    pub t: Vec<f64>,
+    /// Roll, pitch \[rad\] and thrust per tick (NaN where none).
+    pub command: Vec<[f64; 3]>,
+}
+
+/// `dflat review`.
+pub fn run(args: ReviewArgs) -> Result<()> {
+    let csv_path = match args.flight.extension().and_then(|e| e.to_str()) {
+        Some("tlog") => args.flight.with_extension("csv"),
+        _ => args.flight.clone(),
+    };
+    let csv = FlightCsv::read(&csv_path)?;
+    let log = load_tlog_beside(&csv_path)?;
+    let html = render(&csv_path, &csv, log.as_ref(), None);
+    let out = args.out.unwrap_or_else(|| csv_path.with_extension("html"));
+    std::fs::write(&out, html).with_context(|| format!("cannot write {}", out.display()))?;
+    println!("{}", out.display());
+    Ok(())
+}
+
+/// The `.tlog` beside a CSV, if there is one.
+pub fn load_tlog_beside(csv: &Path) -> Result<Option<FlightLog>> {
+    let tlog = csv.with_extension("tlog");
+    if !tlog.exists() {
+        return Ok(None);
+    }
+    Ok(Some(FlightLog::read_tlog(&tlog)?))
+}
+
+/// The `q` quantile (nearest rank) of the finite values, NaN if none.
+pub fn quantile(values: &[f64], q: f64) -> f64 {
+    let mut v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    v[((q * (v.len() - 1) as f64).round() as usize).min(v.len() - 1)]
+}
+
+/// Offset from the log's clock to the CSV's (daemon) clock: each
+/// SET_ATTITUDE_TARGET carries its tick time in `time_boot_ms`.
+pub fn log_to_csv_offset(log: &FlightLog) -> Option<f64> {
+    let d: Vec<f64> = log
+        .commands
+        .iter()
+        .map(|c| f64::from(c.time_boot_ms) * 1e-3 - c.t)
+        .collect();
+    let m = quantile(&d, 0.5);
+    m.is_finite().then_some(m)
+}
+
+fn col(csv: &FlightCsv, name: &str) -> Vec<f64> {
+    csv.numbers(name)
+        .into_iter()
+        .map(|v| v.unwrap_or(f64::NAN))
+        .collect()
+}
+
+fn pairs(t: &[f64], v: &[f64], scale: f64) -> Vec<(f64, f64)> {
+    t.iter().zip(v).map(|(t, v)| (*t, v * scale)).collect()
+}
+
+/// Summary numbers of a flight CSV, as (key, label, value, unit).
+pub fn summary(csv: &FlightCsv) -> Vec<(&'static str, &'static str, f64, &'static str)> {
+    let t = col(csv, "t");
+    let pos = ["x", "y", "z"].map(|c| col(csv, c));
+    let re = ["ref_x", "ref_y", "ref_z"].map(|c| col(csv, c));
+    let err: Vec<f64> = (0..t.len())
+        .map(|i| {
+            (0..3)
+                .map(|a| (pos[a][i] - re[a][i]).powi(2))
+                .sum::<f64>()
+                .sqrt()
+        })
+        .collect();
+    let solve = col(csv, "solve_us");
+    let jitter = col(csv, "jitter_us");
+    let age = col(csv, "pose_age_ms");
+    let commands = col(csv, "roll").iter().filter(|v| v.is_finite()).count();
+    let guards = csv.texts("guard").iter().filter(|g| !g.is_empty()).count();
+    let states = csv.texts("state");
+    let changes = states.windows(2).filter(|w| w[0] != w[1]).count();
+    let tracking = states.iter().filter(|s| **s == "TRACKING").count();
+    let period = if t.len() > 1 {
+        (t[t.len() - 1] - t[0]) / (t.len() - 1) as f64
+    } else {
+        0.0
+    };
+    let duration = t.last().zip(t.first()).map_or(0.0, |(b, a)| b - a);
+    vec![
+        ("duration_s", "duration", duration, "s"),
+        ("ticks", "ticks", t.len() as f64, ""),
+        ("commands", "commands sent", commands as f64, ""),
+        ("tracking_s", "time tracking", tracking as f64 * period, "s"),
+        (
+            "tracking_error_p50_m",
+            "tracking error p50",
+            quantile(&err, 0.5),
+            "m",
+        ),
+        (
+            "tracking_error_p95_m",
+            "tracking error p95",
+            quantile(&err, 0.95),
+            "m",
+        ),
+        (
+            "tracking_error_max_m",
+            "tracking error max",
+            quantile(&err, 1.0),
+            "m",
+        ),
+        (
+            "solve_us_p50",
+            "solve time p50",
+            quantile(&solve, 0.5),
+            "µs",
+        ),
+        (
+            "solve_us_p99",
+            "solve time p99",
+            quantile(&solve, 0.99),
+            "µs",
+        ),
+        (
+            "solve_us_max",
+            "solve time max",
+            quantile(&solve, 1.0),
+            "µs",
+        ),
+        (
+            "jitter_us_p99",
+            "tick jitter p99",
+            quantile(&jitter, 0.99),
+            "µs",
+        ),
+        (
+            "jitter_us_max",
+            "tick jitter max",
+            quantile(&jitter, 1.0),
+            "µs",
+        ),
+        ("pose_age_ms_p50", "pose age p50", quantile(&age, 0.5), "ms"),
+        (
+            "pose_age_ms_p99",
+            "pose age p99",
+            quantile(&age, 0.99),
+            "ms",
+        ),
+        ("guard_events", "guard / fallback events", guards as f64, ""),
+        ("state_changes", "state changes", changes as f64, ""),
+    ]
+}
+
+/// State changes and guard events as markers on the CSV's time axis.
+fn markers(csv: &FlightCsv, t: &[f64]) -> Vec<Marker> {
+    let states = csv.texts("state");
+    let guards = csv.texts("guard");
+    let mut out = Vec::new();
+    for i in 0..t.len() {
+        if i > 0 && states[i] != states[i - 1] {
+            out.push(Marker {
+                x: t[i],
+                label: format!("{} → {}", states[i - 1], states[i]),
+                color: "#2a7",
+            });
+        }
+        if !guards[i].is_empty() {
+            out.push(Marker {
+                x: t[i],
+                label: format!("guard: {}", guards[i]),
+                color: "#d22",
+            });
+        }
+    }
+    out
+}
+
+/// The page for a flight: `csv` (required), its `log` (optional: measured
+/// attitude, texts) and an optional re-run's commands.
+pub fn render(
+    name: &Path,
+    csv: &FlightCsv,
+    log: Option<&FlightLog>,
+    overlay: Option<&Overlay>,
+) -> String {
+    let t = col(csv, "t");
+    let marks = markers(csv, &t);
+    let chart = |id: &str, title: &str, y: &str, series: Vec<Series>| Chart {
+        id: id.into(),
+        title: title.into(),
+        x_label: "t [s]".into(),
+        y_label: y.into(),
+        series,
+        markers: marks.clone(),
+        equal_axes: false,
+    };
+    let s = |name: &str, color: &'static str, points: Vec<(f64, f64)>| Series {
+        name: name.into(),
+        color,
+        points,
+        dashed: false,
+    };
+    let dashed = |name: &str, color: &'static str, points: Vec<(f64, f64)>| Series {
+        dashed: true,
+        ..s(name, color, points)
+    };
+    let [x, y, z] = ["x", "y", "z"].map(|c| col(csv, c));
+    let [rx, ry, rz] = ["ref_x", "ref_y", "ref_z"].map(|c| col(csv, c));
+    let mut charts = Vec::new();
+    // The map: east to the right, north up.
+    charts.push(Chart {
+        id: "path".into(),
+        title: "flown path over the reference (north up)".into(),
+        x_label: "east y [m]".into(),
+        y_label: "north x [m]".into(),
+        series: vec![
+            dashed(
+                "reference",
+                "#999",
+                ry.iter().copied().zip(rx.iter().copied()).collect(),
+            ),
+            s(
+                "measured",
+                "#1f5fbf",
+                y.iter().copied().zip(x.iter().copied()).collect(),
+            ),
+        ],
+        markers: Vec::new(),
+        equal_axes: true,
+    });
+    let err: Vec<f64> = (0..t.len())
+        .map(|i| ((x[i] - rx[i]).powi(2) + (y[i] - ry[i]).powi(2) + (z[i] - rz[i]).powi(2)).sqrt())
+        .collect();
+    charts.push(chart(
+        "tracking-error",
+        "tracking error |measured − reference|",
+        "m",
+        vec![s("tracking error", "#c33", pairs(&t, &err, 1.0))],
+    ));
+    charts.push(chart(
+        "altitude",
+        "altitude (−z)",
+        "m",
+        vec![
+            dashed("reference −z", "#999", pairs(&t, &rz, -1.0)),
+            s("measured −z", "#1f5fbf", pairs(&t, &z, -1.0)),
+        ],
+    ));
+    let mut att = vec![
+        s(
+            "roll command",
+            "#1f5fbf",
+            pairs(&t, &col(csv, "roll"), 180.0 / std::f64::consts::PI),
+        ),
+        s(
+            "pitch command",
+            "#c33",
+            pairs(&t, &col(csv, "pitch"), 180.0 / std::f64::consts::PI),
+        ),
+    ];
+    if let Some(log) = log
+        && let Some(offset) = log_to_csv_offset(log)
+    {
+        let deg = 180.0 / std::f64::consts::PI;
+        let at = |i: usize| -> Vec<(f64, f64)> {
+            log.attitude
+                .iter()
+                .map(|a| (a.t + offset, a.euler[i] * deg))
+                .collect()
+        };
+        att.push(dashed("roll measured", "#7fa8e8", at(0)));
+        att.push(dashed("pitch measured", "#e89a9a", at(1)));
+    }
+    let mut thrust = vec![s(
+        "thrust command",
+        "#333",
+        pairs(&t, &col(csv, "thrust"), 1.0),
+    )];
+    if let Some(o) = overlay {
+        let deg = 180.0 / std::f64::consts::PI;
+        let pick = |i: usize, sc: f64| {
+            o.t.iter()
+                .zip(&o.command)
+                .map(|(t, c)| (*t, c[i] * sc))
+                .collect()
+        };
+        att.push(s(&format!("roll, {}", o.label), "#2a7", pick(0, deg)));
+        att.push(s(&format!("pitch, {}", o.label), "#a72", pick(1, deg)));
+        thrust.push(s(&format!("thrust, {}", o.label), "#2a7", pick(2, 1.0)));
+    }
+    charts.push(chart(
+        "attitude",
+        "commanded vs measured attitude",
+        "deg",
+        att,
+    ));
+    charts.push(chart(
+        "thrust",
+        "thrust command (normalised)",
+        "0–1",
+        thrust,
+    ));
+    charts.push(chart(
+        "timing",
+        "solve time and tick jitter",
+        "µs",
+        vec![
+            s(
+                "solve time",
+                "#1f5fbf",
+                pairs(&t, &col(csv, "solve_us"), 1.0),
+            ),
+            s(
+                "tick jitter",
+                "#c33",
+                pairs(&t, &col(csv, "jitter_us"), 1.0),
+            ),
+        ],
+    ));
+    if csv.has("pose_age_ms") {
+        charts.push(chart(
+            "pose-age",
+            "pose age at the tick",
+            "ms",
+            vec![s(
+                "pose age",
+                "#733",
+                pairs(&t, &col(csv, "pose_age_ms"), 1.0),
+            )],
+        ));
+    }
+    let dist = ["dist_x", "dist_y", "dist_z"].map(|c| col(csv, c));
+    if dist.iter().any(|d| d.iter().any(|v| v.is_finite())) {
+        charts.push(chart(
+            "disturbance",
+            "disturbance estimate (acceleration offset)",
+            "m/s²",
+            vec![
+                s("d̂ x", "#1f5fbf", pairs(&t, &dist[0], 1.0)),
+                s("d̂ y", "#c33", pairs(&t, &dist[1], 1.0)),
+                s("d̂ z", "#2a7", pairs(&t, &dist[2], 1.0)),
+            ],
+        ));
+    }
+    page(name, csv, log, &charts)
+}
+
+fn page(name: &Path, csv: &FlightCsv, log: Option<&FlightLog>, charts: &[Chart]) -> String {
+    let title = format!("dflat review — {}", name.display());
+    let mut h = String::new();
+    let _ = write!(
+        h,
+        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>{}</title>\
+         <style>body{{font-family:sans-serif;margin:2em;max-width:960px}}table{{border-collapse:collapse}}\
+         td,th{{padding:2px 10px;text-align:left;border-bottom:1px solid #ddd}}td.v{{text-align:right}}\
+         figure{{margin:1.5em 0}}</style></head><body>\n<h1>{}</h1>\n",
+        esc(&title),
+        esc(&title)
+    );
+    h.push_str("<table id=\"summary\">\n");
+    for (key, label, value, unit) in summary(csv) {
+        let shown = if value.is_finite() {
+            if value.fract() == 0.0 && value.abs() < 1e9 {
+                format!("{value:.0}")
+            } else {
+                format!("{value:.3}")
+            }
+        } else {
+            "—".into()
+        };
+        let _ = writeln!(
+            h,
+            "<tr><th>{}</th><td class=\"v\" data-key=\"{key}\" data-value=\"{value}\">{shown}</td><td>{unit}</td></tr>",
+            esc(label)
+        );
+    }
+    h.push_str("</table>\n<p>Green dashed lines: state changes; red: guard and fallback events (hover for the label).</p>\n");
+    for c in charts {
+        let _ = writeln!(h, "<figure>{}</figure>", c.to_svg());
+    }
+    if let Some(log) = log
+        && !log.texts.is_empty()
+    {
+        h.push_str("<h2>STATUSTEXT</h2>\n<ul id=\"texts\">\n");
+        for (t, text) in &log.texts {
+            let _ = writeln!(h, "<li>{t:.2} s: {}</li>", esc(text));
+        }
+        h.push_str("</ul>\n");
+    }
+    h.push_str("</body></html>\n");
+    h
+}

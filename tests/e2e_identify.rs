@@ -1,0 +1,167 @@
+//! End to end: `dflat identify` recovers a vehicle that is not the one the
+//! configuration assumes, from the daemon's own .tlog of a SITL flight.
+//!
+//! The plants differ from the shipped defaults (τ = 0.2 s, k̃ = 1, no
+//! delay, hover 0.5): τ 0.12 s and 0.35 s, k̃ 0.8, a 40 ms pure delay,
+//! hover thrust 0.42, with position noise or vision-rate poses. τ, k̃ and
+//! the hover thrust must come back within 10 %, the delay within one
+//! control tick (20 ms). The last test flies the identified configuration
+//! and compares its path error with the default configuration's.
+
+#[path = "support/mod.rs"]
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use common::*;
+use dflat_sim::flightlog::FlightLog;
+use dflat_sim::identify::{self, Identification, VerticalResult, manoeuvre_mission};
+use dflat_sim::sitl::SitlMode;
+
+/// The plant all flights here fly (besides τ): k̃ 0.8, 40 ms delay, hover 0.42.
+const PLANT: &str = r#"
+plant = "spatial"
+k = 0.8
+command_delay_ms = 40.0
+hover_thrust = 0.42
+start = [0.0, 0.0, -10.0]
+"#;
+
+/// The daemon's side: the spatial model with the shipped default values.
+const DAEMON: &str = r#"
+[logging]
+dir = "@DIR@"
+tlog = true
+csv = true
+[vehicle]
+model = "spatial"
+thrust_mode = "normalized"
+"#;
+
+fn tlog_in(dir: &Path) -> PathBuf {
+    std::fs::read_dir(dir)
+        .expect("read dir")
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .find(|p| p.extension().is_some_and(|x| x == "tlog"))
+        .expect("no .tlog written")
+}
+
+fn identify_flight(
+    name: &str,
+    extra_daemon: &str,
+    sitl: &str,
+    fly_s: u64,
+) -> (Flight, Identification) {
+    let config = format!(
+        "{DAEMON}{extra_daemon}{}\n[sitl]\n{PLANT}{sitl}",
+        manoeuvre_mission([0.0, 0.0, -10.0])
+    );
+    let flight = fly_in_process(name, &config, Duration::from_secs(fly_s));
+    let log = FlightLog::read_tlog(&tlog_in(&scratch_dir(name))).expect("tlog");
+    let found = identify::identify(&log).expect("identify");
+    eprintln!("{name}:\n{}", found.report(name, None));
+    (flight, found)
+}
+
+fn assert_within(name: &str, what: &str, got: f64, truth: f64, fraction: f64) {
+    let err = (got - truth).abs() / truth;
+    eprintln!(
+        "{name}: {what} {got:.4} (truth {truth}, error {:.1} %)",
+        err * 100.0
+    );
+    assert!(
+        err <= fraction,
+        "{name}: {what} {got:.4}, truth {truth}: {:.1} % off",
+        err * 100.0
+    );
+}
+
+fn check(name: &str, found: &Identification, tau: f64) {
+    assert_within(name, "τ", found.tau.value, tau, 0.10);
+    assert_within(name, "k̃", found.gain.value, 0.8, 0.10);
+    let delay_ms = found.delay.value * 1e3;
+    eprintln!("{name}: delay {delay_ms:.1} ms (truth 40 ms + transport and sampling)");
+    assert!(
+        (delay_ms - 40.0).abs() <= 20.0,
+        "{name}: delay {delay_ms:.1} ms"
+    );
+    let VerticalResult::Fitted(v) = &found.vertical else {
+        panic!("{name}: vertical not identified: {:?}", found.vertical)
+    };
+    assert_within(name, "hover thrust", v.hover_thrust, 0.42, 0.10);
+    // The intervals are honest: they contain the truth, within 10 %.
+    assert!(
+        found.tau.ci.is_finite() && found.tau.ci < 0.1 * tau,
+        "{:?}",
+        found.tau
+    );
+}
+
+#[test]
+fn identifies_a_fast_delayed_plant_with_noisy_positions() {
+    let (_, found) = identify_flight("identify-fast", "", "tau = 0.12\nnoise_sigma = 0.01\n", 17);
+    check("identify-fast", &found, 0.12);
+}
+
+#[test]
+fn identifies_a_slow_plant_flown_on_vision_rate_poses() {
+    let (_, found) = identify_flight(
+        "identify-vision",
+        "[link]\npose_source = \"vision_position_estimate\"\n",
+        "tau = 0.35\nvision_rate_hz = 30.0\nvision_latency_ms = 40.0\nvision_noise_sigma = 0.01\n",
+        17,
+    );
+    check("identify-vision", &found, 0.35);
+}
+
+/// The path of the before/after comparison and its speed \[m/s\].
+const L_PATH: [[f64; 3]; 3] = [[0.0, 0.0, -10.0], [15.0, 0.0, -10.0], [15.0, 15.0, -10.0]];
+
+/// Flies the L path with `vehicle` as the `[vehicle]` table; returns the
+/// cross-track p95 \[m\] while commanded and the flight's directory.
+fn fly_l_path(name: &str, vehicle: &str) -> f64 {
+    let config = format!(
+        "[logging]\ndir = \"@DIR@\"\ntlog = true\n{vehicle}\n[mission]\nstart = \"path\"\n\
+         path = [[0.0, 0.0, -10.0], [15.0, 0.0, -10.0], [15.0, 15.0, -10.0]]\nspeed = 5.0\n\
+         [sitl]\n{PLANT}tau = 0.35\n"
+    );
+    let flight = fly_in_process(name, &config, Duration::from_secs(10));
+    let errors: Vec<f64> = flight
+        .report
+        .trace
+        .iter()
+        .filter(|s| s.mode == SitlMode::Offboard)
+        .map(|s| path_distance(&L_PATH, s.position))
+        .collect();
+    assert!(
+        errors.len() > 200,
+        "{name}: {} offboard samples",
+        errors.len()
+    );
+    quantile(&errors, 0.95)
+}
+
+#[test]
+fn the_identified_configuration_flies_the_l_path_better() {
+    let default_vehicle = "[vehicle]\nmodel = \"spatial\"\nthrust_mode = \"normalized\"\n";
+    let before = fly_l_path("identify-before", default_vehicle);
+    // Identify from the default flight's own log.
+    let log = FlightLog::read_tlog(&tlog_in(&scratch_dir("identify-before"))).expect("tlog");
+    let found = identify::identify(&log).expect("identify");
+    let snippet = found.vehicle_snippet("identify-before", None);
+    eprintln!("{}\n{snippet}", found.report("identify-before", None));
+    let tuned = snippet.replace(
+        "[vehicle]\n",
+        "[vehicle]\nmodel = \"spatial\"\nthrust_mode = \"normalized\"\n",
+    );
+    let after = fly_l_path("identify-after", &tuned);
+    eprintln!(
+        "L path at 5 m/s, plant τ 0.35 s, k̃ 0.8, 40 ms delay, hover 0.42: cross-track p95 \
+         default config {before:.3} m, identified config {after:.3} m"
+    );
+    assert!(
+        after < before,
+        "identified {after:.3} m vs default {before:.3} m"
+    );
+}
