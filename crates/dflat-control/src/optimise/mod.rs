@@ -84,12 +84,21 @@
 pub mod banded;
 pub mod bounds;
 pub mod clarabel;
+pub mod clarabel_cone;
+pub mod cone;
+pub mod cone_qp;
+pub mod cone_solver;
+#[cfg(test)]
+mod cone_tests;
 pub mod fast_banded;
 pub mod interior_point;
 pub mod smoothness;
 
 pub use bounds::AxisBounds;
 pub use clarabel::{ClarabelSolver, KktTuning};
+pub use clarabel_cone::ClarabelConeSolver;
+pub use cone::ConeBounds;
+pub use cone_solver::{AxisWeights, ConeInteriorPointSolver};
 pub use fast_banded::FastBandedSolver;
 pub use interior_point::BandedInteriorPointSolver;
 pub use smoothness::Smoothness;
