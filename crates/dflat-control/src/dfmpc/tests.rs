@@ -2,7 +2,10 @@
 
 use super::*;
 use crate::optimise::smoothness::accel_block;
-use crate::optimise::{KktTuning, baseline};
+use crate::optimise::{
+    AxisProblem, BandedInteriorPointSolver, ClarabelSolver, FastBandedSolver, KktTuning,
+    Smoothness, baseline,
+};
 
 const DT: f64 = 0.02;
 
@@ -433,6 +436,7 @@ fn banded_failure_falls_back_to_clarabel_and_says_so() {
     let settings = |qp_solver| DfMpcSettings {
         constraints: OutputConstraints {
             max_tilt: Some(20f64.to_radians()),
+            tilt_bound: PlanTiltBound::Box,
             ..Default::default()
         },
         qp_solver,
