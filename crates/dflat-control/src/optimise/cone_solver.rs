@@ -11,6 +11,8 @@ use crate::ControlError;
 /// kept at ≥ this fraction of their cold-start values (chosen on the
 /// corner manoeuvre of the `corner` bench: see `docs/performance.md`).
 const WARM_FLOOR: f64 = 1e-3;
+/// Which duals a warm start keeps.
+const WARM_DUALS: Start = Start::Cold;
 
 /// Weights of one axis: tracking q ≥ 0 [1/m²], jerk r > 0 [s⁶/m²], and
 /// the smoothness term.
@@ -178,7 +180,7 @@ impl ConeInteriorPointSolver {
         if self.warm_start && self.previous_valid {
             self.qp.shift(WARM_FLOOR);
             self.qp.set_start([&self.warm[0], &self.warm[1]], dt, true);
-            result = self.qp.solve(&self.c, a0, &self.lo, &self.hi, Start::Warm);
+            result = self.qp.solve(&self.c, a0, &self.lo, &self.hi, WARM_DUALS);
             self.warm_used = result.is_ok();
         }
         if result.is_err() {
