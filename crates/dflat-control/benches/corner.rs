@@ -72,10 +72,6 @@ impl Config {
     fn settings(self, n: usize) -> DfMpcSettings {
         let constraints = OutputConstraints {
             max_tilt: Some(TILT_DEG.to_radians()),
-            tilt_bound: match self {
-                Self::BoxBanded => PlanTiltBound::Box,
-                _ => PlanTiltBound::Cone,
-            },
             ..Default::default()
         };
         DfMpcSettings {
@@ -88,6 +84,10 @@ impl Config {
                 Self::ConeClarabel => QpSolver::Clarabel,
                 _ => QpSolver::Banded,
             },
+            plan_tilt_bound: match self {
+                Self::BoxBanded => PlanTiltBound::Box,
+                _ => PlanTiltBound::Cone,
+            },
             warm_start: !matches!(self, Self::ConeCold),
             solver_time_limit: f64::INFINITY,
             ..Default::default()
@@ -98,11 +98,7 @@ impl Config {
 /// The measurements of one closed-loop flight with the warm cone.
 fn record(n: usize) -> Vec<Measurement> {
     let plant = plant();
-    let mut ctrl = DfMpc::new(
-        ControlModel::Planar(plant),
-        Config::ConeWarm.settings(n),
-    )
-    .unwrap();
+    let mut ctrl = DfMpc::new(ControlModel::Planar(plant), Config::ConeWarm.settings(n)).unwrap();
     let mut reference = path();
     let mut x = SVector::<f64, 6>::zeros();
     let mut out = Vec::with_capacity(TICKS);
@@ -121,15 +117,20 @@ fn record(n: usize) -> Vec<Measurement> {
 }
 
 /// Tick times \[s\] of `repeats` replays, and which ticks were constrained.
-fn replay(config: Config, n: usize, flight: &[Measurement], repeats: usize) -> (Vec<f64>, Vec<f64>) {
+fn replay(
+    config: Config,
+    n: usize,
+    flight: &[Measurement],
+    repeats: usize,
+) -> (Vec<f64>, Vec<f64>) {
     let (mut all, mut constrained) = (Vec::new(), Vec::new());
     for _ in 0..repeats {
         let mut ctrl = DfMpc::new(ControlModel::Planar(plant()), config.settings(n)).unwrap();
         let mut reference = path();
         for m in flight {
             let start = Instant::now();
-            let out = std::hint::black_box(ctrl.update(std::hint::black_box(m), &mut reference))
-                .unwrap();
+            let out =
+                std::hint::black_box(ctrl.update(std::hint::black_box(m), &mut reference)).unwrap();
             let t = start.elapsed().as_secs_f64();
             all.push(t);
             if out.constrained {

@@ -47,12 +47,15 @@ pub enum PlanTiltBound {
     /// Each axis separately, `|Δ²y/δt²| ≤ g·tan(max_tilt)`: the combined
     /// planned tilt can reach `atan(√2·tan(max_tilt))` (39° at 30°). Each
     /// axis is its own QP ([`BandedInteriorPointSolver`](crate::optimise::BandedInteriorPointSolver)).
+    /// Default: the cone's tick is not yet within its time budget and on
+    /// the L path it tracks slightly worse at the same bound (it flies 30°
+    /// where the box flies up to the 35° command limit); `docs/results.md`.
+    #[default]
     Box,
     /// The tilt cone `‖(ẍ, ÿ)‖ ≤ g·tan(max_tilt)` per stage — the vehicle's
     /// limit — with both horizontal axes in one QP
     /// ([`ConeInteriorPointSolver`](crate::optimise::ConeInteriorPointSolver),
-    /// warm-started; speed bounds soft with an exact penalty). Default.
-    #[default]
+    /// warm-started; speed bounds soft with an exact penalty).
     Cone,
 }
 
@@ -62,11 +65,9 @@ pub enum PlanTiltBound {
 #[serde(default, deny_unknown_fields)]
 pub struct OutputConstraints {
     /// Max tilt \[rad\] as a bound on the planned horizontal acceleration
-    /// `g·tan(max_tilt)`, as [`OutputConstraints::tilt_bound`] says.
-    /// Default none.
+    /// `g·tan(max_tilt)`, as [`DfMpcSettings::plan_tilt_bound`] says
+    /// (a box per axis by default). Default none.
     pub max_tilt: Option<f64>,
-    /// How `max_tilt` applies: the cone (default) or a box per axis.
-    pub tilt_bound: PlanTiltBound,
     /// Max speed per axis `|Δy/δt|` [m/s]; when the window is already
     /// faster, the plan brakes to it at 90 % of the acceleration bound
     /// ([`AxisBounds::speed`](crate::optimise::AxisBounds::speed); with the
@@ -119,6 +120,9 @@ pub struct DfMpcSettings {
     /// The solver for a plan that violates a constraint. Default
     /// [`QpSolver::Banded`].
     pub qp_solver: QpSolver,
+    /// How [`OutputConstraints::max_tilt`] applies: a box per axis
+    /// (default) or the tilt cone.
+    pub plan_tilt_bound: PlanTiltBound,
     /// Warm-start the cone QP from the previous tick's solution, shifted
     /// one step ([`ConeInteriorPointSolver`](crate::optimise::ConeInteriorPointSolver)).
     /// Default true.
@@ -150,6 +154,7 @@ impl Default for DfMpcSettings {
             saturation: Some(InputSaturation::default()),
             constraints: OutputConstraints::default(),
             qp_solver: QpSolver::Banded,
+            plan_tilt_bound: PlanTiltBound::Box,
             warm_start: true,
             solver_time_limit: 0.01,
             smoothness_weight: [0.0; 3],

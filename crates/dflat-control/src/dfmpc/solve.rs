@@ -79,10 +79,10 @@ pub(super) fn build_pipelines(
 ) -> Result<(Vec<AxisPipeline>, Option<HorizontalCone>), ControlError> {
     let axes = model.axes();
     let c = &settings.constraints;
-    let cone_mode = c.tilt_bound == PlanTiltBound::Cone && c.max_tilt.is_some();
+    let cone_mode = settings.plan_tilt_bound == PlanTiltBound::Cone && c.max_tilt.is_some();
     let dt = model.dt();
     let n = settings.horizon;
-    let lags = input_lags(&model);
+    let lags = input_lags(model);
     let mut pipelines = Vec::with_capacity(axes);
     for (axis, lag) in lags.iter().enumerate().take(axes) {
         let (q, r) = (settings.tracking_weight[axis], settings.jerk_weight[axis]);
@@ -300,5 +300,4 @@ impl DfMpc {
         }
         Ok(report)
     }
-
 }

@@ -436,9 +436,9 @@ fn banded_failure_falls_back_to_clarabel_and_says_so() {
     let settings = |qp_solver| DfMpcSettings {
         constraints: OutputConstraints {
             max_tilt: Some(20f64.to_radians()),
-            tilt_bound: PlanTiltBound::Box,
             ..Default::default()
         },
+        plan_tilt_bound: PlanTiltBound::Box,
         qp_solver,
         solver_time_limit: f64::INFINITY,
         ..Default::default()

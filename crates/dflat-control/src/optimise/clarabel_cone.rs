@@ -85,17 +85,17 @@ impl ClarabelConeSolver {
                 pval.push(2.0 * w.q);
                 colptr.push(prow.len());
             }
-            for f in 0..n {
-                if f > 1 && band[f][2] != 0.0 {
+            for (f, col) in band.iter().enumerate() {
+                if f > 1 && col[2] != 0.0 {
                     prow.push(a_of(i, f - 2));
-                    pval.push(band[f][2]);
+                    pval.push(col[2]);
                 }
                 if f > 0 {
                     prow.push(a_of(i, f - 1));
-                    pval.push(band[f][1]);
+                    pval.push(col[1]);
                 }
                 prow.push(a_of(i, f));
-                pval.push(band[f][0]);
+                pval.push(col[0]);
                 colptr.push(prow.len());
             }
         }
@@ -205,7 +205,11 @@ impl ClarabelConeSolver {
     /// [`ConeInteriorPointSolver::solve_pair`](super::ConeInteriorPointSolver::solve_pair);
     /// the plans' contents on entry are not used). A status other than
     /// `Solved` is [`ControlError::Solver`].
-    pub fn solve_pair(&mut self, x: AxisProblem<'_>, y: AxisProblem<'_>) -> Result<(), ControlError> {
+    pub fn solve_pair(
+        &mut self,
+        x: AxisProblem<'_>,
+        y: AxisProblem<'_>,
+    ) -> Result<(), ControlError> {
         check_lengths(self.horizon, x.reference, x.plan)?;
         check_lengths(self.horizon, y.reference, y.plan)?;
         let (n, dt) = (self.horizon - 2, self.dt);
@@ -213,7 +217,8 @@ impl ClarabelConeSolver {
         for (i, a) in [&x, &y].into_iter().enumerate() {
             let q = self.weights[i].q;
             for f in 0..n {
-                self.qvec[2 * n * i + f] = 2.0 * q * (baseline(a.fixed, f + 3) - a.reference[f + 3]);
+                self.qvec[2 * n * i + f] =
+                    2.0 * q * (baseline(a.fixed, f + 3) - a.reference[f + 3]);
             }
             self.qvec[2 * n * i + n] =
                 sent_linear_term(&self.weights[i].smoothness, a.fixed, a.sent, dt);

@@ -8,6 +8,9 @@ use super::*;
 const DT: f64 = 0.02;
 const G: f64 = 9.81;
 
+/// The x and y plans `y_0..y_N` \[m\].
+type Plans = [Vec<f64>; 2];
+
 /// One axis of an instance.
 #[derive(Debug, Clone)]
 struct Axis {
@@ -53,17 +56,14 @@ fn objective(
         let speed: Vec<f64> = (2..horizon).map(|j| (plan[j + 1] - plan[j]) / DT).collect();
         let d1 = a.fixed[1] - a.fixed[0];
         let d2 = a.fixed[2] - 2.0 * a.fixed[1] + a.fixed[0];
-        bounds
-            .axis()
-            .speed_rows(horizon, &a.fixed, DT, |lo, hi| {
-                // Rows are on the deviation: add the baseline's speed back.
-                let j = k + 2;
-                let base = (d1 + j as f64 * d2) / DT;
-                let s = speed[k];
-                obj += bounds.speed_penalty
-                    * ((s - (hi + base)).max(0.0) + ((lo + base) - s).max(0.0));
-                k += 1;
-            });
+        bounds.axis().speed_rows(horizon, &a.fixed, DT, |lo, hi| {
+            // Rows are on the deviation: add the baseline's speed back.
+            let j = k + 2;
+            let base = (d1 + j as f64 * d2) / DT;
+            let s = speed[k];
+            obj += bounds.speed_penalty * ((s - (hi + base)).max(0.0) + ((lo + base) - s).max(0.0));
+            k += 1;
+        });
     }
     obj
 }
@@ -80,7 +80,7 @@ fn solve_both(
     weights: [AxisWeights; 2],
     bounds: ConeBounds,
     axes: &[Axis; 2],
-) -> Option<([Vec<f64>; 2], [Vec<f64>; 2])> {
+) -> Option<(Plans, Plans)> {
     let mut clarabel = ClarabelConeSolver::new(
         horizon,
         DT,
