@@ -18,8 +18,9 @@
 //! `d = (z/s)(w/σ)/(z/s + w/σ)` — the hard row's `z/s` in series with
 //! the penalty's `w/σ`. Mehrotra's predictor-corrector, one step length.
 //!
-//! Warm start ([`ConeQp::shift`]): the previous solution moved one stage
-//! earlier, slacks and multipliers kept but pushed off the boundary; see
+//! Warm start ([`ConeQp::shift`]): the previous solution's λ, slacks and
+//! multipliers moved one stage earlier (the slacks and multipliers pushed
+//! off the boundary, used only with [`Start::Warm`]); see
 //! [`ConeInteriorPointSolver`](super::ConeInteriorPointSolver).
 
 use super::banded::SymBand;

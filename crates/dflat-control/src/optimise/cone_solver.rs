@@ -7,11 +7,13 @@ use super::smoothness::{accel_block, sent_linear_term};
 use super::{AxisProblem, ConeBounds, FastBandedSolver, Smoothness, baseline, check_lengths};
 use crate::ControlError;
 
-/// Warm-start floor: slacks and multipliers of the shifted solution are
-/// kept at ≥ this fraction of their cold-start values (chosen on the
-/// corner manoeuvre of the `corner` bench: see `docs/performance.md`).
+/// Warm-start floor of [`ConeQp::shift`]: kept slacks and multipliers stay
+/// at ≥ this fraction of their cold-start values.
 const WARM_FLOOR: f64 = 1e-3;
-/// Which duals a warm start keeps.
+/// What a warm start keeps besides the shifted primal and λ: measured on
+/// the `corner` bench (`docs/performance.md`), keeping the shifted slacks
+/// and multipliers ([`Start::Warm`]) was twice as slow as cold ones, so
+/// they start cold.
 const WARM_DUALS: Start = Start::Cold;
 
 /// Weights of one axis: tracking q ≥ 0 [1/m²], jerk r > 0 [s⁶/m²], and

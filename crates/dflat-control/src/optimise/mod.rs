@@ -76,6 +76,10 @@
 //!   system; the default constrained solver.
 //! * [`clarabel`] — [`ClarabelSolver`]: the same bounded QP in clarabel,
 //!   the fallback (and [`KktTuning`]).
+//! * [`cone`], [`cone_qp`], [`cone_solver`], [`clarabel_cone`] — the tilt
+//!   cone ([`ConeBounds`]): both horizontal axes in one stage-interleaved
+//!   banded interior point ([`ConeInteriorPointSolver`], warm-started),
+//!   and the same problem as clarabel's SOCP ([`ClarabelConeSolver`]).
 //! * [`bounds`] — [`AxisBounds`]: tilt (acceleration), vertical
 //!   acceleration and speed bounds, the braking funnel.
 //! * [`smoothness`] — [`Smoothness`]: the command-smoothness term.
