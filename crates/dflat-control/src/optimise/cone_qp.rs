@@ -109,7 +109,7 @@ pub struct ConeAxis {
     /// Tracking weight q [1/m²].
     pub q: f64,
     /// The ã block of P, `[diag, (k−1, k), (k−2, k)]` per column
-    /// ([`accel_block`](super::smoothness::accel_block)).
+    /// (as the crate-internal `smoothness::accel_block` builds it).
     pub accel: Vec<[f64; 3]>,
 }
 
@@ -470,9 +470,16 @@ impl ConeQp {
                     }
                 }
             }
-            self.ldl
-                .factor(&self.kkt)
-                .map_err(|_| ControlError::Solver("cone QP: factorisation failed".into()))?;
+            if self.ldl.factor(&self.kkt).is_err() {
+                // The end game's barrier terms (z/s up to ~1e20) can make
+                // the KKT matrix numerically singular: an acceptable best
+                // iterate is the answer then, as when stalled.
+                if best.0 <= ACCEPTABLE_MERIT {
+                    self.v.copy_from_slice(&self.best);
+                    return Ok(iteration);
+                }
+                return Err(ControlError::Solver("cone QP: factorisation failed".into()));
+            }
 
             // Predictor (affine), then Mehrotra's corrector.
             self.direction(rho, soft, |s, z, _| s * z);
@@ -515,12 +522,12 @@ impl ConeQp {
 
     /// The weight `d` a side adds to `hhᵀ` in the KKT matrix.
     fn side_weight(sd: &Side, soft: bool) -> f64 {
-        let d1 = sd.z / sd.s;
         if soft {
-            let d2 = sd.w / sd.sig;
-            d1 * d2 / (d1 + d2)
+            // z/s in series with w/σ, in the form that stays finite when
+            // either ratio is huge.
+            1.0 / (sd.s / sd.z + sd.sig / sd.w)
         } else {
-            d1
+            sd.z / sd.s
         }
     }
 
