@@ -6,9 +6,12 @@
 //!   (half-bandwidth 4), classic window.
 //! * `df_mpc::multirate_smooth_tick` — steady-state tick with multi-rate
 //!   windows (15 Hz samples, 60 ms late) and the smoothness term.
-//! * `df_mpc::tilt_constrained_tick` — DF-MPC with a 15° tilt constraint
-//!   that binds on both axes (banded interior point, the default);
-//!   `tilt_constrained_tick_clarabel` the same solved by clarabel.
+//! * `df_mpc::tilt_constrained_tick` — DF-MPC with a 15° tilt bound as a
+//!   box per axis that binds on both axes (banded interior point, the
+//!   default); `tilt_constrained_tick_clarabel` the same solved by clarabel.
+//! * `df_mpc::tilt_cone_tick` — the 15° bound as the tilt cone (both axes
+//!   in one banded interior point); `tilt_cone_tick_clarabel` the same SOCP
+//!   in clarabel. Percentiles over a corner manoeuvre: `benches/corner.rs`.
 //! * `df_mpc::qp_banded` / `df_mpc::qp_clarabel` — the same unconstrained
 //!   DF QP (both axes) solved by the banded solver and handed whole to
 //!   clarabel: the generic baseline (`qp_clarabel` with the KKT tuning
@@ -21,7 +24,7 @@
 
 #![allow(missing_docs)]
 
-use dflat_control::dfmpc::{DfMpc, DfMpcSettings, OutputConstraints, QpSolver};
+use dflat_control::dfmpc::{DfMpc, DfMpcSettings, OutputConstraints, PlanTiltBound, QpSolver};
 use dflat_control::optimise::{
     AxisBounds, AxisProblem, ClarabelSolver, FastBandedSolver, KktTuning, Smoothness,
 };
@@ -99,12 +102,17 @@ mod df_mpc {
     }
 
     fn tilt_constrained(n: usize, qp_solver: QpSolver) -> DfMpcSettings {
+        tilt_bounded(n, qp_solver, PlanTiltBound::Box)
+    }
+
+    fn tilt_bounded(n: usize, qp_solver: QpSolver, bound: PlanTiltBound) -> DfMpcSettings {
         DfMpcSettings {
             horizon: n,
             constraints: OutputConstraints {
                 max_tilt: Some(15f64.to_radians()),
                 ..Default::default()
             },
+            plan_tilt_bound: bound,
             qp_solver,
             solver_time_limit: f64::INFINITY,
             ..Default::default()
@@ -116,6 +124,27 @@ mod df_mpc {
     #[divan::bench(args = HORIZONS, sample_count = 20, sample_size = 5)]
     fn tilt_constrained_tick(bencher: Bencher, n: usize) {
         bench_tick(bencher, tilt_constrained(n, QpSolver::Banded), true);
+    }
+
+    /// DF-MPC tick with a binding 15° tilt *cone* (both axes in one QP,
+    /// banded interior point, cold: every iteration is the first tick).
+    #[divan::bench(args = HORIZONS, sample_count = 20, sample_size = 5)]
+    fn tilt_cone_tick(bencher: Bencher, n: usize) {
+        bench_tick(
+            bencher,
+            tilt_bounded(n, QpSolver::Banded, PlanTiltBound::Cone),
+            true,
+        );
+    }
+
+    /// As `tilt_cone_tick`, the same cone problem solved by clarabel (SOCP).
+    #[divan::bench(args = HORIZONS, sample_count = 20, sample_size = 5)]
+    fn tilt_cone_tick_clarabel(bencher: Bencher, n: usize) {
+        bench_tick(
+            bencher,
+            tilt_bounded(n, QpSolver::Clarabel, PlanTiltBound::Cone),
+            true,
+        );
     }
 
     /// As `tilt_constrained_tick`, solved by clarabel.

@@ -32,20 +32,20 @@
 //! above.
 
 mod settings;
+mod solve;
 #[cfg(test)]
 mod tests;
 
-pub use settings::{DfMpcSettings, InputSaturation, OutputConstraints, QpSolver};
+pub use settings::{DfMpcSettings, InputSaturation, OutputConstraints, PlanTiltBound, QpSolver};
+
+use solve::{AxisPipeline, HorizontalCone, build_pipelines};
 
 use nalgebra::Vector3;
 
 use crate::disturbance::{DisturbanceEstimate, DisturbanceEstimator};
 use crate::model::ControlModel;
-use crate::optimise::{
-    AxisBounds, AxisProblem, BandedInteriorPointSolver, ClarabelSolver, FastBandedSolver,
-    Smoothness, invalid,
-};
-use crate::window::{MultiRateWindow, Window, input_lags};
+use crate::optimise::{AxisBounds, ConeBounds, invalid};
+use crate::window::{MultiRateWindow, Window};
 use crate::{ControlError, Controller, Measurement, ReferenceSource, TickOutput, limit_tilt};
 
 /// Most ticks [`Controller::plan_fallback`] flies the last good plan (and
@@ -83,6 +83,9 @@ pub struct DfMpc {
     estimator: Option<DisturbanceEstimator>,
     /// One optimisation pipeline per controlled axis (x, y; z spatial).
     axes: Vec<AxisPipeline>,
+    /// The horizontal pair's tilt-cone QP, when the plan's tilt bound is
+    /// the cone ([`PlanTiltBound::Cone`]).
+    cone: Option<HorizontalCone>,
     /// Reference y_ref,k..y_ref,k+N (model frame, m) of this tick, and of
     /// the last good tick (swapped after each good tick).
     reference: Vec<Vector3<f64>>,
@@ -101,41 +104,6 @@ pub struct DfMpc {
     plan: PlanState,
     /// Whether the sent inputs are all recorded.
     record: RecordState,
-}
-
-/// One axis's optimisation: the fast path, the bounded solvers when the
-/// axis has bounds, and its reference and plan buffers.
-#[derive(Debug)]
-struct AxisPipeline {
-    /// The unconstrained problem (the fast path).
-    fast: FastBandedSolver,
-    /// The problem with this axis's bounds, when it has any.
-    bounded: Option<BoundedQp>,
-    /// The bounds (empty when none).
-    bounds: AxisBounds,
-    /// This tick's reference on this axis, y_ref,k..y_ref,k+N \[m\].
-    reference: Vec<f64>,
-    /// This tick's plan y*_k..y*_{k+N} \[m\] (a workspace until it is good).
-    plan: Vec<f64>,
-    /// The last good tick's plan \[m\] (swapped with `plan`).
-    good_plan: Vec<f64>,
-}
-
-/// The bounded QP of one axis: the banded interior point first (with
-/// [`QpSolver::Banded`]), clarabel when it does not converge.
-#[derive(Debug)]
-struct BoundedQp {
-    interior_point: Option<BandedInteriorPointSolver>,
-    clarabel: ClarabelSolver,
-}
-
-/// What [`DfMpc::optimise`] reports of a tick's solve.
-#[derive(Debug, Clone, Copy, Default)]
-struct SolveReport {
-    /// A bound was binding on some axis (a bounded solver ran).
-    constrained: bool,
-    /// Clarabel solved an axis the interior point did not.
-    qp_fallback: bool,
 }
 
 /// The plan DF-MPC can fly without a new solve ([`Controller::plan_fallback`]).
@@ -194,63 +162,8 @@ impl DfMpc {
                 "needs the spatial model (the planar model does not control z)",
             ));
         }
-        let dt = model.dt();
+        let (pipelines, cone) = build_pipelines(&model, &settings)?;
         let n = settings.horizon;
-        let lags = input_lags(&model);
-        let mut pipelines = Vec::with_capacity(axes);
-        for (axis, lag) in lags.iter().enumerate().take(axes) {
-            let (q, r) = (settings.tracking_weight[axis], settings.jerk_weight[axis]);
-            let smoothness = Smoothness {
-                weight: settings.smoothness_weight[axis],
-                kappa: lag / dt,
-                gravity: model.gravity(),
-            };
-            let acceleration = if axis < 2 {
-                c.max_tilt.map(|t| {
-                    let a = model.gravity() * t.tan();
-                    [-a, a]
-                })
-            } else {
-                c.vertical_acceleration
-            };
-            let bounds = AxisBounds {
-                acceleration,
-                speed: c.max_speed,
-            };
-            let bounded = if bounds.is_empty() {
-                None
-            } else {
-                Some(BoundedQp {
-                    interior_point: if settings.qp_solver == QpSolver::Banded {
-                        Some(BandedInteriorPointSolver::new(
-                            n,
-                            (q, r, dt),
-                            bounds,
-                            smoothness,
-                        )?)
-                    } else {
-                        None
-                    },
-                    clarabel: ClarabelSolver::with_smoothness(
-                        n,
-                        q,
-                        r,
-                        dt,
-                        bounds,
-                        settings.solver_time_limit,
-                        smoothness,
-                    )?,
-                })
-            };
-            pipelines.push(AxisPipeline {
-                fast: FastBandedSolver::with_smoothness(n, q, r, dt, smoothness)?,
-                bounded,
-                bounds,
-                reference: vec![0.0; n + 1],
-                plan: vec![0.0; n + 1],
-                good_plan: vec![0.0; n + 1],
-            });
-        }
         Ok(Self {
             model,
             settings,
@@ -264,6 +177,7 @@ impl DfMpc {
                 .map(|d| DisturbanceEstimator::new(model, d))
                 .transpose()?,
             axes: pipelines,
+            cone,
             reference: vec![Vector3::zeros(); n + 1],
             good_reference: vec![Vector3::zeros(); n + 1],
             good_y0: Vector3::zeros(),
@@ -315,7 +229,14 @@ impl DfMpc {
         }
     }
 
-    /// The per-axis bounds derived from the constraints (x, y, z order).
+    /// The horizontal tilt cone (and its soft speed bounds), when the plan's
+    /// tilt bound is the cone ([`PlanTiltBound::Cone`]).
+    pub fn cone_bounds(&self) -> Option<&ConeBounds> {
+        self.cone.as_ref().map(|c| c.bounds())
+    }
+
+    /// The per-axis bounds derived from the constraints (x, y, z order);
+    /// with the cone, the horizontal axes' are in [`DfMpc::cone_bounds`].
     pub fn bounds(&self, axis: usize) -> Option<&AxisBounds> {
         self.axes.get(axis).map(|a| &a.bounds)
     }
@@ -362,93 +283,6 @@ impl DfMpc {
             }
         }
         Ok(())
-    }
-
-    /// Step 4: output trajectory optimisation, per axis — the fast path
-    /// first (x and y together when they share weights), then the bounded
-    /// QP for an axis whose fast plan violates a configured bound.
-    /// `sent_acceleration`: what the command sent at k−1 asks for (with a
-    /// smoothness weight).
-    fn optimise(
-        &mut self,
-        fixed: &[Vector3<f64>; 3],
-        sent_acceleration: Option<Vector3<f64>>,
-    ) -> Result<SolveReport, ControlError> {
-        let mut fixed_axis = [[0.0; 3]; 3];
-        for (axis, f) in fixed_axis.iter_mut().enumerate().take(self.axes.len()) {
-            *f = [fixed[0][axis], fixed[1][axis], fixed[2][axis]];
-        }
-        let sent = |axis: usize| sent_acceleration.map(|c| c[axis]);
-        let [ax, ay, rest @ ..] = self.axes.as_mut_slice() else {
-            unreachable!("DfMpc::new makes at least two axes")
-        };
-        let paired =
-            ax.fast.weights() == ay.fast.weights() && ax.fast.smoothness() == ay.fast.smoothness();
-        if paired {
-            ax.fast.solve_pair(
-                AxisProblem {
-                    fixed: &fixed_axis[0],
-                    sent: sent(0),
-                    reference: &ax.reference,
-                    plan: &mut ax.plan,
-                },
-                AxisProblem {
-                    fixed: &fixed_axis[1],
-                    sent: sent(1),
-                    reference: &ay.reference,
-                    plan: &mut ay.plan,
-                },
-            )?;
-        } else {
-            for (axis, p) in [(0, &mut *ax), (1, &mut *ay)] {
-                p.fast.solve_problem(AxisProblem {
-                    fixed: &fixed_axis[axis],
-                    sent: sent(axis),
-                    reference: &p.reference,
-                    plan: &mut p.plan,
-                })?;
-            }
-        }
-        if let Some(az) = rest.first_mut() {
-            az.fast.solve_problem(AxisProblem {
-                fixed: &fixed_axis[2],
-                sent: sent(2),
-                reference: &az.reference,
-                plan: &mut az.plan,
-            })?;
-        }
-        let mut report = SolveReport::default();
-        let dt = self.model.dt();
-        for (axis, p) in self.axes.iter_mut().enumerate() {
-            let Some(qp) = &mut p.bounded else { continue };
-            if !qp.clarabel.bounds().violated_by(&p.plan, dt) {
-                continue;
-            }
-            // The banded interior point first; clarabel when it does not
-            // converge (its own failure is the tick's).
-            let solved = match &mut qp.interior_point {
-                Some(ip) => ip
-                    .solve_problem(AxisProblem {
-                        fixed: &fixed_axis[axis],
-                        sent: sent(axis),
-                        reference: &p.reference,
-                        plan: &mut p.plan,
-                    })
-                    .is_ok(),
-                None => false,
-            };
-            if !solved {
-                report.qp_fallback |= qp.interior_point.is_some();
-                qp.clarabel.solve_problem(AxisProblem {
-                    fixed: &fixed_axis[axis],
-                    sent: sent(axis),
-                    reference: &p.reference,
-                    plan: &mut p.plan,
-                })?;
-            }
-            report.constrained = true;
-        }
-        Ok(report)
     }
 
     /// Step 5: the output-to-input map F on y*_k..y*_{k+3} of this tick's
@@ -775,6 +609,9 @@ impl Controller for DfMpc {
         self.record = RecordState::Recorded;
         if let Some(e) = &mut self.estimator {
             e.reset();
+        }
+        if let Some(c) = &mut self.cone {
+            c.forget();
         }
     }
 

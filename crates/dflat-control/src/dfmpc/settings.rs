@@ -39,17 +39,40 @@ impl Default for InputSaturation {
     }
 }
 
-/// Optional inequality constraints on the planned outputs (solved with
-/// clarabel when the unconstrained plan violates them).
+/// How the plan's tilt bound ([`OutputConstraints::max_tilt`]) bounds the
+/// horizontal acceleration.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum PlanTiltBound {
+    /// Each axis separately, `|Δ²y/δt²| ≤ g·tan(max_tilt)`: the combined
+    /// planned tilt can reach `atan(√2·tan(max_tilt))` (39° at 30°). Each
+    /// axis is its own QP ([`BandedInteriorPointSolver`](crate::optimise::BandedInteriorPointSolver)).
+    /// Default: the cone's tick is not yet within its time budget and on
+    /// the L path it tracks slightly worse at the same bound (it flies 30°
+    /// where the box flies up to the 35° command limit); `docs/results.md`.
+    #[default]
+    Box,
+    /// The tilt cone `‖(ẍ, ÿ)‖ ≤ g·tan(max_tilt)` per stage — the vehicle's
+    /// limit — with both horizontal axes in one QP
+    /// ([`ConeInteriorPointSolver`](crate::optimise::ConeInteriorPointSolver),
+    /// warm-started; speed bounds soft with an exact penalty).
+    Cone,
+}
+
+/// Optional inequality constraints on the planned outputs (solved when the
+/// unconstrained plan violates them).
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct OutputConstraints {
-    /// Max tilt \[rad\] as a bound on the horizontal acceleration per axis,
-    /// `|Δ²y/δt²| ≤ g·tan(max_tilt)`. Default none.
+    /// Max tilt \[rad\] as a bound on the planned horizontal acceleration
+    /// `g·tan(max_tilt)`, as [`DfMpcSettings::plan_tilt_bound`] says
+    /// (a box per axis by default). Default none.
     pub max_tilt: Option<f64>,
     /// Max speed per axis `|Δy/δt|` [m/s]; when the window is already
     /// faster, the plan brakes to it at 90 % of the acceleration bound
-    /// ([`AxisBounds::speed`](crate::optimise::AxisBounds::speed)). Default none.
+    /// ([`AxisBounds::speed`](crate::optimise::AxisBounds::speed); with the
+    /// cone, at 90 % of `g·tan(max_tilt)/√2` per axis, and the horizontal
+    /// speed rows are soft: [`ConeBounds`](crate::optimise::ConeBounds)). Default none.
     pub max_speed: Option<f64>,
     /// Bounds `[a_min, a_max]` on the vertical acceleration `Δ²z/δt²`
     /// [m/s²] in the model frame (NED: positive down); spatial model only.
@@ -97,6 +120,13 @@ pub struct DfMpcSettings {
     /// The solver for a plan that violates a constraint. Default
     /// [`QpSolver::Banded`].
     pub qp_solver: QpSolver,
+    /// How [`OutputConstraints::max_tilt`] applies: a box per axis
+    /// (default) or the tilt cone.
+    pub plan_tilt_bound: PlanTiltBound,
+    /// Warm-start the cone QP from the previous tick's solution, shifted
+    /// one step ([`ConeInteriorPointSolver`](crate::optimise::ConeInteriorPointSolver)).
+    /// Default true.
+    pub warm_start: bool,
     /// Wall-time limit for one clarabel solve \[s\] (`f64::INFINITY` for
     /// none). Default 0.01.
     pub solver_time_limit: f64,
@@ -124,6 +154,8 @@ impl Default for DfMpcSettings {
             saturation: Some(InputSaturation::default()),
             constraints: OutputConstraints::default(),
             qp_solver: QpSolver::Banded,
+            plan_tilt_bound: PlanTiltBound::Box,
+            warm_start: true,
             solver_time_limit: 0.01,
             smoothness_weight: [0.0; 3],
             multi_rate: None,

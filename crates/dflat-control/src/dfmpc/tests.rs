@@ -2,7 +2,10 @@
 
 use super::*;
 use crate::optimise::smoothness::accel_block;
-use crate::optimise::{KktTuning, baseline};
+use crate::optimise::{
+    AxisProblem, BandedInteriorPointSolver, ClarabelSolver, FastBandedSolver, KktTuning,
+    Smoothness, baseline,
+};
 
 const DT: f64 = 0.02;
 
@@ -435,6 +438,7 @@ fn banded_failure_falls_back_to_clarabel_and_says_so() {
             max_tilt: Some(20f64.to_radians()),
             ..Default::default()
         },
+        plan_tilt_bound: PlanTiltBound::Box,
         qp_solver,
         solver_time_limit: f64::INFINITY,
         ..Default::default()

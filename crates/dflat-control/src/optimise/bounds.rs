@@ -40,7 +40,6 @@ impl AxisBounds {
         dt: f64,
         mut out: impl FnMut(f64, f64),
     ) {
-        let d1 = fixed[1] - fixed[0];
         let d2 = fixed[2] - 2.0 * fixed[1] + fixed[0];
         if let Some([lo, hi]) = self.acceleration {
             let a_base = d2 / (dt * dt);
@@ -48,6 +47,21 @@ impl AxisBounds {
                 out(lo - a_base, hi - a_base);
             }
         }
+        self.speed_rows(horizon, fixed, dt, out);
+    }
+
+    /// The speed rows of [`AxisBounds::row_bounds`] alone: `(lo, hi)` on
+    /// `Δp_j/δt`, j = 2..N−1, funnel included (nothing without a speed
+    /// bound).
+    pub(crate) fn speed_rows(
+        &self,
+        horizon: usize,
+        fixed: &[f64; 3],
+        dt: f64,
+        mut out: impl FnMut(f64, f64),
+    ) {
+        let d1 = fixed[1] - fixed[0];
+        let d2 = fixed[2] - 2.0 * fixed[1] + fixed[0];
         if let Some(v) = self.speed {
             let funnel = self.speed_funnel(fixed, dt);
             for j in 2..=horizon - 1 {

@@ -76,6 +76,10 @@
 //!   system; the default constrained solver.
 //! * [`clarabel`] — [`ClarabelSolver`]: the same bounded QP in clarabel,
 //!   the fallback (and [`KktTuning`]).
+//! * [`cone`], [`cone_qp`], [`cone_solver`], [`clarabel_cone`] — the tilt
+//!   cone ([`ConeBounds`]): both horizontal axes in one stage-interleaved
+//!   banded interior point ([`ConeInteriorPointSolver`], warm-started),
+//!   and the same problem as clarabel's SOCP ([`ClarabelConeSolver`]).
 //! * [`bounds`] — [`AxisBounds`]: tilt (acceleration), vertical
 //!   acceleration and speed bounds, the braking funnel.
 //! * [`smoothness`] — [`Smoothness`]: the command-smoothness term.
@@ -84,12 +88,21 @@
 pub mod banded;
 pub mod bounds;
 pub mod clarabel;
+pub mod clarabel_cone;
+pub mod cone;
+pub mod cone_qp;
+pub mod cone_solver;
+#[cfg(test)]
+mod cone_tests;
 pub mod fast_banded;
 pub mod interior_point;
 pub mod smoothness;
 
 pub use bounds::AxisBounds;
 pub use clarabel::{ClarabelSolver, KktTuning};
+pub use clarabel_cone::ClarabelConeSolver;
+pub use cone::ConeBounds;
+pub use cone_solver::{AxisWeights, ConeInteriorPointSolver};
 pub use fast_banded::FastBandedSolver;
 pub use interior_point::BandedInteriorPointSolver;
 pub use smoothness::Smoothness;

@@ -1,0 +1,212 @@
+//! Percentiles of the DF-MPC tick over a recorded corner manoeuvre: the
+//! tilt cone's constrained tick against clarabel solving the same cone
+//! problem and against the unconstrained fast tick, same run.
+//!
+//! A planar vehicle (ψ = 0) flies the L path (0, 0) → (20, 0) → (20, 20) m
+//! at 8 m/s under DF-MPC with a 20° tilt cone in the plan (the start, the
+//! corner and the stop bind it); its measurements are recorded once. Each
+//! configuration then replays the recording tick by tick (its own
+//! commands enter its window), every tick timed; `REPEATS` replays per
+//! configuration. Reported per horizon N: median, p99 and max over all
+//! timed ticks, over the ticks that solved a constrained QP, and the
+//! ratios the budgets are stated in (`docs/performance.md`).
+//!
+//! Run: `cargo bench -p dflat-control --bench corner` (a horizon list as
+//! argument, e.g. `-- 200`, limits the run).
+
+#![allow(missing_docs)]
+
+use std::time::Instant;
+
+use dflat_control::dfmpc::{DfMpc, DfMpcSettings, OutputConstraints, PlanTiltBound, QpSolver};
+use dflat_control::reference::Reference;
+use dflat_control::{ControlModel, Controller, Frame, Measurement};
+use dflat_model::{FlatModel, PlanarModel, PlanarParams};
+use nalgebra::{SVector, Vector2, Vector3};
+
+const DT: f64 = 0.02;
+const TICKS: usize = 400;
+const SPEED: f64 = 8.0;
+const TILT_DEG: f64 = 20.0;
+
+fn plant() -> PlanarModel {
+    PlanarModel::new(PlanarParams {
+        psi: 0.0,
+        frame: Frame::Ned,
+        ..Default::default()
+    })
+    .unwrap()
+}
+
+fn path() -> Reference {
+    let w = [[0.0, 0.0], [20.0, 0.0], [20.0, 20.0]].map(|[x, y]| Vector3::new(x, y, -2.0));
+    Reference::path(&w, SPEED).unwrap()
+}
+
+#[derive(Clone, Copy)]
+enum Config {
+    Fast,
+    ConeWarm,
+    ConeCold,
+    ConeClarabel,
+    BoxBanded,
+}
+
+impl Config {
+    const ALL: [Self; 5] = [
+        Self::Fast,
+        Self::ConeWarm,
+        Self::ConeCold,
+        Self::ConeClarabel,
+        Self::BoxBanded,
+    ];
+    fn name(self) -> &'static str {
+        match self {
+            Self::Fast => "fast (no bound)",
+            Self::ConeWarm => "cone, banded IP, warm",
+            Self::ConeCold => "cone, banded IP, cold",
+            Self::ConeClarabel => "cone, clarabel SOCP",
+            Self::BoxBanded => "box, banded IP",
+        }
+    }
+    fn settings(self, n: usize) -> DfMpcSettings {
+        let constraints = OutputConstraints {
+            max_tilt: Some(TILT_DEG.to_radians()),
+            ..Default::default()
+        };
+        DfMpcSettings {
+            horizon: n,
+            constraints: match self {
+                Self::Fast => OutputConstraints::default(),
+                _ => constraints,
+            },
+            qp_solver: match self {
+                Self::ConeClarabel => QpSolver::Clarabel,
+                _ => QpSolver::Banded,
+            },
+            plan_tilt_bound: match self {
+                Self::BoxBanded => PlanTiltBound::Box,
+                _ => PlanTiltBound::Cone,
+            },
+            warm_start: !matches!(self, Self::ConeCold),
+            solver_time_limit: f64::INFINITY,
+            ..Default::default()
+        }
+    }
+}
+
+/// The measurements of one closed-loop flight with the warm cone.
+fn record(n: usize) -> Vec<Measurement> {
+    let plant = plant();
+    let mut ctrl = DfMpc::new(ControlModel::Planar(plant), Config::ConeWarm.settings(n)).unwrap();
+    let mut reference = path();
+    let mut x = SVector::<f64, 6>::zeros();
+    let mut out = Vec::with_capacity(TICKS);
+    for k in 0..TICKS {
+        let y = plant.output(&x);
+        let m = Measurement {
+            t: k as f64 * DT,
+            position: Vector3::new(y.x, y.y, -2.0),
+            yaw: 0.0,
+        };
+        let c = ctrl.update(&m, &mut reference).unwrap();
+        x = plant.step(&x, &Vector2::new(c.command.pitch, c.command.roll));
+        out.push(m);
+    }
+    out
+}
+
+/// Tick times \[s\] of `repeats` replays, and which ticks were constrained.
+fn replay(
+    config: Config,
+    n: usize,
+    flight: &[Measurement],
+    repeats: usize,
+) -> (Vec<f64>, Vec<f64>) {
+    let (mut all, mut constrained) = (Vec::new(), Vec::new());
+    for _ in 0..repeats {
+        let mut ctrl = DfMpc::new(ControlModel::Planar(plant()), config.settings(n)).unwrap();
+        let mut reference = path();
+        for m in flight {
+            let start = Instant::now();
+            let out =
+                std::hint::black_box(ctrl.update(std::hint::black_box(m), &mut reference)).unwrap();
+            let t = start.elapsed().as_secs_f64();
+            all.push(t);
+            if out.constrained {
+                constrained.push(t);
+            }
+        }
+    }
+    (all, constrained)
+}
+
+fn percentile(v: &mut [f64], p: f64) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    let i = ((p / 100.0) * (v.len() - 1) as f64).round() as usize;
+    v[i]
+}
+
+fn us(v: f64) -> String {
+    format!("{:.1}", v * 1e6)
+}
+
+fn main() {
+    let horizons: Vec<usize> = std::env::args()
+        .skip(1)
+        .filter_map(|a| a.parse().ok())
+        .collect();
+    let horizons = if horizons.is_empty() {
+        vec![100, 200, 400, 800]
+    } else {
+        horizons
+    };
+    println!(
+        "corner manoeuvre: L path at {SPEED} m/s, {TILT_DEG}° cone, {TICKS} ticks; times in µs"
+    );
+    for n in horizons {
+        let flight = record(n);
+        let repeats = if n >= 800 { 2 } else { 5 };
+        println!("\nN = {n} ({repeats} replays)");
+        println!(
+            "| configuration | all: median | p99 | max | constrained ticks | constrained: median | p99 | max |"
+        );
+        println!("|---|---|---|---|---|---|---|---|");
+        let mut stats = Vec::new();
+        for config in Config::ALL {
+            let (mut all, mut con) = replay(config, n, &flight, repeats);
+            let s = [
+                percentile(&mut all, 50.0),
+                percentile(&mut all, 99.0),
+                percentile(&mut all, 100.0),
+                percentile(&mut con, 50.0),
+                percentile(&mut con, 99.0),
+                percentile(&mut con, 100.0),
+            ];
+            println!(
+                "| {} | {} | {} | {} | {} | {} | {} | {} |",
+                config.name(),
+                us(s[0]),
+                us(s[1]),
+                us(s[2]),
+                con.len() / repeats,
+                us(s[3]),
+                us(s[4]),
+                us(s[5])
+            );
+            stats.push(s);
+        }
+        let (fast, warm, clarabel) = (stats[0], stats[1], stats[3]);
+        println!(
+            "ratios (constrained ticks): clarabel / warm cone: median {:.1}×, p99 {:.1}×; \
+             warm cone / fast tick median: median {:.1}×, p99 {:.1}×",
+            clarabel[3] / warm[3],
+            clarabel[4] / warm[4],
+            warm[3] / fast[0],
+            warm[4] / fast[0],
+        );
+    }
+}

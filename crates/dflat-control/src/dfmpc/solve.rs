@@ -1,0 +1,303 @@
+//! Step 4 of the tick, output trajectory optimisation: the per-axis
+//! pipelines (fast path, bounded QP) and the horizontal pair's tilt cone.
+
+use nalgebra::Vector3;
+
+use super::{DfMpc, DfMpcSettings, PlanTiltBound, QpSolver};
+use crate::ControlError;
+use crate::model::ControlModel;
+use crate::optimise::{
+    AxisBounds, AxisProblem, AxisWeights, BandedInteriorPointSolver, ClarabelConeSolver,
+    ClarabelSolver, ConeBounds, ConeInteriorPointSolver, FastBandedSolver, KktTuning, Smoothness,
+};
+use crate::window::input_lags;
+
+/// One axis's optimisation: the fast path, the bounded solvers when the
+/// axis has bounds, and its reference and plan buffers.
+#[derive(Debug)]
+pub(super) struct AxisPipeline {
+    /// The unconstrained problem (the fast path).
+    pub(super) fast: FastBandedSolver,
+    /// The problem with this axis's bounds, when it has any.
+    pub(super) bounded: Option<BoundedQp>,
+    /// The bounds (empty when none).
+    pub(super) bounds: AxisBounds,
+    /// This tick's reference on this axis, y_ref,k..y_ref,k+N \[m\].
+    pub(super) reference: Vec<f64>,
+    /// This tick's plan y*_k..y*_{k+N} \[m\] (a workspace until it is good).
+    pub(super) plan: Vec<f64>,
+    /// The last good tick's plan \[m\] (swapped with `plan`).
+    pub(super) good_plan: Vec<f64>,
+}
+
+/// The bounded QP of one axis: the banded interior point first (with
+/// [`QpSolver::Banded`]), clarabel when it does not converge.
+#[derive(Debug)]
+pub(super) struct BoundedQp {
+    pub(super) interior_point: Option<BandedInteriorPointSolver>,
+    pub(super) clarabel: ClarabelSolver,
+}
+
+/// What [`DfMpc::optimise`] reports of a tick's solve.
+#[derive(Debug, Clone, Copy, Default)]
+pub(super) struct SolveReport {
+    /// A bound was binding on some axis (a bounded solver ran).
+    pub(super) constrained: bool,
+    /// Clarabel solved an axis the interior point did not.
+    pub(super) qp_fallback: bool,
+}
+
+/// The horizontal pair's tilt-cone QP ([`PlanTiltBound::Cone`]): the
+/// banded interior point first (with [`QpSolver::Banded`]), clarabel's
+/// SOCP when it does not converge.
+#[derive(Debug)]
+pub(super) struct HorizontalCone {
+    interior_point: Option<ConeInteriorPointSolver>,
+    clarabel: ClarabelConeSolver,
+}
+
+impl HorizontalCone {
+    /// The bounds of the pair.
+    pub(super) fn bounds(&self) -> &ConeBounds {
+        self.clarabel.bounds()
+    }
+
+    /// Forgets the warm start (a reset, or a tick that did not solve).
+    pub(super) fn forget(&mut self) {
+        if let Some(ip) = &mut self.interior_point {
+            ip.forget();
+        }
+    }
+}
+
+/// The per-axis pipelines (fast path and, where the axis has bounds of
+/// its own, the bounded QP) and, with the cone, the horizontal pair's
+/// cone QP (all allocation happens here).
+pub(super) fn build_pipelines(
+    model: &ControlModel,
+    settings: &DfMpcSettings,
+) -> Result<(Vec<AxisPipeline>, Option<HorizontalCone>), ControlError> {
+    let axes = model.axes();
+    let c = &settings.constraints;
+    let cone_mode = settings.plan_tilt_bound == PlanTiltBound::Cone && c.max_tilt.is_some();
+    let dt = model.dt();
+    let n = settings.horizon;
+    let lags = input_lags(model);
+    let mut pipelines = Vec::with_capacity(axes);
+    for (axis, lag) in lags.iter().enumerate().take(axes) {
+        let (q, r) = (settings.tracking_weight[axis], settings.jerk_weight[axis]);
+        let smoothness = Smoothness {
+            weight: settings.smoothness_weight[axis],
+            kappa: lag / dt,
+            gravity: model.gravity(),
+        };
+        let acceleration = if axis < 2 {
+            c.max_tilt.filter(|_| !cone_mode).map(|t| {
+                let a = model.gravity() * t.tan();
+                [-a, a]
+            })
+        } else {
+            c.vertical_acceleration
+        };
+        let bounds = AxisBounds {
+            acceleration,
+            speed: c.max_speed,
+        };
+        let bounded = if bounds.is_empty() {
+            None
+        } else {
+            Some(BoundedQp {
+                interior_point: if settings.qp_solver == QpSolver::Banded {
+                    Some(BandedInteriorPointSolver::new(
+                        n,
+                        (q, r, dt),
+                        bounds,
+                        smoothness,
+                    )?)
+                } else {
+                    None
+                },
+                clarabel: ClarabelSolver::with_smoothness(
+                    n,
+                    q,
+                    r,
+                    dt,
+                    bounds,
+                    settings.solver_time_limit,
+                    smoothness,
+                )?,
+            })
+        };
+        pipelines.push(AxisPipeline {
+            fast: FastBandedSolver::with_smoothness(n, q, r, dt, smoothness)?,
+            bounded,
+            bounds,
+            reference: vec![0.0; n + 1],
+            plan: vec![0.0; n + 1],
+            good_plan: vec![0.0; n + 1],
+        });
+    }
+
+    let cone = match c.max_tilt {
+        Some(t) if cone_mode => {
+            let bounds = ConeBounds::new(model.gravity() * t.tan(), c.max_speed);
+            let weights: [AxisWeights; 2] = std::array::from_fn(|axis| AxisWeights {
+                q: settings.tracking_weight[axis],
+                r: settings.jerk_weight[axis],
+                smoothness: pipelines[axis].fast.smoothness(),
+            });
+            Some(HorizontalCone {
+                interior_point: (settings.qp_solver == QpSolver::Banded)
+                    .then(|| {
+                        ConeInteriorPointSolver::new(n, dt, weights, bounds, settings.warm_start)
+                    })
+                    .transpose()?,
+                clarabel: ClarabelConeSolver::new(
+                    n,
+                    dt,
+                    weights,
+                    bounds,
+                    settings.solver_time_limit,
+                    true,
+                    KktTuning::SHIPPED,
+                )?,
+            })
+        }
+        _ => None,
+    };
+    Ok((pipelines, cone))
+}
+
+impl DfMpc {
+    /// Step 4: output trajectory optimisation, per axis — the fast path
+    /// first (x and y together when they share weights), then the bounded
+    /// QP for an axis whose fast plan violates a configured bound.
+    /// `sent_acceleration`: what the command sent at k−1 asks for (with a
+    /// smoothness weight).
+    pub(super) fn optimise(
+        &mut self,
+        fixed: &[Vector3<f64>; 3],
+        sent_acceleration: Option<Vector3<f64>>,
+    ) -> Result<SolveReport, ControlError> {
+        let mut fixed_axis = [[0.0; 3]; 3];
+        for (axis, f) in fixed_axis.iter_mut().enumerate().take(self.axes.len()) {
+            *f = [fixed[0][axis], fixed[1][axis], fixed[2][axis]];
+        }
+        let sent = |axis: usize| sent_acceleration.map(|c| c[axis]);
+        let [ax, ay, rest @ ..] = self.axes.as_mut_slice() else {
+            unreachable!("DfMpc::new makes at least two axes")
+        };
+        let paired =
+            ax.fast.weights() == ay.fast.weights() && ax.fast.smoothness() == ay.fast.smoothness();
+        if paired {
+            ax.fast.solve_pair(
+                AxisProblem {
+                    fixed: &fixed_axis[0],
+                    sent: sent(0),
+                    reference: &ax.reference,
+                    plan: &mut ax.plan,
+                },
+                AxisProblem {
+                    fixed: &fixed_axis[1],
+                    sent: sent(1),
+                    reference: &ay.reference,
+                    plan: &mut ay.plan,
+                },
+            )?;
+        } else {
+            for (axis, p) in [(0, &mut *ax), (1, &mut *ay)] {
+                p.fast.solve_problem(AxisProblem {
+                    fixed: &fixed_axis[axis],
+                    sent: sent(axis),
+                    reference: &p.reference,
+                    plan: &mut p.plan,
+                })?;
+            }
+        }
+        if let Some(az) = rest.first_mut() {
+            az.fast.solve_problem(AxisProblem {
+                fixed: &fixed_axis[2],
+                sent: sent(2),
+                reference: &az.reference,
+                plan: &mut az.plan,
+            })?;
+        }
+        let mut report = SolveReport::default();
+        let dt = self.model.dt();
+        for (axis, p) in self.axes.iter_mut().enumerate() {
+            let Some(qp) = &mut p.bounded else { continue };
+            if !qp.clarabel.bounds().violated_by(&p.plan, dt) {
+                continue;
+            }
+            // The banded interior point first; clarabel when it does not
+            // converge (its own failure is the tick's).
+            let solved = match &mut qp.interior_point {
+                Some(ip) => ip
+                    .solve_problem(AxisProblem {
+                        fixed: &fixed_axis[axis],
+                        sent: sent(axis),
+                        reference: &p.reference,
+                        plan: &mut p.plan,
+                    })
+                    .is_ok(),
+                None => false,
+            };
+            if !solved {
+                report.qp_fallback |= qp.interior_point.is_some();
+                qp.clarabel.solve_problem(AxisProblem {
+                    fixed: &fixed_axis[axis],
+                    sent: sent(axis),
+                    reference: &p.reference,
+                    plan: &mut p.plan,
+                })?;
+            }
+            report.constrained = true;
+        }
+        if let Some(cone) = &mut self.cone {
+            let [ax, ay, ..] = self.axes.as_mut_slice() else {
+                unreachable!("DfMpc::new makes at least two axes")
+            };
+            if !cone.bounds().violated_by(&ax.plan, &ay.plan, dt) {
+                // Not solved: the next solve has no previous one to shift.
+                cone.forget();
+                return Ok(report);
+            }
+            let x = AxisProblem {
+                fixed: &fixed_axis[0],
+                sent: sent(0),
+                reference: &ax.reference,
+                plan: &mut ax.plan,
+            };
+            let y = AxisProblem {
+                fixed: &fixed_axis[1],
+                sent: sent(1),
+                reference: &ay.reference,
+                plan: &mut ay.plan,
+            };
+            let solved = match &mut cone.interior_point {
+                Some(ip) => ip.solve_pair(x, y).is_ok(),
+                None => false,
+            };
+            if !solved {
+                report.qp_fallback |= cone.interior_point.is_some();
+                cone.forget();
+                cone.clarabel.solve_pair(
+                    AxisProblem {
+                        fixed: &fixed_axis[0],
+                        sent: sent(0),
+                        reference: &ax.reference,
+                        plan: &mut ax.plan,
+                    },
+                    AxisProblem {
+                        fixed: &fixed_axis[1],
+                        sent: sent(1),
+                        reference: &ay.reference,
+                        plan: &mut ay.plan,
+                    },
+                )?;
+            }
+            report.constrained = true;
+        }
+        Ok(report)
+    }
+}

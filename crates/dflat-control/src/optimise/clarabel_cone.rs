@@ -1,0 +1,261 @@
+//! The two-axis tilt-cone problem ([`super::cone`]) as a second-order cone
+//! program in clarabel: the fallback of [`ConeInteriorPointSolver`](super::ConeInteriorPointSolver)
+//! and the reference its property tests compare with.
+
+use clarabel::algebra::CscMatrix;
+use clarabel::solver::{
+    DefaultSettings, DefaultSettingsBuilder, DefaultSolver, IPSolver, SolverStatus, SupportedConeT,
+};
+
+use super::clarabel::KktTuning;
+use super::smoothness::{accel_block, sent_linear_term};
+use super::{AxisProblem, AxisWeights, ConeBounds, FastBandedSolver, baseline, check_lengths};
+use crate::ControlError;
+
+/// Both horizontal axes with the tilt cone, solved by clarabel.
+///
+/// Variables `[p_x, ã_x, p_y, ã_y, σ]` (n = N − 2 each; σ the elastic
+/// variables of the soft speed sides, 4n of them, when there is a speed
+/// bound and it is soft). Per axis the cost, the equality rows
+/// `Δ²p_f/δt² − ã_f = 0` and the speed rows as
+/// [`ClarabelSolver`](super::ClarabelSolver); per stage f the cone
+/// `(A, ã_{x,f} + a_{0,x}, ã_{y,f} + a_{0,y}) ∈ SOC₃`. The sparsity is fixed
+/// at construction; each solve updates `q` and `b` only.
+pub struct ClarabelConeSolver {
+    horizon: usize,
+    dt: f64,
+    weights: [AxisWeights; 2],
+    bounds: ConeBounds,
+    soft: bool,
+    solver: DefaultSolver<f64>,
+    qvec: Vec<f64>,
+    bvec: Vec<f64>,
+    /// First speed row, first cone row.
+    m_speed: usize,
+    m_cone: usize,
+}
+
+impl std::fmt::Debug for ClarabelConeSolver {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ClarabelConeSolver")
+            .field("horizon", &self.horizon)
+            .field("dt", &self.dt)
+            .field("bounds", &self.bounds)
+            .field("soft", &self.soft)
+            .finish_non_exhaustive()
+    }
+}
+
+impl ClarabelConeSolver {
+    /// Builds the solver once for horizon N, step δt \[s\], per-axis
+    /// weights (x, y), the bounds, the clarabel time limit \[s\], whether
+    /// the speed rows are soft (as [`ConeInteriorPointSolver`](super::ConeInteriorPointSolver):
+    /// `true`; `false` gives the hard-bounded reference problem) and
+    /// clarabel's KKT settings.
+    pub fn new(
+        horizon: usize,
+        dt: f64,
+        weights: [AxisWeights; 2],
+        bounds: ConeBounds,
+        time_limit: f64,
+        soft: bool,
+        tuning: KktTuning,
+    ) -> Result<Self, ControlError> {
+        for w in &weights {
+            FastBandedSolver::check_args(horizon, w.q, w.r, dt)?;
+            w.smoothness.check()?;
+        }
+        bounds.check()?;
+        if time_limit.is_nan() || time_limit <= 0.0 {
+            return Err(super::invalid("solver_time_limit", "> 0 s (or infinity)"));
+        }
+        let n = horizon - 2;
+        let speed = bounds.speed.is_some();
+        let soft = soft && speed;
+        let n_sig = if soft { 4 * n } else { 0 };
+        let nv = 4 * n + n_sig;
+        let p_of = |i: usize, f: usize| 2 * n * i + f;
+        let a_of = |i: usize, f: usize| 2 * n * i + n + f;
+        // P, upper triangle, column by column.
+        let (mut colptr, mut prow, mut pval) = (vec![0usize], Vec::new(), Vec::new());
+        for (i, w) in weights.iter().enumerate() {
+            let band = accel_block(n, w.r, dt, &w.smoothness);
+            for f in 0..n {
+                prow.push(p_of(i, f));
+                pval.push(2.0 * w.q);
+                colptr.push(prow.len());
+            }
+            for (f, col) in band.iter().enumerate() {
+                if f > 1 && col[2] != 0.0 {
+                    prow.push(a_of(i, f - 2));
+                    pval.push(col[2]);
+                }
+                if f > 0 {
+                    prow.push(a_of(i, f - 1));
+                    pval.push(col[1]);
+                }
+                prow.push(a_of(i, f));
+                pval.push(col[0]);
+                colptr.push(prow.len());
+            }
+        }
+        for _ in 0..n_sig {
+            colptr.push(prow.len());
+        }
+        let p_mat = CscMatrix::new(nv, nv, colptr, prow, pval);
+
+        let (mut tr, mut tc, mut tv) = (Vec::new(), Vec::new(), Vec::new());
+        let mut push = |r: usize, c: usize, v: f64| {
+            tr.push(r);
+            tc.push(c);
+            tv.push(v);
+        };
+        let inv_dt2 = 1.0 / (dt * dt);
+        let mut m = 0;
+        for i in 0..2 {
+            for f in 0..n {
+                push(m, p_of(i, f), inv_dt2);
+                if f >= 1 {
+                    push(m, p_of(i, f - 1), -2.0 * inv_dt2);
+                }
+                if f >= 2 {
+                    push(m, p_of(i, f - 2), inv_dt2);
+                }
+                push(m, a_of(i, f), -1.0);
+                m += 1;
+            }
+        }
+        let m_speed = m;
+        if speed {
+            let mut sig = 4 * n;
+            for i in 0..2 {
+                for g in 0..n {
+                    // ±(p_g − p_{g−1})/δt − σ ≤ b.
+                    for sign in [1.0, -1.0] {
+                        push(m, p_of(i, g), sign / dt);
+                        if g >= 1 {
+                            push(m, p_of(i, g - 1), -sign / dt);
+                        }
+                        if soft {
+                            push(m, sig, -1.0);
+                            sig += 1;
+                        }
+                        m += 1;
+                    }
+                }
+            }
+            for s in 0..n_sig {
+                push(m, 4 * n + s, -1.0);
+                m += 1;
+            }
+        }
+        let m_cone = m;
+        for f in 0..n {
+            // s = b − A·x = (A, a_0x + ã_x, a_0y + ã_y).
+            push(m + 1, a_of(0, f), -1.0);
+            push(m + 2, a_of(1, f), -1.0);
+            m += 3;
+        }
+        let a_mat = CscMatrix::new_from_triplets(m, nv, tr, tc, tv);
+        let mut cones = vec![SupportedConeT::ZeroConeT(2 * n)];
+        if m_cone > m_speed {
+            cones.push(SupportedConeT::NonnegativeConeT(m_cone - m_speed));
+        }
+        cones.extend((0..n).map(|_| SupportedConeT::SecondOrderConeT(3)));
+        let mut qvec = vec![0.0; nv];
+        qvec[4 * n..].fill(bounds.speed_penalty);
+        let mut bvec = vec![0.0; m];
+        for f in 0..n {
+            bvec[m_cone + 3 * f] = bounds.acceleration;
+        }
+        let settings: DefaultSettings<f64> = DefaultSettingsBuilder::default()
+            .verbose(false)
+            .presolve_enable(false)
+            .equilibrate_enable(false)
+            .iterative_refinement_reltol(tuning.refinement_reltol)
+            .iterative_refinement_abstol(tuning.refinement_abstol)
+            .static_regularization_constant(tuning.static_regularization)
+            .time_limit(time_limit)
+            .direct_solve_method("qdldl".to_string())
+            .max_threads(1)
+            .build()
+            .map_err(|e| ControlError::Solver(format!("settings: {e}")))?;
+        let solver = DefaultSolver::new(&p_mat, &qvec, &a_mat, &bvec, &cones, settings)
+            .map_err(|e| ControlError::Solver(format!("setup: {e}")))?;
+        Ok(Self {
+            horizon,
+            dt,
+            weights,
+            bounds,
+            soft,
+            solver,
+            qvec,
+            bvec,
+            m_speed,
+            m_cone,
+        })
+    }
+
+    /// The bounds this solver enforces.
+    pub fn bounds(&self) -> &ConeBounds {
+        &self.bounds
+    }
+
+    /// Solves both axes (arguments as
+    /// [`ConeInteriorPointSolver::solve_pair`](super::ConeInteriorPointSolver::solve_pair);
+    /// the plans' contents on entry are not used). A status other than
+    /// `Solved` is [`ControlError::Solver`].
+    pub fn solve_pair(
+        &mut self,
+        x: AxisProblem<'_>,
+        y: AxisProblem<'_>,
+    ) -> Result<(), ControlError> {
+        check_lengths(self.horizon, x.reference, x.plan)?;
+        check_lengths(self.horizon, y.reference, y.plan)?;
+        let (n, dt) = (self.horizon - 2, self.dt);
+        let fixed = [x.fixed, y.fixed];
+        for (i, a) in [&x, &y].into_iter().enumerate() {
+            let q = self.weights[i].q;
+            for f in 0..n {
+                self.qvec[2 * n * i + f] =
+                    2.0 * q * (baseline(a.fixed, f + 3) - a.reference[f + 3]);
+            }
+            self.qvec[2 * n * i + n] =
+                sent_linear_term(&self.weights[i].smoothness, a.fixed, a.sent, dt);
+            let a0 = (a.fixed[2] - 2.0 * a.fixed[1] + a.fixed[0]) / (dt * dt);
+            for f in 0..n {
+                self.bvec[self.m_cone + 3 * f + 1 + i] = a0;
+            }
+        }
+        let mut m = self.m_speed;
+        let bvec = &mut self.bvec;
+        let axis = self.bounds.axis();
+        for fx in fixed {
+            axis.speed_rows(self.horizon, fx, dt, |lo, hi| {
+                bvec[m] = hi;
+                bvec[m + 1] = -lo;
+                m += 2;
+            });
+        }
+        self.solver
+            .update_q(&self.qvec)
+            .and_then(|()| self.solver.update_b(&self.bvec))
+            .map_err(|e| ControlError::Solver(format!("update: {e}")))?;
+        self.solver.solve();
+        let status = self.solver.solution.status;
+        if status != SolverStatus::Solved {
+            return Err(ControlError::Solver(format!("{status:?}")));
+        }
+        let sol = &self.solver.solution.x;
+        for (i, (plan, fx)) in [x.plan, y.plan].into_iter().zip(fixed).enumerate() {
+            plan[..3].copy_from_slice(fx);
+            for f in 0..n {
+                plan[f + 3] = baseline(fx, f + 3) + sol[2 * n * i + f];
+            }
+            if plan.iter().any(|v| !v.is_finite()) {
+                return Err(ControlError::Solver("non-finite solution".to_string()));
+            }
+        }
+        Ok(())
+    }
+}

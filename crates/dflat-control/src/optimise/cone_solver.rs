@@ -1,0 +1,209 @@
+//! [`ConeInteriorPointSolver`]: both horizontal axes with the tilt cone
+//! ([`super::cone`]), solved by the banded interior point of
+//! [`super::cone_qp`], warm-started across ticks.
+
+use super::cone_qp::{ConeAxis, ConeQp, STAGE, Start, a_at, p_at};
+use super::smoothness::{accel_block, sent_linear_term};
+use super::{AxisProblem, ConeBounds, FastBandedSolver, Smoothness, baseline, check_lengths};
+use crate::ControlError;
+
+/// Warm-start floor of [`ConeQp::shift`]: kept slacks and multipliers stay
+/// at ≥ this fraction of their cold-start values.
+const WARM_FLOOR: f64 = 1e-3;
+/// What a warm start keeps besides the shifted primal and λ: measured on
+/// the `corner` bench (`docs/performance.md`), keeping the shifted slacks
+/// and multipliers ([`Start::Warm`]) was twice as slow as cold ones, so
+/// they start cold.
+const WARM_DUALS: Start = Start::Cold;
+
+/// Weights of one axis: tracking q ≥ 0 [1/m²], jerk r > 0 [s⁶/m²], and
+/// the smoothness term.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AxisWeights {
+    /// Tracking weight q [1/m²].
+    pub q: f64,
+    /// Jerk weight r [s⁶/m²].
+    pub r: f64,
+    /// Command-smoothness term (weight 0: none).
+    pub smoothness: Smoothness,
+}
+
+/// The two horizontal axes with the tilt cone and soft speed bounds
+/// ([`ConeBounds`]), one stage-ordered banded interior point (O(N) per
+/// iteration), warm-started from the previous tick's solution shifted by
+/// one step when the previous tick used it too.
+///
+/// [`DfMpc`](crate::dfmpc::DfMpc) uses it first and falls back to
+/// [`ClarabelConeSolver`](super::ClarabelConeSolver) (the same problem as
+/// an SOCP) when it does not converge.
+#[derive(Debug, Clone)]
+pub struct ConeInteriorPointSolver {
+    horizon: usize,
+    dt: f64,
+    weights: [AxisWeights; 2],
+    bounds: ConeBounds,
+    qp: ConeQp,
+    c: Vec<f64>,
+    lo: Vec<f64>,
+    hi: Vec<f64>,
+    /// Start deviations per axis (cold), then the warm guess.
+    p: [Vec<f64>; 2],
+    warm: [Vec<f64>; 2],
+    /// The last solution's plans `y*_0..y*_N` per axis \[m\].
+    previous: [Vec<f64>; 2],
+    /// Warm starts enabled, and whether `previous` is last tick's.
+    warm_start: bool,
+    previous_valid: bool,
+    iterations: usize,
+    warm_used: bool,
+}
+
+impl ConeInteriorPointSolver {
+    /// Builds the solver for horizon N ≥ 3, step δt > 0 \[s\], per-axis
+    /// weights (x, y), the bounds, and whether to warm-start.
+    pub fn new(
+        horizon: usize,
+        dt: f64,
+        weights: [AxisWeights; 2],
+        bounds: ConeBounds,
+        warm_start: bool,
+    ) -> Result<Self, ControlError> {
+        for w in &weights {
+            FastBandedSolver::check_args(horizon, w.q, w.r, dt)?;
+            w.smoothness.check()?;
+        }
+        bounds.check()?;
+        let n = horizon - 2;
+        let axes = weights.map(|w| ConeAxis {
+            q: w.q,
+            accel: accel_block(n, w.r, dt, &w.smoothness),
+        });
+        let penalty = bounds.speed.map(|_| bounds.speed_penalty);
+        let qp = ConeQp::new(n, dt, [&axes[0], &axes[1]], bounds.acceleration, penalty);
+        let m = qp.rows();
+        Ok(Self {
+            horizon,
+            dt,
+            weights,
+            bounds,
+            qp,
+            c: vec![0.0; STAGE * n],
+            lo: vec![0.0; m],
+            hi: vec![0.0; m],
+            p: [vec![0.0; n], vec![0.0; n]],
+            warm: [vec![0.0; n], vec![0.0; n]],
+            previous: [vec![0.0; horizon + 1], vec![0.0; horizon + 1]],
+            warm_start,
+            previous_valid: false,
+            iterations: 0,
+            warm_used: false,
+        })
+    }
+
+    /// The bounds this solver enforces.
+    pub fn bounds(&self) -> &ConeBounds {
+        &self.bounds
+    }
+
+    /// Horizon N \[steps\].
+    pub fn horizon(&self) -> usize {
+        self.horizon
+    }
+
+    /// Interior-point iterations of the last solve (both attempts when a
+    /// warm start failed and a cold one followed).
+    pub fn iterations(&self) -> usize {
+        self.iterations
+    }
+
+    /// Whether the last successful solve was warm-started.
+    pub fn warm_started(&self) -> bool {
+        self.warm_used
+    }
+
+    /// Forgets the previous solution: the next solve starts cold. Call it
+    /// when a tick did not use this solver (its plan is then not the one
+    /// the next tick continues) and on a controller reset.
+    pub fn forget(&mut self) {
+        self.previous_valid = false;
+    }
+
+    /// Solves both axes with the cone. `x.plan` and `y.plan` hold the
+    /// cold start on entry (any plan, e.g. the unconstrained optimum of
+    /// the fast path) and the solution on exit; `fixed`, `sent`,
+    /// `reference` as [`FastBandedSolver::solve_problem`]. With warm
+    /// starts on and a solution from the previous tick, that solution
+    /// shifted by one step is the start instead; should it fail, the cold
+    /// start is tried. Errors: wrong lengths, and [`ControlError::Solver`]
+    /// when the interior point does not converge.
+    pub fn solve_pair(
+        &mut self,
+        x: AxisProblem<'_>,
+        y: AxisProblem<'_>,
+    ) -> Result<(), ControlError> {
+        check_lengths(self.horizon, x.reference, x.plan)?;
+        check_lengths(self.horizon, y.reference, y.plan)?;
+        let (dt, n) = (self.dt, self.horizon - 2);
+        let fixed = [x.fixed, y.fixed];
+        self.c.fill(0.0);
+        let mut a0 = [0.0; 2];
+        for (i, a) in [&x, &y].into_iter().enumerate() {
+            let q = self.weights[i].q;
+            for f in 0..n {
+                let b = baseline(a.fixed, f + 3);
+                self.c[p_at(i, f)] = 2.0 * q * (b - a.reference[f + 3]);
+                self.p[i][f] = a.plan[f + 3] - b;
+                // The warm guess: the previous plan one step on.
+                let j = f + 4;
+                let prev = &self.previous[i];
+                let guess = if j <= self.horizon {
+                    prev[j]
+                } else {
+                    2.0 * prev[self.horizon] - prev[self.horizon - 1]
+                };
+                self.warm[i][f] = guess - b;
+            }
+            self.c[a_at(i, 0)] = sent_linear_term(&self.weights[i].smoothness, a.fixed, a.sent, dt);
+            a0[i] = (a.fixed[2] - 2.0 * a.fixed[1] + a.fixed[0]) / (dt * dt);
+        }
+        let axis = self.bounds.axis();
+        let mut k = 0;
+        for fx in fixed {
+            let (lo, hi) = (&mut self.lo, &mut self.hi);
+            axis.speed_rows(self.horizon, fx, dt, |l, h| {
+                lo[k] = l;
+                hi[k] = h;
+                k += 1;
+            });
+        }
+        self.iterations = 0;
+        self.warm_used = false;
+        let mut result = Err(ControlError::Solver("cone QP: not run".into()));
+        if self.warm_start && self.previous_valid {
+            self.qp.shift(WARM_FLOOR);
+            self.qp.set_start([&self.warm[0], &self.warm[1]], dt, true);
+            result = self.qp.solve(&self.c, a0, &self.lo, &self.hi, WARM_DUALS);
+            self.warm_used = result.is_ok();
+        }
+        if result.is_err() {
+            self.iterations += self.qp.iterations();
+            self.qp.set_start([&self.p[0], &self.p[1]], dt, false);
+            result = self.qp.solve(&self.c, a0, &self.lo, &self.hi, Start::Cold);
+        }
+        self.previous_valid = false;
+        result?;
+        self.iterations += self.qp.iterations();
+        for (i, (plan, fx)) in [x.plan, y.plan].into_iter().zip(fixed).enumerate() {
+            plan[..3].copy_from_slice(fx);
+            for f in 0..n {
+                plan[f + 3] = baseline(fx, f + 3) + self.qp.p(i, f);
+            }
+            if plan.iter().any(|v| !v.is_finite()) {
+                return Err(ControlError::Solver("non-finite solution".to_string()));
+            }
+            self.previous[i].copy_from_slice(plan);
+        }
+        self.previous_valid = true;
+        Ok(())
+    }
+}

@@ -1,0 +1,255 @@
+//! Tests of the two-axis tilt-cone solvers: the banded interior point
+//! against clarabel's SOCP on random instances, soft against hard speed
+//! bounds, warm against cold starts.
+
+use super::smoothness::accel_block;
+use super::*;
+
+const DT: f64 = 0.02;
+const G: f64 = 9.81;
+
+/// The x and y plans `y_0..y_N` \[m\].
+type Plans = [Vec<f64>; 2];
+
+/// One axis of an instance.
+#[derive(Debug, Clone)]
+struct Axis {
+    fixed: [f64; 3],
+    sent: Option<f64>,
+    reference: Vec<f64>,
+}
+
+/// The soft problem's objective (`½xᵀPx + cᵀx` per axis as clarabel's,
+/// plus ρ times the speed violations) of the plans.
+fn objective(
+    horizon: usize,
+    weights: &[AxisWeights; 2],
+    bounds: &ConeBounds,
+    axes: &[Axis; 2],
+    plans: [&[f64]; 2],
+) -> f64 {
+    let n = horizon - 2;
+    let mut obj = 0.0;
+    for i in 0..2 {
+        let (w, a, plan) = (&weights[i], &axes[i], plans[i]);
+        let p: Vec<f64> = (0..n)
+            .map(|f| plan[f + 3] - baseline(&a.fixed, f + 3))
+            .collect();
+        let at = |f: isize| if f < 0 { 0.0 } else { p[f as usize] };
+        let acc: Vec<f64> = (0..n as isize)
+            .map(|f| (at(f) - 2.0 * at(f - 1) + at(f - 2)) / (DT * DT))
+            .collect();
+        let band = accel_block(n, w.r, DT, &w.smoothness);
+        for f in 0..n {
+            obj += w.q * p[f] * p[f]
+                + 2.0 * w.q * (baseline(&a.fixed, f + 3) - a.reference[f + 3]) * p[f];
+            obj += 0.5 * band[f][0] * acc[f] * acc[f];
+            if f >= 1 {
+                obj += band[f][1] * acc[f - 1] * acc[f];
+            }
+            if f >= 2 {
+                obj += band[f][2] * acc[f - 2] * acc[f];
+            }
+        }
+        obj += smoothness::sent_linear_term(&w.smoothness, &a.fixed, a.sent, DT) * acc[0];
+        let mut k = 0;
+        let speed: Vec<f64> = (2..horizon).map(|j| (plan[j + 1] - plan[j]) / DT).collect();
+        let d1 = a.fixed[1] - a.fixed[0];
+        let d2 = a.fixed[2] - 2.0 * a.fixed[1] + a.fixed[0];
+        bounds.axis().speed_rows(horizon, &a.fixed, DT, |lo, hi| {
+            // Rows are on the deviation: add the baseline's speed back.
+            let j = k + 2;
+            let base = (d1 + j as f64 * d2) / DT;
+            let s = speed[k];
+            obj += bounds.speed_penalty * ((s - (hi + base)).max(0.0) + ((lo + base) - s).max(0.0));
+            k += 1;
+        });
+    }
+    obj
+}
+
+fn jerk(p: &[f64]) -> f64 {
+    (p[3] - 3.0 * p[2] + 3.0 * p[1] - p[0]) / DT.powi(3)
+}
+
+/// Solves an instance with the banded interior point (cold, from the
+/// unconstrained optimum) and with clarabel's SOCP (its default KKT
+/// settings); returns both plan pairs, or `None` when clarabel fails.
+fn solve_both(
+    horizon: usize,
+    weights: [AxisWeights; 2],
+    bounds: ConeBounds,
+    axes: &[Axis; 2],
+) -> Option<(Plans, Plans)> {
+    let mut clarabel = ClarabelConeSolver::new(
+        horizon,
+        DT,
+        weights,
+        bounds,
+        f64::INFINITY,
+        true,
+        KktTuning::CLARABEL_DEFAULTS,
+    )
+    .unwrap();
+    let mut want = [vec![0.0; horizon + 1], vec![0.0; horizon + 1]];
+    let [wx, wy] = &mut want;
+    clarabel
+        .solve_pair(
+            AxisProblem {
+                fixed: &axes[0].fixed,
+                sent: axes[0].sent,
+                reference: &axes[0].reference,
+                plan: wx,
+            },
+            AxisProblem {
+                fixed: &axes[1].fixed,
+                sent: axes[1].sent,
+                reference: &axes[1].reference,
+                plan: wy,
+            },
+        )
+        .ok()?;
+    let mut got = [vec![0.0; horizon + 1], vec![0.0; horizon + 1]];
+    for (i, plan) in got.iter_mut().enumerate() {
+        let w = weights[i];
+        let mut fast =
+            FastBandedSolver::with_smoothness(horizon, w.q, w.r, DT, w.smoothness).unwrap();
+        fast.solve_problem(AxisProblem {
+            fixed: &axes[i].fixed,
+            sent: axes[i].sent,
+            reference: &axes[i].reference,
+            plan,
+        })
+        .unwrap();
+    }
+    let mut ip = ConeInteriorPointSolver::new(horizon, DT, weights, bounds, false).unwrap();
+    let [gx, gy] = &mut got;
+    ip.solve_pair(
+        AxisProblem {
+            fixed: &axes[0].fixed,
+            sent: axes[0].sent,
+            reference: &axes[0].reference,
+            plan: gx,
+        },
+        AxisProblem {
+            fixed: &axes[1].fixed,
+            sent: axes[1].sent,
+            reference: &axes[1].reference,
+            plan: gy,
+        },
+    )
+    .unwrap();
+    Some((got, want))
+}
+
+fn from_rest(horizon: usize, target: [f64; 2]) -> [Axis; 2] {
+    target.map(|t| Axis {
+        fixed: [0.0; 3],
+        sent: None,
+        reference: vec![t; horizon + 1],
+    })
+}
+
+#[test]
+fn cone_binds_and_matches_clarabel_from_rest() {
+    let horizon = 100;
+    let w = AxisWeights {
+        q: 5.0,
+        r: 0.01,
+        smoothness: Smoothness::default(),
+    };
+    let a = G * 15f64.to_radians().tan();
+    let bounds = ConeBounds::new(a, None);
+    let axes = from_rest(horizon, [8.0, -6.0]);
+    let (got, want) = solve_both(horizon, [w, w], bounds, &axes).unwrap();
+    // The cone binds: the peak planned acceleration is at the bound, and
+    // each axis uses more than the box's share would allow at the corner
+    // of a 45° move (here 37°: x gets 0.8·A, beyond A/√2).
+    let peak = ConeBounds::peak_acceleration(&got[0], &got[1], DT);
+    assert!((peak - a).abs() < 1e-6 * a, "peak {peak} vs {a}");
+    assert!(!bounds.violated_by(&got[0], &got[1], DT));
+    for i in 0..2 {
+        for j in 0..=horizon {
+            assert!(
+                (got[i][j] - want[i][j]).abs() < 1e-5,
+                "axis {i} y_{j}: {} vs {}",
+                got[i][j],
+                want[i][j]
+            );
+        }
+    }
+    let (ow, og) = (
+        objective(horizon, &[w, w], &bounds, &axes, [&want[0], &want[1]]),
+        objective(horizon, &[w, w], &bounds, &axes, [&got[0], &got[1]]),
+    );
+    assert!(og <= ow + 1e-7 * (1.0 + ow.abs()), "{og} vs {ow}");
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::test_runner::Config::with_cases(128))]
+    /// The banded interior point ([`ConeInteriorPointSolver`], cold start)
+    /// gives clarabel's SOCP solution ([`ClarabelConeSolver`], clarabel's
+    /// default KKT settings) on random instances — both axes moving,
+    /// tilt bounds 5–35°, with and without soft speed bounds (windows
+    /// faster than them included) and the smoothness term: cost no higher
+    /// than clarabel's (1e-7 relative), first jerk per axis (what the
+    /// command depends on) to 1e-3 relative, first ten outputs to 1e-5 m,
+    /// the cone holds. `PROPTEST_CASES` for more cases.
+    #[test]
+    fn cone_solver_matches_clarabel_socp(
+        horizon in 20usize..=200,
+        q in proptest::array::uniform2(0.5f64..10.0),
+        r in proptest::array::uniform2(1e-3f64..0.1),
+        tilt_deg in 5.0f64..35.0,
+        speed in proptest::option::of(2.0f64..8.0),
+        y0 in proptest::array::uniform2(-5.0f64..5.0),
+        v0 in proptest::array::uniform2(-6.0f64..6.0),
+        a0_frac in proptest::array::uniform2(-0.6f64..0.6),
+        target in proptest::array::uniform2(-20.0f64..20.0),
+        slope in proptest::array::uniform2(-3.0f64..3.0),
+        smooth in proptest::option::of((1.0f64..50.0, 1.0f64..8.0, -0.5f64..0.5)),
+    ) {
+        let a = G * tilt_deg.to_radians().tan();
+        let bounds = ConeBounds::new(a, speed);
+        let weights: [AxisWeights; 2] = std::array::from_fn(|i| AxisWeights {
+            q: q[i],
+            r: r[i],
+            smoothness: smooth.map_or(Smoothness::default(), |(weight, kappa, _)| Smoothness {
+                weight,
+                kappa,
+                gravity: G,
+            }),
+        });
+        let axes: [Axis; 2] = std::array::from_fn(|i| {
+            let acc = a0_frac[i] * a;
+            Axis {
+                fixed: [y0[i], y0[i] + v0[i] * DT, y0[i] + 2.0 * v0[i] * DT + acc * DT * DT],
+                sent: smooth.map(|(_, _, d)| acc + d),
+                reference: (0..=horizon)
+                    .map(|j| target[i] + slope[i] * DT * j as f64)
+                    .collect(),
+            }
+        });
+        let solved = solve_both(horizon, weights, bounds, &axes);
+        proptest::prop_assume!(solved.is_some(), "clarabel did not solve");
+        let (got, want) = solved.unwrap();
+        let obj = |p: &[Vec<f64>; 2]| objective(horizon, &weights, &bounds, &axes, [&p[0], &p[1]]);
+        let (og, ow) = (obj(&got), obj(&want));
+        proptest::prop_assert!(og <= ow + 1e-7 * (1.0 + ow.abs()), "cost {og} vs clarabel {ow}");
+        for i in 0..2 {
+            let (jg, jw) = (jerk(&got[i]), jerk(&want[i]));
+            proptest::prop_assert!(
+                (jg - jw).abs() <= 1e-3 * jw.abs().max(1.0),
+                "axis {i}: first jerk {jg} vs {jw}"
+            );
+            for j in 0..=10 {
+                proptest::prop_assert!(
+                    (got[i][j] - want[i][j]).abs() <= 1e-5,
+                    "axis {i} y_{j}: {} vs {}", got[i][j], want[i][j]
+                );
+            }
+        }
+        let cone = ConeBounds::new(a, None);
+        proptest::prop_assert!(!cone.violated_by(&got[0], &got[1], DT));
+    }
+}
