@@ -222,6 +222,10 @@ impl Harness {
                 );
             }
             (_, Goal::Path) => {}
+            (_, Goal::Brake { from, velocity }) => assert!(
+                from.iter().chain(&velocity).all(|v| v.is_finite()),
+                "brake {from:?} {velocity:?}"
+            ),
         }
         if s.state() == FlightState::Tracking {
             assert!(matches!(s.goal(), Goal::Setpoint(_) | Goal::Path));

@@ -91,6 +91,7 @@ pub fn build_controller(cfg: &Config) -> Result<Box<dyn Controller>, ControlErro
                     vertical_acceleration: None,
                 },
                 qp_solver: c.qp_solver,
+                plan_tilt_bound: c.plan_tilt_bound,
                 smoothness_weight: c.smoothness_weight,
                 multi_rate: c.multi_rate.then(|| MultiRateSettings {
                     fit_span: c.multi_rate_window,

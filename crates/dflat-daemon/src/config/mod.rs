@@ -7,7 +7,7 @@
 
 use std::path::{Path, PathBuf};
 
-use dflat_control::dfmpc::QpSolver;
+use dflat_control::dfmpc::{PlanTiltBound, QpSolver};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
@@ -341,6 +341,12 @@ pub struct ControllerConfig {
     /// interior-point method, O(N) per iteration, with clarabel as the
     /// fallback — or "clarabel" alone. Default "banded".
     pub qp_solver: QpSolver,
+    /// How `constraint_tilt_deg` bounds the plan (df-mpc): "box" (each
+    /// horizontal axis separately; the combined planned tilt can reach
+    /// 39° at 30°) or "cone" (the combined tilt, both axes in one QP —
+    /// the vehicle's real limit; slower per constrained tick, see
+    /// docs/performance.md). Default "box".
+    pub plan_tilt_bound: PlanTiltBound,
     /// Disturbance estimation (df-mpc; offset-free tracking): acceleration
     /// offsets (wind, drag) and, for the spatial model, the thrust scale
     /// (hover thrust, mass). Default false.
@@ -378,6 +384,7 @@ impl Default for ControllerConfig {
             constraint_tilt_deg: 30.0,
             constraint_speed: 0.0,
             qp_solver: QpSolver::Banded,
+            plan_tilt_bound: PlanTiltBound::Box,
             disturbance: false,
             disturbance_bandwidth_hz: 0.1,
             disturbance_window: 50,
@@ -427,9 +434,11 @@ pub struct MissionConfig {
     /// `mission.start = "path"` starts the path at the first engagement.
     pub on_engage: OnEngage,
     /// Braking deceleration at engagement as a fraction of the plan's tilt
-    /// bound (0.1–1): the vehicle stops at `p + v·|v| / (2·a)`,
+    /// bound (0.1–1): the stop reference coasts for half of `vehicle.tau`
+    /// (the attitude builds up) and then decelerates at
     /// `a = brake_fraction · g · tan(controller.constraint_tilt_deg, or
-    /// vehicle.max_tilt_deg without one)`.
+    /// vehicle.max_tilt_deg without one)`, stopping at
+    /// `p + v·τ/2 + v·|v| / (2·a)`.
     pub brake_fraction: f64,
     /// Peak acceleration of the path's speed ramp \[m/s²\] (0 = none, or
     /// 0.5–10): a path starts (and resumes) from rest with its reference

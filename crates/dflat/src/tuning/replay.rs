@@ -120,14 +120,25 @@ fn shift(e: Event, by: f64) -> Event {
             yaw,
             reset_counter,
         },
-        Event::Heartbeat { arrival } => Event::Heartbeat {
+        Event::Heartbeat { arrival, mode } => Event::Heartbeat {
             arrival: arrival + by,
+            mode,
         },
         Event::Setpoint { arrival, position } => Event::Setpoint {
             arrival: arrival + by,
             position,
         },
-        a @ Event::Attitude { .. } => a,
+        Event::Attitude {
+            arrival,
+            roll,
+            pitch,
+            yaw,
+        } => Event::Attitude {
+            arrival: arrival + by,
+            roll,
+            pitch,
+            yaw,
+        },
     }
 }
 
@@ -218,9 +229,9 @@ fn run_pass(
         while let Some(e) = pending.peek() {
             let arrival = match e {
                 Event::Pose { arrival, .. }
-                | Event::Heartbeat { arrival }
+                | Event::Heartbeat { arrival, .. }
+                | Event::Attitude { arrival, .. }
                 | Event::Setpoint { arrival, .. } => *arrival,
-                Event::Attitude { .. } => f64::NEG_INFINITY,
             };
             if arrival > w {
                 break;
