@@ -64,12 +64,14 @@ impl Controller for Flaky {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn failed_and_late_ticks_fly_the_previous_plan_then_level_hover_and_recover() {
     let out = std::env::temp_dir().join(format!("dflat-plan-fallback-{}", std::process::id()));
-    let (mut cfg, plant) = demo_config(&DemoOptions {
+    let (mut cfg, mut plant) = demo_config(&DemoOptions {
         speed: 5.0,
         out: out.clone(),
         seconds: None,
     })
     .unwrap();
+    // Engaged as soon as the stream runs (the demo plays a pilot instead).
+    plant.sitl.engage = dflat_sim::sitl::SitlEngage::Auto;
     cfg.logging.dir = String::new();
     // No speed ramp: the abrupt start from rest binds the 30° plan-tilt
     // bound, and the summary's count of constrained ticks is under test

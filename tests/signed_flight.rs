@@ -90,6 +90,8 @@ fn config(scratch: &Scratch, daemon_key: Option<u8>, sitl_key: u8) -> (Config, S
     })
     .unwrap();
     cfg.logging.dir = String::new();
+    // Engaged as soon as the stream runs (the demo plays a pilot instead).
+    plant.sitl.engage = dflat_sim::sitl::SitlEngage::Auto;
     plant.sitl.signing_key_file = scratch.key_file(sitl_key);
     if let Some(k) = daemon_key {
         cfg.link.signing_key_file = scratch.key_file(k);

@@ -9,13 +9,19 @@
 //!    its port; the vehicle starts at the first waypoint of the L path
 //!    (−20, −30) → (0, −30) → (0, 0) at z = −10 m;
 //! 2. start the daemon ([`dflat_daemon::run`]) with `--link
-//!    udpout:127.0.0.1:PORT`; its mission flies the path at `--speed` as
-//!    soon as pose is fresh;
-//! 3. follow the SITL's true state until the vehicle is within
+//!    udpout:127.0.0.1:PORT`; it streams in STANDBY while the SITL hovers
+//!    in position mode;
+//! 3. play the pilot (the SITL's `engage = "pilot"`): after
+//!    [`ENGAGE_AFTER_S`] of streaming switch to OFFBOARD — the daemon
+//!    engages and flies the path at `--speed`; [`OVERRIDE_AFTER_S`] later
+//!    take over in position mode for [`OVERRIDE_S`], then hand back — the
+//!    daemon resumes the path from where the vehicle is;
+//! 4. follow the SITL's true state until the vehicle is within
 //!    [`ARRIVAL_RADIUS`] of the last waypoint and has settled for
 //!    [`SETTLE_S`], or until the time limit;
-//! 4. stop both, measure the true path error, draw the flown path (reference
-//!    black, flown red) as SVG and PNG, and report.
+//! 5. stop both, measure the true path error while the daemon flew,
+//!    draw the flown path (reference black, daemon red, pilot blue) as SVG
+//!    and PNG, and report.
 //!
 //! [`DemoOutcome::failure`] says whether the flight counts as failed (no
 //! commands, diverged, path not finished, strayed from the path).
@@ -25,7 +31,7 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use dflat_sim::harness::{ErrorStats, polyline_distance};
-use dflat_sim::plot::{DF_RED, PathPlot, Series, north_up, write_path_plot};
+use dflat_sim::plot::{DF_RED, FMPC_BLUE, PathPlot, Series, north_up, write_path_plot};
 use nalgebra::Vector3;
 use thiserror::Error;
 
@@ -33,8 +39,8 @@ use dflat_daemon::DaemonError;
 use dflat_daemon::FlightSummary;
 use dflat_daemon::config::{Config, ConfigError, MissionStart};
 use dflat_sim::sitl::{
-    self, SitlConfigError, SitlCounters, SitlError, SitlHandle, SitlOptions, SitlSettings,
-    TruthSample,
+    self, SitlConfigError, SitlCounters, SitlEngage, SitlError, SitlHandle, SitlMode, SitlOptions,
+    SitlSettings, TruthSample,
 };
 
 /// The shipped SITL configuration (daemon + SITL on loopback).
@@ -49,8 +55,15 @@ pub const ARRIVAL_RADIUS: f64 = 0.5;
 pub const SETTLE_S: f64 = 2.0;
 /// A true path error above this fails the demo \[m\].
 pub const MAX_PATH_ERROR: f64 = 5.0;
-/// Extra time beyond path length / speed before the demo gives up \[s\].
-pub const TIME_MARGIN_S: f64 = 8.0;
+/// Extra time beyond path length / speed before the demo gives up \[s\]
+/// (hover, speed ramp, override and braking included).
+pub const TIME_MARGIN_S: f64 = 16.0;
+/// The pilot engages after the daemon's stream has run this long \[s\].
+pub const ENGAGE_AFTER_S: f64 = 1.5;
+/// The pilot takes over this long after engaging \[s\].
+pub const OVERRIDE_AFTER_S: f64 = 4.0;
+/// The pilot keeps control this long before handing back \[s\].
+pub const OVERRIDE_S: f64 = 2.0;
 
 /// Why the demo could not run (a failed *flight* is a [`DemoOutcome`]).
 #[derive(Debug, Error)]
@@ -131,6 +144,11 @@ pub struct DemoOutcome {
     pub plot: [PathBuf; 2],
     /// The SITL's truth CSV.
     pub truth_csv: PathBuf,
+    /// What the pilot did, SITL time \[s\] and words.
+    pub pilot: Vec<(f64, &'static str)>,
+    /// Largest change of the command between consecutive telemetry
+    /// samples (50 Hz) in the second after the hand-back \[deg\].
+    pub handback_step_deg: Option<f64>,
 }
 
 impl DemoOutcome {
@@ -169,11 +187,27 @@ impl DemoOutcome {
             "dflat demo: {} on the L path at {} m/s, SITL {:?} plant, in one process on loopback",
             d.controller, m.speed, self.sitl_config.sitl.plant
         );
+        let pilot: Vec<String> = self
+            .pilot
+            .iter()
+            .map(|(t, what)| format!("{t:.1} s {what}"))
+            .collect();
+        let _ = writeln!(s, "  pilot (SITL time)           {}", pilot.join(" → "));
+        let t = &d.time_in_state_s;
+        let _ = writeln!(
+            s,
+            "  engagement                  {} engagements, {} disengagements; standby {:.1} s; hand-back: largest command step {} in the first second",
+            d.engagements,
+            d.disengagements,
+            t.standby,
+            self.handback_step_deg
+                .map_or("n/a".to_owned(), |v| format!("{v:.1}°/tick"))
+        );
         match (&self.path_error, self.path_time_s) {
             (Some(e), t) => {
                 let _ = writeln!(
                     s,
-                    "  path error (true position)  median {:.3} m, p95 {:.3} m, max {:.3} m ({} samples)",
+                    "  path error (true position)  median {:.3} m, p95 {:.3} m, max {:.3} m ({} samples, daemon in control)",
                     e.median, e.p95, e.max, e.count
                 );
                 let _ = writeln!(
@@ -276,6 +310,8 @@ pub fn demo_config(options: &DemoOptions) -> Result<(Config, SitlSettings), Demo
     cfg.validate(file)?;
     let mut sitl = SitlSettings::parse(SITL_TOML, file)?;
     sitl.sitl.url = "udpin:127.0.0.1:0".into();
+    // The demo plays the pilot (see the module docs).
+    sitl.sitl.engage = SitlEngage::Pilot;
     Ok((cfg, sitl))
 }
 
@@ -321,7 +357,7 @@ pub async fn run(options: &DemoOptions) -> Result<DemoOutcome, DemoError> {
 
     let started = Instant::now();
     let end = *wps.last().unwrap_or(&Vector3::zeros());
-    let arrival = watch(&sitl, end, limit, started).await;
+    let (arrival, pilot) = watch(&sitl, end, limit, started).await;
     let _ = stop_tx.send(());
     let summary = daemon.await.map_err(|e| DemoError::Join(e.to_string()))??;
     let wall_s = started.elapsed().as_secs_f64();
@@ -336,11 +372,28 @@ pub async fn run(options: &DemoOptions) -> Result<DemoOutcome, DemoError> {
         Some(t0) => report.trace.iter().filter(|s| s.t >= t0).collect(),
         None => Vec::new(),
     };
+    // The controller's error: while the daemon flew (not the pilot).
     let path_error = ErrorStats::from_values(
         flown
             .iter()
+            .filter(|s| s.mode == SitlMode::Offboard)
             .map(|s| polyline_distance(&wps, &Vector3::from(s.position), false)),
     );
+    let handback_step_deg = pilot
+        .iter()
+        .rev()
+        .find(|(_, what)| *what == HAND_BACK)
+        .and_then(|(t, _)| {
+            let cmds: Vec<[f64; 2]> = report
+                .trace
+                .iter()
+                .filter(|s| s.t >= *t && s.t <= t + 1.0 && s.mode == SitlMode::Offboard)
+                .filter_map(|s| s.command.map(|c| [c.roll, c.pitch]))
+                .collect();
+            cmds.windows(2)
+                .map(|w| ((w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1])).to_degrees())
+                .reduce(f64::max)
+        });
     let path_time_s = match (first_command, arrival) {
         (Some(t0), Some(ta)) => Some(ta - t0),
         _ => None,
@@ -355,12 +408,22 @@ pub async fn run(options: &DemoOptions) -> Result<DemoOutcome, DemoError> {
         "north [m]",
     );
     plot.reference = north_up(&wps);
-    let flown_points: Vec<Vector3<f64>> = flown.iter().map(|s| Vector3::from(s.position)).collect();
-    plot.series.push(Series::new(
-        "flown (true position)",
-        DF_RED,
-        north_up(&flown_points),
-    ));
+    // One series per stretch flown by the daemon (red) or the pilot in
+    // position mode (blue); one legend entry each.
+    let mut named = [false; 2];
+    for stretch in flown.chunk_by(|a, b| a.mode == b.mode) {
+        let daemon = stretch[0].mode == SitlMode::Offboard;
+        let (name, color, i) = if daemon {
+            ("daemon (true position)", DF_RED, 0)
+        } else {
+            ("pilot, position mode", FMPC_BLUE, 1)
+        };
+        let points: Vec<Vector3<f64>> = stretch.iter().map(|s| Vector3::from(s.position)).collect();
+        let name = if named[i] { "" } else { name };
+        named[i] = true;
+        plot.series
+            .push(Series::new(name, color, north_up(&points)));
+    }
     let plot = write_path_plot(&options.out.join("demo_path"), &plot)?;
 
     Ok(DemoOutcome {
@@ -375,23 +438,57 @@ pub async fn run(options: &DemoOptions) -> Result<DemoOutcome, DemoError> {
         diverged: report.diverged,
         plot,
         truth_csv,
+        pilot,
+        handback_step_deg,
     })
 }
 
-/// Follows the truth until arrival + settling or the time limit; returns the
-/// SITL time of arrival at `end`, if any.
+/// Words of the pilot's hand-back in [`DemoOutcome::pilot`].
+const HAND_BACK: &str = "hand-back (OFFBOARD)";
+
+/// Follows the truth until arrival + settling or the time limit, playing
+/// the pilot on the way (engage, override, hand back); returns the SITL
+/// time of arrival at `end`, if any, and what the pilot did when.
 async fn watch(
     sitl: &SitlHandle,
     end: Vector3<f64>,
     limit_s: f64,
     started: Instant,
-) -> Option<f64> {
+) -> (Option<f64>, Vec<(f64, &'static str)>) {
     let mut tick = tokio::time::interval(Duration::from_millis(20));
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
     let mut arrived: Option<f64> = None;
+    let mut pilot: Vec<(f64, &'static str)> = Vec::new();
+    let mut stream_since: Option<f64> = None;
     loop {
         tick.tick().await;
         let truth = sitl.truth();
+        // The pilot's script, on the SITL's clock.
+        let t = truth.t;
+        if stream_since.is_none() && sitl.counters().commands_accepted > 0 {
+            stream_since = Some(t);
+            pilot.push((t, "hover in POSCTL, daemon streaming"));
+        }
+        let last = pilot.last().map(|(at, what)| (*at, *what));
+        match (stream_since, last) {
+            (Some(s), Some((_, "hover in POSCTL, daemon streaming")))
+                if t >= s + ENGAGE_AFTER_S =>
+            {
+                sitl.request_mode(SitlMode::Offboard);
+                pilot.push((t, "engage (OFFBOARD)"));
+            }
+            (_, Some((at, "engage (OFFBOARD)")))
+                if t >= at + OVERRIDE_AFTER_S && arrived.is_none() =>
+            {
+                sitl.request_mode(SitlMode::Hold);
+                pilot.push((t, "override (POSCTL)"));
+            }
+            (_, Some((at, "override (POSCTL)"))) if t >= at + OVERRIDE_S => {
+                sitl.request_mode(SitlMode::Offboard);
+                pilot.push((t, HAND_BACK));
+            }
+            _ => {}
+        }
         if arrived.is_none()
             && truth.command.is_some()
             && (Vector3::from(truth.position) - end).norm() < ARRIVAL_RADIUS
@@ -401,10 +498,10 @@ async fn watch(
         if let Some(ta) = arrived
             && truth.t - ta >= SETTLE_S
         {
-            return arrived;
+            return (arrived, pilot);
         }
         if started.elapsed().as_secs_f64() >= limit_s || sitl.diverged() {
-            return arrived;
+            return (arrived, pilot);
         }
     }
 }
