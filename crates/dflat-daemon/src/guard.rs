@@ -41,6 +41,13 @@ pub struct GuardCounts {
     pub pose_jumps: u64,
     /// Residual failsafes.
     pub residual_failsafes: u64,
+    /// Times the stream was stopped after `safety.level_hover_max_ms` of
+    /// level hover (the controller could not fly).
+    pub control_failsafes: u64,
+    /// Times a pose source's clock was found running slow or ever later
+    /// (`safety.pose_max_latency_ms`) and its poses re-stamped with their
+    /// arrival time.
+    pub pose_clock_faults: u64,
 }
 
 /// Why [`CommandGuard::check`] refused a command.

@@ -465,7 +465,7 @@ impl fmt::Display for FlightSummary {
         let g = &self.guards;
         writeln!(
             f,
-            "  guards        {} non-finite, {} tilt / {} thrust saturated, {} failures, {} overruns, {} plan / {} held / {} level fallbacks, {} pose jumps, {} residual failsafes",
+            "  guards        {} non-finite, {} tilt / {} thrust saturated, {} failures, {} overruns, {} plan / {} held / {} level fallbacks, {} pose jumps, {} residual failsafes, {} control failsafes (stream stopped), {} pose clock faults",
             g.non_finite,
             g.tilt_saturated,
             g.thrust_saturated,
@@ -475,7 +475,9 @@ impl fmt::Display for FlightSummary {
             g.held,
             g.level_hover,
             g.pose_jumps,
-            g.residual_failsafes
+            g.residual_failsafes,
+            g.control_failsafes,
+            g.pose_clock_faults
         )?;
         let s = &self.solves;
         writeln!(

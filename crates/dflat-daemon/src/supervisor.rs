@@ -166,6 +166,8 @@ pub enum Cause {
     PilotControl,
     /// Braked after an engagement: the mission resumes.
     Resume,
+    /// The controller could not fly: level hover ran out.
+    ControlFailed,
 }
 
 impl Cause {
@@ -183,6 +185,7 @@ impl Cause {
             Cause::Engaged => "engaged, braking",
             Cause::PilotControl => "pilot has control",
             Cause::Resume => "braked, resuming",
+            Cause::ControlFailed => "control failed, stream off",
         }
     }
 }
@@ -459,6 +462,17 @@ impl Supervisor {
         }
         self.latched_until = Some(t + latch);
         Some(self.enter(FlightState::Failsafe, cause, t))
+    }
+
+    /// Lifts a failsafe's latch (the controller can fly again): recovery
+    /// follows at the next tick with fresh pose and a live autopilot.
+    pub fn release_latch(&mut self) {
+        self.latched_until = None;
+    }
+
+    /// True while a forced failsafe's latch holds.
+    pub fn latched(&self, t: f64) -> bool {
+        self.latched_until.is_some_and(|u| t < u)
     }
 
     /// The current state.

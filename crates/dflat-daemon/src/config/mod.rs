@@ -502,6 +502,19 @@ pub struct SafetyConfig {
     /// for the tick (the previous plan's y*_{k+1}) for 5 ticks in a row, the
     /// stream stops (FAILSAFE) for 2 s.
     pub residual_failsafe_m: f64,
+    /// When the controller cannot fly (failed or late ticks past the plan
+    /// fallback), level hover is streamed for at most this long \[ms\]
+    /// (0–10000); then the stream stops (FAILSAFE, "control failed") so
+    /// the autopilot's own failsafe takes over, until the controller
+    /// solves again on the live poses (tried each tick, not sent).
+    pub level_hover_max_ms: f64,
+    /// A pose whose capture time (source clock mapped to ours) lies more
+    /// than this \[ms\] before its arrival for a second on end means the
+    /// source clock runs slow or ever later than ours (a lagging simulator,
+    /// a drifting VIO clock): poses are then stamped with their arrival
+    /// time instead (logged, STATUSTEXT, counted in the summary).
+    /// 10–5000.
+    pub pose_max_latency_ms: f64,
 }
 
 impl Default for SafetyConfig {
@@ -513,6 +526,8 @@ impl Default for SafetyConfig {
             pose_jump_margin_m: 0.5,
             hold_last_ticks: 5,
             residual_failsafe_m: 0.0,
+            level_hover_max_ms: 1000.0,
+            pose_max_latency_ms: 500.0,
         }
     }
 }

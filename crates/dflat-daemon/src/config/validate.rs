@@ -225,6 +225,18 @@ impl Config {
                 100.0,
             )?;
         }
+        v.range(
+            "safety.level_hover_max_ms",
+            s.level_hover_max_ms,
+            0.0,
+            10000.0,
+        )?;
+        v.range(
+            "safety.pose_max_latency_ms",
+            s.pose_max_latency_ms,
+            10.0,
+            5000.0,
+        )?;
         Ok(())
     }
 }

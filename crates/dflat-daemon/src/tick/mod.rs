@@ -49,6 +49,11 @@ pub use inputs::{
 pub const REFUSAL_TEXT_INTERVAL: f64 = 1.0;
 /// How long a residual failsafe lasts before pose may re-engage \[s\].
 const RESIDUAL_FAILSAFE_LATCH: f64 = 2.0;
+/// After a control failsafe, consecutive successful trial solves (not
+/// sent) before the stream may resume.
+const TRIAL_TICKS: u32 = 5;
+/// A pose clock's lag must exceed its bound this long \[s\] to count.
+const POSE_LATENCY_PERSISTENCE: f64 = 1.0;
 
 /// One pose as the control core keeps it.
 #[derive(Debug, Clone, Copy)]
@@ -152,6 +157,18 @@ pub struct ControlCore {
     mode: Option<AutopilotMode>,
     /// The vehicle's motion from the poses (engagement's stop point).
     motion: MotionEstimator,
+    /// Since when level hover has been streamed \[s\].
+    level_hover_since: Option<f64>,
+    /// In a control failsafe: the controller is tried each tick.
+    control_failsafe: bool,
+    /// Consecutive successful trial solves in a control failsafe.
+    trial_streak: u32,
+    /// Since when poses have arrived later than `safety.pose_max_latency_ms`
+    /// after their mapped capture time \[s\].
+    pose_late_since: Option<f64>,
+    /// The pose source's clock was found unusable: poses are stamped with
+    /// their arrival time.
+    pose_time_arrival: bool,
     last_used_arrival: Option<f64>,
     reference: Option<Reference>,
     reference_generation: u64,
@@ -218,6 +235,11 @@ impl ControlCore {
             standby_attitude: None,
             mode: None,
             motion: MotionEstimator::new(),
+            level_hover_since: None,
+            control_failsafe: false,
+            trial_streak: 0,
+            pose_late_since: None,
+            pose_time_arrival: false,
             last_used_arrival: None,
             reference: None,
             reference_generation,
@@ -321,6 +343,9 @@ impl ControlCore {
                 row.guard = Some("residual");
             }
         }
+        if self.control_failsafe && self.supervisor.state() == FlightState::Failsafe {
+            self.trial(t);
+        }
         let mut command = None;
         let mut solve_us = None;
         if self.supervisor.state().streams()
@@ -412,6 +437,18 @@ impl ControlCore {
                 None,
             ),
         };
+        // Level hover for longer than `safety.level_hover_max_ms`: let go —
+        // stop the stream so the autopilot's own failsafe takes over.
+        if self.fallback_kind == Some(FallbackKind::LevelHover) {
+            let since = *self.level_hover_since.get_or_insert(t);
+            if t - since >= self.config.safety.level_hover_max_ms / 1000.0 {
+                self.let_go(t);
+                row.guard = Some("let_go");
+                return (None, solve_us);
+            }
+        } else {
+            self.level_hover_since = None;
+        }
         // This tick's command is not applied in standby: correct it at the
         // next tick from the attitude then.
         self.standby_attitude = if self.supervisor.state() == FlightState::Standby {
@@ -633,6 +670,61 @@ impl ControlCore {
         }
     }
 
+    /// The controller cannot fly: failsafe until it solves again
+    /// ([`ControlCore::trial`]); the cause is said (STATUSTEXT) and counted.
+    fn let_go(&mut self, t: f64) {
+        self.level_hover_since = None;
+        if let Some(tr) = self
+            .supervisor
+            .force_failsafe(t, Cause::ControlFailed, f64::INFINITY)
+        {
+            self.counts.guards.control_failsafes += 1;
+            self.control_failsafe = true;
+            self.trial_streak = 0;
+            self.fallback_kind = None;
+            error!(
+                level_hover_ms = self.config.safety.level_hover_max_ms,
+                "controller cannot fly: stream stopped, the autopilot's failsafe takes over"
+            );
+            self.reset_controller();
+            self.last_used_arrival = None;
+            self.announce(tr);
+        }
+    }
+
+    /// In a control failsafe: one solve on the newest pose, not sent
+    /// (the controller is reset afterwards, so nothing unsent stays in its
+    /// window). After [`TRIAL_TICKS`] good ones in a row the latch is
+    /// lifted and the stream resumes at the next tick.
+    fn trial(&mut self, t: f64) {
+        let (Some(pose), Some(reference)) = (self.pose, self.reference.as_ref()) else {
+            return;
+        };
+        let mut reference = reference.clone();
+        let measurement = Measurement {
+            t: if self.multi_rate { t } else { pose.capture },
+            position: Vector3::from(pose.position),
+            yaw: self.yaw_of(pose.yaw, self.attitude_yaw),
+        };
+        let controller = &mut self.controller;
+        let ok = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            controller.update(&measurement, &mut reference).is_ok()
+        }))
+        .unwrap_or(false);
+        self.reset_controller();
+        self.trial_streak = if ok { self.trial_streak + 1 } else { 0 };
+        if self.trial_streak >= TRIAL_TICKS {
+            self.control_failsafe = false;
+            self.trial_streak = 0;
+            self.supervisor.release_latch();
+            info!("controller solves again: the stream may resume");
+            self.text(
+                MavSeverity::MAV_SEVERITY_NOTICE,
+                "dflat: controller flies again",
+            );
+        }
+    }
+
     /// The input that explains the attitude change since the previous
     /// (standby) tick replaces the one recorded then
     /// ([`Controller::correct_last_input`]). Thrust: the hover thrust
@@ -734,8 +826,16 @@ impl ControlCore {
     ) {
         self.supervisor.on_pose(arrival, position);
         let capture = match self.config.link.pose_time {
-            PoseTime::Source => self.clock.capture_time(arrival, source_time),
-            PoseTime::Arrival => arrival,
+            PoseTime::Source if !self.pose_time_arrival => {
+                let capture = self.clock.capture_time(arrival, source_time);
+                self.check_pose_clock(arrival, capture);
+                if self.pose_time_arrival {
+                    arrival
+                } else {
+                    capture
+                }
+            }
+            PoseTime::Source | PoseTime::Arrival => arrival,
         };
         let mut pose = PoseSample {
             arrival,
@@ -789,6 +889,34 @@ impl ControlCore {
             // The jumped pose is the newest one now.
             self.pose = Some(pose);
             self.re_anchor(arrival, &pose);
+        }
+    }
+
+    /// A pose captured (by the mapped source clock) more than
+    /// `safety.pose_max_latency_ms` before its arrival, for
+    /// [`POSE_LATENCY_PERSISTENCE`] on end: the source clock runs slow or
+    /// ever later than ours. From then on poses are stamped with their
+    /// arrival time (said, logged, counted).
+    fn check_pose_clock(&mut self, arrival: f64, capture: f64) {
+        let late = arrival - capture > self.config.safety.pose_max_latency_ms / 1000.0;
+        if !late {
+            self.pose_late_since = None;
+            return;
+        }
+        let since = *self.pose_late_since.get_or_insert(arrival);
+        if arrival - since >= POSE_LATENCY_PERSISTENCE {
+            self.pose_time_arrival = true;
+            self.counts.guards.pose_clock_faults += 1;
+            error!(
+                lag_s = arrival - capture,
+                "pose source clock runs slow or ever later: poses stamped with their arrival time"
+            );
+            self.text(
+                MavSeverity::MAV_SEVERITY_WARNING,
+                "dflat: pose clock lags, using arrival time",
+            );
+            // The samples held were stamped by the bad clock.
+            self.reset_controller();
         }
     }
 

@@ -272,3 +272,101 @@ fn events_map_from_inbound_messages() {
     let attitude = Inbound::Other(30);
     assert_eq!(event_from(&attitude, PoseSource::Odometry, 1.5), None);
 }
+
+#[test]
+fn a_controller_that_cannot_fly_lets_go_after_the_level_hover_period_and_resumes() {
+    // Good for 10 ticks, failing for 200, good again. The script index
+    // counts every update (trials included).
+    let mut script = vec![Script::Command(0.05, 0.0); 10];
+    script.extend(vec![Script::Fail; 200]);
+    script.push(Script::Command(0.02, 0.0));
+    let (mut core, _) = core(script);
+    let max_level_ticks =
+        (Config::default().safety.level_hover_max_ms / 1000.0 / DT).round() as usize;
+    let out = fly(&mut core, 300);
+    // Streamed: 10 good, the fallback (5 plan steps or held, then level
+    // hover for at most the configured period), then nothing.
+    let level = out.iter().filter(|o| o.row.guard == Some("level")).count();
+    assert!(level <= max_level_ticks, "{level} level-hover ticks");
+    assert!(level >= max_level_ticks - 1, "{level} level-hover ticks");
+    let let_go = out
+        .iter()
+        .position(|o| o.row.guard == Some("let_go"))
+        .expect("the stream stops");
+    assert!(out[let_go].command.is_none());
+    let texts: Vec<String> = out
+        .iter()
+        .flat_map(|o| o.texts.iter())
+        .filter_map(|m| match m {
+            MavMessage::STATUSTEXT(d) => Some(d.text.to_str().unwrap_or("").to_owned()),
+            _ => None,
+        })
+        .collect();
+    assert!(
+        texts
+            .iter()
+            .any(|t| t.contains("control failed, stream off")),
+        "{texts:?}"
+    );
+    assert_eq!(core.counts().guards.control_failsafes, 1);
+    // Silent while the controller fails (trials are not sent) …
+    let resumed = out[let_go..]
+        .iter()
+        .position(|o| o.command.is_some())
+        .map(|i| i + let_go)
+        .expect("resumes once the controller solves");
+    assert!(
+        out[let_go..resumed].iter().all(|o| o.command.is_none()),
+        "nothing sent in between"
+    );
+    assert!(texts.iter().any(|t| t.contains("controller flies again")));
+    // … and streams its commands again afterwards.
+    let last = out.last().unwrap().command.as_ref().unwrap();
+    assert_eq!(last.command.roll, 0.02);
+}
+
+#[test]
+fn a_pose_clock_running_slow_is_replaced_by_arrival_times() {
+    let (mut core, _) = core(vec![Script::Command(0.0, 0.0)]);
+    // The source clock runs at 0.6× ours: the mapped capture times fall
+    // ever further behind the arrivals.
+    let mut outs = Vec::new();
+    for k in 0..200u64 {
+        let t = k as f64 * DT;
+        let events = [
+            Event::Heartbeat {
+                arrival: t - 0.001,
+                mode: OFFBOARD,
+            },
+            Event::Pose {
+                arrival: t - 0.001,
+                source_time: Some(100.0 + 0.6 * t),
+                position: [0.0, 0.0, -10.0],
+                yaw: Some(0.0),
+                reset_counter: None,
+            },
+        ];
+        let time = TickTime {
+            tick: k,
+            t,
+            scheduled: t,
+            jitter_us: 0,
+        };
+        outs.push(core.step(&time, events, &mut || 0.0));
+    }
+    assert_eq!(core.counts().guards.pose_clock_faults, 1);
+    // Lag 0.4·t exceeds 0.5 s from t = 1.25 s, for 1 s: found by 2.3 s.
+    let found = outs
+        .iter()
+        .position(|o| {
+            o.texts.iter().any(|m| {
+                matches!(m, MavMessage::STATUSTEXT(d) if d.text.to_str().unwrap_or("").contains("pose clock lags"))
+            })
+        })
+        .unwrap();
+    let t_found = found as f64 * DT;
+    assert!((2.2..2.4).contains(&t_found), "{t_found}");
+    // Afterwards the pose age in the record is the arrival's (≈ 1 ms).
+    let age = outs.last().unwrap().row.pose_age_ms.unwrap();
+    assert!(age < 5.0, "{age} ms");
+}
