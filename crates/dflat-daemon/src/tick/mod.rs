@@ -23,14 +23,14 @@ use dflat_control::reference::Reference;
 use dflat_control::{ControlModel, Controller, Measurement};
 use dflat_link::dialect::MavSeverity;
 use dflat_link::{
-    AttitudeCommand, AutopilotFamily, AutopilotMode, MavMessage, Target, ThrustMapping,
-    set_attitude_target, statustext,
+    AttitudeCommand, AutopilotMode, MavMessage, Target, ThrustMapping, set_attitude_target,
+    statustext,
 };
 use nalgebra::Vector3;
 use tracing::{debug, error, info, warn};
 
 use crate::clock::PoseClock;
-use crate::config::{AutopilotKind, Config, PoseSourceKind, PoseTime};
+use crate::config::{Config, PoseSourceKind, PoseTime};
 use crate::control::{control_model, reference_for};
 use crate::guard::{
     CommandGuard, Fallback, FallbackKind, GuardCounts, ResidualMonitor, is_pose_jump,
@@ -41,6 +41,7 @@ use crate::summary::{DisturbanceSummary, SolveCounts};
 use crate::supervisor::{Cause, FlightState, Goal, SetpointOutcome, Supervisor, Transition};
 
 mod inputs;
+mod standby;
 pub use inputs::{
     Event, brake_acceleration, event_from, pose_source, source_filter, supervisor_config,
 };
@@ -670,104 +671,6 @@ impl ControlCore {
         }
     }
 
-    /// The controller cannot fly: failsafe until it solves again
-    /// ([`ControlCore::trial`]); the cause is said (STATUSTEXT) and counted.
-    fn let_go(&mut self, t: f64) {
-        self.level_hover_since = None;
-        if let Some(tr) = self
-            .supervisor
-            .force_failsafe(t, Cause::ControlFailed, f64::INFINITY)
-        {
-            self.counts.guards.control_failsafes += 1;
-            self.control_failsafe = true;
-            self.trial_streak = 0;
-            self.fallback_kind = None;
-            error!(
-                level_hover_ms = self.config.safety.level_hover_max_ms,
-                "controller cannot fly: stream stopped, the autopilot's failsafe takes over"
-            );
-            self.reset_controller();
-            self.last_used_arrival = None;
-            self.announce(tr);
-        }
-    }
-
-    /// In a control failsafe: one solve on the newest pose, not sent
-    /// (the controller is reset afterwards, so nothing unsent stays in its
-    /// window). After [`TRIAL_TICKS`] good ones in a row the latch is
-    /// lifted and the stream resumes at the next tick.
-    fn trial(&mut self, t: f64) {
-        let (Some(pose), Some(reference)) = (self.pose, self.reference.as_ref()) else {
-            return;
-        };
-        let mut reference = reference.clone();
-        let measurement = Measurement {
-            t: if self.multi_rate { t } else { pose.capture },
-            position: Vector3::from(pose.position),
-            yaw: self.yaw_of(pose.yaw, self.attitude_yaw),
-        };
-        let controller = &mut self.controller;
-        let ok = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            controller.update(&measurement, &mut reference).is_ok()
-        }))
-        .unwrap_or(false);
-        self.reset_controller();
-        self.trial_streak = if ok { self.trial_streak + 1 } else { 0 };
-        if self.trial_streak >= TRIAL_TICKS {
-            self.control_failsafe = false;
-            self.trial_streak = 0;
-            self.supervisor.release_latch();
-            info!("controller solves again: the stream may resume");
-            self.text(
-                MavSeverity::MAV_SEVERITY_NOTICE,
-                "dflat: controller flies again",
-            );
-        }
-    }
-
-    /// The input that explains the attitude change since the previous
-    /// (standby) tick replaces the one recorded then
-    /// ([`Controller::correct_last_input`]). Thrust: the hover thrust
-    /// (the autopilot's position mode holds altitude), with the disturbance
-    /// estimate's thrust scale when there is one.
-    fn correct_standby_input(&mut self) {
-        let (Some(before), Some(now), Some(model)) =
-            (self.standby_attitude.take(), self.attitude, self.model)
-        else {
-            return;
-        };
-        let [pitch, roll] = model.input_from_attitude(before, now);
-        let thrust = self
-            .controller
-            .disturbance()
-            .map_or(model.gravity(), |d| d.hover_thrust);
-        self.controller
-            .correct_last_input(&Vector3::new(pitch, roll, thrust));
-    }
-
-    /// The autopilot's HEARTBEAT mode (family per `link.autopilot`): the
-    /// supervisor learns whether our commands are applied; a change is
-    /// logged and said once.
-    fn apply_mode(&mut self, mut mode: AutopilotMode) {
-        mode.family = match self.config.link.autopilot {
-            AutopilotKind::Auto => mode.family,
-            AutopilotKind::Px4 => AutopilotFamily::Px4,
-            AutopilotKind::Ardupilot => AutopilotFamily::ArduPilot,
-        };
-        self.supervisor.on_mode(mode.applies_commands());
-        if self.mode != Some(mode) {
-            info!(mode = %mode, applies = mode.applies_commands(), "autopilot mode");
-            let text = format!("dflat: autopilot {mode}");
-            self.text(MavSeverity::MAV_SEVERITY_INFO, &text);
-            self.mode = Some(mode);
-        }
-    }
-
-    /// The autopilot's mode as last reported.
-    pub fn autopilot_mode(&self) -> Option<AutopilotMode> {
-        self.mode
-    }
-
     /// Applies one inbound fact (pose clock, jump check, supervisor).
     pub fn apply(&mut self, event: Event) {
         match event {
@@ -889,34 +792,6 @@ impl ControlCore {
             // The jumped pose is the newest one now.
             self.pose = Some(pose);
             self.re_anchor(arrival, &pose);
-        }
-    }
-
-    /// A pose captured (by the mapped source clock) more than
-    /// `safety.pose_max_latency_ms` before its arrival, for
-    /// [`POSE_LATENCY_PERSISTENCE`] on end: the source clock runs slow or
-    /// ever later than ours. From then on poses are stamped with their
-    /// arrival time (said, logged, counted).
-    fn check_pose_clock(&mut self, arrival: f64, capture: f64) {
-        let late = arrival - capture > self.config.safety.pose_max_latency_ms / 1000.0;
-        if !late {
-            self.pose_late_since = None;
-            return;
-        }
-        let since = *self.pose_late_since.get_or_insert(arrival);
-        if arrival - since >= POSE_LATENCY_PERSISTENCE {
-            self.pose_time_arrival = true;
-            self.counts.guards.pose_clock_faults += 1;
-            error!(
-                lag_s = arrival - capture,
-                "pose source clock runs slow or ever later: poses stamped with their arrival time"
-            );
-            self.text(
-                MavSeverity::MAV_SEVERITY_WARNING,
-                "dflat: pose clock lags, using arrival time",
-            );
-            // The samples held were stamped by the bad clock.
-            self.reset_controller();
         }
     }
 

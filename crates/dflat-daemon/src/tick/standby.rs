@@ -1,0 +1,142 @@
+//! The parts of the tick that decide whether commands are applied and
+//! whether the daemon can fly at all: standby's input correction, the
+//! autopilot's mode, letting go when the controller cannot fly (and the
+//! trial solves that end it), and the pose clock's sanity check.
+
+use dflat_control::Measurement;
+use dflat_link::dialect::MavSeverity;
+use dflat_link::{AutopilotFamily, AutopilotMode};
+use nalgebra::Vector3;
+use tracing::{error, info};
+
+use super::{ControlCore, POSE_LATENCY_PERSISTENCE, TRIAL_TICKS};
+use crate::config::AutopilotKind;
+use crate::supervisor::Cause;
+
+impl ControlCore {
+    /// The controller cannot fly: failsafe until it solves again
+    /// ([`ControlCore::trial`]); the cause is said (STATUSTEXT) and counted.
+    pub(super) fn let_go(&mut self, t: f64) {
+        self.level_hover_since = None;
+        if let Some(tr) = self
+            .supervisor
+            .force_failsafe(t, Cause::ControlFailed, f64::INFINITY)
+        {
+            self.counts.guards.control_failsafes += 1;
+            self.control_failsafe = true;
+            self.trial_streak = 0;
+            self.fallback_kind = None;
+            error!(
+                level_hover_ms = self.config.safety.level_hover_max_ms,
+                "controller cannot fly: stream stopped, the autopilot's failsafe takes over"
+            );
+            self.reset_controller();
+            self.last_used_arrival = None;
+            self.announce(tr);
+        }
+    }
+
+    /// In a control failsafe: one solve on the newest pose, not sent
+    /// (the controller is reset afterwards, so nothing unsent stays in its
+    /// window). After [`TRIAL_TICKS`] good ones in a row the latch is
+    /// lifted and the stream resumes at the next tick.
+    pub(super) fn trial(&mut self, t: f64) {
+        let (Some(pose), Some(reference)) = (self.pose, self.reference.as_ref()) else {
+            return;
+        };
+        let mut reference = reference.clone();
+        let measurement = Measurement {
+            t: if self.multi_rate { t } else { pose.capture },
+            position: Vector3::from(pose.position),
+            yaw: self.yaw_of(pose.yaw, self.attitude_yaw),
+        };
+        let controller = &mut self.controller;
+        let ok = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            controller.update(&measurement, &mut reference).is_ok()
+        }))
+        .unwrap_or(false);
+        self.reset_controller();
+        self.trial_streak = if ok { self.trial_streak + 1 } else { 0 };
+        if self.trial_streak >= TRIAL_TICKS {
+            self.control_failsafe = false;
+            self.trial_streak = 0;
+            self.supervisor.release_latch();
+            info!("controller solves again: the stream may resume");
+            self.text(
+                MavSeverity::MAV_SEVERITY_NOTICE,
+                "dflat: controller flies again",
+            );
+        }
+    }
+
+    /// The input that explains the attitude change since the previous
+    /// (standby) tick replaces the one recorded then
+    /// ([`Controller::correct_last_input`]). Thrust: the hover thrust
+    /// (the autopilot's position mode holds altitude), with the disturbance
+    /// estimate's thrust scale when there is one.
+    pub(super) fn correct_standby_input(&mut self) {
+        let (Some(before), Some(now), Some(model)) =
+            (self.standby_attitude.take(), self.attitude, self.model)
+        else {
+            return;
+        };
+        let [pitch, roll] = model.input_from_attitude(before, now);
+        let thrust = self
+            .controller
+            .disturbance()
+            .map_or(model.gravity(), |d| d.hover_thrust);
+        self.controller
+            .correct_last_input(&Vector3::new(pitch, roll, thrust));
+    }
+
+    /// The autopilot's HEARTBEAT mode (family per `link.autopilot`): the
+    /// supervisor learns whether our commands are applied; a change is
+    /// logged and said once.
+    pub(super) fn apply_mode(&mut self, mut mode: AutopilotMode) {
+        mode.family = match self.config.link.autopilot {
+            AutopilotKind::Auto => mode.family,
+            AutopilotKind::Px4 => AutopilotFamily::Px4,
+            AutopilotKind::Ardupilot => AutopilotFamily::ArduPilot,
+        };
+        self.supervisor.on_mode(mode.applies_commands());
+        if self.mode != Some(mode) {
+            info!(mode = %mode, applies = mode.applies_commands(), "autopilot mode");
+            let text = format!("dflat: autopilot {mode}");
+            self.text(MavSeverity::MAV_SEVERITY_INFO, &text);
+            self.mode = Some(mode);
+        }
+    }
+
+    /// The autopilot's mode as last reported.
+    pub fn autopilot_mode(&self) -> Option<AutopilotMode> {
+        self.mode
+    }
+
+    /// A pose captured (by the mapped source clock) more than
+    /// `safety.pose_max_latency_ms` before its arrival, for
+    /// [`POSE_LATENCY_PERSISTENCE`] on end: the source clock runs slow or
+    /// ever later than ours. From then on poses are stamped with their
+    /// arrival time (said, logged, counted).
+    pub(super) fn check_pose_clock(&mut self, arrival: f64, capture: f64) {
+        let late = arrival - capture > self.config.safety.pose_max_latency_ms / 1000.0;
+        if !late {
+            self.pose_late_since = None;
+            return;
+        }
+        let since = *self.pose_late_since.get_or_insert(arrival);
+        if arrival - since >= POSE_LATENCY_PERSISTENCE {
+            self.pose_time_arrival = true;
+            self.counts.guards.pose_clock_faults += 1;
+            error!(
+                lag_s = arrival - capture,
+                "pose source clock runs slow or ever later: poses stamped with their arrival time"
+            );
+            self.text(
+                MavSeverity::MAV_SEVERITY_WARNING,
+                "dflat: pose clock lags, using arrival time",
+            );
+            // The samples held were stamped by the bad clock.
+            self.reset_controller();
+        }
+    }
+}
