@@ -442,7 +442,11 @@ impl ControlCore {
         // stop the stream so the autopilot's own failsafe takes over.
         if self.fallback_kind == Some(FallbackKind::LevelHover) {
             let since = *self.level_hover_since.get_or_insert(t);
-            if t - since >= self.config.safety.level_hover_max_ms / 1000.0 {
+            // Each tick stands for one period (half a period of margin
+            // against wake-up jitter): at most max / period ticks are sent.
+            if t - since + 0.5 * self.period >= self.config.safety.level_hover_max_ms / 1000.0 {
+                // This tick's level hover is not sent: not counted either.
+                self.counts.guards.level_hover = self.counts.guards.level_hover.saturating_sub(1);
                 self.let_go(t);
                 row.guard = Some("let_go");
                 return (None, solve_us);

@@ -1,0 +1,143 @@
+//! When the daemon cannot fly, it lets go (issue 13): a controller that
+//! fails on every tick from some point on. The daemon flies its plan
+//! fallback, then level hover for at most `safety.level_hover_max_ms`,
+//! then stops the stream — the SITL's own position hold takes over — and
+//! says why (STATUSTEXT). No level hover beyond the configured period.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+use dflat::demo::{DemoOptions, demo_config};
+use dflat_control::{ControlError, Controller, Measurement, ReferenceSource, TickOutput};
+use dflat_daemon::config::MissionStart;
+use dflat_daemon::control::build_controller;
+use dflat_daemon::supervisor::FlightState;
+use dflat_link::MavMessage;
+use dflat_sim::sitl::{self, SitlEngage, SitlMode, SitlOptions};
+
+/// The configured level-hover period \[ms\] (shorter than the default 1 s
+/// to keep the test short).
+const LEVEL_HOVER_MAX_MS: f64 = 600.0;
+
+/// Delegates until `broken` is set, then fails every update.
+struct Breakable {
+    inner: Box<dyn Controller>,
+    broken: Arc<AtomicBool>,
+}
+
+impl Controller for Breakable {
+    fn name(&self) -> &'static str {
+        "breakable df-mpc"
+    }
+    fn multi_rate(&self) -> bool {
+        self.inner.multi_rate()
+    }
+    fn observe(&mut self, sample: &Measurement) {
+        self.inner.observe(sample);
+    }
+    fn update(
+        &mut self,
+        measurement: &Measurement,
+        reference: &mut dyn ReferenceSource,
+    ) -> Result<TickOutput, ControlError> {
+        if self.broken.load(Ordering::Relaxed) {
+            return Err(ControlError::Solver("injected: cannot fly".into()));
+        }
+        self.inner.update(measurement, reference)
+    }
+    fn plan_fallback(&mut self, m: &Measurement, max_steps: usize) -> Option<TickOutput> {
+        self.inner.plan_fallback(m, max_steps)
+    }
+    fn correct_last_input(&mut self, applied: &nalgebra::Vector3<f64>) {
+        self.inner.correct_last_input(applied);
+    }
+    fn reset(&mut self) {
+        self.inner.reset();
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_controller_that_fails_every_tick_stops_the_stream_in_time() {
+    let out = std::env::temp_dir().join(format!("dflat-let-go-{}", std::process::id()));
+    let (mut cfg, mut plant) = demo_config(&DemoOptions {
+        speed: 5.0,
+        out,
+        seconds: None,
+    })
+    .unwrap();
+    cfg.logging.dir = String::new();
+    cfg.mission.start = MissionStart::Hold;
+    cfg.safety.level_hover_max_ms = LEVEL_HOVER_MAX_MS;
+    plant.sitl.engage = SitlEngage::Auto;
+    let (tx, taps) = mpsc::channel();
+    let sitl = sitl::spawn(
+        &plant,
+        SitlOptions {
+            record_trace: true,
+            tap: Some(tx),
+            ..SitlOptions::default()
+        },
+    )
+    .unwrap();
+    let broken = Arc::new(AtomicBool::new(false));
+    let controller = Breakable {
+        inner: build_controller(&cfg).unwrap(),
+        broken: broken.clone(),
+    };
+    let link = format!("udpout:127.0.0.1:{}", sitl.local_addr().port());
+    let daemon = dflat_daemon::spawn_with_controller(cfg.clone(), Some(link), Box::new(controller))
+        .await
+        .unwrap();
+    let until = Instant::now() + Duration::from_secs(5);
+    while daemon.state() != Some(FlightState::Holding) {
+        assert!(Instant::now() < until, "not engaged: {:?}", daemon.state());
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    tokio::time::sleep(Duration::from_secs(1)).await;
+    broken.store(true, Ordering::Relaxed);
+    let broke_at = Instant::now();
+    tokio::time::sleep(Duration::from_secs(3)).await;
+    let state = daemon.state();
+    let mode = sitl.mode();
+    daemon.shutdown();
+    let summary = daemon.join().await.unwrap();
+    sitl.stop().unwrap();
+
+    assert_eq!(state, Some(FlightState::Failsafe), "{summary}");
+    assert_eq!(mode, SitlMode::Hold, "the autopilot's own hold took over");
+    let g = summary.guards;
+    assert_eq!(g.control_failsafes, 1, "{g:?}");
+    let level_ticks_max = (LEVEL_HOVER_MAX_MS / 20.0).round() as u64;
+    assert!(
+        g.level_hover <= level_ticks_max,
+        "{} level-hover ticks",
+        g.level_hover
+    );
+    assert!(g.level_hover > 0, "{g:?}");
+    // The last command the SITL received, and the cause said.
+    let frames: Vec<_> = taps.try_iter().collect();
+    let last_command = frames
+        .iter()
+        .filter(|f| matches!(f.message, MavMessage::SET_ATTITUDE_TARGET(_)))
+        .map(|f| f.at)
+        .max()
+        .unwrap();
+    let streamed_after = last_command.duration_since(broke_at).as_secs_f64();
+    let plan = f64::from(cfg.safety.hold_last_ticks) * 0.02;
+    eprintln!(
+        "stream stopped {streamed_after:.2} s after the controller broke (plan {plan:.2} s + level hover ≤ {:.2} s), {} level-hover ticks",
+        LEVEL_HOVER_MAX_MS / 1000.0,
+        g.level_hover
+    );
+    assert!(
+        streamed_after <= plan + LEVEL_HOVER_MAX_MS / 1000.0 + 0.1,
+        "streamed {streamed_after:.2} s"
+    );
+    let said = frames.iter().any(|f| match &f.message {
+        MavMessage::STATUSTEXT(d) => d.text.to_str().unwrap_or("").contains("control failed"),
+        _ => false,
+    });
+    assert!(said, "no STATUSTEXT naming the cause");
+}
