@@ -59,9 +59,14 @@ enum Op {
         steps: i8,
     },
     /// A pose sample between ticks (multi-rate).
-    Sample { position: [Coord; 3], age_ms: u8 },
+    Sample {
+        position: [Coord; 3],
+        age_ms: u8,
+    },
     /// A tick whose update fails (NaN reference), answered by the plan.
-    Fail { max_steps: u8 },
+    Fail {
+        max_steps: u8,
+    },
     /// A new setpoint.
     Target([Coord; 3]),
     Reset,
@@ -250,7 +255,10 @@ fuzz_target!(|input: Input| {
                     position = Vector3::new(0.0, 0.0, -5.0);
                 }
             }
-            Op::Sample { position: p, age_ms } => {
+            Op::Sample {
+                position: p,
+                age_ms,
+            } => {
                 let mut s = position;
                 for (axis, c) in p.iter().enumerate() {
                     s[axis] = c.apply(s[axis]);

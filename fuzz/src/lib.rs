@@ -123,7 +123,9 @@ impl Harness {
                 let c = sent.command;
                 assert!(self.core.state().streams(), "a command outside streaming");
                 assert!(
-                    [c.roll, c.pitch, c.yaw, c.thrust].iter().all(|v| v.is_finite()),
+                    [c.roll, c.pitch, c.yaw, c.thrust]
+                        .iter()
+                        .all(|v| v.is_finite()),
                     "{c:?}"
                 );
                 assert!(
@@ -285,6 +287,9 @@ pub fn check_inbound(inbound: &Inbound) {
             assert!(a.body_rates.iter().all(|r| r.is_none_or(finite)), "{a:?}");
             assert!(a.thrust.is_none_or(finite), "{a:?}");
         }
+        Inbound::ParamValue(p) => {
+            assert!(p.value.is_finite() && p.name.len() <= 16, "{p:?}");
+        }
         Inbound::Heartbeat(_) | Inbound::Other(_) => {}
     }
 }
@@ -360,7 +365,10 @@ mod tests {
         ] {
             let h = run(seed);
             assert_eq!(h.core.state(), FlightState::Tracking);
-            assert_eq!(h.core.supervisor().goal(), Goal::Setpoint([5.0, 1.0, -10.0]));
+            assert_eq!(
+                h.core.supervisor().goal(),
+                Goal::Setpoint([5.0, 1.0, -10.0])
+            );
         }
     }
 }

@@ -23,6 +23,7 @@
 //! * [`records`] — per-flight CSV and file names.
 //! * [`summary`] — measurements and the shutdown summary.
 
+pub mod autopilot_params;
 pub mod clock;
 pub mod commands;
 pub mod config;

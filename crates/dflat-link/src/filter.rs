@@ -103,6 +103,7 @@ impl SourceFilter {
         let trusted = match msg {
             MavMessage::HEARTBEAT(_)
             | MavMessage::ATTITUDE(_)
+            | MavMessage::PARAM_VALUE(_)
             | MavMessage::LOCAL_POSITION_NED(_) => self.sent_by_autopilot(header),
             MavMessage::ODOMETRY(_) | MavMessage::VISION_POSITION_ESTIMATE(_) => {
                 self.sent_by_autopilot(header)

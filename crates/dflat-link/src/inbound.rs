@@ -25,8 +25,25 @@ pub enum Inbound {
     PositionSetpoint(PositionSetpoint),
     /// SET_ATTITUDE_TARGET (82): the command the SITL autopilot receives.
     AttitudeTarget(AttitudeTarget),
+    /// PARAM_VALUE (22): one of the autopilot's parameters.
+    ParamValue(ParamValue),
     /// Any other message of the common dialect, by message id.
     Other(u32),
+}
+
+/// PARAM_VALUE (22) contents: a parameter's name and value (as a float;
+/// PX4 and ArduPilot send the parameters dflat reads as REAL32 or as
+/// float-cast integers).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ParamValue {
+    /// The parameter's name (at most 16 characters).
+    pub name: String,
+    /// Its value (finite).
+    pub value: f64,
+    /// Its index, and the number of parameters the sender has.
+    pub index: u16,
+    /// Number of parameters the sender has.
+    pub count: u16,
 }
 
 /// HEARTBEAT (0) contents.
@@ -163,6 +180,12 @@ pub fn decode(header: &MavHeader, msg: &MavMessage) -> Result<Inbound, LinkError
             Inbound::PositionSetpoint(decode_setpoint(d)?)
         }
         MavMessage::SET_ATTITUDE_TARGET(d) => Inbound::AttitudeTarget(decode_attitude_target(d)?),
+        MavMessage::PARAM_VALUE(d) => Inbound::ParamValue(ParamValue {
+            name: d.param_id.to_str().unwrap_or("").to_owned(),
+            value: finite("PARAM_VALUE", "param_value", d.param_value)?,
+            index: d.param_index,
+            count: d.param_count,
+        }),
         other => Inbound::Other(mavlink::Message::message_id(other)),
     })
 }

@@ -56,15 +56,16 @@ pub use frame::{
     parse_frame, serialize_v2, write_v2,
 };
 pub use inbound::{
-    Attitude, AttitudeTarget, Heartbeat, Inbound, Pose, PoseSource, PositionSetpoint, decode, ids,
+    Attitude, AttitudeTarget, Heartbeat, Inbound, ParamValue, Pose, PoseSource, PositionSetpoint,
+    decode, ids,
 };
 pub use math::{ThrustMapping, euler_from_quaternion, quaternion_from_euler};
 pub use modes::{AutopilotFamily, AutopilotMode};
 pub use outbound::{
     ATTITUDE_TARGET_MASK, AttitudeCommand, DaemonStatus, HEARTBEAT_MAVLINK_VERSION, Outbound,
     STATUSTEXT_MAX_LEN, Target, attitude, heartbeat_autopilot, heartbeat_onboard,
-    local_position_ned, odometry, set_attitude_target, statustext, truncate_text,
-    vision_position_estimate,
+    local_position_ned, odometry, param_request_read, set_attitude_target, statustext,
+    truncate_text, vision_position_estimate,
 };
 pub use signing::{
     KeyFileError, KeyFormatError, ONE_MINUTE, SIGNING_EPOCH_UNIX_S, SignatureCheck, Signing,

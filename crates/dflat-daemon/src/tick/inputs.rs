@@ -44,6 +44,15 @@ pub enum Event {
         /// field (`link.autopilot` may override it: [`crate::tick`]).
         mode: AutopilotMode,
     },
+    /// PARAM_VALUE from the autopilot.
+    Param {
+        /// Arrival \[s\].
+        arrival: f64,
+        /// The parameter's name.
+        name: ParamName,
+        /// Its value (finite).
+        value: f64,
+    },
     /// An accepted position setpoint.
     Setpoint {
         /// Arrival \[s\].
@@ -51,6 +60,35 @@ pub enum Event {
         /// Position, local NED \[m\].
         position: [f64; 3],
     },
+}
+
+/// A MAVLink parameter name (at most 16 bytes), kept inline so that
+/// [`Event`] stays `Copy`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ParamName {
+    bytes: [u8; 16],
+    len: u8,
+}
+
+impl ParamName {
+    /// The name, cut to 16 bytes (at a character boundary).
+    pub fn new(name: &str) -> Self {
+        let mut end = name.len().min(16);
+        while !name.is_char_boundary(end) {
+            end -= 1;
+        }
+        let mut bytes = [0u8; 16];
+        bytes[..end].copy_from_slice(&name.as_bytes()[..end]);
+        Self {
+            bytes,
+            len: end as u8,
+        }
+    }
+
+    /// The name.
+    pub fn as_str(&self) -> &str {
+        std::str::from_utf8(&self.bytes[..usize::from(self.len)]).unwrap_or("")
+    }
 }
 
 /// The event a decoded, accepted message is for the control thread (`None`:
@@ -77,6 +115,11 @@ pub fn event_from(inbound: &Inbound, pose_source: PoseSource, arrival: f64) -> O
                 custom_mode: h.custom_mode,
                 armed: h.armed,
             },
+        }),
+        Inbound::ParamValue(p) => Some(Event::Param {
+            arrival,
+            name: ParamName::new(&p.name),
+            value: p.value,
         }),
         Inbound::PositionSetpoint(s) => Some(Event::Setpoint {
             arrival,

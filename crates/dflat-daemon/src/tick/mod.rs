@@ -29,6 +29,7 @@ use dflat_link::{
 use nalgebra::Vector3;
 use tracing::{debug, error, info, warn};
 
+use crate::autopilot_params::AutopilotParams;
 use crate::clock::PoseClock;
 use crate::config::{Config, PoseSourceKind, PoseTime};
 use crate::control::{control_model, reference_for};
@@ -43,7 +44,7 @@ use crate::supervisor::{Cause, FlightState, Goal, SetpointOutcome, Supervisor, T
 mod inputs;
 mod standby;
 pub use inputs::{
-    Event, brake_acceleration, event_from, pose_source, source_filter, supervisor_config,
+    Event, ParamName, brake_acceleration, event_from, pose_source, source_filter, supervisor_config,
 };
 
 /// Smallest interval between two "setpoint refused" STATUSTEXTs \[s\].
@@ -158,6 +159,11 @@ pub struct ControlCore {
     mode: Option<AutopilotMode>,
     /// The vehicle's motion from the poses (engagement's stop point).
     motion: MotionEstimator,
+    /// The autopilot's own hover thrust and tilt limit, read at start-up.
+    params: AutopilotParams,
+    /// Engagement is refused (the autopilot's tilt limit is below ours);
+    /// said once.
+    tilt_refusal_said: bool,
     /// Since when level hover has been streamed \[s\].
     level_hover_since: Option<f64>,
     /// In a control failsafe: the controller is tried each tick.
@@ -236,6 +242,8 @@ impl ControlCore {
             standby_attitude: None,
             mode: None,
             motion: MotionEstimator::new(),
+            params: AutopilotParams::new(),
+            tilt_refusal_said: false,
             level_hover_since: None,
             control_failsafe: false,
             trial_streak: 0,
@@ -289,6 +297,12 @@ impl ControlCore {
         // 1. Inbound facts up to now.
         for event in events {
             self.apply(event);
+        }
+        // Parameter requests due (sent with the texts).
+        for name in self.params.due(t) {
+            debug!(name, "requesting the autopilot's parameter");
+            self.pending_texts
+                .push(dflat_link::param_request_read(self.target, name));
         }
         // 2. Decide.
         self.supervisor.set_motion(self.motion.estimate());
@@ -695,8 +709,9 @@ impl ControlCore {
             }
             Event::Heartbeat { arrival, mode } => {
                 self.supervisor.on_heartbeat(arrival);
-                self.apply_mode(mode);
+                self.apply_mode(mode, arrival);
             }
+            Event::Param { name, value, .. } => self.apply_param(name.as_str(), value),
             Event::Setpoint { arrival, position } => {
                 let t = arrival;
                 match self.supervisor.on_setpoint(t, position) {

@@ -10,7 +10,8 @@ use nalgebra::Vector3;
 use tracing::{error, info};
 
 use super::{ControlCore, POSE_LATENCY_PERSISTENCE, TRIAL_TICKS};
-use crate::config::AutopilotKind;
+use crate::autopilot_params::ParamKind;
+use crate::config::{AutopilotKind, ThrustMode};
 use crate::supervisor::Cause;
 
 impl ControlCore {
@@ -92,18 +93,82 @@ impl ControlCore {
     /// The autopilot's HEARTBEAT mode (family per `link.autopilot`): the
     /// supervisor learns whether our commands are applied; a change is
     /// logged and said once.
-    pub(super) fn apply_mode(&mut self, mut mode: AutopilotMode) {
+    pub(super) fn apply_mode(&mut self, mut mode: AutopilotMode, arrival: f64) {
         mode.family = match self.config.link.autopilot {
             AutopilotKind::Auto => mode.family,
             AutopilotKind::Px4 => AutopilotFamily::Px4,
             AutopilotKind::Ardupilot => AutopilotFamily::ArduPilot,
         };
-        self.supervisor.on_mode(mode.applies_commands());
+        if mode.family != AutopilotFamily::Other {
+            self.params.start(mode.family, arrival);
+        }
+        let refused = self.tilt_refused();
+        if refused && mode.applies_commands() && !self.tilt_refusal_said {
+            self.tilt_refusal_said = true;
+            let limit = self.params.tilt_limit().map_or(0.0, |p| p.value);
+            let name = self.params.tilt_limit().map_or("", |p| p.spec.name);
+            error!(
+                max_tilt_deg = self.config.vehicle.max_tilt_deg,
+                autopilot_limit_deg = limit,
+                "not engaging: vehicle.max_tilt_deg exceeds the autopilot's {name}"
+            );
+            let text = format!(
+                "dflat: not engaging, tilt {:.0} > {name} {limit:.0}",
+                self.config.vehicle.max_tilt_deg
+            );
+            self.text(MavSeverity::MAV_SEVERITY_CRITICAL, &text);
+        }
+        self.supervisor.on_mode(mode.applies_commands() && !refused);
         if self.mode != Some(mode) {
             info!(mode = %mode, applies = mode.applies_commands(), "autopilot mode");
             let text = format!("dflat: autopilot {mode}");
             self.text(MavSeverity::MAV_SEVERITY_INFO, &text);
             self.mode = Some(mode);
+        }
+    }
+
+    /// The autopilot's tilt limit is known and below `vehicle.max_tilt_deg`:
+    /// it would cut commands the window records as sent.
+    fn tilt_refused(&self) -> bool {
+        self.params
+            .tilt_limit()
+            .is_some_and(|p| self.config.vehicle.max_tilt_deg > p.value + 1e-6)
+    }
+
+    /// A PARAM_VALUE from the autopilot: a value dflat reads is logged next
+    /// to the configuration's, and said when they differ.
+    pub(super) fn apply_param(&mut self, name: &str, value: f64) {
+        let Some(known) = self.params.on_value(name, value) else {
+            return;
+        };
+        let v = &self.config.vehicle;
+        match known.spec.kind {
+            ParamKind::HoverThrust => {
+                info!(
+                    param = name,
+                    autopilot = known.value,
+                    config = v.hover_thrust,
+                    "hover thrust: the configuration's vehicle.hover_thrust is flown; \
+                     the disturbance estimator takes up a difference"
+                );
+                if v.thrust_mode == ThrustMode::Normalized
+                    && (known.value - v.hover_thrust).abs() > 0.05
+                {
+                    let text = format!(
+                        "dflat: {name} {:.2}, config hover {:.2}",
+                        known.value, v.hover_thrust
+                    );
+                    self.text(MavSeverity::MAV_SEVERITY_WARNING, &text);
+                }
+            }
+            ParamKind::TiltLimitDeg => {
+                info!(
+                    param = name,
+                    autopilot_deg = known.value,
+                    config_deg = v.max_tilt_deg,
+                    "tilt limit"
+                );
+            }
         }
     }
 

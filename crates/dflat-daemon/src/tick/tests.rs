@@ -370,3 +370,62 @@ fn a_pose_clock_running_slow_is_replaced_by_arrival_times() {
     let age = outs.last().unwrap().row.pose_age_ms.unwrap();
     assert!(age < 5.0, "{age} ms");
 }
+
+#[test]
+fn reads_the_autopilots_parameters_and_refuses_to_engage_above_its_tilt_limit() {
+    let (mut core, _) = core(vec![Script::Command(0.0, 0.0)]);
+    let step = |core: &mut ControlCore, k: u64, extra: Vec<Event>| {
+        let t = k as f64 * DT;
+        let mut events = vec![
+            Event::Heartbeat {
+                arrival: t - 0.001,
+                mode: OFFBOARD,
+            },
+            Event::Pose {
+                arrival: t - 0.001,
+                source_time: None,
+                position: [0.0, 0.0, -10.0],
+                yaw: Some(0.0),
+                reset_counter: None,
+            },
+        ];
+        events.extend(extra);
+        let time = TickTime {
+            tick: k,
+            t,
+            scheduled: t,
+            jitter_us: 0,
+        };
+        core.step(&time, events, &mut || 0.0)
+    };
+    // The PX4 family is known: both parameters are requested.
+    let out = step(&mut core, 0, vec![]);
+    let requested: Vec<String> = out
+        .texts
+        .iter()
+        .filter_map(|m| match m {
+            MavMessage::PARAM_REQUEST_READ(d) => Some(d.param_id.to_str().unwrap().to_owned()),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(requested, ["MPC_THR_HOVER", "MPC_TILTMAX_AIR"]);
+    // The autopilot allows 30°, the configuration asks 35°: not engaged.
+    let param = |name: &str, value: f64| Event::Param {
+        arrival: 0.0,
+        name: ParamName::new(name),
+        value,
+    };
+    let mut out = step(&mut core, 1, vec![param("MPC_TILTMAX_AIR", 30.0)]);
+    for k in 2..10 {
+        out.texts.extend(step(&mut core, k, vec![]).texts);
+    }
+    assert_eq!(core.state(), FlightState::Standby);
+    let said = out.texts.iter().any(|m| {
+        matches!(m, MavMessage::STATUSTEXT(d) if d.text.to_str().unwrap_or("").contains("not engaging, tilt 35 > MPC_TILTMAX_AIR 30"))
+    });
+    assert!(said);
+    // Allowed 45°: engaged at the next heartbeat.
+    step(&mut core, 10, vec![param("MPC_TILTMAX_AIR", 45.0)]);
+    step(&mut core, 11, vec![]);
+    assert!(core.state().engaged(), "{:?}", core.state());
+}

@@ -128,6 +128,15 @@ fn shift(e: Event, by: f64) -> Event {
             arrival: arrival + by,
             position,
         },
+        Event::Param {
+            arrival,
+            name,
+            value,
+        } => Event::Param {
+            arrival: arrival + by,
+            name,
+            value,
+        },
         Event::Attitude {
             arrival,
             roll,
@@ -231,6 +240,7 @@ fn run_pass(
                 Event::Pose { arrival, .. }
                 | Event::Heartbeat { arrival, .. }
                 | Event::Attitude { arrival, .. }
+                | Event::Param { arrival, .. }
                 | Event::Setpoint { arrival, .. } => *arrival,
             };
             if arrival > w {
