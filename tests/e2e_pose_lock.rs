@@ -23,7 +23,9 @@ fn commands(tap: &Receiver<TapFrame>, into: &mut Vec<Instant>) {
 
 /// Commands the SITL received in `[from, from + span)`.
 fn count(all: &[Instant], from: Instant, span: Duration) -> usize {
-    all.iter().filter(|t| **t >= from && **t < from + span).count()
+    all.iter()
+        .filter(|t| **t >= from && **t < from + span)
+        .count()
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
