@@ -13,8 +13,8 @@
 //! period) is credited to that command although the tick used the previous
 //! one: the clock's latency is then slightly underestimated.
 //!
-//! The pose stream is VISION_POSITION_ESTIMATE when `sitl.vision_rate_hz`
-//! > 0, else LOCAL_POSITION_NED. The one-shot faults act on
+//! The pose stream is VISION_POSITION_ESTIMATE when vision is on
+//! (`sitl.vision_rate_hz` above 0), else LOCAL_POSITION_NED. The one-shot faults act on
 //! LOCAL_POSITION_NED (a delayed pose is sent at the first plant step at or
 //! after its due time: to the plant step's resolution, 5 ms at 200 Hz).
 
