@@ -25,7 +25,7 @@ use super::{ControlReport, Outgoing, ST_SHUTDOWN, Stop, encode_state, notify_sta
 use crate::guard::WatchdogCadence;
 use crate::realtime::{RealtimeApplied, RealtimeConfig, RealtimeError, apply_to_current_thread};
 use crate::records::CsvRecorder;
-use crate::schedule::TickPlanner;
+use crate::schedule::{TickCause, TickPlanner};
 use crate::summary::Histogram;
 use crate::tick::{ControlCore, Event, TickTime};
 
@@ -58,6 +58,20 @@ pub(super) struct ControlLoop {
     /// Where the outcome of applying them goes (the daemon's start waits).
     pub realtime_result:
         Option<tokio::sync::oneshot::Sender<Result<RealtimeApplied, RealtimeError>>>,
+}
+
+/// A pose tick's time is its pose's arrival plus this \[s\]: a margin
+/// for the µs-scale error of a replay's log-clock mapping.
+const BATCH_MARGIN: f64 = 20e-6;
+
+/// An event's arrival \[s\] since the epoch.
+fn arrival(e: &Event) -> f64 {
+    match e {
+        Event::Pose { arrival, .. }
+        | Event::Attitude { arrival, .. }
+        | Event::Heartbeat { arrival, .. }
+        | Event::Setpoint { arrival, .. } => *arrival,
+    }
 }
 
 impl ControlLoop {
@@ -162,13 +176,32 @@ impl ControlLoop {
                 debug!("expected pose late or lost: deadline fallback");
             }
             let lateness = Duration::from_secs_f64(slot.lateness);
+            // The tick's time: a pose tick's is its pose's arrival, and it
+            // takes the events up to it — exactly those queued before the
+            // pose (the receive task queues in arrival order), so the batch
+            // does not depend on how soon this thread woke and a replay
+            // from the logs finds the same one. Later ones (the ATTITUDE
+            // sent with the pose) wait for the next tick.
+            let t = match slot.cause {
+                TickCause::Pose => (slot.due + BATCH_MARGIN).min(self.secs(wake)),
+                TickCause::Deadline => self.secs(wake),
+            };
+            let taken = batch
+                .iter()
+                .position(|e| arrival(e) > t)
+                .unwrap_or(batch.len());
+            for e in &batch[taken..] {
+                if let Event::Pose { arrival, .. } = e {
+                    planner.on_pose(*arrival);
+                }
+            }
             let time = TickTime {
                 tick: slot.tick,
-                t: self.secs(wake),
+                t,
                 scheduled: slot.due,
                 jitter_us: u32::try_from(lateness.as_micros()).unwrap_or(u32::MAX),
             };
-            let step = self.core.step(&time, batch.drain(..), &mut stopwatch);
+            let step = self.core.step(&time, batch.drain(..taken), &mut stopwatch);
             for tr in &step.transitions {
                 self.state.store(encode_state(tr.to), Ordering::Relaxed);
                 notify_status(tr.to);
