@@ -37,6 +37,22 @@ impl RealtimeConfig {
     }
 }
 
+impl RealtimeConfig {
+    /// The settings for the daemon's link threads (the async runtime's
+    /// workers: receive, send, heartbeat): SCHED_FIFO one below the control
+    /// thread, no pinning, no memory locking of their own (`mlockall` is
+    /// process-wide). A pose-locked tick waits on the receive task and its
+    /// command on the send task: under load they need the priority too.
+    /// Nothing asked for: nothing.
+    pub fn link_threads(&self) -> RealtimeConfig {
+        RealtimeConfig {
+            fifo_priority: self.fifo_priority.saturating_sub(1),
+            cpus: Vec::new(),
+            lock_memory: false,
+        }
+    }
+}
+
 /// A real-time setting the system refused.
 #[derive(Debug, Clone, PartialEq, Eq, Error)]
 pub enum RealtimeError {
@@ -141,6 +157,21 @@ pub fn apply_to_current_thread(cfg: &RealtimeConfig) -> Result<RealtimeApplied, 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn link_threads_run_one_below_the_control_thread_unpinned() {
+        let cfg = RealtimeConfig {
+            fifo_priority: 80,
+            cpus: vec![1],
+            lock_memory: true,
+        };
+        let l = cfg.link_threads();
+        assert_eq!(
+            (l.fifo_priority, l.cpus.len(), l.lock_memory),
+            (79, 0, false)
+        );
+        assert!(!RealtimeConfig::default().link_threads().is_enabled());
+    }
 
     #[test]
     fn nothing_asked_nothing_done() {

@@ -303,6 +303,18 @@ pub struct FlightSummary {
     pub ticks: u64,
     /// Ticks skipped because the loop woke more than one period late.
     pub missed_ticks: u64,
+    /// `controller.tick`: "pose" or "clock".
+    pub tick_mode: String,
+    /// Ticks run the moment a pose arrived (pose-locked).
+    pub pose_ticks: u64,
+    /// Ticks run at their deadline (clock ticks, ticks no pose was expected
+    /// for, and the fallbacks).
+    pub deadline_ticks: u64,
+    /// Deadline ticks that waited for an expected pose in vain (late or
+    /// lost pose; the command stream went on).
+    pub fallback_ticks: u64,
+    /// The control thread's real-time settings in effect.
+    pub realtime: crate::realtime::RealtimeApplied,
     /// SET_ATTITUDE_TARGET messages handed to the link.
     pub commands: u64,
     /// Ticks on which the controller returned an error (nothing sent).
@@ -313,7 +325,8 @@ pub struct FlightSummary {
     pub jitter_us: Percentiles,
     /// Pose arrival → SET_ATTITUDE_TARGET written to the link \[µs\], for
     /// ticks whose pose arrived since the previous tick. Includes the wait
-    /// for the tick (up to one period: the loop runs on its own clock).
+    /// for the tick: the queue's hand-over with `controller.tick = "pose"`,
+    /// up to one period with `"clock"`.
     pub latency_us: Percentiles,
     /// Tick wake → SET_ATTITUDE_TARGET written to the link \[µs\]: the
     /// daemon's own share of the latency (solve, queue, socket).
@@ -405,6 +418,22 @@ impl fmt::Display for FlightSummary {
             "  duration      {:.1} s, {} ticks, {} missed, {} commands, {} control errors",
             self.duration_s, self.ticks, self.missed_ticks, self.commands, self.control_errors
         )?;
+        writeln!(
+            f,
+            "  tick = {:<7}{} on a pose, {} on the deadline ({} fallbacks for a late or lost pose)",
+            format!("{},", self.tick_mode),
+            self.pose_ticks,
+            self.deadline_ticks,
+            self.fallback_ticks
+        )?;
+        let rt = &self.realtime;
+        if rt.fifo_priority > 0 || !rt.cpus.is_empty() || rt.memory_locked {
+            writeln!(
+                f,
+                "  realtime      SCHED_FIFO {}, cpus {:?}, memory locked {}",
+                rt.fifo_priority, rt.cpus, rt.memory_locked
+            )?;
+        }
         writeln!(f, "  solve time    {}", self.solve_us)?;
         writeln!(f, "  tick jitter   {}", self.jitter_us)?;
         writeln!(f, "  pose→command  {}", self.latency_us)?;

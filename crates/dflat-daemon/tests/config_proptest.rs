@@ -93,6 +93,9 @@ const FIELDS: &[(&str, Kind, f64, f64, Set)] = &[
     ("controller.rate_hz", Kind::Float, 10.0, 200.0, |c, v| {
         c.controller.rate_hz = v
     }),
+    ("controller.pose_wait_ms", Kind::Float, 0.0, 10.0, |c, v| {
+        c.controller.pose_wait_ms = v
+    }),
     ("controller.horizon", Kind::Usize, 10.0, 2000.0, |c, v| {
         c.controller.horizon = v as usize
     }),

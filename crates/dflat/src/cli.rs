@@ -143,9 +143,17 @@ fn run_daemon(args: DaemonArgs) -> Result<()> {
         "info",
         args.log_json || cfg.logging.format == LogFormat::Json,
     );
+    // `[realtime]`: the link threads one priority below the control thread
+    // (a refusal is reported by the control thread, which stops the start).
+    let link_rt = cfg.realtime.link_threads();
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .thread_name("dflat-io")
+        .on_thread_start(move || {
+            if link_rt.is_enabled() {
+                let _ = dflat_daemon::realtime::apply_to_current_thread(&link_rt);
+            }
+        })
         .enable_all()
         .build()
         .context("cannot start the async runtime")?;

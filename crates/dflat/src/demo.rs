@@ -234,10 +234,27 @@ impl DemoOutcome {
         let _ = writeln!(s, "  tick jitter                 {}", d.jitter_us);
         let _ = writeln!(
             s,
-            "  pose→command latency        {} (includes the wait for the tick)",
+            "  pose→command latency        {} (arrival → sent, includes the wait for the tick)",
             d.latency_us
         );
         let _ = writeln!(s, "  tick→command                {}", d.tick_to_send_us);
+        let pl = &self.sitl.pose_latency;
+        let _ = writeln!(
+            s,
+            "  at the SITL                 pose departure→command p50 {} µs, p99 {} µs, max {} µs ({} matched, {} without a new pose); command interval p50 {} µs, jitter p99 {} µs",
+            pl.p50_us,
+            pl.p99_us,
+            pl.max_us,
+            pl.matched,
+            pl.unmatched,
+            pl.interval_p50_us,
+            pl.jitter_p99_us
+        );
+        let _ = writeln!(
+            s,
+            "  ticks placed                tick = {}: {} on a pose, {} on the deadline ({} fallbacks)",
+            d.tick_mode, d.pose_ticks, d.deadline_ticks, d.fallback_ticks
+        );
         let _ = writeln!(
             s,
             "  ticks                       {} run, {} missed, {} commands, {} control errors",

@@ -160,6 +160,18 @@ async fn run_until(
         c.attitudes_sent,
         c.late_steps
     ));
+    let l = &c.pose_latency;
+    say(&format!(
+        "sitl pose→command: p50 {} µs, p99 {} µs, max {} µs ({} matched, {} without a new pose); command interval p50 {} µs, jitter p99 {} µs, max interval {} µs",
+        l.p50_us,
+        l.p99_us,
+        l.max_us,
+        l.matched,
+        l.unmatched,
+        l.interval_p50_us,
+        l.jitter_p99_us,
+        l.interval_max_us
+    ));
     Ok(report)
 }
 

@@ -54,6 +54,7 @@
 //! the SITL does not check frames from the GCS, the daemon does.
 //!
 //! In-process hooks ([`SitlHandle`]): the true state and an optional trace,
+//! one-shot pose faults and the pose → command latency ([`PoseLatency`]),
 //! counters, the current mode, a tap of every received frame, a pose pause
 //! switch (the pose stream stops, HEARTBEAT goes on) and a pose offset (an
 //! estimator jump as the daemon sees it). `dflat sitl` (the binary crate's shell) maps
@@ -85,8 +86,10 @@ use thiserror::Error;
 use dflat_link::transport::Endpoint;
 
 mod config;
+mod latency;
 pub mod pilot;
 pub use config::{SitlAutopilot, SitlConfig, SitlConfigError, SitlIds, SitlPlant, SitlSettings};
+pub use latency::PoseLatency;
 pub use pilot::{ModeMachine, PilotAction, PilotMode, SitlEngage};
 
 /// Gravity of the simulated world [m/s²].
@@ -278,6 +281,9 @@ pub struct SitlCounters {
     pub late_steps: u64,
     /// Failed socket sends.
     pub send_errors: u64,
+    /// Pose departure → command arrival and the command cadence
+    /// (see [`PoseLatency`]).
+    pub pose_latency: PoseLatency,
 }
 
 #[derive(Default)]
@@ -328,6 +334,7 @@ impl Counters {
             plant_steps: g(&self.plant_steps),
             late_steps: g(&self.late_steps),
             send_errors: g(&self.send_errors),
+            pose_latency: PoseLatency::default(),
         }
     }
 }
@@ -404,6 +411,8 @@ struct Shared {
     pilot_velocity: Mutex<Option<[f64; 3]>>,
     peers: Mutex<Peers>,
     counters: Counters,
+    /// Pose → command latency, one-shot pose faults.
+    latency: latency::LatencyProbe,
     /// Signing of outgoing frames (`None` = unsigned). Shared because any
     /// thread may send the SITL's own frames.
     signing: Option<Mutex<Signing>>,
@@ -595,6 +604,7 @@ pub fn spawn(cfg: &SitlSettings, options: SitlOptions) -> Result<SitlHandle, Sit
         pilot_velocity: Mutex::new(None),
         peers: Mutex::new(Peers::default()),
         counters: Counters::default(),
+        latency: latency::LatencyProbe::default(),
         signing: signing.clone().map(Mutex::new),
     });
 
@@ -730,7 +740,20 @@ impl SitlHandle {
 
     /// The counters now.
     pub fn counters(&self) -> SitlCounters {
-        self.shared.counters.snapshot()
+        let mut c = self.shared.counters.snapshot();
+        c.pose_latency = self.shared.latency.snapshot();
+        c
+    }
+
+    /// Drops the next `n` LOCAL_POSITION_NED (one-shot; ATTITUDE goes on).
+    pub fn drop_next_poses(&self, n: u32) {
+        self.shared.latency.drop_next(n);
+    }
+
+    /// Sends the next LOCAL_POSITION_NED `delay` late (one-shot; to the
+    /// plant step's resolution).
+    pub fn delay_next_pose(&self, delay: Duration) {
+        self.shared.latency.delay_next(delay);
     }
 
     /// The current mode.
@@ -986,6 +1009,7 @@ impl VehicleRx {
                     },
                 ));
                 bump(&self.shared.counters.commands_accepted);
+                self.shared.latency.command(at);
             }
             RxOutcome::Accepted(_) => {}
             RxOutcome::Ignored(_) if is_command => bump(&self.shared.counters.commands_ignored),
@@ -1187,6 +1211,11 @@ impl PlantLoop {
                 state = self.plant.true_state();
             }
             let t = steps as f64 * dt;
+            if let Some(msg) = self.shared.latency.due_delayed(Instant::now())
+                && self.send(&msg)
+            {
+                self.pose_sent();
+            }
             self.sensor.observe(t, &state);
             self.vision(t, &state);
 
@@ -1259,6 +1288,14 @@ impl PlantLoop {
         send_own(&self.shared, &self.socket, self.gcs_socket.as_deref(), msg)
     }
 
+    /// A LOCAL_POSITION_NED left (the latency's pose stream without vision).
+    fn pose_sent(&self) {
+        if self.vision.is_none() {
+            self.shared.latency.pose_sent(Instant::now());
+        }
+        bump(&self.shared.counters.positions_sent);
+    }
+
     /// The vision stand-in at SITL time `t`: capture when due, send what
     /// has waited its latency.
     fn vision(&mut self, t: f64, state: &PlantState) {
@@ -1299,6 +1336,7 @@ impl PlantLoop {
             if let Ok(msg) = dflat_link::vision_position_estimate(usec, p, euler, 0, None)
                 && self.send(&msg)
             {
+                self.shared.latency.pose_sent(Instant::now());
                 bump(&self.shared.counters.visions_sent);
             }
         }
@@ -1313,10 +1351,11 @@ impl PlantLoop {
         let offset = *lock(&self.shared.pose_offset);
         let p = measured.map_or(state.position, |m| m.position);
         let position = [p.x + offset[0], p.y + offset[1], p.z + offset[2]];
-        if let Ok(msg) = dflat_link::local_position_ned(time_boot_ms, position, sample.velocity)
-            && self.send(&msg)
-        {
-            bump(&self.shared.counters.positions_sent);
+        if let Ok(msg) = dflat_link::local_position_ned(time_boot_ms, position, sample.velocity) {
+            let fate = self.shared.latency.pose_fate(Instant::now(), &msg);
+            if fate == latency::PoseFate::Send && self.send(&msg) {
+                self.pose_sent();
+            }
         }
         let rates = state.body_rates.into();
         if let Ok(msg) = dflat_link::attitude(time_boot_ms, sample.euler, rates)

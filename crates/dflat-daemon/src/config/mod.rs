@@ -60,6 +60,8 @@ pub struct Config {
     pub safety: SafetyConfig,
     /// Logs and flight records.
     pub logging: LoggingConfig,
+    /// Real-time scheduling of the control thread (all off by default).
+    pub realtime: crate::realtime::RealtimeConfig,
     /// The SITL autopilot stand-in's `[sitl]` table, kept unparsed: the
     /// daemon does not read it (the SITL lives in `dflat-sim`, which parses
     /// and validates it for `dflat sitl`, `dflat demo` and `dflat
@@ -273,6 +275,17 @@ impl Default for VehicleConfig {
     }
 }
 
+/// What places the control ticks (`controller.tick`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum TickMode {
+    /// Ticks locked to the pose stream, the deadline as the fallback.
+    #[default]
+    Pose,
+    /// The loop's own clock at `rate_hz`.
+    Clock,
+}
+
 /// Which controller runs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "kebab-case")]
@@ -294,6 +307,16 @@ pub struct ControllerConfig {
     pub kind: ControllerKind,
     /// Control rate \[Hz\] (10–200); the model step is its inverse.
     pub rate_hz: f64,
+    /// What places the ticks: "pose" (default) — a tick runs the moment a
+    /// pose arrives, on a grid phase-locked to the pose stream, with the
+    /// period's deadline as the fallback — or "clock" (the loop's own
+    /// 50 Hz clock; a pose waits for the next tick). See
+    /// [`crate::schedule::TickPlanner`].
+    pub tick: TickMode,
+    /// How long past its nominal time a tick waits for an expected pose
+    /// before it runs on the previous one (the deadline fallback) \[ms\]
+    /// (0–10; a longer wait than half a period is cut to it). Default 3.
+    pub pose_wait_ms: f64,
     /// Horizon N \[ticks\] for df-mpc (10–2000).
     pub horizon: usize,
     /// Horizon N \[ticks\] for fmpc (10–2000).
@@ -370,6 +393,8 @@ impl Default for ControllerConfig {
         Self {
             kind: ControllerKind::DfMpc,
             rate_hz: 50.0,
+            tick: TickMode::Pose,
+            pose_wait_ms: 3.0,
             horizon: 100,
             fmpc_horizon: 75,
             q: [1.0, 1.0, 1.0],

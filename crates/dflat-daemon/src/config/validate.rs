@@ -74,6 +74,14 @@ impl Config {
         }
         let c = &self.controller;
         v.range("controller.rate_hz", c.rate_hz, 10.0, 200.0)?;
+        v.range("controller.pose_wait_ms", c.pose_wait_ms, 0.0, 10.0)?;
+        let rt = &self.realtime;
+        v.range(
+            "realtime.fifo_priority",
+            f64::from(rt.fifo_priority),
+            0.0,
+            99.0,
+        )?;
         v.range("controller.horizon", c.horizon as f64, 10.0, 2000.0)?;
         v.range(
             "controller.fmpc_horizon",

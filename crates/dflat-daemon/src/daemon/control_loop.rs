@@ -1,12 +1,21 @@
 //! The control thread: a thin real-time shell around [`ControlCore::step`].
 //!
-//! Per tick: sleep to the absolute deadline ([`Schedule`]), feed the
-//! systemd watchdog, drain the event queue, run the pure step, publish the
-//! state, hand the command and texts to the send task (`try_send`: the loop
-//! never waits on I/O) and the record to the CSV thread.
+//! The loop decides *when* to step, the core *what* to do: it waits on the
+//! event queue until the [`TickPlanner`] says a tick is due — the moment a
+//! fresh pose arrives (`controller.tick = "pose"`, phase-locked to the
+//! stream) or the tick's deadline (the fallback, or `"clock"`). Per tick:
+//! feed the systemd watchdog, hand the events since the previous tick to
+//! the pure step, publish the state, hand the command and texts to the send
+//! task (`try_send`: the loop never waits on I/O) and the record to the CSV
+//! thread.
+//!
+//! Before the first tick the thread applies `[realtime]` (SCHED_FIFO,
+//! affinity, locked memory) and reports the outcome to [`super::spawn`],
+//! which refuses to start when the system refused.
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU8, AtomicU64, Ordering};
+use std::sync::mpsc::RecvTimeoutError;
 use std::time::{Duration, Instant};
 
 use tokio::sync::mpsc;
@@ -14,8 +23,9 @@ use tracing::{debug, info};
 
 use super::{ControlReport, Outgoing, ST_SHUTDOWN, Stop, encode_state, notify_status};
 use crate::guard::WatchdogCadence;
+use crate::realtime::{RealtimeApplied, RealtimeConfig, RealtimeError, apply_to_current_thread};
 use crate::records::CsvRecorder;
-use crate::schedule::Schedule;
+use crate::schedule::{TickCause, TickPlanner};
 use crate::summary::Histogram;
 use crate::tick::{ControlCore, Event, TickTime};
 
@@ -39,9 +49,40 @@ pub(super) struct ControlLoop {
     pub csv: Option<CsvRecorder>,
     /// Tick period.
     pub period: Duration,
+    /// Lock the ticks to the pose stream (`controller.tick = "pose"`).
+    pub pose_lock: bool,
+    /// How long a tick waits for an expected pose \[s\].
+    pub pose_wait: f64,
+    /// Real-time settings for this thread.
+    pub realtime: RealtimeConfig,
+    /// Where the outcome of applying them goes (the daemon's start waits).
+    pub realtime_result:
+        Option<tokio::sync::oneshot::Sender<Result<RealtimeApplied, RealtimeError>>>,
+}
+
+/// A pose tick's time is its pose's arrival plus this \[s\]: a margin
+/// for the µs-scale error of a replay's log-clock mapping.
+const BATCH_MARGIN: f64 = 20e-6;
+
+/// An event's arrival \[s\] since the epoch.
+fn arrival(e: &Event) -> f64 {
+    match e {
+        Event::Pose { arrival, .. }
+        | Event::Attitude { arrival, .. }
+        | Event::Heartbeat { arrival, .. }
+        | Event::Setpoint { arrival, .. } => *arrival,
+    }
 }
 
 impl ControlLoop {
+    /// An event for the next tick; a pose also tells the planner.
+    fn take(&self, event: Event, planner: &mut TickPlanner, batch: &mut Vec<Event>) {
+        if let Event::Pose { arrival, .. } = &event {
+            planner.on_pose(*arrival);
+        }
+        batch.push(event);
+    }
+
     fn secs(&self, t: Instant) -> f64 {
         t.saturating_duration_since(self.epoch).as_secs_f64()
     }
@@ -52,21 +93,39 @@ impl ControlLoop {
         }
     }
 
-    /// Runs until stopped; returns what it measured.
+    /// Runs until stopped; returns what it measured. Returns at once (no
+    /// tick run) when `[realtime]` was refused.
     pub fn run(mut self) -> ControlReport {
-        let mut schedule = Schedule::new(self.period);
+        let applied = apply_to_current_thread(&self.realtime);
+        let refused = applied.is_err();
+        let realtime = applied.clone().unwrap_or_default();
+        if let Some(tx) = self.realtime_result.take() {
+            let _ = tx.send(applied);
+        }
+        if refused {
+            // spawn() reports the refusal and stops the other parts.
+            self.stop.request();
+        } else if self.realtime.is_enabled() {
+            info!(?realtime, "control thread real-time settings applied");
+        }
+        let period = self.period.as_secs_f64();
+        let mut planner = TickPlanner::new(
+            period,
+            self.pose_wait,
+            self.pose_lock,
+            self.secs(Instant::now()),
+        );
         let mut solve_hist = Histogram::new();
         let mut jitter = Histogram::new();
         let mut outbound_dropped = 0u64;
         // Reused every tick: no allocation once the queue has been seen full.
         let mut batch: Vec<Event> = Vec::with_capacity(64);
-        let start = Instant::now();
         self.state
             .store(encode_state(self.core.state()), Ordering::Relaxed);
         // systemd: ready once this loop runs; the watchdog is fed from the
         // loop itself (a stuck loop gets the daemon restarted). No-ops when
         // not under systemd.
-        if let Err(e) = sd_notify::notify(&[sd_notify::NotifyState::Ready]) {
+        if !refused && let Err(e) = sd_notify::notify(&[sd_notify::NotifyState::Ready]) {
             debug!(error = %e, "sd_notify READY failed");
         }
         notify_status(self.core.state());
@@ -77,37 +136,72 @@ impl ControlLoop {
         let epoch = self.epoch;
         let mut stopwatch = move || epoch.elapsed().as_secs_f64();
 
-        loop {
-            let deadline = start + schedule.next_deadline();
+        while !self.stop.requested() {
+            // Wait: for events (pose-locked: a pose may run the tick now)
+            // until the planner's next wake time.
+            let wake_at = self.epoch + Duration::from_secs_f64(planner.wake_at().max(0.0));
             let now = Instant::now();
-            if now < deadline {
-                std::thread::sleep(deadline - now);
+            if now < wake_at {
+                if self.pose_lock {
+                    match self.events.recv_timeout(wake_at - now) {
+                        Ok(event) => self.take(event, &mut planner, &mut batch),
+                        Err(RecvTimeoutError::Timeout) => {}
+                        // The receive task is gone (shutdown): keep time.
+                        Err(RecvTimeoutError::Disconnected) => std::thread::sleep(wake_at - now),
+                    }
+                } else {
+                    std::thread::sleep(wake_at - now);
+                }
+            }
+            while let Ok(event) = self.events.try_recv() {
+                self.take(event, &mut planner, &mut batch);
             }
             if self.stop.requested() {
                 break;
             }
             let wake = Instant::now();
+            let Some(slot) = planner.poll(self.secs(wake)) else {
+                continue;
+            };
             if let Some(w) = watchdog.as_mut()
                 && w.due(wake)
             {
                 let _ = sd_notify::notify(&[sd_notify::NotifyState::Watchdog]);
             }
-            let Some(slot) = schedule.on_wake(wake.saturating_duration_since(start)) else {
-                continue;
-            };
             let _span = tracing::debug_span!("tick", k = slot.tick).entered();
             if slot.missed > 0 {
                 debug!(missed = slot.missed, "ticks skipped");
             }
-            batch.clear();
-            batch.extend(self.events.try_iter());
+            if slot.fallback {
+                debug!("expected pose late or lost: deadline fallback");
+            }
+            let lateness = Duration::from_secs_f64(slot.lateness);
+            // The tick's time: a pose tick's is its pose's arrival, and it
+            // takes the events up to it — exactly those queued before the
+            // pose (the receive task queues in arrival order), so the batch
+            // does not depend on how soon this thread woke and a replay
+            // from the logs finds the same one. Later ones (the ATTITUDE
+            // sent with the pose) wait for the next tick.
+            let t = match slot.cause {
+                TickCause::Pose => (slot.due + BATCH_MARGIN).min(self.secs(wake)),
+                TickCause::Deadline => self.secs(wake),
+            };
+            let taken = batch
+                .iter()
+                .position(|e| arrival(e) > t)
+                .unwrap_or(batch.len());
+            for e in &batch[taken..] {
+                if let Event::Pose { arrival, .. } = e {
+                    planner.on_pose(*arrival);
+                }
+            }
             let time = TickTime {
                 tick: slot.tick,
-                t: self.secs(wake),
-                scheduled: self.secs(wake - slot.jitter),
-                jitter_us: u32::try_from(slot.jitter.as_micros()).unwrap_or(u32::MAX),
+                t,
+                scheduled: slot.due,
+                jitter_us: u32::try_from(lateness.as_micros()).unwrap_or(u32::MAX),
             };
-            let step = self.core.step(&time, batch.drain(..), &mut stopwatch);
+            let step = self.core.step(&time, batch.drain(..taken), &mut stopwatch);
             for tr in &step.transitions {
                 self.state.store(encode_state(tr.to), Ordering::Relaxed);
                 notify_status(tr.to);
@@ -128,7 +222,9 @@ impl ControlLoop {
             if let Some(us) = step.solve_us {
                 solve_hist.record(u64::from(us));
             }
-            jitter.record(slot.jitter.as_micros().min(u128::from(u64::MAX)) as u64);
+            // Wake lateness: after the deadline, or after the pose's
+            // arrival (the queue's hand-over) for pose ticks.
+            jitter.record(lateness.as_micros().min(u128::from(u64::MAX)) as u64);
             if let Some(csv) = &self.csv {
                 csv.record(&step.row);
             }
@@ -147,7 +243,9 @@ impl ControlLoop {
         let supervisor = self.core.supervisor();
         ControlReport {
             ticks: self.ticks.load(Ordering::Relaxed),
-            missed: schedule.missed_total(),
+            missed: planner.counts().missed,
+            tick_counts: planner.counts(),
+            realtime,
             commands: counts.commands,
             control_errors: counts.control_errors,
             outbound_dropped,

@@ -48,7 +48,7 @@ use thiserror::Error;
 use tokio::sync::{mpsc, watch};
 use tracing::{error, info, warn};
 
-use crate::config::{Config, ModelKind};
+use crate::config::{Config, ModelKind, TickMode};
 use crate::control::{build_controller, configured_path, thrust_mapping};
 use crate::guard::GuardCounts;
 use crate::records::{CsvRecorder, CsvReport, flight_stem};
@@ -99,6 +99,10 @@ pub enum DaemonError {
     /// refused (the message names the `[link]` field).
     #[error("signing: {0}")]
     Signing(#[from] SigningError),
+    /// `[realtime]` asked for a scheduling the system refused (the message
+    /// names the field and what to grant).
+    #[error("{0}")]
+    Realtime(#[from] crate::realtime::RealtimeError),
     /// A thread could not be started or ended abnormally.
     #[error("internal: {0}")]
     Internal(String),
@@ -173,6 +177,8 @@ impl Stop {
 struct ControlReport {
     ticks: u64,
     missed: u64,
+    tick_counts: crate::schedule::TickCounts,
+    realtime: crate::realtime::RealtimeApplied,
     commands: u64,
     control_errors: u64,
     outbound_dropped: u64,
@@ -223,6 +229,7 @@ struct Parts {
     controller: String,
     model: String,
     rate_hz: f64,
+    tick_mode: &'static str,
     started: Instant,
     cpu_at_start: Option<f64>,
     tap: Option<TlogTap>,
@@ -270,6 +277,7 @@ impl DaemonHandle {
             controller,
             model,
             rate_hz,
+            tick_mode,
             started,
             cpu_at_start,
             tap,
@@ -312,6 +320,11 @@ impl DaemonHandle {
             duration_s,
             ticks: control.ticks,
             missed_ticks: control.missed,
+            tick_mode: tick_mode.to_owned(),
+            pose_ticks: control.tick_counts.by_pose,
+            deadline_ticks: control.tick_counts.by_deadline,
+            fallback_ticks: control.tick_counts.fallbacks,
+            realtime: control.realtime,
             commands: control.commands,
             control_errors: control.control_errors,
             solve_us: control.solve.percentiles(),
@@ -520,6 +533,7 @@ pub async fn spawn_with_controller(
         stop.clone(),
     ));
 
+    let (rt_tx, rt_rx) = tokio::sync::oneshot::channel();
     let loop_ctx = control_loop::ControlLoop {
         core: ControlCore::new(&config, controller, mapping),
         events: event_rx,
@@ -530,11 +544,31 @@ pub async fn spawn_with_controller(
         epoch,
         csv,
         period: Duration::from_secs_f64(1.0 / config.controller.rate_hz),
+        pose_lock: config.controller.tick == TickMode::Pose,
+        pose_wait: config.controller.pose_wait_ms / 1000.0,
+        realtime: config.realtime.clone(),
+        realtime_result: Some(rt_tx),
     };
     let control = std::thread::Builder::new()
         .name("dflat-control".into())
         .spawn(move || loop_ctx.run())
         .map_err(|e| DaemonError::Internal(format!("cannot start the control thread: {e}")))?;
+    // The control thread applies `[realtime]` first: refuse to start when
+    // the system refused (the other parts stop with the stop request).
+    match rt_rx.await {
+        Ok(Ok(_)) => {}
+        Ok(Err(e)) => {
+            error!(error = %e, "real-time settings refused");
+            stop.request();
+            let _ = control.join();
+            return Err(DaemonError::Realtime(e));
+        }
+        Err(_) => {
+            return Err(DaemonError::Internal(
+                "control thread ended at start".into(),
+            ));
+        }
+    }
 
     Ok(DaemonHandle {
         stop,
@@ -551,6 +585,10 @@ pub async fn spawn_with_controller(
                 ModelKind::Spatial => "spatial".into(),
             },
             rate_hz: config.controller.rate_hz,
+            tick_mode: match config.controller.tick {
+                TickMode::Pose => "pose",
+                TickMode::Clock => "clock",
+            },
             started: epoch,
             cpu_at_start,
             tap,
