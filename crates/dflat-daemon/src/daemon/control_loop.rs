@@ -70,6 +70,7 @@ fn arrival(e: &Event) -> f64 {
         Event::Pose { arrival, .. }
         | Event::Attitude { arrival, .. }
         | Event::Heartbeat { arrival, .. }
+        | Event::Param { arrival, .. }
         | Event::Setpoint { arrival, .. } => *arrival,
     }
 }
