@@ -323,6 +323,8 @@ struct Shared {
     command_timeout_us: AtomicU64,
     /// The latest periodic messages, for MAV_CMD_REQUEST_MESSAGE.
     latest: Mutex<Latest>,
+    /// A position setpoint addressed to the SITL was answered (once).
+    told_setpoints: AtomicBool,
     /// Signing of outgoing frames (`None` = unsigned). Shared because any
     /// thread may send the SITL's own frames.
     signing: Option<Mutex<Signing>>,
@@ -528,6 +530,7 @@ pub fn spawn(cfg: &SitlSettings, options: SitlOptions) -> Result<SitlHandle, Sit
         )),
         command_timeout_us: AtomicU64::new((cfg.sitl.command_timeout_s * 1e6).round() as u64),
         latest: Mutex::new(Latest::default()),
+        told_setpoints: AtomicBool::new(false),
         signing: signing.clone().map(Mutex::new),
     });
 

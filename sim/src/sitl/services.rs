@@ -184,6 +184,18 @@ pub(super) fn serve(
                 );
             }
         }
+        // The stand-in flies attitude targets only; say where position
+        // setpoints go (once), rather than dropping them silently.
+        MavMessage::SET_POSITION_TARGET_LOCAL_NED(_)
+            if addressing == Addressing::ToUs
+                && !shared.told_setpoints.swap(true, Ordering::Relaxed) =>
+        {
+            let text = format!(
+                "SITL: setpoints go to the companion, not {}/{}",
+                own.0, own.1
+            );
+            shared.refuse(link, &text);
+        }
         MavMessage::SETUP_SIGNING(_) => {
             bump(&shared.counters.signing_setups_refused);
             shared.refuse(link, "SITL: SETUP_SIGNING refused, key from config");
