@@ -8,7 +8,7 @@
 //! |---|---|
 //! | MAV_CMD_REQUEST_MESSAGE (512), param1 = HEARTBEAT (0) | ACCEPTED, then the HEARTBEAT |
 //! | MAV_CMD_REQUEST_MESSAGE, param1 = STATUSTEXT (253) | ACCEPTED, then the daemon's state as a STATUSTEXT |
-//! | MAV_CMD_REQUEST_MESSAGE, any other message | DENIED (the daemon does not send it) |
+//! | MAV_CMD_REQUEST_MESSAGE, any other message | DENIED, and a STATUSTEXT: the daemon does not send it |
 //! | any other command of the common dialect | UNSUPPORTED |
 //!
 //! Addressing: a command addressed to the daemon's system and component is
@@ -21,53 +21,13 @@
 //! mavlink crate's enum) and are counted as malformed, not answered.
 
 use dflat_link::MavMessage;
-use dflat_link::dialect::{COMMAND_ACK_DATA, MavCmd, MavResult};
+pub use dflat_link::command::{Addressing, CommandRequest, command_ack};
+use dflat_link::dialect::{MavCmd, MavResult};
 
 /// HEARTBEAT's message id.
 const HEARTBEAT_ID: u32 = 0;
 /// STATUSTEXT's message id.
 const STATUSTEXT_ID: u32 = 253;
-
-/// A command received as COMMAND_LONG or COMMAND_INT, with its sender.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct CommandRequest {
-    /// The command.
-    pub command: MavCmd,
-    /// param1 (for MAV_CMD_REQUEST_MESSAGE: the message id).
-    pub param1: f32,
-    /// Addressed system (0 = broadcast).
-    pub target_system: u8,
-    /// Addressed component (0 = broadcast).
-    pub target_component: u8,
-    /// Sender's system id.
-    pub sender_system: u8,
-    /// Sender's component id.
-    pub sender_component: u8,
-}
-
-impl CommandRequest {
-    /// The request in `msg` from `(sender_system, sender_component)`, if it
-    /// is a COMMAND_LONG or COMMAND_INT.
-    pub fn from_message(msg: &MavMessage, sender_system: u8, sender_component: u8) -> Option<Self> {
-        let (command, param1, target_system, target_component) = match msg {
-            MavMessage::COMMAND_LONG(c) => {
-                (c.command, c.param1, c.target_system, c.target_component)
-            }
-            MavMessage::COMMAND_INT(c) => {
-                (c.command, c.param1, c.target_system, c.target_component)
-            }
-            _ => return None,
-        };
-        Some(Self {
-            command,
-            param1,
-            target_system,
-            target_component,
-            sender_system,
-            sender_component,
-        })
-    }
-}
 
 /// A message the daemon sends in answer to MAV_CMD_REQUEST_MESSAGE.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -85,54 +45,40 @@ pub struct CommandAnswer {
     pub ack: MavMessage,
     /// Sent after the acknowledgement, when the command asked for it.
     pub then: Option<RequestedMessage>,
+    /// Why a command was DENIED, sent as a STATUSTEXT after the ack.
+    pub reason: Option<String>,
 }
 
 /// The daemon's answer to `req` (`None`: not addressed to it, or a
 /// broadcast it does not support). `own` = (system, component).
 pub fn answer(req: &CommandRequest, own: (u8, u8)) -> Option<CommandAnswer> {
-    let to_us = req.target_system == own.0 && req.target_component == own.1;
-    let broadcast =
-        req.target_component == 0 && (req.target_system == 0 || req.target_system == own.0);
-    if !to_us && !broadcast {
+    let addressing = req.addressing(own);
+    if addressing == Addressing::Elsewhere {
         return None;
     }
     let (result, then) = match req.command {
-        MavCmd::MAV_CMD_REQUEST_MESSAGE => {
-            // param1 is a float carrying an integer message id.
-            let id = req.param1;
-            let id = (id.is_finite() && id >= 0.0 && id.fract() == 0.0).then_some(id as u32);
-            match id {
-                Some(HEARTBEAT_ID) => (
-                    MavResult::MAV_RESULT_ACCEPTED,
-                    Some(RequestedMessage::Heartbeat),
-                ),
-                Some(STATUSTEXT_ID) => (
-                    MavResult::MAV_RESULT_ACCEPTED,
-                    Some(RequestedMessage::Status),
-                ),
-                _ => (MavResult::MAV_RESULT_DENIED, None),
-            }
-        }
+        MavCmd::MAV_CMD_REQUEST_MESSAGE => match req.requested_message_id() {
+            Some(HEARTBEAT_ID) => (
+                MavResult::MAV_RESULT_ACCEPTED,
+                Some(RequestedMessage::Heartbeat),
+            ),
+            Some(STATUSTEXT_ID) => (
+                MavResult::MAV_RESULT_ACCEPTED,
+                Some(RequestedMessage::Status),
+            ),
+            _ => (MavResult::MAV_RESULT_DENIED, None),
+        },
         _ => (MavResult::MAV_RESULT_UNSUPPORTED, None),
     };
-    if broadcast && result != MavResult::MAV_RESULT_ACCEPTED {
+    if addressing == Addressing::Broadcast && result != MavResult::MAV_RESULT_ACCEPTED {
         return None;
     }
+    let reason = (result == MavResult::MAV_RESULT_DENIED)
+        .then(|| format!("dflat: message {} not sent by this component", req.param1));
     Some(CommandAnswer {
         ack: command_ack(req, result),
         then,
-    })
-}
-
-/// COMMAND_ACK for `req` with `result`, addressed to its sender.
-pub fn command_ack(req: &CommandRequest, result: MavResult) -> MavMessage {
-    MavMessage::COMMAND_ACK(COMMAND_ACK_DATA {
-        command: req.command,
-        result,
-        progress: 0,
-        result_param2: 0,
-        target_system: req.sender_system,
-        target_component: req.sender_component,
+        reason,
     })
 }
 
@@ -146,6 +92,8 @@ mod tests {
         CommandRequest {
             command,
             param1,
+            param2: 0.0,
+            param3: 0.0,
             target_system: target.0,
             target_component: target.1,
             sender_system: 255,
@@ -185,6 +133,7 @@ mod tests {
             let a = answer(&req(MavCmd::MAV_CMD_REQUEST_MESSAGE, id, OWN), OWN).unwrap();
             assert_eq!(result_of(&a).1, MavResult::MAV_RESULT_DENIED, "{id}");
             assert_eq!(a.then, None);
+            assert!(a.reason.is_some_and(|r| r.contains("not sent")), "{id}");
         }
     }
 

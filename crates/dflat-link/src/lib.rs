@@ -30,6 +30,7 @@
 //! (the mavlink crate's own readers skip them silently). Logging:
 //! [`tlog::TlogWriter`].
 
+pub mod command;
 mod error;
 mod filter;
 mod frame;
@@ -37,6 +38,7 @@ mod inbound;
 pub mod math;
 pub mod modes;
 mod outbound;
+pub mod params;
 mod signing;
 mod stats;
 pub mod tlog;
@@ -49,6 +51,7 @@ pub use mavlink::dialects::common as dialect;
 pub use mavlink::dialects::common::MavMessage;
 pub use mavlink::{MavHeader, MavlinkVersion};
 
+pub use command::{Addressing, CommandRequest, command_ack};
 pub use error::{ErrorCategory, FrameError, LinkError, PayloadFault, SetpointRejection};
 pub use filter::{LinkRx, RxOutcome, SourceFilter, Verdict};
 pub use frame::{

@@ -149,8 +149,11 @@ async fn run_until(
     }
     let report = handle.stop()?;
     let c = &report.counters;
+    let g = &c.to_gcs;
     say(&format!(
-        "sitl stopped: commands {} accepted, {} ignored, {} rejected, {} unauthenticated; sent hb {} pos {} att {}; late steps {}",
+        "sitl stopped: commands {} accepted, {} ignored, {} rejected, {} unauthenticated; \
+         to vehicle hb {} pos {} att {} status {}; to gcs hb {} pos {} att {} status {} replies {} routed {}; \
+         acked {} commands, params set {} refused {}; late steps {}",
         c.commands_accepted,
         c.commands_ignored,
         c.commands_rejected,
@@ -158,6 +161,16 @@ async fn run_until(
         c.heartbeats_sent,
         c.positions_sent,
         c.attitudes_sent,
+        c.sys_status_sent,
+        g.heartbeats,
+        g.positions,
+        g.attitudes,
+        g.sys_status,
+        g.replies,
+        c.gcs_frames_routed,
+        c.commands_acked,
+        c.params_set,
+        c.params_refused,
         c.late_steps
     ));
     let l = &c.pose_latency;

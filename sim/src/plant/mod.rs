@@ -61,8 +61,8 @@ pub struct PlantState {
     pub pitch: f64,
     /// Yaw ψ \[rad\] (ZYX).
     pub yaw: f64,
-    /// Body rates p, q, r, FRD [rad/s] (zero for the first-order plants,
-    /// which do not model them).
+    /// Body rates p, q, r, FRD [rad/s] (the first-order plants: from their
+    /// roll and pitch rates at fixed yaw, [`body_rates_from_euler_rates`]).
     pub body_rates: Vector3<f64>,
     /// Actual specific collective thrust [m/s²].
     pub thrust: f64,
@@ -437,6 +437,25 @@ pub fn thrust_axis(roll: f64, pitch: f64, yaw: f64) -> Vector3<f64> {
 
 /// Horizontal NED acceleration at constant altitude [m/s²]:
 /// `[−g·R13/R33, −g·R23/R33]` (non-finite at 90° tilt).
+/// Body rates p, q, r (FRD [rad/s]) of ZYX Euler angles `roll`, `pitch`
+/// changing at `roll_rate`, `pitch_rate`, `yaw_rate` [rad/s]:
+/// p = φ̇ − sinθ·ψ̇, q = cosφ·θ̇ + sinφ·cosθ·ψ̇, r = −sinφ·θ̇ + cosφ·cosθ·ψ̇.
+pub fn body_rates_from_euler_rates(
+    roll: f64,
+    pitch: f64,
+    roll_rate: f64,
+    pitch_rate: f64,
+    yaw_rate: f64,
+) -> Vector3<f64> {
+    let (sr, cr) = roll.sin_cos();
+    let (sp, cp) = pitch.sin_cos();
+    Vector3::new(
+        roll_rate - sp * yaw_rate,
+        cr * pitch_rate + sr * cp * yaw_rate,
+        -sr * pitch_rate + cr * cp * yaw_rate,
+    )
+}
+
 pub(crate) fn level_flight_acceleration(g: f64, roll: f64, pitch: f64, yaw: f64) -> (f64, f64) {
     let a = thrust_axis(roll, pitch, yaw);
     (-g * a.x / a.z, -g * a.y / a.z)
@@ -467,6 +486,51 @@ impl HeldCommand {
             let (c, s) = options.saturate(command);
             self.command = c;
             self.saturated = s;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every plant reports the body rates of its attitude motion: after a
+    /// pitch step the pitch rate agrees with the finite difference of the
+    /// pitch (the first-order plants reported 0 before).
+    #[test]
+    fn body_rates_follow_the_attitude_motion() {
+        let options = PlantOptions {
+            plant_dt: 1.0 / 200.0,
+            ..PlantOptions::default()
+        };
+        for kind in [PlantKind::Planar, PlantKind::Spatial, PlantKind::RigidBody] {
+            let mut plant = build_plant(kind, &options, 1).unwrap();
+            plant.reset(&PlantState::hover(Vector3::zeros(), options.g));
+            plant.apply(&AttitudeCommand {
+                pitch: -0.3,
+                roll: 0.2,
+                yaw: 0.0,
+                thrust: options.thrust_command_for(options.g),
+            });
+            let h = options.plant_dt;
+            plant.advance(0.1);
+            let before = plant.true_state();
+            plant.advance(h);
+            let after = plant.true_state();
+            let q = 0.5 * (before.body_rates.y + after.body_rates.y);
+            let p = 0.5 * (before.body_rates.x + after.body_rates.x);
+            let dpitch = (after.pitch - before.pitch) / h;
+            let droll = (after.roll - before.roll) / h;
+            assert!(dpitch < -0.1 && droll > 0.05, "{kind:?}: {dpitch} {droll}");
+            // q = cosφ·θ̇ at fixed yaw; p = φ̇.
+            assert!(
+                (q - before.roll.cos() * dpitch).abs() < 0.05 * dpitch.abs(),
+                "{kind:?}: q {q} vs {dpitch}"
+            );
+            assert!(
+                (p - droll).abs() < 0.05 * droll.abs(),
+                "{kind:?}: p {p} vs {droll}"
+            );
         }
     }
 }

@@ -135,7 +135,11 @@ impl Plant for PlanarPlant {
             roll: self.x[5],
             pitch: self.x[4],
             yaw: self.yaw,
-            body_rates: Vector3::zeros(),
+            body_rates: {
+                // The first-order attitude loop's rates, fixed yaw.
+                let d = self.derivative(&self.x, &self.wind.velocity());
+                super::body_rates_from_euler_rates(self.x[5], self.x[4], d[5], d[4], 0.0)
+            },
             thrust: self.options.g / (self.x[4].cos() * self.x[5].cos()),
         }
     }

@@ -130,7 +130,11 @@ impl Plant for SpatialPlant {
             roll: self.x[7],
             pitch: self.x[6],
             yaw: self.yaw,
-            body_rates: Vector3::zeros(),
+            body_rates: {
+                // The first-order attitude loop's rates, fixed yaw.
+                let d = self.derivative(&self.x, &self.wind.velocity());
+                super::body_rates_from_euler_rates(self.x[7], self.x[6], d[7], d[6], 0.0)
+            },
             thrust: self.x[8],
         }
     }

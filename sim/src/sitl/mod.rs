@@ -54,7 +54,6 @@
 //! the SITL does not check frames from the GCS, the daemon does.
 //!
 //! In-process hooks ([`SitlHandle`]): the true state and an optional trace,
-//! one-shot pose faults and the pose → command latency ([`PoseLatency`]),
 //! counters, the current mode, a tap of every received frame, a pose pause
 //! switch (the pose stream stops, HEARTBEAT goes on) and a pose offset (an
 //! estimator jump as the daemon sees it). `dflat sitl` (the binary crate's shell) maps
@@ -77,20 +76,30 @@ use crate::sensing::{GaussianOptions, GaussianSensor, Sensor};
 use dflat_control::AttitudeCommand as PlantCommand;
 use dflat_link::dialect::{MavAutopilot, MavState};
 use dflat_link::{
-    Frame, Inbound, LinkRx, MavHeader, MavMessage, RxOutcome, Signing, SourceFilter,
-    euler_from_quaternion, frames, serialize_v2, timestamp_from_system_time,
+    LinkRx, MavHeader, MavMessage, Signing, SourceFilter, serialize_v2, timestamp_from_system_time,
 };
 use nalgebra::Vector3;
 use thiserror::Error;
 
 use dflat_link::transport::Endpoint;
 
+pub mod commands;
 mod config;
+mod counters;
 mod latency;
+pub mod params;
 pub mod pilot;
+mod routing;
+mod services;
 pub use config::{SitlAutopilot, SitlConfig, SitlConfigError, SitlIds, SitlPlant, SitlSettings};
+pub use counters::{SentCounts, SitlCounters};
 pub use latency::PoseLatency;
+pub use params::{ParamError, ParamTable, SitlParam};
 pub use pilot::{ModeMachine, PilotAction, PilotMode, SitlEngage};
+
+use counters::{Counters, Kind, bump};
+use routing::{Dest, GcsRx, Links, Peers, VehicleRx};
+use services::Latest;
 
 /// Gravity of the simulated world [m/s²].
 pub const GRAVITY: f64 = 9.81;
@@ -241,104 +250,6 @@ pub struct TruthSample {
     pub mode: SitlMode,
 }
 
-/// Counters of a SITL run (a snapshot).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub struct SitlCounters {
-    /// HEARTBEATs sent on the vehicle link.
-    pub heartbeats_sent: u64,
-    /// LOCAL_POSITION_NED sent on the vehicle link.
-    pub positions_sent: u64,
-    /// VISION_POSITION_ESTIMATE sent on the vehicle link (`sitl.vision_rate_hz`).
-    pub visions_sent: u64,
-    /// ATTITUDE sent on the vehicle link.
-    pub attitudes_sent: u64,
-    /// Frames received on the vehicle link (valid CRC).
-    pub frames_received: u64,
-    /// SET_ATTITUDE_TARGET accepted.
-    pub commands_accepted: u64,
-    /// SET_ATTITUDE_TARGET from a wrong source or addressed elsewhere.
-    pub commands_ignored: u64,
-    /// SET_ATTITUDE_TARGET trusted but invalid (non-finite, bad quaternion, type_mask).
-    pub commands_rejected: u64,
-    /// Signing on: SET_ATTITUDE_TARGET refused for a missing, wrong or
-    /// replayed signature (not applied).
-    pub commands_unauthenticated: u64,
-    /// Framing errors (CRC, unknown id, truncation) on either link.
-    pub frame_errors: u64,
-    /// Frames received from the ground station.
-    pub gcs_frames_in: u64,
-    /// Frames sent to the ground station (routed and own telemetry).
-    pub gcs_frames_out: u64,
-    /// Entries into the hold mode after commanded flight.
-    pub hold_entries: u64,
-    /// Mode changes (position ⇄ offboard).
-    pub mode_changes: u64,
-    /// Requests for offboard refused because no stream was alive.
-    pub offboard_refused: u64,
-    /// Plant integration steps.
-    pub plant_steps: u64,
-    /// Plant steps that ran late (the thread missed its deadline).
-    pub late_steps: u64,
-    /// Failed socket sends.
-    pub send_errors: u64,
-    /// Pose departure → command arrival and the command cadence
-    /// (see [`PoseLatency`]).
-    pub pose_latency: PoseLatency,
-}
-
-#[derive(Default)]
-struct Counters {
-    heartbeats_sent: AtomicU64,
-    positions_sent: AtomicU64,
-    visions_sent: AtomicU64,
-    attitudes_sent: AtomicU64,
-    frames_received: AtomicU64,
-    commands_accepted: AtomicU64,
-    commands_ignored: AtomicU64,
-    commands_rejected: AtomicU64,
-    commands_unauthenticated: AtomicU64,
-    frame_errors: AtomicU64,
-    gcs_frames_in: AtomicU64,
-    gcs_frames_out: AtomicU64,
-    hold_entries: AtomicU64,
-    mode_changes: AtomicU64,
-    offboard_refused: AtomicU64,
-    plant_steps: AtomicU64,
-    late_steps: AtomicU64,
-    send_errors: AtomicU64,
-}
-
-fn bump(c: &AtomicU64) {
-    c.fetch_add(1, Ordering::Relaxed);
-}
-
-impl Counters {
-    fn snapshot(&self) -> SitlCounters {
-        let g = |c: &AtomicU64| c.load(Ordering::Relaxed);
-        SitlCounters {
-            heartbeats_sent: g(&self.heartbeats_sent),
-            positions_sent: g(&self.positions_sent),
-            visions_sent: g(&self.visions_sent),
-            attitudes_sent: g(&self.attitudes_sent),
-            frames_received: g(&self.frames_received),
-            commands_accepted: g(&self.commands_accepted),
-            commands_ignored: g(&self.commands_ignored),
-            commands_rejected: g(&self.commands_rejected),
-            commands_unauthenticated: g(&self.commands_unauthenticated),
-            frame_errors: g(&self.frame_errors),
-            gcs_frames_in: g(&self.gcs_frames_in),
-            gcs_frames_out: g(&self.gcs_frames_out),
-            hold_entries: g(&self.hold_entries),
-            mode_changes: g(&self.mode_changes),
-            offboard_refused: g(&self.offboard_refused),
-            plant_steps: g(&self.plant_steps),
-            late_steps: g(&self.late_steps),
-            send_errors: g(&self.send_errors),
-            pose_latency: PoseLatency::default(),
-        }
-    }
-}
-
 /// One frame received on the vehicle link, for [`SitlOptions::tap`].
 #[derive(Debug, Clone)]
 pub struct TapFrame {
@@ -386,12 +297,6 @@ pub struct SitlReport {
     pub diverged: bool,
 }
 
-#[derive(Default)]
-struct Peers {
-    vehicle: Option<SocketAddr>,
-    gcs: Option<SocketAddr>,
-}
-
 struct Shared {
     start: Instant,
     stop: AtomicBool,
@@ -409,10 +314,21 @@ struct Shared {
     mode_request: Mutex<Option<SitlMode>>,
     /// A stick velocity from the in-process hook, taken by the plant loop.
     pilot_velocity: Mutex<Option<[f64; 3]>>,
-    peers: Mutex<Peers>,
+    links: Links,
     counters: Counters,
     /// Pose → command latency, one-shot pose faults.
     latency: latency::LatencyProbe,
+    /// The flavour (mode numbers, parameter names).
+    autopilot: SitlAutopilot,
+    /// The parameter table (`PARAM_*`).
+    params: Mutex<ParamTable>,
+    /// The offboard-loss timeout \[µs\] (`sitl.command_timeout_s`, or
+    /// `COM_OF_LOSS_T` / `GUID_TIMEOUT` set over MAVLink).
+    command_timeout_us: AtomicU64,
+    /// The latest periodic messages, for MAV_CMD_REQUEST_MESSAGE.
+    latest: Mutex<Latest>,
+    /// A position setpoint addressed to the SITL was answered (once).
+    told_setpoints: AtomicBool,
     /// Signing of outgoing frames (`None` = unsigned). Shared because any
     /// thread may send the SITL's own frames.
     signing: Option<Mutex<Signing>>,
@@ -602,14 +518,27 @@ pub fn spawn(cfg: &SitlSettings, options: SitlOptions) -> Result<SitlHandle, Sit
         command: Mutex::new(None),
         mode_request: Mutex::new(None),
         pilot_velocity: Mutex::new(None),
-        peers: Mutex::new(Peers::default()),
+        links: Links {
+            vehicle: Arc::new(socket),
+            gcs: gcs_socket.map(Arc::new),
+            peers: Mutex::new(Peers::default()),
+        },
         counters: Counters::default(),
         latency: latency::LatencyProbe::default(),
+        autopilot: cfg.sitl.autopilot,
+        params: Mutex::new(ParamTable::new(
+            cfg.sitl.autopilot,
+            cfg.sitl.hover_thrust,
+            TILT_LIMIT_DEG,
+            cfg.sitl.command_timeout_s,
+            cfg.ids.system_id,
+        )),
+        command_timeout_us: AtomicU64::new((cfg.sitl.command_timeout_s * 1e6).round() as u64),
+        latest: Mutex::new(Latest::default()),
+        told_setpoints: AtomicBool::new(false),
         signing: signing.clone().map(Mutex::new),
     });
 
-    let socket = Arc::new(socket);
-    let gcs_socket = gcs_socket.map(Arc::new);
     let mut threads = Vec::new();
 
     let filter = SourceFilter {
@@ -625,8 +554,6 @@ pub fn spawn(cfg: &SitlSettings, options: SitlOptions) -> Result<SitlHandle, Sit
     link.signing = signing;
     let rx = VehicleRx {
         shared: shared.clone(),
-        socket: socket.clone(),
-        gcs_socket: gcs_socket.clone(),
         link,
         tap: options.tap.clone(),
         hover_thrust: cfg.sitl.hover_thrust,
@@ -641,11 +568,10 @@ pub fn spawn(cfg: &SitlSettings, options: SitlOptions) -> Result<SitlHandle, Sit
         spawn_thread("dflat-sitl-rx", move || rx.run()).map_err(stop_on_err)?,
     ));
 
-    if let Some(gs) = gcs_socket.clone() {
+    if let Some(gs) = shared.links.gcs.clone() {
         let gcs = GcsRx {
             shared: shared.clone(),
             socket: gs,
-            vehicle_socket: socket.clone(),
         };
         threads.push((
             "gcs",
@@ -655,15 +581,12 @@ pub fn spawn(cfg: &SitlSettings, options: SitlOptions) -> Result<SitlHandle, Sit
 
     let sim = PlantLoop {
         shared: shared.clone(),
-        socket,
-        gcs_socket,
         plant,
         sensor,
         vision,
         options: popts,
         plant_rate_hz: cfg.sitl.plant_rate_hz,
         telemetry_rate_hz: cfg.sitl.telemetry_rate_hz,
-        command_timeout: Duration::from_secs_f64(cfg.sitl.command_timeout_s),
         hover_thrust: cfg.sitl.hover_thrust,
         autopilot: cfg.sitl.autopilot,
         modes: ModeMachine::new(cfg.sitl.engage, cfg.sitl.pilot.clone()),
@@ -840,241 +763,6 @@ impl Drop for SitlHandle {
     }
 }
 
-/// Sends `msg` from the SITL to the vehicle peer and the GCS peer (signed
-/// when signing is on).
-fn send_own(
-    shared: &Shared,
-    socket: &UdpSocket,
-    gcs_socket: Option<&UdpSocket>,
-    msg: &MavMessage,
-) -> bool {
-    let frame = match shared.encode(msg) {
-        Ok(f) => f,
-        Err(_) => {
-            bump(&shared.counters.send_errors);
-            return false;
-        }
-    };
-    let (vehicle, gcs) = {
-        let p = lock(&shared.peers);
-        (p.vehicle, p.gcs)
-    };
-    let mut sent = false;
-    if let Some(peer) = vehicle {
-        match socket.send_to(frame.as_bytes(), peer) {
-            Ok(_) => sent = true,
-            Err(_) => bump(&shared.counters.send_errors),
-        }
-    }
-    if let (Some(gs), Some(peer)) = (gcs_socket, gcs)
-        && gs.send_to(frame.as_bytes(), peer).is_ok()
-    {
-        bump(&shared.counters.gcs_frames_out);
-    }
-    sent
-}
-
-/// Receives on the vehicle link: commands in, routing to the GCS.
-struct VehicleRx {
-    shared: Arc<Shared>,
-    socket: Arc<UdpSocket>,
-    gcs_socket: Option<Arc<UdpSocket>>,
-    link: LinkRx,
-    tap: Option<Sender<TapFrame>>,
-    hover_thrust: f64,
-}
-
-impl VehicleRx {
-    fn run(mut self) -> Result<(), SitlError> {
-        let mut buf = vec![0u8; 65_536];
-        let mut forward = Vec::with_capacity(4096);
-        while !self.shared.stop.load(Ordering::Relaxed) {
-            let (n, from) = match self.socket.recv_from(&mut buf) {
-                Ok(x) => x,
-                Err(e)
-                    if matches!(
-                        e.kind(),
-                        std::io::ErrorKind::WouldBlock
-                            | std::io::ErrorKind::TimedOut
-                            | std::io::ErrorKind::Interrupted
-                            | std::io::ErrorKind::ConnectionRefused
-                            | std::io::ErrorKind::ConnectionReset
-                    ) =>
-                {
-                    continue;
-                }
-                Err(e) => {
-                    tracing::warn!(error = %e, "sitl: receive failed");
-                    std::thread::sleep(RX_POLL);
-                    continue;
-                }
-            };
-            let at = Instant::now();
-            lock(&self.shared.peers).vehicle = Some(from);
-            forward.clear();
-            for item in frames(&buf[..n]) {
-                let frame = match item {
-                    Ok(f) => f,
-                    Err(e) => {
-                        bump(&self.shared.counters.frame_errors);
-                        tracing::debug!(error = %e, "sitl: bad frame");
-                        continue;
-                    }
-                };
-                bump(&self.shared.counters.frames_received);
-                if let Some(tap) = &self.tap {
-                    // A closed tap only means nobody listens any more.
-                    let _ = tap.send(TapFrame {
-                        at,
-                        header: frame.header,
-                        message: frame.message.clone(),
-                    });
-                }
-                if !self.authenticate(&frame) {
-                    continue;
-                }
-                self.handle(at, &frame.header, &frame.message);
-                if self.gcs_socket.is_some() && !self.addressed_to_autopilot(&frame.message) {
-                    append_routed(&mut forward, &frame);
-                }
-            }
-            if !forward.is_empty()
-                && let Some(gs) = &self.gcs_socket
-            {
-                let peer = lock(&self.shared.peers).gcs;
-                if let Some(peer) = peer
-                    && gs.send_to(&forward, peer).is_ok()
-                {
-                    bump(&self.shared.counters.gcs_frames_out);
-                }
-            }
-        }
-        Ok(())
-    }
-
-    /// The signing gate ([`LinkRx::authenticate`]): `true` to go on with
-    /// the frame. With signing off everything passes; with signing on a
-    /// wrong signature or a replayed timestamp is refused for every
-    /// message, a missing one for commands (and for everything if the
-    /// signing's `accept_unsigned_telemetry` is off). A refused
-    /// SET_ATTITUDE_TARGET is counted in `commands_unauthenticated`.
-    fn authenticate(&mut self, frame: &Frame) -> bool {
-        if self.link.signing.is_none() {
-            return true;
-        }
-        let now = timestamp_from_system_time(SystemTime::now());
-        match self
-            .link
-            .authenticate(&frame.header, &frame.message, frame.signed.as_ref(), now)
-        {
-            Ok(()) => true,
-            Err(check) => {
-                if matches!(frame.message, MavMessage::SET_ATTITUDE_TARGET(_)) {
-                    bump(&self.shared.counters.commands_unauthenticated);
-                    tracing::debug!(?check, "sitl: command refused by signing");
-                }
-                false
-            }
-        }
-    }
-
-    /// True for messages addressed to this autopilot specifically (not routed on).
-    fn addressed_to_autopilot(&self, msg: &MavMessage) -> bool {
-        use dflat_link::mavlink::Message as _;
-        msg.target_system_id() == Some(self.shared.system_id)
-            && msg.target_component_id() == Some(self.shared.component_id)
-    }
-
-    fn handle(&mut self, at: Instant, header: &MavHeader, msg: &MavMessage) {
-        let is_command = matches!(msg, MavMessage::SET_ATTITUDE_TARGET(_));
-        match self.link.handle(header, msg) {
-            RxOutcome::Accepted(Inbound::AttitudeTarget(t)) => {
-                let Some(q) = t.q else {
-                    bump(&self.shared.counters.commands_rejected);
-                    return;
-                };
-                let [roll, pitch, yaw] = euler_from_quaternion(q);
-                let thrust = t.thrust.unwrap_or(self.hover_thrust);
-                if !(roll.is_finite() && pitch.is_finite() && yaw.is_finite()) {
-                    bump(&self.shared.counters.commands_rejected);
-                    return;
-                }
-                *lock(&self.shared.command) = Some((
-                    at,
-                    ReceivedCommand {
-                        roll,
-                        pitch,
-                        yaw,
-                        thrust: thrust.clamp(0.0, 1.0),
-                    },
-                ));
-                bump(&self.shared.counters.commands_accepted);
-                self.shared.latency.command(at);
-            }
-            RxOutcome::Accepted(_) => {}
-            RxOutcome::Ignored(_) if is_command => bump(&self.shared.counters.commands_ignored),
-            RxOutcome::Rejected(e) if is_command => {
-                tracing::debug!(error = %e, "sitl: command rejected");
-                bump(&self.shared.counters.commands_rejected);
-            }
-            RxOutcome::Ignored(_) | RxOutcome::Rejected(_) => {}
-        }
-    }
-}
-
-/// Appends a received frame to a datagram being routed on: a signed frame
-/// as its bytes (re-serializing would strip the signature), an unsigned one
-/// re-serialized as MAVLink 2.
-fn append_routed(out: &mut Vec<u8>, frame: &Frame) {
-    match &frame.signed {
-        Some(signed) => out.extend_from_slice(signed.as_bytes()),
-        None => {
-            if let Ok(enc) = serialize_v2(&frame.header, &frame.message) {
-                out.extend_from_slice(enc.as_bytes());
-            }
-        }
-    }
-}
-
-/// Receives on the GCS port and routes to the vehicle link.
-struct GcsRx {
-    shared: Arc<Shared>,
-    socket: Arc<UdpSocket>,
-    vehicle_socket: Arc<UdpSocket>,
-}
-
-impl GcsRx {
-    fn run(self) -> Result<(), SitlError> {
-        let mut buf = vec![0u8; 65_536];
-        let mut forward = Vec::with_capacity(4096);
-        while !self.shared.stop.load(Ordering::Relaxed) {
-            let (n, from) = match self.socket.recv_from(&mut buf) {
-                Ok(x) => x,
-                Err(_) => continue,
-            };
-            lock(&self.shared.peers).gcs = Some(from);
-            forward.clear();
-            for item in frames(&buf[..n]) {
-                match item {
-                    Ok(f) => {
-                        bump(&self.shared.counters.gcs_frames_in);
-                        append_routed(&mut forward, &f);
-                    }
-                    Err(_) => bump(&self.shared.counters.frame_errors),
-                }
-            }
-            let peer = lock(&self.shared.peers).vehicle;
-            if let Some(peer) = peer
-                && !forward.is_empty()
-                && self.vehicle_socket.send_to(&forward, peer).is_err()
-            {
-                bump(&self.shared.counters.send_errors);
-            }
-        }
-        Ok(())
-    }
-}
-
 /// Seed offset of the vision stand-in's noise (independent of the
 /// LOCAL_POSITION_NED noise).
 const VISION_SEED: u64 = 0x5649_5349_4f4e;
@@ -1097,15 +785,12 @@ struct VisionStream {
 /// The real-time plant loop: integrate, command or hold, send telemetry.
 struct PlantLoop {
     shared: Arc<Shared>,
-    socket: Arc<UdpSocket>,
-    gcs_socket: Option<Arc<UdpSocket>>,
     plant: Box<dyn Plant>,
     sensor: GaussianSensor,
     vision: Option<VisionStream>,
     options: PlantOptions,
     plant_rate_hz: f64,
     telemetry_rate_hz: f64,
-    command_timeout: Duration,
     hover_thrust: f64,
     autopilot: SitlAutopilot,
     modes: ModeMachine,
@@ -1150,7 +835,7 @@ impl PlantLoop {
 
             // The mode (pilot, stream), then the command or the hold.
             let received = (*lock(&self.shared.command))
-                .filter(|(at, _)| at.elapsed() < self.command_timeout)
+                .filter(|(at, _)| at.elapsed() < self.shared.command_timeout())
                 .map(|(_, c)| c);
             if let Some(v) = lock(&self.shared.pilot_velocity).take() {
                 self.modes.set_velocity(v);
@@ -1165,7 +850,7 @@ impl PlantLoop {
                     dflat_link::dialect::MavSeverity::MAV_SEVERITY_WARNING,
                     "SITL: offboard refused, no setpoint stream",
                 );
-                self.send(&text);
+                self.send(&text, Kind::Reply);
             }
             if step.changed {
                 mode = self.modes.mode();
@@ -1211,9 +896,8 @@ impl PlantLoop {
                 state = self.plant.true_state();
             }
             let t = steps as f64 * dt;
-            if let Some(msg) = self.shared.latency.due_delayed(Instant::now())
-                && self.send(&msg)
-            {
+            if let Some(msg) = self.shared.latency.due_delayed(Instant::now()) {
+                self.send(&msg, Kind::Position);
                 self.pose_sent();
             }
             self.sensor.observe(t, &state);
@@ -1233,9 +917,11 @@ impl PlantLoop {
                     mode.custom_mode(self.autopilot),
                     MavState::MAV_STATE_ACTIVE,
                 );
-                if self.send(&hb) {
-                    bump(&self.shared.counters.heartbeats_sent);
-                }
+                lock(&self.shared.latest).heartbeat = Some(hb.clone());
+                self.send(&hb, Kind::Heartbeat);
+                let status = services::sys_status();
+                lock(&self.shared.latest).sys_status = Some(status.clone());
+                self.send(&status, Kind::SysStatus);
                 // Due once per slot, whoever listens: a ground station
                 // alone on the GCS port gets 1 Hz, not the plant rate.
                 heartbeat_due = false;
@@ -1284,8 +970,9 @@ impl PlantLoop {
         csv_error.map_or(Ok(()), Err)
     }
 
-    fn send(&self, msg: &MavMessage) -> bool {
-        send_own(&self.shared, &self.socket, self.gcs_socket.as_deref(), msg)
+    /// Sends the SITL's own `msg` to both links, counted as `kind`.
+    fn send(&self, msg: &MavMessage, kind: Kind) {
+        self.shared.send_own(msg, Dest::Both, kind);
     }
 
     /// A LOCAL_POSITION_NED left (the latency's pose stream without vision).
@@ -1293,7 +980,6 @@ impl PlantLoop {
         if self.vision.is_none() {
             self.shared.latency.pose_sent(Instant::now());
         }
-        bump(&self.shared.counters.positions_sent);
     }
 
     /// The vision stand-in at SITL time `t`: capture when due, send what
@@ -1333,11 +1019,9 @@ impl PlantLoop {
         }
         for (capture, p, euler) in due {
             let usec = (capture * 1e6).round() as u64;
-            if let Ok(msg) = dflat_link::vision_position_estimate(usec, p, euler, 0, None)
-                && self.send(&msg)
-            {
+            if let Ok(msg) = dflat_link::vision_position_estimate(usec, p, euler, 0, None) {
+                self.send(&msg, Kind::Vision);
                 self.shared.latency.pose_sent(Instant::now());
-                bump(&self.shared.counters.visions_sent);
             }
         }
     }
@@ -1352,16 +1036,17 @@ impl PlantLoop {
         let p = measured.map_or(state.position, |m| m.position);
         let position = [p.x + offset[0], p.y + offset[1], p.z + offset[2]];
         if let Ok(msg) = dflat_link::local_position_ned(time_boot_ms, position, sample.velocity) {
+            lock(&self.shared.latest).position = Some(msg.clone());
             let fate = self.shared.latency.pose_fate(Instant::now(), &msg);
-            if fate == latency::PoseFate::Send && self.send(&msg) {
+            if fate == latency::PoseFate::Send {
+                self.send(&msg, Kind::Position);
                 self.pose_sent();
             }
         }
         let rates = state.body_rates.into();
-        if let Ok(msg) = dflat_link::attitude(time_boot_ms, sample.euler, rates)
-            && self.send(&msg)
-        {
-            bump(&self.shared.counters.attitudes_sent);
+        if let Ok(msg) = dflat_link::attitude(time_boot_ms, sample.euler, rates) {
+            lock(&self.shared.latest).attitude = Some(msg.clone());
+            self.send(&msg, Kind::Attitude);
         }
     }
 
@@ -1472,426 +1157,4 @@ pub fn read_truth_csv(path: &Path) -> std::io::Result<Vec<TruthRow>> {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn udpin_parses_and_others_are_refused() {
-        assert_eq!(
-            parse_udpin("link", "udpin:127.0.0.1:14540").unwrap(),
-            "127.0.0.1:14540".parse().unwrap()
-        );
-        assert!(parse_udpin("link", "udpout:127.0.0.1:14540").is_err());
-        assert!(parse_udpin("link", "udpin:nonsense").is_err());
-    }
-
-    #[test]
-    fn truth_rows_round_trip() {
-        let s = TruthSample {
-            t: 1.25,
-            position: [1.0, -2.0, -10.0],
-            velocity: [0.5, 0.0, 0.0],
-            euler: [0.0, -0.1, 0.0],
-            command: Some(ReceivedCommand {
-                roll: 0.0,
-                pitch: -0.1,
-                yaw: 0.0,
-                thrust: 0.5,
-            }),
-            mode: SitlMode::Offboard,
-        };
-        let mut buf = Vec::new();
-        write_truth_row(&mut buf, &s).unwrap();
-        let dir = std::env::temp_dir().join(format!("dflat-truth-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let path = dir.join("t.csv");
-        let mut text = b"header\n".to_vec();
-        text.extend_from_slice(&buf);
-        std::fs::write(&path, text).unwrap();
-        let rows = read_truth_csv(&path).unwrap();
-        assert_eq!(rows.len(), 1);
-        assert_eq!(rows[0].position, [1.0, -2.0, -10.0]);
-        assert!(rows[0].commanded);
-        let _ = std::fs::remove_dir_all(&dir);
-    }
-
-    fn test_config() -> SitlSettings {
-        let mut cfg = SitlSettings::default();
-        cfg.sitl.url = "udpin:127.0.0.1:0".into();
-        cfg.sitl.start = [0.0, 0.0, -10.0];
-        cfg
-    }
-
-    #[test]
-    fn holds_position_without_commands_and_streams_telemetry() {
-        let cfg = test_config();
-        let sitl = spawn(
-            &cfg,
-            SitlOptions {
-                record_trace: true,
-                ..SitlOptions::default()
-            },
-        )
-        .unwrap();
-        // A peer speaks (a heartbeat from the daemon's component).
-        let client = UdpSocket::bind("127.0.0.1:0").unwrap();
-        client
-            .set_read_timeout(Some(Duration::from_millis(500)))
-            .unwrap();
-        let hb = dflat_link::heartbeat_onboard(dflat_link::DaemonStatus::Standby);
-        let f = serialize_v2(&dflat_link::header(1, 191, 0), &hb).unwrap();
-        client.send_to(f.as_bytes(), sitl.local_addr()).unwrap();
-        let mut buf = [0u8; 2048];
-        let mut positions = 0;
-        let deadline = Instant::now() + Duration::from_millis(400);
-        while Instant::now() < deadline {
-            if let Ok((n, _)) = client.recv_from(&mut buf) {
-                for fr in frames(&buf[..n]).flatten() {
-                    if matches!(fr.message, MavMessage::LOCAL_POSITION_NED(_)) {
-                        assert_eq!(fr.header.system_id, 1);
-                        assert_eq!(fr.header.component_id, 1);
-                        positions += 1;
-                    }
-                }
-            }
-        }
-        assert!(positions >= 10, "{positions} positions in 0.4 s");
-        assert_eq!(sitl.mode(), SitlMode::Hold);
-        let report = sitl.stop().unwrap();
-        let p = report.last.position;
-        assert!(p[0].abs() < 1e-6 && p[1].abs() < 1e-6 && (p[2] + 10.0).abs() < 1e-6);
-        assert!(!report.trace.is_empty());
-    }
-
-    #[test]
-    fn hold_loop_brings_the_plant_back() {
-        let cfg = test_config();
-        let popts = plant_options(&cfg);
-        for kind in [PlantKind::Planar, PlantKind::Spatial, PlantKind::RigidBody] {
-            let mut plant = build_plant(kind, &popts, 1).unwrap();
-            let mut s = PlantState::hover(Vector3::new(3.0, -2.0, -8.0), GRAVITY);
-            s.velocity = Vector3::new(2.0, 1.0, 0.0);
-            plant.reset(&s);
-            let target = Vector3::new(0.0, 0.0, -10.0);
-            for _ in 0..(20.0 / popts.plant_dt) as usize {
-                let c = hold_law(&popts, &plant.true_state(), &target, &Vector3::zeros());
-                plant.apply(&c);
-                plant.advance(popts.plant_dt);
-            }
-            let e = plant.position() - target;
-            let horizontal = e.x.hypot(e.y);
-            assert!(horizontal < 0.05, "{kind:?}: {e:?}");
-            if kind != PlantKind::Planar {
-                assert!(e.z.abs() < 0.05, "{kind:?}: {e:?}");
-            }
-        }
-    }
-
-    fn attitude_target(target: (u8, u8), pitch: f64) -> MavMessage {
-        dflat_link::set_attitude_target(
-            dflat_link::Target {
-                system: target.0,
-                component: target.1,
-            },
-            0,
-            &dflat_link::AttitudeCommand {
-                roll: 0.0,
-                pitch,
-                yaw: 0.0,
-                thrust: 0.5,
-            },
-        )
-        .unwrap()
-    }
-
-    /// A SITL of [`test_config`] with a GCS port, and two client sockets
-    /// (100 ms read timeout) to play the daemon and the ground station.
-    fn with_gcs(options: SitlOptions) -> (SitlHandle, UdpSocket, UdpSocket) {
-        let sitl = spawn(
-            &test_config(),
-            SitlOptions {
-                gcs: Some("udpin:127.0.0.1:0".into()),
-                ..options
-            },
-        )
-        .unwrap();
-        let daemon = UdpSocket::bind("127.0.0.1:0").unwrap();
-        let gcs = UdpSocket::bind("127.0.0.1:0").unwrap();
-        for s in [&daemon, &gcs] {
-            s.set_read_timeout(Some(Duration::from_millis(100)))
-                .unwrap();
-        }
-        (sitl, daemon, gcs)
-    }
-
-    fn send(client: &UdpSocket, to: SocketAddr, sys: u8, comp: u8, msg: &MavMessage) {
-        let f = serialize_v2(&dflat_link::header(sys, comp, 0), msg).unwrap();
-        client.send_to(f.as_bytes(), to).unwrap();
-    }
-
-    #[test]
-    fn follows_addressed_commands_then_holds_after_timeout() {
-        let mut cfg = test_config();
-        cfg.sitl.command_timeout_s = 0.2;
-        let sitl = spawn(&cfg, SitlOptions::default()).unwrap();
-        let to = sitl.local_addr();
-        let client = UdpSocket::bind("127.0.0.1:0").unwrap();
-        // Addressed elsewhere, or from another system: ignored.
-        send(&client, to, 1, 191, &attitude_target((1, 2), -0.2));
-        send(&client, to, 7, 191, &attitude_target((1, 1), -0.2));
-        // Nose down for 0.6 s: accelerates north.
-        let until = Instant::now() + Duration::from_millis(600);
-        while Instant::now() < until {
-            send(&client, to, 1, 191, &attitude_target((1, 1), -0.2));
-            std::thread::sleep(Duration::from_millis(20));
-        }
-        assert_eq!(sitl.mode(), SitlMode::Offboard);
-        let moving = sitl.truth();
-        assert!(moving.velocity[0] > 0.3, "{moving:?}");
-        assert!(moving.command.is_some_and(|c| (c.pitch + 0.2).abs() < 1e-3));
-        // Silence: the stand-in holds on its own and stops.
-        std::thread::sleep(Duration::from_millis(400));
-        assert_eq!(sitl.mode(), SitlMode::Hold);
-        let c = sitl.counters();
-        assert_eq!(c.commands_ignored, 2, "{c:?}");
-        assert!(c.commands_accepted >= 20, "{c:?}");
-        assert_eq!(c.hold_entries, 1);
-        let report = sitl.stop().unwrap();
-        assert!(!report.diverged);
-    }
-
-    #[test]
-    fn routes_between_gcs_and_vehicle_link() {
-        let (sitl, daemon, gcs) = with_gcs(SitlOptions::default());
-        let hb = dflat_link::heartbeat_onboard(dflat_link::DaemonStatus::Standby);
-        send(&daemon, sitl.local_addr(), 1, 191, &hb);
-        send(&gcs, sitl.gcs_addr().unwrap(), 255, 190, &hb);
-        std::thread::sleep(Duration::from_millis(50));
-        // GCS → daemon.
-        send(&gcs, sitl.gcs_addr().unwrap(), 255, 190, &hb);
-        // daemon → GCS (a heartbeat: broadcast, routed).
-        send(&daemon, sitl.local_addr(), 1, 191, &hb);
-        let seen_by = |s: &UdpSocket, sys: u32| {
-            let mut buf = [0u8; 4096];
-            let until = Instant::now() + Duration::from_millis(500);
-            while Instant::now() < until {
-                if let Ok((n, _)) = s.recv_from(&mut buf)
-                    && frames(&buf[..n])
-                        .flatten()
-                        .any(|f| f.header.system_id == sys)
-                {
-                    return true;
-                }
-            }
-            false
-        };
-        assert!(
-            seen_by(&daemon, 255),
-            "GCS frame not routed to the vehicle link"
-        );
-        assert!(seen_by(&gcs, 1), "nothing routed to the GCS");
-        let c = sitl.stop().unwrap().counters;
-        assert!(c.gcs_frames_in >= 2 && c.gcs_frames_out >= 1, "{c:?}");
-    }
-
-    fn key(byte: u8) -> dflat_link::SigningKey {
-        dflat_link::SigningKey::from_bytes([byte; 32])
-    }
-
-    /// Signing with `key` as `link_id`, starting at the wall clock.
-    fn signing(key: dflat_link::SigningKey, link_id: u8) -> Signing {
-        Signing::new(key, link_id, timestamp_from_system_time(SystemTime::now()))
-    }
-
-    fn sign(signing: &mut Signing, sys: u8, comp: u8, seq: u8, msg: &MavMessage) -> Vec<u8> {
-        let now = timestamp_from_system_time(SystemTime::now());
-        let f = signing
-            .sign(&dflat_link::header(sys, comp, seq), msg, now)
-            .unwrap();
-        f.as_bytes().to_vec()
-    }
-
-    /// The SITL's signing as `sitl.signing_key_file` sets it up.
-    fn sitl_signing_with(byte: u8) -> Signing {
-        let mut s = signing(key(byte), SIGNING_LINK_ID);
-        s.accept_unsigned_telemetry = true;
-        s
-    }
-
-    #[test]
-    fn with_signing_only_signed_commands_are_applied() {
-        let cfg = test_config();
-        let sitl = spawn(
-            &cfg,
-            SitlOptions {
-                signing: Some(sitl_signing_with(0x5a)),
-                ..SitlOptions::default()
-            },
-        )
-        .unwrap();
-        let to = sitl.local_addr();
-        let client = UdpSocket::bind("127.0.0.1:0").unwrap();
-        client
-            .set_read_timeout(Some(Duration::from_millis(200)))
-            .unwrap();
-        let cmd = attitude_target((1, 1), -0.2);
-        // Unsigned, and signed with another key: refused and counted.
-        let mut stranger = signing(key(0x33), 0);
-        for _ in 0..5 {
-            send(&client, to, 1, 191, &cmd);
-            let f = sign(&mut stranger, 1, 191, 0, &cmd);
-            client.send_to(&f, to).unwrap();
-            std::thread::sleep(Duration::from_millis(20));
-        }
-        std::thread::sleep(Duration::from_millis(100));
-        let c = sitl.counters();
-        assert_eq!(c.commands_unauthenticated, 10, "{c:?}");
-        assert_eq!(c.commands_accepted, 0, "{c:?}");
-        assert_eq!(sitl.mode(), SitlMode::Hold);
-        assert!(sitl.truth().command.is_none());
-        // Signed with the SITL's key: applied.
-        let mut ours = signing(key(0x5a), 0);
-        let until = Instant::now() + Duration::from_millis(300);
-        while Instant::now() < until {
-            let f = sign(&mut ours, 1, 191, 0, &cmd);
-            client.send_to(&f, to).unwrap();
-            std::thread::sleep(Duration::from_millis(20));
-        }
-        std::thread::sleep(Duration::from_millis(60));
-        assert_eq!(sitl.mode(), SitlMode::Offboard);
-        let c = sitl.counters();
-        assert!(c.commands_accepted >= 5, "{c:?}");
-        assert_eq!(c.commands_unauthenticated, 10, "{c:?}");
-        // A replayed signed command is refused.
-        let f = sign(&mut ours, 1, 191, 0, &cmd);
-        client.send_to(&f, to).unwrap();
-        client.send_to(&f, to).unwrap();
-        std::thread::sleep(Duration::from_millis(60));
-        let after = sitl.counters();
-        assert_eq!(
-            after.commands_accepted,
-            c.commands_accepted + 1,
-            "{after:?}"
-        );
-        assert_eq!(after.commands_unauthenticated, 11, "{after:?}");
-        // The SITL's telemetry is signed with its key, as link 1.
-        let mut verifier = signing(key(0x5a), 0);
-        let mut buf = [0u8; 2048];
-        let mut verified = 0;
-        let deadline = Instant::now() + Duration::from_millis(300);
-        while Instant::now() < deadline {
-            let Ok((n, _)) = client.recv_from(&mut buf) else {
-                continue;
-            };
-            for fr in frames(&buf[..n]).flatten() {
-                let now = timestamp_from_system_time(SystemTime::now());
-                let check = verifier.verify(&fr.header, fr.signed.as_ref(), now);
-                assert!(
-                    matches!(
-                        check,
-                        dflat_link::SignatureCheck::Valid {
-                            link_id: SIGNING_LINK_ID,
-                            ..
-                        }
-                    ),
-                    "{:?}: {check:?}",
-                    fr.message
-                );
-                verified += 1;
-            }
-        }
-        assert!(verified >= 10, "{verified} verified frames");
-        sitl.stop().unwrap();
-    }
-
-    #[test]
-    fn signed_frames_are_routed_with_their_signature() {
-        let (sitl, daemon, gcs) = with_gcs(SitlOptions {
-            signing: Some(sitl_signing_with(0x5a)),
-            ..SitlOptions::default()
-        });
-        let (link, gcs_port) = (sitl.local_addr(), sitl.gcs_addr().unwrap());
-        let hb = dflat_link::heartbeat_onboard(dflat_link::DaemonStatus::Standby);
-        let mut daemon_signing = signing(key(0x5a), 0);
-        let mut gcs_signing = signing(key(0x5a), 2);
-        let mut stranger = signing(key(0x33), 0);
-        daemon
-            .send_to(&sign(&mut daemon_signing, 1, 191, 0, &hb), link)
-            .unwrap();
-        gcs.send_to(&sign(&mut gcs_signing, 255, 190, 0, &hb), gcs_port)
-            .unwrap();
-        std::thread::sleep(Duration::from_millis(50));
-        // daemon → GCS: a wrong key (seq 7) is dropped, unsigned (8) and
-        // signed (9) heartbeats are routed, the signed one byte for byte.
-        daemon
-            .send_to(&sign(&mut stranger, 1, 191, 7, &hb), link)
-            .unwrap();
-        let unsigned_hb = serialize_v2(&dflat_link::header(1, 191, 8), &hb).unwrap();
-        daemon.send_to(unsigned_hb.as_bytes(), link).unwrap();
-        let signed_hb = sign(&mut daemon_signing, 1, 191, 9, &hb);
-        daemon.send_to(&signed_hb, link).unwrap();
-        // GCS → daemon, byte for byte.
-        let gcs_hb = sign(&mut gcs_signing, 255, 190, 1, &hb);
-        gcs.send_to(&gcs_hb, gcs_port).unwrap();
-        let collect = |s: &UdpSocket, sys: u32| {
-            let mut buf = [0u8; 4096];
-            let mut seen = Vec::new();
-            let until = Instant::now() + Duration::from_millis(400);
-            while Instant::now() < until {
-                if let Ok((n, _)) = s.recv_from(&mut buf) {
-                    seen.extend(
-                        frames(&buf[..n])
-                            .flatten()
-                            .filter(|f| f.header.system_id == sys),
-                    );
-                }
-            }
-            seen
-        };
-        let at_gcs: Vec<_> = collect(&gcs, 1)
-            .into_iter()
-            .filter(|f| f.header.component_id == 191)
-            .collect();
-        let seqs: Vec<u8> = at_gcs.iter().map(|f| f.header.sequence).collect();
-        assert!(!seqs.contains(&7), "badly signed frame routed: {seqs:?}");
-        assert!(seqs.contains(&8), "unsigned heartbeat not routed: {seqs:?}");
-        let routed = at_gcs.iter().find(|f| f.header.sequence == 9);
-        assert_eq!(
-            routed.and_then(|f| f.signed.as_ref()).map(|s| s.as_bytes()),
-            Some(&signed_hb[..]),
-            "signed heartbeat not routed unchanged"
-        );
-        let at_daemon = collect(&daemon, 255);
-        assert!(
-            at_daemon
-                .iter()
-                .any(|f| f.signed.as_ref().map(|s| s.as_bytes()) == Some(&gcs_hb[..])),
-            "GCS frame not routed unchanged: {at_daemon:?}"
-        );
-        sitl.stop().unwrap();
-    }
-
-    #[test]
-    fn sitl_key_file_is_checked_at_start() {
-        use std::os::unix::fs::PermissionsExt as _;
-        let dir = std::env::temp_dir().join(format!("dflat-sitl-key-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let path = dir.join("key");
-        std::fs::write(&path, format!("{}\n", "5a".repeat(32))).unwrap();
-        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o644)).unwrap();
-        let mut cfg = test_config();
-        cfg.sitl.signing_key_file = path.display().to_string();
-        let err = spawn(&cfg, SitlOptions::default()).unwrap_err().to_string();
-        assert!(err.contains("sitl.signing_key_file"), "{err}");
-        assert!(
-            err.contains("0644") && err.contains(&path.display().to_string()),
-            "{err}"
-        );
-        assert!(!err.contains("link.signing_key_file"), "{err}");
-        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o600)).unwrap();
-        let sitl = spawn(&cfg, SitlOptions::default()).unwrap();
-        assert!(sitl.shared.signing.is_some());
-        sitl.stop().unwrap();
-        let _ = std::fs::remove_dir_all(&dir);
-    }
-}
+mod tests;

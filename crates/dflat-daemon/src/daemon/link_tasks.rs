@@ -215,6 +215,9 @@ fn answer_command(req: &CommandRequest, ctx: &RxContext, out: &mpsc::Sender<Outg
     };
     debug!(command = ?req.command, "command answered");
     let _ = out.try_send(Outgoing::plain(reply.ack));
+    if let Some(reason) = &reply.reason {
+        send_text(out, MavSeverity::MAV_SEVERITY_INFO, reason);
+    }
     let state = ctx.state.load(Ordering::Relaxed);
     match reply.then {
         Some(RequestedMessage::Heartbeat) => {
