@@ -166,7 +166,7 @@ const VELOCITY_ONLY: u16 = 1 | 2 | 4 | 64 | 128 | 256 | 1024 | 2048;
 
 fn plant(name: &str) -> (dflat_daemon::config::Config, SitlSettings) {
     let out = std::env::temp_dir().join(format!("dflat-{name}-{}", std::process::id()));
-    let (mut cfg, plant) = demo_config(&DemoOptions {
+    let (mut cfg, mut plant) = demo_config(&DemoOptions {
         speed: 5.0,
         out,
         seconds: None,
@@ -174,6 +174,8 @@ fn plant(name: &str) -> (dflat_daemon::config::Config, SitlSettings) {
     .unwrap();
     cfg.logging.dir = String::new();
     cfg.mission.start = MissionStart::Hold;
+    // Engaged as soon as the stream runs (the demo plays a pilot instead).
+    plant.sitl.engage = dflat_sim::sitl::SitlEngage::Auto;
     (cfg, plant)
 }
 

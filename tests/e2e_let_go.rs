@@ -141,3 +141,56 @@ async fn a_controller_that_fails_every_tick_stops_the_stream_in_time() {
     });
     assert!(said, "no STATUSTEXT naming the cause");
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_pose_clock_at_0_6_of_real_time_is_found_and_replaced() {
+    let out = std::env::temp_dir().join(format!("dflat-clock-{}", std::process::id()));
+    let (mut cfg, mut plant) = demo_config(&DemoOptions {
+        speed: 5.0,
+        out,
+        seconds: None,
+    })
+    .unwrap();
+    cfg.logging.dir = String::new();
+    cfg.mission.start = MissionStart::Hold;
+    plant.sitl.engage = SitlEngage::Auto;
+    plant.sitl.pose_clock_rate = 0.6;
+    plant.sitl.noise_sigma = 0.01;
+    let (tx, taps) = mpsc::channel();
+    let sitl = sitl::spawn(
+        &plant,
+        SitlOptions {
+            tap: Some(tx),
+            ..SitlOptions::default()
+        },
+    )
+    .unwrap();
+    let start = plant.sitl.start;
+    let link = format!("udpout:127.0.0.1:{}", sitl.local_addr().port());
+    let daemon = dflat_daemon::spawn(cfg.clone(), Some(link)).await.unwrap();
+    tokio::time::sleep(Duration::from_secs(6)).await;
+    let state = daemon.state();
+    let truth = sitl.truth();
+    daemon.shutdown();
+    let summary = daemon.join().await.unwrap();
+    sitl.stop().unwrap();
+    let g = summary.guards;
+    eprintln!(
+        "0.6x pose clock: {g:?}; final state {state:?}; at {:?}",
+        truth.position
+    );
+    assert_eq!(g.pose_clock_faults, 1, "{summary}");
+    let level_ticks_max = (cfg.safety.level_hover_max_ms / 20.0).round() as u64;
+    assert!(g.level_hover <= level_ticks_max, "{g:?}");
+    let said = taps.try_iter().any(|f| match &f.message {
+        MavMessage::STATUSTEXT(d) => d.text.to_str().unwrap_or("").contains("pose clock lags"),
+        _ => false,
+    });
+    assert!(said, "no STATUSTEXT naming the cause");
+    // Re-stamped with arrival times, the daemon flies on: holding, near
+    // where it started.
+    assert_eq!(state, Some(FlightState::Holding), "{summary}");
+    let d =
+        ((truth.position[0] - start[0]).powi(2) + (truth.position[1] - start[1]).powi(2)).sqrt();
+    assert!(d < 0.5, "drifted {d:.2} m");
+}

@@ -191,6 +191,11 @@ pub struct SitlConfig {
     /// Pure delay \[ms\] (0–500) between a received command and its
     /// application by the plant (the autopilot's and actuators' latency).
     pub command_delay_ms: f64,
+    /// Rate of the clock that stamps the poses (LOCAL_POSITION_NED
+    /// `time_boot_ms`, vision `time_usec`) relative to real time (0.1–10;
+    /// 1 = true): a lagging simulator or a drifting VIO clock (< 1), or a
+    /// fast one (> 1). The plant and every other timing stay real time.
+    pub pose_clock_rate: f64,
     /// Plant mass factor relative to nominal (0.5–2).
     pub mass_factor: f64,
     /// Gaussian position noise σ \[m\] (0–1).
@@ -243,6 +248,7 @@ impl Default for SitlConfig {
             hover_thrust: 0.5,
             tau_thrust: 0.04,
             command_delay_ms: 0.0,
+            pose_clock_rate: 1.0,
             mass_factor: 1.0,
             noise_sigma: 0.0,
             vision_rate_hz: 0.0,
@@ -290,6 +296,7 @@ impl SitlConfig {
         range("sitl.hover_thrust", si.hover_thrust, 0.05, 0.95)?;
         range("sitl.tau_thrust", si.tau_thrust, 0.005, 1.0)?;
         range("sitl.command_delay_ms", si.command_delay_ms, 0.0, 500.0)?;
+        range("sitl.pose_clock_rate", si.pose_clock_rate, 0.1, 10.0)?;
         range("sitl.mass_factor", si.mass_factor, 0.5, 2.0)?;
         range("sitl.noise_sigma", si.noise_sigma, 0.0, 1.0)?;
         if si.vision_rate_hz != 0.0 {

@@ -590,6 +590,7 @@ pub fn spawn(cfg: &SitlSettings, options: SitlOptions) -> Result<SitlHandle, Sit
         hover_thrust: cfg.sitl.hover_thrust,
         autopilot: cfg.sitl.autopilot,
         modes: ModeMachine::new(cfg.sitl.engage, cfg.sitl.pilot.clone()),
+        pose_clock_rate: cfg.sitl.pose_clock_rate,
         record_trace: options.record_trace,
         truth_file,
     };
@@ -794,6 +795,8 @@ struct PlantLoop {
     hover_thrust: f64,
     autopilot: SitlAutopilot,
     modes: ModeMachine,
+    /// `sitl.pose_clock_rate`.
+    pose_clock_rate: f64,
     record_trace: bool,
     truth_file: Option<(PathBuf, BufWriter<File>)>,
 }
@@ -1018,7 +1021,7 @@ impl PlantLoop {
             due.push((capture, p, euler));
         }
         for (capture, p, euler) in due {
-            let usec = (capture * 1e6).round() as u64;
+            let usec = (capture * self.pose_clock_rate * 1e6).round() as u64;
             if let Ok(msg) = dflat_link::vision_position_estimate(usec, p, euler, 0, None) {
                 self.send(&msg, Kind::Vision);
                 self.shared.latency.pose_sent(Instant::now());
@@ -1030,7 +1033,7 @@ impl PlantLoop {
         if self.shared.pose_paused.load(Ordering::Relaxed) {
             return;
         }
-        let time_boot_ms = (sample.t * 1000.0).round() as u32;
+        let time_boot_ms = (sample.t * self.pose_clock_rate * 1000.0).round() as u32;
         let measured = self.sensor.measure(sample.t);
         let offset = *lock(&self.shared.pose_offset);
         let p = measured.map_or(state.position, |m| m.position);
