@@ -310,3 +310,51 @@ async fn offboard_is_refused_without_a_stream_and_the_ardupilot_flavour_flies() 
 }
 
 mod support;
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn engagement_is_refused_above_the_autopilots_tilt_limit() {
+    // The SITL's MPC_TILTMAX_AIR is its own 35° limit; ask for 40°.
+    let (mut cfg, plant) = setup("tilt-refused", MissionStart::Hold, SitlAutopilot::Px4);
+    cfg.vehicle.max_tilt_deg = 40.0;
+    let (sitl, taps) = tap_sitl(&plant);
+    let link = format!("udpout:127.0.0.1:{}", sitl.local_addr().port());
+    let daemon = dflat_daemon::spawn(cfg.clone(), Some(link)).await.unwrap();
+    wait_for(&daemon, FlightState::Standby, Duration::from_secs(5))
+        .await
+        .expect("standby");
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    sitl.request_mode(SitlMode::Offboard);
+    tokio::time::sleep(Duration::from_secs(3)).await;
+    let state = daemon.state();
+    daemon.shutdown();
+    let summary = daemon.join().await.unwrap();
+    sitl.stop().unwrap();
+    let frames: Vec<_> = taps.try_iter().collect();
+    let requested: Vec<String> = frames
+        .iter()
+        .filter_map(|f| match &f.message {
+            MavMessage::PARAM_REQUEST_READ(d) => Some(d.param_id.to_str().unwrap_or("").to_owned()),
+            _ => None,
+        })
+        .collect();
+    assert!(
+        requested.iter().any(|n| n == "MPC_THR_HOVER"),
+        "{requested:?}"
+    );
+    assert!(
+        requested.iter().any(|n| n == "MPC_TILTMAX_AIR"),
+        "{requested:?}"
+    );
+    let said: Vec<String> = frames
+        .iter()
+        .filter_map(|f| match &f.message {
+            MavMessage::STATUSTEXT(d) => Some(d.text.to_str().unwrap_or("").to_owned()),
+            _ => None,
+        })
+        .filter(|t| t.contains("not engaging"))
+        .collect();
+    eprintln!("{said:?}");
+    assert_eq!(said, ["dflat: not engaging, tilt 40 > MPC_TILTMAX_AIR 35"]);
+    assert_eq!(state, Some(FlightState::Standby), "{summary}");
+    assert_eq!(summary.engagements, 0);
+}

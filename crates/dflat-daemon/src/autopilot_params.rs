@@ -16,6 +16,7 @@
 //! enters as arguments.
 
 use dflat_link::AutopilotFamily;
+use dflat_link::params::AutopilotParam;
 
 /// Seconds between two requests for a parameter not answered yet.
 pub const RETRY_S: f64 = 1.0;
@@ -27,54 +28,53 @@ pub const TRIES: u32 = 3;
 pub enum ParamKind {
     /// Normalised hover thrust (0–1).
     HoverThrust,
-    /// Largest tilt the autopilot allows \[deg\] (after `scale`).
+    /// Largest tilt the autopilot allows \[deg\].
     TiltLimitDeg,
 }
 
-/// One parameter dflat reads: its name, meaning and unit scale.
+/// One parameter dflat reads: its name in the autopilot's firmware and its
+/// meaning (names, wire units and conversions from [`dflat_link::params`],
+/// the table the SITL serves too).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ParamSpec {
     /// The autopilot's name.
     pub name: &'static str,
     /// What it means.
     pub kind: ParamKind,
-    /// Multiply the value by this for dflat's unit (centidegrees → deg).
-    pub scale: f64,
+    /// The shared parameter.
+    pub param: AutopilotParam,
+    /// The firmware it is read from.
+    pub family: AutopilotFamily,
 }
 
-const PX4: [ParamSpec; 2] = [
-    ParamSpec {
-        name: "MPC_THR_HOVER",
-        kind: ParamKind::HoverThrust,
-        scale: 1.0,
-    },
-    ParamSpec {
-        name: "MPC_TILTMAX_AIR",
-        kind: ParamKind::TiltLimitDeg,
-        scale: 1.0,
-    },
-];
-const ARDUPILOT: [ParamSpec; 2] = [
-    ParamSpec {
-        name: "MOT_THST_HOVER",
-        kind: ParamKind::HoverThrust,
-        scale: 1.0,
-    },
-    ParamSpec {
-        name: "ANGLE_MAX",
-        kind: ParamKind::TiltLimitDeg,
-        scale: 0.01,
-    },
-];
+impl ParamSpec {
+    /// A wire value in dflat's unit (tilt in degrees, thrust 0–1).
+    pub fn convert(&self, value: f64) -> f64 {
+        let si = self.param.to_si(self.family, value);
+        match self.kind {
+            ParamKind::HoverThrust => si,
+            ParamKind::TiltLimitDeg => si.to_degrees(),
+        }
+    }
+}
 
 /// The parameters dflat reads from an autopilot of `family` (none for
 /// families whose parameters it does not know).
-pub fn params_for(family: AutopilotFamily) -> &'static [ParamSpec] {
-    match family {
-        AutopilotFamily::Px4 => &PX4,
-        AutopilotFamily::ArduPilot => &ARDUPILOT,
-        AutopilotFamily::Other => &[],
-    }
+pub fn params_for(family: AutopilotFamily) -> Vec<ParamSpec> {
+    [
+        (AutopilotParam::HoverThrust, ParamKind::HoverThrust),
+        (AutopilotParam::TiltMax, ParamKind::TiltLimitDeg),
+    ]
+    .into_iter()
+    .filter_map(|(param, kind)| {
+        Some(ParamSpec {
+            name: param.name(family)?,
+            kind,
+            param,
+            family,
+        })
+    })
+    .collect()
 }
 
 /// A value received for one of the parameters dflat reads.
@@ -82,7 +82,7 @@ pub fn params_for(family: AutopilotFamily) -> &'static [ParamSpec] {
 pub struct KnownParam {
     /// Which.
     pub spec: ParamSpec,
-    /// In dflat's unit (see [`ParamSpec::scale`]).
+    /// In dflat's unit (see [`ParamSpec::convert`]).
     pub value: f64,
 }
 
@@ -96,7 +96,7 @@ struct Pending {
 /// The reader (see the module docs).
 #[derive(Debug, Clone, Default)]
 pub struct AutopilotParams {
-    started: bool,
+    family: Option<AutopilotFamily>,
     pending: Vec<Pending>,
     hover_thrust: Option<KnownParam>,
     tilt_limit: Option<KnownParam>,
@@ -112,13 +112,13 @@ impl AutopilotParams {
     /// The autopilot's family is known at `t` \[s\]: the first call
     /// schedules the requests (later calls do nothing).
     pub fn start(&mut self, family: AutopilotFamily, t: f64) {
-        if self.started {
+        if self.family.is_some() {
             return;
         }
-        self.started = true;
+        self.family = Some(family);
         self.pending = params_for(family)
-            .iter()
-            .map(|&spec| Pending {
+            .into_iter()
+            .map(|spec| Pending {
                 spec,
                 tries: 0,
                 next_at: t,
@@ -156,14 +156,14 @@ impl AutopilotParams {
         let i = self.pending.iter().position(|p| p.spec.name == name);
         let spec = match i {
             Some(i) => self.pending.remove(i).spec,
-            None => *PX4
-                .iter()
-                .chain(&ARDUPILOT)
-                .find(|s| s.name == name && self.started)?,
+            // A late answer, after the requests were given up.
+            None => params_for(self.family?)
+                .into_iter()
+                .find(|s| s.name == name)?,
         };
         let known = KnownParam {
             spec,
-            value: value * spec.scale,
+            value: spec.convert(value),
         };
         match spec.kind {
             ParamKind::HoverThrust => self.hover_thrust = Some(known),
@@ -208,7 +208,7 @@ mod tests {
         assert_eq!(p.hover_thrust().unwrap().value, 0.42);
         assert!(p.tilt_limit().is_none());
         // A late answer still counts; unknown names and NaN do not.
-        assert_eq!(p.on_value("MPC_TILTMAX_AIR", 30.0).unwrap().value, 30.0);
+        assert!((p.on_value("MPC_TILTMAX_AIR", 30.0).unwrap().value - 30.0).abs() < 1e-9);
         assert!(p.on_value("BAT_V_CHARGED", 4.2).is_none());
         assert!(p.on_value("MPC_THR_HOVER", f64::NAN).is_none());
         assert_eq!(p.hover_thrust().unwrap().value, 0.42);
@@ -219,7 +219,7 @@ mod tests {
         let mut p = AutopilotParams::new();
         p.start(AutopilotFamily::ArduPilot, 0.0);
         assert_eq!(p.due(0.0), ["MOT_THST_HOVER", "ANGLE_MAX"]);
-        assert_eq!(p.on_value("ANGLE_MAX", 3000.0).unwrap().value, 30.0);
+        assert!((p.on_value("ANGLE_MAX", 3000.0).unwrap().value - 30.0).abs() < 1e-9);
         let mut other = AutopilotParams::new();
         other.start(AutopilotFamily::Other, 0.0);
         assert!(other.due(0.0).is_empty());

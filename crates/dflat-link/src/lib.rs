@@ -67,8 +67,8 @@ pub use modes::{AutopilotFamily, AutopilotMode};
 pub use outbound::{
     ATTITUDE_TARGET_MASK, AttitudeCommand, DaemonStatus, HEARTBEAT_MAVLINK_VERSION, Outbound,
     STATUSTEXT_MAX_LEN, Target, attitude, heartbeat_autopilot, heartbeat_onboard,
-    local_position_ned, odometry, param_request_read, set_attitude_target, statustext,
-    truncate_text, vision_position_estimate,
+    local_position_ned, odometry, set_attitude_target, statustext, truncate_text,
+    vision_position_estimate,
 };
 pub use signing::{
     KeyFileError, KeyFormatError, ONE_MINUTE, SIGNING_EPOCH_UNIX_S, SignatureCheck, Signing,

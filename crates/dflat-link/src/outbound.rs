@@ -10,8 +10,7 @@
 use mavlink::dialects::common::{
     ATTITUDE_DATA, AttitudeTargetTypemask, HEARTBEAT_DATA, LOCAL_POSITION_NED_DATA, MavAutopilot,
     MavEstimatorType, MavFrame, MavMessage, MavModeFlag, MavSeverity, MavState, MavType,
-    ODOMETRY_DATA, PARAM_REQUEST_READ_DATA, SET_ATTITUDE_TARGET_DATA, STATUSTEXT_DATA,
-    VISION_POSITION_ESTIMATE_DATA,
+    ODOMETRY_DATA, SET_ATTITUDE_TARGET_DATA, STATUSTEXT_DATA, VISION_POSITION_ESTIMATE_DATA,
 };
 use mavlink::types::CharArray;
 
@@ -311,18 +310,6 @@ pub fn statustext(severity: MavSeverity, text: &str) -> MavMessage {
         text: CharArray::from(text),
         id: 0,
         chunk_seq: 0,
-    })
-}
-
-/// PARAM_REQUEST_READ (20) of parameter `name` (at most 16 characters,
-/// longer names are cut) from `target`.
-pub fn param_request_read(target: Target, name: &str) -> MavMessage {
-    let name: String = name.chars().take(16).collect();
-    MavMessage::PARAM_REQUEST_READ(PARAM_REQUEST_READ_DATA {
-        param_index: -1,
-        target_system: target.system,
-        target_component: target.component,
-        param_id: CharArray::from(name.as_str()),
     })
 }
 

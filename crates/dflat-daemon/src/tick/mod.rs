@@ -302,7 +302,10 @@ impl ControlCore {
         for name in self.params.due(t) {
             debug!(name, "requesting the autopilot's parameter");
             self.pending_texts
-                .push(dflat_link::param_request_read(self.target, name));
+                .push(dflat_link::params::param_request_read(
+                    (self.target.system, self.target.component),
+                    name,
+                ));
         }
         // 2. Decide.
         self.supervisor.set_motion(self.motion.estimate());
