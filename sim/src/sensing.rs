@@ -243,6 +243,11 @@ pub struct VisionOptions {
     pub timing_jitter: f64,
     /// Per-tick measurement model.
     pub mode: VisionMode,
+    /// Phase of the sample grid \[s\]: the captures are shifted this much
+    /// earlier, so with a sample rate equal to the control rate (and no
+    /// jitter) each sample arrives exactly `arrival_lead` before the control
+    /// tick that first sees it (0: on the tick). `0 ..<` one sample period.
+    pub arrival_lead: f64,
 }
 
 impl Default for VisionOptions {
@@ -257,6 +262,7 @@ impl Default for VisionOptions {
             burst_len: 1.0,
             timing_jitter: 0.005,
             mode: VisionMode::Extrapolate,
+            arrival_lead: 0.0,
         }
     }
 }
@@ -306,6 +312,13 @@ impl VisionOptions {
             0.0,
             0.499 / self.rate_hz,
             "0 ..< half the sample period s",
+        )?;
+        check_range(
+            "vision.arrival_lead",
+            self.arrival_lead,
+            0.0,
+            0.999 / self.rate_hz,
+            "0 ..< the sample period s",
         )?;
         check_positive("vision.rate_hz", self.rate_hz)
     }
@@ -468,7 +481,7 @@ impl VisionSensor {
 impl Sensor for VisionSensor {
     fn reset(&mut self, t0: f64, truth: &PlantState) {
         let period = self.period();
-        self.t_start = t0 - self.options.latency - 2.0 * period;
+        self.t_start = t0 - self.options.latency - 2.0 * period - self.options.arrival_lead;
         self.k = 0;
         self.dropping = false;
         self.last_arrival = f64::NEG_INFINITY;

@@ -25,6 +25,7 @@ mod figures;
 pub mod mismatch;
 pub mod noise_sweep;
 pub mod paths;
+pub mod phase;
 pub mod tilt_cone;
 pub mod vision_rate;
 
