@@ -64,17 +64,6 @@ pub(super) struct ControlLoop {
 /// for the µs-scale error of a replay's log-clock mapping.
 const BATCH_MARGIN: f64 = 20e-6;
 
-/// An event's arrival \[s\] since the epoch.
-fn arrival(e: &Event) -> f64 {
-    match e {
-        Event::Pose { arrival, .. }
-        | Event::Attitude { arrival, .. }
-        | Event::Heartbeat { arrival, .. }
-        | Event::Param { arrival, .. }
-        | Event::Setpoint { arrival, .. } => *arrival,
-    }
-}
-
 impl ControlLoop {
     /// An event for the next tick; a pose also tells the planner.
     fn take(&self, event: Event, planner: &mut TickPlanner, batch: &mut Vec<Event>) {
@@ -189,7 +178,7 @@ impl ControlLoop {
             };
             let taken = batch
                 .iter()
-                .position(|e| arrival(e) > t)
+                .position(|e| e.arrival() > t)
                 .unwrap_or(batch.len());
             for e in &batch[taken..] {
                 if let Event::Pose { arrival, .. } = e {

@@ -62,6 +62,32 @@ pub enum Event {
     },
 }
 
+impl Event {
+    /// Arrival \[s\] since the daemon's epoch.
+    pub fn arrival(&self) -> f64 {
+        match self {
+            Event::Pose { arrival, .. }
+            | Event::Attitude { arrival, .. }
+            | Event::Heartbeat { arrival, .. }
+            | Event::Param { arrival, .. }
+            | Event::Setpoint { arrival, .. } => *arrival,
+        }
+    }
+
+    /// The same event arriving `by` \[s\] later (a replay maps a log's
+    /// clock to the daemon's this way).
+    pub fn shifted(mut self, by: f64) -> Self {
+        match &mut self {
+            Event::Pose { arrival, .. }
+            | Event::Attitude { arrival, .. }
+            | Event::Heartbeat { arrival, .. }
+            | Event::Param { arrival, .. }
+            | Event::Setpoint { arrival, .. } => *arrival += by,
+        }
+        self
+    }
+}
+
 /// A MAVLink parameter name (at most 16 bytes), kept inline so that
 /// [`Event`] stays `Copy`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -13,7 +13,7 @@
 //! the daemon's epoch, and a stopwatch (monotonic seconds) the step reads
 //! around the controller's solve to detect a deadline overrun.
 //!
-//! The exit path is written once ([`ControlCore::guarded`]): controller
+//! The exit path is written once (`tick/exit.rs`): controller
 //! output → thrust mapping → [`CommandGuard`] → command. A good tick's
 //! command, a plan-fallback step and the held / level-hover fallback all
 //! pass through it exactly once, so each guard counter counts a command at
@@ -41,8 +41,11 @@ use crate::records::{CsvDisturbance, CsvRow};
 use crate::summary::{DisturbanceSummary, SolveCounts};
 use crate::supervisor::{Cause, FlightState, Goal, SetpointOutcome, Supervisor, Transition};
 
+mod exit;
 mod inputs;
 mod standby;
+use exit::update_caught;
+
 pub use inputs::{
     Event, ParamName, brake_acceleration, event_from, pose_source, source_filter, supervisor_config,
 };
@@ -394,34 +397,16 @@ impl ControlCore {
         row: &mut CsvRow,
     ) -> (Option<SentCommand>, u32) {
         let multi_rate = self.multi_rate;
-        // Multi-rate: the samples were observed as they arrived; the tick
-        // passes its own time. Otherwise the newest pose with its capture
-        // time (not newer than the last: no new pose).
-        let measurement = Measurement {
-            t: if multi_rate { t } else { pose.capture },
-            position: Vector3::from(pose.position),
-            yaw: self.yaw_of(pose.yaw, self.attitude_yaw),
-        };
+        let measurement = self.tick_measurement(t, &pose);
         // Standby: the tick before sent a command the autopilot did not
         // apply; record the input its attitude shows instead, before this
         // tick's update uses the window.
         self.correct_standby_input();
         let t0 = stopwatch();
-        // A panicking controller is a bug, but it must not take the loop
-        // down with it: treat it as a failed tick and reset.
-        let controller = &mut self.controller;
         let Some(reference) = self.reference.as_mut() else {
             unreachable!("control() runs with a reference")
         };
-        let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            controller.update(&measurement, reference)
-        }))
-        .unwrap_or_else(|_| {
-            controller.reset();
-            Err(dflat_control::ControlError::Solver(
-                "controller panicked (reset)".into(),
-            ))
-        });
+        let result = update_caught(self.controller.as_mut(), &measurement, reference);
         if result.is_err() && multi_rate {
             // After a reset (panic) the window needs a sample again (a
             // repeated sample replaces the one held).
@@ -525,91 +510,16 @@ impl ControlCore {
         (sent, solve_us)
     }
 
-    /// The exit path, once per command: the controller's command with its
-    /// thrust mapped to [0, 1] units and through the [`CommandGuard`].
-    fn guarded(
-        &mut self,
-        command: &dflat_control::AttitudeCommand,
-    ) -> Result<AttitudeCommand, String> {
-        let thrust = self
-            .mapping
-            .normalized(command.thrust)
-            .map_err(|e| e.to_string())?;
-        self.guard
-            .check(
-                AttitudeCommand {
-                    roll: command.roll,
-                    pitch: command.pitch,
-                    yaw: command.yaw,
-                    thrust,
-                },
-                &mut self.counts.guards,
-            )
-            .map_err(|e| e.to_string())
-    }
-
-    /// A failed or late tick's command: the previous plan one step further
-    /// (DF-MPC; recorded in its window), guarded like any command; else the
-    /// held command, then level hover. Counts and announces the kind.
-    fn fallback_command(
-        &mut self,
-        measurement: &Measurement,
-        failed: Result<(dflat_control::TickOutput, AttitudeCommand), String>,
-        solve_us: u32,
-        row: &mut CsvRow,
-    ) -> AttitudeCommand {
-        match failed {
-            Ok(_) => {
-                self.counts.guards.deadline_overruns += 1;
-                if self.error_streak == 0 {
-                    warn!(solve_us, "deadline overrun: fallback command");
-                }
-            }
-            Err(e) => {
-                self.counts.control_errors += 1;
-                self.counts.guards.controller_failures += 1;
-                if self.error_streak == 0 {
-                    warn!(error = %e, "controller failed: fallback command");
-                }
-            }
+    /// The measurement a tick at `t` hands the controller: multi-rate, the
+    /// tick's own time (the samples were observed as they arrived);
+    /// otherwise the newest pose at its capture time (not newer than the
+    /// last: no new pose).
+    fn tick_measurement(&self, t: f64, pose: &PoseSample) -> Measurement {
+        Measurement {
+            t: if self.multi_rate { t } else { pose.capture },
+            position: Vector3::from(pose.position),
+            yaw: self.yaw_of(pose.yaw, self.attitude_yaw),
         }
-        self.error_streak += 1;
-        let planned = self
-            .controller
-            .plan_fallback(measurement, self.fallback.hold_ticks as usize)
-            .and_then(|out| {
-                let command = self.guarded(&out.command).ok()?;
-                Some((command, out.plan[1]))
-            });
-        match planned {
-            Some((_, next)) => self.residual.predict([next.x, next.y, next.z]),
-            None => self.residual.forget(),
-        }
-        let (command, kind) = self.fallback.command(planned.map(|(c, _)| c));
-        let (counter, note, text) = match kind {
-            FallbackKind::Plan => (
-                &mut self.counts.guards.plan_steps,
-                "plan",
-                "dflat: control failed, flying the previous plan",
-            ),
-            FallbackKind::Held => (
-                &mut self.counts.guards.held,
-                "held",
-                "dflat: control failed, holding last command",
-            ),
-            FallbackKind::LevelHover => (
-                &mut self.counts.guards.level_hover,
-                "level",
-                "dflat: control failed, level hover",
-            ),
-        };
-        *counter += 1;
-        row.guard = Some(note);
-        if self.fallback_kind != Some(kind) {
-            self.fallback_kind = Some(kind);
-            self.text(MavSeverity::MAV_SEVERITY_CRITICAL, text);
-        }
-        command
     }
 
     fn text(&mut self, severity: MavSeverity, text: &str) {
@@ -786,13 +696,14 @@ impl ControlCore {
                 )
         });
         // Every sample to a multi-rate controller (late ones too).
-        if !jump {
-            self.observe(&pose);
-            self.motion.push(capture, position);
-        } else {
+        // The motion estimate restarts at a jump (the old poses are
+        // another frame).
+        if jump {
             self.motion.reset();
-            self.motion.push(capture, position);
+        } else {
+            self.observe(&pose);
         }
+        self.motion.push(capture, position);
         // The newest for the others, by the source's own clock when both
         // have one (a falling offset estimate may map a newer pose before
         // the previous capture), else by capture time; its time must then

@@ -3,12 +3,12 @@
 //! autopilot's mode, letting go when the controller cannot fly (and the
 //! trial solves that end it), and the pose clock's sanity check.
 
-use dflat_control::Measurement;
 use dflat_link::dialect::MavSeverity;
 use dflat_link::{AutopilotFamily, AutopilotMode};
 use nalgebra::Vector3;
 use tracing::{error, info};
 
+use super::exit::update_caught;
 use super::{ControlCore, POSE_LATENCY_PERSISTENCE, TRIAL_TICKS};
 use crate::autopilot_params::ParamKind;
 use crate::config::{AutopilotKind, ThrustMode};
@@ -45,17 +45,10 @@ impl ControlCore {
         let (Some(pose), Some(reference)) = (self.pose, self.reference.as_ref()) else {
             return;
         };
+        // On a copy: a trial must not move a path's progress.
         let mut reference = reference.clone();
-        let measurement = Measurement {
-            t: if self.multi_rate { t } else { pose.capture },
-            position: Vector3::from(pose.position),
-            yaw: self.yaw_of(pose.yaw, self.attitude_yaw),
-        };
-        let controller = &mut self.controller;
-        let ok = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            controller.update(&measurement, &mut reference).is_ok()
-        }))
-        .unwrap_or(false);
+        let measurement = self.tick_measurement(t, &pose);
+        let ok = update_caught(self.controller.as_mut(), &measurement, &mut reference).is_ok();
         self.reset_controller();
         self.trial_streak = if ok { self.trial_streak + 1 } else { 0 };
         if self.trial_streak >= TRIAL_TICKS {

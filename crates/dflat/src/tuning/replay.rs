@@ -105,52 +105,6 @@ fn tlog_events(path: &Path, cfg: &Config) -> Result<(Vec<Event>, Sent)> {
     Ok((events, sent))
 }
 
-fn shift(e: Event, by: f64) -> Event {
-    match e {
-        Event::Pose {
-            arrival,
-            source_time,
-            position,
-            yaw,
-            reset_counter,
-        } => Event::Pose {
-            arrival: arrival + by,
-            source_time,
-            position,
-            yaw,
-            reset_counter,
-        },
-        Event::Heartbeat { arrival, mode } => Event::Heartbeat {
-            arrival: arrival + by,
-            mode,
-        },
-        Event::Setpoint { arrival, position } => Event::Setpoint {
-            arrival: arrival + by,
-            position,
-        },
-        Event::Param {
-            arrival,
-            name,
-            value,
-        } => Event::Param {
-            arrival: arrival + by,
-            name,
-            value,
-        },
-        Event::Attitude {
-            arrival,
-            roll,
-            pitch,
-            yaw,
-        } => Event::Attitude {
-            arrival: arrival + by,
-            roll,
-            pitch,
-            yaw,
-        },
-    }
-}
-
 /// Re-runs the flight of `csv` (with its `.tlog` beside it) under `cfg`.
 pub fn replay(csv_path: &Path, csv: &FlightCsv, cfg: &Config) -> Result<ReplayReport> {
     let tlog = csv_path.with_extension("tlog");
@@ -220,7 +174,7 @@ fn run_pass(
     let mut age_diffs = Vec::new();
     let controller = build_controller(cfg).context("cannot build the controller")?;
     let mut core = ControlCore::new(cfg, controller, thrust_mapping(cfg));
-    let mut pending = events.iter().map(|e| shift(*e, offset)).peekable();
+    let mut pending = events.iter().map(|e| e.shifted(offset)).peekable();
     let logged = ["roll", "pitch", "yaw", "thrust"].map(|c| csv.numbers(c));
     let mut report = ReplayReport {
         ticks: csv.rows.len(),
@@ -236,14 +190,7 @@ fn run_pass(
         let w = wake[i];
         let mut batch = Vec::new();
         while let Some(e) = pending.peek() {
-            let arrival = match e {
-                Event::Pose { arrival, .. }
-                | Event::Heartbeat { arrival, .. }
-                | Event::Attitude { arrival, .. }
-                | Event::Param { arrival, .. }
-                | Event::Setpoint { arrival, .. } => *arrival,
-            };
-            if arrival > w {
+            if e.arrival() > w {
                 break;
             }
             batch.extend(pending.next());
