@@ -17,7 +17,6 @@
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
-use dflat::demo::{DemoOptions, demo_config};
 use dflat_daemon::config::{Config, MissionStart};
 use dflat_daemon::supervisor::FlightState;
 use dflat_link::MavMessage;
@@ -36,16 +35,8 @@ const HANDBACK_STEP_DEG: f64 = 5.0;
 /// noise off here unless set) with the SITL's pilot in charge of
 /// engagement.
 fn setup(name: &str, start: MissionStart, autopilot: SitlAutopilot) -> (Config, SitlSettings) {
-    let out = std::env::temp_dir().join(format!("dflat-{name}-{}", std::process::id()));
-    let (mut cfg, mut plant) = demo_config(&DemoOptions {
-        speed: 5.0,
-        out,
-        seconds: None,
-    })
-    .unwrap();
-    cfg.logging.dir = std::env::var("DFLAT_E2E_LOG").unwrap_or_default();
+    let (mut cfg, mut plant) = support::sitl_flight(name, SitlEngage::Pilot);
     cfg.mission.start = start;
-    plant.sitl.engage = SitlEngage::Pilot;
     plant.sitl.autopilot = autopilot;
     plant.sitl.noise_sigma = 0.01;
     (cfg, plant)

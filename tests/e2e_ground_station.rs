@@ -16,7 +16,6 @@ use std::net::{SocketAddr, UdpSocket};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use dflat::demo::{DemoOptions, demo_config};
 use dflat_daemon::config::MissionStart;
 use dflat_link::dialect::{
     COMMAND_LONG_DATA, MavCmd, MavFrame, MavResult, PositionTargetTypemask,
@@ -24,6 +23,8 @@ use dflat_link::dialect::{
 };
 use dflat_link::{MavHeader, MavMessage, frames, serialize_v2};
 use dflat_sim::sitl::{self, SitlHandle, SitlOptions, SitlSettings};
+
+mod support;
 
 type Seen = Arc<Mutex<Vec<(Instant, MavHeader, MavMessage)>>>;
 
@@ -165,17 +166,9 @@ const POSITION_AND_YAW: u16 = 8 | 16 | 32 | 64 | 128 | 256 | 2048;
 const VELOCITY_ONLY: u16 = 1 | 2 | 4 | 64 | 128 | 256 | 1024 | 2048;
 
 fn plant(name: &str) -> (dflat_daemon::config::Config, SitlSettings) {
-    let out = std::env::temp_dir().join(format!("dflat-{name}-{}", std::process::id()));
-    let (mut cfg, mut plant) = demo_config(&DemoOptions {
-        speed: 5.0,
-        out,
-        seconds: None,
-    })
-    .unwrap();
-    cfg.logging.dir = String::new();
-    cfg.mission.start = MissionStart::Hold;
     // Engaged as soon as the stream runs (the demo plays a pilot instead).
-    plant.sitl.engage = dflat_sim::sitl::SitlEngage::Auto;
+    let (mut cfg, plant) = support::sitl_flight(name, dflat_sim::sitl::SitlEngage::Auto);
+    cfg.mission.start = MissionStart::Hold;
     (cfg, plant)
 }
 

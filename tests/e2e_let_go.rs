@@ -9,68 +9,24 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
-use dflat::demo::{DemoOptions, demo_config};
-use dflat_control::{ControlError, Controller, Measurement, ReferenceSource, TickOutput};
 use dflat_daemon::config::MissionStart;
 use dflat_daemon::control::build_controller;
 use dflat_daemon::supervisor::FlightState;
 use dflat_link::MavMessage;
 use dflat_sim::sitl::{self, SitlEngage, SitlMode, SitlOptions};
 
+mod support;
+use support::{Fault, Faulty};
+
 /// The configured level-hover period \[ms\] (shorter than the default 1 s
 /// to keep the test short).
 const LEVEL_HOVER_MAX_MS: f64 = 600.0;
 
-/// Delegates until `broken` is set, then fails every update.
-struct Breakable {
-    inner: Box<dyn Controller>,
-    broken: Arc<AtomicBool>,
-}
-
-impl Controller for Breakable {
-    fn name(&self) -> &'static str {
-        "breakable df-mpc"
-    }
-    fn multi_rate(&self) -> bool {
-        self.inner.multi_rate()
-    }
-    fn observe(&mut self, sample: &Measurement) {
-        self.inner.observe(sample);
-    }
-    fn update(
-        &mut self,
-        measurement: &Measurement,
-        reference: &mut dyn ReferenceSource,
-    ) -> Result<TickOutput, ControlError> {
-        if self.broken.load(Ordering::Relaxed) {
-            return Err(ControlError::Solver("injected: cannot fly".into()));
-        }
-        self.inner.update(measurement, reference)
-    }
-    fn plan_fallback(&mut self, m: &Measurement, max_steps: usize) -> Option<TickOutput> {
-        self.inner.plan_fallback(m, max_steps)
-    }
-    fn correct_last_input(&mut self, applied: &nalgebra::Vector3<f64>) {
-        self.inner.correct_last_input(applied);
-    }
-    fn reset(&mut self) {
-        self.inner.reset();
-    }
-}
-
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_controller_that_fails_every_tick_stops_the_stream_in_time() {
-    let out = std::env::temp_dir().join(format!("dflat-let-go-{}", std::process::id()));
-    let (mut cfg, mut plant) = demo_config(&DemoOptions {
-        speed: 5.0,
-        out,
-        seconds: None,
-    })
-    .unwrap();
-    cfg.logging.dir = String::new();
+    let (mut cfg, plant) = support::sitl_flight("let-go", SitlEngage::Auto);
     cfg.mission.start = MissionStart::Hold;
     cfg.safety.level_hover_max_ms = LEVEL_HOVER_MAX_MS;
-    plant.sitl.engage = SitlEngage::Auto;
     let (tx, taps) = mpsc::channel();
     let sitl = sitl::spawn(
         &plant,
@@ -82,9 +38,12 @@ async fn a_controller_that_fails_every_tick_stops_the_stream_in_time() {
     )
     .unwrap();
     let broken = Arc::new(AtomicBool::new(false));
-    let controller = Breakable {
+    let breaks = broken.clone();
+    // Fails every update once `broken` is set.
+    let controller = Faulty {
         inner: build_controller(&cfg).unwrap(),
-        broken: broken.clone(),
+        tick: 0,
+        fault: Box::new(move |_| breaks.load(Ordering::Relaxed).then_some(Fault::Fail)),
     };
     let link = format!("udpout:127.0.0.1:{}", sitl.local_addr().port());
     let daemon = dflat_daemon::spawn_with_controller(cfg.clone(), Some(link), Box::new(controller))
@@ -144,16 +103,8 @@ async fn a_controller_that_fails_every_tick_stops_the_stream_in_time() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_pose_clock_at_0_6_of_real_time_is_found_and_replaced() {
-    let out = std::env::temp_dir().join(format!("dflat-clock-{}", std::process::id()));
-    let (mut cfg, mut plant) = demo_config(&DemoOptions {
-        speed: 5.0,
-        out,
-        seconds: None,
-    })
-    .unwrap();
-    cfg.logging.dir = String::new();
+    let (mut cfg, mut plant) = support::sitl_flight("clock", SitlEngage::Auto);
     cfg.mission.start = MissionStart::Hold;
-    plant.sitl.engage = SitlEngage::Auto;
     plant.sitl.pose_clock_rate = 0.6;
     plant.sitl.noise_sigma = 0.01;
     let (tx, taps) = mpsc::channel();

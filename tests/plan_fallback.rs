@@ -4,75 +4,18 @@
 //! demo's L path at 5 m/s against the built-in SITL, in-process, with the
 //! controller wrapped so that its update fails on chosen ticks.
 
-use std::ops::Range;
 use std::time::{Duration, Instant};
 
-use dflat::demo::{DemoOptions, demo_config};
-use dflat_control::disturbance::DisturbanceReport;
-use dflat_control::{ControlError, Controller, Measurement, ReferenceSource, TickOutput};
 use dflat_daemon::control::build_controller;
-use dflat_sim::sitl::{self, SitlOptions};
+use dflat_sim::sitl::{self, SitlEngage, SitlOptions};
 use nalgebra::Vector3;
 
-/// Fails `update` on the ticks (counted from the first update) in `fail`,
-/// and takes 30 ms (more than the 20 ms tick) on those in `slow`.
-struct Flaky {
-    inner: Box<dyn Controller>,
-    tick: usize,
-    fail: Vec<Range<usize>>,
-    slow: Range<usize>,
-}
-
-impl Controller for Flaky {
-    fn name(&self) -> &'static str {
-        "flaky df-mpc"
-    }
-    fn multi_rate(&self) -> bool {
-        self.inner.multi_rate()
-    }
-    fn observe(&mut self, sample: &Measurement) {
-        self.inner.observe(sample);
-    }
-    fn update(
-        &mut self,
-        measurement: &Measurement,
-        reference: &mut dyn ReferenceSource,
-    ) -> Result<TickOutput, ControlError> {
-        let k = self.tick;
-        self.tick += 1;
-        if self.fail.iter().any(|r| r.contains(&k)) {
-            return Err(ControlError::Solver(format!(
-                "injected failure at tick {k}"
-            )));
-        }
-        if self.slow.contains(&k) {
-            std::thread::sleep(Duration::from_millis(30));
-        }
-        self.inner.update(measurement, reference)
-    }
-    fn plan_fallback(&mut self, measurement: &Measurement, max_steps: usize) -> Option<TickOutput> {
-        self.inner.plan_fallback(measurement, max_steps)
-    }
-    fn reset(&mut self) {
-        self.inner.reset();
-    }
-    fn disturbance(&self) -> Option<DisturbanceReport> {
-        self.inner.disturbance()
-    }
-}
+mod support;
+use support::{Fault, Faulty};
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn failed_and_late_ticks_fly_the_previous_plan_then_level_hover_and_recover() {
-    let out = std::env::temp_dir().join(format!("dflat-plan-fallback-{}", std::process::id()));
-    let (mut cfg, mut plant) = demo_config(&DemoOptions {
-        speed: 5.0,
-        out: out.clone(),
-        seconds: None,
-    })
-    .unwrap();
-    // Engaged as soon as the stream runs (the demo plays a pilot instead).
-    plant.sitl.engage = dflat_sim::sitl::SitlEngage::Auto;
-    cfg.logging.dir = String::new();
+    let (mut cfg, plant) = support::sitl_flight("plan-fallback", SitlEngage::Auto);
     // No speed ramp: the abrupt start from rest binds the 30° plan-tilt
     // bound, and the summary's count of constrained ticks is under test
     // (with the shipped ramp the bound does not bind on this path).
@@ -82,7 +25,7 @@ async fn failed_and_late_ticks_fly_the_previous_plan_then_level_hover_and_recove
     // 4 failed ticks (< hold: all flown on the plan), then 11 (5 on the
     // plan, 6 level hover), then 3 late ones (each flies step 1 of its own
     // late plan).
-    let fail = vec![150..154, 300..311];
+    let fail = [150..154, 300..311];
     let failures: usize = fail.iter().map(|r| r.len()).sum();
     let slow = 400..403;
 
@@ -95,11 +38,20 @@ async fn failed_and_late_ticks_fly_the_previous_plan_then_level_hover_and_recove
     )
     .unwrap();
     let link = format!("udpout:127.0.0.1:{}", sitl.local_addr().port());
-    let controller = Flaky {
+    let slow_ticks = slow.clone();
+    let controller = Faulty {
         inner: build_controller(&cfg).unwrap(),
         tick: 0,
-        fail,
-        slow: slow.clone(),
+        fault: Box::new(move |k| {
+            if fail.iter().any(|r| r.contains(&k)) {
+                Some(Fault::Fail)
+            } else if slow_ticks.contains(&k) {
+                // More than the 20 ms tick.
+                Some(Fault::Slow(Duration::from_millis(30)))
+            } else {
+                None
+            }
+        }),
     };
     let daemon = dflat_daemon::spawn_with_controller(cfg.clone(), Some(link), Box::new(controller))
         .await
@@ -122,7 +74,6 @@ async fn failed_and_late_ticks_fly_the_previous_plan_then_level_hover_and_recove
     daemon.shutdown();
     let summary = daemon.join().await.unwrap();
     let report = sitl.stop().unwrap();
-    let _ = std::fs::remove_dir_all(&out);
 
     let g = summary.guards;
     assert_eq!(g.controller_failures, failures as u64, "{g:?}");

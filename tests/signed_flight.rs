@@ -21,7 +21,6 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant, SystemTime};
 
-use dflat::demo::{DemoOptions, demo_config};
 use dflat_daemon::config::Config;
 use dflat_daemon::supervisor::FlightState;
 use dflat_link::{
@@ -30,6 +29,8 @@ use dflat_link::{
 };
 use dflat_sim::sitl::{self, SitlOptions, SitlReport, SitlSettings};
 use nalgebra::Vector3;
+
+mod support;
 
 /// One flight at a time: each runs a real-time plant and a 50 Hz control
 /// loop (a 2-core machine has no room for three at once).
@@ -83,15 +84,8 @@ impl Drop for Scratch {
 /// The demo's configuration (L path at 5 m/s, SITL on a free port, no
 /// records) with the SITL's key and, if given, the daemon's.
 fn config(scratch: &Scratch, daemon_key: Option<u8>, sitl_key: u8) -> (Config, SitlSettings) {
-    let (mut cfg, mut plant) = demo_config(&DemoOptions {
-        speed: 5.0,
-        out: scratch.dir.clone(),
-        seconds: None,
-    })
-    .unwrap();
-    cfg.logging.dir = String::new();
     // Engaged as soon as the stream runs (the demo plays a pilot instead).
-    plant.sitl.engage = dflat_sim::sitl::SitlEngage::Auto;
+    let (mut cfg, mut plant) = support::sitl_flight("signed", dflat_sim::sitl::SitlEngage::Auto);
     plant.sitl.signing_key_file = scratch.key_file(sitl_key);
     if let Some(k) = daemon_key {
         cfg.link.signing_key_file = scratch.key_file(k);
