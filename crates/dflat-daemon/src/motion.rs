@@ -1,14 +1,13 @@
 //! The vehicle's motion from its recent poses, for engagement only: where
-//! it is, how fast it moves, and where it would stop braking at a given
-//! deceleration.
+//! it is and how fast it moves.
 //!
 //! DF-MPC itself needs no velocity (its window holds outputs and inputs);
-//! the shell needs one number at the moment the pilot engages — the stop
-//! point to hold — and while in standby, the same stop point for the
-//! command it streams. A least-squares line through the poses of the last
-//! [`MOTION_SPAN`] seconds (by capture time) gives position and velocity
-//! with the pose noise averaged: at σ = 1 cm and 50 Hz, about 4 cm/s of
-//! velocity noise.
+//! the shell needs the motion at the moment the pilot engages — the stop it
+//! brakes along (`dflat_control::reference::Reference::braking`) — and, in
+//! standby, the same stop for the command it streams. A least-squares line
+//! through the poses of the last [`MOTION_SPAN`] seconds (by capture time)
+//! gives position and velocity with the pose noise averaged: at σ = 1 cm
+//! and 50 Hz, about 4 cm/s of velocity noise.
 //!
 //! Positions local NED \[m\], velocities \[m/s\], times \[s\] on the daemon's
 //! clock. Pure: no clock, no I/O.
@@ -35,18 +34,6 @@ impl Motion {
     /// Speed \[m/s\] (3-D).
     pub fn speed(&self) -> f64 {
         norm(self.velocity)
-    }
-
-    /// Where the vehicle stops braking at constant deceleration `a`
-    /// \[m/s², > 0\] along its velocity: `p + v·|v| / (2a)`.
-    pub fn stop_point(&self, a: f64) -> [f64; 3] {
-        let v = self.velocity;
-        let s = norm(v) / (2.0 * a.max(1e-6));
-        [
-            self.position[0] + v[0] * s,
-            self.position[1] + v[1] * s,
-            self.position[2] + v[2] * s,
-        ]
     }
 }
 
@@ -167,22 +154,6 @@ mod tests {
         let e = m.estimate().unwrap();
         assert!(e.speed() < 1e-9, "{e:?}");
         assert!((e.position[0] - 1.0).abs() < 1e-9);
-    }
-
-    #[test]
-    fn stop_point_is_the_braking_distance_ahead() {
-        let m = Motion {
-            t: 0.0,
-            position: [1.0, 2.0, -10.0],
-            velocity: [2.0, 0.0, 0.0],
-        };
-        // v² / 2a = 4 / 8 = 0.5 m north.
-        assert_eq!(m.stop_point(4.0), [1.5, 2.0, -10.0]);
-        let still = Motion {
-            velocity: [0.0; 3],
-            ..m
-        };
-        assert_eq!(still.stop_point(4.0), still.position);
     }
 
     proptest! {

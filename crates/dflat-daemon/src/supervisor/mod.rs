@@ -470,11 +470,6 @@ impl Supervisor {
         self.latched_until = None;
     }
 
-    /// True while a forced failsafe's latch holds.
-    pub fn latched(&self, t: f64) -> bool {
-        self.latched_until.is_some_and(|u| t < u)
-    }
-
     /// The current state.
     pub fn state(&self) -> FlightState {
         self.state

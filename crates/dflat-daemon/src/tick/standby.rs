@@ -165,11 +165,6 @@ impl ControlCore {
         }
     }
 
-    /// The autopilot's mode as last reported.
-    pub fn autopilot_mode(&self) -> Option<AutopilotMode> {
-        self.mode
-    }
-
     /// A pose captured (by the mapped source clock) more than
     /// `safety.pose_max_latency_ms` before its arrival, for
     /// [`POSE_LATENCY_PERSISTENCE`] on end: the source clock runs slow or
