@@ -90,38 +90,47 @@ fn core(script: Vec<Script>) -> (ControlCore, Arc<AtomicUsize>) {
     )
 }
 
+/// Tick `k` (at k·δt) after an autopilot heartbeat (PX4 OFFBOARD) and a
+/// fresh pose stamped `source_time` (`None`: arrival) 1 ms before it, then
+/// `extra`; the stopwatch advances 0.1 ms per reading.
+fn step_at(
+    core: &mut ControlCore,
+    k: u64,
+    source_time: Option<f64>,
+    extra: Vec<Event>,
+) -> StepOutput {
+    let t = k as f64 * DT;
+    let mut events = vec![
+        Event::Heartbeat {
+            arrival: t - 0.001,
+            mode: OFFBOARD,
+        },
+        Event::Pose {
+            arrival: t - 0.001,
+            source_time,
+            position: [0.0, 0.0, -10.0],
+            yaw: Some(0.0),
+            reset_counter: None,
+        },
+    ];
+    events.extend(extra);
+    let time = TickTime {
+        tick: k,
+        t,
+        scheduled: t,
+        jitter_us: 0,
+    };
+    let mut clock = t;
+    core.step(&time, events, &mut || {
+        clock += 1e-4;
+        clock
+    })
+}
+
 /// Runs `ticks` ticks from t = 0 with a fresh pose and an autopilot
 /// heartbeat before each; returns every step's output.
 fn fly(core: &mut ControlCore, ticks: u64) -> Vec<StepOutput> {
-    let mut clock = 0.0;
-    (0..ticks)
-        .map(|k| {
-            let t = k as f64 * DT;
-            let events = [
-                Event::Heartbeat {
-                    arrival: t - 0.001,
-                    mode: OFFBOARD,
-                },
-                Event::Pose {
-                    arrival: t - 0.001,
-                    source_time: None,
-                    position: [0.0, 0.0, -10.0],
-                    yaw: Some(0.0),
-                    reset_counter: None,
-                },
-            ];
-            let time = TickTime {
-                tick: k,
-                t,
-                scheduled: t,
-                jitter_us: 0,
-            };
-            core.step(&time, events, &mut || {
-                clock += 1e-4;
-                clock
-            })
-        })
-        .collect()
+    (0..ticks).map(|k| step_at(core, k, None, vec![])).collect()
 }
 
 #[test]
@@ -330,30 +339,16 @@ fn a_pose_clock_running_slow_is_replaced_by_arrival_times() {
     let (mut core, _) = core(vec![Script::Command(0.0, 0.0)]);
     // The source clock runs at 0.6× ours: the mapped capture times fall
     // ever further behind the arrivals.
-    let mut outs = Vec::new();
-    for k in 0..200u64 {
-        let t = k as f64 * DT;
-        let events = [
-            Event::Heartbeat {
-                arrival: t - 0.001,
-                mode: OFFBOARD,
-            },
-            Event::Pose {
-                arrival: t - 0.001,
-                source_time: Some(100.0 + 0.6 * t),
-                position: [0.0, 0.0, -10.0],
-                yaw: Some(0.0),
-                reset_counter: None,
-            },
-        ];
-        let time = TickTime {
-            tick: k,
-            t,
-            scheduled: t,
-            jitter_us: 0,
-        };
-        outs.push(core.step(&time, events, &mut || 0.0));
-    }
+    let outs: Vec<StepOutput> = (0..200u64)
+        .map(|k| {
+            step_at(
+                &mut core,
+                k,
+                Some(100.0 + 0.6 * (k as f64 * DT - 0.001)),
+                vec![],
+            )
+        })
+        .collect();
     assert_eq!(core.counts().guards.pose_clock_faults, 1);
     // Lag 0.4·t exceeds 0.5 s from t = 1.25 s, for 1 s: found by 2.3 s.
     let found = outs
@@ -374,30 +369,7 @@ fn a_pose_clock_running_slow_is_replaced_by_arrival_times() {
 #[test]
 fn reads_the_autopilots_parameters_and_refuses_to_engage_above_its_tilt_limit() {
     let (mut core, _) = core(vec![Script::Command(0.0, 0.0)]);
-    let step = |core: &mut ControlCore, k: u64, extra: Vec<Event>| {
-        let t = k as f64 * DT;
-        let mut events = vec![
-            Event::Heartbeat {
-                arrival: t - 0.001,
-                mode: OFFBOARD,
-            },
-            Event::Pose {
-                arrival: t - 0.001,
-                source_time: None,
-                position: [0.0, 0.0, -10.0],
-                yaw: Some(0.0),
-                reset_counter: None,
-            },
-        ];
-        events.extend(extra);
-        let time = TickTime {
-            tick: k,
-            t,
-            scheduled: t,
-            jitter_us: 0,
-        };
-        core.step(&time, events, &mut || 0.0)
-    };
+    let step = |core: &mut ControlCore, k: u64, extra: Vec<Event>| step_at(core, k, None, extra);
     // The PX4 family is known: both parameters are requested.
     let out = step(&mut core, 0, vec![]);
     let requested: Vec<String> = out
