@@ -38,16 +38,19 @@ impl ControlCore {
             .map_err(|e| e.to_string())
     }
 
-    /// A failed or late tick's command: the previous plan one step further
-    /// (DF-MPC; recorded in its window), guarded like any command; else the
-    /// held command, then level hover. Counts and announces the kind.
+    /// A failed or late tick's command at `t`: the previous plan one step
+    /// further (DF-MPC; recorded in its window), guarded like any command;
+    /// else the held command, then level hover — for at most
+    /// `safety.level_hover_max_ms`, after which the daemon lets go (`None`:
+    /// nothing is sent). Counts and announces the kind.
     pub(super) fn fallback_command(
         &mut self,
+        t: f64,
         measurement: &Measurement,
         failed: Result<(dflat_control::TickOutput, AttitudeCommand), String>,
         solve_us: u32,
         row: &mut CsvRow,
-    ) -> AttitudeCommand {
+    ) -> Option<AttitudeCommand> {
         match failed {
             Ok(_) => {
                 self.counts.guards.deadline_overruns += 1;
@@ -76,6 +79,20 @@ impl ControlCore {
             None => self.residual.forget(),
         }
         let (command, kind) = self.fallback.command(planned.map(|(c, _)| c));
+        if kind == FallbackKind::LevelHover {
+            // Each tick stands for one period (half a period of margin
+            // against wake-up jitter): at most max / period ticks are sent.
+            let since = *self.level_hover_since.get_or_insert(t);
+            if t - since + 0.5 * self.period >= self.config.safety.level_hover_max_ms / 1000.0 {
+                // Let go: stop the stream so the autopilot's own failsafe
+                // takes over.
+                self.let_go(t);
+                row.guard = Some("let_go");
+                return None;
+            }
+        } else {
+            self.level_hover_since = None;
+        }
         let (counter, note, text) = match kind {
             FallbackKind::Plan => (
                 &mut self.counts.guards.plan_steps,
@@ -99,7 +116,7 @@ impl ControlCore {
             self.fallback_kind = Some(kind);
             self.text(MavSeverity::MAV_SEVERITY_CRITICAL, text);
         }
-        command
+        Some(command)
     }
 }
 

@@ -429,33 +429,18 @@ impl ControlCore {
                 }
                 self.error_streak = 0;
                 self.fallback_kind = None;
+                self.level_hover_since = None;
                 self.counts.solves.record(&out);
                 self.fallback.good(command);
                 self.residual
                     .predict([out.plan[1].x, out.plan[1].y, out.plan[1].z]);
                 (command, Some(out))
             }
-            failed => (
-                self.fallback_command(&measurement, failed, solve_us, row),
-                None,
-            ),
+            failed => match self.fallback_command(t, &measurement, failed, solve_us, row) {
+                Some(command) => (command, None),
+                None => return (None, solve_us),
+            },
         };
-        // Level hover for longer than `safety.level_hover_max_ms`: let go —
-        // stop the stream so the autopilot's own failsafe takes over.
-        if self.fallback_kind == Some(FallbackKind::LevelHover) {
-            let since = *self.level_hover_since.get_or_insert(t);
-            // Each tick stands for one period (half a period of margin
-            // against wake-up jitter): at most max / period ticks are sent.
-            if t - since + 0.5 * self.period >= self.config.safety.level_hover_max_ms / 1000.0 {
-                // This tick's level hover is not sent: not counted either.
-                self.counts.guards.level_hover = self.counts.guards.level_hover.saturating_sub(1);
-                self.let_go(t);
-                row.guard = Some("let_go");
-                return (None, solve_us);
-            }
-        } else {
-            self.level_hover_since = None;
-        }
         // This tick's command is not applied in standby: correct it at the
         // next tick from the attitude then.
         self.standby_attitude = if self.supervisor.state() == FlightState::Standby {
