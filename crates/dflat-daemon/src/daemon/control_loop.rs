@@ -231,6 +231,7 @@ impl ControlLoop {
         let csv = self.csv.take().map(CsvRecorder::finish);
         let counts = self.core.counts().clone();
         let supervisor = self.core.supervisor();
+        let (engagements, disengagements) = supervisor.engagement_counts();
         ControlReport {
             ticks: self.ticks.load(Ordering::Relaxed),
             missed: planner.counts().missed,
@@ -243,8 +244,8 @@ impl ControlLoop {
             jitter,
             time_in_state: supervisor.time_in_states(now),
             state_changes: supervisor.transitions(),
-            engagements: supervisor.engagement_counts().0,
-            disengagements: supervisor.engagement_counts().1,
+            engagements,
+            disengagements,
             final_state: supervisor.state(),
             csv,
             disturbance: counts.disturbance,
