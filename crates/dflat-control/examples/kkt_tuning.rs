@@ -116,6 +116,7 @@ fn main() {
                 static_regularization: 1e-12,
                 refinement_reltol: 1e-10,
                 refinement_abstol: 1e-10,
+                gap_tolerance: 1e-8,
             },
         ),
     ];

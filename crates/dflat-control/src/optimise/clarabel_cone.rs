@@ -174,6 +174,8 @@ impl ClarabelConeSolver {
             .equilibrate_enable(false)
             .iterative_refinement_reltol(tuning.refinement_reltol)
             .iterative_refinement_abstol(tuning.refinement_abstol)
+            .tol_gap_abs(tuning.gap_tolerance)
+            .tol_gap_rel(tuning.gap_tolerance)
             .static_regularization_constant(tuning.static_regularization)
             .time_limit(time_limit)
             .direct_solve_method("qdldl".to_string())
