@@ -133,6 +133,8 @@ pub struct BandedCholesky {
     fwd: Vec<f64>,
     /// Back-substitution rows: `[1/L_ii, L_{i+1,i}/L_ii, …, L_{i+b,i}/L_ii]`.
     bwd: Vec<f64>,
+    /// `1/L_ii`, scratch of the fixed-bandwidth factorisation.
+    inv_diag: Vec<f64>,
     factored: bool,
 }
 
@@ -145,6 +147,7 @@ impl BandedCholesky {
             l: vec![0.0; n * (bandwidth + 1)],
             fwd: vec![0.0; n * (bandwidth + 1)],
             bwd: vec![0.0; n * (bandwidth + 1)],
+            inv_diag: vec![0.0; n],
             factored: false,
         }
     }
@@ -172,8 +175,83 @@ impl BandedCholesky {
     pub fn factor(&mut self, a: &SymBand) -> Result<(), ControlError> {
         assert!(a.n == self.n && a.b == self.b, "shape mismatch");
         self.factored = false;
-        let (n, b, w) = (self.n, self.b, self.b + 1);
         self.l.copy_from_slice(&a.lower);
+        match self.b {
+            7 => self.factor_band::<7>()?,
+            9 => self.factor_band::<9>()?,
+            _ => self.factor_generic()?,
+        }
+        self.substitution_rows();
+        self.factored = true;
+        Ok(())
+    }
+
+    /// The band-limited LLᵀ of `l` in place, for a compile-time bandwidth
+    /// (the two-axis cone problems: 7, 9 with smoothness): the same
+    /// operations as [`BandedCholesky::factor_generic`] in the same order,
+    /// with fixed trip counts past the first B rows and a multiplication by
+    /// the pivot's inverse in place of the division.
+    fn factor_band<const B: usize>(&mut self) -> Result<(), ControlError> {
+        let n = self.n;
+        let w = B + 1;
+        let l = &mut self.l;
+        for i in 0..n.min(B) {
+            Self::factor_row(l, w, B, i)?;
+            self.inv_diag[i] = 1.0 / l[i * w];
+        }
+        for i in B..n {
+            let (done, rest) = l.split_at_mut(i * w);
+            let row = &mut rest[..w];
+            // row[d] = L[i][i − d]; j = i − d for d = B..1.
+            for d in (1..=B).rev() {
+                let j = i - d;
+                let rj = &done[j * w..(j + 1) * w];
+                let mut s = row[d];
+                // k = i − B .. j − 1: L[i][k] = row[i − k], L[j][k] = rj[j − k].
+                for e in (d + 1..=B).rev() {
+                    // k = i − e, j − k = e − d.
+                    s -= row[e] * rj[e - d];
+                }
+                row[d] = s * self.inv_diag[j];
+            }
+            let mut dii = row[0];
+            for e in (1..=B).rev() {
+                dii -= row[e] * row[e];
+            }
+            if !(dii > 0.0 && dii.is_finite()) {
+                return Err(ControlError::NotPositiveDefinite);
+            }
+            row[0] = dii.sqrt();
+            self.inv_diag[i] = 1.0 / row[0];
+        }
+        Ok(())
+    }
+
+    /// Row i of the generic factorisation (any bandwidth b).
+    fn factor_row(l: &mut [f64], w: usize, b: usize, i: usize) -> Result<(), ControlError> {
+        let j0 = i.saturating_sub(b);
+        for j in j0..i {
+            let mut s = l[i * w + (i - j)];
+            for k in j0..j {
+                s -= l[i * w + (i - k)] * l[j * w + (j - k)];
+            }
+            l[i * w + (i - j)] = s / l[j * w];
+        }
+        let mut d = l[i * w];
+        for k in j0..i {
+            let v = l[i * w + (i - k)];
+            d -= v * v;
+        }
+        if !(d > 0.0 && d.is_finite()) {
+            return Err(ControlError::NotPositiveDefinite);
+        }
+        l[i * w] = d.sqrt();
+        Ok(())
+    }
+
+    /// The band-limited LLᵀ of `l` in place, any bandwidth.
+    fn factor_generic(&mut self) -> Result<(), ControlError> {
+        let (n, b, w) = (self.n, self.b, self.b + 1);
         let l = &mut self.l;
         for i in 0..n {
             // Off-diagonal entries L[i][j], j = i−b..i−1, left to right.
@@ -196,6 +274,12 @@ impl BandedCholesky {
             }
             l[i * w] = d.sqrt();
         }
+        Ok(())
+    }
+
+    /// The pre-divided rows of the substitutions from `l`.
+    fn substitution_rows(&mut self) {
+        let (n, b, w) = (self.n, self.b, self.b + 1);
         // Pre-divided rows for the substitutions: no division in the
         // sequential recurrences, and the newest unknown enters last so the
         // critical path per row is one multiply-subtract.
@@ -212,8 +296,6 @@ impl BandedCholesky {
                 };
             }
         }
-        self.factored = true;
-        Ok(())
     }
 
     /// Solves `A·x = rhs` in place (`x` holds rhs on entry), O(n·b).
@@ -287,6 +369,8 @@ impl BandedCholesky {
         match self.b {
             3 => return self.run_band::<3, 1>(&self.fwd, [x], false),
             4 => return self.run_band::<4, 1>(&self.fwd, [x], false),
+            7 => return self.run_band::<7, 1>(&self.fwd, [x], false),
+            9 => return self.run_band::<9, 1>(&self.fwd, [x], false),
             _ => {}
         }
         let (n, b, w) = (self.n, self.b, self.b + 1);
@@ -305,6 +389,8 @@ impl BandedCholesky {
         match self.b {
             3 => return self.run_band::<3, 1>(&self.bwd, [x], true),
             4 => return self.run_band::<4, 1>(&self.bwd, [x], true),
+            7 => return self.run_band::<7, 1>(&self.bwd, [x], true),
+            9 => return self.run_band::<9, 1>(&self.bwd, [x], true),
             _ => {}
         }
         let (n, b, w) = (self.n, self.b, self.b + 1);

@@ -2,6 +2,7 @@
 //! ([`super::cone`]), solved by the banded interior point of
 //! [`super::cone_qp`], warm-started across ticks.
 
+use super::cone_alm::{self, AlmTuning, ConeAlm};
 use super::cone_qp::{ConeAxis, ConeQp, STAGE, Start, a_at, p_at};
 use super::smoothness::{accel_block, sent_linear_term};
 use super::{AxisProblem, ConeBounds, FastBandedSolver, Smoothness, baseline, check_lengths};
@@ -43,6 +44,11 @@ pub struct ConeInteriorPointSolver {
     weights: [AxisWeights; 2],
     bounds: ConeBounds,
     qp: ConeQp,
+    alm: ConeAlm,
+    /// ALM linear term (2n, interleaved) and scratch.
+    c_alm: Vec<f64>,
+    base: Vec<f64>,
+    rhs: Vec<f64>,
     c: Vec<f64>,
     lo: Vec<f64>,
     hi: Vec<f64>,
@@ -56,6 +62,17 @@ pub struct ConeInteriorPointSolver {
     previous_valid: bool,
     iterations: usize,
     warm_used: bool,
+    /// Which method gave the last solution.
+    method: ConeMethod,
+}
+
+/// Which method of [`ConeInteriorPointSolver`] solved a tick.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ConeMethod {
+    /// The augmented Lagrangian ([`ConeAlm`]).
+    Alm,
+    /// The stage interior point ([`ConeQp`]), after the ALM failed.
+    InteriorPoint,
 }
 
 impl ConeInteriorPointSolver {
@@ -80,6 +97,16 @@ impl ConeInteriorPointSolver {
         });
         let penalty = bounds.speed.map(|_| bounds.speed_penalty);
         let qp = ConeQp::new(n, dt, [&axes[0], &axes[1]], bounds.acceleration, penalty);
+        let fast = |w: &AxisWeights| {
+            FastBandedSolver::with_smoothness(horizon, w.q, w.r, dt, w.smoothness)
+        };
+        let alm = ConeAlm::new(
+            [fast(&weights[0])?, fast(&weights[1])?],
+            dt,
+            bounds.acceleration,
+            penalty,
+            AlmTuning::default(),
+        );
         let m = qp.rows();
         Ok(Self {
             horizon,
@@ -87,6 +114,10 @@ impl ConeInteriorPointSolver {
             weights,
             bounds,
             qp,
+            alm,
+            c_alm: vec![0.0; 2 * n],
+            base: vec![0.0; n],
+            rhs: vec![0.0; n],
             c: vec![0.0; STAGE * n],
             lo: vec![0.0; m],
             hi: vec![0.0; m],
@@ -97,6 +128,7 @@ impl ConeInteriorPointSolver {
             previous_valid: false,
             iterations: 0,
             warm_used: false,
+            method: ConeMethod::Alm,
         })
     }
 
@@ -164,6 +196,13 @@ impl ConeInteriorPointSolver {
                 self.warm[i][f] = guess - b;
             }
             self.c[a_at(i, 0)] = sent_linear_term(&self.weights[i].smoothness, a.fixed, a.sent, dt);
+            self.alm
+                .axis(i)
+                .right_hand_side(a.fixed, a.sent, a.reference, &mut self.base, &mut self.rhs);
+            for f in 0..n {
+                // ½xᵀ(2H)x − 2·rhsᵀx: the fast path's objective, doubled.
+                self.c_alm[cone_alm::at(i, f)] = -2.0 * self.rhs[f];
+            }
             a0[i] = (a.fixed[2] - 2.0 * a.fixed[1] + a.fixed[0]) / (dt * dt);
         }
         let axis = self.bounds.axis();
@@ -177,26 +216,41 @@ impl ConeInteriorPointSolver {
             });
         }
         self.iterations = 0;
-        self.warm_used = false;
-        let mut result = Err(ControlError::Solver("cone QP: not run".into()));
-        if self.warm_start && self.previous_valid {
-            self.qp.shift(WARM_FLOOR);
-            self.qp.set_start([&self.warm[0], &self.warm[1]], dt, true);
-            result = self.qp.solve(&self.c, a0, &self.lo, &self.hi, WARM_DUALS);
-            self.warm_used = result.is_ok();
-        }
-        if result.is_err() {
-            self.iterations += self.qp.iterations();
-            self.qp.set_start([&self.p[0], &self.p[1]], dt, false);
-            result = self.qp.solve(&self.c, a0, &self.lo, &self.hi, Start::Cold);
-        }
+        let warm = self.warm_start && self.previous_valid;
+        self.warm_used = warm;
         self.previous_valid = false;
-        result?;
-        self.iterations += self.qp.iterations();
+        // First the augmented Lagrangian (warm: last tick's plan and
+        // multipliers one step on), then the interior point from the cold
+        // start should it fail.
+        if warm {
+            self.alm.shift();
+            self.alm.set_start([&self.warm[0], &self.warm[1]]);
+        } else {
+            self.alm.reset_multipliers();
+            self.alm.set_start([&self.p[0], &self.p[1]]);
+        }
+        let alm = self.alm.solve(&self.c_alm, a0, &self.lo, &self.hi);
+        self.iterations = self.alm.newton_steps();
+        if let Err(e) = &alm { if std::env::var_os("CONE_DEBUG").is_some() { eprintln!("ALM failed: {e}"); } }
+        if alm.is_ok() {
+            self.method = ConeMethod::Alm;
+        } else {
+            self.alm.reset_multipliers();
+            self.warm_used = false;
+            self.method = ConeMethod::InteriorPoint;
+            self.qp.set_start([&self.p[0], &self.p[1]], dt, false);
+            self.qp.solve(&self.c, a0, &self.lo, &self.hi, Start::Cold)?;
+            self.iterations += self.qp.iterations();
+        }
+        if std::env::var_os("CONE_TICK").is_some() { eprintln!("tick {:?} warm {} iters {} factors {}", self.method, warm, self.iterations, self.alm.factorisations()); }
+        let solution = |i: usize, f: usize| match self.method {
+            ConeMethod::Alm => self.alm.p(i, f),
+            ConeMethod::InteriorPoint => self.qp.p(i, f),
+        };
         for (i, (plan, fx)) in [x.plan, y.plan].into_iter().zip(fixed).enumerate() {
             plan[..3].copy_from_slice(fx);
             for f in 0..n {
-                plan[f + 3] = baseline(fx, f + 3) + self.qp.p(i, f);
+                plan[f + 3] = baseline(fx, f + 3) + solution(i, f);
             }
             if plan.iter().any(|v| !v.is_finite()) {
                 return Err(ControlError::Solver("non-finite solution".to_string()));

@@ -41,6 +41,8 @@ pub struct FastBandedSolver {
     /// `s/(g²·δt²)·κ`: the sent command's gain on the first free output.
     sent_gain: f64,
     pub(super) dt: f64,
+    /// `q·I + w·DᵀD (+ s·EᵀE)` on the free outputs, half-bandwidth 3 (4).
+    hessian: SymBand,
     factor: BandedCholesky,
     slots: [Slot; 2],
 }
@@ -71,6 +73,51 @@ impl FastBandedSolver {
         } else {
             (0.0, 0.0)
         };
+        let hessian = Self::hessian(n, q, w, s, &smoothness);
+        let bandwidth = hessian.bandwidth();
+        let mut factor = BandedCholesky::new(n, bandwidth);
+        factor.factor(&hessian)?;
+        let slot = Slot {
+            base: vec![0.0; n],
+            rhs: vec![0.0; n],
+            p: vec![0.0; n],
+            work: vec![0.0; n],
+        };
+        Ok(Self {
+            horizon,
+            q,
+            w,
+            smoothness,
+            s,
+            sent_gain,
+            dt,
+            hessian,
+            factor,
+            slots: [slot.clone(), slot],
+        })
+    }
+
+    /// The smoothness term this solver carries (weight 0: none).
+    pub fn smoothness(&self) -> Smoothness {
+        self.smoothness
+    }
+
+    /// The right-hand side's shift on the first free output from the sent
+    /// command: `−s/(g²δt²)·κ·(a_0 − c_{−1})` (0 without smoothness or
+    /// without `sent`).
+    fn sent_shift(&self, fixed: &[f64; 3], sent: Option<f64>) -> f64 {
+        match sent {
+            Some(c) if self.s > 0.0 => {
+                let a0 = (fixed[2] - 2.0 * fixed[1] + fixed[0]) / (self.dt * self.dt);
+                -self.sent_gain * (a0 - c)
+            }
+            _ => 0.0,
+        }
+    }
+
+    /// The Hessian `q·I + w·DᵀD (+ s·EᵀE)` of the deviation from the
+    /// baseline on n free outputs (objective `pᵀHp − 2·rhsᵀp`).
+    fn hessian(n: usize, q: f64, w: f64, s: f64, smoothness: &Smoothness) -> SymBand {
         let bandwidth = if s > 0.0 { BANDWIDTH + 1 } else { BANDWIDTH };
         let mut hessian = SymBand::zeros(n, bandwidth);
         for i in 0..n {
@@ -107,43 +154,7 @@ impl FastBandedSolver {
                 }
             }
         }
-        let mut factor = BandedCholesky::new(n, bandwidth);
-        factor.factor(&hessian)?;
-        let slot = Slot {
-            base: vec![0.0; n],
-            rhs: vec![0.0; n],
-            p: vec![0.0; n],
-            work: vec![0.0; n],
-        };
-        Ok(Self {
-            horizon,
-            q,
-            w,
-            smoothness,
-            s,
-            sent_gain,
-            dt,
-            factor,
-            slots: [slot.clone(), slot],
-        })
-    }
-
-    /// The smoothness term this solver carries (weight 0: none).
-    pub fn smoothness(&self) -> Smoothness {
-        self.smoothness
-    }
-
-    /// The right-hand side's shift on the first free output from the sent
-    /// command: `−s/(g²δt²)·κ·(a_0 − c_{−1})` (0 without smoothness or
-    /// without `sent`).
-    fn sent_shift(&self, fixed: &[f64; 3], sent: Option<f64>) -> f64 {
-        match sent {
-            Some(c) if self.s > 0.0 => {
-                let a0 = (fixed[2] - 2.0 * fixed[1] + fixed[0]) / (self.dt * self.dt);
-                -self.sent_gain * (a0 - c)
-            }
-            _ => 0.0,
-        }
+        hessian
     }
 
     /// Horizon N \[steps\].
@@ -189,12 +200,25 @@ impl FastBandedSolver {
     /// `T = κ·I + (1 − κ)·S`, applied to `d = D·p` as a two-tap filter and
     /// its transpose.
     fn residual(q: f64, w: f64, smooth: (f64, f64), slot: &mut Slot) {
+        Self::residual_of(q, w, smooth, &slot.p, Some(&slot.rhs), &mut slot.work);
+    }
+
+    /// `out = rhs − H·p` as [`FastBandedSolver::residual`] (rhs = 0 when
+    /// `None`).
+    fn residual_of(
+        q: f64,
+        w: f64,
+        smooth: (f64, f64),
+        p: &[f64],
+        rhs: Option<&[f64]>,
+        out: &mut [f64],
+    ) {
         let (s, kappa) = smooth;
         // x = w·D·p: third backward difference by three first differences,
         // fused in one pass (p before the horizon is 0).
         let (mut p1, mut e1, mut f1) = (0.0, 0.0, 0.0);
         let scale = if s > 0.0 { 1.0 } else { w };
-        for (x, &p) in slot.work.iter_mut().zip(&slot.p) {
+        for (x, &p) in out.iter_mut().zip(p) {
             let e = p - p1;
             let f = e - e1;
             *x = scale * (f - f1);
@@ -204,20 +228,20 @@ impl FastBandedSolver {
             // x = (w·I + s·TᵀT)·d in place, backwards: g_f = (T·d)_f needs
             // d_{f−1} (not yet overwritten), (Tᵀg)_f needs g_{f+1} (carried).
             let mut g_next = 0.0;
-            for f in (0..slot.work.len()).rev() {
-                let d = slot.work[f];
-                let d_prev = if f > 0 { slot.work[f - 1] } else { 0.0 };
+            for f in (0..out.len()).rev() {
+                let d = out[f];
+                let d_prev = if f > 0 { out[f - 1] } else { 0.0 };
                 let g = d_prev + kappa * (d - d_prev);
                 let tg = g_next + kappa * (g - g_next);
-                slot.work[f] = w * d + s * tg;
+                out[f] = w * d + s * tg;
                 g_next = g;
             }
         }
         // work = rhs − q·p − Dᵀ·x: three forward differences (x beyond
         // the horizon is 0), fused with the combination, in one pass.
         let (mut x1, mut e1, mut f1) = (0.0, 0.0, 0.0);
-        let it = slot.work.iter_mut().zip(&slot.rhs).zip(&slot.p).rev();
-        for ((r, &b), &p) in it {
+        for (k, (r, &p)) in out.iter_mut().zip(p).enumerate().rev() {
+            let b = rhs.map_or(0.0, |rhs| rhs[k]);
             let x = *r;
             let e = x - x1;
             let f = e - e1;
@@ -225,6 +249,43 @@ impl FastBandedSolver {
             (x1, e1, f1) = (x, e, f);
             *r = b - q * p - g;
         }
+    }
+
+    /// `out = H·p` (the Hessian of [`FastBandedSolver::hessian`]) by
+    /// differencing, accurate to ~ε·|H·p| where the assembled band is not
+    /// (see [`FastBandedSolver::residual`]). Lengths n.
+    pub(crate) fn apply_hessian(&self, p: &[f64], out: &mut [f64]) {
+        let smooth = (self.s, self.smoothness.kappa);
+        Self::residual_of(self.q, self.w, smooth, p, None, out);
+        out.iter_mut().for_each(|v| *v = -*v);
+    }
+
+    /// The assembled Hessian `q·I + w·DᵀD (+ s·EᵀE)` (n × n, band 3 or 4).
+    pub(crate) fn hessian_band(&self) -> &SymBand {
+        &self.hessian
+    }
+
+    /// The baseline `b_3..b_N` and the right-hand side `q·(ref − b)` plus
+    /// the sent command's shift on the first free output (objective
+    /// `pᵀHp − 2·rhsᵀp` in the deviation p = y − b). Lengths n; `reference`
+    /// has N + 1 entries.
+    pub(crate) fn right_hand_side(
+        &self,
+        fixed: &[f64; 3],
+        sent: Option<f64>,
+        reference: &[f64],
+        base: &mut [f64],
+        rhs: &mut [f64],
+    ) {
+        let shift = self.sent_shift(fixed, sent);
+        let d1 = fixed[1] - fixed[0];
+        let d2 = fixed[2] - 2.0 * fixed[1] + fixed[0];
+        for (f, ((b, r), &y_ref)) in base.iter_mut().zip(rhs.iter_mut()).zip(&reference[3..]).enumerate() {
+            let j = (f + 3) as f64;
+            *b = fixed[0] + j * d1 + 0.5 * j * (j - 1.0) * d2;
+            *r = self.q * (y_ref - *b);
+        }
+        rhs[0] += shift;
     }
 
     /// The refined plan `y_j = b_j + (p + correction)_j` after the fixed outputs.

@@ -90,6 +90,7 @@ pub mod bounds;
 pub mod clarabel;
 pub mod clarabel_cone;
 pub mod cone;
+pub mod cone_alm;
 pub mod cone_qp;
 pub mod cone_solver;
 #[cfg(test)]

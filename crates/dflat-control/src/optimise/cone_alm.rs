@@ -1,0 +1,687 @@
+//! The tilt-cone problem ([`super::cone`]) by an augmented Lagrangian on
+//! the free outputs alone, each subproblem minimised by semismooth Newton
+//! on a banded positive-definite matrix: the fast path's matrix plus one
+//! block per stage outside the cone, so that a tick whose active set
+//! barely moved costs a few banded factorisations.
+//!
+//! Unknowns: `x = (p_{x,0}, p_{y,0}, p_{x,1}, p_{y,1}, …)`, the deviations of
+//! the free outputs from the zero-jerk baseline (2n, n = N − 2), objective
+//! `½xᵀPx + cᵀx` with P = 2·H per axis (H: [`FastBandedSolver`]'s Hessian;
+//! half-bandwidth 7 interleaved, 9 with the smoothness term). Stage f's
+//! acceleration `u_f = G_f·x + a_0`, `G_f·x = (p_f − 2p_{f−1} + p_{f−2})/δt²`
+//! per axis (indices 2(f−2)..2f+1, inside the band).
+//!
+//! With multipliers y_f ∈ ℝ² and penalty σ, the augmented Lagrangian
+//!
+//! ```text
+//! L(x) = ½xᵀPx + cᵀx + Σ_f [σ/2·dist²(u_f + y_f/σ, D) − ‖y_f‖²/(2σ)] + speed terms
+//! ```
+//!
+//! (D the disc of radius A) is convex, once differentiable, piecewise
+//! twice: its generalised Hessian is `P + σ·Σ G_fᵀ(I − ∂Π_D)G_f`, where
+//! `I − ∂Π_D(w) = (1 − A/‖w‖)·I + (A/‖w‖)·ŵŵᵀ` outside the disc and 0 inside.
+//! Newton with an Armijo line search minimises it; then `y_f ← σ(w_f −
+//! Π_D(w_f))`, and σ grows tenfold when the constraint residual did not
+//! fall tenfold. A soft speed side `h·x ≤ b` with exact penalty ρ has its
+//! multiplier clamped to [0, ρ] (∞ when hard): `v ← clamp(v + σ_s·t, 0, ρ)`.
+//!
+//! Stops when the Lagrangian's gradient is below 1e-8 of the linear term's
+//! scale and the multipliers moved less than 1e-9 (scaled) in the last
+//! update — the interior point's ([`super::cone_qp`]) tolerances.
+//! `P·x` is evaluated by differencing ([`FastBandedSolver::apply_hessian`]).
+//!
+//! Warm start ([`ConeAlm::shift`]): the multipliers one stage on, σ kept.
+
+use super::FastBandedSolver;
+use super::banded::{BandedCholesky, SymBand};
+use crate::ControlError;
+
+/// Newton steps per solve, over all outer iterations.
+pub const MAX_NEWTON_STEPS: usize = 40;
+/// Outer (multiplier) updates per solve.
+const MAX_OUTER: usize = 20;
+/// Step halvings of the line search.
+const MAX_HALVINGS: usize = 30;
+/// Armijo's sufficient-decrease fraction.
+const ARMIJO: f64 = 1e-4;
+/// Relative tolerance of the Lagrangian's gradient.
+const DUAL_TOLERANCE: f64 = 1e-8;
+/// Tolerance of the Newton decrement `−gᵀd` (the predicted decrease of
+/// L) relative to the objective's scale `|c|·|x|`.
+const DECREMENT_TOLERANCE: f64 = 1e-13;
+/// Decrement (relative, as [`DECREMENT_TOLERANCE`]) below which a full
+/// step counts as the local phase, where the next step reuses the factor.
+const REUSE_DECREMENT: f64 = 1e-7;
+/// Relative tolerance of the constraint residual.
+const PRIMAL_TOLERANCE: f64 = 1e-8;
+/// Growth of σ when the constraint residual stalls.
+const SIGMA_GROWTH: f64 = 10.0;
+
+/// Index of `p_{axis, f}` in x.
+pub(super) fn at(axis: usize, f: usize) -> usize {
+    2 * f + axis
+}
+
+/// The second difference `(1, −2, 1)` on p_f, p_{f−1}, p_{f−2}.
+const D2: [f64; 3] = [1.0, -2.0, 1.0];
+
+/// A speed row `(p_{i,g} − p_{i,g−1})/δt` (p_{−1} = 0).
+#[derive(Debug, Clone, Copy)]
+struct Row {
+    idx: [usize; 2],
+    coef: [f64; 2],
+    len: usize,
+}
+
+impl Row {
+    fn dot(&self, v: &[f64]) -> f64 {
+        (0..self.len).map(|k| self.coef[k] * v[self.idx[k]]).sum()
+    }
+    fn axpy(&self, a: f64, out: &mut [f64]) {
+        for k in 0..self.len {
+            out[self.idx[k]] += a * self.coef[k];
+        }
+    }
+}
+
+/// Tuning of [`ConeAlm`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AlmTuning {
+    /// Initial penalty σ on the cone, per (m/s²)² of violation.
+    pub sigma: f64,
+    /// Largest σ.
+    pub sigma_max: f64,
+}
+
+impl Default for AlmTuning {
+    fn default() -> Self {
+        Self {
+            sigma: std::env::var("ALM_SIGMA").ok().and_then(|v| v.parse().ok()).unwrap_or(1e5),
+            sigma_max: 1e8,
+        }
+    }
+}
+
+/// The augmented-Lagrangian solver of the two-axis cone problem (module
+/// docs). Allocates at construction only.
+#[derive(Debug, Clone)]
+pub struct ConeAlm {
+    n: usize,
+    dt: f64,
+    inv_dt2: f64,
+    /// Cone radius A [m/s²].
+    limit: f64,
+    /// Speed penalty ρ (None: no speed rows; ∞: hard).
+    penalty: Option<f64>,
+    tuning: AlmTuning,
+    sigma: f64,
+    axes: [FastBandedSolver; 2],
+    base: SymBand,
+    kkt: SymBand,
+    chol: BandedCholesky,
+    rows: Vec<Row>,
+    /// Cone multipliers y_f [cost per m/s²].
+    y: Vec<[f64; 2]>,
+    /// Speed multipliers `[upper, lower]` per row.
+    v: Vec<[f64; 2]>,
+    /// Iterate, linear term, gradient, direction, P·direction, scratch.
+    x: Vec<f64>,
+    c: Vec<f64>,
+    g: Vec<f64>,
+    d: Vec<f64>,
+    pd: Vec<f64>,
+    px: Vec<f64>,
+    /// Per-stage u_f and G_f·d.
+    u: Vec<[f64; 2]>,
+    du: Vec<[f64; 2]>,
+    /// Per-row h·x and h·d.
+    hx: Vec<f64>,
+    hd: Vec<f64>,
+    axis_in: Vec<f64>,
+    axis_out: Vec<f64>,
+    newton_steps: usize,
+    /// Factorisations of the last solve.
+    factorisations: usize,
+    /// Largest diagonal entry of P.
+    diag_max: f64,
+}
+
+impl ConeAlm {
+    /// A solver for the axes' weights (`axes[i]`'s horizon N, n = N − 2
+    /// free outputs per axis) at step δt \[s\], cone radius `limit` = A
+    /// [m/s²], speed rows with exact penalty ρ when `speed_penalty` is
+    /// given (`f64::INFINITY`: hard).
+    pub fn new(
+        axes: [FastBandedSolver; 2],
+        dt: f64,
+        limit: f64,
+        speed_penalty: Option<f64>,
+        tuning: AlmTuning,
+    ) -> Self {
+        let n = axes[0].horizon() - 2;
+        assert_eq!(axes[1].horizon() - 2, n, "axes of one horizon");
+        let size = 2 * n;
+        let axis_b = axes
+            .iter()
+            .map(|a| a.hessian_band().bandwidth())
+            .max()
+            .unwrap_or(3);
+        let bandwidth = 2 * axis_b + 1;
+        let mut base = SymBand::zeros(size, bandwidth);
+        for (i, ax) in axes.iter().enumerate() {
+            let h = ax.hessian_band();
+            for f in 0..n {
+                for g in f.saturating_sub(h.bandwidth())..=f {
+                    base.add(at(i, f), at(i, g), 2.0 * h.get(f, g));
+                }
+            }
+        }
+        let diag_max = (0..size).fold(0.0f64, |a, i| a.max(base.get(i, i)));
+        let mut rows = Vec::new();
+        if speed_penalty.is_some() {
+            for i in 0..2 {
+                rows.extend((0..n).map(|g| {
+                    if g == 0 {
+                        Row {
+                            idx: [at(i, 0), 0],
+                            coef: [1.0 / dt, 0.0],
+                            len: 1,
+                        }
+                    } else {
+                        Row {
+                            idx: [at(i, g - 1), at(i, g)],
+                            coef: [-1.0 / dt, 1.0 / dt],
+                            len: 2,
+                        }
+                    }
+                }));
+            }
+        }
+        let m = rows.len();
+        Self {
+            n,
+            dt,
+            inv_dt2: 1.0 / (dt * dt),
+            limit,
+            penalty: speed_penalty,
+            tuning,
+            sigma: tuning.sigma,
+            axes,
+            kkt: base.clone(),
+            base,
+            chol: BandedCholesky::new(size, bandwidth),
+            rows,
+            y: vec![[0.0; 2]; n],
+            v: vec![[0.0; 2]; m],
+            x: vec![0.0; size],
+            c: vec![0.0; size],
+            g: vec![0.0; size],
+            d: vec![0.0; size],
+            pd: vec![0.0; size],
+            px: vec![0.0; size],
+            u: vec![[0.0; 2]; n],
+            du: vec![[0.0; 2]; n],
+            hx: vec![0.0; m],
+            hd: vec![0.0; m],
+            axis_in: vec![0.0; n],
+            axis_out: vec![0.0; n],
+            newton_steps: 0,
+            factorisations: 0,
+            diag_max,
+        }
+    }
+
+    /// The weights of axis i (0: x, 1: y).
+    pub fn axis(&self, i: usize) -> &FastBandedSolver {
+        &self.axes[i]
+    }
+
+    /// Number of speed rows (n per axis, or none).
+    pub fn rows(&self) -> usize {
+        self.rows.len()
+    }
+
+    /// Newton steps of the last solve.
+    pub fn newton_steps(&self) -> usize {
+        self.newton_steps
+    }
+
+    /// Factorisations of the last solve (Newton steps in the local phase
+    /// reuse the last factor).
+    pub fn factorisations(&self) -> usize {
+        self.factorisations
+    }
+
+    /// The deviation `p_{axis, f}` of the current iterate.
+    pub fn p(&self, axis: usize, f: usize) -> f64 {
+        self.x[at(axis, f)]
+    }
+
+    /// Sets the primal start from `p` (per axis, length n).
+    pub fn set_start(&mut self, p: [&[f64]; 2]) {
+        for (i, p) in p.iter().enumerate() {
+            for (f, &v) in p.iter().enumerate().take(self.n) {
+                self.x[at(i, f)] = v;
+            }
+        }
+    }
+
+    /// Forgets the multipliers and σ (a cold start).
+    pub fn reset_multipliers(&mut self) {
+        self.y.iter_mut().for_each(|y| *y = [0.0; 2]);
+        self.v.iter_mut().for_each(|v| *v = [0.0; 2]);
+        self.sigma = self.tuning.sigma;
+    }
+
+    /// Moves the multipliers one stage earlier (the last stage keeps its
+    /// own): the warm start of the next tick.
+    pub fn shift(&mut self) {
+        let n = self.n;
+        if n >= 2 {
+            self.y.copy_within(1..n, 0);
+        }
+        let m = self.rows.len();
+        for r in [0..m / 2, m / 2..m] {
+            if r.len() >= 2 {
+                self.v.copy_within(r.start + 1..r.end, r.start);
+            }
+        }
+    }
+
+    /// σ on the speed rows: the cone's σ in acceleration-like units
+    /// (rows scaled by 1/δt).
+    fn sigma_speed(&self) -> f64 {
+        self.sigma * self.inv_dt2
+    }
+
+    /// `G_f·v` per axis (outputs before the horizon are 0), without a_0.
+    fn accel(inv_dt2: f64, v: &[f64], f: usize) -> [f64; 2] {
+        let mut a = [0.0; 2];
+        for (k, &c) in D2.iter().enumerate() {
+            if let Some(g) = f.checked_sub(k) {
+                a[0] += c * v[at(0, g)];
+                a[1] += c * v[at(1, g)];
+            }
+        }
+        [a[0] * inv_dt2, a[1] * inv_dt2]
+    }
+
+    /// `out += G_fᵀ·e`.
+    fn scatter(inv_dt2: f64, out: &mut [f64], f: usize, e: [f64; 2]) {
+        for (k, &c) in D2.iter().enumerate() {
+            if let Some(g) = f.checked_sub(k) {
+                out[at(0, g)] += c * inv_dt2 * e[0];
+                out[at(1, g)] += c * inv_dt2 * e[1];
+            }
+        }
+    }
+
+    /// `out = P·v` by differencing.
+    fn apply_p(&mut self, which: Vector) {
+        for i in 0..2 {
+            let src = match which {
+                Vector::X => &self.x,
+                Vector::D => &self.d,
+            };
+            for f in 0..self.n {
+                self.axis_in[f] = src[at(i, f)];
+            }
+            self.axes[i].apply_hessian(&self.axis_in, &mut self.axis_out);
+            let dst = match which {
+                Vector::X => &mut self.px,
+                Vector::D => &mut self.pd,
+            };
+            for f in 0..self.n {
+                dst[at(i, f)] = 2.0 * self.axis_out[f];
+            }
+        }
+    }
+
+    /// The disc's projection residual of `w`: `(w − Π(w), ‖w‖)`.
+    fn outside(&self, w: [f64; 2]) -> ([f64; 2], f64) {
+        let norm = (w[0] * w[0] + w[1] * w[1]).sqrt();
+        if norm <= self.limit {
+            ([0.0; 2], norm)
+        } else {
+            let k = 1.0 - self.limit / norm;
+            ([k * w[0], k * w[1]], norm)
+        }
+    }
+
+    /// A speed side's updated multiplier `clamp(v + σ_s·t, 0, ρ)`.
+    fn side_multiplier(&self, v: f64, t: f64) -> f64 {
+        let rho = self.penalty.unwrap_or(f64::INFINITY);
+        (v + self.sigma_speed() * t).clamp(0.0, rho)
+    }
+
+    /// The Lagrangian's non-quadratic part at `x + α·d` (`u`, `du`, `hx`,
+    /// `hd` current), and — with `gradient` — the gradient into `g`
+    /// (`px` must hold P·x then) and the updated multipliers' change.
+    fn penalty_terms(&self, alpha: f64, lo: &[f64], hi: &[f64]) -> f64 {
+        let s = self.sigma;
+        let ss = self.sigma_speed();
+        let mut value = 0.0;
+        for f in 0..self.n {
+            let w = [
+                self.u[f][0] + alpha * self.du[f][0] + self.y[f][0] / s,
+                self.u[f][1] + alpha * self.du[f][1] + self.y[f][1] / s,
+            ];
+            let (r, _) = self.outside(w);
+            value += 0.5 * s * (r[0] * r[0] + r[1] * r[1])
+                - (self.y[f][0] * self.y[f][0] + self.y[f][1] * self.y[f][1]) / (2.0 * s);
+        }
+        for (k, v) in self.v.iter().enumerate() {
+            let h = self.hx[k] + alpha * self.hd[k];
+            for (j, &vj) in v.iter().enumerate() {
+                let t = if j == 0 { h - hi[k] } else { lo[k] - h };
+                let vn = self.side_multiplier(vj, t);
+                value += vn * t - (vn - vj) * (vn - vj) / (2.0 * ss);
+            }
+        }
+        value
+    }
+
+    /// u, h·x and the gradient `g = P·x + c + Σ G_fᵀy'_f + Σ ±h·v'` at x;
+    /// returns `(‖g‖∞, constraint residual)`, the residual being the largest
+    /// multiplier change `‖y' − y‖/σ` (cone, m/s²) or `|v' − v|/σ_s`
+    /// (speed, m/s · δt scaled back) the update would make.
+    fn gradient(&mut self, a0: [f64; 2], lo: &[f64], hi: &[f64]) -> (f64, f64, f64) {
+        self.apply_p(Vector::X);
+        for ((g, p), c) in self.g.iter_mut().zip(&self.px).zip(&self.c) {
+            *g = p + c;
+        }
+        let s = self.sigma;
+        let mut cone_res: f64 = 0.0;
+        for f in 0..self.n {
+            let a = Self::accel(self.inv_dt2, &self.x, f);
+            self.u[f] = [a[0] + a0[0], a[1] + a0[1]];
+            let w = [
+                self.u[f][0] + self.y[f][0] / s,
+                self.u[f][1] + self.y[f][1] / s,
+            ];
+            let (r, _) = self.outside(w);
+            let yn = [s * r[0], s * r[1]];
+            let (ex, ey) = (yn[0] - self.y[f][0], yn[1] - self.y[f][1]);
+            cone_res = cone_res.max((ex * ex + ey * ey).sqrt() / s);
+            if yn != [0.0; 2] {
+                Self::scatter(self.inv_dt2, &mut self.g, f, yn);
+            }
+        }
+        let ss = self.sigma_speed();
+        let mut speed_res: f64 = 0.0;
+        for k in 0..self.rows.len() {
+            let h = self.rows[k].dot(&self.x);
+            self.hx[k] = h;
+            let mut e = 0.0;
+            for j in 0..2 {
+                let t = if j == 0 { h - hi[k] } else { lo[k] - h };
+                let vn = self.side_multiplier(self.v[k][j], t);
+                speed_res = speed_res.max((vn - self.v[k][j]).abs() / ss);
+                e += if j == 0 { vn } else { -vn };
+            }
+            if e != 0.0 {
+                self.rows[k].axpy(e, &mut self.g);
+            }
+        }
+        let gn = self.g.iter().fold(0.0f64, |a, b| a.max(b.abs()));
+        (gn, cone_res, speed_res)
+    }
+
+    /// The generalised Hessian `P + σ·Σ G_fᵀ J_f G_f + σ_s·Σ hhᵀ` at x.
+    fn assemble(&mut self, lo: &[f64], hi: &[f64]) {
+        self.kkt.clone_from(&self.base);
+        let s = self.sigma;
+        let k2 = self.inv_dt2 * self.inv_dt2;
+        for f in 0..self.n {
+            let w = [
+                self.u[f][0] + self.y[f][0] / s,
+                self.u[f][1] + self.y[f][1] / s,
+            ];
+            let norm = (w[0] * w[0] + w[1] * w[1]).sqrt();
+            if norm <= self.limit {
+                continue;
+            }
+            let (wx, wy) = (w[0] / norm, w[1] / norm);
+            let t = self.limit / norm;
+            let j = [
+                [1.0 - t + t * wx * wx, t * wx * wy],
+                [t * wx * wy, 1.0 - t + t * wy * wy],
+            ];
+            for (ka, &ca) in D2.iter().enumerate() {
+                let Some(ga) = f.checked_sub(ka) else { continue };
+                for (kb, &cb) in D2.iter().enumerate() {
+                    let Some(gb) = f.checked_sub(kb) else {
+                        continue;
+                    };
+                    for (i, ji) in j.iter().enumerate() {
+                        for (jj, &jv) in ji.iter().enumerate() {
+                            let (r, c) = (at(i, ga), at(jj, gb));
+                            if r >= c {
+                                self.kkt.add(r, c, s * k2 * ca * cb * jv);
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        let ss = self.sigma_speed();
+        let rho = self.penalty.unwrap_or(f64::INFINITY);
+        for k in 0..self.rows.len() {
+            let h = self.hx[k];
+            let mut active = 0.0;
+            for j in 0..2 {
+                let t = if j == 0 { h - hi[k] } else { lo[k] - h };
+                let raw = self.v[k][j] + ss * t;
+                if raw > 0.0 && raw < rho {
+                    active += ss;
+                }
+            }
+            if active == 0.0 {
+                continue;
+            }
+            let row = self.rows[k];
+            for a in 0..row.len {
+                for b in 0..=a {
+                    self.kkt
+                        .add(row.idx[a], row.idx[b], active * row.coef[a] * row.coef[b]);
+                }
+            }
+        }
+    }
+
+    /// Solves for the linear term `c` (2n, interleaved), fixed relative
+    /// accelerations `a0` [m/s²] and speed row bounds `lo ≤ h·x ≤ hi` from
+    /// the primal start ([`ConeAlm::set_start`]) and the multipliers held
+    /// (zero, or shifted from the last solve). Returns the Newton steps;
+    /// errors when it does not converge within [`MAX_NEWTON_STEPS`].
+    pub fn solve(
+        &mut self,
+        c: &[f64],
+        a0: [f64; 2],
+        lo: &[f64],
+        hi: &[f64],
+    ) -> Result<usize, ControlError> {
+        let m = self.rows.len();
+        if c.len() != 2 * self.n || lo.len() != m || hi.len() != m {
+            return Err(ControlError::InvalidSetting {
+                field: "cone ALM",
+                reason: "c needs 2n entries, lo and hi one per row".into(),
+            });
+        }
+        let finite = |v: &[f64]| v.iter().all(|a| a.is_finite());
+        if !(finite(c) && finite(lo) && finite(hi) && finite(&self.x) && finite(&a0))
+            || lo.iter().zip(hi).any(|(l, h)| l > h)
+        {
+            return Err(ControlError::InvalidSetting {
+                field: "cone ALM",
+                reason: "finite data with lo ≤ hi".into(),
+            });
+        }
+        self.c.copy_from_slice(c);
+        let c_scale = 1.0 + c.iter().fold(0.0f64, |a, b| a.max(b.abs()));
+        // P·x has entries ~1e10 even by differencing: its rounding floor,
+        // ε·max|P_ii|·|x| (1e-5 at δt = 0.02 s, r = 0.01), bounds how
+        // small the gradient can be made.
+        let x_scale = 1.0 + self.x.iter().fold(0.0f64, |a, b| a.max(b.abs()));
+        let floor = 16.0 * f64::EPSILON * self.diag_max * x_scale;
+        let dual_tol = (DUAL_TOLERANCE * c_scale).max(floor);
+        let decrement_tol = DECREMENT_TOLERANCE * c_scale * x_scale;
+        self.factorisations = 0;
+        let (mut last_full, mut last_decrement) = (false, f64::INFINITY);
+        let mut reuse_allowed = true;
+        let inner_tol = decrement_tol;
+        let cone_tol = PRIMAL_TOLERANCE * (1.0 + self.limit);
+        let b_scale = 1.0 + lo.iter().chain(hi).fold(0.0f64, |a, b| a.max(b.abs()));
+        let speed_tol = PRIMAL_TOLERANCE * b_scale;
+        self.newton_steps = 0;
+        let mut previous_res = f64::INFINITY;
+        for _outer in 0..MAX_OUTER {
+            // Inner: minimise L(·; y, v, σ) by semismooth Newton, until
+            // the gradient or the Newton decrement −gᵀd is negligible.
+            let (mut cone_res, mut speed_res);
+            loop {
+                let gn;
+                (gn, cone_res, speed_res) = self.gradient(a0, lo, hi);
+                if gn <= dual_tol {
+                    break;
+                }
+                if self.newton_steps == MAX_NEWTON_STEPS {
+                    return Err(ControlError::Solver(format!(
+                        "cone ALM: no convergence in {MAX_NEWTON_STEPS} Newton steps \
+                         (gradient {gn:.1e}, residual {:.1e})",
+                        cone_res.max(speed_res)
+                    )));
+                }
+                self.newton_steps += 1;
+                // In the local phase (last step full, its decrement small)
+                // the matrix barely changes: its factor is reused.
+                let reuse = reuse_allowed
+                    && last_full
+                    && last_decrement <= REUSE_DECREMENT * c_scale * x_scale;
+                reuse_allowed = true;
+                if !reuse {
+                    self.assemble(lo, hi);
+                    self.chol.factor(&self.kkt)?;
+                    self.factorisations += 1;
+                }
+                for (d, g) in self.d.iter_mut().zip(&self.g) {
+                    *d = -g;
+                }
+                self.chol.solve_in_place(&mut self.d)?;
+                let decrement: f64 = -self.g.iter().zip(&self.d).map(|(g, d)| g * d).sum::<f64>();
+                if !(decrement > 0.0) && reuse {
+                    // The old factor no longer gives a descent direction.
+                    last_full = false;
+                    continue;
+                }
+                if reuse && decrement > 0.1 * last_decrement {
+                    // The old factor converges slowly here: refactor next.
+                    reuse_allowed = false;
+                }
+                last_decrement = decrement;
+                if decrement <= inner_tol {
+                    // Converged to rounding: the full step, and done.
+                    for (x, d) in self.x.iter_mut().zip(&self.d) {
+                        *x += d;
+                    }
+                    (_, cone_res, speed_res) = self.gradient(a0, lo, hi);
+                    break;
+                }
+                last_full = self.line_search(lo, hi)?;
+            }
+            // Multiplier update (the gradient above is the Lagrangian's
+            // with the updated multipliers: stationarity holds).
+            let s = self.sigma;
+            for f in 0..self.n {
+                let w = [
+                    self.u[f][0] + self.y[f][0] / s,
+                    self.u[f][1] + self.y[f][1] / s,
+                ];
+                let (r, _) = self.outside(w);
+                self.y[f] = [s * r[0], s * r[1]];
+            }
+            for k in 0..m {
+                let h = self.hx[k];
+                for j in 0..2 {
+                    let t = if j == 0 { h - hi[k] } else { lo[k] - h };
+                    self.v[k][j] = self.side_multiplier(self.v[k][j], t);
+                }
+            }
+            if std::env::var_os("CONE_DEBUG").is_some() { eprintln!("outer sigma {:.1e} steps {} cone {cone_res:.1e}/{cone_tol:.1e} speed {speed_res:.1e}/{speed_tol:.1e}", self.sigma, self.newton_steps); }
+            if cone_res <= cone_tol && speed_res <= speed_tol {
+                if self.x.iter().any(|v| !v.is_finite()) {
+                    return Err(ControlError::Solver("cone ALM: non-finite iterate".into()));
+                }
+                return Ok(self.newton_steps);
+            }
+            let res = (cone_res / cone_tol).max(speed_res / speed_tol);
+            if res > 0.1 * previous_res && self.sigma < self.tuning.sigma_max {
+                self.sigma = (self.sigma * SIGMA_GROWTH).min(self.tuning.sigma_max);
+            }
+            previous_res = res;
+        }
+        Err(ControlError::Solver(
+            "cone ALM: no convergence in the multiplier updates".into(),
+        ))
+    }
+
+    /// Armijo backtracking on L along d from x (u, hx, g current); moves x.
+    /// Returns whether the full step was taken.
+    fn line_search(&mut self, lo: &[f64], hi: &[f64]) -> Result<bool, ControlError> {
+        self.apply_p(Vector::D);
+        let slope: f64 = self.g.iter().zip(&self.d).map(|(g, d)| g * d).sum();
+        if !(slope < 0.0) {
+            // Not a descent direction: the factor is too inexact to go on.
+            return Err(ControlError::Solver(format!(
+                "cone ALM: no descent (slope {slope:.1e})"
+            )));
+        }
+        // Quadratic part along d: α·(Px + c)·d + ½α²·dᵀPd.
+        let lin: f64 = self
+            .px
+            .iter()
+            .zip(&self.c)
+            .zip(&self.d)
+            .map(|((p, c), d)| (p + c) * d)
+            .sum();
+        let curv: f64 = self.pd.iter().zip(&self.d).map(|(p, d)| p * d).sum();
+        for f in 0..self.n {
+            self.du[f] = Self::accel(self.inv_dt2, &self.d, f);
+        }
+        for k in 0..self.rows.len() {
+            self.hd[k] = self.rows[k].dot(&self.d);
+        }
+        let base = self.penalty_terms(0.0, lo, hi);
+        let mut alpha = 1.0;
+        for _ in 0..MAX_HALVINGS {
+            let value = alpha * lin + 0.5 * alpha * alpha * curv + self.penalty_terms(alpha, lo, hi);
+            if value <= base + ARMIJO * alpha * slope {
+                if std::env::var_os("CONE_DEBUG").is_some() { let dn = self.d.iter().fold(0.0f64, |a, b| a.max(b.abs())); eprintln!("  alpha {alpha:.2e} |d| {dn:.2e} slope {slope:.2e} lin {lin:.2e} curv {curv:.2e}"); }
+                for (x, d) in self.x.iter_mut().zip(&self.d) {
+                    *x += alpha * d;
+                }
+                return Ok(alpha == 1.0);
+            }
+            alpha *= 0.5;
+        }
+        // No decrease measurable: the merit is flat to rounding here, where
+        // the full Newton step is the best guess.
+        if std::env::var_os("CONE_DEBUG").is_some() { eprintln!("  line search failed, slope {slope:.2e}"); }
+        for (x, d) in self.x.iter_mut().zip(&self.d) {
+            *x += d;
+        }
+        Ok(true)
+    }
+
+    /// Step δt \[s\].
+    pub fn dt(&self) -> f64 {
+        self.dt
+    }
+}
+
+/// Which vector [`ConeAlm::apply_p`] multiplies.
+#[derive(Debug, Clone, Copy)]
+enum Vector {
+    X,
+    D,
+}
