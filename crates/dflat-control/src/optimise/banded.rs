@@ -93,6 +93,11 @@ impl SymBand {
         &self.lower
     }
 
+    /// The lower band, mutable (layout as [`SymBand::lower`]).
+    pub(crate) fn lower_mut(&mut self) -> &mut [f64] {
+        &mut self.lower
+    }
+
     /// Sets every entry to zero.
     pub fn fill_zero(&mut self) {
         self.lower.iter_mut().for_each(|v| *v = 0.0);
@@ -133,8 +138,6 @@ pub struct BandedCholesky {
     fwd: Vec<f64>,
     /// Back-substitution rows: `[1/L_ii, L_{i+1,i}/L_ii, …, L_{i+b,i}/L_ii]`.
     bwd: Vec<f64>,
-    /// `1/L_ii`, scratch of the fixed-bandwidth factorisation.
-    inv_diag: Vec<f64>,
     factored: bool,
 }
 
@@ -147,7 +150,6 @@ impl BandedCholesky {
             l: vec![0.0; n * (bandwidth + 1)],
             fwd: vec![0.0; n * (bandwidth + 1)],
             bwd: vec![0.0; n * (bandwidth + 1)],
-            inv_diag: vec![0.0; n],
             factored: false,
         }
     }
@@ -187,65 +189,39 @@ impl BandedCholesky {
     }
 
     /// The band-limited LLᵀ of `l` in place, for a compile-time bandwidth
-    /// (the two-axis cone problems: 7, 9 with smoothness): the same
-    /// operations as [`BandedCholesky::factor_generic`] in the same order,
-    /// with fixed trip counts past the first B rows and a multiplication by
-    /// the pivot's inverse in place of the division.
+    /// (the two-axis cone problems: 7, 9 with smoothness), right-looking:
+    /// each column, once scaled, updates the B(B+1)/2 entries of the block
+    /// after it — independent multiply-adds, where the row-oriented
+    /// [`BandedCholesky::factor_generic`] chains its dot products. Rounding
+    /// differs from the generic loop's in the last bits.
     fn factor_band<const B: usize>(&mut self) -> Result<(), ControlError> {
         let n = self.n;
         let w = B + 1;
         let l = &mut self.l;
-        for i in 0..n.min(B) {
-            Self::factor_row(l, w, B, i)?;
-            self.inv_diag[i] = 1.0 / l[i * w];
-        }
-        for i in B..n {
-            let (done, rest) = l.split_at_mut(i * w);
-            let row = &mut rest[..w];
-            // row[d] = L[i][i − d]; j = i − d for d = B..1.
-            for d in (1..=B).rev() {
-                let j = i - d;
-                let rj = &done[j * w..(j + 1) * w];
-                let mut s = row[d];
-                // k = i − B .. j − 1: L[i][k] = row[i − k], L[j][k] = rj[j − k].
-                for e in (d + 1..=B).rev() {
-                    // k = i − e, j − k = e − d.
-                    s -= row[e] * rj[e - d];
-                }
-                row[d] = s * self.inv_diag[j];
-            }
-            let mut dii = row[0];
-            for e in (1..=B).rev() {
-                dii -= row[e] * row[e];
-            }
-            if !(dii > 0.0 && dii.is_finite()) {
+        for j in 0..n {
+            let d = l[j * w];
+            if !(d > 0.0 && d.is_finite()) {
                 return Err(ControlError::NotPositiveDefinite);
             }
-            row[0] = dii.sqrt();
-            self.inv_diag[i] = 1.0 / row[0];
-        }
-        Ok(())
-    }
-
-    /// Row i of the generic factorisation (any bandwidth b).
-    fn factor_row(l: &mut [f64], w: usize, b: usize, i: usize) -> Result<(), ControlError> {
-        let j0 = i.saturating_sub(b);
-        for j in j0..i {
-            let mut s = l[i * w + (i - j)];
-            for k in j0..j {
-                s -= l[i * w + (i - k)] * l[j * w + (j - k)];
+            let pivot = d.sqrt();
+            l[j * w] = pivot;
+            let inv = 1.0 / pivot;
+            let mut col = [0.0f64; B];
+            let span = B.min(n - 1 - j);
+            for t in 1..=span {
+                let v = l[(j + t) * w + t] * inv;
+                l[(j + t) * w + t] = v;
+                col[t - 1] = v;
             }
-            l[i * w + (i - j)] = s / l[j * w];
+            // Entry (j + t1, j + t2), t1 ≥ t2, lives at (j + t1)·w + t1 − t2.
+            for t1 in 1..=span {
+                let row = &mut l[(j + t1) * w..(j + t1) * w + w];
+                let c1 = col[t1 - 1];
+                for t2 in 1..=t1 {
+                    row[t1 - t2] -= c1 * col[t2 - 1];
+                }
+            }
         }
-        let mut d = l[i * w];
-        for k in j0..i {
-            let v = l[i * w + (i - k)];
-            d -= v * v;
-        }
-        if !(d > 0.0 && d.is_finite()) {
-            return Err(ControlError::NotPositiveDefinite);
-        }
-        l[i * w] = d.sqrt();
         Ok(())
     }
 

@@ -52,6 +52,7 @@ const DECREMENT_TOLERANCE: f64 = 1e-13;
 /// Decrement (relative, as [`DECREMENT_TOLERANCE`]) below which a full
 /// step counts as the local phase, where the next step reuses the factor.
 const REUSE_DECREMENT: f64 = 1e-7;
+
 /// Relative tolerance of the constraint residual.
 const PRIMAL_TOLERANCE: f64 = 1e-8;
 /// Growth of σ when the constraint residual stalls.
@@ -96,7 +97,7 @@ pub struct AlmTuning {
 impl Default for AlmTuning {
     fn default() -> Self {
         Self {
-            sigma: std::env::var("ALM_SIGMA").ok().and_then(|v| v.parse().ok()).unwrap_or(1e5),
+            sigma: 1e5,
             sigma_max: 1e8,
         }
     }
@@ -447,17 +448,22 @@ impl ConeAlm {
                 [1.0 - t + t * wx * wx, t * wx * wy],
                 [t * wx * wy, 1.0 - t + t * wy * wy],
             ];
+            // G_fᵀ(σ·k2·J)G_f into the band: entry (at(i, f − ka),
+            // at(jj, f − kb)) at row·w + (row − col), lower triangle only.
+            let w = self.kkt.bandwidth() + 1;
+            let lower = self.kkt.lower_mut();
             for (ka, &ca) in D2.iter().enumerate() {
                 let Some(ga) = f.checked_sub(ka) else { continue };
                 for (kb, &cb) in D2.iter().enumerate() {
                     let Some(gb) = f.checked_sub(kb) else {
                         continue;
                     };
+                    let scale = s * k2 * ca * cb;
                     for (i, ji) in j.iter().enumerate() {
                         for (jj, &jv) in ji.iter().enumerate() {
                             let (r, c) = (at(i, ga), at(jj, gb));
                             if r >= c {
-                                self.kkt.add(r, c, s * k2 * ca * cb * jv);
+                                lower[r * w + (r - c)] += scale * jv;
                             }
                         }
                     }
@@ -532,7 +538,10 @@ impl ConeAlm {
         let inner_tol = decrement_tol;
         let cone_tol = PRIMAL_TOLERANCE * (1.0 + self.limit);
         let b_scale = 1.0 + lo.iter().chain(hi).fold(0.0f64, |a, b| a.max(b.abs()));
-        let speed_tol = PRIMAL_TOLERANCE * b_scale;
+        // A soft side's violation costs ρ per m/s: its tolerance is ρ
+        // times tighter so that the cost is as accurate as the cone's.
+        let rho = self.penalty.filter(|r| r.is_finite()).unwrap_or(1.0);
+        let speed_tol = PRIMAL_TOLERANCE * b_scale / rho.max(1.0);
         self.newton_steps = 0;
         let mut previous_res = f64::INFINITY;
         for _outer in 0..MAX_OUTER {
@@ -607,7 +616,6 @@ impl ConeAlm {
                     self.v[k][j] = self.side_multiplier(self.v[k][j], t);
                 }
             }
-            if std::env::var_os("CONE_DEBUG").is_some() { eprintln!("outer sigma {:.1e} steps {} cone {cone_res:.1e}/{cone_tol:.1e} speed {speed_res:.1e}/{speed_tol:.1e}", self.sigma, self.newton_steps); }
             if cone_res <= cone_tol && speed_res <= speed_tol {
                 if self.x.iter().any(|v| !v.is_finite()) {
                     return Err(ControlError::Solver("cone ALM: non-finite iterate".into()));
@@ -656,7 +664,6 @@ impl ConeAlm {
         for _ in 0..MAX_HALVINGS {
             let value = alpha * lin + 0.5 * alpha * alpha * curv + self.penalty_terms(alpha, lo, hi);
             if value <= base + ARMIJO * alpha * slope {
-                if std::env::var_os("CONE_DEBUG").is_some() { let dn = self.d.iter().fold(0.0f64, |a, b| a.max(b.abs())); eprintln!("  alpha {alpha:.2e} |d| {dn:.2e} slope {slope:.2e} lin {lin:.2e} curv {curv:.2e}"); }
                 for (x, d) in self.x.iter_mut().zip(&self.d) {
                     *x += alpha * d;
                 }
@@ -666,7 +673,6 @@ impl ConeAlm {
         }
         // No decrease measurable: the merit is flat to rounding here, where
         // the full Newton step is the best guess.
-        if std::env::var_os("CONE_DEBUG").is_some() { eprintln!("  line search failed, slope {slope:.2e}"); }
         for (x, d) in self.x.iter_mut().zip(&self.d) {
             *x += d;
         }

@@ -8,15 +8,6 @@ use super::smoothness::{accel_block, sent_linear_term};
 use super::{AxisProblem, ConeBounds, FastBandedSolver, Smoothness, baseline, check_lengths};
 use crate::ControlError;
 
-/// Warm-start floor of [`ConeQp::shift`]: kept slacks and multipliers stay
-/// at ≥ this fraction of their cold-start values.
-const WARM_FLOOR: f64 = 1e-3;
-/// What a warm start keeps besides the shifted primal and λ: measured on
-/// the `corner` bench (`docs/performance.md`), keeping the shifted slacks
-/// and multipliers ([`Start::Warm`]) was twice as slow as cold ones, so
-/// they start cold.
-const WARM_DUALS: Start = Start::Cold;
-
 /// Weights of one axis: tracking q ≥ 0 [1/m²], jerk r > 0 [s⁶/m²], and
 /// the smoothness term.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -231,7 +222,6 @@ impl ConeInteriorPointSolver {
         }
         let alm = self.alm.solve(&self.c_alm, a0, &self.lo, &self.hi);
         self.iterations = self.alm.newton_steps();
-        if let Err(e) = &alm { if std::env::var_os("CONE_DEBUG").is_some() { eprintln!("ALM failed: {e}"); } }
         if alm.is_ok() {
             self.method = ConeMethod::Alm;
         } else {
@@ -242,7 +232,6 @@ impl ConeInteriorPointSolver {
             self.qp.solve(&self.c, a0, &self.lo, &self.hi, Start::Cold)?;
             self.iterations += self.qp.iterations();
         }
-        if std::env::var_os("CONE_TICK").is_some() { eprintln!("tick {:?} warm {} iters {} factors {}", self.method, warm, self.iterations, self.alm.factorisations()); }
         let solution = |i: usize, f: usize| match self.method {
             ConeMethod::Alm => self.alm.p(i, f),
             ConeMethod::InteriorPoint => self.qp.p(i, f),
