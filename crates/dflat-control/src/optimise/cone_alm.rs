@@ -53,6 +53,9 @@ const DECREMENT_TOLERANCE: f64 = 1e-13;
 /// step counts as the local phase, where the next step reuses the factor.
 const REUSE_DECREMENT: f64 = 1e-7;
 
+/// Decrement (relative, as [`DECREMENT_TOLERANCE`]) after whose full step
+/// the inner loop stops without a confirming step.
+const LOCAL_STOP: f64 = 1e-10;
 /// Relative tolerance of the constraint residual.
 const PRIMAL_TOLERANCE: f64 = 1e-8;
 /// Growth of σ when the constraint residual stalls.
@@ -143,6 +146,8 @@ pub struct ConeAlm {
     newton_steps: usize,
     /// Factorisations of the last solve.
     factorisations: usize,
+    /// Whether `px` holds P·x for the current x.
+    px_current: bool,
     /// Largest diagonal entry of P.
     diag_max: f64,
 }
@@ -228,6 +233,7 @@ impl ConeAlm {
             axis_out: vec![0.0; n],
             newton_steps: 0,
             factorisations: 0,
+            px_current: false,
             diag_max,
         }
     }
@@ -260,6 +266,7 @@ impl ConeAlm {
 
     /// Sets the primal start from `p` (per axis, length n).
     pub fn set_start(&mut self, p: [&[f64]; 2]) {
+        self.px_current = false;
         for (i, p) in p.iter().enumerate() {
             for (f, &v) in p.iter().enumerate().take(self.n) {
                 self.x[at(i, f)] = v;
@@ -387,7 +394,10 @@ impl ConeAlm {
     /// multiplier change `‖y' − y‖/σ` (cone, m/s²) or `|v' − v|/σ_s`
     /// (speed, m/s · δt scaled back) the update would make.
     fn gradient(&mut self, a0: [f64; 2], lo: &[f64], hi: &[f64]) -> (f64, f64, f64) {
-        self.apply_p(Vector::X);
+        if !self.px_current {
+            self.apply_p(Vector::X);
+            self.px_current = true;
+        }
         for ((g, p), c) in self.g.iter_mut().zip(&self.px).zip(&self.c) {
             *g = p + c;
         }
@@ -453,7 +463,9 @@ impl ConeAlm {
             let w = self.kkt.bandwidth() + 1;
             let lower = self.kkt.lower_mut();
             for (ka, &ca) in D2.iter().enumerate() {
-                let Some(ga) = f.checked_sub(ka) else { continue };
+                let Some(ga) = f.checked_sub(ka) else {
+                    continue;
+                };
                 for (kb, &cb) in D2.iter().enumerate() {
                     let Some(gb) = f.checked_sub(kb) else {
                         continue;
@@ -524,6 +536,7 @@ impl ConeAlm {
             });
         }
         self.c.copy_from_slice(c);
+        self.px_current = false;
         let c_scale = 1.0 + c.iter().fold(0.0f64, |a, b| a.max(b.abs()));
         // P·x has entries ~1e10 even by differencing: its rounding floor,
         // ε·max|P_ii|·|x| (1e-5 at δt = 0.02 s, r = 0.01), bounds how
@@ -593,10 +606,17 @@ impl ConeAlm {
                     for (x, d) in self.x.iter_mut().zip(&self.d) {
                         *x += d;
                     }
+                    self.px_current = false;
                     (_, cone_res, speed_res) = self.gradient(a0, lo, hi);
                     break;
                 }
                 last_full = self.line_search(lo, hi)?;
+                if last_full && decrement <= LOCAL_STOP * c_scale * x_scale {
+                    // A full step from a small decrement: the next one is
+                    // of its square (Newton's local rate), below tolerance.
+                    (_, cone_res, speed_res) = self.gradient(a0, lo, hi);
+                    break;
+                }
             }
             // Multiplier update (the gradient above is the Lagrangian's
             // with the updated multipliers: stationarity holds).
@@ -662,21 +682,29 @@ impl ConeAlm {
         let base = self.penalty_terms(0.0, lo, hi);
         let mut alpha = 1.0;
         for _ in 0..MAX_HALVINGS {
-            let value = alpha * lin + 0.5 * alpha * alpha * curv + self.penalty_terms(alpha, lo, hi);
+            let value =
+                alpha * lin + 0.5 * alpha * alpha * curv + self.penalty_terms(alpha, lo, hi);
             if value <= base + ARMIJO * alpha * slope {
-                for (x, d) in self.x.iter_mut().zip(&self.d) {
-                    *x += alpha * d;
-                }
+                self.step(alpha);
                 return Ok(alpha == 1.0);
             }
             alpha *= 0.5;
         }
         // No decrease measurable: the merit is flat to rounding here, where
         // the full Newton step is the best guess.
-        for (x, d) in self.x.iter_mut().zip(&self.d) {
-            *x += d;
-        }
+        self.step(1.0);
         Ok(true)
+    }
+
+    /// `x += α·d`, and `P·x` with it from `P·d` (both by differencing,
+    /// so the sum keeps their accuracy).
+    fn step(&mut self, alpha: f64) {
+        for (x, d) in self.x.iter_mut().zip(&self.d) {
+            *x += alpha * d;
+        }
+        for (p, d) in self.px.iter_mut().zip(&self.pd) {
+            *p += alpha * d;
+        }
     }
 
     /// Step δt \[s\].

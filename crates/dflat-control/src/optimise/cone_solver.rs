@@ -187,9 +187,13 @@ impl ConeInteriorPointSolver {
                 self.warm[i][f] = guess - b;
             }
             self.c[a_at(i, 0)] = sent_linear_term(&self.weights[i].smoothness, a.fixed, a.sent, dt);
-            self.alm
-                .axis(i)
-                .right_hand_side(a.fixed, a.sent, a.reference, &mut self.base, &mut self.rhs);
+            self.alm.axis(i).right_hand_side(
+                a.fixed,
+                a.sent,
+                a.reference,
+                &mut self.base,
+                &mut self.rhs,
+            );
             for f in 0..n {
                 // ½xᵀ(2H)x − 2·rhsᵀx: the fast path's objective, doubled.
                 self.c_alm[cone_alm::at(i, f)] = -2.0 * self.rhs[f];
@@ -229,7 +233,8 @@ impl ConeInteriorPointSolver {
             self.warm_used = false;
             self.method = ConeMethod::InteriorPoint;
             self.qp.set_start([&self.p[0], &self.p[1]], dt, false);
-            self.qp.solve(&self.c, a0, &self.lo, &self.hi, Start::Cold)?;
+            self.qp
+                .solve(&self.c, a0, &self.lo, &self.hi, Start::Cold)?;
             self.iterations += self.qp.iterations();
         }
         let solution = |i: usize, f: usize| match self.method {

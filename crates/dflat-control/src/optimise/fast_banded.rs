@@ -280,7 +280,12 @@ impl FastBandedSolver {
         let shift = self.sent_shift(fixed, sent);
         let d1 = fixed[1] - fixed[0];
         let d2 = fixed[2] - 2.0 * fixed[1] + fixed[0];
-        for (f, ((b, r), &y_ref)) in base.iter_mut().zip(rhs.iter_mut()).zip(&reference[3..]).enumerate() {
+        for (f, ((b, r), &y_ref)) in base
+            .iter_mut()
+            .zip(rhs.iter_mut())
+            .zip(&reference[3..])
+            .enumerate()
+        {
             let j = (f + 3) as f64;
             *b = fixed[0] + j * d1 + 0.5 * j * (j - 1.0) * d2;
             *r = self.q * (y_ref - *b);
