@@ -102,3 +102,55 @@ impl AxisBounds {
         false
     }
 }
+
+/// A bound row `g·v` over at most two indices of a solver's unknowns
+/// (the banded interior points' and the cone ALM's speed and
+/// acceleration rows).
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Row {
+    pub(super) idx: [usize; 2],
+    pub(super) coef: [f64; 2],
+    pub(super) len: usize,
+}
+
+impl Row {
+    /// The row `v[index]` (coefficient 1).
+    pub(super) fn single(index: usize) -> Self {
+        Self {
+            idx: [index, 0],
+            coef: [1.0, 0.0],
+            len: 1,
+        }
+    }
+
+    /// Speed row g = 0..n−1 per axis, `(p_g − p_{g−1})/δt` with p_{−1} = 0
+    /// (the output after the fixed ones starts from the baseline), p_k at
+    /// `index(k)`.
+    pub(super) fn speed(g: usize, dt: f64, index: impl Fn(usize) -> usize) -> Self {
+        if g == 0 {
+            Self {
+                idx: [index(0), 0],
+                coef: [1.0 / dt, 0.0],
+                len: 1,
+            }
+        } else {
+            Self {
+                idx: [index(g - 1), index(g)],
+                coef: [-1.0 / dt, 1.0 / dt],
+                len: 2,
+            }
+        }
+    }
+
+    /// `g·v`.
+    pub(super) fn dot(&self, v: &[f64]) -> f64 {
+        (0..self.len).map(|k| self.coef[k] * v[self.idx[k]]).sum()
+    }
+
+    /// `out += a·g`.
+    pub(super) fn axpy(&self, a: f64, out: &mut [f64]) {
+        for k in 0..self.len {
+            out[self.idx[k]] += a * self.coef[k];
+        }
+    }
+}

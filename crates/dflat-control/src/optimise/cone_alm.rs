@@ -34,6 +34,7 @@
 
 use super::FastBandedSolver;
 use super::banded::{BandedCholesky, SymBand};
+use super::bounds::Row;
 use crate::ControlError;
 
 /// Newton steps per solve, over all outer iterations.
@@ -69,25 +70,6 @@ pub(super) fn at(axis: usize, f: usize) -> usize {
 /// The second difference `(1, −2, 1)` on p_f, p_{f−1}, p_{f−2}.
 const D2: [f64; 3] = [1.0, -2.0, 1.0];
 
-/// A speed row `(p_{i,g} − p_{i,g−1})/δt` (p_{−1} = 0).
-#[derive(Debug, Clone, Copy)]
-struct Row {
-    idx: [usize; 2],
-    coef: [f64; 2],
-    len: usize,
-}
-
-impl Row {
-    fn dot(&self, v: &[f64]) -> f64 {
-        (0..self.len).map(|k| self.coef[k] * v[self.idx[k]]).sum()
-    }
-    fn axpy(&self, a: f64, out: &mut [f64]) {
-        for k in 0..self.len {
-            out[self.idx[k]] += a * self.coef[k];
-        }
-    }
-}
-
 /// Tuning of [`ConeAlm`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct AlmTuning {
@@ -111,7 +93,6 @@ impl Default for AlmTuning {
 #[derive(Debug, Clone)]
 pub struct ConeAlm {
     n: usize,
-    dt: f64,
     inv_dt2: f64,
     /// Cone radius A [m/s²].
     limit: f64,
@@ -186,27 +167,12 @@ impl ConeAlm {
         let mut rows = Vec::new();
         if speed_penalty.is_some() {
             for i in 0..2 {
-                rows.extend((0..n).map(|g| {
-                    if g == 0 {
-                        Row {
-                            idx: [at(i, 0), 0],
-                            coef: [1.0 / dt, 0.0],
-                            len: 1,
-                        }
-                    } else {
-                        Row {
-                            idx: [at(i, g - 1), at(i, g)],
-                            coef: [-1.0 / dt, 1.0 / dt],
-                            len: 2,
-                        }
-                    }
-                }));
+                rows.extend((0..n).map(|g| Row::speed(g, dt, |k| at(i, k))));
             }
         }
         let m = rows.len();
         Self {
             n,
-            dt,
             inv_dt2: 1.0 / (dt * dt),
             limit,
             penalty: speed_penalty,
@@ -241,11 +207,6 @@ impl ConeAlm {
     /// The weights of axis i (0: x, 1: y).
     pub fn axis(&self, i: usize) -> &FastBandedSolver {
         &self.axes[i]
-    }
-
-    /// Number of speed rows (n per axis, or none).
-    pub fn rows(&self) -> usize {
-        self.rows.len()
     }
 
     /// Newton steps of the last solve.
@@ -591,7 +552,7 @@ impl ConeAlm {
                 }
                 self.chol.solve_in_place(&mut self.d)?;
                 let decrement: f64 = -self.g.iter().zip(&self.d).map(|(g, d)| g * d).sum::<f64>();
-                if !(decrement > 0.0) && reuse {
+                if (decrement.is_nan() || decrement <= 0.0) && reuse {
                     // The old factor no longer gives a descent direction.
                     last_full = false;
                     continue;
@@ -658,7 +619,7 @@ impl ConeAlm {
     fn line_search(&mut self, lo: &[f64], hi: &[f64]) -> Result<bool, ControlError> {
         self.apply_p(Vector::D);
         let slope: f64 = self.g.iter().zip(&self.d).map(|(g, d)| g * d).sum();
-        if !(slope < 0.0) {
+        if slope.is_nan() || slope >= 0.0 {
             // Not a descent direction: the factor is too inexact to go on.
             return Err(ControlError::Solver(format!(
                 "cone ALM: no descent (slope {slope:.1e})"
@@ -705,11 +666,6 @@ impl ConeAlm {
         for (p, d) in self.px.iter_mut().zip(&self.pd) {
             *p += alpha * d;
         }
-    }
-
-    /// Step δt \[s\].
-    pub fn dt(&self) -> f64 {
-        self.dt
     }
 }
 

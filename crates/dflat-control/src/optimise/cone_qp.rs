@@ -18,12 +18,12 @@
 //! `d = (z/s)(w/σ)/(z/s + w/σ)` — the hard row's `z/s` in series with
 //! the penalty's `w/σ`. Mehrotra's predictor-corrector, one step length.
 //!
-//! Warm start ([`ConeQp::shift`]): the previous solution's λ, slacks and
-//! multipliers moved one stage earlier (the slacks and multipliers pushed
-//! off the boundary, used only with [`Start::Warm`]); see
-//! [`ConeInteriorPointSolver`](super::ConeInteriorPointSolver).
+//! Always started cold: the warm path of
+//! [`ConeInteriorPointSolver`](super::ConeInteriorPointSolver) is the
+//! augmented Lagrangian ([`super::cone_alm`]), this its fallback.
 
 use super::banded::SymBand;
+use super::bounds::Row;
 use super::interior_point::BandedLdl;
 use crate::ControlError;
 
@@ -84,25 +84,6 @@ struct Side {
     e0: f64,
 }
 
-/// A speed row `(p_{i,g} − p_{i,g−1})/δt` (p_{−1} = 0).
-#[derive(Debug, Clone, Copy)]
-struct Row {
-    idx: [usize; 2],
-    coef: [f64; 2],
-    len: usize,
-}
-
-impl Row {
-    fn dot(&self, v: &[f64]) -> f64 {
-        (0..self.len).map(|k| self.coef[k] * v[self.idx[k]]).sum()
-    }
-    fn axpy(&self, a: f64, out: &mut [f64]) {
-        for k in 0..self.len {
-            out[self.idx[k]] += a * self.coef[k];
-        }
-    }
-}
-
 /// Per-axis data of [`ConeQp::new`].
 #[derive(Debug, Clone)]
 pub struct ConeAxis {
@@ -137,15 +118,6 @@ pub struct ConeQp {
     best: Vec<f64>,
     /// Iterations of the last solve.
     iterations: usize,
-}
-
-/// What [`ConeQp::solve`] starts from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Start {
-    /// `p` given, ã from it, λ = 0; slacks and multipliers from scratch.
-    Cold,
-    /// `p` given, λ, slacks and multipliers as left by [`ConeQp::shift`].
-    Warm,
 }
 
 impl ConeQp {
@@ -194,21 +166,7 @@ impl ConeQp {
         let mut rows = Vec::new();
         if speed_penalty.is_some() {
             for i in 0..2 {
-                rows.extend((0..n).map(|g| {
-                    if g == 0 {
-                        Row {
-                            idx: [p_at(i, 0), 0],
-                            coef: [1.0 / dt, 0.0],
-                            len: 1,
-                        }
-                    } else {
-                        Row {
-                            idx: [p_at(i, g - 1), p_at(i, g)],
-                            coef: [-1.0 / dt, 1.0 / dt],
-                            len: 2,
-                        }
-                    }
-                }));
+                rows.extend((0..n).map(|g| Row::speed(g, dt, |k| p_at(i, k))));
             }
         }
         let m = rows.len();
@@ -252,8 +210,8 @@ impl ConeQp {
     }
 
     /// Sets the primal start from `p` (per axis, length n): ã from the
-    /// equality; λ = 0 unless `keep_multipliers`.
-    pub fn set_start(&mut self, p: [&[f64]; 2], dt: f64, keep_multipliers: bool) {
+    /// equality, λ = 0.
+    pub fn set_start(&mut self, p: [&[f64]; 2], dt: f64) {
         let inv_dt2 = 1.0 / (dt * dt);
         for (i, p) in p.iter().enumerate() {
             for f in 0..self.n {
@@ -261,45 +219,8 @@ impl ConeQp {
                 let pm2 = if f >= 2 { p[f - 2] } else { 0.0 };
                 self.v[p_at(i, f)] = p[f];
                 self.v[a_at(i, f)] = (p[f] - 2.0 * pm1 + pm2) * inv_dt2;
-                if !keep_multipliers {
-                    self.v[l_at(i, f)] = 0.0;
-                }
+                self.v[l_at(i, f)] = 0.0;
             }
-        }
-    }
-
-    /// Moves the last solution's multipliers, slacks and duals one stage
-    /// earlier (the last stage keeps its own) for a warm start, and pushes
-    /// each complementary pair off the boundary to at least `floor` times
-    /// its cold-start value.
-    pub fn shift(&mut self, floor: f64) {
-        let n = self.n;
-        for f in 0..n.saturating_sub(1) {
-            for i in 0..2 {
-                self.v[l_at(i, f)] = self.v[l_at(i, f + 1)];
-            }
-            self.cones[f] = self.cones[f + 1];
-        }
-        let nrows = self.rows.len();
-        for axis_rows in [0..nrows / 2, nrows / 2..nrows] {
-            let r = axis_rows.clone();
-            if r.is_empty() {
-                continue;
-            }
-            for g in r.start..r.end - 1 {
-                self.sides[g] = self.sides[g + 1];
-            }
-        }
-        let a2 = 0.5 * self.limit * self.limit;
-        for c in &mut self.cones {
-            c.s = c.s.max(floor * a2);
-            c.z = c.z.max(floor / a2);
-        }
-        for side in self.sides.iter_mut().flatten() {
-            side.s = side.s.max(floor);
-            side.z = side.z.max(floor);
-            side.sig = side.sig.max(floor * 1e-3);
-            side.w = side.w.max(floor);
         }
     }
 
@@ -334,15 +255,14 @@ impl ConeQp {
     /// Solves for the linear term `c` (full KKT length: on p and ã; zero on
     /// λ), relative fixed accelerations `a0` [m/s²] (u = ã + a0) and speed
     /// row bounds `lo ≤ g·x ≤ hi`. The primal start must be set
-    /// ([`ConeQp::set_start`]); `start` says whether slacks and multipliers
-    /// are kept from [`ConeQp::shift`]. Returns the iterations.
+    /// ([`ConeQp::set_start`]); slacks and multipliers start cold. Returns
+    /// the iterations.
     pub fn solve(
         &mut self,
         c: &[f64],
         a0: [f64; 2],
         lo: &[f64],
         hi: &[f64],
-        start: Start,
     ) -> Result<usize, ControlError> {
         let n = self.n;
         let m = self.rows.len();
@@ -369,9 +289,7 @@ impl ConeQp {
         let cone_scale = 1.0 + a2;
         let rho = self.penalty.unwrap_or(f64::INFINITY);
         let soft = self.soft();
-        if start == Start::Cold {
-            self.cold_duals(lo, hi, b_scale);
-        }
+        self.cold_duals(lo, hi, b_scale);
         let pairs = (n + m * if soft { 4 } else { 2 }).max(1) as f64;
 
         let mut best = (f64::INFINITY, 0usize);

@@ -1,9 +1,10 @@
 //! [`ConeInteriorPointSolver`]: both horizontal axes with the tilt cone
-//! ([`super::cone`]), solved by the banded interior point of
-//! [`super::cone_qp`], warm-started across ticks.
+//! ([`super::cone`]), solved by the augmented Lagrangian of
+//! [`super::cone_alm`] (warm-started across ticks), with the banded
+//! interior point of [`super::cone_qp`] as its fallback.
 
 use super::cone_alm::{self, AlmTuning, ConeAlm};
-use super::cone_qp::{ConeAxis, ConeQp, STAGE, Start, a_at, p_at};
+use super::cone_qp::{ConeAxis, ConeQp, STAGE, a_at, p_at};
 use super::smoothness::{accel_block, sent_linear_term};
 use super::{AxisProblem, ConeBounds, FastBandedSolver, Smoothness, baseline, check_lengths};
 use crate::ControlError;
@@ -21,9 +22,11 @@ pub struct AxisWeights {
 }
 
 /// The two horizontal axes with the tilt cone and soft speed bounds
-/// ([`ConeBounds`]), one stage-ordered banded interior point (O(N) per
-/// iteration), warm-started from the previous tick's solution shifted by
-/// one step when the previous tick used it too.
+/// ([`ConeBounds`]): the augmented Lagrangian ([`ConeAlm`], O(N) per
+/// Newton step), warm-started from the previous tick's solution and
+/// multipliers shifted by one step when the previous tick used it too;
+/// should it not converge, the stage-ordered banded interior point
+/// ([`ConeQp`]) from the cold start.
 ///
 /// [`DfMpc`](crate::dfmpc::DfMpc) uses it first and falls back to
 /// [`ClarabelConeSolver`](super::ClarabelConeSolver) (the same problem as
@@ -157,8 +160,8 @@ impl ConeInteriorPointSolver {
     /// `reference` as [`FastBandedSolver::solve_problem`]. With warm
     /// starts on and a solution from the previous tick, that solution
     /// shifted by one step is the start instead; should it fail, the cold
-    /// start is tried. Errors: wrong lengths, and [`ControlError::Solver`]
-    /// when the interior point does not converge.
+    /// start is tried with the interior point. Errors: wrong lengths, and
+    /// [`ControlError::Solver`] when neither converges.
     pub fn solve_pair(
         &mut self,
         x: AxisProblem<'_>,
@@ -172,8 +175,15 @@ impl ConeInteriorPointSolver {
         let mut a0 = [0.0; 2];
         for (i, a) in [&x, &y].into_iter().enumerate() {
             let q = self.weights[i].q;
+            self.alm.axis(i).right_hand_side(
+                a.fixed,
+                a.sent,
+                a.reference,
+                &mut self.base,
+                &mut self.rhs,
+            );
             for f in 0..n {
-                let b = baseline(a.fixed, f + 3);
+                let b = self.base[f];
                 self.c[p_at(i, f)] = 2.0 * q * (b - a.reference[f + 3]);
                 self.p[i][f] = a.plan[f + 3] - b;
                 // The warm guess: the previous plan one step on.
@@ -187,13 +197,6 @@ impl ConeInteriorPointSolver {
                 self.warm[i][f] = guess - b;
             }
             self.c[a_at(i, 0)] = sent_linear_term(&self.weights[i].smoothness, a.fixed, a.sent, dt);
-            self.alm.axis(i).right_hand_side(
-                a.fixed,
-                a.sent,
-                a.reference,
-                &mut self.base,
-                &mut self.rhs,
-            );
             for f in 0..n {
                 // ½xᵀ(2H)x − 2·rhsᵀx: the fast path's objective, doubled.
                 self.c_alm[cone_alm::at(i, f)] = -2.0 * self.rhs[f];
@@ -232,9 +235,8 @@ impl ConeInteriorPointSolver {
             self.alm.reset_multipliers();
             self.warm_used = false;
             self.method = ConeMethod::InteriorPoint;
-            self.qp.set_start([&self.p[0], &self.p[1]], dt, false);
-            self.qp
-                .solve(&self.c, a0, &self.lo, &self.hi, Start::Cold)?;
+            self.qp.set_start([&self.p[0], &self.p[1]], dt);
+            self.qp.solve(&self.c, a0, &self.lo, &self.hi)?;
             self.iterations += self.qp.iterations();
         }
         let solution = |i: usize, f: usize| match self.method {

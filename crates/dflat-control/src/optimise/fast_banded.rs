@@ -171,22 +171,30 @@ impl FastBandedSolver {
     /// Baseline, right-hand side `q·(ref − b)` on the free outputs (plus
     /// `shift` on the first), `p = rhs`.
     fn prepare(q: f64, slot: &mut Slot, fixed: &[f64; 3], reference: &[f64], shift: f64) {
+        Self::baseline_and_rhs(q, fixed, reference, shift, &mut slot.base, &mut slot.rhs);
+        slot.p.copy_from_slice(&slot.rhs);
+    }
+
+    /// Baseline `b_3..b_N` and right-hand side `q·(ref − b)` (plus `shift`
+    /// on the first free output).
+    fn baseline_and_rhs(
+        q: f64,
+        fixed: &[f64; 3],
+        reference: &[f64],
+        shift: f64,
+        base: &mut [f64],
+        rhs: &mut [f64],
+    ) {
         let d1 = fixed[1] - fixed[0];
         let d2 = fixed[2] - 2.0 * fixed[1] + fixed[0];
-        let it = slot
-            .base
-            .iter_mut()
-            .zip(slot.rhs.iter_mut())
-            .zip(slot.p.iter_mut());
-        for (f, (((b, r), p), &y_ref)) in it.zip(&reference[3..]).enumerate() {
+        let it = base.iter_mut().zip(rhs.iter_mut());
+        for (f, ((b, r), &y_ref)) in it.zip(&reference[3..]).enumerate() {
             let j = (f + 3) as f64;
             *b = fixed[0] + j * d1 + 0.5 * j * (j - 1.0) * d2;
             *r = q * (y_ref - *b);
-            *p = *r;
         }
         if shift != 0.0 {
-            slot.rhs[0] += shift;
-            slot.p[0] = slot.rhs[0];
+            rhs[0] += shift;
         }
     }
 
@@ -278,19 +286,7 @@ impl FastBandedSolver {
         rhs: &mut [f64],
     ) {
         let shift = self.sent_shift(fixed, sent);
-        let d1 = fixed[1] - fixed[0];
-        let d2 = fixed[2] - 2.0 * fixed[1] + fixed[0];
-        for (f, ((b, r), &y_ref)) in base
-            .iter_mut()
-            .zip(rhs.iter_mut())
-            .zip(&reference[3..])
-            .enumerate()
-        {
-            let j = (f + 3) as f64;
-            *b = fixed[0] + j * d1 + 0.5 * j * (j - 1.0) * d2;
-            *r = self.q * (y_ref - *b);
-        }
-        rhs[0] += shift;
+        Self::baseline_and_rhs(self.q, fixed, reference, shift, base, rhs);
     }
 
     /// The refined plan `y_j = b_j + (p + correction)_j` after the fixed outputs.

@@ -29,6 +29,7 @@
 //! All storage is allocated in [`StageQp::new`].
 
 use super::banded::SymBand;
+use super::bounds::Row;
 use super::smoothness::{accel_block, sent_linear_term};
 use super::{AxisBounds, AxisProblem, FastBandedSolver, Smoothness, baseline};
 use crate::ControlError;
@@ -158,25 +159,6 @@ impl BandedLdl {
     }
 }
 
-/// A bound row `g·v` over at most two KKT indices.
-#[derive(Debug, Clone, Copy)]
-struct Row {
-    idx: [usize; 2],
-    coef: [f64; 2],
-    len: usize,
-}
-
-impl Row {
-    fn dot(&self, v: &[f64]) -> f64 {
-        (0..self.len).map(|k| self.coef[k] * v[self.idx[k]]).sum()
-    }
-    fn axpy(&self, a: f64, out: &mut [f64]) {
-        for k in 0..self.len {
-            out[self.idx[k]] += a * self.coef[k];
-        }
-    }
-}
-
 /// Slacks, multipliers, primal residuals and steps of one bound row.
 #[derive(Debug, Clone, Copy, Default)]
 struct RowState {
@@ -269,29 +251,11 @@ impl StageQp {
         }
         let mut rows = Vec::new();
         if acceleration {
-            rows.extend((0..n).map(|f| Row {
-                idx: [a_at(f), 0],
-                coef: [1.0, 0.0],
-                len: 1,
-            }));
+            rows.extend((0..n).map(|f| Row::single(a_at(f))));
         }
         if speed {
             // Speed rows j = 2..N−1 on y_j, y_{j+1}: p_{j−3}, p_{j−2}.
-            rows.extend((0..n).map(|g| {
-                if g == 0 {
-                    Row {
-                        idx: [p_at(0), 0],
-                        coef: [1.0 / dt, 0.0],
-                        len: 1,
-                    }
-                } else {
-                    Row {
-                        idx: [p_at(g - 1), p_at(g)],
-                        coef: [-1.0 / dt, 1.0 / dt],
-                        len: 2,
-                    }
-                }
-            }));
+            rows.extend((0..n).map(|g| Row::speed(g, dt, p_at)));
         }
         let m = rows.len();
         Self {
