@@ -56,7 +56,7 @@ const REUSE_DECREMENT: f64 = 1e-7;
 
 /// Decrement (relative, as [`DECREMENT_TOLERANCE`]) after whose full step
 /// the inner loop stops without a confirming step.
-const LOCAL_STOP: f64 = 1e-10;
+const LOCAL_STOP: f64 = 1e-11;
 /// Relative tolerance of the constraint residual.
 const PRIMAL_TOLERANCE: f64 = 1e-8;
 /// Growth of σ when the constraint residual stalls.
