@@ -181,9 +181,11 @@ impl BandedCholesky {
         match self.b {
             7 => self.factor_band::<7>()?,
             9 => self.factor_band::<9>()?,
-            _ => self.factor_generic()?,
+            _ => {
+                self.factor_generic()?;
+                self.substitution_rows();
+            }
         }
-        self.substitution_rows();
         self.factored = true;
         Ok(())
     }
@@ -193,7 +195,9 @@ impl BandedCholesky {
     /// each column, once scaled, updates the B(B+1)/2 entries of the block
     /// after it — independent multiply-adds, where the row-oriented
     /// [`BandedCholesky::factor_generic`] chains its dot products. Rounding
-    /// differs from the generic loop's in the last bits.
+    /// differs from the generic loop's in the last bits. Writes the
+    /// substitution rows as it goes (row j of L is final once column j is
+    /// pivoted).
     fn factor_band<const B: usize>(&mut self) -> Result<(), ControlError> {
         let n = self.n;
         let w = B + 1;
@@ -212,6 +216,13 @@ impl BandedCholesky {
                 let v = l[(j + t) * w + t] * inv;
                 l[(j + t) * w + t] = v;
                 col[t - 1] = v;
+            }
+            let (fwd, bwd) = (&mut self.fwd[j * w..j * w + w], &mut self.bwd[j * w..j * w + w]);
+            fwd[0] = inv;
+            bwd[0] = inv;
+            for d in 1..=B {
+                fwd[d] = if d <= j { l[j * w + d] * inv } else { 0.0 };
+                bwd[d] = col[d - 1] * inv;
             }
             // Entry (j + t1, j + t2), t1 ≥ t2, lives at (j + t1)·w + t1 − t2.
             for t1 in 1..=span {

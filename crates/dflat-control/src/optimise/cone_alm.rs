@@ -30,7 +30,7 @@
 //! update — the interior point's ([`super::cone_qp`]) tolerances.
 //! `P·x` is evaluated by differencing ([`FastBandedSolver::apply_hessian`]).
 //!
-//! Warm start ([`ConeAlm::shift`]): the multipliers one stage on, σ kept.
+//! Warm start ([`ConeAlm::shift`]): the multipliers one stage on, σ from its initial value.
 
 use super::FastBandedSolver;
 use super::banded::{BandedCholesky, SymBand};
@@ -82,7 +82,7 @@ pub struct AlmTuning {
 impl Default for AlmTuning {
     fn default() -> Self {
         Self {
-            sigma: 1e5,
+            sigma: 1e4,
             sigma_max: 1e8,
         }
     }
@@ -131,6 +131,8 @@ pub struct ConeAlm {
     px_current: bool,
     /// Largest diagonal entry of P.
     diag_max: f64,
+    /// The Lagrangian's non-quadratic part at x (set by `gradient`).
+    penalty_value: f64,
 }
 
 impl ConeAlm {
@@ -201,6 +203,7 @@ impl ConeAlm {
             factorisations: 0,
             px_current: false,
             diag_max,
+            penalty_value: 0.0,
         }
     }
 
@@ -243,8 +246,11 @@ impl ConeAlm {
     }
 
     /// Moves the multipliers one stage earlier (the last stage keeps its
-    /// own): the warm start of the next tick.
+    /// own) and restarts σ from its initial value: the warm start of the
+    /// next tick. (A σ grown on a hard tick and kept makes the next ticks'
+    /// subproblems stiff: their semismooth Newton then zigzags.)
     pub fn shift(&mut self) {
+        self.sigma = self.tuning.sigma;
         let n = self.n;
         if n >= 2 {
             self.y.copy_within(1..n, 0);
@@ -364,6 +370,7 @@ impl ConeAlm {
         }
         let s = self.sigma;
         let mut cone_res: f64 = 0.0;
+        let mut value = 0.0;
         for f in 0..self.n {
             let a = Self::accel(self.inv_dt2, &self.x, f);
             self.u[f] = [a[0] + a0[0], a[1] + a0[1]];
@@ -372,6 +379,8 @@ impl ConeAlm {
                 self.u[f][1] + self.y[f][1] / s,
             ];
             let (r, _) = self.outside(w);
+            value += 0.5 * s * (r[0] * r[0] + r[1] * r[1])
+                - (self.y[f][0] * self.y[f][0] + self.y[f][1] * self.y[f][1]) / (2.0 * s);
             let yn = [s * r[0], s * r[1]];
             let (ex, ey) = (yn[0] - self.y[f][0], yn[1] - self.y[f][1]);
             cone_res = cone_res.max((ex * ex + ey * ey).sqrt() / s);
@@ -388,6 +397,7 @@ impl ConeAlm {
             for j in 0..2 {
                 let t = if j == 0 { h - hi[k] } else { lo[k] - h };
                 let vn = self.side_multiplier(self.v[k][j], t);
+                value += vn * t - (vn - self.v[k][j]) * (vn - self.v[k][j]) / (2.0 * ss);
                 speed_res = speed_res.max((vn - self.v[k][j]).abs() / ss);
                 e += if j == 0 { vn } else { -vn };
             }
@@ -395,6 +405,7 @@ impl ConeAlm {
                 self.rows[k].axpy(e, &mut self.g);
             }
         }
+        self.penalty_value = value;
         let gn = self.g.iter().fold(0.0f64, |a, b| a.max(b.abs()));
         (gn, cone_res, speed_res)
     }
@@ -640,7 +651,7 @@ impl ConeAlm {
         for k in 0..self.rows.len() {
             self.hd[k] = self.rows[k].dot(&self.d);
         }
-        let base = self.penalty_terms(0.0, lo, hi);
+        let base = self.penalty_value;
         let mut alpha = 1.0;
         for _ in 0..MAX_HALVINGS {
             let value =
