@@ -105,8 +105,10 @@ pub struct ConeAlm {
     kkt: SymBand,
     chol: BandedCholesky,
     rows: Vec<Row>,
-    /// Cone multipliers y_f [cost per m/s²].
+    /// Cone multipliers y_f [cost per m/s²], and their update
+    /// `σ·(w_f − Π(w_f))` at x (set by `gradient`).
     y: Vec<[f64; 2]>,
+    y_next: Vec<[f64; 2]>,
     /// Speed multipliers `[upper, lower]` per row.
     v: Vec<[f64; 2]>,
     /// Iterate, linear term, gradient, direction, P·direction, scratch.
@@ -133,6 +135,11 @@ pub struct ConeAlm {
     diag_max: f64,
     /// The Lagrangian's non-quadratic part at x (set by `gradient`).
     penalty_value: f64,
+    /// Which stages lie outside the disc and which speed sides are in
+    /// their penalty's quadratic range, at x (set by `gradient`) and at
+    /// the last factorisation.
+    active: Vec<bool>,
+    factored_active: Vec<bool>,
 }
 
 impl ConeAlm {
@@ -186,6 +193,7 @@ impl ConeAlm {
             chol: BandedCholesky::new(size, bandwidth),
             rows,
             y: vec![[0.0; 2]; n],
+            y_next: vec![[0.0; 2]; n],
             v: vec![[0.0; 2]; m],
             x: vec![0.0; size],
             c: vec![0.0; size],
@@ -204,6 +212,8 @@ impl ConeAlm {
             px_current: false,
             diag_max,
             penalty_value: 0.0,
+            active: vec![false; n + 2 * m],
+            factored_active: vec![false; n + 2 * m],
         }
     }
 
@@ -269,25 +279,32 @@ impl ConeAlm {
         self.sigma * self.inv_dt2
     }
 
-    /// `G_f·v` per axis (outputs before the horizon are 0), without a_0.
-    fn accel(inv_dt2: f64, v: &[f64], f: usize) -> [f64; 2] {
-        let mut a = [0.0; 2];
-        for (k, &c) in D2.iter().enumerate() {
-            if let Some(g) = f.checked_sub(k) {
-                a[0] += c * v[at(0, g)];
-                a[1] += c * v[at(1, g)];
-            }
+    /// `out[f] = G_f·v` per axis for every stage (outputs before the
+    /// horizon are 0), without a_0.
+    fn accelerations(inv_dt2: f64, v: &[f64], out: &mut [[f64; 2]]) {
+        let (mut p1, mut p2) = ([0.0; 2], [0.0; 2]);
+        for (f, o) in out.iter_mut().enumerate() {
+            let p0 = [v[at(0, f)], v[at(1, f)]];
+            *o = [
+                (p0[0] - 2.0 * p1[0] + p2[0]) * inv_dt2,
+                (p0[1] - 2.0 * p1[1] + p2[1]) * inv_dt2,
+            ];
+            p2 = p1;
+            p1 = p0;
         }
-        [a[0] * inv_dt2, a[1] * inv_dt2]
     }
 
-    /// `out += G_fᵀ·e`.
-    fn scatter(inv_dt2: f64, out: &mut [f64], f: usize, e: [f64; 2]) {
-        for (k, &c) in D2.iter().enumerate() {
-            if let Some(g) = f.checked_sub(k) {
-                out[at(0, g)] += c * inv_dt2 * e[0];
-                out[at(1, g)] += c * inv_dt2 * e[1];
+    /// `out += Σ_f G_fᵀ·e_f`.
+    fn add_transposed(inv_dt2: f64, e: &[[f64; 2]], out: &mut [f64]) {
+        let n = e.len();
+        let (mut e1, mut e2) = ([0.0; 2], [0.0; 2]);
+        for f in (0..n).rev() {
+            let e0 = e[f];
+            for i in 0..2 {
+                out[at(i, f)] += (e0[i] - 2.0 * e1[i] + e2[i]) * inv_dt2;
             }
+            e2 = e1;
+            e1 = e0;
         }
     }
 
@@ -312,15 +329,10 @@ impl ConeAlm {
         }
     }
 
-    /// The disc's projection residual of `w`: `(w − Π(w), ‖w‖)`.
-    fn outside(&self, w: [f64; 2]) -> ([f64; 2], f64) {
-        let norm = (w[0] * w[0] + w[1] * w[1]).sqrt();
-        if norm <= self.limit {
-            ([0.0; 2], norm)
-        } else {
-            let k = 1.0 - self.limit / norm;
-            ([k * w[0], k * w[1]], norm)
-        }
+    /// `‖w‖` when `w` lies outside the disc (then `w − Π(w) = (1 − A/‖w‖)·w`).
+    fn radial(&self, w: [f64; 2]) -> Option<f64> {
+        let n2 = w[0] * w[0] + w[1] * w[1];
+        (n2 > self.limit * self.limit).then(|| n2.sqrt())
     }
 
     /// A speed side's updated multiplier `clamp(v + σ_s·t, 0, ρ)`.
@@ -330,8 +342,7 @@ impl ConeAlm {
     }
 
     /// The Lagrangian's non-quadratic part at `x + α·d` (`u`, `du`, `hx`,
-    /// `hd` current), and — with `gradient` — the gradient into `g`
-    /// (`px` must hold P·x then) and the updated multipliers' change.
+    /// `hd` current), without its constant `−Σ‖y_f‖²/(2σ)`.
     fn penalty_terms(&self, alpha: f64, lo: &[f64], hi: &[f64]) -> f64 {
         let s = self.sigma;
         let ss = self.sigma_speed();
@@ -341,9 +352,9 @@ impl ConeAlm {
                 self.u[f][0] + alpha * self.du[f][0] + self.y[f][0] / s,
                 self.u[f][1] + alpha * self.du[f][1] + self.y[f][1] / s,
             ];
-            let (r, _) = self.outside(w);
-            value += 0.5 * s * (r[0] * r[0] + r[1] * r[1])
-                - (self.y[f][0] * self.y[f][0] + self.y[f][1] * self.y[f][1]) / (2.0 * s);
+            if let Some(norm) = self.radial(w) {
+                value += 0.5 * s * (norm - self.limit) * (norm - self.limit);
+            }
         }
         for (k, v) in self.v.iter().enumerate() {
             let h = self.hx[k] + alpha * self.hd[k];
@@ -369,26 +380,31 @@ impl ConeAlm {
             *g = p + c;
         }
         let s = self.sigma;
-        let mut cone_res: f64 = 0.0;
+        Self::accelerations(self.inv_dt2, &self.x, &mut self.u);
+        let mut res2: f64 = 0.0;
         let mut value = 0.0;
         for f in 0..self.n {
-            let a = Self::accel(self.inv_dt2, &self.x, f);
-            self.u[f] = [a[0] + a0[0], a[1] + a0[1]];
-            let w = [
-                self.u[f][0] + self.y[f][0] / s,
-                self.u[f][1] + self.y[f][1] / s,
-            ];
-            let (r, _) = self.outside(w);
-            value += 0.5 * s * (r[0] * r[0] + r[1] * r[1])
-                - (self.y[f][0] * self.y[f][0] + self.y[f][1] * self.y[f][1]) / (2.0 * s);
-            let yn = [s * r[0], s * r[1]];
-            let (ex, ey) = (yn[0] - self.y[f][0], yn[1] - self.y[f][1]);
-            cone_res = cone_res.max((ex * ex + ey * ey).sqrt() / s);
-            if yn != [0.0; 2] {
-                Self::scatter(self.inv_dt2, &mut self.g, f, yn);
-            }
+            let u = [self.u[f][0] + a0[0], self.u[f][1] + a0[1]];
+            self.u[f] = u;
+            let y = self.y[f];
+            let w = [u[0] + y[0] / s, u[1] + y[1] / s];
+            let yn = match self.radial(w) {
+                Some(norm) => {
+                    value += 0.5 * s * (norm - self.limit) * (norm - self.limit);
+                    let k = s * (1.0 - self.limit / norm);
+                    [k * w[0], k * w[1]]
+                }
+                None => [0.0; 2],
+            };
+            self.active[f] = yn != [0.0; 2];
+            let (ex, ey) = (yn[0] - y[0], yn[1] - y[1]);
+            res2 = res2.max(ex * ex + ey * ey);
+            self.y_next[f] = yn;
         }
+        let cone_res = res2.sqrt() / s;
+        Self::add_transposed(self.inv_dt2, &self.y_next, &mut self.g);
         let ss = self.sigma_speed();
+        let rho = self.penalty.unwrap_or(f64::INFINITY);
         let mut speed_res: f64 = 0.0;
         for k in 0..self.rows.len() {
             let h = self.rows[k].dot(&self.x);
@@ -397,6 +413,8 @@ impl ConeAlm {
             for j in 0..2 {
                 let t = if j == 0 { h - hi[k] } else { lo[k] - h };
                 let vn = self.side_multiplier(self.v[k][j], t);
+                let raw = self.v[k][j] + ss * t;
+                self.active[self.n + 2 * k + j] = raw > 0.0 && raw < rho;
                 value += vn * t - (vn - self.v[k][j]) * (vn - self.v[k][j]) / (2.0 * ss);
                 speed_res = speed_res.max((vn - self.v[k][j]).abs() / ss);
                 e += if j == 0 { vn } else { -vn };
@@ -420,10 +438,9 @@ impl ConeAlm {
                 self.u[f][0] + self.y[f][0] / s,
                 self.u[f][1] + self.y[f][1] / s,
             ];
-            let norm = (w[0] * w[0] + w[1] * w[1]).sqrt();
-            if norm <= self.limit {
+            let Some(norm) = self.radial(w) else {
                 continue;
-            }
+            };
             let (wx, wy) = (w[0] / norm, w[1] / norm);
             let t = self.limit / norm;
             let j = [
@@ -520,6 +537,9 @@ impl ConeAlm {
         self.factorisations = 0;
         let (mut last_full, mut last_decrement) = (false, f64::INFINITY);
         let mut reuse_allowed = true;
+        let mut compare_decrement = f64::INFINITY;
+        // Whether the factor is of this solve's matrix at the current σ.
+        let mut factor_current = false;
         let inner_tol = decrement_tol;
         let cone_tol = PRIMAL_TOLERANCE * (1.0 + self.limit);
         let b_scale = 1.0 + lo.iter().chain(hi).fold(0.0f64, |a, b| a.max(b.abs()));
@@ -547,16 +567,21 @@ impl ConeAlm {
                     )));
                 }
                 self.newton_steps += 1;
-                // In the local phase (last step full, its decrement small)
-                // the matrix barely changes: its factor is reused.
+                // In the local phase (last step full, its decrement small,
+                // the active set the one factored) the matrix changes only
+                // in the active stages' curvature: its factor is reused.
                 let reuse = reuse_allowed
                     && last_full
-                    && last_decrement <= REUSE_DECREMENT * c_scale * x_scale;
+                    && factor_current
+                    && last_decrement <= REUSE_DECREMENT * c_scale * x_scale
+                    && self.active == self.factored_active;
                 reuse_allowed = true;
                 if !reuse {
                     self.assemble(lo, hi);
-                    self.chol.factor(&self.kkt)?;
+                    self.chol.factor_taking(&mut self.kkt)?;
                     self.factorisations += 1;
+                    self.factored_active.clone_from(&self.active);
+                    factor_current = true;
                 }
                 for (d, g) in self.d.iter_mut().zip(&self.g) {
                     *d = -g;
@@ -568,11 +593,12 @@ impl ConeAlm {
                     last_full = false;
                     continue;
                 }
-                if reuse && decrement > 0.1 * last_decrement {
+                if reuse && decrement > 0.1 * compare_decrement {
                     // The old factor converges slowly here: refactor next.
                     reuse_allowed = false;
                 }
                 last_decrement = decrement;
+                compare_decrement = decrement;
                 if decrement <= inner_tol {
                     // Converged to rounding: the full step, and done.
                     for (x, d) in self.x.iter_mut().zip(&self.d) {
@@ -583,7 +609,7 @@ impl ConeAlm {
                     break;
                 }
                 last_full = self.line_search(lo, hi)?;
-                if last_full && decrement <= LOCAL_STOP * c_scale * x_scale {
+                if last_full && !reuse && decrement <= LOCAL_STOP * c_scale * x_scale {
                     // A full step from a small decrement: the next one is
                     // of its square (Newton's local rate), below tolerance.
                     (_, cone_res, speed_res) = self.gradient(a0, lo, hi);
@@ -592,15 +618,7 @@ impl ConeAlm {
             }
             // Multiplier update (the gradient above is the Lagrangian's
             // with the updated multipliers: stationarity holds).
-            let s = self.sigma;
-            for f in 0..self.n {
-                let w = [
-                    self.u[f][0] + self.y[f][0] / s,
-                    self.u[f][1] + self.y[f][1] / s,
-                ];
-                let (r, _) = self.outside(w);
-                self.y[f] = [s * r[0], s * r[1]];
-            }
+            self.y.copy_from_slice(&self.y_next);
             for k in 0..m {
                 let h = self.hx[k];
                 for j in 0..2 {
@@ -617,7 +635,10 @@ impl ConeAlm {
             let res = (cone_res / cone_tol).max(speed_res / speed_tol);
             if res > 0.1 * previous_res && self.sigma < self.tuning.sigma_max {
                 self.sigma = (self.sigma * SIGMA_GROWTH).min(self.tuning.sigma_max);
+                factor_current = false;
             }
+            // The multipliers moved: the next decrement is not comparable.
+            compare_decrement = f64::INFINITY;
             previous_res = res;
         }
         Err(ControlError::Solver(
@@ -645,9 +666,7 @@ impl ConeAlm {
             .map(|((p, c), d)| (p + c) * d)
             .sum();
         let curv: f64 = self.pd.iter().zip(&self.d).map(|(p, d)| p * d).sum();
-        for f in 0..self.n {
-            self.du[f] = Self::accel(self.inv_dt2, &self.d, f);
-        }
+        Self::accelerations(self.inv_dt2, &self.d, &mut self.du);
         for k in 0..self.rows.len() {
             self.hd[k] = self.rows[k].dot(&self.d);
         }
