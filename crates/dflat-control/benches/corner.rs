@@ -63,8 +63,8 @@ impl Config {
     fn name(self) -> &'static str {
         match self {
             Self::Fast => "fast (no bound)",
-            Self::ConeWarm => "cone, banded IP, warm",
-            Self::ConeCold => "cone, banded IP, cold",
+            Self::ConeWarm => "cone, banded ALM, warm",
+            Self::ConeCold => "cone, banded, cold (ALM, then IP)",
             Self::ConeClarabel => "cone, clarabel SOCP",
             Self::BoxBanded => "box, banded IP",
         }

@@ -54,7 +54,7 @@ pub enum PlanTiltBound {
     Box,
     /// The tilt cone `‖(ẍ, ÿ)‖ ≤ g·tan(max_tilt)` per stage — the vehicle's
     /// limit — with both horizontal axes in one QP
-    /// ([`ConeInteriorPointSolver`](crate::optimise::ConeInteriorPointSolver),
+    /// ([`BandedConeSolver`](crate::optimise::BandedConeSolver),
     /// warm-started; speed bounds soft with an exact penalty).
     Cone,
 }
@@ -124,7 +124,7 @@ pub struct DfMpcSettings {
     /// (default) or the tilt cone.
     pub plan_tilt_bound: PlanTiltBound,
     /// Warm-start the cone QP from the previous tick's solution, shifted
-    /// one step ([`ConeInteriorPointSolver`](crate::optimise::ConeInteriorPointSolver)).
+    /// one step ([`BandedConeSolver`](crate::optimise::BandedConeSolver)).
     /// Default true.
     pub warm_start: bool,
     /// Wall-time limit for one clarabel solve \[s\] (`f64::INFINITY` for

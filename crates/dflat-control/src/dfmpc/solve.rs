@@ -7,8 +7,8 @@ use super::{DfMpc, DfMpcSettings, PlanTiltBound, QpSolver};
 use crate::ControlError;
 use crate::model::ControlModel;
 use crate::optimise::{
-    AxisBounds, AxisProblem, AxisWeights, BandedInteriorPointSolver, ClarabelConeSolver,
-    ClarabelSolver, ConeBounds, ConeInteriorPointSolver, FastBandedSolver, KktTuning, Smoothness,
+    AxisBounds, AxisProblem, AxisWeights, BandedConeSolver, BandedInteriorPointSolver,
+    ClarabelConeSolver, ClarabelSolver, ConeBounds, FastBandedSolver, KktTuning, Smoothness,
 };
 use crate::window::input_lags;
 
@@ -48,11 +48,12 @@ pub(super) struct SolveReport {
 }
 
 /// The horizontal pair's tilt-cone QP ([`PlanTiltBound::Cone`]): the
-/// banded interior point first (with [`QpSolver::Banded`]), clarabel's
-/// SOCP when it does not converge.
+/// banded cone solver first (with [`QpSolver::Banded`]; augmented
+/// Lagrangian, interior point as its fallback), clarabel's SOCP when it
+/// does not converge.
 #[derive(Debug)]
 pub(super) struct HorizontalCone {
-    interior_point: Option<ConeInteriorPointSolver>,
+    banded: Option<BandedConeSolver>,
     clarabel: ClarabelConeSolver,
 }
 
@@ -64,8 +65,8 @@ impl HorizontalCone {
 
     /// Forgets the warm start (a reset, or a tick that did not solve).
     pub(super) fn forget(&mut self) {
-        if let Some(ip) = &mut self.interior_point {
-            ip.forget();
+        if let Some(banded) = &mut self.banded {
+            banded.forget();
         }
     }
 }
@@ -147,10 +148,8 @@ pub(super) fn build_pipelines(
                 smoothness: pipelines[axis].fast.smoothness(),
             });
             Some(HorizontalCone {
-                interior_point: (settings.qp_solver == QpSolver::Banded)
-                    .then(|| {
-                        ConeInteriorPointSolver::new(n, dt, weights, bounds, settings.warm_start)
-                    })
+                banded: (settings.qp_solver == QpSolver::Banded)
+                    .then(|| BandedConeSolver::new(n, dt, weights, bounds, settings.warm_start))
                     .transpose()?,
                 clarabel: ClarabelConeSolver::new(
                     n,
@@ -274,12 +273,12 @@ impl DfMpc {
                 reference: &ay.reference,
                 plan: &mut ay.plan,
             };
-            let solved = match &mut cone.interior_point {
-                Some(ip) => ip.solve_pair(x, y).is_ok(),
+            let solved = match &mut cone.banded {
+                Some(banded) => banded.solve_pair(x, y).is_ok(),
                 None => false,
             };
             if !solved {
-                report.qp_fallback |= cone.interior_point.is_some();
+                report.qp_fallback |= cone.banded.is_some();
                 cone.forget();
                 cone.clarabel.solve_pair(
                     AxisProblem {

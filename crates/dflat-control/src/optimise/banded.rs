@@ -259,7 +259,10 @@ impl BandedCholesky {
                     }
                 }
             }
-            let (fwd, bwd) = (&mut self.fwd[j * w..j * w + w], &mut self.bwd[j * w..j * w + w]);
+            let (fwd, bwd) = (
+                &mut self.fwd[j * w..j * w + w],
+                &mut self.bwd[j * w..j * w + w],
+            );
             fwd[0] = inv;
             bwd[0] = inv;
             for d in 1..=B {

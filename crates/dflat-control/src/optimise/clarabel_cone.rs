@@ -1,5 +1,5 @@
 //! The two-axis tilt-cone problem ([`super::cone`]) as a second-order cone
-//! program in clarabel: the fallback of [`ConeInteriorPointSolver`](super::ConeInteriorPointSolver)
+//! program in clarabel: the fallback of [`BandedConeSolver`](super::BandedConeSolver)
 //! and the reference its property tests compare with.
 
 use clarabel::algebra::CscMatrix;
@@ -49,7 +49,7 @@ impl std::fmt::Debug for ClarabelConeSolver {
 impl ClarabelConeSolver {
     /// Builds the solver once for horizon N, step δt \[s\], per-axis
     /// weights (x, y), the bounds, the clarabel time limit \[s\], whether
-    /// the speed rows are soft (as [`ConeInteriorPointSolver`](super::ConeInteriorPointSolver):
+    /// the speed rows are soft (as [`BandedConeSolver`](super::BandedConeSolver):
     /// `true`; `false` gives the hard-bounded reference problem) and
     /// clarabel's KKT settings.
     pub fn new(
@@ -204,7 +204,7 @@ impl ClarabelConeSolver {
     }
 
     /// Solves both axes (arguments as
-    /// [`ConeInteriorPointSolver::solve_pair`](super::ConeInteriorPointSolver::solve_pair);
+    /// [`BandedConeSolver::solve_pair`](super::BandedConeSolver::solve_pair);
     /// the plans' contents on entry are not used). A status other than
     /// `Solved` is [`ControlError::Solver`].
     pub fn solve_pair(

@@ -1,5 +1,5 @@
 //! The tilt cone on the horizontal plan: bounds of the two-axis problem
-//! solved by [`ConeInteriorPointSolver`](super::ConeInteriorPointSolver)
+//! solved by [`BandedConeSolver`](super::BandedConeSolver)
 //! and [`ClarabelConeSolver`](super::ClarabelConeSolver).
 //!
 //! # The problem

@@ -19,7 +19,7 @@
 //! the penalty's `w/σ`. Mehrotra's predictor-corrector, one step length.
 //!
 //! Always started cold: the warm path of
-//! [`ConeInteriorPointSolver`](super::ConeInteriorPointSolver) is the
+//! [`BandedConeSolver`](super::BandedConeSolver) is the
 //! augmented Lagrangian ([`super::cone_alm`]), this its fallback.
 
 use super::banded::SymBand;

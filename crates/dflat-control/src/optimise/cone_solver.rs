@@ -1,4 +1,4 @@
-//! [`ConeInteriorPointSolver`]: both horizontal axes with the tilt cone
+//! [`BandedConeSolver`]: both horizontal axes with the tilt cone
 //! ([`super::cone`]), solved by the augmented Lagrangian of
 //! [`super::cone_alm`] (warm-started across ticks), with the banded
 //! interior point of [`super::cone_qp`] as its fallback.
@@ -32,7 +32,7 @@ pub struct AxisWeights {
 /// [`ClarabelConeSolver`](super::ClarabelConeSolver) (the same problem as
 /// an SOCP) when it does not converge.
 #[derive(Debug, Clone)]
-pub struct ConeInteriorPointSolver {
+pub struct BandedConeSolver {
     horizon: usize,
     dt: f64,
     weights: [AxisWeights; 2],
@@ -60,7 +60,7 @@ pub struct ConeInteriorPointSolver {
     method: ConeMethod,
 }
 
-/// Which method of [`ConeInteriorPointSolver`] solved a tick.
+/// Which method of [`BandedConeSolver`] solved a tick.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ConeMethod {
     /// The augmented Lagrangian ([`ConeAlm`]).
@@ -69,7 +69,7 @@ pub enum ConeMethod {
     InteriorPoint,
 }
 
-impl ConeInteriorPointSolver {
+impl BandedConeSolver {
     /// Builds the solver for horizon N ≥ 3, step δt > 0 \[s\], per-axis
     /// weights (x, y), the bounds, and whether to warm-start.
     pub fn new(
@@ -136,10 +136,15 @@ impl ConeInteriorPointSolver {
         self.horizon
     }
 
-    /// Interior-point iterations of the last solve (both attempts when a
-    /// warm start failed and a cold one followed).
+    /// Iterations of the last solve: the augmented Lagrangian's Newton
+    /// steps, plus the interior point's iterations when it followed.
     pub fn iterations(&self) -> usize {
         self.iterations
+    }
+
+    /// Which method gave the last solution.
+    pub fn method(&self) -> ConeMethod {
+        self.method
     }
 
     /// Whether the last successful solve was warm-started.

@@ -76,10 +76,12 @@
 //!   system; the default constrained solver.
 //! * [`clarabel`] — [`ClarabelSolver`]: the same bounded QP in clarabel,
 //!   the fallback (and [`KktTuning`]).
-//! * [`cone`], [`cone_qp`], [`cone_solver`], [`clarabel_cone`] — the tilt
-//!   cone ([`ConeBounds`]): both horizontal axes in one stage-interleaved
-//!   banded interior point ([`ConeInteriorPointSolver`], warm-started),
-//!   and the same problem as clarabel's SOCP ([`ClarabelConeSolver`]).
+//! * [`cone`], [`cone_alm`], [`cone_qp`], [`cone_solver`], [`clarabel_cone`]
+//!   — the tilt cone ([`ConeBounds`]): both horizontal axes in one
+//!   stage-interleaved banded problem ([`BandedConeSolver`]: an augmented
+//!   Lagrangian warm-started across ticks, a banded interior point as its
+//!   fallback), and the same problem as clarabel's SOCP
+//!   ([`ClarabelConeSolver`]).
 //! * [`bounds`] — [`AxisBounds`]: tilt (acceleration), vertical
 //!   acceleration and speed bounds, the braking funnel.
 //! * [`smoothness`] — [`Smoothness`]: the command-smoothness term.
@@ -103,7 +105,7 @@ pub use bounds::AxisBounds;
 pub use clarabel::{ClarabelSolver, KktTuning};
 pub use clarabel_cone::ClarabelConeSolver;
 pub use cone::ConeBounds;
-pub use cone_solver::{AxisWeights, ConeInteriorPointSolver};
+pub use cone_solver::{AxisWeights, BandedConeSolver, ConeMethod};
 pub use fast_banded::FastBandedSolver;
 pub use interior_point::BandedInteriorPointSolver;
 pub use smoothness::Smoothness;
