@@ -1,17 +1,20 @@
 //! The tilt cone in the plan against the box (issue 17): DF-MPC with a
 //! planned tilt bound applied as the cone `‖(ẍ, ÿ)‖ ≤ g·tan(bound)` or per
 //! axis, on the L path and the three DSL letters at 7–9 m/s, under the
-//! paths study's vision-like sensing.
+//! paths study's vision-like sensing. Three bounds per cell: the box and
+//! the cone at [`TiltConeConfig::plan_tilt_deg`], and the cone at the
+//! command limit [`TiltConeConfig::command_tilt_deg`] (the box's combined
+//! tilt reaches it: the like-for-like comparison).
 //!
 //! Controller: DF-MPC as the daemon ships it (`df-mr-smooth`: N = 100,
 //! q = 1, r = 0.003, smoothness 50 on x and y, multi-rate window M = 25,
 //! σ = 2 cm), the command limited as the daemon does (35° on the
-//! combined tilt, [`TiltLimit::Cone`]), the plan bounded at
-//! [`TiltConeConfig::plan_tilt_deg`] either way. Per (path, speed, bound):
+//! combined tilt, [`TiltLimit::Cone`]). Per (path, speed, bound):
 //! the planned tilt (the first free planned acceleration `Δ²y_{k+1}/δt²` as
 //! a tilt, max and p95 over ticks), the flown tilt (plant trace), the path
-//! error (pooled ticks: mean, p95, max), the share of ticks whose command
-//! was saturated and the share that solved a constrained QP. Seeds: trial
+//! error (pooled ticks: mean, p95, max), the command's smoothness (RMS of
+//! its attitude rate), the share of ticks whose command was saturated and
+//! the share that solved a constrained QP. Seeds: trial
 //! k of path p at speed i uses `seed_base + 1000·p + 100·i + k`, the same
 //! for both bounds (same noise).
 
@@ -70,7 +73,8 @@ pub struct TiltConeRow {
     pub path: String,
     /// Path speed [m/s].
     pub speed: f64,
-    /// "box" or "cone".
+    /// The plan's tilt bound: "box 30°", "cone 30°" (the plan bound) or
+    /// "cone 35°" (the cone at the command limit).
     pub bound: String,
     /// Largest / p95 planned tilt \[deg\].
     pub planned_tilt_max_deg: f64,
@@ -86,6 +90,9 @@ pub struct TiltConeRow {
     pub path_error_p95: f64,
     /// Largest path error \[m\].
     pub path_error_max: f64,
+    /// RMS of the commanded attitude's rate `‖Δ(pitch, roll)‖/δt` over
+    /// ticks \[deg/s\]: the command's smoothness.
+    pub command_rate_rms_dps: f64,
     /// Share of ticks with a saturated command.
     pub saturated_share: f64,
     /// Share of ticks that solved a constrained QP.
@@ -107,11 +114,11 @@ impl TiltConeResult {
     /// The rows as a markdown table.
     pub fn table(&self) -> String {
         let mut s = String::from(
-            "| path | m/s | plan bound | planned tilt max / p95 (deg) | flown tilt max / p95 (deg) | path error mean / p95 / max (m) | saturated | constrained |\n|---|---|---|---|---|---|---|---|\n",
+            "| path | m/s | plan bound | planned tilt max / p95 (deg) | flown tilt max / p95 (deg) | path error mean / p95 / max (m) | command rate RMS (deg/s) | saturated | constrained |\n|---|---|---|---|---|---|---|---|---|\n",
         );
         for r in &self.rows {
             s.push_str(&format!(
-                "| {} | {} | {} | {:.1} / {:.1} | {:.1} / {:.1} | {:.3} / {:.3} / {:.3} | {:.1} % | {:.1} % |\n",
+                "| {} | {} | {} | {:.1} / {:.1} | {:.1} / {:.1} | {:.3} / {:.3} / {:.3} | {:.1} | {:.1} % | {:.1} % |\n",
                 r.path,
                 r.speed,
                 r.bound,
@@ -122,6 +129,7 @@ impl TiltConeResult {
                 r.path_error_mean,
                 r.path_error_p95,
                 r.path_error_max,
+                r.command_rate_rms_dps,
                 100.0 * r.saturated_share,
                 100.0 * r.constrained_share,
             ));
@@ -133,6 +141,7 @@ impl TiltConeResult {
 fn factory(
     config: &TiltConeConfig,
     bound: PlanTiltBound,
+    plan_tilt_deg: f64,
 ) -> Result<ControllerFactory, ExperimentError> {
     let settings = DfMpcSettings {
         horizon: 100,
@@ -150,7 +159,7 @@ fn factory(
             ..InputSaturation::default()
         }),
         constraints: OutputConstraints {
-            max_tilt: Some(config.plan_tilt_deg.to_radians()),
+            max_tilt: Some(plan_tilt_deg.to_radians()),
             ..OutputConstraints::default()
         },
         plan_tilt_bound: bound,
@@ -212,8 +221,17 @@ fn row(path: &str, speed: f64, bound: &str, dt: f64, results: &[TrialResult]) ->
     let g = PlanarParams::default().g;
     let (mut planned, mut flown, mut errors) = (Vec::new(), Vec::new(), Vec::new());
     let (mut ticks, mut saturated, mut constrained, mut failures) = (0, 0, 0, 0);
+    let (mut rate_sq, mut rates) = (0.0, 0usize);
     for r in results {
         failures += r.errors.len();
+        for w in r.ticks.windows(2) {
+            let (a, b) = (&w[0].command, &w[1].command);
+            let rate = (b.pitch - a.pitch).hypot(b.roll - a.roll).to_degrees() / dt;
+            if rate.is_finite() {
+                rate_sq += rate * rate;
+                rates += 1;
+            }
+        }
         for t in &r.ticks {
             let p = &t.plan;
             let a = (p[3] - 2.0 * p[2] + p[1]) / (dt * dt);
@@ -238,6 +256,7 @@ fn row(path: &str, speed: f64, bound: &str, dt: f64, results: &[TrialResult]) ->
         path_error_mean: finite_errors.iter().sum::<f64>() / finite_errors.len().max(1) as f64,
         path_error_p95: percentile(errors.clone(), 95.0),
         path_error_max: percentile(errors, 100.0),
+        command_rate_rms_dps: (rate_sq / rates.max(1) as f64).sqrt(),
         saturated_share: share(saturated),
         constrained_share: share(constrained),
         controller_errors: failures,
@@ -276,19 +295,27 @@ pub fn run_tilt_cone(
             paths::waypoints(&paths::DSL_L_XY, lab.dsl_altitude),
         ),
     ];
-    let bounds = [("box", PlanTiltBound::Box), ("cone", PlanTiltBound::Cone)];
+    // The box and the cone at the plan bound, and the cone at the command
+    // limit: the like-for-like comparison with the box, whose combined
+    // tilt the command limit alone caps.
+    let (plan, command) = (config.plan_tilt_deg, config.command_tilt_deg);
+    let bounds = [
+        (format!("box {plan:.0}°"), PlanTiltBound::Box, plan),
+        (format!("cone {plan:.0}°"), PlanTiltBound::Cone, plan),
+        (format!("cone {command:.0}°"), PlanTiltBound::Cone, command),
+    ];
     let mut specs = Vec::new();
     let mut keys = Vec::new();
     for (pi, (name, w)) in path_list.iter().enumerate() {
         for (si, &speed) in config.speeds.iter().enumerate() {
-            for (bname, bound) in bounds {
-                let f = factory(config, bound)?;
+            for (bname, bound, tilt) in &bounds {
+                let f = factory(config, *bound, *tilt)?;
                 let t = trial(format!("{bname} {name} {speed} m/s"), f, w, speed)?;
                 for k in 0..config.trials {
                     let seed = config.seed_base + 1000 * pi as u64 + 100 * si as u64 + k as u64;
                     specs.push((t.clone(), seed));
                 }
-                keys.push((*name, speed, bname));
+                keys.push((*name, speed, bname.as_str()));
             }
         }
     }
