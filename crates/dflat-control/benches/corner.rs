@@ -8,8 +8,9 @@
 //! configuration then replays the recording tick by tick (its own
 //! commands enter its window), every tick timed; `REPEATS` replays per
 //! configuration. Reported per horizon N: median, p99 and max over all
-//! timed ticks, over the ticks that solved a constrained QP, and the
-//! ratios the budgets are stated in (`docs/performance.md`).
+//! timed ticks, over the ticks that solved a constrained QP, the ratios
+//! the budgets are stated in (`docs/performance.md`), and the warm cone
+//! solver's work (Newton steps, factorisations, fallbacks).
 //!
 //! Run: `cargo bench -p dflat-control --bench corner` (a horizon list as
 //! argument, e.g. `-- 200`, limits the run).
@@ -19,6 +20,7 @@
 use std::time::Instant;
 
 use dflat_control::dfmpc::{DfMpc, DfMpcSettings, OutputConstraints, PlanTiltBound, QpSolver};
+use dflat_control::optimise::ConeMethod;
 use dflat_control::reference::Reference;
 use dflat_control::{ControlModel, Controller, Frame, Measurement};
 use dflat_model::{FlatModel, PlanarModel, PlanarParams};
@@ -116,14 +118,29 @@ fn record(n: usize) -> Vec<Measurement> {
     out
 }
 
-/// Tick times \[s\] of `repeats` replays, and which ticks were constrained.
+/// What the banded cone solver did on the constrained ticks of a replay.
+#[derive(Default)]
+struct ConeWork {
+    /// Newton steps (plus interior-point iterations) per tick.
+    iterations: Vec<f64>,
+    /// The augmented Lagrangian's factorisations per tick.
+    factorisations: Vec<f64>,
+    /// Ticks the interior point solved (the ALM did not converge).
+    interior_point: usize,
+    /// Ticks clarabel solved (the banded solver failed).
+    clarabel: usize,
+}
+
+/// Tick times \[s\] of `repeats` replays, which ticks were constrained,
+/// and the banded cone solver's work on them.
 fn replay(
     config: Config,
     n: usize,
     flight: &[Measurement],
     repeats: usize,
-) -> (Vec<f64>, Vec<f64>) {
+) -> (Vec<f64>, Vec<f64>, ConeWork) {
     let (mut all, mut constrained) = (Vec::new(), Vec::new());
+    let mut work = ConeWork::default();
     for _ in 0..repeats {
         let mut ctrl = DfMpc::new(ControlModel::Planar(plant()), config.settings(n)).unwrap();
         let mut reference = path();
@@ -135,10 +152,16 @@ fn replay(
             all.push(t);
             if out.constrained {
                 constrained.push(t);
+                work.clarabel += usize::from(out.qp_fallback);
+                if let (Some(cone), false) = (ctrl.cone_solver(), out.qp_fallback) {
+                    work.iterations.push(cone.iterations() as f64);
+                    work.factorisations.push(cone.factorisations() as f64);
+                    work.interior_point += usize::from(cone.method() == ConeMethod::InteriorPoint);
+                }
             }
         }
     }
-    (all, constrained)
+    (all, constrained, work)
 }
 
 fn percentile(v: &mut [f64], p: f64) -> f64 {
@@ -176,8 +199,25 @@ fn main() {
         );
         println!("|---|---|---|---|---|---|---|---|");
         let mut stats = Vec::new();
+        let mut cone_work = String::new();
         for config in Config::ALL {
-            let (mut all, mut con) = replay(config, n, &flight, repeats);
+            let (mut all, mut con, mut work) = replay(config, n, &flight, repeats);
+            if matches!(config, Config::ConeWarm) {
+                let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+                let ticks = work.iterations.len();
+                cone_work = format!(
+                    "warm cone work per constrained tick: iterations mean {:.2}, p99 {}, max {}; \
+                     factorisations mean {:.2}; interior-point fallbacks {} and clarabel fallbacks {} \
+                     of {} ticks",
+                    mean(&work.iterations),
+                    percentile(&mut work.iterations, 99.0),
+                    percentile(&mut work.iterations, 100.0),
+                    mean(&work.factorisations),
+                    work.interior_point,
+                    work.clarabel,
+                    ticks + work.clarabel,
+                );
+            }
             let s = [
                 percentile(&mut all, 50.0),
                 percentile(&mut all, 99.0),
@@ -208,5 +248,6 @@ fn main() {
             warm[3] / fast[0],
             warm[4] / fast[0],
         );
+        println!("{cone_work}");
     }
 }

@@ -44,7 +44,7 @@ use nalgebra::Vector3;
 
 use crate::disturbance::{DisturbanceEstimate, DisturbanceEstimator};
 use crate::model::ControlModel;
-use crate::optimise::{AxisBounds, ConeBounds, invalid};
+use crate::optimise::{AxisBounds, BandedConeSolver, ConeBounds, invalid};
 use crate::window::{MultiRateWindow, Window};
 use crate::{ControlError, Controller, Measurement, ReferenceSource, TickOutput, limit_tilt};
 
@@ -233,6 +233,13 @@ impl DfMpc {
     /// tilt bound is the cone ([`PlanTiltBound::Cone`]).
     pub fn cone_bounds(&self) -> Option<&ConeBounds> {
         self.cone.as_ref().map(|c| c.bounds())
+    }
+
+    /// The banded tilt-cone solver, with the statistics of its last solve
+    /// (iterations, method, warm start), when the plan's tilt bound is the
+    /// cone and the constrained solver is [`QpSolver::Banded`].
+    pub fn cone_solver(&self) -> Option<&BandedConeSolver> {
+        self.cone.as_ref().and_then(|c| c.banded())
     }
 
     /// The per-axis bounds derived from the constraints (x, y, z order);

@@ -63,6 +63,11 @@ impl HorizontalCone {
         self.clarabel.bounds()
     }
 
+    /// The banded solver, when it is used.
+    pub(super) fn banded(&self) -> Option<&BandedConeSolver> {
+        self.banded.as_ref()
+    }
+
     /// Forgets the warm start (a reset, or a tick that did not solve).
     pub(super) fn forget(&mut self) {
         if let Some(banded) = &mut self.banded {

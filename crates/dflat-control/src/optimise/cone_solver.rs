@@ -142,6 +142,12 @@ impl BandedConeSolver {
         self.iterations
     }
 
+    /// Factorisations of the augmented Lagrangian's last solve (at most
+    /// one per Newton step: the local phase reuses the factor).
+    pub fn factorisations(&self) -> usize {
+        self.alm.factorisations()
+    }
+
     /// Which method gave the last solution.
     pub fn method(&self) -> ConeMethod {
         self.method
