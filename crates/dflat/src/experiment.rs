@@ -12,6 +12,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use clap::{Args, Subcommand};
+use dflat_control::dfmpc::QpSolver;
 use dflat_sim::experiments::OutputPaths;
 use dflat_sim::experiments::mismatch::{MismatchConfig, run_mismatch, write_mismatch};
 use dflat_sim::experiments::noise_sweep::{NoiseSweepConfig, run_noise_sweep, write_noise_sweep};
@@ -84,6 +85,11 @@ pub struct PhaseArgs {
     /// Base of the seed rule.
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// Solve the constrained plans with clarabel alone instead of the
+    /// banded solvers (the same problems: tells the problem's behaviour
+    /// from the solver's).
+    #[arg(long)]
+    clarabel: bool,
     /// No progress bar.
     #[arg(long)]
     no_progress: bool,
@@ -104,6 +110,11 @@ pub struct TiltConeArgs {
     /// Base of the seed rule.
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// Solve the constrained plans with clarabel alone instead of the
+    /// banded solvers (the same problems: tells the problem's behaviour
+    /// from the solver's).
+    #[arg(long)]
+    clarabel: bool,
     /// No progress bar.
     #[arg(long)]
     no_progress: bool,
@@ -208,6 +219,11 @@ pub struct VisionRateArgs {
     /// Base of the seed rule.
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// Solve the constrained plans with clarabel alone instead of the
+    /// banded solvers (the same problems: tells the problem's behaviour
+    /// from the solver's).
+    #[arg(long)]
+    clarabel: bool,
     /// No progress bar.
     #[arg(long)]
     no_progress: bool,
@@ -291,6 +307,11 @@ pub fn run(command: ExperimentCommand) -> Result<()> {
                 speeds: a.speeds,
                 trials: a.trials,
                 seed_base: a.seed,
+                qp_solver: if a.clarabel {
+                    QpSolver::Clarabel
+                } else {
+                    QpSolver::Banded
+                },
                 ..TiltConeConfig::default()
             };
             let result = run_tilt_cone(&config, !a.no_progress).context("tilt-cone study")?;

@@ -21,7 +21,7 @@
 use std::sync::Arc;
 
 use dflat_control::dfmpc::{
-    DfMpc, DfMpcSettings, InputSaturation, OutputConstraints, PlanTiltBound,
+    DfMpc, DfMpcSettings, InputSaturation, OutputConstraints, PlanTiltBound, QpSolver,
 };
 use dflat_control::reference::{Reference, paths};
 use dflat_control::window::MultiRateSettings;
@@ -52,6 +52,10 @@ pub struct TiltConeConfig {
     pub command_tilt_deg: f64,
     /// First seed.
     pub seed_base: u64,
+    /// The constrained solver (box and cone): the banded solvers, or
+    /// clarabel alone — the same problems, to tell the problem's behaviour
+    /// from the solver's.
+    pub qp_solver: QpSolver,
 }
 
 impl Default for TiltConeConfig {
@@ -62,6 +66,7 @@ impl Default for TiltConeConfig {
             plan_tilt_deg: 30.0,
             command_tilt_deg: 35.0,
             seed_base: 0,
+            qp_solver: QpSolver::Banded,
         }
     }
 }
@@ -93,6 +98,10 @@ pub struct TiltConeRow {
     /// RMS of the commanded attitude's rate `‖Δ(pitch, roll)‖/δt` over
     /// ticks \[deg/s\]: the command's smoothness.
     pub command_rate_rms_dps: f64,
+    /// p95 of the commanded attitude's rate \[deg/s\].
+    pub command_rate_p95_dps: f64,
+    /// Largest commanded attitude rate \[deg/s\].
+    pub command_rate_max_dps: f64,
     /// Share of ticks with a saturated command.
     pub saturated_share: f64,
     /// Share of ticks that solved a constrained QP.
@@ -114,11 +123,11 @@ impl TiltConeResult {
     /// The rows as a markdown table.
     pub fn table(&self) -> String {
         let mut s = String::from(
-            "| path | m/s | plan bound | planned tilt max / p95 (deg) | flown tilt max / p95 (deg) | path error mean / p95 / max (m) | command rate RMS (deg/s) | saturated | constrained |\n|---|---|---|---|---|---|---|---|---|\n",
+            "| path | m/s | plan bound | planned tilt max / p95 (deg) | flown tilt max / p95 (deg) | path error mean / p95 / max (m) | command rate RMS / p95 / max (deg/s) | saturated | constrained |\n|---|---|---|---|---|---|---|---|---|\n",
         );
         for r in &self.rows {
             s.push_str(&format!(
-                "| {} | {} | {} | {:.1} / {:.1} | {:.1} / {:.1} | {:.3} / {:.3} / {:.3} | {:.1} | {:.1} % | {:.1} % |\n",
+                "| {} | {} | {} | {:.1} / {:.1} | {:.1} / {:.1} | {:.3} / {:.3} / {:.3} | {:.1} / {:.0} / {:.0} | {:.1} % | {:.1} % |\n",
                 r.path,
                 r.speed,
                 r.bound,
@@ -130,6 +139,8 @@ impl TiltConeResult {
                 r.path_error_p95,
                 r.path_error_max,
                 r.command_rate_rms_dps,
+                r.command_rate_p95_dps,
+                r.command_rate_max_dps,
                 100.0 * r.saturated_share,
                 100.0 * r.constrained_share,
             ));
@@ -163,6 +174,7 @@ fn factory(
             ..OutputConstraints::default()
         },
         plan_tilt_bound: bound,
+        qp_solver: config.qp_solver,
         ..DfMpcSettings::default()
     };
     let model = || -> Result<ControlModel, ExperimentError> {
@@ -221,15 +233,14 @@ fn row(path: &str, speed: f64, bound: &str, dt: f64, results: &[TrialResult]) ->
     let g = PlanarParams::default().g;
     let (mut planned, mut flown, mut errors) = (Vec::new(), Vec::new(), Vec::new());
     let (mut ticks, mut saturated, mut constrained, mut failures) = (0, 0, 0, 0);
-    let (mut rate_sq, mut rates) = (0.0, 0usize);
+    let mut rates = Vec::new();
     for r in results {
         failures += r.errors.len();
         for w in r.ticks.windows(2) {
             let (a, b) = (&w[0].command, &w[1].command);
             let rate = (b.pitch - a.pitch).hypot(b.roll - a.roll).to_degrees() / dt;
             if rate.is_finite() {
-                rate_sq += rate * rate;
-                rates += 1;
+                rates.push(rate);
             }
         }
         for t in &r.ticks {
@@ -256,7 +267,11 @@ fn row(path: &str, speed: f64, bound: &str, dt: f64, results: &[TrialResult]) ->
         path_error_mean: finite_errors.iter().sum::<f64>() / finite_errors.len().max(1) as f64,
         path_error_p95: percentile(errors.clone(), 95.0),
         path_error_max: percentile(errors, 100.0),
-        command_rate_rms_dps: (rate_sq / rates.max(1) as f64).sqrt(),
+        command_rate_rms_dps: (rates.iter().map(|r| r * r).sum::<f64>()
+            / rates.len().max(1) as f64)
+            .sqrt(),
+        command_rate_p95_dps: percentile(rates.clone(), 95.0),
+        command_rate_max_dps: percentile(rates, 100.0),
         saturated_share: share(saturated),
         constrained_share: share(constrained),
         controller_errors: failures,

@@ -47,9 +47,11 @@ pub enum PlanTiltBound {
     /// Each axis separately, `|Δ²y/δt²| ≤ g·tan(max_tilt)`: the combined
     /// planned tilt can reach `atan(√2·tan(max_tilt))` (39° at 30°). Each
     /// axis is its own QP ([`BandedInteriorPointSolver`](crate::optimise::BandedInteriorPointSolver)).
-    /// Default: the cone's tick is not yet within its time budget and on
-    /// the L path it tracks slightly worse at the same bound (it flies 30°
-    /// where the box flies up to the 35° command limit); `docs/results.md`.
+    /// Default (the first round's behaviour). At the same bound the cone
+    /// tracks slightly worse on L-shaped paths (it flies the bound where
+    /// the box flies up to the command limit); at the command limit it
+    /// tracks better, with larger command steps at corners:
+    /// `docs/results.md`.
     #[default]
     Box,
     /// The tilt cone `‖(ẍ, ÿ)‖ ≤ g·tan(max_tilt)` per stage — the vehicle's
