@@ -25,12 +25,21 @@
 //! fall tenfold. A soft speed side `h·x ≤ b` with exact penalty ρ has its
 //! multiplier clamped to [0, ρ] (∞ when hard): `v ← clamp(v + σ_s·t, 0, ρ)`.
 //!
-//! Stops when the Lagrangian's gradient is below 1e-8 of the linear term's
-//! scale and the multipliers moved less than 1e-9 (scaled) in the last
-//! update — the interior point's ([`super::cone_qp`]) tolerances.
-//! `P·x` is evaluated by differencing ([`FastBandedSolver::apply_hessian`]).
+//! Each inner solve stops when the gradient is below 1e-8 of the linear
+//! term's scale or the Newton decrement `−gᵀd` below 1e-13 of the
+//! objective's (the rounding floor of P·x, whose entries reach 1e10) —
+//! or, while the multipliers are far off, below σ·(0.1·residual)², the
+//! change the next update makes (inexact inner solves). The solve stops
+//! when the constraint residual (the multipliers' change in the update,
+//! over σ) is below 1e-8 of the radius. The factor is reused while the
+//! last step was full, its decrement small and the active set (stages
+//! outside the disc, speed sides in their quadratic range) the one
+//! factored; once a reused factor stops converging tenfold per step, the
+//! next step refactors. `P·x` is evaluated by differencing
+//! ([`FastBandedSolver::apply_hessian`]) and then updated by `α·P·d`.
 //!
-//! Warm start ([`ConeAlm::shift`]): the multipliers one stage on, σ from its initial value.
+//! Warm start ([`ConeAlm::shift`]): the multipliers one stage on, σ from
+//! its initial value (1e4).
 
 use super::FastBandedSolver;
 use super::banded::{BandedCholesky, SymBand};
@@ -370,10 +379,12 @@ impl ConeAlm {
         value
     }
 
-    /// u, h·x and the gradient `g = P·x + c + Σ G_fᵀy'_f + Σ ±h·v'` at x;
-    /// returns `(‖g‖∞, constraint residual)`, the residual being the largest
-    /// multiplier change `‖y' − y‖/σ` (cone, m/s²) or `|v' − v|/σ_s`
-    /// (speed, m/s · δt scaled back) the update would make.
+    /// u, h·x and the gradient `g = P·x + c + Σ G_fᵀy'_f + Σ ±h·v'` at x,
+    /// with the updated cone multipliers y' (`y_next`), the penalty part of
+    /// L (`penalty_value`) and the active set (`active`); returns
+    /// `(‖g‖∞, cone residual, speed residual)`, the residuals being the
+    /// largest multiplier change `‖y' − y‖/σ` (cone, m/s²) and `|v' − v|/σ_s`
+    /// (speed rows) the update would make.
     fn gradient(&mut self, a0: [f64; 2], lo: &[f64], hi: &[f64]) -> (f64, f64, f64) {
         if !self.px_current {
             self.apply_p(Vector::X);

@@ -286,8 +286,8 @@ proptest::proptest! {
     /// outputs plus a position error of up to 1 mm, the reference one step
     /// on), solved by one warm-started [`BandedConeSolver`] and, each
     /// tick, by clarabel's SOCP from scratch: cost no higher than
-    /// clarabel's (1e-7 relative), first ten outputs to 1e-5 m, the cone
-    /// holds; after the first tick the solver starts warm, and the
+    /// clarabel's (1e-7 relative), first jerk per axis to 1e-3 relative,
+    /// first ten outputs to 1e-5 m, the cone holds; after the first tick the solver starts warm, and the
     /// augmented Lagrangian (not its interior-point fallback) solves at
     /// least 90 % of the ticks.
     #[test]
@@ -342,6 +342,11 @@ proptest::proptest! {
             let (og, ow) = (obj(&got), obj(&want));
             proptest::prop_assert!(og <= ow + 1e-7 * (1.0 + ow.abs()), "tick {tick}: cost {og} vs clarabel {ow}");
             for i in 0..2 {
+                let (jg, jw) = (jerk(&got[i]), jerk(&want[i]));
+                proptest::prop_assert!(
+                    (jg - jw).abs() <= 1e-3 * jw.abs().max(1.0),
+                    "tick {tick} axis {i}: first jerk {jg} vs {jw}"
+                );
                 for j in 0..=10 {
                     proptest::prop_assert!(
                         (got[i][j] - want[i][j]).abs() <= 1e-5,
