@@ -411,6 +411,7 @@ impl Controller for FlatnessMpc {
             saturated,
             constrained: false,
             qp_fallback: false,
+            cone_interior_point: false,
         })
     }
 

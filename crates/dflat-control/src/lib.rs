@@ -92,6 +92,10 @@ pub struct TickOutput {
     /// axis and clarabel solved it instead (DF-MPC with
     /// `QpSolver::Banded`; see `DfMpcSettings::qp_solver`).
     pub qp_fallback: bool,
+    /// True when the tilt cone's augmented Lagrangian did not converge and
+    /// its banded interior point solved instead (DF-MPC with the cone and
+    /// `QpSolver::Banded`; see `optimise::BandedConeSolver`).
+    pub cone_interior_point: bool,
 }
 
 /// Why a controller tick failed. The shell decides what to do (hold the

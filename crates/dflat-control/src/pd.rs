@@ -297,6 +297,7 @@ impl Controller for Pd {
             saturated,
             constrained: false,
             qp_fallback: false,
+            cone_interior_point: false,
         })
     }
 

@@ -379,6 +379,11 @@ pub struct SolveCounts {
     /// converge and clarabel solved instead (`controller.qp_solver =
     /// "banded"`). More than a few per flight is worth a look.
     pub qp_fallbacks: u64,
+    /// Of the constrained ticks with the tilt cone
+    /// (`controller.plan_tilt_bound = "cone"`), those on which the
+    /// augmented Lagrangian did not converge and the banded interior point
+    /// solved instead (slower: the first tick of a burst, or a hard one).
+    pub cone_interior_point: u64,
     /// Ticks whose command the controller clipped by its input saturation
     /// (before the guard's own tilt / thrust caps).
     pub saturated: u64,
@@ -389,6 +394,7 @@ impl SolveCounts {
     pub fn record(&mut self, out: &dflat_control::TickOutput) {
         self.constrained += u64::from(out.constrained);
         self.qp_fallbacks += u64::from(out.qp_fallback);
+        self.cone_interior_point += u64::from(out.cone_interior_point);
         self.saturated += u64::from(out.saturated);
     }
 }
@@ -511,8 +517,8 @@ impl fmt::Display for FlightSummary {
         let s = &self.solves;
         writeln!(
             f,
-            "  solves        {} constrained ({} by clarabel after the banded solver), {} saturated by the controller",
-            s.constrained, s.qp_fallbacks, s.saturated
+            "  solves        {} constrained ({} by clarabel after the banded solver, {} by the cone's interior point), {} saturated by the controller",
+            s.constrained, s.qp_fallbacks, s.cone_interior_point, s.saturated
         )?;
         write!(f, "  resources     CPU {cpu}, peak RSS {rss}")?;
         if let Some(c) = &self.csv {

@@ -228,8 +228,11 @@ impl DemoOutcome {
         let _ = writeln!(s, "  solve time                  {}", d.solve_us);
         let _ = writeln!(
             s,
-            "  constrained ticks           {} ({} by clarabel after the banded solver), {} saturated",
-            d.solves.constrained, d.solves.qp_fallbacks, d.solves.saturated
+            "  constrained ticks           {} ({} by clarabel after the banded solver, {} by the cone's interior point), {} saturated",
+            d.solves.constrained,
+            d.solves.qp_fallbacks,
+            d.solves.cone_interior_point,
+            d.solves.saturated
         );
         let _ = writeln!(s, "  tick jitter                 {}", d.jitter_us);
         let _ = writeln!(

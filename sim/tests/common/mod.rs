@@ -86,6 +86,7 @@ impl Controller for TestPd {
             saturated: pitch != pitch_raw || roll != roll_raw,
             constrained: false,
             qp_fallback: false,
+            cone_interior_point: false,
         })
     }
 
@@ -141,6 +142,7 @@ impl Controller for Constant {
             saturated: false,
             constrained: false,
             qp_fallback: false,
+            cone_interior_point: false,
         })
     }
     fn reset(&mut self) {}

@@ -505,6 +505,7 @@ impl Controller for DfMpc {
             saturated,
             constrained: solve.constrained,
             qp_fallback: solve.qp_fallback,
+            cone_interior_point: solve.cone_interior_point,
         })
     }
 
@@ -576,6 +577,7 @@ impl Controller for DfMpc {
             saturated,
             constrained: false,
             qp_fallback: false,
+            cone_interior_point: false,
         })
     }
 

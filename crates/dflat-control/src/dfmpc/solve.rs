@@ -8,7 +8,8 @@ use crate::ControlError;
 use crate::model::ControlModel;
 use crate::optimise::{
     AxisBounds, AxisProblem, AxisWeights, BandedConeSolver, BandedInteriorPointSolver,
-    ClarabelConeSolver, ClarabelSolver, ConeBounds, FastBandedSolver, KktTuning, Smoothness,
+    ClarabelConeSolver, ClarabelSolver, ConeBounds, ConeMethod, FastBandedSolver, KktTuning,
+    Smoothness,
 };
 use crate::window::input_lags;
 
@@ -45,6 +46,9 @@ pub(super) struct SolveReport {
     pub(super) constrained: bool,
     /// Clarabel solved an axis the interior point did not.
     pub(super) qp_fallback: bool,
+    /// The cone's interior point solved where its augmented Lagrangian
+    /// did not converge.
+    pub(super) cone_interior_point: bool,
 }
 
 /// The horizontal pair's tilt-cone QP ([`PlanTiltBound::Cone`]): the
@@ -279,7 +283,11 @@ impl DfMpc {
                 plan: &mut ay.plan,
             };
             let solved = match &mut cone.banded {
-                Some(banded) => banded.solve_pair(x, y).is_ok(),
+                Some(banded) => {
+                    let ok = banded.solve_pair(x, y).is_ok();
+                    report.cone_interior_point = ok && banded.method() == ConeMethod::InteriorPoint;
+                    ok
+                }
                 None => false,
             };
             if !solved {

@@ -479,3 +479,76 @@ fn banded_failure_falls_back_to_clarabel_and_says_so() {
         "{a:?} {c:?}"
     );
 }
+
+/// The warm-started cone through the DF-MPC, in closed loop: an L path at
+/// 8 m/s under a 20° cone (start, corner and stop bind it), the banded
+/// solver's commands against clarabel's SOCP fed the same measurements
+/// (each controller's own commands in its window), the plan inside the
+/// cone, and the tick's report consistent with the solver's.
+#[test]
+fn warm_cone_flies_the_corner_as_clarabel_does() {
+    use dflat_model::FlatModel;
+    let plant = dflat_model::PlanarModel::new(dflat_model::PlanarParams {
+        psi: 0.0,
+        frame: crate::Frame::Ned,
+        ..Default::default()
+    })
+    .unwrap();
+    let settings = |qp_solver| DfMpcSettings {
+        horizon: 100,
+        constraints: OutputConstraints {
+            max_tilt: Some(20f64.to_radians()),
+            ..Default::default()
+        },
+        plan_tilt_bound: PlanTiltBound::Cone,
+        qp_solver,
+        solver_time_limit: f64::INFINITY,
+        ..Default::default()
+    };
+    let path = || {
+        let w = [[0.0, 0.0], [20.0, 0.0], [20.0, 20.0]].map(|[x, y]| Vector3::new(x, y, -2.0));
+        crate::reference::Reference::path(&w, 8.0).unwrap()
+    };
+    let mut banded = DfMpc::new(ControlModel::Planar(plant), settings(QpSolver::Banded)).unwrap();
+    let mut clarabel =
+        DfMpc::new(ControlModel::Planar(plant), settings(QpSolver::Clarabel)).unwrap();
+    let (mut rb, mut rc) = (path(), path());
+    let mut x = nalgebra::SVector::<f64, 6>::zeros();
+    let (mut constrained, mut warm) = (0, 0);
+    for k in 0..200 {
+        let y = plant.output(&x);
+        let m = Measurement {
+            t: k as f64 * DT,
+            position: Vector3::new(y.x, y.y, -2.0),
+            yaw: 0.0,
+        };
+        let a = banded.update(&m, &mut rb).unwrap();
+        let c = clarabel.update(&m, &mut rc).unwrap();
+        assert_eq!(a.constrained, c.constrained, "tick {k}");
+        assert!(!a.qp_fallback, "tick {k}: clarabel had to solve");
+        let solver = banded.cone_solver().expect("banded cone solver");
+        if a.constrained {
+            constrained += 1;
+            warm += usize::from(solver.warm_started());
+            assert_eq!(
+                a.cone_interior_point,
+                solver.method() == crate::optimise::ConeMethod::InteriorPoint,
+                "tick {k}"
+            );
+            let cone = banded.cone_bounds().unwrap();
+            assert!(!cone.violated_by(banded.plan(0).unwrap(), banded.plan(1).unwrap(), DT));
+        } else {
+            assert!(!a.cone_interior_point);
+        }
+        for (p, q) in [
+            (a.command.pitch, c.command.pitch),
+            (a.command.roll, c.command.roll),
+        ] {
+            assert!((p - q).abs() < 1e-4, "tick {k}: {a:?} vs {c:?}");
+        }
+        x = plant.step(&x, &nalgebra::Vector2::new(a.command.pitch, a.command.roll));
+    }
+    // The cone binds on most of the flight, and the solver runs warm there.
+    assert!(constrained > 100, "{constrained}");
+    assert!(warm * 10 >= constrained * 8, "{warm} of {constrained}");
+}

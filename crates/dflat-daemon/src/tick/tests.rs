@@ -69,6 +69,7 @@ impl Controller for Scripted {
             saturated: false,
             constrained: false,
             qp_fallback: false,
+            cone_interior_point: false,
         })
     }
 
