@@ -9,8 +9,8 @@
 //! commands enter its window), every tick timed; `REPEATS` replays per
 //! configuration. Reported per horizon N: median, p99 and max over all
 //! timed ticks, over the ticks that solved a constrained QP, the ratios
-//! the budgets are stated in (`docs/performance.md`), and the warm cone
-//! solver's work (Newton steps, factorisations, fallbacks).
+//! the budgets are stated in (`docs/performance.md`), and the banded cone
+//! solver's work, warm and cold (Newton steps, factorisations, fallbacks).
 //!
 //! Run: `cargo bench -p dflat-control --bench corner` (a horizon list as
 //! argument, e.g. `-- 200`, limits the run).
@@ -199,14 +199,18 @@ fn main() {
         );
         println!("|---|---|---|---|---|---|---|---|");
         let mut stats = Vec::new();
-        let mut cone_work = String::new();
+        let mut cone_work = Vec::new();
         for config in Config::ALL {
             let (mut all, mut con, mut work) = replay(config, n, &flight, repeats);
-            if matches!(config, Config::ConeWarm) {
+            if let Some(start) = match config {
+                Config::ConeWarm => Some("warm"),
+                Config::ConeCold => Some("cold"),
+                _ => None,
+            } {
                 let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
                 let ticks = work.iterations.len();
-                cone_work = format!(
-                    "warm cone work per constrained tick: iterations mean {:.2}, p99 {}, max {}; \
+                cone_work.push(format!(
+                    "{start} cone work per constrained tick: iterations mean {:.2}, p99 {}, max {}; \
                      factorisations mean {:.2}; interior-point fallbacks {} and clarabel fallbacks {} \
                      of {} ticks",
                     mean(&work.iterations),
@@ -216,7 +220,7 @@ fn main() {
                     work.interior_point,
                     work.clarabel,
                     ticks + work.clarabel,
-                );
+                ));
             }
             let s = [
                 percentile(&mut all, 50.0),
@@ -248,6 +252,8 @@ fn main() {
             warm[3] / fast[0],
             warm[4] / fast[0],
         );
-        println!("{cone_work}");
+        for line in cone_work {
+            println!("{line}");
+        }
     }
 }
