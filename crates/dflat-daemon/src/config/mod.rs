@@ -360,15 +360,17 @@ pub struct ControllerConfig {
     /// to it at 90 % of the tilt bound's acceleration rather than making
     /// the QP infeasible.
     pub constraint_speed: f64,
-    /// Solver of the constrained QP (df-mpc): "banded" — a banded
-    /// interior-point method, O(N) per iteration, with clarabel as the
-    /// fallback — or "clarabel" alone. Default "banded".
+    /// Solver of the constrained QP (df-mpc): "banded" — O(N) per
+    /// iteration: an interior point for the box, an augmented Lagrangian
+    /// (interior point as its fallback) for the cone; clarabel as the
+    /// fallback of both — or "clarabel" alone. Default "banded".
     pub qp_solver: QpSolver,
     /// How `constraint_tilt_deg` bounds the plan (df-mpc): "box" (each
     /// horizontal axis separately; the combined planned tilt can reach
-    /// 39° at 30°) or "cone" (the combined tilt, both axes in one QP —
-    /// the vehicle's real limit; slower per constrained tick, see
-    /// docs/performance.md). Default "box".
+    /// 39° at 30°) or "cone" (the combined tilt, both axes in one
+    /// problem — the vehicle's real limit — solved warm by a banded
+    /// augmented Lagrangian; docs/results.md, docs/performance.md).
+    /// Default "box".
     pub plan_tilt_bound: PlanTiltBound,
     /// Disturbance estimation (df-mpc; offset-free tracking): acceleration
     /// offsets (wind, drag) and, for the spatial model, the thrust scale
