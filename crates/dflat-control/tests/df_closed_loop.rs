@@ -1,7 +1,9 @@
 //! Closed-loop tests of [`DfMpc`] on the models' own Euler step (plant =
 //! model, 50 Hz, no noise), in NED with yaw ≠ 0.
 
-use dflat_control::dfmpc::{DfMpc, DfMpcSettings, InputSaturation, OutputConstraints};
+use dflat_control::dfmpc::{
+    DfMpc, DfMpcSettings, InputSaturation, OutputConstraints, PlanTiltBound,
+};
 use dflat_control::tilt::tilt;
 use dflat_control::{
     ControlError, ControlModel, Controller, Frame, Measurement, ReferenceSource, TickOutput,
@@ -214,6 +216,93 @@ fn df_spatial_setpoint_reached_and_held() {
         );
     }
     assert!(constrained);
+}
+
+/// The spatial model plans thrust, so its tilt cone follows the vertical
+/// plan: ‖a_h‖ ≤ tan(max_tilt)·(g − a_z) per stage (NED). A move 10 m
+/// across and 3 m down from hover (the descent takes thrust away, so the
+/// cone narrows below g·tan(max_tilt) there): every stage's planned tilt
+/// atan(‖a_h‖ / (g − a_z)) stays within the bound, the radius the
+/// controller reports is the vertical plan's, and the setpoint is reached.
+#[test]
+fn df_spatial_cone_follows_the_vertical_plan() {
+    let plant = SpatialModel::new(SpatialParams {
+        psi: 0.3,
+        frame: Frame::Ned,
+        ..Default::default()
+    })
+    .unwrap();
+    let max_tilt = 25f64.to_radians();
+    let settings = DfMpcSettings {
+        constraints: OutputConstraints {
+            max_tilt: Some(max_tilt),
+            vertical_acceleration: Some([-3.0, 3.0]),
+            ..Default::default()
+        },
+        plan_tilt_bound: PlanTiltBound::Cone,
+        solver_time_limit: f64::INFINITY,
+        ..Default::default()
+    };
+    let mut ctrl = DfMpc::new(ControlModel::Spatial(plant), settings).unwrap();
+    let target = Vector3::new(8.0, -6.0, 3.0); // 10 m across, 3 m down
+    let mut reference = Setpoint(target);
+    let mut x = SVector::<f64, 9>::zeros();
+    x[8] = G; // hovering
+    let (mut constrained, mut narrowest, mut widest) = (0, f64::INFINITY, 0.0f64);
+    let dt2 = DT * DT;
+    for k in 0..600 {
+        let p = plant.output(&x);
+        let m = Measurement {
+            t: k as f64 * DT,
+            position: p,
+            yaw: 0.3,
+        };
+        let out = ctrl
+            .update(&m, &mut reference)
+            .unwrap_or_else(|e| panic!("tick {k}: {e}"));
+        constrained += usize::from(out.constrained);
+        let (px, py, pz) = (
+            ctrl.plan(0).unwrap(),
+            ctrl.plan(1).unwrap(),
+            ctrl.plan(2).unwrap(),
+        );
+        let radius = ctrl.cone_radius().unwrap();
+        for j in 1..px.len() - 2 {
+            let acc = |v: &[f64]| (v[j + 2] - 2.0 * v[j + 1] + v[j]) / dt2;
+            let (ah, az) = (acc(px).hypot(acc(py)), acc(pz));
+            let vertical = G - az;
+            assert!(
+                (radius[j - 1] - max_tilt.tan() * vertical.max(0.2 * G)).abs() < 1e-9,
+                "tick {k} row {j}: radius {} for a_z {az}",
+                radius[j - 1]
+            );
+            assert!(
+                ah <= radius[j - 1] * (1.0 + 1e-6) + 1e-9,
+                "tick {k} row {j}: |a_h| {ah} > {}",
+                radius[j - 1]
+            );
+            if vertical >= 0.2 * G {
+                assert!(ah.atan2(vertical) <= max_tilt + 1e-6);
+            }
+            narrowest = narrowest.min(radius[j - 1]);
+            widest = widest.max(radius[j - 1]);
+        }
+        if k >= 500 {
+            let err = (p - target).norm();
+            assert!(err < 0.01, "tick {k}: error {err} m");
+        }
+        x = plant.step(
+            &x,
+            &Vector3::new(out.command.pitch, out.command.roll, out.command.thrust),
+        );
+    }
+    assert!(constrained > 10, "{constrained}");
+    // The descent narrows the cone, the braking at its end widens it.
+    let nominal = G * max_tilt.tan();
+    assert!(
+        narrowest < 0.9 * nominal && widest > 1.1 * nominal,
+        "{narrowest} {widest}"
+    );
 }
 
 #[test]

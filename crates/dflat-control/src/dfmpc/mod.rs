@@ -235,6 +235,15 @@ impl DfMpc {
         self.cone.as_ref().map(|c| c.bounds())
     }
 
+    /// The tilt cone's radius per stage [m/s²] as of the last tick
+    /// (stage f bounds the planned horizontal acceleration of output
+    /// f + 2): `g·tan(max_tilt)` with the planar model; with the spatial
+    /// model `tan(max_tilt)·(g − a_z)` (NED; `g + a_z` z up) from the
+    /// vertical plan, the thrust's vertical part floored at 0.2·g.
+    pub fn cone_radius(&self) -> Option<&[f64]> {
+        self.cone.as_ref().map(|c| c.radius())
+    }
+
     /// The banded tilt-cone solver, with the statistics of its last solve
     /// (iterations, method, warm start), when the plan's tilt bound is the
     /// cone and the constrained solver is [`QpSolver::Banded`].

@@ -59,7 +59,23 @@ pub(super) struct SolveReport {
 pub(super) struct HorizontalCone {
     banded: Option<BandedConeSolver>,
     clarabel: ClarabelConeSolver,
+    /// tan(max_tilt).
+    tilt_tan: f64,
+    /// Gravity g [m/s²], and the sign of the vertical acceleration in the
+    /// thrust's vertical part `g − sign·a_z` (NED, z down: +1; z up: −1).
+    gravity: f64,
+    down: f64,
+    /// The cone's radius per stage [m/s²]: `g·tan(max_tilt)` with the
+    /// planar model; with the spatial model `tan(max_tilt)·(g − sign·a_z)`
+    /// from the vertical plan, the thrust's vertical part floored at
+    /// [`MIN_VERTICAL_SHARE`]·g.
+    radius: Vec<f64>,
 }
+
+/// Floor of the thrust's vertical part, as a share of g, in the spatial
+/// model's tilt cone (a plan descending at nearly g would otherwise leave
+/// no horizontal acceleration at all).
+pub(super) const MIN_VERTICAL_SHARE: f64 = 0.2;
 
 impl HorizontalCone {
     /// The bounds of the pair.
@@ -70,6 +86,29 @@ impl HorizontalCone {
     /// The banded solver, when it is used.
     pub(super) fn banded(&self) -> Option<&BandedConeSolver> {
         self.banded.as_ref()
+    }
+
+    /// The cone's radius per stage [m/s²] (stage f bounds the acceleration
+    /// of output f + 2).
+    pub(super) fn radius(&self) -> &[f64] {
+        &self.radius
+    }
+
+    /// Sets the radius per stage from the vertical plan `z` (`z_0..z_N`
+    /// \[m\], model frame) for the solvers: the spatial model's tilt cone
+    /// `‖a_h‖ ≤ tan(max_tilt)·(g − sign·a_z)`.
+    fn follow_vertical_plan(&mut self, z: &[f64], dt: f64) -> Result<(), ControlError> {
+        let dt2 = dt * dt;
+        let floor = MIN_VERTICAL_SHARE * self.gravity;
+        for (f, r) in self.radius.iter_mut().enumerate() {
+            let j = f + 1;
+            let az = (z[j + 2] - 2.0 * z[j + 1] + z[j]) / dt2;
+            *r = self.tilt_tan * (self.gravity - self.down * az).max(floor);
+        }
+        if let Some(banded) = &mut self.banded {
+            banded.set_radius(&self.radius)?;
+        }
+        self.clarabel.set_radius(&self.radius)
     }
 
     /// Forgets the warm start (a reset, or a tick that did not solve).
@@ -151,6 +190,10 @@ pub(super) fn build_pipelines(
     let cone = match c.max_tilt {
         Some(t) if cone_mode => {
             let bounds = ConeBounds::new(model.gravity() * t.tan(), c.max_speed);
+            let down = match model.frame() {
+                crate::Frame::Ned => 1.0,
+                crate::Frame::Zup => -1.0,
+            };
             let weights: [AxisWeights; 2] = std::array::from_fn(|axis| AxisWeights {
                 q: settings.tracking_weight[axis],
                 r: settings.jerk_weight[axis],
@@ -169,6 +212,10 @@ pub(super) fn build_pipelines(
                     true,
                     KktTuning::SHIPPED,
                 )?,
+                tilt_tan: t.tan(),
+                gravity: model.gravity(),
+                down,
+                radius: vec![bounds.acceleration; n - 2],
             })
         }
         _ => None,
@@ -262,10 +309,18 @@ impl DfMpc {
             report.constrained = true;
         }
         if let Some(cone) = &mut self.cone {
-            let [ax, ay, ..] = self.axes.as_mut_slice() else {
+            let [ax, ay, rest @ ..] = self.axes.as_mut_slice() else {
                 unreachable!("DfMpc::new makes at least two axes")
             };
-            if !cone.bounds().violated_by(&ax.plan, &ay.plan, dt) {
+            if let Some(az) = rest.first() {
+                // The spatial model plans thrust: the tilt cone's radius
+                // follows the vertical plan (solved above).
+                cone.follow_vertical_plan(&az.plan, dt)?;
+            }
+            if !cone
+                .bounds()
+                .violated_within(&ax.plan, &ay.plan, dt, cone.radius())
+            {
                 // Not solved: the next solve has no previous one to shift.
                 cone.forget();
                 return Ok(report);

@@ -26,6 +26,8 @@ pub struct ClarabelConeSolver {
     dt: f64,
     weights: [AxisWeights; 2],
     bounds: ConeBounds,
+    /// The cone's radius per stage [m/s²] (the bounds' A unless set).
+    radius: Vec<f64>,
     soft: bool,
     solver: DefaultSolver<f64>,
     qvec: Vec<f64>,
@@ -188,6 +190,7 @@ impl ClarabelConeSolver {
             horizon,
             dt,
             weights,
+            radius: vec![bounds.acceleration; n],
             bounds,
             soft,
             solver,
@@ -201,6 +204,21 @@ impl ClarabelConeSolver {
     /// The bounds this solver enforces.
     pub fn bounds(&self) -> &ConeBounds {
         &self.bounds
+    }
+
+    /// Sets the cone's radius per stage A_f [m/s²] (N − 2 entries, finite
+    /// and > 0; stage f bounds the acceleration of output f + 2) for the
+    /// next solves, instead of the bounds' constant A.
+    pub fn set_radius(&mut self, radius: &[f64]) -> Result<(), ControlError> {
+        if radius.len() != self.radius.len() || radius.iter().any(|r| !(r.is_finite() && *r > 0.0))
+        {
+            return Err(ControlError::InvalidSetting {
+                field: "cone radius",
+                reason: "one finite radius > 0 per stage".into(),
+            });
+        }
+        self.radius.copy_from_slice(radius);
+        Ok(())
     }
 
     /// Solves both axes (arguments as
@@ -226,6 +244,7 @@ impl ClarabelConeSolver {
                 sent_linear_term(&self.weights[i].smoothness, a.fixed, a.sent, dt);
             let a0 = (a.fixed[2] - 2.0 * a.fixed[1] + a.fixed[0]) / (dt * dt);
             for f in 0..n {
+                self.bvec[self.m_cone + 3 * f] = self.radius[f];
                 self.bvec[self.m_cone + 3 * f + 1 + i] = a0;
             }
         }

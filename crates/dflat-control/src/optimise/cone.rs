@@ -16,6 +16,12 @@
 //!
 //! (a second-order cone in `(g·tan, a_x, a_y)`; the interior point treats it
 //! as the convex quadratic constraint `½(‖a_f‖² − A²) ≤ 0`, the same set).
+//! The radius may differ per stage (`set_radius` on the solvers): the
+//! spatial model plans thrust, and its tilt is `atan(‖a_h‖/(g − a_z))`
+//! (NED; `g + a_z` z up), so the DF-MPC solves the vertical axis first and
+//! bounds each stage by `A_f = tan(tilt_max)·(g − a_z,f)` from that plan
+//! (the thrust's vertical part floored at 0.2·g) — exact for the planned
+//! thrust, though not jointly optimal over the three axes.
 //! Optionally per axis the **speed** rows `|Δy_j/δt| ≤ v`, j = 2..N−1, as
 //! in [`AxisBounds`]: *soft* — each side `g·x ≤ h + σ`, `σ ≥ 0`, with the
 //! exact (L1) penalty `ρ·σ` in the cost — so that no combination of
@@ -72,13 +78,20 @@ impl ConeBounds {
     /// the cone by more than a relative 1e-6 or break a speed bound (as
     /// [`AxisBounds::violated_by`]).
     pub fn violated_by(&self, x: &[f64], y: &[f64], dt: f64) -> bool {
-        let limit = self.acceleration * (1.0 + 1e-6) + 1e-9;
+        self.violated_within(x, y, dt, &[])
+    }
+
+    /// As [`ConeBounds::violated_by`] with the cone's radius per stage
+    /// (`radius[j − 1]` bounds the acceleration row j = 1..N−2; the
+    /// constant A where `radius` is shorter).
+    pub fn violated_within(&self, x: &[f64], y: &[f64], dt: f64, radius: &[f64]) -> bool {
         let dt2 = dt * dt;
         let n = x.len().min(y.len());
         for j in 1..n.saturating_sub(2) {
+            let r = radius.get(j - 1).copied().unwrap_or(self.acceleration);
             let ax = (x[j + 2] - 2.0 * x[j + 1] + x[j]) / dt2;
             let ay = (y[j + 2] - 2.0 * y[j + 1] + y[j]) / dt2;
-            if ax.hypot(ay) > limit {
+            if ax.hypot(ay) > r * (1.0 + 1e-6) + 1e-9 {
                 return true;
             }
         }

@@ -106,8 +106,10 @@ impl Default for AlmTuning {
 pub struct ConeAlm {
     n: usize,
     inv_dt2: f64,
-    /// Cone radius A [m/s²].
+    /// Nominal cone radius A [m/s²], and the radius per stage (A unless
+    /// [`ConeAlm::set_radius`] set others).
     limit: f64,
+    radius: Vec<f64>,
     /// Speed penalty ρ (None: no speed rows; ∞: hard).
     penalty: Option<f64>,
     tuning: AlmTuning,
@@ -196,6 +198,7 @@ impl ConeAlm {
             n,
             inv_dt2: 1.0 / (dt * dt),
             limit,
+            radius: vec![limit; n],
             penalty: speed_penalty,
             tuning,
             sigma: tuning.sigma,
@@ -341,10 +344,27 @@ impl ConeAlm {
         }
     }
 
-    /// `‖w‖` when `w` lies outside the disc (then `w − Π(w) = (1 − A/‖w‖)·w`).
-    fn radial(&self, w: [f64; 2]) -> Option<f64> {
+    /// `(‖w‖, A_f)` when `w` lies outside stage f's disc of radius A_f
+    /// (then `w − Π(w) = (1 − A_f/‖w‖)·w`).
+    fn radial(&self, w: [f64; 2], f: usize) -> Option<(f64, f64)> {
         let n2 = w[0] * w[0] + w[1] * w[1];
-        (n2 > self.limit * self.limit).then(|| n2.sqrt())
+        let r = self.radius[f];
+        (n2 > r * r).then(|| (n2.sqrt(), r))
+    }
+
+    /// Sets the cone's radius per stage `A_f` [m/s²] (n entries, finite
+    /// and > 0; stage f bounds the acceleration of output f + 2), for the
+    /// next solves — the spatial model's tilt cone, whose radius follows
+    /// the planned vertical acceleration.
+    pub fn set_radius(&mut self, radius: &[f64]) -> Result<(), ControlError> {
+        if radius.len() != self.n || radius.iter().any(|r| !(r.is_finite() && *r > 0.0)) {
+            return Err(ControlError::InvalidSetting {
+                field: "cone radius",
+                reason: "one finite radius > 0 per stage".into(),
+            });
+        }
+        self.radius.copy_from_slice(radius);
+        Ok(())
     }
 
     /// A speed side's updated multiplier `clamp(v + σ_s·t, 0, ρ)`.
@@ -364,8 +384,8 @@ impl ConeAlm {
                 self.u[f][0] + alpha * self.du[f][0] + self.y[f][0] / s,
                 self.u[f][1] + alpha * self.du[f][1] + self.y[f][1] / s,
             ];
-            if let Some(norm) = self.radial(w) {
-                value += 0.5 * s * (norm - self.limit) * (norm - self.limit);
+            if let Some((norm, r)) = self.radial(w, f) {
+                value += 0.5 * s * (norm - r) * (norm - r);
             }
         }
         for (k, v) in self.v.iter().enumerate() {
@@ -402,10 +422,10 @@ impl ConeAlm {
             self.u[f] = u;
             let y = self.y[f];
             let w = [u[0] + y[0] / s, u[1] + y[1] / s];
-            let yn = match self.radial(w) {
-                Some(norm) => {
-                    value += 0.5 * s * (norm - self.limit) * (norm - self.limit);
-                    let k = s * (1.0 - self.limit / norm);
+            let yn = match self.radial(w, f) {
+                Some((norm, r)) => {
+                    value += 0.5 * s * (norm - r) * (norm - r);
+                    let k = s * (1.0 - r / norm);
                     [k * w[0], k * w[1]]
                 }
                 None => [0.0; 2],
@@ -452,11 +472,11 @@ impl ConeAlm {
                 self.u[f][0] + self.y[f][0] / s,
                 self.u[f][1] + self.y[f][1] / s,
             ];
-            let Some(norm) = self.radial(w) else {
+            let Some((norm, r)) = self.radial(w, f) else {
                 continue;
             };
             let (wx, wy) = (w[0] / norm, w[1] / norm);
-            let t = self.limit / norm;
+            let t = r / norm;
             let j = [
                 [1.0 - t + t * wx * wx, t * wx * wy],
                 [t * wx * wy, 1.0 - t + t * wy * wy],

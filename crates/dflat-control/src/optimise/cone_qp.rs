@@ -98,8 +98,9 @@ pub struct ConeAxis {
 #[derive(Debug, Clone)]
 pub struct ConeQp {
     n: usize,
-    /// Cone radius A [m/s²].
-    limit: f64,
+    /// Cone radius per stage A_f [m/s²] (the nominal A unless
+    /// [`ConeQp::set_radius`] set others).
+    radius: Vec<f64>,
     /// Speed penalty ρ (None: no speed rows).
     penalty: Option<f64>,
     base: SymBand,
@@ -172,7 +173,7 @@ impl ConeQp {
         let m = rows.len();
         Self {
             n,
-            limit,
+            radius: vec![limit; n],
             penalty: speed_penalty,
             kkt: base.clone(),
             base,
@@ -224,10 +225,23 @@ impl ConeQp {
         }
     }
 
+    /// Sets the cone's radius per stage A_f [m/s²] (n entries, finite and
+    /// > 0) for the next solves.
+    pub fn set_radius(&mut self, radius: &[f64]) -> Result<(), ControlError> {
+        if radius.len() != self.n || radius.iter().any(|r| !(r.is_finite() && *r > 0.0)) {
+            return Err(ControlError::InvalidSetting {
+                field: "cone radius",
+                reason: "one finite radius > 0 per stage".into(),
+            });
+        }
+        self.radius.copy_from_slice(radius);
+        Ok(())
+    }
+
     /// Cold-start slacks and multipliers for the current primal iterate.
     fn cold_duals(&mut self, lo: &[f64], hi: &[f64], b_scale: f64) {
-        let a2 = 0.5 * self.limit * self.limit;
-        for c in &mut self.cones {
+        for (c, r) in self.cones.iter_mut().zip(&self.radius) {
+            let a2 = 0.5 * r * r;
             c.s = a2;
             c.z = 1.0 / a2;
         }
@@ -285,8 +299,7 @@ impl ConeQp {
         let norm = |v: &[f64]| v.iter().fold(0.0f64, |a, b| a.max(b.abs()));
         let c_scale = 1.0 + norm(c);
         let b_scale = 1.0 + norm(lo).max(norm(hi));
-        let a2 = self.limit * self.limit;
-        let cone_scale = 1.0 + a2;
+        let cone_scale = 1.0 + self.radius.iter().fold(0.0f64, |a, r| a.max(r * r));
         let rho = self.penalty.unwrap_or(f64::INFINITY);
         let soft = self.soft();
         self.cold_duals(lo, hi, b_scale);
@@ -304,6 +317,7 @@ impl ConeQp {
             let mut rp_cone: f64 = 0.0;
             for (f, cs) in self.cones.iter_mut().enumerate() {
                 cs.u = [self.v[a_at(0, f)] + a0[0], self.v[a_at(1, f)] + a0[1]];
+                let a2 = self.radius[f] * self.radius[f];
                 let cf = 0.5 * (cs.u[0] * cs.u[0] + cs.u[1] * cs.u[1] - a2);
                 cs.r = cf + cs.s;
                 rp_cone = rp_cone.max(cs.r.abs());

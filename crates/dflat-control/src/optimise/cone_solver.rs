@@ -148,6 +148,16 @@ impl BandedConeSolver {
         self.alm.factorisations()
     }
 
+    /// Sets the cone's radius per stage A_f [m/s²] (N − 2 entries, finite
+    /// and > 0; stage f bounds the acceleration of output f + 2) for the
+    /// next solves, instead of the bounds' constant A: the spatial
+    /// model's tilt cone `‖a_h‖ ≤ tan(tilt)·(g ∓ a_z)` with the planned
+    /// vertical acceleration.
+    pub fn set_radius(&mut self, radius: &[f64]) -> Result<(), ControlError> {
+        self.alm.set_radius(radius)?;
+        self.qp.set_radius(radius)
+    }
+
     /// Which method gave the last solution.
     pub fn method(&self) -> ConeMethod {
         self.method

@@ -80,6 +80,7 @@ fn clarabel_plans(
     weights: [AxisWeights; 2],
     bounds: ConeBounds,
     axes: &[Axis; 2],
+    radius: Option<&[f64]>,
 ) -> Option<Plans> {
     let mut clarabel = ClarabelConeSolver::new(
         horizon,
@@ -91,6 +92,9 @@ fn clarabel_plans(
         KktTuning::REFERENCE,
     )
     .unwrap();
+    if let Some(r) = radius {
+        clarabel.set_radius(r).unwrap();
+    }
     let mut want = [vec![0.0; horizon + 1], vec![0.0; horizon + 1]];
     let [wx, wy] = &mut want;
     clarabel
@@ -154,15 +158,20 @@ fn banded_plans(
 }
 
 /// Solves an instance with the banded cone solver (cold) and with
-/// clarabel's SOCP; returns both plan pairs, or `None` when clarabel fails.
+/// clarabel's SOCP, with the cone's radius per stage when given; returns
+/// both plan pairs, or `None` when clarabel fails.
 fn solve_both(
     horizon: usize,
     weights: [AxisWeights; 2],
     bounds: ConeBounds,
     axes: &[Axis; 2],
+    radius: Option<&[f64]>,
 ) -> Option<(Plans, Plans)> {
-    let want = clarabel_plans(horizon, weights, bounds, axes)?;
+    let want = clarabel_plans(horizon, weights, bounds, axes, radius)?;
     let mut solver = BandedConeSolver::new(horizon, DT, weights, bounds, false).unwrap();
+    if let Some(r) = radius {
+        solver.set_radius(r).unwrap();
+    }
     Some((banded_plans(&mut solver, weights, axes), want))
 }
 
@@ -185,7 +194,7 @@ fn cone_binds_and_matches_clarabel_from_rest() {
     let a = G * 15f64.to_radians().tan();
     let bounds = ConeBounds::new(a, None);
     let axes = from_rest(horizon, [8.0, -6.0]);
-    let (got, want) = solve_both(horizon, [w, w], bounds, &axes).unwrap();
+    let (got, want) = solve_both(horizon, [w, w], bounds, &axes, None).unwrap();
     // The cone binds: the peak planned acceleration is at the bound, and
     // each axis uses more than the box's share would allow at the corner
     // of a 45° move (here 37°: x gets 0.8·A, beyond A/√2).
@@ -219,7 +228,8 @@ proptest::proptest! {
     /// faster than them included) and the smoothness term: cost no higher
     /// than clarabel's (1e-7 relative), first jerk per axis (what the
     /// command depends on) to 1e-3 relative, first ten outputs to 1e-5 m,
-    /// the cone holds. `PROPTEST_CASES` for more cases.
+    /// the cone holds — with the constant radius or one per stage (0.5–1.5×,
+    /// as the spatial model's). `PROPTEST_CASES` for more cases.
     #[test]
     fn cone_solver_matches_clarabel_socp(
         horizon in 20usize..=200,
@@ -233,8 +243,13 @@ proptest::proptest! {
         target in proptest::array::uniform2(-20.0f64..20.0),
         slope in proptest::array::uniform2(-3.0f64..3.0),
         smooth in proptest::option::of((1.0f64..50.0, 1.0f64..8.0, -0.5f64..0.5)),
+        radius_scale in proptest::option::of(proptest::collection::vec(0.5f64..1.5, 198)),
     ) {
         let a = G * tilt_deg.to_radians().tan();
+        // The spatial model's cone: a radius per stage (the thrust's
+        // vertical part varies along the plan).
+        let radius: Option<Vec<f64>> =
+            radius_scale.map(|k| k[..horizon - 2].iter().map(|k| a * k).collect());
         let bounds = ConeBounds::new(a, speed);
         let weights: [AxisWeights; 2] = std::array::from_fn(|i| AxisWeights {
             q: q[i],
@@ -255,7 +270,7 @@ proptest::proptest! {
                     .collect(),
             }
         });
-        let solved = solve_both(horizon, weights, bounds, &axes);
+        let solved = solve_both(horizon, weights, bounds, &axes, radius.as_deref());
         proptest::prop_assume!(solved.is_some(), "clarabel did not solve");
         let (got, want) = solved.unwrap();
         let obj = |p: &[Vec<f64>; 2]| objective(horizon, &weights, &bounds, &axes, [&p[0], &p[1]]);
@@ -275,7 +290,17 @@ proptest::proptest! {
             }
         }
         let cone = ConeBounds::new(a, None);
-        proptest::prop_assert!(!cone.violated_by(&got[0], &got[1], DT));
+        let within = radius.as_deref().unwrap_or(&[]);
+        proptest::prop_assert!(!cone.violated_within(&got[0], &got[1], DT, within));
+        if let Some(r) = &radius {
+            // The radius binds where it is smallest: no stage uses more.
+            let dt2 = DT * DT;
+            for j in 1..horizon - 1 {
+                let ax = (got[0][j + 2] - 2.0 * got[0][j + 1] + got[0][j]) / dt2;
+                let ay = (got[1][j + 2] - 2.0 * got[1][j + 1] + got[1][j]) / dt2;
+                proptest::prop_assert!(ax.hypot(ay) <= r[j - 1] * (1.0 + 1e-6) + 1e-9);
+            }
+        }
     }
 }
 
@@ -326,7 +351,7 @@ proptest::proptest! {
                     .map(|j| target[i] + slope[i] * DT * (j + tick) as f64)
                     .collect();
             }
-            let Some(want) = clarabel_plans(horizon, weights, bounds, &axes) else {
+            let Some(want) = clarabel_plans(horizon, weights, bounds, &axes, None) else {
                 // Clarabel failed: the sequence ends here.
                 break;
             };
