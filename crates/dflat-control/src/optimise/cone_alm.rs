@@ -36,7 +36,7 @@
 //! outside the disc, speed sides in their quadratic range) the one
 //! factored; once a reused factor stops converging tenfold per step, the
 //! next step refactors. `P·x` is evaluated by differencing
-//! ([`FastBandedSolver::apply_hessian`]) and then updated by `α·P·d`.
+//! (`FastBandedSolver::apply_hessian`) and then updated by `α·P·d`.
 //!
 //! Warm start ([`ConeAlm::shift`]): the multipliers one stage on, σ from
 //! its initial value (1e4).
