@@ -22,7 +22,7 @@
 //! `I − ∂Π_D(w) = (1 − A/‖w‖)·I + (A/‖w‖)·ŵŵᵀ` outside the disc and 0 inside.
 //! Newton with an Armijo line search minimises it; then `y_f ← σ(w_f −
 //! Π_D(w_f))`, and σ grows tenfold when the constraint residual did not
-//! fall tenfold. A soft speed side `h·x ≤ b` with exact penalty ρ has its
+//! fall tenfold (below). A soft speed side `h·x ≤ b` with exact penalty ρ has its
 //! multiplier clamped to [0, ρ] (∞ when hard): `v ← clamp(v + σ_s·t, 0, ρ)`.
 //!
 //! Each inner solve stops when the gradient is below 1e-8 of the linear
@@ -31,7 +31,12 @@
 //! or, while the multipliers are far off, below σ·(0.1·residual)², the
 //! change the next update makes (inexact inner solves). The solve stops
 //! when the constraint residual (the multipliers' change in the update,
-//! over σ) is below 1e-8 of the radius. The factor is reused while the
+//! over σ) is below 1e-8 of the radius and what the residuals can cost,
+//! `Σ‖y_f‖·residual_f`, is below 1e-9 of the objective's scale (a stage
+//! strictly inside the disc where the optimum is on it costs ‖y_f‖ per
+//! m/s²: with many active stages the residual test alone left the cost
+//! 1e-7 above the optimum). σ grows tenfold only while the residual is
+//! above its tolerance and did not fall tenfold. The factor is reused while the
 //! last step was full, its decrement small and the active set (stages
 //! outside the disc, speed sides in their quadratic range) the one
 //! factored; once a reused factor stops converging tenfold per step, the
@@ -68,6 +73,10 @@ const REUSE_DECREMENT: f64 = 1e-7;
 const LOCAL_STOP: f64 = 1e-11;
 /// Relative tolerance of the constraint residual.
 const PRIMAL_TOLERANCE: f64 = 1e-8;
+/// Tolerance of the residuals' cost (`gap`) relative to the objective's
+/// scale `|c|·|x|`: with many active stages and large multipliers the
+/// residual tolerance alone left the cost 1e-7 above the optimum.
+const GAP_TOLERANCE: f64 = 1e-9;
 /// Fraction of the constraint residual within which an inner solve is
 /// accurate enough for the next multiplier update.
 const INEXACT: f64 = 0.1;
@@ -149,6 +158,10 @@ pub struct ConeAlm {
     diag_max: f64,
     /// The Lagrangian's non-quadratic part at x (set by `gradient`).
     penalty_value: f64,
+    /// `Σ ‖y'_f‖·‖y'_f − y_f‖/σ + Σ v'·|v' − v|/σ_s` at x (set by
+    /// `gradient`): what the constraints' residuals can cost — a stage
+    /// inside the disc by δ where the optimum is on it costs ‖y‖·δ.
+    gap: f64,
     /// Which stages lie outside the disc and which speed sides are in
     /// their penalty's quadratic range, at x (set by `gradient`) and at
     /// the last factorisation.
@@ -227,6 +240,7 @@ impl ConeAlm {
             px_current: false,
             diag_max,
             penalty_value: 0.0,
+            gap: 0.0,
             active: vec![false; n + 2 * m],
             factored_active: vec![false; n + 2 * m],
         }
@@ -417,6 +431,7 @@ impl ConeAlm {
         Self::accelerations(self.inv_dt2, &self.x, &mut self.u);
         let mut res2: f64 = 0.0;
         let mut value = 0.0;
+        let mut gap = 0.0;
         for f in 0..self.n {
             let u = [self.u[f][0] + a0[0], self.u[f][1] + a0[1]];
             self.u[f] = u;
@@ -432,7 +447,11 @@ impl ConeAlm {
             };
             self.active[f] = yn != [0.0; 2];
             let (ex, ey) = (yn[0] - y[0], yn[1] - y[1]);
-            res2 = res2.max(ex * ex + ey * ey);
+            let e2 = ex * ex + ey * ey;
+            res2 = res2.max(e2);
+            if e2 > 0.0 {
+                gap += (yn[0] * yn[0] + yn[1] * yn[1]).sqrt() * e2.sqrt() / s;
+            }
             self.y_next[f] = yn;
         }
         let cone_res = res2.sqrt() / s;
@@ -451,6 +470,7 @@ impl ConeAlm {
                 self.active[self.n + 2 * k + j] = raw > 0.0 && raw < rho;
                 value += vn * t - (vn - self.v[k][j]) * (vn - self.v[k][j]) / (2.0 * ss);
                 speed_res = speed_res.max((vn - self.v[k][j]).abs() / ss);
+                gap += vn * (vn - self.v[k][j]).abs() / ss;
                 e += if j == 0 { vn } else { -vn };
             }
             if e != 0.0 {
@@ -458,6 +478,7 @@ impl ConeAlm {
             }
         }
         self.penalty_value = value;
+        self.gap = gap;
         let gn = self.g.iter().fold(0.0f64, |a, b| a.max(b.abs()));
         (gn, cone_res, speed_res)
     }
@@ -576,6 +597,7 @@ impl ConeAlm {
         let mut factor_current = false;
         let inner_tol = decrement_tol;
         let cone_tol = PRIMAL_TOLERANCE * (1.0 + self.limit);
+        let gap_tol = GAP_TOLERANCE * c_scale * x_scale;
         let b_scale = 1.0 + lo.iter().chain(hi).fold(0.0f64, |a, b| a.max(b.abs()));
         // A soft side's violation costs ρ per m/s: its tolerance is ρ
         // times tighter so that the cost is as accurate as the cone's.
@@ -666,14 +688,14 @@ impl ConeAlm {
                     self.v[k][j] = self.side_multiplier(self.v[k][j], t);
                 }
             }
-            if cone_res <= cone_tol && speed_res <= speed_tol {
+            if cone_res <= cone_tol && speed_res <= speed_tol && self.gap <= gap_tol {
                 if self.x.iter().any(|v| !v.is_finite()) {
                     return Err(ControlError::Solver("cone ALM: non-finite iterate".into()));
                 }
                 return Ok(self.newton_steps);
             }
             let res = (cone_res / cone_tol).max(speed_res / speed_tol);
-            if res > 0.1 * previous_res && self.sigma < self.tuning.sigma_max {
+            if res > 1.0 && res > 0.1 * previous_res && self.sigma < self.tuning.sigma_max {
                 self.sigma = (self.sigma * SIGMA_GROWTH).min(self.tuning.sigma_max);
                 factor_current = false;
             }

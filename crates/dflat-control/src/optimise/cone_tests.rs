@@ -228,8 +228,9 @@ proptest::proptest! {
     /// faster than them included) and the smoothness term: cost no higher
     /// than clarabel's (1e-7 relative), first jerk per axis (what the
     /// command depends on) to 1e-3 relative, first ten outputs to 1e-5 m,
-    /// the cone holds — with the constant radius or one per stage (0.5–1.5×,
-    /// as the spatial model's). `PROPTEST_CASES` for more cases.
+    /// the cone holds — with the constant radius or one per stage (a wave of
+    /// ±0–40 % over 10–200 stages, as the spatial model's from a vertical
+    /// plan). `PROPTEST_CASES` for more cases.
     #[test]
     fn cone_solver_matches_clarabel_socp(
         horizon in 20usize..=200,
@@ -243,13 +244,18 @@ proptest::proptest! {
         target in proptest::array::uniform2(-20.0f64..20.0),
         slope in proptest::array::uniform2(-3.0f64..3.0),
         smooth in proptest::option::of((1.0f64..50.0, 1.0f64..8.0, -0.5f64..0.5)),
-        radius_scale in proptest::option::of(proptest::collection::vec(0.5f64..1.5, 198)),
+        radius_wave in proptest::option::of((0.0f64..0.4, 10.0f64..200.0, 0.0f64..6.3)),
     ) {
         let a = G * tilt_deg.to_radians().tan();
         // The spatial model's cone: a radius per stage (the thrust's
-        // vertical part varies along the plan).
-        let radius: Option<Vec<f64>> =
-            radius_scale.map(|k| k[..horizon - 2].iter().map(|k| a * k).collect());
+        // vertical part varies along the vertical plan, smoothly).
+        let radius: Option<Vec<f64>> = radius_wave.map(|(amp, period, phase)| {
+            (0..horizon - 2)
+                .map(|f| {
+                    a * (1.0 + amp * (std::f64::consts::TAU * f as f64 / period + phase).sin())
+                })
+                .collect()
+        });
         let bounds = ConeBounds::new(a, speed);
         let weights: [AxisWeights; 2] = std::array::from_fn(|i| AxisWeights {
             q: q[i],
@@ -308,8 +314,8 @@ proptest::proptest! {
     #![proptest_config(proptest::test_runner::Config::with_cases(12))]
     /// The warm path: a receding-horizon sequence from rest towards a
     /// moving target (each tick's fixed outputs are the last plan's next
-    /// outputs plus a position error of up to 1 mm, the reference one step
-    /// on), solved by one warm-started [`BandedConeSolver`] and, each
+    /// outputs shifted by a position error of up to 2 cm, the reference one
+    /// step on), solved by one warm-started [`BandedConeSolver`] and, each
     /// tick, by clarabel's SOCP from scratch: cost no higher than
     /// clarabel's (1e-7 relative), first jerk per axis to 1e-3 relative,
     /// first ten outputs to 1e-5 m, the cone holds; after the first tick the solver starts warm, and the
@@ -324,7 +330,7 @@ proptest::proptest! {
         speed in proptest::option::of(3.0f64..8.0),
         target in proptest::array::uniform2(-20.0f64..20.0),
         slope in proptest::array::uniform2(-4.0f64..4.0),
-        error in proptest::collection::vec(proptest::array::uniform2(-1e-3f64..1e-3), 25),
+        error in proptest::collection::vec(proptest::array::uniform2(-0.02f64..0.02), 25),
         smooth in proptest::option::of((1.0f64..50.0, 1.0f64..8.0)),
     ) {
         let a = G * tilt_deg.to_radians().tan();
@@ -365,7 +371,14 @@ proptest::proptest! {
             alm_ticks += usize::from(solver.method() == ConeMethod::Alm);
             let obj = |p: &[Vec<f64>; 2]| objective(horizon, &weights, &bounds, &axes, [&p[0], &p[1]]);
             let (og, ow) = (obj(&got), obj(&want));
-            proptest::prop_assert!(og <= ow + 1e-7 * (1.0 + ow.abs()), "tick {tick}: cost {og} vs clarabel {ow}");
+            proptest::prop_assert!(
+                og <= ow + 1e-7 * (1.0 + ow.abs()),
+                "tick {tick}: cost {og} vs clarabel {ow} ({:?}, {} iterations); peak {} vs clarabel {} (A {a})",
+                solver.method(),
+                solver.iterations(),
+                ConeBounds::peak_acceleration(&got[0], &got[1], DT),
+                ConeBounds::peak_acceleration(&want[0], &want[1], DT),
+            );
             for i in 0..2 {
                 let (jg, jw) = (jerk(&got[i]), jerk(&want[i]));
                 proptest::prop_assert!(
@@ -380,11 +393,13 @@ proptest::proptest! {
                 }
             }
             proptest::prop_assert!(!ConeBounds::new(a, None).violated_by(&got[0], &got[1], DT));
-            // The next tick: the plan flown with a position error, the
+            // The next tick: the plan flown, seen with a position error
+            // (the window's outputs are the measured one and its
+            // predictions, so the error shifts all three), the
             // acceleration sent the plan's first.
             for (i, axis) in axes.iter_mut().enumerate() {
                 let p = &got[i];
-                axis.fixed = [p[1], p[2], p[3] + e[i]];
+                axis.fixed = [p[1] + e[i], p[2] + e[i], p[3] + e[i]];
                 axis.sent = smooth.map(|_| (p[3] - 2.0 * p[2] + p[1]) / (DT * DT));
             }
             proptest::prop_assert!(tick + 1 < error.len() || alm_ticks * 10 >= 9 * error.len(), "ALM solved {alm_ticks} of {} ticks", error.len());
