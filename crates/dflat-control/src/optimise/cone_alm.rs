@@ -32,7 +32,7 @@
 //! change the next update makes (inexact inner solves). The solve stops
 //! when the constraint residual (the multipliers' change in the update,
 //! over σ) is below 1e-8 of the radius and what the residuals can cost,
-//! `Σ‖y_f‖·residual_f`, is below 1e-9 of the objective's scale (a stage
+//! `Σ‖y_f‖·residual_f`, is below 3e-9 of the objective's scale (a stage
 //! strictly inside the disc where the optimum is on it costs ‖y_f‖ per
 //! m/s²: with many active stages the residual test alone left the cost
 //! 1e-7 above the optimum). σ grows tenfold only while the residual is
@@ -76,7 +76,7 @@ const PRIMAL_TOLERANCE: f64 = 1e-8;
 /// Tolerance of the residuals' cost (`gap`) relative to the objective's
 /// scale `|c|·|x|`: with many active stages and large multipliers the
 /// residual tolerance alone left the cost 1e-7 above the optimum.
-const GAP_TOLERANCE: f64 = 1e-9;
+const GAP_TOLERANCE: f64 = 3e-9;
 /// Fraction of the constraint residual within which an inner solve is
 /// accurate enough for the next multiplier update.
 const INEXACT: f64 = 0.1;
