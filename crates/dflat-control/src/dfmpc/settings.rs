@@ -73,8 +73,10 @@ pub struct OutputConstraints {
     /// Max speed per axis `|Δy/δt|` [m/s]; when the window is already
     /// faster, the plan brakes to it at 90 % of the acceleration bound
     /// ([`AxisBounds::speed`](crate::optimise::AxisBounds::speed); with the
-    /// cone, at 90 % of `g·tan(max_tilt)/√2` per axis, and the horizontal
-    /// speed rows are soft: [`ConeBounds`](crate::optimise::ConeBounds)). Default none.
+    /// cone, at 90 % of `g·tan(max_tilt)/√2` per axis — with the spatial
+    /// model, of its narrowest stage's radius — and the horizontal speed
+    /// rows are soft: [`ConeBounds`](crate::optimise::ConeBounds)). Default
+    /// none.
     pub max_speed: Option<f64>,
     /// Bounds `[a_min, a_max]` on the vertical acceleration `Δ²z/δt²`
     /// [m/s²] in the model frame (NED: positive down); spatial model only.

@@ -250,7 +250,7 @@ impl ClarabelConeSolver {
         }
         let mut m = self.m_speed;
         let bvec = &mut self.bvec;
-        let axis = self.bounds.axis();
+        let axis = self.bounds.axis_within(&self.radius);
         for fx in fixed {
             axis.speed_rows(self.horizon, fx, dt, |lo, hi| {
                 bvec[m] = hi;

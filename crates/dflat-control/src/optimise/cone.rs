@@ -65,9 +65,13 @@ impl ConeBounds {
     }
 
     /// The per-axis view used for the speed rows: the speed bound with the
-    /// box `±A/√2` that sets the braking funnel's rate.
-    pub(crate) fn axis(&self) -> AxisBounds {
-        let a = self.acceleration / std::f64::consts::SQRT_2;
+    /// box `±A/√2` that sets the braking funnel's rate — with the cone's
+    /// radius per stage (`radius`; empty: A), the narrowest stage's
+    /// `A_f/√2`, a rate every stage allows on both axes at once (the
+    /// spatial model's cone narrows where the plan descends).
+    pub(crate) fn axis_within(&self, radius: &[f64]) -> AxisBounds {
+        let narrowest = radius.iter().copied().fold(self.acceleration, f64::min);
+        let a = narrowest / std::f64::consts::SQRT_2;
         AxisBounds {
             acceleration: Some([-a, a]),
             speed: self.speed,

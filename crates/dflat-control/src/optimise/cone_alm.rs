@@ -31,7 +31,7 @@
 //! or, while the multipliers are far off, below σ·(0.1·residual)², the
 //! change the next update makes (inexact inner solves). The solve stops
 //! when the constraint residual (the multipliers' change in the update,
-//! over σ) is below 1e-7 of the radius and what the residuals can cost,
+//! over σ) is below 1e-8 of the radius and what the residuals can cost,
 //! `Σ‖y_f‖·residual_f`, is below 3e-9 of the objective's scale (a stage
 //! strictly inside the disc where the optimum is on it costs ‖y_f‖ per
 //! m/s²: with many active stages the residual test alone left the cost
@@ -72,7 +72,7 @@ const REUSE_DECREMENT: f64 = 1e-7;
 /// the inner loop stops without a confirming step.
 const LOCAL_STOP: f64 = 1e-11;
 /// Relative tolerance of the constraint residual.
-const PRIMAL_TOLERANCE: f64 = 1e-7;
+const PRIMAL_TOLERANCE: f64 = 1e-8;
 /// Tolerance of the residuals' cost (`gap`) relative to the objective's
 /// scale `|c|·|x|`: with many active stages and large multipliers the
 /// residual tolerance alone left the cost 1e-7 above the optimum.
