@@ -154,3 +154,27 @@ impl Row {
         }
     }
 }
+
+/// The data check of the banded solvers over rows (the stage interior
+/// point, the cone's interior point and augmented Lagrangian): `shape_ok`
+/// (else the error says `shape`, the lengths expected), every entry of
+/// `data` and of the row bounds finite, and `lo ≤ hi` row by row.
+pub(super) fn check_row_data(
+    field: &'static str,
+    shape_ok: bool,
+    shape: &str,
+    data: &[&[f64]],
+    lo: &[f64],
+    hi: &[f64],
+) -> Result<(), crate::ControlError> {
+    if !shape_ok {
+        return Err(super::invalid(field, shape));
+    }
+    let finite = |v: &[f64]| v.iter().all(|a| a.is_finite());
+    if !(data.iter().all(|v| finite(v)) && finite(lo) && finite(hi))
+        || lo.iter().zip(hi).any(|(l, h)| l > h)
+    {
+        return Err(super::invalid(field, "finite data with lo ≤ hi"));
+    }
+    Ok(())
+}

@@ -210,13 +210,7 @@ impl ClarabelConeSolver {
     /// and > 0; stage f bounds the acceleration of output f + 2) for the
     /// next solves, instead of the bounds' constant A.
     pub fn set_radius(&mut self, radius: &[f64]) -> Result<(), ControlError> {
-        if radius.len() != self.radius.len() || radius.iter().any(|r| !(r.is_finite() && *r > 0.0))
-        {
-            return Err(ControlError::InvalidSetting {
-                field: "cone radius",
-                reason: "one finite radius > 0 per stage".into(),
-            });
-        }
+        super::cone::check_radius(radius, self.radius.len())?;
         self.radius.copy_from_slice(radius);
         Ok(())
     }

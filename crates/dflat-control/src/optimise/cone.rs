@@ -142,3 +142,15 @@ impl ConeBounds {
         Ok(())
     }
 }
+
+/// Checks a cone radius per stage for a solver of `n` stages: n entries,
+/// each finite and > 0 [m/s²].
+pub(crate) fn check_radius(radius: &[f64], n: usize) -> Result<(), crate::ControlError> {
+    if radius.len() != n || radius.iter().any(|r| !(r.is_finite() && *r > 0.0)) {
+        return Err(super::invalid(
+            "cone radius",
+            "one finite radius > 0 per stage",
+        ));
+    }
+    Ok(())
+}

@@ -48,7 +48,7 @@
 
 use super::FastBandedSolver;
 use super::banded::{BandedCholesky, SymBand};
-use super::bounds::Row;
+use super::bounds::{Row, check_row_data};
 use crate::ControlError;
 
 /// Newton steps per solve, over all outer iterations.
@@ -73,7 +73,7 @@ const REUSE_DECREMENT: f64 = 1e-7;
 const LOCAL_STOP: f64 = 1e-11;
 /// Relative tolerance of the constraint residual.
 const PRIMAL_TOLERANCE: f64 = 1e-8;
-/// Tolerance of the residuals' cost (`gap`) relative to the objective's
+/// Tolerance of the residuals' cost (`residual_cost`) relative to the objective's
 /// scale `|c|·|x|`: with many active stages and large multipliers the
 /// residual tolerance alone left the cost 1e-7 above the optimum.
 const GAP_TOLERANCE: f64 = 3e-9;
@@ -158,10 +158,6 @@ pub struct ConeAlm {
     diag_max: f64,
     /// The Lagrangian's non-quadratic part at x (set by `gradient`).
     penalty_value: f64,
-    /// `Σ ‖y'_f‖·‖y'_f − y_f‖/σ + Σ v'·|v' − v|/σ_s` at x (set by
-    /// `gradient`): what the constraints' residuals can cost — a stage
-    /// inside the disc by δ where the optimum is on it costs ‖y‖·δ.
-    gap: f64,
     /// Which stages lie outside the disc and which speed sides are in
     /// their penalty's quadratic range, at x (set by `gradient`) and at
     /// the last factorisation.
@@ -240,7 +236,6 @@ impl ConeAlm {
             px_current: false,
             diag_max,
             penalty_value: 0.0,
-            gap: 0.0,
             active: vec![false; n + 2 * m],
             factored_active: vec![false; n + 2 * m],
         }
@@ -366,17 +361,17 @@ impl ConeAlm {
         (n2 > r * r).then(|| (n2.sqrt(), r))
     }
 
+    /// The cone's radius per stage `A_f` [m/s²] (the nominal A unless set).
+    pub fn radius(&self) -> &[f64] {
+        &self.radius
+    }
+
     /// Sets the cone's radius per stage `A_f` [m/s²] (n entries, finite
     /// and > 0; stage f bounds the acceleration of output f + 2), for the
     /// next solves — the spatial model's tilt cone, whose radius follows
     /// the planned vertical acceleration.
     pub fn set_radius(&mut self, radius: &[f64]) -> Result<(), ControlError> {
-        if radius.len() != self.n || radius.iter().any(|r| !(r.is_finite() && *r > 0.0)) {
-            return Err(ControlError::InvalidSetting {
-                field: "cone radius",
-                reason: "one finite radius > 0 per stage".into(),
-            });
-        }
+        super::cone::check_radius(radius, self.n)?;
         self.radius.copy_from_slice(radius);
         Ok(())
     }
@@ -431,7 +426,6 @@ impl ConeAlm {
         Self::accelerations(self.inv_dt2, &self.x, &mut self.u);
         let mut res2: f64 = 0.0;
         let mut value = 0.0;
-        let mut gap = 0.0;
         for f in 0..self.n {
             let u = [self.u[f][0] + a0[0], self.u[f][1] + a0[1]];
             self.u[f] = u;
@@ -447,11 +441,7 @@ impl ConeAlm {
             };
             self.active[f] = yn != [0.0; 2];
             let (ex, ey) = (yn[0] - y[0], yn[1] - y[1]);
-            let e2 = ex * ex + ey * ey;
-            res2 = res2.max(e2);
-            if e2 > 0.0 {
-                gap += (yn[0] * yn[0] + yn[1] * yn[1]).sqrt() * e2.sqrt() / s;
-            }
+            res2 = res2.max(ex * ex + ey * ey);
             self.y_next[f] = yn;
         }
         let cone_res = res2.sqrt() / s;
@@ -470,7 +460,6 @@ impl ConeAlm {
                 self.active[self.n + 2 * k + j] = raw > 0.0 && raw < rho;
                 value += vn * t - (vn - self.v[k][j]) * (vn - self.v[k][j]) / (2.0 * ss);
                 speed_res = speed_res.max((vn - self.v[k][j]).abs() / ss);
-                gap += vn * (vn - self.v[k][j]).abs() / ss;
                 e += if j == 0 { vn } else { -vn };
             }
             if e != 0.0 {
@@ -478,9 +467,35 @@ impl ConeAlm {
             }
         }
         self.penalty_value = value;
-        self.gap = gap;
         let gn = self.g.iter().fold(0.0f64, |a, b| a.max(b.abs()));
         (gn, cone_res, speed_res)
+    }
+
+    /// What the constraints' residuals can cost at x (`y_next`, `hx`
+    /// current, the multipliers not yet updated):
+    /// `Σ ‖y'_f‖·‖y'_f − y_f‖/σ + Σ v'·|v' − v|/σ_s` — a stage inside the
+    /// disc by δ where the optimum is on it costs ‖y‖·δ. Only the stop
+    /// needs it, once per multiplier update.
+    fn residual_cost(&self, lo: &[f64], hi: &[f64]) -> f64 {
+        let s = self.sigma;
+        let mut gap = 0.0;
+        for (yn, y) in self.y_next.iter().zip(&self.y) {
+            let (ex, ey) = (yn[0] - y[0], yn[1] - y[1]);
+            let e2 = ex * ex + ey * ey;
+            if e2 > 0.0 {
+                gap += (yn[0] * yn[0] + yn[1] * yn[1]).sqrt() * e2.sqrt() / s;
+            }
+        }
+        let ss = self.sigma_speed();
+        for (k, v) in self.v.iter().enumerate() {
+            let h = self.hx[k];
+            for (j, &vj) in v.iter().enumerate() {
+                let t = if j == 0 { h - hi[k] } else { lo[k] - h };
+                let vn = self.side_multiplier(vj, t);
+                gap += vn * (vn - vj).abs() / ss;
+            }
+        }
+        gap
     }
 
     /// The generalised Hessian `P + σ·Σ G_fᵀ J_f G_f + σ_s·Σ hhᵀ` at x.
@@ -564,21 +579,14 @@ impl ConeAlm {
         hi: &[f64],
     ) -> Result<usize, ControlError> {
         let m = self.rows.len();
-        if c.len() != 2 * self.n || lo.len() != m || hi.len() != m {
-            return Err(ControlError::InvalidSetting {
-                field: "cone ALM",
-                reason: "c needs 2n entries, lo and hi one per row".into(),
-            });
-        }
-        let finite = |v: &[f64]| v.iter().all(|a| a.is_finite());
-        if !(finite(c) && finite(lo) && finite(hi) && finite(&self.x) && finite(&a0))
-            || lo.iter().zip(hi).any(|(l, h)| l > h)
-        {
-            return Err(ControlError::InvalidSetting {
-                field: "cone ALM",
-                reason: "finite data with lo ≤ hi".into(),
-            });
-        }
+        check_row_data(
+            "cone ALM",
+            c.len() == 2 * self.n && lo.len() == m && hi.len() == m,
+            "c needs 2n entries, lo and hi one per row",
+            &[c, &self.x, &a0],
+            lo,
+            hi,
+        )?;
         self.c.copy_from_slice(c);
         self.px_current = false;
         let c_scale = 1.0 + c.iter().fold(0.0f64, |a, b| a.max(b.abs()));
@@ -678,6 +686,7 @@ impl ConeAlm {
                     break;
                 }
             }
+            let gap = self.residual_cost(lo, hi);
             // Multiplier update (the gradient above is the Lagrangian's
             // with the updated multipliers: stationarity holds).
             self.y.copy_from_slice(&self.y_next);
@@ -688,7 +697,7 @@ impl ConeAlm {
                     self.v[k][j] = self.side_multiplier(self.v[k][j], t);
                 }
             }
-            if cone_res <= cone_tol && speed_res <= speed_tol && self.gap <= gap_tol {
+            if cone_res <= cone_tol && speed_res <= speed_tol && gap <= gap_tol {
                 if self.x.iter().any(|v| !v.is_finite()) {
                     return Err(ControlError::Solver("cone ALM: non-finite iterate".into()));
                 }

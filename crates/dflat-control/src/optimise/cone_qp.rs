@@ -23,7 +23,7 @@
 //! augmented Lagrangian ([`super::cone_alm`]), this its fallback.
 
 use super::banded::SymBand;
-use super::bounds::Row;
+use super::bounds::{Row, check_row_data};
 use super::interior_point::BandedLdl;
 use crate::ControlError;
 
@@ -228,12 +228,7 @@ impl ConeQp {
     /// Sets the cone's radius per stage A_f [m/s²] (n entries, finite and
     /// > 0) for the next solves.
     pub fn set_radius(&mut self, radius: &[f64]) -> Result<(), ControlError> {
-        if radius.len() != self.n || radius.iter().any(|r| !(r.is_finite() && *r > 0.0)) {
-            return Err(ControlError::InvalidSetting {
-                field: "cone radius",
-                reason: "one finite radius > 0 per stage".into(),
-            });
-        }
+        super::cone::check_radius(radius, self.n)?;
         self.radius.copy_from_slice(radius);
         Ok(())
     }
@@ -280,21 +275,14 @@ impl ConeQp {
     ) -> Result<usize, ControlError> {
         let n = self.n;
         let m = self.rows.len();
-        if c.len() != STAGE * n || lo.len() != m || hi.len() != m {
-            return Err(ControlError::InvalidSetting {
-                field: "cone QP",
-                reason: "c needs 6n entries, lo and hi one per row".into(),
-            });
-        }
-        let finite = |v: &[f64]| v.iter().all(|a| a.is_finite());
-        if !(finite(c) && finite(lo) && finite(hi) && finite(&self.v) && finite(&a0))
-            || lo.iter().zip(hi).any(|(l, h)| l > h)
-        {
-            return Err(ControlError::InvalidSetting {
-                field: "cone QP",
-                reason: "finite data with lo ≤ hi".into(),
-            });
-        }
+        check_row_data(
+            "cone QP",
+            c.len() == STAGE * n && lo.len() == m && hi.len() == m,
+            "c needs 6n entries, lo and hi one per row",
+            &[c, &self.v, &a0],
+            lo,
+            hi,
+        )?;
         self.c.copy_from_slice(c);
         let norm = |v: &[f64]| v.iter().fold(0.0f64, |a, b| a.max(b.abs()));
         let c_scale = 1.0 + norm(c);

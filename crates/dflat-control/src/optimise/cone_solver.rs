@@ -58,9 +58,6 @@ pub struct BandedConeSolver {
     warm_used: bool,
     /// Which method gave the last solution.
     method: ConeMethod,
-    /// The cone's radius per stage when set ([`BandedConeSolver::set_radius`];
-    /// empty: the bounds' A), for the braking funnel.
-    radius: Vec<f64>,
 }
 
 /// Which method of [`BandedConeSolver`] solved a tick.
@@ -126,7 +123,6 @@ impl BandedConeSolver {
             iterations: 0,
             warm_used: false,
             method: ConeMethod::Alm,
-            radius: Vec::with_capacity(n),
         })
     }
 
@@ -159,10 +155,7 @@ impl BandedConeSolver {
     /// vertical acceleration.
     pub fn set_radius(&mut self, radius: &[f64]) -> Result<(), ControlError> {
         self.alm.set_radius(radius)?;
-        self.qp.set_radius(radius)?;
-        self.radius.clear();
-        self.radius.extend_from_slice(radius);
-        Ok(())
+        self.qp.set_radius(radius)
     }
 
     /// Which method gave the last solution.
@@ -231,7 +224,7 @@ impl BandedConeSolver {
             }
             a0[i] = (a.fixed[2] - 2.0 * a.fixed[1] + a.fixed[0]) / (dt * dt);
         }
-        let axis = self.bounds.axis_within(&self.radius);
+        let axis = self.bounds.axis_within(self.alm.radius());
         let mut k = 0;
         for fx in fixed {
             let (lo, hi) = (&mut self.lo, &mut self.hi);

@@ -29,7 +29,7 @@
 //! All storage is allocated in [`StageQp::new`].
 
 use super::banded::SymBand;
-use super::bounds::Row;
+use super::bounds::{Row, check_row_data};
 use super::smoothness::{accel_block, sent_linear_term};
 use super::{AxisBounds, AxisProblem, FastBandedSolver, Smoothness, baseline};
 use crate::ControlError;
@@ -294,21 +294,14 @@ impl StageQp {
     ) -> Result<usize, ControlError> {
         let n = self.n;
         let m = self.rows.len();
-        if c_p.len() != n || p.len() != n || lo.len() != m || hi.len() != m {
-            return Err(ControlError::InvalidSetting {
-                field: "stage QP",
-                reason: "c_p and p need n entries, lo and hi one per row".into(),
-            });
-        }
-        let finite = |v: &[f64]| v.iter().all(|a| a.is_finite());
-        if !(finite(c_p) && finite(lo) && finite(hi) && finite(p) && c_a0.is_finite())
-            || lo.iter().zip(hi).any(|(l, h)| l > h)
-        {
-            return Err(ControlError::InvalidSetting {
-                field: "stage QP",
-                reason: "finite data with lo ≤ hi".into(),
-            });
-        }
+        check_row_data(
+            "stage QP",
+            c_p.len() == n && p.len() == n && lo.len() == m && hi.len() == m,
+            "c_p and p need n entries, lo and hi one per row",
+            &[c_p, p, &[c_a0]],
+            lo,
+            hi,
+        )?;
         let norm = |v: &[f64]| v.iter().fold(0.0f64, |a, b| a.max(b.abs()));
         // Linear term and start: p given, ã from the equality, λ = 0.
         self.c.fill(0.0);
