@@ -142,6 +142,20 @@ impl Row {
         }
     }
 
+    /// The speed rows g = 0..n−1 of both horizontal axes, axis 0's first
+    /// (the order in which the cone solvers shift their multipliers),
+    /// p_{axis, k} at `index(axis, k)`.
+    pub(super) fn speed_pair(
+        n: usize,
+        dt: f64,
+        index: impl Fn(usize, usize) -> usize,
+    ) -> Vec<Self> {
+        (0..2)
+            .flat_map(|axis| (0..n).map(move |g| (axis, g)))
+            .map(|(axis, g)| Self::speed(g, dt, |k| index(axis, k)))
+            .collect()
+    }
+
     /// `g·v`.
     pub(super) fn dot(&self, v: &[f64]) -> f64 {
         (0..self.len).map(|k| self.coef[k] * v[self.idx[k]]).sum()

@@ -196,12 +196,11 @@ impl ConeAlm {
             }
         }
         let diag_max = (0..size).fold(0.0f64, |a, i| a.max(base.get(i, i)));
-        let mut rows = Vec::new();
-        if speed_penalty.is_some() {
-            for i in 0..2 {
-                rows.extend((0..n).map(|g| Row::speed(g, dt, |k| at(i, k))));
-            }
-        }
+        let rows = if speed_penalty.is_some() {
+            Row::speed_pair(n, dt, at)
+        } else {
+            Vec::new()
+        };
         let m = rows.len();
         Self {
             n,

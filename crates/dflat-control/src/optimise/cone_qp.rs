@@ -164,12 +164,11 @@ impl ConeQp {
                 base.add(l_at(i, f), l_at(i, f), -REGULARISATION);
             }
         }
-        let mut rows = Vec::new();
-        if speed_penalty.is_some() {
-            for i in 0..2 {
-                rows.extend((0..n).map(|g| Row::speed(g, dt, |k| p_at(i, k))));
-            }
-        }
+        let rows = if speed_penalty.is_some() {
+            Row::speed_pair(n, dt, p_at)
+        } else {
+            Vec::new()
+        };
         let m = rows.len();
         Self {
             n,

@@ -124,37 +124,33 @@ impl FastBandedSolver {
             hessian.add(i, i, q);
         }
         // Row i of D: Δ³ over y_i..y_{i+3}; free unknown f ↔ y_{f+3}.
-        for i in 0..n {
-            for (a, &ca) in D3.iter().enumerate() {
-                let Some(fa) = (i + a).checked_sub(3) else {
-                    continue;
-                };
-                for (b, &cb) in D3.iter().enumerate().take(a + 1) {
-                    let Some(fb) = (i + b).checked_sub(3) else {
-                        continue;
-                    };
-                    hessian.add(fa, fb, w * ca * cb);
-                }
-            }
-        }
+        Self::add_gram(&mut hessian, n, &D3, w);
         if s > 0.0 {
             // Row i of E = T·D: δt²·Δc_i over y_{i−1}..y_{i+3}.
-            let e = smoothness.stencil();
-            for i in 0..n {
-                for (a, &ca) in e.iter().enumerate() {
-                    let Some(fa) = (i + a).checked_sub(4) else {
+            Self::add_gram(&mut hessian, n, &smoothness.stencil(), s);
+        }
+        hessian
+    }
+
+    /// `hessian += weight·RᵀR` for the n rows of a difference stencil
+    /// ending at y_{i+3} (row i's last coefficient on free unknown i,
+    /// `stencil[a]` on unknown i + a − (len − 1); unknowns before the
+    /// first free one are fixed and dropped).
+    fn add_gram(hessian: &mut SymBand, n: usize, stencil: &[f64], weight: f64) {
+        let last = stencil.len() - 1;
+        for i in 0..n {
+            for (a, &ca) in stencil.iter().enumerate() {
+                let Some(fa) = (i + a).checked_sub(last) else {
+                    continue;
+                };
+                for (b, &cb) in stencil.iter().enumerate().take(a + 1) {
+                    let Some(fb) = (i + b).checked_sub(last) else {
                         continue;
                     };
-                    for (b, &cb) in e.iter().enumerate().take(a + 1) {
-                        let Some(fb) = (i + b).checked_sub(4) else {
-                            continue;
-                        };
-                        hessian.add(fa, fb, s * ca * cb);
-                    }
+                    hessian.add(fa, fb, weight * ca * cb);
                 }
             }
         }
-        hessian
     }
 
     /// Horizon N \[steps\].
