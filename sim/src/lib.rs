@@ -24,7 +24,7 @@
 //! * [`experiments`] — the paper's studies (noise sweep, L-path comparison,
 //!   DSL demonstration): pure runs returning results, JSON and plot writers.
 //!
-//! Conventions (see `DESIGN.md`): local NED \[m\], body FRD, ZYX Euler angles
+//! Conventions (`docs/ARCHITECTURE.md`, the README): local NED \[m\], body FRD, ZYX Euler angles
 //! \[rad\], specific thrust [m/s²] (thrust / mass), SI units throughout.
 
 pub mod experiments;

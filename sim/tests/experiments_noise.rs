@@ -122,7 +122,7 @@ fn without_noise_both_mpcs_reach_the_target_as_the_reference_trace_does() {
         assert!(row.mean_error_after < 0.1, "{name}: {row:?}");
         assert_eq!(row.controller_errors, 0, "{name}");
     }
-    // The independent trace (shared/reference/trace_1d.json, Euler plant at
+    // The independent trace (reference/trace_1d.json, Euler plant at
     // 200 Hz, 50 Hz samples): mae 1.569 m (DF) and 1.633 m (FMPC). The lab
     // integrates with RK4 and averages at 200 Hz: within 1 %.
     let df = result.row("df-mpc", 0).expect("df").mean_error;

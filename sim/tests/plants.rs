@@ -219,19 +219,9 @@ fn euler_plant_replays_the_reference_trace() {
     // The reference trace (paper §VI: planar, x only, z-up frame, Euler at
     // 200 Hz, command held 4 steps). Our NED plant with θ_cmd = −u and
     // θ = −θ_zup reproduces x_true tick by tick.
-    let dirs = [
-        std::env::var("DFLAT_REFERENCE_DIR").unwrap_or_default(),
-        concat!(env!("CARGO_MANIFEST_DIR"), "/../reference").to_string(),
-        "/work/shared/reference".to_string(),
-    ];
-    let Some(text) = dirs
-        .iter()
-        .filter(|d| !d.is_empty())
-        .find_map(|d| std::fs::read_to_string(format!("{d}/trace_1d.json")).ok())
-    else {
-        eprintln!("trace_1d.json not found; skipping");
-        return;
-    };
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../reference/trace_1d.json");
+    let text = std::fs::read_to_string(path)
+        .unwrap_or_else(|e| panic!("cannot read {path}: {e} (the repository's reference/)"));
     let json: serde_json::Value = serde_json::from_str(&text).expect("valid JSON");
     let o = PlantOptions {
         integrator: Integrator::Euler,

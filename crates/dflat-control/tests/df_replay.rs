@@ -1,4 +1,4 @@
-//! Replays the paper's 1-D simulation (`shared/reference/trace_1d.json`,
+//! Replays the paper's 1-D simulation (`reference/trace_1d.json`,
 //! DF-MPC runs) tick by tick into [`DfMpc`] and compares the command and the
 //! first four planned outputs at every tick.
 //!
@@ -32,7 +32,7 @@ use nalgebra::Vector3;
 
 const TRACE: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
-    "/../../../shared/reference/trace_1d.json"
+    "/../../reference/trace_1d.json"
 );
 const RTOL: f64 = 1e-6;
 const FLOOR_Y: f64 = 1e-3;
@@ -52,7 +52,7 @@ impl ReferenceSource for Setpoint {
 
 fn load() -> serde_json::Value {
     let text = std::fs::read_to_string(TRACE).unwrap_or_else(|e| {
-        panic!("reference trace missing: cannot read {TRACE}: {e}; it ships in shared/reference/")
+        panic!("reference trace missing: cannot read {TRACE}: {e}; it ships in the repository's reference/")
     });
     serde_json::from_str(&text).unwrap_or_else(|e| panic!("{TRACE} is not valid JSON: {e}"))
 }

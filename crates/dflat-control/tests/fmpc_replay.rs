@@ -1,4 +1,4 @@
-//! Replays the paper's 1-D simulation trace (`shared/reference/trace_1d.json`)
+//! Replays the paper's 1-D simulation trace (`reference/trace_1d.json`)
 //! into [`FlatnessMpc`]: the measured positions `ym` tick by tick, and the
 //! command `u` (θ_cmd) must match the independently computed one.
 
@@ -11,7 +11,7 @@ use serde_json::Value;
 
 const TRACE: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
-    "/../../../shared/reference/trace_1d.json"
+    "/../../reference/trace_1d.json"
 );
 
 /// Relative tolerance on θ_cmd at every tick (the trace's smallest |u| is
@@ -21,7 +21,7 @@ const SCALE_FLOOR: f64 = f64::MIN_POSITIVE;
 
 fn load() -> Value {
     let text = std::fs::read_to_string(TRACE).unwrap_or_else(|e| {
-        panic!("reference trace missing: cannot read {TRACE}: {e} (it ships in shared/reference beside the repo)")
+        panic!("reference trace missing: cannot read {TRACE}: {e} (it ships in the repository's reference/)")
     });
     serde_json::from_str(&text).expect("trace_1d.json is not valid JSON")
 }

@@ -1,5 +1,5 @@
 //! Agreement with the independently derived reference vectors in
-//! `shared/reference/` (80-bit arithmetic, rounded to f64).
+//! `reference/` (vendored from the shared derivation; 80-bit arithmetic, rounded to f64).
 //!
 //! Rule (reference README): per vector `rtol = max(1e-9, 10·float64_roundoff)`,
 //! where `float64_roundoff` is the worst component-wise relative error of
@@ -100,11 +100,11 @@ struct FullJsonParams {
 }
 
 fn reference_dir() -> PathBuf {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/reference");
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../reference");
     assert!(
         dir.is_dir(),
-        "reference vectors not found: expected the directory {} (the shared \
-         `reference/` folder beside the repository; it is present in CI)",
+        "reference vectors not found: expected the directory {} (the repository's \
+         `reference/` folder, vendored from the shared derivation)",
         dir.display()
     );
     dir

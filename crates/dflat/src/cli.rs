@@ -76,10 +76,28 @@ pub fn main() -> std::process::ExitCode {
     match run(cli) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            eprintln!("error: {}", error_text(&e));
             std::process::ExitCode::from(2)
         }
     }
+}
+
+/// The error and its causes on one line, `outer: cause: …`, each cause said
+/// once: a cause whose text the message before it already contains (most of
+/// our errors print their source in their own message) is not repeated.
+pub fn error_text(e: &anyhow::Error) -> String {
+    let mut text = String::new();
+    for cause in e.chain() {
+        let part = cause.to_string();
+        if text.contains(&part) {
+            continue;
+        }
+        if !text.is_empty() {
+            text.push_str(": ");
+        }
+        text.push_str(&part);
+    }
+    text
 }
 
 fn run(cli: Cli) -> Result<()> {
@@ -169,4 +187,31 @@ fn run_daemon(args: DaemonArgs) -> Result<()> {
             .with_context(|| format!("cannot write {}", path.display()))?;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::error_text;
+
+    #[derive(Debug, thiserror::Error)]
+    #[error("cfg.toml: cannot read: {source}")]
+    struct Read {
+        source: std::io::Error,
+    }
+
+    #[test]
+    fn a_cause_already_in_the_message_is_said_once() {
+        let io = std::io::Error::new(std::io::ErrorKind::NotFound, "No such file or directory");
+        let e = anyhow::Error::new(Read { source: io });
+        assert_eq!(
+            error_text(&e),
+            "cfg.toml: cannot read: No such file or directory"
+        );
+    }
+
+    #[test]
+    fn a_context_and_a_new_cause_are_both_said() {
+        let e = anyhow::anyhow!("bad port").context("--link udpout:x");
+        assert_eq!(error_text(&e), "--link udpout:x: bad port");
+    }
 }
