@@ -238,17 +238,41 @@ async fn a_mission_is_uploaded_started_paused_continued_and_its_yaw_flown() {
     // MISSION_START without a mission is denied.
     let t1 = Instant::now();
     gcs.send(&command(MavCmd::MAV_CMD_MISSION_START, 0.0, 0.0));
-    let denied = gcs.wait(t1, Duration::from_secs(2), command_ack(MavCmd::MAV_CMD_MISSION_START));
+    let denied = gcs.wait(
+        t1,
+        Duration::from_secs(2),
+        command_ack(MavCmd::MAV_CMD_MISSION_START),
+    );
     assert_eq!(denied, Some(MavResult::MAV_RESULT_DENIED));
 
     // The mission: 4 m/s, an L (8 m north, then 6 m east, facing east
     // from the corner on), and back 6 m west.
     let waypoints = [at(8.0, 0.0), at(8.0, 6.0), at(8.0, 0.0)];
     let mission = [
-        item(0, MavCmd::MAV_CMD_DO_CHANGE_SPEED, [1.0, 4.0, -1.0, 0.0], [0.0; 3]),
-        item(1, MavCmd::MAV_CMD_NAV_WAYPOINT, [0.0, 0.5, 0.0, f32::NAN], waypoints[0]),
-        item(2, MavCmd::MAV_CMD_NAV_WAYPOINT, [0.0, 0.5, 0.0, 90.0], waypoints[1]),
-        item(3, MavCmd::MAV_CMD_NAV_WAYPOINT, [0.0, 0.5, 0.0, f32::NAN], waypoints[2]),
+        item(
+            0,
+            MavCmd::MAV_CMD_DO_CHANGE_SPEED,
+            [1.0, 4.0, -1.0, 0.0],
+            [0.0; 3],
+        ),
+        item(
+            1,
+            MavCmd::MAV_CMD_NAV_WAYPOINT,
+            [0.0, 0.5, 0.0, f32::NAN],
+            waypoints[0],
+        ),
+        item(
+            2,
+            MavCmd::MAV_CMD_NAV_WAYPOINT,
+            [0.0, 0.5, 0.0, 90.0],
+            waypoints[1],
+        ),
+        item(
+            3,
+            MavCmd::MAV_CMD_NAV_WAYPOINT,
+            [0.0, 0.5, 0.0, f32::NAN],
+            waypoints[2],
+        ),
     ];
     assert_eq!(
         gcs.upload(&mission),
@@ -256,11 +280,13 @@ async fn a_mission_is_uploaded_started_paused_continued_and_its_yaw_flown() {
     );
     // Downloaded back as uploaded.
     let t2 = Instant::now();
-    gcs.send(&MavMessage::MISSION_REQUEST_LIST(MISSION_REQUEST_LIST_DATA {
-        target_system: 1,
-        target_component: 191,
-        mission_type: MavMissionType::MAV_MISSION_TYPE_MISSION,
-    }));
+    gcs.send(&MavMessage::MISSION_REQUEST_LIST(
+        MISSION_REQUEST_LIST_DATA {
+            target_system: 1,
+            target_component: 191,
+            mission_type: MavMissionType::MAV_MISSION_TYPE_MISSION,
+        },
+    ));
     gcs.send(&mission_request_int(
         (1, 191),
         2,
@@ -276,13 +302,20 @@ async fn a_mission_is_uploaded_started_paused_continued_and_its_yaw_flown() {
     });
     eprintln!("download: count {count:?}, item 2 {item2:?}");
     assert_eq!(count, Some(4));
-    assert_eq!(item2, Some((2, ((start[1] + 6.0) * 1e4).round() as i32, 90.0)));
+    assert_eq!(
+        item2,
+        Some((2, ((start[1] + 6.0) * 1e4).round() as i32, 90.0))
+    );
 
     // Start; a partial upload right after it times out while the mission
     // flies on.
     let t3 = Instant::now();
     gcs.send(&command(MavCmd::MAV_CMD_MISSION_START, 0.0, 0.0));
-    let started = gcs.wait(t3, Duration::from_secs(2), command_ack(MavCmd::MAV_CMD_MISSION_START));
+    let started = gcs.wait(
+        t3,
+        Duration::from_secs(2),
+        command_ack(MavCmd::MAV_CMD_MISSION_START),
+    );
     assert_eq!(started, Some(MavResult::MAV_RESULT_ACCEPTED));
     gcs.send(&mission_count(
         (1, 191),
@@ -293,15 +326,38 @@ async fn a_mission_is_uploaded_started_paused_continued_and_its_yaw_flown() {
     tokio::time::sleep(Duration::from_millis(1500)).await;
     let t4 = Instant::now();
     gcs.send(&command(MavCmd::MAV_CMD_DO_PAUSE_CONTINUE, 0.0, 0.0));
-    let paused = gcs.wait(t4, Duration::from_secs(2), command_ack(MavCmd::MAV_CMD_DO_PAUSE_CONTINUE));
+    let paused = gcs.wait(
+        t4,
+        Duration::from_secs(2),
+        command_ack(MavCmd::MAV_CMD_DO_PAUSE_CONTINUE),
+    );
     assert_eq!(paused, Some(MavResult::MAV_RESULT_ACCEPTED));
     tokio::time::sleep(Duration::from_millis(2500)).await;
     let t5 = Instant::now();
     gcs.send(&command(MavCmd::MAV_CMD_DO_PAUSE_CONTINUE, 1.0, 0.0));
-    let continued = gcs.wait(t5, Duration::from_secs(2), command_ack(MavCmd::MAV_CMD_DO_PAUSE_CONTINUE));
+    let continued = gcs.wait(
+        t5,
+        Duration::from_secs(2),
+        command_ack(MavCmd::MAV_CMD_DO_PAUSE_CONTINUE),
+    );
     assert_eq!(continued, Some(MavResult::MAV_RESULT_ACCEPTED));
     let last = gcs.wait(t3, Duration::from_secs(25), |m| match m {
         MavMessage::MISSION_ITEM_REACHED(d) if d.seq == 3 => Some(()),
+        _ => None,
+    });
+    // The partial upload's end (1.5 s × 6 requests), and the stored
+    // mission after it.
+    gcs.wait(t3, Duration::from_secs(12), ack_of);
+    let t6 = Instant::now();
+    gcs.send(&MavMessage::MISSION_REQUEST_LIST(
+        MISSION_REQUEST_LIST_DATA {
+            target_system: 1,
+            target_component: 191,
+            mission_type: MavMissionType::MAV_MISSION_TYPE_MISSION,
+        },
+    ));
+    let count_after = gcs.wait(t6, Duration::from_secs(2), |m| match m {
+        MavMessage::MISSION_COUNT(d) => Some(d.count),
         _ => None,
     });
     let cancelled = gcs.from_daemon(t3, ack_of);
@@ -323,19 +379,26 @@ async fn a_mission_is_uploaded_started_paused_continued_and_its_yaw_flown() {
     assert!(last.is_some(), "the mission's last item was not reached");
     assert_eq!(reached, vec![1, 2, 3]);
     assert_eq!(
+        count_after,
+        Some(4),
+        "the failed upload changed the mission"
+    );
+    assert_eq!(
         cancelled,
         vec![MavMissionResult::MAV_MISSION_OPERATION_CANCELLED],
         "the partial upload times out, nothing else"
     );
-    assert!(current.iter().any(|c| c.2 == 4), "no PAUSED MISSION_CURRENT");
+    assert!(
+        current.iter().any(|c| c.2 == 4),
+        "no PAUSED MISSION_CURRENT"
+    );
     assert_eq!(current.last().map(|c| (c.0, c.2)), Some((3, 5)));
 
     // The truth: stopped during the pause; the cross-track error; the heading.
     let trace = &report.trace;
     let t_of = |at: Instant| at.duration_since(sim_t0).as_secs_f64();
     let (t_start, pause_at, resume_at) = (t_of(t3), t_of(t4), t_of(t5));
-    let in_window =
-        |s: &dflat_sim::sitl::TruthSample, a: f64, b: f64| s.t >= a && s.t <= b;
+    let in_window = |s: &dflat_sim::sitl::TruthSample, a: f64, b: f64| s.t >= a && s.t <= b;
     let speed = |s: &dflat_sim::sitl::TruthSample| s.velocity[0].hypot(s.velocity[1]);
     let paused_speed = trace
         .iter()
@@ -372,14 +435,20 @@ async fn a_mission_is_uploaded_started_paused_continued_and_its_yaw_flown() {
             _ => None,
         })
         .collect();
-    let mut yaw_rate: f64 = 0.0;
+    // The yaw rate over 10 commands (time_boot_ms is whole milliseconds).
+    let mut unwrapped = vec![0.0];
     let mut tilt_step: f64 = 0.0;
     for w in targets.windows(2) {
-        let dt = f64::from(w[1].0.saturating_sub(w[0].0)) / 1000.0;
-        if dt > 0.0 {
-            yaw_rate = yaw_rate.max(dflat_link::math::wrap_pi(w[1].1 - w[0].1).abs() / dt);
-        }
+        let last = unwrapped[unwrapped.len() - 1];
+        unwrapped.push(last + dflat_link::math::wrap_pi(w[1].1 - w[0].1));
         tilt_step = tilt_step.max((w[1].2 - w[0].2).abs());
+    }
+    let mut yaw_rate: f64 = 0.0;
+    for i in 10..targets.len() {
+        let dt = f64::from(targets[i].0.saturating_sub(targets[i - 10].0)) / 1000.0;
+        if dt > 0.0 {
+            yaw_rate = yaw_rate.max((unwrapped[i] - unwrapped[i - 10]).abs() / dt);
+        }
     }
     eprintln!(
         "pause: speed {paused_speed:.3} m/s before continue; cross-track p95 {cross_p95:.3} m, \
@@ -393,7 +462,10 @@ async fn a_mission_is_uploaded_started_paused_continued_and_its_yaw_flown() {
         targets.len()
     );
     assert!(pause_at < resume_at);
-    assert!(paused_speed < 0.3, "still moving when paused: {paused_speed}");
+    assert!(
+        paused_speed < 0.3,
+        "still moving when paused: {paused_speed}"
+    );
     assert!(cross_p95 < 0.5, "cross-track p95 {cross_p95}");
     assert!(
         (final_heading.to_degrees() - 90.0).abs() < 2.0,

@@ -190,7 +190,12 @@ mod tests {
 
     #[test]
     fn request_heartbeat_is_accepted_and_sent() {
-        let a = answer(&req(MavCmd::MAV_CMD_REQUEST_MESSAGE, 0.0, OWN), OWN, &CommandContext::default()).unwrap();
+        let a = answer(
+            &req(MavCmd::MAV_CMD_REQUEST_MESSAGE, 0.0, OWN),
+            OWN,
+            &CommandContext::default(),
+        )
+        .unwrap();
         assert_eq!(
             result_of(&a),
             (
@@ -201,14 +206,24 @@ mod tests {
             )
         );
         assert_eq!(a.then, Some(RequestedMessage::Heartbeat));
-        let a = answer(&req(MavCmd::MAV_CMD_REQUEST_MESSAGE, 253.0, OWN), OWN, &CommandContext::default()).unwrap();
+        let a = answer(
+            &req(MavCmd::MAV_CMD_REQUEST_MESSAGE, 253.0, OWN),
+            OWN,
+            &CommandContext::default(),
+        )
+        .unwrap();
         assert_eq!(a.then, Some(RequestedMessage::Status));
     }
 
     #[test]
     fn a_message_the_daemon_does_not_send_is_denied() {
         for id in [30.0, 148.0, 0.5, -1.0, f32::NAN] {
-            let a = answer(&req(MavCmd::MAV_CMD_REQUEST_MESSAGE, id, OWN), OWN, &CommandContext::default()).unwrap();
+            let a = answer(
+                &req(MavCmd::MAV_CMD_REQUEST_MESSAGE, id, OWN),
+                OWN,
+                &CommandContext::default(),
+            )
+            .unwrap();
             assert_eq!(result_of(&a).1, MavResult::MAV_RESULT_DENIED, "{id}");
             assert_eq!(a.then, None);
             assert!(a.reason.is_some_and(|r| r.contains("not sent")), "{id}");
@@ -217,7 +232,12 @@ mod tests {
 
     #[test]
     fn unsupported_commands_are_said_to_be() {
-        let a = answer(&req(MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, 1.0, OWN), OWN, &CommandContext::default()).unwrap();
+        let a = answer(
+            &req(MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, 1.0, OWN),
+            OWN,
+            &CommandContext::default(),
+        )
+        .unwrap();
         assert_eq!(
             result_of(&a),
             (
@@ -231,17 +251,66 @@ mod tests {
 
     #[test]
     fn broadcasts_are_answered_only_when_supported() {
-        assert!(answer(&req(MavCmd::MAV_CMD_REQUEST_MESSAGE, 0.0, (0, 0)), OWN, &CommandContext::default()).is_some());
-        assert!(answer(&req(MavCmd::MAV_CMD_REQUEST_MESSAGE, 0.0, (1, 0)), OWN, &CommandContext::default()).is_some());
-        assert!(answer(&req(MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, 1.0, (0, 0)), OWN, &CommandContext::default()).is_none());
-        assert!(answer(&req(MavCmd::MAV_CMD_REQUEST_MESSAGE, 30.0, (1, 0)), OWN, &CommandContext::default()).is_none());
+        assert!(
+            answer(
+                &req(MavCmd::MAV_CMD_REQUEST_MESSAGE, 0.0, (0, 0)),
+                OWN,
+                &CommandContext::default()
+            )
+            .is_some()
+        );
+        assert!(
+            answer(
+                &req(MavCmd::MAV_CMD_REQUEST_MESSAGE, 0.0, (1, 0)),
+                OWN,
+                &CommandContext::default()
+            )
+            .is_some()
+        );
+        assert!(
+            answer(
+                &req(MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, 1.0, (0, 0)),
+                OWN,
+                &CommandContext::default()
+            )
+            .is_none()
+        );
+        assert!(
+            answer(
+                &req(MavCmd::MAV_CMD_REQUEST_MESSAGE, 30.0, (1, 0)),
+                OWN,
+                &CommandContext::default()
+            )
+            .is_none()
+        );
     }
 
     #[test]
     fn commands_for_others_are_not_answered() {
-        assert!(answer(&req(MavCmd::MAV_CMD_REQUEST_MESSAGE, 0.0, (1, 1)), OWN, &CommandContext::default()).is_none());
-        assert!(answer(&req(MavCmd::MAV_CMD_REQUEST_MESSAGE, 0.0, (2, 191)), OWN, &CommandContext::default()).is_none());
-        assert!(answer(&req(MavCmd::MAV_CMD_REQUEST_MESSAGE, 0.0, (2, 0)), OWN, &CommandContext::default()).is_none());
+        assert!(
+            answer(
+                &req(MavCmd::MAV_CMD_REQUEST_MESSAGE, 0.0, (1, 1)),
+                OWN,
+                &CommandContext::default()
+            )
+            .is_none()
+        );
+        assert!(
+            answer(
+                &req(MavCmd::MAV_CMD_REQUEST_MESSAGE, 0.0, (2, 191)),
+                OWN,
+                &CommandContext::default()
+            )
+            .is_none()
+        );
+        assert!(
+            answer(
+                &req(MavCmd::MAV_CMD_REQUEST_MESSAGE, 0.0, (2, 0)),
+                OWN,
+                &CommandContext::default()
+            )
+            .is_none()
+        );
     }
 
     #[test]
@@ -262,20 +331,72 @@ mod tests {
         let mut too_fast = speed;
         too_fast.param2 = 40.0;
         let table = [
-            (req(MavCmd::MAV_CMD_MISSION_START, 2.0, OWN), flying, MAV_RESULT_ACCEPTED, Some(MissionAction::Start { first: 2 })),
-            (req(MavCmd::MAV_CMD_MISSION_START, 0.0, OWN), standby, MAV_RESULT_ACCEPTED, Some(MissionAction::Start { first: 0 })),
-            (req(MavCmd::MAV_CMD_MISSION_START, 0.0, OWN), none, MAV_RESULT_DENIED, None),
-            (req(MavCmd::MAV_CMD_MISSION_START, 0.0, OWN), CommandContext { has_mission: true, ..none }, MAV_RESULT_TEMPORARILY_REJECTED, None),
-            (req(MavCmd::MAV_CMD_DO_PAUSE_CONTINUE, 0.0, OWN), flying, MAV_RESULT_ACCEPTED, Some(MissionAction::Pause)),
-            (req(MavCmd::MAV_CMD_DO_PAUSE_CONTINUE, 1.0, OWN), flying, MAV_RESULT_ACCEPTED, Some(MissionAction::Continue)),
-            (req(MavCmd::MAV_CMD_DO_PAUSE_CONTINUE, 0.0, OWN), standby, MAV_RESULT_TEMPORARILY_REJECTED, None),
-            (req(MavCmd::MAV_CMD_DO_PAUSE_CONTINUE, 2.0, OWN), flying, MAV_RESULT_DENIED, None),
-            (speed, none, MAV_RESULT_ACCEPTED, Some(MissionAction::Speed(3.0))),
+            (
+                req(MavCmd::MAV_CMD_MISSION_START, 2.0, OWN),
+                flying,
+                MAV_RESULT_ACCEPTED,
+                Some(MissionAction::Start { first: 2 }),
+            ),
+            (
+                req(MavCmd::MAV_CMD_MISSION_START, 0.0, OWN),
+                standby,
+                MAV_RESULT_ACCEPTED,
+                Some(MissionAction::Start { first: 0 }),
+            ),
+            (
+                req(MavCmd::MAV_CMD_MISSION_START, 0.0, OWN),
+                none,
+                MAV_RESULT_DENIED,
+                None,
+            ),
+            (
+                req(MavCmd::MAV_CMD_MISSION_START, 0.0, OWN),
+                CommandContext {
+                    has_mission: true,
+                    ..none
+                },
+                MAV_RESULT_TEMPORARILY_REJECTED,
+                None,
+            ),
+            (
+                req(MavCmd::MAV_CMD_DO_PAUSE_CONTINUE, 0.0, OWN),
+                flying,
+                MAV_RESULT_ACCEPTED,
+                Some(MissionAction::Pause),
+            ),
+            (
+                req(MavCmd::MAV_CMD_DO_PAUSE_CONTINUE, 1.0, OWN),
+                flying,
+                MAV_RESULT_ACCEPTED,
+                Some(MissionAction::Continue),
+            ),
+            (
+                req(MavCmd::MAV_CMD_DO_PAUSE_CONTINUE, 0.0, OWN),
+                standby,
+                MAV_RESULT_TEMPORARILY_REJECTED,
+                None,
+            ),
+            (
+                req(MavCmd::MAV_CMD_DO_PAUSE_CONTINUE, 2.0, OWN),
+                flying,
+                MAV_RESULT_DENIED,
+                None,
+            ),
+            (
+                speed,
+                none,
+                MAV_RESULT_ACCEPTED,
+                Some(MissionAction::Speed(3.0)),
+            ),
             (too_fast, flying, MAV_RESULT_DENIED, None),
         ];
         for (r, ctx, result, action) in table {
             let a = answer(&r, OWN, &ctx).unwrap();
-            assert_eq!((result_of(&a).1, a.action), (result, action), "{r:?} {ctx:?}");
+            assert_eq!(
+                (result_of(&a).1, a.action),
+                (result, action),
+                "{r:?} {ctx:?}"
+            );
             assert_eq!(a.reason.is_some(), result != MAV_RESULT_ACCEPTED);
         }
         // Broadcasts are the autopilot's.

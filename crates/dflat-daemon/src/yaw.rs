@@ -117,13 +117,18 @@ mod tests {
     fn the_heading_turns_at_the_rate_limit_the_short_way() {
         let mut y = YawCommand::new(1.0);
         assert_eq!(y.step(0.0, Some(3.0), 0.0), 0.0);
-        let h = y.step(0.5, Some(3.0), 0.0);
-        assert!((h - 0.5).abs() < 1e-12);
+        let h = y.step(0.1, Some(3.0), 0.0);
+        assert!((h - 0.1).abs() < 1e-12, "{h}");
+        // After a gap, at most 0.1 s worth of turn.
+        let h = y.step(1.0, Some(3.0), 0.0);
+        assert!((h - 0.2).abs() < 1e-12, "{h}");
         // From 3.0 to −3.0 is 0.28 rad the short way (through ±π).
-        y.follow(1.0, 3.0);
-        let h = y.step(1.1, Some(-3.0), 0.0);
+        y.follow(2.0, 3.0);
+        let h = y.step(2.1, Some(-3.0), 0.0);
         assert!((wrap_pi(h - 3.1)).abs() < 1e-12, "{h}");
-        let h = y.step(2.0, Some(-3.0), 0.0);
+        let h = y.step(2.2, Some(-3.0), 0.0);
+        assert!((wrap_pi(h - 3.2)).abs() < 1e-12, "{h}");
+        let h = y.step(2.3, Some(-3.0), 0.0);
         assert!((h - -3.0).abs() < 1e-12, "{h}");
         // No target: kept; a NaN target is no target.
         assert_eq!(y.step(3.0, None, 0.0), h);

@@ -282,7 +282,13 @@ impl PlantOptions {
         }
         check_positive("gust_tau", self.gust_tau)?;
         check_range("command_delay", self.command_delay, 0.0, 2.0, "0 ..= 2 s")?;
-        check_range("max_yaw_rate", self.max_yaw_rate, 0.0, 100.0, "0 ..= 100 rad/s")?;
+        check_range(
+            "max_yaw_rate",
+            self.max_yaw_rate,
+            0.0,
+            100.0,
+            "0 ..= 100 rad/s",
+        )?;
         check_positive("yaw_tau", self.yaw_tau)?;
         self.rigid.validate()
     }

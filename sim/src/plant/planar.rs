@@ -142,7 +142,13 @@ impl Plant for PlanarPlant {
             body_rates: {
                 // The first-order attitude and yaw loops' rates.
                 let d = self.derivative(&self.x, &self.wind.velocity());
-                super::body_rates_from_euler_rates(self.x[5], self.x[4], d[5], d[4], super::yaw::yaw_rate(&self.options, self.yaw, self.held.command.yaw))
+                super::body_rates_from_euler_rates(
+                    self.x[5],
+                    self.x[4],
+                    d[5],
+                    d[4],
+                    super::yaw::yaw_rate(&self.options, self.yaw, self.held.command.yaw),
+                )
             },
             thrust: self.options.g / (self.x[4].cos() * self.x[5].cos()),
         }

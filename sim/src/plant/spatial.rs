@@ -136,7 +136,13 @@ impl Plant for SpatialPlant {
             body_rates: {
                 // The first-order attitude and yaw loops' rates.
                 let d = self.derivative(&self.x, &self.wind.velocity());
-                super::body_rates_from_euler_rates(self.x[7], self.x[6], d[7], d[6], super::yaw::yaw_rate(&self.options, self.yaw, self.held.command.yaw))
+                super::body_rates_from_euler_rates(
+                    self.x[7],
+                    self.x[6],
+                    d[7],
+                    d[6],
+                    super::yaw::yaw_rate(&self.options, self.yaw, self.held.command.yaw),
+                )
             },
             thrust: self.x[8],
         }

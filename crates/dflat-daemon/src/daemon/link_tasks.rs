@@ -19,8 +19,8 @@ use tracing::{debug, error, info, warn};
 use super::{Outgoing, RxReport, Stop, TxReport, daemon_status, decode_state};
 use crate::commands::{CommandContext, CommandRequest, RequestedMessage, answer};
 use crate::mission::{ItemRules, Mission, MissionChange, MissionProtocol};
-use crate::supervisor::FlightState;
 use crate::signing::{PERSIST_INTERVAL, TimestampStore};
+use crate::supervisor::FlightState;
 use crate::tick::{Event, REFUSAL_TEXT_INTERVAL, event_from};
 
 /// What the receive task needs to know of the daemon.
@@ -48,11 +48,7 @@ pub(super) struct RxContext {
 
 /// Sends a mission-protocol reply; hands a changed mission to the control
 /// thread.
-fn send_reply(
-    reply: crate::mission::Reply,
-    ctx: &RxContext,
-    out: &mpsc::Sender<Outgoing>,
-) {
+fn send_reply(reply: crate::mission::Reply, ctx: &RxContext, out: &mpsc::Sender<Outgoing>) {
     for m in reply.messages {
         let _ = out.try_send(Outgoing::plain(m));
     }
@@ -205,9 +201,7 @@ pub(super) async fn receive_task(
                 {
                     let has_mission = missions.mission().has_navigation();
                     if let Some(action) = answer_command(&req, &ctx, has_mission, &out)
-                        && events
-                            .try_send(Event::Mission { arrival, action })
-                            .is_err()
+                        && events.try_send(Event::Mission { arrival, action }).is_err()
                     {
                         report.events_dropped += 1;
                     }

@@ -140,7 +140,10 @@ pub fn parse_item(fields: &ItemFields, rules: &ItemRules) -> Result<MissionItem,
         if !v.is_finite() || v.abs() > rules.geofence[i] {
             return Err(refuse(
                 result,
-                format!("dflat: item {seq}: {} outside the fence", ["x", "y", "z"][i]),
+                format!(
+                    "dflat: item {seq}: {} outside the fence",
+                    ["x", "y", "z"][i]
+                ),
             ));
         }
     }
@@ -265,16 +268,16 @@ mod tests {
         .unwrap();
         assert_eq!(l.position(), Some([1.0, 0.0, -5.0]));
         let s = parse_item(
-            &fields(MavCmd::MAV_CMD_DO_CHANGE_SPEED, [1.0, 3.0, -1.0, 0.0], [0.0; 3]),
+            &fields(
+                MavCmd::MAV_CMD_DO_CHANGE_SPEED,
+                [1.0, 3.0, -1.0, 0.0],
+                [0.0; 3],
+            ),
             &RULES,
         )
         .unwrap();
         assert_eq!(s, MissionItem::ChangeSpeed { speed: Some(3.0) });
-        let mut legacy = fields(
-            MavCmd::MAV_CMD_NAV_WAYPOINT,
-            [0.0; 4],
-            [4.0, 2.0, -10.0],
-        );
+        let mut legacy = fields(MavCmd::MAV_CMD_NAV_WAYPOINT, [0.0; 4], [4.0, 2.0, -10.0]);
         legacy.int = false;
         assert_eq!(
             parse_item(&legacy, &RULES).unwrap().position(),
@@ -309,14 +312,21 @@ mod tests {
                 MavMissionResult::MAV_MISSION_INVALID_PARAM7,
             ),
             (
-                fields(MavCmd::MAV_CMD_DO_CHANGE_SPEED, [1.0, 50.0, 0.0, 0.0], [0.0; 3]),
+                fields(
+                    MavCmd::MAV_CMD_DO_CHANGE_SPEED,
+                    [1.0, 50.0, 0.0, 0.0],
+                    [0.0; 3],
+                ),
                 MavMissionResult::MAV_MISSION_INVALID_PARAM2,
             ),
         ];
         for (f, result) in table {
             let e = parse_item(&f, &RULES).unwrap_err();
             assert_eq!(e.result, result, "{f:?}");
-            assert!(e.text.len() <= 50 && e.text.starts_with("dflat: item 0"), "{e:?}");
+            assert!(
+                e.text.len() <= 50 && e.text.starts_with("dflat: item 0"),
+                "{e:?}"
+            );
         }
     }
 }

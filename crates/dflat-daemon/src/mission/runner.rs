@@ -139,11 +139,7 @@ impl MissionRunner {
     /// Starts (or restarts) the mission at the first navigation item at
     /// or after `first` (MAV_CMD_MISSION_START param1).
     pub fn start(&mut self, first: u16) {
-        self.current = self
-            .legs
-            .iter()
-            .position(|l| l.seq >= first)
-            .unwrap_or(0);
+        self.current = self.legs.iter().position(|l| l.seq >= first).unwrap_or(0);
         self.hold_until = None;
         self.finished_since = None;
         self.status = MissionStatus::Active;
@@ -397,9 +393,17 @@ mod tests {
         reference.horizon(&Vector3::new(0.0, 0.0, -10.0), 0.02, &mut out);
         assert!((out[0] - Vector3::new(0.0, 0.0, -10.0)).norm() < 1e-9);
         r.pause();
-        assert!(r.update(1.0, [6.0, 0.0, -10.0], 6.0, true).reached.is_empty());
+        assert!(
+            r.update(1.0, [6.0, 0.0, -10.0], 6.0, true)
+                .reached
+                .is_empty()
+        );
         assert!(r.resume() && !r.resume());
-        assert!(r.update(2.0, [5.9, 0.0, -10.0], 6.0, true).reached.is_empty());
+        assert!(
+            r.update(2.0, [5.9, 0.0, -10.0], 6.0, true)
+                .reached
+                .is_empty()
+        );
         // Outside the tight radius, the end counts once the reference has
         // finished for END_SETTLE.
         let up = r.update(2.0 + END_SETTLE, [5.9, 0.0, -10.0], 6.0, true);

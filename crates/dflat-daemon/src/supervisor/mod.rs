@@ -715,7 +715,11 @@ impl Supervisor {
         // A restart of the mission being flown is a new goal too.
         self.goal = Goal::None;
         self.set_goal(Goal::Mission);
-        Ok(Some(self.enter(FlightState::Tracking, Cause::MissionStarted, t)))
+        Ok(Some(self.enter(
+            FlightState::Tracking,
+            Cause::MissionStarted,
+            t,
+        )))
     }
 
     /// The mission's last item was reached (and held) at `t`: hold `end`.

@@ -121,7 +121,10 @@ fn the_window_predicts_the_same_with_and_without_a_heading_change() {
     let planned = fixed_heading.iter().filter(|(p, _)| p.is_some()).count();
     assert!(planned > 100, "only {planned} ticks planned");
     let diff = largest_plan_difference(&fixed_heading, &turned);
-    assert!(diff < 1e-9, "plans differ by {diff} m with a heading change");
+    assert!(
+        diff < 1e-9,
+        "plans differ by {diff} m with a heading change"
+    );
 
     // The commands: the same thrust axis at another heading, the heading
     // rate-limited on its way to the setpoint's yaw.
@@ -154,5 +157,8 @@ fn the_window_predicts_the_same_with_and_without_a_heading_change() {
     let unconverted = run(YawMode::Fixed, turning, Some(1.5));
     let reference = run(YawMode::Fixed, |_| 0.0, None);
     let diff = largest_plan_difference(&reference, &unconverted);
-    assert!(diff > 1e-6, "a heading change left the fixed window: {diff}");
+    assert!(
+        diff > 1e-6,
+        "a heading change left the fixed window: {diff}"
+    );
 }

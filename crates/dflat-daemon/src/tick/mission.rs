@@ -41,7 +41,10 @@ impl ControlCore {
     /// flown from the next MAV_CMD_MISSION_START. A clear while the
     /// mission is flown stops it (the vehicle brakes and holds).
     pub fn load_mission(&mut self, t: f64, mission: Option<Mission>) {
-        info!(items = mission.as_ref().map_or(0, Mission::len), "mission loaded");
+        info!(
+            items = mission.as_ref().map_or(0, Mission::len),
+            "mission loaded"
+        );
         if mission.is_none()
             && self.supervisor.goal() == Goal::Mission
             && let Some(tr) = self.supervisor.pause(t)
@@ -63,7 +66,10 @@ impl ControlCore {
                     .as_ref()
                     .and_then(|m| MissionRunner::new(m, self.config.mission.speed));
                 let Some(mut runner) = runner else {
-                    self.text(MavSeverity::MAV_SEVERITY_WARNING, "dflat: no mission to start");
+                    self.text(
+                        MavSeverity::MAV_SEVERITY_WARNING,
+                        "dflat: no mission to start",
+                    );
                     return;
                 };
                 runner.start(first);
@@ -189,7 +195,8 @@ impl ControlCore {
             .is_none_or(|(at, last)| last != now || t - at >= MISSION_CURRENT_INTERVAL);
         if due {
             self.mission_current_sent = Some((t, now));
-            self.pending_texts.push(mission_current(now.0, now.1, now.2));
+            self.pending_texts
+                .push(mission_current(now.0, now.1, now.2));
         }
     }
 

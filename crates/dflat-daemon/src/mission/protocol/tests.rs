@@ -70,7 +70,11 @@ fn upload(p: &mut MissionProtocol, xs: &[f64], t0: f64) -> Reply {
     p.handle(&count(xs.len() as u16, M), GCS, t0);
     let mut last = Reply::default();
     for (i, x) in xs.iter().enumerate() {
-        last = p.handle(&wp(i as u16, *x, MavCmd::MAV_CMD_NAV_WAYPOINT), GCS, t0 + 0.1);
+        last = p.handle(
+            &wp(i as u16, *x, MavCmd::MAV_CMD_NAV_WAYPOINT),
+            GCS,
+            t0 + 0.1,
+        );
     }
     last
 }
@@ -179,17 +183,19 @@ fn a_partial_upload_is_retried_then_cancelled() {
 fn out_of_sequence_items_are_ignored_and_a_retry_resumes() {
     let mut p = MissionProtocol::new(OWN, RULES);
     p.handle(&count(2, M), GCS, 0.0);
-    assert!(p
-        .handle(&wp(1, 1.0, MavCmd::MAV_CMD_NAV_WAYPOINT), GCS, 0.1)
-        .messages
-        .is_empty());
+    assert!(
+        p.handle(&wp(1, 1.0, MavCmd::MAV_CMD_NAV_WAYPOINT), GCS, 0.1)
+            .messages
+            .is_empty()
+    );
     assert_eq!(said(&p.poll(0.0 + ITEM_TIMEOUT)), [Said::Request(0)]);
     p.handle(&wp(0, 1.0, MavCmd::MAV_CMD_NAV_WAYPOINT), GCS, 1.6);
     // A duplicate of item 0 (our request crossed it) is ignored too.
-    assert!(p
-        .handle(&wp(0, 1.0, MavCmd::MAV_CMD_NAV_WAYPOINT), GCS, 1.7)
-        .messages
-        .is_empty());
+    assert!(
+        p.handle(&wp(0, 1.0, MavCmd::MAV_CMD_NAV_WAYPOINT), GCS, 1.7)
+            .messages
+            .is_empty()
+    );
     let r = p.handle(&wp(1, 2.0, MavCmd::MAV_CMD_NAV_WAYPOINT), GCS, 1.8);
     assert_eq!(
         said(&r),
@@ -212,7 +218,11 @@ fn other_types_senders_and_addressees() {
     // Addressed to the autopilot, or broadcast: not ours.
     let to_autopilot = mission_count((1, 1), 1, M);
     assert!(p.handle(&to_autopilot, GCS, 0.0).messages.is_empty());
-    assert!(p.handle(&mission_count((1, 0), 1, M), GCS, 0.0).messages.is_empty());
+    assert!(
+        p.handle(&mission_count((1, 0), 1, M), GCS, 0.0)
+            .messages
+            .is_empty()
+    );
     // A second sender during an upload is denied; the first goes on.
     p.handle(&count(1, M), GCS, 0.0);
     let other = (254, 1);
