@@ -9,7 +9,8 @@
 //!   SITL's parameters listed and read; a setpoint addressed to the
 //!   autopilot answered with a STATUSTEXT; distinct refusal texts for a
 //!   velocity-only setpoint and a wrong frame; a setpoint's yaw refused
-//!   with a message; the SITL's ATTITUDE carries body rates in flight; a
+//!   with a message (`vehicle.yaw_mode = "fixed"`); the SITL's ATTITUDE
+//!   carries body rates in flight; a
 //!   command to the SITL is not routed to the daemon.
 
 use std::net::{SocketAddr, UdpSocket};
@@ -264,7 +265,10 @@ fn a_lone_ground_station_gets_heartbeats_at_1_hz() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_ground_station_talks_to_both_components() {
-    let (cfg, plant) = plant("gcs-daemon");
+    let (mut cfg, plant) = plant("gcs-daemon");
+    // The refusal of a setpoint's yaw is `yaw_mode = "fixed"`'s (the yaw is
+    // flown by default: tests/e2e_mission_yaw.rs).
+    cfg.vehicle.yaw_mode = dflat_daemon::config::YawMode::Fixed;
     let hover = plant.sitl.hover_thrust;
     let sitl = with_gcs(&plant);
     let link = format!("udpout:127.0.0.1:{}", sitl.local_addr().port());

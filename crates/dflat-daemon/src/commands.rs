@@ -9,7 +9,13 @@
 //! | MAV_CMD_REQUEST_MESSAGE (512), param1 = HEARTBEAT (0) | ACCEPTED, then the HEARTBEAT |
 //! | MAV_CMD_REQUEST_MESSAGE, param1 = STATUSTEXT (253) | ACCEPTED, then the daemon's state as a STATUSTEXT |
 //! | MAV_CMD_REQUEST_MESSAGE, any other message | DENIED, and a STATUSTEXT: the daemon does not send it |
+//! | MAV_CMD_MISSION_START (300), param1 = first item | ACCEPTED with a mission uploaded and the stream on (flown at once, or after the engagement in standby); DENIED without a mission, TEMPORARILY_REJECTED without the stream |
+//! | MAV_CMD_DO_PAUSE_CONTINUE (193), param1 0 / 1 | ACCEPTED while engaged: pause = brake to a stop and hold, continue = the goal before, from where the vehicle is; TEMPORARILY_REJECTED in standby; DENIED for another param1 |
+//! | MAV_CMD_DO_CHANGE_SPEED (178), param2 = speed \[m/s\] | ACCEPTED for 0.1–20 m/s (the mission's speed from now on); DENIED otherwise |
 //! | any other command of the common dialect | UNSUPPORTED |
+//!
+//! The three mission commands are acted on only when addressed to the
+//! daemon itself (a broadcast MISSION_START is the autopilot's).
 //!
 //! Addressing: a command addressed to the daemon's system and component is
 //! always answered. A broadcast (target component 0, target system 0 or
@@ -23,6 +29,9 @@
 use dflat_link::MavMessage;
 pub use dflat_link::command::{Addressing, CommandRequest, command_ack};
 use dflat_link::dialect::{MavCmd, MavResult};
+
+use crate::mission::items::MAX_SPEED;
+use crate::tick::MissionAction;
 
 /// HEARTBEAT's message id.
 const HEARTBEAT_ID: u32 = 0;
@@ -45,16 +54,40 @@ pub struct CommandAnswer {
     pub ack: MavMessage,
     /// Sent after the acknowledgement, when the command asked for it.
     pub then: Option<RequestedMessage>,
-    /// Why a command was DENIED, sent as a STATUSTEXT after the ack.
+    /// Why a command was not accepted, sent as a STATUSTEXT after the ack.
     pub reason: Option<String>,
+    /// The mission command for the control thread, when accepted.
+    pub action: Option<MissionAction>,
+}
+
+/// What the mission commands' answers depend on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct CommandContext {
+    /// A mission with a navigation item is uploaded.
+    pub has_mission: bool,
+    /// The daemon streams commands (standby, holding, tracking).
+    pub streaming: bool,
+    /// The autopilot applies them (holding, tracking).
+    pub engaged: bool,
 }
 
 /// The daemon's answer to `req` (`None`: not addressed to it, or a
 /// broadcast it does not support). `own` = (system, component).
-pub fn answer(req: &CommandRequest, own: (u8, u8)) -> Option<CommandAnswer> {
+pub fn answer(req: &CommandRequest, own: (u8, u8), ctx: &CommandContext) -> Option<CommandAnswer> {
     let addressing = req.addressing(own);
     if addressing == Addressing::Elsewhere {
         return None;
+    }
+    if let Some((result, action, reason)) = mission_command(req, ctx) {
+        if addressing == Addressing::Broadcast {
+            return None;
+        }
+        return Some(CommandAnswer {
+            ack: command_ack(req, result),
+            then: None,
+            reason: reason.map(str::to_owned),
+            action,
+        });
     }
     let (result, then) = match req.command {
         MavCmd::MAV_CMD_REQUEST_MESSAGE => match req.requested_message_id() {
@@ -79,7 +112,52 @@ pub fn answer(req: &CommandRequest, own: (u8, u8)) -> Option<CommandAnswer> {
         ack: command_ack(req, result),
         then,
         reason,
+        action: None,
     })
+}
+
+type MissionAnswer = (MavResult, Option<MissionAction>, Option<&'static str>);
+
+/// The answer to a mission command (`None`: not one).
+fn mission_command(req: &CommandRequest, ctx: &CommandContext) -> Option<MissionAnswer> {
+    let rejected = |why| Some((MavResult::MAV_RESULT_TEMPORARILY_REJECTED, None, Some(why)));
+    let denied = |why| Some((MavResult::MAV_RESULT_DENIED, None, Some(why)));
+    let accepted = |action| Some((MavResult::MAV_RESULT_ACCEPTED, Some(action), None));
+    match req.command {
+        MavCmd::MAV_CMD_MISSION_START => {
+            if !ctx.has_mission {
+                denied("dflat: no mission uploaded to 191")
+            } else if !ctx.streaming {
+                rejected("dflat: mission start: not in control")
+            } else {
+                let first = dflat_link::command::whole(req.param1).unwrap_or(0);
+                accepted(MissionAction::Start {
+                    first: first.min(u32::from(u16::MAX)) as u16,
+                })
+            }
+        }
+        MavCmd::MAV_CMD_DO_PAUSE_CONTINUE => {
+            let action = match dflat_link::command::whole(req.param1) {
+                Some(0) => MissionAction::Pause,
+                Some(1) => MissionAction::Continue,
+                _ => return denied("dflat: pause/continue: param1 not 0 or 1"),
+            };
+            if ctx.engaged {
+                accepted(action)
+            } else {
+                rejected("dflat: pause/continue: not engaged")
+            }
+        }
+        MavCmd::MAV_CMD_DO_CHANGE_SPEED => {
+            let speed = f64::from(req.param2);
+            if speed.is_finite() && (0.1..=MAX_SPEED).contains(&speed) {
+                accepted(MissionAction::Speed(speed))
+            } else {
+                denied("dflat: speed not 0.1-20 m/s")
+            }
+        }
+        _ => None,
+    }
 }
 
 #[cfg(test)]
@@ -112,7 +190,12 @@ mod tests {
 
     #[test]
     fn request_heartbeat_is_accepted_and_sent() {
-        let a = answer(&req(MavCmd::MAV_CMD_REQUEST_MESSAGE, 0.0, OWN), OWN).unwrap();
+        let a = answer(
+            &req(MavCmd::MAV_CMD_REQUEST_MESSAGE, 0.0, OWN),
+            OWN,
+            &CommandContext::default(),
+        )
+        .unwrap();
         assert_eq!(
             result_of(&a),
             (
@@ -123,14 +206,24 @@ mod tests {
             )
         );
         assert_eq!(a.then, Some(RequestedMessage::Heartbeat));
-        let a = answer(&req(MavCmd::MAV_CMD_REQUEST_MESSAGE, 253.0, OWN), OWN).unwrap();
+        let a = answer(
+            &req(MavCmd::MAV_CMD_REQUEST_MESSAGE, 253.0, OWN),
+            OWN,
+            &CommandContext::default(),
+        )
+        .unwrap();
         assert_eq!(a.then, Some(RequestedMessage::Status));
     }
 
     #[test]
     fn a_message_the_daemon_does_not_send_is_denied() {
         for id in [30.0, 148.0, 0.5, -1.0, f32::NAN] {
-            let a = answer(&req(MavCmd::MAV_CMD_REQUEST_MESSAGE, id, OWN), OWN).unwrap();
+            let a = answer(
+                &req(MavCmd::MAV_CMD_REQUEST_MESSAGE, id, OWN),
+                OWN,
+                &CommandContext::default(),
+            )
+            .unwrap();
             assert_eq!(result_of(&a).1, MavResult::MAV_RESULT_DENIED, "{id}");
             assert_eq!(a.then, None);
             assert!(a.reason.is_some_and(|r| r.contains("not sent")), "{id}");
@@ -139,7 +232,12 @@ mod tests {
 
     #[test]
     fn unsupported_commands_are_said_to_be() {
-        let a = answer(&req(MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, 1.0, OWN), OWN).unwrap();
+        let a = answer(
+            &req(MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, 1.0, OWN),
+            OWN,
+            &CommandContext::default(),
+        )
+        .unwrap();
         assert_eq!(
             result_of(&a),
             (
@@ -153,17 +251,157 @@ mod tests {
 
     #[test]
     fn broadcasts_are_answered_only_when_supported() {
-        assert!(answer(&req(MavCmd::MAV_CMD_REQUEST_MESSAGE, 0.0, (0, 0)), OWN).is_some());
-        assert!(answer(&req(MavCmd::MAV_CMD_REQUEST_MESSAGE, 0.0, (1, 0)), OWN).is_some());
-        assert!(answer(&req(MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, 1.0, (0, 0)), OWN).is_none());
-        assert!(answer(&req(MavCmd::MAV_CMD_REQUEST_MESSAGE, 30.0, (1, 0)), OWN).is_none());
+        assert!(
+            answer(
+                &req(MavCmd::MAV_CMD_REQUEST_MESSAGE, 0.0, (0, 0)),
+                OWN,
+                &CommandContext::default()
+            )
+            .is_some()
+        );
+        assert!(
+            answer(
+                &req(MavCmd::MAV_CMD_REQUEST_MESSAGE, 0.0, (1, 0)),
+                OWN,
+                &CommandContext::default()
+            )
+            .is_some()
+        );
+        assert!(
+            answer(
+                &req(MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, 1.0, (0, 0)),
+                OWN,
+                &CommandContext::default()
+            )
+            .is_none()
+        );
+        assert!(
+            answer(
+                &req(MavCmd::MAV_CMD_REQUEST_MESSAGE, 30.0, (1, 0)),
+                OWN,
+                &CommandContext::default()
+            )
+            .is_none()
+        );
     }
 
     #[test]
     fn commands_for_others_are_not_answered() {
-        assert!(answer(&req(MavCmd::MAV_CMD_REQUEST_MESSAGE, 0.0, (1, 1)), OWN).is_none());
-        assert!(answer(&req(MavCmd::MAV_CMD_REQUEST_MESSAGE, 0.0, (2, 191)), OWN).is_none());
-        assert!(answer(&req(MavCmd::MAV_CMD_REQUEST_MESSAGE, 0.0, (2, 0)), OWN).is_none());
+        assert!(
+            answer(
+                &req(MavCmd::MAV_CMD_REQUEST_MESSAGE, 0.0, (1, 1)),
+                OWN,
+                &CommandContext::default()
+            )
+            .is_none()
+        );
+        assert!(
+            answer(
+                &req(MavCmd::MAV_CMD_REQUEST_MESSAGE, 0.0, (2, 191)),
+                OWN,
+                &CommandContext::default()
+            )
+            .is_none()
+        );
+        assert!(
+            answer(
+                &req(MavCmd::MAV_CMD_REQUEST_MESSAGE, 0.0, (2, 0)),
+                OWN,
+                &CommandContext::default()
+            )
+            .is_none()
+        );
+    }
+
+    #[test]
+    fn mission_commands_depend_on_the_mission_and_the_state() {
+        use MavResult::*;
+        let flying = CommandContext {
+            has_mission: true,
+            streaming: true,
+            engaged: true,
+        };
+        let standby = CommandContext {
+            engaged: false,
+            ..flying
+        };
+        let none = CommandContext::default();
+        let mut speed = req(MavCmd::MAV_CMD_DO_CHANGE_SPEED, 1.0, OWN);
+        speed.param2 = 3.0;
+        let mut too_fast = speed;
+        too_fast.param2 = 40.0;
+        let table = [
+            (
+                req(MavCmd::MAV_CMD_MISSION_START, 2.0, OWN),
+                flying,
+                MAV_RESULT_ACCEPTED,
+                Some(MissionAction::Start { first: 2 }),
+            ),
+            (
+                req(MavCmd::MAV_CMD_MISSION_START, 0.0, OWN),
+                standby,
+                MAV_RESULT_ACCEPTED,
+                Some(MissionAction::Start { first: 0 }),
+            ),
+            (
+                req(MavCmd::MAV_CMD_MISSION_START, 0.0, OWN),
+                none,
+                MAV_RESULT_DENIED,
+                None,
+            ),
+            (
+                req(MavCmd::MAV_CMD_MISSION_START, 0.0, OWN),
+                CommandContext {
+                    has_mission: true,
+                    ..none
+                },
+                MAV_RESULT_TEMPORARILY_REJECTED,
+                None,
+            ),
+            (
+                req(MavCmd::MAV_CMD_DO_PAUSE_CONTINUE, 0.0, OWN),
+                flying,
+                MAV_RESULT_ACCEPTED,
+                Some(MissionAction::Pause),
+            ),
+            (
+                req(MavCmd::MAV_CMD_DO_PAUSE_CONTINUE, 1.0, OWN),
+                flying,
+                MAV_RESULT_ACCEPTED,
+                Some(MissionAction::Continue),
+            ),
+            (
+                req(MavCmd::MAV_CMD_DO_PAUSE_CONTINUE, 0.0, OWN),
+                standby,
+                MAV_RESULT_TEMPORARILY_REJECTED,
+                None,
+            ),
+            (
+                req(MavCmd::MAV_CMD_DO_PAUSE_CONTINUE, 2.0, OWN),
+                flying,
+                MAV_RESULT_DENIED,
+                None,
+            ),
+            (
+                speed,
+                none,
+                MAV_RESULT_ACCEPTED,
+                Some(MissionAction::Speed(3.0)),
+            ),
+            (too_fast, flying, MAV_RESULT_DENIED, None),
+        ];
+        for (r, ctx, result, action) in table {
+            let a = answer(&r, OWN, &ctx).unwrap();
+            assert_eq!(
+                (result_of(&a).1, a.action),
+                (result, action),
+                "{r:?} {ctx:?}"
+            );
+            assert_eq!(a.reason.is_some(), result != MAV_RESULT_ACCEPTED);
+        }
+        // Broadcasts are the autopilot's.
+        let b = req(MavCmd::MAV_CMD_MISSION_START, 0.0, (1, 0));
+        assert!(answer(&b, OWN, &flying).is_none());
     }
 
     #[test]

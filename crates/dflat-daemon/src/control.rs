@@ -153,7 +153,8 @@ pub fn configured_path(cfg: &Config) -> Option<Result<Reference, ControlError>> 
 /// The reference for a goal (`None` for [`Goal::None`]).
 pub fn reference_for(cfg: &Config, goal: Goal) -> Option<Result<Reference, ControlError>> {
     match goal {
-        Goal::None => None,
+        // The mission's reference is the control core's (section by section).
+        Goal::None | Goal::Mission => None,
         Goal::Hold(p) | Goal::Setpoint(p) => Some(Reference::setpoint(Vector3::from(p))),
         Goal::Path => configured_path(cfg),
         Goal::Brake { from, velocity } => Some(Reference::braking(

@@ -30,6 +30,7 @@ pub mod config;
 pub mod control;
 pub mod daemon;
 pub mod guard;
+pub mod mission;
 pub mod motion;
 pub mod realtime;
 pub mod records;
@@ -38,6 +39,7 @@ pub mod signing;
 pub mod summary;
 pub mod supervisor;
 pub mod tick;
+pub mod yaw;
 
 pub use daemon::{DaemonError, DaemonHandle, run, shutdown_signal, spawn, spawn_with_controller};
 pub use summary::FlightSummary;

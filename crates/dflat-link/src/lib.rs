@@ -36,6 +36,7 @@ mod filter;
 mod frame;
 mod inbound;
 pub mod math;
+pub mod mission;
 pub mod modes;
 mod outbound;
 pub mod params;

@@ -30,6 +30,7 @@ mod planar;
 mod rigid;
 mod spatial;
 mod wind;
+mod yaw;
 
 pub use delay::DelayedPlant;
 pub use planar::PlanarPlant;
@@ -213,6 +214,12 @@ pub struct PlantOptions {
     /// autopilot (0 = none): [`build_plant`] then wraps the plant in a
     /// [`DelayedPlant`].
     pub command_delay: f64,
+    /// Largest yaw rate of the first-order plants' yaw loop \[rad/s\]
+    /// (`plant/yaw.rs`); 0 (the default, the paper's set-up): the heading
+    /// stays at its reset value and the yaw command is ignored.
+    pub max_yaw_rate: f64,
+    /// Time constant of that yaw loop \[s\] (> 0).
+    pub yaw_tau: f64,
 }
 
 impl Default for PlantOptions {
@@ -235,6 +242,8 @@ impl Default for PlantOptions {
             gust_tau: 1.0,
             rigid: RigidBodyOptions::default(),
             command_delay: 0.0,
+            max_yaw_rate: 0.0,
+            yaw_tau: 0.1,
         }
     }
 }
@@ -273,6 +282,14 @@ impl PlantOptions {
         }
         check_positive("gust_tau", self.gust_tau)?;
         check_range("command_delay", self.command_delay, 0.0, 2.0, "0 ..= 2 s")?;
+        check_range(
+            "max_yaw_rate",
+            self.max_yaw_rate,
+            0.0,
+            100.0,
+            "0 ..= 100 rad/s",
+        )?;
+        check_positive("yaw_tau", self.yaw_tau)?;
         self.rigid.validate()
     }
 

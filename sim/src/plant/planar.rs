@@ -18,8 +18,11 @@ use crate::SimError;
 /// θ̇ = (k̃·θ_cmd − θ)/τ,            φ̇ = (k̃·φ_cmd − φ)/τ
 /// ```
 ///
-/// Altitude and yaw stay at their reset values; the yaw and thrust commands
-/// are ignored (the autopilot holds altitude).
+/// Altitude stays at its reset value and the thrust command is ignored (the
+/// autopilot holds altitude). The heading follows the yaw command through
+/// the yaw loop of [`PlantOptions::max_yaw_rate`] (`plant/yaw.rs`; off by
+/// default: the heading stays at its reset value), and pitch and roll act
+/// in the body frame at the actual heading.
 #[derive(Debug, Clone)]
 pub struct PlanarPlant {
     options: PlantOptions,
@@ -111,6 +114,7 @@ impl Plant for PlanarPlant {
             self.x = integrate(self.options.integrator, &self.x, h, |x| {
                 self.derivative(x, &w)
             });
+            self.yaw = super::yaw::step_yaw(&self.options, self.yaw, self.held.command.yaw, h);
             self.wind.step(h);
             self.t += h;
         }
@@ -136,9 +140,15 @@ impl Plant for PlanarPlant {
             pitch: self.x[4],
             yaw: self.yaw,
             body_rates: {
-                // The first-order attitude loop's rates, fixed yaw.
+                // The first-order attitude and yaw loops' rates.
                 let d = self.derivative(&self.x, &self.wind.velocity());
-                super::body_rates_from_euler_rates(self.x[5], self.x[4], d[5], d[4], 0.0)
+                super::body_rates_from_euler_rates(
+                    self.x[5],
+                    self.x[4],
+                    d[5],
+                    d[4],
+                    super::yaw::yaw_rate(&self.options, self.yaw, self.held.command.yaw),
+                )
             },
             thrust: self.options.g / (self.x[4].cos() * self.x[5].cos()),
         }

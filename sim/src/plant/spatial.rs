@@ -19,7 +19,9 @@ use crate::SimError;
 /// Ṫ = (k_T·T_cmd − T)/τ_T,  k_T = thrust_gain / mass_factor
 /// ```
 ///
-/// Yaw stays at its reset value; the yaw command is ignored.
+/// The heading follows the yaw command through the yaw loop of
+/// [`PlantOptions::max_yaw_rate`] (`plant/yaw.rs`; off by default: the
+/// heading stays at its reset value).
 #[derive(Debug, Clone)]
 pub struct SpatialPlant {
     options: PlantOptions,
@@ -106,6 +108,7 @@ impl Plant for SpatialPlant {
             self.x = integrate(self.options.integrator, &self.x, h, |x| {
                 self.derivative(x, &w)
             });
+            self.yaw = super::yaw::step_yaw(&self.options, self.yaw, self.held.command.yaw, h);
             self.wind.step(h);
             self.t += h;
         }
@@ -131,9 +134,15 @@ impl Plant for SpatialPlant {
             pitch: self.x[6],
             yaw: self.yaw,
             body_rates: {
-                // The first-order attitude loop's rates, fixed yaw.
+                // The first-order attitude and yaw loops' rates.
                 let d = self.derivative(&self.x, &self.wind.velocity());
-                super::body_rates_from_euler_rates(self.x[7], self.x[6], d[7], d[6], 0.0)
+                super::body_rates_from_euler_rates(
+                    self.x[7],
+                    self.x[6],
+                    d[7],
+                    d[6],
+                    super::yaw::yaw_rate(&self.options, self.yaw, self.held.command.yaw),
+                )
             },
             thrust: self.x[8],
         }

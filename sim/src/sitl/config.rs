@@ -234,6 +234,11 @@ pub struct SitlConfig {
     /// optional `mode` (`position` / `offboard`) and optional `velocity`
     /// (stick, local NED m/s, flown in position mode).
     pub pilot: Vec<PilotAction>,
+    /// The autopilot's yaw loop (planar and spatial plants): the heading
+    /// follows SET_ATTITUDE_TARGET's yaw at most this fast \[deg/s\]
+    /// (0 = the heading never changes; 0–720), with a 0.1 s time constant,
+    /// while pitch and roll act in the body frame at the actual heading.
+    pub max_yaw_rate_deg_s: f64,
 }
 
 impl Default for SitlConfig {
@@ -261,6 +266,7 @@ impl Default for SitlConfig {
             autopilot: SitlAutopilot::Px4,
             engage: SitlEngage::Auto,
             pilot: Vec::new(),
+            max_yaw_rate_deg_s: 90.0,
         }
     }
 }
@@ -295,6 +301,7 @@ impl SitlConfig {
         range("sitl.k", si.k, 0.2, 5.0)?;
         range("sitl.hover_thrust", si.hover_thrust, 0.05, 0.95)?;
         range("sitl.tau_thrust", si.tau_thrust, 0.005, 1.0)?;
+        range("sitl.max_yaw_rate_deg_s", si.max_yaw_rate_deg_s, 0.0, 720.0)?;
         range("sitl.command_delay_ms", si.command_delay_ms, 0.0, 500.0)?;
         range("sitl.pose_clock_rate", si.pose_clock_rate, 0.1, 10.0)?;
         range("sitl.mass_factor", si.mass_factor, 0.5, 2.0)?;

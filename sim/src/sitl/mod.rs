@@ -439,6 +439,7 @@ pub fn plant_options(cfg: &SitlSettings) -> PlantOptions {
         thrust_tau: s.tau_thrust,
         command_delay: s.command_delay_ms / 1000.0,
         mass_factor: s.mass_factor,
+        max_yaw_rate: s.max_yaw_rate_deg_s.to_radians(),
         ..PlantOptions::default()
     }
 }

@@ -256,6 +256,24 @@ pub struct VehicleConfig {
     pub thrust_value: f64,
     /// Normalised thrust that hovers, for `normalized` mode (0.05–0.95).
     pub hover_thrust: f64,
+    /// `flown` (default): the yaw of setpoints and mission items is flown,
+    /// at most `max_yaw_rate_deg_s`, and the vehicle keeps its heading
+    /// otherwise; `fixed`: every command carries `yaw_deg` and a
+    /// setpoint's yaw is ignored (said once).
+    pub yaw_mode: YawMode,
+    /// Largest commanded yaw rate \[deg/s\] (5–360).
+    pub max_yaw_rate_deg_s: f64,
+}
+
+/// `vehicle.yaw_mode`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum YawMode {
+    /// The goals' yaw is flown (rate-limited); the heading is kept otherwise.
+    #[default]
+    Flown,
+    /// Every command carries `vehicle.yaw_deg`.
+    Fixed,
 }
 
 impl Default for VehicleConfig {
@@ -271,6 +289,8 @@ impl Default for VehicleConfig {
             thrust_mode: ThrustMode::Fixed,
             thrust_value: 0.5,
             hover_thrust: 0.5,
+            yaw_mode: YawMode::Flown,
+            max_yaw_rate_deg_s: 45.0,
         }
     }
 }
@@ -472,6 +492,13 @@ pub struct MissionConfig {
     /// speed rising smoothly to `speed`, no step in the reference
     /// acceleration — without it the first tick asks for the tilt limit.
     pub start_acceleration: f64,
+    /// Acceptance radius \[m\] of an uploaded waypoint whose param2 is 0,
+    /// and of a loiter (0.05–50).
+    pub acceptance_radius_m: f64,
+    /// MISSION_ITEM_INT's x and y in MAV_FRAME_LOCAL_NED are metres × this
+    /// (1e4, the MAVLink specification; 1e7 for MAVProxy's `wp` and
+    /// pymavlink's `mavwp`, which scale every frame like latitudes).
+    pub local_xy_scale: f64,
 }
 
 /// `mission.on_engage`.
@@ -501,6 +528,8 @@ impl Default for MissionConfig {
             on_engage: OnEngage::Resume,
             brake_fraction: 1.0,
             start_acceleration: 3.0,
+            acceptance_radius_m: 1.0,
+            local_xy_scale: 1e4,
         }
     }
 }

@@ -65,6 +65,12 @@ impl Config {
         v.range("vehicle.max_tilt_deg", ve.max_tilt_deg, 1.0, 60.0)?;
         v.range("vehicle.thrust_value", ve.thrust_value, 0.0, 1.0)?;
         v.range("vehicle.hover_thrust", ve.hover_thrust, 0.05, 0.95)?;
+        v.range(
+            "vehicle.max_yaw_rate_deg_s",
+            ve.max_yaw_rate_deg_s,
+            5.0,
+            360.0,
+        )?;
         if ve.model == ModelKind::Spatial && ve.thrust_mode == ThrustMode::Fixed {
             return Err(v.err(
                 "vehicle.thrust_mode",
@@ -160,6 +166,19 @@ impl Config {
         let m = &self.mission;
         v.range("mission.speed", m.speed, 0.1, 20.0)?;
         v.range("mission.brake_fraction", m.brake_fraction, 0.1, 1.0)?;
+        v.range(
+            "mission.acceptance_radius_m",
+            m.acceptance_radius_m,
+            0.05,
+            50.0,
+        )?;
+        if m.local_xy_scale != 1e4 && m.local_xy_scale != 1e7 {
+            return Err(v.err(
+                "mission.local_xy_scale",
+                &m.local_xy_scale.to_string(),
+                "1e4 (the MAVLink specification) or 1e7 (MAVProxy, pymavlink mavwp)",
+            ));
+        }
         if m.start_acceleration != 0.0 {
             v.range(
                 "mission.start_acceleration",

@@ -35,6 +35,9 @@ pub(super) struct ControlLoop {
     pub core: ControlCore,
     /// Events from the receive task.
     pub events: std::sync::mpsc::Receiver<Event>,
+    /// Missions the receive task's mission protocol accepted (`None`:
+    /// cleared), loaded before the tick's events.
+    pub missions: std::sync::mpsc::Receiver<Option<crate::mission::Mission>>,
     /// To the send task.
     pub out: mpsc::Sender<Outgoing>,
     /// Stop request.
@@ -191,6 +194,9 @@ impl ControlLoop {
                 scheduled: slot.due,
                 jitter_us: u32::try_from(lateness.as_micros()).unwrap_or(u32::MAX),
             };
+            while let Ok(mission) = self.missions.try_recv() {
+                self.core.load_mission(t, mission);
+            }
             let step = self.core.step(&time, batch.drain(..taken), &mut stopwatch);
             for tr in &step.transitions {
                 self.state.store(encode_state(tr.to), Ordering::Relaxed);

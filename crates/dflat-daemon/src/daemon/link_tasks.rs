@@ -17,8 +17,10 @@ use tokio::sync::mpsc;
 use tracing::{debug, error, info, warn};
 
 use super::{Outgoing, RxReport, Stop, TxReport, daemon_status, decode_state};
-use crate::commands::{CommandRequest, RequestedMessage, answer};
+use crate::commands::{CommandContext, CommandRequest, RequestedMessage, answer};
+use crate::mission::{ItemRules, Mission, MissionChange, MissionProtocol};
 use crate::signing::{PERSIST_INTERVAL, TimestampStore};
+use crate::supervisor::FlightState;
 use crate::tick::{Event, REFUSAL_TEXT_INTERVAL, event_from};
 
 /// What the receive task needs to know of the daemon.
@@ -34,8 +36,37 @@ pub(super) struct RxContext {
     pub autopilot_component: u8,
     /// The fixed yaw ψ⋆ the model flies \[rad\].
     pub yaw: f64,
+    /// `vehicle.yaw_mode = "fixed"`: a setpoint's yaw is not flown.
+    pub yaw_fixed: bool,
     /// The published flight state (for the answers to REQUEST_MESSAGE).
     pub state: Arc<AtomicU8>,
+    /// How uploaded mission items are read.
+    pub mission_rules: ItemRules,
+    /// Missions accepted by the protocol, to the control thread.
+    pub missions: std::sync::mpsc::Sender<Option<Mission>>,
+}
+
+/// Sends a mission-protocol reply; hands a changed mission to the control
+/// thread.
+fn send_reply(reply: crate::mission::Reply, ctx: &RxContext, out: &mpsc::Sender<Outgoing>) {
+    for m in reply.messages {
+        let _ = out.try_send(Outgoing::plain(m));
+    }
+    for text in &reply.texts {
+        info!(text, "mission protocol");
+        send_text(out, MavSeverity::MAV_SEVERITY_WARNING, text);
+    }
+    match reply.change {
+        Some(MissionChange::Uploaded(m)) => {
+            info!(items = m.len(), "mission uploaded");
+            let _ = ctx.missions.send(Some(m));
+        }
+        Some(MissionChange::Cleared) => {
+            info!("mission cleared");
+            let _ = ctx.missions.send(None);
+        }
+        None => {}
+    }
 }
 
 /// The STATUSTEXT that says why a trusted SET_POSITION_TARGET_LOCAL_NED was
@@ -84,11 +115,19 @@ pub(super) async fn receive_task(
     let mut last_refusal: Option<Instant> = None;
     let mut told_addressing = false;
     let mut told_yaw = false;
+    let mut missions = MissionProtocol::new(ctx.own, ctx.mission_rules);
+    let mut mission_timer = tokio::time::interval(Duration::from_millis(100));
+    mission_timer.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     loop {
         let received = tokio::select! {
             biased;
             _ = stop_rx.wait_for(|s| *s) => break,
             r = transport.recv() => r,
+            _ = mission_timer.tick() => {
+                let now = ctx.epoch.elapsed().as_secs_f64();
+                send_reply(missions.poll(now), &ctx, &out);
+                continue;
+            }
         };
         let frame = match received {
             Ok(RecvEvent::Frame(frame)) => frame,
@@ -144,6 +183,7 @@ pub(super) async fn receive_task(
             RxOutcome::Accepted(inbound) => {
                 if let Inbound::PositionSetpoint(s) = inbound
                     && let Some(yaw) = s.yaw
+                    && ctx.yaw_fixed
                     && !told_yaw
                     && (dflat_link::math::wrap_pi(yaw - ctx.yaw)).abs() > 1f64.to_radians()
                 {
@@ -159,7 +199,15 @@ pub(super) async fn receive_task(
                 }
                 if let Some(req) = CommandRequest::from_message(&frame.message, sender.0, sender.1)
                 {
-                    answer_command(&req, &ctx, &out);
+                    let has_mission = missions.mission().has_navigation();
+                    if let Some(action) = answer_command(&req, &ctx, has_mission, &out)
+                        && events.try_send(Event::Mission { arrival, action }).is_err()
+                    {
+                        report.events_dropped += 1;
+                    }
+                }
+                if matches!(inbound, Inbound::Other(_)) {
+                    send_reply(missions.handle(&frame.message, sender, arrival), &ctx, &out);
                 }
                 event_from(inbound, ctx.pose_source, arrival)
             }
@@ -208,17 +256,27 @@ pub(super) async fn receive_task(
 }
 
 /// COMMAND_ACK (and what REQUEST_MESSAGE asked for) for a command the
-/// daemon answers ([`crate::commands`]).
-fn answer_command(req: &CommandRequest, ctx: &RxContext, out: &mpsc::Sender<Outgoing>) {
-    let Some(reply) = answer(req, ctx.own) else {
-        return;
+/// daemon answers ([`crate::commands`]); the mission command accepted, for
+/// the control thread.
+fn answer_command(
+    req: &CommandRequest,
+    ctx: &RxContext,
+    has_mission: bool,
+    out: &mpsc::Sender<Outgoing>,
+) -> Option<crate::tick::MissionAction> {
+    let state = ctx.state.load(Ordering::Relaxed);
+    let flight = decode_state(state);
+    let context = CommandContext {
+        has_mission,
+        streaming: flight.is_some_and(FlightState::streams),
+        engaged: flight.is_some_and(FlightState::engaged),
     };
+    let reply = answer(req, ctx.own, &context)?;
     debug!(command = ?req.command, "command answered");
     let _ = out.try_send(Outgoing::plain(reply.ack));
     if let Some(reason) = &reply.reason {
         send_text(out, MavSeverity::MAV_SEVERITY_INFO, reason);
     }
-    let state = ctx.state.load(Ordering::Relaxed);
     match reply.then {
         Some(RequestedMessage::Heartbeat) => {
             let _ = out.try_send(Outgoing::plain(heartbeat_onboard(daemon_status(state))));
@@ -233,6 +291,7 @@ fn answer_command(req: &CommandRequest, ctx: &RxContext, out: &mpsc::Sender<Outg
         }
         None => {}
     }
+    reply.action
 }
 
 /// Sends what the other parts queue: header and sequence, signing (the

@@ -505,6 +505,7 @@ pub async fn spawn_with_controller(
 
     let (event_tx, event_rx) = std::sync::mpsc::sync_channel::<Event>(EVENT_QUEUE);
     let (out_tx, out_rx) = mpsc::channel::<Outgoing>(OUTBOUND_QUEUE);
+    let (mission_tx, mission_rx) = std::sync::mpsc::channel::<Option<crate::mission::Mission>>();
 
     let own = (config.link.system_id, config.link.component_id);
     let mut link_rx = LinkRx::new(source_filter(&config.link));
@@ -515,7 +516,14 @@ pub async fn spawn_with_controller(
         own,
         autopilot_component: config.link.autopilot_component,
         yaw: config.vehicle.yaw_deg.to_radians(),
+        yaw_fixed: config.vehicle.yaw_mode == crate::config::YawMode::Fixed,
         state: state.clone(),
+        mission_rules: crate::mission::ItemRules {
+            int_scale: config.mission.local_xy_scale,
+            geofence: config.mission.geofence,
+            acceptance_radius: config.mission.acceptance_radius_m,
+        },
+        missions: mission_tx,
     };
     let rx = tokio::spawn(link_tasks::receive_task(
         transport.clone(),
@@ -537,6 +545,7 @@ pub async fn spawn_with_controller(
     let loop_ctx = control_loop::ControlLoop {
         core: ControlCore::new(&config, controller, mapping),
         events: event_rx,
+        missions: mission_rx,
         out: out_tx,
         stop: stop.clone(),
         state: state.clone(),

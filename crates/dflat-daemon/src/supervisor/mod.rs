@@ -126,6 +126,9 @@ pub enum Goal {
     Setpoint([f64; 3]),
     /// Fly the configured path, then hold its end.
     Path,
+    /// Fly the mission uploaded over MAVLink (the control core builds its
+    /// reference section by section: `crate::mission::MissionRunner`).
+    Mission,
     /// Brake from `from` (local NED \[m\]) moving at `velocity` (local NED
     /// [m/s]) to a stop at the braking deceleration, then hold there
     /// (standby and engagement; `dflat_control::reference::Reference::braking`).
@@ -168,6 +171,14 @@ pub enum Cause {
     Resume,
     /// The controller could not fly: level hover ran out.
     ControlFailed,
+    /// MAV_CMD_MISSION_START: the uploaded mission is flown.
+    MissionStarted,
+    /// The mission's last item was reached.
+    MissionFinished,
+    /// MAV_CMD_DO_PAUSE_CONTINUE 0: stopping and holding.
+    Paused,
+    /// MAV_CMD_DO_PAUSE_CONTINUE 1: the goal before the pause goes on.
+    Continued,
 }
 
 impl Cause {
@@ -186,6 +197,10 @@ impl Cause {
             Cause::PilotControl => "pilot has control",
             Cause::Resume => "braked, resuming",
             Cause::ControlFailed => "control failed, stream off",
+            Cause::MissionStarted => "mission start",
+            Cause::MissionFinished => "mission done",
+            Cause::Paused => "paused",
+            Cause::Continued => "continue",
         }
     }
 }
@@ -338,6 +353,8 @@ pub struct Supervisor {
     /// Engagements and disengagements so far.
     engagements: u64,
     disengagements: u64,
+    /// Paused (MAV_CMD_DO_PAUSE_CONTINUE): `pending` goes on at a continue.
+    paused: bool,
 }
 
 impl Supervisor {
@@ -362,6 +379,7 @@ impl Supervisor {
             path_resumed: false,
             engagements: 0,
             disengagements: 0,
+            paused: false,
         }
     }
 
@@ -623,7 +641,11 @@ impl Supervisor {
             (FlightState::Holding | FlightState::Tracking, _) if !engaged => {
                 // Pilot override: the mission goal is kept for the hand-back.
                 self.pending = match self.goal {
-                    g @ (Goal::Path | Goal::Setpoint(_)) if self.cfg.resume_on_engage => g,
+                    g @ (Goal::Path | Goal::Setpoint(_) | Goal::Mission)
+                        if self.cfg.resume_on_engage =>
+                    {
+                        g
+                    }
                     _ if self.braking.is_some() && self.cfg.resume_on_engage => self.pending,
                     _ => Goal::None,
                 };
@@ -635,7 +657,7 @@ impl Supervisor {
             (FlightState::Holding, _) if self.braked(t) => {
                 self.braking = None;
                 match self.pending {
-                    g @ (Goal::Path | Goal::Setpoint(_)) => {
+                    g @ (Goal::Path | Goal::Setpoint(_) | Goal::Mission) => {
                         self.set_goal(g);
                         let cause =
                             if g == Goal::Path && self.cfg.start_path && self.engagements == 1 {
@@ -676,6 +698,77 @@ impl Supervisor {
         self.path_resumed && self.goal == Goal::Path
     }
 
+    /// MAV_CMD_MISSION_START at `t`: fly the mission (from its start). In
+    /// standby it is flown after the next engagement, once braked. Refused
+    /// when not streaming.
+    pub fn on_mission_start(&mut self, t: f64) -> Result<Option<Transition>, Refusal> {
+        if !self.state.streams() {
+            return Err(Refusal::NotInControl(self.state));
+        }
+        self.paused = false;
+        self.last_setpoint = None;
+        self.pending = Goal::Mission;
+        if self.state == FlightState::Standby {
+            return Ok(None);
+        }
+        self.braking = None;
+        // A restart of the mission being flown is a new goal too.
+        self.goal = Goal::None;
+        self.set_goal(Goal::Mission);
+        Ok(Some(self.enter(
+            FlightState::Tracking,
+            Cause::MissionStarted,
+            t,
+        )))
+    }
+
+    /// The mission's last item was reached (and held) at `t`: hold `end`.
+    pub fn on_mission_finished(&mut self, t: f64, end: [f64; 3]) -> Option<Transition> {
+        if self.goal != Goal::Mission || self.state != FlightState::Tracking {
+            return None;
+        }
+        self.set_goal(Goal::Hold(end));
+        self.pending = Goal::None;
+        Some(self.enter(FlightState::Holding, Cause::MissionFinished, t))
+    }
+
+    /// MAV_CMD_DO_PAUSE_CONTINUE 0 at `t`: while tracking a path, a
+    /// setpoint or a mission, stop from the vehicle's motion (the braking
+    /// reference) and hold; the goal is kept for [`Supervisor::resume`].
+    /// `None` when there is nothing to pause (holding already).
+    pub fn pause(&mut self, t: f64) -> Option<Transition> {
+        if self.state != FlightState::Tracking {
+            return None;
+        }
+        let goal = self.goal;
+        let stop = self.stop_goal()?;
+        self.set_goal(stop);
+        self.pending = goal;
+        self.paused = true;
+        Some(self.enter(FlightState::Holding, Cause::Paused, t))
+    }
+
+    /// MAV_CMD_DO_PAUSE_CONTINUE 1 at `t`: the paused goal goes on (a path
+    /// from its closest point). `None` when not paused.
+    pub fn resume(&mut self, t: f64) -> Option<Transition> {
+        if !(self.paused && self.state == FlightState::Holding) {
+            return None;
+        }
+        self.paused = false;
+        let goal = self.pending;
+        if !matches!(goal, Goal::Path | Goal::Setpoint(_) | Goal::Mission) {
+            return None;
+        }
+        self.set_goal(goal);
+        self.path_resumed = goal == Goal::Path;
+        Some(self.enter(FlightState::Tracking, Cause::Continued, t))
+    }
+
+    /// True while paused (MAV_CMD_DO_PAUSE_CONTINUE 0).
+    pub fn paused(&self) -> bool {
+        self.paused
+    }
+
     fn set_goal(&mut self, goal: Goal) {
         if goal != self.goal {
             self.path_resumed = false;
@@ -694,6 +787,9 @@ impl Supervisor {
         self.transitions += 1;
         if to == FlightState::Failsafe {
             self.last_setpoint = None;
+        }
+        if !matches!(cause, Cause::Paused) {
+            self.paused = false;
         }
         Transition {
             from,

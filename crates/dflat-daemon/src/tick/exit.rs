@@ -25,12 +25,15 @@ impl ControlCore {
             .mapping
             .normalized(command.thrust)
             .map_err(|e| e.to_string())?;
+        // The controller's tilt is a world-frame one (its model flies the
+        // fixed heading ψ⋆): the same thrust axis at the commanded heading.
+        let (pitch, roll, yaw) = self.tilt_to_command(command.pitch, command.roll);
         self.guard
             .check(
                 AttitudeCommand {
-                    roll: command.roll,
-                    pitch: command.pitch,
-                    yaw: command.yaw,
+                    roll,
+                    pitch,
+                    yaw,
                     thrust,
                 },
                 &mut self.counts.guards,

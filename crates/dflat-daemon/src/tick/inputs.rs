@@ -59,6 +59,15 @@ pub enum Event {
         arrival: f64,
         /// Position, local NED \[m\].
         position: [f64; 3],
+        /// Yaw \[rad\], when the setpoint sets one.
+        yaw: Option<f64>,
+    },
+    /// A mission command the receive task accepted (COMMAND_ACK sent).
+    Mission {
+        /// Arrival \[s\].
+        arrival: f64,
+        /// What to do.
+        action: super::MissionAction,
     },
 }
 
@@ -70,7 +79,8 @@ impl Event {
             | Event::Attitude { arrival, .. }
             | Event::Heartbeat { arrival, .. }
             | Event::Param { arrival, .. }
-            | Event::Setpoint { arrival, .. } => *arrival,
+            | Event::Setpoint { arrival, .. }
+            | Event::Mission { arrival, .. } => *arrival,
         }
     }
 
@@ -82,7 +92,8 @@ impl Event {
             | Event::Attitude { arrival, .. }
             | Event::Heartbeat { arrival, .. }
             | Event::Param { arrival, .. }
-            | Event::Setpoint { arrival, .. } => *arrival += by,
+            | Event::Setpoint { arrival, .. }
+            | Event::Mission { arrival, .. } => *arrival += by,
         }
         self
     }
@@ -150,6 +161,7 @@ pub fn event_from(inbound: &Inbound, pose_source: PoseSource, arrival: f64) -> O
         Inbound::PositionSetpoint(s) => Some(Event::Setpoint {
             arrival,
             position: s.position,
+            yaw: s.yaw,
         }),
         _ => None,
     }

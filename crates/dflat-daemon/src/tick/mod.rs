@@ -43,8 +43,10 @@ use crate::supervisor::{Cause, FlightState, Goal, SetpointOutcome, Supervisor, T
 
 mod exit;
 mod inputs;
+mod mission;
 mod standby;
 use exit::update_caught;
+pub use mission::MissionAction;
 
 pub use inputs::{
     Event, ParamName, brake_acceleration, event_from, pose_source, source_filter, supervisor_config,
@@ -190,6 +192,18 @@ pub struct ControlCore {
     /// Outputs produced between steps (by [`ControlCore::apply`]).
     pending_texts: Vec<MavMessage>,
     pending_transitions: Vec<Transition>,
+    /// The mission uploaded over MAVLink, if any.
+    mission: Option<crate::mission::Mission>,
+    /// The mission being flown (started), if any.
+    runner: Option<crate::mission::MissionRunner>,
+    /// The last MISSION_CURRENT sent: when, and (seq, total, state).
+    mission_current_sent: Option<(f64, (u16, u16, dflat_link::dialect::MissionState))>,
+    /// The yaw of the setpoint being flown \[rad\], if it set one.
+    setpoint_yaw: Option<f64>,
+    /// The commanded heading, rate-limited.
+    yaw_command: crate::yaw::YawCommand,
+    /// The heading this tick's command carries \[rad\].
+    commanded_yaw: f64,
 }
 
 impl std::fmt::Debug for ControlCore {
@@ -262,6 +276,14 @@ impl ControlCore {
             counts: CoreCounts::default(),
             pending_texts: Vec::new(),
             pending_transitions: Vec::new(),
+            mission: None,
+            runner: None,
+            mission_current_sent: None,
+            setpoint_yaw: None,
+            yaw_command: crate::yaw::YawCommand::new(
+                config.vehicle.max_yaw_rate_deg_s.to_radians(),
+            ),
+            commanded_yaw: config.vehicle.yaw_deg.to_radians(),
         }
     }
 
@@ -321,6 +343,7 @@ impl ControlCore {
             self.announce(tr);
         }
         self.refresh_reference();
+        self.commanded_yaw = self.heading(t);
 
         // 3. Control.
         let mut row = CsvRow {
@@ -377,6 +400,7 @@ impl ControlCore {
             command = sent;
             solve_us = Some(us);
         }
+        self.mission_tick(t);
         row.state = self.supervisor.state();
         StepOutput {
             command,
@@ -602,25 +626,32 @@ impl ControlCore {
             } => {
                 self.attitude_yaw = Some(yaw);
                 if roll.is_finite() && pitch.is_finite() {
-                    self.attitude = Some([pitch, roll]);
+                    // As the window records inputs: a world-frame tilt.
+                    self.attitude = Some(self.tilt_from_measured(pitch, roll, yaw));
                 }
             }
+            Event::Mission { arrival, action } => self.apply_mission(arrival, action),
             Event::Heartbeat { arrival, mode } => {
                 self.supervisor.on_heartbeat(arrival);
                 self.apply_mode(mode, arrival);
             }
             Event::Param { name, value, .. } => self.apply_param(name.as_str(), value),
-            Event::Setpoint { arrival, position } => {
+            Event::Setpoint {
+                arrival,
+                position,
+                yaw,
+            } => {
                 let t = arrival;
                 match self.supervisor.on_setpoint(t, position) {
                     SetpointOutcome::Accepted { goal, transition } => {
                         debug!(?goal, "setpoint accepted");
+                        self.setpoint_yaw = yaw;
                         if let Some(tr) = transition {
                             self.announce(tr);
                         }
                         self.refresh_reference();
                     }
-                    SetpointOutcome::Unchanged => {}
+                    SetpointOutcome::Unchanged => self.setpoint_yaw = yaw,
                     SetpointOutcome::Refused(refusal) => {
                         let due = self
                             .last_refusal_text
@@ -720,6 +751,17 @@ impl ControlCore {
             return;
         }
         self.reference_generation = generation;
+        if self.supervisor.goal() == Goal::Mission {
+            self.reference = match self.mission_reference() {
+                Some(Ok(r)) => Some(r),
+                Some(Err(e)) => {
+                    error!(error = %e, "cannot build the mission's reference; keeping the previous one");
+                    self.reference.take()
+                }
+                None => self.reference.take(),
+            };
+            return;
+        }
         self.reference = match reference_for(&self.config, self.supervisor.goal()) {
             Some(Ok(mut r)) => {
                 if self.supervisor.path_resumed()
@@ -749,5 +791,7 @@ impl ControlCore {
     }
 }
 
+#[cfg(test)]
+mod heading_tests;
 #[cfg(test)]
 mod tests;
