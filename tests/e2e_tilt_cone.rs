@@ -16,6 +16,8 @@ async fn the_daemon_flies_with_the_tilt_cone_in_the_plan() {
     let (mut cfg, mut plant) = demo_config(&DemoOptions::default()).unwrap();
     cfg.logging.dir = String::new();
     cfg.controller.plan_tilt_bound = PlanTiltBound::Cone;
+    // The tilt-rate bound is in the box solvers only.
+    cfg.controller.max_tilt_rate_deg_s = 0.0;
     cfg.controller.constraint_tilt_deg = 12.0;
     plant.sitl.engage = SitlEngage::Auto;
     plant.sitl.pilot.clear();

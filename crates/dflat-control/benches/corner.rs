@@ -12,6 +12,10 @@
 //! the budgets are stated in (`docs/performance.md`), and the banded cone
 //! solver's work, warm and cold (Newton steps, factorisations, fallbacks).
 //!
+//! The tilt-rate bound (`max_tilt_rate`, [`RATE_DEG_S`]) is timed with the
+//! box (the daemon's set-up: box + tilt rate), alone, and with clarabel
+//! solving the same box + tilt-rate QP.
+//!
 //! Run: `cargo bench -p dflat-control --bench corner` (a horizon list as
 //! argument, e.g. `-- 200`, limits the run).
 
@@ -30,6 +34,9 @@ const DT: f64 = 0.02;
 const TICKS: usize = 400;
 const SPEED: f64 = 8.0;
 const TILT_DEG: f64 = 20.0;
+/// The tilt-rate bound of the tilt-rate configurations \[deg/s\] (the
+/// daemon's default).
+const RATE_DEG_S: f64 = 150.0;
 
 fn plant() -> PlanarModel {
     PlanarModel::new(PlanarParams {
@@ -52,15 +59,21 @@ enum Config {
     ConeCold,
     ConeClarabel,
     BoxBanded,
+    BoxRate,
+    RateAlone,
+    BoxRateClarabel,
 }
 
 impl Config {
-    const ALL: [Self; 5] = [
+    const ALL: [Self; 8] = [
         Self::Fast,
         Self::ConeWarm,
         Self::ConeCold,
         Self::ConeClarabel,
         Self::BoxBanded,
+        Self::BoxRate,
+        Self::RateAlone,
+        Self::BoxRateClarabel,
     ];
     fn name(self) -> &'static str {
         match self {
@@ -69,6 +82,9 @@ impl Config {
             Self::ConeCold => "cone, banded, cold (ALM, then IP)",
             Self::ConeClarabel => "cone, clarabel SOCP",
             Self::BoxBanded => "box, banded IP",
+            Self::BoxRate => "box + tilt rate, banded IP",
+            Self::RateAlone => "tilt rate alone, banded IP",
+            Self::BoxRateClarabel => "box + tilt rate, clarabel",
         }
     }
     fn settings(self, n: usize) -> DfMpcSettings {
@@ -76,18 +92,29 @@ impl Config {
             max_tilt: Some(TILT_DEG.to_radians()),
             ..Default::default()
         };
+        let rate = Some(RATE_DEG_S.to_radians());
         DfMpcSettings {
             horizon: n,
             constraints: match self {
                 Self::Fast => OutputConstraints::default(),
+                Self::BoxRate | Self::BoxRateClarabel => OutputConstraints {
+                    max_tilt_rate: rate,
+                    ..constraints
+                },
+                Self::RateAlone => OutputConstraints {
+                    max_tilt_rate: rate,
+                    ..Default::default()
+                },
                 _ => constraints,
             },
             qp_solver: match self {
-                Self::ConeClarabel => QpSolver::Clarabel,
+                Self::ConeClarabel | Self::BoxRateClarabel => QpSolver::Clarabel,
                 _ => QpSolver::Banded,
             },
             plan_tilt_bound: match self {
-                Self::BoxBanded => PlanTiltBound::Box,
+                Self::BoxBanded | Self::BoxRate | Self::RateAlone | Self::BoxRateClarabel => {
+                    PlanTiltBound::Box
+                }
                 _ => PlanTiltBound::Cone,
             },
             warm_start: !matches!(self, Self::ConeCold),
@@ -251,6 +278,16 @@ fn main() {
             clarabel[4] / warm[4],
             warm[3] / fast[0],
             warm[4] / fast[0],
+        );
+        let (rate, rate_clarabel) = (stats[5], stats[7]);
+        println!(
+            "tilt rate (constrained ticks): box + rate banded median {} µs, p99 {} µs; \
+             clarabel / banded: median {:.1}×, p99 {:.1}×; banded / fast tick median: {:.1}×",
+            us(rate[3]),
+            us(rate[4]),
+            rate_clarabel[3] / rate[3],
+            rate_clarabel[4] / rate[4],
+            rate[3] / fast[0],
         );
         for line in cone_work {
             println!("{line}");

@@ -12,6 +12,10 @@
 //! * `df_mpc::tilt_cone_tick` — the 15° bound as the tilt cone (both axes
 //!   in one banded interior point); `tilt_cone_tick_clarabel` the same SOCP
 //!   in clarabel. Percentiles over a corner manoeuvre: `benches/corner.rs`.
+//! * `df_mpc::tilt_rate_tick` — the 15° box plus a 150°/s tilt-rate bound
+//!   (the first tick of a 10 m step: the rate rows bind from the first
+//!   command), banded interior point; `tilt_rate_tick_clarabel` the same
+//!   solved by clarabel.
 //! * `df_mpc::qp_banded` / `df_mpc::qp_clarabel` — the same unconstrained
 //!   DF QP (both axes) solved by the banded solver and handed whole to
 //!   clarabel: the generic baseline (`qp_clarabel` with the KKT tuning
@@ -145,6 +149,25 @@ mod df_mpc {
             tilt_bounded(n, QpSolver::Clarabel, PlanTiltBound::Cone),
             true,
         );
+    }
+
+    fn tilt_rate(n: usize, qp_solver: QpSolver) -> DfMpcSettings {
+        let mut s = tilt_constrained(n, qp_solver);
+        s.constraints.max_tilt_rate = Some(150f64.to_radians());
+        s
+    }
+
+    /// DF-MPC tick with the 15° box and a 150°/s tilt-rate bound, both
+    /// binding (banded interior point).
+    #[divan::bench(args = HORIZONS, sample_count = 20, sample_size = 5)]
+    fn tilt_rate_tick(bencher: Bencher, n: usize) {
+        bench_tick(bencher, tilt_rate(n, QpSolver::Banded), true);
+    }
+
+    /// As `tilt_rate_tick`, solved by clarabel.
+    #[divan::bench(args = HORIZONS, sample_count = 20, sample_size = 5)]
+    fn tilt_rate_tick_clarabel(bencher: Bencher, n: usize) {
+        bench_tick(bencher, tilt_rate(n, QpSolver::Clarabel), true);
     }
 
     /// As `tilt_constrained_tick`, solved by clarabel.

@@ -81,6 +81,7 @@ fn problem(c: &Case) -> (Smoothness, AxisBounds) {
         AxisBounds {
             acceleration: Some([-a, a]),
             speed: None,
+            tilt_rate: None,
         },
     )
 }

@@ -218,6 +218,14 @@ impl ControlModel {
         )
     }
 
+    /// The attitude gain k̃ [-]: the attitude settles to k̃·θ_cmd.
+    pub fn attitude_gain(&self) -> f64 {
+        match self {
+            ControlModel::Planar(m) => m.params().k,
+            ControlModel::Spatial(m) => m.params().k,
+        }
+    }
+
     /// The inverse of [`ControlModel::input_state_step`]'s attitude part:
     /// the commanded `(θ_cmd, φ_cmd)` \[rad\] that takes the measured
     /// attitude `before = (θ, φ)` to `after` in one step δt,

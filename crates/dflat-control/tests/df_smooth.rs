@@ -219,6 +219,7 @@ fn smooth_clarabel_agrees_with_fast_path() {
     let bounds = AxisBounds {
         acceleration: Some([-2.0, 2.0]),
         speed: None,
+        tilt_rate: None,
     };
     let mut bounded =
         ClarabelSolver::with_smoothness(n, 1.0, 0.08, DT, bounds, f64::INFINITY, sm).unwrap();
@@ -229,6 +230,7 @@ fn smooth_clarabel_agrees_with_fast_path() {
     let relaxed = AxisBounds {
         acceleration: Some([-2.0001, 2.0001]),
         speed: None,
+        tilt_rate: None,
     };
     assert!(!relaxed.violated_by(&b, DT));
 }

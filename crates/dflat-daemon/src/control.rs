@@ -89,6 +89,8 @@ pub fn build_controller(cfg: &Config) -> Result<Box<dyn Controller>, ControlErro
                         .then(|| c.constraint_tilt_deg.to_radians()),
                     max_speed: (c.constraint_speed > 0.0).then_some(c.constraint_speed),
                     vertical_acceleration: None,
+                    max_tilt_rate: (c.max_tilt_rate_deg_s > 0.0)
+                        .then(|| c.max_tilt_rate_deg_s.to_radians()),
                 },
                 qp_solver: c.qp_solver,
                 plan_tilt_bound: c.plan_tilt_bound,

@@ -492,7 +492,8 @@ impl Controller for DfMpc {
             previous_input,
         } = self.fixed_outputs(measurement, &d)?;
         let y0 = fixed[0];
-        let sent_acceleration = if self.smooth {
+        let sent_acceleration = if self.smooth || self.settings.constraints.max_tilt_rate.is_some()
+        {
             Some(commanded_acceleration(&self.model, &previous_input)? + d.acceleration)
         } else {
             None

@@ -82,12 +82,22 @@ pub struct OutputConstraints {
     /// [m/s²] in the model frame (NED: positive down); spatial model only.
     /// Default none.
     pub vertical_acceleration: Option<[f64; 2]>,
+    /// Max tilt rate of the command \[rad/s\]: the plan's pitch and roll
+    /// commands change by at most `max_tilt_rate·δt` per tick, the first
+    /// against the command sent at the previous tick
+    /// ([`TiltRate`](crate::optimise::TiltRate): exact in the per-axis
+    /// tilt for the first command, linearised about hover after it).
+    /// Box tilt bound only ([`PlanTiltBound::Box`]). Default none.
+    pub max_tilt_rate: Option<f64>,
 }
 
 impl OutputConstraints {
     /// True when at least one constraint is configured.
     pub fn any(&self) -> bool {
-        self.max_tilt.is_some() || self.max_speed.is_some() || self.vertical_acceleration.is_some()
+        self.max_tilt.is_some()
+            || self.max_speed.is_some()
+            || self.vertical_acceleration.is_some()
+            || self.max_tilt_rate.is_some()
     }
 }
 
@@ -209,6 +219,21 @@ impl DfMpcSettings {
             return Err(invalid(
                 "constraints.vertical_acceleration",
                 "[a_min, a_max] finite with a_min < 0 < a_max (m/s²)",
+            ));
+        }
+        if c.max_tilt_rate.is_some_and(|w| !(w.is_finite() && w > 0.0)) {
+            return Err(invalid(
+                "constraints.max_tilt_rate",
+                "finite and > 0 (rad/s)",
+            ));
+        }
+        if c.max_tilt_rate.is_some()
+            && c.max_tilt.is_some()
+            && self.plan_tilt_bound == PlanTiltBound::Cone
+        {
+            return Err(invalid(
+                "constraints.max_tilt_rate",
+                "not available with plan_tilt_bound = cone yet (box only)",
             ));
         }
         if self.solver_time_limit.is_nan() || self.solver_time_limit <= 0.0 {

@@ -9,7 +9,7 @@ use crate::model::ControlModel;
 use crate::optimise::{
     AxisBounds, AxisProblem, AxisWeights, BandedConeSolver, BandedInteriorPointSolver,
     ClarabelConeSolver, ClarabelSolver, ConeBounds, ConeMethod, FastBandedSolver, KktTuning,
-    Smoothness,
+    Smoothness, TiltRate,
 };
 use crate::window::input_lags;
 
@@ -148,9 +148,16 @@ pub(super) fn build_pipelines(
         } else {
             c.vertical_acceleration
         };
+        let tilt_rate = c.max_tilt_rate.filter(|_| axis < 2).map(|w| TiltRate {
+            step: w * dt,
+            kappa: lag / dt,
+            gain: model.attitude_gain(),
+            gravity: model.gravity(),
+        });
         let bounds = AxisBounds {
             acceleration,
             speed: c.max_speed,
+            tilt_rate,
         };
         let bounded = if bounds.is_empty() {
             None
@@ -281,7 +288,7 @@ impl DfMpc {
         let dt = self.model.dt();
         for (axis, p) in self.axes.iter_mut().enumerate() {
             let Some(qp) = &mut p.bounded else { continue };
-            if !qp.clarabel.bounds().violated_by(&p.plan, dt) {
+            if !p.bounds.violated(&p.plan, sent(axis), dt) {
                 continue;
             }
             // The banded interior point first; clarabel when it does not

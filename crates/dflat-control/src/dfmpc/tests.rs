@@ -112,6 +112,7 @@ fn constrained_plan_respects_bounds() {
     let bounds = AxisBounds {
         acceleration: Some([-a_max, a_max]),
         speed: Some(v_max),
+        tilt_rate: None,
     };
     let mut fast = FastBandedSolver::new(100, 1.0, 0.08, DT).unwrap();
     let mut cs = ClarabelSolver::new(100, 1.0, 0.08, DT, bounds, f64::INFINITY).unwrap();
@@ -123,7 +124,8 @@ fn constrained_plan_respects_bounds() {
     assert!(
         !AxisBounds {
             acceleration: Some([-a_max * 1.0001, a_max * 1.0001]),
-            speed: Some(v_max * 1.0001)
+            speed: Some(v_max * 1.0001),
+            tilt_rate: None,
         }
         .violated_by(&plan, DT)
     );
@@ -203,7 +205,7 @@ proptest::proptest! {
         let fixed = [y0, y0 + v0 * DT, y0 + 2.0 * v0 * DT + a0 * DT * DT];
         let reference: Vec<f64> =
             (0..=horizon).map(|j| target + slope * DT * j as f64).collect();
-        let bounds = AxisBounds { acceleration: Some([-a_max, a_max]), speed };
+        let bounds = AxisBounds { acceleration: Some([-a_max, a_max]), speed, tilt_rate: None };
         let (smoothness, sent) = match smooth {
             Some((weight, kappa, delta)) => (
                 Smoothness { weight, kappa, gravity: 9.81 },
@@ -288,6 +290,7 @@ fn faster_than_the_speed_bound_brakes_in_a_funnel() {
     let bounds = AxisBounds {
         acceleration: Some([-a_max, a_max]),
         speed: Some(v_max),
+        tilt_rate: None,
     };
     let n = 300; // 6 s: long enough to get down to 1 m/s
     let mut cs = ClarabelSolver::new(n, 1.0, 0.08, DT, bounds, f64::INFINITY).unwrap();
@@ -316,6 +319,7 @@ fn solver_failure_is_an_error() {
     let bounds = AxisBounds {
         acceleration: Some([-1.0, 1.0]),
         speed: Some(1.0),
+        tilt_rate: None,
     };
     let mut cs = ClarabelSolver::new(50, 1.0, 0.08, DT, bounds, 1e-12).unwrap();
     let mut plan = vec![0.0; 51];
@@ -451,6 +455,7 @@ fn banded_failure_falls_back_to_clarabel_and_says_so() {
     let bounds = AxisBounds {
         acceleration: Some([-1.0, 1.0]),
         speed: None,
+        tilt_rate: None,
     };
     for p in &mut broken.axes {
         let qp = p.bounded.as_mut().expect("the axis has bounds");

@@ -1,5 +1,9 @@
 //! Inequality bounds on one axis's planned outputs: acceleration (the tilt
-//! bound, or the vertical acceleration), speed, and the braking funnel.
+//! bound, or the vertical acceleration), speed, the braking funnel, and the
+//! tilt-rate bound on the command's change per tick ([`TiltRate`], its
+//! maths in [`super::tilt_rate`]).
+
+pub use super::tilt_rate::TiltRate;
 
 /// Inequality bounds on one axis's planned outputs.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -12,6 +16,12 @@ pub struct AxisBounds {
     /// `max(v, |v_1| − 0.9·a·(j − 1)·δt)`, v_1 the window's speed, a the
     /// braking bound (the plan slows at 90 % of it).
     pub speed: Option<f64>,
+    /// The tilt-rate bound on this axis's command (horizontal axes): rows
+    /// on the change of the command per tick, stage 0 against the command
+    /// sent at the previous tick ([`TiltRate`]). With it, the acceleration
+    /// rows widen where the rate bound cannot reach them in time (a
+    /// funnel, [`TiltRate`]), so the problem stays feasible.
+    pub tilt_rate: Option<TiltRate>,
 }
 
 impl AxisBounds {
@@ -32,22 +42,36 @@ impl AxisBounds {
     /// The bounds `(lo, hi)` of each constraint row for this window, in row
     /// order — the acceleration rows `Δ²p_j/δt²`, j = 1..N−2, then the speed
     /// rows `Δp_j/δt`, j = 2..N−1, on the deviation p from the baseline
-    /// (so the baseline's own acceleration and speed are subtracted).
+    /// (so the baseline's own acceleration and speed are subtracted), then
+    /// the tilt-rate rows ([`TiltRate::rows`]; `sent` the acceleration the
+    /// command sent at k−1 asks for [m/s²]). With a tilt-rate bound the
+    /// acceleration rows follow its funnel ([`TiltRate::funnel`]).
     pub(crate) fn row_bounds(
         &self,
         horizon: usize,
         fixed: &[f64; 3],
+        sent: Option<f64>,
         dt: f64,
         mut out: impl FnMut(f64, f64),
     ) {
         let d2 = fixed[2] - 2.0 * fixed[1] + fixed[0];
+        let a_base = d2 / (dt * dt);
         if let Some([lo, hi]) = self.acceleration {
-            let a_base = d2 / (dt * dt);
-            for _ in 1..=horizon - 2 {
-                out(lo - a_base, hi - a_base);
+            match &self.tilt_rate {
+                Some(rate) => rate.funnel(horizon, fixed, sent, [lo, hi], dt, |l, h| {
+                    out(l - a_base, h - a_base)
+                }),
+                None => {
+                    for _ in 1..=horizon - 2 {
+                        out(lo - a_base, hi - a_base);
+                    }
+                }
             }
         }
-        self.speed_rows(horizon, fixed, dt, out);
+        self.speed_rows(horizon, fixed, dt, &mut out);
+        if let Some(rate) = &self.tilt_rate {
+            rate.rows(horizon, fixed, sent, dt, out);
+        }
     }
 
     /// The speed rows of [`AxisBounds::row_bounds`] alone: `(lo, hi)` on
@@ -74,7 +98,17 @@ impl AxisBounds {
 
     /// True when no bound is set.
     pub fn is_empty(&self) -> bool {
-        self.acceleration.is_none() && self.speed.is_none()
+        self.acceleration.is_none() && self.speed.is_none() && self.tilt_rate.is_none()
+    }
+
+    /// [`AxisBounds::violated_by`], or the tilt-rate bound violated
+    /// ([`TiltRate::violated_by`], `sent` as in [`AxisBounds::row_bounds`]):
+    /// the check of the fast plan.
+    pub fn violated(&self, plan: &[f64], sent: Option<f64>, dt: f64) -> bool {
+        self.violated_by(plan, dt)
+            || self
+                .tilt_rate
+                .is_some_and(|r| r.violated_by(plan, sent, dt))
     }
 
     /// True when `plan` (`y_0..y_N` \[m\], step δt \[s\]) violates a bound by
@@ -103,13 +137,13 @@ impl AxisBounds {
     }
 }
 
-/// A bound row `g·v` over at most two indices of a solver's unknowns
-/// (the banded interior points' and the cone ALM's speed and
-/// acceleration rows).
+/// A bound row `g·v` over at most three indices of a solver's unknowns
+/// (the banded interior points' and the cone ALM's speed, acceleration
+/// and tilt-rate rows).
 #[derive(Debug, Clone, Copy)]
 pub(super) struct Row {
-    pub(super) idx: [usize; 2],
-    pub(super) coef: [f64; 2],
+    pub(super) idx: [usize; 3],
+    pub(super) coef: [f64; 3],
     pub(super) len: usize,
 }
 
@@ -117,9 +151,28 @@ impl Row {
     /// The row `v[index]` (coefficient 1).
     pub(super) fn single(index: usize) -> Self {
         Self {
-            idx: [index, 0],
-            coef: [1.0, 0.0],
+            idx: [index, 0, 0],
+            coef: [1.0, 0.0, 0.0],
             len: 1,
+        }
+    }
+
+    /// Tilt-rate row f = 0..n−1 ([`TiltRate::rows`]) on the planned
+    /// accelerations ã at `index(k)`: ã_0 alone for f = 0, else
+    /// `κ·ã_f + (1 − 2κ)·ã_{f−1} − (1 − κ)·ã_{f−2}` (ã_{−1} = 0).
+    pub(super) fn tilt_rate(f: usize, kappa: f64, index: impl Fn(usize) -> usize) -> Self {
+        match f {
+            0 => Self::single(index(0)),
+            1 => Self {
+                idx: [index(1), index(0), 0],
+                coef: [kappa, 1.0 - 2.0 * kappa, 0.0],
+                len: 2,
+            },
+            _ => Self {
+                idx: [index(f), index(f - 1), index(f - 2)],
+                coef: [kappa, 1.0 - 2.0 * kappa, kappa - 1.0],
+                len: 3,
+            },
         }
     }
 
@@ -129,14 +182,14 @@ impl Row {
     pub(super) fn speed(g: usize, dt: f64, index: impl Fn(usize) -> usize) -> Self {
         if g == 0 {
             Self {
-                idx: [index(0), 0],
-                coef: [1.0 / dt, 0.0],
+                idx: [index(0), 0, 0],
+                coef: [1.0 / dt, 0.0, 0.0],
                 len: 1,
             }
         } else {
             Self {
-                idx: [index(g - 1), index(g)],
-                coef: [-1.0 / dt, 1.0 / dt],
+                idx: [index(g - 1), index(g), 0],
+                coef: [-1.0 / dt, 1.0 / dt, 0.0],
                 len: 2,
             }
         }

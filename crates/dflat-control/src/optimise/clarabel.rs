@@ -28,7 +28,8 @@ use crate::ControlError;
 /// The smoothness term ([`Smoothness`]) in these variables: with
 /// `A_j = a_j − a_0 = ã_{j−1}`, `c_j − c_{j−1} = κ·ã_j + (1 − 2κ)·ã_{j−1}
 /// − (1 − κ)·ã_{j−2}` (ã before 0 is 0) plus `a_0 − c_{−1}` at j = 0: band 2
-/// in P, the sent command in q.
+/// in P, the sent command in q. The tilt-rate rows ([`super::TiltRate`])
+/// are the same combination, bounded (row 0: ã_0 alone).
 pub struct ClarabelSolver {
     horizon: usize,
     dt: f64,
@@ -233,6 +234,21 @@ impl ClarabelSolver {
                 m += 2;
             }
         }
+        if let Some(rate) = &bounds.tilt_rate {
+            rate.check()?;
+            // Tilt-rate rows on ã (the stage interior point's rows).
+            let kp = rate.kappa;
+            for f in 0..n {
+                let coeffs = [kp, 1.0 - 2.0 * kp, kp - 1.0];
+                let terms = if f == 0 { 1 } else { (f + 1).min(3) };
+                for (d, &c) in coeffs.iter().enumerate().take(terms) {
+                    let c = if f == 0 { 1.0 } else { c };
+                    t.push(m, n + f - d, c);
+                    t.push(m + 1, n + f - d, -c);
+                }
+                m += 2;
+            }
+        }
         let a_mat = CscMatrix::new_from_triplets(m, nv, t.rows, t.cols, t.vals);
         let mut cones = Vec::new();
         if m_eq > 0 {
@@ -324,11 +340,12 @@ impl ClarabelSolver {
         // Rows `±row ≤ b`: the upper bound, then minus the lower.
         let mut m = self.m_eq;
         let bvec = &mut self.bvec;
-        self.bounds.row_bounds(self.horizon, fixed, dt, |lo, hi| {
-            bvec[m] = hi;
-            bvec[m + 1] = -lo;
-            m += 2;
-        });
+        self.bounds
+            .row_bounds(self.horizon, fixed, sent, dt, |lo, hi| {
+                bvec[m] = hi;
+                bvec[m + 1] = -lo;
+                m += 2;
+            });
         self.solver
             .update_q(&self.qvec)
             .and_then(|()| self.solver.update_b(&self.bvec))

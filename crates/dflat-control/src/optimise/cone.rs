@@ -75,6 +75,7 @@ impl ConeBounds {
         AxisBounds {
             acceleration: Some([-a, a]),
             speed: self.speed,
+            tilt_rate: None,
         }
     }
 
@@ -102,6 +103,7 @@ impl ConeBounds {
         let speed = AxisBounds {
             acceleration: None,
             speed: self.speed,
+            tilt_rate: None,
         };
         speed.violated_by(x, dt) || speed.violated_by(y, dt)
     }

@@ -36,6 +36,9 @@ use crate::ControlError;
 
 /// Iteration limit.
 pub const MAX_ITERATIONS: usize = 40;
+/// Iteration limit with tilt-rate rows (long stretches of active
+/// three-entry rows; random cases needed up to ~60 from the witness start).
+pub const MAX_ITERATIONS_TILT_RATE: usize = 100;
 /// Iterations without a better iterate after which the best one is taken.
 const STALL_ITERATIONS: usize = 4;
 /// Largest merit (residuals over their tolerances) a stalled or last
@@ -194,6 +197,9 @@ pub struct StageQp {
     rhs: Vec<f64>,
     /// The best iterate's p.
     best: Vec<f64>,
+    /// Iteration limit ([`MAX_ITERATIONS`], with tilt-rate rows
+    /// [`MAX_ITERATIONS_TILT_RATE`]).
+    max_iterations: usize,
 }
 
 // Stage order λ_f, ã_f, p_f: λ_f reaches back to p_{f−2} (distance 4),
@@ -212,7 +218,9 @@ impl StageQp {
     /// A solver for n ≥ 1 free outputs at step δt: tracking weight q, the
     /// ã block of P (`[diag, (k−1, k), (k−2, k)]` per column, as
     /// clarabel's), and bound rows on ã_f for `acceleration` and on
-    /// `(p_{f} − p_{f−1})/δt`, f = −1..n−2 (p_{−1} = 0), for `speed`.
+    /// `(p_{f} − p_{f−1})/δt`, f = −1..n−2 (p_{−1} = 0), for `speed`, and
+    /// with `tilt_rate = Some(κ)` the tilt-rate rows on ã
+    /// ([`Row::tilt_rate`]).
     pub fn new(
         n: usize,
         q: f64,
@@ -220,10 +228,12 @@ impl StageQp {
         accel: &[[f64; 3]],
         acceleration: bool,
         speed: bool,
+        tilt_rate: Option<f64>,
     ) -> Self {
         let size = 3 * n;
-        // Half-bandwidth: 6 with the smoothness term (ã_f–ã_{f−2}), else 4.
-        let bandwidth = if accel.iter().any(|c| c[2] != 0.0) {
+        // Half-bandwidth: 6 with the smoothness term or the tilt-rate rows
+        // (ã_f–ã_{f−2}), else 4.
+        let bandwidth = if tilt_rate.is_some() || accel.iter().any(|c| c[2] != 0.0) {
             6
         } else {
             4
@@ -257,6 +267,9 @@ impl StageQp {
             // Speed rows j = 2..N−1 on y_j, y_{j+1}: p_{j−3}, p_{j−2}.
             rows.extend((0..n).map(|g| Row::speed(g, dt, p_at)));
         }
+        if let Some(kappa) = tilt_rate {
+            rows.extend((0..n).map(|f| Row::tilt_rate(f, kappa, a_at)));
+        }
         let m = rows.len();
         Self {
             n,
@@ -272,6 +285,11 @@ impl StageQp {
             dv: vec![0.0; size],
             rhs: vec![0.0; size],
             best: vec![0.0; n],
+            max_iterations: if tilt_rate.is_some() {
+                MAX_ITERATIONS_TILT_RATE
+            } else {
+                MAX_ITERATIONS
+            },
         }
     }
 
@@ -335,7 +353,8 @@ impl StageQp {
 
         // (lowest merit, its iteration); the iterate is in `best`.
         let mut best = (f64::INFINITY, 0usize);
-        for iteration in 0..MAX_ITERATIONS {
+        let max_iterations = self.max_iterations;
+        for iteration in 0..max_iterations {
             // r = M·v + c + Gᵀ(z_u − z_l): dual residual on p, ã; the
             // equality residual A·x on λ.
             self.base.mul_vec(&self.v, &mut self.r);
@@ -389,7 +408,7 @@ impl StageQp {
             // Stalled: an acceptable best iterate not improved on for a few
             // iterations (far from the solution progress is not monotone).
             let stalled = best.0 <= ACCEPTABLE_MERIT && iteration >= best.1 + STALL_ITERATIONS;
-            if merit <= 1.0 || stalled || iteration + 1 == MAX_ITERATIONS {
+            if merit <= 1.0 || stalled || iteration + 1 == max_iterations {
                 if best.0 > ACCEPTABLE_MERIT {
                     break;
                 }
@@ -548,6 +567,9 @@ impl BandedInteriorPointSolver {
         smoothness: Smoothness,
     ) -> Result<Self, ControlError> {
         let fast = FastBandedSolver::with_smoothness(horizon, q, r, dt, smoothness)?;
+        if let Some(t) = &bounds.tilt_rate {
+            t.check()?;
+        }
         let n = horizon - 2;
         let accel = accel_block(n, r, dt, &smoothness);
         let qp = StageQp::new(
@@ -557,6 +579,7 @@ impl BandedInteriorPointSolver {
             &accel,
             bounds.acceleration.is_some(),
             bounds.speed.is_some(),
+            bounds.tilt_rate.map(|t| t.kappa),
         );
         let m = qp.rows();
         Ok(Self {
@@ -606,12 +629,35 @@ impl BandedInteriorPointSolver {
             self.c_p[f] = 2.0 * q * (b - reference[f + 3]);
             self.p[f] = plan[f + 3] - b;
         }
+        if let Some(rate) = &self.bounds.tilt_rate {
+            // With the tilt-rate rows the start is the witness trajectory
+            // at half the rate (strictly inside the rate rows): the
+            // unconstrained plan breaks those narrow rows by many times
+            // their width and the iterates then crawl (40 iterations were
+            // not enough on random cases). p from ã: Δ²p_f = ã_f·δt².
+            let a0 = (fixed[2] - 2.0 * fixed[1] + fixed[0]) / (dt * dt);
+            let (mut pm2, mut pm1, mut f) = (0.0, 0.0, 0);
+            let p = &mut self.p;
+            rate.witness(
+                self.fast.horizon,
+                fixed,
+                sent,
+                self.bounds.acceleration,
+                dt,
+                0.5,
+                |a| {
+                    let pf = 2.0 * pm1 - pm2 + (a - a0) * dt * dt;
+                    p[f] = pf;
+                    (pm2, pm1, f) = (pm1, pf, f + 1);
+                },
+            );
+        }
         let sm = self.fast.smoothness;
         let c_a0 = sent_linear_term(&sm, fixed, sent, dt);
         let (lo, hi) = (&mut self.lo, &mut self.hi);
         let mut i = 0;
         self.bounds
-            .row_bounds(self.fast.horizon, fixed, dt, |l, h| {
+            .row_bounds(self.fast.horizon, fixed, sent, dt, |l, h| {
                 lo[i] = l;
                 hi[i] = h;
                 i += 1;

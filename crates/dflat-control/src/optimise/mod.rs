@@ -85,6 +85,9 @@
 //! * [`bounds`] — [`AxisBounds`]: tilt (acceleration), vertical
 //!   acceleration and speed bounds, the braking funnel.
 //! * [`smoothness`] — [`Smoothness`]: the command-smoothness term.
+//! * [`tilt_rate`] — [`TiltRate`]: the tilt-rate bound, rows on the
+//!   command's change per tick (box solvers: the stage interior point and
+//!   clarabel).
 //! * [`banded`] — banded symmetric matrices, Cholesky and LDLᵀ factors.
 
 pub mod banded;
@@ -100,6 +103,9 @@ mod cone_tests;
 pub mod fast_banded;
 pub mod interior_point;
 pub mod smoothness;
+pub mod tilt_rate;
+#[cfg(test)]
+mod tilt_rate_tests;
 
 pub use bounds::AxisBounds;
 pub use clarabel::{ClarabelSolver, KktTuning};
@@ -109,6 +115,7 @@ pub use cone_solver::{AxisWeights, BandedConeSolver, ConeMethod};
 pub use fast_banded::FastBandedSolver;
 pub use interior_point::BandedInteriorPointSolver;
 pub use smoothness::Smoothness;
+pub use tilt_rate::TiltRate;
 
 use crate::ControlError;
 

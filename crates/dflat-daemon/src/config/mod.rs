@@ -408,6 +408,15 @@ pub struct ControllerConfig {
     /// A pose step between ticks larger than this \[m\] resets the estimate
     /// (0.01–100). Default 1.
     pub disturbance_max_step: f64,
+    /// Tilt-rate bound in the plan (df-mpc) \[deg/s\] (0 = off, else
+    /// 10–1000): the planned pitch and roll commands change by at most
+    /// this times δt per tick, the first one against the command sent at
+    /// the previous tick, so no goal change makes the command jump
+    /// (docs/controllers.md, "The tilt-rate bound"). Default 150 (3° per
+    /// tick at 50 Hz on each NED axis; ≤ 4.3° on pitch or roll at any yaw,
+    /// inside the 5°/tick budget). Box plan-tilt bound only: with
+    /// `plan_tilt_bound = "cone"` set it to 0.
+    pub max_tilt_rate_deg_s: f64,
 }
 
 impl Default for ControllerConfig {
@@ -438,6 +447,7 @@ impl Default for ControllerConfig {
             disturbance_max_acceleration: 3.0,
             disturbance_thrust_scale_range: [0.5, 2.0],
             disturbance_max_step: 1.0,
+            max_tilt_rate_deg_s: 150.0,
         }
     }
 }

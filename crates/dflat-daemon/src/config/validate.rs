@@ -111,6 +111,21 @@ impl Config {
             )?;
         }
         v.range("controller.constraint_speed", c.constraint_speed, 0.0, 50.0)?;
+        if c.max_tilt_rate_deg_s != 0.0 {
+            v.range(
+                "controller.max_tilt_rate_deg_s",
+                c.max_tilt_rate_deg_s,
+                10.0,
+                1000.0,
+            )?;
+            if c.plan_tilt_bound == PlanTiltBound::Cone && c.constraint_tilt_deg > 0.0 {
+                return Err(v.err(
+                    "controller.max_tilt_rate_deg_s",
+                    &c.max_tilt_rate_deg_s.to_string(),
+                    "0 with plan_tilt_bound = \"cone\" (the tilt-rate bound is in the box solvers only)",
+                ));
+            }
+        }
         for i in 0..3 {
             v.range(
                 &format!("controller.smoothness_weight[{i}]"),
