@@ -24,6 +24,12 @@ use nalgebra::Vector3;
 
 use crate::{ControlError, ReferenceSource};
 
+mod brake;
+mod path;
+
+use brake::Brake;
+use path::{Path, Ramp};
+
 /// Look-ahead time of the closest-point search \[s\]: the search window is
 /// `max(MIN_LOOKAHEAD, LOOKAHEAD_TIME·speed)` of arc length.
 pub const LOOKAHEAD_TIME: f64 = 1.0;
@@ -41,121 +47,6 @@ enum Kind {
     Setpoint(Vector3<f64>),
     Path(Path),
     Brake(Brake),
-}
-
-/// A straight stop at constant deceleration, with its monotone progress.
-#[derive(Debug, Clone, PartialEq)]
-struct Brake {
-    /// Where the braking starts, NED \[m\].
-    start: Vector3<f64>,
-    /// Unit direction of the motion.
-    dir: Vector3<f64>,
-    /// Speed at the start [m/s] (> 0).
-    speed: f64,
-    /// Deceleration [m/s²] (> 0).
-    decel: f64,
-    /// Distance coasted at the initial speed before the deceleration
-    /// starts (`speed · lag`: the attitude loop's response) \[m\].
-    coast: f64,
-    /// Stopping distance `coast + speed² / (2·decel)` \[m\]; moves on with
-    /// a vehicle that overshoots it (never back).
-    length: f64,
-    /// Distance of the current closest point from the start \[m\].
-    progress: f64,
-}
-
-impl Brake {
-    fn point(&self, s: f64) -> Vector3<f64> {
-        self.start + self.dir * s.clamp(0.0, self.length)
-    }
-
-    /// Speed on the braking profile at distance `s` [m/s].
-    fn speed_at(&self, s: f64) -> f64 {
-        if s < self.coast {
-            return self.speed;
-        }
-        (self.speed * self.speed - 2.0 * self.decel * (s - self.coast))
-            .max(0.0)
-            .sqrt()
-    }
-
-    /// Distance along the profile `tau` \[s\] after passing `s`.
-    fn advance(&self, s: f64, tau: f64) -> f64 {
-        let coast_left = if self.speed > 0.0 {
-            ((self.coast - s) / self.speed).max(0.0)
-        } else {
-            0.0
-        };
-        if tau <= coast_left {
-            return s + self.speed * tau;
-        }
-        let s0 = s.max(self.coast);
-        let v = self.speed_at(s0);
-        let t = (tau - coast_left).min(v / self.decel);
-        (s0 + v * t - 0.5 * self.decel * t * t).min(self.length)
-    }
-
-    fn update(&mut self, q: &Vector3<f64>) {
-        if is_finite3(q) {
-            let s = (q - self.start).dot(&self.dir);
-            // Past the stop point: the stop moves on with the vehicle.
-            self.length = self.length.max(s);
-            self.progress = s.clamp(self.progress, self.length);
-        }
-    }
-}
-
-/// A polyline flown at constant speed, with its monotone progress.
-#[derive(Debug, Clone, PartialEq)]
-struct Path {
-    /// Waypoints, NED \[m\]; at least two, consecutive ones distinct.
-    points: Vec<Vector3<f64>>,
-    /// Arc length at each waypoint \[m\]; `cum[0] = 0`.
-    cum: Vec<f64>,
-    /// Unit direction of each segment (one fewer than `points`).
-    dirs: Vec<Vector3<f64>>,
-    /// Desired speed along the path [m/s].
-    speed: f64,
-    /// Arc length searched ahead of the progress for the closest point \[m\].
-    lookahead: f64,
-    /// Arc length of the current closest point \[m\].
-    progress: f64,
-    /// Segment holding `progress` (a corner belongs to the next segment).
-    seg: usize,
-    /// The speed ramp at the start, if any ([`Reference::with_ramp`]).
-    ramp: Option<Ramp>,
-}
-
-/// A smooth start: the reference speed rises from `v0` to the path speed
-/// as `v(τ) = v0 + (V − v0)·(1 − cos(πτ/T))/2` over `T` (zero acceleration
-/// at both ends, peak acceleration `π(V − v0)/(2T)`).
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct Ramp {
-    /// Speed at the start [m/s].
-    v0: f64,
-    /// Duration \[s\].
-    duration: f64,
-    /// Time since the start \[s\] (one control step per horizon call).
-    elapsed: f64,
-}
-
-impl Ramp {
-    /// Speed at time `tau` \[s\] since the start, for path speed `speed`.
-    fn speed(&self, speed: f64, tau: f64) -> f64 {
-        if tau >= self.duration {
-            return speed;
-        }
-        let x = std::f64::consts::PI * tau.max(0.0) / self.duration;
-        self.v0 + (speed - self.v0) * 0.5 * (1.0 - x.cos())
-    }
-
-    /// Distance covered from time 0 to `tau` \[s\].
-    fn distance(&self, speed: f64, tau: f64) -> f64 {
-        let t = tau.clamp(0.0, self.duration);
-        let k = std::f64::consts::PI / self.duration;
-        let ramp = self.v0 * t + (speed - self.v0) * 0.5 * (t - (k * t).sin() / k);
-        ramp + speed * (tau - self.duration).max(0.0)
-    }
 }
 
 fn invalid(field: &'static str, reason: impl Into<String>) -> ControlError {
@@ -424,84 +315,6 @@ impl Reference {
     }
 }
 
-impl Path {
-    fn length(&self) -> f64 {
-        self.cum[self.cum.len() - 1]
-    }
-
-    fn segments(&self) -> usize {
-        self.dirs.len()
-    }
-
-    /// Closest point of segment `i` to `q`, restricted to arc lengths
-    /// `[lo, hi]` within the segment: its arc length and squared distance.
-    fn project(&self, i: usize, q: &Vector3<f64>, lo: f64, hi: f64) -> (f64, f64) {
-        let along = (q - self.points[i]).dot(&self.dirs[i]);
-        let s = (self.cum[i] + along).clamp(lo, hi);
-        let p = self.points[i] + self.dirs[i] * (s - self.cum[i]);
-        (s, (q - p).norm_squared())
-    }
-
-    /// Segment holding arc length `s`, searching forward from `hint`. A
-    /// corner belongs to the segment that leaves it (direction of the next
-    /// waypoint); the path end to the last segment.
-    fn segment_from(&self, mut hint: usize, s: f64) -> usize {
-        let last = self.segments() - 1;
-        hint = hint.min(last);
-        while hint < last && s >= self.cum[hint + 1] {
-            hint += 1;
-        }
-        hint
-    }
-
-    /// Point at arc length `s` (clamped to the path) on segment `seg`.
-    fn point_on(&self, seg: usize, s: f64) -> Vector3<f64> {
-        let s = s.clamp(0.0, self.length());
-        self.points[seg] + self.dirs[seg] * (s - self.cum[seg])
-    }
-
-    /// Moves the progress to the closest point to `q` within
-    /// `[progress, progress + lookahead]` (never backwards).
-    fn update(&mut self, q: &Vector3<f64>) {
-        if !is_finite3(q) {
-            return;
-        }
-        let lo = self.progress;
-        let hi = (self.progress + self.lookahead).min(self.length());
-        let mut best_s = lo;
-        let mut best_d2 = f64::INFINITY;
-        let mut i = self.seg;
-        while i < self.segments() && self.cum[i] <= hi {
-            let a = self.cum[i].max(lo);
-            let b = self.cum[i + 1].min(hi);
-            if a <= b {
-                let (s, d2) = self.project(i, q, a, b);
-                if d2 < best_d2 {
-                    best_d2 = d2;
-                    best_s = s;
-                }
-            }
-            i += 1;
-        }
-        self.progress = best_s.max(lo);
-        self.seg = self.segment_from(self.seg, self.progress);
-    }
-
-    fn closest(&self) -> (Vector3<f64>, Vector3<f64>) {
-        let p = self.point_on(self.seg, self.progress);
-        let speed = match self.ramp {
-            Some(r) => r.speed(self.speed, r.elapsed),
-            None => self.speed,
-        };
-        let v = if self.progress >= self.length() {
-            Vector3::zeros()
-        } else {
-            self.dirs[self.seg] * speed
-        };
-        (p, v)
-    }
-}
-
 impl ReferenceSource for Reference {
     /// `out[0]` is the closest point (advancing the progress); `out[j]` lies
     /// `j·δt·speed` further along the path, held at the end. A non-positive
@@ -559,87 +372,4 @@ impl ReferenceSource for Reference {
     }
 }
 
-/// The paths flown in the paper, as NED waypoints at a caller-given
-/// altitude z (NED, so z = −10 is 10 m above the origin).
-///
-/// Waypoints are `(x, y)` = (north, east) \[m\]. The paper gives the
-/// coordinates of the L path only; the DSL letters are our reconstruction
-/// of Fig. 8 (sizes 20–30 m, placed side by side along east so that they
-/// read "DSL").
-pub mod paths {
-    use nalgebra::Vector3;
-
-    use super::Reference;
-    use crate::ControlError;
-
-    /// The L-shaped teach path of the controller comparison (§VII-C,
-    /// Figs. 6–7): (x, y) = (−20, −30) → (0, −30) → (0, 0) \[m\].
-    pub const L_XY: [[f64; 2]; 3] = [[-20.0, -30.0], [0.0, -30.0], [0.0, 0.0]];
-    /// Speeds of the controller comparison on the L path [m/s].
-    pub const L_SPEEDS: [f64; 4] = [3.0, 5.0, 7.0, 9.0];
-
-    /// "D" of the DSL demonstration: a 30 m stem north, then a bowl of
-    /// radius 15 m bulging east (polyline, 30° steps), closed back at the
-    /// start.
-    pub const D_XY: [[f64; 2]; 10] = [
-        [0.0, 0.0],
-        [30.0, 0.0],
-        [30.0, 5.0],
-        [27.990_381_056_766_58, 12.5],
-        [22.5, 17.990_381_056_766_58],
-        [15.0, 20.0],
-        [7.5, 17.990_381_056_766_58],
-        [2.009_618_943_233_42, 12.5],
-        [0.0, 5.0],
-        [0.0, 0.0],
-    ];
-    /// Speed of the "D" flight [m/s].
-    pub const D_SPEED: f64 = 10.0;
-
-    /// "S" of the DSL demonstration: 20 m wide, 30 m tall, drawn from the
-    /// top right to the bottom left in three east–west legs.
-    pub const S_XY: [[f64; 2]; 6] = [
-        [30.0, 50.0],
-        [30.0, 30.0],
-        [15.0, 30.0],
-        [15.0, 50.0],
-        [0.0, 50.0],
-        [0.0, 30.0],
-    ];
-    /// Speed of the "S" flight [m/s].
-    pub const S_SPEED: f64 = 3.0;
-
-    /// "L" of the DSL demonstration: 30 m south along the stem, then 20 m
-    /// east.
-    pub const DSL_L_XY: [[f64; 2]; 3] = [[30.0, 60.0], [0.0, 60.0], [0.0, 80.0]];
-    /// Speed of the DSL "L" flight [m/s].
-    pub const DSL_L_SPEED: f64 = 8.0;
-
-    /// NED waypoints `(x, y, z)` \[m\] from `(x, y)` pairs at altitude `z`.
-    pub fn waypoints(xy: &[[f64; 2]], z: f64) -> Vec<Vector3<f64>> {
-        xy.iter().map(|p| Vector3::new(p[0], p[1], z)).collect()
-    }
-
-    /// The comparison's L path at altitude `z` (NED \[m\]) flown at `speed` [m/s].
-    pub fn l(z: f64, speed: f64) -> Result<Reference, ControlError> {
-        Reference::path(&waypoints(&L_XY, z), speed)
-    }
-
-    /// The DSL "D" at altitude `z` (NED \[m\]) flown at `speed` [m/s]
-    /// (the paper: [`D_SPEED`]).
-    pub fn d(z: f64, speed: f64) -> Result<Reference, ControlError> {
-        Reference::path(&waypoints(&D_XY, z), speed)
-    }
-
-    /// The DSL "S" at altitude `z` (NED \[m\]) flown at `speed` [m/s]
-    /// (the paper: [`S_SPEED`]).
-    pub fn s(z: f64, speed: f64) -> Result<Reference, ControlError> {
-        Reference::path(&waypoints(&S_XY, z), speed)
-    }
-
-    /// The DSL "L" at altitude `z` (NED \[m\]) flown at `speed` [m/s]
-    /// (the paper: [`DSL_L_SPEED`]).
-    pub fn dsl_l(z: f64, speed: f64) -> Result<Reference, ControlError> {
-        Reference::path(&waypoints(&DSL_L_XY, z), speed)
-    }
-}
+pub mod paths;
