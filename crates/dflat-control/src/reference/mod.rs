@@ -1,8 +1,68 @@
-//! Reference generation (paper §VII-C): a fixed setpoint, or a path of
-//! straight segments between waypoints flown at a desired speed; and (ours)
-//! a stop: braking at constant deceleration along the current velocity,
-//! for the moment the autopilot hands control to the controller while the
-//! vehicle moves ([`Reference::braking`]).
+//! Reference generation: every goal becomes a reference over the horizon
+//! that a vehicle can fly.
+//!
+//! * [`Reference::setpoint`] — a fixed point.
+//! * [`Reference::path`] — the paper's path (§VII-C): closest point, then
+//!   δt·speed along the polyline.
+//! * [`Reference::braking`] — a stop along the current velocity.
+//! * [`Reference::route`] / [`Reference::setpoint_route`] — a polyline on a
+//!   smooth speed profile in time (routes, below).
+//! * [`Reference::stream`] — a planner's streamed samples, extrapolated
+//!   (streams, below).
+//!
+//! # Routes
+//!
+//! How to build one: a [`RouteSpec`] with the vehicle's position and
+//! velocity, the [`Waypoint`]s (position, optional leg speed, hold time,
+//! optional yaw), the cruise speed and the ramps' peak acceleration.
+//!
+//! ```
+//! use dflat_control::reference::{Reference, RouteSpec, Waypoint};
+//! use nalgebra::Vector3;
+//!
+//! let spec = RouteSpec {
+//!     start: Vector3::new(0.0, 0.0, -10.0),       // the vehicle, NED m
+//!     start_velocity: Vector3::zeros(),           // its velocity, NED m/s
+//!     waypoints: vec![
+//!         Waypoint::at(Vector3::new(20.0, 0.0, -10.0)), // cruise speed, fly through
+//!         Waypoint {
+//!             speed: Some(2.0),                   // the leg *to* it, m/s
+//!             hold_s: 3.0,                        // stop and wait 3 s
+//!             yaw: Some(std::f64::consts::FRAC_PI_2), // face east there
+//!             ..Waypoint::at(Vector3::new(20.0, 10.0, -10.0))
+//!         },
+//!     ],
+//!     cruise_speed: 5.0,                          // m/s
+//!     acceleration: 1.5,                          // peak of every ramp, m/s²
+//! };
+//! let mut reference = Reference::route(&spec).unwrap();
+//! assert!((reference.path_length() - 30.0).abs() < 1e-9);
+//! reference.set_time(12.0); // the controller's clock: the route starts now
+//! assert_eq!(reference.last_reached(), None);
+//! ```
+//!
+//! Each tick the shell calls [`Reference::set_time`] with the measurement's
+//! time before the controller's update. The profile: every speed change
+//! (start, leg speeds, stops at holds and the end) is a cosine ramp
+//! `v(τ) = v_a + (v_b − v_a)(1 − cos(πτ/T))/2`, `T = π|v_b − v_a|/(2a)`,
+//! so neither the reference velocity nor its acceleration steps; legs too
+//! short for their speed fly the fastest speed that fits. A start with the
+//! vehicle moving keeps the along-track speed as the start ramp's first
+//! speed and blends the rest `w` out as `e(τ) = w·τ·exp(−τ/T_b)`,
+//! `T_b = max(2|w|/a, 0.5 s)`: the reference starts at the vehicle with
+//! its velocity and merges onto the line.
+//!
+//! # Streams
+//!
+//! A [`StreamSample`] (time on the controller's clock, position, optional
+//! velocity, acceleration, yaw, yaw rate) is extrapolated as a coordinated
+//! turn (exact on a circle flown at constant speed) for
+//! [`StreamSettings::extrapolation_s`], then slowed to a stop over
+//! [`StreamSettings::decay_s`] with a cosine on the prediction's clock,
+//! so the horizon's tail stops smoothly and a stream that goes silent
+//! becomes a smooth stop and hold. [`Reference::push_sample`] refreshes it.
+//!
+//! # Paths and stops
 //!
 //! For a path, the reference at tick k is the point of the path closest to
 //! the measured position, `y_ref,k = y_closest`; the reference over the
@@ -17,12 +77,28 @@
 //! later leg that passes near the vehicle (the second leg of an L, the legs
 //! of an S) is not grabbed early, and the reference never moves backwards.
 //!
+//! A stop ([`Reference::braking`]) brakes at constant deceleration along
+//! the current velocity, for the moment the autopilot hands control to the
+//! controller while the vehicle moves.
+//!
 //! All positions are local NED \[m\]; speeds [m/s]. Nothing here allocates
 //! after construction.
 
 use nalgebra::Vector3;
 
 use crate::{ControlError, ReferenceSource};
+
+mod brake;
+mod path;
+mod route;
+mod stream;
+
+use brake::Brake;
+use path::{Path, Ramp};
+use route::Route;
+pub use route::{MIN_BLEND_TIME, RouteSpec, Waypoint};
+use stream::Stream;
+pub use stream::{IMPLIED_MIN_GAP, StreamSample, StreamSettings, TURN_MIN_SPEED};
 
 /// Look-ahead time of the closest-point search \[s\]: the search window is
 /// `max(MIN_LOOKAHEAD, LOOKAHEAD_TIME·speed)` of arc length.
@@ -41,121 +117,8 @@ enum Kind {
     Setpoint(Vector3<f64>),
     Path(Path),
     Brake(Brake),
-}
-
-/// A straight stop at constant deceleration, with its monotone progress.
-#[derive(Debug, Clone, PartialEq)]
-struct Brake {
-    /// Where the braking starts, NED \[m\].
-    start: Vector3<f64>,
-    /// Unit direction of the motion.
-    dir: Vector3<f64>,
-    /// Speed at the start [m/s] (> 0).
-    speed: f64,
-    /// Deceleration [m/s²] (> 0).
-    decel: f64,
-    /// Distance coasted at the initial speed before the deceleration
-    /// starts (`speed · lag`: the attitude loop's response) \[m\].
-    coast: f64,
-    /// Stopping distance `coast + speed² / (2·decel)` \[m\]; moves on with
-    /// a vehicle that overshoots it (never back).
-    length: f64,
-    /// Distance of the current closest point from the start \[m\].
-    progress: f64,
-}
-
-impl Brake {
-    fn point(&self, s: f64) -> Vector3<f64> {
-        self.start + self.dir * s.clamp(0.0, self.length)
-    }
-
-    /// Speed on the braking profile at distance `s` [m/s].
-    fn speed_at(&self, s: f64) -> f64 {
-        if s < self.coast {
-            return self.speed;
-        }
-        (self.speed * self.speed - 2.0 * self.decel * (s - self.coast))
-            .max(0.0)
-            .sqrt()
-    }
-
-    /// Distance along the profile `tau` \[s\] after passing `s`.
-    fn advance(&self, s: f64, tau: f64) -> f64 {
-        let coast_left = if self.speed > 0.0 {
-            ((self.coast - s) / self.speed).max(0.0)
-        } else {
-            0.0
-        };
-        if tau <= coast_left {
-            return s + self.speed * tau;
-        }
-        let s0 = s.max(self.coast);
-        let v = self.speed_at(s0);
-        let t = (tau - coast_left).min(v / self.decel);
-        (s0 + v * t - 0.5 * self.decel * t * t).min(self.length)
-    }
-
-    fn update(&mut self, q: &Vector3<f64>) {
-        if is_finite3(q) {
-            let s = (q - self.start).dot(&self.dir);
-            // Past the stop point: the stop moves on with the vehicle.
-            self.length = self.length.max(s);
-            self.progress = s.clamp(self.progress, self.length);
-        }
-    }
-}
-
-/// A polyline flown at constant speed, with its monotone progress.
-#[derive(Debug, Clone, PartialEq)]
-struct Path {
-    /// Waypoints, NED \[m\]; at least two, consecutive ones distinct.
-    points: Vec<Vector3<f64>>,
-    /// Arc length at each waypoint \[m\]; `cum[0] = 0`.
-    cum: Vec<f64>,
-    /// Unit direction of each segment (one fewer than `points`).
-    dirs: Vec<Vector3<f64>>,
-    /// Desired speed along the path [m/s].
-    speed: f64,
-    /// Arc length searched ahead of the progress for the closest point \[m\].
-    lookahead: f64,
-    /// Arc length of the current closest point \[m\].
-    progress: f64,
-    /// Segment holding `progress` (a corner belongs to the next segment).
-    seg: usize,
-    /// The speed ramp at the start, if any ([`Reference::with_ramp`]).
-    ramp: Option<Ramp>,
-}
-
-/// A smooth start: the reference speed rises from `v0` to the path speed
-/// as `v(τ) = v0 + (V − v0)·(1 − cos(πτ/T))/2` over `T` (zero acceleration
-/// at both ends, peak acceleration `π(V − v0)/(2T)`).
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct Ramp {
-    /// Speed at the start [m/s].
-    v0: f64,
-    /// Duration \[s\].
-    duration: f64,
-    /// Time since the start \[s\] (one control step per horizon call).
-    elapsed: f64,
-}
-
-impl Ramp {
-    /// Speed at time `tau` \[s\] since the start, for path speed `speed`.
-    fn speed(&self, speed: f64, tau: f64) -> f64 {
-        if tau >= self.duration {
-            return speed;
-        }
-        let x = std::f64::consts::PI * tau.max(0.0) / self.duration;
-        self.v0 + (speed - self.v0) * 0.5 * (1.0 - x.cos())
-    }
-
-    /// Distance covered from time 0 to `tau` \[s\].
-    fn distance(&self, speed: f64, tau: f64) -> f64 {
-        let t = tau.clamp(0.0, self.duration);
-        let k = std::f64::consts::PI / self.duration;
-        let ramp = self.v0 * t + (speed - self.v0) * 0.5 * (t - (k * t).sin() / k);
-        ramp + speed * (tau - self.duration).max(0.0)
-    }
+    Route(Route),
+    Stream(Stream),
 }
 
 fn invalid(field: &'static str, reason: impl Into<String>) -> ControlError {
@@ -355,6 +318,8 @@ impl Reference {
             Kind::Setpoint(_) => 0.0,
             Kind::Path(p) => p.progress,
             Kind::Brake(b) => b.progress,
+            Kind::Route(r) => r.progress(),
+            Kind::Stream(_) => 0.0,
         }
     }
 
@@ -365,6 +330,8 @@ impl Reference {
             Kind::Setpoint(_) => 0.0,
             Kind::Path(p) => p.length(),
             Kind::Brake(b) => b.length,
+            Kind::Route(r) => r.length(),
+            Kind::Stream(_) => 0.0,
         }
     }
 
@@ -372,8 +339,9 @@ impl Reference {
     /// held forever and never finishes, nor does a stop (it holds its end).
     pub fn is_finished(&self) -> bool {
         match &self.kind {
-            Kind::Setpoint(_) | Kind::Brake(_) => false,
+            Kind::Setpoint(_) | Kind::Brake(_) | Kind::Stream(_) => false,
             Kind::Path(p) => p.progress >= p.length() - 1e-9 * p.length().max(1.0),
+            Kind::Route(r) => r.elapsed >= r.duration(),
         }
     }
 
@@ -384,6 +352,8 @@ impl Reference {
             Kind::Setpoint(_) => 0.0,
             Kind::Path(p) => p.speed,
             Kind::Brake(b) => b.speed,
+            Kind::Route(r) => r.cruise(),
+            Kind::Stream(s) => s.closest().1.norm(),
         }
     }
 
@@ -394,6 +364,8 @@ impl Reference {
     pub fn distance_to_path(&self, point: &Vector3<f64>) -> f64 {
         match &self.kind {
             Kind::Setpoint(p) => (point - p).norm(),
+            Kind::Route(r) => r.distance(point),
+            Kind::Stream(s) => (point - s.closest().0).norm(),
             Kind::Brake(b) => {
                 let s = (point - b.start).dot(&b.dir);
                 (point - b.point(s)).norm()
@@ -408,6 +380,150 @@ impl Reference {
         }
     }
 
+    /// A route (see the module docs, "Routes", and [`RouteSpec`]): the
+    /// polyline from `spec.start` through the waypoints on a smooth,
+    /// time-parametrised speed profile (start ramp from the vehicle's
+    /// velocity, per-leg speeds, stops at holds and at the end, then a
+    /// hold). Errors name the offending field.
+    pub fn route(spec: &RouteSpec) -> Result<Self, ControlError> {
+        Ok(Self {
+            kind: Kind::Route(Route::new(spec)?),
+        })
+    }
+
+    /// A setpoint flown as a route: a straight line from `from` (NED \[m\],
+    /// the vehicle) moving at `velocity` (NED [m/s]) to `target`, cruising
+    /// at `speed` [m/s] with ramps of peak `acceleration` [m/s²], stopping
+    /// at the target and holding it. A target at `from` holds it (the
+    /// vehicle's velocity blended out).
+    pub fn setpoint_route(
+        from: Vector3<f64>,
+        velocity: Vector3<f64>,
+        target: Vector3<f64>,
+        speed: f64,
+        acceleration: f64,
+    ) -> Result<Self, ControlError> {
+        Self::route(&RouteSpec {
+            start: from,
+            start_velocity: velocity,
+            waypoints: vec![Waypoint::at(target)],
+            cruise_speed: speed,
+            acceleration,
+        })
+    }
+
+    /// A streamed trajectory from its first `sample` (see the
+    /// module docs, "Streams"). Errors on non-finite sample fields or
+    /// settings out of range.
+    pub fn stream(settings: StreamSettings, sample: &StreamSample) -> Result<Self, ControlError> {
+        Ok(Self {
+            kind: Kind::Stream(Stream::new(settings, sample)?),
+        })
+    }
+
+    /// A new sample for a stream: the prediction restarts from it. Errors
+    /// (and changes nothing) on a non-finite sample, one older than the
+    /// newest, or a reference that is not a stream.
+    pub fn push_sample(&mut self, sample: &StreamSample) -> Result<(), ControlError> {
+        match &mut self.kind {
+            Kind::Stream(s) => s.push(sample),
+            _ => Err(invalid("stream sample", "the reference is not a stream")),
+        }
+    }
+
+    /// A stream's predicted position at controller time `t` \[s\] (NED
+    /// \[m\]; `None` for other references). Pure: moves no clock.
+    pub fn stream_position_at(&self, t: f64) -> Option<Vector3<f64>> {
+        match &self.kind {
+            Kind::Stream(s) => Some(s.state(t).0),
+            _ => None,
+        }
+    }
+
+    /// True for a streamed trajectory.
+    pub fn is_stream(&self) -> bool {
+        matches!(self.kind, Kind::Stream(_))
+    }
+
+    /// A stream's newest sample (`None` for other references).
+    pub fn last_sample(&self) -> Option<&StreamSample> {
+        match &self.kind {
+            Kind::Stream(s) => Some(s.last()),
+            _ => None,
+        }
+    }
+
+    /// A stream's time since its newest sample \[s\] at the reference's
+    /// current time (`None` for other references).
+    pub fn sample_age(&self) -> Option<f64> {
+        match &self.kind {
+            Kind::Stream(s) => Some(s.age()),
+            _ => None,
+        }
+    }
+
+    /// Where the reference comes to rest, NED \[m\]: a stream's stop
+    /// point after its decay, a route's end, a stop's stop point, a
+    /// setpoint; a path's end.
+    pub fn rest_point(&self) -> Vector3<f64> {
+        match &self.kind {
+            Kind::Setpoint(p) => *p,
+            Kind::Stream(s) => s.stop_point(),
+            Kind::Route(r) => r.state(r.duration() + 1.0, &mut (0, 0)).0,
+            Kind::Brake(b) => b.point(b.length),
+            Kind::Path(p) => p.point_on(p.segments() - 1, p.length()),
+        }
+    }
+
+    /// The reference's position and velocity now (NED \[m\], [m/s]) without
+    /// moving any progress: a route's or a stream's at its clock; a
+    /// path's or a stop's at its current progress.
+    pub fn current(&self) -> (Vector3<f64>, Vector3<f64>) {
+        match &self.kind {
+            Kind::Setpoint(p) => (*p, Vector3::zeros()),
+            Kind::Stream(s) => s.closest(),
+            Kind::Route(r) => r.state(r.elapsed, &mut (0, 0)),
+            Kind::Brake(b) => (b.point(b.progress), b.dir * b.speed_at(b.progress)),
+            Kind::Path(p) => p.closest(),
+        }
+    }
+
+    /// Sets the reference's clock to the controller's time `t` \[s\] (the
+    /// time of the measurement the next update uses). Routes and streams
+    /// are trajectories in time: a route starts at its first `set_time`; a
+    /// stream predicts from its newest sample to `t`. Without calls they
+    /// advance one control step per horizon. No effect on setpoints, paths
+    /// and stops, nor for a non-finite `t`.
+    pub fn set_time(&mut self, t: f64) {
+        match &mut self.kind {
+            Kind::Route(r) => r.set_time(t),
+            Kind::Stream(s) => s.set_time(t),
+            _ => {}
+        }
+    }
+
+    /// Index (into the spec's waypoints) of the last waypoint the route's
+    /// profile has reached (for MISSION_ITEM_REACHED; an acceptance radius
+    /// is the caller's to check). `None` before the first, and for other
+    /// references.
+    pub fn last_reached(&self) -> Option<usize> {
+        match &self.kind {
+            Kind::Route(r) => r.last_reached(),
+            _ => None,
+        }
+    }
+
+    /// The heading to fly \[rad\], NED: a route's waypoint being flown to
+    /// (the last one once reached), a stream's newest sample; `None` when
+    /// it has none, and for other references.
+    pub fn yaw_target(&self) -> Option<f64> {
+        match &self.kind {
+            Kind::Route(r) => r.yaw_target(),
+            Kind::Stream(s) => s.last().yaw,
+            _ => None,
+        }
+    }
+
     /// Restarts the progress at the path start (a setpoint is unchanged).
     pub fn reset(&mut self) {
         match &mut self.kind {
@@ -419,86 +535,9 @@ impl Reference {
                 }
             }
             Kind::Brake(b) => b.progress = 0.0,
-            Kind::Setpoint(_) => {}
+            Kind::Route(r) => r.reset(),
+            Kind::Setpoint(_) | Kind::Stream(_) => {}
         }
-    }
-}
-
-impl Path {
-    fn length(&self) -> f64 {
-        self.cum[self.cum.len() - 1]
-    }
-
-    fn segments(&self) -> usize {
-        self.dirs.len()
-    }
-
-    /// Closest point of segment `i` to `q`, restricted to arc lengths
-    /// `[lo, hi]` within the segment: its arc length and squared distance.
-    fn project(&self, i: usize, q: &Vector3<f64>, lo: f64, hi: f64) -> (f64, f64) {
-        let along = (q - self.points[i]).dot(&self.dirs[i]);
-        let s = (self.cum[i] + along).clamp(lo, hi);
-        let p = self.points[i] + self.dirs[i] * (s - self.cum[i]);
-        (s, (q - p).norm_squared())
-    }
-
-    /// Segment holding arc length `s`, searching forward from `hint`. A
-    /// corner belongs to the segment that leaves it (direction of the next
-    /// waypoint); the path end to the last segment.
-    fn segment_from(&self, mut hint: usize, s: f64) -> usize {
-        let last = self.segments() - 1;
-        hint = hint.min(last);
-        while hint < last && s >= self.cum[hint + 1] {
-            hint += 1;
-        }
-        hint
-    }
-
-    /// Point at arc length `s` (clamped to the path) on segment `seg`.
-    fn point_on(&self, seg: usize, s: f64) -> Vector3<f64> {
-        let s = s.clamp(0.0, self.length());
-        self.points[seg] + self.dirs[seg] * (s - self.cum[seg])
-    }
-
-    /// Moves the progress to the closest point to `q` within
-    /// `[progress, progress + lookahead]` (never backwards).
-    fn update(&mut self, q: &Vector3<f64>) {
-        if !is_finite3(q) {
-            return;
-        }
-        let lo = self.progress;
-        let hi = (self.progress + self.lookahead).min(self.length());
-        let mut best_s = lo;
-        let mut best_d2 = f64::INFINITY;
-        let mut i = self.seg;
-        while i < self.segments() && self.cum[i] <= hi {
-            let a = self.cum[i].max(lo);
-            let b = self.cum[i + 1].min(hi);
-            if a <= b {
-                let (s, d2) = self.project(i, q, a, b);
-                if d2 < best_d2 {
-                    best_d2 = d2;
-                    best_s = s;
-                }
-            }
-            i += 1;
-        }
-        self.progress = best_s.max(lo);
-        self.seg = self.segment_from(self.seg, self.progress);
-    }
-
-    fn closest(&self) -> (Vector3<f64>, Vector3<f64>) {
-        let p = self.point_on(self.seg, self.progress);
-        let speed = match self.ramp {
-            Some(r) => r.speed(self.speed, r.elapsed),
-            None => self.speed,
-        };
-        let v = if self.progress >= self.length() {
-            Vector3::zeros()
-        } else {
-            self.dirs[self.seg] * speed
-        };
-        (p, v)
     }
 }
 
@@ -509,6 +548,8 @@ impl ReferenceSource for Reference {
     fn horizon(&mut self, measured: &Vector3<f64>, dt: f64, out: &mut [Vector3<f64>]) {
         match &mut self.kind {
             Kind::Setpoint(p) => out.fill(*p),
+            Kind::Route(r) => r.horizon(dt, out),
+            Kind::Stream(s) => s.horizon(dt, out),
             Kind::Brake(b) => {
                 b.update(measured);
                 let dt = if dt.is_finite() && dt > 0.0 { dt } else { 0.0 };
@@ -547,6 +588,8 @@ impl ReferenceSource for Reference {
     fn closest(&mut self, measured: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
         match &mut self.kind {
             Kind::Setpoint(p) => (*p, Vector3::zeros()),
+            Kind::Route(r) => r.state(r.elapsed, &mut (0, 0)),
+            Kind::Stream(s) => s.closest(),
             Kind::Path(path) => {
                 path.update(measured);
                 path.closest()
@@ -559,87 +602,4 @@ impl ReferenceSource for Reference {
     }
 }
 
-/// The paths flown in the paper, as NED waypoints at a caller-given
-/// altitude z (NED, so z = −10 is 10 m above the origin).
-///
-/// Waypoints are `(x, y)` = (north, east) \[m\]. The paper gives the
-/// coordinates of the L path only; the DSL letters are our reconstruction
-/// of Fig. 8 (sizes 20–30 m, placed side by side along east so that they
-/// read "DSL").
-pub mod paths {
-    use nalgebra::Vector3;
-
-    use super::Reference;
-    use crate::ControlError;
-
-    /// The L-shaped teach path of the controller comparison (§VII-C,
-    /// Figs. 6–7): (x, y) = (−20, −30) → (0, −30) → (0, 0) \[m\].
-    pub const L_XY: [[f64; 2]; 3] = [[-20.0, -30.0], [0.0, -30.0], [0.0, 0.0]];
-    /// Speeds of the controller comparison on the L path [m/s].
-    pub const L_SPEEDS: [f64; 4] = [3.0, 5.0, 7.0, 9.0];
-
-    /// "D" of the DSL demonstration: a 30 m stem north, then a bowl of
-    /// radius 15 m bulging east (polyline, 30° steps), closed back at the
-    /// start.
-    pub const D_XY: [[f64; 2]; 10] = [
-        [0.0, 0.0],
-        [30.0, 0.0],
-        [30.0, 5.0],
-        [27.990_381_056_766_58, 12.5],
-        [22.5, 17.990_381_056_766_58],
-        [15.0, 20.0],
-        [7.5, 17.990_381_056_766_58],
-        [2.009_618_943_233_42, 12.5],
-        [0.0, 5.0],
-        [0.0, 0.0],
-    ];
-    /// Speed of the "D" flight [m/s].
-    pub const D_SPEED: f64 = 10.0;
-
-    /// "S" of the DSL demonstration: 20 m wide, 30 m tall, drawn from the
-    /// top right to the bottom left in three east–west legs.
-    pub const S_XY: [[f64; 2]; 6] = [
-        [30.0, 50.0],
-        [30.0, 30.0],
-        [15.0, 30.0],
-        [15.0, 50.0],
-        [0.0, 50.0],
-        [0.0, 30.0],
-    ];
-    /// Speed of the "S" flight [m/s].
-    pub const S_SPEED: f64 = 3.0;
-
-    /// "L" of the DSL demonstration: 30 m south along the stem, then 20 m
-    /// east.
-    pub const DSL_L_XY: [[f64; 2]; 3] = [[30.0, 60.0], [0.0, 60.0], [0.0, 80.0]];
-    /// Speed of the DSL "L" flight [m/s].
-    pub const DSL_L_SPEED: f64 = 8.0;
-
-    /// NED waypoints `(x, y, z)` \[m\] from `(x, y)` pairs at altitude `z`.
-    pub fn waypoints(xy: &[[f64; 2]], z: f64) -> Vec<Vector3<f64>> {
-        xy.iter().map(|p| Vector3::new(p[0], p[1], z)).collect()
-    }
-
-    /// The comparison's L path at altitude `z` (NED \[m\]) flown at `speed` [m/s].
-    pub fn l(z: f64, speed: f64) -> Result<Reference, ControlError> {
-        Reference::path(&waypoints(&L_XY, z), speed)
-    }
-
-    /// The DSL "D" at altitude `z` (NED \[m\]) flown at `speed` [m/s]
-    /// (the paper: [`D_SPEED`]).
-    pub fn d(z: f64, speed: f64) -> Result<Reference, ControlError> {
-        Reference::path(&waypoints(&D_XY, z), speed)
-    }
-
-    /// The DSL "S" at altitude `z` (NED \[m\]) flown at `speed` [m/s]
-    /// (the paper: [`S_SPEED`]).
-    pub fn s(z: f64, speed: f64) -> Result<Reference, ControlError> {
-        Reference::path(&waypoints(&S_XY, z), speed)
-    }
-
-    /// The DSL "L" at altitude `z` (NED \[m\]) flown at `speed` [m/s]
-    /// (the paper: [`DSL_L_SPEED`]).
-    pub fn dsl_l(z: f64, speed: f64) -> Result<Reference, ControlError> {
-        Reference::path(&waypoints(&DSL_L_XY, z), speed)
-    }
-}
+pub mod paths;

@@ -1,0 +1,334 @@
+//! Streamed trajectories: a planner's samples (time, position, optional
+//! velocity, acceleration, yaw, yaw rate) → the reference over the horizon,
+//! predicted from the newest sample.
+//!
+//! # The prediction
+//!
+//! From a sample at time `t_s` with position `p`, velocity `v` and
+//! acceleration `a` (NED), the reference at controller time `t` is
+//! `P(σ(t − t_s))`:
+//!
+//! * `P(σ)` is a **coordinated turn** in the horizontal plane: the
+//!   horizontal speed `|v_h|` changes at the tangential acceleration
+//!   `a_t = v_h·a_h/|v_h|` while the heading turns at
+//!   `ω = (v_x a_y − v_y a_x)/|v_h|²` (closed form), so a circle flown at
+//!   constant speed is predicted exactly; slower than
+//!   [`TURN_MIN_SPEED`] the horizontal part is constant acceleration,
+//!   `p + vσ + aσ²/2`. Vertically it is constant acceleration.
+//! * `σ(τ)` is the **decay**: `σ = τ` for the first `extrapolation_s`
+//!   after the sample; then the prediction's clock slows as
+//!   `dσ/dτ = (1 + cos(π x/decay_s))/2`, `x = τ − extrapolation_s`, and
+//!   stops after `decay_s` at `σ = extrapolation_s + decay_s/2`. So the
+//!   reference velocity `P'(σ)·σ'` falls smoothly to zero (no step in
+//!   velocity or acceleration) and the horizon's tail holds where the
+//!   extrapolation stops. A stream whose samples stop thus becomes a
+//!   smooth stop and hold by itself.
+//!
+//! Each new sample replaces the prediction. Without a velocity the sample
+//! is a point: `v = a = 0` (the reference holds it), unless
+//! `implied_velocity` is on and the two previous samples are recent
+//! (spacing in [`IMPLIED_MIN_GAP`, `implied_max_gap_s`]): then `v` and
+//! `a` are the second-order backward differences of the last three
+//! samples, `v = (3p_k − 4p_{k−1} + p_{k−2})/(2h)`, `a = (p_k − 2p_{k−1} +
+//! p_{k−2})/h²` (for unequal spacing, the derivatives of the quadratic
+//! through them). Without an acceleration, `a = 0`.
+
+use nalgebra::Vector3;
+
+use super::{invalid, is_finite3};
+use crate::ControlError;
+
+/// Slower than this [m/s] the horizontal prediction is constant
+/// acceleration instead of a coordinated turn.
+pub const TURN_MIN_SPEED: f64 = 0.3;
+/// Samples closer in time than this \[s\] do not imply a velocity.
+pub const IMPLIED_MIN_GAP: f64 = 0.005;
+
+/// One sample of a streamed trajectory.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StreamSample {
+    /// Time of the sample on the controller's clock \[s\].
+    pub t: f64,
+    /// Position, local NED \[m\].
+    pub position: Vector3<f64>,
+    /// Velocity, local NED [m/s], if the sender gave one.
+    pub velocity: Option<Vector3<f64>>,
+    /// Acceleration, local NED [m/s²], if the sender gave one.
+    pub acceleration: Option<Vector3<f64>>,
+    /// Heading \[rad\], NED, if the sender gave one (carried for yaw).
+    pub yaw: Option<f64>,
+    /// Heading rate \[rad/s\], if the sender gave one (carried for yaw).
+    pub yaw_rate: Option<f64>,
+}
+
+/// How a stream is extrapolated (see the module docs).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StreamSettings {
+    /// Time after a sample the prediction runs at full rate \[s\] (≥ 0).
+    pub extrapolation_s: f64,
+    /// Time over which the prediction then slows to a stop \[s\] (> 0).
+    pub decay_s: f64,
+    /// Position-only samples imply a velocity and an acceleration from the
+    /// two before them.
+    pub implied_velocity: bool,
+    /// Largest sample spacing \[s\] that implies a velocity (> 0).
+    pub implied_max_gap_s: f64,
+}
+
+impl Default for StreamSettings {
+    /// 1.0 s at full rate, 1.0 s decay, no implied velocity (0.25 s gap).
+    fn default() -> Self {
+        Self {
+            extrapolation_s: 1.0,
+            decay_s: 1.0,
+            implied_velocity: false,
+            implied_max_gap_s: 0.25,
+        }
+    }
+}
+
+impl StreamSettings {
+    /// Checks the ranges, naming the field.
+    pub fn validate(&self) -> Result<(), ControlError> {
+        if !(self.extrapolation_s.is_finite() && self.extrapolation_s >= 0.0) {
+            return Err(invalid("extrapolation_s", "must be finite and ≥ 0 s"));
+        }
+        if !(self.decay_s.is_finite() && self.decay_s > 0.0) {
+            return Err(invalid("decay_s", "must be finite and > 0 s"));
+        }
+        if !(self.implied_max_gap_s.is_finite() && self.implied_max_gap_s > 0.0) {
+            return Err(invalid("implied_max_gap_s", "must be finite and > 0 s"));
+        }
+        Ok(())
+    }
+}
+
+/// The prediction from one sample.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Prediction {
+    t: f64,
+    p: Vector3<f64>,
+    v: Vector3<f64>,
+    a: Vector3<f64>,
+}
+
+impl Prediction {
+    /// Position and velocity `sigma` \[s\] along the extrapolation.
+    fn at(&self, sigma: f64) -> (Vector3<f64>, Vector3<f64>) {
+        let s = sigma;
+        let z = self.p.z + self.v.z * s + 0.5 * self.a.z * s * s;
+        let vz = self.v.z + self.a.z * s;
+        let speed = self.v.x.hypot(self.v.y);
+        if speed < TURN_MIN_SPEED {
+            let x = self.p.x + self.v.x * s + 0.5 * self.a.x * s * s;
+            let y = self.p.y + self.v.y * s + 0.5 * self.a.y * s * s;
+            return (
+                Vector3::new(x, y, z),
+                Vector3::new(self.v.x + self.a.x * s, self.v.y + self.a.y * s, vz),
+            );
+        }
+        let omega = (self.v.x * self.a.y - self.v.y * self.a.x) / (speed * speed);
+        let at = (self.v.x * self.a.x + self.v.y * self.a.y) / speed;
+        let th0 = self.v.y.atan2(self.v.x);
+        let th = th0 + omega * s;
+        let spd = speed + at * s;
+        let (c0, s0) = (th0.cos(), th0.sin());
+        let (c1, s1) = (th.cos(), th.sin());
+        // U(σ) = ∫₀^σ u(θ0 + ωσ') dσ', IU = ∫₀^σ U; small ω: series.
+        let (ux, uy, iux, iuy) = if (omega * s).abs() < 1e-4 {
+            let w = omega;
+            (
+                s * c0 - 0.5 * w * s * s * s0,
+                s * s0 + 0.5 * w * s * s * c0,
+                0.5 * s * s * c0 - w * s * s * s / 6.0 * s0,
+                0.5 * s * s * s0 + w * s * s * s / 6.0 * c0,
+            )
+        } else {
+            let w = omega;
+            let ux = (s1 - s0) / w;
+            let uy = (c0 - c1) / w;
+            let iux = (-(c1 - c0) / w - s * s0) / w;
+            let iuy = (s * c0 - (s1 - s0) / w) / w;
+            (ux, uy, iux, iuy)
+        };
+        // ∫ (speed + a_t σ') u dσ' = speed·U + a_t (σU − IU).
+        let x = self.p.x + speed * ux + at * (s * ux - iux);
+        let y = self.p.y + speed * uy + at * (s * uy - iuy);
+        (Vector3::new(x, y, z), Vector3::new(spd * c1, spd * s1, vz))
+    }
+}
+
+/// A streamed trajectory: the newest prediction and the samples before it.
+#[derive(Debug, Clone, PartialEq)]
+pub(super) struct Stream {
+    settings: StreamSettings,
+    pred: Prediction,
+    /// The newest sample (yaw carried).
+    last: StreamSample,
+    /// Times and positions of the previous position-only samples.
+    history: [Option<(f64, Vector3<f64>)>; 2],
+    /// Controller time now \[s\] (set by `set_time`, else advanced by δt).
+    now: f64,
+    driven: bool,
+}
+
+fn check_sample(s: &StreamSample) -> Result<(), ControlError> {
+    let ok = s.t.is_finite()
+        && is_finite3(&s.position)
+        && s.velocity.is_none_or(|v| is_finite3(&v))
+        && s.acceleration.is_none_or(|a| is_finite3(&a))
+        && s.yaw.is_none_or(f64::is_finite)
+        && s.yaw_rate.is_none_or(f64::is_finite);
+    if ok {
+        Ok(())
+    } else {
+        Err(invalid("stream sample", "all given fields must be finite"))
+    }
+}
+
+impl Stream {
+    pub(super) fn new(
+        settings: StreamSettings,
+        sample: &StreamSample,
+    ) -> Result<Self, ControlError> {
+        settings.validate()?;
+        check_sample(sample)?;
+        let mut s = Self {
+            settings,
+            pred: Prediction {
+                t: sample.t,
+                p: sample.position,
+                v: Vector3::zeros(),
+                a: Vector3::zeros(),
+            },
+            last: *sample,
+            history: [None, None],
+            now: sample.t,
+            driven: false,
+        };
+        s.push(sample)?;
+        Ok(s)
+    }
+
+    /// Replaces the prediction with one from `sample`. A sample older than
+    /// the newest is refused.
+    pub(super) fn push(&mut self, sample: &StreamSample) -> Result<(), ControlError> {
+        check_sample(sample)?;
+        if sample.t < self.pred.t {
+            return Err(invalid("stream sample", "older than the newest sample"));
+        }
+        let implied = if sample.velocity.is_none() && self.settings.implied_velocity {
+            self.implied(sample)
+        } else {
+            None
+        };
+        let (v, a) = match (sample.velocity, implied) {
+            (Some(v), _) => (v, sample.acceleration.unwrap_or_else(Vector3::zeros)),
+            (None, Some(va)) => va,
+            (None, None) => (
+                Vector3::zeros(),
+                sample.acceleration.unwrap_or_else(Vector3::zeros),
+            ),
+        };
+        if sample.velocity.is_none() {
+            if self.history[1].is_some_and(|(t, _)| t >= sample.t) {
+                // Same time as the previous one: replace it.
+                self.history[1] = Some((sample.t, sample.position));
+            } else {
+                self.history = [self.history[1], Some((sample.t, sample.position))];
+            }
+        } else {
+            self.history = [None, None];
+        }
+        self.pred = Prediction {
+            t: sample.t,
+            p: sample.position,
+            v,
+            a,
+        };
+        self.last = *sample;
+        Ok(())
+    }
+
+    /// Velocity and acceleration of the quadratic through the two previous
+    /// samples and `sample`, at `sample`'s time.
+    fn implied(&self, sample: &StreamSample) -> Option<(Vector3<f64>, Vector3<f64>)> {
+        let (t1, p1) = self.history[1]?;
+        let (t0, p0) = self.history[0]?;
+        let (h2, h1) = (sample.t - t1, t1 - t0);
+        let (lo, hi) = (IMPLIED_MIN_GAP, self.settings.implied_max_gap_s);
+        if !(h2 >= lo && h2 <= hi && h1 >= lo && h1 <= hi) {
+            return None;
+        }
+        // Divided differences of the quadratic through (t0,p0),(t1,p1),(t2,p2).
+        let d21 = (sample.position - p1) / h2;
+        let d10 = (p1 - p0) / h1;
+        let a = (d21 - d10) * (2.0 / (h1 + h2));
+        let v = d21 + a * (0.5 * h2);
+        Some((v, a))
+    }
+
+    /// Sets the controller time now \[s\].
+    pub(super) fn set_time(&mut self, t: f64) {
+        if t.is_finite() {
+            self.now = t;
+            self.driven = true;
+        }
+    }
+
+    /// The decay's clock `σ` for time `tau` \[s\] after the sample, and
+    /// its rate `dσ/dτ`.
+    fn sigma(&self, tau: f64) -> (f64, f64) {
+        let (tc, td) = (self.settings.extrapolation_s, self.settings.decay_s);
+        let tau = tau.max(0.0);
+        if tau <= tc {
+            return (tau, 1.0);
+        }
+        let x = tau - tc;
+        if x >= td {
+            return (tc + 0.5 * td, 0.0);
+        }
+        let k = std::f64::consts::PI / td;
+        (
+            tc + 0.5 * x + 0.5 * (k * x).sin() / k,
+            0.5 * (1.0 + (k * x).cos()),
+        )
+    }
+
+    /// Position and velocity at controller time `t`.
+    pub(super) fn state(&self, t: f64) -> (Vector3<f64>, Vector3<f64>) {
+        let (sigma, rate) = self.sigma(t - self.pred.t);
+        let (p, v) = self.pred.at(sigma);
+        (p, v * rate)
+    }
+
+    pub(super) fn horizon(&mut self, dt: f64, out: &mut [Vector3<f64>]) {
+        let dt = if dt.is_finite() && dt > 0.0 { dt } else { 0.0 };
+        for (j, o) in out.iter_mut().enumerate() {
+            *o = self.state(self.now + j as f64 * dt).0;
+        }
+        if !self.driven {
+            self.now += dt;
+        }
+    }
+
+    pub(super) fn closest(&self) -> (Vector3<f64>, Vector3<f64>) {
+        self.state(self.now)
+    }
+
+    /// Where the prediction stops (the hold after the decay).
+    pub(super) fn stop_point(&self) -> Vector3<f64> {
+        self.state(self.pred.t + self.settings.extrapolation_s + self.settings.decay_s)
+            .0
+    }
+
+    /// The newest sample.
+    pub(super) fn last(&self) -> &StreamSample {
+        &self.last
+    }
+
+    /// Time since the newest sample \[s\] at the current time.
+    pub(super) fn age(&self) -> f64 {
+        self.now - self.pred.t
+    }
+}
