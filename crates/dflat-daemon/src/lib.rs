@@ -30,6 +30,7 @@ pub mod config;
 pub mod control;
 pub mod daemon;
 pub mod guard;
+pub mod link_health;
 pub mod motion;
 pub mod realtime;
 pub mod records;
