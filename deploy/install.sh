@@ -20,6 +20,10 @@ fi
 id -u dflat >/dev/null 2>&1 || useradd --system --no-create-home --shell /usr/sbin/nologin --groups dialout dflat
 install -D -m 0755 "$bin" /usr/local/bin/dflat
 install -d -m 0755 /etc/dflat
+# MAVLink signing keys (link.signing_key_file = "/etc/dflat/keys/…"): a
+# directory only the daemon's user can enter; key files mode 0600 inside.
+install -d -m 0700 -o dflat -g dflat /etc/dflat/keys
+chown dflat:dflat /etc/dflat/keys && chmod 0700 /etc/dflat/keys
 if [ -f /etc/dflat/dflat.toml ]; then
   install -m 0644 "$cfg" /etc/dflat/dflat.toml.new
   echo "kept /etc/dflat/dflat.toml; new default written to /etc/dflat/dflat.toml.new"

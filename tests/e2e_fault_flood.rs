@@ -1,7 +1,10 @@
-//! Fault injection, end to end: a flood of 10,000 messages/s for 3 s at the
-//! daemon's own socket — a third valid LOCAL_POSITION_NED from a wrong
-//! system id (42), a third valid-from-the-GCS setpoints outside the
-//! geofence, a third garbage bytes — while it holds against the SITL.
+//! Fault injection, end to end: a flood of 10,000 messages/s for 3 s into
+//! the SITL's ground-station port, which routes it to the daemon's link (the
+//! daemon's own socket is connected to the autopilot: datagrams sent to it
+//! from elsewhere are dropped by the kernel, see `e2e_intruder`) — a third
+//! valid LOCAL_POSITION_NED from a wrong system id (42), a third
+//! valid-from-the-GCS setpoints outside the geofence, a third garbage bytes
+//! (counted by the router, not forwarded) — while it holds against the SITL.
 //!
 //! The 50 Hz tick keeps going: the daemon stays HOLDING for the whole
 //! flight (the flood neither fakes nor starves the pose), no tick gap
@@ -62,6 +65,7 @@ noise_sigma = 0.01
         &dflat_sim::sitl::SitlSettings::load(&config).expect("sitl config"),
         SitlOptions {
             link: Some("udpin:127.0.0.1:0".into()),
+            gcs: Some("udpin:127.0.0.1:0".into()),
             tap: Some(tx),
             ..SitlOptions::default()
         },
@@ -73,8 +77,9 @@ noise_sigma = 0.01
         sim.local_addr(),
         &["--summary-json", summary_path.to_str().unwrap()],
     );
-    let target = daemon_local_addr(&daemon, Duration::from_secs(10))
+    daemon_local_addr(&daemon, Duration::from_secs(10))
         .expect("the daemon did not log its local address");
+    let target = sim.gcs_addr().expect("the SITL's GCS port");
 
     // Holding for 1 s.
     let until = Instant::now() + Duration::from_secs(15);
@@ -203,8 +208,12 @@ noise_sigma = 0.01
     // reported figures, not by tests on a shared machine); that the flood
     // costs no tick is asserted below from the CSV's tick indices.
     assert!(jitter["p99"].as_u64().is_some(), "no jitter in the summary");
-    let bad_frames = link["malformed"].as_u64().unwrap() + link["crc_errors"].as_u64().unwrap();
-    assert!(bad_frames > 0, "no malformed frame counted");
+    // Garbage is counted by the router that received it.
+    eprintln!("router frame errors {}", report.counters.frame_errors);
+    assert!(
+        report.counters.frame_errors > 0,
+        "no malformed frame counted"
+    );
     assert!(
         link["ignored_wrong_source"].as_u64().unwrap() > wrong / 2,
         "wrong-source poses not counted"

@@ -342,6 +342,8 @@ impl Lcg {
 
 pub use dflat_link::mavlink;
 
+pub mod link_bodies;
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -31,6 +31,7 @@ pub mod control;
 pub mod daemon;
 pub mod guard;
 pub mod mission;
+pub mod link_health;
 pub mod motion;
 pub mod realtime;
 pub mod records;

@@ -77,15 +77,17 @@ impl TimestampStore {
     /// The persisted timestamp; `None` if the file does not exist yet.
     /// A file that exists but does not hold a number is refused.
     pub fn load(&self) -> Result<Option<u64>, SigningError> {
-        match std::fs::read_to_string(&self.path) {
-            Ok(text) => text.trim().parse::<u64>().map(Some).map_err(|_| {
-                refuse(
-                    TS_FIELD,
-                    &self.path,
-                    "does not hold a decimal timestamp (delete it only if the \
+        match std::fs::read(&self.path) {
+            Ok(text) => dflat_link::parse_timestamp_file(&text)
+                .map(Some)
+                .ok_or_else(|| {
+                    refuse(
+                        TS_FIELD,
+                        &self.path,
+                        "does not hold a decimal timestamp (delete it only if the \
                      wall clock is known to be right)",
-                )
-            }),
+                    )
+                }),
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
             Err(e) => Err(refuse(TS_FIELD, &self.path, e.to_string())),
         }
@@ -121,7 +123,12 @@ pub fn setup(
     let start = restart_timestamp(store.load()?, now);
     store.store(start)?;
     let mut signing = Signing::new(key, link.signing_link_id, start);
-    signing.accept_unsigned_telemetry = link.signing_accept_unsigned_telemetry;
+    // Validated with the config (names known, none that must be signed).
+    signing.accept_unsigned = link
+        .signing_accept_unsigned
+        .iter()
+        .filter_map(|n| dflat_link::unsigned_message_id(n).ok())
+        .collect();
     Ok(Some((signing, store)))
 }
 

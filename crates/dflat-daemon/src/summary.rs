@@ -249,6 +249,8 @@ pub struct LinkSummary {
     pub bad_signature: u64,
     /// Signing on: replayed (stale-timestamp) frames.
     pub replayed: u64,
+    /// Signing on: signed frames dated more than a minute ahead of the clock.
+    pub future_timestamp: u64,
 }
 
 impl LinkSummary {
@@ -269,6 +271,7 @@ impl LinkSummary {
             unsigned: rx.unsigned,
             bad_signature: rx.bad_signature,
             replayed: rx.replayed,
+            future_timestamp: rx.future_timestamp,
         }
     }
 
@@ -282,6 +285,7 @@ impl LinkSummary {
             + self.unsigned
             + self.bad_signature
             + self.replayed
+            + self.future_timestamp
     }
 }
 
@@ -366,6 +370,9 @@ pub struct FlightSummary {
     /// What the controller's successful ticks reported (constrained
     /// solves, solver fallbacks, input saturation).
     pub solves: SolveCounts,
+    /// The link's guards: foreign senders, reconnects, the command slot,
+    /// replies, link-task stalls.
+    pub link_guard: crate::link_health::LinkGuardSummary,
 }
 
 /// Counts over the controller's successful ticks, from
@@ -519,6 +526,21 @@ impl fmt::Display for FlightSummary {
             f,
             "  solves        {} constrained ({} by clarabel after the banded solver, {} by the cone's interior point), {} saturated by the controller",
             s.constrained, s.qp_fallbacks, s.cone_interior_point, s.saturated
+        )?;
+        let lg = &self.link_guard;
+        writeln!(
+            f,
+            "  link guard    peer {}, {} foreign frames dropped, {} reconnects, {} sends dropped, {} future-dated; commands {} replaced / {} stale; replies {} sent / {} dropped; {} link-task stalls",
+            lg.peer.map_or("-".to_owned(), |p| p.to_string()),
+            lg.foreign_frames,
+            lg.reconnects,
+            lg.send_dropped,
+            lg.future_timestamp,
+            lg.commands_replaced,
+            lg.commands_stale,
+            lg.replies_sent,
+            lg.replies_dropped,
+            lg.link_stalls
         )?;
         write!(f, "  resources     CPU {cpu}, peak RSS {rss}")?;
         if let Some(c) = &self.csv {

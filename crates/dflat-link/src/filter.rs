@@ -169,10 +169,12 @@ impl LinkRx {
 
     /// Signing gate, before [`handle`](Self::handle). With signing off:
     /// `Ok`. With signing on: a bad signature or a replayed timestamp is
-    /// refused for every message; an unsigned frame is refused if it is a
-    /// command ([`Signing::is_command`]) or `accept_unsigned_telemetry` is
-    /// off. Refusals are counted (`unsigned`, `bad_signature`, `replayed`)
-    /// and returned. `now`: the wall clock as a signing timestamp.
+    /// refused for every message, and so is a timestamp more than a minute
+    /// ahead of the clock; an unsigned frame is refused unless
+    /// [`Signing::accepts_unsigned`] (never for [`Signing::must_be_signed`]:
+    /// setpoints, pose, HEARTBEAT, PARAM_VALUE, missions, commands).
+    /// Refusals are counted (`unsigned`, `bad_signature`, `replayed`,
+    /// `future_timestamp`) and returned. `now`: the wall clock as a signing timestamp.
     pub fn authenticate(
         &mut self,
         header: &MavHeader,
@@ -186,14 +188,13 @@ impl LinkRx {
         let check = signing.verify(header, signed, now);
         let refused = match check {
             SignatureCheck::Valid { .. } => return Ok(()),
-            SignatureCheck::Unsigned
-                if signing.accept_unsigned_telemetry && !Signing::is_command(msg) =>
-            {
+            SignatureCheck::Unsigned if signing.accepts_unsigned(msg) => {
                 return Ok(());
             }
             SignatureCheck::Unsigned => &mut self.stats.unsigned,
             SignatureCheck::BadSignature => &mut self.stats.bad_signature,
             SignatureCheck::Replayed => &mut self.stats.replayed,
+            SignatureCheck::FutureTimestamp => &mut self.stats.future_timestamp,
         };
         *refused += 1;
         self.stats.record_received(msg.message_id());

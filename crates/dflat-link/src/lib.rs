@@ -30,6 +30,7 @@
 //! (the mavlink crate's own readers skip them silently). Logging:
 //! [`tlog::TlogWriter`].
 
+pub mod backoff;
 pub mod command;
 mod error;
 mod filter;
@@ -72,9 +73,10 @@ pub use outbound::{
     vision_position_estimate,
 };
 pub use signing::{
-    KeyFileError, KeyFormatError, ONE_MINUTE, SIGNING_EPOCH_UNIX_S, SignatureCheck, Signing,
-    SigningKey, TIMESTAMP_MAX, TIMESTAMP_UNITS_PER_S, load_key_file, restart_timestamp,
-    timestamp_from_system_time,
+    KEY_FILE_MAX, KeyFileError, KeyFormatError, MUST_BE_SIGNED, ONE_MINUTE, SIGNING_EPOCH_UNIX_S,
+    SignatureCheck, Signing, SigningKey, TIMESTAMP_MAX, TIMESTAMP_UNITS_PER_S, check_key_metadata,
+    constant_time_eq, load_key_file, must_be_signed_id, parse_timestamp_file, restart_timestamp,
+    timestamp_from_system_time, unsigned_message_id,
 };
 pub use stats::{LinkStats, MessageCounts};
 

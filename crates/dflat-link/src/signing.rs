@@ -134,6 +134,11 @@ pub enum SignatureCheck {
     /// its (link id, system, component) stream, or a new stream starts more
     /// than a minute behind the newest known timestamp.
     Replayed,
+    /// Valid signature, but the timestamp is more than [`ONE_MINUTE`] ahead
+    /// of the wall clock (only checked when the clock is known, `now` > 0).
+    /// Accepting it would let one frame push its stream (and the replay
+    /// window of every new stream) into the future.
+    FutureTimestamp,
 }
 
 /// Signing state of one link: the key, our link id, the next outgoing
@@ -148,9 +153,14 @@ pub struct Signing {
     /// Newest timestamp known (ours, incoming, wall clock).
     newest: u64,
     streams: HashMap<(u8, u8, u8), u64>,
-    /// Accept unsigned messages other than commands (setpoints, attitude
-    /// targets) — see [`Signing::is_command`].
+    /// Accept every unsigned message outside [`Signing::must_be_signed`]
+    /// (the SITL autopilot's looseness towards its ground station; the
+    /// daemon never sets it, it uses [`accept_unsigned`](Self::accept_unsigned)).
     pub accept_unsigned_telemetry: bool,
+    /// Message ids accepted unsigned (the daemon's
+    /// `link.signing_accept_unsigned`). Ids in [`Signing::must_be_signed`]
+    /// are refused unsigned even when listed.
+    pub accept_unsigned: Vec<u32>,
 }
 
 impl fmt::Debug for Signing {
@@ -161,6 +171,7 @@ impl fmt::Debug for Signing {
             .field("next", &self.next)
             .field("streams", &self.streams.len())
             .field("accept_unsigned_telemetry", &self.accept_unsigned_telemetry)
+            .field("accept_unsigned", &self.accept_unsigned)
             .finish()
     }
 }
@@ -179,6 +190,7 @@ impl Signing {
             newest: start,
             streams: HashMap::new(),
             accept_unsigned_telemetry: false,
+            accept_unsigned: Vec::new(),
         }
     }
 
@@ -194,12 +206,20 @@ impl Signing {
     }
 
     /// Messages that always need a valid signature while signing is on:
-    /// SET_POSITION_TARGET_LOCAL_NED and SET_ATTITUDE_TARGET.
-    pub fn is_command(msg: &MavMessage) -> bool {
-        matches!(
-            msg,
-            MavMessage::SET_POSITION_TARGET_LOCAL_NED(_) | MavMessage::SET_ATTITUDE_TARGET(_)
-        )
+    /// everything that moves the vehicle or changes the daemon's view of
+    /// the autopilot ([`MUST_BE_SIGNED`]).
+    pub fn must_be_signed(msg: &MavMessage) -> bool {
+        must_be_signed_id(mavlink::Message::message_id(msg))
+    }
+
+    /// Whether an unsigned `msg` is let through: not in
+    /// [`must_be_signed`](Self::must_be_signed), and listed in
+    /// [`accept_unsigned`](Self::accept_unsigned) (or
+    /// [`accept_unsigned_telemetry`](Self::accept_unsigned_telemetry) set).
+    pub fn accepts_unsigned(&self, msg: &MavMessage) -> bool {
+        let id = mavlink::Message::message_id(msg);
+        !must_be_signed_id(id)
+            && (self.accept_unsigned_telemetry || self.accept_unsigned.contains(&id))
     }
 
     /// Serializes and signs `msg`. The timestamp is max(next, `now`), then
@@ -241,10 +261,13 @@ impl Signing {
         let raw = &frame.0;
         let mut value = [0u8; 6];
         raw.calculate_signature(&self.key.0, &mut value);
-        if value != raw.signature_value() {
+        if !constant_time_eq(&value, raw.signature_value()) {
             return SignatureCheck::BadSignature;
         }
         let timestamp = frame.timestamp();
+        if now > 0 && timestamp > now.saturating_add(ONE_MINUTE) {
+            return SignatureCheck::FutureTimestamp;
+        }
         let link_id = frame.link_id();
         let system = u8::try_from(header.system_id).unwrap_or(u8::MAX);
         let stream = (link_id, system, header.component_id);
@@ -259,6 +282,51 @@ impl Signing {
         self.newest = self.newest.max(timestamp);
         SignatureCheck::Valid { link_id, timestamp }
     }
+}
+
+/// Message ids that must carry a valid signature while signing is on,
+/// whatever `accept_unsigned` says: they move the vehicle or change the
+/// daemon's view of the autopilot. HEARTBEAT (0, mode and armed state),
+/// PARAM_VALUE (22), ATTITUDE (30), LOCAL_POSITION_NED (32), the mission
+/// protocol (37–47, 51, 73), COMMAND_INT / COMMAND_LONG (75, 76: mission
+/// start, pause, speed), SET_ATTITUDE_TARGET (82),
+/// SET_POSITION_TARGET_LOCAL_NED (84), VISION_POSITION_ESTIMATE (102),
+/// SETUP_SIGNING (256), ODOMETRY (331).
+pub const MUST_BE_SIGNED: &[u32] = &[
+    0, 22, 30, 32, 37, 38, 39, 40, 41, 42, 43, 44, 45, 46, 47, 51, 73, 75, 76, 82, 84, 102, 256,
+    331,
+];
+
+/// Whether message id `id` is in [`MUST_BE_SIGNED`].
+pub fn must_be_signed_id(id: u32) -> bool {
+    MUST_BE_SIGNED.contains(&id)
+}
+
+/// The message id of `name` (a common-dialect message name, e.g.
+/// `"SYS_STATUS"`) for `link.signing_accept_unsigned`; an error in words if
+/// the name is unknown or the message must be signed ([`MUST_BE_SIGNED`]).
+pub fn unsigned_message_id(name: &str) -> Result<u32, &'static str> {
+    use mavlink::Message as _;
+    let id = MavMessage::message_id_from_name(name.trim())
+        .ok_or("a message name of the common dialect (e.g. \"SYS_STATUS\")")?;
+    if must_be_signed_id(id) {
+        return Err(
+            "a message that may go unsigned: setpoints, pose, HEARTBEAT, ATTITUDE, \
+                    PARAM_VALUE, missions and commands must always be signed",
+        );
+    }
+    Ok(id)
+}
+
+/// Compares two byte strings in time that depends on their lengths only
+/// (not on where they first differ), so a forger cannot learn a signature
+/// byte by byte from response timing.
+pub fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
+    if a.len() != b.len() {
+        return false;
+    }
+    let diff = a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y));
+    std::hint::black_box(diff) == 0
 }
 
 /// A signing key file that is refused, with the reason in words.
@@ -279,35 +347,95 @@ fn effective_uid() -> Option<u32> {
     line.split_whitespace().nth(2)?.parse().ok()
 }
 
+/// Largest key file read \[bytes\]: a key is 32 bytes, 64 hex digits or a
+/// passphrase; anything longer is refused, not read.
+pub const KEY_FILE_MAX: u64 = 4096;
+
 /// Reads a signing key file (64 hex digits, 32 raw bytes or a passphrase,
 /// see [`SigningKey::parse`]), refusing it unless it is a regular file with
 /// mode 0600 owned by the running user. Used by the daemon and the SITL.
+///
+/// The file is opened once, without following a symbolic link
+/// (`O_NOFOLLOW`) and without blocking on a FIFO (`O_NONBLOCK`); the checks
+/// are made with `fstat` on that open descriptor and the contents read from
+/// it, so the file checked is the file read (no race with a rename).
 pub fn load_key_file(path: &std::path::Path) -> Result<SigningKey, KeyFileError> {
-    use std::os::unix::fs::MetadataExt as _;
+    use std::io::Read as _;
+    use std::os::unix::fs::{MetadataExt as _, OpenOptionsExt as _};
     let refuse = |reason: String| KeyFileError {
         path: path.to_owned(),
         reason,
     };
-    let meta = std::fs::metadata(path).map_err(|e| refuse(e.to_string()))?;
-    if !meta.is_file() {
-        return Err(refuse("not a regular file".into()));
+    let file = std::fs::OpenOptions::new()
+        .read(true)
+        .custom_flags(libc::O_NOFOLLOW | libc::O_NONBLOCK | libc::O_CLOEXEC)
+        .open(path)
+        .map_err(|e| {
+            if e.raw_os_error() == Some(libc::ELOOP) {
+                refuse("is a symbolic link: name the key file itself".into())
+            } else {
+                refuse(e.to_string())
+            }
+        })?;
+    let meta = file.metadata().map_err(|e| refuse(e.to_string()))?;
+    check_key_metadata(
+        meta.is_file(),
+        meta.mode(),
+        meta.uid(),
+        meta.len(),
+        effective_uid(),
+    )
+    .map_err(refuse)?;
+    let mut bytes = Vec::with_capacity(usize::try_from(meta.len()).unwrap_or(0));
+    file.take(KEY_FILE_MAX + 1)
+        .read_to_end(&mut bytes)
+        .map_err(|e| refuse(e.to_string()))?;
+    if bytes.len() as u64 > KEY_FILE_MAX {
+        return Err(refuse(format!("longer than {KEY_FILE_MAX} bytes")));
     }
-    let mode = meta.mode() & 0o7777;
-    if mode != 0o600 {
-        return Err(refuse(format!(
-            "mode {mode:04o} refused: the key file must be mode 0600 (chmod 600)"
-        )));
-    }
-    if let Some(uid) = effective_uid()
-        && meta.uid() != uid
-    {
-        return Err(refuse(format!(
-            "owned by uid {}, not by the running user (uid {uid})",
-            meta.uid()
-        )));
-    }
-    let bytes = std::fs::read(path).map_err(|e| refuse(e.to_string()))?;
     SigningKey::parse(&bytes).map_err(|e| refuse(e.to_string()))
+}
+
+/// The checks [`load_key_file`] makes on the key file's `fstat`: a regular
+/// file, mode exactly 0600, owned by `euid` (when known), at most
+/// [`KEY_FILE_MAX`] bytes. Pure, for tests and fuzzing.
+pub fn check_key_metadata(
+    regular: bool,
+    mode: u32,
+    uid: u32,
+    len: u64,
+    euid: Option<u32>,
+) -> Result<(), String> {
+    if !regular {
+        return Err("not a regular file".into());
+    }
+    let mode = mode & 0o7777;
+    if mode != 0o600 {
+        return Err(format!(
+            "mode {mode:04o} refused: the key file must be mode 0600 (chmod 600)"
+        ));
+    }
+    if let Some(euid) = euid
+        && uid != euid
+    {
+        return Err(format!(
+            "owned by uid {uid}, not by the running user (uid {euid})"
+        ));
+    }
+    if len > KEY_FILE_MAX {
+        return Err(format!("longer than {KEY_FILE_MAX} bytes"));
+    }
+    Ok(())
+}
+
+/// Parses a persisted signing timestamp file's contents: one decimal
+/// number (surrounding whitespace ignored) no larger than [`TIMESTAMP_MAX`].
+pub fn parse_timestamp_file(contents: &[u8]) -> Option<u64> {
+    let text = std::str::from_utf8(contents).ok()?.trim();
+    if text.is_empty() || text.len() > 20 || !text.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    text.parse::<u64>().ok().filter(|t| *t <= TIMESTAMP_MAX)
 }
 
 #[cfg(test)]
@@ -340,6 +468,43 @@ mod tests {
             format!("{:?}", SigningKey::from_bytes(raw)),
             "SigningKey(<redacted>)"
         );
+    }
+
+    #[test]
+    fn key_file_is_read_through_one_descriptor_without_following_links() {
+        use std::os::unix::fs::PermissionsExt as _;
+        let dir = std::env::temp_dir().join(format!("dflat-keyfile-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let key = dir.join("key");
+        std::fs::write(&key, "ab".repeat(32)).unwrap();
+        std::fs::set_permissions(&key, std::fs::Permissions::from_mode(0o600)).unwrap();
+        assert_eq!(
+            load_key_file(&key).unwrap(),
+            SigningKey::from_bytes([0xab; 32])
+        );
+        // A symbolic link to a good key file is refused, naming why.
+        let link = dir.join("link");
+        std::os::unix::fs::symlink(&key, &link).unwrap();
+        let e = load_key_file(&link).unwrap_err();
+        assert!(e.reason.contains("symbolic link"), "{e}");
+        // A directory, a too-long file, a group-readable file: refused.
+        assert!(load_key_file(&dir).is_err());
+        let long = dir.join("long");
+        std::fs::write(&long, vec![b'a'; 5000]).unwrap();
+        std::fs::set_permissions(&long, std::fs::Permissions::from_mode(0o600)).unwrap();
+        assert!(load_key_file(&long).unwrap_err().reason.contains("longer"));
+        std::fs::set_permissions(&key, std::fs::Permissions::from_mode(0o640)).unwrap();
+        assert!(load_key_file(&key).unwrap_err().reason.contains("0640"));
+        let _ = std::fs::remove_dir_all(&dir);
+        // The pure checks and the timestamp parser.
+        assert!(check_key_metadata(true, 0o100600, 5, 64, Some(5)).is_ok());
+        assert!(check_key_metadata(true, 0o100600, 5, 64, Some(6)).is_err());
+        assert!(check_key_metadata(false, 0o600, 5, 64, Some(5)).is_err());
+        assert_eq!(parse_timestamp_file(b" 123\n"), Some(123));
+        assert_eq!(parse_timestamp_file(b"-1"), None);
+        assert_eq!(parse_timestamp_file(b"281474976710656"), None);
+        assert_eq!(parse_timestamp_file(b""), None);
     }
 
     #[test]

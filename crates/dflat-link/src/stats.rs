@@ -104,13 +104,16 @@ pub struct LinkStats {
     pub rejected: u64,
     /// Outbound messages refused by a builder or failed to write.
     pub send_errors: u64,
-    /// Signing on: unsigned frames refused (commands, or all without
-    /// `accept_unsigned_telemetry`).
+    /// Signing on: unsigned frames refused (everything that must be signed,
+    /// and what `accept_unsigned` does not list).
     pub unsigned: u64,
     /// Signing on: frames signed with another key (or altered).
     pub bad_signature: u64,
     /// Signing on: correctly signed frames with a stale timestamp (replay).
     pub replayed: u64,
+    /// Signing on: correctly signed frames with a timestamp more than a
+    /// minute ahead of the clock.
+    pub future_timestamp: u64,
 }
 
 impl LinkStats {

@@ -13,19 +13,29 @@
 //! them silently).
 //!
 //! Semantics per kind:
-//! * `udpin` binds `HOST:PORT` and replies to the last sender; sends before
-//!   any peer has spoken are dropped ([`SendOutcome::NoPeer`]). This is the
-//!   autopilot (SITL) side.
-//! * `udpout` binds an ephemeral local port, sends to `HOST:PORT` and
-//!   receives from anyone (the source filter decides what to act on). This
-//!   is the daemon side.
-//! * `tcpout` connects once; a closed connection is [`TransportError::Closed`]
-//!   (no reconnect).
+//! * `udpin` binds `HOST:PORT`. With [`UdpInPeer::LastSender`] (the
+//!   default of [`Transport::open`]; the autopilot side) it replies to the
+//!   last sender; with [`UdpInPeer::Lock`] (the daemon) it talks to one
+//!   peer: the configured address, or the one the caller locks with
+//!   [`Transport::lock_peer`] (the daemon: the first sender of the
+//!   autopilot's HEARTBEAT); datagrams from any other address are dropped
+//!   and counted ([`TransportCounters::foreign_datagrams`], said once in
+//!   the log). Sends before there is a peer are dropped
+//!   ([`SendOutcome::NoPeer`]).
+//! * `udpout` binds the address of the interface that routes to `HOST:PORT`
+//!   (ephemeral port) and `connect()`s the socket to it, so the kernel
+//!   drops datagrams from any other sender. This is the daemon side.
+//! * `tcpout` connects; with [`OpenOptions::reconnect`] a lost connection
+//!   is re-established with [`Backoff`] (each reconnect logged and counted),
+//!   otherwise it is [`TransportError::Closed`].
 //! * `serial` opens the port with the mavlink crate's direct-serial
 //!   transport (8N1, no flow control) in two blocking threads (reader,
-//!   writer). The mavlink reader verifies checksums itself and skips bad
-//!   frames, so on serial links CRC failures are *not* counted; payload
-//!   decoding errors still are.
+//!   writer; the writer's queue is bounded, [`SERIAL_TX_QUEUE`], beyond it
+//!   frames are dropped and counted). The mavlink reader verifies checksums
+//!   itself and skips bad frames, so on serial links CRC failures are *not*
+//!   counted; payload decoding errors still are. With
+//!   [`OpenOptions::reconnect`] a port that closes is reopened with
+//!   [`Backoff`].
 //!
 //! An optional [`TlogTap`] records every frame sent and received, with a µs
 //! UNIX timestamp, in a `.tlog` file, written by its own thread so socket
@@ -41,6 +51,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex as StdMutex};
 use std::time::{Instant, SystemTime, UNIX_EPOCH};
 
+use crate::backoff::Backoff;
 use crate::tlog::TlogWriter;
 use crate::{
     EncodedFrame, FrameError, FrameParser, LinkError, MAX_FRAME_LEN, MavHeader, MavMessage,
@@ -61,6 +72,53 @@ const STREAM_CHUNK: usize = 4096;
 const TAP_QUEUE: usize = 8192;
 /// Capacity of the serial reader → async queue \[events\].
 const SERIAL_QUEUE: usize = 1024;
+/// Capacity of the serial writer's queue \[frames\]: about 0.1 s of a
+/// 921600 baud link; beyond it frames are dropped and counted.
+pub const SERIAL_TX_QUEUE: usize = 64;
+
+/// How a `udpin` transport chooses the peer it talks to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum UdpInPeer {
+    /// Reply to whoever sent last (the autopilot side, MAVLink routers).
+    #[default]
+    LastSender,
+    /// One peer: this address if given, else none until the caller
+    /// [locks](Transport::lock_peer) one. Datagrams from other addresses are
+    /// dropped and counted.
+    Lock(Option<SocketAddr>),
+}
+
+/// Options of [`Transport::open_with`].
+#[derive(Debug, Clone, Default)]
+pub struct OpenOptions {
+    /// Record every frame sent and received here.
+    pub tap: Option<TlogTap>,
+    /// `udpin`: how the peer is chosen.
+    pub udpin_peer: UdpInPeer,
+    /// TCP / serial: reconnect with backoff when the connection is lost
+    /// (else a lost connection is [`TransportError::Closed`]).
+    pub reconnect: bool,
+}
+
+/// What a [`Transport`] counted of its peer handling.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
+pub struct TransportCounters {
+    /// Datagrams dropped because they came from an address other than the
+    /// peer (udpout: after `connect()` the kernel drops most of them first).
+    pub foreign_datagrams: u64,
+    /// Connections re-established (TCP, serial).
+    pub reconnects: u64,
+    /// Frames dropped because the serial writer's queue was full, or the
+    /// link was down (TCP, serial reconnecting).
+    pub send_dropped: u64,
+}
+
+#[derive(Debug, Default)]
+struct AtomicCounters {
+    foreign_datagrams: AtomicU64,
+    reconnects: AtomicU64,
+    send_dropped: AtomicU64,
+}
 
 /// Microseconds since the UNIX epoch on the system clock (0 if the clock is
 /// before 1970).
@@ -245,6 +303,8 @@ pub struct Received {
     /// The frame's bytes if it carried a MAVLink 2 signature (verify with
     /// `LinkRx::authenticate`).
     pub signed: Option<SignedFrame>,
+    /// The datagram's source address (UDP); `None` for TCP and serial.
+    pub from: Option<SocketAddr>,
 }
 
 /// What [`Transport::recv`] yields.
@@ -263,8 +323,12 @@ pub enum SendOutcome {
     /// Written (or, for serial, queued to the writer thread); the frame's
     /// length in bytes.
     Sent(usize),
-    /// `udpin` before any peer has spoken: dropped.
+    /// No peer to send to: `udpin` before one spoke (or was locked), or a
+    /// TCP / serial link while it reconnects. Dropped.
     NoPeer,
+    /// The serial writer's bounded queue is full: dropped (counted in
+    /// [`TransportCounters::send_dropped`]).
+    QueueFull,
 }
 
 /// A cloneable handle over one open MAVLink connection. All clones share
@@ -294,22 +358,36 @@ struct Inner {
     io: Io,
     rx: Mutex<RxState>,
     tap: Option<TlogTap>,
+    counters: Arc<AtomicCounters>,
+}
+
+/// How a UDP transport treats source addresses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum UdpMode {
+    /// `udpin`, reply to the last sender.
+    LastSender,
+    /// `udpin`, one (locked) peer.
+    Lock,
+    /// `udpout`: connected to the peer.
+    Connected,
 }
 
 enum Io {
     Udp {
         socket: UdpSocket,
-        /// `udpin`: last sender (None until one spoke); `udpout`: fixed.
+        /// The peer sends go to (`udpin`: None until one spoke or was locked).
         peer: StdMutex<Option<SocketAddr>>,
-        reply_to_last: bool,
+        mode: UdpMode,
     },
     Tcp {
-        read: Mutex<OwnedReadHalf>,
-        write: Mutex<OwnedWriteHalf>,
+        addr: SocketAddr,
+        reconnect: bool,
+        read: Mutex<Option<OwnedReadHalf>>,
+        write: Mutex<Option<OwnedWriteHalf>>,
     },
     Serial {
-        /// Raw frames to the writer thread.
-        tx: std::sync::mpsc::Sender<mavlink::MAVLinkV2MessageRaw>,
+        /// Raw frames to the writer thread (bounded).
+        tx: std::sync::mpsc::SyncSender<mavlink::MAVLinkV2MessageRaw>,
         /// Events from the reader thread.
         rx: Mutex<mpsc::Receiver<Result<RecvEvent, TransportError>>>,
     },
@@ -336,7 +414,14 @@ impl RxState {
 
     /// Feeds `len` bytes of `self.buf` to the parser and queues the events.
     /// `complete`: the bytes are a whole datagram (no frame continues).
-    fn ingest(&mut self, len: usize, complete: bool, arrival: Instant, tap: Option<&TlogTap>) {
+    fn ingest(
+        &mut self,
+        len: usize,
+        complete: bool,
+        arrival: Instant,
+        from: Option<SocketAddr>,
+        tap: Option<&TlogTap>,
+    ) {
         let bytes = &self.buf[..len];
         // Keep the mirror equal to the parser's buffer after `push`.
         let keep = self.parser.pending();
@@ -362,6 +447,7 @@ impl RxState {
                         message: frame.message,
                         arrival,
                         signed: frame.signed,
+                        from,
                     })));
                 }
                 Err(e) => self.pending.push_back(RecvEvent::Error(e)),
@@ -381,6 +467,7 @@ impl RxState {
                             message: frame.message,
                             arrival,
                             signed: frame.signed,
+                            from,
                         })));
                     }
                     Err(e) => self.pending.push_back(RecvEvent::Error(e)),
@@ -394,6 +481,12 @@ impl RxState {
             self.pending
                 .push_back(RecvEvent::Error(FrameError::NoMarker));
         }
+    }
+
+    /// Forgets a partial frame (the stream was reconnected).
+    fn reset_stream(&mut self) {
+        self.parser = FrameParser::new();
+        self.mirror.clear();
     }
 
     fn errors_queued(&self) -> usize {
@@ -416,6 +509,28 @@ impl Transport {
         endpoint: &Endpoint,
         tap: Option<TlogTap>,
     ) -> Result<Self, TransportError> {
+        Self::open_with(
+            endpoint,
+            OpenOptions {
+                tap,
+                ..OpenOptions::default()
+            },
+        )
+        .await
+    }
+
+    /// Opens `endpoint` with `options` (tap, `udpin` peer policy,
+    /// reconnection of stream links).
+    pub async fn open_with(
+        endpoint: &Endpoint,
+        options: OpenOptions,
+    ) -> Result<Self, TransportError> {
+        let OpenOptions {
+            tap,
+            udpin_peer,
+            reconnect,
+        } = options;
+        let counters = Arc::new(AtomicCounters::default());
         let name = endpoint.to_string();
         let io_err = |op: &'static str| {
             let name = name.clone();
@@ -430,43 +545,48 @@ impl Transport {
                 let addr = resolve(&name, host, *port).await?;
                 let socket = UdpSocket::bind(addr).await.map_err(io_err("bind"))?;
                 let local = socket.local_addr().map_err(io_err("local_addr"))?;
+                let (mode, peer) = match udpin_peer {
+                    UdpInPeer::LastSender => (UdpMode::LastSender, None),
+                    UdpInPeer::Lock(peer) => (UdpMode::Lock, peer),
+                };
+                if let Some(peer) = peer {
+                    socket.connect(peer).await.map_err(io_err("connect"))?;
+                }
                 let io = Io::Udp {
                     socket,
-                    peer: StdMutex::new(None),
-                    reply_to_last: true,
+                    peer: StdMutex::new(peer),
+                    mode,
                 };
                 (io, Some(local), DATAGRAM_MAX)
             }
             Endpoint::UdpOut { host, port } => {
                 let addr = resolve(&name, host, *port).await?;
-                let any: SocketAddr = if addr.is_ipv4() {
-                    SocketAddr::from(([0, 0, 0, 0], 0))
-                } else {
-                    SocketAddr::from(([0u16; 8], 0))
-                };
-                let socket = UdpSocket::bind(any).await.map_err(io_err("bind"))?;
+                let socket = bind_towards(addr).await.map_err(io_err("bind"))?;
+                socket.connect(addr).await.map_err(io_err("connect"))?;
                 let local = socket.local_addr().map_err(io_err("local_addr"))?;
                 let io = Io::Udp {
                     socket,
                     peer: StdMutex::new(Some(addr)),
-                    reply_to_last: false,
+                    mode: UdpMode::Connected,
                 };
                 (io, Some(local), DATAGRAM_MAX)
             }
             Endpoint::TcpOut { host, port } => {
                 let addr = resolve(&name, host, *port).await?;
-                let stream = TcpStream::connect(addr).await.map_err(io_err("connect"))?;
-                stream.set_nodelay(true).map_err(io_err("set_nodelay"))?;
+                let stream = tcp_connect(addr).await.map_err(io_err("connect"))?;
                 let local = stream.local_addr().map_err(io_err("local_addr"))?;
                 let (read, write) = stream.into_split();
                 let io = Io::Tcp {
-                    read: Mutex::new(read),
-                    write: Mutex::new(write),
+                    addr,
+                    reconnect,
+                    read: Mutex::new(Some(read)),
+                    write: Mutex::new(Some(write)),
                 };
                 (io, Some(local), STREAM_CHUNK)
             }
             Endpoint::Serial { path, baud } => {
-                let io = serial::open(&name, path, *baud, tap.clone()).await?;
+                let io = serial::open(&name, path, *baud, tap.clone(), reconnect, counters.clone())
+                    .await?;
                 (io, None, 0)
             }
         };
@@ -479,8 +599,91 @@ impl Transport {
                 io,
                 rx: Mutex::new(RxState::new(buf_len)),
                 tap,
+                counters,
             }),
         })
+    }
+
+    /// `udpin` with [`UdpInPeer::Lock`]: talk only to `peer` from now on
+    /// (the socket is `connect()`ed to it, so the kernel drops other
+    /// senders). An error for other kinds of transport, or if a different
+    /// peer is already locked.
+    pub async fn lock_peer(&self, peer: SocketAddr) -> Result<(), TransportError> {
+        let io_err = |op: &'static str, source| TransportError::Io {
+            endpoint: self.inner.name.clone(),
+            op,
+            source,
+        };
+        let Io::Udp {
+            socket,
+            peer: current,
+            mode: UdpMode::Lock,
+        } = &self.inner.io
+        else {
+            return Err(io_err(
+                "lock peer",
+                std::io::Error::other("not a udpin link with a locked peer"),
+            ));
+        };
+        {
+            let mut cur = current.lock().unwrap_or_else(|p| p.into_inner());
+            match *cur {
+                Some(p) if p == peer => return Ok(()),
+                Some(p) => {
+                    return Err(io_err(
+                        "lock peer",
+                        std::io::Error::other(format!("already locked onto {p}")),
+                    ));
+                }
+                None => *cur = Some(peer),
+            }
+        }
+        socket
+            .connect(peer)
+            .await
+            .map_err(|e| io_err("connect", e))?;
+        tracing::info!(endpoint = %self.inner.name, %peer, "udpin peer locked");
+        Ok(())
+    }
+
+    /// `udpin` with [`UdpInPeer::Lock`] and no peer yet: the caller decides
+    /// which sender to [lock](Self::lock_peer) onto.
+    pub fn awaiting_peer(&self) -> bool {
+        match &self.inner.io {
+            Io::Udp {
+                peer,
+                mode: UdpMode::Lock,
+                ..
+            } => peer.lock().unwrap_or_else(|p| p.into_inner()).is_none(),
+            _ => false,
+        }
+    }
+
+    /// What this transport counted (foreign datagrams, reconnects, dropped
+    /// sends).
+    pub fn counters(&self) -> TransportCounters {
+        let c = &self.inner.counters;
+        TransportCounters {
+            foreign_datagrams: c.foreign_datagrams.load(Ordering::Relaxed),
+            reconnects: c.reconnects.load(Ordering::Relaxed),
+            send_dropped: c.send_dropped.load(Ordering::Relaxed),
+        }
+    }
+
+    /// Counts a datagram from a foreign address (the first one is logged).
+    fn foreign(&self, from: SocketAddr) {
+        let n = self
+            .inner
+            .counters
+            .foreign_datagrams
+            .fetch_add(1, Ordering::Relaxed);
+        if n == 0 {
+            tracing::warn!(
+                endpoint = %self.inner.name,
+                %from,
+                "datagram from an address other than the peer dropped (said once; counted in the summary)"
+            );
+        }
     }
 
     /// The endpoint this transport was opened on.
@@ -538,15 +741,40 @@ impl Transport {
                     .await
                     .map_err(|e| io_err("send", e))?;
             }
-            Io::Tcp { write, .. } => {
+            Io::Tcp {
+                write, reconnect, ..
+            } => {
                 let mut w = write.lock().await;
-                w.write_all(bytes).await.map_err(|e| io_err("send", e))?;
+                let Some(stream) = w.as_mut() else {
+                    self.inner
+                        .counters
+                        .send_dropped
+                        .fetch_add(1, Ordering::Relaxed);
+                    return Ok(SendOutcome::NoPeer);
+                };
+                if let Err(e) = stream.write_all(bytes).await {
+                    if *reconnect {
+                        // The receive side notices too and reconnects.
+                        *w = None;
+                    }
+                    return Err(io_err("send", e));
+                }
             }
-            Io::Serial { tx, .. } => {
-                tx.send(*frame.raw()).map_err(|_| TransportError::Closed {
-                    endpoint: self.inner.name.clone(),
-                })?;
-            }
+            Io::Serial { tx, .. } => match tx.try_send(*frame.raw()) {
+                Ok(()) => {}
+                Err(std::sync::mpsc::TrySendError::Full(_)) => {
+                    self.inner
+                        .counters
+                        .send_dropped
+                        .fetch_add(1, Ordering::Relaxed);
+                    return Ok(SendOutcome::QueueFull);
+                }
+                Err(std::sync::mpsc::TrySendError::Disconnected(_)) => {
+                    return Err(TransportError::Closed {
+                        endpoint: self.inner.name.clone(),
+                    });
+                }
+            },
         }
         if let Some(tap) = &self.inner.tap {
             tap.record(unix_time_us(), bytes);
@@ -579,36 +807,126 @@ impl Transport {
                 source,
             };
             match &self.inner.io {
-                Io::Udp {
-                    socket,
-                    peer,
-                    reply_to_last,
-                } => {
+                Io::Udp { socket, peer, mode } => {
                     let (n, from) = socket.recv_from(&mut state.buf).await.map_err(io_err)?;
                     let arrival = Instant::now();
-                    if *reply_to_last {
-                        *peer.lock().unwrap_or_else(|p| p.into_inner()) = Some(from);
+                    let current = *peer.lock().unwrap_or_else(|p| p.into_inner());
+                    match mode {
+                        UdpMode::LastSender => {
+                            *peer.lock().unwrap_or_else(|p| p.into_inner()) = Some(from);
+                        }
+                        // Queued before connect(), or a kernel without the
+                        // filter: checked here too.
+                        UdpMode::Lock | UdpMode::Connected => {
+                            if current.is_some_and(|p| p != from) {
+                                self.foreign(from);
+                                continue;
+                            }
+                        }
                     }
-                    state.ingest(n, true, arrival, self.inner.tap.as_ref());
+                    state.ingest(n, true, arrival, Some(from), self.inner.tap.as_ref());
                 }
-                Io::Tcp { read, .. } => {
-                    let n = {
+                Io::Tcp {
+                    addr,
+                    reconnect,
+                    read,
+                    write,
+                } => {
+                    let got = {
                         let mut r = read.lock().await;
                         let RxState { buf, .. } = &mut *state;
-                        r.read(buf).await.map_err(io_err)?
+                        match r.as_mut() {
+                            Some(stream) => Some(stream.read(buf).await),
+                            None => None,
+                        }
                     };
                     let arrival = Instant::now();
-                    if n == 0 {
-                        return Err(TransportError::Closed {
-                            endpoint: self.inner.name.clone(),
+                    let lost = match got {
+                        Some(Ok(0)) | None => None,
+                        Some(Ok(n)) => {
+                            state.ingest(n, false, arrival, None, self.inner.tap.as_ref());
+                            continue;
+                        }
+                        Some(Err(e)) => Some(e),
+                    };
+                    if !*reconnect {
+                        return Err(match lost {
+                            Some(e) => io_err(e),
+                            None => TransportError::Closed {
+                                endpoint: self.inner.name.clone(),
+                            },
                         });
                     }
-                    state.ingest(n, false, arrival, self.inner.tap.as_ref());
+                    tracing::warn!(
+                        endpoint = %self.inner.name,
+                        error = ?lost.map(|e| e.to_string()),
+                        "TCP link lost: reconnecting"
+                    );
+                    *read.lock().await = None;
+                    *write.lock().await = None;
+                    state.reset_stream();
+                    let stream = self.tcp_reconnect(*addr).await;
+                    let (r, w) = stream.into_split();
+                    *read.lock().await = Some(r);
+                    *write.lock().await = Some(w);
                 }
                 Io::Serial { .. } => unreachable!("handled above"),
             }
         }
     }
+}
+
+impl Transport {
+    /// Connects to `addr` until it works, waiting [`Backoff`] between
+    /// attempts; counts and logs the reconnection.
+    async fn tcp_reconnect(&self, addr: SocketAddr) -> TcpStream {
+        let mut backoff = Backoff::new();
+        loop {
+            tokio::time::sleep(backoff.next_delay()).await;
+            match tcp_connect(addr).await {
+                Ok(stream) => {
+                    let n = self
+                        .inner
+                        .counters
+                        .reconnects
+                        .fetch_add(1, Ordering::Relaxed)
+                        + 1;
+                    tracing::info!(
+                        endpoint = %self.inner.name,
+                        attempts = backoff.attempts(),
+                        reconnects = n,
+                        "TCP link reconnected"
+                    );
+                    return stream;
+                }
+                Err(e) => {
+                    tracing::debug!(endpoint = %self.inner.name, error = %e, "reconnect failed")
+                }
+            }
+        }
+    }
+}
+
+async fn tcp_connect(addr: SocketAddr) -> std::io::Result<TcpStream> {
+    let stream = TcpStream::connect(addr).await?;
+    stream.set_nodelay(true)?;
+    Ok(stream)
+}
+
+/// A UDP socket bound to the address of the interface the kernel routes
+/// `peer` through (ephemeral port): a probe socket `connect()`ed to the
+/// peer tells the source address the route picks.
+async fn bind_towards(peer: SocketAddr) -> std::io::Result<UdpSocket> {
+    let any: SocketAddr = if peer.is_ipv4() {
+        SocketAddr::from(([0, 0, 0, 0], 0))
+    } else {
+        SocketAddr::from(([0u16; 8], 0))
+    };
+    let probe = std::net::UdpSocket::bind(any)?;
+    probe.connect(peer)?;
+    let local = SocketAddr::new(probe.local_addr()?.ip(), 0);
+    drop(probe);
+    UdpSocket::bind(local).await
 }
 
 async fn resolve(endpoint: &str, host: &str, port: u16) -> Result<SocketAddr, TransportError> {
@@ -627,25 +945,48 @@ async fn resolve(endpoint: &str, host: &str, port: u16) -> Result<SocketAddr, Tr
 
 mod serial {
     //! Serial ports through the mavlink crate's direct-serial transport,
-    //! in two blocking threads.
+    //! in two blocking threads; the port is reopened with backoff when it
+    //! closes (if asked).
 
+    use std::sync::atomic::Ordering;
+    use std::sync::{Arc, Mutex as StdMutex};
     use std::time::{Duration, Instant};
 
     use crate::FrameError;
+    use crate::backoff::Backoff;
     use mavlink::error::MessageReadError;
     use mavlink::{Connectable, MAVLinkMessageRaw, MavConnection, SerialConfig};
     use tokio::sync::{Mutex, mpsc};
 
-    use super::{Io, Received, RecvEvent, SERIAL_QUEUE, TlogTap, TransportError, unix_time_us};
+    use super::{
+        AtomicCounters, Io, Received, RecvEvent, SERIAL_QUEUE, SERIAL_TX_QUEUE, TlogTap,
+        TransportError, unix_time_us,
+    };
+
+    type Conn = mavlink::Connection<crate::MavMessage>;
+    /// The open port, `None` while it is being reopened.
+    type Slot = Arc<StdMutex<Option<Arc<Conn>>>>;
+
+    fn connect(path: &str, baud: u32) -> std::io::Result<Conn> {
+        SerialConfig::new(path.to_owned(), baud)
+            .timeout(Duration::from_millis(100))
+            .connect::<crate::MavMessage>()
+    }
+
+    fn current(slot: &Slot) -> Option<Arc<Conn>> {
+        slot.lock().unwrap_or_else(|p| p.into_inner()).clone()
+    }
 
     pub(super) async fn open(
         name: &str,
         path: &str,
         baud: u32,
         tap: Option<TlogTap>,
+        reconnect: bool,
+        counters: Arc<AtomicCounters>,
     ) -> Result<Io, TransportError> {
-        let config = SerialConfig::new(path.to_owned(), baud).timeout(Duration::from_millis(100));
-        let conn = tokio::task::spawn_blocking(move || config.connect::<crate::MavMessage>())
+        let open_path = path.to_owned();
+        let conn = tokio::task::spawn_blocking(move || connect(&open_path, baud))
             .await
             .map_err(|e| TransportError::Io {
                 endpoint: name.to_owned(),
@@ -657,17 +998,23 @@ mod serial {
                 op: "open",
                 source,
             })?;
-        let conn = std::sync::Arc::new(conn);
+        let slot: Slot = Arc::new(StdMutex::new(Some(Arc::new(conn))));
         let (ev_tx, ev_rx) = mpsc::channel(SERIAL_QUEUE);
-        let (raw_tx, raw_rx) = std::sync::mpsc::channel::<mavlink::MAVLinkV2MessageRaw>();
+        let (raw_tx, raw_rx) =
+            std::sync::mpsc::sync_channel::<mavlink::MAVLinkV2MessageRaw>(SERIAL_TX_QUEUE);
 
-        let reader = conn.clone();
+        let reader = slot.clone();
         let reader_name = name.to_owned();
+        let reader_path = path.to_owned();
+        let reader_counters = counters.clone();
         std::thread::Builder::new()
             .name("dflat-serial-rx".into())
             .spawn(move || {
                 loop {
-                    let item = match reader.recv_raw() {
+                    let Some(conn) = current(&reader) else {
+                        return;
+                    };
+                    let item = match conn.recv_raw() {
                         Ok(raw) => {
                             let arrival = Instant::now();
                             let bytes = match &raw {
@@ -684,6 +1031,7 @@ mod serial {
                                         message: frame.message,
                                         arrival,
                                         signed: frame.signed,
+                                        from: None,
                                     })))
                                 }
                                 Err(e) => Ok(RecvEvent::Error(e)),
@@ -694,6 +1042,32 @@ mod serial {
                         }
                         Err(MessageReadError::Io(e)) => {
                             let closed = e.kind() == std::io::ErrorKind::UnexpectedEof;
+                            if closed && reconnect {
+                                drop(conn);
+                                *reader.lock().unwrap_or_else(|p| p.into_inner()) = None;
+                                tracing::warn!(endpoint = %reader_name, "serial port closed: reopening");
+                                let mut backoff = Backoff::new();
+                                let conn = loop {
+                                    std::thread::sleep(backoff.next_delay());
+                                    if ev_tx.is_closed() {
+                                        return; // the transport was dropped
+                                    }
+                                    match connect(&reader_path, baud) {
+                                        Ok(c) => break c,
+                                        Err(e) => tracing::debug!(endpoint = %reader_name, error = %e, "reopen failed"),
+                                    }
+                                };
+                                *reader.lock().unwrap_or_else(|p| p.into_inner()) =
+                                    Some(Arc::new(conn));
+                                let n = reader_counters.reconnects.fetch_add(1, Ordering::Relaxed) + 1;
+                                tracing::info!(
+                                    endpoint = %reader_name,
+                                    attempts = backoff.attempts(),
+                                    reconnects = n,
+                                    "serial link reopened"
+                                );
+                                continue;
+                            }
                             let err = if closed {
                                 TransportError::Closed {
                                     endpoint: reader_name.clone(),
@@ -725,10 +1099,16 @@ mod serial {
             })?;
 
         let writer_name = name.to_owned();
+        let writer = slot;
         std::thread::Builder::new()
             .name("dflat-serial-tx".into())
             .spawn(move || {
                 while let Ok(raw) = raw_rx.recv() {
+                    let Some(conn) = current(&writer) else {
+                        // Reopening: the frame is dropped (a newer command follows).
+                        counters.send_dropped.fetch_add(1, Ordering::Relaxed);
+                        continue;
+                    };
                     if let Err(e) = conn.send_raw(&MAVLinkMessageRaw::V2(raw)) {
                         tracing::warn!(endpoint = %writer_name, error = %e, "serial write failed");
                     }
@@ -1119,6 +1499,123 @@ mod tests {
             .unwrap()
             .as_bytes()
             .to_vec()
+    }
+
+    #[tokio::test]
+    async fn udpout_hears_only_its_peer() {
+        let peer = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+        let client = Transport::open(
+            &Endpoint::parse(&format!("udpout:{}", peer.local_addr().unwrap())).unwrap(),
+        )
+        .await
+        .unwrap();
+        let local = client.local_addr().unwrap();
+        // Bound to the interface that routes to the peer (loopback here).
+        assert!(local.ip().is_loopback(), "{local}");
+        let hb = heartbeat_onboard(DaemonStatus::Active);
+        let frame = crate::serialize_v2(&hdr(1, 1, 1), &hb).unwrap();
+        let intruder = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+        intruder.send_to(frame.as_bytes(), local).unwrap();
+        peer.send_to(frame.as_bytes(), local).unwrap();
+        let got = recv_frame(&client).await;
+        assert_eq!(got.from, Some(peer.local_addr().unwrap()));
+        // Nothing else arrives: the intruder's datagram never reached us.
+        assert!(
+            tokio::time::timeout(Duration::from_millis(200), client.recv())
+                .await
+                .is_err()
+        );
+    }
+
+    #[tokio::test]
+    async fn udpin_lock_drops_other_senders() {
+        let server = Transport::open_with(
+            &Endpoint::parse("udpin:127.0.0.1:0").unwrap(),
+            OpenOptions {
+                udpin_peer: UdpInPeer::Lock(None),
+                ..OpenOptions::default()
+            },
+        )
+        .await
+        .unwrap();
+        let addr = server.local_addr().unwrap();
+        let hb = heartbeat_onboard(DaemonStatus::Active);
+        assert!(server.awaiting_peer());
+        assert_eq!(
+            server.send(&hdr(1, 191, 0), &hb).await.unwrap(),
+            SendOutcome::NoPeer
+        );
+        let autopilot = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+        let intruder = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+        let frame = crate::serialize_v2(&hdr(1, 1, 0), &hb).unwrap();
+        autopilot.send_to(frame.as_bytes(), addr).unwrap();
+        let first = recv_frame(&server).await;
+        server.lock_peer(first.from.unwrap()).await.unwrap();
+        assert!(!server.awaiting_peer());
+        assert!(
+            server
+                .lock_peer(intruder.local_addr().unwrap())
+                .await
+                .is_err()
+        );
+        intruder.send_to(frame.as_bytes(), addr).unwrap();
+        autopilot.send_to(frame.as_bytes(), addr).unwrap();
+        let next = recv_frame(&server).await;
+        assert_eq!(next.from, Some(autopilot.local_addr().unwrap()));
+        // Replies go to the locked peer, not to the last sender.
+        server.send(&hdr(1, 191, 1), &hb).await.unwrap();
+        let mut buf = [0u8; 512];
+        autopilot
+            .set_read_timeout(Some(Duration::from_secs(2)))
+            .unwrap();
+        assert!(autopilot.recv(&mut buf).unwrap() > 0);
+        // A configured peer: locked from the start.
+        let fixed = Transport::open_with(
+            &Endpoint::parse("udpin:127.0.0.1:0").unwrap(),
+            OpenOptions {
+                udpin_peer: UdpInPeer::Lock(Some(autopilot.local_addr().unwrap())),
+                ..OpenOptions::default()
+            },
+        )
+        .await
+        .unwrap();
+        assert!(!fixed.awaiting_peer());
+        let faddr = fixed.local_addr().unwrap();
+        intruder.send_to(frame.as_bytes(), faddr).unwrap();
+        autopilot.send_to(frame.as_bytes(), faddr).unwrap();
+        let got = recv_frame(&fixed).await;
+        assert_eq!(got.from, Some(autopilot.local_addr().unwrap()));
+    }
+
+    #[tokio::test]
+    async fn tcp_reconnects_with_backoff() {
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+        let port = listener.local_addr().unwrap().port();
+        let client_task = tokio::spawn(async move {
+            Transport::open_with(
+                &Endpoint::parse(&format!("tcpout:127.0.0.1:{port}")).unwrap(),
+                OpenOptions {
+                    reconnect: true,
+                    ..OpenOptions::default()
+                },
+            )
+            .await
+            .unwrap()
+        });
+        let (first, _) = listener.accept().await.unwrap();
+        let client = client_task.await.unwrap();
+        drop(first); // the server goes away
+        let hb = heartbeat_onboard(DaemonStatus::Active);
+        let frame = crate::serialize_v2(&hdr(1, 1, 4), &hb).unwrap();
+        let server = tokio::spawn(async move {
+            let (mut again, _) = listener.accept().await.unwrap();
+            again.write_all(frame.as_bytes()).await.unwrap();
+            again
+        });
+        let got = recv_frame(&client).await;
+        assert_eq!(got.header.sequence, 4);
+        assert_eq!(client.counters().reconnects, 1);
+        drop(server.await.unwrap());
     }
 
     #[tokio::test]

@@ -135,7 +135,8 @@ fn unsigned_setpoint_is_rejected_while_signing_is_on() {
         Err(SignatureCheck::Unsigned)
     );
     assert_eq!(rx.stats.unsigned, 1);
-    // Unsigned telemetry passes only with accept_unsigned_telemetry.
+    // HEARTBEAT (mode, armed) must be signed even with
+    // accept_unsigned_telemetry; a message outside the protected set passes.
     let hb = heartbeat_autopilot(
         dflat_link::dialect::MavAutopilot::MAV_AUTOPILOT_PX4,
         true,
@@ -143,16 +144,49 @@ fn unsigned_setpoint_is_rejected_while_signing_is_on() {
         dflat_link::dialect::MavState::MAV_STATE_ACTIVE,
     );
     let ap = header(1, 1, 0);
-    assert!(rx.authenticate(&ap, &hb, None, NOW).is_ok());
-    assert!(matches!(rx.handle(&ap, &hb), RxOutcome::Accepted(_)));
-    if let Some(s) = rx.signing.as_mut() {
-        s.accept_unsigned_telemetry = false;
-    }
     assert_eq!(
         rx.authenticate(&ap, &hb, None, NOW),
         Err(SignatureCheck::Unsigned)
     );
-    assert_eq!(rx.stats.unsigned, 2);
+    let sys = MavMessage::SYS_STATUS(Default::default());
+    assert!(rx.authenticate(&ap, &sys, None, NOW).is_ok());
+    if let Some(s) = rx.signing.as_mut() {
+        s.accept_unsigned_telemetry = false;
+    }
+    assert_eq!(
+        rx.authenticate(&ap, &sys, None, NOW),
+        Err(SignatureCheck::Unsigned)
+    );
+    assert_eq!(rx.stats.unsigned, 3);
+    // The per-message list: SYS_STATUS listed passes, HEARTBEAT listed does not.
+    if let Some(s) = rx.signing.as_mut() {
+        s.accept_unsigned = vec![1, 0];
+    }
+    assert!(rx.authenticate(&ap, &sys, None, NOW).is_ok());
+    assert_eq!(
+        rx.authenticate(&ap, &hb, None, NOW),
+        Err(SignatureCheck::Unsigned)
+    );
+    assert!(matches!(rx.handle(&ap, &hb), RxOutcome::Accepted(_)));
+    // Every protected message is refused unsigned whatever the lists say.
+    for msg in [
+        hb.clone(),
+        MavMessage::LOCAL_POSITION_NED(Default::default()),
+        MavMessage::ODOMETRY(Default::default()),
+        MavMessage::VISION_POSITION_ESTIMATE(Default::default()),
+        MavMessage::ATTITUDE(Default::default()),
+        MavMessage::PARAM_VALUE(Default::default()),
+        MavMessage::MISSION_ITEM_INT(Default::default()),
+        MavMessage::MISSION_COUNT(Default::default()),
+        MavMessage::COMMAND_LONG(Default::default()),
+        MavMessage::SET_ATTITUDE_TARGET(Default::default()),
+        sp.clone(),
+    ] {
+        assert!(Signing::must_be_signed(&msg), "{msg:?}");
+    }
+    assert_eq!(dflat_link::unsigned_message_id("SYS_STATUS"), Ok(1));
+    assert!(dflat_link::unsigned_message_id("HEARTBEAT").is_err());
+    assert!(dflat_link::unsigned_message_id("NOT_A_MESSAGE").is_err());
     // The same setpoint signed with the key passes.
     let mut tx = Signing::new(key(1), 0, NOW);
     let f = parse_frame(tx.sign(&gcs(), &sp, NOW).unwrap().as_bytes()).unwrap();
@@ -160,4 +194,26 @@ fn unsigned_setpoint_is_rejected_while_signing_is_on() {
         rx.authenticate(&f.header, &f.message, f.signed.as_ref(), NOW)
             .is_ok()
     );
+}
+
+#[test]
+fn future_dated_signature_is_refused_and_comparison_is_exact() {
+    let mut rx = LinkRx::new(SourceFilter::default());
+    rx.signing = Some(Signing::new(key(1), 0, NOW));
+    // A sender whose clock is 5 minutes ahead of ours.
+    let mut ahead = Signing::new(key(1), 0, NOW + 5 * ONE_MINUTE);
+    let f = parse_frame(ahead.sign(&gcs(), &setpoint(), 0).unwrap().as_bytes()).unwrap();
+    assert_eq!(
+        rx.authenticate(&f.header, &f.message, f.signed.as_ref(), NOW),
+        Err(SignatureCheck::FutureTimestamp)
+    );
+    assert_eq!(rx.stats.future_timestamp, 1);
+    // Without a clock (now = 0) the bound is not applied.
+    assert!(
+        rx.authenticate(&f.header, &f.message, f.signed.as_ref(), 0)
+            .is_ok()
+    );
+    assert!(dflat_link::constant_time_eq(b"abcdef", b"abcdef"));
+    assert!(!dflat_link::constant_time_eq(b"abcdef", b"abcdeg"));
+    assert!(!dflat_link::constant_time_eq(b"abc", b"abcd"));
 }

@@ -37,10 +37,11 @@
 //!   applied and is counted in [`SitlCounters::commands_unauthenticated`];
 //!   unsigned SET_POSITION_TARGET_LOCAL_NED and every frame with a wrong
 //!   signature or a replayed timestamp are dropped too. Other *unsigned*
-//!   messages (HEARTBEAT, …) are still accepted, as the daemon's
-//!   `link.signing_accept_unsigned_telemetry = true` does — looser than
-//!   ArduPilot, which with signing on accepts unsigned frames only of
-//!   RADIO_STATUS or on its USB channel. A dropped frame is not routed to
+//!   messages outside [`dflat_link::MUST_BE_SIGNED`] are still accepted
+//!   (the daemon accepts only those listed in
+//!   `link.signing_accept_unsigned`) — looser than ArduPilot, which with
+//!   signing on accepts unsigned frames only of RADIO_STATUS or on its USB
+//!   channel. A dropped frame is not routed to
 //!   the ground station either.
 //!
 //! Link: `udpin:HOST:PORT` (port 0 picks a free one, see

@@ -131,10 +131,6 @@ pub struct LinkConfig {
     pub signing_link_id: u8,
     /// File holding the last signing timestamp (required with a key file).
     pub signing_timestamp_file: String,
-    /// With signing on, accept unsigned messages other than commands
-    /// (telemetry, pose) from trusted senders; badly signed or replayed
-    /// frames are always refused, unsigned setpoints always.
-    pub signing_accept_unsigned_telemetry: bool,
     /// How the autopilot's HEARTBEAT `custom_mode` is read: `auto` (from
     /// its `autopilot` field: MAV_AUTOPILOT_PX4 or _ARDUPILOTMEGA), `px4`
     /// or `ardupilot` (override, for a bridge that reports another type).
@@ -145,6 +141,20 @@ pub struct LinkConfig {
     /// taken as applied — for an autopilot whose modes dflat cannot read;
     /// no standby, no bumpless engagement).
     pub engagement: Engagement,
+    /// With signing on, the messages (common-dialect names, e.g.
+    /// `"SYS_STATUS"`) still accepted *unsigned* from trusted senders.
+    /// Default empty: everything must be signed. Messages that move the
+    /// vehicle or change the daemon's view of the autopilot (HEARTBEAT,
+    /// ATTITUDE, PARAM_VALUE, the pose messages, setpoints, missions,
+    /// COMMAND_LONG/INT, SETUP_SIGNING: [`dflat_link::MUST_BE_SIGNED`]) are
+    /// refused here. Risk: anyone who can reach the link can forge a listed
+    /// message; list only what the daemon does not act on.
+    pub signing_accept_unsigned: Vec<String>,
+    /// `udpin` only: the peer's address (`HOST:PORT`) the daemon talks to;
+    /// frames from any other address are dropped, counted and said once.
+    /// Empty (default): lock onto the first address that sends the
+    /// configured autopilot's HEARTBEAT (signed, with signing on).
+    pub peer: String,
 }
 
 /// `link.autopilot`: how the autopilot's mode is read.
@@ -199,9 +209,10 @@ impl Default for LinkConfig {
             signing_key_file: String::new(),
             signing_link_id: 0,
             signing_timestamp_file: "/var/lib/dflat/signing_timestamp".into(),
-            signing_accept_unsigned_telemetry: true,
             autopilot: AutopilotKind::Auto,
             engagement: Engagement::Mode,
+            signing_accept_unsigned: Vec::new(),
+            peer: String::new(),
         }
     }
 }

@@ -56,6 +56,29 @@ impl Config {
                 ));
             }
         }
+        for (i, name) in l.signing_accept_unsigned.iter().enumerate() {
+            let field = format!("link.signing_accept_unsigned[{i}]");
+            match dflat_link::unsigned_message_id(name) {
+                Ok(_) => {}
+                Err(reason) => return Err(v.err(&field, &format!("{name:?}"), reason)),
+            }
+        }
+        if !l.peer.trim().is_empty() {
+            if !l.url.trim().starts_with("udpin:") {
+                return Err(v.err(
+                    "link.peer",
+                    &format!("{:?}", l.peer),
+                    "\"\" unless link.url is udpin:HOST:PORT (udpout, tcp and serial have one peer)",
+                ));
+            }
+            if l.peer.trim().parse::<std::net::SocketAddr>().is_err() {
+                return Err(v.err(
+                    "link.peer",
+                    &format!("{:?}", l.peer),
+                    "an address IP:PORT (e.g. \"192.168.1.10:14550\") or \"\"",
+                ));
+            }
+        }
         let ve = &self.vehicle;
         v.range("vehicle.tau", ve.tau, 0.02, 2.0)?;
         v.range("vehicle.k", ve.k, 0.2, 5.0)?;

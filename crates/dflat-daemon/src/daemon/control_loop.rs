@@ -19,10 +19,11 @@ use std::sync::mpsc::RecvTimeoutError;
 use std::time::{Duration, Instant};
 
 use tokio::sync::mpsc;
-use tracing::{debug, info};
+use tracing::{debug, error, info};
 
 use super::{ControlReport, Outgoing, ST_SHUTDOWN, Stop, encode_state, notify_status};
 use crate::guard::WatchdogCadence;
+use crate::link_health::{CommandSlot, LinkHealth};
 use crate::realtime::{RealtimeApplied, RealtimeConfig, RealtimeError, apply_to_current_thread};
 use crate::records::CsvRecorder;
 use crate::schedule::{TickCause, TickPlanner};
@@ -38,8 +39,12 @@ pub(super) struct ControlLoop {
     /// Missions the receive task's mission protocol accepted (`None`:
     /// cleared), loaded before the tick's events.
     pub missions: std::sync::mpsc::Receiver<Option<crate::mission::Mission>>,
-    /// To the send task.
+    /// To the send task (texts).
     pub out: mpsc::Sender<Outgoing>,
+    /// The command slot of the send task.
+    pub commands: Arc<CommandSlot<Outgoing>>,
+    /// Liveness of the link tasks: a stalled one stops the watchdog.
+    pub health: Arc<LinkHealth>,
     /// Stop request.
     pub stop: Arc<Stop>,
     /// Published state (HEARTBEAT, [`super::DaemonHandle::state`]).
@@ -156,7 +161,25 @@ impl ControlLoop {
             let Some(slot) = planner.poll(self.secs(wake)) else {
                 continue;
             };
-            if let Some(w) = watchdog.as_mut()
+            // A stalled or dead link task: the watchdog is no longer fed
+            // (systemd restarts the daemon), HEARTBEAT says CRITICAL.
+            if !self.health.fault()
+                && let Some(task) = self.health.stalled(wake)
+            {
+                self.health.set_fault();
+                error!(
+                    task = task.name(),
+                    "link task stalled: watchdog no longer fed"
+                );
+                let _ = sd_notify::notify(&[sd_notify::NotifyState::WatchdogTrigger]);
+                let text = dflat_link::statustext(
+                    dflat_link::dialect::MavSeverity::MAV_SEVERITY_CRITICAL,
+                    &format!("dflat: link task {} stalled", task.name()),
+                );
+                self.send(Outgoing::plain(text), &mut outbound_dropped);
+            }
+            if !self.health.fault()
+                && let Some(w) = watchdog.as_mut()
                 && w.due(wake)
             {
                 let _ = sd_notify::notify(&[sd_notify::NotifyState::Watchdog]);
@@ -213,7 +236,7 @@ impl ControlLoop {
                         .pose_arrival
                         .map(|s| self.epoch + Duration::from_secs_f64(s)),
                 };
-                self.send(item, &mut outbound_dropped);
+                self.commands.put(item);
             }
             if let Some(us) = step.solve_us {
                 solve_hist.record(u64::from(us));

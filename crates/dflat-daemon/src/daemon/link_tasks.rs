@@ -1,9 +1,15 @@
 //! The link tasks: receive (frames → events for the control thread, and the
 //! answers a component owes: COMMAND_ACK, refusals), send (header,
 //! sequence, signing, latency figures) and the 1 Hz HEARTBEAT.
+//!
+//! The send task serves, in this order: the command slot (the newest
+//! SET_ATTITUDE_TARGET, dropped if older than one tick), the daemon's own
+//! queue (HEARTBEAT, state texts) and, within [`ReplyBudget`], the replies
+//! queue (answers and refusals from the receive task). Each task marks
+//! itself alive in [`LinkHealth`] every [`BEAT_INTERVAL`].
 
 use std::sync::Arc;
-use std::sync::atomic::{AtomicU8, Ordering};
+use std::sync::atomic::{AtomicU8, AtomicU64, Ordering};
 use std::time::{Duration, Instant, SystemTime};
 
 use dflat_link::dialect::MavSeverity;
@@ -18,6 +24,10 @@ use tracing::{debug, error, info, warn};
 
 use super::{Outgoing, RxReport, Stop, TxReport, daemon_status, decode_state};
 use crate::commands::{CommandContext, CommandRequest, RequestedMessage, answer};
+use crate::link_health::{
+    BEAT_INTERVAL, CommandSlot, LinkHealth, LinkTask, REPLY_BURST, REPLY_RATE_HZ, ReplyBudget,
+    StallHook,
+};
 use crate::mission::{ItemRules, Mission, MissionChange, MissionProtocol};
 use crate::signing::{PERSIST_INTERVAL, TimestampStore};
 use crate::supervisor::FlightState;
@@ -44,13 +54,17 @@ pub(super) struct RxContext {
     pub mission_rules: ItemRules,
     /// Missions accepted by the protocol, to the control thread.
     pub missions: std::sync::mpsc::Sender<Option<Mission>>,
+    /// Link-task liveness (a stall makes the HEARTBEAT answer CRITICAL).
+    pub health: Arc<LinkHealth>,
+    /// The test-only stall hook.
+    pub stall: Option<StallHook>,
 }
 
 /// Sends a mission-protocol reply; hands a changed mission to the control
 /// thread.
-fn send_reply(reply: crate::mission::Reply, ctx: &RxContext, out: &mpsc::Sender<Outgoing>) {
+fn send_reply(reply: crate::mission::Reply, ctx: &RxContext, out: &Replies) {
     for m in reply.messages {
-        let _ = out.try_send(Outgoing::plain(m));
+        out.send(m);
     }
     for text in &reply.texts {
         info!(text, "mission protocol");
@@ -66,6 +80,23 @@ fn send_reply(reply: crate::mission::Reply, ctx: &RxContext, out: &mpsc::Sender<
             let _ = ctx.missions.send(None);
         }
         None => {}
+    }
+}
+
+/// The replies queue (bounded) and its drop counter.
+#[derive(Debug, Clone)]
+pub(super) struct Replies {
+    /// To the send task.
+    pub tx: mpsc::Sender<Outgoing>,
+    /// Replies dropped because the queue was full.
+    pub dropped: Arc<AtomicU64>,
+}
+
+impl Replies {
+    fn send(&self, message: MavMessage) {
+        if self.tx.try_send(Outgoing::plain(message)).is_err() {
+            self.dropped.fetch_add(1, Ordering::Relaxed);
+        }
     }
 }
 
@@ -95,8 +126,14 @@ pub fn setpoint_refusal_text(e: &LinkError) -> String {
     }
 }
 
-fn send_text(out: &mpsc::Sender<Outgoing>, severity: MavSeverity, text: &str) {
-    let _ = out.try_send(Outgoing::plain(statustext(severity, text)));
+fn send_text(out: &Replies, severity: MavSeverity, text: &str) {
+    out.send(statustext(severity, text));
+}
+
+/// Waits until stopped (a stalled task's last state: no work, no beats).
+async fn stalled(task: LinkTask, stop_rx: &mut tokio::sync::watch::Receiver<bool>) {
+    warn!(task = task.name(), "test hook: link task stalled");
+    let _ = stop_rx.wait_for(|s| *s).await;
 }
 
 /// Receives frames until stopped: signing check, filter and decode, events
@@ -106,7 +143,7 @@ pub(super) async fn receive_task(
     mut link: LinkRx,
     ctx: RxContext,
     events: std::sync::mpsc::SyncSender<Event>,
-    out: mpsc::Sender<Outgoing>,
+    out: Replies,
     stop: Arc<Stop>,
     fault: Arc<std::sync::Mutex<Option<TransportError>>>,
 ) -> RxReport {
@@ -118,16 +155,31 @@ pub(super) async fn receive_task(
     let mut missions = MissionProtocol::new(ctx.own, ctx.mission_rules);
     let mut mission_timer = tokio::time::interval(Duration::from_millis(100));
     mission_timer.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    let mut told_unlocked = false;
+    let mut beat = tokio::time::interval(BEAT_INTERVAL);
+    beat.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     loop {
         let received = tokio::select! {
             biased;
             _ = stop_rx.wait_for(|s| *s) => break,
-            r = transport.recv() => r,
             _ = mission_timer.tick() => {
                 let now = ctx.epoch.elapsed().as_secs_f64();
                 send_reply(missions.poll(now), &ctx, &out);
                 continue;
             }
+            _ = beat.tick() => {
+                if StallHook::due(ctx.stall, LinkTask::Receive, ctx.epoch.elapsed()) {
+                    None
+                } else {
+                    ctx.health.beat(LinkTask::Receive, Instant::now());
+                    continue;
+                }
+            }
+            r = transport.recv() => Some(r),
+        };
+        let Some(received) = received else {
+            stalled(LinkTask::Receive, &mut stop_rx).await;
+            break;
         };
         let frame = match received {
             Ok(RecvEvent::Frame(frame)) => frame,
@@ -157,7 +209,43 @@ pub(super) async fn receive_task(
             .saturating_duration_since(ctx.epoch)
             .as_secs_f64();
         let is_setpoint = matches!(frame.message, MavMessage::SET_POSITION_TARGET_LOCAL_NED(_));
-        if link.signing.is_some() {
+        // udpin without a peer yet: only the autopilot's HEARTBEAT (signed,
+        // with signing on) is looked at; it locks the peer.
+        let unlocked = transport.awaiting_peer();
+        if unlocked {
+            let from_autopilot = matches!(frame.message, MavMessage::HEARTBEAT(_))
+                && frame.header.system_id == u32::from(ctx.own.0)
+                && frame.header.component_id == ctx.autopilot_component;
+            let authentic = from_autopilot
+                && link.signing.as_mut().is_none_or(|s| {
+                    let now = timestamp_from_system_time(SystemTime::now());
+                    matches!(
+                        s.verify(&frame.header, frame.signed.as_ref(), now),
+                        SignatureCheck::Valid { .. }
+                    )
+                });
+            match frame.from {
+                Some(from) if authentic => {
+                    if let Err(e) = transport.lock_peer(from).await {
+                        warn!(error = %e, "cannot lock the udpin peer");
+                        continue;
+                    }
+                    report.peer = Some(from);
+                }
+                _ => {
+                    report.foreign_frames += 1;
+                    if !told_unlocked {
+                        told_unlocked = true;
+                        info!(
+                            from = ?frame.from,
+                            "udpin: frame dropped before the autopilot's HEARTBEAT locked the peer (said once)"
+                        );
+                    }
+                    continue;
+                }
+            }
+        }
+        if link.signing.is_some() && !unlocked {
             let now = timestamp_from_system_time(SystemTime::now());
             if let Err(check) =
                 link.authenticate(&frame.header, &frame.message, frame.signed.as_ref(), now)
@@ -262,7 +350,7 @@ fn answer_command(
     req: &CommandRequest,
     ctx: &RxContext,
     has_mission: bool,
-    out: &mpsc::Sender<Outgoing>,
+    out: &Replies,
 ) -> Option<crate::tick::MissionAction> {
     let state = ctx.state.load(Ordering::Relaxed);
     let flight = decode_state(state);
@@ -273,13 +361,18 @@ fn answer_command(
     };
     let reply = answer(req, ctx.own, &context)?;
     debug!(command = ?req.command, "command answered");
-    let _ = out.try_send(Outgoing::plain(reply.ack));
+    out.send(reply.ack);
     if let Some(reason) = &reply.reason {
         send_text(out, MavSeverity::MAV_SEVERITY_INFO, reason);
     }
     match reply.then {
         Some(RequestedMessage::Heartbeat) => {
-            let _ = out.try_send(Outgoing::plain(heartbeat_onboard(daemon_status(state))));
+            let status = if ctx.health.fault() {
+                DaemonStatus::Critical
+            } else {
+                daemon_status(state)
+            };
+            out.send(heartbeat_onboard(status));
         }
         Some(RequestedMessage::Status) => {
             let name = decode_state(state).map_or("starting", |s| s.name());
@@ -294,15 +387,45 @@ fn answer_command(
     reply.action
 }
 
+/// What the send task takes from: the command slot, the daemon's own
+/// queue, the replies queue.
+pub(super) struct SendInputs {
+    /// The newest SET_ATTITUDE_TARGET.
+    pub commands: Arc<CommandSlot<Outgoing>>,
+    /// HEARTBEAT and the control thread's texts.
+    pub out: mpsc::Receiver<Outgoing>,
+    /// Answers and refusals of the receive task (rate-limited).
+    pub replies: mpsc::Receiver<Outgoing>,
+    /// A command older than this when its turn comes is dropped (one tick).
+    pub max_command_age: Duration,
+    /// Liveness.
+    pub health: Arc<LinkHealth>,
+    /// The test-only stall hook.
+    pub stall: Option<StallHook>,
+    /// The daemon's epoch.
+    pub epoch: Instant,
+}
+
 /// Sends what the other parts queue: header and sequence, signing (the
 /// timestamp persisted every [`PERSIST_INTERVAL`]), counters and the
-/// pose → command and tick → send latencies.
+/// pose → command and tick → send latencies. Commands first, then the
+/// daemon's own messages, then replies within the [`ReplyBudget`].
 pub(super) async fn send_task(
     transport: Transport,
-    mut out: mpsc::Receiver<Outgoing>,
+    inputs: SendInputs,
+    stop: Arc<Stop>,
     (system_id, component_id): (u8, u8),
     mut signing: Option<(Signing, TimestampStore)>,
 ) -> TxReport {
+    let SendInputs {
+        commands,
+        mut out,
+        mut replies,
+        max_command_age,
+        health,
+        stall,
+        epoch,
+    } = inputs;
     let mut report = TxReport::default();
     let mut persisted = Instant::now();
     let persist = |s: &Signing, store: &TimestampStore| {
@@ -312,8 +435,55 @@ pub(super) async fn send_task(
     };
     let mut sequence: u8 = 0;
     let mut no_peer = 0u64;
-    // Ends when every sender (control thread, heartbeat, receive task) is gone.
-    while let Some(item) = out.recv().await {
+    let mut budget = ReplyBudget::new(REPLY_RATE_HZ, REPLY_BURST, 0.0);
+    let mut beat = tokio::time::interval(BEAT_INTERVAL / 2);
+    beat.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    let mut stop_rx = stop.tx.subscribe();
+    let mut replies_open = true;
+    let secs = |t: Instant| t.saturating_duration_since(epoch).as_secs_f64();
+    // Ends when the daemon's own queue closes (control thread and heartbeat
+    // task gone), after a last look at the slot.
+    loop {
+        let reply_ready = replies_open && budget.available(secs(Instant::now()));
+        let item = tokio::select! {
+            biased;
+            () = commands.notified() => match commands.take() {
+                Some(item) => item,
+                None => continue,
+            },
+            item = out.recv() => match item {
+                Some(item) => item,
+                None => match commands.take() {
+                    Some(item) => item,
+                    None => break,
+                },
+            },
+            item = replies.recv(), if reply_ready => match item {
+                Some(item) => {
+                    budget.take(secs(Instant::now()));
+                    report.replies_sent += 1;
+                    item
+                }
+                None => {
+                    replies_open = false;
+                    continue;
+                }
+            },
+            _ = beat.tick() => {
+                if StallHook::due(stall, LinkTask::Send, epoch.elapsed()) {
+                    stalled(LinkTask::Send, &mut stop_rx).await;
+                    break;
+                }
+                health.beat(LinkTask::Send, Instant::now());
+                continue;
+            }
+        };
+        if let Some(tick) = item.tick
+            && tick.elapsed() > max_command_age
+        {
+            report.commands_stale += 1;
+            continue;
+        }
         let header = MavHeader {
             system_id: u32::from(system_id),
             component_id,
@@ -346,10 +516,12 @@ pub(super) async fn send_task(
                     report.tick_to_send.record(us(tick));
                 }
             }
-            Ok(SendOutcome::NoPeer) => {
+            Ok(SendOutcome::NoPeer | SendOutcome::QueueFull) => {
                 no_peer += 1;
                 if no_peer == 1 {
-                    warn!("no peer yet on the udpin link: outbound messages dropped");
+                    warn!(
+                        "no peer (udpin before the lock, or the link is reconnecting) or the serial queue is full: outbound messages dropped"
+                    );
                 }
             }
             Err(e) => {
@@ -359,6 +531,9 @@ pub(super) async fn send_task(
                 }
             }
         }
+    }
+    while replies.try_recv().is_ok() {
+        report.replies_pending += 1;
     }
     if let Some((s, store)) = &signing {
         persist(s, store);
@@ -371,17 +546,39 @@ pub(super) async fn heartbeat_task(
     out: mpsc::Sender<Outgoing>,
     state: Arc<AtomicU8>,
     stop: Arc<Stop>,
+    health: Arc<LinkHealth>,
+    stall: Option<StallHook>,
+    epoch: Instant,
 ) {
     let mut stop_rx = stop.tx.subscribe();
     let mut interval = tokio::time::interval(Duration::from_secs(1));
     interval.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    let mut beat = tokio::time::interval(BEAT_INTERVAL);
+    beat.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     loop {
-        tokio::select! {
+        let stall_now = tokio::select! {
             biased;
             _ = stop_rx.wait_for(|s| *s) => break,
-            _ = interval.tick() => {}
+            _ = beat.tick() => {
+                if StallHook::due(stall, LinkTask::Heartbeat, epoch.elapsed()) {
+                    true
+                } else {
+                    health.beat(LinkTask::Heartbeat, Instant::now());
+                    continue;
+                }
+            }
+            _ = interval.tick() => false,
+        };
+        if stall_now {
+            stalled(LinkTask::Heartbeat, &mut stop_rx).await;
+            break;
         }
-        let status = daemon_status(state.load(Ordering::Relaxed));
+        // A stalled link task: CRITICAL until restarted.
+        let status = if health.fault() {
+            DaemonStatus::Critical
+        } else {
+            daemon_status(state.load(Ordering::Relaxed))
+        };
         if out
             .try_send(Outgoing::plain(heartbeat_onboard(status)))
             .is_err()

@@ -42,7 +42,7 @@ use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU64, Ordering};
 use std::time::{Duration, Instant, SystemTime};
 
 use dflat_control::Controller;
-use dflat_link::transport::{Endpoint, TlogTap, Transport, TransportError};
+use dflat_link::transport::{Endpoint, OpenOptions, TlogTap, Transport, TransportError, UdpInPeer};
 use dflat_link::{DaemonStatus, LinkRx, LinkStats, MavMessage, timestamp_from_system_time};
 use thiserror::Error;
 use tokio::sync::{mpsc, watch};
@@ -51,6 +51,7 @@ use tracing::{error, info, warn};
 use crate::config::{Config, ModelKind, TickMode};
 use crate::control::{build_controller, configured_path, thrust_mapping};
 use crate::guard::GuardCounts;
+use crate::link_health::{CommandSlot, LinkGuardSummary, LinkHealth, REPLY_QUEUE, StallHook};
 use crate::records::{CsvRecorder, CsvReport, flight_stem};
 use crate::signing::SigningError;
 use crate::summary::{
@@ -201,6 +202,10 @@ struct RxReport {
     stats: LinkStats,
     transport_errors: u64,
     events_dropped: u64,
+    /// udpin: frames dropped before the peer was locked.
+    foreign_frames: u64,
+    /// udpin: the peer locked onto.
+    peer: Option<SocketAddr>,
 }
 
 /// What the send task counted.
@@ -209,6 +214,9 @@ struct TxReport {
     stats: LinkStats,
     latency: Histogram,
     tick_to_send: Histogram,
+    commands_stale: u64,
+    replies_sent: u64,
+    replies_pending: u64,
 }
 
 /// A running daemon (see [`spawn`]).
@@ -220,6 +228,7 @@ pub struct DaemonHandle {
     ticks: Arc<AtomicU64>,
     local_addr: Option<SocketAddr>,
     fault: Arc<std::sync::Mutex<Option<TransportError>>>,
+    health: Arc<LinkHealth>,
     parts: Parts,
 }
 
@@ -233,6 +242,9 @@ struct Parts {
     started: Instant,
     cpu_at_start: Option<f64>,
     tap: Option<TlogTap>,
+    transport: Transport,
+    commands: Arc<CommandSlot<Outgoing>>,
+    replies_dropped: Arc<AtomicU64>,
     control: std::thread::JoinHandle<ControlReport>,
     rx: tokio::task::JoinHandle<RxReport>,
     tx: tokio::task::JoinHandle<TxReport>,
@@ -281,6 +293,9 @@ impl DaemonHandle {
             started,
             cpu_at_start,
             tap,
+            transport,
+            commands,
+            replies_dropped,
             control,
             rx,
             tx,
@@ -312,6 +327,19 @@ impl DaemonHandle {
             _ => None,
         };
         self.state.store(ST_SHUTDOWN, Ordering::Relaxed);
+        let counters = transport.counters();
+        let link_guard = LinkGuardSummary {
+            foreign_frames: counters.foreign_datagrams + rx.foreign_frames,
+            peer: rx.peer,
+            reconnects: counters.reconnects,
+            send_dropped: counters.send_dropped,
+            future_timestamp: rx.stats.future_timestamp,
+            commands_replaced: commands.replaced(),
+            commands_stale: tx.commands_stale,
+            replies_dropped: replies_dropped.load(Ordering::Relaxed) + tx.replies_pending,
+            replies_sent: tx.replies_sent,
+            link_stalls: self.health.stalls(),
+        };
         let summary = FlightSummary {
             link,
             controller,
@@ -346,6 +374,7 @@ impl DaemonHandle {
             disturbance: control.disturbance,
             guards: control.guards,
             solves: control.solves,
+            link_guard,
         };
         let fault = self.fault.lock().unwrap_or_else(|p| p.into_inner()).take();
         match fault {
@@ -437,7 +466,7 @@ pub async fn spawn_with_controller(
             link_id = s.link_id(),
             timestamp = s.timestamp(),
             timestamp_file = %store.path().display(),
-            accept_unsigned_telemetry = s.accept_unsigned_telemetry,
+            accept_unsigned = ?s.accept_unsigned,
             "MAVLink 2 signing on"
         );
     }
@@ -479,9 +508,30 @@ pub async fn spawn_with_controller(
     };
 
     let controller_name = controller.name().to_owned();
-    let transport = Transport::open_with_tap(&endpoint, tap.clone())
-        .await
-        .map_err(DaemonError::Link)?;
+    // udpin: one peer (link.peer, or the first sender of the autopilot's
+    // HEARTBEAT); udpout connects; tcp / serial reconnect.
+    let peer = match config.link.peer.trim() {
+        "" => None,
+        p => Some(p.parse::<SocketAddr>().map_err(|e| {
+            DaemonError::Link(TransportError::BadUrl {
+                url: p.to_owned(),
+                reason: format!("link.peer: {e}"),
+            })
+        })?),
+    };
+    if peer.is_some() && !matches!(endpoint, Endpoint::UdpIn { .. }) {
+        warn!(link = %endpoint, "link.peer applies to udpin links only: ignored");
+    }
+    let transport = Transport::open_with(
+        &endpoint,
+        OpenOptions {
+            tap: tap.clone(),
+            udpin_peer: UdpInPeer::Lock(peer),
+            reconnect: true,
+        },
+    )
+    .await
+    .map_err(DaemonError::Link)?;
     let local_addr = transport.local_addr();
     info!(
         link = %endpoint,
@@ -506,6 +556,18 @@ pub async fn spawn_with_controller(
     let (event_tx, event_rx) = std::sync::mpsc::sync_channel::<Event>(EVENT_QUEUE);
     let (out_tx, out_rx) = mpsc::channel::<Outgoing>(OUTBOUND_QUEUE);
     let (mission_tx, mission_rx) = std::sync::mpsc::channel::<Option<crate::mission::Mission>>();
+    let (reply_tx, reply_rx) = mpsc::channel::<Outgoing>(REPLY_QUEUE);
+    let replies_dropped = Arc::new(AtomicU64::new(0));
+    let commands = Arc::new(CommandSlot::<Outgoing>::default());
+    let health = Arc::new(LinkHealth::new(epoch));
+    let stall = StallHook::from_env();
+    if let Some(h) = stall {
+        warn!(
+            task = h.task.name(),
+            after_s = h.after_s,
+            "test-only stall hook set (DFLAT_TEST_STALL_TASK)"
+        );
+    }
 
     let own = (config.link.system_id, config.link.component_id);
     let mut link_rx = LinkRx::new(source_filter(&config.link));
@@ -524,21 +586,44 @@ pub async fn spawn_with_controller(
             acceptance_radius: config.mission.acceptance_radius_m,
         },
         missions: mission_tx,
+        health: health.clone(),
+        stall,
     };
     let rx = tokio::spawn(link_tasks::receive_task(
         transport.clone(),
         link_rx,
         rx_ctx,
         event_tx,
-        out_tx.clone(),
+        link_tasks::Replies {
+            tx: reply_tx,
+            dropped: replies_dropped.clone(),
+        },
         stop.clone(),
         fault.clone(),
     ));
-    let tx = tokio::spawn(link_tasks::send_task(transport, out_rx, own, signing));
+    let period = Duration::from_secs_f64(1.0 / config.controller.rate_hz);
+    let tx = tokio::spawn(link_tasks::send_task(
+        transport.clone(),
+        link_tasks::SendInputs {
+            commands: commands.clone(),
+            out: out_rx,
+            replies: reply_rx,
+            max_command_age: period,
+            health: health.clone(),
+            stall,
+            epoch,
+        },
+        stop.clone(),
+        own,
+        signing,
+    ));
     let heartbeat = tokio::spawn(link_tasks::heartbeat_task(
         out_tx.clone(),
         state.clone(),
         stop.clone(),
+        health.clone(),
+        stall,
+        epoch,
     ));
 
     let (rt_tx, rt_rx) = tokio::sync::oneshot::channel();
@@ -547,12 +632,14 @@ pub async fn spawn_with_controller(
         events: event_rx,
         missions: mission_rx,
         out: out_tx,
+        commands: commands.clone(),
+        health: health.clone(),
         stop: stop.clone(),
         state: state.clone(),
         ticks: ticks.clone(),
         epoch,
         csv,
-        period: Duration::from_secs_f64(1.0 / config.controller.rate_hz),
+        period,
         pose_lock: config.controller.tick == TickMode::Pose,
         pose_wait: config.controller.pose_wait_ms / 1000.0,
         realtime: config.realtime.clone(),
@@ -586,6 +673,7 @@ pub async fn spawn_with_controller(
         ticks,
         local_addr,
         fault,
+        health,
         parts: Parts {
             link: endpoint.to_string(),
             controller: controller_name,
@@ -601,6 +689,9 @@ pub async fn spawn_with_controller(
             started: epoch,
             cpu_at_start,
             tap,
+            transport,
+            commands,
+            replies_dropped,
             control,
             rx,
             tx,
