@@ -39,6 +39,7 @@ pub mod math;
 pub mod modes;
 mod outbound;
 pub mod params;
+pub mod refusal;
 mod signing;
 mod stats;
 pub mod tlog;
@@ -53,7 +54,7 @@ pub use mavlink::{MavHeader, MavlinkVersion};
 
 pub use command::{Addressing, CommandRequest, command_ack};
 pub use error::{ErrorCategory, FrameError, LinkError, PayloadFault, SetpointRejection};
-pub use filter::{LinkRx, RxOutcome, SourceFilter, Verdict};
+pub use filter::{DEFAULT_GCS_SYSTEM_IDS, LinkRx, RxOutcome, SourceFilter, Verdict};
 pub use frame::{
     EncodedFrame, Frame, FrameIter, FrameParser, MAX_FRAME_LEN, SignedFrame, frames, header,
     parse_frame, serialize_v2, write_v2,

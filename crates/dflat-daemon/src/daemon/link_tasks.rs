@@ -17,9 +17,11 @@ use tokio::sync::mpsc;
 use tracing::{debug, error, info, warn};
 
 use super::{Outgoing, RxReport, Stop, TxReport, daemon_status, decode_state};
-use crate::commands::{CommandRequest, RequestedMessage, answer};
+use crate::commands::{CommandRequest, RequestedMessage, answer, command_ack};
 use crate::signing::{PERSIST_INTERVAL, TimestampStore};
-use crate::tick::{Event, REFUSAL_TEXT_INTERVAL, event_from};
+use crate::tick::{Event, event_from};
+use dflat_link::dialect::MavResult;
+use dflat_link::refusal::{RefusalLimiter, Say};
 
 /// What the receive task needs to know of the daemon.
 #[derive(Debug, Clone)]
@@ -81,7 +83,8 @@ pub(super) async fn receive_task(
 ) -> RxReport {
     let mut stop_rx = stop.tx.subscribe();
     let mut report = RxReport::default();
-    let mut last_refusal: Option<Instant> = None;
+    // Refusals said once per sender and reason per 10 s, with a count.
+    let mut refusals: RefusalLimiter<(u8, u8)> = RefusalLimiter::default();
     let mut told_addressing = false;
     let mut told_yaw = false;
     loop {
@@ -123,17 +126,17 @@ pub(super) async fn receive_task(
             if let Err(check) =
                 link.authenticate(&frame.header, &frame.message, frame.signed.as_ref(), now)
             {
-                let due =
-                    last_refusal.is_none_or(|t| t.elapsed().as_secs_f64() >= REFUSAL_TEXT_INTERVAL);
-                if is_setpoint && due {
-                    last_refusal = Some(Instant::now());
+                if is_setpoint {
                     let text = match check {
                         SignatureCheck::Unsigned => "dflat: setpoint refused: unsigned",
                         SignatureCheck::Replayed => "dflat: setpoint refused: replayed",
                         _ => "dflat: setpoint refused: bad signature",
                     };
-                    info!(?check, "setpoint refused by signing");
-                    send_text(&out, MavSeverity::MAV_SEVERITY_WARNING, text);
+                    let sender = (frame.header.system_id as u8, frame.header.component_id);
+                    let say = refusals.refuse(sender, text, ctx.epoch.elapsed().as_secs_f64());
+                    say_refusal(&out, say, text, || {
+                        info!(?check, "setpoint refused by signing")
+                    });
                 }
                 continue;
             }
@@ -159,7 +162,7 @@ pub(super) async fn receive_task(
                 }
                 if let Some(req) = CommandRequest::from_message(&frame.message, sender.0, sender.1)
                 {
-                    answer_command(&req, &ctx, &out);
+                    answer_command(&req, &ctx, &out, &mut refusals);
                 }
                 event_from(inbound, ctx.pose_source, arrival)
             }
@@ -182,16 +185,17 @@ pub(super) async fn receive_task(
                 None
             }
             RxOutcome::Rejected(e) if is_setpoint => {
-                let due =
-                    last_refusal.is_none_or(|t| t.elapsed().as_secs_f64() >= REFUSAL_TEXT_INTERVAL);
-                if due {
-                    last_refusal = Some(Instant::now());
-                    info!(error = %e, "setpoint refused");
-                    send_text(
-                        &out,
-                        MavSeverity::MAV_SEVERITY_WARNING,
-                        &setpoint_refusal_text(e),
-                    );
+                let text = setpoint_refusal_text(e);
+                let say = refusals.refuse(sender, &text, ctx.epoch.elapsed().as_secs_f64());
+                say_refusal(&out, say, &text, || info!(error = %e, "setpoint refused"));
+                None
+            }
+            RxOutcome::Ignored(Verdict::IgnoreWrongSource) => {
+                if let Some(id) = link
+                    .filter
+                    .unknown_ground_station(&frame.header, &frame.message)
+                {
+                    refuse_unknown_gcs(id, &frame.message, sender, &ctx, &mut refusals, &out);
                 }
                 None
             }
@@ -207,16 +211,73 @@ pub(super) async fn receive_task(
     report
 }
 
+/// Sends `text` as a WARNING STATUSTEXT as the limiter says: the first
+/// time (and `log`, the caller's INFO/WARN line), again with the count of
+/// repeats held back once the interval passed; repeats in between only at
+/// DEBUG.
+fn say_refusal(out: &mpsc::Sender<Outgoing>, say: Say, text: &str, log: impl FnOnce()) {
+    match say {
+        Say::First => log(),
+        Say::Again { held_back } => debug!(text, held_back, "refusal repeated"),
+        Say::Quiet => {
+            debug!(text, "refusal repeated (not said)");
+            return;
+        }
+    }
+    send_text(out, MavSeverity::MAV_SEVERITY_WARNING, &say.text(text));
+}
+
+/// The refusal of a request (setpoint, command, mission) from system `id`,
+/// a ground station `link.gcs_system_ids` does not name: never acted on; a
+/// command gets COMMAND_ACK DENIED every time; the STATUSTEXT naming the id
+/// and the key to set, and a WARN line, once per sender per 10 s.
+fn refuse_unknown_gcs(
+    id: u8,
+    msg: &MavMessage,
+    sender: (u8, u8),
+    ctx: &RxContext,
+    refusals: &mut RefusalLimiter<(u8, u8)>,
+    out: &mpsc::Sender<Outgoing>,
+) {
+    if let Some(req) = CommandRequest::from_message(msg, sender.0, sender.1) {
+        let _ = out.try_send(Outgoing::plain(command_ack(
+            &req,
+            MavResult::MAV_RESULT_DENIED,
+        )));
+    }
+    use dflat_link::mavlink::Message as _;
+    let text = format!("dflat: id {id} not in link.gcs_system_ids");
+    let say = refusals.refuse(sender, &text, ctx.epoch.elapsed().as_secs_f64());
+    say_refusal(out, say, &text, || {
+        warn!(
+            system = id,
+            component = sender.1,
+            message = msg.message_name(),
+            "request from a ground station not in link.gcs_system_ids refused; add its id there to accept it"
+        );
+    });
+}
+
 /// COMMAND_ACK (and what REQUEST_MESSAGE asked for) for a command the
 /// daemon answers ([`crate::commands`]).
-fn answer_command(req: &CommandRequest, ctx: &RxContext, out: &mpsc::Sender<Outgoing>) {
+fn answer_command(
+    req: &CommandRequest,
+    ctx: &RxContext,
+    out: &mpsc::Sender<Outgoing>,
+    refusals: &mut RefusalLimiter<(u8, u8)>,
+) {
     let Some(reply) = answer(req, ctx.own) else {
         return;
     };
     debug!(command = ?req.command, "command answered");
     let _ = out.try_send(Outgoing::plain(reply.ack));
     if let Some(reason) = &reply.reason {
-        send_text(out, MavSeverity::MAV_SEVERITY_INFO, reason);
+        // Said once per sender and reason per 10 s (SDKs retry requests).
+        let sender = (req.sender_system, req.sender_component);
+        match refusals.refuse(sender, reason, ctx.epoch.elapsed().as_secs_f64()) {
+            Say::Quiet => debug!(reason, "command refusal repeated (not said)"),
+            say => send_text(out, MavSeverity::MAV_SEVERITY_INFO, &say.text(reason)),
+        }
     }
     let state = ctx.state.load(Ordering::Relaxed);
     match reply.then {
