@@ -312,7 +312,8 @@ async fn a_ground_station_talks_to_both_components() {
     assert_eq!(acks[0].map(|a| a.1), Some(accepted));
     assert_eq!(acks[1].map(|a| a.1), Some(unsupported));
     assert_eq!(acks[2].map(|a| a.1), Some(accepted));
-    assert_eq!(acks[3].map(|a| a.1), Some(unsupported));
+    // The SITL's plant starts in the air: takeoff refused in words.
+    assert_eq!(acks[3].map(|a| a.1), Some(MavResult::MAV_RESULT_DENIED));
     let attitude = gcs.wait((1, 1), t0, |m| {
         matches!(m, MavMessage::ATTITUDE(_)).then_some(())
     });
@@ -338,12 +339,14 @@ async fn a_ground_station_talks_to_both_components() {
     );
     let loss = params.iter().filter(|(n, ..)| n == "COM_OF_LOSS_T").count();
     assert_eq!(loss, 2, "listed and read: {params:?}");
-    // The SITL keeps frames addressed to it (as PX4 does) and says where
-    // setpoints go. Sent straight to the daemon's socket from another one,
-    // the frame is not heard at all: the daemon's socket is connected to
-    // the autopilot (the kernel drops other senders), so it says nothing.
+    // The SITL keeps frames addressed to it (as PX4 does) and flies them
+    // in OFFBOARD; with the daemon's attitude stream alive too, the latest
+    // type wins and it says so. Sent straight to the daemon's socket from
+    // another one, the frame is not heard at all: the daemon's socket is
+    // connected to the autopilot (the kernel drops other senders), so it
+    // says nothing.
     let sitl_told = gcs.wait((1, 1), t0, |m| {
-        text(m).filter(|t| t.contains("setpoints go to the companion"))
+        text(m).filter(|t| t.contains("2 setpoint streams"))
     });
     let direct = UdpSocket::bind("127.0.0.1:0").unwrap();
     let to_autopilot = setpoint(
@@ -429,5 +432,9 @@ async fn a_ground_station_talks_to_both_components() {
     eprintln!("sitl counters: {c:?}");
     // Commands, requests and the setpoint to the SITL itself stayed there.
     assert!(c.gcs_frames_kept >= 6, "{c:?}");
-    assert_eq!((c.commands_acked, c.commands_unsupported), (3, 1), "{c:?}");
+    assert_eq!(
+        (c.commands_acked, c.commands_unsupported, c.commands_denied),
+        (3, 0, 1),
+        "{c:?}"
+    );
 }

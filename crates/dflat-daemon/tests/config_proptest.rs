@@ -52,7 +52,10 @@ const FIELDS: &[(&str, Kind, f64, f64, Set)] = &[
         c.link.component_id = v as u8
     }),
     ("link.gcs_system_id", Kind::Id, 1.0, 255.0, |c, v| {
-        c.link.gcs_system_id = v as u8
+        c.link.gcs_system_id = Some(v as u8)
+    }),
+    ("link.gcs_system_ids[0]", Kind::Id, 1.0, 255.0, |c, v| {
+        c.link.gcs_system_ids[0] = v as u8
     }),
     (
         "link.pose_clock_window_s",

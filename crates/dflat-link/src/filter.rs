@@ -17,8 +17,8 @@ use crate::{FrameError, LinkError, LinkStats, SignatureCheck, SignedFrame, Signi
 /// 3. ODOMETRY, VISION_POSITION_ESTIMATE: from the autopilot or from one of
 ///    `pose_components` of the own vehicle (e.g. 197, a VIO component), or
 ///    from the ground station (mocap relayed by a GCS).
-/// 4. SET_POSITION_TARGET_LOCAL_NED: from the ground station
-///    (`gcs_system_id`, any component) or one of `setpoint_components` of the
+/// 4. SET_POSITION_TARGET_LOCAL_NED: from a ground station (one of
+///    `gcs_system_ids`, any component) or one of `setpoint_components` of the
 ///    own vehicle; and it must be addressed to us: `target_system` ∈ {0,
 ///    vehicle}, `target_component` ∈ {0, own component} — else
 ///    [`Verdict::IgnoreNotAddressed`].
@@ -35,8 +35,9 @@ pub struct SourceFilter {
     pub autopilot_component_id: u8,
     /// This endpoint's component id (daemon default 191, MAV_COMP_ID_ONBOARD_COMPUTER).
     pub own_component_id: u8,
-    /// The ground station's system id (default 255).
-    pub gcs_system_id: u8,
+    /// The ground stations' system ids (default 255 — QGroundControl,
+    /// MAVProxy — and 245 — MAVSDK).
+    pub gcs_system_ids: Vec<u8>,
     /// Own-vehicle components allowed to send position setpoints (default none).
     pub setpoint_components: Vec<u8>,
     /// Own-vehicle components allowed to send ODOMETRY / VISION_POSITION_ESTIMATE
@@ -50,12 +51,16 @@ impl Default for SourceFilter {
             vehicle_system_id: 1,
             autopilot_component_id: 1,
             own_component_id: 191,
-            gcs_system_id: 255,
+            gcs_system_ids: DEFAULT_GCS_SYSTEM_IDS.to_vec(),
             setpoint_components: Vec::new(),
             pose_components: Vec::new(),
         }
     }
 }
+
+/// The ground-station system ids trusted by default: 255 (QGroundControl,
+/// MAVProxy) and 245 (MAVSDK).
+pub const DEFAULT_GCS_SYSTEM_IDS: [u8; 2] = [255, 245];
 
 /// The filter's decision for one message.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -78,7 +83,7 @@ impl SourceFilter {
     }
 
     fn sent_by_gcs(&self, header: &MavHeader) -> bool {
-        header.system_id == u32::from(self.gcs_system_id)
+        u8::try_from(header.system_id).is_ok_and(|s| self.gcs_system_ids.contains(&s))
     }
 
     fn sent_by_autopilot(&self, header: &MavHeader) -> bool {
@@ -130,6 +135,40 @@ impl SourceFilter {
             }
             _ => Verdict::Accept,
         }
+    }
+}
+
+impl SourceFilter {
+    /// The sender's system id when `msg` is a request that moves the
+    /// vehicle or asks something of this endpoint — a position setpoint, a
+    /// command, a mission message — addressed to us (or broadcast) by
+    /// another system that is not one of `gcs_system_ids`: a ground station
+    /// the configuration does not name. The caller refuses it in words
+    /// (it is never acted on: [`check`](Self::check) ignores it).
+    pub fn unknown_ground_station(&self, header: &MavHeader, msg: &MavMessage) -> Option<u8> {
+        let system = u8::try_from(header.system_id).ok()?;
+        if system == self.vehicle_system_id || self.gcs_system_ids.contains(&system) {
+            return None;
+        }
+        // Commands only when addressed to this component: a broadcast is
+        // declined by silence (MAVLink's convention), not refused.
+        let command = matches!(
+            msg,
+            MavMessage::COMMAND_LONG(_) | MavMessage::COMMAND_INT(_)
+        );
+        if command && msg.target_component_id() != Some(self.own_component_id) {
+            return None;
+        }
+        let request = command
+            || matches!(
+                msg,
+                MavMessage::SET_POSITION_TARGET_LOCAL_NED(_)
+                    | MavMessage::MISSION_COUNT(_)
+                    | MavMessage::MISSION_ITEM_INT(_)
+                    | MavMessage::MISSION_CLEAR_ALL(_)
+                    | MavMessage::MISSION_REQUEST_LIST(_)
+            );
+        (request && self.addressed_to_us(msg)).then_some(system)
     }
 }
 

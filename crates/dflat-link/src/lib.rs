@@ -41,6 +41,7 @@ pub mod mission;
 pub mod modes;
 mod outbound;
 pub mod params;
+pub mod refusal;
 mod signing;
 mod stats;
 pub mod tlog;
@@ -55,7 +56,7 @@ pub use mavlink::{MavHeader, MavlinkVersion};
 
 pub use command::{Addressing, CommandRequest, command_ack};
 pub use error::{ErrorCategory, FrameError, LinkError, PayloadFault, SetpointRejection};
-pub use filter::{LinkRx, RxOutcome, SourceFilter, Verdict};
+pub use filter::{DEFAULT_GCS_SYSTEM_IDS, LinkRx, RxOutcome, SourceFilter, Verdict};
 pub use frame::{
     EncodedFrame, Frame, FrameIter, FrameParser, MAX_FRAME_LEN, SignedFrame, frames, header,
     parse_frame, serialize_v2, write_v2,

@@ -3,11 +3,16 @@
 //!
 //! | command | answer |
 //! |---|---|
-//! | MAV_CMD_REQUEST_MESSAGE (512): HEARTBEAT 0, SYS_STATUS 1, ATTITUDE 30, LOCAL_POSITION_NED 32, AUTOPILOT_VERSION 148 | ACCEPTED, then the message (DENIED while the SITL has not sent it yet, e.g. the pose paused) |
+//! | MAV_CMD_REQUEST_MESSAGE (512): HEARTBEAT 0, SYS_STATUS 1, ATTITUDE 30, ATTITUDE_QUATERNION 31, LOCAL_POSITION_NED 32, GLOBAL_POSITION_INT 33, BATTERY_STATUS 147, AUTOPILOT_VERSION 148, HOME_POSITION 242, EXTENDED_SYS_STATE 245 | ACCEPTED, then the message (DENIED while the SITL has not sent it yet, e.g. the pose paused) |
+//! | MAV_CMD_GET_HOME_POSITION (410) | ACCEPTED, HOME_POSITION |
+//! | MAV_CMD_SET_MESSAGE_INTERVAL (511) | the streams of [`super::px4_face::Streams`]: ACCEPTED; HEARTBEAT, ATTITUDE, LOCAL_POSITION_NED (rate from the config) and others DENIED, STATUSTEXT (answered in `services`) |
+//! | MAV_CMD_DO_REPOSITION (192, `goto_location`) | ACCEPTED: AUTO_LOITER at the target (answered in `services`) |
+//! | MAV_CMD_NAV_RETURN_TO_LAUNCH (20) | ACCEPTED: AUTO_RTL, flies to home (the start point) and holds there |
+//! | MAV_CMD_NAV_TAKEOFF (22), MAV_CMD_NAV_LAND (21) | DENIED, STATUSTEXT: the plant starts in the air and cannot land |
 //! | MAV_CMD_REQUEST_MESSAGE, any other message | DENIED, STATUSTEXT "not sent" |
 //! | MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES (520) | ACCEPTED, AUTOPILOT_VERSION |
-//! | MAV_CMD_DO_SET_MODE (176), param2 = PX4 main mode OFFBOARD 6 / POSCTL 3, ArduPilot GUIDED_NOGPS 20 / LOITER 5 | ACCEPTED and switched; offboard without a live setpoint stream DENIED, STATUSTEXT; other modes DENIED |
-//! | MAV_CMD_COMPONENT_ARM_DISARM (400) | arm: ACCEPTED (always armed); disarm: DENIED, STATUSTEXT |
+//! | MAV_CMD_DO_SET_MODE (176), param2 = PX4 main mode OFFBOARD 6 / POSCTL 3 / AUTO 4 with param3 = LOITER 3 or RTL 5, ArduPilot GUIDED_NOGPS 20 / LOITER 5 | ACCEPTED and switched; offboard without a live setpoint stream (attitude or position) DENIED, STATUSTEXT; other modes DENIED |
+//! | MAV_CMD_COMPONENT_ARM_DISARM (400) | ACCEPTED: arm / disarm (disarmed, the plant — which cannot land — keeps hovering on the position hold; commands are not applied) |
 //! | anything else | UNSUPPORTED |
 //!
 //! Addressing as [`dflat_link::command`]: a command to the SITL's own
@@ -25,6 +30,7 @@ use dflat_link::command::{Addressing, CommandRequest, command_ack, whole};
 use dflat_link::dialect::{MavCmd, MavResult};
 use dflat_link::modes::px4;
 
+use super::px4_face::{PX4_AUTO_LOITER, PX4_AUTO_RTL, PX4_MAIN_AUTO};
 use super::{ARDUPILOT_MODE_GUIDED_NOGPS, ARDUPILOT_MODE_LOITER, SitlAutopilot, SitlMode};
 
 /// A message the SITL sends on request.
@@ -40,6 +46,16 @@ pub enum SitlMessage {
     LocalPosition,
     /// AUTOPILOT_VERSION (148).
     AutopilotVersion,
+    /// ATTITUDE_QUATERNION (31).
+    AttitudeQuaternion,
+    /// GLOBAL_POSITION_INT (33).
+    GlobalPosition,
+    /// BATTERY_STATUS (147).
+    Battery,
+    /// HOME_POSITION (242).
+    Home,
+    /// EXTENDED_SYS_STATE (245).
+    ExtendedSysState,
 }
 
 impl SitlMessage {
@@ -51,6 +67,11 @@ impl SitlMessage {
             30 => Self::Attitude,
             32 => Self::LocalPosition,
             148 => Self::AutopilotVersion,
+            31 => Self::AttitudeQuaternion,
+            33 => Self::GlobalPosition,
+            147 => Self::Battery,
+            242 => Self::Home,
+            245 => Self::ExtendedSysState,
             _ => return None,
         })
     }
@@ -63,7 +84,8 @@ pub struct CommandContext {
     pub own: (u8, u8),
     /// Its flavour (mode numbers).
     pub autopilot: SitlAutopilot,
-    /// A SET_ATTITUDE_TARGET arrived within the offboard-loss timeout.
+    /// A setpoint (SET_ATTITUDE_TARGET, or a position setpoint to the
+    /// autopilot) arrived within the offboard-loss timeout.
     pub stream_alive: bool,
     /// The pose stream has started and is not paused (ATTITUDE and
     /// LOCAL_POSITION_NED can be sent).
@@ -83,6 +105,8 @@ pub struct SitlAnswer {
     pub then: Option<SitlMessage>,
     /// The mode to switch to.
     pub mode: Option<SitlMode>,
+    /// Arm (`true`) or disarm.
+    pub armed: Option<bool>,
 }
 
 /// The SITL's answer to `req` (`None`: not addressed to it, or a
@@ -103,13 +127,25 @@ pub fn answer(req: &CommandRequest, ctx: &CommandContext) -> Option<SitlAnswer> 
             out = Outcome::new(MavResult::MAV_RESULT_ACCEPTED);
             out.then = Some(SitlMessage::AutopilotVersion);
         }
-        MavCmd::MAV_CMD_DO_SET_MODE => out = set_mode(req.param2, ctx),
+        #[allow(deprecated)]
+        MavCmd::MAV_CMD_GET_HOME_POSITION => {
+            out = Outcome::new(MavResult::MAV_RESULT_ACCEPTED);
+            out.then = Some(SitlMessage::Home);
+        }
+        MavCmd::MAV_CMD_DO_SET_MODE => out = set_mode(req.param2, req.param3, ctx),
         MavCmd::MAV_CMD_COMPONENT_ARM_DISARM => {
-            out = if req.param1 == 1.0 {
-                Outcome::new(MavResult::MAV_RESULT_ACCEPTED)
-            } else {
-                Outcome::denied("SITL: disarm refused, the SITL stays armed".into())
-            };
+            out = Outcome::new(MavResult::MAV_RESULT_ACCEPTED);
+            out.armed = Some(req.param1 == 1.0);
+        }
+        MavCmd::MAV_CMD_NAV_RETURN_TO_LAUNCH => {
+            out = Outcome::new(MavResult::MAV_RESULT_ACCEPTED);
+            out.mode = Some(SitlMode::Rtl);
+        }
+        MavCmd::MAV_CMD_NAV_TAKEOFF => {
+            out = Outcome::denied("SITL: takeoff refused: plant starts in the air".into());
+        }
+        MavCmd::MAV_CMD_NAV_LAND => {
+            out = Outcome::denied("SITL: land refused: the plant cannot land".into());
         }
         _ => {}
     }
@@ -122,6 +158,7 @@ pub fn answer(req: &CommandRequest, ctx: &CommandContext) -> Option<SitlAnswer> 
         reason: out.reason,
         then: out.then,
         mode: out.mode,
+        armed: out.armed,
     })
 }
 
@@ -130,6 +167,7 @@ struct Outcome {
     reason: Option<String>,
     then: Option<SitlMessage>,
     mode: Option<SitlMode>,
+    armed: Option<bool>,
 }
 
 impl Outcome {
@@ -139,6 +177,7 @@ impl Outcome {
             reason: None,
             then: None,
             mode: None,
+            armed: None,
         }
     }
 
@@ -155,7 +194,13 @@ fn request_message(id: Option<u32>, ctx: &CommandContext) -> Outcome {
         let id = id.map_or("?".to_owned(), |i| i.to_string());
         return Outcome::denied(format!("SITL: message {id} not sent"));
     };
-    let pose = matches!(message, SitlMessage::Attitude | SitlMessage::LocalPosition);
+    let pose = matches!(
+        message,
+        SitlMessage::Attitude
+            | SitlMessage::LocalPosition
+            | SitlMessage::AttitudeQuaternion
+            | SitlMessage::GlobalPosition
+    );
     if pose && !ctx.pose_available {
         return Outcome::denied(format!("SITL: {message:?} not available (pose paused)"));
     }
@@ -164,15 +209,21 @@ fn request_message(id: Option<u32>, ctx: &CommandContext) -> Outcome {
     out
 }
 
-fn set_mode(custom: f32, ctx: &CommandContext) -> Outcome {
+fn set_mode(custom: f32, sub: f32, ctx: &CommandContext) -> Outcome {
+    let sub = whole(sub).unwrap_or(0);
     let mode = whole(custom).and_then(|m| match ctx.autopilot {
         SitlAutopilot::Px4 if m == u32::from(px4::OFFBOARD) => Some(SitlMode::Offboard),
         SitlAutopilot::Px4 if m == u32::from(px4::POSCTL) => Some(SitlMode::Hold),
+        SitlAutopilot::Px4 if m == PX4_MAIN_AUTO && sub == PX4_AUTO_LOITER => {
+            Some(SitlMode::Loiter)
+        }
+        SitlAutopilot::Px4 if m == PX4_MAIN_AUTO && sub == PX4_AUTO_RTL => Some(SitlMode::Rtl),
         SitlAutopilot::Ardupilot if m == ARDUPILOT_MODE_GUIDED_NOGPS => Some(SitlMode::Offboard),
         SitlAutopilot::Ardupilot if m == ARDUPILOT_MODE_LOITER => Some(SitlMode::Hold),
         _ => None,
     });
     match mode {
+        None if sub != 0 => Outcome::denied(format!("SITL: mode {custom}/{sub} not modelled")),
         None => Outcome::denied(format!("SITL: mode {custom} not modelled")),
         Some(SitlMode::Offboard) if !ctx.stream_alive => {
             Outcome::denied("SITL: offboard refused, no setpoint stream".into())
@@ -317,8 +368,58 @@ mod tests {
     }
 
     #[test]
+    fn px4_hold_rtl_disarm_and_refused_takeoff() {
+        let mut hold = req(MavCmd::MAV_CMD_DO_SET_MODE, 1.0, 4.0, (1, 1));
+        hold.param3 = 3.0;
+        let a = answer(&hold, &CTX).unwrap();
+        assert_eq!(
+            (a.result, a.mode),
+            (MavResult::MAV_RESULT_ACCEPTED, Some(SitlMode::Loiter))
+        );
+        hold.param3 = 5.0;
+        assert_eq!(answer(&hold, &CTX).unwrap().mode, Some(SitlMode::Rtl));
+        hold.param3 = 4.0; // AUTO_MISSION: no missions
+        let a = answer(&hold, &CTX).unwrap();
+        assert_eq!(a.result, MavResult::MAV_RESULT_DENIED);
+        assert!(a.reason.unwrap().contains("4/4"));
+        let rtl = answer(
+            &req(MavCmd::MAV_CMD_NAV_RETURN_TO_LAUNCH, 0.0, 0.0, (1, 1)),
+            &CTX,
+        )
+        .unwrap();
+        assert_eq!(
+            (rtl.result, rtl.mode),
+            (MavResult::MAV_RESULT_ACCEPTED, Some(SitlMode::Rtl))
+        );
+        let disarm = answer(
+            &req(MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, 0.0, 0.0, (1, 1)),
+            &CTX,
+        )
+        .unwrap();
+        assert_eq!(
+            (disarm.result, disarm.armed),
+            (MavResult::MAV_RESULT_ACCEPTED, Some(false))
+        );
+        for c in [MavCmd::MAV_CMD_NAV_TAKEOFF, MavCmd::MAV_CMD_NAV_LAND] {
+            let a = answer(&req(c, 0.0, 0.0, (1, 1)), &CTX).unwrap();
+            assert_eq!(a.result, MavResult::MAV_RESULT_DENIED);
+            assert!(a.reason.unwrap().contains("refused"));
+        }
+        for (id, m) in [
+            (242.0, SitlMessage::Home),
+            (245.0, SitlMessage::ExtendedSysState),
+        ] {
+            let a = answer(&req(MavCmd::MAV_CMD_REQUEST_MESSAGE, id, 0.0, (1, 1)), &CTX).unwrap();
+            assert_eq!(
+                (a.result, a.then),
+                (MavResult::MAV_RESULT_ACCEPTED, Some(m))
+            );
+        }
+    }
+
+    #[test]
     fn unknown_commands_unsupported_broadcasts_quiet_others_ignored() {
-        let takeoff = req(MavCmd::MAV_CMD_NAV_TAKEOFF, 0.0, 0.0, (1, 1));
+        let takeoff = req(MavCmd::MAV_CMD_DO_FLIGHTTERMINATION, 0.0, 0.0, (1, 1));
         let a = answer(&takeoff, &CTX).unwrap();
         assert_eq!(a.result, MavResult::MAV_RESULT_UNSUPPORTED);
         match a.ack {
@@ -327,7 +428,13 @@ mod tests {
             }
             other => panic!("{other:?}"),
         }
-        assert!(answer(&req(MavCmd::MAV_CMD_NAV_TAKEOFF, 0.0, 0.0, (0, 0)), &CTX).is_none());
+        assert!(
+            answer(
+                &req(MavCmd::MAV_CMD_DO_FLIGHTTERMINATION, 0.0, 0.0, (0, 0)),
+                &CTX
+            )
+            .is_none()
+        );
         assert!(
             answer(
                 &req(MavCmd::MAV_CMD_REQUEST_MESSAGE, 0.0, 0.0, (0, 0)),
@@ -342,12 +449,6 @@ mod tests {
             )
             .is_none()
         );
-        let disarm = answer(
-            &req(MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, 0.0, 0.0, (1, 1)),
-            &CTX,
-        )
-        .unwrap();
-        assert_eq!(disarm.result, MavResult::MAV_RESULT_DENIED);
     }
 
     #[test]

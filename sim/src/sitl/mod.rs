@@ -26,6 +26,14 @@
 //!   quaternion becomes roll/pitch/yaw, the normalised thrust the specific
 //!   thrust `T = thrust / sitl.hover_thrust · g` (ignored by the planar
 //!   plant, whose altitude the autopilot holds);
+//! * it answers like a PX4 an SDK can script ([`px4_face`]): HOME_POSITION,
+//!   EXTENDED_SYS_STATE, ATTITUDE_QUATERNION, GLOBAL_POSITION_INT,
+//!   BATTERY_STATUS (unknown) with SET_MESSAGE_INTERVAL, AUTOPILOT_VERSION,
+//!   the mission protocol (unsupported, answered), AUTO_LOITER (hold, goto)
+//!   and AUTO_RTL flown by its own position loop ([`position_control`]),
+//!   disarm; and in OFFBOARD it flies SET_POSITION_TARGET_LOCAL_NED
+//!   addressed to it with that loop (the latest setpoint type wins against
+//!   SET_ATTITUDE_TARGET, said every 10 s);
 //! * when no valid command arrived for `sitl.command_timeout_s` it holds
 //!   position on its own: an internal PD position loop on its true state,
 //!   like an autopilot's position-mode failsafe. It starts in that mode;
@@ -84,12 +92,15 @@ use thiserror::Error;
 
 use dflat_link::transport::Endpoint;
 
+mod autopilot_state;
 pub mod commands;
 mod config;
 mod counters;
 mod latency;
 pub mod params;
 pub mod pilot;
+pub mod position_control;
+pub mod px4_face;
 mod routing;
 mod services;
 pub use config::{SitlAutopilot, SitlConfig, SitlConfigError, SitlIds, SitlPlant, SitlSettings};
@@ -112,6 +123,8 @@ pub const PX4_MODE_OFFBOARD: u32 = 6 << 16;
 pub const PX4_MODE_POSCTL: u32 = 3 << 16;
 /// ArduPilot Copter LOITER, reported in position mode.
 pub const ARDUPILOT_MODE_LOITER: u32 = 5;
+/// ArduPilot Copter RTL, reported in return-to-launch.
+pub const ARDUPILOT_MODE_RTL: u32 = 6;
 /// ArduPilot Copter GUIDED_NOGPS, reported in offboard mode.
 pub const ARDUPILOT_MODE_GUIDED_NOGPS: u32 = 20;
 /// Deceleration the position mode brakes at when it takes over \[m/s²\]
@@ -188,8 +201,16 @@ pub const SIGNING_LINK_ID: u8 = 1;
 pub enum SitlMode {
     /// Holding position on its own (start, and after a command timeout).
     Hold,
-    /// Following SET_ATTITUDE_TARGET.
+    /// Following the setpoint stream: SET_ATTITUDE_TARGET, or position
+    /// setpoints to the autopilot flown by its position loop (the latest
+    /// type wins).
     Offboard,
+    /// PX4 AUTO_LOITER (`hold()`, `goto_location()`): the SITL's position
+    /// loop flies to a goal and holds there.
+    Loiter,
+    /// PX4 AUTO_RTL: as [`SitlMode::Loiter`] with home (the start point)
+    /// as the goal; the plant cannot land, so it holds there.
+    Rtl,
 }
 
 impl SitlMode {
@@ -198,6 +219,8 @@ impl SitlMode {
         match self {
             SitlMode::Hold => "hold",
             SitlMode::Offboard => "offboard",
+            SitlMode::Loiter => "loiter",
+            SitlMode::Rtl => "rtl",
         }
     }
 
@@ -209,14 +232,28 @@ impl SitlMode {
             (SitlAutopilot::Px4, SitlMode::Offboard) => PX4_MODE_OFFBOARD,
             (SitlAutopilot::Ardupilot, SitlMode::Hold) => ARDUPILOT_MODE_LOITER,
             (SitlAutopilot::Ardupilot, SitlMode::Offboard) => ARDUPILOT_MODE_GUIDED_NOGPS,
+            (SitlAutopilot::Px4, SitlMode::Loiter) => px4_face::px4_auto(px4_face::PX4_AUTO_LOITER),
+            (SitlAutopilot::Px4, SitlMode::Rtl) => px4_face::px4_auto(px4_face::PX4_AUTO_RTL),
+            (SitlAutopilot::Ardupilot, SitlMode::Loiter) => ARDUPILOT_MODE_LOITER,
+            (SitlAutopilot::Ardupilot, SitlMode::Rtl) => ARDUPILOT_MODE_RTL,
         }
     }
 
     fn from_u8(v: u8) -> Self {
-        if v == 1 {
-            SitlMode::Offboard
-        } else {
-            SitlMode::Hold
+        match v {
+            1 => SitlMode::Offboard,
+            2 => SitlMode::Loiter,
+            3 => SitlMode::Rtl,
+            _ => SitlMode::Hold,
+        }
+    }
+
+    fn as_u8(self) -> u8 {
+        match self {
+            SitlMode::Hold => 0,
+            SitlMode::Offboard => 1,
+            SitlMode::Loiter => 2,
+            SitlMode::Rtl => 3,
         }
     }
 }
@@ -328,11 +365,11 @@ struct Shared {
     command_timeout_us: AtomicU64,
     /// The latest periodic messages, for MAV_CMD_REQUEST_MESSAGE.
     latest: Mutex<Latest>,
-    /// A position setpoint addressed to the SITL was answered (once).
-    told_setpoints: AtomicBool,
     /// Signing of outgoing frames (`None` = unsigned). Shared because any
     /// thread may send the SITL's own frames.
     signing: Option<Mutex<Signing>>,
+    /// The PX4 face: armed, position setpoints, goals, streams, home.
+    px4: autopilot_state::Px4State,
 }
 
 /// Locks a mutex, recovering the data if a thread panicked while holding it.
@@ -537,8 +574,8 @@ pub fn spawn(cfg: &SitlSettings, options: SitlOptions) -> Result<SitlHandle, Sit
         )),
         command_timeout_us: AtomicU64::new((cfg.sitl.command_timeout_s * 1e6).round() as u64),
         latest: Mutex::new(Latest::default()),
-        told_setpoints: AtomicBool::new(false),
         signing: signing.clone().map(Mutex::new),
+        px4: autopilot_state::Px4State::new(cfg.sitl.start),
     });
 
     let mut threads = Vec::new();
@@ -547,7 +584,7 @@ pub fn spawn(cfg: &SitlSettings, options: SitlOptions) -> Result<SitlHandle, Sit
         vehicle_system_id: cfg.ids.system_id,
         autopilot_component_id: cfg.ids.autopilot_component,
         own_component_id: cfg.ids.autopilot_component,
-        gcs_system_id: cfg.ids.gcs_system_id,
+        gcs_system_ids: vec![cfg.ids.gcs_system_id],
         ..SourceFilter::default()
     };
     // The receive side verifies with its own copy (per-stream timestamps);
@@ -716,6 +753,17 @@ impl SitlHandle {
         self.shared.pose_paused.store(false, Ordering::Relaxed);
     }
 
+    /// Position setpoints addressed to the autopilot accepted so far
+    /// (flown in OFFBOARD by the SITL's position loop).
+    pub fn position_setpoints_accepted(&self) -> u64 {
+        self.shared.px4.setpoints_accepted.load(Ordering::Relaxed)
+    }
+
+    /// Whether the vehicle is armed (disarm is accepted over MAVLink).
+    pub fn armed(&self) -> bool {
+        self.shared.px4.armed()
+    }
+
     /// Whether the pose stream is paused.
     pub fn pose_paused(&self) -> bool {
         self.shared.pose_paused.load(Ordering::Relaxed)
@@ -814,6 +862,11 @@ impl PlantLoop {
         let mut steps: u64 = 0;
         let mut mode = SitlMode::Hold;
         let mut hold_target = self.plant.position();
+        // The moving target of loiter / RTL (position, velocity) and its goal.
+        let mut mover: ([f64; 3], [f64; 3]) = (hold_target.into(), [0.0; 3]);
+        let mut goal: [f64; 3] = hold_target.into();
+        // When the two-streams warning was last said [s].
+        let mut told_both: Option<f64> = None;
         let mut rows: u64 = 0;
         let mut csv_error = None;
         let t0 = self.plant.true_state();
@@ -839,15 +892,23 @@ impl PlantLoop {
             let before = steps;
 
             // The mode (pilot, stream), then the command or the hold.
-            let received = (*lock(&self.shared.command))
-                .filter(|(at, _)| at.elapsed() < self.shared.command_timeout())
-                .map(|(_, c)| c);
+            let attitude = (*lock(&self.shared.command))
+                .filter(|(at, _)| at.elapsed() < self.shared.command_timeout());
+            let position_sp = self
+                .shared
+                .px4
+                .fresh_setpoint(self.shared.command_timeout());
+            let received = attitude.map(|(_, c)| c);
             if let Some(v) = lock(&self.shared.pilot_velocity).take() {
                 self.modes.set_velocity(v);
             }
             let request = lock(&self.shared.mode_request).take();
             let elapsed_t = steps as f64 * dt;
-            let step = self.modes.step(elapsed_t, received.is_some(), request);
+            let step = self.modes.step(
+                elapsed_t,
+                received.is_some() || position_sp.is_some(),
+                request,
+            );
             if step.refused {
                 bump(&self.shared.counters.offboard_refused);
                 tracing::warn!("sitl: offboard refused, no setpoint stream");
@@ -861,29 +922,91 @@ impl PlantLoop {
                 mode = self.modes.mode();
                 bump(&self.shared.counters.mode_changes);
                 heartbeat_due = true;
-                if mode == SitlMode::Hold {
+                if mode != SitlMode::Offboard {
                     // Brake and hold where the vehicle stops.
                     let s = self.plant.true_state();
                     let v = s.velocity;
                     hold_target = s.position + v * (v.norm() / (2.0 * HOLD_BRAKE));
-                    bump(&self.shared.counters.hold_entries);
-                    tracing::info!(stream = received.is_some(), "sitl: position mode");
+                    mover = (hold_target.into(), [0.0; 3]);
+                    goal = match mode {
+                        SitlMode::Rtl => self.shared.px4.home,
+                        _ => hold_target.into(),
+                    };
+                    if mode == SitlMode::Hold {
+                        bump(&self.shared.counters.hold_entries);
+                    }
+                    tracing::info!(
+                        stream = received.is_some(),
+                        mode = mode.as_str(),
+                        "sitl: mode"
+                    );
                 } else {
                     tracing::info!("sitl: offboard");
                 }
             }
-            let fresh = received.filter(|_| mode == SitlMode::Offboard);
-            let command = match fresh {
-                Some(c) => self.plant_command(&c),
+            if let Some(g) = lock(&self.shared.px4.goal).take() {
+                goal = g;
+            }
+            let armed = self.shared.px4.armed();
+            let (flown, both) = autopilot_state::latest_wins(attitude, position_sp);
+            let flown = flown.filter(|_| mode == SitlMode::Offboard && armed);
+            if both && mode == SitlMode::Offboard {
+                let now = self.shared.elapsed();
+                if now - told_both.unwrap_or(f64::NEG_INFINITY)
+                    >= dflat_link::refusal::REFUSAL_REPEAT_S
+                {
+                    told_both = Some(now);
+                    tracing::warn!(
+                        "sitl: attitude and position setpoints both stream; the latest type flies"
+                    );
+                    let text = dflat_link::statustext(
+                        dflat_link::dialect::MavSeverity::MAV_SEVERITY_WARNING,
+                        "SITL: 2 setpoint streams, the latest type flies",
+                    );
+                    self.send(&text, Kind::Reply);
+                }
+            }
+            let fresh = match flown {
+                Some(autopilot_state::Flown::Attitude(c)) => Some(c),
+                _ => None,
+            };
+            let command = match flown {
+                Some(autopilot_state::Flown::Attitude(c)) => self.plant_command(&c),
+                Some(autopilot_state::Flown::Position(t)) => position_control::command(
+                    &position_control::PositionGains::OFFBOARD,
+                    &self.options,
+                    &t,
+                    &self.plant.true_state(),
+                ),
+                None if matches!(mode, SitlMode::Loiter | SitlMode::Rtl) => {
+                    mover = position_control::approach(
+                        mover.0,
+                        mover.1,
+                        goal,
+                        n as f64 * dt,
+                        position_control::CRUISE_SPEED,
+                        position_control::CRUISE_ACCEL,
+                    );
+                    hold_target = Vector3::from(mover.0);
+                    let target = position_control::PositionTarget {
+                        velocity: mover.1,
+                        ..position_control::PositionTarget::hold(mover.0)
+                    };
+                    position_control::command(
+                        &position_control::PositionGains::OFFBOARD,
+                        &self.options,
+                        &target,
+                        &self.plant.true_state(),
+                    )
+                }
                 None => {
                     let v = Vector3::from(self.modes.velocity());
                     hold_target += v * (n as f64 * dt);
+                    mover = (hold_target.into(), [0.0; 3]);
                     self.hold_command(&hold_target, &v)
                 }
             };
-            self.shared
-                .mode
-                .store(u8::from(mode == SitlMode::Offboard), Ordering::Relaxed);
+            self.shared.mode.store(mode.as_u8(), Ordering::Relaxed);
             self.plant.apply(&command);
             self.plant.advance(n as f64 * dt);
             steps += n;
@@ -918,19 +1041,24 @@ impl PlantLoop {
                 };
                 let hb = dflat_link::heartbeat_autopilot(
                     autopilot,
-                    true,
+                    armed,
                     mode.custom_mode(self.autopilot),
-                    MavState::MAV_STATE_ACTIVE,
+                    if armed {
+                        MavState::MAV_STATE_ACTIVE
+                    } else {
+                        MavState::MAV_STATE_STANDBY
+                    },
                 );
                 lock(&self.shared.latest).heartbeat = Some(hb.clone());
                 self.send(&hb, Kind::Heartbeat);
-                let status = services::sys_status();
+                let status = px4_face::sys_status();
                 lock(&self.shared.latest).sys_status = Some(status.clone());
                 self.send(&status, Kind::SysStatus);
                 // Due once per slot, whoever listens: a ground station
                 // alone on the GCS port gets 1 Hz, not the plant rate.
                 heartbeat_due = false;
             }
+            self.px4_streams(t, &state);
             if before / telemetry_every != steps / telemetry_every {
                 let sample = TruthSample {
                     t,
@@ -1052,6 +1180,52 @@ impl PlantLoop {
         if let Ok(msg) = dflat_link::attitude(time_boot_ms, sample.euler, rates) {
             lock(&self.shared.latest).attitude = Some(msg.clone());
             self.send(&msg, Kind::Attitude);
+        }
+    }
+
+    /// The streams of the PX4 face that are due at SITL time `t` \[s\]
+    /// (HOME_POSITION, EXTENDED_SYS_STATE, ATTITUDE_QUATERNION,
+    /// GLOBAL_POSITION_INT, BATTERY_STATUS; their intervals set by
+    /// SET_MESSAGE_INTERVAL). The pose-like ones pause with the pose.
+    fn px4_streams(&self, t: f64, state: &PlantState) {
+        let due = lock(&self.shared.px4.streams).due(t);
+        if due.is_empty() {
+            return;
+        }
+        let time_boot_ms = (t * self.pose_clock_rate * 1000.0).round() as u32;
+        let paused = self.shared.pose_paused.load(Ordering::Relaxed);
+        let offset = *lock(&self.shared.pose_offset);
+        let p = [
+            state.position.x + offset[0],
+            state.position.y + offset[1],
+            state.position.z + offset[2],
+        ];
+        let px4 = &self.shared.px4;
+        for stream in due {
+            let msg = match stream {
+                px4_face::Stream::AttitudeQuaternion if !paused => px4_face::attitude_quaternion(
+                    time_boot_ms,
+                    [state.roll, state.pitch, state.yaw],
+                    state.body_rates.into(),
+                ),
+                px4_face::Stream::GlobalPosition if !paused => px4_face::global_position_int(
+                    &px4.origin,
+                    px4.home,
+                    time_boot_ms,
+                    p,
+                    state.velocity.into(),
+                    state.yaw,
+                ),
+                px4_face::Stream::Home => {
+                    px4_face::home_position(&px4.origin, px4.home, (t * 1e6) as u64)
+                }
+                px4_face::Stream::ExtendedSysState => px4_face::extended_sys_state(
+                    dflat_link::dialect::MavLandedState::MAV_LANDED_STATE_IN_AIR,
+                ),
+                px4_face::Stream::Battery => px4_face::battery_status(),
+                _ => continue,
+            };
+            self.send(&msg, Kind::Reply);
         }
     }
 

@@ -11,6 +11,11 @@
 //! * **offboard** ([`SitlMode::Offboard`]; PX4 OFFBOARD, ArduPilot
 //!   GUIDED_NOGPS): the attitude targets are applied.
 //!
+//! * **hold / goto / return** ([`SitlMode::Loiter`], [`SitlMode::Rtl`];
+//!   PX4 AUTO_LOITER / AUTO_RTL, from MAV_CMD_DO_SET_MODE, DO_REPOSITION and
+//!   NAV_RETURN_TO_LAUNCH): the SITL's position loop flies to a goal and
+//!   holds; like position mode, an override of auto engagement.
+//!
 //! Entering offboard needs a live stream (a command within
 //! `sitl.command_timeout_s`): a request without one is refused (counted,
 //! STATUSTEXT), as PX4 refuses OFFBOARD without a setpoint stream. A stream
@@ -164,8 +169,8 @@ impl ModeMachine {
     /// A mode request; returns true when refused.
     fn request(&mut self, mode: SitlMode, stream_alive: bool) -> bool {
         match mode {
-            SitlMode::Hold => {
-                self.mode = SitlMode::Hold;
+            SitlMode::Hold | SitlMode::Loiter | SitlMode::Rtl => {
+                self.mode = mode;
                 self.overridden = true;
                 false
             }

@@ -31,7 +31,7 @@ use super::counters::{Kind, bump};
 use super::{RX_POLL, ReceivedCommand, Shared, SitlError, TapFrame, lock, services};
 
 /// One of the SITL's two links.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub(super) enum Link {
     /// The vehicle link (the daemon).
     Vehicle,

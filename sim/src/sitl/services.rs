@@ -9,17 +9,23 @@ use std::time::Duration;
 
 use dflat_link::command::{Addressing, CommandRequest};
 use dflat_link::dialect::{
-    AUTOPILOT_VERSION_DATA, FILE_TRANSFER_PROTOCOL_DATA, MavProtocolCapability, MavResult,
-    MavSeverity, MavSysStatusSensor, SYS_STATUS_DATA,
+    FILE_TRANSFER_PROTOCOL_DATA, MavProtocolCapability, MavResult, MavSeverity,
 };
 use dflat_link::params::{AutopilotParam, param_name};
 use dflat_link::{MavHeader, MavMessage, statustext};
 
+use super::SitlMode;
 use super::commands::{CommandContext, SitlMessage, answer, ftp_reply};
 use super::counters::{Kind, bump};
 use super::params::ParamError;
+use super::position_control::position_target;
+use super::px4_face;
 use super::routing::{Dest, Link};
 use super::{Shared, lock};
+use dflat_link::command::{command_ack, whole};
+use dflat_link::dialect::{MavCmd, MavFrame};
+use dflat_link::refusal::Say;
+use std::time::Instant;
 
 /// The latest of the SITL's periodic messages, for MAV_CMD_REQUEST_MESSAGE.
 #[derive(Debug, Default)]
@@ -30,30 +36,7 @@ pub(super) struct Latest {
     pub(super) position: Option<MavMessage>,
 }
 
-/// SYS_STATUS of the stand-in: gyro, accelerometer, attitude, altitude and
-/// position control present, enabled and healthy; no battery model
-/// (voltage and current unknown).
-pub(super) fn sys_status() -> MavMessage {
-    let sensors = MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_3D_GYRO
-        | MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_3D_ACCEL
-        | MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL
-        | MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION
-        | MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_Z_ALTITUDE_CONTROL
-        | MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL
-        | MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS;
-    MavMessage::SYS_STATUS(SYS_STATUS_DATA {
-        onboard_control_sensors_present: sensors,
-        onboard_control_sensors_enabled: sensors,
-        onboard_control_sensors_health: sensors,
-        load: 0,
-        voltage_battery: u16::MAX,
-        current_battery: -1,
-        battery_remaining: -1,
-        ..SYS_STATUS_DATA::default()
-    })
-}
-
-/// AUTOPILOT_VERSION: MAVLink 2, COMMAND_INT, attitude targets, and the
+/// AUTOPILOT_VERSION ([`px4_face::autopilot_version`]) with the
 /// flavour's parameter encoding (PX4 bytewise, ArduPilot cast).
 fn autopilot_version(shared: &Shared) -> MavMessage {
     let encoding = match shared.params_family() {
@@ -62,13 +45,7 @@ fn autopilot_version(shared: &Shared) -> MavMessage {
         }
         _ => MavProtocolCapability::MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST,
     };
-    MavMessage::AUTOPILOT_VERSION(AUTOPILOT_VERSION_DATA {
-        capabilities: MavProtocolCapability::MAV_PROTOCOL_CAPABILITY_MAVLINK2
-            | MavProtocolCapability::MAV_PROTOCOL_CAPABILITY_COMMAND_INT
-            | MavProtocolCapability::MAV_PROTOCOL_CAPABILITY_SET_ATTITUDE_TARGET
-            | encoding,
-        ..AUTOPILOT_VERSION_DATA::default()
-    })
+    px4_face::autopilot_version(shared.system_id, encoding)
 }
 
 impl Shared {
@@ -85,9 +62,48 @@ impl Shared {
         self.send_own(msg, Dest::Only(link), Kind::Reply);
     }
 
+    /// Says a refusal on `link`: the first of its reason at once (INFO),
+    /// repeats at most once per 10 s with their count (DEBUG).
     fn refuse(&self, link: Link, text: &str) {
-        tracing::info!(text, "sitl: refused");
-        self.reply(link, &statustext(MavSeverity::MAV_SEVERITY_WARNING, text));
+        let say = lock(&self.px4.refusals).refuse(link, text, self.elapsed());
+        match say {
+            Say::First => tracing::info!(text, "sitl: refused"),
+            Say::Again { held_back } => tracing::debug!(text, held_back, "sitl: refused again"),
+            Say::Quiet => {
+                tracing::debug!(text, "sitl: refused (repeat not said)");
+                return;
+            }
+        }
+        self.reply(
+            link,
+            &statustext(MavSeverity::MAV_SEVERITY_WARNING, &say.text(text)),
+        );
+    }
+}
+
+/// A message of the PX4 face built now for MAV_CMD_REQUEST_MESSAGE, from
+/// the latest truth sample.
+fn on_request(shared: &Shared, m: SitlMessage) -> MavMessage {
+    let truth = *lock(&shared.truth);
+    let px4 = &shared.px4;
+    let time_boot_ms = (truth.t * 1000.0).round() as u32;
+    match m {
+        SitlMessage::Home => px4_face::home_position(&px4.origin, px4.home, (truth.t * 1e6) as u64),
+        SitlMessage::AttitudeQuaternion => {
+            px4_face::attitude_quaternion(time_boot_ms, truth.euler, [0.0; 3])
+        }
+        SitlMessage::GlobalPosition => px4_face::global_position_int(
+            &px4.origin,
+            px4.home,
+            time_boot_ms,
+            truth.position,
+            truth.velocity,
+            truth.euler[2],
+        ),
+        SitlMessage::Battery => px4_face::battery_status(),
+        _ => px4_face::extended_sys_state(
+            dflat_link::dialect::MavLandedState::MAV_LANDED_STATE_IN_AIR,
+        ),
     }
 }
 
@@ -110,6 +126,7 @@ pub(super) fn serve(
         MavMessage::COMMAND_LONG(_) | MavMessage::COMMAND_INT(_) => {
             if let Some(req) =
                 CommandRequest::from_message(msg, header.system_id as u8, header.component_id)
+                && !px4_command(shared, link, &req, msg)
             {
                 command(shared, link, &req);
             }
@@ -184,17 +201,28 @@ pub(super) fn serve(
                 );
             }
         }
-        // The stand-in flies attitude targets only; say where position
-        // setpoints go (once), rather than dropping them silently.
-        MavMessage::SET_POSITION_TARGET_LOCAL_NED(_)
-            if addressing == Addressing::ToUs
-                && !shared.told_setpoints.swap(true, Ordering::Relaxed) =>
+        // Position setpoints to the autopilot: flown in OFFBOARD by its
+        // own position loop (PX4 does the same).
+        MavMessage::SET_POSITION_TARGET_LOCAL_NED(_) if addressing == Addressing::ToUs => {
+            match position_target(msg) {
+                Some(Ok(t)) => shared.px4.set_setpoint(Instant::now(), t),
+                Some(Err(text)) => shared.refuse(link, text),
+                None => {}
+            }
+        }
+        MavMessage::MISSION_COUNT(_)
+        | MavMessage::MISSION_ITEM_INT(_)
+        | MavMessage::MISSION_CLEAR_ALL(_)
+        | MavMessage::MISSION_REQUEST_LIST(_)
+            if addressing == Addressing::ToUs =>
         {
-            let text = format!(
-                "SITL: setpoints go to the companion, not {}/{}",
-                own.0, own.1
-            );
-            shared.refuse(link, &text);
+            let sender = (header.system_id as u8, header.component_id);
+            if let Some(answer) = px4_face::mission_answer(msg, sender) {
+                if matches!(msg, MavMessage::MISSION_COUNT(_)) {
+                    shared.refuse(link, "SITL: missions unsupported, hold/goto/offboard");
+                }
+                shared.reply(link, &answer);
+            }
         }
         MavMessage::SETUP_SIGNING(_) => {
             bump(&shared.counters.signing_setups_refused);
@@ -205,9 +233,105 @@ pub(super) fn serve(
     Some(addressing)
 }
 
+/// The commands that need the SITL's state to answer (pure parts in
+/// [`px4_face`]): MAV_CMD_SET_MESSAGE_INTERVAL and MAV_CMD_DO_REPOSITION
+/// (`goto_location`: AUTO_LOITER at the target). True when answered.
+fn px4_command(shared: &Shared, link: Link, req: &CommandRequest, msg: &MavMessage) -> bool {
+    if req.addressing((shared.system_id, shared.component_id)) != Addressing::ToUs {
+        return false;
+    }
+    let (result, reason) = match req.command {
+        MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL => {
+            let id = whole(req.param1).unwrap_or(u32::MAX);
+            let set = lock(&shared.px4.streams).set(id, req.param2, shared.elapsed());
+            match set {
+                Ok(()) => {
+                    tracing::info!(id, interval_us = req.param2, "sitl: message interval set");
+                    (MavResult::MAV_RESULT_ACCEPTED, None)
+                }
+                Err(text) => (MavResult::MAV_RESULT_DENIED, Some(text)),
+            }
+        }
+        MavCmd::MAV_CMD_DO_REPOSITION => match reposition_target(shared, msg) {
+            Some(goal) => {
+                tracing::info!(?goal, "sitl: goto");
+                *lock(&shared.px4.goal) = Some(goal);
+                *lock(&shared.mode_request) = Some(SitlMode::Loiter);
+                (MavResult::MAV_RESULT_ACCEPTED, None)
+            }
+            None => (
+                MavResult::MAV_RESULT_DENIED,
+                Some("SITL: goto refused: no valid position".to_owned()),
+            ),
+        },
+        _ => return false,
+    };
+    bump(&shared.counters.commands_acked);
+    if result == MavResult::MAV_RESULT_DENIED {
+        bump(&shared.counters.commands_denied);
+    }
+    shared.reply(link, &command_ack(req, result));
+    if let Some(text) = reason {
+        shared.refuse(link, &text);
+    }
+    true
+}
+
+/// The local NED goal of a MAV_CMD_DO_REPOSITION: lat/lon (degE7 in
+/// COMMAND_INT x/y, degrees in COMMAND_LONG param5/6) and altitude AMSL
+/// (z / param7) through the SITL's geodetic origin; NaN keeps the current
+/// altitude, lat/lon 0 the current position (as PX4).
+// MAV_FRAME_GLOBAL_RELATIVE_ALT_INT is deprecated but still sent.
+#[allow(deprecated)]
+fn reposition_target(shared: &Shared, msg: &MavMessage) -> Option<[f64; 3]> {
+    let now = lock(&shared.truth).position;
+    let (lat, lon, alt) = match msg {
+        MavMessage::COMMAND_INT(d) if d.x != 0 || d.y != 0 => {
+            (f64::from(d.x) * 1e-7, f64::from(d.y) * 1e-7, f64::from(d.z))
+        }
+        MavMessage::COMMAND_LONG(d) if d.param5 != 0.0 || d.param6 != 0.0 => (
+            f64::from(d.param5),
+            f64::from(d.param6),
+            f64::from(d.param7),
+        ),
+        MavMessage::COMMAND_INT(_) | MavMessage::COMMAND_LONG(_) => {
+            let (lat, lon, _) = shared.px4.origin.global(now);
+            let alt = match msg {
+                MavMessage::COMMAND_INT(d) => f64::from(d.z),
+                MavMessage::COMMAND_LONG(d) => f64::from(d.param7),
+                _ => f64::NAN,
+            };
+            (lat, lon, alt)
+        }
+        _ => return None,
+    };
+    // COMMAND_INT in a relative-altitude frame: above home.
+    let relative = matches!(
+        msg,
+        MavMessage::COMMAND_INT(d) if matches!(
+            d.frame,
+            MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT | MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
+        )
+    );
+    let alt = if !alt.is_finite() {
+        shared.px4.origin.global(now).2
+    } else if relative {
+        shared.px4.origin.global(shared.px4.home).2 + alt
+    } else {
+        alt
+    };
+    let goal = shared.px4.origin.local(lat, lon, alt)?;
+    // Farther than 10 km from the origin is a wrong origin, not a goto.
+    (goal.iter().all(|x| x.abs() < 10_000.0)).then_some(goal)
+}
+
 fn command(shared: &Shared, link: Link, req: &CommandRequest) {
-    let stream_alive =
-        lock(&shared.command).is_some_and(|(at, _)| at.elapsed() < shared.command_timeout());
+    let stream_alive = lock(&shared.command)
+        .is_some_and(|(at, _)| at.elapsed() < shared.command_timeout())
+        || shared
+            .px4
+            .fresh_setpoint(shared.command_timeout())
+            .is_some();
     let pose_available =
         !shared.pose_paused.load(Ordering::Relaxed) && lock(&shared.latest).attitude.is_some();
     let ctx = CommandContext {
@@ -233,16 +357,28 @@ fn command(shared: &Shared, link: Link, req: &CommandRequest) {
     if let Some(mode) = a.mode {
         *lock(&shared.mode_request) = Some(mode);
     }
+    if let Some(armed) = a.armed
+        && shared.px4.armed.swap(armed, Ordering::Relaxed) != armed
+    {
+        tracing::info!(armed, "sitl: armed state changed");
+        if !armed {
+            shared.refuse(link, "SITL: disarmed; no ground, position hold on");
+        }
+    }
     let then = match a.then {
         Some(SitlMessage::AutopilotVersion) => Some(autopilot_version(shared)),
         Some(m) => {
             let latest = lock(&shared.latest);
             match m {
                 SitlMessage::Heartbeat => latest.heartbeat.clone(),
-                SitlMessage::SysStatus => latest.sys_status.clone().or_else(|| Some(sys_status())),
+                SitlMessage::SysStatus => latest
+                    .sys_status
+                    .clone()
+                    .or_else(|| Some(px4_face::sys_status())),
                 SitlMessage::Attitude => latest.attitude.clone(),
                 SitlMessage::LocalPosition => latest.position.clone(),
                 SitlMessage::AutopilotVersion => None,
+                other => Some(on_request(shared, other)),
             }
         }
         None => None,

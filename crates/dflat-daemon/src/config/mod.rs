@@ -96,8 +96,11 @@ pub struct LinkConfig {
     pub autopilot_component: u8,
     /// This daemon's component id (1–255; 191 = MAV_COMP_ID_ONBOARD_COMPUTER).
     pub component_id: u8,
-    /// The ground station's system id whose setpoints are accepted (1–255).
-    pub gcs_system_id: u8,
+    /// Deprecated: one ground station's system id (1–255). Still read: when
+    /// set, it stands for `gcs_system_ids = [id]` (a note is logged at
+    /// start). Use `gcs_system_ids`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gcs_system_id: Option<u8>,
     /// The pose message used by the controller.
     pub pose_source: PoseSourceKind,
     /// Also accept SET_POSITION_TARGET_LOCAL_NED from the vehicle's own
@@ -155,6 +158,24 @@ pub struct LinkConfig {
     /// Empty (default): lock onto the first address that sends the
     /// configured autopilot's HEARTBEAT (signed, with signing on).
     pub peer: String,
+    /// The ground stations' system ids whose setpoints, commands and
+    /// missions are acted on (each 1–255, at least one; default `[255,
+    /// 245]`: QGroundControl and MAVProxy use 255, MAVSDK 245). A request
+    /// from another system is refused in words (STATUSTEXT naming the id
+    /// and this key, COMMAND_ACK DENIED) and never flown. The id is not a
+    /// security boundary: signing is (docs/safety.md).
+    pub gcs_system_ids: Vec<u8>,
+}
+
+impl LinkConfig {
+    /// The ground-station ids in force: `[gcs_system_id]` when the
+    /// deprecated key is set, else `gcs_system_ids`.
+    pub fn ground_station_ids(&self) -> Vec<u8> {
+        match self.gcs_system_id {
+            Some(id) => vec![id],
+            None => self.gcs_system_ids.clone(),
+        }
+    }
 }
 
 /// `link.autopilot`: how the autopilot's mode is read.
@@ -199,7 +220,7 @@ impl Default for LinkConfig {
             system_id: 1,
             autopilot_component: 1,
             component_id: 191,
-            gcs_system_id: 255,
+            gcs_system_id: None,
             pose_source: PoseSourceKind::LocalPositionNed,
             vehicle_setpoints: true,
             pose_components: Vec::new(),
@@ -213,6 +234,7 @@ impl Default for LinkConfig {
             engagement: Engagement::Mode,
             signing_accept_unsigned: Vec::new(),
             peer: String::new(),
+            gcs_system_ids: dflat_link::DEFAULT_GCS_SYSTEM_IDS.to_vec(),
         }
     }
 }

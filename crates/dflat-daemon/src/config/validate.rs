@@ -14,9 +14,33 @@ impl Config {
             ("link.system_id", l.system_id),
             ("link.autopilot_component", l.autopilot_component),
             ("link.component_id", l.component_id),
-            ("link.gcs_system_id", l.gcs_system_id),
         ] {
             v.range(name, f64::from(id), 1.0, 255.0)?;
+        }
+        if let Some(id) = l.gcs_system_id {
+            v.range("link.gcs_system_id", f64::from(id), 1.0, 255.0)?;
+            if l.gcs_system_ids != dflat_link::DEFAULT_GCS_SYSTEM_IDS {
+                return Err(v.err(
+                    "link.gcs_system_id",
+                    &id.to_string(),
+                    "unset when link.gcs_system_ids is set (it is the deprecated one-id form)",
+                ));
+            }
+        }
+        if l.gcs_system_ids.is_empty() {
+            return Err(v.err(
+                "link.gcs_system_ids",
+                "[]",
+                "at least one ground-station id, each 1 to 255",
+            ));
+        }
+        for (i, id) in l.gcs_system_ids.iter().enumerate() {
+            v.range(
+                &format!("link.gcs_system_ids[{i}]"),
+                f64::from(*id),
+                1.0,
+                255.0,
+            )?;
         }
         for (i, c) in l.pose_components.iter().enumerate() {
             v.range(

@@ -23,7 +23,7 @@ use tokio::sync::mpsc;
 use tracing::{debug, error, info, warn};
 
 use super::{Outgoing, RxReport, Stop, TxReport, daemon_status, decode_state};
-use crate::commands::{CommandContext, CommandRequest, RequestedMessage, answer};
+use crate::commands::{CommandContext, CommandRequest, RequestedMessage, answer, command_ack};
 use crate::link_health::{
     BEAT_INTERVAL, CommandSlot, LinkHealth, LinkTask, REPLY_BURST, REPLY_RATE_HZ, ReplyBudget,
     StallHook,
@@ -31,7 +31,9 @@ use crate::link_health::{
 use crate::mission::{ItemRules, Mission, MissionChange, MissionProtocol};
 use crate::signing::{PERSIST_INTERVAL, TimestampStore};
 use crate::supervisor::FlightState;
-use crate::tick::{Event, REFUSAL_TEXT_INTERVAL, event_from};
+use crate::tick::{Event, event_from};
+use dflat_link::dialect::MavResult;
+use dflat_link::refusal::{RefusalLimiter, Say};
 
 /// What the receive task needs to know of the daemon.
 #[derive(Debug, Clone)]
@@ -149,7 +151,8 @@ pub(super) async fn receive_task(
 ) -> RxReport {
     let mut stop_rx = stop.tx.subscribe();
     let mut report = RxReport::default();
-    let mut last_refusal: Option<Instant> = None;
+    // Refusals said once per sender and reason per 10 s, with a count.
+    let mut refusals: RefusalLimiter<(u8, u8)> = RefusalLimiter::default();
     let mut told_addressing = false;
     let mut told_yaw = false;
     let mut missions = MissionProtocol::new(ctx.own, ctx.mission_rules);
@@ -250,17 +253,17 @@ pub(super) async fn receive_task(
             if let Err(check) =
                 link.authenticate(&frame.header, &frame.message, frame.signed.as_ref(), now)
             {
-                let due =
-                    last_refusal.is_none_or(|t| t.elapsed().as_secs_f64() >= REFUSAL_TEXT_INTERVAL);
-                if is_setpoint && due {
-                    last_refusal = Some(Instant::now());
+                if is_setpoint {
                     let text = match check {
                         SignatureCheck::Unsigned => "dflat: setpoint refused: unsigned",
                         SignatureCheck::Replayed => "dflat: setpoint refused: replayed",
                         _ => "dflat: setpoint refused: bad signature",
                     };
-                    info!(?check, "setpoint refused by signing");
-                    send_text(&out, MavSeverity::MAV_SEVERITY_WARNING, text);
+                    let sender = (frame.header.system_id as u8, frame.header.component_id);
+                    let say = refusals.refuse(sender, text, ctx.epoch.elapsed().as_secs_f64());
+                    say_refusal(&out, say, text, || {
+                        info!(?check, "setpoint refused by signing")
+                    });
                 }
                 continue;
             }
@@ -288,7 +291,7 @@ pub(super) async fn receive_task(
                 if let Some(req) = CommandRequest::from_message(&frame.message, sender.0, sender.1)
                 {
                     let has_mission = missions.mission().has_navigation();
-                    if let Some(action) = answer_command(&req, &ctx, has_mission, &out)
+                    if let Some(action) = answer_command(&req, &ctx, has_mission, &out, &mut refusals)
                         && events.try_send(Event::Mission { arrival, action }).is_err()
                     {
                         report.events_dropped += 1;
@@ -318,16 +321,17 @@ pub(super) async fn receive_task(
                 None
             }
             RxOutcome::Rejected(e) if is_setpoint => {
-                let due =
-                    last_refusal.is_none_or(|t| t.elapsed().as_secs_f64() >= REFUSAL_TEXT_INTERVAL);
-                if due {
-                    last_refusal = Some(Instant::now());
-                    info!(error = %e, "setpoint refused");
-                    send_text(
-                        &out,
-                        MavSeverity::MAV_SEVERITY_WARNING,
-                        &setpoint_refusal_text(e),
-                    );
+                let text = setpoint_refusal_text(e);
+                let say = refusals.refuse(sender, &text, ctx.epoch.elapsed().as_secs_f64());
+                say_refusal(&out, say, &text, || info!(error = %e, "setpoint refused"));
+                None
+            }
+            RxOutcome::Ignored(Verdict::IgnoreWrongSource) => {
+                if let Some(id) = link
+                    .filter
+                    .unknown_ground_station(&frame.header, &frame.message)
+                {
+                    refuse_unknown_gcs(id, &frame.message, sender, &ctx, &mut refusals, &out);
                 }
                 None
             }
@@ -343,6 +347,50 @@ pub(super) async fn receive_task(
     report
 }
 
+/// Sends `text` as a WARNING STATUSTEXT as the limiter says: the first
+/// time (and `log`, the caller's INFO/WARN line), again with the count of
+/// repeats held back once the interval passed; repeats in between only at
+/// DEBUG.
+fn say_refusal(out: &Replies, say: Say, text: &str, log: impl FnOnce()) {
+    match say {
+        Say::First => log(),
+        Say::Again { held_back } => debug!(text, held_back, "refusal repeated"),
+        Say::Quiet => {
+            debug!(text, "refusal repeated (not said)");
+            return;
+        }
+    }
+    send_text(out, MavSeverity::MAV_SEVERITY_WARNING, &say.text(text));
+}
+
+/// The refusal of a request (setpoint, command, mission) from system `id`,
+/// a ground station `link.gcs_system_ids` does not name: never acted on; a
+/// command gets COMMAND_ACK DENIED every time; the STATUSTEXT naming the id
+/// and the key to set, and a WARN line, once per sender per 10 s.
+fn refuse_unknown_gcs(
+    id: u8,
+    msg: &MavMessage,
+    sender: (u8, u8),
+    ctx: &RxContext,
+    refusals: &mut RefusalLimiter<(u8, u8)>,
+    out: &Replies,
+) {
+    if let Some(req) = CommandRequest::from_message(msg, sender.0, sender.1) {
+        out.send(command_ack(&req, MavResult::MAV_RESULT_DENIED));
+    }
+    use dflat_link::mavlink::Message as _;
+    let text = format!("dflat: id {id} not in link.gcs_system_ids");
+    let say = refusals.refuse(sender, &text, ctx.epoch.elapsed().as_secs_f64());
+    say_refusal(out, say, &text, || {
+        warn!(
+            system = id,
+            component = sender.1,
+            message = msg.message_name(),
+            "request from a ground station not in link.gcs_system_ids refused; add its id there to accept it"
+        );
+    });
+}
+
 /// COMMAND_ACK (and what REQUEST_MESSAGE asked for) for a command the
 /// daemon answers ([`crate::commands`]); the mission command accepted, for
 /// the control thread.
@@ -351,6 +399,7 @@ fn answer_command(
     ctx: &RxContext,
     has_mission: bool,
     out: &Replies,
+    refusals: &mut RefusalLimiter<(u8, u8)>,
 ) -> Option<crate::tick::MissionAction> {
     let state = ctx.state.load(Ordering::Relaxed);
     let flight = decode_state(state);
@@ -363,7 +412,12 @@ fn answer_command(
     debug!(command = ?req.command, "command answered");
     out.send(reply.ack);
     if let Some(reason) = &reply.reason {
-        send_text(out, MavSeverity::MAV_SEVERITY_INFO, reason);
+        // Said once per sender and reason per 10 s (SDKs retry requests).
+        let sender = (req.sender_system, req.sender_component);
+        match refusals.refuse(sender, reason, ctx.epoch.elapsed().as_secs_f64()) {
+            Say::Quiet => debug!(reason, "command refusal repeated (not said)"),
+            say => send_text(out, MavSeverity::MAV_SEVERITY_INFO, &say.text(reason)),
+        }
     }
     match reply.then {
         Some(RequestedMessage::Heartbeat) => {

@@ -570,6 +570,12 @@ pub async fn spawn_with_controller(
     }
 
     let own = (config.link.system_id, config.link.component_id);
+    if let Some(id) = config.link.gcs_system_id {
+        tracing::warn!(
+            id,
+            "link.gcs_system_id is deprecated: read as link.gcs_system_ids = [{id}] (MAVSDK's 245 is not heard); set link.gcs_system_ids instead"
+        );
+    }
     let mut link_rx = LinkRx::new(source_filter(&config.link));
     link_rx.signing = signing.as_ref().map(|(s, _)| s.clone());
     let rx_ctx = link_tasks::RxContext {

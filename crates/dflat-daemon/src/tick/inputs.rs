@@ -168,14 +168,14 @@ pub fn event_from(inbound: &Inbound, pose_source: PoseSource, arrival: f64) -> O
 }
 
 /// The receive path's source filter from `[link]`: the autopilot and the
-/// ground station by id, setpoints from every other component of the
+/// ground stations by id, setpoints from every other component of the
 /// vehicle with `link.vehicle_setpoints`, pose from `link.pose_components`.
 pub fn source_filter(link: &LinkConfig) -> SourceFilter {
     let mut filter = SourceFilter {
         vehicle_system_id: link.system_id,
         autopilot_component_id: link.autopilot_component,
         own_component_id: link.component_id,
-        gcs_system_id: link.gcs_system_id,
+        gcs_system_ids: link.ground_station_ids(),
         setpoint_components: Vec::new(),
         pose_components: link.pose_components.clone(),
     };
