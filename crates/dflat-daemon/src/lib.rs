@@ -32,6 +32,7 @@ pub mod daemon;
 pub mod guard;
 pub mod motion;
 pub mod realtime;
+pub mod record_store;
 pub mod records;
 pub mod schedule;
 pub mod signing;

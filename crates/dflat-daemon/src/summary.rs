@@ -366,6 +366,8 @@ pub struct FlightSummary {
     /// What the controller's successful ticks reported (constrained
     /// solves, solver fallbacks, input saturation).
     pub solves: SolveCounts,
+    /// The records: quota, flights deleted, disk trouble.
+    pub records: crate::record_store::RecordsSummary,
 }
 
 /// Counts over the controller's successful ticks, from
@@ -539,6 +541,7 @@ impl fmt::Display for FlightSummary {
                 t.dropped
             )?;
         }
+        crate::record_store::write_summary(f, self)?;
         if let Some(d) = &self.disturbance {
             let r = &d.report;
             let hover = d

@@ -39,6 +39,7 @@ pub mod math;
 pub mod modes;
 mod outbound;
 pub mod params;
+pub mod records;
 mod signing;
 mod stats;
 pub mod tlog;
