@@ -1,5 +1,8 @@
 //! End to end: when the pose stream stops, the daemon stops streaming
-//! attitude targets within 200 ms, and resumes when pose returns.
+//! attitude targets once its failsafe level hover is over
+//! (`safety.level_hover_max_ms`, 1 s by default, plus the pose timeout and
+//! 200 ms of margin), and resumes when pose returns. (What it streams in
+//! that second is `e2e_pose_loss_level`'s subject.)
 //!
 //! The real `dflat daemon` binary against the SITL run in-process
 //! (`dflat_sim::sitl`), whose hooks pause / resume the pose stream and
@@ -16,8 +19,10 @@ use dflat_daemon::config::Config;
 use dflat_link::MavMessage;
 use dflat_sim::sitl::{self, SitlOptions, TapFrame};
 
-/// The daemon must fall silent within this time after the pose stops.
-const STOP_WITHIN: Duration = Duration::from_millis(200);
+/// The daemon must fall silent within this time after the pose stops:
+/// the pose timeout (100 ms) and the level hover (1 s) of the defaults,
+/// plus 200 ms.
+const STOP_WITHIN: Duration = Duration::from_millis(1300);
 /// ... and stream again within this time after the pose returns.
 const RESUME_WITHIN: Duration = Duration::from_millis(500);
 
@@ -76,7 +81,7 @@ start = [0.0, 0.0, -10.0]
         let _ = attitude_targets(&tap);
         let paused = Instant::now();
         sim.pause_pose();
-        std::thread::sleep(Duration::from_millis(1200));
+        std::thread::sleep(Duration::from_millis(1800));
         let during = attitude_targets(&tap);
         let last = during.iter().filter(|t| **t >= paused).max().copied();
         let silent_after = last.map_or(Duration::ZERO, |t| t - paused);

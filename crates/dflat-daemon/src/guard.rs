@@ -168,6 +168,17 @@ impl Fallback {
         self.held = 0;
     }
 
+    /// Level attitude at hover thrust, yaw of the last command sent (else
+    /// the default yaw): what a failsafe leaves in the autopilot.
+    pub fn level_command(&self) -> AttitudeCommand {
+        AttitudeCommand {
+            roll: 0.0,
+            pitch: 0.0,
+            yaw: self.last_yaw.unwrap_or(self.default_yaw),
+            thrust: self.hover_thrust.clamp(0.0, 1.0),
+        }
+    }
+
     /// The command for a failed tick; `planned` is the controller's plan
     /// command for it (already guarded), if it offered one.
     pub fn command(&mut self, planned: Option<AttitudeCommand>) -> (AttitudeCommand, FallbackKind) {

@@ -34,6 +34,7 @@ pub mod mission;
 pub mod link_health;
 pub mod motion;
 pub mod realtime;
+pub mod record_store;
 pub mod records;
 pub mod schedule;
 pub mod signing;

@@ -2,16 +2,22 @@
 //!
 //! The control loop hands each tick's [`CsvRow`] (a small `Copy` value) to
 //! [`CsvRecorder::record`], which never blocks and never allocates; a
-//! dedicated thread formats and writes it through a buffer. A full queue
-//! drops the row and counts it. [`CsvRecorder::finish`] writes everything
-//! queued and flushes.
+//! dedicated thread formats each row into a buffer and writes it whole with
+//! one `write` call ([`RecordFile`]): a SIGKILL loses at most the rows still
+//! queued (milliseconds), never a user-space buffer, and never leaves a
+//! torn row from our side. The file is `fdatasync`ed at least every
+//! `records.sync_ms`. A full queue drops the row and counts it; the
+//! per-flight quota and a disk error (full, read-only) stop the rows and
+//! count them. [`CsvRecorder::finish`] writes everything queued and syncs.
 
 use std::fs::File;
-use std::io::{self, BufWriter, Write};
+use std::io::{self, Write};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::time::{SystemTime, UNIX_EPOCH};
+use std::time::{Duration, SystemTime, UNIX_EPOCH};
+
+use dflat_link::records::{RecordBudget, RecordFile};
 
 use serde::Serialize;
 
@@ -203,8 +209,17 @@ pub struct CsvReport {
     pub rows: u64,
     /// Rows dropped (queue full: the disk fell behind).
     pub dropped: u64,
-    /// Write errors (the first is logged).
+    /// Write errors (the first is logged and stops the file).
     pub write_errors: u64,
+    /// Rows dropped because the per-flight quota (`records.max_mb`) was
+    /// used up.
+    pub quota_dropped: u64,
+    /// Rows dropped after a write error stopped the file (disk trouble).
+    pub error_dropped: u64,
+    /// Bytes written.
+    pub bytes: u64,
+    /// `fdatasync` calls made.
+    pub syncs: u64,
 }
 
 /// The per-flight CSV, written by its own thread.
@@ -216,8 +231,23 @@ pub struct CsvRecorder {
 }
 
 impl CsvRecorder {
-    /// Creates (truncates) `path`, writes the header and starts the thread.
+    /// Creates (truncates) `path`, writes the header and starts the
+    /// thread (no quota, synced every second).
     pub fn create(path: &Path) -> io::Result<Self> {
+        Self::create_with(
+            path,
+            Arc::new(RecordBudget::new(None)),
+            Duration::from_secs(1),
+        )
+    }
+
+    /// Creates (truncates) `path`, writes the header and starts the
+    /// thread: rows within `budget`, synced at least every `sync_every`.
+    pub fn create_with(
+        path: &Path,
+        budget: Arc<RecordBudget>,
+        sync_every: Duration,
+    ) -> io::Result<Self> {
         let file = File::create(path)?;
         let (tx, rx) = std::sync::mpsc::sync_channel::<CsvRow>(CSV_QUEUE);
         let dropped = Arc::new(AtomicU64::new(0));
@@ -225,31 +255,44 @@ impl CsvRecorder {
         let thread = std::thread::Builder::new()
             .name("dflat-csv".into())
             .spawn(move || {
-                let mut w = BufWriter::with_capacity(64 * 1024, file);
-                let mut report = CsvReport {
+                let mut file = RecordFile::new(file, &path, budget, sync_every);
+                // One row's text, reused: formatted here, written whole.
+                let mut line: Vec<u8> = Vec::with_capacity(512);
+                line.extend_from_slice(CSV_HEADER.as_bytes());
+                line.push(b'\n');
+                file.write_record(&line);
+                let mut format_errors = 0u64;
+                loop {
+                    let row = match rx.recv_timeout(sync_every) {
+                        Ok(row) => row,
+                        Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {
+                            file.sync_if_due();
+                            continue;
+                        }
+                        // Ends when the sender is dropped (finish), after draining.
+                        Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => break,
+                    };
+                    line.clear();
+                    match write_row(&mut line, &row) {
+                        Ok(()) => {
+                            file.write_record(&line);
+                        }
+                        Err(_) => format_errors += 1,
+                    }
+                }
+                file.sync();
+                let stats = file.stats();
+                CsvReport {
                     path,
-                    ..CsvReport::default()
-                };
-                let note = |e: io::Error, report: &mut CsvReport| {
-                    if report.write_errors == 0 {
-                        tracing::warn!(file = %report.path.display(), error = %e, "CSV write failed");
-                    }
-                    report.write_errors += 1;
-                };
-                if let Err(e) = writeln!(w, "{CSV_HEADER}") {
-                    note(e, &mut report);
+                    // The header is not a row.
+                    rows: stats.records.saturating_sub(1),
+                    dropped: 0,
+                    write_errors: stats.write_errors + format_errors,
+                    quota_dropped: stats.quota_dropped,
+                    error_dropped: stats.error_dropped,
+                    bytes: stats.bytes,
+                    syncs: stats.syncs,
                 }
-                // Ends when the sender is dropped (finish), after draining.
-                while let Ok(row) = rx.recv() {
-                    match write_row(&mut w, &row) {
-                        Ok(()) => report.rows += 1,
-                        Err(e) => note(e, &mut report),
-                    }
-                }
-                if let Err(e) = w.flush() {
-                    note(e, &mut report);
-                }
-                report
             })?;
         Ok(Self {
             tx,

@@ -373,6 +373,8 @@ pub struct FlightSummary {
     /// The link's guards: foreign senders, reconnects, the command slot,
     /// replies, link-task stalls.
     pub link_guard: crate::link_health::LinkGuardSummary,
+    /// The records: quota, flights deleted, disk trouble.
+    pub records: crate::record_store::RecordsSummary,
 }
 
 /// Counts over the controller's successful ticks, from
@@ -561,6 +563,7 @@ impl fmt::Display for FlightSummary {
                 t.dropped
             )?;
         }
+        crate::record_store::write_summary(f, self)?;
         if let Some(d) = &self.disturbance {
             let r = &d.report;
             let hover = d

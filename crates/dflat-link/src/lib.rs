@@ -42,6 +42,7 @@ pub mod modes;
 mod outbound;
 pub mod params;
 pub mod refusal;
+pub mod records;
 mod signing;
 mod stats;
 pub mod tlog;

@@ -56,6 +56,24 @@ fn frame_len(head: [u8; 3]) -> Option<usize> {
     }
 }
 
+/// Encodes one `.tlog` record — `timestamp_us` \[µs since the UNIX epoch\]
+/// big-endian, then `frame` (exactly one MAVLink 1 or 2 frame) — into
+/// `out`; returns its length. Lets a writer put a record on disk with one
+/// `write` call.
+pub fn encode_record(timestamp_us: u64, frame: &[u8], out: &mut [u8]) -> Result<usize, TlogError> {
+    let head = match frame {
+        [a, b, c, ..] => [*a, *b, *c],
+        _ => return Err(TlogError::NotAFrame { len: frame.len() }),
+    };
+    let n = 8 + frame.len();
+    if frame_len(head) != Some(frame.len()) || out.len() < n {
+        return Err(TlogError::NotAFrame { len: frame.len() });
+    }
+    out[..8].copy_from_slice(&timestamp_us.to_be_bytes());
+    out[8..n].copy_from_slice(frame);
+    Ok(n)
+}
+
 /// Writes `.tlog` records to `W`.
 #[derive(Debug)]
 pub struct TlogWriter<W: Write> {

@@ -43,7 +43,6 @@
 
 use std::collections::VecDeque;
 use std::fmt;
-use std::io::BufWriter;
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
@@ -52,7 +51,6 @@ use std::sync::{Arc, Mutex as StdMutex};
 use std::time::{Instant, SystemTime, UNIX_EPOCH};
 
 use crate::backoff::Backoff;
-use crate::tlog::TlogWriter;
 use crate::{
     EncodedFrame, FrameError, FrameParser, LinkError, MAX_FRAME_LEN, MavHeader, MavMessage,
     SignedFrame,
@@ -435,7 +433,7 @@ impl RxState {
         while let Some(item) = self.parser.next_frame() {
             match item {
                 Ok(frame) => {
-                    if let Some(tap) = tap {
+                    if let Some(tap) = tap.filter(|t| t.inbound) {
                         let end = self.mirror.len().saturating_sub(self.parser.pending());
                         match self.mirror.get(end.saturating_sub(frame.len)..end) {
                             Some(raw) if raw.len() == frame.len => tap.record(ts, raw),
@@ -459,7 +457,7 @@ impl RxState {
             for item in self.parser.finish() {
                 match item {
                     Ok(frame) => {
-                        if let Some(tap) = tap {
+                        if let Some(tap) = tap.filter(|t| t.inbound) {
                             tap.record_message(ts, &frame.header, &frame.message);
                         }
                         self.pending.push_back(RecvEvent::Frame(Box::new(Received {
@@ -1023,7 +1021,7 @@ mod serial {
                             };
                             match crate::parse_frame(bytes) {
                                 Ok(frame) => {
-                                    if let Some(tap) = &tap {
+                                    if let Some(tap) = tap.as_ref().filter(|t| t.inbound) {
                                         tap.record(unix_time_us(), bytes);
                                     }
                                     Ok(RecvEvent::Frame(Box::new(Received {
@@ -1137,8 +1135,40 @@ pub struct TlogReport {
     /// Records dropped because the writer fell behind (queue full) or the
     /// tap was already closed.
     pub dropped: u64,
-    /// Write errors (the first one is logged).
+    /// Write errors (the first one is logged and stops the file).
     pub write_errors: u64,
+    /// Records dropped because the per-flight quota was used up.
+    pub quota_dropped: u64,
+    /// Records dropped after a write error stopped the file.
+    pub error_dropped: u64,
+    /// Bytes written.
+    pub bytes: u64,
+    /// `fdatasync` calls made.
+    pub syncs: u64,
+}
+
+/// How a [`TlogTap`] writes: its quota and sync cadence.
+#[derive(Debug, Clone)]
+pub struct TapOptions {
+    /// The flight's byte quota, shared with its other records.
+    pub budget: Arc<crate::records::RecordBudget>,
+    /// Longest time written frames stay unsynced \[s\] (`fdatasync`).
+    pub sync_every: std::time::Duration,
+    /// The transport records every frame it receives (`true`), or the
+    /// caller records the frames it accepts with
+    /// [`TlogTap::record_received`] (`false`: only frames that passed the
+    /// source filter and authentication go into the tlog).
+    pub inbound: bool,
+}
+
+impl Default for TapOptions {
+    fn default() -> Self {
+        Self {
+            budget: Arc::new(crate::records::RecordBudget::new(None)),
+            sync_every: std::time::Duration::from_secs(1),
+            inbound: true,
+        }
+    }
 }
 
 // Records are inline so that queuing one never allocates; the channel's
@@ -1158,6 +1188,8 @@ enum TapMsg {
 /// and counts the record); [`close`](Self::close) flushes and ends it.
 #[derive(Clone)]
 pub struct TlogTap {
+    /// [`TapOptions::inbound`].
+    inbound: bool,
     tx: std::sync::mpsc::SyncSender<TapMsg>,
     dropped: Arc<AtomicU64>,
     path: Arc<PathBuf>,
@@ -1170,14 +1202,24 @@ impl fmt::Debug for TlogTap {
 }
 
 impl TlogTap {
-    /// Creates (truncates) `path` and starts the writer thread.
+    /// Creates (truncates) `path` and starts the writer thread (no quota,
+    /// synced every second).
     pub fn create(path: &Path) -> Result<Self, TransportError> {
+        Self::create_with(path, TapOptions::default())
+    }
+
+    /// Creates (truncates) `path` and starts the writer thread: each frame
+    /// is one `write` of its whole record, synced at least every
+    /// `options.sync_every`, within `options.budget`; a write error stops
+    /// the file (counted, the budget's disk notice raised).
+    pub fn create_with(path: &Path, options: TapOptions) -> Result<Self, TransportError> {
         let io_err = |op, source| TransportError::Io {
             endpoint: path.display().to_string(),
             op,
             source,
         };
         let file = std::fs::File::create(path).map_err(|e| io_err("create tlog", e))?;
+        let inbound = options.inbound;
         let (tx, rx) = std::sync::mpsc::sync_channel::<TapMsg>(TAP_QUEUE);
         let dropped = Arc::new(AtomicU64::new(0));
         let thread_dropped = dropped.clone();
@@ -1185,20 +1227,35 @@ impl TlogTap {
         std::thread::Builder::new()
             .name("dflat-tlog".into())
             .spawn(move || {
-                let mut writer = TlogWriter::new(BufWriter::with_capacity(64 * 1024, file));
-                let mut write_errors = 0u64;
-                let note = |e: &dyn fmt::Display, write_errors: &mut u64| {
-                    if *write_errors == 0 {
-                        tracing::warn!(file = %thread_path.display(), error = %e, "tlog write failed");
-                    }
-                    *write_errors += 1;
-                };
+                let mut file = crate::records::RecordFile::new(
+                    file,
+                    &thread_path,
+                    options.budget,
+                    options.sync_every,
+                );
+                let mut record = [0u8; 8 + MAX_FRAME_LEN];
+                let mut bad_frames = 0u64;
                 let mut reply = None;
-                while let Ok(msg) = rx.recv() {
+                loop {
+                    let msg = match rx.recv_timeout(options.sync_every) {
+                        Ok(msg) => msg,
+                        Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {
+                            file.sync_if_due();
+                            continue;
+                        }
+                        Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => break,
+                    };
                     match msg {
                         TapMsg::Record { ts_us, len, bytes } => {
-                            if let Err(e) = writer.write_frame(ts_us, &bytes[..usize::from(len)]) {
-                                note(&e, &mut write_errors);
+                            match crate::tlog::encode_record(
+                                ts_us,
+                                &bytes[..usize::from(len)],
+                                &mut record,
+                            ) {
+                                Ok(n) => {
+                                    file.write_record(&record[..n]);
+                                }
+                                Err(_) => bad_frames += 1,
                             }
                         }
                         TapMsg::Close(r) => {
@@ -1207,14 +1264,17 @@ impl TlogTap {
                         }
                     }
                 }
-                if let Err(e) = writer.flush() {
-                    note(&e, &mut write_errors);
-                }
+                file.sync();
+                let stats = file.stats();
                 let report = TlogReport {
                     path: thread_path.clone(),
-                    records: writer.records(),
-                    dropped: thread_dropped.load(Ordering::Relaxed),
-                    write_errors,
+                    records: stats.records,
+                    dropped: thread_dropped.load(Ordering::Relaxed) + bad_frames,
+                    write_errors: stats.write_errors,
+                    quota_dropped: stats.quota_dropped,
+                    error_dropped: stats.error_dropped,
+                    bytes: stats.bytes,
+                    syncs: stats.syncs,
                 };
                 if let Some(r) = reply {
                     let _ = r.send(report);
@@ -1222,6 +1282,7 @@ impl TlogTap {
             })
             .map_err(|e| io_err("spawn tlog writer", e))?;
         Ok(Self {
+            inbound,
             tx,
             dropped,
             path: Arc::new(path.to_owned()),
@@ -1249,6 +1310,17 @@ impl TlogTap {
         };
         if self.tx.try_send(msg).is_err() {
             self.dropped.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+
+    /// Queues a received frame that the caller accepted (with
+    /// [`TapOptions::inbound`] off): its own bytes when signed, else
+    /// re-serialized (MAVLink 2), stamped now.
+    pub fn record_received(&self, frame: &Received) {
+        let ts = unix_time_us();
+        match &frame.signed {
+            Some(signed) => self.record(ts, signed.as_bytes()),
+            None => self.record_message(ts, &frame.header, &frame.message),
         }
     }
 

@@ -11,6 +11,10 @@ pub struct FlightCsv {
     pub header: Vec<String>,
     /// Rows of fields, each as long as the header.
     pub rows: Vec<Vec<String>>,
+    /// The file ended in a torn row (the daemon was killed mid-write, or
+    /// the disk filled up): what was dropped, for a warning. The rows
+    /// before it are complete.
+    pub torn_tail: Option<String>,
 }
 
 impl FlightCsv {
@@ -23,8 +27,27 @@ impl FlightCsv {
         Self::parse(&text, path)
     }
 
-    /// Parses CSV text; `file` names it in errors.
+    /// Parses CSV text; `file` names it in errors. A torn tail — a last
+    /// row without its newline (a crash mid-write) or a tail of NUL bytes
+    /// (a crash before the data reached the disk) — is dropped and reported
+    /// in [`torn_tail`](Self::torn_tail); damage anywhere else (a complete
+    /// row with the wrong number of fields) is an error.
     pub fn parse(text: &str, file: &Path) -> Result<Self, FlightLogError> {
+        // A tail of NULs: the file's length reached the disk, its data not.
+        let clean = text.trim_end_matches('\0');
+        let mut torn_tail = (clean.len() < text.len())
+            .then(|| format!("{} NUL bytes at the end", text.len() - clean.len()));
+        let text = clean;
+        // No final newline: the last line was cut mid-write. (A file
+        // without any newline is a header alone: kept, checked below.)
+        let text = match text.rfind('\n') {
+            Some(i) if i + 1 < text.len() => {
+                let cut = &text[i + 1..];
+                torn_tail = Some(format!("a torn last row ({} bytes, no newline)", cut.len()));
+                &text[..=i]
+            }
+            _ => text,
+        };
         let err = |line: usize, message: String| FlightLogError::Csv {
             file: file.to_owned(),
             line,
@@ -64,7 +87,11 @@ impl FlightCsv {
             }
             rows.push(fields);
         }
-        Ok(Self { header, rows })
+        Ok(Self {
+            header,
+            rows,
+            torn_tail,
+        })
     }
 
     /// Index of a column.
@@ -124,5 +151,29 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("`tick`"), "{e}");
+    }
+
+    #[test]
+    fn a_torn_tail_is_dropped_and_reported() {
+        let f = Path::new("f.csv");
+        let whole = "tick,t,state,x\n0,0.0,WAITING,\n1,0.02,TRACKING,1.5\n";
+        let csv = FlightCsv::parse(whole, f).unwrap();
+        assert_eq!((csv.rows.len(), csv.torn_tail.is_none()), (2, true));
+        // Cut mid-row, at every byte of the last row.
+        for cut in whole.len() - 17..whole.len() - 1 {
+            let csv = FlightCsv::parse(&whole[..cut], f).unwrap();
+            assert_eq!(csv.rows.len(), 1, "cut at {cut}");
+            assert!(csv.torn_tail.as_deref().unwrap().contains("torn last row"));
+        }
+        // A NUL tail (data not on disk yet).
+        let nul = format!("{whole}{}", "\0".repeat(40));
+        let csv = FlightCsv::parse(&nul, f).unwrap();
+        assert_eq!(csv.rows.len(), 2);
+        assert!(csv.torn_tail.as_deref().unwrap().contains("NUL"));
+        // Only the header.
+        let csv = FlightCsv::parse("tick,t,state,x\n", f).unwrap();
+        assert!(csv.rows.is_empty() && csv.torn_tail.is_none());
+        // A complete bad row in the middle is still an error.
+        assert!(FlightCsv::parse("tick,t,state\n0,1\n2,0.1,X\n", f).is_err());
     }
 }

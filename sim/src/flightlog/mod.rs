@@ -36,6 +36,15 @@ pub enum FlightLogError {
         /// What is wrong.
         message: String,
     },
+    /// The tlog holds no complete record (0 bytes, or the daemon was
+    /// killed before its first record was whole).
+    #[error("{file}: no complete .tlog record ({bytes} bytes)")]
+    EmptyTlog {
+        /// The file.
+        file: PathBuf,
+        /// Its length \[bytes\].
+        bytes: u64,
+    },
     /// The CSV is malformed.
     #[error("{file}: line {line}: {message}")]
     Csv {
@@ -105,6 +114,9 @@ pub struct FlightLog {
     pub records: u64,
     /// Records whose frame did not decode (bad CRC, unknown id).
     pub undecoded: u64,
+    /// The file ended inside a record (the daemon was killed mid-write, or
+    /// the disk filled up): that partial record was dropped.
+    pub torn_tail: bool,
     /// SET_ATTITUDE_TARGET sent by the daemon.
     pub commands: Vec<CommandSample>,
     /// ATTITUDE from the autopilot.
@@ -131,8 +143,10 @@ pub const HEARTBEAT_STALE: f64 = 3.0;
 
 impl FlightLog {
     /// Reads and decodes a `.tlog`. A truncated last record (the daemon
-    /// killed mid-write) ends the log without error; any other damage is
-    /// an error naming the byte offset.
+    /// killed mid-write) ends the log without error and sets
+    /// [`torn_tail`](Self::torn_tail); a file without any complete record
+    /// is [`FlightLogError::EmptyTlog`]; any other damage is an error
+    /// naming the byte offset.
     pub fn read_tlog(path: &Path) -> Result<Self, FlightLogError> {
         let file = std::fs::File::open(path).map_err(|source| FlightLogError::Io {
             file: path.to_owned(),
@@ -146,7 +160,10 @@ impl FlightLog {
         for record in TlogReader::new(BufReader::new(file)) {
             let record = match record {
                 Ok(r) => r,
-                Err(dflat_link::tlog::TlogError::Truncated { .. }) if log.records > 0 => break,
+                Err(dflat_link::tlog::TlogError::Truncated { .. }) => {
+                    log.torn_tail = true;
+                    break;
+                }
                 Err(e) => {
                     return Err(FlightLogError::Tlog {
                         file: path.to_owned(),
@@ -166,9 +183,9 @@ impl FlightLog {
             log.push(t, &frame.message, &mut attitude_raw);
         }
         if log.records == 0 {
-            return Err(FlightLogError::Tlog {
+            return Err(FlightLogError::EmptyTlog {
                 file: path.to_owned(),
-                message: "empty: no records".into(),
+                bytes: std::fs::metadata(path).map_or(0, |m| m.len()),
             });
         }
         // ATTITUDE sample times: the source clock mapped by the smallest

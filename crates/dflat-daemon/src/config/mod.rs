@@ -62,6 +62,8 @@ pub struct Config {
     pub logging: LoggingConfig,
     /// Real-time scheduling of the control thread (all off by default).
     pub realtime: crate::realtime::RealtimeConfig,
+    /// Crash safety and disk quotas of the flight records.
+    pub records: RecordsConfig,
     /// The SITL autopilot stand-in's `[sitl]` table, kept unparsed: the
     /// daemon does not read it (the SITL lives in `dflat-sim`, which parses
     /// and validates it for `dflat sitl`, `dflat demo` and `dflat
@@ -693,7 +695,10 @@ impl Config {
     }
 }
 
+mod records;
 mod validate;
+
+pub use records::{MIB, RecordsConfig};
 
 #[cfg(test)]
 mod tests;

@@ -128,6 +128,8 @@ impl Config {
         let c = &self.controller;
         v.range("controller.rate_hz", c.rate_hz, 10.0, 200.0)?;
         v.range("controller.pose_wait_ms", c.pose_wait_ms, 0.0, 10.0)?;
+        self.records
+            .validate(|field, x, allowed| v.err(field, &x.to_string(), allowed))?;
         let rt = &self.realtime;
         v.range(
             "realtime.fifo_priority",

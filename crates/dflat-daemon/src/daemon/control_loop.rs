@@ -55,6 +55,8 @@ pub(super) struct ControlLoop {
     pub epoch: Instant,
     /// The flight CSV, if recorded.
     pub csv: Option<CsvRecorder>,
+    /// The records' budget: its disk / quota notices are said here, once.
+    pub records: Arc<dflat_link::records::RecordBudget>,
     /// Tick period.
     pub period: Duration,
     /// Lock the ticks to the pose stream (`controller.tick = "pose"`).
@@ -227,6 +229,13 @@ impl ControlLoop {
             }
             for text in step.texts {
                 self.send(Outgoing::plain(text), &mut outbound_dropped);
+            }
+            let notices = self.records.take_notices();
+            if notices != 0 {
+                for (severity, text) in crate::record_store::notice_texts(notices) {
+                    let text = dflat_link::statustext(severity, text);
+                    self.send(Outgoing::plain(text), &mut outbound_dropped);
+                }
             }
             if let Some(sent) = step.command {
                 let item = Outgoing {

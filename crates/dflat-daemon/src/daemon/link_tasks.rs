@@ -269,6 +269,13 @@ pub(super) async fn receive_task(
             }
         }
         let outcome = link.handle(&frame.header, &frame.message);
+        // The tlog holds only what passed the filter and authentication
+        // (the tap's `inbound` is off; the rest is counted in `link`).
+        if let Some(tap) = transport.tap()
+            && matches!(outcome, RxOutcome::Accepted(_) | RxOutcome::Rejected(_))
+        {
+            tap.record_received(&frame);
+        }
         let sender = (frame.header.system_id as u8, frame.header.component_id);
         let event = match &outcome {
             RxOutcome::Accepted(inbound) => {

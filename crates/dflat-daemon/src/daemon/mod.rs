@@ -52,7 +52,7 @@ use crate::config::{Config, ModelKind, TickMode};
 use crate::control::{build_controller, configured_path, thrust_mapping};
 use crate::guard::GuardCounts;
 use crate::link_health::{CommandSlot, LinkGuardSummary, LinkHealth, REPLY_QUEUE, StallHook};
-use crate::records::{CsvRecorder, CsvReport, flight_stem};
+use crate::records::CsvReport;
 use crate::signing::SigningError;
 use crate::summary::{
     DisturbanceSummary, FlightSummary, Histogram, LinkSummary, SolveCounts, StateTimes,
@@ -245,6 +245,8 @@ struct Parts {
     transport: Transport,
     commands: Arc<CommandSlot<Outgoing>>,
     replies_dropped: Arc<AtomicU64>,
+    records_budget: Arc<dflat_link::records::RecordBudget>,
+    records_summary: crate::record_store::RecordsSummary,
     control: std::thread::JoinHandle<ControlReport>,
     rx: tokio::task::JoinHandle<RxReport>,
     tx: tokio::task::JoinHandle<TxReport>,
@@ -296,6 +298,8 @@ impl DaemonHandle {
             transport,
             commands,
             replies_dropped,
+            records_budget,
+            records_summary,
             control,
             rx,
             tx,
@@ -375,6 +379,7 @@ impl DaemonHandle {
             guards: control.guards,
             solves: control.solves,
             link_guard,
+            records: crate::record_store::finish_summary(records_summary, &records_budget),
         };
         let fault = self.fault.lock().unwrap_or_else(|p| p.into_inner()).take();
         match fault {
@@ -475,37 +480,11 @@ pub async fn spawn_with_controller(
         .validate()
         .map_err(|e| DaemonError::Internal(format!("thrust mapping: {e}")))?;
 
-    // Records.
-    let started_wall = SystemTime::now();
-    let (csv, tap) = if config.logging.dir.trim().is_empty() {
-        (None, None)
-    } else {
-        let dir = PathBuf::from(&config.logging.dir);
-        std::fs::create_dir_all(&dir).map_err(|source| DaemonError::Records {
-            path: dir.clone(),
-            source,
-        })?;
-        let stem = flight_stem(&dir, started_wall);
-        let csv = if config.logging.csv {
-            let path = stem.with_extension("csv");
-            Some(
-                CsvRecorder::create(&path)
-                    .map_err(|source| DaemonError::Records { path, source })?,
-            )
-        } else {
-            None
-        };
-        let tap = if config.logging.tlog {
-            let path = stem.with_extension("tlog");
-            Some(TlogTap::create(&path).map_err(|e| match e {
-                TransportError::Io { source, .. } => DaemonError::Records { path, source },
-                other => DaemonError::Internal(other.to_string()),
-            })?)
-        } else {
-            None
-        };
-        (csv, tap)
-    };
+    // Records: never a reason not to fly (disk trouble is noticed).
+    let records = crate::record_store::open(&config, SystemTime::now());
+    let (csv, tap) = (records.csv, records.tap);
+    let records_budget = records.budget;
+    let records_summary = records.summary;
 
     let controller_name = controller.name().to_owned();
     // udpin: one peer (link.peer, or the first sender of the autopilot's
@@ -645,6 +624,7 @@ pub async fn spawn_with_controller(
         ticks: ticks.clone(),
         epoch,
         csv,
+        records: records_budget.clone(),
         period,
         pose_lock: config.controller.tick == TickMode::Pose,
         pose_wait: config.controller.pose_wait_ms / 1000.0,
@@ -698,6 +678,8 @@ pub async fn spawn_with_controller(
             transport,
             commands,
             replies_dropped,
+            records_budget,
+            records_summary,
             control,
             rx,
             tx,

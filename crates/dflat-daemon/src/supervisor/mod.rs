@@ -38,9 +38,13 @@
 //! times on the companion computer's clock, so staleness does not depend on
 //! the sender's clock (vision timestamps are not used yet).
 //!
-//! In `Failsafe` and `WaitingForPose` no attitude target is streamed: a
-//! frozen stream would keep PX4 in offboard mode, while silence lets the
-//! autopilot's own failsafe take over.
+//! In `Failsafe` and `WaitingForPose` the controller's attitude targets are
+//! not streamed: a frozen stream would keep PX4 in offboard mode, while
+//! silence lets the autopilot's own failsafe take over. A failsafe entered
+//! while engaged first streams level hover for at most
+//! `safety.level_hover_max_ms` (the control core's `tick/failsafe_level.rs`),
+//! so that the autopilot holds a level command, not the last tilt, until
+//! its offboard-loss timeout.
 
 use serde::Serialize;
 

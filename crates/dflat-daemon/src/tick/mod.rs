@@ -42,6 +42,7 @@ use crate::summary::{DisturbanceSummary, SolveCounts};
 use crate::supervisor::{Cause, FlightState, Goal, SetpointOutcome, Supervisor, Transition};
 
 mod exit;
+mod failsafe_level;
 mod inputs;
 mod mission;
 mod standby;
@@ -171,6 +172,10 @@ pub struct ControlCore {
     tilt_refusal_said: bool,
     /// Since when level hover has been streamed \[s\].
     level_hover_since: Option<f64>,
+    /// A failsafe's level hover, while it streams (`tick/failsafe_level.rs`).
+    failsafe_level: Option<failsafe_level::FailsafeLevel>,
+    /// The autopilot's tilt integrated since the newest pose (the brake).
+    tilt_since_pose: failsafe_level::TiltSincePose,
     /// In a control failsafe: the controller is tried each tick.
     control_failsafe: bool,
     /// Consecutive successful trial solves in a control failsafe.
@@ -262,6 +267,8 @@ impl ControlCore {
             params: AutopilotParams::new(),
             tilt_refusal_said: false,
             level_hover_since: None,
+            failsafe_level: None,
+            tilt_since_pose: Default::default(),
             control_failsafe: false,
             trial_streak: 0,
             pose_late_since: None,
@@ -332,7 +339,9 @@ impl ControlCore {
                     name,
                 ));
         }
-        // 2. Decide.
+        // 2. Decide. (The level command a failsafe would leave is taken
+        // before a failsafe resets the controller.)
+        let level = self.failsafe_level_command();
         self.supervisor.set_motion(self.motion.estimate());
         let decision = self.supervisor.tick(t);
         if decision.reset_controller {
@@ -387,6 +396,7 @@ impl ControlCore {
                 row.guard = Some("residual");
             }
         }
+        self.maybe_start_failsafe_level(t, level);
         if self.control_failsafe && self.supervisor.state() == FlightState::Failsafe {
             self.trial(t);
         }
@@ -399,6 +409,8 @@ impl ControlCore {
             let (sent, us) = self.control(t, pose, stopwatch, &mut row);
             command = sent;
             solve_us = Some(us);
+        } else {
+            command = self.failsafe_level_tick(t, &mut row);
         }
         self.mission_tick(t);
         row.state = self.supervisor.state();
@@ -620,10 +632,17 @@ impl ControlCore {
                 position,
                 yaw,
                 reset_counter,
-            } => self.apply_pose(arrival, source_time, position, yaw, reset_counter),
-            Event::Attitude {
-                roll, pitch, yaw, ..
             } => {
+                self.tilt_since_pose.on_pose(arrival);
+                self.apply_pose(arrival, source_time, position, yaw, reset_counter);
+            }
+            Event::Attitude {
+                arrival,
+                roll,
+                pitch,
+                yaw,
+            } => {
+                self.tilt_since_pose.on_attitude(arrival, [pitch, roll]);
                 self.attitude_yaw = Some(yaw);
                 if roll.is_finite() && pitch.is_finite() {
                     // As the window records inputs: a world-frame tilt.

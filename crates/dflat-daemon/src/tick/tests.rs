@@ -402,3 +402,105 @@ fn reads_the_autopilots_parameters_and_refuses_to_engage_above_its_tilt_limit() 
     step(&mut core, 11, vec![]);
     assert!(core.state().engaged(), "{:?}", core.state());
 }
+
+/// Tick `k` with only an autopilot heartbeat (the pose stream stopped).
+fn step_without_pose(core: &mut ControlCore, k: u64) -> StepOutput {
+    let t = k as f64 * DT;
+    let time = TickTime {
+        tick: k,
+        t,
+        scheduled: t,
+        jitter_us: 0,
+    };
+    let events = [Event::Heartbeat {
+        arrival: t - 0.001,
+        mode: OFFBOARD,
+    }];
+    let mut clock = t;
+    core.step(&time, events, &mut || {
+        clock += 1e-4;
+        clock
+    })
+}
+
+#[test]
+fn losing_pose_while_engaged_streams_level_hover_then_stops() {
+    // The controller commands 20° of roll: the vehicle accelerates.
+    let tilt = 20f64.to_radians();
+    let (mut core, _) = core(vec![Script::Command(tilt, 0.0)]);
+    let out = fly(&mut core, 50);
+    assert!(core.state().engaged(), "{:?}", core.state());
+    assert_eq!(out[49].command.as_ref().unwrap().command.roll, tilt);
+    let cfg = Config::default();
+    let timeout_ticks = (cfg.safety.pose_timeout_ms / 1000.0 / DT).round() as u64;
+    let level_ticks = (cfg.safety.level_hover_max_ms / 1000.0 / DT).round() as usize;
+    // The pose stops after tick 49.
+    let lost: Vec<StepOutput> = (50..50 + 120).map(|k| step_without_pose(&mut core, k)).collect();
+    let failsafe_at = lost
+        .iter()
+        .position(|o| o.transitions.iter().any(|t| t.to == FlightState::Failsafe))
+        .expect("failsafe on stale pose");
+    assert!(failsafe_at as u64 <= timeout_ticks, "failsafe at {failsafe_at}");
+    // From the failsafe tick on: level, at hover thrust, yaw kept, then silence.
+    let level: Vec<&StepOutput> = lost[failsafe_at..]
+        .iter()
+        .take_while(|o| o.command.is_some())
+        .collect();
+    assert_eq!(level.len(), level_ticks, "one level command per tick for level_hover_max_ms");
+    for o in &level {
+        let c = o.command.as_ref().unwrap().command;
+        assert_eq!((c.roll, c.pitch, c.yaw), (0.0, 0.0, 0.0));
+        assert!((c.thrust - 0.5).abs() < 1e-12, "hover thrust {}", c.thrust);
+        assert_eq!(o.row.guard, Some("level"));
+        assert_eq!(o.row.state, FlightState::Failsafe);
+    }
+    assert!(
+        lost[failsafe_at + level_ticks..].iter().all(|o| o.command.is_none()),
+        "the stream stops after the level hover"
+    );
+    assert_eq!(lost[failsafe_at + level_ticks].row.guard, Some("let_go"));
+    assert_eq!(core.counts().guards.level_hover, level_ticks as u64);
+    // Said once when it starts and once when it ends.
+    let texts = |o: &StepOutput| {
+        o.texts
+            .iter()
+            .filter_map(|m| match m {
+                MavMessage::STATUSTEXT(s) => Some(s.text.to_str().unwrap_or("").to_owned()),
+                _ => None,
+            })
+            .collect::<Vec<_>>()
+    };
+    let all: Vec<String> = lost.iter().flat_map(texts).collect();
+    assert_eq!(all.iter().filter(|t| t.contains("level hover then stream off")).count(), 1);
+    assert_eq!(all.iter().filter(|t| t.contains("level hover over")).count(), 1);
+    // The pose returns: streaming again.
+    let back = fly_from(&mut core, 170, 5);
+    assert!(back.iter().any(|o| o.command.is_some()));
+}
+
+#[test]
+fn without_level_hover_pose_loss_goes_silent_at_once() {
+    let tilt = 20f64.to_radians();
+    let mut cfg = Config::default();
+    cfg.safety.level_hover_max_ms = 0.0;
+    let controller = Scripted {
+        script: vec![Script::Command(tilt, 0.0)],
+        tick: 0,
+        updates: Arc::new(AtomicUsize::new(0)),
+    };
+    let mapping = thrust_mapping(&cfg);
+    let mut core = ControlCore::new(&cfg, Box::new(controller), mapping);
+    fly(&mut core, 50);
+    let lost: Vec<StepOutput> = (50..80).map(|k| step_without_pose(&mut core, k)).collect();
+    let failsafe_at = lost
+        .iter()
+        .position(|o| o.row.state == FlightState::Failsafe)
+        .expect("failsafe");
+    assert!(lost[failsafe_at..].iter().all(|o| o.command.is_none()));
+    assert_eq!(core.counts().guards.level_hover, 0);
+}
+
+/// Ticks `from..from + n` with fresh poses.
+fn fly_from(core: &mut ControlCore, from: u64, n: u64) -> Vec<StepOutput> {
+    (from..from + n).map(|k| step_at(core, k, None, vec![])).collect()
+}

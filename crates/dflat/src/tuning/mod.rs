@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, Result, bail};
 
-use dflat_sim::flightlog::FlightLog;
+use dflat_sim::flightlog::{FlightCsv, FlightLog};
 use dflat_sim::identify::{self, FlownVehicle};
 
 pub mod replay;
@@ -57,6 +57,34 @@ pub fn tlog_of(flight: &Path) -> Result<PathBuf> {
     Ok(tlog)
 }
 
+/// Reads a flight CSV; a torn tail (a crash mid-write) is dropped with a
+/// warning on stderr and the complete rows are used.
+pub fn read_csv(path: &Path) -> Result<FlightCsv> {
+    let csv = FlightCsv::read(path)?;
+    if let Some(torn) = &csv.torn_tail {
+        eprintln!(
+            "warning: {}: {torn} dropped (the daemon was stopped mid-write); using the {} complete rows",
+            path.display(),
+            csv.rows.len()
+        );
+    }
+    Ok(csv)
+}
+
+/// Reads a flight `.tlog`; a torn last record is dropped with a warning
+/// on stderr and the complete records are used.
+pub fn read_tlog(path: &Path) -> Result<FlightLog> {
+    let log = FlightLog::read_tlog(path)?;
+    if log.torn_tail {
+        eprintln!(
+            "warning: {}: a torn last record dropped (the daemon was stopped mid-write); using the {} complete records",
+            path.display(),
+            log.records
+        );
+    }
+    Ok(log)
+}
+
 /// The `[vehicle]` values of a configuration file.
 pub fn flown_vehicle(config: &Path) -> Result<FlownVehicle> {
     let cfg = dflat_daemon::config::Config::load(config)?;
@@ -81,7 +109,7 @@ pub fn run_identify(args: IdentifyArgs) -> Result<()> {
         bail!("no flight given");
     };
     let tlog = tlog_of(&flight)?;
-    let log = FlightLog::read_tlog(&tlog)?;
+    let log = read_tlog(&tlog)?;
     let flown = args.config.as_deref().map(flown_vehicle).transpose()?;
     let found = identify::identify(&log).with_context(|| format!("{}", tlog.display()))?;
     let name = tlog.display().to_string();

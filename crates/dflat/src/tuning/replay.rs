@@ -239,7 +239,7 @@ pub fn run(args: ReplayArgs) -> Result<()> {
         Some("tlog") => args.flight.with_extension("csv"),
         _ => args.flight.clone(),
     };
-    let csv = FlightCsv::read(&csv_path)?;
+    let csv = super::read_csv(&csv_path)?;
     let cfg = Config::load(&args.config)?;
     let mut report = replay(&csv_path, &csv, &cfg)?;
     report.overlay.label = format!("replay with {}", args.config.display());

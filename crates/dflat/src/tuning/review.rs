@@ -41,7 +41,7 @@ pub fn run(args: ReviewArgs) -> Result<()> {
         Some("tlog") => args.flight.with_extension("csv"),
         _ => args.flight.clone(),
     };
-    let csv = FlightCsv::read(&csv_path)?;
+    let csv = super::read_csv(&csv_path)?;
     let log = load_tlog_beside(&csv_path)?;
     let html = render(&csv_path, &csv, log.as_ref(), None);
     let out = args.out.unwrap_or_else(|| csv_path.with_extension("html"));
@@ -50,13 +50,24 @@ pub fn run(args: ReviewArgs) -> Result<()> {
     Ok(())
 }
 
-/// The `.tlog` beside a CSV, if there is one.
+/// The `.tlog` beside a CSV, if there is one with a complete record (an
+/// empty one — the daemon killed before its first frame was whole — is
+/// left out with a warning; a torn tail is dropped with one).
 pub fn load_tlog_beside(csv: &Path) -> Result<Option<FlightLog>> {
     let tlog = csv.with_extension("tlog");
     if !tlog.exists() {
         return Ok(None);
     }
-    Ok(Some(FlightLog::read_tlog(&tlog)?))
+    match super::read_tlog(&tlog) {
+        Ok(log) => Ok(Some(log)),
+        Err(e) => match e.downcast_ref::<dflat_sim::flightlog::FlightLogError>() {
+            Some(empty @ dflat_sim::flightlog::FlightLogError::EmptyTlog { .. }) => {
+                eprintln!("warning: {empty}: reviewing from the CSV alone");
+                Ok(None)
+            }
+            _ => Err(e),
+        },
+    }
 }
 
 /// The `q` quantile (nearest rank) of the finite values, NaN if none.
