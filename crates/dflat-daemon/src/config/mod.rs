@@ -388,6 +388,9 @@ pub struct ControllerConfig {
     /// A pose step between ticks larger than this \[m\] resets the estimate
     /// (0.01–100). Default 1.
     pub disturbance_max_step: f64,
+    /// `[controller.estimator]`: the baselines' state source
+    /// ([`EstimatorConfig`]; fmpc and pd only).
+    pub estimator: EstimatorConfig,
 }
 
 impl Default for ControllerConfig {
@@ -418,6 +421,7 @@ impl Default for ControllerConfig {
             disturbance_max_acceleration: 3.0,
             disturbance_thrust_scale_range: [0.5, 2.0],
             disturbance_max_step: 1.0,
+            estimator: EstimatorConfig::default(),
         }
     }
 }
@@ -621,7 +625,10 @@ impl Config {
     }
 }
 
+mod estimator;
 mod validate;
+
+pub use estimator::{EstimatorConfig, StateSourceKind};
 
 #[cfg(test)]
 mod tests;
