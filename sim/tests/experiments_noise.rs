@@ -181,6 +181,7 @@ fn invalid_options_are_errors() {
                 q: 1.0,
                 r: -1.0,
                 max_tilt_deg: 60.0,
+                estimator: None,
             }],
             ..reduced()
         },

@@ -31,10 +31,10 @@ fn json(r: &PathsResult) -> String {
 }
 
 #[test]
-fn reduced_run_completes_for_all_three_controllers() {
+fn reduced_run_completes_for_all_six_controllers() {
     let result = run_paths(&reduced(), false).expect("runs");
-    assert_eq!(result.trials.len(), 3);
-    assert_eq!(result.summary.len(), 3);
+    assert_eq!(result.trials.len(), 6);
+    assert_eq!(result.summary.len(), 6);
     for t in &result.trials {
         let m = &t.metrics;
         assert!(!m.diverged, "{}: {m:?}", t.controller);
@@ -56,7 +56,10 @@ fn reduced_run_completes_for_all_three_controllers() {
         assert!(m.no_measurement_ticks <= 1);
     }
     let names: Vec<&str> = result.controllers.iter().map(|c| c.name()).collect();
-    assert_eq!(names, ["df-mpc", "fmpc", "pd"]);
+    assert_eq!(
+        names,
+        ["df-mpc", "fmpc", "pd", "df-mr-smooth", "fmpc-est", "pd-est"]
+    );
     // The paper's claim (§VII-C, Fig. "boxplot_control_compare"): with
     // vision-like positions DF-MPC tracks the L path best — the lowest p95
     // path error (the full study: 0.58 vs 2.92 / 3.35 m at 5 m/s,
@@ -73,7 +76,7 @@ fn reduced_run_completes_for_all_three_controllers() {
     let (df, fmpc, pd) = (p95("df-mpc"), p95("fmpc"), p95("pd"));
     println!("p95 path error at 5 m/s: df-mpc {df:.3}, fmpc {fmpc:.3}, pd {pd:.3} m");
     assert!(df < fmpc && df < pd, "df {df} fmpc {fmpc} pd {pd}");
-    assert_eq!(result.flown.len(), 3);
+    assert_eq!(result.flown.len(), 6);
     assert!(result.flown.iter().all(|f| f.positions.len() == 300));
     assert!(result.tuning.is_none() && result.dsl.is_empty());
 
@@ -95,7 +98,7 @@ fn reduced_run_completes_for_all_three_controllers() {
     let v: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&out.json).expect("json")).expect("valid");
     assert_eq!(v["experiment"], "paths");
-    assert_eq!(v["trials"].as_array().map(Vec::len), Some(3));
+    assert_eq!(v["trials"].as_array().map(Vec::len), Some(6));
     assert!(v["trials"][0]["metrics"]["path_error"]["p95"].is_number());
     assert!(v["summary"][0]["smoothness_deg"].is_number());
     assert!(v["tuning"].is_null());
@@ -194,6 +197,7 @@ fn invalid_options_are_errors() {
                 kp: -1.0,
                 kd: 1.0,
                 max_tilt_deg: 35.0,
+                estimator: None,
             }],
             ..reduced()
         },

@@ -6,8 +6,12 @@
 //!
 //! Per axis, at tick k:
 //!
-//! * flat state from the last three measurements (history padded with the
-//!   first one): `z = [y_k, (y_k − y_{k−1})/δt, (y_k − 2y_{k−1} + y_{k−2})/δt²]`;
+//! * flat state, by [`FmpcSettings::state`]: from the last three
+//!   measurements (history padded with the first one),
+//!   `z = [y_k, (y_k − y_{k−1})/δt, (y_k − 2y_{k−1} + y_{k−2})/δt²]` — the
+//!   paper's simulation (§VI) — or from a [`crate::estimator::StateEstimator`] fed with every
+//!   pose at its capture time and predicted to the tick through the sent
+//!   commands — the paper's outdoor set-up (§VII, STEAM);
 //! * model: the triple integrator discretised exactly at δt (zero-order hold
 //!   on the jerk v), `z_{j+1} = A z_j + B v_j`, position `x_j = c·z_j`;
 //! * cost `Σ_{j=1..N} q (x_j − ref_j)² + Σ_{i=0..N−1} r v_i²` over the jerks
@@ -30,6 +34,7 @@ use dflat_model::attitude::{pitch_roll_from_ratios, thrust_pitch_roll};
 use dflat_model::{FlatError, Frame};
 use nalgebra::{DMatrix, Vector3};
 
+use crate::estimator::{BaselineEstimator, StateSource};
 use crate::{
     AttitudeCommand, ControlError, ControlModel, Controller, Measurement, ReferenceSource,
     TickOutput, TiltLimit, limit_tilt,
@@ -60,6 +65,10 @@ pub struct FmpcSettings {
     pub max_tilt: Option<f64>,
     /// How `max_tilt` applies (default [`TiltLimit::PerAxis`], the paper).
     pub tilt_limit: TiltLimit,
+    /// Where the flat state comes from. Default
+    /// [`StateSource::FiniteDifference`] (the paper's §VI definition); the
+    /// daemon and the lab's path study default to the estimator.
+    pub state: StateSource,
 }
 
 impl Default for FmpcSettings {
@@ -70,6 +79,7 @@ impl Default for FmpcSettings {
             r: [0.01; 3],
             max_tilt: Some(35f64.to_radians()),
             tilt_limit: TiltLimit::PerAxis,
+            state: StateSource::FiniteDifference,
         }
     }
 }
@@ -131,6 +141,8 @@ pub struct FlatnessMpc {
     hist: [Vector3<f64>; 3],
     /// Whether `hist` holds a measurement yet.
     started: bool,
+    /// The state estimator ([`StateSource::Estimator`]), else None.
+    estimator: Option<BaselineEstimator>,
 }
 
 /// Impulse response of the exactly discretised triple integrator:
@@ -266,6 +278,7 @@ impl FlatnessMpc {
             refs: vec![Vector3::zeros(); n + 1],
             hist: [Vector3::zeros(); 3],
             started: false,
+            estimator: BaselineEstimator::from_source(settings.state, &model)?,
         })
     }
 
@@ -290,6 +303,23 @@ impl Controller for FlatnessMpc {
         "fmpc"
     }
 
+    fn multi_rate(&self) -> bool {
+        self.estimator.is_some()
+    }
+
+    fn observe(&mut self, sample: &Measurement) {
+        if let Some(e) = &mut self.estimator {
+            // A refused sample (non-finite, out of order) is dropped.
+            let _ = e.estimator.observe(sample.t, &sample.position);
+        }
+    }
+
+    fn correct_last_input(&mut self, applied: &Vector3<f64>) {
+        if let Some(e) = &mut self.estimator {
+            e.correct(&self.model, applied);
+        }
+    }
+
     fn update(
         &mut self,
         measurement: &Measurement,
@@ -298,7 +328,14 @@ impl Controller for FlatnessMpc {
         if !measurement_is_finite(measurement) {
             return Err(ControlError::NonFiniteMeasurement);
         }
-        let y = measurement.position;
+        let estimate = match &self.estimator {
+            Some(e) => Some(e.state_at(measurement.t)?),
+            None => None,
+        };
+        let y = match &estimate {
+            Some(s) => Vector3::new(s[0][0], s[1][0], s[2][0]),
+            None => measurement.position,
+        };
         let hist = if self.started {
             [self.hist[1], self.hist[2], y]
         } else {
@@ -314,7 +351,10 @@ impl Controller for FlatnessMpc {
         let mut v = [[0.0; 3]; 3]; // per axis: jerks v_0, v_1, v_2
         for axis in 0..self.axes {
             let (y2, y1, y0) = (hist[0][axis], hist[1][axis], hist[2][axis]);
-            let za = [y0, (y0 - y1) / dt, (y0 - 2.0 * y1 + y2) / (dt * dt)];
+            let za = match &estimate {
+                Some(s) => [s[axis][0], s[axis][1], s[axis][2]],
+                None => [y0, (y0 - y1) / dt, (y0 - 2.0 * y1 + y2) / (dt * dt)],
+            };
             let gains = &self.gains[axis];
             let mut acc = [0.0; 3];
             for (j, r) in self.refs[1..].iter().enumerate() {
@@ -404,6 +444,9 @@ impl Controller for FlatnessMpc {
 
         self.hist = hist;
         self.started = true;
+        if let Some(e) = &mut self.estimator {
+            e.sent(&self.model, measurement.t, &command);
+        }
         Ok(TickOutput {
             command,
             plan,
@@ -418,6 +461,9 @@ impl Controller for FlatnessMpc {
     fn reset(&mut self) {
         self.hist = [Vector3::zeros(); 3];
         self.started = false;
+        if let Some(e) = &mut self.estimator {
+            e.estimator.reset();
+        }
     }
 }
 

@@ -14,6 +14,9 @@
 //! * [`reference::Reference`] — a fixed setpoint or a path with a speed.
 //! * [`dfmpc::DfMpc`] — the discrete-flatness MPC of the paper (§V).
 //! * [`fmpc::FlatnessMpc`] and [`pd::Pd`] — the paper's baselines.
+//! * [`estimator::StateEstimator`] — the baselines' state estimator: a
+//!   white-noise-on-jerk Kalman filter over timestamped poses, predicted
+//!   to the tick through the sent inputs.
 //! * [`disturbance::DisturbanceEstimator`] — acceleration-offset and
 //!   thrust-scale estimation for offset-free DF-MPC (optional).
 //!
@@ -23,6 +26,7 @@
 
 pub mod dfmpc;
 pub mod disturbance;
+pub mod estimator;
 pub mod fmpc;
 pub mod model;
 pub mod optimise;

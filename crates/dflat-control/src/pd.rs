@@ -2,9 +2,12 @@
 //!
 //! Each tick: the reference position and velocity are the closest point of
 //! the path and the desired speed along it ([`ReferenceSource::closest`]);
-//! the velocity is the first difference of the measured positions
-//! `(y_k − y_{k−1})/δt`, optionally low-pass filtered (no model-based
-//! estimate); the desired acceleration is
+//! position and velocity, by [`PdSettings::state`], are the measurement and
+//! the first difference of the measured positions `(y_k − y_{k−1})/δt`,
+//! optionally low-pass filtered — the paper's simulation set-up — or the
+//! estimate of a [`crate::estimator::StateEstimator`] fed with every pose
+//! at its capture time and predicted to the tick — the outdoor set-up
+//! (§VII, STEAM); the desired acceleration is
 //! `a = k_p (p_ref − p) + k_d (v_ref − v)` per axis, limited; the attitude
 //! (and, for the spatial model, the thrust) follows from the model's
 //! attitude map, `θ_cmd = θ/k̃`, saturated at the maximum tilt.
@@ -14,6 +17,7 @@ use dflat_model::{FlatError, Frame};
 use nalgebra::{Vector2, Vector3};
 
 use crate::TiltLimit;
+use crate::estimator::{BaselineEstimator, StateSource};
 use crate::fmpc::{limit_pair, measurement_is_finite};
 use crate::{
     AttitudeCommand, ControlError, ControlModel, Controller, Measurement, ReferenceSource,
@@ -48,6 +52,10 @@ pub struct PdSettings {
     pub max_tilt: f64,
     /// How `max_tilt` applies (default [`TiltLimit::PerAxis`], the paper).
     pub tilt_limit: TiltLimit,
+    /// Where position and velocity come from. Default
+    /// [`StateSource::FiniteDifference`]; the daemon and the lab's path
+    /// study default to the estimator (`velocity_cutoff_hz` then unused).
+    pub state: StateSource,
 }
 
 impl Default for PdSettings {
@@ -61,6 +69,7 @@ impl Default for PdSettings {
             velocity_cutoff_hz: None,
             max_tilt,
             tilt_limit: TiltLimit::PerAxis,
+            state: StateSource::FiniteDifference,
         }
     }
 }
@@ -137,6 +146,8 @@ pub struct Pd {
     started: bool,
     /// Time \[s\] of the newest measurement used.
     last_t: f64,
+    /// The state estimator ([`StateSource::Estimator`]), else None.
+    estimator: Option<BaselineEstimator>,
 }
 
 impl Pd {
@@ -180,6 +191,7 @@ impl Pd {
             velocity: Vector3::zeros(),
             started: false,
             last_t: f64::NEG_INFINITY,
+            estimator: BaselineEstimator::from_source(settings.state, &model)?,
         })
     }
 
@@ -211,6 +223,23 @@ impl Controller for Pd {
         "pd"
     }
 
+    fn multi_rate(&self) -> bool {
+        self.estimator.is_some()
+    }
+
+    fn observe(&mut self, sample: &Measurement) {
+        if let Some(e) = &mut self.estimator {
+            // A refused sample (non-finite, out of order) is dropped.
+            let _ = e.estimator.observe(sample.t, &sample.position);
+        }
+    }
+
+    fn correct_last_input(&mut self, applied: &Vector3<f64>) {
+        if let Some(e) = &mut self.estimator {
+            e.correct(&self.model, applied);
+        }
+    }
+
     fn update(
         &mut self,
         measurement: &Measurement,
@@ -219,10 +248,16 @@ impl Controller for Pd {
         if !measurement_is_finite(measurement) {
             return Err(ControlError::NonFiniteMeasurement);
         }
+        let estimate = match &self.estimator {
+            Some(e) => Some(e.state_at(measurement.t)?),
+            None => None,
+        };
         // No pose since the previous tick: extrapolate with the velocity
         // estimate instead of reading a repeated position as a stop.
-        let stale = self.started && measurement.t <= self.last_t;
-        let y = if stale {
+        let stale = estimate.is_none() && self.started && measurement.t <= self.last_t;
+        let y = if let Some(s) = &estimate {
+            Vector3::new(s[0][0], s[1][0], s[2][0])
+        } else if stale {
             self.prev + self.velocity * self.dt
         } else {
             measurement.position
@@ -231,7 +266,9 @@ impl Controller for Pd {
         if !(p_ref.iter().chain(v_ref.iter()).all(|c| c.is_finite())) {
             return Err(ControlError::NonFiniteReference);
         }
-        let velocity = if stale {
+        let velocity = if let Some(s) = &estimate {
+            Vector3::new(s[0][1], s[1][1], s[2][1])
+        } else if stale {
             self.velocity
         } else if self.started {
             let raw = (y - self.prev) / self.dt;
@@ -290,6 +327,9 @@ impl Controller for Pd {
         if !stale {
             self.last_t = measurement.t;
         }
+        if let Some(e) = &mut self.estimator {
+            e.sent(&self.model, measurement.t, &command);
+        }
         Ok(TickOutput {
             command,
             plan: [y; 4],
@@ -306,6 +346,9 @@ impl Controller for Pd {
         self.velocity = Vector3::zeros();
         self.started = false;
         self.last_t = f64::NEG_INFINITY;
+        if let Some(e) = &mut self.estimator {
+            e.estimator.reset();
+        }
     }
 }
 

@@ -62,6 +62,9 @@ pub fn thrust_mapping(cfg: &Config) -> ThrustMapping {
 /// weights, horizons, saturation (`vehicle.max_tilt_deg` as a bound on the
 /// combined tilt, [`TiltLimit::Cone`], as the exit guard applies it) and
 /// constraints;
+/// for fmpc and pd the state source (`[controller.estimator]`: by default
+/// a state estimator fed with every pose, then the shell feeds them through
+/// [`Controller::observe`]);
 /// for df-mpc also the smoothness weight, the multi-rate window
 /// (`controller.multi_rate`, then the shell feeds every pose through
 /// [`Controller::observe`]) and the disturbance estimator.
@@ -119,6 +122,7 @@ pub fn build_controller(cfg: &Config) -> Result<Box<dyn Controller>, ControlErro
                 r: c.fmpc_r_jerk,
                 max_tilt: Some(max_tilt),
                 tilt_limit: TiltLimit::Cone,
+                state: c.estimator.state_source(c, v),
             },
         )?),
         ControllerKind::Pd => Box::new(Pd::new(
@@ -131,6 +135,7 @@ pub fn build_controller(cfg: &Config) -> Result<Box<dyn Controller>, ControlErro
                 velocity_cutoff_hz: None,
                 max_tilt,
                 tilt_limit: TiltLimit::Cone,
+                state: c.estimator.state_source(c, v),
             },
         )?),
     })

@@ -2,7 +2,9 @@
 
 use std::sync::Arc;
 
-use dflat_control::dfmpc::{DfMpc, DfMpcSettings, InputSaturation};
+use dflat_control::dfmpc::{DfMpc, DfMpcSettings, InputSaturation, OutputConstraints};
+use dflat_control::window::MultiRateSettings;
+use dflat_control::estimator::{EstimatorSettings, StateSource};
 use dflat_control::fmpc::{FlatnessMpc, FmpcSettings};
 use dflat_control::pd::{Pd, PdSettings};
 use dflat_control::{
@@ -34,7 +36,26 @@ pub enum ControllerSpec {
         /// Command saturation \[deg\].
         max_tilt_deg: f64,
     },
-    /// Flatness MPC ([`FlatnessMpc`]) on finite-difference flat states.
+    /// DF-MPC as the daemon ships it (`df-mr-smooth`, name
+    /// "df-mr-smooth"): multi-rate windows fed with every pose sample at
+    /// its capture time, command-smoothness weight, tilt bound on the plan
+    /// per axis (`docs/configuration.md`, `config/default.toml`).
+    DfMrSmooth {
+        /// Horizon N [steps of δt].
+        horizon: usize,
+        /// Tracking weight q (x and y).
+        q: f64,
+        /// Jerk weight r (x and y).
+        r: f64,
+        /// Command-smoothness weight (x and y) [1/rad²].
+        smoothness: f64,
+        /// Tilt bound on the plan, per axis \[deg\].
+        plan_tilt_deg: f64,
+        /// Command saturation \[deg\].
+        max_tilt_deg: f64,
+    },
+    /// Flatness MPC ([`FlatnessMpc`]) on finite-difference flat states, or
+    /// on a state estimator's (`estimator`).
     Fmpc {
         /// Horizon N [steps of δt].
         horizon: usize,
@@ -44,9 +65,14 @@ pub enum ControllerSpec {
         r: f64,
         /// Command saturation \[deg\].
         max_tilt_deg: f64,
+        /// The state estimator ([`StateSource::Estimator`]; name
+        /// "fmpc-est"); absent: finite differences (the paper's §VI set-up,
+        /// name "fmpc").
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        estimator: Option<EstimatorSettings>,
     },
     /// PD on the closest path point and the desired velocity ([`Pd`]),
-    /// finite-difference velocity.
+    /// finite-difference velocity or a state estimator's (`estimator`).
     Pd {
         /// Position gain k_p \[1/s²\].
         kp: f64,
@@ -54,26 +80,60 @@ pub enum ControllerSpec {
         kd: f64,
         /// Command saturation (and acceleration limit g·tan) \[deg\].
         max_tilt_deg: f64,
+        /// The state estimator (name "pd-est"); absent: finite
+        /// differences (name "pd").
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        estimator: Option<EstimatorSettings>,
     },
 }
 
 impl ControllerSpec {
-    /// The controller's short name, as its [`Controller::name`]:
-    /// "df-mpc", "fmpc" or "pd".
+    /// The controller's short name: "df-mpc", "fmpc" or "pd" (as its
+    /// [`Controller::name`]), "fmpc-est" or "pd-est" for the baselines fed
+    /// by the state estimator.
     pub fn name(&self) -> &'static str {
         match self {
             Self::DfMpc { .. } => "df-mpc",
-            Self::Fmpc { .. } => "fmpc",
-            Self::Pd { .. } => "pd",
+            Self::DfMrSmooth { .. } => "df-mr-smooth",
+            Self::Fmpc {
+                estimator: None, ..
+            } => "fmpc",
+            Self::Fmpc { .. } => "fmpc-est",
+            Self::Pd {
+                estimator: None, ..
+            } => "pd",
+            Self::Pd { .. } => "pd-est",
         }
     }
 
-    /// The paper's label: "Discrete-Flatness", "Flatness MPC", "PD".
+    /// The paper's label: "Discrete-Flatness", "Flatness MPC", "PD"; the
+    /// estimator-fed baselines add "(estimator)".
     pub fn label(&self) -> &'static str {
         match self {
             Self::DfMpc { .. } => "Discrete-Flatness",
-            Self::Fmpc { .. } => "Flatness MPC",
-            Self::Pd { .. } => "PD",
+            Self::DfMrSmooth { .. } => "Discrete-Flatness (as shipped)",
+            Self::Fmpc {
+                estimator: None, ..
+            } => "Flatness MPC",
+            Self::Fmpc { .. } => "Flatness MPC (estimator)",
+            Self::Pd {
+                estimator: None, ..
+            } => "PD",
+            Self::Pd { .. } => "PD (estimator)",
+        }
+    }
+
+    /// The baseline's state source (finite differences for DF-MPC, which
+    /// has none).
+    fn state_source(&self) -> StateSource {
+        match self {
+            Self::Fmpc {
+                estimator: Some(e), ..
+            }
+            | Self::Pd {
+                estimator: Some(e), ..
+            } => StateSource::Estimator(*e),
+            _ => StateSource::FiniteDifference,
         }
     }
 
@@ -83,6 +143,14 @@ impl ControllerSpec {
             Self::DfMpc { horizon, q, r, .. } | Self::Fmpc { horizon, q, r, .. } => {
                 format!("N = {horizon}, q = {q}, r = {r}")
             }
+            Self::DfMrSmooth {
+                horizon,
+                q,
+                r,
+                smoothness,
+                plan_tilt_deg,
+                ..
+            } => format!("N = {horizon}, q = {q}, r = {r}, s = {smoothness}, plan ≤ {plan_tilt_deg}°"),
             Self::Pd { kp, kd, .. } => format!("kp = {kp}, kd = {kd}"),
         }
     }
@@ -97,6 +165,7 @@ impl ControllerSpec {
             controller: self.name(),
             source,
         };
+        let state = self.state_source();
         Ok(match *self {
             Self::DfMpc {
                 horizon,
@@ -119,11 +188,43 @@ impl ControllerSpec {
                 )
                 .map_err(wrap)?,
             ),
+            Self::DfMrSmooth {
+                horizon,
+                q,
+                r,
+                smoothness,
+                plan_tilt_deg,
+                max_tilt_deg,
+            } => Box::new(
+                DfMpc::new(
+                    model,
+                    DfMpcSettings {
+                        horizon,
+                        tracking_weight: [q; 3],
+                        jerk_weight: [r; 3],
+                        smoothness_weight: [smoothness, smoothness, 0.0],
+                        multi_rate: Some(MultiRateSettings::default()),
+                        constraints: OutputConstraints {
+                            max_tilt: Some(plan_tilt_deg.to_radians()),
+                            ..OutputConstraints::default()
+                        },
+                        saturation: Some(InputSaturation {
+                            max_tilt: max_tilt_deg.to_radians(),
+                            ..InputSaturation::default()
+                        }),
+                        // The lab is deterministic: no wall-clock limit.
+                        solver_time_limit: f64::INFINITY,
+                        ..DfMpcSettings::default()
+                    },
+                )
+                .map_err(wrap)?,
+            ),
             Self::Fmpc {
                 horizon,
                 q,
                 r,
                 max_tilt_deg,
+                ..
             } => Box::new(
                 FlatnessMpc::new(
                     model,
@@ -134,6 +235,7 @@ impl ControllerSpec {
                         max_tilt: Some(max_tilt_deg.to_radians()),
                         // The lab's plants clip each channel the same way.
                         tilt_limit: TiltLimit::PerAxis,
+                        state,
                     },
                 )
                 .map_err(wrap)?,
@@ -142,6 +244,7 @@ impl ControllerSpec {
                 kp,
                 kd,
                 max_tilt_deg,
+                ..
             } => {
                 let tilt = max_tilt_deg.to_radians();
                 Box::new(
@@ -152,6 +255,7 @@ impl ControllerSpec {
                             kd: [kd; 3],
                             max_horizontal_acceleration: 9.81 * tilt.tan(),
                             max_tilt: tilt,
+                            state,
                             ..PdSettings::default()
                         },
                     )

@@ -21,6 +21,7 @@
 //! [`paths::run_paths`] / [`paths::write_paths`].
 
 mod controllers;
+mod fair;
 mod figures;
 pub mod mismatch;
 pub mod noise_sweep;

@@ -84,11 +84,13 @@ impl Default for NoiseSweepConfig {
                     q: 1.0,
                     r: 0.1,
                     max_tilt_deg: tilt,
+                    estimator: None,
                 },
                 ControllerSpec::Pd {
                     kp: 2.0,
                     kd: 2.5,
                     max_tilt_deg: tilt,
+                    estimator: None,
                 },
             ],
         }

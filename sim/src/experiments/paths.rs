@@ -125,8 +125,10 @@ impl Default for Tuning {
                 kp,
                 kd,
                 max_tilt_deg: tilt,
+                estimator: None,
             });
         }
+        candidates.extend(super::fair::estimator_candidates(tilt));
         Self {
             speeds: vec![5.0, 9.0],
             trials: 3,
@@ -215,8 +217,12 @@ impl PathsConfig {
                     kp: 3.0,
                     kd: 3.0,
                     max_tilt_deg: tilt,
+                    estimator: None,
                 },
-            ],
+            ]
+            .into_iter()
+            .chain(super::fair::fair_controllers(tilt))
+            .collect(),
             tuning: None,
             dsl: true,
             dsl_altitude: -20.0,
@@ -445,19 +451,21 @@ impl PathsResult {
     /// saturated share per controller.
     pub fn table(&self) -> String {
         let mut s = format!(
-            "{:>6} | {:<7} | {:>7} {:>7} {:>7} | {:>9} | {:>6} | {:>5}\n",
-            "speed", "ctrl", "median", "p95", "max", "|du| deg", "sat %", "div"
+            "{:>6} | {:<12} | {:>7} {:>7} {:>7} {:>7} | {:>9} | {:>6} | {:>5}\n",
+            "speed", "ctrl", "mean", "median", "p95", "max", "|du| deg", "sat %", "div"
         );
         for &speed in &self.config.speeds {
             for c in &self.controllers {
                 let Some(r) = self.row(c.name(), speed) else {
                     continue;
                 };
-                let (med, p95, max) = r
+                let (mean, med, p95, max) = r
                     .path_error
-                    .map_or((f64::NAN, f64::NAN, f64::NAN), |e| (e.median, e.p95, e.max));
+                    .map_or((f64::NAN, f64::NAN, f64::NAN, f64::NAN), |e| {
+                        (e.mean, e.median, e.p95, e.max)
+                    });
                 s += &format!(
-                    "{speed:>6.1} | {:<7} | {med:>7.3} {p95:>7.3} {max:>7.3} | {:>9.3} | {:>6.1} | {:>2}/{:<2}\n",
+                    "{speed:>6.1} | {:<12} | {mean:>7.3} {med:>7.3} {p95:>7.3} {max:>7.3} | {:>9.3} | {:>6.1} | {:>2}/{:<2}\n",
                     c.name(),
                     r.smoothness_deg,
                     100.0 * r.saturation_share,
@@ -473,7 +481,7 @@ impl PathsResult {
             );
             for c in &t.candidates {
                 s += &format!(
-                    "  {:<7} {:<28} {:>8} {}\n",
+                    "  {:<12} {:<40} {:>8} {}\n",
                     c.spec.name(),
                     c.spec.describe(),
                     c.score
@@ -826,7 +834,13 @@ fn speed_label(v: f64) -> String {
 }
 
 fn color(c: &ControllerSpec, k: usize) -> RGBColor {
-    controller_color(c.name(), k)
+    match c.name() {
+        // Apart from their finite-difference namesakes (blue, green).
+        "fmpc-est" => RGBColor(23, 190, 207),
+        "pd-est" => RGBColor(188, 189, 34),
+        "df-mr-smooth" => RGBColor(148, 103, 189),
+        name => controller_color(name, k),
+    }
 }
 
 /// Writes the JSON and the plots (stems under the plot prefix):

@@ -329,11 +329,13 @@ impl Default for VisionRateConfig {
                     q: 1.0,
                     r: 0.01,
                     max_tilt_deg: tilt,
+                    estimator: None,
                 }),
                 VisionController::Baseline(ControllerSpec::Pd {
                     kp: 3.0,
                     kd: 3.0,
                     max_tilt_deg: tilt,
+                    estimator: None,
                 }),
             ],
         }

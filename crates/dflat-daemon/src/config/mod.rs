@@ -452,6 +452,9 @@ pub struct ControllerConfig {
     /// inside the 5°/tick budget). Box plan-tilt bound only: with
     /// `plan_tilt_bound = "cone"` set it to 0.
     pub max_tilt_rate_deg_s: f64,
+    /// `[controller.estimator]`: the baselines' state source
+    /// ([`EstimatorConfig`]; fmpc and pd only).
+    pub estimator: EstimatorConfig,
 }
 
 impl Default for ControllerConfig {
@@ -483,6 +486,7 @@ impl Default for ControllerConfig {
             disturbance_thrust_scale_range: [0.5, 2.0],
             disturbance_max_step: 1.0,
             max_tilt_rate_deg_s: 150.0,
+            estimator: EstimatorConfig::default(),
         }
     }
 }
@@ -695,9 +699,11 @@ impl Config {
     }
 }
 
+mod estimator;
 mod records;
 mod validate;
 
+pub use estimator::{EstimatorConfig, StateSourceKind};
 pub use records::{MIB, RecordsConfig};
 
 #[cfg(test)]

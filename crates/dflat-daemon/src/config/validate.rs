@@ -190,6 +190,7 @@ impl Config {
             250.0,
         )?;
         v.range("controller.sample_sigma", c.sample_sigma, 1e-4, 1.0)?;
+        c.estimator.validate(&mut v)?;
         v.range(
             "controller.disturbance_bandwidth_hz",
             c.disturbance_bandwidth_hz,
@@ -332,7 +333,7 @@ impl Config {
     }
 }
 
-struct Validator<'a> {
+pub(super) struct Validator<'a> {
     file: &'a Path,
 }
 
@@ -346,7 +347,7 @@ impl Validator<'_> {
         }
     }
 
-    fn range(&mut self, field: &str, x: f64, lo: f64, hi: f64) -> Result<(), ConfigError> {
+    pub(super) fn range(&mut self, field: &str, x: f64, lo: f64, hi: f64) -> Result<(), ConfigError> {
         if x.is_finite() && x >= lo && x <= hi {
             Ok(())
         } else {
