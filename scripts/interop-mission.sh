@@ -152,12 +152,13 @@ ROWS+=("$("$PY" "$OUT/client.py" pymavlink "$GCS_PORT" || STATUS=1)")
 cleanup
 PIDS=()
 
-# 2. MAVProxy's wp module aimed at component 191 (uploads, then exits);
+# 2. MAVProxy's wp module aimed at component 191 (uploads, then exits; its
+#    mav.tlog goes to $OUT);
 #    the start and the MISSION_ITEM_REACHED by pymavlink.
 start_vehicle mavproxy 1e7
-timeout 25 "$MAVPROXY" --master="udpout:127.0.0.1:$GCS_PORT" --source-system=255 \
+(cd "$OUT" && exec timeout 25 "$MAVPROXY" --master="udpout:127.0.0.1:$GCS_PORT" --source-system=255 \
     --target-system=1 --target-component=191 --non-interactive \
-    --cmd="wp load $OUT/mission.txt" >"$OUT/mavproxy.out" 2>&1 &
+    --cmd="wp load $OUT/mission.txt") >"$OUT/mavproxy.out" 2>&1 &
 MP=$!
 for _ in $(seq 200); do
     grep -qE "Sent all|waypoints in" "$OUT/mavproxy.out" 2>/dev/null && break

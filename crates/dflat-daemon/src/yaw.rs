@@ -95,8 +95,8 @@ mod tests {
             let (p, r) = tilt_at_heading(pitch, roll, from, to);
             let a = thrust_axis(pitch, roll, from);
             let b = thrust_axis(p, r, to);
-            for i in 0..3 {
-                prop_assert!((a[i] - b[i]).abs() < 1e-9, "{a:?} vs {b:?}");
+            for (x, y) in a.iter().zip(&b) {
+                prop_assert!((x - y).abs() < 1e-9, "{a:?} vs {b:?}");
             }
             // And back.
             let (p2, r2) = tilt_at_heading(p, r, to, from);

@@ -281,7 +281,8 @@ impl MissionRunner {
                 && self.section_s.get(k).is_some_and(|s| progress >= *s);
             let settled = self.current == self.section_end
                 && self.finished_since.is_some_and(|f| t - f >= END_SETTLE);
-            if !(d <= leg.acceptance || passed || settled) {
+            let reached = d <= leg.acceptance || passed || settled;
+            if !reached {
                 break;
             }
             up.reached.push(leg.seq);

@@ -12,6 +12,9 @@ use crate::yaw::tilt_at_heading;
 
 const DT: f64 = 0.02;
 
+/// One tick's plan and command.
+type Tick = (Option<[[f64; 3]; 4]>, Option<AttitudeCommand>);
+
 /// PX4 armed, in POSCTL (standby) or OFFBOARD (engaged).
 fn mode(offboard: bool) -> dflat_link::AutopilotMode {
     dflat_link::AutopilotMode {
@@ -34,11 +37,7 @@ fn truth(k: u64) -> ([f64; 2], [f64; 3]) {
 /// Flies 150 ticks (50 in standby, then engaged with a setpoint at tick
 /// 60 carrying `setpoint_yaw`); the measured heading is `heading(k)`.
 /// Returns every tick's (plan, command).
-fn run(
-    yaw_mode: YawMode,
-    heading: impl Fn(u64) -> f64,
-    setpoint_yaw: Option<f64>,
-) -> Vec<(Option<[[f64; 3]; 4]>, Option<AttitudeCommand>)> {
+fn run(yaw_mode: YawMode, heading: impl Fn(u64) -> f64, setpoint_yaw: Option<f64>) -> Vec<Tick> {
     let mut cfg = Config::default();
     cfg.vehicle.yaw_mode = yaw_mode;
     let controller = build_controller(&cfg).unwrap();
@@ -92,10 +91,7 @@ fn run(
         .collect()
 }
 
-fn largest_plan_difference(
-    a: &[(Option<[[f64; 3]; 4]>, Option<AttitudeCommand>)],
-    b: &[(Option<[[f64; 3]; 4]>, Option<AttitudeCommand>)],
-) -> f64 {
+fn largest_plan_difference(a: &[Tick], b: &[Tick]) -> f64 {
     let mut worst: f64 = 0.0;
     for ((pa, _), (pb, _)) in a.iter().zip(b) {
         let (Some(pa), Some(pb)) = (pa, pb) else {
@@ -103,8 +99,8 @@ fn largest_plan_difference(
             continue;
         };
         for (x, y) in pa.iter().zip(pb) {
-            for i in 0..3 {
-                worst = worst.max((x[i] - y[i]).abs());
+            for (u, v) in x.iter().zip(y) {
+                worst = worst.max((u - v).abs());
             }
         }
     }

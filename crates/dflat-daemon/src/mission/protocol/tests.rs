@@ -188,7 +188,7 @@ fn out_of_sequence_items_are_ignored_and_a_retry_resumes() {
             .messages
             .is_empty()
     );
-    assert_eq!(said(&p.poll(0.0 + ITEM_TIMEOUT)), [Said::Request(0)]);
+    assert_eq!(said(&p.poll(ITEM_TIMEOUT)), [Said::Request(0)]);
     p.handle(&wp(0, 1.0, MavCmd::MAV_CMD_NAV_WAYPOINT), GCS, 1.6);
     // A duplicate of item 0 (our request crossed it) is ignored too.
     assert!(
