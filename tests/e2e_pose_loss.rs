@@ -34,7 +34,7 @@ fn attitude_targets(tap: &Receiver<TapFrame>) -> Vec<Instant> {
 }
 
 #[test]
-fn pose_loss_stops_the_stream_within_200_ms_and_pose_return_resumes_it() {
+fn pose_loss_stops_the_stream_after_the_level_hover_and_pose_return_resumes_it() {
     let dir = scratch("poseloss");
     let text = format!(
         r#"

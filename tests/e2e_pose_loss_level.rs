@@ -111,13 +111,17 @@ command_timeout_s = 1.0
         .iter()
         .map(|s| speed(s.velocity) - v0)
         .fold(f64::NEG_INFINITY, f64::max);
-    let dv: Vec<f64> = (0..3).map(|i| last.velocity[i] - first.velocity[i]).collect();
+    let dv: Vec<f64> = (0..3)
+        .map(|i| last.velocity[i] - first.velocity[i])
+        .collect();
     let velocity_change = speed([dv[0], dv[1], dv[2]]);
 
     let targets: Vec<(f64, f64)> = tap
         .try_iter()
         .filter_map(|f| match &f.message {
-            MavMessage::SET_ATTITUDE_TARGET(d) if f.header.component_id == cfg.link.component_id => {
+            MavMessage::SET_ATTITUDE_TARGET(d)
+                if f.header.component_id == cfg.link.component_id =>
+            {
                 let after = if f.at >= paused {
                     (f.at - paused).as_secs_f64()
                 } else {
@@ -193,7 +197,12 @@ fn losing_pose_while_accelerating_leaves_a_level_vehicle() {
         loss.speed_gain
     );
     eprintln!(
-        "speed gained in the 2 s after the loss: {:.2} m/s (brake, level, stream off) vs {:.2} m/s (silent at once); largest command tilt after the loss {:.1}°",
-        loss.speed_gain, before.speed_gain, loss.max_command_tilt_after
+        "speed gained in the 2 s after the loss: {:.2} m/s (brake, level, stream off) vs {:.2} m/s (silent at once); \
+         |Δv| over the 2 s {:.2} vs {:.2} m/s; largest command tilt after the loss {:.1}°",
+        loss.speed_gain,
+        before.speed_gain,
+        loss.velocity_change,
+        before.velocity_change,
+        loss.max_command_tilt_after
     );
 }

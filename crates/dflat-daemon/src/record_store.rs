@@ -252,7 +252,10 @@ pub fn write_summary(
     }
     let mib = |b: u64| b as f64 / crate::config::MIB;
     if let Some(why) = &r.off_at_start {
-        write!(f, "\n  records       OFF at start, flew without them: {why}")?;
+        write!(
+            f,
+            "\n  records       OFF at start, flew without them: {why}"
+        )?;
     }
     let quota = r
         .max_bytes
@@ -311,7 +314,11 @@ mod tests {
         assert_eq!(plan_pruning(&flights, 150, 100), vec![0], "50 + 100 fits");
         assert_eq!(plan_pruning(&flights, 130, 100), vec![0, 1]);
         assert_eq!(plan_pruning(&flights, 100, 100), vec![0, 1, 2]);
-        assert_eq!(plan_pruning(&flights, 50, 100), vec![0, 1, 2], "never more than all");
+        assert_eq!(
+            plan_pruning(&flights, 50, 100),
+            vec![0, 1, 2],
+            "never more than all"
+        );
         assert!(plan_pruning(&[], 10, 100).is_empty());
     }
 

@@ -270,7 +270,11 @@ mod tests {
         assert!(!f.write_record(b"row\n"));
         let s = f.stats();
         assert_eq!((s.records, s.write_errors, s.error_dropped), (0, 1, 2));
-        assert_eq!(budget.used(), 0, "nothing reserved for what was not written");
+        assert_eq!(
+            budget.used(),
+            0,
+            "nothing reserved for what was not written"
+        );
         assert_eq!(budget.take_notices(), NOTICE_DISK);
         assert_eq!(budget.take_notices(), 0);
     }

@@ -121,8 +121,8 @@ impl TiltSincePose {
             let from = t0.max(since);
             if arrival > from {
                 let dt = arrival - from;
-                for i in 0..2 {
-                    self.integral[i] += 0.5 * (a0[i] + attitude[i]) * dt;
+                for (acc, (a, b)) in self.integral.iter_mut().zip(a0.iter().zip(attitude)) {
+                    *acc += 0.5 * (a + b) * dt;
                 }
             }
         }
@@ -231,7 +231,9 @@ impl ControlCore {
         if t - level.since + 0.5 * self.period >= max {
             self.failsafe_level = None;
             if max > 0.0 {
-                info!("failsafe level hover over: attitude stream off, the autopilot's failsafe takes over");
+                info!(
+                    "failsafe level hover over: attitude stream off, the autopilot's failsafe takes over"
+                );
                 self.text(
                     MavSeverity::MAV_SEVERITY_CRITICAL,
                     "dflat: level hover over, stream off",
@@ -308,9 +310,9 @@ mod tests {
             let (c, time) = brake_command(integral, attitude, tau, k, max_tilt, 0.5).unwrap();
             assert!(c[0].hypot(c[1]) <= max_tilt + 1e-12);
             assert!((BRAKE_TIME..=0.5).contains(&time));
-            for axis in 0..2 {
-                let rest = simulated_integral(attitude[axis], c[axis], time, tau, k);
-                let total = integral[axis] + rest;
+            for (axis, ((theta0, cmd), before)) in attitude.iter().zip(c).zip(integral).enumerate()
+            {
+                let total = before + simulated_integral(*theta0, cmd, time, tau, k);
                 assert!(total.abs() < 1e-3, "axis {axis}: ∫θ dt left {total}");
             }
         }
@@ -332,7 +334,10 @@ mod tests {
         s.on_attitude(0.1, [0.2, -0.1]);
         let (i, a) = s.at(0.2).unwrap();
         // 0.1 s trapezoid (0.2 / −0.05 mean) + 0.1 s held at the newest.
-        assert!((i[0] - 0.04).abs() < 1e-12 && (i[1] + 0.015).abs() < 1e-12, "{i:?}");
+        assert!(
+            (i[0] - 0.04).abs() < 1e-12 && (i[1] + 0.015).abs() < 1e-12,
+            "{i:?}"
+        );
         assert_eq!(a, [0.2, -0.1]);
         s.on_pose(0.15);
         let (i, _) = s.at(0.25).unwrap();

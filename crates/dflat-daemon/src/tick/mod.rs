@@ -400,18 +400,18 @@ impl ControlCore {
         if self.control_failsafe && self.supervisor.state() == FlightState::Failsafe {
             self.trial(t);
         }
-        let mut command = None;
         let mut solve_us = None;
-        if self.supervisor.state().streams()
+        let command = if self.supervisor.state().streams()
             && let Some(pose) = self.pose
             && self.reference.is_some()
         {
             let (sent, us) = self.control(t, pose, stopwatch, &mut row);
-            command = sent;
             solve_us = Some(us);
+            sent
         } else {
-            command = self.failsafe_level_tick(t, &mut row);
-        }
+            // A failsafe's brake and level hover, while due.
+            self.failsafe_level_tick(t, &mut row)
+        };
         self.mission_tick(t);
         row.state = self.supervisor.state();
         StepOutput {

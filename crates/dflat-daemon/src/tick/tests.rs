@@ -435,18 +435,27 @@ fn losing_pose_while_engaged_streams_level_hover_then_stops() {
     let timeout_ticks = (cfg.safety.pose_timeout_ms / 1000.0 / DT).round() as u64;
     let level_ticks = (cfg.safety.level_hover_max_ms / 1000.0 / DT).round() as usize;
     // The pose stops after tick 49.
-    let lost: Vec<StepOutput> = (50..50 + 120).map(|k| step_without_pose(&mut core, k)).collect();
+    let lost: Vec<StepOutput> = (50..50 + 120)
+        .map(|k| step_without_pose(&mut core, k))
+        .collect();
     let failsafe_at = lost
         .iter()
         .position(|o| o.transitions.iter().any(|t| t.to == FlightState::Failsafe))
         .expect("failsafe on stale pose");
-    assert!(failsafe_at as u64 <= timeout_ticks, "failsafe at {failsafe_at}");
+    assert!(
+        failsafe_at as u64 <= timeout_ticks,
+        "failsafe at {failsafe_at}"
+    );
     // From the failsafe tick on: level, at hover thrust, yaw kept, then silence.
     let level: Vec<&StepOutput> = lost[failsafe_at..]
         .iter()
         .take_while(|o| o.command.is_some())
         .collect();
-    assert_eq!(level.len(), level_ticks, "one level command per tick for level_hover_max_ms");
+    assert_eq!(
+        level.len(),
+        level_ticks,
+        "one level command per tick for level_hover_max_ms"
+    );
     for o in &level {
         let c = o.command.as_ref().unwrap().command;
         assert_eq!((c.roll, c.pitch, c.yaw), (0.0, 0.0, 0.0));
@@ -455,7 +464,9 @@ fn losing_pose_while_engaged_streams_level_hover_then_stops() {
         assert_eq!(o.row.state, FlightState::Failsafe);
     }
     assert!(
-        lost[failsafe_at + level_ticks..].iter().all(|o| o.command.is_none()),
+        lost[failsafe_at + level_ticks..]
+            .iter()
+            .all(|o| o.command.is_none()),
         "the stream stops after the level hover"
     );
     assert_eq!(lost[failsafe_at + level_ticks].row.guard, Some("let_go"));
@@ -471,8 +482,18 @@ fn losing_pose_while_engaged_streams_level_hover_then_stops() {
             .collect::<Vec<_>>()
     };
     let all: Vec<String> = lost.iter().flat_map(texts).collect();
-    assert_eq!(all.iter().filter(|t| t.contains("level hover then stream off")).count(), 1);
-    assert_eq!(all.iter().filter(|t| t.contains("level hover over")).count(), 1);
+    assert_eq!(
+        all.iter()
+            .filter(|t| t.contains("level hover then stream off"))
+            .count(),
+        1
+    );
+    assert_eq!(
+        all.iter()
+            .filter(|t| t.contains("level hover over"))
+            .count(),
+        1
+    );
     // The pose returns: streaming again.
     let back = fly_from(&mut core, 170, 5);
     assert!(back.iter().any(|o| o.command.is_some()));
@@ -502,5 +523,7 @@ fn without_level_hover_pose_loss_goes_silent_at_once() {
 
 /// Ticks `from..from + n` with fresh poses.
 fn fly_from(core: &mut ControlCore, from: u64, n: u64) -> Vec<StepOutput> {
-    (from..from + n).map(|k| step_at(core, k, None, vec![])).collect()
+    (from..from + n)
+        .map(|k| step_at(core, k, None, vec![]))
+        .collect()
 }
