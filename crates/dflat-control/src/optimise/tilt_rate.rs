@@ -140,6 +140,7 @@ impl TiltRate {
     /// first-stage interval. `shrink` = 1: the funnel's witness, on the
     /// rows' boundary while it ramps; < 1: strictly inside the rate rows
     /// (the interior point's start).
+    #[allow(clippy::too_many_arguments)] // the problem's data, as `funnel`
     pub(crate) fn witness(
         &self,
         horizon: usize,

@@ -23,8 +23,8 @@ fn cost(
     let n = plan.len() - 1;
     let a = |j: usize| (plan[j + 2] - 2.0 * plan[j + 1] + plan[j]) / (DT * DT);
     let mut c = 0.0;
-    for j in 0..=n {
-        c += q * (plan[j] - reference[j]).powi(2);
+    for (y, yr) in plan.iter().zip(reference) {
+        c += q * (y - yr).powi(2);
     }
     for j in 0..=n - 3 {
         let d3 = plan[j + 3] - 3.0 * plan[j + 2] + 3.0 * plan[j + 1] - plan[j];
@@ -97,8 +97,8 @@ proptest::proptest! {
             cost((q, r), &smoothness, sent, &reference, &got),
         );
         proptest::prop_assert!(cg <= cw + 1e-7 * (1.0 + cw.abs()), "banded cost {cg} above clarabel's {cw}");
-        for j in 0..=10 {
-            proptest::prop_assert!((got[j] - want[j]).abs() <= 1e-5, "y_{j}: {} vs {}", got[j], want[j]);
+        for (j, (g, w)) in got.iter().zip(&want).take(11).enumerate() {
+            proptest::prop_assert!((g - w).abs() <= 1e-5, "y_{j}: {g} vs {w}");
         }
         let mut steps = Vec::new();
         let mut first = [0.0; 2];

@@ -448,8 +448,8 @@ pub struct ControllerConfig {
     /// this times δt per tick, the first one against the command sent at
     /// the previous tick, so no goal change makes the command jump
     /// (docs/controllers.md, "The tilt-rate bound"). Default 150 (3° per
-    /// tick at 50 Hz on each NED axis; ≤ 4.3° on pitch or roll at any yaw,
-    /// inside the 5°/tick budget). Box plan-tilt bound only: with
+    /// tick at 50 Hz on each NED axis; pitch and roll measured ≤ 4.5° per
+    /// tick after 10 and 20 m diagonal steps, inside the 5°/tick budget). Box plan-tilt bound only: with
     /// `plan_tilt_bound = "cone"` set it to 0.
     pub max_tilt_rate_deg_s: f64,
     /// `[controller.estimator]`: the baselines' state source
