@@ -321,12 +321,12 @@ mod tests {
             );
         }
         let a = answer(
-            &req(MavCmd::MAV_CMD_REQUEST_MESSAGE, 245.0, 0.0, (1, 1)),
+            &req(MavCmd::MAV_CMD_REQUEST_MESSAGE, 77.0, 0.0, (1, 1)),
             &CTX,
         )
         .unwrap();
         assert_eq!(a.result, MavResult::MAV_RESULT_DENIED);
-        assert!(a.reason.unwrap().contains("245"));
+        assert!(a.reason.unwrap().contains("77"));
         let paused = CommandContext {
             pose_available: false,
             ..CTX

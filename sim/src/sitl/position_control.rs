@@ -138,17 +138,16 @@ pub fn acceleration(
     position: [f64; 3],
     velocity: [f64; 3],
 ) -> [f64; 3] {
-    let mut a = [0.0; 3];
-    for i in 0..3 {
+    let mut a: [f64; 3] = std::array::from_fn(|i| {
         let (kp, kd) = if i < 2 {
             (gains.kp_xy, gains.kd_xy)
         } else {
             (gains.kp_z, gains.kd_z)
         };
-        a[i] = target.acceleration[i]
+        target.acceleration[i]
             + kp * (target.position[i] - position[i])
-            + kd * (target.velocity[i] - velocity[i]);
-    }
+            + kd * (target.velocity[i] - velocity[i])
+    });
     let max_h = g * gains.max_tilt_deg.to_radians().tan();
     let h = a[0].hypot(a[1]);
     if h > max_h {
@@ -387,7 +386,7 @@ mod tests {
                 .is_err()
         );
         d.x = 0.0;
-        d.coordinate_frame = MavFrame::MAV_FRAME_BODY_NED;
+        d.coordinate_frame = MavFrame::MAV_FRAME_BODY_FRD;
         assert!(
             position_target(&MavMessage::SET_POSITION_TARGET_LOCAL_NED(d))
                 .unwrap()

@@ -322,7 +322,7 @@ fn reposition_target(shared: &Shared, msg: &MavMessage) -> Option<[f64; 3]> {
     };
     let goal = shared.px4.origin.local(lat, lon, alt)?;
     // Farther than 10 km from the origin is a wrong origin, not a goto.
-    (goal.iter().all(|x| x.abs() < 10_000.0)).then_some(goal)
+    goal.iter().all(|x| x.abs() < 10_000.0).then_some(goal)
 }
 
 fn command(shared: &Shared, link: Link, req: &CommandRequest) {
