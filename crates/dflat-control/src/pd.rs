@@ -262,6 +262,11 @@ impl Controller for Pd {
         } else {
             measurement.position
         };
+        // One control step of the reference first: a path's start ramp
+        // advances only with `horizon` (its speed would stay at the ramp's
+        // v0 = 0 and PD would hover at the start).
+        let mut step = [Vector3::zeros()];
+        reference.horizon(&y, self.dt, &mut step);
         let (p_ref, v_ref) = reference.closest(&y);
         if !(p_ref.iter().chain(v_ref.iter()).all(|c| c.is_finite())) {
             return Err(ControlError::NonFiniteReference);

@@ -3,10 +3,10 @@
 use std::sync::Arc;
 
 use dflat_control::dfmpc::{DfMpc, DfMpcSettings, InputSaturation, OutputConstraints};
-use dflat_control::window::MultiRateSettings;
 use dflat_control::estimator::{EstimatorSettings, StateSource};
 use dflat_control::fmpc::{FlatnessMpc, FmpcSettings};
 use dflat_control::pd::{Pd, PdSettings};
+use dflat_control::window::MultiRateSettings;
 use dflat_control::{
     ControlError, ControlModel, Controller, Measurement, ReferenceSource, TickOutput, TiltLimit,
 };
@@ -150,7 +150,9 @@ impl ControllerSpec {
                 smoothness,
                 plan_tilt_deg,
                 ..
-            } => format!("N = {horizon}, q = {q}, r = {r}, s = {smoothness}, plan ≤ {plan_tilt_deg}°"),
+            } => format!(
+                "N = {horizon}, q = {q}, r = {r}, s = {smoothness}, plan ≤ {plan_tilt_deg}°"
+            ),
             Self::Pd { kp, kd, .. } => format!("kp = {kp}, kd = {kd}"),
         }
     }

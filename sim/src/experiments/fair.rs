@@ -56,7 +56,7 @@ pub(crate) fn fair_controllers(tilt: f64) -> Vec<ControllerSpec> {
 /// Flatness MPC (estimator) jerk weight chosen by the search.
 const FMPC_EST_R: f64 = 0.01;
 /// PD (estimator) gains (k_p, k_d) chosen by the search.
-const PD_EST_GAINS: (f64, f64) = (3.0, 3.0);
+const PD_EST_GAINS: (f64, f64) = (6.0, 5.0);
 
 /// The weight search's candidates for the estimator-fed baselines: the
 /// finite-difference ones' grids, widened by one step each way (the

@@ -118,6 +118,7 @@ impl Default for Tuning {
                 q: 1.0,
                 r,
                 max_tilt_deg: tilt,
+                estimator: None,
             });
         }
         for (kp, kd) in [(1.0, 1.6), (2.0, 2.5), (3.0, 3.0), (4.0, 4.0)] {
@@ -212,6 +213,7 @@ impl PathsConfig {
                     q: 1.0,
                     r: 0.01,
                     max_tilt_deg: tilt,
+                    estimator: None,
                 },
                 ControllerSpec::Pd {
                     kp: 3.0,

@@ -65,7 +65,10 @@ fn transition_matches_a_numerical_integration_of_the_model() {
             let k4 = rhs(x + k3 * dt);
             x += (k1 + k2 * 2.0 + k3 * 2.0 + k4) * (dt / 6.0);
         }
-        assert!((exact - x).norm() < 1e-9, "λ {lambda} h {h}: {exact} vs {x}");
+        assert!(
+            (exact - x).norm() < 1e-9,
+            "λ {lambda} h {h}: {exact} vs {x}"
+        );
     }
 }
 
@@ -113,7 +116,13 @@ fn bad_settings_and_samples_are_refused_and_change_nothing() {
         Err(SampleRejected::NonFinite)
     );
     assert_eq!(e.estimate_at(1.2).unwrap(), before);
-    assert_eq!(e.counts(), EstimatorCounts { used: 2, rejected: 2 });
+    assert_eq!(
+        e.counts(),
+        EstimatorCounts {
+            used: 2,
+            rejected: 2
+        }
+    );
 }
 
 #[test]
@@ -154,7 +163,10 @@ fn inputs_sent_after_the_newest_sample_move_the_estimate() {
     let a = aware.estimate_at(t_last + 0.2).unwrap();
     let p = plain.estimate_at(t_last + 0.2).unwrap();
     // a(t) = 3 (1 − e^{−t/τ}) over 0.19 s: 1.8 m/s².
-    assert!((a[0][2] - 3.0 * (1.0 - (-0.19f64 / 0.2).exp())).abs() < 0.05, "{a:?}");
+    assert!(
+        (a[0][2] - 3.0 * (1.0 - (-0.19f64 / 0.2).exp())).abs() < 0.05,
+        "{a:?}"
+    );
     assert!(a[0][1] > 0.15, "{a:?}");
     assert!(p[0][2].abs() < 0.05 && p[0][1].abs() < 0.05, "{p:?}");
 }

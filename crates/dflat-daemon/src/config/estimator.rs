@@ -3,8 +3,8 @@
 use dflat_control::estimator::{EstimatorSettings, StateSource};
 use serde::{Deserialize, Serialize};
 
-use super::{ConfigError, ControllerConfig, VehicleConfig};
 use super::validate::Validator;
+use super::{ConfigError, ControllerConfig, VehicleConfig};
 
 /// Where the baselines (`kind = "fmpc"`, `"pd"`) take their state from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
@@ -52,11 +52,16 @@ impl Default for EstimatorConfig {
 
 impl EstimatorConfig {
     /// The baselines' state source for this configuration.
-    pub fn state_source(&self, controller: &ControllerConfig, vehicle: &VehicleConfig) -> StateSource {
+    pub fn state_source(
+        &self,
+        controller: &ControllerConfig,
+        vehicle: &VehicleConfig,
+    ) -> StateSource {
         match self.state_source {
             StateSourceKind::FiniteDifference => StateSource::FiniteDifference,
             StateSourceKind::Estimator => {
-                let mut s = EstimatorSettings::for_sensor(controller.sample_sigma, self.pose_rate_hz);
+                let mut s =
+                    EstimatorSettings::for_sensor(controller.sample_sigma, self.pose_rate_hz);
                 if self.jerk_psd > 0.0 {
                     s.jerk_psd = self.jerk_psd;
                 }
@@ -67,7 +72,12 @@ impl EstimatorConfig {
     }
 
     pub(super) fn validate(&self, v: &mut Validator<'_>) -> Result<(), ConfigError> {
-        v.range("controller.estimator.pose_rate_hz", self.pose_rate_hz, 1.0, 400.0)?;
+        v.range(
+            "controller.estimator.pose_rate_hz",
+            self.pose_rate_hz,
+            1.0,
+            400.0,
+        )?;
         if self.jerk_psd != 0.0 {
             v.range("controller.estimator.jerk_psd", self.jerk_psd, 1e-3, 1e6)?;
         }

@@ -347,7 +347,13 @@ impl Validator<'_> {
         }
     }
 
-    pub(super) fn range(&mut self, field: &str, x: f64, lo: f64, hi: f64) -> Result<(), ConfigError> {
+    pub(super) fn range(
+        &mut self,
+        field: &str,
+        x: f64,
+        lo: f64,
+        hi: f64,
+    ) -> Result<(), ConfigError> {
         if x.is_finite() && x >= lo && x <= hi {
             Ok(())
         } else {
