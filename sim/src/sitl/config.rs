@@ -234,6 +234,9 @@ pub struct SitlConfig {
     /// optional `mode` (`position` / `offboard`) and optional `velocity`
     /// (stick, local NED m/s, flown in position mode).
     pub pilot: Vec<PilotAction>,
+    /// Linear aerodynamic drag of the plant \[1/s\] on every axis (0–2,
+    /// default 0): `v̇ = … − drag·v`. The truth `dflat identify` should find.
+    pub drag: f64,
 }
 
 impl Default for SitlConfig {
@@ -261,6 +264,7 @@ impl Default for SitlConfig {
             autopilot: SitlAutopilot::Px4,
             engage: SitlEngage::Auto,
             pilot: Vec::new(),
+            drag: 0.0,
         }
     }
 }
@@ -296,6 +300,7 @@ impl SitlConfig {
         range("sitl.hover_thrust", si.hover_thrust, 0.05, 0.95)?;
         range("sitl.tau_thrust", si.tau_thrust, 0.005, 1.0)?;
         range("sitl.command_delay_ms", si.command_delay_ms, 0.0, 500.0)?;
+        range("sitl.drag", si.drag, 0.0, 2.0)?;
         range("sitl.pose_clock_rate", si.pose_clock_rate, 0.1, 10.0)?;
         range("sitl.mass_factor", si.mass_factor, 0.5, 2.0)?;
         range("sitl.noise_sigma", si.noise_sigma, 0.0, 1.0)?;

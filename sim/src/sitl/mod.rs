@@ -439,6 +439,7 @@ pub fn plant_options(cfg: &SitlSettings) -> PlantOptions {
         thrust_tau: s.tau_thrust,
         command_delay: s.command_delay_ms / 1000.0,
         mass_factor: s.mass_factor,
+        drag: s.drag,
         ..PlantOptions::default()
     }
 }

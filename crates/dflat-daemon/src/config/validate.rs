@@ -65,6 +65,9 @@ impl Config {
         v.range("vehicle.max_tilt_deg", ve.max_tilt_deg, 1.0, 60.0)?;
         v.range("vehicle.thrust_value", ve.thrust_value, 0.0, 1.0)?;
         v.range("vehicle.hover_thrust", ve.hover_thrust, 0.05, 0.95)?;
+        v.range("vehicle.drag_h", ve.drag_h, 0.0, 2.0)?;
+        v.range("vehicle.drag_v", ve.drag_v, 0.0, 2.0)?;
+        v.range("vehicle.delay_ms", ve.delay_ms, 0.0, 500.0)?;
         if ve.model == ModelKind::Spatial && ve.thrust_mode == ThrustMode::Fixed {
             return Err(v.err(
                 "vehicle.thrust_mode",
