@@ -208,12 +208,15 @@ fn fly_l_path_on(name: &str, vehicle: &str, plant: &str) -> f64 {
 #[test]
 fn identifies_drag_and_delay_and_flies_as_well_as_a_matched_plant() {
     let spatial = "[vehicle]\nmodel = \"spatial\"\nthrust_mode = \"normalized\"\n";
-    let (_, found) = identify_flight(
-        "identify-drag",
-        "",
-        &format!("{DRAG_PLANT}noise_sigma = 0.005\n"),
-        17,
+    let name = "identify-drag";
+    let config = format!(
+        "{DAEMON}{}\n[sitl]\n{DRAG_PLANT}noise_sigma = 0.005\n",
+        manoeuvre_mission([0.0, 0.0, -10.0])
     );
+    fly_in_process(name, &config, Duration::from_secs(17));
+    let log = FlightLog::read_tlog(&tlog_in(&scratch_dir(name))).expect("tlog");
+    let found = identify::identify(&log).expect("identify");
+    eprintln!("{name}:\n{}", found.report(name, None));
     let Some(drag) = found.drag_estimate() else {
         panic!("drag not identified: {:?}", found.drag)
     };
