@@ -165,3 +165,96 @@ fn the_identified_configuration_flies_the_l_path_better() {
         "identified {after:.3} m vs default {before:.3} m"
     );
 }
+
+/// A plant closer to a real airframe: linear drag 0.3 /s, a fast attitude
+/// loop (τ 0.08 s) and a 40 ms pure command delay, hover 0.42, k̃ 0.8.
+const DRAG_PLANT: &str = r#"
+plant = "spatial"
+k = 0.8
+tau = 0.08
+command_delay_ms = 40.0
+hover_thrust = 0.42
+drag = 0.3
+start = [0.0, 0.0, -10.0]
+"#;
+
+/// Cross-track p95 \[m\] of the L path at 5 m/s with `vehicle` on `plant`.
+fn fly_l_path_on(name: &str, vehicle: &str, plant: &str) -> f64 {
+    let config = format!(
+        "[logging]\ndir = \"@DIR@\"\ntlog = true\n{vehicle}\n[mission]\nstart = \"path\"\n\
+         path = [[0.0, 0.0, -10.0], [15.0, 0.0, -10.0], [15.0, 15.0, -10.0]]\nspeed = 5.0\n\
+         [sitl]\n{plant}"
+    );
+    let flight = fly_in_process(name, &config, Duration::from_secs(10));
+    let errors: Vec<f64> = flight
+        .report
+        .trace
+        .iter()
+        .filter(|s| s.mode == SitlMode::Offboard)
+        .map(|s| path_distance(&L_PATH, s.position))
+        .collect();
+    assert!(
+        errors.len() > 200,
+        "{name}: {} offboard samples",
+        errors.len()
+    );
+    quantile(&errors, 0.95)
+}
+
+/// Drag and delay identified as their own terms (drag within 10 %, delay
+/// within one control tick), and the identified configuration flown on
+/// that plant tracks within 1.2× of the plant that matches the default
+/// model exactly.
+#[test]
+#[ignore = "not met yet: drag 0.334 ± 0.016 /s against the truth 0.3 (11.5 %, budget 10 %): the \
+            drag fit takes thrust·R33 = g and the manoeuvre climbs ±1.5 m; the L-path budget \
+            has not been flown"]
+fn identifies_drag_and_delay_and_flies_as_well_as_a_matched_plant() {
+    let spatial = "[vehicle]\nmodel = \"spatial\"\nthrust_mode = \"normalized\"\n";
+    let name = "identify-drag";
+    let config = format!(
+        "{DAEMON}{}\n[sitl]\n{DRAG_PLANT}noise_sigma = 0.005\n",
+        manoeuvre_mission([0.0, 0.0, -10.0])
+    );
+    fly_in_process(name, &config, Duration::from_secs(17));
+    let log = FlightLog::read_tlog(&tlog_in(&scratch_dir(name))).expect("tlog");
+    let found = identify::identify(&log).expect("identify");
+    eprintln!("{name}:\n{}", found.report(name, None));
+    let Some(drag) = found.drag_estimate() else {
+        panic!("drag not identified: {:?}", found.drag)
+    };
+    assert_within("identify-drag", "drag", drag.value, 0.3, 0.10);
+    assert!(
+        drag.ci.is_finite() && (drag.value - 0.3).abs() <= drag.ci.max(0.03),
+        "interval {drag:?} vs truth 0.3"
+    );
+    let delay_ms = found.delay.value * 1e3;
+    eprintln!("identify-drag: delay {delay_ms:.1} ms (truth 40 ms)");
+    assert!((delay_ms - 40.0).abs() <= 20.0, "delay {delay_ms:.1} ms");
+    assert_within("identify-drag", "τ", found.tau.value, 0.08, 0.15);
+
+    let snippet = found.vehicle_snippet("identify-drag", None);
+    eprintln!("{snippet}");
+    let tuned = snippet.replace(
+        "[vehicle]\n",
+        "[vehicle]\nmodel = \"spatial\"\nthrust_mode = \"normalized\"\n",
+    );
+    // The plant equal to the default model: τ 0.2, k̃ 1, hover 0.5, no
+    // delay, no drag.
+    let matched = fly_l_path_on(
+        "identify-matched",
+        spatial,
+        "plant = \"spatial\"\nstart = [0.0, 0.0, -10.0]\n",
+    );
+    let before = fly_l_path_on("identify-drag-before", spatial, DRAG_PLANT);
+    let after = fly_l_path_on("identify-drag-after", &tuned, DRAG_PLANT);
+    eprintln!(
+        "L path at 5 m/s: cross-track p95 matched plant {matched:.3} m; drag/delay plant with \
+         the default config {before:.3} m, with the identified config {after:.3} m ({:.2}× matched)",
+        after / matched
+    );
+    assert!(
+        after <= 1.2 * matched,
+        "identified {after:.3} m vs matched {matched:.3} m"
+    );
+}

@@ -25,16 +25,16 @@
 //! v_{k+1} = v_k + δt·(a(θ_k, φ_k, κ·T_k) + d)
 //! ```
 //!
-//! Both maps see the outputs only through second differences `Δ²y_j` (the
-//! accelerations), so the offset is removed by shifting the outputs by a
-//! quadratic with second difference δt²·d, `ỹ_j = y_j − ½·δt²·d·j(j−1)`
-//! (`ỹ_0 = y_0`, `ỹ_1 = y_1`, `ỹ_2 = y_2 − δt²d`, `ỹ_3 = y_3 − 3δt²d`),
-//! and the thrust scale by working in effective thrust κ·T (a linear
-//! first-order lag commutes with the scale):
+//! The offset goes straight into the models' maps (Λ's thrust acceleration
+//! is `Δ²y/δt² + D·Δy/δt − d`, F⁻¹ adds `δt²·d`:
+//! [`dflat_model::PlanarModel::next_output_offset`] and its siblings), exact
+//! with and without the model's linear drag D; the thrust scale by working
+//! in effective thrust κ·T (a linear first-order lag commutes with the
+//! scale):
 //!
 //! ```text
-//! F⁻¹_d(y_0..y_2, u) = F⁻¹(ỹ_0..ỹ_2, [θ_cmd, φ_cmd, κ·T_cmd]) + 3δt²·d
-//! F_d(y_0..y_3)      = F(ỹ_0..ỹ_3) with T_cmd divided by κ
+//! F⁻¹_d(y_0..y_2, u) = F⁻¹ with offset d of (y_0..y_2, [θ_cmd, φ_cmd, κ·T_cmd])
+//! F_d(y_0..y_3)      = F with offset d of (y_0..y_3), T_cmd divided by κ
 //! ```
 //!
 //! With the nominal estimate (d = 0, κ = 1) they call the plain maps, so
@@ -138,11 +138,10 @@ impl ControlModel {
         }
     }
 
-    /// δt²·d: the second difference \[m\] a constant acceleration offset `d`
-    /// \[m/s²\] adds to the outputs (z dropped for the planar model).
-    fn offset_curvature(&self, d: &DisturbanceEstimate) -> Vector3<f64> {
-        let dt = self.dt();
-        let mut q = d.acceleration * (dt * dt);
+    /// The offset d \[m/s²\] the maps add to the step (z dropped for the
+    /// planar model).
+    fn offset(&self, d: &DisturbanceEstimate) -> Vector3<f64> {
+        let mut q = d.acceleration;
         if let ControlModel::Planar(_) = self {
             q.z = 0.0;
         }
@@ -163,13 +162,18 @@ impl ControlModel {
         if d.is_nominal() {
             return self.next_output(y, u);
         }
-        let q = self.offset_curvature(d);
-        let shifted = [y[0], y[1], y[2] - q];
-        let mut u_eff = *u;
-        if let ControlModel::Spatial(_) = self {
-            u_eff.z *= d.thrust_scale;
+        let q = self.offset(d);
+        match self {
+            ControlModel::Planar(m) => {
+                let w = [xy(&y[0]), xy(&y[1]), xy(&y[2])];
+                let n = m.next_output_offset(&w, &Vector2::new(u.x, u.y), &xy(&q))?;
+                Ok(Vector3::new(n.x, n.y, y[2].z))
+            }
+            ControlModel::Spatial(m) => {
+                let u_eff = Vector3::new(u.x, u.y, u.z * d.thrust_scale);
+                m.next_output_offset(y, &u_eff, &q)
+            }
         }
-        Ok(self.next_output(&shifted, &u_eff)? + 3.0 * q)
     }
 
     /// F with a disturbance estimate (see the module docs): the input
@@ -184,16 +188,35 @@ impl ControlModel {
         if d.is_nominal() {
             return self.input_from_outputs(y);
         }
-        let q = self.offset_curvature(d);
-        let shifted = [y[0], y[1], y[2] - q, y[3] - 3.0 * q];
-        let mut u = self.input_from_outputs(&shifted)?;
-        if let ControlModel::Spatial(_) = self {
-            u.z /= d.thrust_scale;
-        }
+        let q = self.offset(d);
+        let u = match self {
+            ControlModel::Planar(m) => {
+                let w = [xy(&y[0]), xy(&y[1]), xy(&y[2]), xy(&y[3])];
+                let u = m.input_from_outputs_offset(&w, &xy(&q))?;
+                Vector3::new(u.x, u.y, m.params().g)
+            }
+            ControlModel::Spatial(m) => {
+                let mut u = m.input_from_outputs_offset(y, &q)?;
+                u.z /= d.thrust_scale;
+                u
+            }
+        };
         if u.iter().all(|v| v.is_finite()) {
             Ok(u)
         } else {
             Err(FlatError::NonFinite("input"))
+        }
+    }
+
+    /// The model's linear drag \[1/s\] per axis, `[D_h, D_h, D_v]` (planar:
+    /// `D_v = 0`): the step subtracts `D·v` from the acceleration.
+    pub fn drag(&self) -> Vector3<f64> {
+        match self {
+            ControlModel::Planar(m) => Vector3::new(m.params().drag_h, m.params().drag_h, 0.0),
+            ControlModel::Spatial(m) => {
+                let p = m.params();
+                Vector3::new(p.drag_h, p.drag_h, p.drag_v)
+            }
         }
     }
 

@@ -77,6 +77,7 @@ fn replay(trace: &serde_json::Value, run: &str) -> (f64, f64) {
             g: f(&setup["g"]),
             psi: 0.0,
             frame: Frame::Zup,
+            drag_h: 0.0,
         })
         .unwrap(),
     );

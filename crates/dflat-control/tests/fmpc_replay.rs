@@ -44,6 +44,7 @@ fn replay(trace: &Value, run: &str) -> f64 {
         g: num(&setup["g"], "setup.g"),
         psi: 0.0,
         frame: Frame::Zup,
+        drag_h: 0.0,
     })
     .unwrap();
     let q = num(&runs["weights"]["Q"], "weights.Q");

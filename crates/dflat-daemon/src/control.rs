@@ -33,6 +33,7 @@ pub fn control_model(cfg: &Config) -> Result<ControlModel, ControlError> {
             g: v.gravity,
             psi,
             frame: Frame::Ned,
+            drag_h: v.drag_h,
         })?),
         ModelKind::Spatial => ControlModel::Spatial(SpatialModel::new(SpatialParams {
             dt,
@@ -42,6 +43,8 @@ pub fn control_model(cfg: &Config) -> Result<ControlModel, ControlError> {
             g: v.gravity,
             psi,
             frame: Frame::Ned,
+            drag_h: v.drag_h,
+            drag_v: v.drag_v,
         })?),
     })
 }
@@ -56,6 +59,13 @@ pub fn thrust_mapping(cfg: &Config) -> ThrustMapping {
             gravity: v.gravity,
         },
     }
+}
+
+/// `vehicle.delay_ms` rounded to control ticks at `controller.rate_hz`.
+pub fn delay_ticks(cfg: &Config) -> usize {
+    (cfg.vehicle.delay_ms * 1e-3 * cfg.controller.rate_hz)
+        .round()
+        .clamp(0.0, dflat_control::dfmpc::MAX_DELAY_TICKS as f64) as usize
 }
 
 /// The controller chosen by `controller.kind`, with the configured model,
@@ -110,6 +120,7 @@ pub fn build_controller(cfg: &Config) -> Result<Box<dyn Controller>, ControlErro
                     thrust_scale_range: c.disturbance_thrust_scale_range,
                     max_step: c.disturbance_max_step,
                 }),
+                delay_ticks: delay_ticks(cfg),
                 ..DfMpcSettings::default()
             };
             Box::new(DfMpc::new(model, settings)?)

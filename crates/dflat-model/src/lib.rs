@@ -20,6 +20,13 @@
 //! * [`full`] — paper §IV-A: the 12-state rigid body with thrust and
 //!   torques, R = 4, no uniform F⁻¹ ([`FullModel::predict_outputs`]).
 //!
+//! Both the planar and the spatial model carry an optional linear drag in
+//! the world frame, `v_{k+1} = v_k + δt·(a_thrust − D·v_k)` with
+//! `D = diag(drag_h, drag_h[, drag_v])` \[1/s\] (0 by default: the paper's
+//! models). The maps stay exact: Λ recovers the thrust acceleration as
+//! `Δ²y_k/δt² + D·(y_{k+1} − y_k)/δt`, and F⁻¹ subtracts `D·v_{k+1}` with
+//! `v_{k+1} = (y_{k+2} − y_{k+1})/δt` (docs/controllers.md, *Drag*).
+//!
 //! Frames: [`Frame::Ned`] (MAVLink local NED, body FRD, thrust along −z body)
 //! or [`Frame::Zup`] (the paper's convention, thrust along +z body). Euler
 //! angles are ZYX: body→world rotation `R = Rz(ψ)·Ry(θ)·Rx(φ)`.
@@ -87,6 +94,20 @@ pub(crate) fn check_positive(name: &'static str, value: f64) -> Result<(), FlatE
             name,
             value,
             allowed: "finite and > 0",
+        })
+    }
+}
+
+/// Checks a linear drag coefficient D \[1/s\]: finite, ≥ 0 and `D·δt < 1`
+/// (beyond that one Euler step reverses the velocity).
+pub(crate) fn check_drag(name: &'static str, value: f64, dt: f64) -> Result<(), FlatError> {
+    if value.is_finite() && value >= 0.0 && value * dt < 1.0 {
+        Ok(())
+    } else {
+        Err(FlatError::InvalidParameter {
+            name,
+            value,
+            allowed: "finite, >= 0 and < 1/dt",
         })
     }
 }

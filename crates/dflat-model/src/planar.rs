@@ -5,12 +5,15 @@
 //! (rad), output `y = [x, y]` (m), window R = 3. Euler step δt:
 //!
 //! ```text
-//! ẍ = s·g·R13/R33,  ÿ = s·g·R23/R33          (s = −1 NED, +1 z-up)
+//! ẍ = s·g·R13/R33 − D·ẋ,  ÿ = s·g·R23/R33 − D·ẏ    (s = −1 NED, +1 z-up)
 //! θ̇ = (k̃·θ_cmd − θ)/τ,  φ̇ = (k̃·φ_cmd − φ)/τ
 //! ```
 //!
+//! with the linear drag D = `drag_h` \[1/s\] (0: the paper's model).
+//!
 //! Λ: velocities are first differences, the ratios R13/R33, R23/R33 are
-//! `s·Δ²y/(g·δt²)`, and pitch/roll follow from them and ψ⋆
+//! `s·(Δ²y/δt² + D·Δy/δt)/g` (the thrust's acceleration: the second
+//! difference plus what drag took), and pitch/roll follow from them and ψ⋆
 //! ([`crate::attitude::pitch_roll_from_ratios`]).
 //!
 //! F: the attitude at k and k+1 from `y_k..y_{k+3}`, then the exact inverse
@@ -18,13 +21,19 @@
 //! (The paper prints `(τ·θ_{k+1} − θ_k)/k̃`, which drops δt.)
 //!
 //! F⁻¹: the attitude at k from `y_k..y_{k+2}`, one attitude step with u_k,
-//! then `y_{k+3} = 2·y_{k+2} − y_{k+1} + δt²·a(θ_{k+1}, φ_{k+1})`.
+//! then `y_{k+3} = 2·y_{k+2} − y_{k+1} + δt²·(a(θ_{k+1}, φ_{k+1}) − D·v_{k+1})`
+//! with `v_{k+1} = (y_{k+2} − y_{k+1})/δt`.
+//!
+//! [`PlanarModel::input_from_outputs_offset`] and
+//! [`PlanarModel::next_output_offset`] are F and F⁻¹ of the same step with a
+//! constant acceleration offset d added (`ẍ = … − D·ẋ + d_x`): the
+//! disturbance-aware maps of the controllers.
 
 use nalgebra::{SVector, Vector2};
 
 use crate::attitude::{Frame, pitch_roll_from_ratios, ratios_from_pitch_roll};
 use crate::{
-    FlatError, FlatModel, check_finite, check_finite_param, check_len, check_positive,
+    FlatError, FlatModel, check_drag, check_finite, check_finite_param, check_len, check_positive,
     finite_result,
 };
 
@@ -50,10 +59,13 @@ pub struct PlanarParams {
     pub psi: f64,
     /// Frame convention.
     pub frame: Frame,
+    /// Linear horizontal drag D \[1/s\] in the world frame (≥ 0, D·δt < 1):
+    /// `v_{k+1} = v_k + δt·(a − D·v_k)`. 0 is the paper's model.
+    pub drag_h: f64,
 }
 
 impl Default for PlanarParams {
-    /// 50 Hz, τ = 0.2 s, k̃ = 1, g = 9.81, ψ = 0, NED.
+    /// 50 Hz, τ = 0.2 s, k̃ = 1, g = 9.81, ψ = 0, NED, no drag.
     fn default() -> Self {
         Self {
             dt: 0.02,
@@ -62,6 +74,7 @@ impl Default for PlanarParams {
             g: 9.81,
             psi: 0.0,
             frame: Frame::Ned,
+            drag_h: 0.0,
         }
     }
 }
@@ -80,6 +93,7 @@ impl PlanarModel {
         check_positive("k", p.k)?;
         check_positive("g", p.g)?;
         check_finite_param("psi", p.psi)?;
+        check_drag("drag_h", p.drag_h, p.dt)?;
         Ok(Self { p })
     }
 
@@ -101,10 +115,64 @@ impl PlanarModel {
         pitch_roll_from_ratios(s * a.x, s * a.y, self.p.psi)
     }
 
-    /// Attitude at the first of three outputs (from their second difference).
-    fn attitude_at(&self, y0: &PlanarOutput, y1: &PlanarOutput, y2: &PlanarOutput) -> (f64, f64) {
-        let dt2 = self.p.dt * self.p.dt;
-        self.attitude(&((y2 - 2.0 * y1 + y0) / dt2))
+    /// Attitude at the first of three outputs: from the thrust's
+    /// acceleration, their second difference plus the drag at the first
+    /// velocity minus the acceleration offset `d` [m/s²].
+    fn attitude_at(
+        &self,
+        y0: &PlanarOutput,
+        y1: &PlanarOutput,
+        y2: &PlanarOutput,
+        d: &Vector2<f64>,
+    ) -> (f64, f64) {
+        let dt = self.p.dt;
+        let a = (y2 - 2.0 * y1 + y0) / (dt * dt) + self.p.drag_h * (y1 - y0) / dt - d;
+        self.attitude(&a)
+    }
+
+    /// F with a constant acceleration offset `d` [m/s²] in the step
+    /// (`ẍ = … − D·ẋ + d_x`): the input at the first of four outputs.
+    /// `d = 0` is [`FlatModel::input_from_outputs`].
+    pub fn input_from_outputs_offset(
+        &self,
+        y: &[PlanarOutput],
+        d: &Vector2<f64>,
+    ) -> Result<PlanarInput, FlatError> {
+        check_len(y.len(), 4)?;
+        check_finite(y.iter().flat_map(|v| v.iter()).chain(d.iter()), "outputs")?;
+        let (t0, p0) = self.attitude_at(&y[0], &y[1], &y[2], d);
+        let (t1, p1) = self.attitude_at(&y[1], &y[2], &y[3], d);
+        finite_result(
+            PlanarInput::new(self.attitude_command(t0, t1), self.attitude_command(p0, p1)),
+            "input",
+        )
+    }
+
+    /// F⁻¹ with a constant acceleration offset `d` [m/s²] in the step: the
+    /// output after three when `u` is applied at the first.
+    /// `d = 0` is [`FlatModel::next_output`].
+    pub fn next_output_offset(
+        &self,
+        y: &[PlanarOutput],
+        u: &PlanarInput,
+        d: &Vector2<f64>,
+    ) -> Result<PlanarOutput, FlatError> {
+        check_len(y.len(), 3)?;
+        check_finite(
+            y.iter()
+                .flat_map(|v| v.iter())
+                .chain(u.iter())
+                .chain(d.iter()),
+            "outputs and input",
+        )?;
+        let (t0, p0) = self.attitude_at(&y[0], &y[1], &y[2], d);
+        let acc = self.acceleration(self.attitude_step(t0, u.x), self.attitude_step(p0, u.y))?;
+        let dt = self.p.dt;
+        let v1 = (y[2] - y[1]) / dt;
+        finite_result(
+            2.0 * y[2] - y[1] + dt * dt * (acc - self.p.drag_h * v1 + d),
+            "next output",
+        )
     }
 
     /// One Euler step of the first-order attitude loop.
@@ -136,11 +204,12 @@ impl FlatModel for PlanarModel {
         let acc = self
             .acceleration(x[4], x[5])
             .unwrap_or_else(|_| Vector2::zeros());
+        let drag = self.p.drag_h;
         PlanarState::from([
             x[0] + dt * x[1],
-            x[1] + dt * acc.x,
+            x[1] + dt * (acc.x - drag * x[1]),
             x[2] + dt * x[3],
-            x[3] + dt * acc.y,
+            x[3] + dt * (acc.y - drag * x[3]),
             self.attitude_step(x[4], u.x),
             self.attitude_step(x[5], u.y),
         ])
@@ -154,7 +223,7 @@ impl FlatModel for PlanarModel {
         check_len(y.len(), 3)?;
         check_finite(y.iter().flat_map(|v| v.iter()), "outputs")?;
         let v = (y[1] - y[0]) / self.p.dt;
-        let (theta, phi) = self.attitude_at(&y[0], &y[1], &y[2]);
+        let (theta, phi) = self.attitude_at(&y[0], &y[1], &y[2], &Vector2::zeros());
         finite_result(
             PlanarState::from([y[0].x, v.x, y[0].y, v.y, theta, phi]),
             "state",
@@ -162,26 +231,11 @@ impl FlatModel for PlanarModel {
     }
 
     fn input_from_outputs(&self, y: &[PlanarOutput]) -> Result<PlanarInput, FlatError> {
-        check_len(y.len(), 4)?;
-        check_finite(y.iter().flat_map(|v| v.iter()), "outputs")?;
-        let (t0, p0) = self.attitude_at(&y[0], &y[1], &y[2]);
-        let (t1, p1) = self.attitude_at(&y[1], &y[2], &y[3]);
-        finite_result(
-            PlanarInput::new(self.attitude_command(t0, t1), self.attitude_command(p0, p1)),
-            "input",
-        )
+        self.input_from_outputs_offset(y, &Vector2::zeros())
     }
 
     fn next_output(&self, y: &[PlanarOutput], u: &PlanarInput) -> Result<PlanarOutput, FlatError> {
-        check_len(y.len(), 3)?;
-        check_finite(
-            y.iter().flat_map(|v| v.iter()).chain(u.iter()),
-            "outputs and input",
-        )?;
-        let (t0, p0) = self.attitude_at(&y[0], &y[1], &y[2]);
-        let acc = self.acceleration(self.attitude_step(t0, u.x), self.attitude_step(p0, u.y))?;
-        let dt2 = self.p.dt * self.p.dt;
-        finite_result(2.0 * y[2] - y[1] + dt2 * acc, "next output")
+        self.next_output_offset(y, u, &Vector2::zeros())
     }
 }
 

@@ -11,7 +11,8 @@
 //!
 //! ```text
 //! p_{k+1} = p_k + δt·v_k
-//! v_{k+1} = v_k + δt·a_k,   a_k = g·e3 − T_k·R_k·e3   (NED)
+//! v_{k+1} = v_k + δt·(a_k − D·v_k),   D = diag(drag_h, drag_h, drag_v) [1/s]
+//!                           a_k = g·e3 − T_k·R_k·e3   (NED)
 //!                           a_k = T_k·R_k·e3 − g·e3   (z-up)
 //! θ_{k+1} = θ_k + δt·(k̃·θ_cmd − θ_k)/τ           (φ likewise)
 //! T_{k+1} = T_k + δt·(T_cmd − T_k)/τ_T
@@ -24,7 +25,8 @@
 //! Every input channel reaches the output after exactly three steps, so
 //!
 //! * Λ(y_k, y_{k+1}, y_{k+2}): `v_k = (y_{k+1} − y_k)/δt`,
-//!   `a_k = (y_{k+2} − 2·y_{k+1} + y_k)/δt²`; the specific-thrust vector
+//!   `a_k = (y_{k+2} − 2·y_{k+1} + y_k)/δt² + D·v_k` (drag 0: the second
+//!   difference); the specific-thrust vector
 //!   `t_k = T_k·R_k·e3` follows from a_k and gravity
 //!   ([`Frame::thrust_vector`]); its norm is T_k and its direction gives
 //!   θ_k, φ_k at ψ⋆ (paper eqs. (pitch), (roll)). A thrust vector that does
@@ -36,7 +38,12 @@
 //!   `T_cmd = T_k + τ_T·(T_{k+1} − T_k)/δt`.
 //! * F⁻¹(y_k, y_{k+1}, y_{k+2}, u_k): Λ's attitude and thrust at k, one step
 //!   of the attitude and thrust loops with u_k, the acceleration a_{k+1}
-//!   from them, and `y_{k+3} = 2·y_{k+2} − y_{k+1} + δt²·a_{k+1}`.
+//!   from them, and `y_{k+3} = 2·y_{k+2} − y_{k+1} + δt²·(a_{k+1} − D·v_{k+1})`,
+//!   `v_{k+1} = (y_{k+2} − y_{k+1})/δt`.
+//!
+//! [`SpatialModel::input_from_outputs_offset`] and
+//! [`SpatialModel::next_output_offset`] are F and F⁻¹ with a constant
+//! acceleration offset d in the step, `v_{k+1} = v_k + δt·(a_k − D·v_k + d)`.
 //!
 //! ## What the thrust lag buys
 //!
@@ -56,7 +63,7 @@ use nalgebra::{SVector, Vector3};
 
 use crate::attitude::{Frame, thrust_axis, thrust_pitch_roll};
 use crate::{
-    FlatError, FlatModel, check_finite, check_finite_param, check_len, check_positive,
+    FlatError, FlatModel, check_drag, check_finite, check_finite_param, check_len, check_positive,
     finite_result,
 };
 
@@ -86,10 +93,16 @@ pub struct SpatialParams {
     pub psi: f64,
     /// Frame convention.
     pub frame: Frame,
+    /// Linear horizontal drag \[1/s\] in the world frame (x, y; ≥ 0,
+    /// drag·δt < 1). 0 is no drag.
+    pub drag_h: f64,
+    /// Linear vertical drag \[1/s\] in the world frame (z; ≥ 0,
+    /// drag·δt < 1). 0 is no drag.
+    pub drag_v: f64,
 }
 
 impl Default for SpatialParams {
-    /// 50 Hz, τ = 0.2 s, k̃ = 1, τ_T = 0.04 s, g = 9.81, ψ = 0, NED.
+    /// 50 Hz, τ = 0.2 s, k̃ = 1, τ_T = 0.04 s, g = 9.81, ψ = 0, NED, no drag.
     fn default() -> Self {
         Self {
             dt: 0.02,
@@ -99,6 +112,8 @@ impl Default for SpatialParams {
             g: 9.81,
             psi: 0.0,
             frame: Frame::Ned,
+            drag_h: 0.0,
+            drag_v: 0.0,
         }
     }
 }
@@ -119,6 +134,8 @@ impl SpatialModel {
         check_positive("tau_thrust", p.tau_thrust)?;
         check_positive("g", p.g)?;
         check_finite_param("psi", p.psi)?;
+        check_drag("drag_h", p.drag_h, p.dt)?;
+        check_drag("drag_v", p.drag_v, p.dt)?;
         Ok(Self { p })
     }
 
@@ -154,16 +171,81 @@ impl SpatialModel {
         Ok((thrust, theta, phi))
     }
 
-    /// Thrust and attitude (T, θ, φ) at the first of three outputs, from
-    /// their second difference.
+    /// The drag acceleration \[m/s²\] at velocity `v` \[m/s\]: `D·v`.
+    fn drag(&self, v: &Vector3<f64>) -> Vector3<f64> {
+        Vector3::new(
+            self.p.drag_h * v.x,
+            self.p.drag_h * v.y,
+            self.p.drag_v * v.z,
+        )
+    }
+
+    /// Thrust and attitude (T, θ, φ) at the first of three outputs, from the
+    /// thrust's acceleration: their second difference plus the drag at the
+    /// first velocity minus the acceleration offset `d` \[m/s²\].
     fn attitude_thrust_at(
         &self,
         y0: &SpatialOutput,
         y1: &SpatialOutput,
         y2: &SpatialOutput,
+        d: &Vector3<f64>,
     ) -> Result<(f64, f64, f64), FlatError> {
-        let dt2 = self.p.dt * self.p.dt;
-        self.attitude_thrust(&((y2 - 2.0 * y1 + y0) / dt2))
+        let dt = self.p.dt;
+        let a = (y2 - 2.0 * y1 + y0) / (dt * dt) + self.drag(&((y1 - y0) / dt)) - d;
+        self.attitude_thrust(&a)
+    }
+
+    /// F with a constant acceleration offset `d` \[m/s²\] in the step: the
+    /// input at the first of four outputs. `d = 0` is
+    /// [`FlatModel::input_from_outputs`].
+    pub fn input_from_outputs_offset(
+        &self,
+        y: &[SpatialOutput],
+        d: &Vector3<f64>,
+    ) -> Result<SpatialInput, FlatError> {
+        check_len(y.len(), 4)?;
+        check_finite(y.iter().flat_map(|v| v.iter()).chain(d.iter()), "outputs")?;
+        let (f0, t0, p0) = self.attitude_thrust_at(&y[0], &y[1], &y[2], d)?;
+        let (f1, t1, p1) = self.attitude_thrust_at(&y[1], &y[2], &y[3], d)?;
+        finite_result(
+            SpatialInput::new(
+                self.attitude_command(t0, t1),
+                self.attitude_command(p0, p1),
+                self.thrust_command(f0, f1),
+            ),
+            "input",
+        )
+    }
+
+    /// F⁻¹ with a constant acceleration offset `d` \[m/s²\] in the step:
+    /// the output after three when `u` is applied at the first. `d = 0` is
+    /// [`FlatModel::next_output`].
+    pub fn next_output_offset(
+        &self,
+        y: &[SpatialOutput],
+        u: &SpatialInput,
+        d: &Vector3<f64>,
+    ) -> Result<SpatialOutput, FlatError> {
+        check_len(y.len(), 3)?;
+        check_finite(
+            y.iter()
+                .flat_map(|v| v.iter())
+                .chain(u.iter())
+                .chain(d.iter()),
+            "outputs and input",
+        )?;
+        let (f0, t0, p0) = self.attitude_thrust_at(&y[0], &y[1], &y[2], d)?;
+        let acc = self.acceleration(
+            self.attitude_step(t0, u.x),
+            self.attitude_step(p0, u.y),
+            self.thrust_step(f0, u.z),
+        );
+        let dt = self.p.dt;
+        let v1 = (y[2] - y[1]) / dt;
+        finite_result(
+            2.0 * y[2] - y[1] + dt * dt * (acc - self.drag(&v1) + d),
+            "next output",
+        )
     }
 
     /// One Euler step of the first-order attitude loop.
@@ -201,7 +283,8 @@ impl FlatModel for SpatialModel {
     /// attitude).
     fn step(&self, x: &SpatialState, u: &SpatialInput) -> SpatialState {
         let dt = self.p.dt;
-        let a = self.acceleration(x[6], x[7], x[8]);
+        let v = Vector3::new(x[1], x[3], x[5]);
+        let a = self.acceleration(x[6], x[7], x[8]) - self.drag(&v);
         SpatialState::from([
             x[0] + dt * x[1],
             x[1] + dt * a.x,
@@ -223,7 +306,8 @@ impl FlatModel for SpatialModel {
         check_len(y.len(), 3)?;
         check_finite(y.iter().flat_map(|v| v.iter()), "outputs")?;
         let v = (y[1] - y[0]) / self.p.dt;
-        let (thrust, theta, phi) = self.attitude_thrust_at(&y[0], &y[1], &y[2])?;
+        let (thrust, theta, phi) =
+            self.attitude_thrust_at(&y[0], &y[1], &y[2], &Vector3::zeros())?;
         finite_result(
             SpatialState::from([y[0].x, v.x, y[0].y, v.y, y[0].z, v.z, theta, phi, thrust]),
             "state",
@@ -231,18 +315,7 @@ impl FlatModel for SpatialModel {
     }
 
     fn input_from_outputs(&self, y: &[SpatialOutput]) -> Result<SpatialInput, FlatError> {
-        check_len(y.len(), 4)?;
-        check_finite(y.iter().flat_map(|v| v.iter()), "outputs")?;
-        let (f0, t0, p0) = self.attitude_thrust_at(&y[0], &y[1], &y[2])?;
-        let (f1, t1, p1) = self.attitude_thrust_at(&y[1], &y[2], &y[3])?;
-        finite_result(
-            SpatialInput::new(
-                self.attitude_command(t0, t1),
-                self.attitude_command(p0, p1),
-                self.thrust_command(f0, f1),
-            ),
-            "input",
-        )
+        self.input_from_outputs_offset(y, &Vector3::zeros())
     }
 
     fn next_output(
@@ -250,19 +323,7 @@ impl FlatModel for SpatialModel {
         y: &[SpatialOutput],
         u: &SpatialInput,
     ) -> Result<SpatialOutput, FlatError> {
-        check_len(y.len(), 3)?;
-        check_finite(
-            y.iter().flat_map(|v| v.iter()).chain(u.iter()),
-            "outputs and input",
-        )?;
-        let (f0, t0, p0) = self.attitude_thrust_at(&y[0], &y[1], &y[2])?;
-        let acc = self.acceleration(
-            self.attitude_step(t0, u.x),
-            self.attitude_step(p0, u.y),
-            self.thrust_step(f0, u.z),
-        );
-        let dt2 = self.p.dt * self.p.dt;
-        finite_result(2.0 * y[2] - y[1] + dt2 * acc, "next output")
+        self.next_output_offset(y, u, &Vector3::zeros())
     }
 }
 

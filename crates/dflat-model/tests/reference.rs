@@ -162,6 +162,7 @@ fn planar_matches_reference_vectors() {
             g: p.g,
             psi: p.psi,
             frame: frame(&p.frame),
+            drag_h: 0.0,
         })
         .expect("reference parameters are valid");
         let rtol = (10.0 * v.float64_roundoff).max(1e-9);
@@ -253,6 +254,8 @@ fn spatial_matches_reference_vectors() {
             g: p.g,
             psi: p.psi,
             frame: frame(&p.frame),
+            drag_h: 0.0,
+            drag_v: 0.0,
         })
         .expect("reference parameters are valid");
         let rtol = (10.0 * v.float64_roundoff).max(1e-9);
@@ -274,5 +277,145 @@ fn spatial_matches_reference_vectors() {
     println!(
         "spatial: worst error / bound = {worst:.3e} over {} vectors",
         vectors.len()
+    );
+}
+
+/// `vectors_drag.json`: planar and spatial vectors with linear drag in the
+/// world frame (`drag_h`; `drag_v` for the spatial model).
+#[derive(Deserialize)]
+struct DragFile {
+    planar: Vec<DragVector>,
+    spatial: Vec<DragVector>,
+}
+
+#[derive(Deserialize)]
+struct DragVector {
+    params: DragJsonParams,
+    outputs: Vec<Vec<f64>>,
+    state: Vec<f64>,
+    input: Vec<f64>,
+    next_output: Vec<f64>,
+    next_state: Vec<f64>,
+    float64_roundoff: f64,
+}
+
+#[derive(Deserialize)]
+struct DragJsonParams {
+    dt: f64,
+    tau: f64,
+    k: f64,
+    g: f64,
+    psi: f64,
+    frame: String,
+    drag_h: f64,
+    drag_v: f64,
+    tau_t: Option<f64>,
+}
+
+fn load_drag() -> DragFile {
+    let path = reference_dir().join("vectors_drag.json");
+    let text = std::fs::read_to_string(&path)
+        .unwrap_or_else(|e| panic!("cannot read reference file {}: {e}", path.display()));
+    serde_json::from_str(&text)
+        .unwrap_or_else(|e| panic!("cannot parse reference file {}: {e}", path.display()))
+}
+
+/// Checks Λ, F, F⁻¹ and the step of `m` against one drag vector; returns
+/// the worst error / bound.
+#[allow(clippy::too_many_arguments)]
+fn check_drag_vector<M: FlatModel>(
+    m: &M,
+    i: usize,
+    v: &DragVector,
+    out: impl Fn(&[f64]) -> M::Output,
+    inp: impl Fn(&[f64]) -> M::Input,
+    st: impl Fn(&[f64]) -> M::State,
+    slice_s: impl Fn(&M::State) -> Vec<f64>,
+    slice_u: impl Fn(&M::Input) -> Vec<f64>,
+    slice_y: impl Fn(&M::Output) -> Vec<f64>,
+) -> f64 {
+    let rtol = (10.0 * v.float64_roundoff).max(1e-9);
+    let y: Vec<M::Output> = v.outputs.iter().map(|o| out(o)).collect();
+    assert_eq!(y.len(), 4, "vector {i}: drag vectors hold y_k..y_k+3");
+    let u_ref = inp(&v.input);
+    let x_ref = st(&v.state);
+    let mut worst: f64 = 0.0;
+    let x = m.state_from_outputs(&y[..3]).expect("Λ");
+    worst = worst.max(check(i, "state", &slice_s(&x), &v.state, rtol));
+    let u = m.input_from_outputs(&y).expect("F");
+    worst = worst.max(check(i, "input", &slice_u(&u), &v.input, rtol));
+    let y3 = m.next_output(&y[..3], &u_ref).expect("F⁻¹");
+    worst = worst.max(check(i, "next_output", &slice_y(&y3), &v.next_output, rtol));
+    let x1 = m.step(&x_ref, &u_ref);
+    worst = worst.max(check(i, "next_state", &slice_s(&x1), &v.next_state, rtol));
+    worst
+}
+
+/// Both models with linear drag against `vectors_drag.json` (the
+/// reference README's rule); the drag-free files above still pass with
+/// drag 0.
+#[test]
+fn drag_matches_reference_vectors() {
+    let file = load_drag();
+    assert!(file.planar.len() >= 50 && file.spatial.len() >= 50);
+    assert!(
+        file.planar.iter().any(|v| v.params.drag_h > 0.0)
+            && file.spatial.iter().any(|v| v.params.drag_v > 0.0),
+        "the drag file holds cases with drag"
+    );
+    let mut worst: f64 = 0.0;
+    for (i, v) in file.planar.iter().enumerate() {
+        let p = &v.params;
+        let m = PlanarModel::new(PlanarParams {
+            dt: p.dt,
+            tau: p.tau,
+            k: p.k,
+            g: p.g,
+            psi: p.psi,
+            frame: frame(&p.frame),
+            drag_h: p.drag_h,
+        })
+        .expect("reference parameters are valid");
+        worst = worst.max(check_drag_vector(
+            &m,
+            i,
+            v,
+            |o| PlanarOutput::new(o[0], o[1]),
+            |u| PlanarInput::new(u[0], u[1]),
+            PlanarState::from_column_slice,
+            |x| x.as_slice().to_vec(),
+            |u| u.as_slice().to_vec(),
+            |y| y.as_slice().to_vec(),
+        ));
+    }
+    for (i, v) in file.spatial.iter().enumerate() {
+        let p = &v.params;
+        let m = SpatialModel::new(SpatialParams {
+            dt: p.dt,
+            tau: p.tau,
+            k: p.k,
+            tau_thrust: p.tau_t.expect("spatial vectors give tau_t"),
+            g: p.g,
+            psi: p.psi,
+            frame: frame(&p.frame),
+            drag_h: p.drag_h,
+            drag_v: p.drag_v,
+        })
+        .expect("reference parameters are valid");
+        worst = worst.max(check_drag_vector(
+            &m,
+            i,
+            v,
+            |o| SpatialOutput::new(o[0], o[1], o[2]),
+            |u| SpatialInput::new(u[0], u[1], u[2]),
+            SpatialState::from_column_slice,
+            |x| x.as_slice().to_vec(),
+            |u| u.as_slice().to_vec(),
+            |y| y.as_slice().to_vec(),
+        ));
+    }
+    println!(
+        "drag: worst error / bound = {worst:.3e} over {} vectors",
+        file.planar.len() + file.spatial.len()
     );
 }

@@ -41,6 +41,12 @@ fn simulate<M: FlatModel>(
     (xs, ys)
 }
 
+/// Linear drag \[1/s\]: none (the paper's model) or up to 1.5 /s (far
+/// beyond a multirotor's 0.1–0.5 /s).
+fn drag() -> impl Strategy<Value = f64> {
+    prop_oneof![Just(0.0), 0.0..1.5f64]
+}
+
 fn planar_params() -> impl Strategy<Value = PlanarParams> {
     (
         0.005..0.05f64,
@@ -49,21 +55,23 @@ fn planar_params() -> impl Strategy<Value = PlanarParams> {
         9.78..9.83f64,
         -PI..PI,
         frame(),
+        drag(),
     )
-        .prop_map(|(dt, tau, k, g, psi, frame)| PlanarParams {
+        .prop_map(|(dt, tau, k, g, psi, frame, drag_h)| PlanarParams {
             dt,
             tau,
             k,
             g,
             psi,
             frame,
+            drag_h,
         })
 }
 
 fn spatial_params() -> impl Strategy<Value = SpatialParams> {
     // τ_T in [δt, δt + 0.2 s]: forward Euler of a lag overshoots (and the
     // thrust goes negative) when δt > τ_T, which no real vehicle does.
-    (planar_params(), 0.0..0.2f64).prop_map(|(p, extra)| SpatialParams {
+    (planar_params(), 0.0..0.2f64, drag()).prop_map(|(p, extra, drag_v)| SpatialParams {
         dt: p.dt,
         tau: p.tau,
         k: p.k,
@@ -71,6 +79,8 @@ fn spatial_params() -> impl Strategy<Value = SpatialParams> {
         g: p.g,
         psi: p.psi,
         frame: p.frame,
+        drag_h: p.drag_h,
+        drag_v,
     })
 }
 

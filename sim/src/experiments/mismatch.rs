@@ -251,6 +251,7 @@ impl MultiRateDf {
             // The lab is deterministic: no wall-clock limit.
             solver_time_limit: f64::INFINITY,
             disturbance,
+            delay_ticks: 0,
         }
     }
 }

@@ -6,7 +6,11 @@
 //!   delay d ([`attitude`]);
 //! * for the spatial model, from the commanded thrust, the measured tilt
 //!   and the altitude: the hover thrust and the thrust time constant τ_T
-//!   ([`vertical`]).
+//!   ([`vertical`]);
+//! * the horizontal linear drag D, from the acceleration that the measured
+//!   tilt does not explain against the velocity ([`drag`]).
+//!
+//! The pure delay is its own term (`vehicle.delay_ms`): the model has one.
 //!
 //! Only *engaged* data are used (the autopilot armed in its offboard mode
 //! and commands streaming, [`FlightLog::engaged_segments`]). Each value
@@ -16,6 +20,7 @@
 //! [`identify`] takes the decoded log and returns values or a refusal.
 
 pub mod attitude;
+pub mod drag;
 pub mod stats;
 pub mod vertical;
 
@@ -27,6 +32,7 @@ use thiserror::Error;
 
 use crate::flightlog::FlightLog;
 use attitude::{AxisData, AxisFit, fit_axis};
+use drag::{DragData, DragFit, DragSegment, fit_drag};
 use vertical::{VerticalData, VerticalFit, VerticalSegment, fit_vertical};
 
 /// Least engaged time \[s\] to identify anything.
@@ -40,6 +46,9 @@ pub const MIN_THRUST_STD: f64 = 0.002;
 const ATTITUDE_CHUNK_S: f64 = 5.0;
 /// Length of the altitude chunks \[s\] (each with its own z₀, ż₀).
 const VERTICAL_CHUNK_S: f64 = 3.0;
+/// Length of the horizontal chunks for the drag fit \[s\] (each with its
+/// own initial position and velocity).
+const DRAG_CHUNK_S: f64 = 4.0;
 /// Gravity assumed \[m/s²\].
 pub const GRAVITY: f64 = 9.81;
 
@@ -100,6 +109,16 @@ pub enum VerticalResult {
     Skipped(String),
 }
 
+/// The drag fit, or why not.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DragResult {
+    /// Fitted.
+    Fitted(DragFit),
+    /// Not identified, and why.
+    Skipped(String),
+}
+
 /// A value with its 95 % half-width.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct Estimate {
@@ -152,14 +171,26 @@ pub struct Identification {
     pub delay: Estimate,
     /// Vertical (spatial model).
     pub vertical: VerticalResult,
+    /// Horizontal linear drag.
+    pub drag: DragResult,
 }
 
 impl Identification {
-    /// The τ to configure: the model has no delay term, so the pure delay
-    /// is folded into the lag (τ + d, the first-order lag with the same
-    /// mean response time).
+    /// The τ to configure \[s\]: the lag alone (the model has its own
+    /// delay term, `vehicle.delay_ms`).
     pub fn vehicle_tau(&self) -> f64 {
-        self.tau.value + self.delay.value
+        self.tau.value
+    }
+
+    /// The drag estimate \[1/s\], when fitted.
+    pub fn drag_estimate(&self) -> Option<Estimate> {
+        match &self.drag {
+            DragResult::Fitted(f) => Some(Estimate {
+                value: f.drag,
+                ci: f.drag_ci,
+            }),
+            DragResult::Skipped(_) => None,
+        }
     }
 }
 
@@ -277,6 +308,7 @@ pub fn identify(log: &FlightLog) -> Result<Identification, IdentifyError> {
         return Err(IdentifyError::NoAttitude);
     };
     let vertical = vertical_fit(log, &segments, &engaged_cmds, delay.value);
+    let drag = drag_fit(log, &segments);
     Ok(Identification {
         segments,
         engaged_s,
@@ -286,7 +318,34 @@ pub fn identify(log: &FlightLog) -> Result<Identification, IdentifyError> {
         gain,
         delay,
         vertical,
+        drag,
     })
+}
+
+fn drag_fit(log: &FlightLog, segments: &[(f64, f64)]) -> DragResult {
+    let positions = log.positions();
+    let chunks = chunked(
+        segments,
+        positions
+            .iter()
+            .map(|p| (log.pose_time(p), [p.position[0], p.position[1]])),
+        DRAG_CHUNK_S,
+    );
+    let data = DragData {
+        attitude: log.attitude.iter().map(|a| (a.t, a.euler)).collect(),
+        segments: segments
+            .iter()
+            .zip(chunks)
+            .map(|(&span, chunks)| DragSegment { span, chunks })
+            .collect(),
+        gravity: GRAVITY,
+    };
+    match fit_drag(&data) {
+        Some(fit) => DragResult::Fitted(fit),
+        None => DragResult::Skipped(
+            "fewer than 50 position samples engaged, or too little speed variation".into(),
+        ),
+    }
 }
 
 fn vertical_fit(

@@ -6,7 +6,7 @@ use std::fmt::Write as _;
 
 use serde::Serialize;
 
-use super::{AxisResult, Estimate, Identification, VerticalResult};
+use super::{AxisResult, DragResult, Estimate, Identification, VerticalResult};
 
 /// The `[vehicle]` values a flight was flown with (from its configuration).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -21,6 +21,10 @@ pub struct FlownVehicle {
     pub hover_thrust: f64,
     /// The model was the spatial one (thrust values in use).
     pub spatial: bool,
+    /// `vehicle.delay_ms` \[ms\].
+    pub delay_ms: f64,
+    /// `vehicle.drag_h` \[1/s\].
+    pub drag_h: f64,
 }
 
 /// One field's comparison.
@@ -84,11 +88,18 @@ impl Identification {
                 change: e.ci.is_finite() && off > e.ci && off > KEEP_FRACTION * flown.abs(),
             }
         };
-        let tau = Estimate {
-            value: self.vehicle_tau(),
-            ci: (self.tau.ci.powi(2) + self.delay.ci.powi(2)).sqrt(),
+        let delay_ms = Estimate {
+            value: self.delay.value * 1e3,
+            ci: self.delay.ci * 1e3,
         };
-        let mut out = vec![row("tau", flown.tau, tau), row("k", flown.k, self.gain)];
+        let mut out = vec![
+            row("tau", flown.tau, self.tau),
+            row("k", flown.k, self.gain),
+            row("delay_ms", flown.delay_ms, delay_ms),
+        ];
+        if let Some(d) = self.drag_estimate() {
+            out.push(row("drag_h", flown.drag_h, d));
+        }
         if let Some((hover, tau_t)) = self.vertical_estimates() {
             out.push(row("hover_thrust", flown.hover_thrust, hover));
             out.push(row("tau_thrust", flown.tau_thrust, tau_t));
@@ -176,6 +187,36 @@ impl Identification {
                 let _ = writeln!(s, "  not identified: {why}");
             }
         }
+        let _ = writeln!(
+            s,
+            "\nhorizontal drag (tilt's acceleration vs the measured motion):"
+        );
+        match &self.drag {
+            DragResult::Fitted(d) => {
+                let _ = writeln!(
+                    s,
+                    "  drag_h {:.3} ± {:.3} /s   offset [{:.2}, {:.2}] m/s²   variance explained {:.1} %   \
+                     residual rms {:.3} m   whiteness: ρ₁ {:.2}, Ljung–Box Q {:.0} ({})   {} samples",
+                    d.drag,
+                    d.drag_ci,
+                    d.offset[0],
+                    d.offset[1],
+                    d.variance_explained * 100.0,
+                    d.rms,
+                    d.whiteness.lag1,
+                    d.whiteness.ljung_box,
+                    if d.whiteness.white {
+                        "white"
+                    } else {
+                        "not white"
+                    },
+                    d.samples
+                );
+            }
+            DragResult::Skipped(why) => {
+                let _ = writeln!(s, "  not identified: {why}");
+            }
+        }
         if let Some(flown) = flown {
             let _ = writeln!(s, "\ncompared with the configuration flown:");
             for c in self.compare(flown) {
@@ -212,15 +253,29 @@ impl Identification {
         );
         let _ = writeln!(
             s,
-            "# Attitude lag τ {:.3} s and pure delay {:.0} ms: the model has no delay\n\
-             # term, so `tau` is their sum (the first-order lag with the same mean\n\
-             # response time).",
-            self.tau.value,
-            self.delay.value * 1e3
+            "# Attitude lag τ {} s, pure delay {} ms (its own term, rounded to\n\
+             # control ticks by the daemon).",
+            fmt_ci(&self.tau, 1.0, 3),
+            fmt_ci(&self.delay, 1e3, 1)
         );
         let _ = writeln!(s, "[vehicle]");
         let _ = writeln!(s, "tau = {:.3}", self.vehicle_tau());
         let _ = writeln!(s, "k = {:.3}", self.gain.value);
+        let _ = writeln!(s, "delay_ms = {:.1}", (self.delay.value * 1e3).max(0.0));
+        match self.drag_estimate() {
+            Some(d) if d.ci.is_finite() => {
+                let _ = writeln!(
+                    s,
+                    "# Horizontal drag {} /s (acceleration the tilt does not explain,\n\
+                     # against velocity).\ndrag_h = {:.3}",
+                    fmt_ci(&d, 1.0, 3),
+                    d.value.clamp(0.0, 2.0)
+                );
+            }
+            _ => {
+                let _ = writeln!(s, "# drag_h: not determined by this flight.");
+            }
+        }
         match self.vertical_estimates() {
             Some((hover, tau_t)) => {
                 let _ = writeln!(s, "hover_thrust = {:.3}", hover.value);

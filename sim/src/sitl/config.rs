@@ -239,6 +239,9 @@ pub struct SitlConfig {
     /// (0 = the heading never changes; 0–720), with a 0.1 s time constant,
     /// while pitch and roll act in the body frame at the actual heading.
     pub max_yaw_rate_deg_s: f64,
+    /// Linear aerodynamic drag of the plant \[1/s\] on every axis (0–2,
+    /// default 0): `v̇ = … − drag·v`. The truth `dflat identify` should find.
+    pub drag: f64,
 }
 
 impl Default for SitlConfig {
@@ -267,6 +270,7 @@ impl Default for SitlConfig {
             engage: SitlEngage::Auto,
             pilot: Vec::new(),
             max_yaw_rate_deg_s: 90.0,
+            drag: 0.0,
         }
     }
 }
@@ -303,6 +307,7 @@ impl SitlConfig {
         range("sitl.tau_thrust", si.tau_thrust, 0.005, 1.0)?;
         range("sitl.max_yaw_rate_deg_s", si.max_yaw_rate_deg_s, 0.0, 720.0)?;
         range("sitl.command_delay_ms", si.command_delay_ms, 0.0, 500.0)?;
+        range("sitl.drag", si.drag, 0.0, 2.0)?;
         range("sitl.pose_clock_rate", si.pose_clock_rate, 0.1, 10.0)?;
         range("sitl.mass_factor", si.mass_factor, 0.5, 2.0)?;
         range("sitl.noise_sigma", si.noise_sigma, 0.0, 1.0)?;

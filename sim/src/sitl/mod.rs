@@ -478,6 +478,7 @@ pub fn plant_options(cfg: &SitlSettings) -> PlantOptions {
         command_delay: s.command_delay_ms / 1000.0,
         mass_factor: s.mass_factor,
         max_yaw_rate: s.max_yaw_rate_deg_s.to_radians(),
+        drag: s.drag,
         ..PlantOptions::default()
     }
 }

@@ -31,11 +31,14 @@
 //! per tick with the tick time. Everything after the fixed outputs is as
 //! above.
 
+mod delay;
 mod settings;
 mod solve;
 #[cfg(test)]
 mod tests;
 
+use delay::DelayLine;
+pub use delay::MAX_DELAY_TICKS;
 pub use settings::{DfMpcSettings, InputSaturation, OutputConstraints, PlanTiltBound, QpSolver};
 
 use solve::{AxisPipeline, HorizontalCone, build_pipelines};
@@ -104,6 +107,8 @@ pub struct DfMpc {
     plan: PlanState,
     /// Whether the sent inputs are all recorded.
     record: RecordState,
+    /// The inputs sent and not yet in effect (input delay).
+    delay: DelayLine,
 }
 
 /// The plan DF-MPC can fly without a new solve ([`Controller::plan_fallback`]).
@@ -190,6 +195,7 @@ impl DfMpc {
                 .any(|s| *s > 0.0),
             plan: PlanState::Empty,
             record: RecordState::Recorded,
+            delay: DelayLine::new(settings.delay_ticks, model.hover_input()),
         })
     }
 
@@ -402,6 +408,9 @@ impl DfMpc {
         sent: &Vector3<f64>,
         saturated: bool,
     ) {
+        // The input in effect at this tick (the one sent d ticks ago).
+        let applied = self.delay.push(*sent);
+        let sent = &applied;
         if let Some(e) = &mut self.estimator {
             if self.multi.is_some() {
                 // Multi-rate: the estimator fits the timestamped samples it
@@ -491,7 +500,11 @@ impl Controller for DfMpc {
             fixed,
             previous_input,
         } = self.fixed_outputs(measurement, &d)?;
-        let y0 = fixed[0];
+        // 2b. Across the inputs sent and not yet in effect (input delay):
+        // the plan starts at k + d.
+        let planned = self.delay.predict(&self.model, fixed, &d)?;
+        let previous_input = self.delay.newest().unwrap_or(previous_input);
+        let y0 = planned[0];
         let sent_acceleration = if self.smooth || self.settings.constraints.max_tilt_rate.is_some()
         {
             Some(commanded_acceleration(&self.model, &previous_input)? + d.acceleration)
@@ -501,7 +514,7 @@ impl Controller for DfMpc {
         // 3. The reference over the horizon.
         self.build_reference(&y0, reference)?;
         // 4. Output trajectory optimisation.
-        let solve = self.optimise(&fixed, sent_acceleration)?;
+        let solve = self.optimise(&planned, sent_acceleration)?;
         // 5. The output-to-input map F on y*_k..y*_{k+3}.
         let (plan4, u) = self.map_through_f(y0, &d)?;
         // 6. Saturation; the sent input into the window.
@@ -563,6 +576,8 @@ impl Controller for DfMpc {
             }
         }
         let FixedOutputs { window, fixed, .. } = self.fixed_outputs(&m, &d).ok()?;
+        // Step s of the plan is in effect at (good tick + d + s): sending
+        // it now keeps the delay's bookkeeping.
         let plan4: [Vector3<f64>; 4] = std::array::from_fn(|j| {
             let mut p = self.good_y0;
             for (axis, pipeline) in self.axes.iter().enumerate() {
@@ -606,6 +621,9 @@ impl Controller for DfMpc {
         if let Some(e) = &mut self.estimator {
             e.correct_last_input(applied);
         }
+        // The inputs sent in standby were not flown: take the applied one
+        // as what is pending.
+        self.delay.fill(*applied);
         self.plan = PlanState::Empty;
     }
 
@@ -620,6 +638,7 @@ impl Controller for DfMpc {
 
     fn reset(&mut self) {
         self.window.reset();
+        self.delay.fill(self.model.hover_input());
         self.last_t = f64::NEG_INFINITY;
         if let Some(multi) = &mut self.multi {
             multi.reset();

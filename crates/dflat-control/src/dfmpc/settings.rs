@@ -157,6 +157,11 @@ pub struct DfMpcSettings {
     /// ([`crate::disturbance`]): acceleration offset and thrust scale, used
     /// in F⁻¹ and F. `None` (default) runs the paper's DF-MPC unchanged.
     pub disturbance: Option<DisturbanceSettings>,
+    /// Pure input delay d \[ticks\] between sending an input and the
+    /// vehicle applying it (0–25, default 0): the controller predicts across
+    /// the d inputs sent and not yet in effect and plans from there
+    /// (`dfmpc/delay.rs`).
+    pub delay_ticks: usize,
 }
 
 impl Default for DfMpcSettings {
@@ -174,6 +179,7 @@ impl Default for DfMpcSettings {
             smoothness_weight: [0.0; 3],
             multi_rate: None,
             disturbance: None,
+            delay_ticks: 0,
         }
     }
 }
@@ -244,6 +250,9 @@ impl DfMpcSettings {
         }
         if let Some(d) = &self.disturbance {
             d.validate()?;
+        }
+        if self.delay_ticks > super::delay::MAX_DELAY_TICKS {
+            return Err(invalid("delay_ticks", "0–25 ticks"));
         }
         Ok(())
     }

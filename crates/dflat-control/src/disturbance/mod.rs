@@ -62,6 +62,15 @@
 //! with time constant 1/(2π f_c) after the window delay; the estimate does
 //! not depend on the controller (no loop is closed through it).
 //!
+//! # Drag
+//!
+//! With the model's linear drag D (`ControlModel::drag`) the velocity
+//! decays by `β = 1 − D·δt` per tick and the double integral and the
+//! regressors of v_0 and δ decay with it (`drag.rs`); the fit stays linear
+//! and exact for the plant equal to the model, with weights h per axis. With
+//! D = 0 the plain fit below runs unchanged. The noise gains reported are
+//! the drag-free ones (at D·T ≪ 1 they differ little).
+//!
 //! # Noise gain
 //!
 //! With white position noise of standard deviation σ, the fit gives
@@ -292,6 +301,8 @@ pub struct DisturbanceEstimator {
     alpha: f64,
     /// Fit weights h_j, j = 0..L−1 oldest first \[1/s²\].
     weights: Vec<f64>,
+    /// The per-axis basis and weights of the fit with the model's drag.
+    drag: DragBasis,
     /// √Σh² \[1/s²\].
     fit_gain: f64,
     /// std(d̂)/σ \[1/s²\].
@@ -390,6 +401,8 @@ impl DisturbanceEstimator {
         let weights = fit_weights(l, dt)
             .ok_or_else(|| invalid("disturbance.fit_span", "too short for the fit"))?;
         let alpha = 1.0 - (-2.0 * std::f64::consts::PI * settings.bandwidth_hz * dt).exp();
+        let drag = DragBasis::new(model.drag(), l, dt)
+            .ok_or_else(|| invalid("disturbance.fit_span", "too short for the fit"))?;
         let fit_gain = weights.iter().map(|h| h * h).sum::<f64>().sqrt();
         let noise_gain = low_pass_noise_gain(&weights, alpha);
         let slowest = match &model {
@@ -402,6 +415,7 @@ impl DisturbanceEstimator {
             settings,
             alpha,
             weights,
+            drag,
             fit_gain,
             noise_gain,
             settle_ticks,
@@ -708,6 +722,19 @@ impl DisturbanceEstimator {
         let y0 = self.outputs[self.head];
         let (mut s, mut w) = (Vector3::zeros(), Vector3::<f64>::zeros());
         let mut delta = Vector3::zeros();
+        if !self.drag.is_free() {
+            let decay = self.drag.decay;
+            for j in 0..l {
+                let i = (self.head + j) % l;
+                let r = (self.outputs[i] - y0) - s;
+                for axis in 0..3 {
+                    delta[axis] += self.drag.h[axis][j] * r[axis];
+                }
+                s += dt * w;
+                w = w.component_mul(&decay) + dt * (self.accel_g[i] + kappa * self.accel_t[i]);
+            }
+            return delta;
+        }
         for (j, h) in self.weights.iter().enumerate() {
             let i = (self.head + j) % l;
             delta += *h * ((self.outputs[i] - y0) - s);
@@ -725,11 +752,20 @@ impl DisturbanceEstimator {
         let dt = self.model.dt();
         let kappa = self.estimate.thrust_scale;
         let (mut s, mut w) = (Vector3::zeros(), Vector3::<f64>::zeros());
+        let free = self.drag.is_free();
+        let decay = self.drag.decay;
         for j in 0..l {
             let i = (self.head + j) % l;
             self.integral[j] = s;
             s += dt * w;
-            w += dt * (self.accel_g[i] + kappa * self.accel_t[i]);
+            if free {
+                w += dt * (self.accel_g[i] + kappa * self.accel_t[i]);
+            } else {
+                w = w.component_mul(&decay) + dt * (self.accel_g[i] + kappa * self.accel_t[i]);
+            }
+        }
+        if !free {
+            return self.sample_fit_drag(dt);
         }
         let t0 = self.tick_times[self.head];
         let n = (l - 1) as f64;
@@ -773,6 +809,51 @@ impl DisturbanceEstimator {
         delta.iter().all(|v| v.is_finite()).then_some(delta)
     }
 
+    /// [`Self::sample_fit`] with the model's drag: the per-axis basis of
+    /// [`DragBasis`] at the samples' fractional ticks, one 3×3 normal system
+    /// per axis. `integral` holds the decayed double integral.
+    fn sample_fit_drag(&self, dt: f64) -> Option<Vector3<f64>> {
+        let l = self.settings.fit_span;
+        let t0 = self.tick_times[self.head];
+        let n = (l - 1) as f64;
+        let reference = self.last_sample.map_or(Vector3::zeros(), |(_, y)| y);
+        let mut ata = [Matrix3::zeros(); 3];
+        let mut atb = [Vector3::<f64>::zeros(); 3];
+        let (mut count, mut first, mut last) = (0usize, f64::INFINITY, f64::NEG_INFINITY);
+        let cap = self.samples.len();
+        for k in 0..self.sample_len {
+            let (ts, y) = self.samples[(self.sample_head + k) % cap];
+            let tau = (ts - t0) / dt;
+            if !(-1e-6..=n + 1e-6).contains(&tau) {
+                continue;
+            }
+            let tau = tau.clamp(0.0, n);
+            let j = (tau.floor() as usize).min(l - 2);
+            let a = tau - j as f64;
+            let integral = self.integral[j] + a * (self.integral[j + 1] - self.integral[j]);
+            let r = y - reference - integral;
+            for axis in 0..3 {
+                let (b, c) = self.drag.at(axis, tau);
+                let row = Vector3::new(1.0, b / n, 2.0 * c / (n * n));
+                ata[axis] += row * row.transpose();
+                atb[axis] += r[axis] * row;
+            }
+            count += 1;
+            first = first.min(tau);
+            last = last.max(tau);
+        }
+        if count < 3 || first > n / 3.0 || last < 2.0 * n / 3.0 {
+            return None;
+        }
+        let scale = 2.0 / (dt * dt * n * n);
+        let mut delta = Vector3::zeros();
+        for axis in 0..3 {
+            let inv = ata[axis].try_inverse()?;
+            delta[axis] = scale * inv.row(2).dot(&atb[axis].transpose());
+        }
+        delta.iter().all(|v| v.is_finite()).then_some(delta)
+    }
+
     /// The window fit and the low-pass (module docs).
     fn update(&mut self, delta: &Vector3<f64>) {
         let l = self.settings.fit_span;
@@ -806,6 +887,9 @@ impl DisturbanceEstimator {
         self.clamped = clamped;
     }
 }
+
+mod drag;
+use drag::DragBasis;
 
 #[cfg(test)]
 mod tests;

@@ -298,6 +298,16 @@ pub struct VehicleConfig {
     pub yaw_mode: YawMode,
     /// Largest commanded yaw rate \[deg/s\] (5–360).
     pub max_yaw_rate_deg_s: f64,
+    /// Linear horizontal drag \[1/s\] in the world frame (0–2, default 0):
+    /// the model's velocity loses `drag_h·v` of acceleration
+    /// (docs/controllers.md, *Drag and delay*). `dflat identify` estimates it.
+    pub drag_h: f64,
+    /// Linear vertical drag \[1/s\] (spatial model; 0–2, default 0).
+    pub drag_v: f64,
+    /// Pure input delay \[ms\] between a command leaving the daemon and the
+    /// autopilot acting on it (0–500, default 0), rounded to control ticks
+    /// (said at start). DF-MPC predicts across the commands in flight.
+    pub delay_ms: f64,
 }
 
 /// `vehicle.yaw_mode`.
@@ -326,6 +336,9 @@ impl Default for VehicleConfig {
             hover_thrust: 0.5,
             yaw_mode: YawMode::Flown,
             max_yaw_rate_deg_s: 45.0,
+            drag_h: 0.0,
+            drag_v: 0.0,
+            delay_ms: 0.0,
         }
     }
 }

@@ -118,6 +118,9 @@ impl Config {
             5.0,
             360.0,
         )?;
+        v.range("vehicle.drag_h", ve.drag_h, 0.0, 2.0)?;
+        v.range("vehicle.drag_v", ve.drag_v, 0.0, 2.0)?;
+        v.range("vehicle.delay_ms", ve.delay_ms, 0.0, 500.0)?;
         if ve.model == ModelKind::Spatial && ve.thrust_mode == ThrustMode::Fixed {
             return Err(v.err(
                 "vehicle.thrust_mode",

@@ -520,6 +520,17 @@ pub async fn spawn_with_controller(
         rate_hz = config.controller.rate_hz,
         "daemon started"
     );
+    if config.vehicle.delay_ms > 0.0 || config.vehicle.drag_h > 0.0 || config.vehicle.drag_v > 0.0 {
+        let ticks = crate::control::delay_ticks(&config);
+        info!(
+            delay_ms = config.vehicle.delay_ms,
+            delay_ticks = ticks,
+            flown_ms = ticks as f64 * 1e3 / config.controller.rate_hz,
+            drag_h = config.vehicle.drag_h,
+            drag_v = config.vehicle.drag_v,
+            "vehicle model: input delay rounded to control ticks, linear drag"
+        );
+    }
 
     let (stop_tx, stop_rx) = watch::channel(false);
     let stop = Arc::new(Stop {

@@ -9,8 +9,11 @@ use anyhow::{Context as _, Result, bail};
 use dflat_sim::flightlog::{FlightCsv, FlightLog};
 use dflat_sim::identify::{self, FlownVehicle};
 
+mod page;
 pub mod replay;
 pub mod review;
+#[cfg(test)]
+mod review_tests;
 mod svg;
 
 /// Arguments of `dflat identify`.
@@ -95,6 +98,8 @@ pub fn flown_vehicle(config: &Path) -> Result<FlownVehicle> {
         tau_thrust: v.tau_thrust,
         hover_thrust: v.hover_thrust,
         spatial: v.model == dflat_daemon::config::ModelKind::Spatial,
+        delay_ms: v.delay_ms,
+        drag_h: v.drag_h,
     })
 }
 

@@ -1,15 +1,22 @@
 //! `dflat review`: a flight's report as one self-contained HTML page
-//! (inline SVG, no scripts, opens offline): summary numbers at the top,
-//! then the flown path over the reference, the tracking error, commanded
-//! against measured attitude, thrust, solve time and tick jitter, pose
-//! age and the disturbance estimate, with state changes and guard events
-//! marked on every time axis.
+//! (inline SVG and a small inline script; no CDN, no network, opens
+//! offline): a header saying what flew (version, date, config and
+//! `[vehicle]`, sim or real), summary numbers and statistics per phase
+//! (TRACKING apart from HOLDING), then the flown path over the reference,
+//! position and velocity setpoint against measured per axis, the tracking
+//! error, commanded against measured attitude, thrust, solve time and tick
+//! jitter, pose age and the disturbance estimate. Every time axis carries
+//! the supervisor states as labelled bands, FAILSAFE and guard events in
+//! red. The script links zoom and pan across the time charts and moves a
+//! cursor that marks the vehicle on the path; without it the SVGs stand
+//! alone. Long series are min/max thinned (`svg::thin`).
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, Result};
 
+use super::page::{self, Header};
 use super::svg::{Chart, Marker, Series, esc};
 use dflat_sim::flightlog::{FlightCsv, FlightLog};
 
@@ -22,6 +29,10 @@ pub struct ReviewArgs {
     /// The HTML file to write (default `<flight>.html`).
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// The configuration the flight was flown with: its `[vehicle]` table
+    /// goes into the page's header.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
 }
 
 /// Commands of an offline re-run, drawn over the flown ones.
@@ -43,11 +54,61 @@ pub fn run(args: ReviewArgs) -> Result<()> {
     };
     let csv = super::read_csv(&csv_path)?;
     let log = load_tlog_beside(&csv_path)?;
-    let html = render(&csv_path, &csv, log.as_ref(), None);
+    let header = header_for(&csv_path, log.as_ref(), args.config.as_deref())?;
+    let html = render_with(&csv_path, &csv, log.as_ref(), None, &header);
     let out = args.out.unwrap_or_else(|| csv_path.with_extension("html"));
     std::fs::write(&out, html).with_context(|| format!("cannot write {}", out.display()))?;
     println!("{}", out.display());
     Ok(())
+}
+
+/// What the header says: the date from the .tlog, the configuration's
+/// `[vehicle]` table, and sim or real (a configuration with `[sitl]` flew
+/// in simulation).
+pub fn header_for(csv: &Path, log: Option<&FlightLog>, config: Option<&Path>) -> Result<Header> {
+    let mut h = Header {
+        flight: csv.display().to_string(),
+        date: log
+            .filter(|l| l.start_unix_us > 0)
+            .map(|l| page::utc(l.start_unix_us)),
+        kind: "unknown (pass --config)".into(),
+        ..Header::default()
+    };
+    if let Some(path) = config {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("cannot read {}", path.display()))?;
+        // The tables as written (the daemon validated the file when it flew).
+        let table_of = |name: &str| -> Option<String> {
+            let mut out = None::<String>;
+            for line in text.lines() {
+                let l = line.trim();
+                if l.starts_with('[') {
+                    if out.is_some() {
+                        break;
+                    }
+                    if l == format!("[{name}]") {
+                        out = Some(String::new());
+                    }
+                } else if let Some(o) = &mut out
+                    && !l.is_empty()
+                {
+                    o.push_str(line);
+                    o.push('\n');
+                }
+            }
+            out
+        };
+        h.config = Some(path.display().to_string());
+        h.vehicle = Some(
+            table_of("vehicle").unwrap_or_else(|| "(no [vehicle] table: the defaults)".into()),
+        );
+        h.kind = if table_of("sitl").is_some() {
+            "sim (the configuration has a [sitl] table)".into()
+        } else {
+            "real vehicle (no [sitl] table in the configuration)".into()
+        };
+    }
+    Ok(h)
 }
 
 /// The `.tlog` beside a CSV, if there is one with a complete record (an
@@ -205,7 +266,7 @@ fn markers(csv: &FlightCsv, t: &[f64]) -> Vec<Marker> {
             out.push(Marker {
                 x: t[i],
                 label: format!("{} → {}", states[i - 1], states[i]),
-                color: "#2a7",
+                color: page::state_color(states[i]),
             });
         }
         if !guards[i].is_empty() {
@@ -227,8 +288,36 @@ pub fn render(
     log: Option<&FlightLog>,
     overlay: Option<&Overlay>,
 ) -> String {
+    let header = header_for(name, log, None).unwrap_or_default();
+    render_with(name, csv, log, overlay, &header)
+}
+
+/// Central difference of `v` over ±2 ticks \[unit/s\] (NaN at gaps).
+fn rate(t: &[f64], v: &[f64]) -> Vec<f64> {
+    (0..t.len())
+        .map(|i| {
+            let (a, b) = (i.saturating_sub(2), (i + 2).min(t.len().saturating_sub(1)));
+            let dt = t[b] - t[a];
+            if b > a && dt > 0.0 {
+                (v[b] - v[a]) / dt
+            } else {
+                f64::NAN
+            }
+        })
+        .collect()
+}
+
+/// [`render`] with the header given.
+pub fn render_with(
+    name: &Path,
+    csv: &FlightCsv,
+    log: Option<&FlightLog>,
+    overlay: Option<&Overlay>,
+    header: &Header,
+) -> String {
     let t = col(csv, "t");
     let marks = markers(csv, &t);
+    let bands = page::state_bands(&t, &csv.texts("state"));
     let chart = |id: &str, title: &str, y: &str, series: Vec<Series>| Chart {
         id: id.into(),
         title: title.into(),
@@ -237,6 +326,9 @@ pub fn render(
         series,
         markers: marks.clone(),
         equal_axes: false,
+        bands: bands.clone(),
+        time_axis: true,
+        track: Vec::new(),
     };
     let s = |name: &str, color: &'static str, points: Vec<(f64, f64)>| Series {
         name: name.into(),
@@ -271,7 +363,49 @@ pub fn render(
         ],
         markers: Vec::new(),
         equal_axes: true,
+        bands: Vec::new(),
+        time_axis: false,
+        // The vehicle every 0.1 s, for the time cursor.
+        track: (0..t.len())
+            .step_by(5)
+            .filter(|&i| t[i].is_finite() && x[i].is_finite() && y[i].is_finite())
+            .map(|i| (t[i], y[i], x[i]))
+            .collect(),
     });
+    // Position and velocity, setpoint against measured, per axis.
+    for (axis, (p, r)) in
+        ["x (north)", "y (east)", "z (down)"]
+            .iter()
+            .zip([(&x, &rx), (&y, &ry), (&z, &rz)])
+    {
+        let key = &axis[..1];
+        charts.push(chart(
+            &format!("position-{key}"),
+            &format!("position {axis}: setpoint vs measured"),
+            "m",
+            vec![
+                dashed(&format!("{key} setpoint"), "#999", pairs(&t, r, 1.0)),
+                s(&format!("{key} measured"), "#1f5fbf", pairs(&t, p, 1.0)),
+            ],
+        ));
+        charts.push(chart(
+            &format!("velocity-{key}"),
+            &format!("velocity {axis}: setpoint vs measured (central differences)"),
+            "m/s",
+            vec![
+                dashed(
+                    &format!("v{key} setpoint"),
+                    "#999",
+                    pairs(&t, &rate(&t, r), 1.0),
+                ),
+                s(
+                    &format!("v{key} measured"),
+                    "#1f5fbf",
+                    pairs(&t, &rate(&t, p), 1.0),
+                ),
+            ],
+        ));
+    }
     let err: Vec<f64> = (0..t.len())
         .map(|i| ((x[i] - rx[i]).powi(2) + (y[i] - ry[i]).powi(2) + (z[i] - rz[i]).powi(2)).sqrt())
         .collect();
@@ -386,22 +520,36 @@ pub fn render(
             ],
         ));
     }
-    page(name, csv, log, &charts)
+    let states = csv.texts("state");
+    let cmd: Vec<(f64, f64)> = col(csv, "roll")
+        .into_iter()
+        .zip(col(csv, "pitch"))
+        .collect();
+    let phases = page::phase_stats(&t, &states, &err, &cmd, quantile);
+    page(name, csv, log, &charts, header, &phases)
 }
 
-fn page(name: &Path, csv: &FlightCsv, log: Option<&FlightLog>, charts: &[Chart]) -> String {
+fn page(
+    name: &Path,
+    csv: &FlightCsv,
+    log: Option<&FlightLog>,
+    charts: &[Chart],
+    header: &Header,
+    phases: &[page::PhaseStats],
+) -> String {
     let title = format!("dflat review — {}", name.display());
     let mut h = String::new();
     let _ = write!(
         h,
-        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>{}</title>\
-         <style>body{{font-family:sans-serif;margin:2em;max-width:960px}}table{{border-collapse:collapse}}\
-         td,th{{padding:2px 10px;text-align:left;border-bottom:1px solid #ddd}}td.v{{text-align:right}}\
-         figure{{margin:1.5em 0}}</style></head><body>\n<h1>{}</h1>\n",
+        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\
+         <meta name=\"viewport\" content=\"width=device-width, initial-scale=1\"><title>{}</title>\
+         <style>{}</style></head><body>\n<h1>{}</h1>\n",
         esc(&title),
+        page::STYLE,
         esc(&title)
     );
-    h.push_str("<table id=\"summary\">\n");
+    h.push_str(&page::header_html(header));
+    h.push_str("<div class=\"grid\"><div><h2>summary</h2><table id=\"summary\">\n");
     for (key, label, value, unit) in summary(csv) {
         let shown = if value.is_finite() {
             if value.fract() == 0.0 && value.abs() < 1e9 {
@@ -418,10 +566,21 @@ fn page(name: &Path, csv: &FlightCsv, log: Option<&FlightLog>, charts: &[Chart])
             esc(label)
         );
     }
-    h.push_str("</table>\n<p>Green dashed lines: state changes; red: guard and fallback events (hover for the label).</p>\n");
+    h.push_str("</table></div><div><h2>per phase</h2>\n");
+    h.push_str(&page::phase_table(phases));
+    h.push_str(
+        "<p>Bands: the supervisor's states (FAILSAFE red); lines: state changes, \
+         guard and fallback events in red (hover for the label).</p></div></div>\n",
+    );
+    h.push_str(
+        "<div id=\"zoom-bar\"><button id=\"zoom-reset\" type=\"button\">reset zoom</button>\
+         <span id=\"zoom-range\"></span> <span id=\"cursor-time\"></span> \
+         <small>wheel or drag: zoom · shift+drag: pan · double-click: all</small></div>\n<div class=\"grid\">\n",
+    );
     for c in charts {
         let _ = writeln!(h, "<figure>{}</figure>", c.to_svg());
     }
+    h.push_str("</div>\n");
     if let Some(log) = log
         && !log.texts.is_empty()
     {
@@ -431,6 +590,7 @@ fn page(name: &Path, csv: &FlightCsv, log: Option<&FlightLog>, charts: &[Chart])
         }
         h.push_str("</ul>\n");
     }
+    let _ = write!(h, "<script>{}</script>\n", page::SCRIPT);
     h.push_str("</body></html>\n");
     h
 }

@@ -29,6 +29,68 @@ pub struct Marker {
     pub color: &'static str,
 }
 
+/// A labelled band over an x span (a supervisor state).
+#[derive(Debug, Clone)]
+pub struct Band {
+    /// Start and end on the x axis.
+    pub x0: f64,
+    /// End on the x axis.
+    pub x1: f64,
+    /// Label (drawn in the band when wide enough, and its tooltip).
+    pub label: String,
+    /// Fill colour (CSS).
+    pub color: &'static str,
+}
+
+/// Most points a series keeps: above it, min/max thinning per x bucket
+/// (each bucket keeps its first, smallest, largest and last point, in x
+/// order), so peaks survive and a 10-minute flight stays small.
+pub const MAX_POINTS: usize = 2400;
+
+/// Min/max thinning of `points` to at most about `max` points (see
+/// [`MAX_POINTS`]); non-finite points are kept as line breaks.
+pub fn thin(points: &[(f64, f64)], max: usize) -> Vec<(f64, f64)> {
+    if points.len() <= max {
+        return points.to_vec();
+    }
+    let buckets = (max / 4).max(1);
+    let per = points.len().div_ceil(buckets);
+    let mut out = Vec::with_capacity(4 * buckets + 8);
+    for chunk in points.chunks(per) {
+        if chunk.iter().any(|p| !(p.0.is_finite() && p.1.is_finite())) {
+            // Keep the break: the finite ends around it and one NaN.
+            let mut pen = false;
+            for p in chunk {
+                let ok = p.0.is_finite() && p.1.is_finite();
+                if ok != pen {
+                    out.push(*p);
+                    pen = ok;
+                }
+            }
+            continue;
+        }
+        let (mut lo, mut hi) = (0, 0);
+        for (i, p) in chunk.iter().enumerate() {
+            if p.1 < chunk[lo].1 {
+                lo = i;
+            }
+            if p.1 > chunk[hi].1 {
+                hi = i;
+            }
+        }
+        let mut idx = [0, lo, hi, chunk.len() - 1];
+        idx.sort_unstable();
+        let mut last = usize::MAX;
+        for i in idx {
+            if i != last {
+                out.push(chunk[i]);
+                last = i;
+            }
+        }
+    }
+    out
+}
+
 /// A chart.
 #[derive(Debug, Clone, Default)]
 pub struct Chart {
@@ -46,6 +108,13 @@ pub struct Chart {
     pub markers: Vec<Marker>,
     /// Equal scales on both axes (a map).
     pub equal_axes: bool,
+    /// Labelled bands (supervisor states) behind the series.
+    pub bands: Vec<Band>,
+    /// A time axis the page's script may zoom, pan and put the cursor on
+    /// (linked across the page).
+    pub time_axis: bool,
+    /// For the map: (t, x, y) samples of the vehicle, for the time cursor.
+    pub track: Vec<(f64, f64, f64)>,
 }
 
 const W: f64 = 900.0;
@@ -104,17 +173,17 @@ impl Chart {
         let mut svg = String::new();
         let _ = write!(
             svg,
-            r#"<svg id="{}" xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {W} {height}" width="{W}" height="{height}" font-family="sans-serif" font-size="12">"#,
-            esc(&self.id)
-        );
-        let _ = write!(
-            svg,
-            r#"<text x="{}" y="18" text-anchor="middle" font-size="15">{}</text>"#,
-            W / 2.0,
-            esc(&self.title)
+            r#"<svg id="{}" class="chart{}" xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {W} {height}" width="100%" preserveAspectRatio="xMidYMid meet" font-family="sans-serif" font-size="12""#,
+            esc(&self.id),
+            if self.time_axis { " time" } else { "" }
         );
         let (Some((mut x0, mut x1)), Some((mut y0, mut y1))) = (xr, yr) else {
-            svg.push_str(r#"<text x="100" y="80">no data</text></svg>"#);
+            let _ = write!(
+                svg,
+                r#"><text x="{}" y="18" text-anchor="middle" font-size="15">{}</text><text x="100" y="80">no data</text></svg>"#,
+                W / 2.0,
+                esc(&self.title)
+            );
             return svg;
         };
         let pw = W - LEFT - RIGHT;
@@ -128,10 +197,27 @@ impl Chart {
         }
         let px = |x: f64| LEFT + (x - x0) / (x1 - x0) * pw;
         let py = |y: f64| TOP + (1.0 - (y - y0) / (y1 - y0)) * ph;
+        // The mapping, for the page's script (zoom, pan, cursor).
+        let _ = write!(
+            svg,
+            r#" data-x0="{x0}" data-x1="{x1}" data-y0="{y0}" data-y1="{y1}" data-left="{LEFT}" data-top="{TOP}" data-pw="{pw}" data-ph="{ph}">"#
+        );
+        let _ = write!(
+            svg,
+            r#"<text x="{}" y="18" text-anchor="middle" font-size="15">{}</text>"#,
+            W / 2.0,
+            esc(&self.title)
+        );
+        let clip = format!("clip-{}", esc(&self.id));
+        let _ = write!(
+            svg,
+            r#"<clipPath id="{clip}"><rect x="{LEFT}" y="{TOP}" width="{pw}" height="{ph}"/></clipPath>"#
+        );
         let _ = write!(
             svg,
             r##"<rect x="{LEFT}" y="{TOP}" width="{pw}" height="{ph}" fill="none" stroke="#888"/>"##
         );
+        svg.push_str(r#"<g class="xticks">"#);
         for t in ticks(x0, x1) {
             let _ = write!(
                 svg,
@@ -142,6 +228,7 @@ impl Chart {
                 fmt_tick(t)
             );
         }
+        svg.push_str("</g>");
         for t in ticks(y0, y1) {
             let _ = write!(
                 svg,
@@ -162,10 +249,38 @@ impl Chart {
             TOP + ph / 2.0,
             esc(&self.y_label)
         );
+        // Everything on the time axis sits in one group the script scales.
+        let _ = write!(svg, r#"<g clip-path="url(#{clip})"><g class="plot">"#);
+        for b in &self.bands {
+            let (a, z) = (px(b.x0.max(x0)), px(b.x1.min(x1)));
+            if z <= a {
+                continue;
+            }
+            let _ = write!(
+                svg,
+                r#"<rect class="band" data-label="{0}" x="{1:.1}" y="{TOP}" width="{2:.1}" height="{ph}" fill="{3}" fill-opacity="0.16"><title>{0}: {4:.2}–{5:.2} s</title></rect>"#,
+                esc(&b.label),
+                a,
+                z - a,
+                b.color,
+                b.x0,
+                b.x1
+            );
+            if z - a > 8.0 * b.label.len() as f64 {
+                let _ = write!(
+                    svg,
+                    r#"<text class="band-label" x="{:.1}" y="{:.1}" font-size="10" fill="{}">{}</text>"#,
+                    a + 3.0,
+                    TOP + ph - 4.0,
+                    b.color,
+                    esc(&b.label)
+                );
+            }
+        }
         for m in &self.markers {
             let _ = write!(
                 svg,
-                r#"<line class="marker" data-label="{}" x1="{2:.1}" x2="{2:.1}" y1="{TOP}" y2="{3:.1}" stroke="{1}" stroke-width="1" stroke-dasharray="3 3"><title>{0} at {4:.2}</title></line>"#,
+                r#"<line class="marker" data-label="{}" x1="{2:.1}" x2="{2:.1}" y1="{TOP}" y2="{3:.1}" stroke="{1}" stroke-width="1.5" vector-effect="non-scaling-stroke"><title>{0} at {4:.2}</title></line>"#,
                 esc(&m.label),
                 m.color,
                 px(m.x),
@@ -173,9 +288,9 @@ impl Chart {
                 m.x
             );
         }
-        for (i, s) in self.series.iter().enumerate() {
-            let finite: Vec<&(f64, f64)> = s
-                .points
+        for s in &self.series {
+            let points = thin(&s.points, MAX_POINTS);
+            let finite: Vec<&(f64, f64)> = points
                 .iter()
                 .filter(|p| p.0.is_finite() && p.1.is_finite())
                 .collect();
@@ -186,7 +301,7 @@ impl Chart {
                 });
             let mut d = String::new();
             let mut pen_up = true;
-            for p in &s.points {
+            for p in &points {
                 if !(p.0.is_finite() && p.1.is_finite()) {
                     pen_up = true;
                     continue;
@@ -202,7 +317,7 @@ impl Chart {
             }
             let _ = write!(
                 svg,
-                r#"<path class="series" data-name="{}" data-points="{}" data-min="{lo}" data-max="{hi}" d="{d}" fill="none" stroke="{}" stroke-width="1.3"{}/>"#,
+                r#"<path class="series" data-name="{}" data-points="{}" data-min="{lo}" data-max="{hi}" d="{d}" fill="none" stroke="{}" stroke-width="1.3" vector-effect="non-scaling-stroke"{}/>"#,
                 esc(&s.name),
                 finite.len(),
                 s.color,
@@ -212,6 +327,21 @@ impl Chart {
                     ""
                 }
             );
+        }
+        svg.push_str("</g></g>");
+        if !self.track.is_empty() {
+            let track: Vec<String> = self
+                .track
+                .iter()
+                .map(|(t, x, y)| format!("[{t:.2},{:.1},{:.1}]", px(*x), py(*y)))
+                .collect();
+            let _ = write!(
+                svg,
+                r##"<circle class="vehicle" r="6" cx="-20" cy="-20" fill="#e80" stroke="#333" data-track="[{}]"/>"##,
+                track.join(",")
+            );
+        }
+        for (i, s) in self.series.iter().enumerate() {
             let ly = TOP + 14.0 + 15.0 * i as f64;
             let _ = write!(
                 svg,

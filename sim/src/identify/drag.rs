@@ -1,0 +1,274 @@
+//! Linear drag from the horizontal motion: the acceleration that the
+//! measured tilt does not explain, against the velocity.
+//!
+//! Model (local NED, horizontal axes, the planar model's acceleration at
+//! the measured attitude):
+//!
+//! ```text
+//! v̇_h = a_att(t) − D·v_h + c,   a_att = −g·(R13, R23)/R33
+//! ```
+//!
+//! with D the horizontal drag \[1/s\] and c a constant offset per axis (wind,
+//! attitude bias). Integrated twice over a chunk of samples (initial
+//! position and velocity unknown per chunk):
+//!
+//! ```text
+//! x(t) − I₂[a_att](t) = α + β·t − D·I₁[x](t) + c·t²/2
+//! ```
+//!
+//! with I₁[x] the integral of the measured position (no differentiation of
+//! noisy positions anywhere) and I₂ the double integral of a_att. The
+//! affine part is projected out per chunk and (D, c_x, c_y) follow by
+//! linear least squares over both axes. a_att assumes the altitude is held
+//! (thrust·R33 = g): climbs add an error of the order of z̈/g.
+
+use nalgebra::{Matrix3, Vector3};
+use serde::Serialize;
+
+use super::stats::Whiteness;
+
+/// Integration grid \[s\].
+const GRID: f64 = 0.002;
+
+/// One engaged segment's horizontal positions.
+#[derive(Debug, Clone, Default)]
+pub struct DragSegment {
+    /// Segment start and end \[s\].
+    pub span: (f64, f64),
+    /// Chunks of (time \[s\], [north, east] \[m\]), each with its own initial
+    /// position and velocity.
+    pub chunks: Vec<Vec<(f64, [f64; 2])>>,
+}
+
+/// Everything the drag fit reads.
+#[derive(Debug, Clone, Default)]
+pub struct DragData {
+    /// (time \[s\], [roll, pitch, yaw] \[rad\]) measured, in time order.
+    pub attitude: Vec<(f64, [f64; 3])>,
+    /// Segments with position samples.
+    pub segments: Vec<DragSegment>,
+    /// Gravity \[m/s²\].
+    pub gravity: f64,
+}
+
+/// The fitted drag.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct DragFit {
+    /// Horizontal linear drag D \[1/s\].
+    pub drag: f64,
+    /// 95 % half-width of D \[1/s\].
+    pub drag_ci: f64,
+    /// Constant acceleration offset [north, east] \[m/s²\] (wind, bias).
+    pub offset: [f64; 2],
+    /// Position samples fitted (each gives two rows).
+    pub samples: usize,
+    /// Share of the positions' variance (after each chunk's straight line
+    /// and the tilt's share) that drag and offset explain.
+    pub variance_explained: f64,
+    /// RMS of the residuals \[m\].
+    pub rms: f64,
+    /// Residual whiteness.
+    pub whiteness: Whiteness,
+}
+
+/// The horizontal acceleration the attitude gives at hover thrust \[m/s²\].
+fn tilt_acceleration(euler: [f64; 3], g: f64) -> [f64; 2] {
+    let [phi, theta, psi] = euler;
+    let (sf, cf) = phi.sin_cos();
+    let (st, ct) = theta.sin_cos();
+    let (sp, cp) = psi.sin_cos();
+    let r13 = cp * st * cf + sp * sf;
+    let r23 = sp * st * cf - cp * sf;
+    let r33 = (ct * cf).max(0.1);
+    [-g * r13 / r33, -g * r23 / r33]
+}
+
+/// Attitude at `t`: linear between samples (yaw across ±π: the nearer).
+fn attitude_at(att: &[(f64, [f64; 3])], t: f64) -> [f64; 3] {
+    let i = att.partition_point(|(s, _)| *s <= t);
+    match (i.checked_sub(1).map(|j| att[j]), att.get(i)) {
+        (Some((t0, a)), Some(&(t1, b))) if t1 > t0 => {
+            let f = (t - t0) / (t1 - t0);
+            if (b[2] - a[2]).abs() > std::f64::consts::PI {
+                return if f < 0.5 { a } else { b };
+            }
+            std::array::from_fn(|k| a[k] + f * (b[k] - a[k]))
+        }
+        (Some((_, a)), _) | (None, Some(&(_, a))) => a,
+        (None, None) => [0.0; 3],
+    }
+}
+
+/// Position at `t` from a segment's samples (linear; held at the ends).
+fn position_at(samples: &[(f64, [f64; 2])], t: f64) -> [f64; 2] {
+    let i = samples.partition_point(|(s, _)| *s <= t);
+    match (i.checked_sub(1).map(|j| samples[j]), samples.get(i)) {
+        (Some((t0, a)), Some(&(t1, b))) if t1 > t0 => {
+            let f = (t - t0) / (t1 - t0);
+            [a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1])]
+        }
+        (Some((_, a)), _) | (None, Some(&(_, a))) => a,
+        (None, None) => [0.0; 2],
+    }
+}
+
+/// `v` minus its least-squares line in `t`.
+fn project(t: &[f64], v: &[f64]) -> Vec<f64> {
+    let n = t.len() as f64;
+    let (mt, mv) = (t.iter().sum::<f64>() / n, v.iter().sum::<f64>() / n);
+    let stt: f64 = t.iter().map(|x| (x - mt).powi(2)).sum();
+    let stv: f64 = t.iter().zip(v).map(|(x, y)| (x - mt) * (y - mv)).sum();
+    let slope = if stt > 0.0 { stv / stt } else { 0.0 };
+    t.iter()
+        .zip(v)
+        .map(|(x, y)| y - mv - slope * (x - mt))
+        .collect()
+}
+
+/// One least-squares row: target, and regressors [D, c_x, c_y].
+type Row = (f64, Vector3<f64>);
+
+/// The projected rows of every chunk (x rows, then y rows, per chunk).
+fn rows(data: &DragData) -> Vec<Row> {
+    let g = data.gravity;
+    let mut out = Vec::new();
+    for seg in &data.segments {
+        let (a, b) = seg.span;
+        let samples: Vec<(f64, [f64; 2])> = seg.chunks.iter().flatten().copied().collect();
+        if samples.len() < 5 || b <= a {
+            continue;
+        }
+        let n = ((b - a) / GRID).ceil() as usize + 1;
+        // Grids of I₂[a_att] and I₁[x] (trapezoids).
+        let mut i2 = vec![[0.0; 2]; n];
+        let mut i1p = vec![[0.0; 2]; n];
+        let (mut v, mut acc_prev) = (
+            [0.0; 2],
+            tilt_acceleration(attitude_at(&data.attitude, a), g),
+        );
+        let mut p_prev = position_at(&samples, a);
+        for k in 1..n {
+            let t = a + k as f64 * GRID;
+            let acc = tilt_acceleration(attitude_at(&data.attitude, t), g);
+            let p = position_at(&samples, t);
+            for ax in 0..2 {
+                let v_next = v[ax] + 0.5 * (acc[ax] + acc_prev[ax]) * GRID;
+                i2[k][ax] = i2[k - 1][ax] + 0.5 * (v[ax] + v_next) * GRID;
+                v[ax] = v_next;
+                i1p[k][ax] = i1p[k - 1][ax] + 0.5 * (p[ax] + p_prev[ax]) * GRID;
+            }
+            acc_prev = acc;
+            p_prev = p;
+        }
+        let at = |grid: &[[f64; 2]], t: f64, ax: usize| {
+            let x = ((t - a) / GRID).clamp(0.0, (n - 1) as f64);
+            let k = (x.floor() as usize).min(n.saturating_sub(2));
+            let f = x - k as f64;
+            grid[k][ax] * (1.0 - f) + grid[(k + 1).min(n - 1)][ax] * f
+        };
+        for chunk in &seg.chunks {
+            if chunk.len() < 5 {
+                continue;
+            }
+            let t0 = chunk[0].0;
+            let ts: Vec<f64> = chunk.iter().map(|(t, _)| t - t0).collect();
+            let x2 = project(&ts, &ts.iter().map(|s| 0.5 * s * s).collect::<Vec<_>>());
+            for ax in 0..2 {
+                let y: Vec<f64> = chunk.iter().map(|(t, p)| p[ax] - at(&i2, *t, ax)).collect();
+                let x1: Vec<f64> = chunk.iter().map(|(t, _)| -at(&i1p, *t, ax)).collect();
+                let (y, x1) = (project(&ts, &y), project(&ts, &x1));
+                for j in 0..ts.len() {
+                    let mut r = Vector3::new(x1[j], 0.0, 0.0);
+                    r[1 + ax] = x2[j];
+                    out.push((y[j], r));
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Fits D and the offsets. `None` with fewer than 50 samples or when the
+/// velocity does not vary enough to separate drag from the offset.
+pub fn fit_drag(data: &DragData) -> Option<DragFit> {
+    let rows = rows(data);
+    let n = rows.len();
+    if n < 100 {
+        return None;
+    }
+    let mut ata = Matrix3::zeros();
+    let mut atb = Vector3::zeros();
+    let mut syy = 0.0;
+    for (y, r) in &rows {
+        ata += r * r.transpose();
+        atb += *y * r;
+        syy += y * y;
+    }
+    let inv = ata.try_inverse()?;
+    let theta = inv * atb;
+    if !theta.iter().all(|v| v.is_finite()) {
+        return None;
+    }
+    let residuals: Vec<f64> = rows.iter().map(|(y, r)| y - r.dot(&theta)).collect();
+    let sse: f64 = residuals.iter().map(|v| v * v).sum();
+    let whiteness = Whiteness::of(&residuals);
+    let inflation = whiteness.inflation(n as f64 / 10.0);
+    let s2 = sse / (n - 3) as f64;
+    let sd = (s2 * inflation * inv[(0, 0)]).sqrt();
+    Some(DragFit {
+        drag: theta[0],
+        drag_ci: 1.96 * sd,
+        offset: [theta[1], theta[2]],
+        samples: n / 2,
+        variance_explained: if syy > 0.0 { 1.0 - sse / syy } else { 0.0 },
+        rms: (sse / n as f64).sqrt(),
+        whiteness,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A simulated flight with known drag and offset: the fit recovers them.
+    #[test]
+    fn recovers_drag_from_a_simulated_flight() {
+        let (g, drag, offset) = (9.81, 0.3, [0.2, -0.1]);
+        let dt = 0.001;
+        let (mut p, mut v) = ([0.0f64; 2], [0.0f64; 2]);
+        let mut attitude = Vec::new();
+        let mut samples = Vec::new();
+        let psi: f64 = 0.4;
+        for k in 0..20_000 {
+            let t = k as f64 * dt;
+            let euler = [0.15 * (0.9 * t).sin(), 0.2 * (0.6 * t).cos(), psi];
+            if k % 10 == 0 {
+                attitude.push((t, euler));
+            }
+            if k % 20 == 0 {
+                samples.push((t, p));
+            }
+            let a = tilt_acceleration(euler, g);
+            for ax in 0..2 {
+                p[ax] += dt * v[ax];
+                v[ax] += dt * (a[ax] - drag * v[ax] + offset[ax]);
+            }
+        }
+        let chunks: Vec<Vec<(f64, [f64; 2])>> = samples.chunks(150).map(|c| c.to_vec()).collect();
+        let data = DragData {
+            attitude,
+            segments: vec![DragSegment {
+                span: (0.0, 19.999),
+                chunks,
+            }],
+            gravity: g,
+        };
+        let fit = fit_drag(&data).expect("fit");
+        assert!((fit.drag - drag).abs() < 0.01, "{fit:?}");
+        assert!((fit.offset[0] - offset[0]).abs() < 0.02, "{fit:?}");
+        assert!(
+            fit.drag_ci.is_finite() && fit.variance_explained > 0.99,
+            "{fit:?}"
+        );
+    }
+}
