@@ -223,14 +223,17 @@ impl Harness {
                     "setpoint {p:?} outside the fence"
                 );
             }
-            (_, Goal::Path) => {}
+            (_, Goal::Path | Goal::Stream) => {}
             (_, Goal::Brake { from, velocity }) => assert!(
                 from.iter().chain(&velocity).all(|v| v.is_finite()),
                 "brake {from:?} {velocity:?}"
             ),
         }
         if s.state() == FlightState::Tracking {
-            assert!(matches!(s.goal(), Goal::Setpoint(_) | Goal::Path));
+            assert!(matches!(
+                s.goal(),
+                Goal::Setpoint(_) | Goal::Path | Goal::Stream
+            ));
         }
         let t = s.time_in_states(self.now);
         assert!(t.iter().all(|v| v.is_finite() && *v >= 0.0), "{t:?}");
@@ -270,6 +273,11 @@ pub fn check_inbound(inbound: &Inbound) {
         Inbound::PositionSetpoint(s) => {
             assert!(s.position.iter().copied().all(finite), "{s:?}");
             assert!(s.yaw.is_none_or(finite), "{s:?}");
+            assert!(
+                s.velocity.is_none_or(|v| v.iter().copied().all(finite))
+                    && s.acceleration.is_none_or(|a| a.iter().copied().all(finite)),
+                "{s:?}"
+            );
         }
         Inbound::Attitude(a) => {
             assert!(

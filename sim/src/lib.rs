@@ -21,6 +21,9 @@
 //! * [`sitl`] — the SITL autopilot stand-in: a real-time plant behind a
 //!   MAVLink link (std threads, the wall clock), the plant process of
 //!   `dflat sitl` and `dflat demo`. The one part of the lab that does I/O.
+//! * [`trajectory`] — a planner's circle and figure eight (p, v, a, yaw);
+//!   [`pd_ff`] — the anchor: a PD position loop with velocity and
+//!   acceleration feed-forward (PX4's position loop), pure.
 //! * [`experiments`] — the paper's studies (noise sweep, L-path comparison,
 //!   DSL demonstration): pure runs returning results, JSON and plot writers.
 //!
@@ -31,10 +34,12 @@ pub mod experiments;
 pub mod flightlog;
 pub mod harness;
 pub mod identify;
+pub mod pd_ff;
 pub mod plant;
 pub mod plot;
 pub mod sensing;
 pub mod sitl;
+pub mod trajectory;
 
 mod error;
 mod rng;

@@ -168,12 +168,35 @@ pub fn configured_path(cfg: &Config) -> Option<Result<Reference, ControlError>> 
     })
 }
 
-/// The reference for a goal (`None` for [`Goal::None`]).
-pub fn reference_for(cfg: &Config, goal: Goal) -> Option<Result<Reference, ControlError>> {
+/// The reference for a goal (`None` for [`Goal::None`], and for
+/// [`Goal::Stream`]: the tick builds a stream from its samples).
+///
+/// A setpoint is a route ([`Reference::setpoint_route`]) from `from`, the
+/// vehicle's position and velocity (local NED \[m\], [m/s]), at
+/// `mission.speed` with ramps of `stream.route_acceleration`; without
+/// `from`, or at the target already, it is a fixed point.
+pub fn reference_for(
+    cfg: &Config,
+    goal: Goal,
+    from: Option<([f64; 3], [f64; 3])>,
+) -> Option<Result<Reference, ControlError>> {
     match goal {
-        // The mission's reference is the control core's (section by section).
-        Goal::None | Goal::Mission => None,
-        Goal::Hold(p) | Goal::Setpoint(p) => Some(Reference::setpoint(Vector3::from(p))),
+        // The mission's reference is the control core's (section by section);
+        // a stream's is built from its samples.
+        Goal::None | Goal::Mission | Goal::Stream => None,
+        Goal::Hold(p) => Some(Reference::setpoint(Vector3::from(p))),
+        Goal::Setpoint(p) => Some(match from {
+            Some((q, v)) if (Vector3::from(p) - Vector3::from(q)).norm() > 1e-6 => {
+                Reference::setpoint_route(
+                    Vector3::from(q),
+                    Vector3::from(v),
+                    Vector3::from(p),
+                    cfg.mission.speed,
+                    cfg.stream.route_acceleration,
+                )
+            }
+            _ => Reference::setpoint(Vector3::from(p)),
+        }),
         Goal::Path => configured_path(cfg),
         Goal::Brake { from, velocity } => Some(Reference::braking(
             Vector3::from(from),
@@ -235,10 +258,14 @@ mod tests {
         cfg.vehicle.thrust_mode = ThrustMode::Normalized;
         let m = thrust_mapping(&cfg);
         assert!((m.normalized(cfg.vehicle.gravity).unwrap() - 0.5).abs() < 1e-12);
-        assert!(reference_for(&cfg, Goal::None).is_none());
-        assert!(reference_for(&cfg, Goal::Path).unwrap().is_ok());
-        assert!(reference_for(&cfg, Goal::Hold([0.0; 3])).unwrap().is_ok());
+        assert!(reference_for(&cfg, Goal::None, None).is_none());
+        assert!(reference_for(&cfg, Goal::Path, None).unwrap().is_ok());
+        assert!(
+            reference_for(&cfg, Goal::Hold([0.0; 3]), None)
+                .unwrap()
+                .is_ok()
+        );
         cfg.mission.path.clear();
-        assert!(reference_for(&cfg, Goal::Path).is_none());
+        assert!(reference_for(&cfg, Goal::Path, None).is_none());
     }
 }

@@ -108,8 +108,10 @@ pub struct Attitude {
 
 /// A position setpoint in local NED, from SET_POSITION_TARGET_LOCAL_NED (84).
 ///
-/// Velocity, acceleration and yaw-rate fields are not part of the contract
-/// and are not read (they may legitimately be NaN when ignored).
+/// Velocity and acceleration are read when their three type_mask ignore
+/// bits are all clear (then the message is a sample of a streamed
+/// trajectory); fields whose bits are set are not read (they may
+/// legitimately be NaN).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PositionSetpoint {
     /// Sender's timestamp since boot \[ms\].
@@ -118,6 +120,11 @@ pub struct PositionSetpoint {
     pub position: [f64; 3],
     /// Target yaw \[rad\], `None` when the yaw-ignore bit (1024) is set.
     pub yaw: Option<f64>,
+    /// Velocity, local NED [m/s], when bits 8–32 (vx, vy, vz ignore) are clear.
+    pub velocity: Option<[f64; 3]>,
+    /// Acceleration, local NED [m/s²], when bits 64–256 (ax, ay, az ignore)
+    /// are clear and bit 512 (force) is not set.
+    pub acceleration: Option<[f64; 3]>,
     /// Addressed system id (0 = broadcast).
     pub target_system: u8,
     /// Addressed component id (0 = broadcast).
@@ -315,10 +322,29 @@ fn decode_setpoint(d: &SET_POSITION_TARGET_LOCAL_NED_DATA) -> Result<PositionSet
     } else {
         Some(finite(M, "yaw", d.yaw)?)
     };
+    let velocity_ignore = PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VX_IGNORE
+        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VY_IGNORE
+        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VZ_IGNORE;
+    let velocity = if d.type_mask.intersects(velocity_ignore) {
+        None
+    } else {
+        Some(finite3(M, "velocity", [d.vx, d.vy, d.vz])?)
+    };
+    let acceleration_ignore = PositionTargetTypemask::POSITION_TARGET_TYPEMASK_AX_IGNORE
+        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_AY_IGNORE
+        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_AZ_IGNORE
+        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_FORCE_SET;
+    let acceleration = if d.type_mask.intersects(acceleration_ignore) {
+        None
+    } else {
+        Some(finite3(M, "acceleration", [d.afx, d.afy, d.afz])?)
+    };
     Ok(PositionSetpoint {
         time_boot_ms: d.time_boot_ms,
         position: finite3(M, "position", [d.x, d.y, d.z])?,
         yaw,
+        velocity,
+        acceleration,
         target_system: d.target_system,
         target_component: d.target_component,
     })

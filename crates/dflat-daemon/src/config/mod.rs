@@ -9,6 +9,9 @@ use std::path::{Path, PathBuf};
 
 use dflat_control::dfmpc::{PlanTiltBound, QpSolver};
 use serde::{Deserialize, Serialize};
+
+mod stream;
+pub use stream::StreamConfig;
 use thiserror::Error;
 
 /// A configuration that could not be read or is out of range.
@@ -70,6 +73,8 @@ pub struct Config {
     /// check-config`), so one file can configure both.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub sitl: Option<toml::Table>,
+    /// Streamed trajectories and setpoint routes (`[stream]`).
+    pub stream: StreamConfig,
 }
 
 /// Which MAVLink message carries the pose the controller uses.

@@ -332,6 +332,7 @@ impl Config {
             10.0,
             5000.0,
         )?;
+        self.stream.validate(file)?;
         Ok(())
     }
 }

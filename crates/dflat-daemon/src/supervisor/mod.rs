@@ -133,6 +133,9 @@ pub enum Goal {
     /// Fly the mission uploaded over MAVLink (the control core builds its
     /// reference section by section: `crate::mission::MissionRunner`).
     Mission,
+    /// Track a streamed trajectory (the samples are the reference's; see
+    /// [`Supervisor::on_stream`]).
+    Stream,
     /// Brake from `from` (local NED \[m\]) moving at `velocity` (local NED
     /// [m/s]) to a stop at the braking deceleration, then hold there
     /// (standby and engagement; `dflat_control::reference::Reference::braking`).
@@ -183,6 +186,10 @@ pub enum Cause {
     Paused,
     /// MAV_CMD_DO_PAUSE_CONTINUE 1: the goal before the pause goes on.
     Continued,
+    /// A streamed trajectory sample was accepted.
+    Stream,
+    /// The stream went silent: stopping smoothly, then holding.
+    StreamTimeout,
 }
 
 impl Cause {
@@ -205,6 +212,8 @@ impl Cause {
             Cause::MissionFinished => "mission done",
             Cause::Paused => "paused",
             Cause::Continued => "continue",
+            Cause::Stream => "trajectory stream",
+            Cause::StreamTimeout => "stream lost, stopping",
         }
     }
 }
@@ -246,6 +255,12 @@ pub enum Refusal {
     },
     /// No control (waiting for pose, or failsafe).
     NotInControl(FlightState),
+    /// A stream sample further than `stream.max_jump_m` from where the
+    /// reference (or the vehicle) is.
+    StreamJump {
+        /// The distance \[m\].
+        distance: f64,
+    },
 }
 
 impl Refusal {
@@ -260,6 +275,9 @@ impl Refusal {
                 )
             }
             Refusal::NotInControl(s) => format!("dflat: setpoint refused: {}", s.name()),
+            Refusal::StreamJump { distance } => {
+                format!("dflat: stream refused: jumps {distance:.1} m")
+            }
         }
     }
 }
@@ -583,6 +601,58 @@ impl Supervisor {
         SetpointOutcome::Accepted { goal, transition }
     }
 
+    /// A sample of a streamed trajectory at `position` (local NED \[m\])
+    /// arrived at `t` \[s\]; the shell checked its jump
+    /// ([`Refusal::StreamJump`]). Refused like a setpoint (non-finite,
+    /// outside the fence, not in control). Standby: the stream is flown
+    /// after the next engagement, once braked. Engaged: the goal becomes
+    /// [`Goal::Stream`] (a new generation only when it was not already).
+    pub fn on_stream(&mut self, t: f64, position: [f64; 3]) -> SetpointOutcome {
+        if !position.iter().all(|v| v.is_finite()) {
+            return SetpointOutcome::Refused(Refusal::NonFinite);
+        }
+        if position
+            .iter()
+            .zip(&self.cfg.geofence)
+            .any(|(p, fence)| p.abs() > *fence)
+        {
+            return SetpointOutcome::Refused(Refusal::Geofence { position });
+        }
+        if !self.state.streams() {
+            return SetpointOutcome::Refused(Refusal::NotInControl(self.state));
+        }
+        // A position setpoint after the stream is a new request.
+        self.last_setpoint = None;
+        let goal = Goal::Stream;
+        if self.state == FlightState::Standby {
+            self.pending = goal;
+            return SetpointOutcome::Accepted {
+                goal,
+                transition: None,
+            };
+        }
+        if self.goal == goal && self.braking.is_none() {
+            return SetpointOutcome::Unchanged;
+        }
+        self.braking = None;
+        self.pending = goal;
+        self.set_goal(goal);
+        let transition = (self.state != FlightState::Tracking)
+            .then(|| self.enter(FlightState::Tracking, Cause::Stream, t));
+        SetpointOutcome::Accepted { goal, transition }
+    }
+
+    /// The stream went silent at `t`: hold `rest` (local NED \[m\], where
+    /// the stream's extrapolation stops). `None` unless a stream is flown.
+    pub fn on_stream_timeout(&mut self, t: f64, rest: [f64; 3]) -> Option<Transition> {
+        if self.goal != Goal::Stream || !self.state.engaged() {
+            return None;
+        }
+        self.set_goal(Goal::Hold(rest));
+        self.pending = Goal::None;
+        Some(self.enter(FlightState::Holding, Cause::StreamTimeout, t))
+    }
+
     /// The path reached its end at `t`: hold the last waypoint.
     pub fn on_path_finished(&mut self, t: f64) -> Option<Transition> {
         if self.state != FlightState::Tracking || self.goal != Goal::Path {
@@ -645,7 +715,7 @@ impl Supervisor {
             (FlightState::Holding | FlightState::Tracking, _) if !engaged => {
                 // Pilot override: the mission goal is kept for the hand-back.
                 self.pending = match self.goal {
-                    g @ (Goal::Path | Goal::Setpoint(_) | Goal::Mission)
+                    g @ (Goal::Path | Goal::Setpoint(_) | Goal::Mission | Goal::Stream)
                         if self.cfg.resume_on_engage =>
                     {
                         g
@@ -661,7 +731,7 @@ impl Supervisor {
             (FlightState::Holding, _) if self.braked(t) => {
                 self.braking = None;
                 match self.pending {
-                    g @ (Goal::Path | Goal::Setpoint(_) | Goal::Mission) => {
+                    g @ (Goal::Path | Goal::Setpoint(_) | Goal::Mission | Goal::Stream) => {
                         self.set_goal(g);
                         let cause =
                             if g == Goal::Path && self.cfg.start_path && self.engagements == 1 {

@@ -409,3 +409,56 @@ fn out_of_order_arrivals_do_not_refresh() {
     let d = s.tick(0.35);
     assert_eq!(d.transition.unwrap().to, Failsafe);
 }
+
+#[test]
+fn a_stream_is_tracked_kept_across_a_hand_back_and_held_when_lost() {
+    let mut s = Supervisor::new(cfg_mode());
+    s.on_mode(true);
+    fly(&mut s, 0.0, 0.5, true, true);
+    assert_eq!(s.state(), Holding);
+    // Braked (at rest): the first sample starts the stream.
+    fly(&mut s, 0.5, 3.0, true, true);
+    let g0 = s.goal_generation();
+    let out = s.on_stream(3.0, [2.0, 2.0, -10.0]);
+    assert!(matches!(
+        out,
+        SetpointOutcome::Accepted {
+            goal: Goal::Stream,
+            transition: Some(_)
+        }
+    ));
+    assert_eq!((s.state(), s.goal()), (Tracking, Goal::Stream));
+    assert_eq!(s.goal_generation(), g0 + 1);
+    // Further samples refresh the reference, not the goal.
+    assert_eq!(
+        s.on_stream(3.05, [2.1, 2.0, -10.0]),
+        SetpointOutcome::Unchanged
+    );
+    assert_eq!(s.goal_generation(), g0 + 1);
+    // Refused like setpoints.
+    assert!(matches!(
+        s.on_stream(3.1, [f64::NAN, 0.0, -10.0]),
+        SetpointOutcome::Refused(Refusal::NonFinite)
+    ));
+    assert!(matches!(
+        s.on_stream(3.1, [900.0, 0.0, -10.0]),
+        SetpointOutcome::Refused(Refusal::Geofence { .. })
+    ));
+    // Pilot override, hand-back: the stream resumes once braked.
+    s.on_mode(false);
+    fly(&mut s, 3.1, 3.5, true, true);
+    assert_eq!((s.state(), s.pending_goal()), (Standby, Goal::Stream));
+    s.on_mode(true);
+    fly(&mut s, 3.5, 6.0, true, true);
+    assert_eq!((s.state(), s.goal()), (Tracking, Goal::Stream));
+    // Lost: hold where the stream stops.
+    let tr = s.on_stream_timeout(6.0, [3.0, 2.0, -10.0]).unwrap();
+    assert_eq!((tr.to, tr.cause), (Holding, Cause::StreamTimeout));
+    assert_eq!(s.goal(), Goal::Hold([3.0, 2.0, -10.0]));
+    assert!(s.on_stream_timeout(6.1, [0.0; 3]).is_none(), "once");
+    assert!(
+        Refusal::StreamJump { distance: 12.34 }
+            .text()
+            .contains("12.3 m")
+    );
+}

@@ -53,7 +53,8 @@ pub enum Event {
         /// Its value (finite).
         value: f64,
     },
-    /// An accepted position setpoint.
+    /// An accepted position setpoint, or (velocity and/or acceleration
+    /// given) a sample of a streamed trajectory.
     Setpoint {
         /// Arrival \[s\].
         arrival: f64,
@@ -61,6 +62,12 @@ pub enum Event {
         position: [f64; 3],
         /// Yaw \[rad\], when the setpoint sets one.
         yaw: Option<f64>,
+        /// The sender's `time_boot_ms` \[s\] (`None`: 0).
+        source_time: Option<f64>,
+        /// Velocity, local NED [m/s], when given.
+        velocity: Option<[f64; 3]>,
+        /// Acceleration, local NED [m/s²], when given.
+        acceleration: Option<[f64; 3]>,
     },
     /// A mission command the receive task accepted (COMMAND_ACK sent).
     Mission {
@@ -162,6 +169,9 @@ pub fn event_from(inbound: &Inbound, pose_source: PoseSource, arrival: f64) -> O
             arrival,
             position: s.position,
             yaw: s.yaw,
+            source_time: (s.time_boot_ms > 0).then(|| f64::from(s.time_boot_ms) * 1e-3),
+            velocity: s.velocity,
+            acceleration: s.acceleration,
         }),
         _ => None,
     }

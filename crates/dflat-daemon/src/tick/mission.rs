@@ -218,7 +218,7 @@ impl ControlCore {
         }
         let target = match self.supervisor.goal() {
             Goal::Mission => self.runner.as_ref().and_then(MissionRunner::yaw),
-            Goal::Setpoint(_) => self.setpoint_yaw,
+            Goal::Setpoint(_) | Goal::Stream => self.setpoint_yaw,
             _ => None,
         };
         self.yaw_command.step(t, target, measured.unwrap_or(fixed))

@@ -39,10 +39,11 @@ use crate::guard::{
 use crate::motion::MotionEstimator;
 use crate::records::{CsvDisturbance, CsvRow};
 use crate::summary::{DisturbanceSummary, SolveCounts};
-use crate::supervisor::{Cause, FlightState, Goal, SetpointOutcome, Supervisor, Transition};
+use crate::supervisor::{Cause, FlightState, Goal, Supervisor, Transition};
 
 mod exit;
 mod failsafe_level;
+mod goals;
 mod inputs;
 mod mission;
 mod standby;
@@ -134,6 +135,11 @@ pub struct CoreCounts {
     pub solves: SolveCounts,
     /// What the guards did.
     pub guards: GuardCounts,
+    /// Setpoints and stream samples refused (fence, not finite, not in
+    /// control, stream jump).
+    pub setpoints_refused: u64,
+    /// Streams lost (no sample for `stream.timeout_s`).
+    pub stream_timeouts: u64,
 }
 
 /// Everything the control thread decides with (see the module docs).
@@ -209,6 +215,17 @@ pub struct ControlCore {
     yaw_command: crate::yaw::YawCommand,
     /// The heading this tick's command carries \[rad\].
     commanded_yaw: f64,
+    /// Maps stream senders' `time_boot_ms` onto this computer's clock.
+    stream_clock: PoseClock,
+    /// The newest accepted stream sample (a stream is built from it).
+    newest_sample: Option<dflat_control::reference::StreamSample>,
+    /// The position-only setpoint before the stream's first sample
+    /// (implied velocity): (time \[s\], position \[m\]).
+    stream_seed: Option<(f64, [f64; 3])>,
+    /// Arrival of the newest stream sample \[s\].
+    last_sample_arrival: Option<f64>,
+    /// The newest position-only setpoint: arrival \[s\], (time \[s\], position \[m\]).
+    last_position_setpoint: Option<(f64, (f64, [f64; 3]))>,
 }
 
 impl std::fmt::Debug for ControlCore {
@@ -291,6 +308,11 @@ impl ControlCore {
                 config.vehicle.max_yaw_rate_deg_s.to_radians(),
             ),
             commanded_yaw: config.vehicle.yaw_deg.to_radians(),
+            stream_clock: PoseClock::new(config.link.pose_clock_window_s, 0.0),
+            newest_sample: None,
+            stream_seed: None,
+            last_sample_arrival: None,
+            last_position_setpoint: None,
         }
     }
 
@@ -342,6 +364,7 @@ impl ControlCore {
         // 2. Decide. (The level command a failsafe would leave is taken
         // before a failsafe resets the controller.)
         let level = self.failsafe_level_command();
+        self.check_stream_timeout(t);
         self.supervisor.set_motion(self.motion.estimate());
         let decision = self.supervisor.tick(t);
         if decision.reset_controller {
@@ -442,6 +465,8 @@ impl ControlCore {
         let Some(reference) = self.reference.as_mut() else {
             unreachable!("control() runs with a reference")
         };
+        // Routes and streams are trajectories in time: at the measurement's.
+        reference.set_time(measurement.t);
         let result = update_caught(self.controller.as_mut(), &measurement, reference);
         if result.is_err() && multi_rate {
             // After a reset (panic) the window needs a sample again (a
@@ -659,30 +684,10 @@ impl ControlCore {
                 arrival,
                 position,
                 yaw,
-            } => {
-                let t = arrival;
-                match self.supervisor.on_setpoint(t, position) {
-                    SetpointOutcome::Accepted { goal, transition } => {
-                        debug!(?goal, "setpoint accepted");
-                        self.setpoint_yaw = yaw;
-                        if let Some(tr) = transition {
-                            self.announce(tr);
-                        }
-                        self.refresh_reference();
-                    }
-                    SetpointOutcome::Unchanged => self.setpoint_yaw = yaw,
-                    SetpointOutcome::Refused(refusal) => {
-                        let due = self
-                            .last_refusal_text
-                            .is_none_or(|last| t - last >= REFUSAL_TEXT_INTERVAL);
-                        if due {
-                            self.last_refusal_text = Some(t);
-                            info!(?refusal, "setpoint refused");
-                            self.text(MavSeverity::MAV_SEVERITY_WARNING, &refusal.text());
-                        }
-                    }
-                }
-            }
+                source_time,
+                velocity,
+                acceleration,
+            } => self.apply_setpoint(arrival, position, yaw, source_time, velocity, acceleration),
         }
     }
 
@@ -781,7 +786,29 @@ impl ControlCore {
             };
             return;
         }
-        self.reference = match reference_for(&self.config, self.supervisor.goal()) {
+        let goal = self.supervisor.goal();
+        // A lost stream holds where its extrapolation stops: keep flying
+        // the stream's own smooth stop there.
+        if let Goal::Hold(p) = goal
+            && self
+                .reference
+                .as_ref()
+                .is_some_and(|r| r.is_stream() && (r.rest_point() - Vector3::from(p)).norm() < 1e-9)
+        {
+            return;
+        }
+        if goal == Goal::Stream {
+            if let Some(r) = self.stream_reference() {
+                self.reference = Some(r);
+            }
+            return;
+        }
+        // Setpoints are routes from the vehicle's position and velocity.
+        let from = match self.motion.estimate() {
+            Some(m) => Some((m.position, m.velocity)),
+            None => self.pose.map(|p| (p.position, [0.0; 3])),
+        };
+        self.reference = match reference_for(&self.config, goal, from) {
             Some(Ok(mut r)) => {
                 if self.supervisor.path_resumed()
                     && let Some(p) = self.pose

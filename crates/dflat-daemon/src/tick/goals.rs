@@ -1,0 +1,225 @@
+//! Goals that arrive over MAVLink: position setpoints (flown as routes)
+//! and samples of streamed trajectories.
+//!
+//! SET_POSITION_TARGET_LOCAL_NED is a **stream sample** when its velocity
+//! and/or acceleration are given (type_mask bits clear), except a first
+//! sample whose velocity and acceleration are both exactly zero (what a
+//! sender that leaves every bit clear sends with a position setpoint):
+//! that one is a position setpoint. With `stream.implied_velocity`, a
+//! position-only setpoint arriving within `stream.implied_max_gap_s` of
+//! the previous one is a sample too (its velocity implied).
+//!
+//! **Time base.** A sample's time is the sender's `time_boot_ms` mapped
+//! onto this computer's clock by the same estimator as the pose's
+//! (`crate::clock::PoseClock`, its own instance): the smallest
+//! `arrival − time_boot_ms` over `link.pose_clock_window_s` is taken as
+//! the clock offset, i.e. the fastest message is assumed to have arrived
+//! without delay. `time_boot_ms = 0` means "no time": the arrival time is
+//! used. A mapped time later than the arrival, or more than
+//! [`MAX_SAMPLE_AGE`] before it, is implausible (a sender reboot, a
+//! clock from another origin): the arrival time is used and the estimate
+//! restarts.
+
+use dflat_control::reference::{Reference, StreamSample};
+use dflat_link::dialect::MavSeverity;
+use nalgebra::Vector3;
+use tracing::{debug, info, warn};
+
+use super::{ControlCore, REFUSAL_TEXT_INTERVAL};
+use crate::supervisor::{Goal, Refusal, SetpointOutcome};
+
+/// A sample mapped to more than this long \[s\] before its arrival is
+/// stamped with its arrival instead.
+pub const MAX_SAMPLE_AGE: f64 = 1.0;
+
+impl ControlCore {
+    /// SET_POSITION_TARGET_LOCAL_NED arrived (see the module docs).
+    pub(super) fn apply_setpoint(
+        &mut self,
+        arrival: f64,
+        position: [f64; 3],
+        yaw: Option<f64>,
+        source_time: Option<f64>,
+        velocity: Option<[f64; 3]>,
+        acceleration: Option<[f64; 3]>,
+    ) {
+        let streaming = self.supervisor.goal() == Goal::Stream
+            || self.supervisor.pending_goal() == Goal::Stream;
+        let given = velocity.is_some() || acceleration.is_some();
+        let zero =
+            velocity.is_none_or(|v| v == [0.0; 3]) && acceleration.is_none_or(|a| a == [0.0; 3]);
+        let s = &self.config.stream;
+        let position_only = !given;
+        let implied = position_only
+            && s.implied_velocity
+            && self
+                .last_position_setpoint
+                .is_some_and(|(a, _)| arrival - a <= s.implied_max_gap_s && arrival > a);
+        let t_sample = self.sample_time(arrival, source_time);
+        let previous = self.last_position_setpoint;
+        if position_only {
+            self.last_position_setpoint = Some((arrival, (t_sample, position)));
+        }
+        if (given && (streaming || !zero)) || implied {
+            let sample = StreamSample {
+                t: t_sample,
+                position: Vector3::from(position),
+                velocity: velocity.map(Vector3::from),
+                acceleration: acceleration.map(Vector3::from),
+                yaw,
+                yaw_rate: None,
+            };
+            let seed = if implied {
+                previous.map(|(_, p)| p)
+            } else {
+                None
+            };
+            self.apply_sample(arrival, sample, seed);
+            if self.supervisor.goal() == Goal::Stream {
+                self.setpoint_yaw = yaw;
+            }
+        } else {
+            self.apply_position_setpoint(arrival, position, yaw);
+        }
+    }
+
+    /// The sample's time on this computer's clock (module docs).
+    fn sample_time(&mut self, arrival: f64, source_time: Option<f64>) -> f64 {
+        let t = self.stream_clock.capture_time(arrival, source_time);
+        if t > arrival + 1e-9 || arrival - t > MAX_SAMPLE_AGE || !t.is_finite() {
+            self.stream_clock.reset();
+            return arrival;
+        }
+        t
+    }
+
+    fn refuse(&mut self, t: f64, refusal: Refusal) {
+        self.counts.setpoints_refused += 1;
+        let due = self
+            .last_refusal_text
+            .is_none_or(|last| t - last >= REFUSAL_TEXT_INTERVAL);
+        if due {
+            self.last_refusal_text = Some(t);
+            info!(?refusal, "setpoint refused");
+            self.text(MavSeverity::MAV_SEVERITY_WARNING, &refusal.text());
+        }
+    }
+
+    /// A position setpoint: flown as a route from the vehicle's motion.
+    fn apply_position_setpoint(&mut self, t: f64, position: [f64; 3], yaw: Option<f64>) {
+        match self.supervisor.on_setpoint(t, position) {
+            SetpointOutcome::Accepted { goal, transition } => {
+                debug!(?goal, "setpoint accepted");
+                self.setpoint_yaw = yaw;
+                if let Some(tr) = transition {
+                    self.announce(tr);
+                }
+                self.refresh_reference();
+            }
+            SetpointOutcome::Unchanged => self.setpoint_yaw = yaw,
+            SetpointOutcome::Refused(refusal) => self.refuse(t, refusal),
+        }
+    }
+
+    /// A stream sample (arrived at `arrival`); `seed` is the position-only
+    /// setpoint before it (implied velocity).
+    fn apply_sample(&mut self, arrival: f64, sample: StreamSample, seed: Option<(f64, [f64; 3])>) {
+        let flying_stream = self.supervisor.goal() == Goal::Stream
+            && self.reference.as_ref().is_some_and(Reference::is_stream);
+        // The jump check: from the stream's own prediction, else from the
+        // vehicle.
+        let from = if flying_stream {
+            self.reference
+                .as_ref()
+                .and_then(|r| r.stream_position_at(sample.t))
+        } else {
+            self.pose.map(|p| Vector3::from(p.position))
+        };
+        if let Some(from) = from {
+            let distance = (sample.position - from).norm();
+            if distance > self.config.stream.max_jump_m {
+                warn!(distance, "stream sample jumps: refused");
+                self.refuse(arrival, Refusal::StreamJump { distance });
+                return;
+            }
+        }
+        let position = [sample.position.x, sample.position.y, sample.position.z];
+        match self.supervisor.on_stream(arrival, position) {
+            SetpointOutcome::Refused(refusal) => self.refuse(arrival, refusal),
+            SetpointOutcome::Unchanged => {
+                self.last_sample_arrival = Some(arrival);
+                self.stream_seed = None;
+                if let Some(r) = self.reference.as_mut()
+                    && let Err(e) = r.push_sample(&sample)
+                {
+                    debug!(error = %e, "stream sample not used");
+                }
+                self.newest_sample = Some(sample);
+            }
+            SetpointOutcome::Accepted { goal, transition } => {
+                debug!(?goal, "stream accepted");
+                self.last_sample_arrival = Some(arrival);
+                self.newest_sample = Some(sample);
+                self.stream_seed = seed;
+                if let Some(tr) = transition {
+                    self.announce(tr);
+                }
+                self.refresh_reference();
+            }
+        }
+    }
+
+    /// The stream's reference from its newest sample (`None`: no sample).
+    pub(super) fn stream_reference(&self) -> Option<Reference> {
+        let sample = self.newest_sample?;
+        let settings = self.config.stream.settings();
+        let built = match self.stream_seed {
+            Some((t, p)) if t < sample.t => Reference::stream(
+                settings,
+                &StreamSample {
+                    t,
+                    position: Vector3::from(p),
+                    velocity: None,
+                    acceleration: None,
+                    yaw: None,
+                    yaw_rate: None,
+                },
+            )
+            .and_then(|mut r| r.push_sample(&sample).map(|()| r)),
+            _ => Reference::stream(settings, &sample),
+        };
+        match built {
+            Ok(r) => Some(r),
+            Err(e) => {
+                warn!(error = %e, "cannot build the stream reference");
+                None
+            }
+        }
+    }
+
+    /// A flown stream without samples for `stream.timeout_s`: stop
+    /// smoothly where the extrapolation stops, and hold there.
+    pub(super) fn check_stream_timeout(&mut self, t: f64) {
+        if self.supervisor.goal() != Goal::Stream {
+            return;
+        }
+        let Some(last) = self.last_sample_arrival else {
+            return;
+        };
+        if t - last <= self.config.stream.timeout_s {
+            return;
+        }
+        let Some(rest) = self.reference.as_ref().map(Reference::rest_point) else {
+            return;
+        };
+        if let Some(tr) = self
+            .supervisor
+            .on_stream_timeout(t, [rest.x, rest.y, rest.z])
+        {
+            warn!(silent_s = t - last, "stream lost: stopping");
+            self.counts.stream_timeouts += 1;
+            self.announce(tr);
+            self.refresh_reference();
+        }
+    }
+}
