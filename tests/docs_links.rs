@@ -161,7 +161,11 @@ fn broken_links() -> Vec<String> {
             } else {
                 dir.join(path)
             };
-            let name = page.strip_prefix(repo()).unwrap_or(&page).display().to_string();
+            let name = page
+                .strip_prefix(repo())
+                .unwrap_or(&page)
+                .display()
+                .to_string();
             if !file.exists() {
                 broken.push(format!("{name}: ({target}): {} does not exist", path));
                 continue;
@@ -197,5 +201,8 @@ fn the_checker_finds_links_and_anchors() {
     assert_eq!(links(text), vec!["other.md#a-b-c", "fig.png"]);
     let a = anchors(text);
     assert!(a.contains("a-b-c") && a.contains("a-b-c-1"), "{a:?}");
-    assert_eq!(slug("Flying it against PX4 / ArduPilot"), "flying-it-against-px4--ardupilot");
+    assert_eq!(
+        slug("Flying it against PX4 / ArduPilot"),
+        "flying-it-against-px4--ardupilot"
+    );
 }

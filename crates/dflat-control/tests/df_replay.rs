@@ -30,10 +30,7 @@ use dflat_control::{ControlModel, Controller, Frame, Measurement, ReferenceSourc
 use dflat_model::{PlanarModel, PlanarParams};
 use nalgebra::Vector3;
 
-const TRACE: &str = concat!(
-    env!("CARGO_MANIFEST_DIR"),
-    "/../../reference/trace_1d.json"
-);
+const TRACE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../reference/trace_1d.json");
 const RTOL: f64 = 1e-6;
 const FLOOR_Y: f64 = 1e-3;
 const FLOOR_U: f64 = 0.05;

@@ -9,10 +9,7 @@ use dflat_model::{PlanarModel, PlanarParams};
 use nalgebra::Vector3;
 use serde_json::Value;
 
-const TRACE: &str = concat!(
-    env!("CARGO_MANIFEST_DIR"),
-    "/../../reference/trace_1d.json"
-);
+const TRACE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../reference/trace_1d.json");
 
 /// Relative tolerance on θ_cmd at every tick (the trace's smallest |u| is
 /// 3e-5 rad, so a pure relative error is well defined).

@@ -298,7 +298,8 @@ pub(super) async fn receive_task(
                 if let Some(req) = CommandRequest::from_message(&frame.message, sender.0, sender.1)
                 {
                     let has_mission = missions.mission().has_navigation();
-                    if let Some(action) = answer_command(&req, &ctx, has_mission, &out, &mut refusals)
+                    if let Some(action) =
+                        answer_command(&req, &ctx, has_mission, &out, &mut refusals)
                         && events.try_send(Event::Mission { arrival, action }).is_err()
                     {
                         report.events_dropped += 1;
