@@ -86,7 +86,7 @@ impl Gcs {
     }
 
     /// Messages from the daemon (1/191) after `since` matching `pick`.
-    fn from_daemon<T>(&self, since: Instant, pick: impl Fn(&MavMessage) -> Option<T>) -> Vec<T> {
+    fn daemon_messages<T>(&self, since: Instant, pick: impl Fn(&MavMessage) -> Option<T>) -> Vec<T> {
         self.seen
             .lock()
             .unwrap()
@@ -105,7 +105,7 @@ impl Gcs {
     ) -> Option<T> {
         let until = Instant::now() + limit;
         while Instant::now() < until {
-            if let Some(t) = self.from_daemon(since, &pick).into_iter().next() {
+            if let Some(t) = self.daemon_messages(since, &pick).into_iter().next() {
                 return Some(t);
             }
             std::thread::sleep(Duration::from_millis(10));
@@ -122,10 +122,10 @@ impl Gcs {
         let mut answered = 0;
         let until = Instant::now() + Duration::from_secs(5);
         while Instant::now() < until {
-            if let Some(result) = self.from_daemon(since, ack_of).into_iter().next() {
+            if let Some(result) = self.daemon_messages(since, ack_of).into_iter().next() {
                 return Some(result);
             }
-            let asked = self.from_daemon(since, |m| match m {
+            let asked = self.daemon_messages(since, |m| match m {
                 MavMessage::MISSION_REQUEST_INT(d) => Some(d.seq),
                 _ => None,
             });
@@ -360,16 +360,16 @@ async fn a_mission_is_uploaded_started_paused_continued_and_its_yaw_flown() {
         MavMessage::MISSION_COUNT(d) => Some(d.count),
         _ => None,
     });
-    let cancelled = gcs.from_daemon(t3, ack_of);
-    let reached = gcs.from_daemon(t3, |m| match m {
+    let cancelled = gcs.daemon_messages(t3, ack_of);
+    let reached = gcs.daemon_messages(t3, |m| match m {
         MavMessage::MISSION_ITEM_REACHED(d) => Some(d.seq),
         _ => None,
     });
-    let current = gcs.from_daemon(t3, |m| match m {
+    let current = gcs.daemon_messages(t3, |m| match m {
         MavMessage::MISSION_CURRENT(d) => Some((d.seq, d.total, d.mission_state as u8)),
         _ => None,
     });
-    let texts = gcs.from_daemon(t0, text);
+    let texts = gcs.daemon_messages(t0, text);
     eprintln!("reached {reached:?}; acks after start {cancelled:?}; texts {texts:?}");
     eprintln!("MISSION_CURRENT (seq, total, state): {current:?}");
     tokio::time::sleep(Duration::from_millis(500)).await;

@@ -71,7 +71,9 @@ fn start_sitl(config: &Path) -> (SitlHandle, Receiver<TapFrame>) {
 
 /// The daemon's SET_ATTITUDE_TARGETs (arrival, `time_boot_ms`) and
 /// STATUSTEXTs (arrival, text) among the tapped frames.
-fn daemon_frames(tap: &Receiver<TapFrame>) -> (Vec<(Instant, u32)>, Vec<(Instant, String)>) {
+type Stamped<T> = Vec<(Instant, T)>;
+
+fn daemon_frames(tap: &Receiver<TapFrame>) -> (Stamped<u32>, Stamped<String>) {
     let mut commands = Vec::new();
     let mut texts = Vec::new();
     for f in tap.try_iter() {

@@ -134,6 +134,7 @@ fn fly(
             events.push(Event::Setpoint {
                 arrival: g.t + 0.002,
                 position: g.position,
+                yaw: None,
                 source_time: Some(5.0 + g.t),
                 velocity: g.velocity,
                 acceleration: g.acceleration,
@@ -165,7 +166,7 @@ fn fly(
                 (c.pitch, c.roll)
             }
             None => match sent {
-                Some(c) => (f64::from(c.pitch), f64::from(c.roll)),
+                Some(c) => (c.pitch, c.roll),
                 None => (pitch, roll),
             },
         };

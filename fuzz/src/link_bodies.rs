@@ -5,7 +5,7 @@
 //! the main workspace's tests run the same bodies over seeds and random
 //! bytes (`tests/fuzz_bodies.rs`) without libFuzzer or nightly.
 
-use dflat_daemon::commands::{CommandRequest, answer};
+use dflat_daemon::commands::{CommandContext, CommandRequest, answer};
 use dflat_link::dialect::{MavMessage as Msg, MavResult};
 use dflat_link::tlog::{TlogReader, TlogWriter};
 use dflat_link::{
@@ -90,7 +90,7 @@ pub fn key_and_timestamp_files(data: &[u8]) {
         let uid = u32::from_le_bytes([data[4], data[5], data[6], data[7]]);
         let euid = u32::from_le_bytes([data[8], data[9], data[10], data[11]]);
         let len = u64::from(u16::from_le_bytes([data[12], data[13]]));
-        let regular = data.len() % 2 == 0;
+        let regular = data.len().is_multiple_of(2);
         let ok = check_key_metadata(regular, mode, uid, len, Some(euid)).is_ok();
         assert_eq!(
             ok,
@@ -127,9 +127,17 @@ pub fn tlog_reader(data: &[u8]) {
 
 /// Every frame in `data` as a command to the daemon: the answer (if any)
 /// is a COMMAND_ACK for that command, addressed to its sender, and a
-/// command addressed elsewhere is not answered.
+/// command addressed elsewhere is not answered. The first byte picks the
+/// daemon's state (a mission uploaded, streaming, engaged), so the mission
+/// commands' answers are fuzzed in every state.
 pub fn command_answers(data: &[u8]) {
     let own = (1u8, 191u8);
+    let bits = data.first().copied().unwrap_or(0);
+    let ctx = CommandContext {
+        has_mission: bits & 1 != 0,
+        streaming: bits & 2 != 0,
+        engaged: bits & 4 != 0,
+    };
     for frame in frames(data).flatten() {
         let sender = (
             u8::try_from(frame.header.system_id).unwrap_or(u8::MAX),
@@ -138,7 +146,7 @@ pub fn command_answers(data: &[u8]) {
         let Some(req) = CommandRequest::from_message(&frame.message, sender.0, sender.1) else {
             continue;
         };
-        let Some(reply) = answer(&req, own) else {
+        let Some(reply) = answer(&req, own, &ctx) else {
             continue;
         };
         assert_ne!(

@@ -204,7 +204,7 @@ proptest! {
     /// the circle to within 1e-6 m over the first 0.5 s after each sample.
     #[test]
     fn stream_of_a_circle_predicts_the_circle(
-        radius in 2.0..20.0f64, speed in 0.5..8.0f64, phase in 0.0..6.28f64,
+        radius in 2.0..20.0f64, speed in 0.5..8.0f64, phase in 0.0..std::f64::consts::TAU,
         cw in proptest::bool::ANY,
     ) {
         let w = if cw { speed / radius } else { -speed / radius };

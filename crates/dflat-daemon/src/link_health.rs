@@ -2,16 +2,16 @@
 //! comes first), the rate limit of replies, the liveness of the link tasks
 //! and their counters for the summary.
 //!
-//! * [`CommandSlot`]: SET_ATTITUDE_TARGET has its own one-deep slot between
+//! * [`CommandSlot`] — SET_ATTITUDE_TARGET has its own one-deep slot between
 //!   the control thread and the send task. A newer command replaces one not
 //!   yet sent ([`LinkGuardSummary::commands_replaced`]); the send task drops
 //!   a command older than one tick ([`LinkGuardSummary::commands_stale`]).
 //!   Replies never queue in front of it.
-//! * [`ReplyBudget`]: replies (COMMAND_ACK, STATUSTEXT answers, refusals)
+//! * [`ReplyBudget`] — replies (COMMAND_ACK, STATUSTEXT answers, refusals)
 //!   go through their own bounded queue and leave at most
 //!   [`REPLY_RATE_HZ`] per second (bursts of [`REPLY_BURST`]); the rest is
 //!   dropped and counted ([`LinkGuardSummary::replies_dropped`]).
-//! * [`LinkHealth`]: the receive, send and heartbeat tasks each mark
+//! * [`LinkHealth`] — the receive, send and heartbeat tasks each mark
 //!   themselves alive every [`BEAT_INTERVAL`]. The control loop checks them
 //!   every tick; one silent for [`STALL_LIMIT`] is a stalled (or dead)
 //!   task: the systemd watchdog is no longer fed (and `WATCHDOG=trigger`

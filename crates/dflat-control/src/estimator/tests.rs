@@ -87,14 +87,18 @@ fn lagged_process_noise_tends_to_the_closed_form() {
 
 #[test]
 fn bad_settings_and_samples_are_refused_and_change_nothing() {
-    let mut s = EstimatorSettings::default();
-    s.sigma = 0.0;
+    let s = EstimatorSettings {
+        sigma: 0.0,
+        ..Default::default()
+    };
     assert!(matches!(
         StateEstimator::new(s),
         Err(ControlError::InvalidSetting { field: "sigma", .. })
     ));
-    let mut s = EstimatorSettings::default();
-    s.input_lag = Some(f64::NAN);
+    let s = EstimatorSettings {
+        input_lag: Some(f64::NAN),
+        ..Default::default()
+    };
     assert!(matches!(
         StateEstimator::new(s),
         Err(ControlError::InvalidSetting {

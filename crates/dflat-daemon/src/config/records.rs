@@ -45,12 +45,12 @@ pub const MIB: f64 = 1024.0 * 1024.0;
 impl RecordsConfig {
     /// The per-flight quota \[bytes\], `None` when unbounded.
     pub fn max_bytes(&self) -> Option<u64> {
-        (self.max_mb > 0.0).then(|| (self.max_mb * MIB) as u64)
+        (self.max_mb > 0.0).then_some((self.max_mb * MIB) as u64)
     }
 
     /// The directory quota \[bytes\], `None` when unbounded.
     pub fn keep_bytes(&self) -> Option<u64> {
-        (self.keep_mb > 0.0).then(|| (self.keep_mb * MIB) as u64)
+        (self.keep_mb > 0.0).then_some((self.keep_mb * MIB) as u64)
     }
 
     /// The sync cadence.

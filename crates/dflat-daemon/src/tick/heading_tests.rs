@@ -73,6 +73,9 @@ fn run(yaw_mode: YawMode, heading: impl Fn(u64) -> f64, setpoint_yaw: Option<f64
                     arrival: t - 0.0005,
                     position: [3.0, 1.0, -10.0],
                     yaw: setpoint_yaw,
+                    source_time: None,
+                    velocity: None,
+                    acceleration: None,
                 });
             }
             let time = TickTime {

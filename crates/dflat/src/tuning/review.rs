@@ -590,7 +590,7 @@ fn page(
         }
         h.push_str("</ul>\n");
     }
-    let _ = write!(h, "<script>{}</script>\n", page::SCRIPT);
+    let _ = writeln!(h, "<script>{}</script>", page::SCRIPT);
     h.push_str("</body></html>\n");
     h
 }

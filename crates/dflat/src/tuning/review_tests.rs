@@ -87,6 +87,7 @@ fn flight() -> (FlightCsv, Vec<f64>, Vec<String>) {
     let csv = FlightCsv {
         header: COLUMNS.iter().map(|c| (*c).to_owned()).collect(),
         rows,
+        torn_tail: None,
     };
     (csv, err, states)
 }
