@@ -86,7 +86,11 @@ impl Gcs {
     }
 
     /// Messages from the daemon (1/191) after `since` matching `pick`.
-    fn daemon_messages<T>(&self, since: Instant, pick: impl Fn(&MavMessage) -> Option<T>) -> Vec<T> {
+    fn daemon_messages<T>(
+        &self,
+        since: Instant,
+        pick: impl Fn(&MavMessage) -> Option<T>,
+    ) -> Vec<T> {
         self.seen
             .lock()
             .unwrap()

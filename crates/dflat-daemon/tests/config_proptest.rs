@@ -51,9 +51,9 @@ const FIELDS: &[(&str, Kind, f64, f64, Set)] = &[
     ("link.component_id", Kind::Id, 1.0, 255.0, |c, v| {
         c.link.component_id = v as u8
     }),
-    ("link.gcs_system_id", Kind::Id, 1.0, 255.0, |c, v| {
-        c.link.gcs_system_id = Some(v as u8)
-    }),
+    // The deprecated one-id `link.gcs_system_id` conflicts with any list
+    // the generator draws; its reading and refusal are tested in
+    // tests/gcs_ids_config.rs.
     ("link.gcs_system_ids[0]", Kind::Id, 1.0, 255.0, |c, v| {
         c.link.gcs_system_ids[0] = v as u8
     }),

@@ -83,9 +83,11 @@ proptest::proptest! {
         )
         .unwrap();
         let mut want = vec![0.0; horizon + 1];
-        reference_solver
-            .solve_problem(AxisProblem { fixed: &fixed, sent, reference: &reference, plan: &mut want })
-            .unwrap();
+        // The reference itself must have solved (clarabel reports
+        // AlmostSolved on a few stiff draws): such a case says nothing.
+        let solved = reference_solver
+            .solve_problem(AxisProblem { fixed: &fixed, sent, reference: &reference, plan: &mut want });
+        proptest::prop_assume!(solved.is_ok());
         let mut banded =
             BandedInteriorPointSolver::new(horizon, (q, r, DT), bounds, smoothness).unwrap();
         let mut got = vec![0.0; horizon + 1];
