@@ -25,6 +25,10 @@ fn killed_and_restarted_sitl_failsafe_then_recover_to_holding() {
 start = "hold"
 [vehicle]
 max_tilt_deg = {MAX_TILT_DEG}
+[safety]
+# Silent at once in failsafe (the brake and level hover before it are
+# e2e_pose_loss_level's): this test is about the restart.
+level_hover_max_ms = 0.0
 [logging]
 dir = "{}"
 tlog = false
