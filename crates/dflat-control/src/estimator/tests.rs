@@ -34,8 +34,11 @@ fn chi2_quantile(k: f64, z: f64) -> f64 {
     k * (1.0 - a + z * a.sqrt()).powi(3)
 }
 
-/// z of the two-sided 99.9 % band.
-const Z999: f64 = 3.29;
+/// z of the two-sided band each consistency check uses: 1 − 10⁻⁶. The
+/// proptest makes 3 checks on each of 24 draws, so a consistent filter
+/// fails a run with probability below 10⁻⁴ (at 99.9 % it was 7 %, and CI
+/// met one).
+const Z_BAND: f64 = 4.89;
 
 fn ca_settings(sigma: f64, q: f64) -> EstimatorSettings {
     EstimatorSettings {
@@ -196,13 +199,82 @@ fn run_axis(
     estimator.estimate_at(tick).unwrap()[0] - truth(tick)
 }
 
+/// Average NEES at the last posterior and at the latency-compensated
+/// tick (3 dof) over `runs` trajectories drawn from the filter's own prior,
+/// and the average NIS (1 dof) with its sample count.
+struct Consistency {
+    nees_post: f64,
+    nees_tick: f64,
+    runs: usize,
+    nis: f64,
+    nis_count: usize,
+}
+
+fn consistency(seed: u64, lagged: bool, q: f64, sigma: f64) -> Consistency {
+    let settings = EstimatorSettings {
+        input_lag: lagged.then_some(0.2),
+        ..ca_settings(sigma, q)
+    };
+    let lambda = if lagged { 5.0 } else { 0.0 };
+    let runs = 200;
+    let dt = 0.02; // truth and input step
+    let (mut nees_post, mut nees_tick, mut nis) = (0.0, 0.0, 0.0);
+    let mut nis_count = 0usize;
+    for r in 0..runs {
+        let mut rng = Rng::new(seed * 1000 + r);
+        let mut e = StateEstimator::new(settings).unwrap();
+        // Truth starts from the filter's prior at the first sample.
+        let [sv, sa] = settings.initial_sigma;
+        let mut x = Vector3::new(0.0, sv * rng.normal(), sa * rng.normal());
+        let chol = process_noise(dt, lambda, q).cholesky().unwrap().l();
+        let (ft, gt) = transition(dt, lambda);
+        let mut u = 0.0;
+        let mut t = 0.0;
+        let mut next_sample = 0.0;
+        let mut last_post = None;
+        for k in 0..150 {
+            if k % 25 == 0 {
+                u = 3.0 * rng.normal();
+            }
+            e.record_input(t, &Vector3::new(u, 0.0, 0.0));
+            if t >= next_sample - 1e-12 {
+                let z = x[0] + sigma * rng.normal();
+                e.observe(t, &Vector3::new(z, 0.0, 0.0)).unwrap();
+                if k > 0 {
+                    nis += e.last_nis()[0];
+                    nis_count += 1;
+                }
+                last_post = Some((t, x));
+                next_sample += 3.0 * dt; // 16.7 Hz on the 50 Hz grid
+            }
+            let w = chol * Vector3::new(rng.normal(), rng.normal(), rng.normal());
+            x = ft * x + gt * u + w;
+            t += dt;
+        }
+        let (tp, xp) = last_post.unwrap();
+        let post = e.axis_at(0, tp).unwrap();
+        let d = post.mean - xp;
+        nees_post += d.dot(&(post.covariance.try_inverse().unwrap() * d));
+        let tick = e.axis_at(0, t).unwrap();
+        let d = tick.mean - x;
+        nees_tick += d.dot(&(tick.covariance.try_inverse().unwrap() * d));
+    }
+    Consistency {
+        nees_post: nees_post / runs as f64,
+        nees_tick: nees_tick / runs as f64,
+        runs: runs as usize,
+        nis: nis / nis_count as f64,
+        nis_count,
+    }
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(24))]
 
     /// On a constant-acceleration trajectory the constant-acceleration
     /// filter is unbiased: over 300 seeds the mean error of position,
     /// velocity and acceleration at the (latency-compensated) tick is
-    /// within 4 standard errors of zero, and the spread stays within the
+    /// within 5 standard errors of zero (72 checks a run: a false alarm below 10⁻⁴), and the spread stays within the
     /// filter's own variance (which also carries its jerk prior).
     #[test]
     fn unbiased_on_constant_acceleration(
@@ -234,7 +306,7 @@ proptest! {
         let predicted = predicted / n;
         for i in 0..3 {
             let se = (var[i] / n).sqrt();
-            prop_assert!(mean[i].abs() < 4.0 * se, "axis state {i}: mean {} se {se}", mean[i]);
+            prop_assert!(mean[i].abs() < 5.0 * se, "axis state {i}: mean {} se {se}", mean[i]);
         }
         // No process noise in this truth: the filter's variance (which
         // includes its jerk prior) bounds the spread from above.
@@ -255,63 +327,14 @@ proptest! {
         q in 1.0..40.0f64,
         sigma in 0.005..0.1f64,
     ) {
-        let settings = EstimatorSettings {
-            input_lag: lagged.then_some(0.2),
-            ..ca_settings(sigma, q)
-        };
-        let lambda = if lagged { 5.0 } else { 0.0 };
-        let runs = 200;
-        let dt = 0.02; // truth and input step
-        let (mut nees_post, mut nees_tick, mut nis) = (0.0, 0.0, 0.0);
-        let mut nis_count = 0usize;
-        for r in 0..runs {
-            let mut rng = Rng::new(seed * 1000 + r);
-            let mut e = StateEstimator::new(settings).unwrap();
-            // Truth starts from the filter's prior at the first sample.
-            let [sv, sa] = settings.initial_sigma;
-            let mut x = Vector3::new(0.0, sv * rng.normal(), sa * rng.normal());
-            let chol = process_noise(dt, lambda, q).cholesky().unwrap().l();
-            let (ft, gt) = transition(dt, lambda);
-            let mut u = 0.0;
-            let mut t = 0.0;
-            let mut next_sample = 0.0;
-            let mut last_post = None;
-            for k in 0..150 {
-                if k % 25 == 0 {
-                    u = 3.0 * rng.normal();
-                }
-                e.record_input(t, &Vector3::new(u, 0.0, 0.0));
-                if t >= next_sample - 1e-12 {
-                    let z = x[0] + sigma * rng.normal();
-                    e.observe(t, &Vector3::new(z, 0.0, 0.0)).unwrap();
-                    if k > 0 {
-                        nis += e.last_nis()[0];
-                        nis_count += 1;
-                    }
-                    last_post = Some((t, x));
-                    next_sample += 3.0 * dt; // 16.7 Hz on the 50 Hz grid
-                }
-                let w = chol * Vector3::new(rng.normal(), rng.normal(), rng.normal());
-                x = ft * x + gt * u + w;
-                t += dt;
-            }
-            let (tp, xp) = last_post.unwrap();
-            let post = e.axis_at(0, tp).unwrap();
-            let d = post.mean - xp;
-            nees_post += d.dot(&(post.covariance.try_inverse().unwrap() * d));
-            let tick = e.axis_at(0, t).unwrap();
-            let d = tick.mean - x;
-            nees_tick += d.dot(&(tick.covariance.try_inverse().unwrap() * d));
-        }
-        let n = runs as f64;
-        let band = |k: f64, count: f64| (chi2_quantile(k * count, -Z999) / count, chi2_quantile(k * count, Z999) / count);
-        let (lo, hi) = band(3.0, n);
-        prop_assert!(nees_post / n > lo && nees_post / n < hi, "posterior NEES {} not in [{lo}, {hi}]", nees_post / n);
-        prop_assert!(nees_tick / n > lo && nees_tick / n < hi, "tick NEES {} not in [{lo}, {hi}]", nees_tick / n);
+        let c = consistency(seed, lagged, q, sigma);
+        let band = |k: f64, count: f64| (chi2_quantile(k * count, -Z_BAND) / count, chi2_quantile(k * count, Z_BAND) / count);
+        let (lo, hi) = band(3.0, c.runs as f64);
+        prop_assert!(c.nees_post > lo && c.nees_post < hi, "posterior NEES {} not in [{lo}, {hi}]", c.nees_post);
+        prop_assert!(c.nees_tick > lo && c.nees_tick < hi, "tick NEES {} not in [{lo}, {hi}]", c.nees_tick);
         // NIS over all samples: correlated in time only through the
         // estimate, which the innovations whiten (they are independent).
-        let m = nis_count as f64;
-        let (lo, hi) = band(1.0, m);
-        prop_assert!(nis / m > lo && nis / m < hi, "NIS {} not in [{lo}, {hi}]", nis / m);
+        let (lo, hi) = band(1.0, c.nis_count as f64);
+        prop_assert!(c.nis > lo && c.nis < hi, "NIS {} not in [{lo}, {hi}]", c.nis);
     }
 }
