@@ -308,6 +308,11 @@ fn braking_follows_the_deceleration_profile_to_the_stop_point() {
     r.horizon(&v(1.7, 2.0, -10.0), DT, &mut out);
     assert!(out.iter().all(|o| close(o, &v(1.7, 2.0, -10.0), 1e-12)));
     assert!((r.path_length() - 0.7).abs() < 1e-12);
+    // At most one more stopping distance: a vehicle drifting on (a thrust
+    // offset along the braking direction) is flown back to 1.0 m on.
+    r.horizon(&v(6.0, 2.0, -10.0), DT, &mut out);
+    assert!((r.path_length() - 1.0).abs() < 1e-12);
+    assert!(out.iter().all(|o| close(o, &v(2.0, 2.0, -10.0), 1e-12)), "{:?}", out[0]);
 }
 
 #[test]

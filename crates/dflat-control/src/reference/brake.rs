@@ -19,8 +19,13 @@ pub(super) struct Brake {
     /// starts (`speed · lag`: the attitude loop's response) \[m\].
     pub(super) coast: f64,
     /// Stopping distance `coast + speed² / (2·decel)` \[m\]; moves on with
-    /// a vehicle that overshoots it (never back).
+    /// a vehicle that overshoots it (never back), up to [`Self::max_length`].
     pub(super) length: f64,
+    /// The farthest the stop may move on: twice the nominal stopping
+    /// distance \[m\]. Beyond it the vehicle is flown back, so a drift
+    /// along the braking direction (a thrust or wind offset the disturbance
+    /// estimator has not learnt yet) cannot carry the stop with it.
+    pub(super) max_length: f64,
     /// Distance of the current closest point from the start \[m\].
     pub(super) progress: f64,
 }
@@ -59,8 +64,9 @@ impl Brake {
     pub(super) fn update(&mut self, q: &Vector3<f64>) {
         if is_finite3(q) {
             let s = (q - self.start).dot(&self.dir);
-            // Past the stop point: the stop moves on with the vehicle.
-            self.length = self.length.max(s);
+            // Past the stop point: the stop moves on with the vehicle,
+            // by at most one more stopping distance.
+            self.length = self.length.max(s.min(self.max_length));
             self.progress = s.clamp(self.progress, self.length);
         }
     }

@@ -209,7 +209,10 @@ impl Reference {
     /// to the measured position (never backwards), and the horizon follows
     /// the profile from there, so a vehicle that brakes late is asked to
     /// brake harder; one that overshoots the stop point moves the stop on
-    /// with it instead of being flown back. A (near) zero velocity is a
+    /// with it instead of being flown back, by at most one more stopping
+    /// distance (a drift along the braking direction, such as a thrust
+    /// offset not yet learnt, cannot carry the stop away). A (near) zero
+    /// velocity is a
     /// setpoint at `start`. Errors on non-finite input, a deceleration
     /// that is not > 0 or a negative lag.
     pub fn braking(
@@ -237,6 +240,7 @@ impl Reference {
         if speed < 1e-6 {
             return Self::setpoint(start);
         }
+        let length = speed * lag + speed * speed / (2.0 * decel);
         Ok(Self {
             kind: Kind::Brake(Brake {
                 start,
@@ -244,7 +248,8 @@ impl Reference {
                 speed,
                 decel,
                 coast: speed * lag,
-                length: speed * lag + speed * speed / (2.0 * decel),
+                length,
+                max_length: 2.0 * length,
                 progress: 0.0,
             }),
         })
