@@ -505,9 +505,18 @@ impl Controller for DfMpc {
         let planned = self.delay.predict(&self.model, fixed, &d)?;
         let previous_input = self.delay.newest().unwrap_or(previous_input);
         let y0 = planned[0];
+        // The sent command's acceleration in the plan's terms (Δ²y/δt²):
+        // the thrust's, less the drag at the plan's start velocity, plus
+        // the disturbance. Without the drag the tilt-rate bound's first
+        // row pinned the plan's acceleration to the thrust's, D·v too
+        // high, and a model with drag ran away (0.3 /s: 100 m).
         let sent_acceleration = if self.smooth || self.settings.constraints.max_tilt_rate.is_some()
         {
-            Some(commanded_acceleration(&self.model, &previous_input)? + d.acceleration)
+            let velocity = (y0 - planned[1]) / -self.model.dt();
+            Some(
+                commanded_acceleration(&self.model, &previous_input)? + d.acceleration
+                    - self.model.drag().component_mul(&velocity),
+            )
         } else {
             None
         };
