@@ -32,7 +32,7 @@ use thiserror::Error;
 
 use crate::flightlog::FlightLog;
 use attitude::{AxisData, AxisFit, fit_axis};
-use drag::{DragData, DragFit, DragSegment, fit_drag};
+use drag::{DragData, DragFit, DragSegment, ThrustModel, fit_drag};
 use vertical::{VerticalData, VerticalFit, VerticalSegment, fit_vertical};
 
 /// Least engaged time \[s\] to identify anything.
@@ -308,7 +308,7 @@ pub fn identify(log: &FlightLog) -> Result<Identification, IdentifyError> {
         return Err(IdentifyError::NoAttitude);
     };
     let vertical = vertical_fit(log, &segments, &engaged_cmds, delay.value);
-    let drag = drag_fit(log, &segments);
+    let drag = drag_fit(log, &segments, &vertical, delay.value);
     Ok(Identification {
         segments,
         engaged_s,
@@ -322,7 +322,12 @@ pub fn identify(log: &FlightLog) -> Result<Identification, IdentifyError> {
     })
 }
 
-fn drag_fit(log: &FlightLog, segments: &[(f64, f64)]) -> DragResult {
+fn drag_fit(
+    log: &FlightLog,
+    segments: &[(f64, f64)],
+    vertical: &VerticalResult,
+    delay: f64,
+) -> DragResult {
     let positions = log.positions();
     let chunks = chunked(
         segments,
@@ -333,6 +338,17 @@ fn drag_fit(log: &FlightLog, segments: &[(f64, f64)]) -> DragResult {
     );
     let data = DragData {
         attitude: log.attitude.iter().map(|a| (a.t, a.euler)).collect(),
+        // The thrust the vertical fit found (spatial flights); else the
+        // altitude is taken as held.
+        thrust: match vertical {
+            VerticalResult::Fitted(v) => Some(ThrustModel {
+                commands: log.commands.iter().map(|c| (c.t, c.thrust)).collect(),
+                hover_thrust: v.hover_thrust,
+                tau_thrust: v.tau_thrust,
+                delay,
+            }),
+            VerticalResult::Skipped(_) => None,
+        },
         segments: segments
             .iter()
             .zip(chunks)

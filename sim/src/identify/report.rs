@@ -259,28 +259,15 @@ impl Identification {
             fmt_ci(&self.delay, 1e3, 1)
         );
         let _ = writeln!(s, "[vehicle]");
-        // The delay is folded into τ as before: with `delay_ms` and
-        // `drag_h` set, the identified configuration flew the L path far
-        // worse in the merged tree (e2e_identify, 2026-11-26; open), so
-        // both are offered commented out until that is understood.
-        let _ = writeln!(
-            s,
-            "tau = {:.3}",
-            self.vehicle_tau() + self.delay.value.max(0.0)
-        );
+        let _ = writeln!(s, "tau = {:.3}", self.vehicle_tau());
         let _ = writeln!(s, "k = {:.3}", self.gain.value);
-        let _ = writeln!(
-            s,
-            "# experimental, not yet validated in flight: delay_ms = {:.1} (then tau = {:.3})",
-            (self.delay.value * 1e3).max(0.0),
-            self.vehicle_tau()
-        );
+        let _ = writeln!(s, "delay_ms = {:.1}", (self.delay.value * 1e3).max(0.0));
         match self.drag_estimate() {
             Some(d) if d.ci.is_finite() => {
                 let _ = writeln!(
                     s,
                     "# Horizontal drag {} /s (acceleration the tilt does not explain,\n\
-                     # against velocity). Experimental, not yet validated in flight:\n# drag_h = {:.3}",
+                     # against velocity).\ndrag_h = {:.3}",
                     fmt_ci(&d, 1.0, 3),
                     d.value.clamp(0.0, 2.0)
                 );
