@@ -257,5 +257,8 @@ fn identifies_drag_and_delay_and_flies_as_well_as_a_matched_plant() {
         after <= 1.2 * clean,
         "identified {after:.3} m vs the clean airframe {clean:.3} m"
     );
-    assert!(after < before, "identified {after:.3} m vs default {before:.3} m");
+    assert!(
+        after < before,
+        "identified {after:.3} m vs default {before:.3} m"
+    );
 }

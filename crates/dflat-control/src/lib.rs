@@ -221,4 +221,11 @@ pub trait ReferenceSource {
     /// Closest reference point to `measured` and the reference velocity
     /// there [m/s] (for non-predictive controllers).
     fn closest(&mut self, measured: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>);
+    /// Whether the horizon is a trajectory the vehicle can fly as it is
+    /// (continuous acceleration: a planner's stream). DF-MPC then weighs
+    /// the plan's jerk and command changes against the reference's own
+    /// ([`optimise::feed_forward`]), not against zero. Default: no.
+    fn flyable(&self) -> bool {
+        false
+    }
 }

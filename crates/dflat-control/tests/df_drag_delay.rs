@@ -282,6 +282,9 @@ fn matched_drag_under_the_tilt_rate_bound_tracks_as_without_drag() {
         "L path 4 m/s, tilt box + tilt-rate + smoothness: cross-track p95 drag 0 {plain:.3} m \
          (north {plain_north:.2} m), matched drag 0.3 {drag:.3} m (north {drag_north:.2} m)"
     );
-    assert!(drag_north < 12.5, "overshot the corner to {drag_north:.2} m");
+    assert!(
+        drag_north < 12.5,
+        "overshot the corner to {drag_north:.2} m"
+    );
     assert!(drag <= 1.2 * plain + 0.01, "{drag:.3} m vs {plain:.3} m");
 }

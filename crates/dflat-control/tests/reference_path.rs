@@ -312,7 +312,11 @@ fn braking_follows_the_deceleration_profile_to_the_stop_point() {
     // offset along the braking direction) is flown back to 1.0 m on.
     r.horizon(&v(6.0, 2.0, -10.0), DT, &mut out);
     assert!((r.path_length() - 1.0).abs() < 1e-12);
-    assert!(out.iter().all(|o| close(o, &v(2.0, 2.0, -10.0), 1e-12)), "{:?}", out[0]);
+    assert!(
+        out.iter().all(|o| close(o, &v(2.0, 2.0, -10.0), 1e-12)),
+        "{:?}",
+        out[0]
+    );
 }
 
 #[test]

@@ -298,8 +298,33 @@ fn a_silent_stream_stops_smoothly_and_holds() {
     let settings = StreamSettings {
         extrapolation_s: 0.4,
         decay_s: 0.8,
+        stop_acceleration: 10.0,
         ..StreamSettings::default()
     };
+    // At most 2 m/s² of deceleration: the decay takes π·3/(2·2) = 2.36 s
+    // instead of 0.8, and holds after 0.4 + 2.36 s.
+    let mut gentle = Reference::stream(
+        StreamSettings {
+            stop_acceleration: 2.0,
+            ..settings
+        },
+        &s,
+    )
+    .unwrap();
+    gentle.set_time(10.02);
+    let q = trajectory(&mut gentle, 200);
+    let (dv, _, _) = steps(&q);
+    assert!(dv <= (1.0 + 2.0) * DT * 1.01, "{dv}");
+    let held_from = ((0.4 + std::f64::consts::PI * 3.0 / 4.0) / DT).ceil() as usize + 1;
+    assert!(
+        q[held_from..]
+            .iter()
+            .all(|x| (x - q[held_from]).norm() < 1e-12)
+    );
+    assert!(
+        (q[held_from - 10] - q[held_from]).norm() > 1e-6,
+        "held too early"
+    );
     let mut r = Reference::stream(settings, &s).unwrap();
     r.set_time(10.02);
     let p = trajectory(&mut r, 200);

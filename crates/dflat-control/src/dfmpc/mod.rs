@@ -299,9 +299,25 @@ impl DfMpc {
         {
             return Err(ControlError::NonFiniteReference);
         }
+        let flyable = reference.flyable();
+        let dt = self.model.dt();
         for (axis, pipeline) in self.axes.iter_mut().enumerate() {
             for (dst, r) in pipeline.reference.iter_mut().zip(&self.reference) {
                 *dst = r[axis];
+            }
+            if flyable {
+                let (q, r) = (
+                    self.settings.tracking_weight[axis],
+                    self.settings.jerk_weight[axis],
+                );
+                crate::optimise::feed_forward::feed_forward(
+                    &mut pipeline.reference,
+                    &mut pipeline.feed_forward,
+                    q,
+                    r,
+                    dt,
+                    &pipeline.fast.smoothness(),
+                );
             }
         }
         Ok(())

@@ -25,6 +25,8 @@ pub(super) struct AxisPipeline {
     pub(super) bounds: AxisBounds,
     /// This tick's reference on this axis, y_ref,k..y_ref,k+N \[m\].
     pub(super) reference: Vec<f64>,
+    /// Scratch for the feed-forward shift (N + 1 values).
+    pub(super) feed_forward: Vec<f64>,
     /// This tick's plan y*_k..y*_{k+N} \[m\] (a workspace until it is good).
     pub(super) plan: Vec<f64>,
     /// The last good tick's plan \[m\] (swapped with `plan`).
@@ -189,6 +191,7 @@ pub(super) fn build_pipelines(
             bounded,
             bounds,
             reference: vec![0.0; n + 1],
+            feed_forward: vec![0.0; n + 1],
             plan: vec![0.0; n + 1],
             good_plan: vec![0.0; n + 1],
         });

@@ -85,6 +85,8 @@
 //! * [`bounds`] — [`AxisBounds`]: tilt (acceleration), vertical
 //!   acceleration and speed bounds, the braking funnel.
 //! * [`smoothness`] — [`Smoothness`]: the command-smoothness term.
+//! * [`feed_forward`] — a flyable reference's jerk and command changes as
+//!   the jerk and smoothness terms' targets (streams).
 //! * [`tilt_rate`] — [`TiltRate`]: the tilt-rate bound, rows on the
 //!   command's change per tick (box solvers: the stage interior point and
 //!   clarabel).
@@ -101,6 +103,7 @@ pub mod cone_solver;
 #[cfg(test)]
 mod cone_tests;
 pub mod fast_banded;
+pub mod feed_forward;
 pub mod interior_point;
 pub mod smoothness;
 pub mod tilt_rate;

@@ -547,6 +547,13 @@ impl Reference {
 }
 
 impl ReferenceSource for Reference {
+    /// A stream (position, velocity and acceleration extrapolated as a
+    /// coordinated turn) is flyable as it is; paths (corners), routes
+    /// (corners between legs), setpoints and stops are not.
+    fn flyable(&self) -> bool {
+        self.is_stream()
+    }
+
     /// `out[0]` is the closest point (advancing the progress); `out[j]` lies
     /// `j·δt·speed` further along the path, held at the end. A non-positive
     /// or non-finite `dt` \[s\] holds the closest point over the horizon.

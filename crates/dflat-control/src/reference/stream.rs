@@ -21,7 +21,12 @@
 //!   stops after `decay_s` at `σ = extrapolation_s + decay_s/2`. So the
 //!   reference velocity `P'(σ)·σ'` falls smoothly to zero (no step in
 //!   velocity or acceleration) and the horizon's tail holds where the
-//!   extrapolation stops. A stream whose samples stop thus becomes a
+//!   extrapolation stops. The stop's peak deceleration is `π·|v|/(2·decay_s)`
+//!   at the speed |v| the extrapolation has when it starts to slow; the
+//!   decay is lengthened so that this stays within `stop_acceleration`
+//!   (`decay_s = max(decay_s, π·|v|/(2·stop_acceleration))`): DF-MPC flies
+//!   a stream as it is (its jerk fed forward), so the stop must be gentle
+//!   itself. A stream whose samples stop thus becomes a
 //!   smooth stop and hold by itself.
 //!
 //! Each new sample replaces the prediction. Without a velocity the sample
@@ -73,16 +78,21 @@ pub struct StreamSettings {
     pub implied_velocity: bool,
     /// Largest sample spacing \[s\] that implies a velocity (> 0).
     pub implied_max_gap_s: f64,
+    /// Largest deceleration of the decay's stop [m/s²] (> 0): the decay
+    /// is lengthened for a fast stream (module docs).
+    pub stop_acceleration: f64,
 }
 
 impl Default for StreamSettings {
-    /// 1.0 s at full rate, 1.0 s decay, no implied velocity (0.25 s gap).
+    /// 1.0 s at full rate, 1.0 s decay (longer for a stop above 2 m/s²),
+    /// no implied velocity (0.25 s gap).
     fn default() -> Self {
         Self {
             extrapolation_s: 1.0,
             decay_s: 1.0,
             implied_velocity: false,
             implied_max_gap_s: 0.25,
+            stop_acceleration: 2.0,
         }
     }
 }
@@ -98,6 +108,9 @@ impl StreamSettings {
         }
         if !(self.implied_max_gap_s.is_finite() && self.implied_max_gap_s > 0.0) {
             return Err(invalid("implied_max_gap_s", "must be finite and > 0 s"));
+        }
+        if !(self.stop_acceleration.is_finite() && self.stop_acceleration > 0.0) {
+            return Err(invalid("stop_acceleration", "must be finite and > 0 m/s²"));
         }
         Ok(())
     }
@@ -163,6 +176,8 @@ impl Prediction {
 pub(super) struct Stream {
     settings: StreamSettings,
     pred: Prediction,
+    /// This prediction's decay time \[s\] (≥ `decay_s`; module docs).
+    decay: f64,
     /// The newest sample (yaw carried).
     last: StreamSample,
     /// Times and positions of the previous position-only samples.
@@ -201,6 +216,7 @@ impl Stream {
                 v: Vector3::zeros(),
                 a: Vector3::zeros(),
             },
+            decay: settings.decay_s,
             last: *sample,
             history: [None, None],
             now: sample.t,
@@ -246,6 +262,11 @@ impl Stream {
             v,
             a,
         };
+        let speed = self.pred.at(self.settings.extrapolation_s).1.norm();
+        self.decay = self
+            .settings
+            .decay_s
+            .max(std::f64::consts::FRAC_PI_2 * speed / self.settings.stop_acceleration);
         self.last = *sample;
         Ok(())
     }
@@ -279,7 +300,7 @@ impl Stream {
     /// The decay's clock `σ` for time `tau` \[s\] after the sample, and
     /// its rate `dσ/dτ`.
     fn sigma(&self, tau: f64) -> (f64, f64) {
-        let (tc, td) = (self.settings.extrapolation_s, self.settings.decay_s);
+        let (tc, td) = (self.settings.extrapolation_s, self.decay);
         let tau = tau.max(0.0);
         if tau <= tc {
             return (tau, 1.0);
@@ -318,7 +339,7 @@ impl Stream {
 
     /// Where the prediction stops (the hold after the decay).
     pub(super) fn stop_point(&self) -> Vector3<f64> {
-        self.state(self.pred.t + self.settings.extrapolation_s + self.settings.decay_s)
+        self.state(self.pred.t + self.settings.extrapolation_s + self.decay)
             .0
     }
 

@@ -31,7 +31,8 @@ pub struct StreamConfig {
     /// stream with `implied_velocity` (0.02–1; 0.25 s = 4 Hz).
     pub implied_max_gap_s: f64,
     /// Peak acceleration \[m/s²\] of a setpoint's route (start and stop
-    /// ramps; 0.2–10).
+    /// ramps) and of a lost stream's stop (its decay is lengthened to keep
+    /// within it; 0.2–10).
     pub route_acceleration: f64,
 }
 
@@ -89,6 +90,7 @@ impl StreamConfig {
             decay_s: self.decay_s,
             implied_velocity: self.implied_velocity,
             implied_max_gap_s: self.implied_max_gap_s,
+            stop_acceleration: self.route_acceleration,
         }
     }
 }
