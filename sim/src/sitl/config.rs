@@ -242,6 +242,10 @@ pub struct SitlConfig {
     /// Linear aerodynamic drag of the plant \[1/s\] on every axis (0–2,
     /// default 0): `v̇ = … − drag·v`. The truth `dflat identify` should find.
     pub drag: f64,
+    /// `[sitl.planner]`: stream a circle or a figure eight to the daemon
+    /// once offboard (absent: no planner). See [`super::planner`].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub planner: Option<super::planner::PlannerConfig>,
 }
 
 impl Default for SitlConfig {
@@ -271,6 +275,7 @@ impl Default for SitlConfig {
             pilot: Vec::new(),
             max_yaw_rate_deg_s: 90.0,
             drag: 0.0,
+            planner: None,
         }
     }
 }
@@ -326,6 +331,20 @@ impl SitlConfig {
                 "\"ardupilot\"".into(),
                 "\"ardupilot\" with sitl.plant = \"planar\" only (thrust is a climb rate)".into(),
             ));
+        }
+        if let Some(p) = &si.planner {
+            for (field, x, lo, hi) in p.ranges() {
+                range(field, x, lo, hi)?;
+            }
+            for (field, id) in [
+                ("sitl.planner.system_id", p.system_id),
+                ("sitl.planner.component_id", p.component_id),
+                ("sitl.planner.target_component", p.target_component),
+            ] {
+                if id == 0 {
+                    return Err(err(field, "0".into(), "1 to 255".into()));
+                }
+            }
         }
         for (i, a) in si.pilot.iter().enumerate() {
             range(&format!("sitl.pilot[{i}].at_s"), a.at_s, 0.0, 3600.0)?;

@@ -93,6 +93,9 @@ pub struct SitlCounters {
     pub mode_changes: u64,
     /// Requests for offboard refused because no stream was alive.
     pub offboard_refused: u64,
+    /// SET_POSITION_TARGET_LOCAL_NED samples the planner sent to the
+    /// daemon (`[sitl.planner]`).
+    pub planner_samples: u64,
     /// Plant integration steps.
     pub plant_steps: u64,
     /// Plant steps that ran late (the thread missed its deadline).
@@ -172,6 +175,7 @@ pub(super) struct Counters {
     pub(super) hold_entries: AtomicU64,
     pub(super) mode_changes: AtomicU64,
     pub(super) offboard_refused: AtomicU64,
+    pub(super) planner_samples: AtomicU64,
     pub(super) plant_steps: AtomicU64,
     pub(super) late_steps: AtomicU64,
     pub(super) send_errors: AtomicU64,
@@ -218,6 +222,7 @@ impl Counters {
             hold_entries: get(&self.hold_entries),
             mode_changes: get(&self.mode_changes),
             offboard_refused: get(&self.offboard_refused),
+            planner_samples: get(&self.planner_samples),
             plant_steps: get(&self.plant_steps),
             late_steps: get(&self.late_steps),
             send_errors: get(&self.send_errors),

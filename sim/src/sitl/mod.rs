@@ -99,6 +99,7 @@ mod counters;
 mod latency;
 pub mod params;
 pub mod pilot;
+pub mod planner;
 pub mod position_control;
 pub mod px4_face;
 mod routing;
@@ -333,10 +334,15 @@ pub struct SitlReport {
     pub last: TruthSample,
     /// The plant's state became non-finite at some point.
     pub diverged: bool,
+    /// SITL time \[s\] the planner's trajectory started (its t = 0; the
+    /// first sample), when `[sitl.planner]` streamed.
+    pub planner_start: Option<f64>,
 }
 
 struct Shared {
     start: Instant,
+    /// SITL time the planner's trajectory started \[s\].
+    planner_start: Mutex<Option<f64>>,
     stop: AtomicBool,
     pose_paused: AtomicBool,
     diverged: AtomicBool,
@@ -392,7 +398,16 @@ impl Shared {
 
     /// `msg` as an outgoing frame of the SITL: signed when signing is on.
     fn encode(&self, msg: &MavMessage) -> Result<dflat_link::EncodedFrame, dflat_link::LinkError> {
-        let header = self.header();
+        self.encode_as(self.header(), msg)
+    }
+
+    /// `msg` with `header` (the SITL's own, or the planner's): signed when
+    /// signing is on.
+    fn encode_as(
+        &self,
+        header: MavHeader,
+        msg: &MavMessage,
+    ) -> Result<dflat_link::EncodedFrame, dflat_link::LinkError> {
         match &self.signing {
             Some(s) => {
                 let now = timestamp_from_system_time(SystemTime::now());
@@ -545,6 +560,7 @@ pub fn spawn(cfg: &SitlSettings, options: SitlOptions) -> Result<SitlHandle, Sit
     };
     let shared = Arc::new(Shared {
         start: Instant::now(),
+        planner_start: Mutex::new(None),
         stop: AtomicBool::new(false),
         pose_paused: AtomicBool::new(false),
         diverged: AtomicBool::new(false),
@@ -633,6 +649,7 @@ pub fn spawn(cfg: &SitlSettings, options: SitlOptions) -> Result<SitlHandle, Sit
         pose_clock_rate: cfg.sitl.pose_clock_rate,
         record_trace: options.record_trace,
         truth_file,
+        planner: cfg.sitl.planner.clone().map(planner::Planner::new),
     };
     threads.push((
         "plant",
@@ -805,6 +822,7 @@ impl SitlHandle {
             trace: std::mem::take(&mut *lock(&self.shared.trace)),
             last: self.truth(),
             diverged: self.diverged(),
+            planner_start: *lock(&self.shared.planner_start),
         })
     }
 }
@@ -850,6 +868,8 @@ struct PlantLoop {
     pose_clock_rate: f64,
     record_trace: bool,
     truth_file: Option<(PathBuf, BufWriter<File>)>,
+    /// `[sitl.planner]`: the stream it sends once offboard.
+    planner: Option<planner::Planner>,
 }
 
 impl PlantLoop {
@@ -1060,6 +1080,7 @@ impl PlantLoop {
                 heartbeat_due = false;
             }
             self.px4_streams(t, &state);
+            self.planner_sample(t, mode, &state);
             if before / telemetry_every != steps / telemetry_every {
                 let sample = TruthSample {
                     t,
@@ -1107,6 +1128,32 @@ impl PlantLoop {
     /// Sends the SITL's own `msg` to both links, counted as `kind`.
     fn send(&self, msg: &MavMessage, kind: Kind) {
         self.shared.send_own(msg, Dest::Both, kind);
+    }
+
+    /// The planner's sample due at SITL time `t` \[s\], sent to the
+    /// daemon on the vehicle link from the planner's ids.
+    fn planner_sample(&mut self, t: f64, mode: SitlMode, state: &PlantState) {
+        let Some(planner) = self.planner.as_mut() else {
+            return;
+        };
+        let time_boot_ms = (t * self.pose_clock_rate * 1000.0).round() as u32;
+        let Some(msg) = planner.due(
+            t,
+            mode == SitlMode::Offboard,
+            state.position,
+            time_boot_ms,
+            self.shared.system_id,
+        ) else {
+            return;
+        };
+        if let Some(t0) = planner.started_at() {
+            lock(&self.shared.planner_start).get_or_insert(t0);
+        }
+        let (sys, comp) = planner.ids();
+        let header = dflat_link::header(sys, comp, planner.sequence());
+        if self.shared.send_to_vehicle_as(header, &msg) {
+            bump(&self.shared.counters.planner_samples);
+        }
     }
 
     /// A LOCAL_POSITION_NED left (the latency's pose stream without vision).
@@ -1165,6 +1212,14 @@ impl PlantLoop {
             return;
         }
         let time_boot_ms = (sample.t * self.pose_clock_rate * 1000.0).round() as u32;
+        // ATTITUDE first: the daemon's tick that takes this pose then has
+        // the attitude of the same instant too (it was one tick late when
+        // the pose went first and a tick's cutoff fell between them).
+        let rates = state.body_rates.into();
+        if let Ok(msg) = dflat_link::attitude(time_boot_ms, sample.euler, rates) {
+            lock(&self.shared.latest).attitude = Some(msg.clone());
+            self.send(&msg, Kind::Attitude);
+        }
         let measured = self.sensor.measure(sample.t);
         let offset = *lock(&self.shared.pose_offset);
         let p = measured.map_or(state.position, |m| m.position);
@@ -1176,11 +1231,6 @@ impl PlantLoop {
                 self.send(&msg, Kind::Position);
                 self.pose_sent();
             }
-        }
-        let rates = state.body_rates.into();
-        if let Ok(msg) = dflat_link::attitude(time_boot_ms, sample.euler, rates) {
-            lock(&self.shared.latest).attitude = Some(msg.clone());
-            self.send(&msg, Kind::Attitude);
         }
     }
 

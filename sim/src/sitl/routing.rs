@@ -104,6 +104,25 @@ impl Shared {
         to_vehicle
     }
 
+    /// `msg` from another sender on this machine (`header`: the planner's
+    /// ids) to the vehicle link's peer (the daemon). Whether it left.
+    pub(super) fn send_to_vehicle_as(&self, header: MavHeader, msg: &MavMessage) -> bool {
+        let Ok(frame) = self.encode_as(header, msg) else {
+            bump(&self.counters.send_errors);
+            return false;
+        };
+        let Some((socket, peer)) = self.links.socket_and_peer(Link::Vehicle) else {
+            return false;
+        };
+        match socket.send_to(frame.as_bytes(), peer) {
+            Ok(_) => true,
+            Err(_) => {
+                bump(&self.counters.send_errors);
+                false
+            }
+        }
+    }
+
     /// Whom `msg` addresses, seen from the SITL (`None`: no target).
     pub(super) fn addressing(&self, msg: &MavMessage) -> Option<Addressing> {
         use dflat_link::mavlink::Message as _;
