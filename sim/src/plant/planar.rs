@@ -21,14 +21,17 @@ use crate::SimError;
 /// Altitude stays at its reset value and the thrust command is ignored (the
 /// autopilot holds altitude). The heading follows the yaw command through
 /// the yaw loop of [`PlantOptions::max_yaw_rate`] (`plant/yaw.rs`; off by
-/// default: the heading stays at its reset value), and pitch and roll act
-/// in the body frame at the actual heading.
+/// default: the heading stays at its reset value); θ and φ are the tilt at
+/// the reset heading (a world frame), tracking the command's thrust axis,
+/// and are reported at the actual heading.
 #[derive(Debug, Clone)]
 pub struct PlanarPlant {
     options: PlantOptions,
     x: SVector<f64, 6>,
     z: f64,
     yaw: f64,
+    /// The heading θ and φ are kept at (the reset heading) \[rad\].
+    yaw_ref: f64,
     t: f64,
     held: HeldCommand,
     wind: Wind,
@@ -46,6 +49,7 @@ impl PlanarPlant {
             x: SVector::zeros(),
             z: 0.0,
             yaw: 0.0,
+            yaw_ref: 0.0,
             t: 0.0,
             wind,
         };
@@ -53,17 +57,23 @@ impl PlanarPlant {
         Ok(plant)
     }
 
+    /// Pitch and roll \[rad\] at the actual heading.
+    fn body_tilt(&self) -> (f64, f64) {
+        super::yaw::tilt_between(self.x[4], self.x[5], self.yaw_ref, self.yaw)
+    }
+
     fn derivative(&self, x: &SVector<f64, 6>, w: &Vector3<f64>) -> SVector<f64, 6> {
         let o = &self.options;
-        let (ax, ay) = level_flight_acceleration(o.g, x[5], x[4], self.yaw);
+        let (ax, ay) = level_flight_acceleration(o.g, x[5], x[4], self.yaw_ref);
         let c = &self.held.command;
+        let (cp, cr) = super::yaw::command_tilt(o, c, self.yaw, self.yaw_ref);
         SVector::from([
             x[1],
             ax - o.drag * (x[1] - w.x),
             x[3],
             ay - o.drag * (x[3] - w.y),
-            (o.attitude_gain * c.pitch - x[4]) / o.attitude_tau,
-            (o.attitude_gain * c.roll - x[5]) / o.attitude_tau,
+            (o.attitude_gain * cp - x[4]) / o.attitude_tau,
+            (o.attitude_gain * cr - x[5]) / o.attitude_tau,
         ])
     }
 }
@@ -84,6 +94,7 @@ impl Plant for PlanarPlant {
         ]);
         self.z = state.position.z;
         self.yaw = state.yaw;
+        self.yaw_ref = state.yaw;
         self.t = 0.0;
         let mut s = *state;
         s.thrust = self.options.g;
@@ -129,15 +140,17 @@ impl Plant for PlanarPlant {
     }
 
     fn attitude(&self) -> (f64, f64, f64) {
-        (self.x[5], self.x[4], self.yaw)
+        let (pitch, roll) = self.body_tilt();
+        (roll, pitch, self.yaw)
     }
 
     fn true_state(&self) -> PlantState {
+        let (pitch, roll) = self.body_tilt();
         PlantState {
             position: self.position(),
             velocity: self.velocity(),
-            roll: self.x[5],
-            pitch: self.x[4],
+            roll,
+            pitch,
             yaw: self.yaw,
             body_rates: {
                 // The first-order attitude and yaw loops' rates.

@@ -21,12 +21,16 @@ use crate::SimError;
 ///
 /// The heading follows the yaw command through the yaw loop of
 /// [`PlantOptions::max_yaw_rate`] (`plant/yaw.rs`; off by default: the
-/// heading stays at its reset value).
+/// heading stays at its reset value); θ and φ are the tilt at the reset
+/// heading (a world frame), tracking the command's thrust axis, and are
+/// reported at the actual heading.
 #[derive(Debug, Clone)]
 pub struct SpatialPlant {
     options: PlantOptions,
     x: SVector<f64, 9>,
     yaw: f64,
+    /// The heading θ and φ are kept at (the reset heading) \[rad\].
+    yaw_ref: f64,
     t: f64,
     held: HeldCommand,
     wind: Wind,
@@ -43,6 +47,7 @@ impl SpatialPlant {
             options,
             x: SVector::zeros(),
             yaw: 0.0,
+            yaw_ref: 0.0,
             t: 0.0,
             wind,
         };
@@ -50,10 +55,16 @@ impl SpatialPlant {
         Ok(plant)
     }
 
+    /// Pitch and roll \[rad\] at the actual heading.
+    fn body_tilt(&self) -> (f64, f64) {
+        super::yaw::tilt_between(self.x[6], self.x[7], self.yaw_ref, self.yaw)
+    }
+
     fn derivative(&self, x: &SVector<f64, 9>, w: &Vector3<f64>) -> SVector<f64, 9> {
         let o = &self.options;
         let c = &self.held.command;
-        let axis = thrust_axis(x[7], x[6], self.yaw);
+        let axis = thrust_axis(x[7], x[6], self.yaw_ref);
+        let (cp, cr) = super::yaw::command_tilt(o, c, self.yaw, self.yaw_ref);
         let v = Vector3::new(x[1], x[3], x[5]);
         let a = Vector3::new(0.0, 0.0, o.g) - axis * x[8] - (v - w) * o.drag;
         let k_t = o.thrust_gain / o.mass_factor;
@@ -64,8 +75,8 @@ impl SpatialPlant {
             a.y,
             x[5],
             a.z,
-            (o.attitude_gain * c.pitch - x[6]) / o.attitude_tau,
-            (o.attitude_gain * c.roll - x[7]) / o.attitude_tau,
+            (o.attitude_gain * cp - x[6]) / o.attitude_tau,
+            (o.attitude_gain * cr - x[7]) / o.attitude_tau,
             (k_t * c.thrust - x[8]) / o.thrust_tau,
         ])
     }
@@ -89,6 +100,7 @@ impl Plant for SpatialPlant {
             s.thrust,
         ]);
         self.yaw = s.yaw;
+        self.yaw_ref = s.yaw;
         self.t = 0.0;
         self.held = HeldCommand::steady(&self.options, s);
         self.wind.restart();
@@ -123,15 +135,17 @@ impl Plant for SpatialPlant {
     }
 
     fn attitude(&self) -> (f64, f64, f64) {
-        (self.x[7], self.x[6], self.yaw)
+        let (pitch, roll) = self.body_tilt();
+        (roll, pitch, self.yaw)
     }
 
     fn true_state(&self) -> PlantState {
+        let (pitch, roll) = self.body_tilt();
         PlantState {
             position: self.position(),
             velocity: self.velocity(),
-            roll: self.x[7],
-            pitch: self.x[6],
+            roll,
+            pitch,
             yaw: self.yaw,
             body_rates: {
                 // The first-order attitude and yaw loops' rates.

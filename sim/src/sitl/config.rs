@@ -237,7 +237,8 @@ pub struct SitlConfig {
     /// The autopilot's yaw loop (planar and spatial plants): the heading
     /// follows SET_ATTITUDE_TARGET's yaw at most this fast \[deg/s\]
     /// (0 = the heading never changes; 0–720), with a 0.1 s time constant,
-    /// while pitch and roll act in the body frame at the actual heading.
+    /// while the thrust axis tracks the command's (its pitch and roll at
+    /// its yaw), as PX4's and ArduPilot's attitude controllers do.
     pub max_yaw_rate_deg_s: f64,
     /// Linear aerodynamic drag of the plant \[1/s\] on every axis (0–2,
     /// default 0): `v̇ = … − drag·v`. The truth `dflat identify` should find.

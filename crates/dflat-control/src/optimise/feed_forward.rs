@@ -37,7 +37,7 @@ pub fn feed_forward(
     smoothness: &Smoothness,
 ) {
     let len = reference.len();
-    if len < 4 || scratch.len() < len || !(q > 0.0) {
+    if len < 4 || scratch.len() < len || q.is_nan() || q <= 0.0 {
         return;
     }
     let shift = &mut scratch[..len];
