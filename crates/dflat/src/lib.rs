@@ -20,6 +20,8 @@ pub mod demo;
 mod experiment;
 #[cfg(feature = "lab")]
 mod sitl_demo;
+/// `dflat demo --stream`: a planner's stream flown on the SITL.
+pub mod stream_demo;
 #[cfg(feature = "lab")]
 pub mod tuning;
 

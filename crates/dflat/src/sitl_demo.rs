@@ -38,9 +38,11 @@ pub struct SitlArgs {
 /// `dflat demo` arguments.
 #[derive(Debug, Args)]
 pub struct DemoArgs {
-    /// Speed along the L path [m/s].
-    #[arg(long, default_value_t = 5.0)]
-    speed: f64,
+    /// Speed along the L path [m/s] (default 5), or of the streamed
+    /// circle with --stream (default 4: the heading then turns at 38°/s,
+    /// within vehicle.max_yaw_rate_deg_s).
+    #[arg(long)]
+    speed: Option<f64>,
     /// Directory for the plot, the truth CSV and the daemon's flight records.
     #[arg(long, default_value = "out/demo")]
     out: PathBuf,
@@ -48,6 +50,10 @@ pub struct DemoArgs {
     /// (default: path time + 8 s).
     #[arg(long)]
     seconds: Option<f64>,
+    /// Fly a planner's stream instead of the L path: the SITL streams a
+    /// 6 m circle at --speed (p, v, a, yaw at 20 Hz) to the daemon.
+    #[arg(long)]
+    stream: bool,
 }
 
 fn init_logs(default: &str) {
@@ -91,11 +97,20 @@ pub fn run_sitl(args: SitlArgs) -> Result<()> {
 /// Runs `dflat demo`.
 pub fn run_demo(args: DemoArgs) -> Result<()> {
     init_logs("warn");
+    let default_speed = if args.stream { 4.0 } else { 5.0 };
     let options = demo::DemoOptions {
-        speed: args.speed,
+        speed: args.speed.unwrap_or(default_speed),
         out: args.out,
         seconds: args.seconds,
     };
+    if args.stream {
+        let outcome = runtime()?.block_on(crate::stream_demo::run(&options))?;
+        print!("{}", outcome.summary_text());
+        if let Some(failure) = outcome.failure() {
+            bail!("stream demo failed: {failure}");
+        }
+        return Ok(());
+    }
     let outcome = runtime()?.block_on(demo::run(&options))?;
     print!("{}", outcome.summary_text());
     if let Some(failure) = outcome.failure() {
