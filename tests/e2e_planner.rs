@@ -123,8 +123,7 @@ fn fly(yaw: bool) -> Figures {
     // The heading follows the stream's yaw (along the velocity).
     let last_streamed = offboard
         .iter()
-        .filter(|s| s.t <= t0 + 12.0)
-        .next_back()
+        .rfind(|s| s.t <= t0 + 12.0)
         .expect("offboard at the stream's end");
     let want_yaw = circle.at(last_streamed.t - t0).yaw;
     let yaw_err = dflat_link::math::wrap_pi(last_streamed.euler[2] - want_yaw).abs();

@@ -40,7 +40,7 @@ use dflat_daemon::FlightSummary;
 use dflat_daemon::config::{Config, ConfigError, MissionStart};
 use dflat_sim::sitl::{
     self, SitlConfigError, SitlCounters, SitlEngage, SitlError, SitlHandle, SitlMode, SitlOptions,
-    SitlSettings, TruthSample,
+    SitlReport, SitlSettings, TruthSample,
 };
 
 /// The shipped SITL configuration (daemon + SITL on loopback).
@@ -356,7 +356,8 @@ pub async fn run(options: &DemoOptions) -> Result<DemoOutcome, DemoError> {
         .seconds
         .unwrap_or(path_length(&wps) / cfg.mission.speed + TIME_MARGIN_S);
 
-    let sitl = sitl::spawn(
+    let pair = Pair::start(
+        &cfg,
         &sitl_cfg,
         SitlOptions {
             truth_csv: Some(truth_csv.clone()),
@@ -364,24 +365,12 @@ pub async fn run(options: &DemoOptions) -> Result<DemoOutcome, DemoError> {
             ..SitlOptions::default()
         },
     )?;
-    let link = format!("udpout:127.0.0.1:{}", sitl.local_addr().port());
-    let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
-    let daemon_cfg = cfg.clone();
-    let daemon = tokio::spawn(async move {
-        let shutdown = async move {
-            // A dropped sender also means "stop".
-            let _ = stop_rx.await;
-        };
-        dflat_daemon::run(daemon_cfg, Some(link), shutdown).await
-    });
 
     let started = Instant::now();
     let end = *wps.last().unwrap_or(&Vector3::zeros());
-    let (arrival, pilot) = watch(&sitl, end, limit, started).await;
-    let _ = stop_tx.send(());
-    let summary = daemon.await.map_err(|e| DemoError::Join(e.to_string()))??;
+    let (arrival, pilot) = watch(&pair.sitl, end, limit, started).await;
+    let (summary, report) = pair.stop().await?;
     let wall_s = started.elapsed().as_secs_f64();
-    let report = sitl.stop()?;
 
     let first_command = report
         .trace
@@ -461,6 +450,49 @@ pub async fn run(options: &DemoOptions) -> Result<DemoOutcome, DemoError> {
         pilot,
         handback_step_deg,
     })
+}
+
+/// The SITL and the daemon, started in this process on loopback (the
+/// daemon's link `udpout` to the SITL's port).
+pub(crate) struct Pair {
+    /// The SITL.
+    pub(crate) sitl: SitlHandle,
+    stop: tokio::sync::oneshot::Sender<()>,
+    daemon: tokio::task::JoinHandle<Result<FlightSummary, DaemonError>>,
+}
+
+impl Pair {
+    /// Starts the SITL with `options`, then the daemon on a runtime task.
+    pub(crate) fn start(
+        cfg: &Config,
+        sitl_cfg: &SitlSettings,
+        options: SitlOptions,
+    ) -> Result<Self, DemoError> {
+        let sitl = sitl::spawn(sitl_cfg, options)?;
+        let link = format!("udpout:127.0.0.1:{}", sitl.local_addr().port());
+        let (stop, stop_rx) = tokio::sync::oneshot::channel::<()>();
+        let daemon_cfg = cfg.clone();
+        let daemon = tokio::spawn(async move {
+            let shutdown = async move {
+                // A dropped sender also means "stop".
+                let _ = stop_rx.await;
+            };
+            dflat_daemon::run(daemon_cfg, Some(link), shutdown).await
+        });
+        Ok(Self { sitl, stop, daemon })
+    }
+
+    /// Stops the daemon, then the SITL: the daemon's summary and the
+    /// SITL's report.
+    pub(crate) async fn stop(self) -> Result<(FlightSummary, SitlReport), DemoError> {
+        let _ = self.stop.send(());
+        let summary = self
+            .daemon
+            .await
+            .map_err(|e| DemoError::Join(e.to_string()))??;
+        let report = self.sitl.stop()?;
+        Ok((summary, report))
+    }
 }
 
 /// Words of the pilot's hand-back in [`DemoOutcome::pilot`].

@@ -21,6 +21,7 @@ mod experiment;
 #[cfg(feature = "lab")]
 mod sitl_demo;
 /// `dflat demo --stream`: a planner's stream flown on the SITL.
+#[cfg(feature = "lab")]
 pub mod stream_demo;
 #[cfg(feature = "lab")]
 pub mod tuning;

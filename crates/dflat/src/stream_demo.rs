@@ -20,11 +20,11 @@ use dflat_daemon::config::MissionStart;
 use dflat_sim::harness::ErrorStats;
 use dflat_sim::plot::{DF_RED, PathPlot, Series, north_up, write_path_plot};
 use dflat_sim::sitl::planner::PlannerConfig;
-use dflat_sim::sitl::{self, SitlCounters, SitlEngage, SitlMode, SitlOptions};
+use dflat_sim::sitl::{SitlCounters, SitlEngage, SitlMode, SitlOptions};
 use dflat_sim::trajectory::{Shape, Trajectory};
 use nalgebra::Vector3;
 
-use crate::demo::{DemoError, DemoOptions, demo_config};
+use crate::demo::{DemoError, DemoOptions, Pair, demo_config};
 
 /// How long the planner streams \[s\].
 pub const STREAM_S: f64 = 16.0;
@@ -159,22 +159,15 @@ pub async fn run(options: &DemoOptions) -> Result<StreamDemoOutcome, DemoError> 
         dir: options.out.clone(),
         source,
     })?;
-    let sitl = sitl::spawn(
+    let pair = Pair::start(
+        &cfg,
         &sitl_cfg,
         SitlOptions {
             record_trace: true,
             ..SitlOptions::default()
         },
     )?;
-    let link = format!("udpout:127.0.0.1:{}", sitl.local_addr().port());
-    let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
-    let daemon_cfg = cfg.clone();
-    let daemon = tokio::spawn(async move {
-        let shutdown = async move {
-            let _ = stop_rx.await;
-        };
-        dflat_daemon::run(daemon_cfg, Some(link), shutdown).await
-    });
+    let sitl = &pair.sitl;
     let started = Instant::now();
     let limit = options
         .seconds
@@ -192,10 +185,8 @@ pub async fn run(options: &DemoOptions) -> Result<StreamDemoOutcome, DemoError> 
             break;
         }
     }
-    let _ = stop_tx.send(());
-    let summary = daemon.await.map_err(|e| DemoError::Join(e.to_string()))??;
+    let (summary, report) = pair.stop().await?;
     let wall_s = started.elapsed().as_secs_f64();
-    let report = sitl.stop()?;
 
     let circle = |start: Vector3<f64>| Trajectory {
         shape: Shape::Circle,
