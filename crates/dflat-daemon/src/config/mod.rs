@@ -296,6 +296,12 @@ pub struct VehicleConfig {
     pub thrust_value: f64,
     /// Normalised thrust that hovers, for `normalized` mode (0.05–0.95).
     pub hover_thrust: f64,
+    /// `normalized` mode: fly the autopilot's own hover thrust
+    /// (`MPC_THR_HOVER`, `MOT_THST_HOVER`, read at start) instead of
+    /// `hover_thrust` once it answers before the first engagement (0.05–0.95
+    /// only; `hover_thrust` stands until then, and if it never answers).
+    /// Default false: `hover_thrust` is flown and a difference is said.
+    pub hover_thrust_from_autopilot: bool,
     /// `flown` (default): the yaw of setpoints and mission items is flown,
     /// at most `max_yaw_rate_deg_s`, and the vehicle keeps its heading
     /// otherwise; `fixed`: every command carries `yaw_deg` and a
@@ -339,6 +345,7 @@ impl Default for VehicleConfig {
             thrust_mode: ThrustMode::Fixed,
             thrust_value: 0.5,
             hover_thrust: 0.5,
+            hover_thrust_from_autopilot: false,
             yaw_mode: YawMode::Flown,
             max_yaw_rate_deg_s: 45.0,
             drag_h: 0.0,

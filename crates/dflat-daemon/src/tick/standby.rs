@@ -4,9 +4,9 @@
 //! trial solves that end it), and the pose clock's sanity check.
 
 use dflat_link::dialect::MavSeverity;
-use dflat_link::{AutopilotFamily, AutopilotMode};
+use dflat_link::{AutopilotFamily, AutopilotMode, ThrustMapping};
 use nalgebra::Vector3;
-use tracing::{error, info};
+use tracing::{error, info, warn};
 
 use super::exit::update_caught;
 use super::{ControlCore, POSE_LATENCY_PERSISTENCE, TRIAL_TICKS};
@@ -136,6 +136,9 @@ impl ControlCore {
         };
         let v = &self.config.vehicle;
         match known.spec.kind {
+            ParamKind::HoverThrust if v.hover_thrust_from_autopilot => {
+                self.fly_autopilot_hover(name, known.value);
+            }
             ParamKind::HoverThrust => {
                 info!(
                     param = name,
@@ -163,6 +166,52 @@ impl ControlCore {
                 );
             }
         }
+    }
+
+    /// `vehicle.hover_thrust_from_autopilot`: the autopilot's hover thrust
+    /// `value` (parameter `name`) becomes the one flown — the thrust
+    /// mapping and the level hover's thrust — if it is in 0.05–0.95 and
+    /// the daemon has not engaged yet (a change in flight would step the
+    /// thrust). Said either way.
+    fn fly_autopilot_hover(&mut self, name: &str, value: f64) {
+        let v = &self.config.vehicle;
+        if v.thrust_mode != ThrustMode::Normalized {
+            return;
+        }
+        let (engagements, _) = self.supervisor.engagement_counts();
+        let text = if !(0.05..=0.95).contains(&value) {
+            warn!(
+                param = name,
+                value, "autopilot hover thrust outside 0.05–0.95: vehicle.hover_thrust flown"
+            );
+            format!(
+                "dflat: {name} {value:.2} refused, hover {:.2} flown",
+                v.hover_thrust
+            )
+        } else if engagements > 0 {
+            warn!(
+                param = name,
+                value, "autopilot hover thrust arrived after engagement: not flown"
+            );
+            format!(
+                "dflat: {name} {value:.2} late, hover {:.2} flown",
+                v.hover_thrust
+            )
+        } else {
+            self.mapping = ThrustMapping::Normalized {
+                hover_thrust: value,
+                gravity: v.gravity,
+            };
+            self.fallback.hover_thrust = value;
+            info!(
+                param = name,
+                value,
+                config = v.hover_thrust,
+                "flying the autopilot's hover thrust"
+            );
+            format!("dflat: flying {name} {value:.2} as hover thrust")
+        };
+        self.text(MavSeverity::MAV_SEVERITY_INFO, &text);
     }
 
     /// A pose captured (by the mapped source clock) more than

@@ -527,3 +527,91 @@ fn fly_from(core: &mut ControlCore, from: u64, n: u64) -> Vec<StepOutput> {
         .map(|k| step_at(core, k, None, vec![]))
         .collect()
 }
+
+/// `vehicle.hover_thrust_from_autopilot`: the autopilot's MPC_THR_HOVER
+/// (0.42) answered in standby is flown as the hover thrust (the scripted
+/// controller asks for g: normalised, that is the hover thrust); answered
+/// after the engagement it is not (the thrust would step), and without
+/// the option the configuration's 0.5 is flown.
+#[test]
+fn flies_the_autopilots_hover_thrust_only_when_asked_and_before_engaging() {
+    use crate::config::ThrustMode;
+    let run = |from_autopilot: bool, answer_tick: u64| -> (f64, Vec<String>) {
+        let mut cfg = Config::default();
+        cfg.vehicle.thrust_mode = ThrustMode::Normalized;
+        cfg.vehicle.hover_thrust_from_autopilot = from_autopilot;
+        let controller = Scripted {
+            script: vec![Script::Command(0.0, 0.0)],
+            tick: 0,
+            updates: Arc::new(AtomicUsize::new(0)),
+        };
+        let mapping = thrust_mapping(&cfg);
+        let mut core = ControlCore::new(&cfg, Box::new(controller), mapping);
+        let posctl = dflat_link::AutopilotMode {
+            custom_mode: 3 << 16,
+            ..OFFBOARD
+        };
+        let mut texts = Vec::new();
+        let mut thrust = f64::NAN;
+        for k in 0..40u64 {
+            let t = k as f64 * DT;
+            let mut events = vec![
+                Event::Heartbeat {
+                    arrival: t - 0.001,
+                    mode: if k < 10 { posctl } else { OFFBOARD },
+                },
+                Event::Pose {
+                    arrival: t - 0.001,
+                    source_time: None,
+                    position: [0.0, 0.0, -10.0],
+                    yaw: Some(0.0),
+                    reset_counter: None,
+                },
+            ];
+            if k == answer_tick {
+                events.push(Event::Param {
+                    arrival: t - 0.0005,
+                    name: ParamName::new("MPC_THR_HOVER"),
+                    value: 0.42,
+                });
+            }
+            let time = TickTime {
+                tick: k,
+                t,
+                scheduled: t,
+                jitter_us: 0,
+            };
+            let mut clock = t;
+            let out = core.step(&time, events, &mut || {
+                clock += 1e-4;
+                clock
+            });
+            for m in &out.texts {
+                if let MavMessage::STATUSTEXT(d) = m {
+                    texts.push(d.text.to_str().unwrap_or("").to_owned());
+                }
+            }
+            if let Some(c) = &out.command {
+                thrust = c.command.thrust;
+            }
+        }
+        assert!(core.state().engaged(), "{:?}", core.state());
+        (thrust, texts)
+    };
+    let (thrust, texts) = run(true, 3);
+    assert!((thrust - 0.42).abs() < 1e-9, "{thrust}");
+    assert!(
+        texts
+            .iter()
+            .any(|t| t.contains("flying MPC_THR_HOVER 0.42")),
+        "{texts:?}"
+    );
+    let (thrust, texts) = run(true, 20);
+    assert!((thrust - 0.5).abs() < 1e-9, "{thrust}");
+    assert!(
+        texts.iter().any(|t| t.contains("MPC_THR_HOVER 0.42 late")),
+        "{texts:?}"
+    );
+    let (thrust, _) = run(false, 3);
+    assert!((thrust - 0.5).abs() < 1e-9, "{thrust}");
+}
