@@ -11,7 +11,7 @@
 //!   autopilot applied before).
 //! * The streamed 4 m/s circle of radius 6 m with p, v, a at 20 Hz, 10 Hz
 //!   and 50 Hz: the horizontal error p95 ≤ 0.098 m and below the anchor
-//!   (PD with velocity and acceleration feed-forward, `dflat_sim::pd_ff`)
+//!   (PD with velocity and acceleration feed-forward: the SITL's position loop, `dflat_sim::sitl::position_control`)
 //!   on the same stream and plant; position-only streams are printed.
 //!
 //! Run with `--nocapture` to see the figures:
@@ -22,8 +22,8 @@ use dflat_daemon::config::Config;
 use dflat_daemon::control::{build_controller, thrust_mapping};
 use dflat_daemon::tick::{ControlCore, Event, TickTime};
 use dflat_link::{AutopilotFamily, AutopilotMode};
-use dflat_sim::pd_ff::{PdFfGains, PdFfReference, pd_ff};
 use dflat_sim::plant::{Plant, PlantKind, PlantOptions, PlantState, build_plant};
+use dflat_sim::sitl::position_control::{self, PositionGains, PositionTarget};
 use dflat_sim::trajectory::{Shape, Trajectory};
 use nalgebra::Vector3;
 
@@ -82,7 +82,6 @@ fn fly(
     let mut plant: Box<dyn Plant> =
         build_plant(PlantKind::Planar, &options, 1).expect("planar plant");
     plant.reset(&PlantState::hover(Vector3::from(START), options.g));
-    let gains = PdFfGains::default();
     let mut next_goal = 0;
     let mut ticks = Vec::new();
     let mut clock = 0.0;
@@ -141,17 +140,11 @@ fn fly(
         let applied = match pilot_velocity {
             // The autopilot's own position mode flies the pilot's stick.
             Some(v) => {
-                let c = pd_ff(
-                    &gains,
-                    &PdFfReference {
-                        position: plant.position(),
-                        velocity: Vector3::from(v),
-                        acceleration: Vector3::zeros(),
-                    },
-                    &plant.position(),
-                    &plant.velocity(),
-                    yaw,
-                );
+                let target = PositionTarget {
+                    velocity: v,
+                    ..PositionTarget::hold(plant.position().into())
+                };
+                let c = anchor_command(&target, plant.position(), plant.velocity(), yaw);
                 (c.pitch, c.roll)
             }
             None => match sent {
@@ -282,6 +275,37 @@ fn circle_stream(circle: &Trajectory, rate_hz: f64, seconds: f64, fields: Fields
         .collect()
 }
 
+/// The anchor's gains: PD with velocity and acceleration feed-forward, as
+/// PX4's position loop is in effect (kp 4 /s², kd 3.5 /s: stable with the
+/// 0.2 s attitude lag, kp < kd/τ), 35° of tilt.
+const ANCHOR: PositionGains = PositionGains {
+    kp_xy: 4.0,
+    kd_xy: 3.5,
+    kp_z: 4.0,
+    kd_z: 3.5,
+    max_tilt_deg: 35.0,
+};
+
+/// The anchor's pitch and roll at heading `yaw` (the SITL's position loop,
+/// [`position_control`], with [`ANCHOR`]'s gains; the planar plant holds
+/// altitude, so its thrust is not used).
+fn anchor_command(
+    target: &PositionTarget,
+    position: Vector3<f64>,
+    velocity: Vector3<f64>,
+    yaw: f64,
+) -> AttitudeCommand {
+    let options = PlantOptions::default();
+    let a = position_control::acceleration(
+        &ANCHOR,
+        options.g,
+        target,
+        position.into(),
+        velocity.into(),
+    );
+    position_control::attitude_for(&options, options.g, a, yaw)
+}
+
 /// Horizontal error p95 \[m\] against the circle at the tick's time, over
 /// the full-speed part (2 s after the ramp).
 fn circle_error(ticks: &[Tick], circle: &Trajectory, from: f64) -> f64 {
@@ -302,7 +326,6 @@ fn anchor(circle: &Trajectory, goals: &[Goal], seconds: f64) -> Vec<Tick> {
     let options = PlantOptions::default();
     let mut plant = build_plant(PlantKind::Planar, &options, 1).expect("plant");
     plant.reset(&PlantState::hover(Vector3::from(START), options.g));
-    let gains = PdFfGains::default();
     let mut newest: Option<Goal> = None;
     let mut next = 0;
     let mut ticks = Vec::new();
@@ -314,24 +337,15 @@ fn anchor(circle: &Trajectory, goals: &[Goal], seconds: f64) -> Vec<Tick> {
             next += 1;
         }
         let reference = match newest {
-            Some(g) => PdFfReference {
-                position: Vector3::from(g.position),
-                velocity: Vector3::from(g.velocity.unwrap_or([0.0; 3])),
-                acceleration: Vector3::from(g.acceleration.unwrap_or([0.0; 3])),
+            Some(g) => PositionTarget {
+                position: g.position,
+                velocity: g.velocity.unwrap_or([0.0; 3]),
+                acceleration: g.acceleration.unwrap_or([0.0; 3]),
+                yaw: None,
             },
-            None => PdFfReference {
-                position: Vector3::from(START),
-                velocity: Vector3::zeros(),
-                acceleration: Vector3::zeros(),
-            },
+            None => PositionTarget::hold(START),
         };
-        let c = pd_ff(
-            &gains,
-            &reference,
-            &plant.position(),
-            &plant.velocity(),
-            0.0,
-        );
+        let c = anchor_command(&reference, plant.position(), plant.velocity(), 0.0);
         ticks.push(Tick {
             t,
             position: plant.position(),

@@ -21,9 +21,10 @@
 //! * [`sitl`] — the SITL autopilot stand-in: a real-time plant behind a
 //!   MAVLink link (std threads, the wall clock), the plant process of
 //!   `dflat sitl` and `dflat demo`. The one part of the lab that does I/O.
-//! * [`trajectory`] — a planner's circle and figure eight (p, v, a, yaw);
-//!   [`pd_ff`] — the anchor: a PD position loop with velocity and
-//!   acceleration feed-forward (PX4's position loop), pure.
+//! * [`trajectory`] — a planner's circle and figure eight (p, v, a, yaw).
+//!   The anchor the goal tests compare with — a PD position loop with
+//!   velocity and acceleration feed-forward, PX4's in effect — is the
+//!   SITL's own OFFBOARD position loop ([`sitl::position_control`], pure).
 //! * [`experiments`] — the paper's studies (noise sweep, L-path comparison,
 //!   DSL demonstration): pure runs returning results, JSON and plot writers.
 //!
@@ -34,7 +35,6 @@ pub mod experiments;
 pub mod flightlog;
 pub mod harness;
 pub mod identify;
-pub mod pd_ff;
 pub mod plant;
 pub mod plot;
 pub mod sensing;
