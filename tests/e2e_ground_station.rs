@@ -13,8 +13,7 @@
 //!   carries body rates in flight; a
 //!   command to the SITL is not routed to the daemon.
 
-use std::net::{SocketAddr, UdpSocket};
-use std::sync::{Arc, Mutex};
+use std::net::UdpSocket;
 use std::time::{Duration, Instant};
 
 use dflat_daemon::config::MissionStart;
@@ -22,99 +21,12 @@ use dflat_link::dialect::{
     COMMAND_LONG_DATA, MavCmd, MavFrame, MavResult, PositionTargetTypemask,
     SET_POSITION_TARGET_LOCAL_NED_DATA,
 };
-use dflat_link::{MavHeader, MavMessage, frames, serialize_v2};
+use dflat_link::{MavMessage, serialize_v2};
 use dflat_sim::sitl::{self, SitlHandle, SitlOptions, SitlSettings};
 
 mod support;
 
-type Seen = Arc<Mutex<Vec<(Instant, MavHeader, MavMessage)>>>;
-
-/// The ground station: a socket on the SITL's GCS port and every frame it
-/// received.
-struct Gcs {
-    socket: UdpSocket,
-    to: SocketAddr,
-    seen: Seen,
-    seq: u8,
-}
-
-impl Gcs {
-    fn new(sitl: &SitlHandle) -> Self {
-        let socket = UdpSocket::bind("127.0.0.1:0").unwrap();
-        socket
-            .set_read_timeout(Some(Duration::from_millis(50)))
-            .unwrap();
-        let seen: Seen = Arc::default();
-        let (rx, store) = (socket.try_clone().unwrap(), seen.clone());
-        std::thread::spawn(move || {
-            let mut buf = [0u8; 65_536];
-            loop {
-                match rx.recv_from(&mut buf) {
-                    Ok((n, _)) => {
-                        let mut s = store.lock().unwrap();
-                        for f in frames(&buf[..n]).flatten() {
-                            s.push((Instant::now(), f.header, f.message));
-                        }
-                    }
-                    Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {}
-                    Err(e) if e.kind() == std::io::ErrorKind::TimedOut => {}
-                    Err(_) => break,
-                }
-                if Arc::strong_count(&store) == 1 {
-                    break;
-                }
-            }
-        });
-        let mut gcs = Self {
-            socket,
-            to: sitl.gcs_addr().unwrap(),
-            seen,
-            seq: 0,
-        };
-        // A ground station's heartbeat makes it known to the SITL.
-        gcs.send(&MavMessage::HEARTBEAT(Default::default()));
-        gcs
-    }
-
-    fn send(&mut self, msg: &MavMessage) {
-        let f = serialize_v2(&dflat_link::header(255, 190, self.seq), msg).unwrap();
-        self.seq = self.seq.wrapping_add(1);
-        self.socket.send_to(f.as_bytes(), self.to).unwrap();
-    }
-
-    /// Frames from `(sys, comp)` received after `since` matching `pick`.
-    fn from<T>(
-        &self,
-        who: (u32, u8),
-        since: Instant,
-        pick: impl Fn(&MavMessage) -> Option<T>,
-    ) -> Vec<T> {
-        self.seen
-            .lock()
-            .unwrap()
-            .iter()
-            .filter(|(at, h, _)| *at >= since && (h.system_id, h.component_id) == who)
-            .filter_map(|(_, _, m)| pick(m))
-            .collect()
-    }
-
-    /// Waits up to 2 s for a frame from `who` after `since` matching `pick`.
-    fn wait<T>(
-        &self,
-        who: (u32, u8),
-        since: Instant,
-        pick: impl Fn(&MavMessage) -> Option<T>,
-    ) -> Option<T> {
-        let until = Instant::now() + Duration::from_secs(2);
-        while Instant::now() < until {
-            if let Some(t) = self.from(who, since, &pick).into_iter().next() {
-                return Some(t);
-            }
-            std::thread::sleep(Duration::from_millis(20));
-        }
-        None
-    }
-}
+use support::gcs::Gcs;
 
 fn heartbeats(m: &MavMessage) -> Option<()> {
     matches!(m, MavMessage::HEARTBEAT(_)).then_some(())
@@ -188,7 +100,7 @@ fn with_gcs(plant: &SitlSettings) -> SitlHandle {
 fn a_lone_ground_station_gets_heartbeats_at_1_hz() {
     let (_, plant) = plant("gcs-alone");
     let sitl = with_gcs(&plant);
-    let gcs = Gcs::new(&sitl);
+    let gcs = Gcs::new(sitl.gcs_addr().unwrap(), 255);
     std::thread::sleep(Duration::from_millis(300));
     let since = Instant::now();
     std::thread::sleep(Duration::from_secs(4));
@@ -273,7 +185,7 @@ async fn a_ground_station_talks_to_both_components() {
     let sitl = with_gcs(&plant);
     let link = format!("udpout:127.0.0.1:{}", sitl.local_addr().port());
     let daemon = dflat_daemon::spawn(cfg, Some(link)).await.unwrap();
-    let mut gcs = Gcs::new(&sitl);
+    let mut gcs = Gcs::new(sitl.gcs_addr().unwrap(), 255);
     tokio::time::sleep(Duration::from_millis(1500)).await;
 
     // Commands to both components: supported and not.

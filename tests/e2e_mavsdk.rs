@@ -14,99 +14,23 @@
 //!   ATTITUDE_QUATERNION, AUTOPILOT_VERSION, SET_MESSAGE_INTERVAL, hold
 //!   (AUTO_LOITER), goto, RTL, disarm, the mission protocol.
 
-use std::net::{SocketAddr, UdpSocket};
-use std::sync::{Arc, Mutex};
+use std::net::UdpSocket;
 use std::time::{Duration, Instant};
 
 use dflat_daemon::config::MissionStart;
+use dflat_link::MavMessage;
 use dflat_link::dialect::{
     COMMAND_INT_DATA, COMMAND_LONG_DATA, MISSION_CLEAR_ALL_DATA, MISSION_COUNT_DATA, MavCmd,
     MavFrame, MavLandedState, MavMissionResult, MavResult, PositionTargetTypemask,
     SET_POSITION_TARGET_LOCAL_NED_DATA,
 };
-use dflat_link::{MavHeader, MavMessage, frames, serialize_v2};
 use dflat_sim::sitl::{self, SitlHandle, SitlMode, SitlOptions, SitlSettings};
 
 mod support;
 
-type Seen = Arc<Mutex<Vec<(Instant, MavHeader, MavMessage)>>>;
-
-/// A ground station of system `id` (component 190) on `to`.
-struct Gcs {
-    socket: UdpSocket,
-    to: SocketAddr,
-    id: u8,
-    seen: Seen,
-    seq: u8,
-}
+use support::gcs::Gcs;
 
 impl Gcs {
-    fn new(to: SocketAddr, id: u8) -> Self {
-        let socket = UdpSocket::bind("127.0.0.1:0").unwrap();
-        socket
-            .set_read_timeout(Some(Duration::from_millis(50)))
-            .unwrap();
-        let seen: Seen = Arc::default();
-        let (rx, store) = (socket.try_clone().unwrap(), seen.clone());
-        std::thread::spawn(move || {
-            let mut buf = [0u8; 65_536];
-            while Arc::strong_count(&store) > 1 {
-                if let Ok((n, _)) = rx.recv_from(&mut buf) {
-                    let mut s = store.lock().unwrap();
-                    for f in frames(&buf[..n]).flatten() {
-                        s.push((Instant::now(), f.header, f.message));
-                    }
-                }
-            }
-        });
-        let mut gcs = Self {
-            socket,
-            to,
-            id,
-            seen,
-            seq: 0,
-        };
-        gcs.send(&MavMessage::HEARTBEAT(Default::default()));
-        gcs
-    }
-
-    fn send(&mut self, msg: &MavMessage) {
-        let f = serialize_v2(&dflat_link::header(self.id, 190, self.seq), msg).unwrap();
-        self.seq = self.seq.wrapping_add(1);
-        self.socket.send_to(f.as_bytes(), self.to).unwrap();
-    }
-
-    fn from<T>(
-        &self,
-        who: (u32, u8),
-        since: Instant,
-        pick: impl Fn(&MavMessage) -> Option<T>,
-    ) -> Vec<T> {
-        self.seen
-            .lock()
-            .unwrap()
-            .iter()
-            .filter(|(at, h, _)| *at >= since && (h.system_id, h.component_id) == who)
-            .filter_map(|(_, _, m)| pick(m))
-            .collect()
-    }
-
-    fn wait<T>(
-        &self,
-        who: (u32, u8),
-        since: Instant,
-        pick: impl Fn(&MavMessage) -> Option<T>,
-    ) -> Option<T> {
-        let until = Instant::now() + Duration::from_secs(3);
-        while Instant::now() < until {
-            if let Some(t) = self.from(who, since, &pick).into_iter().next() {
-                return Some(t);
-            }
-            std::thread::sleep(Duration::from_millis(20));
-        }
-        None
-    }
-
     /// (command, result) of a COMMAND_ACK addressed to this ground station.
     fn ack(&self, who: (u32, u8), since: Instant, cmd: MavCmd) -> Option<MavResult> {
         let me = (self.id, 190);

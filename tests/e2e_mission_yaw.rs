@@ -14,109 +14,25 @@
 //! `vehicle.max_yaw_rate_deg_s`; the cross-track error to the mission's
 //! polyline; the largest tilt step per command.
 
-use std::net::{SocketAddr, UdpSocket};
-use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use dflat_daemon::config::MissionStart;
+use dflat_link::MavMessage;
 use dflat_link::dialect::{
     COMMAND_LONG_DATA, MISSION_REQUEST_LIST_DATA, MavCmd, MavFrame, MavMissionResult,
     MavMissionType, MavResult,
 };
 use dflat_link::mission::{ItemFields, mission_count, mission_item_int, mission_request_int};
-use dflat_link::{MavHeader, MavMessage, frames, serialize_v2};
 use dflat_sim::sitl::{self, SitlOptions};
 
 mod support;
 
-type Seen = Arc<Mutex<Vec<(Instant, MavHeader, MavMessage)>>>;
+use support::gcs::Gcs;
 
-/// The ground station on the SITL's GCS port.
-struct Gcs {
-    socket: UdpSocket,
-    to: SocketAddr,
-    seen: Seen,
-    seq: u8,
-}
+/// The daemon: system 1, component 191.
+const DAEMON: (u32, u8) = (1, 191);
 
 impl Gcs {
-    fn new(to: SocketAddr) -> Self {
-        let socket = UdpSocket::bind("127.0.0.1:0").unwrap();
-        socket
-            .set_read_timeout(Some(Duration::from_millis(50)))
-            .unwrap();
-        let seen: Seen = Arc::default();
-        let (rx, store) = (socket.try_clone().unwrap(), seen.clone());
-        std::thread::spawn(move || {
-            let mut buf = [0u8; 65_536];
-            loop {
-                match rx.recv_from(&mut buf) {
-                    Ok((n, _)) => {
-                        let mut s = store.lock().unwrap();
-                        for f in frames(&buf[..n]).flatten() {
-                            s.push((Instant::now(), f.header, f.message));
-                        }
-                    }
-                    Err(e)
-                        if matches!(
-                            e.kind(),
-                            std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
-                        ) => {}
-                    Err(_) => break,
-                }
-                if Arc::strong_count(&store) == 1 {
-                    break;
-                }
-            }
-        });
-        let mut gcs = Self {
-            socket,
-            to,
-            seen,
-            seq: 0,
-        };
-        gcs.send(&MavMessage::HEARTBEAT(Default::default()));
-        gcs
-    }
-
-    fn send(&mut self, msg: &MavMessage) {
-        let f = serialize_v2(&dflat_link::header(255, 190, self.seq), msg).unwrap();
-        self.seq = self.seq.wrapping_add(1);
-        self.socket.send_to(f.as_bytes(), self.to).unwrap();
-    }
-
-    /// Messages from the daemon (1/191) after `since` matching `pick`.
-    fn daemon_messages<T>(
-        &self,
-        since: Instant,
-        pick: impl Fn(&MavMessage) -> Option<T>,
-    ) -> Vec<T> {
-        self.seen
-            .lock()
-            .unwrap()
-            .iter()
-            .filter(|(at, h, _)| *at >= since && (h.system_id, h.component_id) == (1, 191))
-            .filter_map(|(_, _, m)| pick(m))
-            .collect()
-    }
-
-    /// Waits up to `limit` for a message from the daemon after `since`.
-    fn wait<T>(
-        &self,
-        since: Instant,
-        limit: Duration,
-        pick: impl Fn(&MavMessage) -> Option<T>,
-    ) -> Option<T> {
-        let until = Instant::now() + limit;
-        while Instant::now() < until {
-            if let Some(t) = self.daemon_messages(since, &pick).into_iter().next() {
-                return Some(t);
-            }
-            std::thread::sleep(Duration::from_millis(10));
-        }
-        None
-    }
-
     /// Uploads `items` to 1/191, answering each MISSION_REQUEST_INT;
     /// returns the MISSION_ACK's result.
     fn upload(&mut self, items: &[ItemFields]) -> Option<MavMissionResult> {
@@ -126,10 +42,10 @@ impl Gcs {
         let mut answered = 0;
         let until = Instant::now() + Duration::from_secs(5);
         while Instant::now() < until {
-            if let Some(result) = self.daemon_messages(since, ack_of).into_iter().next() {
+            if let Some(result) = self.from(DAEMON, since, ack_of).into_iter().next() {
                 return Some(result);
             }
-            let asked = self.daemon_messages(since, |m| match m {
+            let asked = self.from(DAEMON, since, |m| match m {
                 MavMessage::MISSION_REQUEST_INT(d) => Some(d.seq),
                 _ => None,
             });
@@ -223,7 +139,7 @@ async fn a_mission_is_uploaded_started_paused_continued_and_its_yaw_flown() {
     .unwrap();
     let link = format!("udpout:127.0.0.1:{}", sim.local_addr().port());
     let daemon = dflat_daemon::spawn(cfg, Some(link)).await.unwrap();
-    let mut gcs = Gcs::new(sim.gcs_addr().unwrap());
+    let mut gcs = Gcs::new(sim.gcs_addr().unwrap(), 255);
     tokio::time::sleep(Duration::from_millis(1500)).await;
 
     // A refused item: the upload ends with UNSUPPORTED and words.
@@ -233,7 +149,7 @@ async fn a_mission_is_uploaded_started_paused_continued_and_its_yaw_flown() {
         item(0, MavCmd::MAV_CMD_NAV_WAYPOINT, [0.0; 4], at(2.0, 0.0)),
         item(1, MavCmd::MAV_CMD_NAV_TAKEOFF, [0.0; 4], at(0.0, 0.0)),
     ]);
-    let words = gcs.wait(t0, Duration::from_secs(1), |m| {
+    let words = gcs.wait_for(DAEMON, t0, Duration::from_secs(1), |m| {
         text(m).filter(|t| t.contains("unsupported"))
     });
     eprintln!("refused upload: {refused:?}, {words:?}");
@@ -242,7 +158,8 @@ async fn a_mission_is_uploaded_started_paused_continued_and_its_yaw_flown() {
     // MISSION_START without a mission is denied.
     let t1 = Instant::now();
     gcs.send(&command(MavCmd::MAV_CMD_MISSION_START, 0.0, 0.0));
-    let denied = gcs.wait(
+    let denied = gcs.wait_for(
+        DAEMON,
         t1,
         Duration::from_secs(2),
         command_ack(MavCmd::MAV_CMD_MISSION_START),
@@ -296,11 +213,11 @@ async fn a_mission_is_uploaded_started_paused_continued_and_its_yaw_flown() {
         2,
         MavMissionType::MAV_MISSION_TYPE_MISSION,
     ));
-    let count = gcs.wait(t2, Duration::from_secs(2), |m| match m {
+    let count = gcs.wait_for(DAEMON, t2, Duration::from_secs(2), |m| match m {
         MavMessage::MISSION_COUNT(d) => Some(d.count),
         _ => None,
     });
-    let item2 = gcs.wait(t2, Duration::from_secs(2), |m| match m {
+    let item2 = gcs.wait_for(DAEMON, t2, Duration::from_secs(2), |m| match m {
         MavMessage::MISSION_ITEM_INT(d) => Some((d.seq, d.y, d.param4)),
         _ => None,
     });
@@ -315,7 +232,8 @@ async fn a_mission_is_uploaded_started_paused_continued_and_its_yaw_flown() {
     // flies on.
     let t3 = Instant::now();
     gcs.send(&command(MavCmd::MAV_CMD_MISSION_START, 0.0, 0.0));
-    let started = gcs.wait(
+    let started = gcs.wait_for(
+        DAEMON,
         t3,
         Duration::from_secs(2),
         command_ack(MavCmd::MAV_CMD_MISSION_START),
@@ -330,7 +248,8 @@ async fn a_mission_is_uploaded_started_paused_continued_and_its_yaw_flown() {
     tokio::time::sleep(Duration::from_millis(1500)).await;
     let t4 = Instant::now();
     gcs.send(&command(MavCmd::MAV_CMD_DO_PAUSE_CONTINUE, 0.0, 0.0));
-    let paused = gcs.wait(
+    let paused = gcs.wait_for(
+        DAEMON,
         t4,
         Duration::from_secs(2),
         command_ack(MavCmd::MAV_CMD_DO_PAUSE_CONTINUE),
@@ -339,19 +258,20 @@ async fn a_mission_is_uploaded_started_paused_continued_and_its_yaw_flown() {
     tokio::time::sleep(Duration::from_millis(2500)).await;
     let t5 = Instant::now();
     gcs.send(&command(MavCmd::MAV_CMD_DO_PAUSE_CONTINUE, 1.0, 0.0));
-    let continued = gcs.wait(
+    let continued = gcs.wait_for(
+        DAEMON,
         t5,
         Duration::from_secs(2),
         command_ack(MavCmd::MAV_CMD_DO_PAUSE_CONTINUE),
     );
     assert_eq!(continued, Some(MavResult::MAV_RESULT_ACCEPTED));
-    let last = gcs.wait(t3, Duration::from_secs(25), |m| match m {
+    let last = gcs.wait_for(DAEMON, t3, Duration::from_secs(25), |m| match m {
         MavMessage::MISSION_ITEM_REACHED(d) if d.seq == 3 => Some(()),
         _ => None,
     });
     // The partial upload's end (1.5 s × 6 requests), and the stored
     // mission after it.
-    gcs.wait(t3, Duration::from_secs(12), ack_of);
+    gcs.wait_for(DAEMON, t3, Duration::from_secs(12), ack_of);
     let t6 = Instant::now();
     gcs.send(&MavMessage::MISSION_REQUEST_LIST(
         MISSION_REQUEST_LIST_DATA {
@@ -360,20 +280,20 @@ async fn a_mission_is_uploaded_started_paused_continued_and_its_yaw_flown() {
             mission_type: MavMissionType::MAV_MISSION_TYPE_MISSION,
         },
     ));
-    let count_after = gcs.wait(t6, Duration::from_secs(2), |m| match m {
+    let count_after = gcs.wait_for(DAEMON, t6, Duration::from_secs(2), |m| match m {
         MavMessage::MISSION_COUNT(d) => Some(d.count),
         _ => None,
     });
-    let cancelled = gcs.daemon_messages(t3, ack_of);
-    let reached = gcs.daemon_messages(t3, |m| match m {
+    let cancelled = gcs.from(DAEMON, t3, ack_of);
+    let reached = gcs.from(DAEMON, t3, |m| match m {
         MavMessage::MISSION_ITEM_REACHED(d) => Some(d.seq),
         _ => None,
     });
-    let current = gcs.daemon_messages(t3, |m| match m {
+    let current = gcs.from(DAEMON, t3, |m| match m {
         MavMessage::MISSION_CURRENT(d) => Some((d.seq, d.total, d.mission_state as u8)),
         _ => None,
     });
-    let texts = gcs.daemon_messages(t0, text);
+    let texts = gcs.from(DAEMON, t0, text);
     eprintln!("reached {reached:?}; acks after start {cancelled:?}; texts {texts:?}");
     eprintln!("MISSION_CURRENT (seq, total, state): {current:?}");
     tokio::time::sleep(Duration::from_millis(500)).await;

@@ -9,6 +9,8 @@
 
 #![allow(dead_code)] // each test binary uses a subset
 
+pub mod gcs;
+
 use std::io::{BufRead, BufReader};
 use std::net::{SocketAddr, UdpSocket};
 use std::path::{Path, PathBuf};
