@@ -226,6 +226,17 @@ noise_sigma = 0.01
     assert!(ticks.len() >= 100, "only {} ticks in the CSV", ticks.len());
     let gap = ticks.windows(2).map(|w| w[1] - w[0]).max().unwrap();
     eprintln!("{n} commands, largest tilt {worst:.2}°, largest tick gap {gap}");
+    // Holding under the flood: a command on every tick from the first one.
+    let first = rows
+        .iter()
+        .position(|r| r.get("roll").is_some_and(|v| !v.is_empty()))
+        .expect("no command recorded");
+    assert_eq!(
+        n,
+        rows.len() - first,
+        "{n} commands in {} ticks from the first",
+        rows.len() - first
+    );
     assert!(gap <= MAX_TICK_GAP, "tick gap {gap}");
     // Streaming continuously once holding: no FAILSAFE row.
     assert!(rows.iter().all(|r| r["state"] != "FAILSAFE"));

@@ -106,7 +106,13 @@ noise_sigma = 0.01
     let report = sim.stop().expect("sitl stop");
     assert!(!report.diverged);
     let rows = read_flight_csv(&dir);
-    check_csv_commands(&rows, MAX_TILT_DEG);
+    let (n, _) = check_csv_commands(&rows, MAX_TILT_DEG);
+    // Every command the SITL received after the jump is in the record.
+    assert!(
+        n >= targets.len(),
+        "{n} commands recorded, {} received",
+        targets.len()
+    );
     let jump_rows: Vec<_> = rows
         .iter()
         .filter(|r| r.get("guard").is_some_and(|g| g == "jump"))
