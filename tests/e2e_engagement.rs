@@ -257,7 +257,10 @@ async fn override_and_hand_back_on_the_l_path_without_a_kick() {
         .iter()
         .map(|(_, r, p)| tilt_deg(*r, *p))
         .fold(0.0, f64::max);
+    // The wire never carries more than the limit (the guard's cut), and
+    // the guard never had to cut: the controller kept within it itself.
     assert!(worst_tilt <= MAX_TILT_DEG, "tilt {worst_tilt:.2}°");
+    assert_eq!(summary.guards.tilt_saturated, 0, "{:?}", summary.guards);
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
