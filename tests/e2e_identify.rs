@@ -118,43 +118,31 @@ fn identifies_a_slow_plant_flown_on_vision_rate_poses() {
 /// The path of the before/after comparison and its speed \[m/s\].
 const L_PATH: [[f64; 3]; 3] = [[0.0, 0.0, -10.0], [15.0, 0.0, -10.0], [15.0, 15.0, -10.0]];
 
-/// Flies the L path with `vehicle` as the `[vehicle]` table; returns the
-/// cross-track p95 \[m\] while commanded and the flight's directory.
+/// The `[vehicle]` table of the spatial model with normalised thrust (the
+/// shipped defaults otherwise).
+const SPATIAL: &str = "[vehicle]\nmodel = \"spatial\"\nthrust_mode = \"normalized\"\n";
+
+/// An identified `[vehicle]` snippet flown with the spatial model.
+fn spatial_snippet(snippet: &str) -> String {
+    snippet.replace("[vehicle]\n", SPATIAL)
+}
+
+/// Cross-track p95 \[m\] of the L path at 5 m/s with `vehicle` as the
+/// `[vehicle]` table, on [`PLANT`] with τ 0.35 s.
 fn fly_l_path(name: &str, vehicle: &str) -> f64 {
-    let config = format!(
-        "[logging]\ndir = \"@DIR@\"\ntlog = true\n{vehicle}\n[mission]\nstart = \"path\"\n\
-         path = [[0.0, 0.0, -10.0], [15.0, 0.0, -10.0], [15.0, 15.0, -10.0]]\nspeed = 5.0\n\
-         [sitl]\n{PLANT}tau = 0.35\n"
-    );
-    let flight = fly_in_process(name, &config, Duration::from_secs(10));
-    let errors: Vec<f64> = flight
-        .report
-        .trace
-        .iter()
-        .filter(|s| s.mode == SitlMode::Offboard)
-        .map(|s| path_distance(&L_PATH, s.position))
-        .collect();
-    assert!(
-        errors.len() > 200,
-        "{name}: {} offboard samples",
-        errors.len()
-    );
-    quantile(&errors, 0.95)
+    fly_l_path_on(name, vehicle, &format!("{PLANT}tau = 0.35\n"))
 }
 
 #[test]
 fn the_identified_configuration_flies_the_l_path_better() {
-    let default_vehicle = "[vehicle]\nmodel = \"spatial\"\nthrust_mode = \"normalized\"\n";
+    let default_vehicle = SPATIAL;
     let before = fly_l_path("identify-before", default_vehicle);
     // Identify from the default flight's own log.
     let log = FlightLog::read_tlog(&tlog_in(&scratch_dir("identify-before"))).expect("tlog");
     let found = identify::identify(&log).expect("identify");
     let snippet = found.vehicle_snippet("identify-before", None);
     eprintln!("{}\n{snippet}", found.report("identify-before", None));
-    let tuned = snippet.replace(
-        "[vehicle]\n",
-        "[vehicle]\nmodel = \"spatial\"\nthrust_mode = \"normalized\"\n",
-    );
+    let tuned = spatial_snippet(&snippet);
     let after = fly_l_path("identify-after", &tuned);
     eprintln!(
         "L path at 5 m/s, plant τ 0.35 s, k̃ 0.8, 40 ms delay, hover 0.42: cross-track p95 \
@@ -177,6 +165,16 @@ hover_thrust = 0.42
 drag = 0.3
 start = [0.0, 0.0, -10.0]
 "#;
+
+/// `plant` (a `[sitl]` body with `command_delay_ms = 40.0` and `drag =
+/// 0.3`) without its delay and drag.
+fn without_drag_and_delay(plant: &str) -> String {
+    let clean = plant
+        .replace("command_delay_ms = 40.0", "command_delay_ms = 0.0")
+        .replace("drag = 0.3", "drag = 0.0");
+    assert_ne!(clean, plant, "no delay and drag to remove");
+    clean
+}
 
 /// Cross-track p95 \[m\] of the L path at 5 m/s with `vehicle` on `plant`.
 fn fly_l_path_on(name: &str, vehicle: &str, plant: &str) -> f64 {
@@ -208,7 +206,7 @@ fn fly_l_path_on(name: &str, vehicle: &str, plant: &str) -> f64 {
 /// configuration on the drag/delay plant).
 #[test]
 fn identifies_drag_and_delay_and_flies_as_well_as_a_matched_plant() {
-    let spatial = "[vehicle]\nmodel = \"spatial\"\nthrust_mode = \"normalized\"\n";
+    let spatial = SPATIAL;
     let name = "identify-drag";
     let config = format!(
         "{DAEMON}{}\n[sitl]\n{DRAG_PLANT}noise_sigma = 0.005\n",
@@ -233,16 +231,11 @@ fn identifies_drag_and_delay_and_flies_as_well_as_a_matched_plant() {
 
     let snippet = found.vehicle_snippet("identify-drag", None);
     eprintln!("{snippet}");
-    let tuned = snippet.replace(
-        "[vehicle]\n",
-        "[vehicle]\nmodel = \"spatial\"\nthrust_mode = \"normalized\"\n",
-    );
+    let tuned = spatial_snippet(&snippet);
     // The same airframe (τ 0.08, k̃ 0.8, hover 0.42) without drag and
     // delay, flown with its exact model: what the identified terms should
     // bring the drag/delay plant to.
-    let clean_plant = DRAG_PLANT
-        .replace("command_delay_ms = 40.0", "command_delay_ms = 0.0")
-        .replace("drag = 0.3", "drag = 0.0");
+    let clean_plant = without_drag_and_delay(DRAG_PLANT);
     let clean_model = format!("{spatial}tau = 0.08\nk = 0.8\nhover_thrust = 0.42\n");
     let clean = fly_l_path_on("identify-clean", &clean_model, &clean_plant);
     let before = fly_l_path_on("identify-drag-before", spatial, DRAG_PLANT);
@@ -281,7 +274,7 @@ start = [0.0, 0.0, -10.0]
 /// drag/delay plant 0.408 m).
 #[test]
 fn identifies_drag_on_a_rigid_body_and_flies_better_than_the_defaults() {
-    let spatial = "[vehicle]\nmodel = \"spatial\"\nthrust_mode = \"normalized\"\n";
+    let spatial = SPATIAL;
     let name = "identify-rigid";
     let config = format!(
         "{DAEMON}{}\n[sitl]\n{RIGID_PLANT}noise_sigma = 0.005\n",
@@ -293,13 +286,8 @@ fn identifies_drag_on_a_rigid_body_and_flies_better_than_the_defaults() {
     eprintln!("{name}:\n{}", found.report(name, None));
     let snippet = found.vehicle_snippet(name, None);
     eprintln!("{snippet}");
-    let tuned = snippet.replace(
-        "[vehicle]\n",
-        "[vehicle]\nmodel = \"spatial\"\nthrust_mode = \"normalized\"\n",
-    );
-    let clean_plant = RIGID_PLANT
-        .replace("command_delay_ms = 40.0", "command_delay_ms = 0.0")
-        .replace("drag = 0.3", "drag = 0.0");
+    let tuned = spatial_snippet(&snippet);
+    let clean_plant = without_drag_and_delay(RIGID_PLANT);
     let clean = fly_l_path_on("rigid-clean", spatial, &clean_plant);
     let before = fly_l_path_on("rigid-before", spatial, RIGID_PLANT);
     let after = fly_l_path_on("rigid-after", &tuned, RIGID_PLANT);
