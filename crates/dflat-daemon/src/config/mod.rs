@@ -270,6 +270,10 @@ pub enum ThrustMode {
     Normalized,
 }
 
+/// The normalised hover thrusts dflat flies: `vehicle.hover_thrust`'s range
+/// and the autopilot's value with `hover_thrust_from_autopilot`.
+pub const HOVER_THRUST_RANGE: (f64, f64) = (0.05, 0.95);
+
 /// `[vehicle]`: the model the controller uses.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]

@@ -111,7 +111,8 @@ impl Config {
         v.range("vehicle.yaw_deg", ve.yaw_deg, -180.0, 180.0)?;
         v.range("vehicle.max_tilt_deg", ve.max_tilt_deg, 1.0, 60.0)?;
         v.range("vehicle.thrust_value", ve.thrust_value, 0.0, 1.0)?;
-        v.range("vehicle.hover_thrust", ve.hover_thrust, 0.05, 0.95)?;
+        let (lo, hi) = super::HOVER_THRUST_RANGE;
+        v.range("vehicle.hover_thrust", ve.hover_thrust, lo, hi)?;
         v.range(
             "vehicle.max_yaw_rate_deg_s",
             ve.max_yaw_rate_deg_s,

@@ -179,7 +179,8 @@ impl ControlCore {
             return;
         }
         let (engagements, _) = self.supervisor.engagement_counts();
-        let text = if !(0.05..=0.95).contains(&value) {
+        let (lo, hi) = crate::config::HOVER_THRUST_RANGE;
+        let text = if !(lo..=hi).contains(&value) {
             warn!(
                 param = name,
                 value, "autopilot hover thrust outside 0.05–0.95: vehicle.hover_thrust flown"
