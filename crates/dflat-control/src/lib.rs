@@ -228,4 +228,15 @@ pub trait ReferenceSource {
     fn flyable(&self) -> bool {
         false
     }
+    /// For a path flown by closest point: the highest reference speed
+    /// [m/s] at the current progress with which a vehicle braking and
+    /// turning at `acceleration` [m/s²] rounds each corner within an arc
+    /// whose tangent points lie `radius` \[m\] from the waypoint and stops
+    /// at the end (PX4's mission corners), and that speed profile's rate
+    /// of change there [m/s²] (the along-path feed-forward). `None`: no
+    /// such limit (not a path, or the reference's own profile already
+    /// accounts for it). Default: `None`.
+    fn corner_speed(&self, _radius: f64, _acceleration: f64) -> Option<(f64, f64)> {
+        None
+    }
 }

@@ -1,14 +1,16 @@
 //! PD control, the paper's non-predictive baseline (§VII-C, its ref. c20).
 //!
 //! Each tick: the reference position and velocity are the closest point of
-//! the path and the desired speed along it ([`ReferenceSource::closest`]);
+//! the path and the desired speed along it ([`ReferenceSource::closest`]),
+//! optionally limited before corners and the end, with that profile's
+//! along-path acceleration `a_ff` fed forward ([`PdSettings::corners`]);
 //! position and velocity, by [`PdSettings::state`], are the measurement and
 //! the first difference of the measured positions `(y_k − y_{k−1})/δt`,
 //! optionally low-pass filtered — the paper's simulation set-up — or the
 //! estimate of a [`crate::estimator::StateEstimator`] fed with every pose
 //! at its capture time and predicted to the tick — the outdoor set-up
 //! (§VII, STEAM); the desired acceleration is
-//! `a = k_p (p_ref − p) + k_d (v_ref − v)` per axis, limited; the attitude
+//! `a = a_ff + k_p (p_ref − p) + k_d (v_ref − v)` per axis, limited; the attitude
 //! (and, for the spatial model, the thrust) follows from the model's
 //! attitude map, `θ_cmd = θ/k̃`, saturated at the maximum tilt.
 
@@ -52,10 +54,27 @@ pub struct PdSettings {
     pub max_tilt: f64,
     /// How `max_tilt` applies (default [`TiltLimit::PerAxis`], the paper).
     pub tilt_limit: TiltLimit,
+    /// Slow down for a path's corners and its end, as PX4's mission mode
+    /// does ([`ReferenceSource::corner_speed`]); `None` (default): the
+    /// paper's PD, which flies every corner at the path speed.
+    pub corners: Option<CornerSlowdown>,
     /// Where position and velocity come from. Default
     /// [`StateSource::FiniteDifference`]; the daemon and the lab's path
     /// study default to the estimator (`velocity_cutoff_hz` then unused).
     pub state: StateSource,
+}
+
+/// How PD rounds a path's corners: the reference speed is limited so that a
+/// vehicle braking and turning at `acceleration` rounds each corner on an arc
+/// whose tangent points lie `radius` from the waypoint, and stops at the end.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CornerSlowdown {
+    /// Distance from a waypoint at which the turn starts \[m\], finite, > 0
+    /// (PX4's acceptance radius).
+    pub radius: f64,
+    /// Braking and turning acceleration [m/s²], finite, > 0 (at most the
+    /// horizontal acceleration limit, with room for the feedback).
+    pub acceleration: f64,
 }
 
 impl Default for PdSettings {
@@ -69,6 +88,7 @@ impl Default for PdSettings {
             velocity_cutoff_hz: None,
             max_tilt,
             tilt_limit: TiltLimit::PerAxis,
+            corners: None,
             state: StateSource::FiniteDifference,
         }
     }
@@ -117,6 +137,20 @@ impl PdSettings {
                 "velocity_cutoff_hz",
                 format!("must be finite and > 0 Hz, got {f}"),
             ));
+        }
+        if let Some(c) = self.corners {
+            if !(c.radius.is_finite() && c.radius > 0.0) {
+                return Err(invalid(
+                    "corners.radius",
+                    format!("must be finite and > 0 m, got {}", c.radius),
+                ));
+            }
+            if !(c.acceleration.is_finite() && c.acceleration > 0.0) {
+                return Err(invalid(
+                    "corners.acceleration",
+                    format!("must be finite and > 0 m/s², got {}", c.acceleration),
+                ));
+            }
         }
         let t = self.max_tilt;
         if !(t.is_finite() && t > 0.0 && t < std::f64::consts::FRAC_PI_2) {
@@ -267,7 +301,20 @@ impl Controller for Pd {
         // v0 = 0 and PD would hover at the start).
         let mut step = [Vector3::zeros()];
         reference.horizon(&y, self.dt, &mut step);
-        let (p_ref, v_ref) = reference.closest(&y);
+        let (p_ref, mut v_ref) = reference.closest(&y);
+        // Slowing for a corner: the limited speed, and its rate along the
+        // path fed forward (PD alone lags the braking).
+        let mut a_ff = Vector3::zeros();
+        if let Some(c) = self.settings.corners
+            && let Some((limit, rate)) = reference.corner_speed(c.radius, c.acceleration)
+        {
+            let speed = v_ref.norm();
+            if speed > limit {
+                let dir = v_ref / speed;
+                v_ref = dir * limit;
+                a_ff = dir * rate;
+            }
+        }
         if !(p_ref.iter().chain(v_ref.iter()).all(|c| c.is_finite())) {
             return Err(ControlError::NonFiniteReference);
         }
@@ -284,7 +331,7 @@ impl Controller for Pd {
 
         let s = &self.settings;
         let mut a = Vector3::from_fn(|i, _| {
-            s.kp[i] * (p_ref[i] - y[i]) + s.kd[i] * (v_ref[i] - velocity[i])
+            a_ff[i] + s.kp[i] * (p_ref[i] - y[i]) + s.kd[i] * (v_ref[i] - velocity[i])
         });
         let mut saturated = false;
         limit_horizontal(&mut a, s.max_horizontal_acceleration, &mut saturated);

@@ -1,7 +1,7 @@
 //! PD control in closed loop on the models' own dynamics, plus its error
 //! handling and settings validation.
 
-use dflat_control::pd::{Pd, PdSettings};
+use dflat_control::pd::{CornerSlowdown, Pd, PdSettings};
 use dflat_control::reference::{Reference, paths};
 use dflat_control::{ControlError, ControlModel, Controller, Frame, Measurement, ReferenceSource};
 use dflat_model::attitude::thrust_axis;
@@ -116,6 +116,52 @@ fn pd_planar_l_path_at_3_m_s_has_bounded_error() {
     assert!(reference.is_finished());
 }
 
+/// The L at 5 m/s from rest at its start: the worst path error and the
+/// ticks until the end is within 0.5 m.
+fn l_at_5_mps(corners: Option<CornerSlowdown>) -> (f64, usize) {
+    let model = planar_ned(0.0);
+    let settings = PdSettings {
+        corners,
+        ..PdSettings::default()
+    };
+    let mut pd = Pd::new(ControlModel::Planar(model), settings).unwrap();
+    let mut reference = paths::l(-10.0, 5.0).unwrap();
+    let x0 = PlanarState::from([-20.0, 0.0, -30.0, 0.0, 0.0, 0.0]);
+    let traj = run_planar(&model, &mut pd, &mut reference, x0, 1500);
+    let worst = traj
+        .iter()
+        .map(|p| reference.distance_to_path(p))
+        .fold(0.0, f64::max);
+    let end = Vector3::new(0.0, 0.0, -10.0);
+    let arrived = traj
+        .iter()
+        .position(|p| (p - end).norm() < 0.5)
+        .expect("the end is reached");
+    (worst, arrived)
+}
+
+#[test]
+fn pd_slowing_for_corners_rounds_them_within_the_radius_and_stops_at_the_end() {
+    // The paper's PD turns only at the corner: at 5 m/s the overshoot is
+    // v²/(2a) plus the lag, metres.
+    let (paper, paper_ticks) = l_at_5_mps(None);
+    let corners = CornerSlowdown {
+        radius: 1.0,
+        acceleration: 3.0,
+    };
+    let (slowed, slowed_ticks) = l_at_5_mps(Some(corners));
+    eprintln!(
+        "L at 5 m/s: paper's PD worst {paper:.3} m, at the end after {paper_ticks} ticks; \
+         slowing for corners {slowed:.3} m, {slowed_ticks} ticks"
+    );
+    assert!(paper > 2.0, "the paper's PD overshoots: {paper} m");
+    // At the corner speed √(a·r) = 1.7 m/s the turn stays near its arc
+    // (r·(√2 − 1) = 0.41 m inside) plus PD's lag.
+    assert!(slowed < 0.8, "slowing for corners: worst {slowed} m");
+    // The price is time: two ramps at 3 m/s², about a second more.
+    assert!(slowed_ticks > paper_ticks && slowed_ticks < paper_ticks + 150);
+}
+
 #[test]
 fn pd_nan_measurement_is_an_error_and_nothing_is_recorded() {
     let model = planar_ned(0.3);
@@ -193,7 +239,18 @@ fn field_of(e: ControlError) -> &'static str {
 fn pd_settings_validation_names_the_field() {
     let ok = PdSettings::default();
     assert_eq!(ok.validate(), Ok(()));
-    let cases: [(PdSettings, &str); 9] = [
+    let corner = |radius: f64, acceleration: f64| PdSettings {
+        corners: Some(CornerSlowdown {
+            radius,
+            acceleration,
+        }),
+        ..ok
+    };
+    let cases: [(PdSettings, &str); 13] = [
+        (corner(0.0, 3.0), "corners.radius"),
+        (corner(f64::NAN, 3.0), "corners.radius"),
+        (corner(1.0, -1.0), "corners.acceleration"),
+        (corner(1.0, f64::INFINITY), "corners.acceleration"),
         (
             PdSettings {
                 kp: [1.0, 0.0, 1.0],

@@ -440,3 +440,62 @@ fn seek_resumes_from_the_closest_point_of_the_whole_path() {
     r.seek(&v(f64::NAN, 0.0, 0.0));
     assert!((r.progress() - 20.4).abs() < 1e-9);
 }
+
+#[test]
+fn corner_speed_rounds_each_corner_at_its_radius_and_stops_at_the_end() {
+    // North 20 m, then east 30 m (90°), then back west 10 m (180°).
+    let pts = [
+        v(0.0, 0.0, -5.0),
+        v(20.0, 0.0, -5.0),
+        v(20.0, 30.0, -5.0),
+        v(20.0, 20.0, -5.0),
+    ];
+    let (r, a) = (1.0, 3.0);
+    let mut path = Reference::path(&pts, 5.0).unwrap();
+    // Walks the vehicle to `q` in 0.5 m steps from the closest point (the
+    // progress search looks only a few metres ahead).
+    let limit = |path: &mut Reference, q: Vector3<f64>| {
+        let from = path.closest(&q).0;
+        let steps = ((q - from).norm() / 0.5).ceil().max(1.0) as usize;
+        for i in 1..=steps {
+            path.closest(&(from + (q - from) * (i as f64 / steps as f64)));
+        }
+        path.corner_speed(r, a).unwrap().0
+    };
+    // At the start, the 90° corner 20 m ahead: √(a·r·cot 45° + 2·a·20).
+    let want = (a * r + 2.0 * a * 20.0).sqrt();
+    assert!((limit(&mut path, v(0.0, 0.0, -5.0)) - want).abs() < 1e-9);
+    // At the 90° corner: √(a·r) (the arc of radius r·cot 45° = r).
+    assert!((limit(&mut path, v(20.0, 0.0, -5.0)) - (a * r).sqrt()).abs() < 1e-9);
+    // 2 m past it the speed has risen as from the corner speed, at +a.
+    let want = (a * r + 2.0 * a * 2.0).sqrt();
+    assert!((limit(&mut path, v(20.0, 2.0, -5.0)) - want).abs() < 1e-9);
+    assert_eq!(path.corner_speed(r, a).unwrap().1, a);
+    // Nearer the reversal ahead than the corner behind: braking, at −a.
+    limit(&mut path, v(20.0, 25.0, -5.0));
+    assert_eq!(path.corner_speed(r, a).unwrap().1, -a);
+    // Approaching the reversal (cot 90° = 0): the speed falls to 0 there.
+    let want = (2.0 * a * 1.0).sqrt();
+    assert!((limit(&mut path, v(20.0, 29.0, -5.0)) - want).abs() < 1e-9);
+    // The end is a stop.
+    assert!(limit(&mut path, v(20.0, 20.0, -5.0)).abs() < 1e-9);
+    // A shallow corner (deflection 30°) is taken faster than a right angle.
+    let mut shallow = Reference::path(
+        &[
+            v(0.0, 0.0, -5.0),
+            v(20.0, 0.0, -5.0),
+            v(20.0 + 20.0 * 30f64.to_radians().cos(), 20.0 * 0.5, -5.0),
+        ],
+        5.0,
+    )
+    .unwrap();
+    let cot15 = 1.0 / 15f64.to_radians().tan();
+    let got = limit(&mut shallow, v(20.0, 0.0, -5.0));
+    assert!((got - (a * r * cot15).sqrt()).abs() < 1e-9, "{got}");
+    // Other references have no such limit, and nonsense has none either.
+    let mut setpoint = Reference::setpoint(v(1.0, 2.0, 3.0)).unwrap();
+    setpoint.closest(&v(0.0, 0.0, 0.0));
+    assert_eq!(setpoint.corner_speed(r, a), None);
+    assert_eq!(path.corner_speed(f64::NAN, a), None);
+    assert_eq!(path.corner_speed(r, 0.0), None);
+}

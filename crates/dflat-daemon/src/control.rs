@@ -4,7 +4,7 @@
 use dflat_control::dfmpc::{DfMpc, DfMpcSettings, InputSaturation, OutputConstraints};
 use dflat_control::disturbance::DisturbanceSettings;
 use dflat_control::fmpc::{FlatnessMpc, FmpcSettings};
-use dflat_control::pd::{Pd, PdSettings};
+use dflat_control::pd::{CornerSlowdown, Pd, PdSettings};
 use dflat_control::reference::Reference;
 use dflat_control::window::MultiRateSettings;
 use dflat_control::{ControlError, ControlModel, Controller, TiltLimit};
@@ -146,6 +146,10 @@ pub fn build_controller(cfg: &Config) -> Result<Box<dyn Controller>, ControlErro
                 velocity_cutoff_hz: None,
                 max_tilt,
                 tilt_limit: TiltLimit::Cone,
+                corners: (c.pd_corner_radius > 0.0).then_some(CornerSlowdown {
+                    radius: c.pd_corner_radius,
+                    acceleration: c.pd_corner_acceleration,
+                }),
                 state: c.estimator.state_source(c, v),
             },
         )?),

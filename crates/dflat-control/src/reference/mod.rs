@@ -594,6 +594,17 @@ impl ReferenceSource for Reference {
         }
     }
 
+    /// A path's corner speed at its progress (`Path::corner_speed`);
+    /// no limit for every other kind (their profiles are their own).
+    fn corner_speed(&self, radius: f64, acceleration: f64) -> Option<(f64, f64)> {
+        match &self.kind {
+            Kind::Path(p) if radius.is_finite() && radius >= 0.0 && acceleration > 0.0 => {
+                Some(p.corner_speed(radius, acceleration))
+            }
+            _ => None,
+        }
+    }
+
     /// The closest point (advancing the progress) and the reference velocity
     /// there, speed × direction of the segment toward the next waypoint
     /// [m/s]; zero at the path end and for a setpoint.

@@ -120,6 +120,43 @@ impl Path {
         self.seg = self.segment_from(self.seg, self.progress);
     }
 
+    /// The highest speed [m/s] at the current progress from which a vehicle
+    /// accelerating at most `acceleration` [m/s²] along the path reaches
+    /// every corner at its corner speed and the end at rest (backward), and
+    /// has reached it no faster than that from the corner behind
+    /// (forward): `v ≤ √(v_c² + 2·a·d)` for each waypoint at arc distance
+    /// `d`; with that profile's rate of change `dv/dt` there (−a braking
+    /// toward a waypoint ahead, +a speeding up from one behind) [m/s²]. A
+    /// corner deflecting the path by β is rounded by an arc of radius
+    /// `R = r·cot(β/2)` with its tangent points `r = radius` \[m\] from the
+    /// waypoint — PX4's mission corner (acceptance radius `r`) — flown at
+    /// lateral acceleration `a`: `v_c = √(a·R)`. The start has no limit
+    /// (its ramp is the start's).
+    pub(super) fn corner_speed(&self, radius: f64, acceleration: f64) -> (f64, f64) {
+        let n = self.points.len();
+        let a = acceleration;
+        let mut limit = (f64::INFINITY, 0.0);
+        for i in 1..n {
+            let corner = if i == n - 1 {
+                0.0
+            } else {
+                let cos_beta = self.dirs[i - 1].dot(&self.dirs[i]).clamp(-1.0, 1.0);
+                // cot(β/2) = sin β / (1 − cos β); straight on: no limit.
+                if 1.0 - cos_beta < 1e-12 {
+                    continue;
+                }
+                let sin_beta = (1.0 - cos_beta * cos_beta).max(0.0).sqrt();
+                (a * radius * sin_beta / (1.0 - cos_beta)).sqrt()
+            };
+            let d = self.cum[i] - self.progress;
+            let v = (corner * corner + 2.0 * a * d.abs()).sqrt();
+            if v < limit.0 {
+                limit = (v, if d > 0.0 { -a } else { a });
+            }
+        }
+        limit
+    }
+
     pub(super) fn closest(&self) -> (Vector3<f64>, Vector3<f64>) {
         let p = self.point_on(self.seg, self.progress);
         let speed = match self.ramp {

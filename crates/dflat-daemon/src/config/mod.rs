@@ -433,6 +433,14 @@ pub struct ControllerConfig {
     pub pd_kp: f64,
     /// PD derivative gain [1/s] (> 0). Default 2.5 (`PdSettings`).
     pub pd_kd: f64,
+    /// PD on a path slows for each corner so that it turns on an arc whose
+    /// tangent points lie this far from the waypoint \[m\], and stops at
+    /// the end, as PX4's mission mode does (0–50; 0 = the paper's PD,
+    /// every corner at the path speed). Default 1.
+    pub pd_corner_radius: f64,
+    /// PD's braking and turning acceleration for those corners [m/s²]
+    /// (0.1–20). Default 3.
+    pub pd_corner_acceleration: f64,
     /// Optional bound on the planned horizontal acceleration, as a tilt
     /// \[deg\] (0 = off; 1–60), on each horizontal axis separately (a box:
     /// the combined planned tilt can exceed it by up to √2 in tan). The
@@ -504,6 +512,8 @@ impl Default for ControllerConfig {
             fmpc_r_jerk: [0.01, 0.01, 0.01],
             pd_kp: 2.0,
             pd_kd: 2.5,
+            pd_corner_radius: 1.0,
+            pd_corner_acceleration: 3.0,
             constraint_tilt_deg: 30.0,
             constraint_speed: 0.0,
             qp_solver: QpSolver::Banded,

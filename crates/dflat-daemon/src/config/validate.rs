@@ -155,6 +155,13 @@ impl Config {
         }
         v.positive("controller.pd_kp", c.pd_kp)?;
         v.positive("controller.pd_kd", c.pd_kd)?;
+        v.range("controller.pd_corner_radius", c.pd_corner_radius, 0.0, 50.0)?;
+        v.range(
+            "controller.pd_corner_acceleration",
+            c.pd_corner_acceleration,
+            0.1,
+            20.0,
+        )?;
         if c.constraint_tilt_deg != 0.0 {
             v.range(
                 "controller.constraint_tilt_deg",
