@@ -23,8 +23,11 @@
 //!     command-smoothness weight s = 50 [1/rad²], a larger jerk weight
 //!     r = 0.003 and a 30° tilt bound on the plan (clarabel when it binds;
 //!     no wall-clock limit in the lab, so runs stay deterministic);
-//!   - `fmpc` (N = 75, q = 1, r = 0.01) and `pd` (k_p = k_d = 3) on the
-//!     extrapolated stream (the paths study's weights).
+//!   - `fmpc-est` (N = 75, q = 1, r = 0.01) and `pd-est` (k_p = 6,
+//!     k_d = 5): the baselines fed by their state estimator, as the paper
+//!     flew them outdoors (the paths study's fair weights; the estimator's
+//!     default rule at each cell's rate and σ, every pose at its capture
+//!     time).
 //!
 //!   The ladder separates the ingredients: `df-paper` → `df-multirate`
 //!   changes only the window; `df-multirate` → `df-mr-smooth` adds the
@@ -72,13 +75,14 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 use dflat_control::dfmpc::{DfMpc, DfMpcSettings, InputSaturation, OutputConstraints};
+use dflat_control::estimator::EstimatorSettings;
 use dflat_control::reference::{Reference, paths};
 use dflat_control::window::MultiRateSettings;
 use dflat_control::{ControlModel, Controller};
 use dflat_model::{PlanarModel, PlanarParams};
 use serde::{Deserialize, Serialize};
 
-use super::{ControllerSpec, ExperimentError, OutputPaths, invalid, mean, write_json};
+use super::{ControllerSpec, ExperimentError, OutputPaths, fair, invalid, mean, write_json};
 use crate::harness::{
     ControllerFactory, ErrorStats, ReferenceFactory, StopCondition, StopReason, TrialSpec,
     polyline_path_distance, run_trials,
@@ -179,8 +183,8 @@ impl VisionController {
             "df-multirate" => RGBColor(255, 127, 14),
             "df-mr-smooth" => RGBColor(148, 103, 189),
             "df-smooth" => RGBColor(140, 86, 75),
-            "fmpc" => RGBColor(31, 119, 180),
-            "pd" => RGBColor(44, 160, 44),
+            "fmpc" | "fmpc-est" => RGBColor(31, 119, 180),
+            "pd" | "pd-est" => RGBColor(44, 160, 44),
             _ => crate::plot::controller_color(self.key(), index),
         }
     }
@@ -324,19 +328,11 @@ impl Default for VisionRateConfig {
                 df(0.0003, 0.0, None, None),
                 df(0.0003, 0.0, mr, None),
                 df(0.003, 50.0, mr, Some(30.0)),
-                VisionController::Baseline(ControllerSpec::Fmpc {
-                    horizon: 75,
-                    q: 1.0,
-                    r: 0.01,
-                    max_tilt_deg: tilt,
-                    estimator: None,
-                }),
-                VisionController::Baseline(ControllerSpec::Pd {
-                    kp: 3.0,
-                    kd: 3.0,
-                    max_tilt_deg: tilt,
-                    estimator: None,
-                }),
+                // The baselines fed by their state estimator (the paths
+                // study's weights; its settings are re-derived per rate,
+                // [`VisionRateConfig::trial`]).
+                VisionController::Baseline(fair::fair_controllers(tilt)[1]),
+                VisionController::Baseline(fair::fair_controllers(tilt)[2]),
             ],
         }
     }
@@ -410,6 +406,22 @@ impl VisionRateConfig {
         let reference = Reference::path(&w, speed).map_err(ExperimentError::Reference)?;
         let factory: ReferenceFactory = Arc::new(move || Box::new(reference.clone()));
         let plant = self.plant_options();
+        // An estimator-fed baseline gets the default rule at this rate.
+        let controller = &match *controller {
+            VisionController::Baseline(mut spec) => {
+                if let ControllerSpec::Fmpc {
+                    estimator: Some(e), ..
+                }
+                | ControllerSpec::Pd {
+                    estimator: Some(e), ..
+                } = &mut spec
+                {
+                    *e = EstimatorSettings::for_sensor(self.sigma, rate);
+                }
+                VisionController::Baseline(spec)
+            }
+            c => c,
+        };
         let mut t = TrialSpec::new(
             format!("{} L {speed} m/s {rate} Hz", controller.key()),
             controller.factory()?,
