@@ -43,7 +43,13 @@ fn reduced_vision_rate_runs_and_writes() {
     let keys: Vec<&str> = result.rows.iter().map(|r| r.controller.as_str()).collect();
     assert_eq!(
         keys,
-        ["df-paper", "df-multirate", "df-mr-smooth", "fmpc-est", "pd-est"]
+        [
+            "df-paper",
+            "df-multirate",
+            "df-mr-smooth",
+            "fmpc-est",
+            "pd-est"
+        ]
     );
     for r in &result.rows {
         assert_eq!(r.trials, 1);
@@ -63,7 +69,11 @@ fn reduced_vision_rate_runs_and_writes() {
     // differences of 15 Hz poses gave 20–55°/tick).
     for key in ["fmpc-est", "pd-est"] {
         let row = result.row(key, BUDGET_RATE, 5.0).unwrap();
-        assert!(row.smoothness_deg < 5.0, "{key}: {}°/tick", row.smoothness_deg);
+        assert!(
+            row.smoothness_deg < 5.0,
+            "{key}: {}°/tick",
+            row.smoothness_deg
+        );
     }
     assert_eq!(result.budgets.len(), 1);
     let table = result.table();

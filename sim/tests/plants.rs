@@ -291,6 +291,50 @@ fn rigid_body_attitude_loop_settles_like_first_order() {
     );
 }
 
+/// The autopilot's rate limit: a 20° pitch step under a 30°/s limit slews
+/// at that rate (a ramp: 90 % in ~0.68 s), where the unlimited loop gets
+/// there in ~0.4 s (τ ≈ 0.18 s) at a peak of ~76°/s.
+#[test]
+fn rigid_body_rate_limit_slews_a_step_at_the_limit() {
+    let limit = 30f64.to_radians();
+    let step = -20f64.to_radians();
+    let rise = |max_rate: [f64; 3]| {
+        let mut o = PlantOptions::default();
+        o.rigid.max_rate = max_rate;
+        let mut p = plant(PlantKind::RigidBody, &o);
+        p.reset(&PlantState::hover(Vector3::new(0.0, 0.0, -20.0), G));
+        p.apply(&cmd(step, 0.0, 0.0, G / step.cos()));
+        let (mut t90, mut peak_rate) = (None, 0.0f64);
+        for i in 1..=600 {
+            p.advance(0.005);
+            peak_rate = peak_rate.max(p.true_state().body_rates.y.abs());
+            if t90.is_none() && p.attitude().1 <= 0.9 * step {
+                t90 = Some(i as f64 * 0.005);
+            }
+        }
+        close(p.attitude().1, step, 1e-3, "pitch settles");
+        (t90.expect("reaches 90 %"), peak_rate)
+    };
+    let (free_t90, free_rate) = rise([0.0; 3]);
+    let (t90, rate) = rise([limit, limit, 0.0]);
+    eprintln!(
+        "20° step: unlimited 90 % in {free_t90:.3} s (peak {:.0}°/s); limited to 30°/s: \
+         {t90:.3} s (peak {:.1}°/s)",
+        free_rate.to_degrees(),
+        rate.to_degrees()
+    );
+    assert!(free_rate > 2.0 * limit, "unlimited peak {free_rate}");
+    // The rate loop tracks the clamped setpoint with a small overshoot.
+    assert!(
+        rate <= 1.05 * limit,
+        "limited peak {}°/s",
+        rate.to_degrees()
+    );
+    // 90 % of 20° at 30°/s is 0.6 s, plus the rate loop's rise.
+    assert!((0.6..0.75).contains(&t90), "limited 90 % in {t90} s");
+    assert!(free_t90 + 0.2 < t90, "{free_t90} vs {t90}");
+}
+
 #[test]
 fn saturation_clips_tilt_and_thrust() {
     let o = PlantOptions::default();

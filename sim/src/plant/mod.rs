@@ -349,6 +349,10 @@ pub struct RigidBodyOptions {
     pub d_filter: f64,
     /// Clamp of each rate integrator's contribution to α [rad/s²].
     pub i_limit: f64,
+    /// Largest body-rate setpoint (p, q, r) the attitude loop may ask
+    /// \[rad/s\] (PX4's MC_ROLLRATE_MAX and kin; ArduPilot's
+    /// ATC_RATE_R_MAX); 0 on an axis: no limit (the default).
+    pub max_rate: [f64; 3],
 }
 
 impl Default for RigidBodyOptions {
@@ -364,6 +368,7 @@ impl Default for RigidBodyOptions {
             rate_d: [0.01, 0.01, 0.0],
             d_filter: 60.0,
             i_limit: 5.0,
+            max_rate: [0.0; 3],
         }
     }
 }
@@ -383,6 +388,15 @@ impl RigidBodyOptions {
             check_range("rigid.rate_i/rate_d", *v, 0.0, 1e4, "0 ..= 1e4")?;
         }
         check_positive("rigid.d_filter", self.d_filter)?;
+        for v in self.max_rate {
+            check_range(
+                "rigid.max_rate",
+                v,
+                0.0,
+                100.0,
+                "0 ..= 100 rad/s (0 = none)",
+            )?;
+        }
         check_range("rigid.i_limit", self.i_limit, 0.0, 1e6, "0 ..= 1e6 rad/s²")
     }
 }

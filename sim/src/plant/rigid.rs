@@ -98,6 +98,15 @@ impl RigidBodyPlant {
             cp * eta_dot_sp.y + sp * ct * eta_dot_sp.z,
             -sp * eta_dot_sp.y + cp * ct * eta_dot_sp.z,
         );
+        // The autopilot's rate limits (0: none).
+        let omega_sp = Vector3::from_fn(|i, _| {
+            let m = rb.max_rate[i];
+            if m > 0.0 {
+                omega_sp[i].clamp(-m, m)
+            } else {
+                omega_sp[i]
+            }
+        });
         // Rate PID (derivative on the filtered measured rate).
         let e_omega = omega_sp - omega;
         let omega_dot_f = (omega - filt) * rb.d_filter;

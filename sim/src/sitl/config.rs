@@ -243,6 +243,11 @@ pub struct SitlConfig {
     /// Linear aerodynamic drag of the plant \[1/s\] on every axis (0–2,
     /// default 0): `v̇ = … − drag·v`. The truth `dflat identify` should find.
     pub drag: f64,
+    /// The full plant's autopilot limits its roll and pitch rate setpoints
+    /// to this \[deg/s\] (PX4's MC_ROLLRATE_MAX / MC_PITCHRATE_MAX,
+    /// ArduPilot's ATC_RATE_R_MAX / ATC_RATE_P_MAX; 0 = no limit, the
+    /// default; 0–2000). Other plants: unused.
+    pub max_tilt_rate_deg_s: f64,
     /// `[sitl.planner]`: stream a circle or a figure eight to the daemon
     /// once offboard (absent: no planner). See [`super::planner`].
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -276,6 +281,7 @@ impl Default for SitlConfig {
             pilot: Vec::new(),
             max_yaw_rate_deg_s: 90.0,
             drag: 0.0,
+            max_tilt_rate_deg_s: 0.0,
             planner: None,
         }
     }
@@ -314,6 +320,12 @@ impl SitlConfig {
         range("sitl.max_yaw_rate_deg_s", si.max_yaw_rate_deg_s, 0.0, 720.0)?;
         range("sitl.command_delay_ms", si.command_delay_ms, 0.0, 500.0)?;
         range("sitl.drag", si.drag, 0.0, 2.0)?;
+        range(
+            "sitl.max_tilt_rate_deg_s",
+            si.max_tilt_rate_deg_s,
+            0.0,
+            2000.0,
+        )?;
         range("sitl.pose_clock_rate", si.pose_clock_rate, 0.1, 10.0)?;
         range("sitl.mass_factor", si.mass_factor, 0.5, 2.0)?;
         range("sitl.noise_sigma", si.noise_sigma, 0.0, 1.0)?;

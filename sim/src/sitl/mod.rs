@@ -80,7 +80,7 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant, SystemTime};
 
-use crate::plant::{Plant, PlantKind, PlantOptions, PlantState, build_plant};
+use crate::plant::{Plant, PlantKind, PlantOptions, PlantState, RigidBodyOptions, build_plant};
 use crate::sensing::{GaussianOptions, GaussianSensor, Sensor};
 use dflat_control::AttitudeCommand as PlantCommand;
 use dflat_link::dialect::{MavAutopilot, MavState};
@@ -494,6 +494,14 @@ pub fn plant_options(cfg: &SitlSettings) -> PlantOptions {
         mass_factor: s.mass_factor,
         max_yaw_rate: s.max_yaw_rate_deg_s.to_radians(),
         drag: s.drag,
+        rigid: RigidBodyOptions {
+            max_rate: [
+                s.max_tilt_rate_deg_s.to_radians(),
+                s.max_tilt_rate_deg_s.to_radians(),
+                0.0,
+            ],
+            ..RigidBodyOptions::default()
+        },
         ..PlantOptions::default()
     }
 }
