@@ -16,6 +16,7 @@ fn estimator_removes_wind_and_hover_thrust_offsets() {
         sigmas: vec![0.0],
         noise_check: false,
         controllers: vec![MismatchController::Df, MismatchController::DfEstimator],
+        airframe: None,
         ..MismatchConfig::default()
     };
     config
@@ -71,6 +72,7 @@ fn noise_check_meets_its_budget_with_df() {
         trials: 1,
         sigmas: vec![0.0],
         scenarios: Vec::new(),
+        airframe: None,
         ..MismatchConfig::default()
     };
     // No scenarios is invalid for the main study …
@@ -80,6 +82,7 @@ fn noise_check_meets_its_budget_with_df() {
         trials: 1,
         sigmas: vec![0.0],
         controllers: vec![MismatchController::Pd],
+        airframe: None,
         ..MismatchConfig::default()
     };
     config.scenarios.truncate(1);
@@ -122,6 +125,7 @@ fn multi_rate_df_with_estimator_meets_the_budget_at_1cm() {
             MismatchController::DfMultiRate,
             MismatchController::DfMultiRateEstimator,
         ],
+        airframe: None,
         ..MismatchConfig::default()
     };
     config

@@ -191,6 +191,10 @@ pub struct MismatchArgs {
     /// Estimator bandwidth [Hz] and fit window [ticks], `f_c,L`.
     #[arg(long, value_delimiter = ',')]
     estimator: Option<Vec<f64>>,
+    /// Skip the airframe part (the L path on a plant with drag and delay,
+    /// flown with and without the model's drag and delay terms).
+    #[arg(long)]
+    no_airframe: bool,
 }
 
 /// Options of `experiment vision-rate`.
@@ -257,6 +261,12 @@ pub fn run(command: ExperimentCommand) -> Result<()> {
                 noise_check: !a.no_noise_check,
                 ..MismatchConfig::default()
             };
+            if a.no_airframe {
+                config.airframe = None;
+            } else if let Some(af) = &mut config.airframe {
+                af.trials = a.common.trials;
+                af.seed_base = a.common.seed;
+            }
             if let Some(s) = a.sigmas {
                 config.sigmas = s;
             }

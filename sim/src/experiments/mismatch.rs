@@ -83,6 +83,8 @@ use dflat_control::dfmpc::{
 };
 use dflat_control::disturbance::{DisturbanceReport, DisturbanceSettings};
 use dflat_control::fmpc::{FlatnessMpc, FmpcSettings};
+
+use super::airframe::{AirframeConfig, AirframeResult, run_airframe};
 use dflat_control::pd::{Pd, PdSettings};
 use dflat_control::reference::Reference;
 use dflat_control::window::MultiRateSettings;
@@ -360,6 +362,10 @@ pub struct MismatchConfig {
     pub controllers: Vec<MismatchController>,
     /// Also fly the noise check.
     pub noise_check: bool,
+    /// Also fly drag and delay on the L path ([`super::airframe`]; issue
+    /// 24); `None`: skip.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub airframe: Option<AirframeConfig>,
 }
 
 impl Default for MismatchConfig {
@@ -379,6 +385,7 @@ impl Default for MismatchConfig {
             scenarios: Vec::new(),
             controllers: MismatchController::ALL.to_vec(),
             noise_check: true,
+            airframe: Some(AirframeConfig::default()),
         };
         c.scenarios = paper_scenarios(&c.base_plant());
         c
@@ -702,6 +709,9 @@ pub struct MismatchResult {
     pub noise_check: Option<NoiseCheck>,
     /// The budgets.
     pub budgets: Budgets,
+    /// Drag and delay on the L path, when flown.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub airframe: Option<AirframeResult>,
     /// Error traces for the plot: per (scenario, controller), trial 0 at the
     /// last σ (issue 5's 1 cm by default), `(t \[s\], true position − setpoint \[m\] NED)` at 10 Hz.
     #[serde(skip)]
@@ -861,6 +871,10 @@ impl MismatchResult {
                 n.mr_worst_ratio,
                 verdict(p)
             );
+        }
+        if let Some(a) = &self.airframe {
+            s.push('\n');
+            s += &a.table();
         }
         s
     }
@@ -1034,6 +1048,10 @@ pub fn run_mismatch(
         steady,
         noise_pass: noise_check.as_ref().map(|n| n.pass),
     };
+    let airframe = match &config.airframe {
+        Some(a) => Some(run_airframe(a, progress)?),
+        None => None,
+    };
     Ok(MismatchResult {
         experiment: "mismatch".to_string(),
         config: config.clone(),
@@ -1041,6 +1059,7 @@ pub fn run_mismatch(
         trials,
         noise_check,
         budgets,
+        airframe,
         traces,
     })
 }

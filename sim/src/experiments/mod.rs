@@ -20,6 +20,7 @@
 //! [`noise_sweep::run_noise_sweep`] / [`noise_sweep::write_noise_sweep`] and
 //! [`paths::run_paths`] / [`paths::write_paths`].
 
+pub mod airframe;
 mod controllers;
 mod fair;
 mod figures;
