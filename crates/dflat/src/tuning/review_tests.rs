@@ -214,7 +214,7 @@ fn thinning_keeps_min_max_and_order() {
 /// The page in a real browser (headless Chromium, when installed): it
 /// loads with no console error, and the zoom changes every time chart's
 /// mapping. Skipped, with the reason printed, when `/usr/bin/chromium` is
-/// absent (Debian: `apt-get install -y chromium`).
+/// absent (Debian: `apt-get install -y chromium`; `.ci/run` installs it).
 #[test]
 fn the_page_runs_in_headless_chromium() {
     let chromium = Path::new("/usr/bin/chromium");
@@ -239,6 +239,12 @@ fn the_page_runs_in_headless_chromium() {
             "--headless",
             "--no-sandbox",
             "--disable-gpu",
+            // No background connections: the machine's network is closed.
+            "--disable-quic",
+            "--no-first-run",
+            "--disable-background-networking",
+            "--disable-component-update",
+            "--disable-sync",
             "--enable-logging=stderr",
             "--v=0",
             &format!("--user-data-dir={}", dir.join("profile").display()),
