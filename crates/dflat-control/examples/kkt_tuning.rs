@@ -82,6 +82,7 @@ fn problem(c: &Case) -> (Smoothness, AxisBounds) {
             acceleration: Some([-a, a]),
             speed: None,
             tilt_rate: None,
+            drag: 0.0,
         },
     )
 }

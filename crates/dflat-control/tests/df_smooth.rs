@@ -220,6 +220,7 @@ fn smooth_clarabel_agrees_with_fast_path() {
         acceleration: Some([-2.0, 2.0]),
         speed: None,
         tilt_rate: None,
+        drag: 0.0,
     };
     let mut bounded =
         ClarabelSolver::with_smoothness(n, 1.0, 0.08, DT, bounds, f64::INFINITY, sm).unwrap();
@@ -231,6 +232,7 @@ fn smooth_clarabel_agrees_with_fast_path() {
         acceleration: Some([-2.0001, 2.0001]),
         speed: None,
         tilt_rate: None,
+        drag: 0.0,
     };
     assert!(!relaxed.violated_by(&b, DT));
 }

@@ -160,6 +160,9 @@ pub(super) fn build_pipelines(
             acceleration,
             speed: c.max_speed,
             tilt_rate,
+            // The tilt bound holds the thrust's acceleration (the plan's
+            // plus D·v); the vertical bound is on the plan's own.
+            drag: if axis < 2 { model.drag()[axis] } else { 0.0 },
         };
         let bounded = if bounds.is_empty() {
             None

@@ -22,9 +22,28 @@ pub struct AxisBounds {
     /// rows widen where the rate bound cannot reach them in time (a
     /// funnel, [`TiltRate`]), so the problem stays feasible.
     pub tilt_rate: Option<TiltRate>,
+    /// The model's linear drag D on this axis \[1/s\] (0: none). The tilt
+    /// holds the thrust's acceleration, the plan's plus `D·v`, so the
+    /// acceleration bound applies to `Δ²y/δt² + D·v_1`, v_1 the window's
+    /// speed `(y_2 − y_1)/δt`: `[lo − D·v_1, hi − D·v_1]` on the plan's
+    /// acceleration, the same for every stage of the tick (the speed the
+    /// window has, not the plan's along the horizon).
+    pub drag: f64,
 }
 
 impl AxisBounds {
+    /// The acceleration bound on the plan's `Δ²y/δt²` for a window whose
+    /// last outputs are `fixed` ([`AxisBounds::drag`]): `[lo, hi]` less
+    /// `D·v_1`.
+    pub(crate) fn acceleration_at(&self, fixed: &[f64; 3], dt: f64) -> Option<[f64; 2]> {
+        let [lo, hi] = self.acceleration?;
+        if self.drag == 0.0 {
+            return Some([lo, hi]);
+        }
+        let shift = self.drag * (fixed[2] - fixed[1]) / dt;
+        Some([lo - shift, hi - shift])
+    }
+
     /// The speed funnel for a window moving faster than the speed bound:
     /// `(|v_1|, a)` with v_1 = (y_2 − y_1)/δt [m/s] and a [m/s²] 90 % of
     /// the acceleration bound that slows it down; the bound at step j is
@@ -33,7 +52,7 @@ impl AxisBounds {
     /// meet any speed — or the window is within the bound.
     pub(crate) fn speed_funnel(&self, fixed: &[f64; 3], dt: f64) -> Option<(f64, f64)> {
         let v = self.speed?;
-        let [lo, hi] = self.acceleration?;
+        let [lo, hi] = self.acceleration_at(fixed, dt)?;
         let v1 = (fixed[2] - fixed[1]) / dt;
         let brake = if v1 > 0.0 { -lo } else { hi };
         (v1.abs() > v).then_some((v1.abs(), 0.9 * brake))
@@ -56,7 +75,7 @@ impl AxisBounds {
     ) {
         let d2 = fixed[2] - 2.0 * fixed[1] + fixed[0];
         let a_base = d2 / (dt * dt);
-        if let Some([lo, hi]) = self.acceleration {
+        if let Some([lo, hi]) = self.acceleration_at(fixed, dt) {
             match &self.tilt_rate {
                 Some(rate) => rate.funnel(horizon, fixed, sent, [lo, hi], dt, |l, h| {
                     out(l - a_base, h - a_base)
@@ -111,12 +130,17 @@ impl AxisBounds {
                 .is_some_and(|r| r.violated_by(plan, sent, dt))
     }
 
-    /// True when `plan` (`y_0..y_N` \[m\], step δt \[s\]) violates a bound by
-    /// more than a relative 1e-6 (absolute 1e-9 near zero bounds).
+    /// True when `plan` (`y_0..y_N` \[m\], step δt \[s\]; its first three
+    /// the window's fixed outputs) violates a bound by more than a relative
+    /// 1e-6 (absolute 1e-9 near zero bounds).
     pub fn violated_by(&self, plan: &[f64], dt: f64) -> bool {
         let tol = |b: f64| 1e-6 * b.abs() + 1e-9;
         let n = plan.len();
-        if let Some([lo, hi]) = self.acceleration {
+        let fixed = match plan {
+            [a, b, c, ..] => [*a, *b, *c],
+            _ => return false,
+        };
+        if let Some([lo, hi]) = self.acceleration_at(&fixed, dt) {
             let dt2 = dt * dt;
             for j in 1..n.saturating_sub(2) {
                 let a = (plan[j + 2] - 2.0 * plan[j + 1] + plan[j]) / dt2;

@@ -76,6 +76,7 @@ impl ConeBounds {
             acceleration: Some([-a, a]),
             speed: self.speed,
             tilt_rate: None,
+            drag: 0.0,
         }
     }
 
@@ -104,6 +105,7 @@ impl ConeBounds {
             acceleration: None,
             speed: self.speed,
             tilt_rate: None,
+            drag: 0.0,
         };
         speed.violated_by(x, dt) || speed.violated_by(y, dt)
     }

@@ -642,7 +642,7 @@ impl BandedInteriorPointSolver {
                 self.fast.horizon,
                 fixed,
                 sent,
-                self.bounds.acceleration,
+                self.bounds.acceleration_at(fixed, dt),
                 dt,
                 0.5,
                 |a| {

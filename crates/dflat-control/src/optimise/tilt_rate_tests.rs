@@ -75,6 +75,7 @@ proptest::proptest! {
             acceleration: a_max.map(|a| [-a, a]),
             speed: None,
             tilt_rate: Some(rate),
+            drag: 0.0,
         };
         let smoothness = Smoothness { weight: smooth.unwrap_or(0.0), kappa, gravity: G };
         let sent = Some(a0 + sent_delta);
@@ -137,6 +138,7 @@ fn the_funnel_keeps_rate_and_acceleration_bounds_feasible() {
         acceleration: Some([-a, a]),
         speed: None,
         tilt_rate: Some(rate),
+        drag: 0.0,
     };
     let sent = Some(a0);
     let mut banded =
@@ -172,6 +174,7 @@ fn the_funnel_keeps_rate_and_acceleration_bounds_feasible() {
         (1.0, 0.01, DT),
         AxisBounds {
             tilt_rate: None,
+            drag: 0.0,
             ..bounds
         },
         f64::INFINITY,
