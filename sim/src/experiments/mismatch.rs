@@ -26,7 +26,9 @@
 //!   arrival cost, smoothness s = 50 on x, y, r = 0.003, q = 1, 30° plan
 //!   tilt — on the spatial model, poses through `observe`) without and with
 //!   the estimator, which then fits the raw timestamped samples; Flatness
-//!   MPC and PD with their library defaults; all clip at 35°.
+//!   MPC and PD with their library weights, fed by their state estimator
+//!   (issue 27; the default rule at the trial's σ, at least 1 mm, and
+//!   50 Hz); all clip at 35°.
 //!   Classic DF weights: the library default (q = 5, r = 0.01) loses the hover
 //!   scenario even noise-free (the 25 % thrust excess drives its plan into
 //!   free fall before any estimate exists); the daemon's (q = 1, r = 0.08)
@@ -46,7 +48,8 @@
 //! * Classic DF (window of 3 raw measurements): without noise and at
 //!   0.1 mm the estimator removes the offsets (wind, mass, hover thrust) to
 //!   ≈ 1 cm, where DF alone is off by 0.5–2 m. At 1 mm and 1 cm the classic
-//!   DF and Flatness MPC diverge with or without the estimator: their flat
+//!   DF diverges with or without the estimator (Flatness MPC did too on
+//!   finite differences; fed by its state estimator it does not): its flat
 //!   maps take second differences of the measured positions, the vertical
 //!   acceleration noise `√6·σ/δt²` (6 m/s² at 1 mm, 61 m/s² at 1 cm) makes
 //!   the thrust vector point down (`FlatError::FreeFall`) within a few
@@ -82,6 +85,7 @@ use dflat_control::dfmpc::{
     DfMpc, DfMpcSettings, InputSaturation, OutputConstraints, PlanTiltBound, QpSolver,
 };
 use dflat_control::disturbance::{DisturbanceReport, DisturbanceSettings};
+use dflat_control::estimator::{EstimatorSettings, StateSource};
 use dflat_control::fmpc::{FlatnessMpc, FmpcSettings};
 
 use super::airframe::{AirframeConfig, AirframeResult, run_airframe};
@@ -445,8 +449,14 @@ impl MismatchConfig {
         }
     }
 
-    /// Builds one controller on the spatial model.
-    pub fn build(&self, which: MismatchController) -> Result<Box<dyn Controller>, ControlError> {
+    /// Builds one controller on the spatial model, for poses of noise σ
+    /// `sigma` \[m\] every 50 Hz tick (the baselines' state estimator's
+    /// default rule at that σ, floored at [`BASELINE_ESTIMATOR_MIN_SIGMA`]).
+    pub fn build(
+        &self,
+        which: MismatchController,
+        sigma: f64,
+    ) -> Result<Box<dyn Controller>, ControlError> {
         let model = ControlModel::Spatial(SpatialModel::new(SpatialParams::default())?);
         let tilt = self.tilt_limit_deg.to_radians();
         let (horizon, q, r) = self.df_weights;
@@ -479,6 +489,7 @@ impl MismatchConfig {
                 model,
                 FmpcSettings {
                     max_tilt: Some(tilt),
+                    state: baseline_state(sigma, model.dt()),
                     ..FmpcSettings::default()
                 },
             )?),
@@ -487,11 +498,25 @@ impl MismatchConfig {
                 PdSettings {
                     max_tilt: tilt,
                     max_horizontal_acceleration: 9.81 * tilt.tan(),
+                    state: baseline_state(sigma, model.dt()),
                     ..PdSettings::default()
                 },
             )?),
         })
     }
+}
+
+/// Smallest σ \[m\] the baselines' estimator is tuned for (its default
+/// rule needs σ > 0; noise-free poses get the 1 mm filter).
+pub const BASELINE_ESTIMATOR_MIN_SIGMA: f64 = 1e-3;
+
+/// The baselines' state: their estimator (issue 27: the paper's outdoor
+/// set-up), by the default rule at σ and one pose per control step `dt`.
+fn baseline_state(sigma: f64, dt: f64) -> StateSource {
+    StateSource::Estimator(EstimatorSettings::for_sensor(
+        sigma.max(BASELINE_ESTIMATOR_MIN_SIGMA),
+        1.0 / dt,
+    ))
 }
 
 /// Forwards to a controller and, when dropped at the end of a trial,
@@ -889,7 +914,7 @@ pub fn run_mismatch(
     config.validate()?;
     for &k in &config.controllers {
         config
-            .build(k)
+            .build(k, config.sigmas.first().copied().unwrap_or(0.0))
             .map_err(|source| ExperimentError::Controller {
                 controller: k.name(),
                 source,
@@ -907,7 +932,7 @@ pub fn run_mismatch(
                     let slot = Arc::new(Mutex::new(None));
                     let cfg = shared.clone();
                     let factory =
-                        recording_factory(k.name(), Arc::new(move || cfg.build(k)), slot.clone());
+                        recording_factory(k.name(), Arc::new(move || cfg.build(k, sigma)), slot.clone());
                     let r = reference.clone();
                     let mut spec = TrialSpec::new(
                         format!("{} {} sigma={sigma} #{t}", sc.name, k.name()),

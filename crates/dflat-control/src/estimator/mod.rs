@@ -61,6 +61,13 @@ pub const DEFAULT_POSE_RATE_HZ: f64 = 15.0;
 /// rule ([`EstimatorSettings::for_sensor`]).
 pub const BANDWIDTH_DIVISOR: f64 = 10.0;
 
+/// Highest bandwidth of the default noise rule \[Hz\]: the acceleration of
+/// a vehicle whose attitude loop lags by τ ≈ 0.2 s changes at ≲ 1/(2πτ) ≈
+/// 0.8 Hz, so a wider filter passes noise and no motion. (Uncapped, 50 Hz
+/// poses of σ = 1 cm gave a 5 Hz filter whose acceleration noise left
+/// estimator-fed Flatness MPC 2 m off a hover setpoint; capped, 5 cm.)
+pub const MAX_BANDWIDTH_HZ: f64 = 1.5;
+
 /// Settings of [`StateEstimator`]. [`EstimatorSettings::for_sensor`]
 /// derives them from the pose noise and rate; [`Default`] is that rule at
 /// σ = 2 cm, 15 Hz.
@@ -98,15 +105,16 @@ fn invalid(field: &'static str, reason: impl Into<String>) -> ControlError {
 
 impl EstimatorSettings {
     /// The default rule from the pose noise σ \[m\] and the pose rate f
-    /// \[Hz\]: bandwidth ω = 2πf / [`BANDWIDTH_DIVISOR`] (1.5 Hz at 15 Hz
-    /// poses) and `q = σ²·ω⁶/f`, the white-jerk density whose steady-state
+    /// \[Hz\]: bandwidth ω = 2π·min(f / [`BANDWIDTH_DIVISOR`],
+    /// [`MAX_BANDWIDTH_HZ`]) (1.5 Hz from 15 Hz poses up) and `q = σ²·ω⁶/f`, the white-jerk density whose steady-state
     /// filter has that bandwidth (the continuous-time Kalman–Bucy filter of
     /// a triple integrator with measurement density σ²/f has its poles on
     /// a circle of radius `(q f/σ²)^{1/6}`). Input lag 0.2 s (the paper's
     /// and the lab's attitude τ). Non-positive arguments give settings that
     /// [`EstimatorSettings::validate`] refuses.
     pub fn for_sensor(sigma: f64, pose_rate_hz: f64) -> Self {
-        let omega = 2.0 * std::f64::consts::PI * pose_rate_hz / BANDWIDTH_DIVISOR;
+        let omega =
+            2.0 * std::f64::consts::PI * (pose_rate_hz / BANDWIDTH_DIVISOR).min(MAX_BANDWIDTH_HZ);
         Self {
             sigma,
             jerk_psd: sigma * sigma * omega.powi(6) / pose_rate_hz,

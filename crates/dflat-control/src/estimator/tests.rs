@@ -139,6 +139,15 @@ fn the_default_rule_gives_the_named_bandwidth() {
     assert!((omega - 2.0 * std::f64::consts::PI * 1.5).abs() < 1e-9);
     assert!(s.validate().is_ok());
     assert!(EstimatorSettings::for_sensor(0.0, 15.0).validate().is_err());
+    // Slower poses get a narrower filter; faster ones keep 1.5 Hz (the
+    // vehicle's acceleration changes no faster), with q for their rate.
+    let bandwidth_hz = |rate: f64| {
+        let s = EstimatorSettings::for_sensor(0.01, rate);
+        (s.jerk_psd * rate / (0.01 * 0.01)).powf(1.0 / 6.0) / (2.0 * std::f64::consts::PI)
+    };
+    assert!((bandwidth_hz(10.0) - 1.0).abs() < 1e-9);
+    assert!((bandwidth_hz(50.0) - 1.5).abs() < 1e-9);
+    assert!((bandwidth_hz(200.0) - 1.5).abs() < 1e-9);
 }
 
 /// The latency is compensated through the inputs: after a commanded

@@ -30,7 +30,7 @@ pub struct EstimatorConfig {
     /// paper's camera; 50 for a 50 Hz pose stream).
     pub pose_rate_hz: f64,
     /// White-jerk spectral density [m²/s⁵] (0 = derived: bandwidth
-    /// 2π·pose_rate_hz/10, `q = σ²ω⁶/pose_rate_hz` with σ =
+    /// ω = 2π·min(pose_rate_hz/10, 1.5 Hz), `q = σ²ω⁶/pose_rate_hz` with σ =
     /// `controller.sample_sigma`; 18.5 at the defaults; else 0.001–1e6).
     pub jerk_psd: f64,
     /// Predict with the sent commands (acceleration lag `vehicle.tau`):
