@@ -931,8 +931,11 @@ pub fn run_mismatch(
                 for t in 0..config.trials {
                     let slot = Arc::new(Mutex::new(None));
                     let cfg = shared.clone();
-                    let factory =
-                        recording_factory(k.name(), Arc::new(move || cfg.build(k, sigma)), slot.clone());
+                    let factory = recording_factory(
+                        k.name(),
+                        Arc::new(move || cfg.build(k, sigma)),
+                        slot.clone(),
+                    );
                     let r = reference.clone();
                     let mut spec = TrialSpec::new(
                         format!("{} {} sigma={sigma} #{t}", sc.name, k.name()),
