@@ -115,6 +115,10 @@ pub struct CsvRow {
     /// controller used it (wake time, shortest round-trip decimal), for an
     /// offline re-run (`dflat replay`). Last column.
     pub wake: f64,
+    /// Link events the tick had applied so far, mission commands excluded
+    /// (its cutoff in the flight's events: `dflat replay` batches the
+    /// tlog's frames by it).
+    pub events: u64,
 }
 
 /// The disturbance estimate as recorded per tick.
@@ -135,7 +139,7 @@ pub struct CsvDisturbance {
 pub const CSV_HEADER: &str = "tick,t,state,x,y,z,\
 plan0_x,plan0_y,plan0_z,plan1_x,plan1_y,plan1_z,plan2_x,plan2_y,plan2_z,plan3_x,plan3_y,plan3_z,\
 ref_x,ref_y,ref_z,roll,pitch,yaw,thrust,solve_us,jitter_us,\
-dist_x,dist_y,dist_z,thrust_scale,hover_thrust,est_status,residual_m,guard,pose_age_ms,t_wake";
+dist_x,dist_y,dist_z,thrust_scale,hover_thrust,est_status,residual_m,guard,pose_age_ms,t_wake,events";
 
 /// The estimator status as written to the CSV.
 fn status_name(s: EstimatorStatus) -> &'static str {
@@ -197,7 +201,7 @@ pub fn write_row<W: Write>(w: &mut W, row: &CsvRow) -> io::Result<()> {
         Some(a) => write!(w, ",{a:.3}")?,
         None => w.write_all(b",")?,
     }
-    writeln!(w, ",{}", row.wake)
+    writeln!(w, ",{},{}", row.wake, row.events)
 }
 
 /// Counters of a finished [`CsvRecorder`].
@@ -367,6 +371,7 @@ mod tests {
             guard: None,
             pose_age_ms: Some(4.25),
             wake: 0.140_123_456_789,
+            events: 31,
         }
     }
 
@@ -379,7 +384,7 @@ mod tests {
             line,
             "7,0.1400,TRACKING,1.0000,-2.5000,-10.0000,\
 1.0000,2.0000,3.0000,1.0000,2.0000,3.0000,1.0000,2.0000,3.0000,1.0000,2.0000,3.0000,\
-0.0000,0.0000,-10.0000,0.010000,-0.200000,0.000000,0.5000,42,120,,,,,,,0.0123,,4.250,0.140123456789\n"
+0.0000,0.0000,-10.0000,0.010000,-0.200000,0.000000,0.5000,42,120,,,,,,,0.0123,,4.250,0.140123456789,31\n"
         );
         let columns = CSV_HEADER.split(',').count();
         assert_eq!(line.trim_end().split(',').count(), columns);

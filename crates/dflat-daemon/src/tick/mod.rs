@@ -144,6 +144,10 @@ pub struct CoreCounts {
 
 /// Everything the control thread decides with (see the module docs).
 pub struct ControlCore {
+    /// Link events applied so far, mission commands excluded (the CSV's
+    /// `events`: the tick's cutoff in the tlog's received frames, for an
+    /// exact replay).
+    events_applied: u64,
     supervisor: Supervisor,
     controller: Box<dyn Controller>,
     mapping: ThrustMapping,
@@ -299,6 +303,7 @@ impl ControlCore {
             fallback_kind: None,
             counts: CoreCounts::default(),
             pending_texts: Vec::new(),
+            events_applied: 0,
             pending_transitions: Vec::new(),
             mission: None,
             runner: None,
@@ -350,6 +355,9 @@ impl ControlCore {
         let t = time.t;
         // 1. Inbound facts up to now.
         for event in events {
+            if !matches!(event, Event::Mission { .. }) {
+                self.events_applied += 1;
+            }
             self.apply(event);
         }
         // Parameter requests due (sent with the texts).
@@ -393,6 +401,7 @@ impl ControlCore {
             guard: self.guard_note.take(),
             pose_age_ms: self.pose.map(|p| (t - p.capture) * 1e3),
             wake: t,
+            events: self.events_applied,
         };
         // The model-consistency residual: this tick's measurement against
         // the previous plan's prediction for it.

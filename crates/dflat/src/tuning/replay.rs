@@ -14,8 +14,11 @@
 //! clock's offset (hence the capture times) moves by the same few
 //! microseconds. The CSV also holds the tick's scheduled time to 0.1 ms and
 //! its jitter in whole µs (a CSV with the `t_wake` column has the exact tick
-//! time). The report counts the ticks reproduced exactly
-//! at the CSV's resolution and the largest difference.
+//! time). A CSV with the `events` column (the events each tick had
+//! applied so far) fixes which frames each tick saw exactly: a pose that
+//! arrived within microseconds of its tick's wake (every pose-locked tick)
+//! lands in the same tick as in flight. The report counts the ticks
+//! reproduced exactly at the CSV's resolution and the largest difference.
 
 use std::io::BufReader;
 use std::path::{Path, PathBuf};
@@ -168,6 +171,8 @@ fn run_pass(
     offset: f64,
 ) -> Result<(ReplayReport, Option<f64>)> {
     let ticks = csv.numbers("tick");
+    // Each tick's cutoff in the events, when logged.
+    let cutoff = csv.numbers("events");
     let t_sched = csv.numbers("t");
     let jitter = csv.numbers("jitter_us");
     let ages = csv.numbers("pose_age_ms");
@@ -186,14 +191,20 @@ fn run_pass(
     };
     let mut diffs = Vec::new();
     let mut zero = || 0.0;
+    let mut taken: u64 = 0;
     for i in 0..csv.rows.len() {
         let w = wake[i];
         let mut batch = Vec::new();
         while let Some(e) = pending.peek() {
-            if e.arrival() > w {
+            let due = match cutoff[i] {
+                Some(n) => (taken as f64) < n,
+                None => e.arrival() <= w,
+            };
+            if !due {
                 break;
             }
             batch.extend(pending.next());
+            taken += 1;
         }
         let time = TickTime {
             tick: ticks[i].unwrap_or(0.0) as u64,
