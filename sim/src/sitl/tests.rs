@@ -1,6 +1,7 @@
 //! The SITL's own tests: telemetry, hold, commands, routing, signing, and
 //! what it answers a ground station.
 
+use super::plant_loop::hold_law;
 use super::*;
 use dflat_link::frames;
 
