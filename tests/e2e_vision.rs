@@ -36,12 +36,17 @@ vision_noise_sigma = 0.02
 
 const PATH: [[f64; 3]; 3] = [[0.0, 0.0, -10.0], [15.0, 0.0, -10.0], [15.0, 10.0, -10.0]];
 /// Bounds on the true path error \[m\] (median, p95, max) and on the mean
-/// tick-to-tick change of the pitch/roll command \[deg\]. Measured: see the
-/// report printed by the test.
-const MEDIAN_BOUND: f64 = 0.2;
-const P95_BOUND: f64 = 0.6;
-const MAX_BOUND: f64 = 1.0;
-const MEAN_STEP_BOUND_DEG: f64 = 3.0;
+/// tick-to-tick change of the pitch/roll command \[deg\], from the lab's
+/// figure for the same controller and sensing: the vision-rate study's
+/// `df-mr-smooth` at 15 Hz and 3 m/s on the L has p95 0.124 m and
+/// 0.29°/tick (docs/results.md, `dflat experiment vision-rate`). This
+/// flight measured median 0.015 m, p95 0.127 m, max 0.386 m, 0.30°/tick
+/// (2026-11-26, dev profile); the bounds are 2× the lab's p95 and 3× its
+/// step, for a daemon on a shared machine's wall clock.
+const MEDIAN_BOUND: f64 = 0.05;
+const P95_BOUND: f64 = 0.25;
+const MAX_BOUND: f64 = 0.6;
+const MEAN_STEP_BOUND_DEG: f64 = 0.9;
 /// The end of the path must be reached within this distance \[m\].
 const ARRIVAL: f64 = 0.5;
 
