@@ -37,7 +37,7 @@ use dflat_model::{PlanarModel, PlanarParams};
 use serde::{Deserialize, Serialize};
 
 use super::paths::PathsConfig;
-use super::{ControllerSpec, ExperimentError, fair, invalid};
+use super::{ControllerSpec, ExperimentError, fair, invalid, percentile};
 use crate::harness::{
     ControllerFactory, ReferenceFactory, StopCondition, StopReason, TrialResult, TrialSpec,
     polyline_path_distance, run_trials,
@@ -298,15 +298,6 @@ impl AirframeResult {
         }
         s
     }
-}
-
-fn percentile(mut v: Vec<f64>, p: f64) -> f64 {
-    v.retain(|x| x.is_finite());
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(f64::total_cmp);
-    v[((p / 100.0) * (v.len() - 1) as f64).round() as usize]
 }
 
 fn trial(

@@ -156,3 +156,14 @@ pub(crate) fn std_dev(values: impl IntoIterator<Item = f64>) -> f64 {
     let m = v.iter().sum::<f64>() / v.len() as f64;
     (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (v.len() - 1) as f64).sqrt()
 }
+
+/// The `p`-th percentile (0–100, nearest rank) of the finite values in `v`;
+/// NaN when there are none.
+pub(crate) fn percentile(mut v: Vec<f64>, p: f64) -> f64 {
+    v.retain(|x| x.is_finite());
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    v[((p / 100.0) * (v.len() - 1) as f64).round() as usize]
+}

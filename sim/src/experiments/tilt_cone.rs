@@ -31,7 +31,7 @@ use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use super::paths::PathsConfig;
-use super::{ExperimentError, write_json};
+use super::{ExperimentError, percentile, write_json};
 use crate::harness::{
     ControllerFactory, ReferenceFactory, StopCondition, TrialResult, TrialSpec,
     polyline_path_distance, run_trials,
@@ -191,15 +191,6 @@ fn factory(
     Ok(Arc::new(move || {
         Box::new(DfMpc::new(m, settings).expect("checked above")) as Box<_>
     }))
-}
-
-fn percentile(mut v: Vec<f64>, p: f64) -> f64 {
-    v.retain(|x| x.is_finite());
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(f64::total_cmp);
-    v[((p / 100.0) * (v.len() - 1) as f64).round() as usize]
 }
 
 fn trial(
