@@ -410,7 +410,7 @@ mod tests {
         assert_eq!(line.trim_end().split(',').count(), columns);
         assert!(line.starts_with("7,0.1400,FAILSAFE,,,,"), "{line}");
         assert!(
-            line.ends_with(",,120,,,,,,,,level,,0.140123456789\n"),
+            line.ends_with(",,120,,,,,,,,level,,0.140123456789,31\n"),
             "{line}"
         );
         // With an estimate.
