@@ -432,7 +432,7 @@ mod tests {
         let line = String::from_utf8(out).unwrap();
         assert_eq!(line.trim_end().split(',').count(), columns);
         assert!(
-            line.ends_with(",120,0.10000,-0.20000,0.00000,1.04000,0.48000,tracking,0.0123,,4.250,0.140123456789\n"),
+            line.ends_with(",120,0.10000,-0.20000,0.00000,1.04000,0.48000,tracking,0.0123,,4.250,0.140123456789,31\n"),
             "{line}"
         );
     }
