@@ -29,21 +29,17 @@
 
 use std::sync::Arc;
 
-use dflat_control::dfmpc::{DfMpc, DfMpcSettings, InputSaturation, OutputConstraints};
-use dflat_control::reference::{Reference, paths};
-use dflat_control::window::MultiRateSettings;
+use dflat_control::dfmpc::DfMpc;
+use dflat_control::reference::paths;
 use dflat_control::{ControlModel, TiltLimit};
 use dflat_model::{PlanarModel, PlanarParams};
 use serde::{Deserialize, Serialize};
 
 use super::paths::PathsConfig;
 use super::{ControllerSpec, ExperimentError, fair, invalid, percentile};
-use crate::harness::{
-    ControllerFactory, ReferenceFactory, StopCondition, StopReason, TrialResult, TrialSpec,
-    polyline_path_distance, run_trials,
-};
-use crate::plant::{PlantOptions, PlantState};
-use crate::sensing::SensorSpec;
+use crate::harness::{ControllerFactory, StopReason, TrialResult, TrialSpec, run_trials};
+use crate::plant::PlantOptions;
+use crate::sensing::VisionMode;
 
 /// Control step of the lab \[s\].
 const DT: f64 = 0.02;
@@ -171,41 +167,26 @@ impl Flier {
             source,
         };
         let model = PlanarModel::new(params).map_err(|e| wrap(e.into()))?;
-        let tilt = 35f64.to_radians();
-        let delay_ticks = if delay { config.delay_ticks() } else { 0 };
-        let settings = match form {
-            DfForm::Shipped => DfMpcSettings {
-                horizon: 100,
-                tracking_weight: [1.0; 3],
-                jerk_weight: [0.003; 3],
-                smoothness_weight: [50.0, 50.0, 0.0],
-                multi_rate: Some(MultiRateSettings::default()),
-                constraints: OutputConstraints {
-                    max_tilt: Some(30f64.to_radians()),
-                    ..OutputConstraints::default()
-                },
-                saturation: Some(InputSaturation {
-                    max_tilt: tilt,
-                    tilt_limit: TiltLimit::Cone,
-                    ..InputSaturation::default()
-                }),
-                delay_ticks,
-                // The lab is deterministic: no wall-clock limit.
-                solver_time_limit: f64::INFINITY,
-                ..DfMpcSettings::default()
-            },
-            DfForm::Paper => DfMpcSettings {
-                horizon: 100,
-                tracking_weight: [1.0; 3],
-                jerk_weight: [0.0003; 3],
-                saturation: Some(InputSaturation {
-                    max_tilt: tilt,
-                    ..InputSaturation::default()
-                }),
-                delay_ticks,
-                ..DfMpcSettings::default()
-            },
+        // The lab's own specs of the two forms, with the model's terms.
+        let specs = match form {
+            DfForm::Shipped => fair::fair_controllers(35.0),
+            DfForm::Paper => PathsConfig::untuned().controllers,
         };
+        let mut settings = specs
+            .iter()
+            .find(|c| match form {
+                DfForm::Shipped => matches!(c, ControllerSpec::DfMrSmooth { .. }),
+                DfForm::Paper => matches!(c, ControllerSpec::DfMpc { .. }),
+            })
+            .and_then(ControllerSpec::df_settings)
+            .ok_or_else(|| invalid("airframe", "the lab has no such DF-MPC spec"))?;
+        if form == DfForm::Shipped {
+            // Limited as the daemon limits it: the combined tilt.
+            if let Some(s) = &mut settings.saturation {
+                s.tilt_limit = TiltLimit::Cone;
+            }
+        }
+        settings.delay_ticks = if delay { config.delay_ticks() } else { 0 };
         DfMpc::new(ControlModel::Planar(model), settings).map_err(wrap)?;
         Ok(Arc::new(move || {
             Box::new(
@@ -306,38 +287,23 @@ fn trial(
     plant: PlantOptions,
     speed: f64,
 ) -> Result<TrialSpec, ExperimentError> {
-    let lab = PathsConfig::untuned();
-    let w = paths::waypoints(&paths::L_XY, lab.altitude);
-    let reference = Reference::path(&w, speed).map_err(ExperimentError::Reference)?;
-    let rf: ReferenceFactory = Arc::new(move || Box::new(reference.clone()));
-    let length: f64 = w.windows(2).map(|p| (p[1] - p[0]).norm()).sum();
-    let mut max_duration = length / speed + lab.timeout_margin;
-    if let Some(cap) = config.max_duration {
-        max_duration = max_duration.min(cap);
+    let mut lab = PathsConfig {
+        max_duration: config.max_duration,
+        ..PathsConfig::untuned()
+    };
+    if flier.multi_rate() {
+        lab.vision.mode = VisionMode::Raw;
     }
-    let mut t = TrialSpec::new(
+    let w = paths::waypoints(&paths::L_XY, lab.altitude);
+    let stop = lab.path_end_stop(&w, speed);
+    lab.path_trial(
         format!("{} L {speed} m/s", flier.name()),
         flier.factory(config)?,
-        rf,
-    );
-    t.initial = PlantState::hover(w[0], plant.g);
-    t.plant_options = plant;
-    let mut vision = lab.vision.clone();
-    if flier.multi_rate() {
-        vision.mode = crate::sensing::VisionMode::Raw;
-    }
-    t.sensor = SensorSpec::Vision(vision);
-    t.stop = StopCondition::PathEnd {
-        end: w[w.len() - 1],
-        radius: lab.arrival_radius,
-        settle: lab.settle,
-        max_duration,
-    };
-    t.path_distance = Some(polyline_path_distance(w.clone(), true));
-    t.divergence_bound = lab.divergence_bound;
-    t.stop_on_divergence = true;
-    t.validate()?;
-    Ok(t)
+        plant,
+        &w,
+        speed,
+        stop,
+    )
 }
 
 fn row(plant: &str, controller: String, speed: f64, results: &[TrialResult]) -> AirframeRow {

@@ -123,6 +123,23 @@ impl ControllerSpec {
         }
     }
 
+    /// The same spec with its state estimator's settings replaced by `e`,
+    /// if it is an estimator-fed baseline (else unchanged).
+    pub fn with_estimator(mut self, e: EstimatorSettings) -> Self {
+        if let Self::Fmpc {
+            estimator: Some(old),
+            ..
+        }
+        | Self::Pd {
+            estimator: Some(old),
+            ..
+        } = &mut self
+        {
+            *old = e;
+        }
+        self
+    }
+
     /// The baseline's state source (finite differences for DF-MPC, which
     /// has none).
     fn state_source(&self) -> StateSource {
@@ -157,6 +174,54 @@ impl ControllerSpec {
         }
     }
 
+    /// DF-MPC's settings for the DF variants, as [`ControllerSpec::build`]
+    /// flies them on the planar model; `None` for the baselines.
+    pub fn df_settings(&self) -> Option<DfMpcSettings> {
+        match *self {
+            Self::DfMpc {
+                horizon,
+                q,
+                r,
+                max_tilt_deg,
+            } => Some(DfMpcSettings {
+                horizon,
+                tracking_weight: [q; 3],
+                jerk_weight: [r; 3],
+                saturation: Some(InputSaturation {
+                    max_tilt: max_tilt_deg.to_radians(),
+                    ..InputSaturation::default()
+                }),
+                ..DfMpcSettings::default()
+            }),
+            Self::DfMrSmooth {
+                horizon,
+                q,
+                r,
+                smoothness,
+                plan_tilt_deg,
+                max_tilt_deg,
+            } => Some(DfMpcSettings {
+                horizon,
+                tracking_weight: [q; 3],
+                jerk_weight: [r; 3],
+                smoothness_weight: [smoothness, smoothness, 0.0],
+                multi_rate: Some(MultiRateSettings::default()),
+                constraints: OutputConstraints {
+                    max_tilt: Some(plan_tilt_deg.to_radians()),
+                    ..OutputConstraints::default()
+                },
+                saturation: Some(InputSaturation {
+                    max_tilt: max_tilt_deg.to_radians(),
+                    ..InputSaturation::default()
+                }),
+                // The lab is deterministic: no wall-clock limit.
+                solver_time_limit: f64::INFINITY,
+                ..DfMpcSettings::default()
+            }),
+            Self::Fmpc { .. } | Self::Pd { .. } => None,
+        }
+    }
+
     /// Builds the controller.
     pub fn build(&self) -> Result<Box<dyn Controller>, ExperimentError> {
         let model = planar_model().map_err(|e| ExperimentError::Controller {
@@ -168,59 +233,13 @@ impl ControllerSpec {
             source,
         };
         let state = self.state_source();
+        if let Some(settings) = self.df_settings() {
+            return Ok(Box::new(DfMpc::new(model, settings).map_err(wrap)?));
+        }
         Ok(match *self {
-            Self::DfMpc {
-                horizon,
-                q,
-                r,
-                max_tilt_deg,
-            } => Box::new(
-                DfMpc::new(
-                    model,
-                    DfMpcSettings {
-                        horizon,
-                        tracking_weight: [q; 3],
-                        jerk_weight: [r; 3],
-                        saturation: Some(InputSaturation {
-                            max_tilt: max_tilt_deg.to_radians(),
-                            ..InputSaturation::default()
-                        }),
-                        ..DfMpcSettings::default()
-                    },
-                )
-                .map_err(wrap)?,
-            ),
-            Self::DfMrSmooth {
-                horizon,
-                q,
-                r,
-                smoothness,
-                plan_tilt_deg,
-                max_tilt_deg,
-            } => Box::new(
-                DfMpc::new(
-                    model,
-                    DfMpcSettings {
-                        horizon,
-                        tracking_weight: [q; 3],
-                        jerk_weight: [r; 3],
-                        smoothness_weight: [smoothness, smoothness, 0.0],
-                        multi_rate: Some(MultiRateSettings::default()),
-                        constraints: OutputConstraints {
-                            max_tilt: Some(plan_tilt_deg.to_radians()),
-                            ..OutputConstraints::default()
-                        },
-                        saturation: Some(InputSaturation {
-                            max_tilt: max_tilt_deg.to_radians(),
-                            ..InputSaturation::default()
-                        }),
-                        // The lab is deterministic: no wall-clock limit.
-                        solver_time_limit: f64::INFINITY,
-                        ..DfMpcSettings::default()
-                    },
-                )
-                .map_err(wrap)?,
-            ),
+            Self::DfMpc { .. } | Self::DfMrSmooth { .. } => {
+                unreachable!("DF variants have settings")
+            }
             Self::Fmpc {
                 horizon,
                 q,

@@ -23,7 +23,7 @@ use std::sync::Arc;
 use dflat_control::dfmpc::{
     DfMpc, DfMpcSettings, InputSaturation, OutputConstraints, PlanTiltBound, QpSolver,
 };
-use dflat_control::reference::{Reference, paths};
+use dflat_control::reference::paths;
 use dflat_control::window::MultiRateSettings;
 use dflat_control::{ControlModel, TiltLimit};
 use dflat_model::{PlanarModel, PlanarParams};
@@ -32,12 +32,7 @@ use serde::{Deserialize, Serialize};
 
 use super::paths::PathsConfig;
 use super::{ExperimentError, percentile, write_json};
-use crate::harness::{
-    ControllerFactory, ReferenceFactory, StopCondition, TrialResult, TrialSpec,
-    polyline_path_distance, run_trials,
-};
-use crate::plant::PlantState;
-use crate::sensing::SensorSpec;
+use crate::harness::{ControllerFactory, TrialResult, TrialSpec, run_trials};
 
 /// Options of the study.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -200,24 +195,15 @@ fn trial(
     speed: f64,
 ) -> Result<TrialSpec, ExperimentError> {
     let lab = PathsConfig::untuned();
-    let reference = Reference::path(waypoints, speed).map_err(ExperimentError::Reference)?;
-    let rf: ReferenceFactory = Arc::new(move || Box::new(reference.clone()));
-    let plant = lab.plant_options();
-    let length: f64 = waypoints.windows(2).map(|p| (p[1] - p[0]).norm()).sum();
-    let mut t = TrialSpec::new(name, controller, rf);
-    t.initial = PlantState::hover(waypoints[0], plant.g);
-    t.plant_options = plant;
-    t.sensor = SensorSpec::Vision(lab.vision.clone());
-    t.stop = StopCondition::PathEnd {
-        end: waypoints[waypoints.len() - 1],
-        radius: lab.arrival_radius,
-        settle: lab.settle,
-        max_duration: length / speed + lab.timeout_margin,
-    };
-    t.path_distance = Some(polyline_path_distance(waypoints.to_vec(), true));
-    t.divergence_bound = lab.divergence_bound;
-    t.validate()?;
-    Ok(t)
+    let stop = lab.path_end_stop(waypoints, speed);
+    lab.path_trial(
+        name,
+        controller,
+        lab.plant_options(),
+        waypoints,
+        speed,
+        stop,
+    )
 }
 
 fn row(path: &str, speed: f64, bound: &str, dt: f64, results: &[TrialResult]) -> TiltConeRow {

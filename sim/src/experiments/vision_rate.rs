@@ -324,16 +324,22 @@ impl Default for VisionRateConfig {
             divergence_bound: 15.0,
             tilt_limit_deg: tilt,
             seed_base: 0,
-            controllers: vec![
+            controllers: [
                 df(0.0003, 0.0, None, None),
                 df(0.0003, 0.0, mr, None),
                 df(0.003, 50.0, mr, Some(30.0)),
-                // The baselines fed by their state estimator (the paths
-                // study's weights; its settings are re-derived per rate,
-                // [`VisionRateConfig::trial`]).
-                VisionController::Baseline(fair::fair_controllers(tilt)[1]),
-                VisionController::Baseline(fair::fair_controllers(tilt)[2]),
-            ],
+            ]
+            .into_iter()
+            // The baselines fed by their state estimator (the paths study's
+            // weights; its settings are re-derived per rate,
+            // [`VisionRateConfig::trial`]).
+            .chain(
+                fair::fair_controllers(tilt)
+                    .into_iter()
+                    .filter(|c| c.df_settings().is_none())
+                    .map(VisionController::Baseline),
+            )
+            .collect(),
         }
     }
 }
@@ -408,18 +414,9 @@ impl VisionRateConfig {
         let plant = self.plant_options();
         // An estimator-fed baseline gets the default rule at this rate.
         let controller = &match *controller {
-            VisionController::Baseline(mut spec) => {
-                if let ControllerSpec::Fmpc {
-                    estimator: Some(e), ..
-                }
-                | ControllerSpec::Pd {
-                    estimator: Some(e), ..
-                } = &mut spec
-                {
-                    *e = EstimatorSettings::for_sensor(self.sigma, rate);
-                }
-                VisionController::Baseline(spec)
-            }
+            VisionController::Baseline(spec) => VisionController::Baseline(
+                spec.with_estimator(EstimatorSettings::for_sensor(self.sigma, rate)),
+            ),
             c => c,
         };
         let mut t = TrialSpec::new(

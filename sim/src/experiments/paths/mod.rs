@@ -70,8 +70,8 @@ use serde::{Deserialize, Serialize};
 use super::figures::speed_series;
 use super::{ControllerSpec, ExperimentError, OutputPaths, invalid, mean, write_json};
 use crate::harness::{
-    ErrorStats, Metrics, ReferenceFactory, StopCondition, StopReason, TrialResult, TrialSpec,
-    polyline_path_distance, quantile, run_trials,
+    ControllerFactory, ErrorStats, Metrics, ReferenceFactory, StopCondition, StopReason,
+    TrialResult, TrialSpec, polyline_path_distance, quantile, run_trials,
 };
 use crate::plant::{PlantOptions, PlantState};
 use crate::plot::{
@@ -512,7 +512,52 @@ impl PathsResult {
     }
 }
 
-/// A trial on `waypoints` at `speed` with `spec`'s controller.
+impl PathsConfig {
+    /// The stop at the end of `waypoints` flown at `speed`: within the
+    /// arrival radius, then the settle time; at the latest after the path's
+    /// time plus the margin (capped by `max_duration`).
+    pub(crate) fn path_end_stop(&self, waypoints: &[Vector3<f64>], speed: f64) -> StopCondition {
+        let mut max_duration = path_length(waypoints) / speed + self.timeout_margin;
+        if let Some(cap) = self.max_duration {
+            max_duration = max_duration.min(cap);
+        }
+        StopCondition::PathEnd {
+            end: waypoints[waypoints.len() - 1],
+            radius: self.arrival_radius,
+            settle: self.settle,
+            max_duration,
+        }
+    }
+
+    /// A trial of `controller` on `waypoints` at `speed` on `plant`, under
+    /// this lab's vision: from hover at the first waypoint, the path error
+    /// to the polyline, stopped by `stop` or on divergence.
+    pub(crate) fn path_trial(
+        &self,
+        name: String,
+        controller: ControllerFactory,
+        plant: PlantOptions,
+        waypoints: &[Vector3<f64>],
+        speed: f64,
+        stop: StopCondition,
+    ) -> Result<TrialSpec, ExperimentError> {
+        let reference = Reference::path(waypoints, speed).map_err(ExperimentError::Reference)?;
+        let factory: ReferenceFactory = Arc::new(move || Box::new(reference.clone()));
+        let mut t = TrialSpec::new(name, controller, factory);
+        t.initial = PlantState::hover(waypoints[0], plant.g);
+        t.plant_options = plant;
+        t.sensor = SensorSpec::Vision(self.vision.clone());
+        t.stop = stop;
+        t.path_distance = Some(polyline_path_distance(waypoints.to_vec(), true));
+        t.divergence_bound = self.divergence_bound;
+        t.stop_on_divergence = true;
+        t.validate()?;
+        Ok(t)
+    }
+}
+
+/// A trial on `waypoints` at `speed` with `spec`'s controller on the lab's
+/// plant.
 fn path_trial(
     config: &PathsConfig,
     spec: &ControllerSpec,
@@ -521,19 +566,14 @@ fn path_trial(
     stop: StopCondition,
     name: String,
 ) -> Result<TrialSpec, ExperimentError> {
-    let reference = Reference::path(waypoints, speed).map_err(ExperimentError::Reference)?;
-    let factory: ReferenceFactory = Arc::new(move || Box::new(reference.clone()));
-    let plant = config.plant_options();
-    let mut t = TrialSpec::new(name, spec.factory()?, factory);
-    t.initial = PlantState::hover(waypoints[0], plant.g);
-    t.plant_options = plant;
-    t.sensor = SensorSpec::Vision(config.vision.clone());
-    t.stop = stop;
-    t.path_distance = Some(polyline_path_distance(waypoints.to_vec(), true));
-    t.divergence_bound = config.divergence_bound;
-    t.stop_on_divergence = true;
-    t.validate()?;
-    Ok(t)
+    config.path_trial(
+        name,
+        spec.factory()?,
+        config.plant_options(),
+        waypoints,
+        speed,
+        stop,
+    )
 }
 
 fn path_length(w: &[Vector3<f64>]) -> f64 {
@@ -547,16 +587,7 @@ fn l_trial(
     speed: f64,
 ) -> Result<TrialSpec, ExperimentError> {
     let w = paths::waypoints(&paths::L_XY, config.altitude);
-    let mut max_duration = path_length(&w) / speed + config.timeout_margin;
-    if let Some(cap) = config.max_duration {
-        max_duration = max_duration.min(cap);
-    }
-    let stop = StopCondition::PathEnd {
-        end: w[w.len() - 1],
-        radius: config.arrival_radius,
-        settle: config.settle,
-        max_duration,
-    };
+    let stop = config.path_end_stop(&w, speed);
     path_trial(
         config,
         spec,
