@@ -115,6 +115,17 @@ fn step_at(
         },
     ];
     events.extend(extra);
+    step_events(core, k, events)
+}
+
+/// Tick `k` at `k·δt` (no jitter) with `events`; the stopwatch advances
+/// 0.1 ms per reading.
+fn step_events(
+    core: &mut ControlCore,
+    k: u64,
+    events: impl IntoIterator<Item = Event>,
+) -> StepOutput {
+    let t = k as f64 * DT;
     let time = TickTime {
         tick: k,
         t,
@@ -406,21 +417,11 @@ fn reads_the_autopilots_parameters_and_refuses_to_engage_above_its_tilt_limit() 
 /// Tick `k` with only an autopilot heartbeat (the pose stream stopped).
 fn step_without_pose(core: &mut ControlCore, k: u64) -> StepOutput {
     let t = k as f64 * DT;
-    let time = TickTime {
-        tick: k,
-        t,
-        scheduled: t,
-        jitter_us: 0,
-    };
     let events = [Event::Heartbeat {
         arrival: t - 0.001,
         mode: OFFBOARD,
     }];
-    let mut clock = t;
-    core.step(&time, events, &mut || {
-        clock += 1e-4;
-        clock
-    })
+    step_events(core, k, events)
 }
 
 #[test]
@@ -575,17 +576,7 @@ fn flies_the_autopilots_hover_thrust_only_when_asked_and_before_engaging() {
                     value: 0.42,
                 });
             }
-            let time = TickTime {
-                tick: k,
-                t,
-                scheduled: t,
-                jitter_us: 0,
-            };
-            let mut clock = t;
-            let out = core.step(&time, events, &mut || {
-                clock += 1e-4;
-                clock
-            });
+            let out = step_events(&mut core, k, events);
             for m in &out.texts {
                 if let MavMessage::STATUSTEXT(d) = m {
                     texts.push(d.text.to_str().unwrap_or("").to_owned());
