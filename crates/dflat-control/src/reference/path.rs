@@ -137,7 +137,8 @@ impl Path {
         let a = acceleration;
         let mut limit = (f64::INFINITY, 0.0);
         for i in 1..n {
-            let corner = if i == n - 1 {
+            // v_c² = a·r·cot(β/2); the end is a stop.
+            let corner_sq = if i == n - 1 {
                 0.0
             } else {
                 let cos_beta = self.dirs[i - 1].dot(&self.dirs[i]).clamp(-1.0, 1.0);
@@ -146,10 +147,10 @@ impl Path {
                     continue;
                 }
                 let sin_beta = (1.0 - cos_beta * cos_beta).max(0.0).sqrt();
-                (a * radius * sin_beta / (1.0 - cos_beta)).sqrt()
+                a * radius * sin_beta / (1.0 - cos_beta)
             };
             let d = self.cum[i] - self.progress;
-            let v = (corner * corner + 2.0 * a * d.abs()).sqrt();
+            let v = (corner_sq + 2.0 * a * d.abs()).sqrt();
             if v < limit.0 {
                 limit = (v, if d > 0.0 { -a } else { a });
             }
