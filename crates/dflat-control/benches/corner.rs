@@ -24,7 +24,7 @@
 use std::time::Instant;
 
 use dflat_control::dfmpc::{DfMpc, DfMpcSettings, OutputConstraints, PlanTiltBound, QpSolver};
-use dflat_control::optimise::ConeMethod;
+use dflat_control::optimise::{Cascade, SolverMethod};
 use dflat_control::reference::Reference;
 use dflat_control::{ControlModel, Controller, Frame, Measurement};
 use dflat_model::{FlatModel, PlanarModel, PlanarParams};
@@ -78,12 +78,12 @@ impl Config {
     fn name(self) -> &'static str {
         match self {
             Self::Fast => "fast (no bound)",
-            Self::ConeWarm => "cone, banded ALM, warm",
-            Self::ConeCold => "cone, banded, cold (ALM, then IP)",
+            Self::ConeWarm => "cone, ALM, warm",
+            Self::ConeCold => "cone, ALM, cold (warm starts off)",
             Self::ConeClarabel => "cone, clarabel SOCP",
-            Self::BoxBanded => "box, banded IP",
-            Self::BoxRate => "box + tilt rate, banded IP",
-            Self::RateAlone => "tilt rate alone, banded IP",
+            Self::BoxBanded => "box, ALM, warm",
+            Self::BoxRate => "box + tilt rate, ALM, warm",
+            Self::RateAlone => "tilt rate alone, ALM, warm",
             Self::BoxRateClarabel => "box + tilt rate, clarabel",
         }
     }
@@ -145,17 +145,41 @@ fn record(n: usize) -> Vec<Measurement> {
     out
 }
 
-/// What the banded cone solver did on the constrained ticks of a replay.
+/// What the cascades' first solver (the augmented Lagrangian) did on the
+/// constrained ticks of a replay, and the times of the first ticks of
+/// constrained bursts.
 #[derive(Default)]
 struct ConeWork {
-    /// Newton steps (plus interior-point iterations) per tick.
+    /// Newton steps per solve it converged on.
     iterations: Vec<f64>,
-    /// The augmented Lagrangian's factorisations per tick.
+    /// Factorisations per solve it converged on.
     factorisations: Vec<f64>,
-    /// Ticks the interior point solved (the ALM did not converge).
+    /// Solves it did not converge on: an interior point solved.
     interior_point: usize,
-    /// Ticks clarabel solved (the banded solver failed).
+    /// Solves clarabel finished (after the banded solvers).
     clarabel: usize,
+    /// Cascade solves in all.
+    solves: usize,
+    /// Times of the first constrained tick after an unconstrained one \[s\].
+    burst_starts: Vec<f64>,
+}
+
+impl ConeWork {
+    /// Notes what `cascade` did on its last tick, if it ran.
+    fn note(&mut self, cascade: Option<&Cascade>) {
+        let Some((place, solver)) = cascade.and_then(Cascade::solved_by) else {
+            return;
+        };
+        self.solves += 1;
+        match solver.method() {
+            SolverMethod::Alm => {
+                self.iterations.push(solver.iterations() as f64);
+                self.factorisations.push(solver.factorisations() as f64);
+            }
+            SolverMethod::InteriorPoint => self.interior_point += 1,
+            SolverMethod::Clarabel => self.clarabel += usize::from(place > 0),
+        }
+    }
 }
 
 /// Tick times \[s\] of `repeats` replays, which ticks were constrained,
@@ -171,6 +195,7 @@ fn replay(
     for _ in 0..repeats {
         let mut ctrl = DfMpc::new(ControlModel::Planar(plant()), config.settings(n)).unwrap();
         let mut reference = path();
+        let mut was_constrained = false;
         for m in flight {
             let start = Instant::now();
             let out =
@@ -179,13 +204,15 @@ fn replay(
             all.push(t);
             if out.constrained {
                 constrained.push(t);
-                work.clarabel += usize::from(out.qp_fallback);
-                if let (Some(cone), false) = (ctrl.cone_solver(), out.qp_fallback) {
-                    work.iterations.push(cone.iterations() as f64);
-                    work.factorisations.push(cone.factorisations() as f64);
-                    work.interior_point += usize::from(cone.method() == ConeMethod::InteriorPoint);
+                if !was_constrained {
+                    work.burst_starts.push(t);
+                }
+                work.note(ctrl.cone_cascade());
+                for axis in 0..2 {
+                    work.note(ctrl.box_cascade(axis));
                 }
             }
+            was_constrained = out.constrained;
         }
     }
     (all, constrained, work)
@@ -210,7 +237,7 @@ fn main() {
         .filter_map(|a| a.parse().ok())
         .collect();
     let horizons = if horizons.is_empty() {
-        vec![100, 200, 400, 800]
+        vec![50, 100, 200, 400, 800]
     } else {
         horizons
     };
@@ -229,24 +256,27 @@ fn main() {
         let mut cone_work = Vec::new();
         for config in Config::ALL {
             let (mut all, mut con, mut work) = replay(config, n, &flight, repeats);
-            if let Some(start) = match config {
-                Config::ConeWarm => Some("warm"),
-                Config::ConeCold => Some("cold"),
-                _ => None,
-            } {
+            if !matches!(
+                config,
+                Config::Fast | Config::ConeClarabel | Config::BoxRateClarabel
+            ) {
                 let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
-                let ticks = work.iterations.len();
+                let bursts = work.burst_starts.len();
                 cone_work.push(format!(
-                    "{start} cone work per constrained tick: iterations mean {:.2}, p99 {}, max {}; \
-                     factorisations mean {:.2}; interior-point fallbacks {} and clarabel fallbacks {} \
-                     of {} ticks",
+                    "{}: ALM per solve: Newton steps mean {:.2}, p99 {}, max {}; \
+                     factorisations mean {:.2}; interior point solved {} and clarabel {} \
+                     of {} solves; first ticks of {} bursts: median {} µs, max {} µs",
+                    config.name(),
                     mean(&work.iterations),
                     percentile(&mut work.iterations, 99.0),
                     percentile(&mut work.iterations, 100.0),
                     mean(&work.factorisations),
                     work.interior_point,
                     work.clarabel,
-                    ticks + work.clarabel,
+                    work.solves,
+                    bursts / repeats,
+                    us(percentile(&mut work.burst_starts, 50.0)),
+                    us(percentile(&mut work.burst_starts, 100.0)),
                 ));
             }
             let s = [

@@ -47,7 +47,7 @@ use nalgebra::Vector3;
 
 use crate::disturbance::{DisturbanceEstimate, DisturbanceEstimator};
 use crate::model::ControlModel;
-use crate::optimise::{AxisBounds, BandedConeSolver, ConeBounds, invalid};
+use crate::optimise::{AxisBounds, Cascade, ConeBounds, invalid};
 use crate::window::{MultiRateWindow, Window};
 use crate::{ControlError, Controller, Measurement, ReferenceSource, TickOutput, limit_tilt};
 
@@ -250,11 +250,17 @@ impl DfMpc {
         self.cone.as_ref().map(|c| c.radius())
     }
 
-    /// The banded tilt-cone solver, with the statistics of its last solve
-    /// (iterations, method, warm start), when the plan's tilt bound is the
-    /// cone and the constrained solver is [`QpSolver::Banded`].
-    pub fn cone_solver(&self) -> Option<&BandedConeSolver> {
-        self.cone.as_ref().and_then(|c| c.banded())
+    /// The tilt cone's cascade of solvers, with the statistics of their
+    /// last solves (which solved, iterations, warm start), when the plan's
+    /// tilt bound is the cone.
+    pub fn cone_cascade(&self) -> Option<&Cascade> {
+        self.cone.as_ref().map(|c| c.cascade())
+    }
+
+    /// The box cascade of `axis` (0 = x, 1 = y, 2 = z), when that axis
+    /// has bounds of its own.
+    pub fn box_cascade(&self, axis: usize) -> Option<&Cascade> {
+        self.axes.get(axis).and_then(|a| a.bounded.as_ref())
     }
 
     /// The per-axis bounds derived from the constraints (x, y, z order);
@@ -553,7 +559,7 @@ impl Controller for DfMpc {
             saturated,
             constrained: solve.constrained,
             qp_fallback: solve.qp_fallback,
-            cone_interior_point: solve.cone_interior_point,
+            cone_interior_point: solve.interior_point,
         })
     }
 
@@ -674,7 +680,12 @@ impl Controller for DfMpc {
             e.reset();
         }
         if let Some(c) = &mut self.cone {
-            c.forget();
+            c.reset();
+        }
+        for a in &mut self.axes {
+            if let Some(b) = &mut a.bounded {
+                b.reset();
+            }
         }
     }
 

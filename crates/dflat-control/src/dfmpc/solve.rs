@@ -8,19 +8,20 @@ use crate::ControlError;
 use crate::model::ControlModel;
 use crate::optimise::{
     AxisBounds, AxisProblem, AxisWeights, BandedConeSolver, BandedInteriorPointSolver,
-    ClarabelConeSolver, ClarabelSolver, ConeBounds, ConeMethod, FastBandedSolver, KktTuning,
-    Smoothness, TiltRate,
+    BoxAlmSolver, Cascade, ClarabelConeSolver, ClarabelSolver, ConeBounds, ConstrainedSolver,
+    FastBandedSolver, KktTuning, Smoothness, SolverMethod, TiltRate,
 };
 use crate::window::input_lags;
 
-/// One axis's optimisation: the fast path, the bounded solvers when the
-/// axis has bounds, and its reference and plan buffers.
+/// One axis's optimisation: the fast path, the constrained cascade when
+/// the axis has bounds, and its reference and plan buffers.
 #[derive(Debug)]
 pub(super) struct AxisPipeline {
     /// The unconstrained problem (the fast path).
     pub(super) fast: FastBandedSolver,
-    /// The problem with this axis's bounds, when it has any.
-    pub(super) bounded: Option<BoundedQp>,
+    /// The problem with this axis's bounds, when it has any: the box's
+    /// cascade (augmented Lagrangian, interior point, clarabel).
+    pub(super) bounded: Option<Cascade>,
     /// The bounds (empty when none).
     pub(super) bounds: AxisBounds,
     /// This tick's reference on this axis, y_ref,k..y_ref,k+N \[m\].
@@ -33,34 +34,35 @@ pub(super) struct AxisPipeline {
     pub(super) good_plan: Vec<f64>,
 }
 
-/// The bounded QP of one axis: the banded interior point first (with
-/// [`QpSolver::Banded`]), clarabel when it does not converge.
-#[derive(Debug)]
-pub(super) struct BoundedQp {
-    pub(super) interior_point: Option<BandedInteriorPointSolver>,
-    pub(super) clarabel: ClarabelSolver,
-}
-
 /// What [`DfMpc::optimise`] reports of a tick's solve.
 #[derive(Debug, Clone, Copy, Default)]
 pub(super) struct SolveReport {
-    /// A bound was binding on some axis (a bounded solver ran).
+    /// A bound was binding on some axis (a constrained cascade ran).
     pub(super) constrained: bool,
-    /// Clarabel solved an axis the interior point did not.
+    /// Clarabel solved where a banded solver came before it.
     pub(super) qp_fallback: bool,
-    /// The cone's interior point solved where its augmented Lagrangian
-    /// did not converge.
-    pub(super) cone_interior_point: bool,
+    /// A banded interior point solved where the augmented Lagrangian did
+    /// not converge (box or cone).
+    pub(super) interior_point: bool,
 }
 
-/// The horizontal pair's tilt-cone QP ([`PlanTiltBound::Cone`]): the
-/// banded cone solver first (with [`QpSolver::Banded`]; augmented
-/// Lagrangian, interior point as its fallback), clarabel's SOCP when it
-/// does not converge.
+impl SolveReport {
+    /// Notes which solver of a cascade solved (its place and method).
+    fn solved(&mut self, cascade: &Cascade, method: SolverMethod) {
+        self.constrained = true;
+        let first = cascade.solved_by().is_some_and(|(i, _)| i == 0);
+        self.qp_fallback |= method == SolverMethod::Clarabel && !first;
+        self.interior_point |= method == SolverMethod::InteriorPoint && !first;
+    }
+}
+
+/// The horizontal pair's tilt-cone QP ([`PlanTiltBound::Cone`]): its
+/// cascade — with [`QpSolver::Banded`] the augmented Lagrangian
+/// (warm-started), the banded interior point, then clarabel's SOCP.
 #[derive(Debug)]
 pub(super) struct HorizontalCone {
-    banded: Option<BandedConeSolver>,
-    clarabel: ClarabelConeSolver,
+    cascade: Cascade,
+    bounds: ConeBounds,
     /// tan(max_tilt).
     tilt_tan: f64,
     /// Gravity g [m/s²], and the sign of the vertical acceleration in the
@@ -82,12 +84,12 @@ pub(super) const MIN_VERTICAL_SHARE: f64 = 0.2;
 impl HorizontalCone {
     /// The bounds of the pair.
     pub(super) fn bounds(&self) -> &ConeBounds {
-        self.clarabel.bounds()
+        &self.bounds
     }
 
-    /// The banded solver, when it is used.
-    pub(super) fn banded(&self) -> Option<&BandedConeSolver> {
-        self.banded.as_ref()
+    /// The cascade of solvers.
+    pub(super) fn cascade(&self) -> &Cascade {
+        &self.cascade
     }
 
     /// The cone's radius per stage [m/s²] (stage f bounds the acceleration
@@ -107,17 +109,12 @@ impl HorizontalCone {
             let az = (z[j + 2] - 2.0 * z[j + 1] + z[j]) / dt2;
             *r = self.tilt_tan * (self.gravity - self.down * az).max(floor);
         }
-        if let Some(banded) = &mut self.banded {
-            banded.set_radius(&self.radius)?;
-        }
-        self.clarabel.set_radius(&self.radius)
+        self.cascade.set_radius(&self.radius)
     }
 
-    /// Forgets the warm start (a reset, or a tick that did not solve).
-    pub(super) fn forget(&mut self) {
-        if let Some(banded) = &mut self.banded {
-            banded.forget();
-        }
+    /// A controller reset: nothing carried to the next solve.
+    pub(super) fn reset(&mut self) {
+        self.cascade.reset();
     }
 }
 
@@ -167,27 +164,32 @@ pub(super) fn build_pipelines(
         let bounded = if bounds.is_empty() {
             None
         } else {
-            Some(BoundedQp {
-                interior_point: if settings.qp_solver == QpSolver::Banded {
-                    Some(BandedInteriorPointSolver::new(
-                        n,
-                        (q, r, dt),
-                        bounds,
-                        smoothness,
-                    )?)
-                } else {
-                    None
-                },
-                clarabel: ClarabelSolver::with_smoothness(
+            let mut solvers: Vec<Box<dyn ConstrainedSolver>> = Vec::new();
+            if settings.qp_solver == QpSolver::Banded {
+                solvers.push(Box::new(BoxAlmSolver::new(
                     n,
-                    q,
-                    r,
-                    dt,
+                    (q, r, dt),
                     bounds,
-                    settings.solver_time_limit,
                     smoothness,
-                )?,
-            })
+                    settings.warm_start,
+                )?));
+                solvers.push(Box::new(BandedInteriorPointSolver::new(
+                    n,
+                    (q, r, dt),
+                    bounds,
+                    smoothness,
+                )?));
+            }
+            solvers.push(Box::new(ClarabelSolver::with_smoothness(
+                n,
+                q,
+                r,
+                dt,
+                bounds,
+                settings.solver_time_limit,
+                smoothness,
+            )?));
+            Some(Cascade::new(solvers)?)
         };
         pipelines.push(AxisPipeline {
             fast: FastBandedSolver::with_smoothness(n, q, r, dt, smoothness)?,
@@ -212,19 +214,31 @@ pub(super) fn build_pipelines(
                 r: settings.jerk_weight[axis],
                 smoothness: pipelines[axis].fast.smoothness(),
             });
+            let mut solvers: Vec<Box<dyn ConstrainedSolver>> = Vec::new();
+            if settings.qp_solver == QpSolver::Banded {
+                for methods in [[true, false], [false, true]] {
+                    solvers.push(Box::new(BandedConeSolver::with_methods(
+                        n,
+                        dt,
+                        weights,
+                        bounds,
+                        settings.warm_start,
+                        methods,
+                    )?));
+                }
+            }
+            solvers.push(Box::new(ClarabelConeSolver::new(
+                n,
+                dt,
+                weights,
+                bounds,
+                settings.solver_time_limit,
+                true,
+                KktTuning::SHIPPED,
+            )?));
             Some(HorizontalCone {
-                banded: (settings.qp_solver == QpSolver::Banded)
-                    .then(|| BandedConeSolver::new(n, dt, weights, bounds, settings.warm_start))
-                    .transpose()?,
-                clarabel: ClarabelConeSolver::new(
-                    n,
-                    dt,
-                    weights,
-                    bounds,
-                    settings.solver_time_limit,
-                    true,
-                    KktTuning::SHIPPED,
-                )?,
+                cascade: Cascade::new(solvers)?,
+                bounds,
                 tilt_tan: t.tan(),
                 gravity: model.gravity(),
                 down,
@@ -293,33 +307,20 @@ impl DfMpc {
         let mut report = SolveReport::default();
         let dt = self.model.dt();
         for (axis, p) in self.axes.iter_mut().enumerate() {
-            let Some(qp) = &mut p.bounded else { continue };
+            let Some(cascade) = &mut p.bounded else {
+                continue;
+            };
             if !p.bounds.violated(&p.plan, sent(axis), dt) {
+                cascade.skip();
                 continue;
             }
-            // The banded interior point first; clarabel when it does not
-            // converge (its own failure is the tick's).
-            let solved = match &mut qp.interior_point {
-                Some(ip) => ip
-                    .solve_problem(AxisProblem {
-                        fixed: &fixed_axis[axis],
-                        sent: sent(axis),
-                        reference: &p.reference,
-                        plan: &mut p.plan,
-                    })
-                    .is_ok(),
-                None => false,
-            };
-            if !solved {
-                report.qp_fallback |= qp.interior_point.is_some();
-                qp.clarabel.solve_problem(AxisProblem {
-                    fixed: &fixed_axis[axis],
-                    sent: sent(axis),
-                    reference: &p.reference,
-                    plan: &mut p.plan,
-                })?;
-            }
-            report.constrained = true;
+            let method = cascade.solve(&mut [AxisProblem {
+                fixed: &fixed_axis[axis],
+                sent: sent(axis),
+                reference: &p.reference,
+                plan: &mut p.plan,
+            }])?;
+            report.solved(cascade, method);
         }
         if let Some(cone) = &mut self.cone {
             let [ax, ay, rest @ ..] = self.axes.as_mut_slice() else {
@@ -331,52 +332,28 @@ impl DfMpc {
                 cone.follow_vertical_plan(&az.plan, dt)?;
             }
             if !cone
-                .bounds()
-                .violated_within(&ax.plan, &ay.plan, dt, cone.radius())
+                .bounds
+                .violated_within(&ax.plan, &ay.plan, dt, &cone.radius)
             {
                 // Not solved: the next solve has no previous one to shift.
-                cone.forget();
+                cone.cascade.skip();
                 return Ok(report);
             }
-            let x = AxisProblem {
-                fixed: &fixed_axis[0],
-                sent: sent(0),
-                reference: &ax.reference,
-                plan: &mut ax.plan,
-            };
-            let y = AxisProblem {
-                fixed: &fixed_axis[1],
-                sent: sent(1),
-                reference: &ay.reference,
-                plan: &mut ay.plan,
-            };
-            let solved = match &mut cone.banded {
-                Some(banded) => {
-                    let ok = banded.solve_pair(x, y).is_ok();
-                    report.cone_interior_point = ok && banded.method() == ConeMethod::InteriorPoint;
-                    ok
-                }
-                None => false,
-            };
-            if !solved {
-                report.qp_fallback |= cone.banded.is_some();
-                cone.forget();
-                cone.clarabel.solve_pair(
-                    AxisProblem {
-                        fixed: &fixed_axis[0],
-                        sent: sent(0),
-                        reference: &ax.reference,
-                        plan: &mut ax.plan,
-                    },
-                    AxisProblem {
-                        fixed: &fixed_axis[1],
-                        sent: sent(1),
-                        reference: &ay.reference,
-                        plan: &mut ay.plan,
-                    },
-                )?;
-            }
-            report.constrained = true;
+            let method = cone.cascade.solve(&mut [
+                AxisProblem {
+                    fixed: &fixed_axis[0],
+                    sent: sent(0),
+                    reference: &ax.reference,
+                    plan: &mut ax.plan,
+                },
+                AxisProblem {
+                    fixed: &fixed_axis[1],
+                    sent: sent(1),
+                    reference: &ay.reference,
+                    plan: &mut ay.plan,
+                },
+            ])?;
+            report.solved(&cone.cascade, method);
         }
         Ok(report)
     }

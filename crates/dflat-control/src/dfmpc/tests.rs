@@ -1,10 +1,11 @@
 //! Tests of the per-axis solvers and of DF-MPC on fixtures.
 
 use super::*;
+use crate::optimise::alm::COLD_TUNING;
 use crate::optimise::smoothness::accel_block;
 use crate::optimise::{
-    AxisProblem, BandedInteriorPointSolver, ClarabelSolver, FastBandedSolver, KktTuning,
-    Smoothness, baseline,
+    AxisProblem, BandedInteriorPointSolver, BoxAlmSolver, ClarabelSolver, FastBandedSolver,
+    KktTuning, Smoothness, baseline,
 };
 
 const DT: f64 = 0.02;
@@ -181,8 +182,9 @@ fn qp_objective(
 
 proptest::proptest! {
     #![proptest_config(proptest::test_runner::Config::with_cases(256))]
-    /// Clarabel with the shipped KKT tuning ([`KktTuning::SHIPPED`]) and
-    /// the banded interior point ([`BandedInteriorPointSolver`]) both give the
+    /// Clarabel with the shipped KKT tuning ([`KktTuning::SHIPPED`]), the
+    /// banded interior point ([`BandedInteriorPointSolver`]) and the
+    /// augmented Lagrangian ([`BoxAlmSolver`]) all give the
     /// plan of clarabel's default settings on random constrained
     /// instances — with and without the smoothness term, windows faster
     /// than the speed bound (funnel) included — to the tolerances
@@ -241,6 +243,21 @@ proptest::proptest! {
                 fixed: &fixed, sent, reference: &reference, plan: &mut got_banded,
             })
             .unwrap();
+        // The augmented Lagrangian from the fast path's plan (as the
+        // cascade gives it), cold.
+        let mut got_alm = vec![0.0; horizon + 1];
+        FastBandedSolver::with_smoothness(horizon, q, r, DT, smoothness)
+            .unwrap()
+            .solve_problem(AxisProblem {
+                fixed: &fixed, sent, reference: &reference, plan: &mut got_alm,
+            })
+            .unwrap();
+        let mut alm = BoxAlmSolver::with_tuning(horizon, (q, r, DT), bounds, smoothness, true, COLD_TUNING).unwrap();
+        alm
+            .solve_problem(AxisProblem {
+                fixed: &fixed, sent, reference: &reference, plan: &mut got_alm,
+            })
+            .unwrap();
         let jerk = |p: &[f64]| (p[3] - 3.0 * p[2] + 3.0 * p[1] - p[0]) / DT.powi(3);
         let jw = jerk(&want);
         // Both stop at ~1e-8 relative gaps, so outputs far out in the
@@ -255,16 +272,20 @@ proptest::proptest! {
         let objective = |plan: &[f64]| {
             qp_objective(horizon, (q, r, DT), &smoothness, &fixed, sent, &reference, plan)
         };
-        let (ow, ob) = (objective(&want), objective(&got_banded));
-        proptest::prop_assert!(
-            ob <= ow + 1e-7 * (1.0 + ow.abs()),
-            "banded cost {ob} above clarabel's {ow}"
-        );
+        let ow = objective(&want);
+        for (name, plan) in [("banded", &got_banded), ("ALM", &got_alm)] {
+            let ob = objective(plan);
+            proptest::prop_assert!(
+                ob <= ow + 1e-7 * (1.0 + ow.abs()),
+                "{name} cost {ob} above clarabel's {ow}"
+            );
+        }
         // (name, plan, first-jerk tolerance (relative), tolerance on
         // the first ten outputs, on the rest [m]).
         let cases = [
             ("clarabel shipped", &got, 1e-6, 1e-6, 1e-5),
             ("banded", &got_banded, 1e-3, 1e-5, 1e-3),
+            ("ALM", &got_alm, 1e-3, 1e-5, 1e-3),
         ];
         for (name, got, jerk_tol, near_tol, far_tol) in cases {
             let jg = jerk(got);
@@ -462,10 +483,26 @@ fn banded_failure_falls_back_to_clarabel_and_says_so() {
         tilt_rate: None,
         drag: 0.0,
     };
-    for p in &mut broken.axes {
-        let qp = p.bounded.as_mut().expect("the axis has bounds");
-        qp.interior_point = Some(
-            BandedInteriorPointSolver::new(10, (1.0, 0.08, DT), bounds, Smoothness::default())
+    let weights = DfMpcSettings::default();
+    for (axis, p) in broken.axes.iter_mut().enumerate() {
+        assert!(p.bounded.is_some(), "the axis has bounds");
+        let (q, r) = (weights.tracking_weight[axis], weights.jerk_weight[axis]);
+        let clarabel = crate::optimise::ClarabelSolver::with_smoothness(
+            p.fast.horizon(),
+            q,
+            r,
+            DT,
+            p.bounds,
+            f64::INFINITY,
+            p.fast.smoothness(),
+        )
+        .unwrap();
+        let alm =
+            BoxAlmSolver::new(10, (1.0, 0.08, DT), bounds, Smoothness::default(), true).unwrap();
+        let ip = BandedInteriorPointSolver::new(10, (1.0, 0.08, DT), bounds, Smoothness::default())
+            .unwrap();
+        p.bounded = Some(
+            crate::optimise::Cascade::new(vec![Box::new(alm), Box::new(ip), Box::new(clarabel)])
                 .unwrap(),
         );
     }
@@ -536,14 +573,19 @@ fn warm_cone_flies_the_corner_as_clarabel_does() {
         let c = clarabel.update(&m, &mut rc).unwrap();
         assert_eq!(a.constrained, c.constrained, "tick {k}");
         assert!(!a.qp_fallback, "tick {k}: clarabel had to solve");
-        let solver = banded.cone_solver().expect("banded cone solver");
+        let cascade = banded.cone_cascade().expect("the cone's cascade");
         if a.constrained {
             constrained += 1;
+            let (place, solver) = cascade.solved_by().expect("a solver solved");
             warm += usize::from(solver.warm_started());
             assert_eq!(
                 a.cone_interior_point,
-                solver.method() == crate::optimise::ConeMethod::InteriorPoint,
+                solver.method() == crate::optimise::SolverMethod::InteriorPoint,
                 "tick {k}"
+            );
+            assert_eq!(
+                place == 0,
+                solver.method() == crate::optimise::SolverMethod::Alm
             );
             let cone = banded.cone_bounds().unwrap();
             assert!(!cone.violated_by(banded.plan(0).unwrap(), banded.plan(1).unwrap(), DT));

@@ -161,23 +161,74 @@ impl AxisBounds {
     }
 }
 
-/// A bound row `g·v` over at most three indices of a solver's unknowns
-/// (the banded interior points' and the cone ALM's speed, acceleration
-/// and tilt-rate rows).
+/// Most entries of a [`Row`]: a tilt-rate row on three stage
+/// accelerations spans five free outputs.
+const ROW_ENTRIES: usize = 5;
+
+/// A bound row `g·v` over at most five indices of a solver's unknowns
+/// (the banded interior points' and the augmented Lagrangian's speed,
+/// acceleration and tilt-rate rows).
 #[derive(Debug, Clone, Copy)]
 pub(super) struct Row {
-    pub(super) idx: [usize; 3],
-    pub(super) coef: [f64; 3],
+    pub(super) idx: [usize; ROW_ENTRIES],
+    pub(super) coef: [f64; ROW_ENTRIES],
     pub(super) len: usize,
 }
 
 impl Row {
+    /// A row from its entries (at most [`ROW_ENTRIES`], distinct indices).
+    fn from_entries(entries: &[(usize, f64)]) -> Self {
+        let mut row = Self {
+            idx: [0; ROW_ENTRIES],
+            coef: [0.0; ROW_ENTRIES],
+            len: entries.len(),
+        };
+        for (k, &(i, c)) in entries.iter().enumerate() {
+            row.idx[k] = i;
+            row.coef[k] = c;
+        }
+        row
+    }
+
     /// The row `v[index]` (coefficient 1).
     pub(super) fn single(index: usize) -> Self {
-        Self {
-            idx: [index, 0, 0],
-            coef: [1.0, 0.0, 0.0],
-            len: 1,
+        Self::from_entries(&[(index, 1.0)])
+    }
+
+    /// This row over the free outputs p instead of the stage accelerations
+    /// ã: each `ã_s = (p_s − 2p_{s−1} + p_{s−2})/δt²` (p before the
+    /// horizon 0) expanded, `stage(k)` the stage of entry k of `self`
+    /// (whose `idx` are stage numbers), p_s at `index(s)`.
+    pub(super) fn on_outputs(&self, inv_dt2: f64, index: impl Fn(usize) -> usize) -> Self {
+        let top = self.idx[..self.len].iter().copied().max().unwrap_or(0);
+        // Entry o holds p_{top − o}.
+        let mut coef = [0.0; ROW_ENTRIES];
+        for k in 0..self.len {
+            let s = self.idx[k];
+            for (m, d) in [1.0, -2.0, 1.0].into_iter().enumerate() {
+                if s >= m {
+                    coef[top - (s - m)] += self.coef[k] * d * inv_dt2;
+                }
+            }
+        }
+        let mut entries = [(0, 0.0); ROW_ENTRIES];
+        let mut len = 0;
+        for (o, &c) in coef.iter().enumerate() {
+            if c != 0.0 && o <= top {
+                entries[len] = (index(top - o), c);
+                len += 1;
+            }
+        }
+        Self::from_entries(&entries[..len])
+    }
+
+    /// The largest distance between two of its indices (the band it
+    /// needs).
+    pub(super) fn span(&self) -> usize {
+        let idx = &self.idx[..self.len];
+        match (idx.iter().max(), idx.iter().min()) {
+            (Some(a), Some(b)) => a - b,
+            _ => 0,
         }
     }
 
@@ -187,16 +238,12 @@ impl Row {
     pub(super) fn tilt_rate(f: usize, kappa: f64, index: impl Fn(usize) -> usize) -> Self {
         match f {
             0 => Self::single(index(0)),
-            1 => Self {
-                idx: [index(1), index(0), 0],
-                coef: [kappa, 1.0 - 2.0 * kappa, 0.0],
-                len: 2,
-            },
-            _ => Self {
-                idx: [index(f), index(f - 1), index(f - 2)],
-                coef: [kappa, 1.0 - 2.0 * kappa, kappa - 1.0],
-                len: 3,
-            },
+            1 => Self::from_entries(&[(index(1), kappa), (index(0), 1.0 - 2.0 * kappa)]),
+            _ => Self::from_entries(&[
+                (index(f), kappa),
+                (index(f - 1), 1.0 - 2.0 * kappa),
+                (index(f - 2), kappa - 1.0),
+            ]),
         }
     }
 
@@ -205,17 +252,9 @@ impl Row {
     /// `index(k)`.
     pub(super) fn speed(g: usize, dt: f64, index: impl Fn(usize) -> usize) -> Self {
         if g == 0 {
-            Self {
-                idx: [index(0), 0, 0],
-                coef: [1.0 / dt, 0.0, 0.0],
-                len: 1,
-            }
+            Self::from_entries(&[(index(0), 1.0 / dt)])
         } else {
-            Self {
-                idx: [index(g - 1), index(g), 0],
-                coef: [-1.0 / dt, 1.0 / dt, 0.0],
-                len: 2,
-            }
+            Self::from_entries(&[(index(g - 1), -1.0 / dt), (index(g), 1.0 / dt)])
         }
     }
 

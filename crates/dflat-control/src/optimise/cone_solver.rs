@@ -1,9 +1,10 @@
 //! [`BandedConeSolver`]: both horizontal axes with the tilt cone
 //! ([`super::cone`]), solved by the augmented Lagrangian of
-//! [`super::cone_alm`] (warm-started across ticks), with the banded
+//! [`super::alm`] (warm-started across ticks), with the banded
 //! interior point of [`super::cone_qp`] as its fallback.
 
-use super::cone_alm::{self, AlmTuning, ConeAlm};
+use super::alm::{AlmTuning, BandedAlm, RowBlock, StageSet};
+use super::bounds::Row;
 use super::cone_qp::{ConeAxis, ConeQp, STAGE, a_at, p_at};
 use super::smoothness::{accel_block, sent_linear_term};
 use super::{AxisProblem, ConeBounds, FastBandedSolver, Smoothness, baseline, check_lengths};
@@ -22,7 +23,7 @@ pub struct AxisWeights {
 }
 
 /// The two horizontal axes with the tilt cone and soft speed bounds
-/// ([`ConeBounds`]): the augmented Lagrangian ([`ConeAlm`], O(N) per
+/// ([`ConeBounds`]): the augmented Lagrangian ([`BandedAlm`], O(N) per
 /// Newton step), warm-started from the previous tick's solution and
 /// multipliers shifted by one step when the previous tick used it too;
 /// should it not converge, the stage-ordered banded interior point
@@ -37,8 +38,10 @@ pub struct BandedConeSolver {
     dt: f64,
     weights: [AxisWeights; 2],
     bounds: ConeBounds,
-    qp: ConeQp,
-    alm: ConeAlm,
+    /// The interior point and the augmented Lagrangian, those this
+    /// solver runs ([`BandedConeSolver::with_methods`]).
+    qp: Option<ConeQp>,
+    alm: Option<BandedAlm>,
     /// ALM linear term (2n, interleaved) and scratch.
     c_alm: Vec<f64>,
     base: Vec<f64>,
@@ -46,6 +49,10 @@ pub struct BandedConeSolver {
     c: Vec<f64>,
     lo: Vec<f64>,
     hi: Vec<f64>,
+    /// The axes' fast paths (their right-hand sides), and the radius per
+    /// stage A_f [m/s²].
+    fast: [FastBandedSolver; 2],
+    radius: Vec<f64>,
     /// Start deviations per axis (cold), then the warm guess.
     p: [Vec<f64>; 2],
     warm: [Vec<f64>; 2],
@@ -63,7 +70,7 @@ pub struct BandedConeSolver {
 /// Which method of [`BandedConeSolver`] solved a tick.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ConeMethod {
-    /// The augmented Lagrangian ([`ConeAlm`]).
+    /// The augmented Lagrangian ([`BandedAlm`]).
     Alm,
     /// The stage interior point ([`ConeQp`]), after the ALM failed.
     InteriorPoint,
@@ -71,7 +78,8 @@ pub enum ConeMethod {
 
 impl BandedConeSolver {
     /// Builds the solver for horizon N ≥ 3, step δt > 0 \[s\], per-axis
-    /// weights (x, y), the bounds, and whether to warm-start.
+    /// weights (x, y), the bounds, and whether to warm-start: the
+    /// augmented Lagrangian with the interior point as its fallback.
     pub fn new(
         horizon: usize,
         dt: f64,
@@ -79,11 +87,28 @@ impl BandedConeSolver {
         bounds: ConeBounds,
         warm_start: bool,
     ) -> Result<Self, ControlError> {
+        Self::with_methods(horizon, dt, weights, bounds, warm_start, [true, true])
+    }
+
+    /// As [`BandedConeSolver::new`], running only the methods chosen:
+    /// `[augmented Lagrangian, interior point]` (at least one) — one entry
+    /// each of the constrained plan's cascade ([`super::cascade`]).
+    pub fn with_methods(
+        horizon: usize,
+        dt: f64,
+        weights: [AxisWeights; 2],
+        bounds: ConeBounds,
+        warm_start: bool,
+        [use_alm, use_ip]: [bool; 2],
+    ) -> Result<Self, ControlError> {
         for w in &weights {
             FastBandedSolver::check_args(horizon, w.q, w.r, dt)?;
             w.smoothness.check()?;
         }
         bounds.check()?;
+        if !(use_alm || use_ip) {
+            return Err(super::invalid("cone solver", "at least one method"));
+        }
         let n = horizon - 2;
         let axes = weights.map(|w| ConeAxis {
             q: w.q,
@@ -94,21 +119,40 @@ impl BandedConeSolver {
         let fast = |w: &AxisWeights| {
             FastBandedSolver::with_smoothness(horizon, w.q, w.r, dt, w.smoothness)
         };
-        let alm = ConeAlm::new(
-            [fast(&weights[0])?, fast(&weights[1])?],
-            dt,
-            bounds.acceleration,
-            penalty,
-            AlmTuning::default(),
-        );
+        let fast = [fast(&weights[0])?, fast(&weights[1])?];
+        // The speed rows per axis, axis 0's first (p_{axis, k} at 2k + axis).
+        let blocks = penalty
+            .map(|penalty| {
+                (0..2)
+                    .map(|axis| RowBlock {
+                        rows: (0..n)
+                            .map(|g| Row::speed(g, dt, |k| 2 * k + axis))
+                            .collect(),
+                        scale: 1.0 / (dt * dt),
+                        penalty,
+                    })
+                    .collect()
+            })
+            .unwrap_or_default();
+        let alm = use_alm.then(|| {
+            BandedAlm::new(
+                fast.to_vec(),
+                dt,
+                StageSet::Disc(vec![bounds.acceleration; n]),
+                blocks,
+                AlmTuning::default(),
+            )
+        });
         let m = qp.rows();
         Ok(Self {
             horizon,
             dt,
             weights,
             bounds,
-            qp,
+            qp: use_ip.then_some(qp),
             alm,
+            fast,
+            radius: vec![bounds.acceleration; n],
             c_alm: vec![0.0; 2 * n],
             base: vec![0.0; n],
             rhs: vec![0.0; n],
@@ -122,7 +166,11 @@ impl BandedConeSolver {
             previous_valid: false,
             iterations: 0,
             warm_used: false,
-            method: ConeMethod::Alm,
+            method: if use_alm {
+                ConeMethod::Alm
+            } else {
+                ConeMethod::InteriorPoint
+            },
         })
     }
 
@@ -143,9 +191,10 @@ impl BandedConeSolver {
     }
 
     /// Factorisations of the augmented Lagrangian's last solve (at most
-    /// one per Newton step: the local phase reuses the factor).
+    /// one per Newton step: the local phase reuses the factor; 0 without
+    /// it).
     pub fn factorisations(&self) -> usize {
-        self.alm.factorisations()
+        self.alm.as_ref().map_or(0, BandedAlm::factorisations)
     }
 
     /// Sets the cone's radius per stage A_f [m/s²] (N − 2 entries, finite
@@ -154,8 +203,15 @@ impl BandedConeSolver {
     /// model's tilt cone `‖a_h‖ ≤ tan(tilt)·(g ∓ a_z)` with the planned
     /// vertical acceleration.
     pub fn set_radius(&mut self, radius: &[f64]) -> Result<(), ControlError> {
-        self.alm.set_radius(radius)?;
-        self.qp.set_radius(radius)
+        super::cone::check_radius(radius, self.horizon - 2)?;
+        if let Some(alm) = &mut self.alm {
+            alm.set_radius(radius)?;
+        }
+        if let Some(qp) = &mut self.qp {
+            qp.set_radius(radius)?;
+        }
+        self.radius.copy_from_slice(radius);
+        Ok(())
     }
 
     /// Which method gave the last solution.
@@ -168,21 +224,48 @@ impl BandedConeSolver {
         self.warm_used
     }
 
-    /// Forgets the previous solution: the next solve starts cold. Call it
-    /// when a tick did not use this solver (its plan is then not the one
-    /// the next tick continues) and on a controller reset.
+    /// Forgets the previous solution: the next solve starts from the plan
+    /// it is given. Call it when a tick did not use this solver (its plan
+    /// is then not the one the next tick continues): the multipliers are
+    /// aged a stage, so that the next constrained burst starts from what
+    /// this one left ([`BandedAlm::age`]).
     pub fn forget(&mut self) {
         self.previous_valid = false;
+        if let Some(alm) = &mut self.alm {
+            alm.age();
+        }
+    }
+
+    /// Takes `plans` (x, y: `y*_0..y*_N` \[m\], another solver's solution
+    /// of this tick) as the previous solution: the next tick starts from
+    /// it.
+    pub fn accept_plans(&mut self, plans: [&[f64]; 2]) {
+        let ok = |p: &[f64]| p.len() == self.horizon + 1 && p.iter().all(|v| v.is_finite());
+        if plans.iter().all(|p| ok(p)) {
+            for (prev, p) in self.previous.iter_mut().zip(plans) {
+                prev.copy_from_slice(p);
+            }
+            self.previous_valid = true;
+        }
+    }
+
+    /// Forgets everything carried between ticks (a controller reset).
+    pub fn reset(&mut self) {
+        self.previous_valid = false;
+        if let Some(alm) = &mut self.alm {
+            alm.reset_multipliers();
+        }
     }
 
     /// Solves both axes with the cone. `x.plan` and `y.plan` hold the
     /// cold start on entry (any plan, e.g. the unconstrained optimum of
-    /// the fast path) and the solution on exit; `fixed`, `sent`,
-    /// `reference` as [`FastBandedSolver::solve_problem`]. With warm
-    /// starts on and a solution from the previous tick, that solution
-    /// shifted by one step is the start instead; should it fail, the cold
-    /// start is tried with the interior point. Errors: wrong lengths, and
-    /// [`ControlError::Solver`] when neither converges.
+    /// the fast path) and the solution on exit (unchanged on an error);
+    /// `fixed`, `sent`, `reference` as [`FastBandedSolver::solve_problem`].
+    /// With warm starts on and a solution from the previous tick, that
+    /// solution shifted by one step is the augmented Lagrangian's start
+    /// instead; should it fail, the interior point starts from the plan
+    /// given. Errors: wrong lengths, and [`ControlError::Solver`] when
+    /// neither converges.
     pub fn solve_pair(
         &mut self,
         x: AxisProblem<'_>,
@@ -196,7 +279,7 @@ impl BandedConeSolver {
         let mut a0 = [0.0; 2];
         for (i, a) in [&x, &y].into_iter().enumerate() {
             let q = self.weights[i].q;
-            self.alm.axis(i).right_hand_side(
+            self.fast[i].right_hand_side(
                 a.fixed,
                 a.sent,
                 a.reference,
@@ -216,15 +299,14 @@ impl BandedConeSolver {
                     2.0 * prev[self.horizon] - prev[self.horizon - 1]
                 };
                 self.warm[i][f] = guess - b;
+                // ½xᵀ(2H)x − 2·rhsᵀx: the fast path's objective, doubled
+                // (p_{i, f} at 2f + i).
+                self.c_alm[2 * f + i] = -2.0 * self.rhs[f];
             }
             self.c[a_at(i, 0)] = sent_linear_term(&self.weights[i].smoothness, a.fixed, a.sent, dt);
-            for f in 0..n {
-                // ½xᵀ(2H)x − 2·rhsᵀx: the fast path's objective, doubled.
-                self.c_alm[cone_alm::at(i, f)] = -2.0 * self.rhs[f];
-            }
             a0[i] = (a.fixed[2] - 2.0 * a.fixed[1] + a.fixed[0]) / (dt * dt);
         }
-        let axis = self.bounds.axis_within(self.alm.radius());
+        let axis = self.bounds.axis_within(&self.radius);
         let mut k = 0;
         for fx in fixed {
             let (lo, hi) = (&mut self.lo, &mut self.hi);
@@ -236,44 +318,70 @@ impl BandedConeSolver {
         }
         self.iterations = 0;
         let warm = self.warm_start && self.previous_valid;
-        self.warm_used = warm;
+        self.warm_used = false;
         self.previous_valid = false;
         // First the augmented Lagrangian (warm: last tick's plan and
-        // multipliers one step on), then the interior point from the cold
-        // start should it fail.
-        if warm {
-            self.alm.shift();
-            self.alm.set_start([&self.warm[0], &self.warm[1]]);
-        } else {
-            self.alm.reset_multipliers();
-            self.alm.set_start([&self.p[0], &self.p[1]]);
-        }
-        let alm = self.alm.solve(&self.c_alm, a0, &self.lo, &self.hi);
-        self.iterations = self.alm.newton_steps();
-        if alm.is_ok() {
-            self.method = ConeMethod::Alm;
-        } else {
-            self.alm.reset_multipliers();
-            self.warm_used = false;
-            self.method = ConeMethod::InteriorPoint;
-            self.qp.set_start([&self.p[0], &self.p[1]], dt);
-            self.qp.solve(&self.c, a0, &self.lo, &self.hi)?;
-            self.iterations += self.qp.iterations();
-        }
-        let solution = |i: usize, f: usize| match self.method {
-            ConeMethod::Alm => self.alm.p(i, f),
-            ConeMethod::InteriorPoint => self.qp.p(i, f),
-        };
-        for (i, (plan, fx)) in [x.plan, y.plan].into_iter().zip(fixed).enumerate() {
-            plan[..3].copy_from_slice(fx);
-            for f in 0..n {
-                plan[f + 3] = baseline(fx, f + 3) + solution(i, f);
+        // multipliers one step on; else the plan given and the multipliers
+        // the last burst left), then the interior point from the plan given
+        // should it fail.
+        let mut solved = None;
+        if let Some(alm) = &mut self.alm {
+            if warm {
+                alm.shift();
+                alm.set_start(&[&self.warm[0], &self.warm[1]]);
+            } else {
+                if !self.warm_start {
+                    // Cold, as configured: no multipliers carried over.
+                    alm.reset_multipliers();
+                }
+                alm.set_start(&[&self.p[0], &self.p[1]]);
             }
-            if plan.iter().any(|v| !v.is_finite()) {
+            let result = alm.solve(&self.c_alm, a0, &self.lo, &self.hi);
+            self.iterations = alm.newton_steps();
+            match result {
+                Ok(_) => {
+                    solved = Some(ConeMethod::Alm);
+                    self.warm_used = warm;
+                }
+                // Its multipliers are no start for the next solve.
+                Err(_) => alm.reset_multipliers(),
+            }
+        }
+        let mut error = None;
+        if solved.is_none()
+            && let Some(qp) = &mut self.qp
+        {
+            qp.set_start([&self.p[0], &self.p[1]], dt);
+            match qp.solve(&self.c, a0, &self.lo, &self.hi) {
+                Ok(_) => solved = Some(ConeMethod::InteriorPoint),
+                Err(e) => error = Some(e),
+            }
+            self.iterations += qp.iterations();
+        }
+        let Some(method) = solved else {
+            return Err(error
+                .unwrap_or_else(|| ControlError::Solver("cone ALM: no convergence".to_string())));
+        };
+        self.method = method;
+        let solution = |i: usize, f: usize| match method {
+            ConeMethod::Alm => self.alm.as_ref().map_or(f64::NAN, |a| a.p(i, f)),
+            ConeMethod::InteriorPoint => self.qp.as_ref().map_or(f64::NAN, |q| q.p(i, f)),
+        };
+        for (i, fx) in fixed.into_iter().enumerate() {
+            let prev = &mut self.previous[i];
+            prev[..3].copy_from_slice(fx);
+            for f in 0..n {
+                prev[f + 3] = baseline(fx, f + 3) + solution(i, f);
+            }
+            if prev.iter().any(|v| !v.is_finite()) {
+                if let Some(alm) = &mut self.alm {
+                    alm.reset_multipliers();
+                }
                 return Err(ControlError::Solver("non-finite solution".to_string()));
             }
-            self.previous[i].copy_from_slice(plan);
         }
+        x.plan.copy_from_slice(&self.previous[0]);
+        y.plan.copy_from_slice(&self.previous[1]);
         self.previous_valid = true;
         Ok(())
     }

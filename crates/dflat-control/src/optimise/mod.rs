@@ -21,19 +21,25 @@
 //! This fast path allocates nothing.
 //!
 //! When inequality constraints are configured and the fast plan violates
-//! one, the axis is re-solved in the same deviation variables plus the
-//! planned accelerations (cost `q·(b + p − y_ref)² + r·(Δã/δt)²`, equality
-//! rows tie ã to Δ²p/δt², bounds on ã are single-entry rows): a
-//! well-scaled QP (the raw one in p alone has a Hessian condition number
-//! near 1e10). By default ([`QpSolver::Banded`](crate::dfmpc::QpSolver::Banded)) with a primal-dual
-//! interior-point method on its KKT system ordered by stage, which is
-//! banded ([`BandedInteriorPointSolver`]): O(N) per iteration,
-//! 2–3× faster than clarabel here (`examples/kkt_tuning.rs`). If it does
-//! not converge, clarabel ([`ClarabelSolver`]) solves the same QP:
-//! its structure is fixed,
-//! so one solver per axis is built once and only `q` and `b` are updated
-//! per tick. A clarabel status other than `Solved` is
-//! [`ControlError::Solver`].
+//! one, the axis (box bounds) or the horizontal pair (the tilt cone) is
+//! re-solved by a [`Cascade`]: an ordered list of [`ConstrainedSolver`]s
+//! tried until one converges. With
+//! [`QpSolver::Banded`](crate::dfmpc::QpSolver::Banded) (the default) the
+//! first is the augmented Lagrangian on the free outputs ([`alm`]: one
+//! banded Newton system per step, warm-started from the previous tick's
+//! plan and multipliers, and between bursts from the multipliers the last
+//! burst left), serving the box (an interval per stage, hard speed and
+//! tilt-rate rows with multipliers clamped at 0, [`BoxAlmSolver`]) and
+//! the cone (a disc per stage, soft speed rows, [`BandedConeSolver`]).
+//! Should it not converge, a banded interior point solves the same QP in
+//! the deviation variables plus the planned accelerations (cost `q·(b + p
+//! − y_ref)² + r·(Δã/δt)²`, equality rows tie ã to Δ²p/δt², bounds on ã
+//! are single-entry rows; a well-scaled QP, its KKT system ordered by
+//! stage, O(N) per iteration: [`BandedInteriorPointSolver`], the cone's in
+//! [`cone_qp`]), and then clarabel ([`ClarabelSolver`],
+//! [`ClarabelConeSolver`]), whose structure is fixed, so one solver is
+//! built once and only `q` and `b` are updated per tick. A clarabel status
+//! other than `Solved` is [`ControlError::Solver`].
 //!
 //! # Command smoothness (optional)
 //!
@@ -71,33 +77,35 @@
 //!
 //! * [`fast_banded`] — [`FastBandedSolver`]: the unconstrained problem, a
 //!   banded Cholesky factor built once, O(N) per tick (the fast path).
-//! * [`interior_point`] — [`BandedInteriorPointSolver`]: the problem with
-//!   bounds, a primal-dual interior point on the stage-ordered (banded) KKT
-//!   system; the default constrained solver.
-//! * [`clarabel`] — [`ClarabelSolver`]: the same bounded QP in clarabel,
-//!   the fallback (and [`KktTuning`]).
-//! * [`cone`], [`cone_alm`], [`cone_qp`], [`cone_solver`], [`clarabel_cone`]
-//!   — the tilt cone ([`ConeBounds`]): both horizontal axes in one
-//!   stage-interleaved banded problem ([`BandedConeSolver`]: an augmented
-//!   Lagrangian warm-started across ticks, a banded interior point as its
-//!   fallback), and the same problem as clarabel's SOCP
-//!   ([`ClarabelConeSolver`]).
+//! * [`cascade`] — [`ConstrainedSolver`] (one interface for the box's and
+//!   the cone's solvers) and [`Cascade`] (the fallback order, as data).
+//! * [`alm`] — [`alm::BandedAlm`]: the augmented Lagrangian of both
+//!   constrained families; [`box_alm`] — [`BoxAlmSolver`], one axis's box
+//!   with it; [`cone_solver`] — [`BandedConeSolver`], the pair's cone with
+//!   it (or with the cone's interior point, [`cone_qp`]).
+//! * [`interior_point`] — [`BandedInteriorPointSolver`]: the box by a
+//!   primal-dual interior point on the stage-ordered (banded) KKT system.
+//! * [`clarabel`], [`clarabel_cone`] — [`ClarabelSolver`],
+//!   [`ClarabelConeSolver`]: the same problems in clarabel, the last
+//!   fallback (and [`KktTuning`]).
+//! * [`cone`] — [`ConeBounds`]: the tilt cone and its soft speed bounds.
 //! * [`bounds`] — [`AxisBounds`]: tilt (acceleration), vertical
 //!   acceleration and speed bounds, the braking funnel.
 //! * [`smoothness`] — [`Smoothness`]: the command-smoothness term.
 //! * [`feed_forward`] — a flyable reference's jerk and command changes as
 //!   the jerk and smoothness terms' targets (streams).
 //! * [`tilt_rate`] — [`TiltRate`]: the tilt-rate bound, rows on the
-//!   command's change per tick (box solvers: the stage interior point and
-//!   clarabel).
+//!   command's change per tick (the box's solvers).
 //! * [`banded`] — banded symmetric matrices, Cholesky and LDLᵀ factors.
 
+pub mod alm;
 pub mod banded;
 pub mod bounds;
+pub mod box_alm;
+pub mod cascade;
 pub mod clarabel;
 pub mod clarabel_cone;
 pub mod cone;
-pub mod cone_alm;
 pub mod cone_qp;
 pub mod cone_solver;
 #[cfg(test)]
@@ -111,6 +119,8 @@ pub mod tilt_rate;
 mod tilt_rate_tests;
 
 pub use bounds::AxisBounds;
+pub use box_alm::BoxAlmSolver;
+pub use cascade::{Cascade, ConstrainedSolver, SolverMethod};
 pub use clarabel::{ClarabelSolver, KktTuning};
 pub use clarabel_cone::ClarabelConeSolver;
 pub use cone::ConeBounds;

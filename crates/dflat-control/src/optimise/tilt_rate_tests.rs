@@ -1,11 +1,11 @@
 //! The tilt-rate rows ([`TiltRate`]) in the box solvers: the banded stage
-//! interior point against clarabel on random instances, the rows hold,
+//! interior point and the augmented Lagrangian against clarabel on random instances, the rows hold,
 //! and the first command's step through the per-axis tilt is within the
 //! bound exactly.
 
 use super::{
-    AxisBounds, AxisProblem, BandedInteriorPointSolver, ClarabelSolver, KktTuning, Smoothness,
-    TiltRate,
+    AxisBounds, AxisProblem, BandedInteriorPointSolver, BoxAlmSolver, Cascade, ClarabelSolver,
+    FastBandedSolver, KktTuning, Smoothness, TiltRate,
 };
 
 const DT: f64 = 0.02;
@@ -45,7 +45,8 @@ fn cost(
 proptest::proptest! {
     #![proptest_config(proptest::test_runner::Config::with_cases(200))]
     /// With tilt-rate rows (and an acceleration bound, its funnel and the
-    /// smoothness term, each optional), the banded interior point gives
+    /// smoothness term, each optional), the banded interior point and the
+    /// box's cascade (augmented Lagrangian, then interior point) give
     /// clarabel's plan (clarabel's defaults at a 1e-11 gap, the
     /// reference): cost no higher than 1e-7 relative, the first ten
     /// outputs to 1e-5 m, the first command to 1e-4 rad. Both plans keep
@@ -95,17 +96,34 @@ proptest::proptest! {
         banded
             .solve_problem(AxisProblem { fixed: &fixed, sent, reference: &reference, plan: &mut got })
             .unwrap();
-        let (cw, cg) = (
-            cost((q, r), &smoothness, sent, &reference, &want),
-            cost((q, r), &smoothness, sent, &reference, &got),
-        );
-        proptest::prop_assert!(cg <= cw + 1e-7 * (1.0 + cw.abs()), "banded cost {cg} above clarabel's {cw}");
-        for (j, (g, w)) in got.iter().zip(&want).take(11).enumerate() {
-            proptest::prop_assert!((g - w).abs() <= 1e-5, "y_{j}: {g} vs {w}");
+        // The product's cascade from the fast path's plan, cold: the
+        // augmented Lagrangian within its step budget, else the interior
+        // point. (Cold, on the narrow rate rows chained over the horizon,
+        // the augmented Lagrangian alone can need hundreds of steps.)
+        let mut got_alm = vec![0.0; horizon + 1];
+        FastBandedSolver::with_smoothness(horizon, q, r, DT, smoothness)
+            .unwrap()
+            .solve_problem(AxisProblem { fixed: &fixed, sent, reference: &reference, plan: &mut got_alm })
+            .unwrap();
+        let mut cascade = Cascade::new(vec![
+            Box::new(BoxAlmSolver::new(horizon, (q, r, DT), bounds, smoothness, true).unwrap()),
+            Box::new(BandedInteriorPointSolver::new(horizon, (q, r, DT), bounds, smoothness).unwrap()),
+        ])
+        .unwrap();
+        cascade
+            .solve(&mut [AxisProblem { fixed: &fixed, sent, reference: &reference, plan: &mut got_alm }])
+            .unwrap();
+        let cw = cost((q, r), &smoothness, sent, &reference, &want);
+        for (name, plan) in [("banded", &got), ("cascade", &got_alm)] {
+            let cg = cost((q, r), &smoothness, sent, &reference, plan);
+            proptest::prop_assert!(cg <= cw + 1e-7 * (1.0 + cw.abs()), "{name} cost {cg} above clarabel's {cw}");
+            for (j, (g, w)) in plan.iter().zip(&want).take(11).enumerate() {
+                proptest::prop_assert!((g - w).abs() <= 1e-5, "{name} y_{j}: {g} vs {w}");
+            }
         }
         let mut steps = Vec::new();
-        let mut first = [0.0; 2];
-        for (i, plan) in [&want, &got].into_iter().enumerate() {
+        let mut first = [0.0; 3];
+        for (i, plan) in [&want, &got, &got_alm].into_iter().enumerate() {
             proptest::prop_assert!(!rate.violated_by(plan, sent, DT), "rows broken ({i})");
             rate.command_steps(plan, sent, DT, &mut steps);
             proptest::prop_assert!(
@@ -114,7 +132,10 @@ proptest::proptest! {
             );
             first[i] = steps[0];
         }
-        proptest::prop_assert!((first[0] - first[1]).abs() <= 1e-4, "first steps {first:?}");
+        proptest::prop_assert!(
+            (first[0] - first[1]).abs() <= 1e-4 && (first[0] - first[2]).abs() <= 1e-4,
+            "first steps {first:?}"
+        );
     }
 }
 
