@@ -82,8 +82,8 @@ impl Config {
             Self::ConeCold => "cone, ALM, cold (warm starts off)",
             Self::ConeClarabel => "cone, clarabel SOCP",
             Self::BoxBanded => "box, ALM, warm",
-            Self::BoxRate => "box + tilt rate, ALM, warm",
-            Self::RateAlone => "tilt rate alone, ALM, warm",
+            Self::BoxRate => "box + tilt rate, IP (ALM next)",
+            Self::RateAlone => "tilt rate alone, IP (ALM next)",
             Self::BoxRateClarabel => "box + tilt rate, clarabel",
         }
     }
@@ -254,7 +254,15 @@ fn main() {
         println!("|---|---|---|---|---|---|---|---|");
         let mut stats = Vec::new();
         let mut cone_work = Vec::new();
+        let only: Option<Vec<String>> = std::env::var("CORNER_ONLY")
+            .ok()
+            .map(|v| v.split(',').map(String::from).collect());
         for config in Config::ALL {
+            if let Some(only) = &only
+                && !only.iter().any(|o| config.name().contains(o.as_str()))
+            {
+                continue;
+            }
             let (mut all, mut con, mut work) = replay(config, n, &flight, repeats);
             if !matches!(
                 config,
@@ -299,6 +307,10 @@ fn main() {
                 us(s[5])
             );
             stats.push(s);
+        }
+        if stats.len() < Config::ALL.len() {
+            cone_work.iter().for_each(|l| println!("{l}"));
+            continue;
         }
         let (fast, warm, clarabel) = (stats[0], stats[1], stats[3]);
         println!(

@@ -166,19 +166,28 @@ pub(super) fn build_pipelines(
         } else {
             let mut solvers: Vec<Box<dyn ConstrainedSolver>> = Vec::new();
             if settings.qp_solver == QpSolver::Banded {
-                solvers.push(Box::new(BoxAlmSolver::new(
+                let alm: Box<dyn ConstrainedSolver> = Box::new(BoxAlmSolver::new(
                     n,
                     (q, r, dt),
                     bounds,
                     smoothness,
                     settings.warm_start,
-                )?));
-                solvers.push(Box::new(BandedInteriorPointSolver::new(
+                )?);
+                let ip: Box<dyn ConstrainedSolver> = Box::new(BandedInteriorPointSolver::new(
                     n,
                     (q, r, dt),
                     bounds,
                     smoothness,
-                )?));
+                )?);
+                // The tilt-rate rows chain the stages over the horizon: on
+                // them the augmented Lagrangian needs 15–50 Newton steps a
+                // tick and falls back often (`benches/corner.rs`), the
+                // interior point does not: it goes first there.
+                if bounds.tilt_rate.is_some() {
+                    solvers.extend([ip, alm]);
+                } else {
+                    solvers.extend([alm, ip]);
+                }
             }
             solvers.push(Box::new(ClarabelSolver::with_smoothness(
                 n,

@@ -333,6 +333,19 @@ impl BandedAlm {
         self.sigma = self.tuning.sigma;
     }
 
+    /// Sets the multipliers from another method's: the stage multipliers
+    /// per stage (`stage(f)`, signed per axis, cost per m/s²) and the rows'
+    /// `[upper, lower]` in row order; σ from its initial value.
+    pub fn set_multipliers(&mut self, stage: impl Fn(usize) -> [f64; 2], rows: &[[f64; 2]]) {
+        self.sigma = self.tuning.sigma;
+        for (f, y) in self.y.iter_mut().enumerate() {
+            *y = stage(f);
+        }
+        for (v, r) in self.v.iter_mut().zip(rows) {
+            *v = [r[0].max(0.0), r[1].max(0.0)];
+        }
+    }
+
     /// Moves the multipliers one stage earlier (the last stage keeps its
     /// own) and restarts σ from its initial value: the warm start of the
     /// next tick. (A σ grown on a hard tick and kept makes the next ticks'

@@ -84,7 +84,11 @@ impl BoxAlmSolver {
                 rows: (0..n)
                     .map(|f| Row::tilt_rate(f, k, |s| s).on_outputs(inv_dt2, |k| k))
                     .collect(),
-                scale: 1.0 / norm2.max(1.0),
+                scale: std::env::var("DFLAT_RATE_SCALE")
+                    .ok()
+                    .and_then(|v| v.parse::<f64>().ok())
+                    .unwrap_or(1.0)
+                    / norm2.max(1.0),
                 penalty: f64::INFINITY,
             });
         }
@@ -137,12 +141,39 @@ impl BoxAlmSolver {
     }
 
     /// Takes `plan` (`y*_0..y*_N` \[m\], another solver's solution of this
-    /// tick) as the previous solution: the next tick starts from it.
-    pub fn accept_plan(&mut self, plan: &[f64]) {
-        if plan.len() == self.previous.len() && plan.iter().all(|v| v.is_finite()) {
-            self.previous.copy_from_slice(plan);
-            self.previous_valid = true;
+    /// tick) as the previous solution, and `duals` (its rows' multipliers
+    /// `[upper, lower]` in [`AxisBounds::row_bounds`]' order, when it has
+    /// them: the interior point's) as the multipliers: the next tick starts
+    /// from them, so that one fallback does not make the next.
+    pub fn accept_plan(&mut self, plan: &[f64], duals: &[[f64; 2]]) {
+        if plan.len() != self.previous.len() || plan.iter().any(|v| !v.is_finite()) {
+            return;
         }
+        self.previous.copy_from_slice(plan);
+        self.previous_valid = true;
+        let n = self.horizon - 2;
+        let accel_rows = if self.bounds.acceleration.is_some() {
+            n
+        } else {
+            0
+        };
+        if duals.len() == accel_rows + self.lo.len()
+            && duals.iter().flatten().all(|z| z.is_finite())
+        {
+            let (stages, rows) = duals.split_at(accel_rows);
+            self.alm.set_multipliers(
+                |f| stages.get(f).map_or([0.0; 2], |z| [z[0] - z[1], 0.0]),
+                rows,
+            );
+        }
+    }
+
+    /// The next solve starts from the plan it is given, keeping the
+    /// multipliers as they are (tests: a solve from another method's
+    /// solution and multipliers).
+    #[cfg(test)]
+    pub(crate) fn start_from_given(&mut self) {
+        self.previous_valid = false;
     }
 
     /// Forgets everything carried between ticks (a controller reset).

@@ -56,9 +56,18 @@ pub trait ConstrainedSolver: std::fmt::Debug + Send {
         false
     }
 
+    /// Its rows' multipliers `[upper, lower]` after its last solve, in
+    /// [`AxisBounds::row_bounds`](super::AxisBounds::row_bounds)' order
+    /// (empty when it does not give them).
+    fn row_duals(&self) -> &[[f64; 2]] {
+        &[]
+    }
+
     /// A later solver of the cascade solved the tick: `axes`' plans are
-    /// the accepted solution, a warm start for this solver's next tick.
-    fn accept(&mut self, _axes: &[AxisProblem<'_>]) {}
+    /// the accepted solution and `duals` that solver's
+    /// [`ConstrainedSolver::row_duals`], a warm start for this solver's
+    /// next tick.
+    fn accept(&mut self, _axes: &[AxisProblem<'_>], _duals: &[[f64; 2]]) {}
 
     /// A tick that did not need the constrained plan.
     fn skip(&mut self) {}
@@ -109,8 +118,10 @@ impl Cascade {
             match self.solvers[i].solve(axes) {
                 Ok(()) => {
                     self.solved_by = Some(i);
-                    for earlier in &mut self.solvers[..i] {
-                        earlier.accept(axes);
+                    let (earlier, rest) = self.solvers.split_at_mut(i);
+                    let duals = rest[0].row_duals();
+                    for solver in earlier {
+                        solver.accept(axes, duals);
                     }
                     return Ok(self.solvers[i].method());
                 }
@@ -200,9 +211,9 @@ impl ConstrainedSolver for BoxAlmSolver {
     fn warm_started(&self) -> bool {
         BoxAlmSolver::warm_started(self)
     }
-    fn accept(&mut self, axes: &[AxisProblem<'_>]) {
+    fn accept(&mut self, axes: &[AxisProblem<'_>], duals: &[[f64; 2]]) {
         if let [a] = axes {
-            self.accept_plan(a.plan);
+            self.accept_plan(a.plan, duals);
         }
     }
     fn skip(&mut self) {
@@ -225,6 +236,9 @@ impl ConstrainedSolver for BandedInteriorPointSolver {
     }
     fn iterations(&self) -> usize {
         BandedInteriorPointSolver::iterations(self)
+    }
+    fn row_duals(&self) -> &[[f64; 2]] {
+        BandedInteriorPointSolver::row_duals(self)
     }
 }
 
@@ -266,7 +280,7 @@ impl ConstrainedSolver for BandedConeSolver {
     fn warm_started(&self) -> bool {
         BandedConeSolver::warm_started(self)
     }
-    fn accept(&mut self, axes: &[AxisProblem<'_>]) {
+    fn accept(&mut self, axes: &[AxisProblem<'_>], _duals: &[[f64; 2]]) {
         if let [x, y] = axes {
             self.accept_plans([x.plan, y.plan]);
         }

@@ -298,6 +298,14 @@ impl StageQp {
         self.rows.len()
     }
 
+    /// The rows' multipliers `[upper, lower]` of the last iterate (≥ 0;
+    /// the Lagrangian's `z_u·(g·x − hi) + z_l·(lo − g·x)`), in row order.
+    pub fn duals(&self, out: &mut [[f64; 2]]) {
+        for (o, st) in out.iter_mut().zip(&self.state) {
+            *o = [st.zu, st.zl];
+        }
+    }
+
     /// Solves for the linear terms `c_p` (on p, length n) and `c_a0` (on
     /// ã_0) and the row bounds `lo ≤ g·x ≤ hi` (one pair per row, in row
     /// order); `p` holds the start on entry (the unconstrained optimum is a
@@ -555,6 +563,8 @@ pub struct BandedInteriorPointSolver {
     hi: Vec<f64>,
     p: Vec<f64>,
     iterations: usize,
+    /// The rows' multipliers of the last solve ([`StageQp::duals`]).
+    duals: Vec<[f64; 2]>,
 }
 
 impl BandedInteriorPointSolver {
@@ -591,6 +601,7 @@ impl BandedInteriorPointSolver {
             hi: vec![0.0; m],
             p: vec![0.0; n],
             iterations: 0,
+            duals: vec![[0.0; 2]; m],
         })
     }
 
@@ -602,6 +613,13 @@ impl BandedInteriorPointSolver {
     /// Interior-point iterations of the last solve.
     pub fn iterations(&self) -> usize {
         self.iterations
+    }
+
+    /// The rows' multipliers `[upper, lower]` of the last solve, in the
+    /// order of [`AxisBounds::row_bounds`] (acceleration, speed, tilt
+    /// rate): a warm start for the augmented Lagrangian.
+    pub fn row_duals(&self) -> &[[f64; 2]] {
+        &self.duals
     }
 
     /// Solves with the bounds; arguments as [`FastBandedSolver::solve_problem`].
@@ -665,6 +683,7 @@ impl BandedInteriorPointSolver {
         self.iterations = self
             .qp
             .solve(&self.c_p, c_a0, &self.lo, &self.hi, &mut self.p)?;
+        self.qp.duals(&mut self.duals);
         for f in 0..n {
             plan[f + 3] = baseline(fixed, f + 3) + self.p[f];
         }

@@ -219,3 +219,75 @@ fn the_funnel_keeps_rate_and_acceleration_bounds_feasible() {
         steps[0]
     );
 }
+
+/// The interior point's plan and row multipliers, handed to the
+/// augmented Lagrangian ([`BoxAlmSolver::accept_plan`], what the cascade
+/// does after a fallback), are a start it finishes from in a few Newton
+/// steps, at the same plan: one fallback does not make the next.
+#[test]
+fn the_interior_points_duals_start_the_augmented_lagrangian() {
+    let horizon = 100;
+    let (q, r) = (1.0, 0.003);
+    let rate = TiltRate {
+        step: 2f64.to_radians(),
+        kappa: 10.0,
+        gain: 1.0,
+        gravity: G,
+    };
+    for a_max in [None, Some(3.0)] {
+        let bounds = AxisBounds {
+            acceleration: a_max.map(|a| [-a, a]),
+            speed: None,
+            tilt_rate: Some(rate),
+            drag: 0.0,
+        };
+        let smoothness = Smoothness::default();
+        let fixed = [0.0, 0.0, 0.0];
+        let reference = vec![10.0; horizon + 1];
+        let sent = Some(0.0);
+        let mut ip =
+            BandedInteriorPointSolver::new(horizon, (q, r, DT), bounds, smoothness).unwrap();
+        let mut plan = vec![0.0; horizon + 1];
+        ip.solve_problem(AxisProblem {
+            fixed: &fixed,
+            sent,
+            reference: &reference,
+            plan: &mut plan,
+        })
+        .unwrap();
+        let mut alm = BoxAlmSolver::new(horizon, (q, r, DT), bounds, smoothness, true).unwrap();
+        alm.accept_plan(&plan, ip.row_duals());
+        alm.start_from_given();
+        let mut again = plan.clone();
+        alm.solve_problem(AxisProblem {
+            fixed: &fixed,
+            sent,
+            reference: &reference,
+            plan: &mut again,
+        })
+        .unwrap();
+        assert!(
+            alm.iterations() <= 10,
+            "{a_max:?}: {} Newton steps",
+            alm.iterations()
+        );
+        for (j, (a, b)) in plan.iter().zip(&again).enumerate() {
+            assert!((a - b).abs() <= 1e-5, "{a_max:?}: y_{j}: {a} vs {b}");
+        }
+        // Without the multipliers the same start needs more.
+        let mut cold = BoxAlmSolver::new(horizon, (q, r, DT), bounds, smoothness, false).unwrap();
+        let mut from_plan = plan.clone();
+        let _ = cold.solve_problem(AxisProblem {
+            fixed: &fixed,
+            sent,
+            reference: &reference,
+            plan: &mut from_plan,
+        });
+        assert!(
+            cold.iterations() > alm.iterations(),
+            "{a_max:?}: {} vs {}",
+            cold.iterations(),
+            alm.iterations()
+        );
+    }
+}
