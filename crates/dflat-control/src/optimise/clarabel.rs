@@ -128,6 +128,72 @@ impl Triplets {
     }
 }
 
+/// One axis's columns of P (upper triangle) at `offset`: `2q` on its n
+/// deviations p, then on its n accelerations ã the jerk and smoothness
+/// block (`band`, [`accel_block`]) — the layout `[p, ã]` of both clarabel
+/// problems.
+pub(super) fn push_axis_hessian(
+    n: usize,
+    q: f64,
+    band: &[[f64; 3]],
+    offset: usize,
+    (colptr, prow, pval): (&mut Vec<usize>, &mut Vec<usize>, &mut Vec<f64>),
+) {
+    for f in 0..n {
+        prow.push(offset + f);
+        pval.push(2.0 * q);
+        colptr.push(prow.len());
+    }
+    let a_of = |f: usize| offset + n + f;
+    for (f, col) in band.iter().enumerate().take(n) {
+        if f > 1 && col[2] != 0.0 {
+            prow.push(a_of(f - 2));
+            pval.push(col[2]);
+        }
+        if f > 0 {
+            prow.push(a_of(f - 1));
+            pval.push(col[1]);
+        }
+        prow.push(a_of(f));
+        pval.push(col[0]);
+        colptr.push(prow.len());
+    }
+}
+
+/// The one clarabel set-up of both problems (the box's QP, the cone's
+/// SOCP): the time limit checked (> 0 s or infinite), presolve off (the
+/// data are updated in place per tick), no equilibration (the variables
+/// are in SI units and well scaled: measured on 10 000 random instances,
+/// Ruiz equilibration costs speed and two to four orders of accuracy in
+/// the first planned jerk), qdldl on one thread, the KKT tuning given.
+pub(super) fn build_solver(
+    (p, q): (&CscMatrix<f64>, &[f64]),
+    (a, b): (&CscMatrix<f64>, &[f64]),
+    cones: &[SupportedConeT<f64>],
+    time_limit: f64,
+    tuning: KktTuning,
+) -> Result<DefaultSolver<f64>, ControlError> {
+    if time_limit.is_nan() || time_limit <= 0.0 {
+        return Err(invalid("solver_time_limit", "> 0 s (or infinity)"));
+    }
+    let settings: DefaultSettings<f64> = DefaultSettingsBuilder::default()
+        .verbose(false)
+        .presolve_enable(false)
+        .equilibrate_enable(false)
+        .iterative_refinement_reltol(tuning.refinement_reltol)
+        .iterative_refinement_abstol(tuning.refinement_abstol)
+        .tol_gap_abs(tuning.gap_tolerance)
+        .tol_gap_rel(tuning.gap_tolerance)
+        .static_regularization_constant(tuning.static_regularization)
+        .time_limit(time_limit)
+        .direct_solve_method("qdldl".to_string())
+        .max_threads(1)
+        .build()
+        .map_err(|e| ControlError::Solver(format!("settings: {e}")))?;
+    DefaultSolver::new(p, q, a, b, cones, settings)
+        .map_err(|e| ControlError::Solver(format!("setup: {e}")))
+}
+
 impl ClarabelSolver {
     /// Builds the solver once for horizon N, weights q ≥ 0 [1/m²], r > 0
     /// [s⁶/m²], step δt \[s\], bounds and clarabel time limit \[s\].
@@ -176,35 +242,12 @@ impl ClarabelSolver {
         // Same argument checks as the fast path.
         FastBandedSolver::check_args(horizon, q, r, dt)?;
         smoothness.check()?;
-        if time_limit.is_nan() || time_limit <= 0.0 {
-            return Err(invalid("solver_time_limit", "> 0 s (or infinity)"));
-        }
         let n = horizon - 2;
         let nv = 2 * n;
         // P (upper triangle): 2q on p; on ã the jerk and smoothness terms.
         let band = accel_block(n, r, dt, &smoothness);
-        let smooth = smoothness.weight > 0.0;
-        let mut colptr = vec![0usize];
-        let (mut prow, mut pval) = (Vec::new(), Vec::new());
-        for c in 0..nv {
-            if c < n {
-                prow.push(c);
-                pval.push(2.0 * q);
-            } else {
-                let k = c - n;
-                if smooth && k > 1 {
-                    prow.push(c - 2);
-                    pval.push(band[k][2]);
-                }
-                if k > 0 {
-                    prow.push(c - 1);
-                    pval.push(band[k][1]);
-                }
-                prow.push(c);
-                pval.push(band[k][0]);
-            }
-            colptr.push(prow.len());
-        }
+        let (mut colptr, mut prow, mut pval) = (vec![0usize], Vec::new(), Vec::new());
+        push_axis_hessian(n, q, &band, 0, (&mut colptr, &mut prow, &mut pval));
         let p_mat = CscMatrix::new(nv, nv, colptr, prow, pval);
 
         let mut t = Triplets {
@@ -259,27 +302,7 @@ impl ClarabelSolver {
         }
         let qvec = vec![0.0; nv];
         let bvec = vec![0.0; m];
-        let settings: DefaultSettings<f64> = DefaultSettingsBuilder::default()
-            .verbose(false)
-            // Data updates need the problem unchanged by presolve.
-            .presolve_enable(false)
-            // The variables are in SI units (m, m/s²) and the data well
-            // scaled; measured on 10 000 random instances, Ruiz
-            // equilibration costs speed and two to four orders of accuracy
-            // in the first planned jerk (what the command depends on).
-            .equilibrate_enable(false)
-            .iterative_refinement_reltol(tuning.refinement_reltol)
-            .iterative_refinement_abstol(tuning.refinement_abstol)
-            .tol_gap_abs(tuning.gap_tolerance)
-            .tol_gap_rel(tuning.gap_tolerance)
-            .static_regularization_constant(tuning.static_regularization)
-            .time_limit(time_limit)
-            .direct_solve_method("qdldl".to_string())
-            .max_threads(1)
-            .build()
-            .map_err(|e| ControlError::Solver(format!("settings: {e}")))?;
-        let solver = DefaultSolver::new(&p_mat, &qvec, &a_mat, &bvec, &cones, settings)
-            .map_err(|e| ControlError::Solver(format!("setup: {e}")))?;
+        let solver = build_solver((&p_mat, &qvec), (&a_mat, &bvec), &cones, time_limit, tuning)?;
         Ok(Self {
             horizon,
             dt,

@@ -3,11 +3,9 @@
 //! and the reference its property tests compare with.
 
 use clarabel::algebra::CscMatrix;
-use clarabel::solver::{
-    DefaultSettings, DefaultSettingsBuilder, DefaultSolver, IPSolver, SolverStatus, SupportedConeT,
-};
+use clarabel::solver::{DefaultSolver, IPSolver, SolverStatus, SupportedConeT};
 
-use super::clarabel::KktTuning;
+use super::clarabel::{KktTuning, build_solver, push_axis_hessian};
 use super::smoothness::{accel_block, sent_linear_term};
 use super::{AxisProblem, AxisWeights, ConeBounds, FastBandedSolver, baseline, check_lengths};
 use crate::ControlError;
@@ -68,9 +66,6 @@ impl ClarabelConeSolver {
             w.smoothness.check()?;
         }
         bounds.check()?;
-        if time_limit.is_nan() || time_limit <= 0.0 {
-            return Err(super::invalid("solver_time_limit", "> 0 s (or infinity)"));
-        }
         let n = horizon - 2;
         let speed = bounds.speed.is_some();
         let soft = soft && speed;
@@ -78,28 +73,17 @@ impl ClarabelConeSolver {
         let nv = 4 * n + n_sig;
         let p_of = |i: usize, f: usize| 2 * n * i + f;
         let a_of = |i: usize, f: usize| 2 * n * i + n + f;
-        // P, upper triangle, column by column.
+        // P, upper triangle, column by column: per axis [p, ã].
         let (mut colptr, mut prow, mut pval) = (vec![0usize], Vec::new(), Vec::new());
         for (i, w) in weights.iter().enumerate() {
             let band = accel_block(n, w.r, dt, &w.smoothness);
-            for f in 0..n {
-                prow.push(p_of(i, f));
-                pval.push(2.0 * w.q);
-                colptr.push(prow.len());
-            }
-            for (f, col) in band.iter().enumerate() {
-                if f > 1 && col[2] != 0.0 {
-                    prow.push(a_of(i, f - 2));
-                    pval.push(col[2]);
-                }
-                if f > 0 {
-                    prow.push(a_of(i, f - 1));
-                    pval.push(col[1]);
-                }
-                prow.push(a_of(i, f));
-                pval.push(col[0]);
-                colptr.push(prow.len());
-            }
+            push_axis_hessian(
+                n,
+                w.q,
+                &band,
+                2 * n * i,
+                (&mut colptr, &mut prow, &mut pval),
+            );
         }
         for _ in 0..n_sig {
             colptr.push(prow.len());
@@ -170,22 +154,7 @@ impl ClarabelConeSolver {
         for f in 0..n {
             bvec[m_cone + 3 * f] = bounds.acceleration;
         }
-        let settings: DefaultSettings<f64> = DefaultSettingsBuilder::default()
-            .verbose(false)
-            .presolve_enable(false)
-            .equilibrate_enable(false)
-            .iterative_refinement_reltol(tuning.refinement_reltol)
-            .iterative_refinement_abstol(tuning.refinement_abstol)
-            .tol_gap_abs(tuning.gap_tolerance)
-            .tol_gap_rel(tuning.gap_tolerance)
-            .static_regularization_constant(tuning.static_regularization)
-            .time_limit(time_limit)
-            .direct_solve_method("qdldl".to_string())
-            .max_threads(1)
-            .build()
-            .map_err(|e| ControlError::Solver(format!("settings: {e}")))?;
-        let solver = DefaultSolver::new(&p_mat, &qvec, &a_mat, &bvec, &cones, settings)
-            .map_err(|e| ControlError::Solver(format!("setup: {e}")))?;
+        let solver = build_solver((&p_mat, &qvec), (&a_mat, &bvec), &cones, time_limit, tuning)?;
         Ok(Self {
             horizon,
             dt,
