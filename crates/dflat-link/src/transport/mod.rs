@@ -41,7 +41,6 @@
 //! UNIX timestamp, in a `.tlog` file, written by its own thread so socket
 //! tasks never wait on the disk.
 
-use std::collections::VecDeque;
 use std::fmt;
 use std::net::SocketAddr;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -60,10 +59,12 @@ use tokio::net::{TcpStream, UdpSocket};
 use tokio::sync::{Mutex, mpsc};
 
 mod endpoint;
+mod rx_state;
 mod serial;
 mod tlog_tap;
 
 pub use endpoint::Endpoint;
+use rx_state::RxState;
 pub use tlog_tap::{TapOptions, TlogReport, TlogTap};
 
 /// Largest UDP datagram accepted \[bytes\].
@@ -273,110 +274,6 @@ enum Io {
         /// Events from the reader thread.
         rx: Mutex<mpsc::Receiver<Result<RecvEvent, TransportError>>>,
     },
-}
-
-/// Receive side state: a scratch buffer, the stream parser and a mirror of
-/// the parser's unconsumed bytes (to tap frames byte-exactly).
-struct RxState {
-    buf: Vec<u8>,
-    parser: FrameParser,
-    mirror: Vec<u8>,
-    pending: VecDeque<RecvEvent>,
-}
-
-impl RxState {
-    fn new(buf_len: usize) -> Self {
-        Self {
-            buf: vec![0; buf_len],
-            parser: FrameParser::new(),
-            mirror: Vec::with_capacity(4 * MAX_FRAME_LEN),
-            pending: VecDeque::with_capacity(16),
-        }
-    }
-
-    /// Feeds `len` bytes of `self.buf` to the parser and queues the events.
-    /// `complete`: the bytes are a whole datagram (no frame continues).
-    fn ingest(
-        &mut self,
-        len: usize,
-        complete: bool,
-        arrival: Instant,
-        from: Option<SocketAddr>,
-        tap: Option<&TlogTap>,
-    ) {
-        let bytes = &self.buf[..len];
-        // Keep the mirror equal to the parser's buffer after `push`.
-        let keep = self.parser.pending();
-        let drop_n = self.mirror.len().saturating_sub(keep);
-        self.mirror.drain(..drop_n);
-        self.mirror.extend_from_slice(bytes);
-        let skipped_before = self.parser.skipped_bytes();
-        let errors_before = self.errors_queued();
-        self.parser.push(bytes);
-        let ts = unix_time_us();
-        while let Some(item) = self.parser.next_frame() {
-            match item {
-                Ok(frame) => {
-                    if let Some(tap) = tap.filter(|t| t.inbound) {
-                        let end = self.mirror.len().saturating_sub(self.parser.pending());
-                        match self.mirror.get(end.saturating_sub(frame.len)..end) {
-                            Some(raw) if raw.len() == frame.len => tap.record(ts, raw),
-                            _ => tap.record_message(ts, &frame.header, &frame.message),
-                        }
-                    }
-                    self.pending.push_back(RecvEvent::Frame(Box::new(Received {
-                        header: frame.header,
-                        message: frame.message,
-                        arrival,
-                        signed: frame.signed,
-                        from,
-                    })));
-                }
-                Err(e) => self.pending.push_back(RecvEvent::Error(e)),
-            }
-        }
-        let skipped = self.parser.skipped_bytes() > skipped_before;
-        if complete {
-            // `finish` also resets the parser's counters.
-            for item in self.parser.finish() {
-                match item {
-                    Ok(frame) => {
-                        if let Some(tap) = tap.filter(|t| t.inbound) {
-                            tap.record_message(ts, &frame.header, &frame.message);
-                        }
-                        self.pending.push_back(RecvEvent::Frame(Box::new(Received {
-                            header: frame.header,
-                            message: frame.message,
-                            arrival,
-                            signed: frame.signed,
-                            from,
-                        })));
-                    }
-                    Err(e) => self.pending.push_back(RecvEvent::Error(e)),
-                }
-            }
-            self.mirror.clear();
-        }
-        // Bytes outside any frame candidate: one error per chunk, unless a
-        // bad candidate in this chunk already explains them.
-        if skipped && self.errors_queued() == errors_before {
-            self.pending
-                .push_back(RecvEvent::Error(FrameError::NoMarker));
-        }
-    }
-
-    /// Forgets a partial frame (the stream was reconnected).
-    fn reset_stream(&mut self) {
-        self.parser = FrameParser::new();
-        self.mirror.clear();
-    }
-
-    fn errors_queued(&self) -> usize {
-        self.pending
-            .iter()
-            .filter(|e| matches!(e, RecvEvent::Error(_)))
-            .count()
-    }
 }
 
 impl Transport {
