@@ -95,8 +95,9 @@ async fn failed_and_late_ticks_fly_the_previous_plan_then_level_hover_and_recove
     // summary counts those ticks (successful ones only).
     let s = summary.solves;
     assert!(s.constrained > 0, "{s:?}");
-    // The banded interior point solves every constrained tick of this
-    // flight: clarabel (the fallback) is never needed.
+    // The banded solvers (the augmented Lagrangian, the interior point)
+    // solve every constrained tick of this flight: clarabel, the last of
+    // the cascade, is never needed.
     assert_eq!(s.qp_fallbacks, 0, "{s:?}");
     assert!(
         s.constrained + g.controller_failures + g.deadline_overruns <= summary.ticks,
