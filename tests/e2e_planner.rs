@@ -17,7 +17,7 @@ use std::time::Duration;
 
 use common::*;
 use dflat_link::MavMessage;
-use dflat_sim::sitl::SitlMode;
+use dflat_sitl::SitlMode;
 use dflat_sim::trajectory::{Shape, Trajectory};
 use nalgebra::Vector3;
 

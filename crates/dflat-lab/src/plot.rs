@@ -26,7 +26,7 @@ use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 pub use plotters::style::RGBColor;
 
-use crate::SimError;
+use dflat_sim::SimError;
 
 /// Discrete-Flatness MPC: red.
 pub const DF_RED: RGBColor = RGBColor(214, 39, 40);

@@ -2,8 +2,8 @@
 //! part: a reduced run (5 m/s, two trials) shows what the model terms buy
 //! on an airframe with drag 0.3 /s and a 40 ms delay.
 
-use dflat_sim::experiments::ExperimentError;
-use dflat_sim::experiments::airframe::{AirframeConfig, run_airframe};
+use dflat_lab::experiments::ExperimentError;
+use dflat_lab::experiments::airframe::{AirframeConfig, run_airframe};
 
 #[test]
 fn drag_and_delay_terms_bring_the_airframe_back_to_the_matched_figure() {

@@ -4,8 +4,8 @@
 
 use std::path::PathBuf;
 
-use dflat_sim::experiments::OutputPaths;
-use dflat_sim::experiments::mismatch::{
+use dflat_lab::experiments::OutputPaths;
+use dflat_lab::experiments::mismatch::{
     MismatchConfig, MismatchController, NOISE_RATIO_BUDGET, run_mismatch, write_mismatch,
 };
 

@@ -4,10 +4,10 @@
 
 use std::path::PathBuf;
 
-use dflat_sim::experiments::noise_sweep::{
+use dflat_lab::experiments::noise_sweep::{
     NoiseSweepConfig, NoiseSweepResult, run_noise_sweep, write_noise_sweep,
 };
-use dflat_sim::experiments::{ControllerSpec, OutputPaths};
+use dflat_lab::experiments::{ControllerSpec, OutputPaths};
 
 fn out_dir(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_TARGET_TMPDIR"))

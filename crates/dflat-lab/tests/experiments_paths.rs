@@ -5,9 +5,9 @@
 
 use std::path::PathBuf;
 
-use dflat_sim::experiments::paths::{PathsConfig, PathsResult, Tuning, run_paths, write_paths};
-use dflat_sim::experiments::{ControllerSpec, OutputPaths};
-use dflat_sim::harness::StopReason;
+use dflat_lab::experiments::paths::{PathsConfig, PathsResult, Tuning, run_paths, write_paths};
+use dflat_lab::experiments::{ControllerSpec, OutputPaths};
+use dflat_lab::harness::StopReason;
 
 fn out_dir(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_TARGET_TMPDIR"))

@@ -1,7 +1,7 @@
 //! The pose-to-tick phase study (issue 15, item 4), reduced: 5 m/s, offsets
 //! 0 and 19 ms, one trial.
 
-use dflat_sim::experiments::phase::{PhaseConfig, run_phase, write_phase};
+use dflat_lab::experiments::phase::{PhaseConfig, run_phase, write_phase};
 
 #[test]
 fn reduced_phase_study_shows_what_the_lock_buys() {

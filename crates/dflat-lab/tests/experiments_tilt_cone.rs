@@ -1,7 +1,7 @@
 //! The tilt-cone study (issue 17), reduced to one speed and one trial:
 //! what the cone in the plan changes in flight, and bad options refused.
 
-use dflat_sim::experiments::tilt_cone::{TiltConeConfig, TiltConeRow, run_tilt_cone};
+use dflat_lab::experiments::tilt_cone::{TiltConeConfig, TiltConeRow, run_tilt_cone};
 
 fn cell<'a>(rows: &'a [TiltConeRow], path: &str, bound: &str) -> &'a TiltConeRow {
     rows.iter()

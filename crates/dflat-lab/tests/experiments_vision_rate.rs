@@ -11,11 +11,11 @@ use dflat_control::{
     ControlError, ControlModel, Controller, Measurement, ReferenceSource, TickOutput,
 };
 use dflat_model::{PlanarModel, PlanarParams};
-use dflat_sim::experiments::OutputPaths;
-use dflat_sim::experiments::vision_rate::{
+use dflat_lab::experiments::OutputPaths;
+use dflat_lab::experiments::vision_rate::{
     BUDGET_RATE, VisionRateConfig, run_vision_rate, write_vision_rate,
 };
-use dflat_sim::harness::{ControllerFactory, ReferenceFactory, TrialSpec, run_trial};
+use dflat_lab::harness::{ControllerFactory, ReferenceFactory, TrialSpec, run_trial};
 use dflat_sim::sensing::{SensorSpec, VisionMode, VisionOptions};
 
 fn out_dir(name: &str) -> PathBuf {
@@ -156,8 +156,8 @@ fn harness_feeds_raw_samples_to_multirate_controller() {
         mode: VisionMode::Raw,
         ..VisionOptions::default()
     });
-    spec.stop = dflat_sim::harness::StopCondition::Duration(8.0);
-    spec.path_distance = Some(dflat_sim::harness::polyline_path_distance(w.clone(), true));
+    spec.stop = dflat_lab::harness::StopCondition::Duration(8.0);
+    spec.path_distance = Some(dflat_lab::harness::polyline_path_distance(w.clone(), true));
     let r = run_trial(&spec, 3).unwrap();
     assert!(
         r.errors.is_empty(),

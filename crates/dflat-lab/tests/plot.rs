@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-use dflat_sim::plot::{
+use dflat_lab::plot::{
     BoxPlot, BoxSeries, BoxStats, DF_RED, FMPC_BLUE, LinePlot, PD_GREEN, PathPlot, Series,
     controller_color, north_up, write_box_plot, write_line_plot, write_path_plot,
 };

@@ -1,4 +1,4 @@
-//! The lab's error type.
+//! The simulation crates' error type and the option checks they share.
 
 use thiserror::Error;
 
@@ -31,7 +31,7 @@ pub enum SimError {
 }
 
 /// Checks `lo <= value <= hi` (and finiteness).
-pub(crate) fn check_range(
+pub fn check_range(
     field: &'static str,
     value: f64,
     lo: f64,
@@ -50,7 +50,7 @@ pub(crate) fn check_range(
 }
 
 /// Checks `value > 0` (and finiteness).
-pub(crate) fn check_positive(field: &'static str, value: f64) -> Result<(), SimError> {
+pub fn check_positive(field: &'static str, value: f64) -> Result<(), SimError> {
     if value.is_finite() && value > 0.0 {
         Ok(())
     } else {

@@ -1,16 +1,19 @@
 //! Plant tests: steady states, NED signs, RK4 against closed forms, the
 //! rigid body's attitude loop, saturation, drag, wind and gusts.
 
-mod common;
-
 use std::f64::consts::FRAC_PI_2;
-
-use common::{G, close};
 use dflat_control::AttitudeCommand;
 use dflat_sim::plant::{
     Integrator, Plant, PlantKind, PlantOptions, PlantState, build_plant, thrust_axis,
 };
 use nalgebra::Vector3;
+
+/// Gravity [m/s²].
+const G: f64 = 9.81;
+
+fn close(a: f64, b: f64, tol: f64, what: &str) {
+    assert!((a - b).abs() <= tol, "{what}: {a} vs {b} (tol {tol})");
+}
 
 const KINDS: [PlantKind; 3] = [PlantKind::Planar, PlantKind::Spatial, PlantKind::RigidBody];
 
@@ -219,7 +222,7 @@ fn euler_plant_replays_the_reference_trace() {
     // The reference trace (paper §VI: planar, x only, z-up frame, Euler at
     // 200 Hz, command held 4 steps). Our NED plant with θ_cmd = −u and
     // θ = −θ_zup reproduces x_true tick by tick.
-    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../reference/trace_1d.json");
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../reference/trace_1d.json");
     let text = std::fs::read_to_string(path)
         .unwrap_or_else(|e| panic!("cannot read {path}: {e} (the repository's reference/)"));
     let json: serde_json::Value = serde_json::from_str(&text).expect("valid JSON");

@@ -4,9 +4,9 @@
 //! looks like to the daemon, built from the lab's plants and sensing:
 //!
 //! * a plant thread integrates one of `dflat-sim`'s plants
-//!   ([`PlanarPlant`](crate::plant::PlanarPlant),
-//!   [`SpatialPlant`](crate::plant::SpatialPlant),
-//!   [`RigidBodyPlant`](crate::plant::RigidBodyPlant), chosen by
+//!   ([`PlanarPlant`](dflat_sim::plant::PlanarPlant),
+//!   [`SpatialPlant`](dflat_sim::plant::SpatialPlant),
+//!   [`RigidBodyPlant`](dflat_sim::plant::RigidBodyPlant), chosen by
 //!   `sitl.plant`) in real time at `sitl.plant_rate_hz`, with the plant
 //!   parameters of `[sitl]` (τ, k̃, hover thrust, mass factor — they may
 //!   differ from the controller's `[vehicle]` model) and the autopilot's
@@ -80,8 +80,8 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant, SystemTime};
 
-use crate::plant::{Plant, PlantKind, PlantOptions, PlantState, RigidBodyOptions, build_plant};
-use crate::sensing::{GaussianOptions, GaussianSensor, Sensor};
+use dflat_sim::plant::{Plant, PlantKind, PlantOptions, PlantState, RigidBodyOptions, build_plant};
+use dflat_sim::sensing::{GaussianOptions, GaussianSensor, Sensor};
 use dflat_control::AttitudeCommand as PlantCommand;
 use dflat_link::dialect::{MavAutopilot, MavState};
 use dflat_link::{
@@ -174,7 +174,7 @@ pub enum SitlError {
     },
     /// The plant options were refused by the lab.
     #[error("sitl plant: {0}")]
-    Plant(#[from] crate::SimError),
+    Plant(#[from] dflat_sim::SimError),
     /// The truth CSV could not be created or written.
     #[error("truth CSV {file}: {source}")]
     Truth {

@@ -2,12 +2,12 @@
 //! offboard, it streams SET_POSITION_TARGET_LOCAL_NED to the daemon (1/191
 //! by default) with position, velocity, acceleration and yaw, as MAVROS,
 //! MAVSDK or any planner sends them, along a circle or a figure eight
-//! ([`crate::trajectory`]) that starts where the vehicle is.
+//! ([`dflat_sim::trajectory`]) that starts where the vehicle is.
 
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
-use crate::trajectory::{Shape, Trajectory};
+use dflat_sim::trajectory::{Shape, Trajectory};
 use dflat_link::MavMessage;
 use dflat_link::dialect::{MavFrame, PositionTargetTypemask, SET_POSITION_TARGET_LOCAL_NED_DATA};
 

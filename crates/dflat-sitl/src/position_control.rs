@@ -24,7 +24,7 @@ use dflat_control::AttitudeCommand;
 use dflat_link::MavMessage;
 use dflat_link::dialect::{MavFrame, PositionTargetTypemask};
 
-use crate::plant::{PlantOptions, PlantState};
+use dflat_sim::plant::{PlantOptions, PlantState};
 
 /// Gains of the position loop.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -252,7 +252,7 @@ pub fn approach(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::plant::{PlantKind, build_plant};
+    use dflat_sim::plant::{PlantKind, build_plant};
     use dflat_link::dialect::SET_POSITION_TARGET_LOCAL_NED_DATA;
     use nalgebra::Vector3;
 

@@ -1,14 +1,26 @@
-//! From a flight log to a tuned vehicle: `dflat identify`, `dflat review`,
-//! `dflat replay`. The shells around `dflat-sim`'s flight-log reader and
-//! identification and the daemon's pure tick; all offline.
+//! # dflat-tuning — from a flight log to a tuned vehicle, offline
+//!
+//! * [`flightlog`] — reading a flight's records back: the daemon's `.tlog`
+//!   and its per-tick CSV (columns from `dflat_daemon::records`' schema).
+//! * [`identify`] — system identification from a flight log (`dflat
+//!   identify`): τ, k̃ and delay per axis, hover thrust and τ_T, drag.
+//! * [`review`] — `dflat review`: a flight's report as one self-contained
+//!   HTML page (inline SVG).
+//! * [`replay`] — `dflat replay`: the daemon's pure tick re-run on a
+//!   flight's logged inputs, with its own or another configuration.
+//!
+//! The functions below are the shells of `dflat identify` and the readers
+//! the review and the replay share.
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, Result, bail};
 
-use dflat_sim::flightlog::{FlightCsv, FlightLog};
-use dflat_sim::identify::{self, FlownVehicle};
+use crate::flightlog::{FlightCsv, FlightLog};
+use crate::identify::FlownVehicle;
 
+pub mod flightlog;
+pub mod identify;
 mod page;
 pub mod replay;
 pub mod review;

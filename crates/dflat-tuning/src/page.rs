@@ -6,7 +6,7 @@
 
 use std::fmt::Write as _;
 
-use super::svg::{Band, esc};
+use crate::svg::{Band, esc};
 
 /// Colour of a supervisor state's band; FAILSAFE is red.
 pub fn state_color(state: &str) -> &'static str {

@@ -30,9 +30,9 @@ use dflat_daemon::control::{build_controller, thrust_mapping};
 use dflat_daemon::tick::{ControlCore, Event, TickTime, event_from, pose_source, source_filter};
 use dflat_link::tlog::TlogReader;
 use dflat_link::{LinkRx, MavMessage, RxOutcome};
-use dflat_sim::flightlog::FlightCsv;
+use crate::flightlog::FlightCsv;
 
-use super::review::{Overlay, load_tlog_beside, quantile, render};
+use crate::review::{Overlay, load_tlog_beside, quantile, render};
 
 /// Arguments of `dflat replay`.
 #[derive(Debug, clap::Args)]
@@ -250,7 +250,7 @@ pub fn run(args: ReplayArgs) -> Result<()> {
         Some("tlog") => args.flight.with_extension("csv"),
         _ => args.flight.clone(),
     };
-    let csv = super::read_csv(&csv_path)?;
+    let csv = crate::read_csv(&csv_path)?;
     let cfg = Config::load(&args.config)?;
     let mut report = replay(&csv_path, &csv, &cfg)?;
     report.overlay.label = format!("replay with {}", args.config.display());

@@ -16,9 +16,9 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, Result};
 
-use super::page::{self, Header};
-use super::svg::{Chart, Marker, Series, esc};
-use dflat_sim::flightlog::{FlightCsv, FlightLog};
+use crate::page::{self, Header};
+use crate::svg::{Chart, Marker, Series, esc};
+use crate::flightlog::{FlightCsv, FlightLog};
 
 /// Arguments of `dflat review`.
 #[derive(Debug, clap::Args)]
@@ -52,7 +52,7 @@ pub fn run(args: ReviewArgs) -> Result<()> {
         Some("tlog") => args.flight.with_extension("csv"),
         _ => args.flight.clone(),
     };
-    let csv = super::read_csv(&csv_path)?;
+    let csv = crate::read_csv(&csv_path)?;
     let log = load_tlog_beside(&csv_path)?;
     let header = header_for(&csv_path, log.as_ref(), args.config.as_deref())?;
     let html = render_with(&csv_path, &csv, log.as_ref(), None, &header);
@@ -119,10 +119,10 @@ pub fn load_tlog_beside(csv: &Path) -> Result<Option<FlightLog>> {
     if !tlog.exists() {
         return Ok(None);
     }
-    match super::read_tlog(&tlog) {
+    match crate::read_tlog(&tlog) {
         Ok(log) => Ok(Some(log)),
-        Err(e) => match e.downcast_ref::<dflat_sim::flightlog::FlightLogError>() {
-            Some(empty @ dflat_sim::flightlog::FlightLogError::EmptyTlog { .. }) => {
+        Err(e) => match e.downcast_ref::<crate::flightlog::FlightLogError>() {
+            Some(empty @ crate::flightlog::FlightLogError::EmptyTlog { .. }) => {
                 eprintln!("warning: {empty}: reviewing from the CSV alone");
                 Ok(None)
             }

@@ -3,10 +3,10 @@
 
 use std::path::Path;
 
-use dflat_sim::flightlog::FlightCsv;
+use crate::flightlog::FlightCsv;
 
-use super::page::Header;
-use super::review::{quantile, render_with};
+use crate::page::Header;
+use crate::review::{quantile, render_with};
 
 const COLUMNS: &[&str] = &[
     "tick",
@@ -192,7 +192,7 @@ fn the_page_has_its_parts_and_a_10_minute_flight_stays_under_2_mb() {
     let at = html.find("data-name=\"tracking error\"").unwrap();
     let points: usize = attr(&html, at, "data-points").parse().unwrap();
     let max: f64 = attr(&html, at, "data-max").parse().unwrap();
-    assert!(points <= super::svg::MAX_POINTS + 8, "{points}");
+    assert!(points <= crate::svg::MAX_POINTS + 8, "{points}");
     let true_max = err.iter().copied().fold(0.0, f64::max);
     assert!((max - true_max).abs() < 2e-4, "{max} vs {true_max}");
 }
@@ -202,12 +202,12 @@ fn thinning_keeps_min_max_and_order() {
     let pts: Vec<(f64, f64)> = (0..10_000)
         .map(|i| (i as f64, ((i * 7919) % 1000) as f64))
         .collect();
-    let thin = super::svg::thin(&pts, 400);
+    let thin = crate::svg::thin(&pts, 400);
     assert!(thin.len() <= 404, "{}", thin.len());
     assert!(thin.windows(2).all(|w| w[0].0 < w[1].0));
     assert_eq!(thin.iter().map(|p| p.1).fold(f64::MIN, f64::max), 999.0);
     assert_eq!(thin.iter().map(|p| p.1).fold(f64::MAX, f64::min), 0.0);
-    let short = super::svg::thin(&pts[..10], 400);
+    let short = crate::svg::thin(&pts[..10], 400);
     assert_eq!(short, pts[..10].to_vec());
 }
 

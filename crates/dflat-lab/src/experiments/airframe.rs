@@ -38,8 +38,8 @@ use serde::{Deserialize, Serialize};
 use super::paths::PathsConfig;
 use super::{ControllerSpec, ExperimentError, fair, invalid, percentile};
 use crate::harness::{ControllerFactory, StopReason, TrialResult, TrialSpec, run_trials};
-use crate::plant::PlantOptions;
-use crate::sensing::VisionMode;
+use dflat_sim::plant::PlantOptions;
+use dflat_sim::sensing::VisionMode;
 
 /// Control step of the lab \[s\].
 const DT: f64 = 0.02;

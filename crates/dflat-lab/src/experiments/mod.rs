@@ -39,7 +39,7 @@ use dflat_control::ControlError;
 use serde::Serialize;
 use thiserror::Error;
 
-use crate::SimError;
+use dflat_sim::SimError;
 
 /// Why an experiment could not run or write its outputs. What happens
 /// inside a trial (controller errors, divergence) is a result, not an error.

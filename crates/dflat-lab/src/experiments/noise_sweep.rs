@@ -32,9 +32,9 @@ use serde::{Deserialize, Serialize};
 
 use super::{ControllerSpec, ExperimentError, OutputPaths, invalid, mean, std_dev, write_json};
 use crate::harness::{FixedTarget, Metrics, StopCondition, StopReason, TrialSpec, run_trials};
-use crate::plant::{PlantOptions, PlantState};
+use dflat_sim::plant::{PlantOptions, PlantState};
 use crate::plot::{LinePlot, RGBColor, Series, controller_color, write_line_plot};
-use crate::sensing::{GaussianOptions, SensorSpec};
+use dflat_sim::sensing::{GaussianOptions, SensorSpec};
 
 /// The paper's noise levels σ \[m\].
 pub const PAPER_SIGMAS: [f64; 8] = [0.0, 1e-4, 2e-4, 5e-4, 1e-3, 2e-3, 5e-3, 1e-2];

@@ -53,8 +53,8 @@ use crate::harness::{
     ErrorStats, ReferenceFactory, StopCondition, StopReason, TrialSpec, polyline_path_distance,
     run_trials,
 };
-use crate::plant::{PlantOptions, PlantState};
-use crate::sensing::{SensorSpec, VisionMode, VisionOptions};
+use dflat_sim::plant::{PlantOptions, PlantState};
+use dflat_sim::sensing::{SensorSpec, VisionMode, VisionOptions};
 
 /// One window of the study: a name and the DF-MPC it flies.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

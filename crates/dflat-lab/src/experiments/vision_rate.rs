@@ -87,9 +87,9 @@ use crate::harness::{
     ControllerFactory, ErrorStats, ReferenceFactory, StopCondition, StopReason, TrialSpec,
     polyline_path_distance, run_trials,
 };
-use crate::plant::{PlantOptions, PlantState};
+use dflat_sim::plant::{PlantOptions, PlantState};
 use crate::plot::{LinePlot, RGBColor, Series, write_line_plot};
-use crate::sensing::{SensorSpec, VisionMode, VisionOptions};
+use dflat_sim::sensing::{SensorSpec, VisionMode, VisionOptions};
 
 /// One controller of the study.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]

@@ -43,10 +43,10 @@ use indicatif::{ProgressBar, ProgressStyle};
 use nalgebra::Vector3;
 use rayon::prelude::*;
 
-use crate::SimError;
-use crate::error::{check_positive, check_range};
-use crate::plant::{PlantKind, PlantOptions, PlantState, build_plant};
-use crate::sensing::{PoseSample, SensorSpec, build_sensor};
+use dflat_sim::SimError;
+use dflat_sim::error::{check_positive, check_range};
+use dflat_sim::plant::{PlantKind, PlantOptions, PlantState, build_plant};
+use dflat_sim::sensing::{PoseSample, SensorSpec, build_sensor};
 
 /// Builds a fresh controller for a trial (called once per trial).
 pub type ControllerFactory = Arc<dyn Fn() -> Box<dyn Controller> + Send + Sync>;

@@ -8,7 +8,7 @@ use std::sync::Arc;
 use dflat_control::{
     AttitudeCommand, ControlError, Controller, Measurement, ReferenceSource, TickOutput,
 };
-use dflat_sim::harness::{ControllerFactory, ReferenceFactory};
+use dflat_lab::harness::{ControllerFactory, ReferenceFactory};
 use nalgebra::Vector3;
 
 /// Gravity [m/s²].

@@ -73,12 +73,12 @@ use crate::harness::{
     ControllerFactory, ErrorStats, Metrics, ReferenceFactory, StopCondition, StopReason,
     TrialResult, TrialSpec, polyline_path_distance, quantile, run_trials,
 };
-use crate::plant::{PlantOptions, PlantState};
+use dflat_sim::plant::{PlantOptions, PlantState};
 use crate::plot::{
     BoxPlot, BoxSeries, LinePlot, PathPlot, RGBColor, Series, controller_color, north_up,
     write_box_plot, write_line_plot, write_path_plot,
 };
-use crate::sensing::{SensorSpec, VisionOptions};
+use dflat_sim::sensing::{SensorSpec, VisionOptions};
 
 mod output;
 
