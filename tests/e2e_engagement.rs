@@ -21,7 +21,8 @@ use dflat_daemon::config::{Config, MissionStart};
 use dflat_daemon::supervisor::FlightState;
 use dflat_link::MavMessage;
 use dflat_sitl::{
-    self as sitl, SitlAutopilot, SitlEngage, SitlHandle, SitlMode, SitlOptions, SitlSettings, TapFrame,
+    self as sitl, SitlAutopilot, SitlEngage, SitlHandle, SitlMode, SitlOptions, SitlSettings,
+    TapFrame,
 };
 
 /// The contract's tilt limit \[deg\] (`vehicle.max_tilt_deg` of the shipped

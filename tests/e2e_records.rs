@@ -29,8 +29,8 @@ use std::time::{Duration, Instant};
 use common::*;
 use dflat_link::MavMessage;
 use dflat_link::tlog::TlogReader;
-use dflat_tuning::flightlog::FlightCsv;
 use dflat_sitl::{self as sitl, SitlHandle, SitlOptions, TapFrame};
+use dflat_tuning::flightlog::FlightCsv;
 
 /// The daemon's side: the spatial model (what `dflat identify` fits),
 /// the identification manoeuvre as the mission.

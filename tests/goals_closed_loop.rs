@@ -23,8 +23,8 @@ use dflat_daemon::control::{build_controller, thrust_mapping};
 use dflat_daemon::tick::{ControlCore, Event, TickTime};
 use dflat_link::{AutopilotFamily, AutopilotMode};
 use dflat_sim::plant::{Plant, PlantKind, PlantOptions, PlantState, build_plant};
-use dflat_sitl::position_control::{self, PositionGains, PositionTarget};
 use dflat_sim::trajectory::{Shape, Trajectory};
+use dflat_sitl::position_control::{self, PositionGains, PositionTarget};
 use nalgebra::Vector3;
 
 const DT: f64 = 0.02;

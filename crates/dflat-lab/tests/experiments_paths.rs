@@ -6,7 +6,7 @@
 use std::path::PathBuf;
 
 use dflat_lab::experiments::paths::{PathsConfig, PathsResult, Tuning, run_paths, write_paths};
-use dflat_lab::experiments::{ControllerSpec, OutputPaths};
+use dflat_lab::experiments::{ControllerSpec, OutputPaths, TrialSetup};
 use dflat_lab::harness::StopReason;
 
 fn out_dir(name: &str) -> PathBuf {
@@ -17,12 +17,16 @@ fn out_dir(name: &str) -> PathBuf {
 
 /// One speed (5 m/s), one trial, capped at 6 s, no search, no DSL.
 fn reduced() -> PathsConfig {
+    let untuned = PathsConfig::untuned();
     PathsConfig {
         speeds: vec![5.0],
         trials: 1,
-        max_duration: Some(6.0),
+        setup: TrialSetup {
+            max_duration: Some(6.0),
+            ..untuned.setup.clone()
+        },
         dsl: false,
-        ..PathsConfig::untuned()
+        ..untuned
     }
 }
 
@@ -189,7 +193,10 @@ fn invalid_options_are_errors() {
             ..reduced()
         },
         PathsConfig {
-            max_duration: Some(0.0),
+            setup: TrialSetup {
+                max_duration: Some(0.0),
+                ..reduced().setup
+            },
             ..reduced()
         },
         PathsConfig {

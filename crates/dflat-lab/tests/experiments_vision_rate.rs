@@ -10,12 +10,12 @@ use dflat_control::window::MultiRateSettings;
 use dflat_control::{
     ControlError, ControlModel, Controller, Measurement, ReferenceSource, TickOutput,
 };
-use dflat_model::{PlanarModel, PlanarParams};
-use dflat_lab::experiments::OutputPaths;
 use dflat_lab::experiments::vision_rate::{
     BUDGET_RATE, VisionRateConfig, run_vision_rate, write_vision_rate,
 };
+use dflat_lab::experiments::{OutputPaths, TrialSetup};
 use dflat_lab::harness::{ControllerFactory, ReferenceFactory, TrialSpec, run_trial};
+use dflat_model::{PlanarModel, PlanarParams};
 use dflat_sim::sensing::{SensorSpec, VisionMode, VisionOptions};
 
 fn out_dir(name: &str) -> PathBuf {
@@ -26,12 +26,16 @@ fn out_dir(name: &str) -> PathBuf {
 
 /// One speed, 15 Hz, one trial, capped at 6 s.
 fn reduced() -> VisionRateConfig {
+    let default = VisionRateConfig::default();
     VisionRateConfig {
         speeds: vec![5.0],
         rates: vec![BUDGET_RATE],
         trials: 1,
-        max_duration: Some(6.0),
-        ..VisionRateConfig::default()
+        setup: TrialSetup {
+            max_duration: Some(6.0),
+            ..default.setup.clone()
+        },
+        ..default
     }
 }
 

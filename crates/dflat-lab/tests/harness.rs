@@ -8,12 +8,12 @@ use std::sync::Arc;
 
 use common::{Constant, Flaky, G, TestPd, close, fixed_ref, pd_factory};
 use dflat_control::{AttitudeCommand, Measurement};
-use dflat_sim::SimError;
 use dflat_lab::harness::{
     ErrorStats, FixedTarget, PlantSample, StopCondition, StopReason, TICKS_HEADER, TickRecord,
     TickStatus, TrialSpec, command_smoothness, fixed_target_error, max_tilt_deg, path_error_stats,
     polyline_distance, polyline_path_distance, quantile, run_trial, run_trials, saturation_share,
 };
+use dflat_sim::SimError;
 use dflat_sim::plant::{PlantKind, PlantOptions, PlantState};
 use dflat_sim::sensing::{GaussianOptions, SensorSpec, VisionOptions};
 use nalgebra::Vector3;

@@ -1,12 +1,12 @@
 //! Plant tests: steady states, NED signs, RK4 against closed forms, the
 //! rigid body's attitude loop, saturation, drag, wind and gusts.
 
-use std::f64::consts::FRAC_PI_2;
 use dflat_control::AttitudeCommand;
 use dflat_sim::plant::{
     Integrator, Plant, PlantKind, PlantOptions, PlantState, build_plant, thrust_axis,
 };
 use nalgebra::Vector3;
+use std::f64::consts::FRAC_PI_2;
 
 /// Gravity [m/s²].
 const G: f64 = 9.81;

@@ -80,15 +80,14 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant, SystemTime};
 
-use dflat_sim::plant::{Plant, PlantKind, PlantOptions, PlantState, RigidBodyOptions, build_plant};
-use dflat_sim::sensing::{GaussianOptions, GaussianSensor, Sensor};
 use dflat_control::AttitudeCommand as PlantCommand;
 use dflat_link::dialect::{MavAutopilot, MavState};
 use dflat_link::{
     LinkRx, MavHeader, MavMessage, Signing, SourceFilter, serialize_v2, timestamp_from_system_time,
 };
+use dflat_sim::plant::{Plant, PlantKind, PlantOptions, PlantState, RigidBodyOptions, build_plant};
+use dflat_sim::sensing::{GaussianOptions, GaussianSensor, Sensor};
 use nalgebra::Vector3;
-use thiserror::Error;
 
 use dflat_link::transport::Endpoint;
 
@@ -96,7 +95,9 @@ mod autopilot_state;
 pub mod commands;
 mod config;
 mod counters;
+mod error;
 mod latency;
+mod mode;
 pub mod params;
 pub mod pilot;
 pub mod planner;
@@ -108,7 +109,9 @@ mod services;
 mod truth;
 pub use config::{SitlAutopilot, SitlConfig, SitlConfigError, SitlIds, SitlPlant, SitlSettings};
 pub use counters::{SentCounts, SitlCounters};
+pub use error::SitlError;
 pub use latency::PoseLatency;
+pub use mode::SitlMode;
 pub use params::{ParamError, ParamTable, SitlParam};
 pub use pilot::{ModeMachine, PilotAction, PilotMode, SitlEngage};
 use plant_loop::{PlantLoop, VISION_QUEUE, VISION_SEED, VisionStream};
@@ -151,118 +154,8 @@ const RX_POLL: Duration = Duration::from_millis(50);
 /// Truth rows buffered between flushes of the truth CSV.
 const CSV_FLUSH_ROWS: u64 = 25;
 
-/// Why the SITL could not start or finish.
-#[derive(Debug, Error)]
-pub enum SitlError {
-    /// The connection string is not `udpin:HOST:PORT`.
-    #[error("{what}: `{url}` is not a SITL endpoint (the SITL listens: udpin:HOST:PORT)")]
-    Endpoint {
-        /// Which endpoint (`link` or `gcs`).
-        what: &'static str,
-        /// The string given.
-        url: String,
-    },
-    /// A socket could not be bound or configured.
-    #[error("{what}: cannot listen on {addr}: {source}")]
-    Bind {
-        /// Which endpoint.
-        what: &'static str,
-        /// The address.
-        addr: SocketAddr,
-        /// The I/O error.
-        source: std::io::Error,
-    },
-    /// The plant options were refused by the lab.
-    #[error("sitl plant: {0}")]
-    Plant(#[from] dflat_sim::SimError),
-    /// The truth CSV could not be created or written.
-    #[error("truth CSV {file}: {source}")]
-    Truth {
-        /// The file.
-        file: PathBuf,
-        /// The I/O error.
-        source: std::io::Error,
-    },
-    /// A SITL thread could not be started.
-    #[error("cannot start the {0} thread: {1}")]
-    Thread(&'static str, std::io::Error),
-    /// A SITL thread panicked (a bug).
-    #[error("the SITL {0} thread panicked")]
-    Panicked(&'static str),
-    /// `sitl.signing_key_file` is refused (mode, owner, contents).
-    #[error("sitl.signing_key_file = {file}: {reason}")]
-    SigningKey {
-        /// The key file.
-        file: PathBuf,
-        /// Why, in words.
-        reason: String,
-    },
-}
-
 /// The SITL's signing link id (the daemon's default is 0).
 pub const SIGNING_LINK_ID: u8 = 1;
-
-/// What the autopilot stand-in is doing.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum SitlMode {
-    /// Holding position on its own (start, and after a command timeout).
-    Hold,
-    /// Following the setpoint stream: SET_ATTITUDE_TARGET, or position
-    /// setpoints to the autopilot flown by its position loop (the latest
-    /// type wins).
-    Offboard,
-    /// PX4 AUTO_LOITER (`hold()`, `goto_location()`): the SITL's position
-    /// loop flies to a goal and holds there.
-    Loiter,
-    /// PX4 AUTO_RTL: as [`SitlMode::Loiter`] with home (the start point)
-    /// as the goal; the plant cannot land, so it holds there.
-    Rtl,
-}
-
-impl SitlMode {
-    /// Lower-case name, as printed and written to the truth CSV.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            SitlMode::Hold => "hold",
-            SitlMode::Offboard => "offboard",
-            SitlMode::Loiter => "loiter",
-            SitlMode::Rtl => "rtl",
-        }
-    }
-
-    /// HEARTBEAT `custom_mode` as `autopilot` reports it: PX4 POSCTL /
-    /// OFFBOARD, ArduPilot LOITER (5) / GUIDED_NOGPS (20).
-    pub fn custom_mode(self, autopilot: SitlAutopilot) -> u32 {
-        match (autopilot, self) {
-            (SitlAutopilot::Px4, SitlMode::Hold) => PX4_MODE_POSCTL,
-            (SitlAutopilot::Px4, SitlMode::Offboard) => PX4_MODE_OFFBOARD,
-            (SitlAutopilot::Ardupilot, SitlMode::Hold) => ARDUPILOT_MODE_LOITER,
-            (SitlAutopilot::Ardupilot, SitlMode::Offboard) => ARDUPILOT_MODE_GUIDED_NOGPS,
-            (SitlAutopilot::Px4, SitlMode::Loiter) => px4_face::px4_auto(px4_face::PX4_AUTO_LOITER),
-            (SitlAutopilot::Px4, SitlMode::Rtl) => px4_face::px4_auto(px4_face::PX4_AUTO_RTL),
-            (SitlAutopilot::Ardupilot, SitlMode::Loiter) => ARDUPILOT_MODE_LOITER,
-            (SitlAutopilot::Ardupilot, SitlMode::Rtl) => ARDUPILOT_MODE_RTL,
-        }
-    }
-
-    fn from_u8(v: u8) -> Self {
-        match v {
-            1 => SitlMode::Offboard,
-            2 => SitlMode::Loiter,
-            3 => SitlMode::Rtl,
-            _ => SitlMode::Hold,
-        }
-    }
-
-    fn as_u8(self) -> u8 {
-        match self {
-            SitlMode::Hold => 0,
-            SitlMode::Offboard => 1,
-            SitlMode::Loiter => 2,
-            SitlMode::Rtl => 3,
-        }
-    }
-}
 
 /// A received attitude command as the autopilot reads it.
 #[derive(Debug, Clone, Copy, PartialEq)]

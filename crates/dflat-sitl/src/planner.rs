@@ -7,9 +7,9 @@
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
-use dflat_sim::trajectory::{Shape, Trajectory};
 use dflat_link::MavMessage;
 use dflat_link::dialect::{MavFrame, PositionTargetTypemask, SET_POSITION_TARGET_LOCAL_NED_DATA};
+use dflat_sim::trajectory::{Shape, Trajectory};
 
 /// `[sitl.planner]`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

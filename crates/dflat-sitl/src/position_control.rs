@@ -252,8 +252,8 @@ pub fn approach(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use dflat_sim::plant::{PlantKind, build_plant};
     use dflat_link::dialect::SET_POSITION_TARGET_LOCAL_NED_DATA;
+    use dflat_sim::plant::{PlantKind, build_plant};
     use nalgebra::Vector3;
 
     fn options() -> PlantOptions {

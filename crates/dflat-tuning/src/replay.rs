@@ -25,12 +25,13 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, Result, bail};
 
+use crate::flightlog::FlightCsv;
 use dflat_daemon::config::Config;
 use dflat_daemon::control::{build_controller, thrust_mapping};
+use dflat_daemon::csv_schema::Column;
 use dflat_daemon::tick::{ControlCore, Event, TickTime, event_from, pose_source, source_filter};
 use dflat_link::tlog::TlogReader;
 use dflat_link::{LinkRx, MavMessage, RxOutcome};
-use crate::flightlog::FlightCsv;
 
 use crate::review::{Overlay, load_tlog_beside, quantile, render};
 
@@ -117,17 +118,25 @@ pub fn replay(csv_path: &Path, csv: &FlightCsv, cfg: &Config) -> Result<ReplayRe
             tlog.display()
         );
     }
-    for needed in ["tick", "t", "jitter_us", "roll", "pitch", "yaw", "thrust"] {
+    for needed in [
+        Column::Tick,
+        Column::T,
+        Column::JitterUs,
+        Column::Roll,
+        Column::Pitch,
+        Column::Yaw,
+        Column::Thrust,
+    ] {
         if !csv.has(needed) {
             bail!("{}: no `{needed}` column", csv_path.display());
         }
     }
     let (events, sent) = tlog_events(&tlog, cfg)?;
-    let t_sched = csv.numbers("t");
-    let jitter = csv.numbers("jitter_us");
+    let t_sched = csv.numbers(Column::T);
+    let jitter = csv.numbers(Column::JitterUs);
     // The exact tick time when the CSV has it (`t_wake`), else scheduled
     // time (0.1 ms) plus jitter (1 µs).
-    let exact = csv.numbers("t_wake");
+    let exact = csv.numbers(Column::TWake);
     let wake: Vec<f64> = t_sched
         .iter()
         .zip(&jitter)
@@ -154,7 +163,7 @@ pub fn replay(csv_path: &Path, csv: &FlightCsv, cfg: &Config) -> Result<ReplayRe
     // tell how far the capture times are off, and pass 2 corrects it.
     let first = run_pass(csv, cfg, &events, &wake, offset)?;
     match first.1 {
-        Some(shift) if csv.has("pose_age_ms") => {
+        Some(shift) if csv.has(Column::PoseAgeMs) => {
             Ok(run_pass(csv, cfg, &events, &wake, offset + shift)?.0)
         }
         _ => Ok(first.0),
@@ -170,17 +179,17 @@ fn run_pass(
     wake: &[f64],
     offset: f64,
 ) -> Result<(ReplayReport, Option<f64>)> {
-    let ticks = csv.numbers("tick");
+    let ticks = csv.numbers(Column::Tick);
     // Each tick's cutoff in the events, when logged.
-    let cutoff = csv.numbers("events");
-    let t_sched = csv.numbers("t");
-    let jitter = csv.numbers("jitter_us");
-    let ages = csv.numbers("pose_age_ms");
+    let cutoff = csv.numbers(Column::Events);
+    let t_sched = csv.numbers(Column::T);
+    let jitter = csv.numbers(Column::JitterUs);
+    let ages = csv.numbers(Column::PoseAgeMs);
     let mut age_diffs = Vec::new();
     let controller = build_controller(cfg).context("cannot build the controller")?;
     let mut core = ControlCore::new(cfg, controller, thrust_mapping(cfg));
     let mut pending = events.iter().map(|e| e.shifted(offset)).peekable();
-    let logged = ["roll", "pitch", "yaw", "thrust"].map(|c| csv.numbers(c));
+    let logged = [Column::Roll, Column::Pitch, Column::Yaw, Column::Thrust].map(|c| csv.numbers(c));
     let mut report = ReplayReport {
         ticks: csv.rows.len(),
         overlay: Overlay {

@@ -16,9 +16,10 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, Result};
 
+use crate::flightlog::{FlightCsv, FlightLog};
 use crate::page::{self, Header};
 use crate::svg::{Chart, Marker, Series, esc};
-use crate::flightlog::{FlightCsv, FlightLog};
+use dflat_daemon::csv_schema::Column;
 
 /// Arguments of `dflat review`.
 #[derive(Debug, clap::Args)]
@@ -153,7 +154,7 @@ pub fn log_to_csv_offset(log: &FlightLog) -> Option<f64> {
     m.is_finite().then_some(m)
 }
 
-fn col(csv: &FlightCsv, name: &str) -> Vec<f64> {
+fn col(csv: &FlightCsv, name: Column) -> Vec<f64> {
     csv.numbers(name)
         .into_iter()
         .map(|v| v.unwrap_or(f64::NAN))
@@ -166,9 +167,9 @@ fn pairs(t: &[f64], v: &[f64], scale: f64) -> Vec<(f64, f64)> {
 
 /// Summary numbers of a flight CSV, as (key, label, value, unit).
 pub fn summary(csv: &FlightCsv) -> Vec<(&'static str, &'static str, f64, &'static str)> {
-    let t = col(csv, "t");
-    let pos = ["x", "y", "z"].map(|c| col(csv, c));
-    let re = ["ref_x", "ref_y", "ref_z"].map(|c| col(csv, c));
+    let t = col(csv, Column::T);
+    let pos = [Column::X, Column::Y, Column::Z].map(|c| col(csv, c));
+    let re = [Column::RefX, Column::RefY, Column::RefZ].map(|c| col(csv, c));
     let err: Vec<f64> = (0..t.len())
         .map(|i| {
             (0..3)
@@ -177,12 +178,19 @@ pub fn summary(csv: &FlightCsv) -> Vec<(&'static str, &'static str, f64, &'stati
                 .sqrt()
         })
         .collect();
-    let solve = col(csv, "solve_us");
-    let jitter = col(csv, "jitter_us");
-    let age = col(csv, "pose_age_ms");
-    let commands = col(csv, "roll").iter().filter(|v| v.is_finite()).count();
-    let guards = csv.texts("guard").iter().filter(|g| !g.is_empty()).count();
-    let states = csv.texts("state");
+    let solve = col(csv, Column::SolveUs);
+    let jitter = col(csv, Column::JitterUs);
+    let age = col(csv, Column::PoseAgeMs);
+    let commands = col(csv, Column::Roll)
+        .iter()
+        .filter(|v| v.is_finite())
+        .count();
+    let guards = csv
+        .texts(Column::Guard)
+        .iter()
+        .filter(|g| !g.is_empty())
+        .count();
+    let states = csv.texts(Column::State);
     let changes = states.windows(2).filter(|w| w[0] != w[1]).count();
     let tracking = states.iter().filter(|s| **s == "TRACKING").count();
     let period = if t.len() > 1 {
@@ -258,8 +266,8 @@ pub fn summary(csv: &FlightCsv) -> Vec<(&'static str, &'static str, f64, &'stati
 
 /// State changes and guard events as markers on the CSV's time axis.
 fn markers(csv: &FlightCsv, t: &[f64]) -> Vec<Marker> {
-    let states = csv.texts("state");
-    let guards = csv.texts("guard");
+    let states = csv.texts(Column::State);
+    let guards = csv.texts(Column::Guard);
     let mut out = Vec::new();
     for i in 0..t.len() {
         if i > 0 && states[i] != states[i - 1] {
@@ -315,9 +323,9 @@ pub fn render_with(
     overlay: Option<&Overlay>,
     header: &Header,
 ) -> String {
-    let t = col(csv, "t");
+    let t = col(csv, Column::T);
     let marks = markers(csv, &t);
-    let bands = page::state_bands(&t, &csv.texts("state"));
+    let bands = page::state_bands(&t, &csv.texts(Column::State));
     let chart = |id: &str, title: &str, y: &str, series: Vec<Series>| Chart {
         id: id.into(),
         title: title.into(),
@@ -340,8 +348,8 @@ pub fn render_with(
         dashed: true,
         ..s(name, color, points)
     };
-    let [x, y, z] = ["x", "y", "z"].map(|c| col(csv, c));
-    let [rx, ry, rz] = ["ref_x", "ref_y", "ref_z"].map(|c| col(csv, c));
+    let [x, y, z] = [Column::X, Column::Y, Column::Z].map(|c| col(csv, c));
+    let [rx, ry, rz] = [Column::RefX, Column::RefY, Column::RefZ].map(|c| col(csv, c));
     let mut charts = Vec::new();
     // The map: east to the right, north up.
     charts.push(Chart {
@@ -428,12 +436,12 @@ pub fn render_with(
         s(
             "roll command",
             "#1f5fbf",
-            pairs(&t, &col(csv, "roll"), 180.0 / std::f64::consts::PI),
+            pairs(&t, &col(csv, Column::Roll), 180.0 / std::f64::consts::PI),
         ),
         s(
             "pitch command",
             "#c33",
-            pairs(&t, &col(csv, "pitch"), 180.0 / std::f64::consts::PI),
+            pairs(&t, &col(csv, Column::Pitch), 180.0 / std::f64::consts::PI),
         ),
     ];
     if let Some(log) = log
@@ -452,7 +460,7 @@ pub fn render_with(
     let mut thrust = vec![s(
         "thrust command",
         "#333",
-        pairs(&t, &col(csv, "thrust"), 1.0),
+        pairs(&t, &col(csv, Column::Thrust), 1.0),
     )];
     if let Some(o) = overlay {
         let deg = 180.0 / std::f64::consts::PI;
@@ -486,16 +494,16 @@ pub fn render_with(
             s(
                 "solve time",
                 "#1f5fbf",
-                pairs(&t, &col(csv, "solve_us"), 1.0),
+                pairs(&t, &col(csv, Column::SolveUs), 1.0),
             ),
             s(
                 "tick jitter",
                 "#c33",
-                pairs(&t, &col(csv, "jitter_us"), 1.0),
+                pairs(&t, &col(csv, Column::JitterUs), 1.0),
             ),
         ],
     ));
-    if csv.has("pose_age_ms") {
+    if csv.has(Column::PoseAgeMs) {
         charts.push(chart(
             "pose-age",
             "pose age at the tick",
@@ -503,11 +511,11 @@ pub fn render_with(
             vec![s(
                 "pose age",
                 "#733",
-                pairs(&t, &col(csv, "pose_age_ms"), 1.0),
+                pairs(&t, &col(csv, Column::PoseAgeMs), 1.0),
             )],
         ));
     }
-    let dist = ["dist_x", "dist_y", "dist_z"].map(|c| col(csv, c));
+    let dist = [Column::DistX, Column::DistY, Column::DistZ].map(|c| col(csv, c));
     if dist.iter().any(|d| d.iter().any(|v| v.is_finite())) {
         charts.push(chart(
             "disturbance",
@@ -520,10 +528,10 @@ pub fn render_with(
             ],
         ));
     }
-    let states = csv.texts("state");
-    let cmd: Vec<(f64, f64)> = col(csv, "roll")
+    let states = csv.texts(Column::State);
+    let cmd: Vec<(f64, f64)> = col(csv, Column::Roll)
         .into_iter()
-        .zip(col(csv, "pitch"))
+        .zip(col(csv, Column::Pitch))
         .collect();
     let phases = page::phase_stats(&t, &states, &err, &cmd, quantile);
     page(name, csv, log, &charts, header, &phases)

@@ -39,8 +39,8 @@ use dflat_daemon::DaemonError;
 use dflat_daemon::FlightSummary;
 use dflat_daemon::config::{Config, ConfigError, MissionStart};
 use dflat_sitl::{
-    self as sitl, SitlConfigError, SitlCounters, SitlEngage, SitlError, SitlHandle, SitlMode, SitlOptions,
-    SitlReport, SitlSettings, TruthSample,
+    self as sitl, SitlConfigError, SitlCounters, SitlEngage, SitlError, SitlHandle, SitlMode,
+    SitlOptions, SitlReport, SitlSettings, TruthSample,
 };
 
 /// The shipped SITL configuration (daemon + SITL on loopback).

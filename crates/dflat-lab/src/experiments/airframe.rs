@@ -30,7 +30,6 @@
 use std::sync::Arc;
 
 use dflat_control::dfmpc::DfMpc;
-use dflat_control::reference::paths;
 use dflat_control::{ControlModel, TiltLimit};
 use dflat_model::{PlanarModel, PlanarParams};
 use serde::{Deserialize, Serialize};
@@ -287,14 +286,12 @@ fn trial(
     plant: PlantOptions,
     speed: f64,
 ) -> Result<TrialSpec, ExperimentError> {
-    let mut lab = PathsConfig {
-        max_duration: config.max_duration,
-        ..PathsConfig::untuned()
-    };
+    let mut lab = PathsConfig::untuned();
+    lab.setup.max_duration = config.max_duration;
     if flier.multi_rate() {
         lab.vision.mode = VisionMode::Raw;
     }
-    let w = paths::waypoints(&paths::L_XY, lab.altitude);
+    let w = lab.setup.l_path();
     let stop = lab.path_end_stop(&w, speed);
     lab.path_trial(
         format!("{} L {speed} m/s", flier.name()),

@@ -29,9 +29,11 @@ pub mod noise_sweep;
 pub mod paths;
 pub mod phase;
 pub mod tilt_cone;
+mod trial;
 pub mod vision_rate;
 
 pub use controllers::ControllerSpec;
+pub use trial::TrialSetup;
 
 use std::path::{Path, PathBuf};
 

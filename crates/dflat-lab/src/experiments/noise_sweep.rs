@@ -32,8 +32,8 @@ use serde::{Deserialize, Serialize};
 
 use super::{ControllerSpec, ExperimentError, OutputPaths, invalid, mean, std_dev, write_json};
 use crate::harness::{FixedTarget, Metrics, StopCondition, StopReason, TrialSpec, run_trials};
-use dflat_sim::plant::{PlantOptions, PlantState};
 use crate::plot::{LinePlot, RGBColor, Series, controller_color, write_line_plot};
+use dflat_sim::plant::{PlantOptions, PlantState};
 use dflat_sim::sensing::{GaussianOptions, SensorSpec};
 
 /// The paper's noise levels σ \[m\].

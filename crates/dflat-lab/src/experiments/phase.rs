@@ -41,19 +41,14 @@
 //! (median, p95), the mean |Δu| per tick and the saturated share.
 
 use std::path::PathBuf;
-use std::sync::Arc;
 
-use dflat_control::reference::{Reference, paths};
 use dflat_control::window::MultiRateSettings;
 use serde::{Deserialize, Serialize};
 
+use super::trial::TrialSetup;
 use super::vision_rate::VisionController;
 use super::{ExperimentError, invalid, mean, write_json};
-use crate::harness::{
-    ErrorStats, ReferenceFactory, StopCondition, StopReason, TrialSpec, polyline_path_distance,
-    run_trials,
-};
-use dflat_sim::plant::{PlantOptions, PlantState};
+use crate::harness::{ErrorStats, StopReason, TrialSpec, run_trials};
 use dflat_sim::sensing::{SensorSpec, VisionMode, VisionOptions};
 
 /// One window of the study: a name and the DF-MPC it flies.
@@ -83,20 +78,10 @@ pub struct PhaseConfig {
     pub latency: f64,
     /// Pose noise per axis \[m\].
     pub sigma: f64,
-    /// Altitude of the L path, NED z \[m\].
-    pub altitude: f64,
-    /// Time flown after arrival \[s\].
-    pub settle: f64,
-    /// Arrival radius \[m\].
-    pub arrival_radius: f64,
-    /// A trial also ends at length/speed + this \[s\].
-    pub timeout_margin: f64,
-    /// Hard cap on a trial's length \[s\] (tests shorten runs).
-    pub max_duration: Option<f64>,
-    /// Path error beyond which a trial counts as diverged \[m\].
-    pub divergence_bound: f64,
-    /// Plant attitude saturation \[deg\].
-    pub tilt_limit_deg: f64,
+    /// The L path, when a trial ends, the divergence bound and the plant's
+    /// saturation (the path studies' shared set-up; flat in the JSON).
+    #[serde(flatten)]
+    pub setup: TrialSetup,
     /// Base of the seed rule.
     pub seed_base: u64,
     /// The windows, in table order.
@@ -134,13 +119,10 @@ impl Default for PhaseConfig {
             rate_hz: 50.0,
             latency: 0.02,
             sigma: 0.002,
-            altitude: -10.0,
-            settle: 2.0,
-            arrival_radius: 1.0,
-            timeout_margin: 20.0,
-            max_duration: None,
-            divergence_bound: 15.0,
-            tilt_limit_deg: tilt,
+            setup: TrialSetup {
+                tilt_limit_deg: tilt,
+                ..TrialSetup::default()
+            },
             seed_base: 0,
             windows: vec![
                 PhaseWindow {
@@ -179,12 +161,7 @@ impl PhaseConfig {
         if self.windows.is_empty() {
             return Err(invalid("windows", "at least one"));
         }
-        if self
-            .max_duration
-            .is_some_and(|d| !(d.is_finite() && d > 0.0))
-        {
-            return Err(invalid("max_duration", "finite and > 0 s"));
-        }
+        self.setup.validate()?;
         for &o in &self.offsets_ms {
             self.vision(o, VisionMode::Raw).validate()?;
         }
@@ -215,37 +192,12 @@ impl PhaseConfig {
         offset_ms: f64,
         speed: f64,
     ) -> Result<TrialSpec, ExperimentError> {
-        let w = paths::waypoints(&paths::L_XY, self.altitude);
-        let length: f64 = w.windows(2).map(|p| (p[1] - p[0]).norm()).sum();
-        let mut max_duration = length / speed + self.timeout_margin;
-        if let Some(cap) = self.max_duration {
-            max_duration = max_duration.min(cap);
-        }
-        let reference = Reference::path(&w, speed).map_err(ExperimentError::Reference)?;
-        let factory: ReferenceFactory = Arc::new(move || Box::new(reference.clone()));
-        let plant = PlantOptions {
-            tilt_limit: self.tilt_limit_deg.to_radians(),
-            ..PlantOptions::default()
-        };
-        let mut t = TrialSpec::new(
+        self.setup.l_trial(
             format!("{} L {speed} m/s {offset_ms} ms", window.name),
             window.controller.factory()?,
-            factory,
-        );
-        t.initial = PlantState::hover(w[0], plant.g);
-        t.plant_options = plant;
-        t.sensor = SensorSpec::Vision(self.vision(offset_ms, window.mode));
-        t.stop = StopCondition::PathEnd {
-            end: w[w.len() - 1],
-            radius: self.arrival_radius,
-            settle: self.settle,
-            max_duration,
-        };
-        t.path_distance = Some(polyline_path_distance(w, true));
-        t.divergence_bound = self.divergence_bound;
-        t.stop_on_divergence = true;
-        t.validate()?;
-        Ok(t)
+            SensorSpec::Vision(self.vision(offset_ms, window.mode)),
+            speed,
+        )
     }
 }
 

@@ -279,7 +279,7 @@ pub fn run_tilt_cone(
     }
     let lab = PathsConfig::untuned();
     let path_list: [(&str, Vec<Vector3<f64>>); 4] = [
-        ("L", paths::waypoints(&paths::L_XY, lab.altitude)),
+        ("L", lab.setup.l_path()),
         ("DSL D", paths::waypoints(&paths::D_XY, lab.dsl_altitude)),
         ("DSL S", paths::waypoints(&paths::S_XY, lab.dsl_altitude)),
         (

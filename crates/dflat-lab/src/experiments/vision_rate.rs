@@ -76,19 +76,17 @@ use std::sync::Arc;
 
 use dflat_control::dfmpc::{DfMpc, DfMpcSettings, InputSaturation, OutputConstraints};
 use dflat_control::estimator::EstimatorSettings;
-use dflat_control::reference::{Reference, paths};
+use dflat_control::reference::paths;
 use dflat_control::window::MultiRateSettings;
 use dflat_control::{ControlModel, Controller};
 use dflat_model::{PlanarModel, PlanarParams};
 use serde::{Deserialize, Serialize};
 
+use super::trial::TrialSetup;
 use super::{ControllerSpec, ExperimentError, OutputPaths, fair, invalid, mean, write_json};
-use crate::harness::{
-    ControllerFactory, ErrorStats, ReferenceFactory, StopCondition, StopReason, TrialSpec,
-    polyline_path_distance, run_trials,
-};
-use dflat_sim::plant::{PlantOptions, PlantState};
+use crate::harness::{ControllerFactory, ErrorStats, StopReason, TrialSpec, run_trials};
 use crate::plot::{LinePlot, RGBColor, Series, write_line_plot};
+use dflat_sim::plant::PlantOptions;
 use dflat_sim::sensing::{SensorSpec, VisionMode, VisionOptions};
 
 /// One controller of the study.
@@ -271,20 +269,10 @@ pub struct VisionRateConfig {
     pub sigma: f64,
     /// Capture-time jitter (uniform ±) \[s\].
     pub timing_jitter: f64,
-    /// Altitude of the L path, NED z \[m\].
-    pub altitude: f64,
-    /// Time flown after arrival \[s\].
-    pub settle: f64,
-    /// Arrival radius \[m\].
-    pub arrival_radius: f64,
-    /// A trial also ends at length/speed + this \[s\].
-    pub timeout_margin: f64,
-    /// Hard cap on a trial's length \[s\] (tests shorten runs).
-    pub max_duration: Option<f64>,
-    /// Path error beyond which a trial counts as diverged \[m\].
-    pub divergence_bound: f64,
-    /// Plant attitude saturation \[deg\].
-    pub tilt_limit_deg: f64,
+    /// The L path, when a trial ends, the divergence bound and the plant's
+    /// saturation (the path studies' shared set-up; flat in the JSON).
+    #[serde(flatten)]
+    pub setup: TrialSetup,
     /// Base of the seed rule.
     pub seed_base: u64,
     /// The controllers, in table and legend order.
@@ -316,13 +304,10 @@ impl Default for VisionRateConfig {
             latency: 0.06,
             sigma: 0.02,
             timing_jitter: 0.005,
-            altitude: -10.0,
-            settle: 2.0,
-            arrival_radius: 1.0,
-            timeout_margin: 20.0,
-            max_duration: None,
-            divergence_bound: 15.0,
-            tilt_limit_deg: tilt,
+            setup: TrialSetup {
+                tilt_limit_deg: tilt,
+                ..TrialSetup::default()
+            },
             seed_base: 0,
             controllers: [
                 df(0.0003, 0.0, None, None),
@@ -360,12 +345,7 @@ impl VisionRateConfig {
         if self.controllers.is_empty() {
             return Err(invalid("controllers", "at least one"));
         }
-        if self
-            .max_duration
-            .is_some_and(|d| !(d.is_finite() && d > 0.0))
-        {
-            return Err(invalid("max_duration", "finite and > 0 s"));
-        }
+        self.setup.validate()?;
         for r in &self.rates {
             self.vision(*r, VisionMode::Raw).validate()?;
         }
@@ -391,10 +371,7 @@ impl VisionRateConfig {
 
     /// The plant options: lab defaults with the configured tilt limit.
     pub fn plant_options(&self) -> PlantOptions {
-        PlantOptions {
-            tilt_limit: self.tilt_limit_deg.to_radians(),
-            ..PlantOptions::default()
-        }
+        self.setup.plant_options()
     }
 
     fn trial(
@@ -403,15 +380,6 @@ impl VisionRateConfig {
         rate: f64,
         speed: f64,
     ) -> Result<TrialSpec, ExperimentError> {
-        let w = paths::waypoints(&paths::L_XY, self.altitude);
-        let length: f64 = w.windows(2).map(|p| (p[1] - p[0]).norm()).sum();
-        let mut max_duration = length / speed + self.timeout_margin;
-        if let Some(cap) = self.max_duration {
-            max_duration = max_duration.min(cap);
-        }
-        let reference = Reference::path(&w, speed).map_err(ExperimentError::Reference)?;
-        let factory: ReferenceFactory = Arc::new(move || Box::new(reference.clone()));
-        let plant = self.plant_options();
         // An estimator-fed baseline gets the default rule at this rate.
         let controller = &match *controller {
             VisionController::Baseline(spec) => VisionController::Baseline(
@@ -419,25 +387,12 @@ impl VisionRateConfig {
             ),
             c => c,
         };
-        let mut t = TrialSpec::new(
+        self.setup.l_trial(
             format!("{} L {speed} m/s {rate} Hz", controller.key()),
             controller.factory()?,
-            factory,
-        );
-        t.initial = PlantState::hover(w[0], plant.g);
-        t.plant_options = plant;
-        t.sensor = SensorSpec::Vision(self.vision(rate, controller.vision_mode()));
-        t.stop = StopCondition::PathEnd {
-            end: w[w.len() - 1],
-            radius: self.arrival_radius,
-            settle: self.settle,
-            max_duration,
-        };
-        t.path_distance = Some(polyline_path_distance(w, true));
-        t.divergence_bound = self.divergence_bound;
-        t.stop_on_divergence = true;
-        t.validate()?;
-        Ok(t)
+            SensorSpec::Vision(self.vision(rate, controller.vision_mode())),
+            speed,
+        )
     }
 }
 

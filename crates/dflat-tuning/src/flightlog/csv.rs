@@ -1,6 +1,9 @@
-//! The daemon's per-tick CSV, read by column name.
+//! The daemon's per-tick CSV, read by column: the columns are
+//! `dflat_daemon::csv_schema`'s [`Column`]s, the list the daemon writes by.
 
 use std::path::Path;
+
+use dflat_daemon::csv_schema::Column;
 
 use super::FlightLogError;
 
@@ -61,8 +64,8 @@ impl FlightCsv {
             .split(',')
             .map(|s| s.trim().to_owned())
             .collect();
-        for needed in ["tick", "t", "state"] {
-            if !header.iter().any(|h| h == needed) {
+        for needed in [Column::Tick, Column::T, Column::State] {
+            if !header.iter().any(|h| h == needed.name()) {
                 return Err(err(
                     1,
                     format!("no `{needed}` column: not a dflat flight CSV"),
@@ -94,20 +97,21 @@ impl FlightCsv {
         })
     }
 
-    /// Index of a column.
-    pub fn index(&self, name: &str) -> Option<usize> {
+    /// Index of a column (a [`Column`], or a name).
+    pub fn index(&self, column: impl AsRef<str>) -> Option<usize> {
+        let name = column.as_ref();
         self.header.iter().position(|h| h == name)
     }
 
     /// True when the CSV has the column.
-    pub fn has(&self, name: &str) -> bool {
-        self.index(name).is_some()
+    pub fn has(&self, column: impl AsRef<str>) -> bool {
+        self.index(column).is_some()
     }
 
     /// A numeric column: `None` for empty or non-numeric fields (and for
     /// every row when the column is missing).
-    pub fn numbers(&self, name: &str) -> Vec<Option<f64>> {
-        match self.index(name) {
+    pub fn numbers(&self, column: impl AsRef<str>) -> Vec<Option<f64>> {
+        match self.index(column) {
             Some(i) => self
                 .rows
                 .iter()
@@ -118,8 +122,8 @@ impl FlightCsv {
     }
 
     /// A text column (empty strings for a missing column).
-    pub fn texts(&self, name: &str) -> Vec<&str> {
-        match self.index(name) {
+    pub fn texts(&self, column: impl AsRef<str>) -> Vec<&str> {
+        match self.index(column) {
             Some(i) => self.rows.iter().map(|r| r[i].as_str()).collect(),
             None => vec![""; self.rows.len()],
         }
@@ -175,5 +179,123 @@ mod tests {
         assert!(csv.rows.is_empty() && csv.torn_tail.is_none());
         // A complete bad row in the middle is still an error.
         assert!(FlightCsv::parse("tick,t,state\n0,1\n2,0.1,X\n", f).is_err());
+    }
+
+    /// The daemon's writer and this reader agree on every column: rows
+    /// written by `dflat_daemon::records::write_row` under its header read
+    /// back field for field, at the CSV's resolution.
+    #[test]
+    fn a_written_row_reads_back_field_for_field() {
+        use dflat_control::disturbance::EstimatorStatus;
+        use dflat_daemon::records::{CSV_HEADER, CsvDisturbance, CsvRow, write_row};
+        use dflat_daemon::supervisor::FlightState;
+
+        let full = CsvRow {
+            tick: 7,
+            t: 0.14,
+            state: FlightState::Tracking,
+            measured: Some([1.25, -2.5, -10.0]),
+            plan: Some([
+                [1.0, 2.0, 3.0],
+                [1.1, 2.1, 3.1],
+                [1.2, 2.2, 3.2],
+                [1.3, 2.3, 3.3],
+            ]),
+            reference: Some([0.5, -0.25, -10.0]),
+            command: Some([0.012345, -0.2, 1.5, 0.4821]),
+            solve_us: Some(42),
+            jitter_us: 120,
+            disturbance: Some(CsvDisturbance {
+                acceleration: [0.1, -0.2, 0.03],
+                thrust_scale: 1.04,
+                hover_thrust: Some(0.48),
+                status: EstimatorStatus::Tracking,
+            }),
+            residual: Some(0.0123),
+            guard: Some("level"),
+            pose_age_ms: Some(4.25),
+            wake: 0.140_123_456_789,
+            events: 31,
+        };
+        let empty = CsvRow {
+            tick: 8,
+            state: FlightState::Failsafe,
+            measured: None,
+            plan: None,
+            reference: None,
+            command: None,
+            solve_us: None,
+            disturbance: None,
+            residual: None,
+            guard: None,
+            pose_age_ms: None,
+            ..full
+        };
+        let mut text = format!("{CSV_HEADER}\n").into_bytes();
+        write_row(&mut text, &full).unwrap();
+        write_row(&mut text, &empty).unwrap();
+        let csv = FlightCsv::parse(&String::from_utf8(text).unwrap(), Path::new("f.csv")).unwrap();
+        assert_eq!(csv.rows.len(), 2);
+        // Every column of the schema is in the file, in order.
+        let names: Vec<&str> = Column::ALL.iter().map(|c| c.name()).collect();
+        assert_eq!(csv.header, names);
+
+        // The value each column should read back, per row (None = empty).
+        let expected = |row: &CsvRow, c: Column| -> Option<f64> {
+            let at = |v: Option<[f64; 3]>, i: usize| v.map(|v| v[i]);
+            let d = row.disturbance;
+            let axis = |cols: &[Column], c: Column| cols.iter().position(|&x| x == c);
+            if let Some(i) = axis(&Column::MEASURED, c) {
+                return at(row.measured, i);
+            }
+            if let Some(i) = axis(&Column::REFERENCE, c) {
+                return at(row.reference, i);
+            }
+            for (k, cols) in Column::PLAN.iter().enumerate() {
+                if let Some(i) = axis(cols, c) {
+                    return row.plan.map(|p| p[k][i]);
+                }
+            }
+            if let Some(i) = axis(&Column::COMMAND, c) {
+                return row.command.map(|v| v[i]);
+            }
+            if let Some(i) = axis(&Column::DISTURBANCE, c) {
+                return d.map(|d| d.acceleration[i]);
+            }
+            match c {
+                Column::Tick => Some(row.tick as f64),
+                Column::T => Some(row.t),
+                Column::SolveUs => row.solve_us.map(f64::from),
+                Column::JitterUs => Some(f64::from(row.jitter_us)),
+                Column::ThrustScale => d.map(|d| d.thrust_scale),
+                Column::HoverThrust => d.and_then(|d| d.hover_thrust),
+                Column::ResidualM => row.residual,
+                Column::PoseAgeMs => row.pose_age_ms,
+                Column::TWake => Some(row.wake),
+                Column::Events => Some(row.events as f64),
+                _ => None,
+            }
+        };
+        let texts = [Column::State, Column::EstStatus, Column::Guard];
+        for (r, row) in [&full, &empty].into_iter().enumerate() {
+            for &c in Column::ALL {
+                if texts.contains(&c) {
+                    continue;
+                }
+                let got = csv.numbers(c)[r];
+                match (expected(row, c), got) {
+                    (Some(want), Some(got)) => assert!(
+                        (want - got).abs() <= 5e-7 * want.abs().max(1.0),
+                        "row {r} {c}: wrote {want}, read {got}"
+                    ),
+                    (want, got) => assert_eq!(want, got, "row {r} {c}"),
+                }
+            }
+        }
+        assert_eq!(csv.texts(Column::State), ["TRACKING", "FAILSAFE"]);
+        assert_eq!(csv.texts(Column::EstStatus), ["tracking", ""]);
+        assert_eq!(csv.texts(Column::Guard), ["level", ""]);
+        // The exact tick time survives to the last digit.
+        assert_eq!(csv.numbers(Column::TWake)[0], Some(0.140_123_456_789));
     }
 }

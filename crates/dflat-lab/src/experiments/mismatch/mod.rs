@@ -105,11 +105,11 @@ use super::{ControllerSpec, ExperimentError, OutputPaths, invalid, mean, std_dev
 use crate::harness::{
     ControllerFactory, FixedTarget, StopCondition, StopReason, TrialSpec, run_trials,
 };
-use dflat_sim::plant::{PlantKind, PlantOptions, PlantState};
 use crate::plot::{
     BoxPlot, BoxSeries, DF_RED, FMPC_BLUE, LinePlot, PD_GREEN, RGBColor, Series, write_box_plot,
     write_line_plot,
 };
+use dflat_sim::plant::{PlantKind, PlantOptions, PlantState};
 use dflat_sim::sensing::{GaussianOptions, SensorSpec};
 
 mod noise_check;

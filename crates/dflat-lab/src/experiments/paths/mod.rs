@@ -61,23 +61,23 @@
 //! true horizontal speed, and as speed vs distance flown.
 
 use std::path::PathBuf;
-use std::sync::Arc;
 
-use dflat_control::reference::{Reference, paths};
+use dflat_control::reference::paths;
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use super::figures::speed_series;
+use super::trial::{TrialSetup, path_length};
 use super::{ControllerSpec, ExperimentError, OutputPaths, invalid, mean, write_json};
 use crate::harness::{
-    ControllerFactory, ErrorStats, Metrics, ReferenceFactory, StopCondition, StopReason,
-    TrialResult, TrialSpec, polyline_path_distance, quantile, run_trials,
+    ControllerFactory, ErrorStats, Metrics, StopCondition, StopReason, TrialResult, TrialSpec,
+    quantile, run_trials,
 };
-use dflat_sim::plant::{PlantOptions, PlantState};
 use crate::plot::{
     BoxPlot, BoxSeries, LinePlot, PathPlot, RGBColor, Series, controller_color, north_up,
     write_box_plot, write_line_plot, write_path_plot,
 };
+use dflat_sim::plant::PlantOptions;
 use dflat_sim::sensing::{SensorSpec, VisionOptions};
 
 mod output;
@@ -150,20 +150,10 @@ pub struct PathsConfig {
     pub speeds: Vec<f64>,
     /// Trials per controller and speed.
     pub trials: usize,
-    /// Altitude of the L path, NED z \[m\] (−10 = 10 m up).
-    pub altitude: f64,
-    /// Time flown after arrival \[s\].
-    pub settle: f64,
-    /// Arrival radius around the path end \[m\].
-    pub arrival_radius: f64,
-    /// A trial also ends at length/speed + this \[s\].
-    pub timeout_margin: f64,
-    /// Hard cap on a trial's length \[s\] (None: no cap; tests shorten runs).
-    pub max_duration: Option<f64>,
-    /// Path error beyond which a trial counts as diverged and stops \[m\].
-    pub divergence_bound: f64,
-    /// Attitude saturation of the plant (autopilot) \[deg\].
-    pub tilt_limit_deg: f64,
+    /// The L path, when a trial ends, the divergence bound and the plant's
+    /// saturation (the path studies' shared set-up; flat in the JSON).
+    #[serde(flatten)]
+    pub setup: TrialSetup,
     /// The vision-like sensing.
     pub vision: VisionOptions,
     /// Base of the seed rules.
@@ -196,13 +186,10 @@ impl PathsConfig {
         Self {
             speeds: paths::L_SPEEDS.to_vec(),
             trials: 10,
-            altitude: -10.0,
-            settle: 2.0,
-            arrival_radius: 1.0,
-            timeout_margin: 20.0,
-            max_duration: None,
-            divergence_bound: 15.0,
-            tilt_limit_deg: tilt,
+            setup: TrialSetup {
+                tilt_limit_deg: tilt,
+                ..TrialSetup::default()
+            },
             vision: VisionOptions::default(),
             seed_base: 0,
             controllers: vec![
@@ -244,36 +231,9 @@ impl PathsConfig {
         if !(1..=10_000).contains(&self.trials) {
             return Err(invalid("trials", "1 ..= 10000"));
         }
-        for (field, v) in [
-            ("altitude", self.altitude),
-            ("dsl_altitude", self.dsl_altitude),
-        ] {
-            if !v.is_finite() {
-                return Err(invalid(field, "finite m"));
-            }
-        }
-        for (field, v) in [
-            ("settle", self.settle),
-            ("timeout_margin", self.timeout_margin),
-        ] {
-            if !(v.is_finite() && (0.0..=3600.0).contains(&v)) {
-                return Err(invalid(field, "0 ..= 3600 s"));
-            }
-        }
-        if !(self.arrival_radius.is_finite() && self.arrival_radius > 0.0) {
-            return Err(invalid("arrival_radius", "finite and > 0 m"));
-        }
-        if self
-            .max_duration
-            .is_some_and(|d| !(d.is_finite() && d > 0.0))
-        {
-            return Err(invalid("max_duration", "finite and > 0 s"));
-        }
-        if !(self.divergence_bound.is_finite() && self.divergence_bound > 0.0) {
-            return Err(invalid("divergence_bound", "finite and > 0 m"));
-        }
-        if !(self.tilt_limit_deg > 0.0 && self.tilt_limit_deg <= 80.0) {
-            return Err(invalid("tilt_limit_deg", "(0, 80] deg"));
+        self.setup.validate()?;
+        if !self.dsl_altitude.is_finite() {
+            return Err(invalid("dsl_altitude", "finite m"));
         }
         if self.controllers.is_empty() {
             return Err(invalid("controllers", "at least one"));
@@ -300,10 +260,7 @@ impl PathsConfig {
 
     /// The plant options: lab defaults with the configured tilt limit.
     pub fn plant_options(&self) -> PlantOptions {
-        PlantOptions {
-            tilt_limit: self.tilt_limit_deg.to_radians(),
-            ..PlantOptions::default()
-        }
+        self.setup.plant_options()
     }
 }
 
@@ -513,25 +470,14 @@ impl PathsResult {
 }
 
 impl PathsConfig {
-    /// The stop at the end of `waypoints` flown at `speed`: within the
-    /// arrival radius, then the settle time; at the latest after the path's
-    /// time plus the margin (capped by `max_duration`).
+    /// The stop at the end of `waypoints` flown at `speed`
+    /// ([`TrialSetup::end_stop`]).
     pub(crate) fn path_end_stop(&self, waypoints: &[Vector3<f64>], speed: f64) -> StopCondition {
-        let mut max_duration = path_length(waypoints) / speed + self.timeout_margin;
-        if let Some(cap) = self.max_duration {
-            max_duration = max_duration.min(cap);
-        }
-        StopCondition::PathEnd {
-            end: waypoints[waypoints.len() - 1],
-            radius: self.arrival_radius,
-            settle: self.settle,
-            max_duration,
-        }
+        self.setup.end_stop(waypoints, speed)
     }
 
     /// A trial of `controller` on `waypoints` at `speed` on `plant`, under
-    /// this lab's vision: from hover at the first waypoint, the path error
-    /// to the polyline, stopped by `stop` or on divergence.
+    /// this lab's vision ([`TrialSetup::trial`]).
     pub(crate) fn path_trial(
         &self,
         name: String,
@@ -541,18 +487,15 @@ impl PathsConfig {
         speed: f64,
         stop: StopCondition,
     ) -> Result<TrialSpec, ExperimentError> {
-        let reference = Reference::path(waypoints, speed).map_err(ExperimentError::Reference)?;
-        let factory: ReferenceFactory = Arc::new(move || Box::new(reference.clone()));
-        let mut t = TrialSpec::new(name, controller, factory);
-        t.initial = PlantState::hover(waypoints[0], plant.g);
-        t.plant_options = plant;
-        t.sensor = SensorSpec::Vision(self.vision.clone());
-        t.stop = stop;
-        t.path_distance = Some(polyline_path_distance(waypoints.to_vec(), true));
-        t.divergence_bound = self.divergence_bound;
-        t.stop_on_divergence = true;
-        t.validate()?;
-        Ok(t)
+        self.setup.trial(
+            name,
+            controller,
+            plant,
+            SensorSpec::Vision(self.vision.clone()),
+            waypoints,
+            speed,
+            stop,
+        )
     }
 }
 
@@ -576,17 +519,13 @@ fn path_trial(
     )
 }
 
-fn path_length(w: &[Vector3<f64>]) -> f64 {
-    w.windows(2).map(|p| (p[1] - p[0]).norm()).sum()
-}
-
 /// A trial on the L path at `speed`, ending at arrival + settle.
 fn l_trial(
     config: &PathsConfig,
     spec: &ControllerSpec,
     speed: f64,
 ) -> Result<TrialSpec, ExperimentError> {
-    let w = paths::waypoints(&paths::L_XY, config.altitude);
+    let w = config.setup.l_path();
     let stop = config.path_end_stop(&w, speed);
     path_trial(
         config,
@@ -721,7 +660,7 @@ pub fn run_paths(config: &PathsConfig, progress: bool) -> Result<PathsResult, Ex
         for (j, (letter, xy, speed)) in letters.iter().enumerate() {
             let w = paths::waypoints(xy, config.dsl_altitude);
             let mut duration = path_length(&w) / speed + 4.0;
-            if let Some(cap) = config.max_duration {
+            if let Some(cap) = config.setup.max_duration {
                 duration = duration.min(cap);
             }
             let t = path_trial(
