@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
-# Builds the onboard binary: `dflat` without the simulation lab, the SITL
-# and plotting (cargo feature `lab` off), with the `onboard` profile
+# Builds the onboard binary: `dflat` without the SITL, the simulation lab
+# and the tuning tools (cargo features `sitl`, `lab`, `tuning` off:
+# `--no-default-features`; none of dflat-sim, dflat-sitl, dflat-lab,
+# dflat-tuning is linked), with the `onboard` profile
 # (release code, no DWARF, symbol names kept), into target/onboard/dflat so
 # it never replaces the full build in target/release. Prints its size and
 # the wall time of the build.

@@ -5,7 +5,7 @@ use std::path::Path;
 use std::process::Command;
 
 use dflat_daemon::config::{Config, ModelKind, ThrustMode};
-use dflat_sim::sitl::{SitlPlant, SitlSettings};
+use dflat_sitl::{SitlPlant, SitlSettings};
 
 fn config_dir() -> &'static Path {
     Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../config"))

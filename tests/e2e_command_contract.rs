@@ -7,7 +7,7 @@
 //! HEARTBEAT and STATUSTEXT are checked too.
 //!
 //! The real `dflat daemon` binary against the SITL run in-process
-//! (`dflat_sim::sitl`), whose tap sees every frame the daemon sends.
+//! (`dflat_sitl`), whose tap sees every frame the daemon sends.
 
 #[path = "support/mod.rs"]
 mod common;

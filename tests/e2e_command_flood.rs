@@ -22,7 +22,7 @@ use dflat_daemon::summary::FlightSummary;
 use dflat_daemon::supervisor::FlightState;
 use dflat_link::MavMessage;
 use dflat_link::dialect::{COMMAND_LONG_DATA, MavCmd};
-use dflat_sim::sitl::{self, SitlOptions, SitlSettings};
+use dflat_sitl::{self as sitl, SitlOptions, SitlSettings};
 
 mod support;
 
@@ -31,7 +31,7 @@ const FLOOD_HZ: f64 = 2000.0;
 const HOLD: Duration = Duration::from_secs(3);
 
 fn config() -> (Config, SitlSettings) {
-    let (mut cfg, plant) = support::sitl_flight("flood", dflat_sim::sitl::SitlEngage::Auto);
+    let (mut cfg, plant) = support::sitl_flight("flood", dflat_sitl::SitlEngage::Auto);
     cfg.mission.start = MissionStart::Hold;
     (cfg, plant)
 }

@@ -20,8 +20,9 @@ use std::time::{Duration, Instant};
 use dflat_daemon::config::{Config, MissionStart};
 use dflat_daemon::supervisor::FlightState;
 use dflat_link::MavMessage;
-use dflat_sim::sitl::{
-    self, SitlAutopilot, SitlEngage, SitlHandle, SitlMode, SitlOptions, SitlSettings, TapFrame,
+use dflat_sitl::{
+    self as sitl, SitlAutopilot, SitlEngage, SitlHandle, SitlMode, SitlOptions, SitlSettings,
+    TapFrame,
 };
 
 /// The contract's tilt limit \[deg\] (`vehicle.max_tilt_deg` of the shipped

@@ -26,7 +26,7 @@ use common::*;
 use dflat_daemon::config::Config;
 use dflat_link::MavMessage;
 use dflat_link::dialect::LOCAL_POSITION_NED_DATA;
-use dflat_sim::sitl::{self, SitlOptions};
+use dflat_sitl::{self as sitl, SitlOptions};
 
 const MAX_TILT_DEG: f64 = 35.0;
 /// Messages per second of the flood.
@@ -65,7 +65,7 @@ noise_sigma = 0.01
     Config::load(&config).expect("daemon config");
     let (tx, tap) = channel();
     let sim = sitl::spawn(
-        &dflat_sim::sitl::SitlSettings::load(&config).expect("sitl config"),
+        &dflat_sitl::SitlSettings::load(&config).expect("sitl config"),
         SitlOptions {
             link: Some("udpin:127.0.0.1:0".into()),
             gcs: Some("udpin:127.0.0.1:0".into()),

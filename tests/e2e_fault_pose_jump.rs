@@ -17,7 +17,7 @@ use std::time::{Duration, Instant};
 use common::*;
 use dflat_daemon::config::Config;
 use dflat_link::MavMessage;
-use dflat_sim::sitl::{self, SitlOptions};
+use dflat_sitl::{self as sitl, SitlOptions};
 
 const MAX_TILT_DEG: f64 = 35.0;
 /// The jump \[m\] (north).
@@ -49,7 +49,7 @@ noise_sigma = 0.01
     Config::load(&config).expect("daemon config");
     let (tx, tap) = channel();
     let sim = sitl::spawn(
-        &dflat_sim::sitl::SitlSettings::load(&config).expect("sitl config"),
+        &dflat_sitl::SitlSettings::load(&config).expect("sitl config"),
         SitlOptions {
             link: Some("udpin:127.0.0.1:0".into()),
             tap: Some(tx),

@@ -22,7 +22,7 @@ use dflat_link::dialect::{
     SET_POSITION_TARGET_LOCAL_NED_DATA,
 };
 use dflat_link::{MavMessage, serialize_v2};
-use dflat_sim::sitl::{self, SitlHandle, SitlOptions, SitlSettings};
+use dflat_sitl::{self as sitl, SitlHandle, SitlOptions, SitlSettings};
 
 mod support;
 
@@ -80,7 +80,7 @@ const VELOCITY_ONLY: u16 = 1 | 2 | 4 | 64 | 128 | 256 | 1024 | 2048;
 
 fn plant(name: &str) -> (dflat_daemon::config::Config, SitlSettings) {
     // Engaged as soon as the stream runs (the demo plays a pilot instead).
-    let (mut cfg, plant) = support::sitl_flight(name, dflat_sim::sitl::SitlEngage::Auto);
+    let (mut cfg, plant) = support::sitl_flight(name, dflat_sitl::SitlEngage::Auto);
     cfg.mission.start = MissionStart::Hold;
     (cfg, plant)
 }

@@ -15,9 +15,9 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use common::*;
-use dflat_sim::flightlog::FlightLog;
-use dflat_sim::identify::{self, Identification, VerticalResult, manoeuvre_mission};
-use dflat_sim::sitl::SitlMode;
+use dflat_sitl::SitlMode;
+use dflat_tuning::flightlog::FlightLog;
+use dflat_tuning::identify::{self, Identification, VerticalResult, manoeuvre_mission};
 
 /// The plant all flights here fly (besides τ): k̃ 0.8, 40 ms delay, hover 0.42.
 const PLANT: &str = r#"

@@ -27,7 +27,7 @@ use dflat_daemon::summary::FlightSummary;
 use dflat_daemon::supervisor::FlightState;
 use dflat_link::dialect::{LOCAL_POSITION_NED_DATA, MavAutopilot, MavState};
 use dflat_link::{MavMessage, frames, heartbeat_autopilot};
-use dflat_sim::sitl::{self, SitlOptions, SitlReport, SitlSettings};
+use dflat_sitl::{self as sitl, SitlOptions, SitlReport, SitlSettings};
 use nalgebra::Vector3;
 
 mod support;
@@ -38,7 +38,7 @@ static SERIAL: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
 const LURE_M: f64 = 30.0;
 
 fn config(name: &str) -> (Config, SitlSettings) {
-    let (mut cfg, plant) = support::sitl_flight(name, dflat_sim::sitl::SitlEngage::Auto);
+    let (mut cfg, plant) = support::sitl_flight(name, dflat_sitl::SitlEngage::Auto);
     cfg.mission.start = MissionStart::Hold;
     (cfg, plant)
 }

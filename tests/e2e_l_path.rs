@@ -11,7 +11,7 @@ mod common;
 use std::time::{Duration, Instant};
 
 use common::*;
-use dflat_sim::sitl::read_truth_csv;
+use dflat_sitl::read_truth_csv;
 
 /// The short L: 15 m north, then 10 m east, at z = −10 m.
 const PATH: [[f64; 3]; 3] = [[0.0, 0.0, -10.0], [15.0, 0.0, -10.0], [15.0, 10.0, -10.0]];

@@ -13,7 +13,7 @@ use dflat_daemon::config::MissionStart;
 use dflat_daemon::control::build_controller;
 use dflat_daemon::supervisor::FlightState;
 use dflat_link::MavMessage;
-use dflat_sim::sitl::{self, SitlEngage, SitlMode, SitlOptions};
+use dflat_sitl::{self as sitl, SitlEngage, SitlMode, SitlOptions};
 
 mod support;
 use support::{Fault, Faulty};

@@ -25,7 +25,7 @@ use common::*;
 use dflat_daemon::config::Config;
 use dflat_link::MavMessage;
 use dflat_link::dialect::MavState;
-use dflat_sim::sitl::{self, SitlOptions};
+use dflat_sitl::{self as sitl, SitlOptions};
 
 /// `WATCHDOG_USEC` given to the daemon: 400 ms → one WATCHDOG=1 per 100 ms.
 const WATCHDOG_USEC: u64 = 400_000;
@@ -91,7 +91,7 @@ fn a_stalled_link_task_stops_the_watchdog_and_reports_critical() {
     Config::load(&config).expect("daemon config");
     let (tx, tap) = channel();
     let sim = sitl::spawn(
-        &dflat_sim::sitl::SitlSettings::load(&config).expect("sitl config"),
+        &dflat_sitl::SitlSettings::load(&config).expect("sitl config"),
         SitlOptions {
             link: Some("udpin:127.0.0.1:0".into()),
             tap: Some(tx),

@@ -24,7 +24,7 @@ use dflat_link::dialect::{
     MavFrame, MavLandedState, MavMissionResult, MavResult, PositionTargetTypemask,
     SET_POSITION_TARGET_LOCAL_NED_DATA,
 };
-use dflat_sim::sitl::{self, SitlHandle, SitlMode, SitlOptions, SitlSettings};
+use dflat_sitl::{self as sitl, SitlHandle, SitlMode, SitlOptions, SitlSettings};
 
 mod support;
 
@@ -89,7 +89,7 @@ fn setpoint(target: (u8, u8), p: [f64; 3], v: [f64; 3], a: [f64; 3], mask: u16) 
 }
 
 fn plant(name: &str) -> (dflat_daemon::config::Config, SitlSettings) {
-    let (mut cfg, plant) = support::sitl_flight(name, dflat_sim::sitl::SitlEngage::Auto);
+    let (mut cfg, plant) = support::sitl_flight(name, dflat_sitl::SitlEngage::Auto);
     cfg.mission.start = MissionStart::Hold;
     (cfg, plant)
 }
@@ -376,7 +376,7 @@ async fn the_sitl_answers_like_a_px4_an_sdk_can_script() {
     );
     tokio::time::sleep(Duration::from_millis(200)).await;
     assert_eq!(sitl.mode(), SitlMode::Loiter);
-    let origin = dflat_sim::sitl::px4_face::GeoOrigin::PX4_SITL;
+    let origin = dflat_sitl::px4_face::GeoOrigin::PX4_SITL;
     let (lat, lon, alt) = origin.global([s[0] + 8.0, s[1], s[2]]);
     let t4 = Instant::now();
     gcs.send(&MavMessage::COMMAND_INT(COMMAND_INT_DATA {

@@ -23,7 +23,7 @@ use dflat_link::dialect::{
     MavMissionType, MavResult,
 };
 use dflat_link::mission::{ItemFields, mission_count, mission_item_int, mission_request_int};
-use dflat_sim::sitl::{self, SitlOptions};
+use dflat_sitl::{self as sitl, SitlOptions};
 
 mod support;
 
@@ -119,7 +119,7 @@ fn yaw_of(q: [f32; 4]) -> f64 {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_mission_is_uploaded_started_paused_continued_and_its_yaw_flown() {
-    let (mut cfg, plant) = support::sitl_flight("mission-yaw", dflat_sim::sitl::SitlEngage::Auto);
+    let (mut cfg, plant) = support::sitl_flight("mission-yaw", dflat_sitl::SitlEngage::Auto);
     cfg.mission.start = MissionStart::Hold;
     let max_yaw_rate = cfg.vehicle.max_yaw_rate_deg_s.to_radians();
     let start = plant.sitl.start;
@@ -322,8 +322,8 @@ async fn a_mission_is_uploaded_started_paused_continued_and_its_yaw_flown() {
     let trace = &report.trace;
     let t_of = |at: Instant| at.duration_since(sim_t0).as_secs_f64();
     let (t_start, pause_at, resume_at) = (t_of(t3), t_of(t4), t_of(t5));
-    let in_window = |s: &dflat_sim::sitl::TruthSample, a: f64, b: f64| s.t >= a && s.t <= b;
-    let speed = |s: &dflat_sim::sitl::TruthSample| s.velocity[0].hypot(s.velocity[1]);
+    let in_window = |s: &dflat_sitl::TruthSample, a: f64, b: f64| s.t >= a && s.t <= b;
+    let speed = |s: &dflat_sitl::TruthSample| s.velocity[0].hypot(s.velocity[1]);
     let paused_speed = trace
         .iter()
         .filter(|s| in_window(s, resume_at - 0.3, resume_at - 0.05))

@@ -17,8 +17,8 @@ use std::time::Duration;
 
 use common::*;
 use dflat_link::MavMessage;
-use dflat_sim::sitl::SitlMode;
 use dflat_sim::trajectory::{Shape, Trajectory};
+use dflat_sitl::SitlMode;
 use nalgebra::Vector3;
 
 /// The budget of issue 22 \[m\].

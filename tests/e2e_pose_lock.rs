@@ -14,7 +14,7 @@ use std::time::{Duration, Instant};
 use dflat::demo::{DemoOptions, demo_config};
 use dflat_daemon::config::{MissionStart, TickMode};
 use dflat_link::MavMessage;
-use dflat_sim::sitl::{self, SitlOptions, TapFrame};
+use dflat_sitl::{self as sitl, SitlOptions, TapFrame};
 
 /// The daemon's stamp (`time_boot_ms`) of every command the SITL received.
 fn commands(tap: &Receiver<TapFrame>, into: &mut Vec<u32>) {

@@ -5,7 +5,7 @@
 //! that second is `e2e_pose_loss_level`'s subject.)
 //!
 //! The real `dflat daemon` binary against the SITL run in-process
-//! (`dflat_sim::sitl`), whose hooks pause / resume the pose stream and
+//! (`dflat_sitl`), whose hooks pause / resume the pose stream and
 //! tap every frame the daemon sends, with its arrival time.
 
 #[path = "support/mod.rs"]
@@ -17,7 +17,7 @@ use std::time::{Duration, Instant};
 use common::*;
 use dflat_daemon::config::Config;
 use dflat_link::MavMessage;
-use dflat_sim::sitl::{self, SitlOptions, TapFrame};
+use dflat_sitl::{self as sitl, SitlOptions, TapFrame};
 
 /// The daemon must fall silent within this time after the pose stops:
 /// the pose timeout (100 ms) and the level hover (1 s) of the defaults,
@@ -52,7 +52,7 @@ start = [0.0, 0.0, -10.0]
     Config::load(&config).expect("daemon config");
     let (tx, tap) = channel();
     let sim = sitl::spawn(
-        &dflat_sim::sitl::SitlSettings::load(&config).expect("sitl config"),
+        &dflat_sitl::SitlSettings::load(&config).expect("sitl config"),
         SitlOptions {
             link: Some("udpin:127.0.0.1:0".into()),
             tap: Some(tx),

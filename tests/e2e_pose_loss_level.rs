@@ -25,7 +25,7 @@ use std::time::{Duration, Instant};
 use common::*;
 use dflat_daemon::config::Config;
 use dflat_link::MavMessage;
-use dflat_sim::sitl::{self, SitlMode, SitlOptions};
+use dflat_sitl::{self as sitl, SitlMode, SitlOptions};
 
 /// What one pose loss did.
 #[derive(Debug)]
@@ -67,7 +67,7 @@ command_timeout_s = 1.0
     let cfg = Config::load(&config).expect("daemon config");
     let (tx, tap) = channel();
     let sim = sitl::spawn(
-        &dflat_sim::sitl::SitlSettings::load(&config).expect("sitl config"),
+        &dflat_sitl::SitlSettings::load(&config).expect("sitl config"),
         SitlOptions {
             link: Some("udpin:127.0.0.1:0".into()),
             tap: Some(tx),

@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 
 use dflat_daemon::config::Config;
 use dflat_daemon::supervisor::FlightState;
-use dflat_sim::sitl::{self, SitlOptions, SitlSettings};
+use dflat_sitl::{self as sitl, SitlOptions, SitlSettings};
 
 /// Altitude band after settling \[m\].
 const ALTITUDE_BAND: f64 = 0.1;

@@ -29,8 +29,8 @@ use std::time::{Duration, Instant};
 use common::*;
 use dflat_link::MavMessage;
 use dflat_link::tlog::TlogReader;
-use dflat_sim::flightlog::FlightCsv;
-use dflat_sim::sitl::{self, SitlHandle, SitlOptions, TapFrame};
+use dflat_sitl::{self as sitl, SitlHandle, SitlOptions, TapFrame};
+use dflat_tuning::flightlog::FlightCsv;
 
 /// The daemon's side: the spatial model (what `dflat identify` fits),
 /// the identification manoeuvre as the mission.
@@ -51,14 +51,14 @@ start = [0.0, 0.0, -10.0]
 noise_sigma = 0.005
 "#,
         records_dir.display(),
-        dflat_sim::identify::manoeuvre_mission([0.0, 0.0, -10.0])
+        dflat_tuning::identify::manoeuvre_mission([0.0, 0.0, -10.0])
     )
 }
 
 fn start_sitl(config: &Path) -> (SitlHandle, Receiver<TapFrame>) {
     let (tx, tap) = channel();
     let sim = sitl::spawn(
-        &dflat_sim::sitl::SitlSettings::load(config).expect("sitl config"),
+        &dflat_sitl::SitlSettings::load(config).expect("sitl config"),
         SitlOptions {
             link: Some("udpin:127.0.0.1:0".into()),
             tap: Some(tx),

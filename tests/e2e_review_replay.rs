@@ -18,7 +18,7 @@ use common::*;
 use dflat_link::MavMessage;
 use dflat_link::mavlink::MavConnection as _;
 use dflat_link::tlog::TlogReader;
-use dflat_sim::flightlog::FlightCsv;
+use dflat_tuning::flightlog::FlightCsv;
 
 const CONFIG: &str = r#"
 [logging]

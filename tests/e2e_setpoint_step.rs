@@ -16,7 +16,7 @@ use std::time::{Duration, Instant};
 
 use common::*;
 use dflat_link::MavMessage;
-use dflat_sim::sitl::read_truth_csv;
+use dflat_sitl::read_truth_csv;
 
 /// The step \[m\] (north).
 const STEP: f64 = 10.0;

@@ -83,7 +83,7 @@ fn sitl_streams_telemetry_and_signals_pause_the_pose() {
         sitl.proc.interrupt_and_wait(Duration::from_secs(5)),
         "SITL did not exit cleanly"
     );
-    let rows = dflat_sim::sitl::read_truth_csv(&truth).unwrap();
+    let rows = dflat_sitl::read_truth_csv(&truth).unwrap();
     assert!(rows.len() > 100, "{} truth rows", rows.len());
     assert!(
         rows.iter()

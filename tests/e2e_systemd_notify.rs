@@ -16,7 +16,7 @@ use std::time::{Duration, Instant};
 
 use common::*;
 use dflat_daemon::config::Config;
-use dflat_sim::sitl::{self, SitlOptions};
+use dflat_sitl::{self as sitl, SitlOptions};
 
 /// `WATCHDOG_USEC` given to the daemon: 400 ms → one WATCHDOG=1 per 100 ms.
 const WATCHDOG_USEC: u64 = 400_000;
@@ -31,7 +31,7 @@ fn ready_status_watchdog_and_stopping_reach_the_notify_socket() {
     let config = write_config(&dir, "sdnotify.toml", &text);
     Config::load(&config).expect("daemon config");
     let sim = sitl::spawn(
-        &dflat_sim::sitl::SitlSettings::load(&config).expect("sitl config"),
+        &dflat_sitl::SitlSettings::load(&config).expect("sitl config"),
         SitlOptions {
             link: Some("udpin:127.0.0.1:0".into()),
             ..SitlOptions::default()

@@ -9,7 +9,7 @@ use std::time::Duration;
 
 use dflat::demo::{DemoOptions, demo_config};
 use dflat_control::dfmpc::PlanTiltBound;
-use dflat_sim::sitl::{self, SitlEngage, SitlOptions};
+use dflat_sitl::{self as sitl, SitlEngage, SitlOptions};
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_daemon_flies_with_the_tilt_cone_in_the_plan() {

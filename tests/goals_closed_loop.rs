@@ -11,7 +11,7 @@
 //!   autopilot applied before).
 //! * The streamed 4 m/s circle of radius 6 m with p, v, a at 20 Hz, 10 Hz
 //!   and 50 Hz: the horizontal error p95 ≤ 0.098 m and below the anchor
-//!   (PD with velocity and acceleration feed-forward: the SITL's position loop, `dflat_sim::sitl::position_control`)
+//!   (PD with velocity and acceleration feed-forward: the SITL's position loop, `dflat_sitl::position_control`)
 //!   on the same stream and plant; position-only streams are printed.
 //!
 //! Run with `--nocapture` to see the figures:
@@ -23,8 +23,8 @@ use dflat_daemon::control::{build_controller, thrust_mapping};
 use dflat_daemon::tick::{ControlCore, Event, TickTime};
 use dflat_link::{AutopilotFamily, AutopilotMode};
 use dflat_sim::plant::{Plant, PlantKind, PlantOptions, PlantState, build_plant};
-use dflat_sim::sitl::position_control::{self, PositionGains, PositionTarget};
 use dflat_sim::trajectory::{Shape, Trajectory};
+use dflat_sitl::position_control::{self, PositionGains, PositionTarget};
 use nalgebra::Vector3;
 
 const DT: f64 = 0.02;

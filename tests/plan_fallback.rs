@@ -7,7 +7,7 @@
 use std::time::{Duration, Instant};
 
 use dflat_daemon::control::build_controller;
-use dflat_sim::sitl::{self, SitlEngage, SitlOptions};
+use dflat_sitl::{self as sitl, SitlEngage, SitlOptions};
 use nalgebra::Vector3;
 
 mod support;

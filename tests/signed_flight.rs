@@ -27,7 +27,7 @@ use dflat_link::{
     SignatureCheck, Signing, SigningKey, TIMESTAMP_UNITS_PER_S, frames, header, heartbeat_onboard,
     timestamp_from_system_time,
 };
-use dflat_sim::sitl::{self, SitlOptions, SitlReport, SitlSettings};
+use dflat_sitl::{self as sitl, SitlOptions, SitlReport, SitlSettings};
 use nalgebra::Vector3;
 
 mod support;
@@ -85,7 +85,7 @@ impl Drop for Scratch {
 /// records) with the SITL's key and, if given, the daemon's.
 fn config(scratch: &Scratch, daemon_key: Option<u8>, sitl_key: u8) -> (Config, SitlSettings) {
     // Engaged as soon as the stream runs (the demo plays a pilot instead).
-    let (mut cfg, mut plant) = support::sitl_flight("signed", dflat_sim::sitl::SitlEngage::Auto);
+    let (mut cfg, mut plant) = support::sitl_flight("signed", dflat_sitl::SitlEngage::Auto);
     plant.sitl.signing_key_file = scratch.key_file(sitl_key);
     if let Some(k) = daemon_key {
         cfg.link.signing_key_file = scratch.key_file(k);

@@ -21,7 +21,7 @@ use std::time::{Duration, Instant};
 use dflat_daemon::config::Config;
 use dflat_link::MavMessage;
 use dflat_link::dialect::{MavFrame, PositionTargetTypemask, SET_POSITION_TARGET_LOCAL_NED_DATA};
-use dflat_sim::sitl::{self, SitlOptions, SitlReport, TapFrame};
+use dflat_sitl::{self as sitl, SitlOptions, SitlReport, TapFrame};
 
 /// The binary under test.
 pub fn bin() -> &'static str {
@@ -333,7 +333,7 @@ pub fn fly_in_process(name: &str, config_text: &str, fly: Duration) -> Flight {
     Config::load(&config).expect("daemon config");
     let (tx, tap) = channel();
     let sim = sitl::spawn(
-        &dflat_sim::sitl::SitlSettings::load(&config).expect("sitl config"),
+        &dflat_sitl::SitlSettings::load(&config).expect("sitl config"),
         SitlOptions {
             link: Some("udpin:127.0.0.1:0".into()),
             tap: Some(tx),
@@ -484,8 +484,8 @@ pub fn daemon_local_addr(daemon: &Proc, limit: Duration) -> Option<SocketAddr> {
 /// tests want the vehicle engaged as soon as the stream runs (`Auto`).
 pub fn sitl_flight(
     name: &str,
-    engage: dflat_sim::sitl::SitlEngage,
-) -> (Config, dflat_sim::sitl::SitlSettings) {
+    engage: dflat_sitl::SitlEngage,
+) -> (Config, dflat_sitl::SitlSettings) {
     let out = std::env::temp_dir().join(format!("dflat-{name}-{}", std::process::id()));
     let (mut cfg, mut plant) = dflat::demo::demo_config(&dflat::demo::DemoOptions {
         speed: 5.0,

@@ -4,7 +4,7 @@
 //! tasks, the 50 Hz control loop, failsafe state machine and telemetry. It
 //! depends on the pure core (`dflat-model`, `dflat-control`) and the link
 //! (`dflat-link`) only: no lab, no plotting, no random numbers. The SITL
-//! autopilot stand-in lives in `dflat-sim`; `dflat demo` composes both in the
+//! autopilot stand-in lives in `dflat-sitl`; `dflat demo` composes both in the
 //! binary crate.
 //!
 //! * [`commands`] — the command protocol: COMMAND_ACK, REQUEST_MESSAGE (pure).
@@ -21,6 +21,8 @@
 //! * [`realtime`] — SCHED_FIFO, CPU affinity and locked memory for the
 //!   control thread (optional, safe APIs).
 //! * [`records`] — per-flight CSV and file names.
+//! * [`csv_schema`] — the per-tick CSV's columns, shared with the offline
+//!   reader (`dflat-tuning`).
 //! * [`summary`] — measurements and the shutdown summary.
 
 pub mod autopilot_params;
@@ -28,6 +30,7 @@ pub mod clock;
 pub mod commands;
 pub mod config;
 pub mod control;
+pub mod csv_schema;
 pub mod daemon;
 pub mod guard;
 pub mod link_health;

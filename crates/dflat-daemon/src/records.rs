@@ -23,6 +23,7 @@ use serde::Serialize;
 
 use dflat_control::disturbance::EstimatorStatus;
 
+pub use crate::csv_schema::{CSV_HEADER, Column};
 use crate::supervisor::FlightState;
 
 /// Queue length between the control loop and the CSV thread \[rows\]
@@ -135,12 +136,6 @@ pub struct CsvDisturbance {
     pub status: EstimatorStatus,
 }
 
-/// The CSV header line (no newline).
-pub const CSV_HEADER: &str = "tick,t,state,x,y,z,\
-plan0_x,plan0_y,plan0_z,plan1_x,plan1_y,plan1_z,plan2_x,plan2_y,plan2_z,plan3_x,plan3_y,plan3_z,\
-ref_x,ref_y,ref_z,roll,pitch,yaw,thrust,solve_us,jitter_us,\
-dist_x,dist_y,dist_z,thrust_scale,hover_thrust,est_status,residual_m,guard,pose_age_ms,t_wake,events";
-
 /// The estimator status as written to the CSV.
 fn status_name(s: EstimatorStatus) -> &'static str {
     match s {
@@ -158,7 +153,8 @@ fn opt3<W: Write>(w: &mut W, v: Option<[f64; 3]>, precision: usize) -> io::Resul
     }
 }
 
-/// Writes one row (with newline) in [`CSV_HEADER`]'s column order. Absent
+/// Writes one row (with newline) in [`CSV_HEADER`]'s column order
+/// ([`Column::ALL`]). Absent
 /// values are empty fields; positions have 0.1 mm, angles 1 µrad resolution.
 pub fn write_row<W: Write>(w: &mut W, row: &CsvRow) -> io::Result<()> {
     write!(w, "{},{:.4},{}", row.tick, row.t, row.state.name())?;

@@ -29,7 +29,7 @@ enum Command {
     },
     /// The autopilot stand-in: a real-time plant behind MAVLink (udpin);
     /// SIGUSR1 / SIGUSR2 pause / resume its pose stream.
-    #[cfg(feature = "lab")]
+    #[cfg(feature = "sitl")]
     Sitl(crate::sitl_demo::SitlArgs),
     /// Fly the L path with the SITL and the daemon on loopback (shipped
     /// defaults); print the summary and draw the flown path.
@@ -37,14 +37,14 @@ enum Command {
     Demo(crate::sitl_demo::DemoArgs),
     /// Identify the vehicle from a flight's .tlog: attitude τ, k̃ and delay,
     /// hover thrust and τ_T, with intervals; writes a `[vehicle]` snippet.
-    #[cfg(feature = "lab")]
+    #[cfg(feature = "tuning")]
     Identify(crate::tuning::IdentifyArgs),
     /// A flight's report as one self-contained HTML page (inline SVG).
-    #[cfg(feature = "lab")]
+    #[cfg(feature = "tuning")]
     Review(crate::tuning::review::ReviewArgs),
     /// Re-run the controller offline on a flight's logged poses, setpoints
     /// and timing, with its own or another configuration.
-    #[cfg(feature = "lab")]
+    #[cfg(feature = "tuning")]
     Replay(crate::tuning::replay::ReplayArgs),
     /// The flight-control daemon (systemd runs this): pose and setpoints in,
     /// attitude commands out, until SIGINT / SIGTERM; prints a summary.
@@ -105,29 +105,29 @@ fn run(cli: Cli) -> Result<()> {
         Command::CheckConfig { file } => {
             #[allow(unused_mut)]
             let mut cfg = dflat_daemon::config::Config::load(&file)?;
-            #[cfg(feature = "lab")]
+            #[cfg(feature = "sitl")]
             {
                 // The [sitl] table is the SITL's: validate it and print it
                 // with its defaults filled in.
-                let sitl = dflat_sim::sitl::SitlSettings::load(&file)?;
+                let sitl = dflat_sitl::SitlSettings::load(&file)?;
                 cfg.sitl = None;
                 print!("{}\n{}", cfg.to_toml(), sitl.to_toml());
             }
-            #[cfg(not(feature = "lab"))]
+            #[cfg(not(feature = "sitl"))]
             print!("{}", cfg.to_toml());
             Ok(())
         }
         #[cfg(feature = "lab")]
         Command::Experiment { which } => crate::experiment::run(which),
-        #[cfg(feature = "lab")]
+        #[cfg(feature = "sitl")]
         Command::Sitl(args) => crate::sitl_demo::run_sitl(args),
         #[cfg(feature = "lab")]
         Command::Demo(args) => crate::sitl_demo::run_demo(args),
-        #[cfg(feature = "lab")]
+        #[cfg(feature = "tuning")]
         Command::Identify(args) => crate::tuning::run_identify(args),
-        #[cfg(feature = "lab")]
+        #[cfg(feature = "tuning")]
         Command::Review(args) => crate::tuning::review::run(args),
-        #[cfg(feature = "lab")]
+        #[cfg(feature = "tuning")]
         Command::Replay(args) => crate::tuning::replay::run(args),
         Command::Daemon(args) => run_daemon(args),
     }

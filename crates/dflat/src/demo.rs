@@ -5,7 +5,7 @@
 //! directory; its controller and vehicle sections are those of
 //! `config/default.toml`):
 //!
-//! 1. start the SITL ([`dflat_sim::sitl`]) on `udpin:127.0.0.1:0` and read back
+//! 1. start the SITL ([`dflat_sitl`]) on `udpin:127.0.0.1:0` and read back
 //!    its port; the vehicle starts at the first waypoint of the L path
 //!    (−20, −30) → (0, −30) → (0, 0) at z = −10 m;
 //! 2. start the daemon ([`dflat_daemon::run`]) with `--link
@@ -30,17 +30,17 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use dflat_sim::harness::{ErrorStats, polyline_distance};
-use dflat_sim::plot::{DF_RED, FMPC_BLUE, PathPlot, Series, north_up, write_path_plot};
+use dflat_lab::harness::{ErrorStats, polyline_distance};
+use dflat_lab::plot::{DF_RED, FMPC_BLUE, PathPlot, Series, north_up, write_path_plot};
 use nalgebra::Vector3;
 use thiserror::Error;
 
 use dflat_daemon::DaemonError;
 use dflat_daemon::FlightSummary;
 use dflat_daemon::config::{Config, ConfigError, MissionStart};
-use dflat_sim::sitl::{
-    self, SitlConfigError, SitlCounters, SitlEngage, SitlError, SitlHandle, SitlMode, SitlOptions,
-    SitlReport, SitlSettings, TruthSample,
+use dflat_sitl::{
+    self as sitl, SitlConfigError, SitlCounters, SitlEngage, SitlError, SitlHandle, SitlMode,
+    SitlOptions, SitlReport, SitlSettings, TruthSample,
 };
 
 /// The shipped SITL configuration (daemon + SITL on loopback).

@@ -1,6 +1,6 @@
 //! `dflat experiment` — the paper's studies in the simulation lab.
 //!
-//! Argument parsing only: the studies live in `dflat_sim::experiments`
+//! Argument parsing only: the studies live in `dflat_lab::experiments`
 //! (pure runs returning results, and writers for the JSON and plots).
 // The doc comments below are clap's --help text: `[m]`, `[s]`, `[link]`
 // are units and TOML sections there, `<out>` a placeholder: not rustdoc
@@ -13,13 +13,13 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use clap::{Args, Subcommand};
 use dflat_control::dfmpc::QpSolver;
-use dflat_sim::experiments::OutputPaths;
-use dflat_sim::experiments::mismatch::{MismatchConfig, run_mismatch, write_mismatch};
-use dflat_sim::experiments::noise_sweep::{NoiseSweepConfig, run_noise_sweep, write_noise_sweep};
-use dflat_sim::experiments::paths::{PathsConfig, run_paths, write_paths};
-use dflat_sim::experiments::phase::{PhaseConfig, run_phase, write_phase};
-use dflat_sim::experiments::tilt_cone::{TiltConeConfig, run_tilt_cone, write_tilt_cone};
-use dflat_sim::experiments::vision_rate::{VisionRateConfig, run_vision_rate, write_vision_rate};
+use dflat_lab::experiments::OutputPaths;
+use dflat_lab::experiments::mismatch::{MismatchConfig, run_mismatch, write_mismatch};
+use dflat_lab::experiments::noise_sweep::{NoiseSweepConfig, run_noise_sweep, write_noise_sweep};
+use dflat_lab::experiments::paths::{PathsConfig, run_paths, write_paths};
+use dflat_lab::experiments::phase::{PhaseConfig, run_phase, write_phase};
+use dflat_lab::experiments::tilt_cone::{TiltConeConfig, run_tilt_cone, write_tilt_cone};
+use dflat_lab::experiments::vision_rate::{VisionRateConfig, run_vision_rate, write_vision_rate};
 
 /// Which study to run.
 #[derive(Debug, Subcommand)]

@@ -2,13 +2,16 @@
 //!
 //! The one binary, `dflat`, and where the daemon and the lab meet:
 //!
-//! * [`cli`] — the command line (`daemon`, `check-config`, and with the `lab`
-//!   feature `sitl`, `demo`, `experiment`).
-//! * [`demo`] (`lab`) — `dflat demo`: the SITL of `dflat-sim` and the daemon
-//!   of `dflat-daemon` on loopback.
+//! * [`cli`] — the command line (`daemon`, `check-config`; with the `sitl`
+//!   feature `sitl`; with `lab` `demo` and `experiment`; with `tuning`
+//!   `identify`, `review` and `replay`).
+//! * [`demo`] (`lab`) — `dflat demo`: the SITL of `dflat-sitl` and the
+//!   daemon of `dflat-daemon` on loopback.
 //!
-//! Features: `lab` (default) links the simulation lab, the SITL and the
-//! plotting. The onboard build leaves it out:
+//! Features (all three default): `sitl` links `dflat-sitl` (and its plants,
+//! `dflat-sim`), `lab` links `dflat-lab` (the harness, the experiments, the
+//! plots; it implies `sitl` for `dflat demo`), `tuning` links
+//! `dflat-tuning`. The onboard build leaves them out:
 //! `cargo build --release -p dflat --no-default-features` gives a binary
 //! with `daemon` and `check-config` only (what `deploy/install.sh`
 //! installs).
@@ -18,12 +21,13 @@ pub mod cli;
 pub mod demo;
 #[cfg(feature = "lab")]
 mod experiment;
-#[cfg(feature = "lab")]
+#[cfg(feature = "sitl")]
 mod sitl_demo;
 /// `dflat demo --stream`: a planner's stream flown on the SITL.
 #[cfg(feature = "lab")]
 pub mod stream_demo;
-#[cfg(feature = "lab")]
-pub mod tuning;
+/// The tuning tools (`dflat identify`, `dflat review`, `dflat replay`).
+#[cfg(feature = "tuning")]
+pub use dflat_tuning as tuning;
 
 pub use cli::main;

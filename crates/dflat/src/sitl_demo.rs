@@ -1,5 +1,5 @@
 //! `dflat sitl` and `dflat demo`: thin CLI shells over
-//! `dflat_sim::sitl` and [`crate::demo`].
+//! `dflat_sitl` and [`crate::demo`].
 // The doc comments below are clap's --help text: `[m]`, `[s]`, `[link]`
 // are units and TOML sections there, `<out>` a placeholder: not rustdoc
 // links or HTML.
@@ -12,8 +12,9 @@ use clap::Args;
 use std::io::Write as _;
 use std::time::Duration;
 
-use dflat_sim::sitl::{self, SitlSettings};
+use dflat_sitl::{self as sitl, SitlSettings};
 
+#[cfg(feature = "lab")]
 use crate::demo;
 
 /// `dflat sitl` arguments.
@@ -36,6 +37,7 @@ pub struct SitlArgs {
 }
 
 /// `dflat demo` arguments.
+#[cfg(feature = "lab")]
 #[derive(Debug, Args)]
 pub struct DemoArgs {
     /// Speed along the L path [m/s] (default 5), or of the streamed
@@ -95,6 +97,7 @@ pub fn run_sitl(args: SitlArgs) -> Result<()> {
 }
 
 /// Runs `dflat demo`.
+#[cfg(feature = "lab")]
 pub fn run_demo(args: DemoArgs) -> Result<()> {
     init_logs("warn");
     let default_speed = if args.stream { 4.0 } else { 5.0 };

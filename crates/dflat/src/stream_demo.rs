@@ -17,11 +17,11 @@ use std::time::{Duration, Instant};
 
 use dflat_daemon::FlightSummary;
 use dflat_daemon::config::MissionStart;
-use dflat_sim::harness::ErrorStats;
-use dflat_sim::plot::{DF_RED, PathPlot, Series, north_up, write_path_plot};
-use dflat_sim::sitl::planner::PlannerConfig;
-use dflat_sim::sitl::{SitlCounters, SitlEngage, SitlMode, SitlOptions};
+use dflat_lab::harness::ErrorStats;
+use dflat_lab::plot::{DF_RED, PathPlot, Series, north_up, write_path_plot};
 use dflat_sim::trajectory::{Shape, Trajectory};
+use dflat_sitl::planner::PlannerConfig;
+use dflat_sitl::{SitlCounters, SitlEngage, SitlMode, SitlOptions};
 use nalgebra::Vector3;
 
 use crate::demo::{DemoError, DemoOptions, Pair, demo_config};
