@@ -410,6 +410,5 @@ impl Supervisor {
     }
 }
 
-
 #[cfg(test)]
 mod tests;

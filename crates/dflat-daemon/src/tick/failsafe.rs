@@ -273,12 +273,7 @@ pub fn next(state: Failsafe, event: Event, limits: &Limits) -> (Failsafe, Action
     use Failsafe as S;
     match (state, event) {
         (S::Nominal, Event::Solved) => (S::Nominal, Action::None),
-        (s, Event::Solved) if s.flying() => (
-            S::Nominal,
-            Action::Recovered {
-                failed: s.failed(),
-            },
-        ),
+        (s, Event::Solved) if s.flying() => (S::Nominal, Action::Recovered { failed: s.failed() }),
         (
             s,
             Event::Failed {
@@ -296,7 +291,8 @@ pub fn next(state: Failsafe, event: Event, limits: &Limits) -> (Failsafe, Action
                 level,
             },
         ) if s.flying() => {
-            let latched_until = (cause == Cause::ResidualDiverged).then_some(t + RESIDUAL_FAILSAFE_LATCH);
+            let latched_until =
+                (cause == Cause::ResidualDiverged).then_some(t + RESIDUAL_FAILSAFE_LATCH);
             match cause {
                 Cause::ControlFailed => (S::Trial { good: 0 }, Action::None),
                 Cause::PoseStale | Cause::AutopilotSilent | Cause::ResidualDiverged if engaged => (
@@ -371,7 +367,13 @@ pub fn next(state: Failsafe, event: Event, limits: &Limits) -> (Failsafe, Action
 /// most `hold_ticks`: once a streak has flown the plan it never falls back
 /// to the older last good command), else level hover — and let go when
 /// level hover has run out.
-fn fallback(s: Failsafe, t: f64, planned: bool, can_hold: bool, limits: &Limits) -> (Failsafe, Action) {
+fn fallback(
+    s: Failsafe,
+    t: f64,
+    planned: bool,
+    can_hold: bool,
+    limits: &Limits,
+) -> (Failsafe, Action) {
     let failed = s.failed() + 1;
     let held_so_far = match s {
         Failsafe::Nominal => Some(0),
@@ -396,7 +398,10 @@ fn fallback(s: Failsafe, t: f64, planned: bool, can_hold: bool, limits: &Limits)
         if limits.ran_out(since, t) {
             return (Failsafe::Trial { good: 0 }, Action::LetGo);
         }
-        (Failsafe::LevelHover { failed, since }, FallbackKind::LevelHover)
+        (
+            Failsafe::LevelHover { failed, since },
+            FallbackKind::LevelHover,
+        )
     };
     let announce = std::mem::discriminant(&next) != std::mem::discriminant(&s);
     (next, Action::Fallback { kind, announce })

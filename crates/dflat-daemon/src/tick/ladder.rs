@@ -99,10 +99,11 @@ impl ControlCore {
     /// is off (`announce`).
     fn start_level(&mut self, announce: bool) {
         if let Failsafe::FailsafeLevel {
-            plan: LevelPlan {
-                brake: Some((c, time)),
-                ..
-            },
+            plan:
+                LevelPlan {
+                    brake: Some((c, time)),
+                    ..
+                },
             ..
         } = self.failsafe
         {

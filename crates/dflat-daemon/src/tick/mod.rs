@@ -384,9 +384,7 @@ impl ControlCore {
         {
             let (r, trip) = self.residual.measure(pose.position);
             row.residual = r;
-            if trip
-                && let Some(tr) = self.supervisor.force_failsafe(t, Cause::ResidualDiverged)
-            {
+            if trip && let Some(tr) = self.supervisor.force_failsafe(t, Cause::ResidualDiverged) {
                 self.counts.guards.residual_failsafes += 1;
                 warn!(residual = ?r, "model residual above the threshold: failsafe");
                 self.reset_controller();
