@@ -2,10 +2,9 @@
 //!
 //! * [`CommandGuard`] — the one exit point every attitude command passes:
 //!   no NaN / Inf leaves, tilt and thrust are saturated, violations counted.
-//! * [`Fallback`] — what to send when the controller failed or overran its
-//!   deadline: the controller's previous plan shifted one step per tick
-//!   (DF-MPC) or the last good command held (PD, Flatness MPC), for at most
-//!   N ticks, then level hover.
+//! * [`Fallback`] — what a failed or late tick can fall back on: the last
+//!   good command (held) and level hover; the failsafe machine
+//!   (`tick/failsafe.rs`) chooses between them and the controller's plan.
 //! * [`is_pose_jump`] — a pose further from the previous one than the
 //!   vehicle can fly in the time between them (or an estimator reset).
 //! * [`ResidualMonitor`] — the model-consistency residual (measured minus
@@ -110,23 +109,10 @@ pub fn wrap_pi(a: f64) -> f64 {
     if w > PI { w - 2.0 * PI } else { w }
 }
 
-/// What the fallback sent.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum FallbackKind {
-    /// The controller's previous plan, shifted one step per failed tick
-    /// ([`dflat_control::Controller::plan_fallback`]).
-    Plan,
-    /// The last good command, held (controllers without a plan).
-    Held,
-    /// Level attitude at hover thrust.
-    LevelHover,
-}
-
-/// The fallback after a failed / late tick: the controller's plan command
-/// when it offers one, else the last good command for at most `hold_ticks`
-/// ticks, then level hover (yaw kept) at hover thrust. Once a streak has
-/// flown the plan, it never falls back to holding the (older) last good
-/// command: a used-up plan goes straight to level hover.
+/// The commands a failed or late tick falls back on: the last good
+/// command (to hold) and level hover at the yaw of the last command sent.
+/// Which one is sent is the failsafe machine's choice
+/// (`tick/failsafe.rs`); this only remembers.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Fallback {
     /// Ticks the last good command may be held.
@@ -138,7 +124,6 @@ pub struct Fallback {
     last_good: Option<AttitudeCommand>,
     /// Yaw of the last command sent by the controller or its plan \[rad\].
     last_yaw: Option<f64>,
-    held: u32,
 }
 
 impl Fallback {
@@ -150,7 +135,6 @@ impl Fallback {
             default_yaw,
             last_good: None,
             last_yaw: None,
-            held: 0,
         }
     }
 
@@ -158,53 +142,35 @@ impl Fallback {
     pub fn good(&mut self, cmd: AttitudeCommand) {
         self.last_good = Some(cmd);
         self.last_yaw = Some(cmd.yaw);
-        self.held = 0;
+    }
+
+    /// A step of the controller's previous plan was sent: the (older) last
+    /// good command is not held after it.
+    pub fn planned(&mut self, cmd: AttitudeCommand) {
+        self.last_good = None;
+        self.last_yaw = Some(cmd.yaw);
     }
 
     /// Forgets the last good command (failsafe, re-anchor).
     pub fn forget(&mut self) {
         self.last_good = None;
         self.last_yaw = None;
-        self.held = 0;
+    }
+
+    /// The last good command, if one may be held.
+    pub fn held(&self) -> Option<AttitudeCommand> {
+        self.last_good
     }
 
     /// Level attitude at hover thrust, yaw of the last command sent (else
-    /// the default yaw): what a failsafe leaves in the autopilot.
+    /// the default yaw): the level-hover fallback, and what a failsafe
+    /// leaves in the autopilot.
     pub fn level_command(&self) -> AttitudeCommand {
         AttitudeCommand {
             roll: 0.0,
             pitch: 0.0,
             yaw: self.last_yaw.unwrap_or(self.default_yaw),
             thrust: self.hover_thrust.clamp(0.0, 1.0),
-        }
-    }
-
-    /// The command for a failed tick; `planned` is the controller's plan
-    /// command for it (already guarded), if it offered one.
-    pub fn command(&mut self, planned: Option<AttitudeCommand>) -> (AttitudeCommand, FallbackKind) {
-        if let Some(cmd) = planned {
-            self.held = self.held.saturating_add(1);
-            self.last_good = None;
-            self.last_yaw = Some(cmd.yaw);
-            return (cmd, FallbackKind::Plan);
-        }
-        match self.last_good {
-            Some(cmd) if self.held < self.hold_ticks => {
-                self.held += 1;
-                (cmd, FallbackKind::Held)
-            }
-            last => {
-                self.held = self.held.saturating_add(1);
-                (
-                    AttitudeCommand {
-                        roll: 0.0,
-                        pitch: 0.0,
-                        yaw: last.map_or(self.last_yaw.unwrap_or(self.default_yaw), |c| c.yaw),
-                        thrust: self.hover_thrust.clamp(0.0, 1.0),
-                    },
-                    FallbackKind::LevelHover,
-                )
-            }
         }
     }
 }
@@ -381,44 +347,23 @@ mod tests {
     }
 
     #[test]
-    fn fallback_holds_then_levels() {
-        let mut f = Fallback::new(3, 0.45, 0.2);
-        let (c, k) = f.command(None);
-        assert_eq!((c, k), (cmd(0.0, 0.0, 0.2, 0.45), FallbackKind::LevelHover));
+    fn fallback_remembers_the_last_good_command_and_the_yaw_flown() {
+        let mut f = Fallback::new(3, 1.45, 0.2);
+        assert_eq!(f.held(), None);
+        // Level hover: default yaw, thrust clamped into [0, 1].
+        assert_eq!(f.level_command(), cmd(0.0, 0.0, 0.2, 1.0));
+        f.hover_thrust = 0.45;
         f.good(cmd(0.1, 0.05, 1.0, 0.6));
-        for _ in 0..3 {
-            assert_eq!(
-                f.command(None),
-                (cmd(0.1, 0.05, 1.0, 0.6), FallbackKind::Held)
-            );
-        }
-        assert_eq!(
-            f.command(None),
-            (cmd(0.0, 0.0, 1.0, 0.45), FallbackKind::LevelHover)
-        );
-        assert_eq!(f.command(None).1, FallbackKind::LevelHover);
-        f.good(cmd(0.0, 0.0, 0.0, 0.5));
-        assert_eq!(f.command(None).1, FallbackKind::Held);
-    }
-
-    #[test]
-    fn fallback_flies_the_plan_then_levels_without_holding() {
-        let mut f = Fallback::new(5, 0.45, 0.2);
-        f.good(cmd(0.1, 0.05, 1.0, 0.6));
-        let step = |i: f64| cmd(0.1 - 0.01 * i, 0.05, 1.1, 0.6);
-        for i in 1..=3 {
-            let (c, k) = f.command(Some(step(f64::from(i))));
-            assert_eq!((c, k), (step(f64::from(i)), FallbackKind::Plan));
-        }
-        // The plan is used up: level hover at the plan's yaw, not the
-        // older last good command.
-        assert_eq!(
-            f.command(None),
-            (cmd(0.0, 0.0, 1.1, 0.45), FallbackKind::LevelHover)
-        );
-        // A good tick starts a new streak.
+        assert_eq!(f.held(), Some(cmd(0.1, 0.05, 1.0, 0.6)));
+        assert_eq!(f.level_command(), cmd(0.0, 0.0, 1.0, 0.45));
+        // A plan step: nothing older is held after it; level at its yaw.
+        f.planned(cmd(0.1, 0.0, 1.1, 0.6));
+        assert_eq!(f.held(), None);
+        assert_eq!(f.level_command(), cmd(0.0, 0.0, 1.1, 0.45));
         f.good(cmd(0.2, 0.0, 1.0, 0.6));
-        assert_eq!(f.command(None).1, FallbackKind::Held);
+        f.forget();
+        assert_eq!(f.held(), None);
+        assert_eq!(f.level_command(), cmd(0.0, 0.0, 0.2, 0.45));
     }
 
     #[test]

@@ -42,301 +42,30 @@
 //! not streamed: a frozen stream would keep PX4 in offboard mode, while
 //! silence lets the autopilot's own failsafe take over. A failsafe entered
 //! while engaged first streams level hover for at most
-//! `safety.level_hover_max_ms` (the control core's `tick/failsafe_level.rs`),
-//! so that the autopilot holds a level command, not the last tilt, until
-//! its offboard-loss timeout.
-
-use serde::Serialize;
+//! `safety.level_hover_max_ms`, so that the autopilot holds a level
+//! command, not the last tilt, until its offboard-loss timeout. What
+//! happens in a failsafe — the level hover, letting go, the controller's
+//! trial, how long recovery is latched — is the control core's failsafe
+//! state machine (`tick/failsafe.rs`); this machine detects stale pose and
+//! a silent autopilot, and recovers when [`Supervisor::tick`] is allowed to.
+//!
+//! Rooms: this file the state, engagement and the tick; `state.rs` the
+//! vocabulary (states, goals, causes, transitions); `goals.rs` the goals
+//! accepted (setpoints, streams, missions, pause).
 
 use crate::motion::Motion;
+
+mod goals;
+mod state;
+pub use state::{
+    Cause, FlightState, Goal, Refusal, SetpointOutcome, SupervisorConfig, TickDecision, Transition,
+};
 
 /// Slower than this \[m/s\] after an engagement counts as braked.
 pub const BRAKED_SPEED: f64 = 0.3;
 /// Braking is over at the latest this long \[s\] after the time the
 /// braking deceleration needs.
 pub const BRAKE_SETTLE: f64 = 2.0;
-
-/// The daemon's state.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum FlightState {
-    /// No fresh pose (or no autopilot heartbeat) yet; not streaming.
-    WaitingForPose,
-    /// Streaming, not engaged: the autopilot flies its own mode; the goal
-    /// follows the vehicle's stop point.
-    Standby,
-    /// Holding a fixed position; streaming.
-    Holding,
-    /// Flying to a setpoint or along the path; streaming.
-    Tracking,
-    /// Pose stale or autopilot silent; not streaming; controller reset.
-    Failsafe,
-}
-
-impl FlightState {
-    /// All states, in the order of [`FlightState::index`].
-    pub const ALL: [FlightState; 5] = [
-        FlightState::WaitingForPose,
-        FlightState::Holding,
-        FlightState::Tracking,
-        FlightState::Failsafe,
-        FlightState::Standby,
-    ];
-
-    /// Position in [`FlightState::ALL`] (0–4).
-    pub fn index(self) -> usize {
-        match self {
-            FlightState::WaitingForPose => 0,
-            FlightState::Holding => 1,
-            FlightState::Tracking => 2,
-            FlightState::Failsafe => 3,
-            FlightState::Standby => 4,
-        }
-    }
-
-    /// Upper-case name for STATUSTEXT and CSV (`WAITING`, `HOLDING`, …).
-    pub fn name(self) -> &'static str {
-        match self {
-            FlightState::WaitingForPose => "WAITING",
-            FlightState::Standby => "STANDBY",
-            FlightState::Holding => "HOLDING",
-            FlightState::Tracking => "TRACKING",
-            FlightState::Failsafe => "FAILSAFE",
-        }
-    }
-
-    /// True in the states that stream SET_ATTITUDE_TARGET.
-    pub fn streams(self) -> bool {
-        matches!(
-            self,
-            FlightState::Standby | FlightState::Holding | FlightState::Tracking
-        )
-    }
-
-    /// True in the states whose commands the autopilot applies.
-    pub fn engaged(self) -> bool {
-        matches!(self, FlightState::Holding | FlightState::Tracking)
-    }
-}
-
-/// What the controller is asked to fly. Positions local NED \[m\].
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Goal {
-    /// Nothing yet (WaitingForPose).
-    None,
-    /// Hold this position.
-    Hold([f64; 3]),
-    /// Fly to this setpoint and hold it.
-    Setpoint([f64; 3]),
-    /// Fly the configured path, then hold its end.
-    Path,
-    /// Fly the mission uploaded over MAVLink (the control core builds its
-    /// reference section by section: `crate::mission::MissionRunner`).
-    Mission,
-    /// Track a streamed trajectory (the samples are the reference's; see
-    /// [`Supervisor::on_stream`]).
-    Stream,
-    /// Brake from `from` (local NED \[m\]) moving at `velocity` (local NED
-    /// [m/s]) to a stop at the braking deceleration, then hold there
-    /// (standby and engagement; `dflat_control::reference::Reference::braking`).
-    Brake {
-        /// Where the braking starts \[m\].
-        from: [f64; 3],
-        /// Velocity there [m/s].
-        velocity: [f64; 3],
-    },
-}
-
-/// Why the state changed.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Cause {
-    /// Pose fresh and autopilot alive (start, or recovery from failsafe).
-    PoseFresh,
-    /// `mission.start = "path"`.
-    MissionStart,
-    /// A position setpoint was accepted.
-    Setpoint,
-    /// A setpoint near the path's first waypoint started the path.
-    PathTrigger,
-    /// The path was flown to its end.
-    PathFinished,
-    /// No pose for longer than the timeout.
-    PoseStale,
-    /// No autopilot HEARTBEAT for longer than the timeout.
-    AutopilotSilent,
-    /// The pose jumped (estimator reset): re-anchored, holding there.
-    PoseJump,
-    /// The model-consistency residual stayed above its threshold.
-    ResidualDiverged,
-    /// The autopilot applies our commands now (pilot switched to OFFBOARD
-    /// / GUIDED_NOGPS): braking to the stop point.
-    Engaged,
-    /// The autopilot left its offboard mode (pilot override, disarm).
-    PilotControl,
-    /// Braked after an engagement: the mission resumes.
-    Resume,
-    /// The controller could not fly: level hover ran out.
-    ControlFailed,
-    /// MAV_CMD_MISSION_START: the uploaded mission is flown.
-    MissionStarted,
-    /// The mission's last item was reached.
-    MissionFinished,
-    /// MAV_CMD_DO_PAUSE_CONTINUE 0: stopping and holding.
-    Paused,
-    /// MAV_CMD_DO_PAUSE_CONTINUE 1: the goal before the pause goes on.
-    Continued,
-    /// A streamed trajectory sample was accepted.
-    Stream,
-    /// The stream went silent: stopping smoothly, then holding.
-    StreamTimeout,
-}
-
-impl Cause {
-    fn words(self) -> &'static str {
-        match self {
-            Cause::PoseFresh => "pose ok",
-            Cause::MissionStart => "path start",
-            Cause::Setpoint => "setpoint",
-            Cause::PathTrigger => "path start",
-            Cause::PathFinished => "path done",
-            Cause::PoseStale => "pose stale, stream off",
-            Cause::AutopilotSilent => "autopilot lost, stream off",
-            Cause::PoseJump => "pose jump, re-anchored",
-            Cause::ResidualDiverged => "model residual, stream off",
-            Cause::Engaged => "engaged, braking",
-            Cause::PilotControl => "pilot has control",
-            Cause::Resume => "braked, resuming",
-            Cause::ControlFailed => "control failed, stream off",
-            Cause::MissionStarted => "mission start",
-            Cause::MissionFinished => "mission done",
-            Cause::Paused => "paused",
-            Cause::Continued => "continue",
-            Cause::Stream => "trajectory stream",
-            Cause::StreamTimeout => "stream lost, stopping",
-        }
-    }
-}
-
-/// A state change, for STATUSTEXT and the log.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Transition {
-    /// State before.
-    pub from: FlightState,
-    /// State after.
-    pub to: FlightState,
-    /// Why.
-    pub cause: Cause,
-    /// When \[s\], the supervisor's clock.
-    pub at: f64,
-}
-
-impl Transition {
-    /// STATUSTEXT text (≤ 50 bytes), e.g. `dflat: FAILSAFE (pose stale, stream off)`.
-    pub fn text(&self) -> String {
-        format!("dflat: {} ({})", self.to.name(), self.cause.words())
-    }
-
-    /// True for transitions into failsafe (sent with a higher severity).
-    pub fn is_failsafe(&self) -> bool {
-        self.to == FlightState::Failsafe
-    }
-}
-
-/// Why a setpoint was refused.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Refusal {
-    /// A coordinate is NaN or infinite.
-    NonFinite,
-    /// Outside the geofence half-widths around the origin.
-    Geofence {
-        /// The refused position \[m\].
-        position: [f64; 3],
-    },
-    /// No control (waiting for pose, or failsafe).
-    NotInControl(FlightState),
-    /// A stream sample further than `stream.max_jump_m` from where the
-    /// reference (or the vehicle) is.
-    StreamJump {
-        /// The distance \[m\].
-        distance: f64,
-    },
-}
-
-impl Refusal {
-    /// STATUSTEXT text (≤ 50 bytes).
-    pub fn text(&self) -> String {
-        match self {
-            Refusal::NonFinite => "dflat: setpoint refused: not finite".into(),
-            Refusal::Geofence { position: p } => {
-                format!(
-                    "dflat: setpoint refused: fence {:.0},{:.0},{:.0}",
-                    p[0], p[1], p[2]
-                )
-            }
-            Refusal::NotInControl(s) => format!("dflat: setpoint refused: {}", s.name()),
-            Refusal::StreamJump { distance } => {
-                format!("dflat: stream refused: jumps {distance:.1} m")
-            }
-        }
-    }
-}
-
-/// Result of [`Supervisor::on_setpoint`].
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum SetpointOutcome {
-    /// Accepted; the goal changed. `transition` when the state changed too.
-    Accepted {
-        /// The new goal.
-        goal: Goal,
-        /// State change (Holding → Tracking), if any.
-        transition: Option<Transition>,
-    },
-    /// The same setpoint as the last accepted one (a streaming ground
-    /// station): nothing changes.
-    Unchanged,
-    /// Refused: say so with STATUSTEXT.
-    Refused(Refusal),
-}
-
-/// What the shell does at a tick.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct TickDecision {
-    /// Run the controller and send SET_ATTITUDE_TARGET.
-    pub stream: bool,
-    /// Reset the controller before anything else (entering failsafe).
-    pub reset_controller: bool,
-    /// The state change at this tick, if any.
-    pub transition: Option<Transition>,
-}
-
-/// Parameters of the [`Supervisor`].
-#[derive(Debug, Clone, PartialEq)]
-pub struct SupervisorConfig {
-    /// Pose older than this \[s\] is stale.
-    pub pose_timeout: f64,
-    /// No autopilot HEARTBEAT for this long \[s\] means it is silent.
-    pub autopilot_timeout: f64,
-    /// Geofence half-widths around the origin \[m\] (x, y, z).
-    pub geofence: [f64; 3],
-    /// The configured path's first and last waypoints, if a path is configured.
-    pub path_ends: Option<([f64; 3], [f64; 3])>,
-    /// A setpoint within this distance \[m\] of the path's first waypoint
-    /// starts the path (0 = never).
-    pub path_trigger_radius: f64,
-    /// Start the path as soon as pose is fresh (`mission.start = "path"`).
-    pub start_path: bool,
-    /// Fly the (closed) path again when it finishes (`mission.repeat`).
-    pub repeat_path: bool,
-    /// Every streamed command counts as applied (`link.engagement =
-    /// "always"`): no standby.
-    pub always_engaged: bool,
-    /// After braking, resume the goal flown before (`mission.on_engage =
-    /// "resume"`); else hold.
-    pub resume_on_engage: bool,
-    /// Braking deceleration at engagement \[m/s²\] (> 0).
-    pub brake_acceleration: f64,
-}
 
 /// Braking after an engagement.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -359,8 +88,6 @@ pub struct Supervisor {
     entered_at: Option<f64>,
     time_in: [f64; 5],
     transitions: u64,
-    /// No recovery from a forced failsafe before this time.
-    latched_until: Option<f64>,
     /// The autopilot applies our commands (its last HEARTBEAT).
     autopilot_engaged: bool,
     /// The vehicle's motion (for the stop point).
@@ -393,7 +120,6 @@ impl Supervisor {
             entered_at: None,
             time_in: [0.0; 5],
             transitions: 0,
-            latched_until: None,
             autopilot_engaged: false,
             motion: None,
             braking: None,
@@ -494,20 +220,15 @@ impl Supervisor {
         Some(self.enter(FlightState::Holding, Cause::PoseJump, t))
     }
 
-    /// Forces failsafe at `t` (residual failsafe); no recovery before
-    /// `t + latch` \[s\]. `None` when not streaming.
-    pub fn force_failsafe(&mut self, t: f64, cause: Cause, latch: f64) -> Option<Transition> {
+    /// Forces failsafe at `t` for `cause` (the model residual, the
+    /// controller failing). `None` when not streaming. How long recovery
+    /// waits is the failsafe machine's (`tick/failsafe.rs`): see
+    /// [`Supervisor::tick`].
+    pub fn force_failsafe(&mut self, t: f64, cause: Cause) -> Option<Transition> {
         if !self.state.streams() {
             return None;
         }
-        self.latched_until = Some(t + latch);
         Some(self.enter(FlightState::Failsafe, cause, t))
-    }
-
-    /// Lifts a failsafe's latch (the controller can fly again): recovery
-    /// follows at the next tick with fresh pose and a live autopilot.
-    pub fn release_latch(&mut self) {
-        self.latched_until = None;
     }
 
     /// The current state.
@@ -554,123 +275,10 @@ impl Supervisor {
         }
     }
 
-    /// A position setpoint (local NED \[m\]) arrived at `t` \[s\].
-    pub fn on_setpoint(&mut self, t: f64, position: [f64; 3]) -> SetpointOutcome {
-        if !position.iter().all(|v| v.is_finite()) {
-            return SetpointOutcome::Refused(Refusal::NonFinite);
-        }
-        if position
-            .iter()
-            .zip(&self.cfg.geofence)
-            .any(|(p, fence)| p.abs() > *fence)
-        {
-            return SetpointOutcome::Refused(Refusal::Geofence { position });
-        }
-        if !self.state.streams() {
-            return SetpointOutcome::Refused(Refusal::NotInControl(self.state));
-        }
-        if self.last_setpoint == Some(position) {
-            return SetpointOutcome::Unchanged;
-        }
-        self.last_setpoint = Some(position);
-        let triggers_path = self.cfg.path_trigger_radius > 0.0
-            && self.cfg.path_ends.is_some_and(|(first, _)| {
-                distance(&first, &position) <= self.cfg.path_trigger_radius
-            });
-        let (goal, cause) = if triggers_path {
-            (Goal::Path, Cause::PathTrigger)
-        } else {
-            (Goal::Setpoint(position), Cause::Setpoint)
-        };
-        if self.state == FlightState::Standby {
-            // Flown after the next engagement (once braked).
-            self.pending = goal;
-            return SetpointOutcome::Accepted {
-                goal,
-                transition: None,
-            };
-        }
-        self.braking = None;
-        self.pending = goal;
-        self.set_goal(goal);
-        let transition = if self.state == FlightState::Tracking {
-            None
-        } else {
-            Some(self.enter(FlightState::Tracking, cause, t))
-        };
-        SetpointOutcome::Accepted { goal, transition }
-    }
-
-    /// A sample of a streamed trajectory at `position` (local NED \[m\])
-    /// arrived at `t` \[s\]; the shell checked its jump
-    /// ([`Refusal::StreamJump`]). Refused like a setpoint (non-finite,
-    /// outside the fence, not in control). Standby: the stream is flown
-    /// after the next engagement, once braked. Engaged: the goal becomes
-    /// [`Goal::Stream`] (a new generation only when it was not already).
-    pub fn on_stream(&mut self, t: f64, position: [f64; 3]) -> SetpointOutcome {
-        if !position.iter().all(|v| v.is_finite()) {
-            return SetpointOutcome::Refused(Refusal::NonFinite);
-        }
-        if position
-            .iter()
-            .zip(&self.cfg.geofence)
-            .any(|(p, fence)| p.abs() > *fence)
-        {
-            return SetpointOutcome::Refused(Refusal::Geofence { position });
-        }
-        if !self.state.streams() {
-            return SetpointOutcome::Refused(Refusal::NotInControl(self.state));
-        }
-        // A position setpoint after the stream is a new request.
-        self.last_setpoint = None;
-        let goal = Goal::Stream;
-        if self.state == FlightState::Standby {
-            self.pending = goal;
-            return SetpointOutcome::Accepted {
-                goal,
-                transition: None,
-            };
-        }
-        if self.goal == goal && self.braking.is_none() {
-            return SetpointOutcome::Unchanged;
-        }
-        self.braking = None;
-        self.pending = goal;
-        self.set_goal(goal);
-        let transition = (self.state != FlightState::Tracking)
-            .then(|| self.enter(FlightState::Tracking, Cause::Stream, t));
-        SetpointOutcome::Accepted { goal, transition }
-    }
-
-    /// The stream went silent at `t`: hold `rest` (local NED \[m\], where
-    /// the stream's extrapolation stops). `None` unless a stream is flown.
-    pub fn on_stream_timeout(&mut self, t: f64, rest: [f64; 3]) -> Option<Transition> {
-        if self.goal != Goal::Stream || !self.state.engaged() {
-            return None;
-        }
-        self.set_goal(Goal::Hold(rest));
-        self.pending = Goal::None;
-        Some(self.enter(FlightState::Holding, Cause::StreamTimeout, t))
-    }
-
-    /// The path reached its end at `t`: hold the last waypoint.
-    pub fn on_path_finished(&mut self, t: f64) -> Option<Transition> {
-        if self.state != FlightState::Tracking || self.goal != Goal::Path {
-            return None;
-        }
-        let (_, end) = self.cfg.path_ends?;
-        if self.cfg.repeat_path {
-            // The same goal again: a new generation rebuilds the reference.
-            self.generation += 1;
-            return None;
-        }
-        self.set_goal(Goal::Hold(end));
-        self.pending = Goal::None;
-        Some(self.enter(FlightState::Holding, Cause::PathFinished, t))
-    }
-
-    /// The control tick at `t` \[s\].
-    pub fn tick(&mut self, t: f64) -> TickDecision {
+    /// The control tick at `t` \[s\]. `may_recover`: a failsafe may end
+    /// now (false while the failsafe machine latches it: a residual
+    /// failsafe's first seconds, a controller not yet trialled).
+    pub fn tick(&mut self, t: f64, may_recover: bool) -> TickDecision {
         if self.entered_at.is_none() {
             self.entered_at = Some(t);
         }
@@ -681,7 +289,6 @@ impl Supervisor {
             .last_heartbeat
             .is_some_and(|h| t - h <= self.cfg.autopilot_timeout);
         let mut reset_controller = false;
-        let latched = self.latched_until.is_some_and(|u| t < u);
         let engaged = self.autopilot_engaged();
         let transition = match (self.state, pose) {
             (FlightState::WaitingForPose, Some(_)) if autopilot_alive => {
@@ -690,7 +297,7 @@ impl Supervisor {
                 }
                 Some(self.start_streaming(t, engaged))
             }
-            (FlightState::Failsafe, Some(_)) if autopilot_alive && !latched => {
+            (FlightState::Failsafe, Some(_)) if autopilot_alive && may_recover => {
                 // A failsafe abandons the mission: hold (or stand by).
                 self.pending = Goal::None;
                 Some(self.start_streaming(t, engaged))
@@ -772,77 +379,6 @@ impl Supervisor {
         self.path_resumed && self.goal == Goal::Path
     }
 
-    /// MAV_CMD_MISSION_START at `t`: fly the mission (from its start). In
-    /// standby it is flown after the next engagement, once braked. Refused
-    /// when not streaming.
-    pub fn on_mission_start(&mut self, t: f64) -> Result<Option<Transition>, Refusal> {
-        if !self.state.streams() {
-            return Err(Refusal::NotInControl(self.state));
-        }
-        self.paused = false;
-        self.last_setpoint = None;
-        self.pending = Goal::Mission;
-        if self.state == FlightState::Standby {
-            return Ok(None);
-        }
-        self.braking = None;
-        // A restart of the mission being flown is a new goal too.
-        self.goal = Goal::None;
-        self.set_goal(Goal::Mission);
-        Ok(Some(self.enter(
-            FlightState::Tracking,
-            Cause::MissionStarted,
-            t,
-        )))
-    }
-
-    /// The mission's last item was reached (and held) at `t`: hold `end`.
-    pub fn on_mission_finished(&mut self, t: f64, end: [f64; 3]) -> Option<Transition> {
-        if self.goal != Goal::Mission || self.state != FlightState::Tracking {
-            return None;
-        }
-        self.set_goal(Goal::Hold(end));
-        self.pending = Goal::None;
-        Some(self.enter(FlightState::Holding, Cause::MissionFinished, t))
-    }
-
-    /// MAV_CMD_DO_PAUSE_CONTINUE 0 at `t`: while tracking a path, a
-    /// setpoint or a mission, stop from the vehicle's motion (the braking
-    /// reference) and hold; the goal is kept for [`Supervisor::resume`].
-    /// `None` when there is nothing to pause (holding already).
-    pub fn pause(&mut self, t: f64) -> Option<Transition> {
-        if self.state != FlightState::Tracking {
-            return None;
-        }
-        let goal = self.goal;
-        let stop = self.stop_goal()?;
-        self.set_goal(stop);
-        self.pending = goal;
-        self.paused = true;
-        Some(self.enter(FlightState::Holding, Cause::Paused, t))
-    }
-
-    /// MAV_CMD_DO_PAUSE_CONTINUE 1 at `t`: the paused goal goes on (a path
-    /// from its closest point). `None` when not paused.
-    pub fn resume(&mut self, t: f64) -> Option<Transition> {
-        if !(self.paused && self.state == FlightState::Holding) {
-            return None;
-        }
-        self.paused = false;
-        let goal = self.pending;
-        if !matches!(goal, Goal::Path | Goal::Setpoint(_) | Goal::Mission) {
-            return None;
-        }
-        self.set_goal(goal);
-        self.path_resumed = goal == Goal::Path;
-        Some(self.enter(FlightState::Tracking, Cause::Continued, t))
-    }
-
-    /// True while paused (MAV_CMD_DO_PAUSE_CONTINUE 0).
-    pub fn paused(&self) -> bool {
-        self.paused
-    }
-
     fn set_goal(&mut self, goal: Goal) {
         if goal != self.goal {
             self.path_resumed = false;
@@ -872,10 +408,6 @@ impl Supervisor {
             at: t,
         }
     }
-}
-
-fn distance(a: &[f64; 3], b: &[f64; 3]) -> f64 {
-    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
 }
 
 #[cfg(test)]

@@ -51,7 +51,7 @@ fn fly(s: &mut Supervisor, from: f64, to: f64, pose: bool, hb: bool) -> Vec<Tick
         if hb {
             s.on_heartbeat(t);
         }
-        out.push(s.tick(t + 0.005));
+        out.push(s.tick(t + 0.005, true));
         t += 0.02;
     }
     out
@@ -61,14 +61,14 @@ fn fly(s: &mut Supervisor, from: f64, to: f64, pose: bool, hb: bool) -> Vec<Tick
 fn waits_for_pose_and_heartbeat_then_holds_the_first_position() {
     let mut s = Supervisor::new(cfg());
     assert_eq!(s.state(), WaitingForPose);
-    let d = s.tick(0.0);
+    let d = s.tick(0.0, true);
     assert!(!d.stream && d.transition.is_none());
     // Pose but no autopilot heartbeat: still waiting, not streaming.
     s.on_pose(0.01, P0);
-    assert!(!s.tick(0.02).stream);
+    assert!(!s.tick(0.02, true).stream);
     s.on_heartbeat(0.03);
     s.on_pose(0.03, P0);
-    let d = s.tick(0.04);
+    let d = s.tick(0.04, true);
     assert!(d.stream);
     let tr = d.transition.unwrap();
     assert_eq!(
@@ -117,7 +117,7 @@ fn stale_pose_stops_the_stream_and_resets_then_fresh_pose_resumes_holding_here()
     s.on_pose(2.0, here);
     // One pose after the gap: no motion yet (as the core reports it).
     s.set_motion(None);
-    let d = s.tick(2.005);
+    let d = s.tick(2.005, true);
     assert!(d.stream);
     assert_eq!(d.transition.unwrap().to, Holding);
     assert_eq!(s.goal(), Goal::Hold(here));
@@ -144,11 +144,18 @@ fn pose_jump_re_anchors_and_residual_failsafe_latches() {
         s.on_setpoint(1.02, END),
         SetpointOutcome::Accepted { .. }
     ));
-    // Residual failsafe: no recovery for 2 s although pose is fresh.
-    let tr = s.force_failsafe(1.1, Cause::ResidualDiverged, 2.0).unwrap();
+    // Residual failsafe: no recovery while the failsafe machine latches
+    // it, although pose is fresh.
+    let tr = s.force_failsafe(1.1, Cause::ResidualDiverged).unwrap();
     assert_eq!(tr.to, Failsafe);
     assert!(tr.text().len() <= 50, "{}", tr.text());
-    assert!(fly(&mut s, 1.1, 3.08, true, true).iter().all(|d| !d.stream));
+    for i in 0..20 {
+        let t = 1.1 + 0.02 * f64::from(i);
+        s.on_pose(t, P0);
+        s.on_heartbeat(t);
+        assert!(!s.tick(t + 0.005, false).stream);
+    }
+    assert_eq!(s.state(), Failsafe);
     assert!(fly(&mut s, 3.1, 3.2, true, true).iter().any(|d| d.stream));
     assert_eq!(s.state(), Holding);
 }
@@ -230,18 +237,18 @@ fn mission_start_path_tracks_at_once_and_time_in_states_adds_up() {
         start_path: true,
         ..cfg()
     });
-    s.tick(0.0);
+    s.tick(0.0, true);
     s.on_pose(0.5, P0);
     s.on_heartbeat(0.5);
     // At rest: engaged (holding) at once, the path at the next tick.
     s.set_motion(moving(0.5, P0[0], 0.0));
-    let tr = s.tick(0.5).transition.unwrap();
+    let tr = s.tick(0.5, true).transition.unwrap();
     assert_eq!((tr.to, tr.cause), (Holding, Cause::PoseFresh));
     assert_eq!(s.pending_goal(), Goal::Path);
-    let tr = s.tick(0.52).transition.unwrap();
+    let tr = s.tick(0.52, true).transition.unwrap();
     assert_eq!((tr.to, tr.cause), (Tracking, Cause::MissionStart));
     assert_eq!(s.goal(), Goal::Path);
-    let tr = s.tick(0.7).transition.unwrap(); // pose 0.2 s old
+    let tr = s.tick(0.7, true).transition.unwrap(); // pose 0.2 s old
     assert_eq!(tr.to, Failsafe);
     let t = s.time_in_states(1.0);
     assert!((t[WaitingForPose.index()] - 0.5).abs() < 1e-12);
@@ -252,7 +259,7 @@ fn mission_start_path_tracks_at_once_and_time_in_states_adds_up() {
     // Recovery holds (does not restart the path).
     s.on_pose(1.0, P0);
     s.on_heartbeat(1.0);
-    assert_eq!(s.tick(1.0).transition.unwrap().to, Holding);
+    assert_eq!(s.tick(1.0, true).transition.unwrap().to, Holding);
 }
 
 #[test]
@@ -269,7 +276,7 @@ fn standby_follows_the_stop_point_until_the_autopilot_applies_commands() {
         let t = k as f64 * 0.02;
         s.on_pose(t, [2.0 * t, 0.0, -10.0]);
         s.set_motion(moving(t, 2.0 * t, 2.0));
-        let d = s.tick(t);
+        let d = s.tick(t, true);
         assert!(d.stream, "standby streams");
         assert_eq!(s.state(), Standby);
         assert_eq!(
@@ -296,7 +303,7 @@ fn standby_follows_the_stop_point_until_the_autopilot_applies_commands() {
     s.on_mode(true);
     s.on_pose(0.2, [0.4, 0.0, -10.0]);
     s.set_motion(moving(0.2, 0.4, 2.0));
-    let tr = s.tick(0.2).transition.unwrap();
+    let tr = s.tick(0.2, true).transition.unwrap();
     assert_eq!((tr.to, tr.cause), (Holding, Cause::Engaged));
     let brake = Goal::Brake {
         from: [0.4, 0.0, -10.0],
@@ -307,27 +314,27 @@ fn standby_follows_the_stop_point_until_the_autopilot_applies_commands() {
     // Still fast: the goal stays; slow: the setpoint is flown.
     s.on_pose(0.4, [0.8, 0.0, -10.0]);
     s.set_motion(moving(0.4, 0.8, 1.0));
-    assert!(s.tick(0.4).transition.is_none());
+    assert!(s.tick(0.4, true).transition.is_none());
     assert_eq!(s.goal(), brake, "frozen at the engagement");
     s.on_pose(0.7, [0.9, 0.0, -10.0]);
     s.set_motion(moving(0.7, 0.9, 0.1));
-    let tr = s.tick(0.7).transition.unwrap();
+    let tr = s.tick(0.7, true).transition.unwrap();
     assert_eq!((tr.to, tr.cause), (Tracking, Cause::Resume));
     assert_eq!(s.goal(), Goal::Setpoint(sp));
     // Pilot override: standby at once, the setpoint kept for later.
     s.on_mode(false);
     s.on_pose(0.72, [1.0, 0.0, -10.0]);
     s.set_motion(moving(0.72, 1.0, 0.0));
-    let tr = s.tick(0.72).transition.unwrap();
+    let tr = s.tick(0.72, true).transition.unwrap();
     assert_eq!((tr.to, tr.cause), (Standby, Cause::PilotControl));
     assert_eq!(s.pending_goal(), Goal::Setpoint(sp));
     assert_eq!(s.goal(), Goal::Hold([1.0, 0.0, -10.0]));
     // Hand-back at rest: holding, then the setpoint again.
     s.on_mode(true);
     s.on_pose(0.74, [1.0, 0.0, -10.0]);
-    assert_eq!(s.tick(0.74).transition.unwrap().to, Holding);
+    assert_eq!(s.tick(0.74, true).transition.unwrap().to, Holding);
     s.on_pose(0.76, [1.0, 0.0, -10.0]);
-    assert_eq!(s.tick(0.76).transition.unwrap().to, Tracking);
+    assert_eq!(s.tick(0.76, true).transition.unwrap().to, Tracking);
     assert_eq!(s.goal(), Goal::Setpoint(sp));
     assert_eq!(s.engagement_counts(), (2, 1));
     let t = s.time_in_states(0.76);
@@ -345,17 +352,17 @@ fn hold_on_engage_forgets_the_goal_before_the_override() {
     s.on_mode(true);
     s.on_pose(0.0, P0);
     s.set_motion(moving(0.0, P0[0], 0.0));
-    assert_eq!(s.tick(0.0).transition.unwrap().to, Holding);
+    assert_eq!(s.tick(0.0, true).transition.unwrap().to, Holding);
     // The mission start flies the path at the first engagement.
-    assert_eq!(s.tick(0.02).transition.unwrap().to, Tracking);
+    assert_eq!(s.tick(0.02, true).transition.unwrap().to, Tracking);
     assert_eq!(s.goal(), Goal::Path);
     s.on_mode(false);
-    assert_eq!(s.tick(0.04).transition.unwrap().to, Standby);
+    assert_eq!(s.tick(0.04, true).transition.unwrap().to, Standby);
     assert_eq!(s.pending_goal(), Goal::None);
     s.on_mode(true);
-    assert_eq!(s.tick(0.06).transition.unwrap().to, Holding);
+    assert_eq!(s.tick(0.06, true).transition.unwrap().to, Holding);
     // Braked, nothing to resume: holding where it stopped.
-    assert!(s.tick(0.08).transition.is_none());
+    assert!(s.tick(0.08, true).transition.is_none());
     assert_eq!(s.state(), Holding);
     assert!(!s.braking());
     // (The motion's position: x of P0, y = 0.)
@@ -372,18 +379,18 @@ fn braking_ends_after_its_time_even_if_never_slow() {
     s.on_pose(0.0, P0);
     // 2 m/s at a = 4 m/s²: 0.5 s of braking, + BRAKE_SETTLE.
     s.set_motion(moving(0.0, P0[0], 2.0));
-    assert_eq!(s.tick(0.0).transition.unwrap().to, Holding);
+    assert_eq!(s.tick(0.0, true).transition.unwrap().to, Holding);
     let end = 0.5 + BRAKE_SETTLE;
     let mut t = 0.02;
     while t < end - 0.01 {
         s.on_pose(t, P0);
         s.on_heartbeat(t);
-        assert!(s.tick(t).transition.is_none(), "at {t}");
+        assert!(s.tick(t, true).transition.is_none(), "at {t}");
         t += 0.02;
     }
     s.on_pose(end, P0);
     s.on_heartbeat(end);
-    assert_eq!(s.tick(end + 0.001).transition.unwrap().to, Tracking);
+    assert_eq!(s.tick(end + 0.001, true).transition.unwrap().to, Tracking);
 }
 
 #[test]
@@ -406,7 +413,7 @@ fn out_of_order_arrivals_do_not_refresh() {
     let mut s = Supervisor::new(cfg());
     fly(&mut s, 0.0, 0.2, true, true);
     s.on_pose(0.1, [9.0; 3]); // older than the newest
-    let d = s.tick(0.35);
+    let d = s.tick(0.35, true);
     assert_eq!(d.transition.unwrap().to, Failsafe);
 }
 

@@ -1,17 +1,43 @@
 //! The exit path, written once: the controller's command with its thrust
 //! mapped and through the [`CommandGuard`](crate::guard::CommandGuard),
-//! the fallback of a failed or late tick, and the controller's update with
-//! a panic caught.
+//! the fallback of a failed or late tick (chosen by the failsafe machine,
+//! `tick/failsafe.rs`), the controller's update with a panic caught, and
+//! why a tick failed ([`TickError`]).
 
 use dflat_control::reference::Reference;
-use dflat_control::{Controller, Measurement};
-use dflat_link::AttitudeCommand;
+use dflat_control::{ControlError, Controller, Measurement};
 use dflat_link::dialect::MavSeverity;
+use dflat_link::{AttitudeCommand, LinkError};
 use tracing::warn;
 
 use super::ControlCore;
-use crate::guard::FallbackKind;
+use super::failsafe::{Action, Event, Failsafe, FallbackKind};
+use crate::guard::NonFinite;
 use crate::records::CsvRow;
+
+/// Why a tick's controller command was not sent (the fallback was). The
+/// text is for the log only.
+#[derive(Debug, thiserror::Error)]
+pub enum TickError {
+    /// The controller's update failed.
+    #[error(transparent)]
+    Control(#[from] ControlError),
+    /// The controller panicked; it was reset.
+    #[error("controller panicked (reset)")]
+    Panicked,
+    /// The command's thrust could not be mapped to \[0, 1\].
+    #[error(transparent)]
+    Thrust(#[from] LinkError),
+    /// The guard refused the command (a field is NaN or infinite).
+    #[error(transparent)]
+    Guard(#[from] NonFinite),
+    /// The solve took longer than the tick period.
+    #[error("deadline overrun: solve took {solve_us} µs")]
+    DeadlineOverrun {
+        /// The solve time \[µs\].
+        solve_us: u32,
+    },
+}
 
 impl ControlCore {
     /// The exit path, once per command: the controller's command with its
@@ -20,56 +46,51 @@ impl ControlCore {
     pub(super) fn guarded(
         &mut self,
         command: &dflat_control::AttitudeCommand,
-    ) -> Result<AttitudeCommand, String> {
-        let thrust = self
-            .mapping
-            .normalized(command.thrust)
-            .map_err(|e| e.to_string())?;
+    ) -> Result<AttitudeCommand, TickError> {
+        let thrust = self.mapping.normalized(command.thrust)?;
         // The controller's tilt is a world-frame one (its model flies the
         // fixed heading ψ⋆): the same thrust axis at the commanded heading.
         let (pitch, roll, yaw) = self.tilt_to_command(command.pitch, command.roll);
-        self.guard
-            .check(
-                AttitudeCommand {
-                    roll,
-                    pitch,
-                    yaw,
-                    thrust,
-                },
-                &mut self.counts.guards,
-            )
-            .map_err(|e| e.to_string())
+        Ok(self.guard.check(
+            AttitudeCommand {
+                roll,
+                pitch,
+                yaw,
+                thrust,
+            },
+            &mut self.counts.guards,
+        )?)
     }
 
     /// A failed or late tick's command at `t`: the previous plan one step
     /// further (DF-MPC; recorded in its window), guarded like any command;
     /// else the held command, then level hover — for at most
     /// `safety.level_hover_max_ms`, after which the daemon lets go (`None`:
-    /// nothing is sent). Counts and announces the kind.
+    /// nothing is sent). The failsafe machine chooses; this counts,
+    /// announces and records the kind.
     pub(super) fn fallback_command(
         &mut self,
         t: f64,
         measurement: &Measurement,
-        failed: Result<(dflat_control::TickOutput, AttitudeCommand), String>,
-        solve_us: u32,
+        failure: &TickError,
         row: &mut CsvRow,
     ) -> Option<AttitudeCommand> {
-        match failed {
-            Ok(_) => {
+        let first = self.failsafe == Failsafe::Nominal;
+        match failure {
+            TickError::DeadlineOverrun { solve_us } => {
                 self.counts.guards.deadline_overruns += 1;
-                if self.error_streak == 0 {
+                if first {
                     warn!(solve_us, "deadline overrun: fallback command");
                 }
             }
-            Err(e) => {
+            e => {
                 self.counts.control_errors += 1;
                 self.counts.guards.controller_failures += 1;
-                if self.error_streak == 0 {
+                if first {
                     warn!(error = %e, "controller failed: fallback command");
                 }
             }
         }
-        self.error_streak += 1;
         let planned = self
             .controller
             .plan_fallback(measurement, self.fallback.hold_ticks as usize)
@@ -81,21 +102,30 @@ impl ControlCore {
             Some((_, next)) => self.residual.predict([next.x, next.y, next.z]),
             None => self.residual.forget(),
         }
-        let (command, kind) = self.fallback.command(planned.map(|(c, _)| c));
-        if kind == FallbackKind::LevelHover {
-            // Each tick stands for one period (half a period of margin
-            // against wake-up jitter): at most max / period ticks are sent.
-            let since = *self.level_hover_since.get_or_insert(t);
-            if t - since + 0.5 * self.period >= self.config.safety.level_hover_max_ms / 1000.0 {
-                // Let go: stop the stream so the autopilot's own failsafe
-                // takes over.
+        let event = Event::Failed {
+            t,
+            planned: planned.is_some(),
+            can_hold: self.fallback.held().is_some(),
+        };
+        let (kind, announce) = match self.failsafe_on(event) {
+            Action::Fallback { kind, announce } => (kind, announce),
+            Action::LetGo => {
+                // Stop the stream so the autopilot's own failsafe takes over.
                 self.let_go(t);
                 row.guard = Some("let_go");
                 return None;
             }
-        } else {
-            self.level_hover_since = None;
-        }
+            _ => return None,
+        };
+        let command = match kind {
+            FallbackKind::Plan => {
+                let command = planned.map(|(c, _)| c)?;
+                self.fallback.planned(command);
+                command
+            }
+            FallbackKind::Held => self.fallback.held()?,
+            FallbackKind::LevelHover => self.fallback.level_command(),
+        };
         let (counter, note, text) = match kind {
             FallbackKind::Plan => (
                 &mut self.counts.guards.plan_steps,
@@ -115,8 +145,7 @@ impl ControlCore {
         };
         *counter += 1;
         row.guard = Some(note);
-        if self.fallback_kind != Some(kind) {
-            self.fallback_kind = Some(kind);
+        if announce {
             self.text(MavSeverity::MAV_SEVERITY_CRITICAL, text);
         }
         Some(command)
@@ -130,14 +159,15 @@ pub(super) fn update_caught(
     controller: &mut dyn Controller,
     measurement: &Measurement,
     reference: &mut Reference,
-) -> Result<dflat_control::TickOutput, dflat_control::ControlError> {
-    std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+) -> Result<dflat_control::TickOutput, TickError> {
+    let caught = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
         controller.update(measurement, reference)
-    }))
-    .unwrap_or_else(|_| {
-        controller.reset();
-        Err(dflat_control::ControlError::Solver(
-            "controller panicked (reset)".into(),
-        ))
-    })
+    }));
+    match caught {
+        Ok(result) => Ok(result?),
+        Err(_) => {
+            controller.reset();
+            Err(TickError::Panicked)
+        }
+    }
 }

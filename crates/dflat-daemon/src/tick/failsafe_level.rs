@@ -23,29 +23,14 @@
 //! ([`brake_command`]). c is chosen to bring the total to zero, so the
 //! vehicle ends at the velocity it had when the last pose arrived. If
 //! ATTITUDE stopped with the pose, its newest sample is held for the
-//! integral; without any ATTITUDE the brake is skipped (level only). Pose returning in the meantime ends it (the
-//! supervisor leaves `Failsafe`). A control failsafe (`ControlFailed`)
-//! has already streamed its level hover (`tick/exit.rs`) and is not
-//! levelled twice.
-
-use dflat_link::dialect::MavSeverity;
-use dflat_link::{AttitudeCommand, set_attitude_target};
-use tracing::{error, info};
-
-use super::{ControlCore, SentCommand};
-use crate::records::CsvRow;
-use crate::supervisor::{Cause, FlightState, Transition};
-
-/// Level hover streamed after a failsafe: since when, and what.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub(super) struct FailsafeLevel {
-    /// Tick time the failsafe was entered \[s\].
-    since: f64,
-    /// The level command (yaw of the last command sent, hover thrust).
-    command: AttitudeCommand,
-    /// The brake first: (pitch, roll) \[rad\] for this long \[s\].
-    brake: Option<([f64; 2], f64)>,
-}
+//! integral; without any ATTITUDE the brake is skipped (level only). Pose
+//! returning in the meantime ends it (the supervisor leaves `Failsafe`).
+//! A control failsafe (`ControlFailed`) has already streamed its level
+//! hover (`tick/exit.rs`) and is not levelled twice.
+//!
+//! This module holds the brake's math; when a failsafe levels, for how
+//! long and what happens next is the failsafe machine's
+//! (`tick/failsafe.rs`), carried out in `tick/ladder.rs`.
 
 /// The braking time the brake aims for \[s\] (longer if the tilt limit
 /// needs it, at most half of `safety.level_hover_max_ms`).
@@ -133,7 +118,7 @@ impl TiltSincePose {
 
     /// The integral up to `t` (the newest attitude held) and the newest
     /// attitude; `None` without a pose or an attitude.
-    fn at(&self, t: f64) -> Option<([f64; 2], [f64; 2])> {
+    pub(super) fn at(&self, t: f64) -> Option<([f64; 2], [f64; 2])> {
         let since = self.since?;
         let (t0, a) = self.last?;
         let dt = (t - t0.max(since)).max(0.0);
@@ -141,143 +126,6 @@ impl TiltSincePose {
             [self.integral[0] + a[0] * dt, self.integral[1] + a[1] * dt],
             a,
         ))
-    }
-}
-
-/// True when the failsafe entered by `tr` first streams level hover: it
-/// left an engaged state (the autopilot was applying our commands) for a
-/// cause that has not levelled already.
-pub(super) fn levels_after(tr: &Transition) -> bool {
-    tr.to == FlightState::Failsafe
-        && tr.from.engaged()
-        && matches!(
-            tr.cause,
-            Cause::PoseStale | Cause::AutopilotSilent | Cause::ResidualDiverged
-        )
-}
-
-impl ControlCore {
-    /// The level command a failsafe would leave now: the fallback's level
-    /// attitude (yaw of the last command sent) at the hover thrust — the
-    /// disturbance estimate's when it has a usable one, else the
-    /// configured one. Taken before a failsafe resets the controller.
-    pub(super) fn failsafe_level_command(&self) -> AttitudeCommand {
-        let mut command = self.fallback.level_command();
-        if let Some(hover) = self
-            .controller
-            .disturbance()
-            .and_then(|d| self.mapping.normalized(d.hover_thrust).ok())
-            .filter(|h| h.is_finite() && (0.0..=1.0).contains(h))
-        {
-            command.thrust = hover;
-        }
-        command
-    }
-
-    /// Starts the level hover of a failsafe entered at `t` when one of the
-    /// pending transitions calls for it (see [`levels_after`]).
-    pub(super) fn maybe_start_failsafe_level(&mut self, t: f64, command: AttitudeCommand) {
-        if !self.pending_transitions.iter().any(levels_after) {
-            return;
-        }
-        let v = &self.config.vehicle;
-        let brake = self.tilt_since_pose.at(t).and_then(|(integral, attitude)| {
-            brake_command(
-                integral,
-                attitude,
-                v.tau,
-                v.k,
-                self.guard.max_tilt,
-                0.5 * self.config.safety.level_hover_max_ms / 1000.0,
-            )
-        });
-        if let Some((c, time)) = brake {
-            info!(
-                pitch_deg = c[0].to_degrees(),
-                roll_deg = c[1].to_degrees(),
-                time_s = time,
-                "failsafe brake: cancelling the velocity gained since the last pose"
-            );
-        }
-        self.failsafe_level = Some(FailsafeLevel {
-            since: t,
-            command,
-            brake,
-        });
-        if self.config.safety.level_hover_max_ms > 0.0 {
-            info!(
-                max_ms = self.config.safety.level_hover_max_ms,
-                "failsafe: level hover, then the attitude stream stops"
-            );
-            self.text(
-                MavSeverity::MAV_SEVERITY_CRITICAL,
-                "dflat: failsafe, level hover then stream off",
-            );
-        }
-    }
-
-    /// This tick's level-hover command in a failsafe, if one is due (and
-    /// `None` once `safety.level_hover_max_ms` has run out: the stream
-    /// stops). Guarded like every command; counted as level hover.
-    pub(super) fn failsafe_level_tick(&mut self, t: f64, row: &mut CsvRow) -> Option<SentCommand> {
-        if self.supervisor.state() != FlightState::Failsafe {
-            self.failsafe_level = None;
-            return None;
-        }
-        let level = self.failsafe_level?;
-        // Each tick stands for one period (half a period of margin against
-        // wake-up jitter): at most max / period commands are sent.
-        let max = self.config.safety.level_hover_max_ms / 1000.0;
-        if t - level.since + 0.5 * self.period >= max {
-            self.failsafe_level = None;
-            if max > 0.0 {
-                info!(
-                    "failsafe level hover over: attitude stream off, the autopilot's failsafe takes over"
-                );
-                self.text(
-                    MavSeverity::MAV_SEVERITY_CRITICAL,
-                    "dflat: level hover over, stream off",
-                );
-            }
-            row.guard = Some("let_go");
-            return None;
-        }
-        let mut wanted = level.command;
-        let braking = level
-            .brake
-            .filter(|(_, time)| t - level.since + 0.5 * self.period < *time);
-        if let Some(([pitch, roll], _)) = braking {
-            wanted.pitch = pitch;
-            wanted.roll = roll;
-        }
-        let command = match self.guard.check(wanted, &mut self.counts.guards) {
-            Ok(c) => c,
-            Err(e) => {
-                // Level at a configured hover thrust always passes; if not,
-                // silence is the only safe answer.
-                error!(error = %e, "failsafe level command refused by the guard: stream off");
-                self.failsafe_level = None;
-                return None;
-            }
-        };
-        let time_boot_ms = (t * 1000.0) as u64 as u32;
-        let message = match set_attitude_target(self.target, time_boot_ms, &command) {
-            Ok(m) => m,
-            Err(e) => {
-                error!(error = %e, "failsafe level command not encodable: stream off");
-                self.failsafe_level = None;
-                return None;
-            }
-        };
-        self.counts.guards.level_hover += 1;
-        self.counts.commands += 1;
-        row.guard = Some(if braking.is_some() { "brake" } else { "level" });
-        row.command = Some([command.roll, command.pitch, command.yaw, command.thrust]);
-        Some(SentCommand {
-            message,
-            command,
-            pose_arrival: None,
-        })
     }
 }
 

@@ -1,5 +1,6 @@
 //! Goals that arrive over MAVLink: position setpoints (flown as routes)
-//! and samples of streamed trajectories.
+//! and samples of streamed trajectories; and the reference rebuilt
+//! whenever the supervisor's goal changes.
 //!
 //! SET_POSITION_TARGET_LOCAL_NED is a **stream sample** when its velocity
 //! and/or acceleration are given (type_mask bits clear), except a first
@@ -23,9 +24,10 @@
 use dflat_control::reference::{Reference, StreamSample};
 use dflat_link::dialect::MavSeverity;
 use nalgebra::Vector3;
-use tracing::{debug, info, warn};
+use tracing::{debug, error, info, warn};
 
 use super::{ControlCore, REFUSAL_TEXT_INTERVAL};
+use crate::control::reference_for;
 use crate::supervisor::{Goal, Refusal, SetpointOutcome};
 
 /// A sample mapped to more than this long \[s\] before its arrival is
@@ -221,5 +223,64 @@ impl ControlCore {
             self.announce(tr);
             self.refresh_reference();
         }
+    }
+
+    /// Rebuilds the reference when the supervisor's goal changed.
+    pub(super) fn refresh_reference(&mut self) {
+        let generation = self.supervisor.goal_generation();
+        if generation == self.reference_generation {
+            return;
+        }
+        self.reference_generation = generation;
+        if self.supervisor.goal() == Goal::Mission {
+            self.reference = match self.mission_reference() {
+                Some(Ok(r)) => Some(r),
+                Some(Err(e)) => {
+                    error!(error = %e, "cannot build the mission's reference; keeping the previous one");
+                    self.reference.take()
+                }
+                None => self.reference.take(),
+            };
+            return;
+        }
+        let goal = self.supervisor.goal();
+        // A lost stream holds where its extrapolation stops: keep flying
+        // the stream's own smooth stop there.
+        if let Goal::Hold(p) = goal
+            && self
+                .reference
+                .as_ref()
+                .is_some_and(|r| r.is_stream() && (r.rest_point() - Vector3::from(p)).norm() < 1e-9)
+        {
+            return;
+        }
+        if goal == Goal::Stream {
+            if let Some(r) = self.stream_reference() {
+                self.reference = Some(r);
+            }
+            return;
+        }
+        // Setpoints are routes from the vehicle's position and velocity.
+        let from = match self.motion.estimate() {
+            Some(m) => Some((m.position, m.velocity)),
+            None => self.pose.map(|p| (p.position, [0.0; 3])),
+        };
+        self.reference = match reference_for(&self.config, goal, from) {
+            Some(Ok(mut r)) => {
+                if self.supervisor.path_resumed()
+                    && let Some(p) = self.pose
+                {
+                    r.seek(&Vector3::from(p.position));
+                }
+                Some(r)
+            }
+            Some(Err(e)) => {
+                // Validated at start; a setpoint is checked finite. Keep
+                // flying the previous reference rather than none.
+                error!(error = %e, "cannot build the reference; keeping the previous one");
+                self.reference.take()
+            }
+            None => None,
+        };
     }
 }

@@ -347,6 +347,41 @@ fn a_controller_that_cannot_fly_lets_go_after_the_level_hover_period_and_resumes
 }
 
 #[test]
+fn the_core_walks_the_failsafe_ladder_and_back() {
+    // No plan (the scripted controller has none): held, level hover, let
+    // go with trials, then flying again.
+    let mut script = vec![Script::Command(0.05, 0.0); 10];
+    script.extend(vec![Script::Fail; 200]);
+    script.push(Script::Command(0.02, 0.0));
+    let (mut core, _) = core(script);
+    let mut names: Vec<&'static str> = vec![core.failsafe().name()];
+    let mut held = 0;
+    for k in 0..300 {
+        step_at(&mut core, k, None, vec![]);
+        let state = core.failsafe();
+        if let failsafe::Failsafe::HeldCommand { held: h, .. } = state {
+            held = held.max(h);
+        }
+        if names.last() != Some(&state.name()) {
+            names.push(state.name());
+        }
+    }
+    assert_eq!(
+        names,
+        [
+            "nominal",
+            "held_command",
+            "level_hover",
+            "trial",
+            "let_go",
+            "nominal"
+        ]
+    );
+    assert_eq!(held, Config::default().safety.hold_last_ticks);
+    assert_eq!(core.state(), FlightState::Holding);
+}
+
+#[test]
 fn a_pose_clock_running_slow_is_replaced_by_arrival_times() {
     let (mut core, _) = core(vec![Script::Command(0.0, 0.0)]);
     // The source clock runs at 0.6× ours: the mapped capture times fall

@@ -1,0 +1,141 @@
+//! The controller's tick: the measurement it gets, the solve with a
+//! panic caught, and the one exit (a guarded command, or the fallback the
+//! failsafe machine chooses: `tick/exit.rs`).
+
+use dflat_control::Measurement;
+use dflat_link::set_attitude_target;
+use nalgebra::Vector3;
+use tracing::{error, info};
+
+use super::exit::{TickError, update_caught};
+use super::failsafe::{Action, Event};
+use super::pose::PoseSample;
+use super::{ControlCore, SentCommand};
+use crate::records::{CsvDisturbance, CsvRow};
+use crate::summary::DisturbanceSummary;
+use crate::supervisor::{FlightState, Goal};
+
+impl ControlCore {
+    /// Runs the controller on `pose` and produces the tick's command (or
+    /// none when it cannot be encoded); returns it and the solve time.
+    pub(super) fn control(
+        &mut self,
+        t: f64,
+        pose: PoseSample,
+        stopwatch: &mut dyn FnMut() -> f64,
+        row: &mut CsvRow,
+    ) -> (Option<SentCommand>, u32) {
+        let multi_rate = self.multi_rate;
+        let measurement = self.tick_measurement(t, &pose);
+        // Standby: the tick before sent a command the autopilot did not
+        // apply; record the input its attitude shows instead, before this
+        // tick's update uses the window.
+        self.correct_standby_input();
+        let t0 = stopwatch();
+        let Some(reference) = self.reference.as_mut() else {
+            unreachable!("control() runs with a reference")
+        };
+        // Routes and streams are trajectories in time: at the measurement's.
+        reference.set_time(measurement.t);
+        let result = update_caught(self.controller.as_mut(), &measurement, reference);
+        if result.is_err() && multi_rate {
+            // After a reset (panic) the window needs a sample again (a
+            // repeated sample replaces the one held).
+            self.observe(&pose);
+        }
+        let solve = (stopwatch() - t0).max(0.0);
+        let solve_us = (solve * 1e6).min(f64::from(u32::MAX)) as u32;
+        row.solve_us = Some(solve_us);
+        let path_done = matches!(self.supervisor.goal(), Goal::Path)
+            && self.reference.as_ref().is_some_and(|r| r.is_finished());
+        let produced = result.and_then(|out| {
+            let command = self.guarded(&out.command)?;
+            if solve > self.period {
+                return Err(TickError::DeadlineOverrun { solve_us });
+            }
+            Ok((out, command))
+        });
+        // The one exit point: a guarded controller command, or the fallback
+        // (the previous plan, the held command, then level hover).
+        let (command, out) = match produced {
+            Ok((out, command)) => {
+                if let Action::Recovered { failed } = self.failsafe_on(Event::Solved) {
+                    info!(ticks = failed, "controller recovered");
+                }
+                self.counts.solves.record(&out);
+                self.fallback.good(command);
+                self.residual
+                    .predict([out.plan[1].x, out.plan[1].y, out.plan[1].z]);
+                (command, Some(out))
+            }
+            Err(failure) => match self.fallback_command(t, &measurement, &failure, row) {
+                Some(command) => (command, None),
+                None => return (None, solve_us),
+            },
+        };
+        // This tick's command is not applied in standby: correct it at the
+        // next tick from the attitude then.
+        self.standby_attitude = if self.supervisor.state() == FlightState::Standby {
+            self.attitude
+        } else {
+            None
+        };
+        let time_boot_ms = (t * 1000.0) as u64 as u32;
+        // Every path above is guarded (or is the fallback's own finite
+        // hover); the encoder refuses a non-finite field all the same.
+        let sent = match set_attitude_target(self.target, time_boot_ms, &command) {
+            Ok(message) => {
+                let fresh = self.last_used_arrival != Some(pose.arrival);
+                self.last_used_arrival = Some(pose.arrival);
+                self.counts.commands += 1;
+                row.command = Some([command.roll, command.pitch, command.yaw, command.thrust]);
+                Some(SentCommand {
+                    message,
+                    command,
+                    pose_arrival: fresh.then_some(pose.arrival),
+                })
+            }
+            Err(e) => {
+                error!(error = %e, "guarded command not encodable: nothing sent");
+                None
+            }
+        };
+        if let Some(out) = out {
+            row.plan = Some(out.plan.map(|p| [p.x, p.y, p.z]));
+            row.reference = Some([out.reference.x, out.reference.y, out.reference.z]);
+            if let Some(report) = self.controller.disturbance() {
+                let hover = self.mapping.normalized(report.hover_thrust).ok();
+                row.disturbance = Some(CsvDisturbance {
+                    acceleration: report.acceleration,
+                    thrust_scale: report.thrust_scale,
+                    hover_thrust: hover,
+                    status: report.status,
+                });
+                self.counts.disturbance = Some(DisturbanceSummary {
+                    report,
+                    hover_thrust_normalized: hover,
+                });
+            }
+        }
+        if path_done {
+            if let Some(tr) = self.supervisor.on_path_finished(t) {
+                self.announce(tr);
+            }
+            // Holding the end, or the path again (`mission.repeat`).
+            self.refresh_reference();
+        }
+        (sent, solve_us)
+    }
+
+    /// The measurement a tick at `t` hands the controller: multi-rate, the
+    /// tick's own time (the samples were observed as they arrived);
+    /// otherwise the newest pose at its capture time (not newer than the
+    /// last: no new pose).
+    pub(super) fn tick_measurement(&self, t: f64, pose: &PoseSample) -> Measurement {
+        Measurement {
+            t: if self.multi_rate { t } else { pose.capture },
+            position: Vector3::from(pose.position),
+            yaw: self.yaw_of(pose.yaw, self.attitude_yaw),
+        }
+    }
+}

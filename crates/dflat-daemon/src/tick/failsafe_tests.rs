@@ -1,0 +1,458 @@
+//! The failsafe machine's transition table, checked as a table: every
+//! (state, event) pair is listed with the state and action it must give.
+
+use std::collections::BTreeSet;
+
+use super::*;
+
+const LIMITS: Limits = Limits {
+    hold_ticks: 2,
+    level_hover_max: 0.1,
+    period: 0.02,
+};
+
+const LEVEL: AttitudeCommand = AttitudeCommand {
+    roll: 0.0,
+    pitch: 0.0,
+    yaw: 0.5,
+    thrust: 0.45,
+};
+
+/// Brake (pitch, roll) for 40 ms, then level.
+const PLAN: LevelPlan = LevelPlan {
+    command: LEVEL,
+    brake: Some(([0.1, -0.05], 0.04)),
+};
+
+const BRAKE: AttitudeCommand = AttitudeCommand {
+    roll: -0.05,
+    pitch: 0.1,
+    yaw: 0.5,
+    thrust: 0.45,
+};
+
+use Failsafe as S;
+
+const N: S = S::Nominal;
+const P: S = S::PlanFallback { failed: 3 };
+const H: S = S::HeldCommand { failed: 1, held: 1 };
+/// Held as long as allowed (`hold_ticks` = 2).
+const H_OUT: S = S::HeldCommand { failed: 2, held: 2 };
+const L: S = S::LevelHover {
+    failed: 4,
+    since: 1.0,
+};
+const FL: S = S::FailsafeLevel {
+    since: 1.0,
+    plan: PLAN,
+    latched_until: None,
+};
+const FL_LATCHED: S = S::FailsafeLevel {
+    since: 1.0,
+    plan: PLAN,
+    latched_until: Some(3.0),
+};
+const G: S = S::LetGo {
+    latched_until: None,
+};
+const G_LATCHED: S = S::LetGo {
+    latched_until: Some(3.0),
+};
+const T: S = S::Trial { good: 2 };
+const T_LAST: S = S::Trial {
+    good: TRIAL_TICKS - 1,
+};
+
+fn failed(t: f64, planned: bool, can_hold: bool) -> Event {
+    Event::Failed {
+        t,
+        planned,
+        can_hold,
+    }
+}
+
+fn entered(cause: Cause, engaged: bool) -> Event {
+    Event::FailsafeEntered {
+        t: 1.04,
+        cause,
+        engaged,
+        level: PLAN,
+    }
+}
+
+fn event_name(e: &Event) -> &'static str {
+    match e {
+        Event::Solved => "solved",
+        Event::Failed { .. } => "failed",
+        Event::FailsafeEntered { .. } => "failsafe_entered",
+        Event::Recovered => "recovered",
+        Event::Idle { .. } => "idle",
+        Event::TrialSolve { .. } => "trial_solve",
+        Event::LevelRefused => "level_refused",
+    }
+}
+
+fn fallback(kind: FallbackKind, announce: bool) -> Action {
+    Action::Fallback { kind, announce }
+}
+
+/// (state, event, next state, action).
+fn table() -> Vec<(S, Event, S, Action)> {
+    use Action as A;
+    use FallbackKind::{Held, LevelHover, Plan};
+    let latch = Some(1.04 + RESIDUAL_FAILSAFE_LATCH);
+    let fl_at = |latched_until| S::FailsafeLevel {
+        since: 1.04,
+        plan: PLAN,
+        latched_until,
+    };
+    let start = A::StartLevel { announce: true };
+    let plan_fail = failed(1.04, true, true);
+    let hold_fail = failed(1.04, false, true);
+    let bare_fail = failed(1.04, false, false);
+    let late_fail = failed(1.09, false, true);
+    vec![
+        // A good tick ends any fallback streak.
+        (N, Event::Solved, N, A::None),
+        (P, Event::Solved, N, A::Recovered { failed: 3 }),
+        (H, Event::Solved, N, A::Recovered { failed: 1 }),
+        (L, Event::Solved, N, A::Recovered { failed: 4 }),
+        (FL, Event::Solved, FL, A::None),
+        (G, Event::Solved, G, A::None),
+        (T, Event::Solved, T, A::None),
+        // A failed tick with a plan to fly: the plan.
+        (
+            N,
+            plan_fail,
+            S::PlanFallback { failed: 1 },
+            fallback(Plan, true),
+        ),
+        (
+            P,
+            plan_fail,
+            S::PlanFallback { failed: 4 },
+            fallback(Plan, false),
+        ),
+        (
+            H,
+            plan_fail,
+            S::PlanFallback { failed: 2 },
+            fallback(Plan, true),
+        ),
+        (
+            L,
+            plan_fail,
+            S::PlanFallback { failed: 5 },
+            fallback(Plan, true),
+        ),
+        (FL, plan_fail, FL, A::None),
+        (G, plan_fail, G, A::None),
+        (T, plan_fail, T, A::None),
+        // No plan, a good command remembered: held (never after a plan),
+        // for at most hold_ticks, then level hover.
+        (
+            N,
+            hold_fail,
+            S::HeldCommand { failed: 1, held: 1 },
+            fallback(Held, true),
+        ),
+        (
+            H,
+            hold_fail,
+            S::HeldCommand { failed: 2, held: 2 },
+            fallback(Held, false),
+        ),
+        (
+            H_OUT,
+            hold_fail,
+            S::LevelHover {
+                failed: 3,
+                since: 1.04,
+            },
+            fallback(LevelHover, true),
+        ),
+        (
+            P,
+            hold_fail,
+            S::LevelHover {
+                failed: 4,
+                since: 1.04,
+            },
+            fallback(LevelHover, true),
+        ),
+        (
+            L,
+            hold_fail,
+            S::LevelHover {
+                failed: 5,
+                since: 1.0,
+            },
+            fallback(LevelHover, false),
+        ),
+        (FL, hold_fail, FL, A::None),
+        (G, hold_fail, G, A::None),
+        (T, hold_fail, T, A::None),
+        // Nothing to hold: level hover at once.
+        (
+            N,
+            bare_fail,
+            S::LevelHover {
+                failed: 1,
+                since: 1.04,
+            },
+            fallback(LevelHover, true),
+        ),
+        (
+            H,
+            bare_fail,
+            S::LevelHover {
+                failed: 2,
+                since: 1.04,
+            },
+            fallback(LevelHover, true),
+        ),
+        // Level hover ran out (1.09 − 1.0 + half a period ≥ 0.1 s): let go.
+        (L, late_fail, S::Trial { good: 0 }, A::LetGo),
+        // The supervisor's failsafe: level (brake first) when it left an
+        // engaged state for pose, autopilot or residual; latched 2 s after
+        // a residual; a control failure goes to the trial.
+        (N, entered(Cause::PoseStale, true), fl_at(None), start),
+        (N, entered(Cause::PoseStale, false), G, A::None),
+        (P, entered(Cause::AutopilotSilent, true), fl_at(None), start),
+        (
+            H,
+            entered(Cause::ResidualDiverged, true),
+            fl_at(latch),
+            start,
+        ),
+        (
+            L,
+            entered(Cause::ResidualDiverged, false),
+            S::LetGo {
+                latched_until: latch,
+            },
+            A::None,
+        ),
+        (
+            N,
+            entered(Cause::ControlFailed, true),
+            S::Trial { good: 0 },
+            A::None,
+        ),
+        (FL, entered(Cause::PoseStale, true), FL, A::None),
+        (G, entered(Cause::PoseStale, true), G, A::None),
+        (T, entered(Cause::PoseStale, true), T, A::None),
+        // Recovery (fresh pose, not latched) starts afresh from any state.
+        (N, Event::Recovered, N, A::None),
+        (P, Event::Recovered, N, A::None),
+        (H, Event::Recovered, N, A::None),
+        (L, Event::Recovered, N, A::None),
+        (FL, Event::Recovered, N, A::None),
+        (G_LATCHED, Event::Recovered, N, A::None),
+        (T, Event::Recovered, N, A::None),
+        // A tick without the controller: the failsafe's brake, its level
+        // hover, then stream off.
+        (
+            FL,
+            Event::Idle { t: 1.02 },
+            FL,
+            A::SendLevel {
+                command: BRAKE,
+                braking: true,
+            },
+        ),
+        (
+            FL,
+            Event::Idle { t: 1.04 },
+            FL,
+            A::SendLevel {
+                command: LEVEL,
+                braking: false,
+            },
+        ),
+        (
+            FL,
+            Event::Idle { t: 1.09 },
+            G,
+            A::LevelOver { announce: true },
+        ),
+        (
+            FL_LATCHED,
+            Event::Idle { t: 1.09 },
+            G_LATCHED,
+            A::LevelOver { announce: true },
+        ),
+        (N, Event::Idle { t: 1.04 }, N, A::None),
+        (P, Event::Idle { t: 1.04 }, P, A::None),
+        (H, Event::Idle { t: 1.04 }, H, A::None),
+        (L, Event::Idle { t: 1.04 }, L, A::None),
+        (G, Event::Idle { t: 1.04 }, G, A::None),
+        (T, Event::Idle { t: 1.04 }, T, A::None),
+        // Trial solves: TRIAL_TICKS good ones in a row lift the latch.
+        (
+            T,
+            Event::TrialSolve { ok: true },
+            S::Trial { good: 3 },
+            A::None,
+        ),
+        (
+            T,
+            Event::TrialSolve { ok: false },
+            S::Trial { good: 0 },
+            A::None,
+        ),
+        (T_LAST, Event::TrialSolve { ok: true }, G, A::FliesAgain),
+        (N, Event::TrialSolve { ok: true }, N, A::None),
+        (P, Event::TrialSolve { ok: true }, P, A::None),
+        (H, Event::TrialSolve { ok: true }, H, A::None),
+        (L, Event::TrialSolve { ok: true }, L, A::None),
+        (FL, Event::TrialSolve { ok: true }, FL, A::None),
+        (G, Event::TrialSolve { ok: true }, G, A::None),
+        // The level command could not be sent: stream off (latch kept).
+        (FL, Event::LevelRefused, G, A::None),
+        (FL_LATCHED, Event::LevelRefused, G_LATCHED, A::None),
+        (N, Event::LevelRefused, N, A::None),
+        (P, Event::LevelRefused, P, A::None),
+        (H, Event::LevelRefused, H, A::None),
+        (L, Event::LevelRefused, L, A::None),
+        (G, Event::LevelRefused, G, A::None),
+        (T, Event::LevelRefused, T, A::None),
+    ]
+}
+
+#[test]
+fn the_transition_table() {
+    let table = table();
+    for (i, (state, event, want_state, want_action)) in table.iter().enumerate() {
+        let (got_state, got_action) = next(*state, *event, &LIMITS);
+        assert_eq!(
+            (got_state, got_action),
+            (*want_state, *want_action),
+            "row {i}: {} on {event:?}",
+            state.name()
+        );
+    }
+    // Every state meets every event at least once.
+    let states = [N, P, H, L, FL, G, T];
+    let events = [
+        Event::Solved,
+        failed(1.0, false, false),
+        entered(Cause::PoseStale, true),
+        Event::Recovered,
+        Event::Idle { t: 1.0 },
+        Event::TrialSolve { ok: true },
+        Event::LevelRefused,
+    ];
+    let listed: BTreeSet<_> = table
+        .iter()
+        .map(|(s, e, _, _)| (s.name(), event_name(e)))
+        .collect();
+    for s in &states {
+        for e in &events {
+            assert!(
+                listed.contains(&(s.name(), event_name(e))),
+                "({}, {}) not in the table",
+                s.name(),
+                event_name(e)
+            );
+        }
+    }
+    assert_eq!(listed.len(), states.len() * events.len());
+}
+
+#[test]
+fn level_hover_off_lets_go_at_the_first_level_tick() {
+    let off = Limits {
+        level_hover_max: 0.0,
+        ..LIMITS
+    };
+    assert_eq!(
+        next(N, failed(1.0, false, false), &off),
+        (S::Trial { good: 0 }, Action::LetGo)
+    );
+    // A plan still flies.
+    assert_eq!(
+        next(N, failed(1.0, true, false), &off).1,
+        fallback(FallbackKind::Plan, true)
+    );
+    // A levelling failsafe is entered silently and over at its first tick.
+    assert_eq!(
+        next(N, entered(Cause::PoseStale, true), &off).1,
+        Action::StartLevel { announce: false }
+    );
+    assert_eq!(
+        next(FL, Event::Idle { t: 1.0 }, &off),
+        (G, Action::LevelOver { announce: false })
+    );
+}
+
+#[test]
+fn holding_is_off_with_zero_hold_ticks() {
+    let none = Limits {
+        hold_ticks: 0,
+        ..LIMITS
+    };
+    assert_eq!(
+        next(N, failed(1.0, false, true), &none).0,
+        S::LevelHover {
+            failed: 1,
+            since: 1.0
+        }
+    );
+}
+
+#[test]
+fn latches() {
+    assert!(!N.latched(0.0) && !P.latched(0.0) && !H.latched(0.0) && !L.latched(0.0));
+    assert!(!FL.latched(2.0) && !G.latched(2.0));
+    assert!(FL_LATCHED.latched(2.99) && !FL_LATCHED.latched(3.0));
+    assert!(G_LATCHED.latched(2.99) && !G_LATCHED.latched(3.0));
+    assert!(T.latched(1e9));
+}
+
+#[test]
+fn a_long_streak_walks_the_ladder() {
+    // Held twice, level hover until it runs out, let go, trials, recovery.
+    let mut s = N;
+    let mut actions = Vec::new();
+    let mut t = 1.0;
+    for _ in 0..12 {
+        let (n, a) = next(s, failed(t, false, true), &LIMITS);
+        s = n;
+        actions.push(a);
+        t += 0.02;
+        if a == Action::LetGo {
+            break;
+        }
+    }
+    let kinds: Vec<_> = actions
+        .iter()
+        .map(|a| match a {
+            Action::Fallback { kind, .. } => format!("{kind:?}"),
+            other => format!("{other:?}"),
+        })
+        .collect();
+    // 2 held, level hover from 1.04: 1.04, 1.06, 1.08, 1.10, 1.12 (< 0.1 s
+    // with half a period), let go at 1.14.
+    assert_eq!(
+        kinds,
+        [
+            "Held",
+            "Held",
+            "LevelHover",
+            "LevelHover",
+            "LevelHover",
+            "LevelHover",
+            "LevelHover",
+            "LetGo"
+        ]
+    );
+    assert!(s.latched(t));
+    for i in 0..TRIAL_TICKS {
+        let (n, a) = next(s, Event::TrialSolve { ok: true }, &LIMITS);
+        s = n;
+        assert_eq!(a == Action::FliesAgain, i + 1 == TRIAL_TICKS);
+    }
+    assert!(!s.latched(t));
+    assert_eq!(next(s, Event::Recovered, &LIMITS).0, N);
+}

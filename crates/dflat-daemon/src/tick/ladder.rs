@@ -1,0 +1,219 @@
+//! The control core's side of the failsafe machine (`tick/failsafe.rs`):
+//! it reports what happened — a supervisor failsafe entered or left, a
+//! trial solve, a tick without the controller — and carries out what the
+//! machine decides: let go, say that the controller flies again, stream a
+//! failsafe's brake and level hover (`tick/failsafe_level.rs`) and stop.
+
+use dflat_link::dialect::MavSeverity;
+use dflat_link::{AttitudeCommand, set_attitude_target};
+use tracing::{debug, error, info};
+
+use super::exit::update_caught;
+use super::failsafe::{self, Action, Event, Failsafe, LevelPlan, Limits};
+use super::failsafe_level::brake_command;
+use super::{ControlCore, SentCommand};
+use crate::records::CsvRow;
+use crate::supervisor::{Cause, FlightState, Transition};
+
+impl ControlCore {
+    /// The failsafe machine's settings, from the configuration.
+    fn failsafe_limits(&self) -> Limits {
+        Limits {
+            hold_ticks: self.fallback.hold_ticks,
+            level_hover_max: self.config.safety.level_hover_max_ms / 1000.0,
+            period: self.period,
+        }
+    }
+
+    /// Feeds `event` to the failsafe machine: the state moves on; returns
+    /// what to do.
+    pub(super) fn failsafe_on(&mut self, event: Event) -> Action {
+        let (state, action) = failsafe::next(self.failsafe, event, &self.failsafe_limits());
+        if state.name() != self.failsafe.name() {
+            debug!(
+                from = self.failsafe.name(),
+                to = state.name(),
+                "failsafe state"
+            );
+        }
+        self.failsafe = state;
+        action
+    }
+
+    /// A state change of the supervisor at `t`: announced, and reported to
+    /// the failsafe machine when it enters or leaves the failsafe. `level`
+    /// is the level command a failsafe would leave, taken before the
+    /// controller was reset.
+    pub(super) fn on_transition(&mut self, t: f64, tr: Transition, level: AttitudeCommand) {
+        self.announce(tr);
+        if tr.to == FlightState::Failsafe {
+            let event = Event::FailsafeEntered {
+                t,
+                cause: tr.cause,
+                engaged: tr.from.engaged(),
+                level: self.level_plan(t, level),
+            };
+            if let Action::StartLevel { announce } = self.failsafe_on(event) {
+                self.start_level(announce);
+            }
+        } else if tr.from == FlightState::Failsafe {
+            self.failsafe_on(Event::Recovered);
+        }
+    }
+
+    /// The level command a failsafe would leave now: the fallback's level
+    /// attitude (yaw of the last command sent) at the hover thrust — the
+    /// disturbance estimate's when it has a usable one, else the
+    /// configured one. Taken before a failsafe resets the controller.
+    pub(super) fn failsafe_level_command(&self) -> AttitudeCommand {
+        let mut command = self.fallback.level_command();
+        if let Some(hover) = self
+            .controller
+            .disturbance()
+            .and_then(|d| self.mapping.normalized(d.hover_thrust).ok())
+            .filter(|h| h.is_finite() && (0.0..=1.0).contains(h))
+        {
+            command.thrust = hover;
+        }
+        command
+    }
+
+    /// What a failsafe entered at `t` streams: `command`, after the brake
+    /// that cancels the velocity gained since the newest pose.
+    fn level_plan(&self, t: f64, command: AttitudeCommand) -> LevelPlan {
+        let v = &self.config.vehicle;
+        let brake = self.tilt_since_pose.at(t).and_then(|(integral, attitude)| {
+            brake_command(
+                integral,
+                attitude,
+                v.tau,
+                v.k,
+                self.guard.max_tilt,
+                0.5 * self.config.safety.level_hover_max_ms / 1000.0,
+            )
+        });
+        LevelPlan { command, brake }
+    }
+
+    /// A levelling failsafe started: logged, and said unless level hover
+    /// is off (`announce`).
+    fn start_level(&mut self, announce: bool) {
+        if let Failsafe::FailsafeLevel {
+            plan:
+                LevelPlan {
+                    brake: Some((c, time)),
+                    ..
+                },
+            ..
+        } = self.failsafe
+        {
+            info!(
+                pitch_deg = c[0].to_degrees(),
+                roll_deg = c[1].to_degrees(),
+                time_s = time,
+                "failsafe brake: cancelling the velocity gained since the last pose"
+            );
+        }
+        if announce {
+            info!(
+                max_ms = self.config.safety.level_hover_max_ms,
+                "failsafe: level hover, then the attitude stream stops"
+            );
+            self.text(
+                MavSeverity::MAV_SEVERITY_CRITICAL,
+                "dflat: failsafe, level hover then stream off",
+            );
+        }
+    }
+
+    /// The controller cannot fly (its level hover ran out): the
+    /// supervisor's failsafe, said (STATUSTEXT) and counted; the failsafe
+    /// machine tries the controller until it solves again
+    /// ([`ControlCore::trial`]).
+    pub(super) fn let_go(&mut self, t: f64) {
+        if let Some(tr) = self.supervisor.force_failsafe(t, Cause::ControlFailed) {
+            self.counts.guards.control_failsafes += 1;
+            error!(
+                level_hover_ms = self.config.safety.level_hover_max_ms,
+                "controller cannot fly: stream stopped, the autopilot's failsafe takes over"
+            );
+            self.reset_controller();
+            self.last_used_arrival = None;
+            self.announce(tr);
+        }
+    }
+
+    /// In a control failsafe: one solve on the newest pose, not sent
+    /// (the controller is reset afterwards, so nothing unsent stays in its
+    /// window). After [`failsafe::TRIAL_TICKS`] good ones in a row the
+    /// latch is lifted and the stream resumes at the next tick.
+    pub(super) fn trial(&mut self, t: f64) {
+        let (Some(pose), Some(reference)) = (self.pose, self.reference.as_ref()) else {
+            return;
+        };
+        // On a copy: a trial must not move a path's progress.
+        let mut reference = reference.clone();
+        let measurement = self.tick_measurement(t, &pose);
+        let ok = update_caught(self.controller.as_mut(), &measurement, &mut reference).is_ok();
+        self.reset_controller();
+        if self.failsafe_on(Event::TrialSolve { ok }) == Action::FliesAgain {
+            info!("controller solves again: the stream may resume");
+            self.text(
+                MavSeverity::MAV_SEVERITY_NOTICE,
+                "dflat: controller flies again",
+            );
+        }
+    }
+
+    /// A tick on which the controller does not fly: a failsafe's brake or
+    /// level-hover command, if one is due (and `None` once
+    /// `safety.level_hover_max_ms` has run out: the stream stops). Guarded
+    /// like every command; counted as level hover.
+    pub(super) fn idle_tick(&mut self, t: f64, row: &mut CsvRow) -> Option<SentCommand> {
+        let (wanted, braking) = match self.failsafe_on(Event::Idle { t }) {
+            Action::SendLevel { command, braking } => (command, braking),
+            Action::LevelOver { announce } => {
+                if announce {
+                    info!(
+                        "failsafe level hover over: attitude stream off, the autopilot's failsafe takes over"
+                    );
+                    self.text(
+                        MavSeverity::MAV_SEVERITY_CRITICAL,
+                        "dflat: level hover over, stream off",
+                    );
+                }
+                row.guard = Some("let_go");
+                return None;
+            }
+            _ => return None,
+        };
+        let command = match self.guard.check(wanted, &mut self.counts.guards) {
+            Ok(c) => c,
+            Err(e) => {
+                // Level at a configured hover thrust always passes; if not,
+                // silence is the only safe answer.
+                error!(error = %e, "failsafe level command refused by the guard: stream off");
+                self.failsafe_on(Event::LevelRefused);
+                return None;
+            }
+        };
+        let time_boot_ms = (t * 1000.0) as u64 as u32;
+        let message = match set_attitude_target(self.target, time_boot_ms, &command) {
+            Ok(m) => m,
+            Err(e) => {
+                error!(error = %e, "failsafe level command not encodable: stream off");
+                self.failsafe_on(Event::LevelRefused);
+                return None;
+            }
+        };
+        self.counts.guards.level_hover += 1;
+        self.counts.commands += 1;
+        row.guard = Some(if braking { "brake" } else { "level" });
+        row.command = Some([command.roll, command.pitch, command.yaw, command.thrust]);
+        Some(SentCommand {
+            message,
+            command,
+            pose_arrival: None,
+        })
+    }
+}
