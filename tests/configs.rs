@@ -94,7 +94,10 @@ fn check_config_refuses_old_keys_and_migrates_them() {
     let out = run(&["check-config", "--migrate"]);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "{stderr}");
-    assert!(stderr.contains("controller.fmpc_horizon has moved"), "{stderr}");
+    assert!(
+        stderr.contains("controller.fmpc_horizon has moved"),
+        "{stderr}"
+    );
     let text = String::from_utf8(out.stdout).unwrap();
     assert!(text.contains("# Longer lookahead.\nhorizon = 90"), "{text}");
     let cfg = Config::parse(&text, Path::new("migrated.toml")).unwrap_or_else(|e| panic!("{e}"));
@@ -105,6 +108,10 @@ fn check_config_refuses_old_keys_and_migrates_them() {
     assert!(cfg.controller.disturbance.enabled);
     assert_eq!(cfg.mission.speed, 4.0);
     // The file itself is left as it was.
-    assert!(std::fs::read_to_string(&old).unwrap().contains("fmpc_horizon = 90"));
+    assert!(
+        std::fs::read_to_string(&old)
+            .unwrap()
+            .contains("fmpc_horizon = 90")
+    );
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -36,8 +36,8 @@ use nalgebra::{DMatrix, Vector3};
 
 use crate::estimator::{BaselineEstimator, StateSource};
 use crate::{
-    AttitudeCommand, ControlError, ControlModel, Controller, Limit, Measurement,
-    ReferenceSource, TickOutput, TiltLimit, limit_tilt,
+    AttitudeCommand, ControlError, ControlModel, Controller, Limit, Measurement, ReferenceSource,
+    TickOutput, TiltLimit, limit_tilt,
 };
 
 /// Largest accepted horizon N \[steps\] (the Hessian is factored densely in

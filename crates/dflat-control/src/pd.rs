@@ -18,13 +18,13 @@ use dflat_model::attitude::thrust_pitch_roll;
 use dflat_model::{FlatError, Frame};
 use nalgebra::{Vector2, Vector3};
 
-use crate::{Limit, TiltLimit};
 use crate::estimator::{BaselineEstimator, StateSource};
 use crate::fmpc::{limit_pair, measurement_is_finite};
 use crate::{
     AttitudeCommand, ControlError, ControlModel, Controller, Measurement, ReferenceSource,
     TickOutput,
 };
+use crate::{Limit, TiltLimit};
 
 /// Settings of [`Pd`].
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -99,9 +99,13 @@ const FIELDS: &[(&str, Kind, f64, f64, Set)] = &[
     ("controller.pose_wait_ms", Kind::Float, 0.0, 10.0, |c, v| {
         c.controller.pose_wait_ms = v
     }),
-    ("controller.dfmpc.horizon", Kind::Usize, 10.0, 2000.0, |c, v| {
-        c.controller.dfmpc.horizon = v as usize
-    }),
+    (
+        "controller.dfmpc.horizon",
+        Kind::Usize,
+        10.0,
+        2000.0,
+        |c, v| c.controller.dfmpc.horizon = v as usize,
+    ),
     (
         "controller.fmpc.horizon",
         Kind::Usize,
@@ -109,15 +113,27 @@ const FIELDS: &[(&str, Kind, f64, f64, Set)] = &[
         2000.0,
         |c, v| c.controller.fmpc.horizon = v as usize,
     ),
-    ("controller.dfmpc.q[0]", Kind::Positive, 1e-3, 1e3, |c, v| {
-        c.controller.dfmpc.q[0] = v
-    }),
-    ("controller.dfmpc.q[1]", Kind::Positive, 1e-3, 1e3, |c, v| {
-        c.controller.dfmpc.q[1] = v
-    }),
-    ("controller.dfmpc.q[2]", Kind::Positive, 1e-3, 1e3, |c, v| {
-        c.controller.dfmpc.q[2] = v
-    }),
+    (
+        "controller.dfmpc.q[0]",
+        Kind::Positive,
+        1e-3,
+        1e3,
+        |c, v| c.controller.dfmpc.q[0] = v,
+    ),
+    (
+        "controller.dfmpc.q[1]",
+        Kind::Positive,
+        1e-3,
+        1e3,
+        |c, v| c.controller.dfmpc.q[1] = v,
+    ),
+    (
+        "controller.dfmpc.q[2]",
+        Kind::Positive,
+        1e-3,
+        1e3,
+        |c, v| c.controller.dfmpc.q[2] = v,
+    ),
     (
         "controller.dfmpc.r_jerk[0]",
         Kind::Positive,

@@ -118,7 +118,8 @@ pub enum QpSolver {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct DfMpcSettings {
-    /// Horizon N [control steps]: outputs y_k..y_{k+N}. Default 100 (2 s at 50 Hz).
+    /// Horizon N [control steps]: outputs y_k..y_{k+N}
+    /// ([`DfMpcSettings::HORIZON`]: 10–2000). Default 100 (2 s at 50 Hz).
     pub horizon: usize,
     /// Tracking weight q per axis `[x, y, z]` [1/m²]. Default 5.
     pub tracking_weight: [f64; 3],
@@ -201,8 +202,9 @@ impl OutputConstraints {
 }
 
 impl DfMpcSettings {
-    /// `horizon` [control steps]: at least 10, at most 2000 (the largest
-    /// that fits the 20 ms tick onboard; `docs/performance.md`).
+    /// `horizon` [control steps]: at least 10 (a plan fallback of a few
+    /// steps), at most 2000 (40 s at 50 Hz; the onboard sanity bound the
+    /// daemon had, now the library's too).
     pub const HORIZON: Limit = Limit::closed(10.0, 2000.0, "ticks");
     /// Each `tracking_weight` \[1/m²\].
     pub const TRACKING_WEIGHT: Limit = Limit::positive("1/m²");

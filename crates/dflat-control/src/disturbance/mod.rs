@@ -156,9 +156,9 @@ use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
 
 use crate::model::ControlModel;
-use crate::{ControlError, Limit};
 /// The estimate's type lives with the maps that use it ([`crate::model`]).
 pub use crate::model::DisturbanceEstimate;
+use crate::{ControlError, Limit};
 
 /// Largest accepted fit window [control steps].
 pub const MAX_WINDOW: usize = 2000;

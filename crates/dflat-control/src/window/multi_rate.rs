@@ -6,8 +6,8 @@ use dflat_model::FlatError;
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
-use crate::{ControlError, Limit};
 use crate::model::ControlModel;
+use crate::{ControlError, Limit};
 
 /// Largest multi-rate window M [control steps].
 pub const MAX_WINDOW: usize = 250;

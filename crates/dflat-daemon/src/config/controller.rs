@@ -300,7 +300,8 @@ impl ControllerConfig {
     pub fn output_constraints(&self) -> OutputConstraints {
         let d = &self.dfmpc;
         OutputConstraints {
-            max_tilt: (self.constraint_tilt_deg > 0.0).then(|| self.constraint_tilt_deg.to_radians()),
+            max_tilt: (self.constraint_tilt_deg > 0.0)
+                .then(|| self.constraint_tilt_deg.to_radians()),
             max_speed: (d.constraint_speed > 0.0).then_some(d.constraint_speed),
             vertical_acceleration: None,
             max_tilt_rate: (d.max_tilt_rate_deg_s > 0.0)

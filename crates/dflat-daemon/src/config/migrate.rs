@@ -27,7 +27,10 @@ pub const MOVES: &[(&str, &[&str])] = &[
     ("disturbance", &["disturbance.enabled"]),
     ("disturbance_bandwidth_hz", &["disturbance.bandwidth_hz"]),
     ("disturbance_window", &["disturbance.window"]),
-    ("disturbance_max_acceleration", &["disturbance.max_acceleration"]),
+    (
+        "disturbance_max_acceleration",
+        &["disturbance.max_acceleration"],
+    ),
     (
         "disturbance_thrust_scale_range",
         &["disturbance.thrust_scale_range"],
@@ -103,10 +106,10 @@ pub enum MigrateError {
     /// Not TOML.
     #[error("not TOML: {0}")]
     Parse(String),
-    /// `controller` is not a standard `[controller]` table (an inline
-    /// table or a value).
-    #[error("`controller` is not a [controller] table; write it as one")]
-    NotATable,
+    /// `controller` or one of its sub-tables is not a table (a value, or
+    /// an inline `controller = { ... }`).
+    #[error("`{0}` is not a [table]; write it as one")]
+    NotATable(String),
     /// A key is set both in the old place and the new one.
     #[error("{old} and {new} are both set; keep one (the new one)")]
     Both {
@@ -126,7 +129,7 @@ pub fn migrate(text: &str) -> Result<Migrated, MigrateError> {
         return Ok(unchanged(text));
     };
     let Some(controller) = item.as_table_mut() else {
-        return Err(MigrateError::NotATable);
+        return Err(MigrateError::NotATable("controller".into()));
     };
     let position = controller.position();
     let mut done = Vec::new();
@@ -140,7 +143,8 @@ pub fn migrate(text: &str) -> Result<Migrated, MigrateError> {
         };
         for target in *new {
             let (sub, leaf) = target.split_once('.').unwrap_or(("", target));
-            let table = sub_table(controller, sub, position);
+            let table = sub_table(controller, sub, position)
+                .ok_or_else(|| MigrateError::NotATable(format!("controller.{sub}")))?;
             if table.contains_key(leaf) {
                 return Err(MigrateError::Both {
                     old: format!("controller.{key}"),
@@ -166,8 +170,13 @@ fn unchanged(text: &str) -> Migrated {
     }
 }
 
-/// `[controller.<name>]`, created right after `[controller]` when absent.
-fn sub_table<'a>(controller: &'a mut Table, name: &str, position: Option<isize>) -> &'a mut Table {
+/// `[controller.<name>]`, created right after `[controller]` when absent
+/// (an inline one is made a standard one); `None` if it is a value.
+fn sub_table<'a>(
+    controller: &'a mut Table,
+    name: &str,
+    position: Option<isize>,
+) -> Option<&'a mut Table> {
     let item = controller.entry(name).or_insert_with(|| {
         let mut t = Table::new();
         if let Some(p) = position {
@@ -183,7 +192,7 @@ fn sub_table<'a>(controller: &'a mut Table, name: &str, position: Option<isize>)
             Err(other) => other,
         };
     }
-    item.as_table_mut().expect("a table: inserted or converted above")
+    item.as_table_mut()
 }
 
 #[cfg(test)]
@@ -293,8 +302,22 @@ speed = 4.0
     }
 
     #[test]
+    fn a_sub_table_that_is_a_value_is_refused() {
+        let e = migrate("[controller]\ndfmpc = 3\nhorizon = 50\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("controller.dfmpc"), "{e}");
+        let e = migrate("controller = 3\n").unwrap_err().to_string();
+        assert!(e.contains("`controller`"), "{e}");
+    }
+
+    #[test]
     fn files_without_old_keys_are_unchanged() {
-        for text in ["", "[vehicle]\ntau = 0.3\n", "[controller]\nrate_hz = 40.0\n"] {
+        for text in [
+            "",
+            "[vehicle]\ntau = 0.3\n",
+            "[controller]\nrate_hz = 40.0\n",
+        ] {
             let m = migrate(text).unwrap();
             assert!(m.moved.is_empty());
             assert_eq!(m.text, text);

@@ -36,8 +36,8 @@ pub enum ConfigError {
     /// its sub-tables ([`migrate::MOVES`]).
     #[error(
         "{file}: {} (`dflat check-config --migrate {}` prints the file migrated)",
-        moved.iter().map(ToString::to_string).collect::<Vec<_>>().join("; "),
-        file.display()
+        .moved.iter().map(ToString::to_string).collect::<Vec<_>>().join("; "),
+        .file.display()
     )]
     Moved {
         /// The file.

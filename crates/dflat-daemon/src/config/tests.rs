@@ -21,10 +21,10 @@ fn unknown_field_is_refused_with_its_name() {
 fn out_of_range_names_field_and_range() {
     let e = parse("[vehicle]\ntau = 5.0\n").unwrap_err().to_string();
     assert!(e.contains("vehicle.tau") && e.contains("0.02 to 2"), "{e}");
-    let e = parse("[controller]\nq = [1.0, -1.0, 1.0]\n")
+    let e = parse("[controller.dfmpc]\nq = [1.0, -1.0, 1.0]\n")
         .unwrap_err()
         .to_string();
-    assert!(e.contains("controller.q[1]"), "{e}");
+    assert!(e.contains("controller.dfmpc.q[1]"), "{e}");
 }
 
 #[test]
@@ -102,23 +102,87 @@ fn effective_config_round_trips() {
 #[test]
 fn controller_fields_are_named_by_their_full_path() {
     for (text, field, allowed) in [
-        ("[controller.dfmpc]\nhorizon = 5", "controller.dfmpc.horizon", "10 to 2000 ticks"),
-        ("[controller.dfmpc]\nhorizon = 2001", "controller.dfmpc.horizon", "10 to 2000 ticks"),
-        ("[controller.fmpc]\nhorizon = 9", "controller.fmpc.horizon", "10 to 2000 ticks"),
-        ("[controller.dfmpc]\nq = [1.0, 0.0, 1.0]", "controller.dfmpc.q[1]", "> 0"),
-        ("[controller.fmpc]\nr_jerk = [1.0, 1.0, -1.0]", "controller.fmpc.r_jerk[2]", "> 0"),
+        (
+            "[controller.dfmpc]\nhorizon = 5",
+            "controller.dfmpc.horizon",
+            "10 to 2000 ticks",
+        ),
+        (
+            "[controller.dfmpc]\nhorizon = 2001",
+            "controller.dfmpc.horizon",
+            "10 to 2000 ticks",
+        ),
+        (
+            "[controller.fmpc]\nhorizon = 9",
+            "controller.fmpc.horizon",
+            "10 to 2000 ticks",
+        ),
+        (
+            "[controller.dfmpc]\nq = [1.0, 0.0, 1.0]",
+            "controller.dfmpc.q[1]",
+            "> 0",
+        ),
+        (
+            "[controller.fmpc]\nr_jerk = [1.0, 1.0, -1.0]",
+            "controller.fmpc.r_jerk[2]",
+            "> 0",
+        ),
         ("[controller.pd]\nkd = 0.0", "controller.pd.kd", "> 0"),
-        ("[controller.pd]\ncorner_radius = 51.0", "controller.pd.corner_radius", "0 (off) or > 0 to 50 m"),
-        ("[controller.pd]\ncorner_acceleration = 0.05", "controller.pd.corner_acceleration", "0.1 to 20"),
-        ("[controller.disturbance]\nwindow = 5", "controller.disturbance.window", "10 to 2000"),
-        ("[controller.disturbance]\nbandwidth_hz = 6.0", "controller.disturbance.bandwidth_hz", "0.001 to 5"),
-        ("[controller.disturbance]\nmax_step = 0.0", "controller.disturbance.max_step", "0.01 to 100"),
-        ("[controller.dfmpc]\nmax_tilt_rate_deg_s = 5.0", "controller.dfmpc.max_tilt_rate_deg_s", "10 to 1000"),
-        ("[controller.dfmpc]\nconstraint_speed = 60.0", "controller.dfmpc.constraint_speed", "50"),
-        ("[controller.dfmpc]\nmulti_rate_window = 1", "controller.dfmpc.multi_rate_window", "2 to 250"),
-        ("[controller]\nconstraint_tilt_deg = 61.0", "controller.constraint_tilt_deg", "1 to 60 deg"),
-        ("[controller]\nsample_sigma = 2.0", "controller.sample_sigma", "0.0001 to 1 m"),
-        ("[controller.estimator]\njerk_psd = 1e7", "controller.estimator.jerk_psd", "1e6"),
+        (
+            "[controller.pd]\ncorner_radius = 51.0",
+            "controller.pd.corner_radius",
+            "0 (off) or > 0 to 50 m",
+        ),
+        (
+            "[controller.pd]\ncorner_acceleration = 0.05",
+            "controller.pd.corner_acceleration",
+            "0.1 to 20",
+        ),
+        (
+            "[controller.disturbance]\nwindow = 5",
+            "controller.disturbance.window",
+            "10 to 2000",
+        ),
+        (
+            "[controller.disturbance]\nbandwidth_hz = 6.0",
+            "controller.disturbance.bandwidth_hz",
+            "0.001 to 5",
+        ),
+        (
+            "[controller.disturbance]\nmax_step = 0.0",
+            "controller.disturbance.max_step",
+            "0.01 to 100",
+        ),
+        (
+            "[controller.dfmpc]\nmax_tilt_rate_deg_s = 5.0",
+            "controller.dfmpc.max_tilt_rate_deg_s",
+            "10 to 1000",
+        ),
+        (
+            "[controller.dfmpc]\nconstraint_speed = 60.0",
+            "controller.dfmpc.constraint_speed",
+            "50",
+        ),
+        (
+            "[controller.dfmpc]\nmulti_rate_window = 1",
+            "controller.dfmpc.multi_rate_window",
+            "2 to 250",
+        ),
+        (
+            "[controller]\nconstraint_tilt_deg = 61.0",
+            "controller.constraint_tilt_deg",
+            "1 to 60 deg",
+        ),
+        (
+            "[controller]\nsample_sigma = 2.0",
+            "controller.sample_sigma",
+            "0.0001 to 1 m",
+        ),
+        (
+            "[controller.estimator]\njerk_psd = 1e7",
+            "controller.estimator.jerk_psd",
+            "1000000 m²/s⁵",
+        ),
     ] {
         let e = parse(text).unwrap_err().to_string();
         assert!(
@@ -185,7 +249,10 @@ fn old_flat_keys_are_refused_with_their_new_place() {
             .unwrap_err()
             .to_string();
         assert!(
-            e.contains(&format!("controller.{old} has moved to controller.{}", new[0])),
+            e.contains(&format!(
+                "controller.{old} has moved to controller.{}",
+                new[0]
+            )),
             "{old}: {e}"
         );
     }
@@ -203,9 +270,18 @@ fn defaults_are_the_cores_where_the_core_has_the_daemons() {
         .settings(),
         Some(d)
     );
-    assert_eq!(c.fmpc.horizon, dflat_control::fmpc::FmpcSettings::default().horizon);
-    assert_eq!(c.fmpc.r_jerk, dflat_control::fmpc::FmpcSettings::default().r);
-    assert_eq!(c.dfmpc.horizon, dflat_control::dfmpc::DfMpcSettings::default().horizon);
+    assert_eq!(
+        c.fmpc.horizon,
+        dflat_control::fmpc::FmpcSettings::default().horizon
+    );
+    assert_eq!(
+        c.fmpc.r_jerk,
+        dflat_control::fmpc::FmpcSettings::default().r
+    );
+    assert_eq!(
+        c.dfmpc.horizon,
+        dflat_control::dfmpc::DfMpcSettings::default().horizon
+    );
     let mr = c.multi_rate().unwrap();
     assert_eq!(mr, dflat_control::window::MultiRateSettings::default());
 }

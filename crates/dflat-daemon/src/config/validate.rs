@@ -285,7 +285,12 @@ impl Validator<'_> {
     }
 
     /// Each element of `xs` inside `limit`, named `field[i]`.
-    pub(super) fn limits(&mut self, field: &str, xs: &[f64], limit: Limit) -> Result<(), ConfigError> {
+    pub(super) fn limits(
+        &mut self,
+        field: &str,
+        xs: &[f64],
+        limit: Limit,
+    ) -> Result<(), ConfigError> {
         for (i, x) in xs.iter().enumerate() {
             self.limit(&format!("{field}[{i}]"), *x, limit)?;
         }
@@ -293,7 +298,12 @@ impl Validator<'_> {
     }
 
     /// `x` exactly 0 ("off") or inside `limit`.
-    pub(super) fn limit_or_off(&mut self, field: &str, x: f64, limit: Limit) -> Result<(), ConfigError> {
+    pub(super) fn limit_or_off(
+        &mut self,
+        field: &str,
+        x: f64,
+        limit: Limit,
+    ) -> Result<(), ConfigError> {
         if x == 0.0 || limit.contains(x) {
             Ok(())
         } else {
