@@ -38,7 +38,7 @@ cat >"$OUT/soak.toml" <<TOML
 # scripts/soak.sh: a closed 20 m × 30 m rectangle at 5 m/s, flown in loops.
 [link]
 pose_source = "vision_position_estimate"
-[controller]
+[controller.dfmpc]
 multi_rate = true
 [mission]
 start = "path"

@@ -56,3 +56,62 @@ fn shipped_configs_say_what_they_promise() {
     assert_eq!(ap.vehicle.thrust_mode, ThrustMode::Fixed);
     assert_eq!(ap.vehicle.thrust_value, 0.5);
 }
+
+/// A file of the flat `[controller]` era: `check-config` refuses it naming
+/// each moved key's new place; `check-config --migrate` prints it migrated
+/// (comments kept), and that text validates with the same values.
+#[test]
+fn check_config_refuses_old_keys_and_migrates_them() {
+    let dir = std::env::temp_dir().join(format!("dflat-migrate-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let old = dir.join("old.toml");
+    std::fs::write(
+        &old,
+        "[controller]\nkind = \"fmpc\"\n# Longer lookahead.\nfmpc_horizon = 90\nq = [2.0, 2.0, 1.0]\n\
+         pd_corner_radius = 0.0\ndisturbance = true\n[mission]\nspeed = 4.0\n",
+    )
+    .unwrap();
+    let run = |args: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_dflat-under-test"))
+            .args(args)
+            .arg(&old)
+            .output()
+            .expect("run dflat check-config")
+    };
+    let out = run(&["check-config"]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{stderr}");
+    for moved in [
+        "controller.fmpc_horizon has moved to controller.fmpc.horizon",
+        "controller.q has moved to controller.dfmpc.q and controller.fmpc.q",
+        "controller.pd_corner_radius has moved to controller.pd.corner_radius",
+        "controller.disturbance has moved to controller.disturbance.enabled",
+        "--migrate",
+    ] {
+        assert!(stderr.contains(moved), "{moved}: {stderr}");
+    }
+
+    let out = run(&["check-config", "--migrate"]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("controller.fmpc_horizon has moved"),
+        "{stderr}"
+    );
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert!(text.contains("# Longer lookahead.\nhorizon = 90"), "{text}");
+    let cfg = Config::parse(&text, Path::new("migrated.toml")).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(cfg.controller.fmpc.horizon, 90);
+    assert_eq!(cfg.controller.fmpc.q, [2.0, 2.0, 1.0]);
+    assert_eq!(cfg.controller.dfmpc.q, [2.0, 2.0, 1.0]);
+    assert_eq!(cfg.controller.pd.corner_radius, 0.0);
+    assert!(cfg.controller.disturbance.enabled);
+    assert_eq!(cfg.mission.speed, 4.0);
+    // The file itself is left as it was.
+    assert!(
+        std::fs::read_to_string(&old)
+            .unwrap()
+            .contains("fmpc_horizon = 90")
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -4,7 +4,7 @@
 //! configured 0.5 (without the estimator the altitude settles ~1 m off;
 //! a heavier vehicle would partly cancel the thrust error, hiding the
 //! mismatch) — and the daemon runs DF-MPC with the
-//! disturbance estimator (`controller.disturbance = true`), spatial model
+//! disturbance estimator (`controller.disturbance.enabled = true`), spatial model
 //! against the spatial plant. A 10 m step north (a two-waypoint path flown
 //! at 20 m/s: the reference reaches the end within 0.5 s) must settle
 //! within 0.3 m of the setpoint in all three axes, and the per-flight CSV
@@ -29,8 +29,8 @@ tlog = false
 model = "spatial"
 thrust_mode = "normalized"
 hover_thrust = 0.5
-[controller]
-disturbance = true
+[controller.disturbance]
+enabled = true
 [sitl]
 plant = "spatial"
 hover_thrust = 0.4

@@ -4,7 +4,7 @@
 //! 60 ms latency, σ = 2 cm — flown by DF-MPC (as shipped), Flatness MPC and
 //! PD (slowing for corners, the default), the baselines fed by their state
 //! estimator (the default `[controller.estimator]`), and the paper's PD
-//! (`pd_corner_radius = 0`) as the anchor for what slowing buys. The four
+//! (`controller.pd.corner_radius = 0`) as the anchor for what slowing buys. The four
 //! flights run at once (separate daemons and SITLs, ephemeral ports).
 //!
 //! Judged from the SITL's truth trace and the commands the daemon sent
@@ -37,7 +37,7 @@ const SATURATED_SHARE: f64 = 0.10;
 /// (g·tan 35° = 6.9 m/s²) the tightest turn has a radius of v²/a = 3.6 m
 /// (the paper's PD, `pd_corner_radius = 0`, measured p95 3.0 m, 14 % at
 /// the limit). The daemon's PD slows for the corner as PX4's mission mode
-/// does (`controller.pd_corner_radius`, default 1 m) and meets it.
+/// does (`controller.pd.corner_radius`, default 1 m) and meets it.
 const PD_P95: f64 = 2.0;
 /// Tilt limit (`vehicle.max_tilt_deg`) and how close counts as at it \[deg\].
 const TILT_LIMIT_DEG: f64 = 35.0;
@@ -57,7 +57,8 @@ pose_source = "vision_position_estimate"
 pose_min_latency_ms = 60.0
 [controller]
 kind = "{kind}"
-pd_corner_radius = {corner_radius:?}
+[controller.pd]
+corner_radius = {corner_radius:?}
 [mission]
 start = "path"
 path = [[-20.0, -30.0, -10.0], [0.0, -30.0, -10.0], [0.0, 0.0, -10.0]]

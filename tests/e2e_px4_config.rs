@@ -31,7 +31,7 @@ async fn hold_altitude_with(disturbance: bool, autopilot_hover: bool) -> (f64, f
     let (text, path) = px4_toml();
     let mut cfg = Config::parse(&text, path).unwrap();
     cfg.logging.dir = String::new();
-    cfg.controller.disturbance = disturbance;
+    cfg.controller.disturbance.enabled = disturbance;
     cfg.vehicle.hover_thrust_from_autopilot = autopilot_hover;
     let mut plant = SitlSettings::parse(&text, path).unwrap();
     plant.sitl.url = "udpin:127.0.0.1:0".into();

@@ -43,7 +43,7 @@ fn spatial_model_streams_at_50_hz_and_holds_altitude() {
 
 #[test]
 fn spatial_model_streams_at_50_hz_and_holds_altitude_classic_window() {
-    let config = format!("{CONFIG}[controller]\nmulti_rate = false\n");
+    let config = format!("{CONFIG}[controller.dfmpc]\nmulti_rate = false\n");
     check("spatial-flight-classic", &config);
 }
 

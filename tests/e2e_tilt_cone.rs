@@ -1,5 +1,5 @@
 //! End to end: the daemon plans with the tilt cone
-//! (`controller.plan_tilt_bound = "cone"`) against the built-in SITL,
+//! (`controller.dfmpc.plan_tilt_bound = "cone"`) against the built-in SITL,
 //! in-process: the shipped SITL configuration with a 12° plan bound, so
 //! the cone binds from the start; the banded solver (augmented Lagrangian,
 //! warm) serves every constrained tick — no clarabel fallback, no control
@@ -15,9 +15,9 @@ use dflat_sitl::{self as sitl, SitlEngage, SitlOptions};
 async fn the_daemon_flies_with_the_tilt_cone_in_the_plan() {
     let (mut cfg, mut plant) = demo_config(&DemoOptions::default()).unwrap();
     cfg.logging.dir = String::new();
-    cfg.controller.plan_tilt_bound = PlanTiltBound::Cone;
+    cfg.controller.dfmpc.plan_tilt_bound = PlanTiltBound::Cone;
     // The tilt-rate bound is in the box solvers only.
-    cfg.controller.max_tilt_rate_deg_s = 0.0;
+    cfg.controller.dfmpc.max_tilt_rate_deg_s = 0.0;
     cfg.controller.constraint_tilt_deg = 12.0;
     plant.sitl.engage = SitlEngage::Auto;
     plant.sitl.pilot.clear();

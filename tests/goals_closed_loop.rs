@@ -408,8 +408,8 @@ fn a_streamed_circle_is_tracked_within_the_anchor_budget() {
         ("smoothness 0, r_jerk 0.0003", 0.0, 0.0003),
     ] {
         let mut c = cfg.clone();
-        c.controller.smoothness_weight = [smooth, smooth, 0.0];
-        c.controller.r_jerk = [r; 3];
+        c.controller.dfmpc.smoothness_weight = [smooth, smooth, 0.0];
+        c.controller.dfmpc.r_jerk = [r; 3];
         let t = fly(&c, seconds, &goals, &|_| None);
         let e = circle_error(&t, &circle, from);
         let st = largest_step(&t, 0.0, seconds);

@@ -36,7 +36,7 @@ use nalgebra::{DMatrix, Vector3};
 
 use crate::estimator::{BaselineEstimator, StateSource};
 use crate::{
-    AttitudeCommand, ControlError, ControlModel, Controller, Measurement, ReferenceSource,
+    AttitudeCommand, ControlError, ControlModel, Controller, Limit, Measurement, ReferenceSource,
     TickOutput, TiltLimit, limit_tilt,
 };
 
@@ -47,7 +47,8 @@ pub const MAX_HORIZON: usize = 2000;
 /// Settings of [`FlatnessMpc`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FmpcSettings {
-    /// Prediction horizon N [steps of δt] (3 ≤ N ≤ [`MAX_HORIZON`]).
+    /// Prediction horizon N [steps of δt] ([`FmpcSettings::HORIZON`]: 10 ≤ N ≤
+    /// [`MAX_HORIZON`]).
     /// Default 75 = 1.5 s at 50 Hz, the paper's FMPC lookahead (§VII-C).
     pub horizon: usize,
     /// Tracking weights q per axis (x, y, z) [1/m²], finite, ≥ 0 (z unused by
@@ -92,20 +93,18 @@ fn invalid(field: &'static str, reason: impl Into<String>) -> ControlError {
 }
 
 impl FmpcSettings {
+    /// `horizon` [steps]: at least 10, at most [`MAX_HORIZON`].
+    pub const HORIZON: Limit = Limit::closed(10.0, MAX_HORIZON as f64, "ticks");
+    /// Each of `q` \[1/m²\].
+    pub const Q: Limit = Limit::positive("1/m²");
+    /// Each of `r` \[s⁶/m²\].
+    pub const R: Limit = Limit::positive("s⁶/m²");
+
     /// Checks every field; the error names the first invalid one.
     pub fn validate(&self) -> Result<(), ControlError> {
-        if !(3..=MAX_HORIZON).contains(&self.horizon) {
-            return Err(invalid(
-                "horizon",
-                format!("must be in [3, {MAX_HORIZON}] steps, got {}", self.horizon),
-            ));
-        }
-        if let Some(q) = self.q.iter().find(|q| !(q.is_finite() && **q >= 0.0)) {
-            return Err(invalid("q", format!("must be finite and >= 0, got {q}")));
-        }
-        if let Some(r) = self.r.iter().find(|r| !(r.is_finite() && **r > 0.0)) {
-            return Err(invalid("r", format!("must be finite and > 0, got {r}")));
-        }
+        Self::HORIZON.check("horizon", self.horizon as f64)?;
+        Self::Q.check_all("q", &self.q)?;
+        Self::R.check_all("r", &self.r)?;
         if let Some(t) = self.max_tilt
             && !(t.is_finite() && t > 0.0 && t < std::f64::consts::FRAC_PI_2)
         {

@@ -28,6 +28,7 @@ pub mod dfmpc;
 pub mod disturbance;
 pub mod estimator;
 pub mod fmpc;
+pub mod limits;
 pub mod model;
 pub mod optimise;
 pub mod pd;
@@ -35,6 +36,7 @@ pub mod reference;
 pub mod tilt;
 pub mod window;
 
+pub use limits::Limit;
 pub use model::ControlModel;
 pub use tilt::{TiltLimit, limit_tilt};
 

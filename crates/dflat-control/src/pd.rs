@@ -18,13 +18,13 @@ use dflat_model::attitude::thrust_pitch_roll;
 use dflat_model::{FlatError, Frame};
 use nalgebra::{Vector2, Vector3};
 
-use crate::TiltLimit;
 use crate::estimator::{BaselineEstimator, StateSource};
 use crate::fmpc::{limit_pair, measurement_is_finite};
 use crate::{
     AttitudeCommand, ControlError, ControlModel, Controller, Measurement, ReferenceSource,
     TickOutput,
 };
+use crate::{Limit, TiltLimit};
 
 /// Settings of [`Pd`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -32,7 +32,7 @@ pub struct PdSettings {
     /// Position gains k_p per axis (x, y, z) [1/s²], finite, > 0 (z unused by
     /// the planar model). Default 2.
     pub kp: [f64; 3],
-    /// Velocity gains k_d per axis (x, y, z) [1/s], finite, ≥ 0. Default 2.5.
+    /// Velocity gains k_d per axis (x, y, z) [1/s], finite, > 0. Default 2.5.
     ///
     /// With the attitude lag τ = 0.2 s the linearised loop per axis is
     /// `τs³ + s² + k_d s + k_p`; the defaults place its poles at −1.3 and
@@ -69,12 +69,21 @@ pub struct PdSettings {
 /// whose tangent points lie `radius` from the waypoint, and stops at the end.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CornerSlowdown {
-    /// Distance from a waypoint at which the turn starts \[m\], finite, > 0
-    /// (PX4's acceptance radius).
+    /// Distance from a waypoint at which the turn starts \[m\]
+    /// ([`CornerSlowdown::RADIUS`]: > 0 to 50; PX4's acceptance radius).
     pub radius: f64,
-    /// Braking and turning acceleration [m/s²], finite, > 0 (at most the
+    /// Braking and turning acceleration [m/s²]
+    /// ([`CornerSlowdown::ACCELERATION`]: 0.1 to 20; at most the
     /// horizontal acceleration limit, with room for the feedback).
     pub acceleration: f64,
+}
+
+impl CornerSlowdown {
+    /// `radius` \[m\] (the daemon's `controller.pd.corner_radius`; 0 there =
+    /// no slowdown).
+    pub const RADIUS: Limit = Limit::above(0.0, 50.0, "m");
+    /// `acceleration` \[m/s²\].
+    pub const ACCELERATION: Limit = Limit::closed(0.1, 20.0, "m/s²");
 }
 
 impl Default for PdSettings {
@@ -102,20 +111,15 @@ fn invalid(field: &'static str, reason: impl Into<String>) -> ControlError {
 }
 
 impl PdSettings {
+    /// Each of `kp` \[1/s²\].
+    pub const KP: Limit = Limit::positive("1/s²");
+    /// Each of `kd` \[1/s\].
+    pub const KD: Limit = Limit::positive("1/s");
+
     /// Checks every field; the error names the first invalid one.
     pub fn validate(&self) -> Result<(), ControlError> {
-        if let Some(k) = self.kp.iter().find(|k| !(k.is_finite() && **k > 0.0)) {
-            return Err(invalid(
-                "kp",
-                format!("must be finite and > 0 1/s², got {k}"),
-            ));
-        }
-        if let Some(k) = self.kd.iter().find(|k| !(k.is_finite() && **k >= 0.0)) {
-            return Err(invalid(
-                "kd",
-                format!("must be finite and >= 0 1/s, got {k}"),
-            ));
-        }
+        Self::KP.check_all("kp", &self.kp)?;
+        Self::KD.check_all("kd", &self.kd)?;
         let a = self.max_horizontal_acceleration;
         if !(a.is_finite() && a > 0.0) {
             return Err(invalid(
@@ -139,18 +143,8 @@ impl PdSettings {
             ));
         }
         if let Some(c) = self.corners {
-            if !(c.radius.is_finite() && c.radius > 0.0) {
-                return Err(invalid(
-                    "corners.radius",
-                    format!("must be finite and > 0 m, got {}", c.radius),
-                ));
-            }
-            if !(c.acceleration.is_finite() && c.acceleration > 0.0) {
-                return Err(invalid(
-                    "corners.acceleration",
-                    format!("must be finite and > 0 m/s², got {}", c.acceleration),
-                ));
-            }
+            CornerSlowdown::RADIUS.check("corners.radius", c.radius)?;
+            CornerSlowdown::ACCELERATION.check("corners.acceleration", c.acceleration)?;
         }
         let t = self.max_tilt;
         if !(t.is_finite() && t > 0.0 && t < std::f64::consts::FRAC_PI_2) {

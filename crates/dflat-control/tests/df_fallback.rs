@@ -189,16 +189,17 @@ fn plan_fallback_ends_at_max_steps_and_at_the_end_of_the_plan() {
         fresh.update(&m(5), &mut reference).unwrap()
     );
 
-    // Horizon 6 keeps y*_0..y*_6: steps 1..=3 use y*_s..y*_{s+3}.
+    // Horizon 10 (the shortest allowed) keeps y*_0..y*_10: steps 1..=7
+    // use y*_s..y*_{s+3}.
     let mut short = controller(DfMpcSettings {
-        horizon: 6,
+        horizon: 10,
         ..DfMpcSettings::default()
     });
     short.update(&m(0), &mut reference).unwrap();
-    for k in 1..=3 {
+    for k in 1..=7 {
         assert!(short.plan_fallback(&m(k), 50).is_some(), "step {k}");
     }
-    assert!(short.plan_fallback(&m(4), 50).is_none());
+    assert!(short.plan_fallback(&m(8), 50).is_none());
 
     // A reset forgets the plan.
     ctrl.reset();

@@ -21,7 +21,7 @@ use nalgebra::{SVector, Vector2, Vector3};
 
 const DT: f64 = 0.02;
 const G: f64 = 9.81;
-/// The daemon's default bound \[deg/s\] (`controller.max_tilt_rate_deg_s`).
+/// The daemon's default bound \[deg/s\] (`controller.dfmpc.max_tilt_rate_deg_s`).
 const RATE_DEG_S: f64 = 150.0;
 /// Slack on the bound per tick \[deg\] when one axis moves at a time (the
 /// L path's legs and corner): the first command is exact in the per-axis

@@ -1,12 +1,10 @@
 //! From the configuration to the controller, the reference and the thrust
 //! mapping the control loop runs with.
 
-use dflat_control::dfmpc::{DfMpc, DfMpcSettings, InputSaturation, OutputConstraints};
-use dflat_control::disturbance::DisturbanceSettings;
+use dflat_control::dfmpc::{DfMpc, DfMpcSettings, InputSaturation};
 use dflat_control::fmpc::{FlatnessMpc, FmpcSettings};
-use dflat_control::pd::{CornerSlowdown, Pd, PdSettings};
+use dflat_control::pd::{Pd, PdSettings};
 use dflat_control::reference::Reference;
-use dflat_control::window::MultiRateSettings;
 use dflat_control::{ControlError, ControlModel, Controller, TiltLimit};
 use dflat_link::ThrustMapping;
 use dflat_model::{Frame, PlanarModel, PlanarParams, SpatialModel, SpatialParams};
@@ -75,9 +73,10 @@ pub fn delay_ticks(cfg: &Config) -> usize {
 /// for fmpc and pd the state source (`[controller.estimator]`: by default
 /// a state estimator fed with every pose, then the shell feeds them through
 /// [`Controller::observe`]);
-/// for df-mpc also the smoothness weight, the multi-rate window
-/// (`controller.multi_rate`, then the shell feeds every pose through
-/// [`Controller::observe`]) and the disturbance estimator.
+/// for df-mpc (`[controller.dfmpc]`) also the smoothness weight, the
+/// multi-rate window (`controller.dfmpc.multi_rate`, then the shell feeds
+/// every pose through [`Controller::observe`]) and the disturbance
+/// estimator (`[controller.disturbance]`).
 pub fn build_controller(cfg: &Config) -> Result<Box<dyn Controller>, ControlError> {
     let model = control_model(cfg)?;
     let c = &cfg.controller;
@@ -85,10 +84,11 @@ pub fn build_controller(cfg: &Config) -> Result<Box<dyn Controller>, ControlErro
     let max_tilt = v.max_tilt_deg.to_radians();
     Ok(match c.kind {
         ControllerKind::DfMpc => {
+            let d = &c.dfmpc;
             let settings = DfMpcSettings {
-                horizon: c.horizon,
-                tracking_weight: c.q,
-                jerk_weight: c.r_jerk,
+                horizon: d.horizon,
+                tracking_weight: d.q,
+                jerk_weight: d.r_jerk,
                 saturation: Some(InputSaturation {
                     max_tilt,
                     // As the exit guard bounds it: the window records what is sent.
@@ -97,29 +97,12 @@ pub fn build_controller(cfg: &Config) -> Result<Box<dyn Controller>, ControlErro
                     // Normalised thrust 1 is g / hover_thrust.
                     thrust_max: (v.gravity / v.hover_thrust).max(THRUST_MIN + 1.0),
                 }),
-                constraints: OutputConstraints {
-                    max_tilt: (c.constraint_tilt_deg > 0.0)
-                        .then(|| c.constraint_tilt_deg.to_radians()),
-                    max_speed: (c.constraint_speed > 0.0).then_some(c.constraint_speed),
-                    vertical_acceleration: None,
-                    max_tilt_rate: (c.max_tilt_rate_deg_s > 0.0)
-                        .then(|| c.max_tilt_rate_deg_s.to_radians()),
-                },
-                qp_solver: c.qp_solver,
-                plan_tilt_bound: c.plan_tilt_bound,
-                smoothness_weight: c.smoothness_weight,
-                multi_rate: c.multi_rate.then(|| MultiRateSettings {
-                    fit_span: c.multi_rate_window,
-                    sample_sigma: c.sample_sigma,
-                    ..MultiRateSettings::default()
-                }),
-                disturbance: c.disturbance.then_some(DisturbanceSettings {
-                    bandwidth_hz: c.disturbance_bandwidth_hz,
-                    fit_span: c.disturbance_window,
-                    max_acceleration: c.disturbance_max_acceleration,
-                    thrust_scale_range: c.disturbance_thrust_scale_range,
-                    max_step: c.disturbance_max_step,
-                }),
+                constraints: c.output_constraints(),
+                qp_solver: d.qp_solver,
+                plan_tilt_bound: d.plan_tilt_bound,
+                smoothness_weight: d.smoothness_weight,
+                multi_rate: c.multi_rate(),
+                disturbance: c.disturbance.settings(),
                 delay_ticks: delay_ticks(cfg),
                 ..DfMpcSettings::default()
             };
@@ -128,9 +111,9 @@ pub fn build_controller(cfg: &Config) -> Result<Box<dyn Controller>, ControlErro
         ControllerKind::Fmpc => Box::new(FlatnessMpc::new(
             model,
             FmpcSettings {
-                horizon: c.fmpc_horizon,
-                q: c.q,
-                r: c.fmpc_r_jerk,
+                horizon: c.fmpc.horizon,
+                q: c.fmpc.q,
+                r: c.fmpc.r_jerk,
                 max_tilt: Some(max_tilt),
                 tilt_limit: TiltLimit::Cone,
                 state: c.estimator.state_source(c, v),
@@ -139,17 +122,14 @@ pub fn build_controller(cfg: &Config) -> Result<Box<dyn Controller>, ControlErro
         ControllerKind::Pd => Box::new(Pd::new(
             model,
             PdSettings {
-                kp: [c.pd_kp; 3],
-                kd: [c.pd_kd; 3],
+                kp: [c.pd.kp; 3],
+                kd: [c.pd.kd; 3],
                 max_horizontal_acceleration: v.gravity * max_tilt.tan(),
                 max_vertical_acceleration: PD_MAX_VERTICAL_ACCELERATION.min(0.9 * v.gravity),
                 velocity_cutoff_hz: None,
                 max_tilt,
                 tilt_limit: TiltLimit::Cone,
-                corners: (c.pd_corner_radius > 0.0).then_some(CornerSlowdown {
-                    radius: c.pd_corner_radius,
-                    acceleration: c.pd_corner_acceleration,
-                }),
+                corners: c.pd.corners(),
                 state: c.estimator.state_source(c, v),
             },
         )?),

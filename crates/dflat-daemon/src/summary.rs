@@ -362,7 +362,7 @@ pub struct FlightSummary {
     /// The .tlog, if written.
     pub tlog: Option<TlogReport>,
     /// The disturbance estimate at the last tick the controller ran
-    /// (`controller.disturbance`), if the controller runs an estimator.
+    /// (`controller.disturbance.enabled`), if the controller runs an estimator.
     pub disturbance: Option<DisturbanceSummary>,
     /// What the control loop's guards did (saturations, fallbacks, pose
     /// jumps, residual failsafes).
@@ -385,11 +385,11 @@ pub struct SolveCounts {
     /// inequality-constrained QP was solved (DF-MPC with constraints).
     pub constrained: u64,
     /// Of those, ticks on which the banded constrained solver did not
-    /// converge and clarabel solved instead (`controller.qp_solver =
+    /// converge and clarabel solved instead (`controller.dfmpc.qp_solver =
     /// "banded"`). More than a few per flight is worth a look.
     pub qp_fallbacks: u64,
     /// Of the constrained ticks with the tilt cone
-    /// (`controller.plan_tilt_bound = "cone"`), those on which the
+    /// (`controller.dfmpc.plan_tilt_bound = "cone"`), those on which the
     /// augmented Lagrangian did not converge and the banded interior point
     /// solved instead (slower: the first tick of a burst, or a hard one).
     pub cone_interior_point: u64,

@@ -99,65 +99,105 @@ const FIELDS: &[(&str, Kind, f64, f64, Set)] = &[
     ("controller.pose_wait_ms", Kind::Float, 0.0, 10.0, |c, v| {
         c.controller.pose_wait_ms = v
     }),
-    ("controller.horizon", Kind::Usize, 10.0, 2000.0, |c, v| {
-        c.controller.horizon = v as usize
-    }),
     (
-        "controller.fmpc_horizon",
+        "controller.dfmpc.horizon",
         Kind::Usize,
         10.0,
         2000.0,
-        |c, v| c.controller.fmpc_horizon = v as usize,
+        |c, v| c.controller.dfmpc.horizon = v as usize,
     ),
-    ("controller.q[0]", Kind::Positive, 1e-3, 1e3, |c, v| {
-        c.controller.q[0] = v
+    (
+        "controller.fmpc.horizon",
+        Kind::Usize,
+        10.0,
+        2000.0,
+        |c, v| c.controller.fmpc.horizon = v as usize,
+    ),
+    (
+        "controller.dfmpc.q[0]",
+        Kind::Positive,
+        1e-3,
+        1e3,
+        |c, v| c.controller.dfmpc.q[0] = v,
+    ),
+    (
+        "controller.dfmpc.q[1]",
+        Kind::Positive,
+        1e-3,
+        1e3,
+        |c, v| c.controller.dfmpc.q[1] = v,
+    ),
+    (
+        "controller.dfmpc.q[2]",
+        Kind::Positive,
+        1e-3,
+        1e3,
+        |c, v| c.controller.dfmpc.q[2] = v,
+    ),
+    (
+        "controller.dfmpc.r_jerk[0]",
+        Kind::Positive,
+        1e-6,
+        10.0,
+        |c, v| c.controller.dfmpc.r_jerk[0] = v,
+    ),
+    (
+        "controller.dfmpc.r_jerk[1]",
+        Kind::Positive,
+        1e-6,
+        10.0,
+        |c, v| c.controller.dfmpc.r_jerk[1] = v,
+    ),
+    (
+        "controller.dfmpc.r_jerk[2]",
+        Kind::Positive,
+        1e-6,
+        10.0,
+        |c, v| c.controller.dfmpc.r_jerk[2] = v,
+    ),
+    ("controller.fmpc.q[1]", Kind::Positive, 1e-3, 1e3, |c, v| {
+        c.controller.fmpc.q[1] = v
     }),
-    ("controller.q[1]", Kind::Positive, 1e-3, 1e3, |c, v| {
-        c.controller.q[1] = v
+    (
+        "controller.pd.corner_radius",
+        Kind::Float,
+        0.0,
+        50.0,
+        |c, v| c.controller.pd.corner_radius = v,
+    ),
+    (
+        "controller.pd.corner_acceleration",
+        Kind::Float,
+        0.1,
+        20.0,
+        |c, v| c.controller.pd.corner_acceleration = v,
+    ),
+    (
+        "controller.dfmpc.max_tilt_rate_deg_s",
+        Kind::FloatOrOff,
+        10.0,
+        1000.0,
+        |c, v| c.controller.dfmpc.max_tilt_rate_deg_s = v,
+    ),
+    (
+        "controller.fmpc.r_jerk[0]",
+        Kind::Positive,
+        1e-6,
+        10.0,
+        |c, v| c.controller.fmpc.r_jerk[0] = v,
+    ),
+    (
+        "controller.fmpc.r_jerk[2]",
+        Kind::Positive,
+        1e-6,
+        10.0,
+        |c, v| c.controller.fmpc.r_jerk[2] = v,
+    ),
+    ("controller.pd.kp", Kind::Positive, 0.01, 100.0, |c, v| {
+        c.controller.pd.kp = v
     }),
-    ("controller.q[2]", Kind::Positive, 1e-3, 1e3, |c, v| {
-        c.controller.q[2] = v
-    }),
-    (
-        "controller.r_jerk[0]",
-        Kind::Positive,
-        1e-6,
-        10.0,
-        |c, v| c.controller.r_jerk[0] = v,
-    ),
-    (
-        "controller.r_jerk[1]",
-        Kind::Positive,
-        1e-6,
-        10.0,
-        |c, v| c.controller.r_jerk[1] = v,
-    ),
-    (
-        "controller.r_jerk[2]",
-        Kind::Positive,
-        1e-6,
-        10.0,
-        |c, v| c.controller.r_jerk[2] = v,
-    ),
-    (
-        "controller.fmpc_r_jerk[0]",
-        Kind::Positive,
-        1e-6,
-        10.0,
-        |c, v| c.controller.fmpc_r_jerk[0] = v,
-    ),
-    (
-        "controller.fmpc_r_jerk[2]",
-        Kind::Positive,
-        1e-6,
-        10.0,
-        |c, v| c.controller.fmpc_r_jerk[2] = v,
-    ),
-    ("controller.pd_kp", Kind::Positive, 0.01, 100.0, |c, v| {
-        c.controller.pd_kp = v
-    }),
-    ("controller.pd_kd", Kind::Positive, 0.01, 100.0, |c, v| {
-        c.controller.pd_kd = v
+    ("controller.pd.kd", Kind::Positive, 0.01, 100.0, |c, v| {
+        c.controller.pd.kd = v
     }),
     (
         "controller.constraint_tilt_deg",
@@ -167,78 +207,78 @@ const FIELDS: &[(&str, Kind, f64, f64, Set)] = &[
         |c, v| c.controller.constraint_tilt_deg = v,
     ),
     (
-        "controller.constraint_speed",
+        "controller.dfmpc.constraint_speed",
         Kind::Float,
         0.0,
         50.0,
-        |c, v| c.controller.constraint_speed = v,
+        |c, v| c.controller.dfmpc.constraint_speed = v,
     ),
     (
-        "controller.smoothness_weight[0]",
+        "controller.dfmpc.smoothness_weight[0]",
         Kind::Float,
         0.0,
         1e4,
-        |c, v| c.controller.smoothness_weight[0] = v,
+        |c, v| c.controller.dfmpc.smoothness_weight[0] = v,
     ),
     (
-        "controller.smoothness_weight[2]",
+        "controller.dfmpc.smoothness_weight[2]",
         Kind::Float,
         0.0,
         1e4,
-        |c, v| c.controller.smoothness_weight[2] = v,
+        |c, v| c.controller.dfmpc.smoothness_weight[2] = v,
     ),
     (
-        "controller.multi_rate_window",
+        "controller.dfmpc.multi_rate_window",
         Kind::Usize,
         2.0,
         250.0,
-        |c, v| c.controller.multi_rate_window = v as usize,
+        |c, v| c.controller.dfmpc.multi_rate_window = v as usize,
     ),
     ("controller.sample_sigma", Kind::Float, 1e-4, 1.0, |c, v| {
         c.controller.sample_sigma = v
     }),
     // Upper limit rate_hz / 10 ≥ 1: see `upper_is_fixed`.
     (
-        "controller.disturbance_bandwidth_hz",
+        "controller.disturbance.bandwidth_hz",
         Kind::Float,
         0.001,
         1.0,
-        |c, v| c.controller.disturbance_bandwidth_hz = v,
+        |c, v| c.controller.disturbance.bandwidth_hz = v,
     ),
     (
-        "controller.disturbance_window",
+        "controller.disturbance.window",
         Kind::Usize,
         10.0,
         2000.0,
-        |c, v| c.controller.disturbance_window = v as usize,
+        |c, v| c.controller.disturbance.window = v as usize,
     ),
     (
-        "controller.disturbance_max_acceleration",
+        "controller.disturbance.max_acceleration",
         Kind::Float,
         0.0,
         10.0,
-        |c, v| c.controller.disturbance_max_acceleration = v,
+        |c, v| c.controller.disturbance.max_acceleration = v,
     ),
     (
-        "controller.disturbance_thrust_scale_range[0]",
+        "controller.disturbance.thrust_scale_range[0]",
         Kind::Float,
         0.1,
         1.0,
-        |c, v| c.controller.disturbance_thrust_scale_range[0] = v,
+        |c, v| c.controller.disturbance.thrust_scale_range[0] = v,
     ),
     (
-        "controller.disturbance_thrust_scale_range[1]",
+        "controller.disturbance.thrust_scale_range[1]",
         Kind::Float,
         1.0,
         10.0,
-        |c, v| c.controller.disturbance_thrust_scale_range[1] = v,
+        |c, v| c.controller.disturbance.thrust_scale_range[1] = v,
     ),
     (
-        "controller.disturbance_max_step",
+        "controller.disturbance.max_step",
         Kind::Float,
         0.01,
         100.0,
-        |c, v| c.controller.disturbance_max_step = v,
+        |c, v| c.controller.disturbance.max_step = v,
     ),
     ("mission.speed", Kind::Float, 0.1, 20.0, |c, v| {
         c.mission.speed = v
@@ -290,7 +330,7 @@ const FIELDS: &[(&str, Kind, f64, f64, Set)] = &[
 
 /// False where the table's `hi` is not the validator's limit.
 fn upper_is_fixed(name: &str) -> bool {
-    name != "controller.disturbance_bandwidth_hz"
+    name != "controller.disturbance.bandwidth_hz"
 }
 
 /// A value in [lo, hi] of the field's type from `u` ∈ [0, 1].
@@ -357,8 +397,8 @@ fn valid_config() -> impl Strategy<Value = Config> {
                 ControllerKind::Fmpc,
                 ControllerKind::Pd,
             ][usize::from(kind)];
-            c.controller.multi_rate = flags[2];
-            c.controller.disturbance = flags[3];
+            c.controller.dfmpc.multi_rate = flags[2];
+            c.controller.disturbance.enabled = flags[3];
             // Consecutive waypoints distinct (random reals: a repeat means
             // the same draw).
             let mut waypoints: Vec<[f64; 3]> = Vec::new();

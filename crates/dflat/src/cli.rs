@@ -19,6 +19,12 @@ enum Command {
     CheckConfig {
         /// The TOML file.
         file: PathBuf,
+        /// Instead: print FILE with the keys of the old flat `[controller]`
+        /// table moved into its sub-tables (`[controller.dfmpc]`, ...;
+        /// comments kept) on stdout, and what moved on stderr; the file
+        /// itself is not written. Fails if the result does not validate.
+        #[arg(long)]
+        migrate: bool,
     },
     /// Run one of the paper's studies in the simulation lab (JSON + plots).
     #[cfg(feature = "lab")]
@@ -102,7 +108,11 @@ pub fn error_text(e: &anyhow::Error) -> String {
 
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
-        Command::CheckConfig { file } => {
+        Command::CheckConfig {
+            file,
+            migrate: true,
+        } => migrate_config(&file),
+        Command::CheckConfig { file, .. } => {
             #[allow(unused_mut)]
             let mut cfg = dflat_daemon::config::Config::load(&file)?;
             #[cfg(feature = "sitl")]
@@ -131,6 +141,27 @@ fn run(cli: Cli) -> Result<()> {
         Command::Replay(args) => crate::tuning::replay::run(args),
         Command::Daemon(args) => run_daemon(args),
     }
+}
+
+/// `dflat check-config --migrate FILE`: the migrated text on stdout, each
+/// move on stderr, then the result validated as `check-config` would.
+fn migrate_config(file: &std::path::Path) -> Result<()> {
+    use anyhow::Context as _;
+    let text = std::fs::read_to_string(file)
+        .with_context(|| format!("{}: cannot read", file.display()))?;
+    let migrated = dflat_daemon::config::migrate::migrate(&text)
+        .with_context(|| format!("{}: cannot migrate", file.display()))?;
+    print!("{}", migrated.text);
+    if migrated.moved.is_empty() {
+        eprintln!("{}: no key to move", file.display());
+    }
+    for m in &migrated.moved {
+        eprintln!("{}: {m}", file.display());
+    }
+    dflat_daemon::config::Config::parse(&migrated.text, file)?;
+    #[cfg(feature = "lab")]
+    dflat_sim::sitl::SitlSettings::parse(&migrated.text, file)?;
+    Ok(())
 }
 
 /// Installs the tracing subscriber on stderr: filter from `RUST_LOG`

@@ -6,7 +6,7 @@ use serde::{Deserialize, Serialize};
 use crate::disturbance::DisturbanceSettings;
 use crate::optimise::{check_problem, invalid};
 use crate::window::MultiRateSettings;
-use crate::{ControlError, TiltLimit};
+use crate::{ControlError, Limit, TiltLimit};
 
 // ---------------------------------------------------------------------------
 // Settings
@@ -118,7 +118,8 @@ pub enum QpSolver {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct DfMpcSettings {
-    /// Horizon N [control steps]: outputs y_k..y_{k+N}. Default 100 (2 s at 50 Hz).
+    /// Horizon N [control steps]: outputs y_k..y_{k+N}
+    /// ([`DfMpcSettings::HORIZON`]: 10–2000). Default 100 (2 s at 50 Hz).
     pub horizon: usize,
     /// Tracking weight q per axis `[x, y, z]` [1/m²]. Default 5.
     pub tracking_weight: [f64; 3],
@@ -188,9 +189,37 @@ fn tilt_ok(v: f64) -> bool {
     v.is_finite() && v > 0.0 && v < std::f64::consts::FRAC_PI_2
 }
 
+impl OutputConstraints {
+    /// `max_tilt`, stated in degrees (the daemon's
+    /// `controller.constraint_tilt_deg`; 0 there = none).
+    pub const MAX_TILT_DEG: Limit = Limit::closed(1.0, 60.0, "deg");
+    /// `max_speed` [m/s] (the daemon's `controller.dfmpc.constraint_speed`;
+    /// 0 there = none).
+    pub const MAX_SPEED: Limit = Limit::above(0.0, 50.0, "m/s");
+    /// `max_tilt_rate`, stated in deg/s (the daemon's
+    /// `controller.dfmpc.max_tilt_rate_deg_s`; 0 there = none).
+    pub const MAX_TILT_RATE_DEG_S: Limit = Limit::closed(10.0, 1000.0, "deg/s");
+}
+
 impl DfMpcSettings {
+    /// `horizon` [control steps]: at least 10 (a plan fallback of a few
+    /// steps), at most 2000 (40 s at 50 Hz; the onboard sanity bound the
+    /// daemon had, now the library's too).
+    pub const HORIZON: Limit = Limit::closed(10.0, 2000.0, "ticks");
+    /// Each `tracking_weight` \[1/m²\].
+    pub const TRACKING_WEIGHT: Limit = Limit::positive("1/m²");
+    /// Each `jerk_weight` \[s⁶/m²\].
+    pub const JERK_WEIGHT: Limit = Limit::positive("s⁶/m²");
+    /// Each `smoothness_weight` \[1/rad²\].
+    pub const SMOOTHNESS_WEIGHT: Limit = Limit::closed(0.0, 1e4, "1/rad²");
+
     /// Checks every field; the error names the first invalid one.
     pub fn validate(&self) -> Result<(), ControlError> {
+        Self::HORIZON.check("horizon", self.horizon as f64)?;
+        Self::TRACKING_WEIGHT.check_all("tracking_weight", &self.tracking_weight)?;
+        Self::JERK_WEIGHT.check_all("jerk_weight", &self.jerk_weight)?;
+        Self::SMOOTHNESS_WEIGHT.check_all("smoothness_weight", &self.smoothness_weight)?;
+        // The solvers' own structural checks (horizon ≥ 3, finite weights).
         check_problem(
             self.horizon,
             &self.tracking_weight,
@@ -213,11 +242,11 @@ impl DfMpcSettings {
             }
         }
         let c = &self.constraints;
-        if c.max_tilt.is_some_and(|t| !tilt_ok(t)) {
-            return Err(invalid("constraints.max_tilt", "in (0, π/2) rad"));
+        if let Some(t) = c.max_tilt {
+            OutputConstraints::MAX_TILT_DEG.check_radians("constraints.max_tilt", t)?;
         }
-        if c.max_speed.is_some_and(|v| !(v.is_finite() && v > 0.0)) {
-            return Err(invalid("constraints.max_speed", "finite and > 0 (m/s)"));
+        if let Some(v) = c.max_speed {
+            OutputConstraints::MAX_SPEED.check("constraints.max_speed", v)?;
         }
         if let Some([lo, hi]) = c.vertical_acceleration
             && !(lo.is_finite() && hi.is_finite() && lo < 0.0 && hi > 0.0)
@@ -227,11 +256,8 @@ impl DfMpcSettings {
                 "[a_min, a_max] finite with a_min < 0 < a_max (m/s²)",
             ));
         }
-        if c.max_tilt_rate.is_some_and(|w| !(w.is_finite() && w > 0.0)) {
-            return Err(invalid(
-                "constraints.max_tilt_rate",
-                "finite and > 0 (rad/s)",
-            ));
+        if let Some(w) = c.max_tilt_rate {
+            OutputConstraints::MAX_TILT_RATE_DEG_S.check_radians("constraints.max_tilt_rate", w)?;
         }
         if c.max_tilt_rate.is_some()
             && c.max_tilt.is_some()

@@ -155,10 +155,10 @@
 use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
 
-use crate::ControlError;
 use crate::model::ControlModel;
 /// The estimate's type lives with the maps that use it ([`crate::model`]).
 pub use crate::model::DisturbanceEstimate;
+use crate::{ControlError, Limit};
 
 /// Largest accepted fit window [control steps].
 pub const MAX_WINDOW: usize = 2000;
@@ -217,39 +217,34 @@ fn invalid(field: &'static str, reason: &str) -> ControlError {
 }
 
 impl DisturbanceSettings {
+    /// `bandwidth_hz`: 0.001 Hz to a tenth of the control rate (`0.1/δt`;
+    /// 5 Hz at 50 Hz), well below the Nyquist rate 1/(2δt).
+    pub fn bandwidth_limit(dt: f64) -> Limit {
+        Limit::closed(0.001, 0.1 / dt, "Hz")
+    }
+    /// `fit_span` (`window` in files) [control steps].
+    pub const WINDOW: Limit = Limit::closed(MIN_WINDOW as f64, MAX_WINDOW as f64, "ticks");
+    /// `max_acceleration` \[m/s²\].
+    pub const MAX_ACCELERATION: Limit = Limit::closed(0.0, 10.0, "m/s²");
+    /// `thrust_scale_range[0]` (κ_min) \[-\].
+    pub const THRUST_SCALE_MIN: Limit = Limit::closed(0.1, 1.0, "");
+    /// `thrust_scale_range[1]` (κ_max) \[-\].
+    pub const THRUST_SCALE_MAX: Limit = Limit::closed(1.0, 10.0, "");
+    /// `max_step` \[m\].
+    pub const MAX_STEP: Limit = Limit::closed(0.01, 100.0, "m");
+
     /// Checks every field; the error names the first invalid one (as
     /// `disturbance.<field>`). The bandwidth is checked against the control
-    /// step in [`DisturbanceEstimator::new`].
+    /// step ([`DisturbanceSettings::bandwidth_limit`]) in
+    /// [`DisturbanceEstimator::new`]; here only that it is positive.
     pub fn validate(&self) -> Result<(), ControlError> {
-        if !(self.bandwidth_hz.is_finite() && self.bandwidth_hz > 0.0) {
-            return Err(invalid(
-                "disturbance.bandwidth_hz",
-                "finite and > 0 Hz (below the Nyquist rate 1/(2δt))",
-            ));
-        }
-        if !(MIN_WINDOW..=MAX_WINDOW).contains(&self.fit_span) {
-            return Err(invalid(
-                "disturbance.fit_span",
-                "an integer in 10..=2000 (control steps)",
-            ));
-        }
-        if !(self.max_acceleration.is_finite() && self.max_acceleration >= 0.0) {
-            return Err(invalid(
-                "disturbance.max_acceleration",
-                "finite and >= 0 m/s²",
-            ));
-        }
+        Limit::positive("Hz").check("disturbance.bandwidth_hz", self.bandwidth_hz)?;
+        Self::WINDOW.check("disturbance.fit_span", self.fit_span as f64)?;
+        Self::MAX_ACCELERATION.check("disturbance.max_acceleration", self.max_acceleration)?;
         let [lo, hi] = self.thrust_scale_range;
-        if !(lo.is_finite() && hi.is_finite() && lo > 0.0 && lo <= 1.0 && hi >= 1.0) {
-            return Err(invalid(
-                "disturbance.thrust_scale_range",
-                "[κ_min, κ_max] finite with 0 < κ_min <= 1 <= κ_max",
-            ));
-        }
-        if !(self.max_step.is_finite() && self.max_step > 0.0) {
-            return Err(invalid("disturbance.max_step", "finite and > 0 m"));
-        }
-        Ok(())
+        Self::THRUST_SCALE_MIN.check("disturbance.thrust_scale_range", lo)?;
+        Self::THRUST_SCALE_MAX.check("disturbance.thrust_scale_range", hi)?;
+        Self::MAX_STEP.check("disturbance.max_step", self.max_step)
     }
 }
 
@@ -386,17 +381,13 @@ fn low_pass_noise_gain(h: &[f64], alpha: f64) -> f64 {
 
 impl DisturbanceEstimator {
     /// Builds the estimator for `model` (all allocation happens here).
-    /// Errors name an invalid setting; the bandwidth must be below the
-    /// Nyquist rate 1/(2δt).
+    /// Errors name an invalid setting; the bandwidth must be in
+    /// [`DisturbanceSettings::bandwidth_limit`] of the model's δt.
     pub fn new(model: ControlModel, settings: DisturbanceSettings) -> Result<Self, ControlError> {
         settings.validate()?;
         let dt = model.dt();
-        if settings.bandwidth_hz >= 0.5 / dt {
-            return Err(invalid(
-                "disturbance.bandwidth_hz",
-                "below the Nyquist rate 1/(2δt) Hz",
-            ));
-        }
+        DisturbanceSettings::bandwidth_limit(dt)
+            .check("disturbance.bandwidth_hz", settings.bandwidth_hz)?;
         let l = settings.fit_span;
         let weights = fit_weights(l, dt)
             .ok_or_else(|| invalid("disturbance.fit_span", "too short for the fit"))?;

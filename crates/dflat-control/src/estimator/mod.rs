@@ -46,7 +46,7 @@ use std::collections::VecDeque;
 use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
 
-use crate::ControlError;
+use crate::{ControlError, Limit};
 
 /// Inputs the estimator keeps (one per control tick: 2.56 s at 50 Hz, far
 /// longer than any pose latency; older ones are dropped and the oldest
@@ -123,6 +123,13 @@ impl EstimatorSettings {
         }
     }
 
+    /// The pose rate of [`EstimatorSettings::for_sensor`] \[Hz\] (the
+    /// daemon's `controller.estimator.pose_rate_hz`).
+    pub const POSE_RATE_HZ: Limit = Limit::closed(1.0, 400.0, "Hz");
+    /// `jerk_psd` \[m²/s⁵\]: wide enough for every value the noise rule
+    /// derives from σ in 1e-4..=1 m and a pose rate in 1..=400 Hz.
+    pub const JERK_PSD: Limit = Limit::closed(1e-12, 1e6, "m²/s⁵");
+
     /// Checks every field; the error names the first invalid one.
     pub fn validate(&self) -> Result<(), ControlError> {
         if !(self.sigma.is_finite() && self.sigma > 0.0) {
@@ -131,12 +138,7 @@ impl EstimatorSettings {
                 format!("must be finite and > 0 m, got {}", self.sigma),
             ));
         }
-        if !(self.jerk_psd.is_finite() && self.jerk_psd > 0.0) {
-            return Err(invalid(
-                "jerk_psd",
-                format!("must be finite and > 0 m²/s⁵, got {}", self.jerk_psd),
-            ));
-        }
+        Self::JERK_PSD.check("jerk_psd", self.jerk_psd)?;
         if let Some(tau) = self.input_lag
             && !(tau.is_finite() && tau > 0.0)
         {

@@ -6,8 +6,8 @@ use dflat_model::FlatError;
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
-use crate::ControlError;
 use crate::model::ControlModel;
+use crate::{ControlError, Limit};
 
 /// Largest multi-rate window M [control steps].
 pub const MAX_WINDOW: usize = 250;
@@ -54,18 +54,19 @@ impl Default for MultiRateSettings {
 }
 
 impl MultiRateSettings {
+    /// `fit_span` (the daemon's `multi_rate_window`) [control steps].
+    pub const WINDOW: Limit = Limit::closed(2.0, MAX_WINDOW as f64, "ticks");
+    /// `sample_sigma` \[m\] (also the baselines' estimator's pose noise).
+    pub const SAMPLE_SIGMA: Limit = Limit::closed(1e-4, 1.0, "m");
+
     /// Checks every field; the error names the first invalid one.
     pub fn validate(&self) -> Result<(), ControlError> {
         let bad = |field: &'static str, reason: &str| ControlError::InvalidSetting {
             field,
             reason: reason.to_string(),
         };
-        if !(2..=MAX_WINDOW).contains(&self.fit_span) {
-            return Err(bad("multi_rate.fit_span", "an integer in 2..=250 (steps)"));
-        }
-        if !(self.sample_sigma.is_finite() && self.sample_sigma > 0.0) {
-            return Err(bad("multi_rate.sample_sigma", "finite and > 0 (m)"));
-        }
+        Self::WINDOW.check("multi_rate.fit_span", self.fit_span as f64)?;
+        Self::SAMPLE_SIGMA.check("multi_rate.sample_sigma", self.sample_sigma)?;
         if !self.process_sigma.iter().all(|s| *s > 0.0) {
             return Err(bad(
                 "multi_rate.process_sigma",

@@ -31,7 +31,8 @@ pub struct EstimatorConfig {
     pub pose_rate_hz: f64,
     /// White-jerk spectral density [m²/s⁵] (0 = derived: bandwidth
     /// ω = 2π·min(pose_rate_hz/10, 1.5 Hz), `q = σ²ω⁶/pose_rate_hz` with σ =
-    /// `controller.sample_sigma`; 18.5 at the defaults; else 0.001–1e6).
+    /// `controller.sample_sigma`; 18.5 at the defaults; else 1e-12–1e6,
+    /// [`EstimatorSettings::JERK_PSD`]).
     pub jerk_psd: f64,
     /// Predict with the sent commands (acceleration lag `vehicle.tau`):
     /// compensates the pose latency through the model. Default true; false
@@ -72,15 +73,15 @@ impl EstimatorConfig {
     }
 
     pub(super) fn validate(&self, v: &mut Validator<'_>) -> Result<(), ConfigError> {
-        v.range(
+        v.limit(
             "controller.estimator.pose_rate_hz",
             self.pose_rate_hz,
-            1.0,
-            400.0,
+            EstimatorSettings::POSE_RATE_HZ,
         )?;
-        if self.jerk_psd != 0.0 {
-            v.range("controller.estimator.jerk_psd", self.jerk_psd, 1e-3, 1e6)?;
-        }
-        Ok(())
+        v.limit_or_off(
+            "controller.estimator.jerk_psd",
+            self.jerk_psd,
+            EstimatorSettings::JERK_PSD,
+        )
     }
 }

@@ -7,7 +7,6 @@
 
 use std::path::{Path, PathBuf};
 
-use dflat_control::dfmpc::{PlanTiltBound, QpSolver};
 use serde::{Deserialize, Serialize};
 
 mod stream;
@@ -32,6 +31,19 @@ pub enum ConfigError {
         file: PathBuf,
         /// The parser's message (names the field and the line).
         message: String,
+    },
+    /// The file uses keys of the flat `[controller]` table that moved to
+    /// its sub-tables ([`migrate::MOVES`]).
+    #[error(
+        "{file}: {} (`dflat check-config --migrate {}` prints the file migrated)",
+        .moved.iter().map(ToString::to_string).collect::<Vec<_>>().join("; "),
+        .file.display()
+    )]
+    Moved {
+        /// The file.
+        file: PathBuf,
+        /// Each old key and its new place.
+        moved: Vec<migrate::MovedKey>,
     },
     /// A field is out of its allowed range.
     #[error("{file}: field `{field}` = {value}: allowed {allowed}")]
@@ -359,177 +371,6 @@ impl Default for VehicleConfig {
     }
 }
 
-/// What places the control ticks (`controller.tick`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
-#[serde(rename_all = "snake_case")]
-pub enum TickMode {
-    /// Ticks locked to the pose stream, the deadline as the fallback.
-    #[default]
-    Pose,
-    /// The loop's own clock at `rate_hz`.
-    Clock,
-}
-
-/// Which controller runs.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
-#[serde(rename_all = "kebab-case")]
-pub enum ControllerKind {
-    /// The discrete-flatness MPC (the product).
-    #[default]
-    DfMpc,
-    /// The Flatness MPC baseline.
-    Fmpc,
-    /// The PD baseline.
-    Pd,
-}
-
-/// `[controller]`: choice and tuning.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct ControllerConfig {
-    /// `df-mpc`, `fmpc` or `pd`.
-    pub kind: ControllerKind,
-    /// Control rate \[Hz\] (10–200); the model step is its inverse.
-    pub rate_hz: f64,
-    /// What places the ticks: "pose" (default) — a tick runs the moment a
-    /// pose arrives, on a grid phase-locked to the pose stream, with the
-    /// period's deadline as the fallback — or "clock" (the loop's own
-    /// 50 Hz clock; a pose waits for the next tick). See
-    /// [`crate::schedule::TickPlanner`].
-    pub tick: TickMode,
-    /// How long past its nominal time a tick waits for an expected pose
-    /// before it runs on the previous one (the deadline fallback) \[ms\]
-    /// (0–10; a longer wait than half a period is cut to it). Default 3.
-    pub pose_wait_ms: f64,
-    /// Horizon N \[ticks\] for df-mpc (10–2000).
-    pub horizon: usize,
-    /// Horizon N \[ticks\] for fmpc (10–2000).
-    pub fmpc_horizon: usize,
-    /// Tracking weight per axis x, y, z [1/m²] (> 0). Default 1 (the lab's
-    /// recommended `df-mr-smooth` set-up, `dflat experiment vision-rate`;
-    /// also the Flatness MPC's).
-    pub q: [f64; 3],
-    /// Jerk weight per axis x, y, z [s⁶/m²] (> 0): cost r·(Δ³y/δt³)².
-    /// Default 0.003 (`df-mr-smooth`; the paper's is 0.08).
-    pub r_jerk: [f64; 3],
-    /// Command-smoothness weight per axis x, y, z [1/rad²] (0–10000) on the
-    /// squared change of the linearised command between ticks. Default
-    /// [50, 50, 0] (`df-mr-smooth` on x, y; 0 = the paper's cost).
-    pub smoothness_weight: [f64; 3],
-    /// Multi-rate windows (df-mpc): every pose is fitted at its own capture
-    /// time through the inputs sent, instead of one pose per tick. Default
-    /// true (`df-mr-smooth`).
-    pub multi_rate: bool,
-    /// Multi-rate window M \[ticks\] (2–250). Default 25 (0.5 s at 50 Hz).
-    pub multi_rate_window: usize,
-    /// Standard deviation of one pose sample per axis \[m\] (0.0001–1), for
-    /// the multi-rate fit. Default 0.02.
-    pub sample_sigma: f64,
-    /// Flatness MPC jerk weight per axis (> 0). Default 0.01 (the library's
-    /// tuned value, `FmpcSettings`: the paper's 0.1 oscillates at N = 75).
-    pub fmpc_r_jerk: [f64; 3],
-    /// PD proportional gain [1/s²] (> 0). Default 2 (the library's tuned
-    /// value, `PdSettings`: settles a 10 m step in ~4.5 s, no overshoot).
-    pub pd_kp: f64,
-    /// PD derivative gain [1/s] (> 0). Default 2.5 (`PdSettings`).
-    pub pd_kd: f64,
-    /// PD on a path slows for each corner so that it turns on an arc whose
-    /// tangent points lie this far from the waypoint \[m\], and stops at
-    /// the end, as PX4's mission mode does (0–50; 0 = the paper's PD,
-    /// every corner at the path speed). Default 1.
-    pub pd_corner_radius: f64,
-    /// PD's braking and turning acceleration for those corners [m/s²]
-    /// (0.1–20). Default 3.
-    pub pd_corner_acceleration: f64,
-    /// Optional bound on the planned horizontal acceleration, as a tilt
-    /// \[deg\] (0 = off; 1–60), on each horizontal axis separately (a box:
-    /// the combined planned tilt can exceed it by up to √2 in tan). The
-    /// constrained QP (`qp_solver`) runs only on ticks whose plan violates
-    /// it. Default 30 (`df-mr-smooth`; below the 35° command limit).
-    pub constraint_tilt_deg: f64,
-    /// Optional bound on the planned speed per axis [m/s] (0 = off). When
-    /// the vehicle is already faster (a gust, pose noise), the plan brakes
-    /// to it at 90 % of the tilt bound's acceleration rather than making
-    /// the QP infeasible.
-    pub constraint_speed: f64,
-    /// Solver of the constrained QP (df-mpc): "banded" — O(N) per
-    /// iteration: an interior point for the box, an augmented Lagrangian
-    /// (interior point as its fallback) for the cone; clarabel as the
-    /// fallback of both — or "clarabel" alone. Default "banded".
-    pub qp_solver: QpSolver,
-    /// How `constraint_tilt_deg` bounds the plan (df-mpc): "box" (each
-    /// horizontal axis separately; the combined planned tilt can reach
-    /// 39° at 30°) or "cone" (the combined tilt, both axes in one
-    /// problem — the vehicle's real limit — solved warm by a banded
-    /// augmented Lagrangian; docs/results.md, docs/performance.md).
-    /// Default "box".
-    pub plan_tilt_bound: PlanTiltBound,
-    /// Disturbance estimation (df-mpc; offset-free tracking): acceleration
-    /// offsets (wind, drag) and, for the spatial model, the thrust scale
-    /// (hover thrust, mass). Default false.
-    pub disturbance: bool,
-    /// Estimator bandwidth \[Hz\] (0.001 to rate_hz/10). Default 0.1.
-    pub disturbance_bandwidth_hz: f64,
-    /// Estimator fit window \[ticks\] (10–2000). Default 50 (1 s at 50 Hz).
-    pub disturbance_window: usize,
-    /// Clamp on each acceleration-offset component [m/s²] (0–10). Default 3.
-    pub disturbance_max_acceleration: f64,
-    /// Bounds on the thrust scale (actual / model thrust), [min, max] with
-    /// 0.1 ≤ min ≤ 1 ≤ max ≤ 10. Default [0.5, 2].
-    pub disturbance_thrust_scale_range: [f64; 2],
-    /// A pose step between ticks larger than this \[m\] resets the estimate
-    /// (0.01–100). Default 1.
-    pub disturbance_max_step: f64,
-    /// Tilt-rate bound in the plan (df-mpc) \[deg/s\] (0 = off, else
-    /// 10–1000): the planned pitch and roll commands change by at most
-    /// this times δt per tick, the first one against the command sent at
-    /// the previous tick, so no goal change makes the command jump
-    /// (docs/controllers.md, "The tilt-rate bound"). Default 150 (3° per
-    /// tick at 50 Hz on each NED axis; pitch and roll measured ≤ 4.5° per
-    /// tick after 10 and 20 m diagonal steps, inside the 5°/tick budget). Box plan-tilt bound only: with
-    /// `plan_tilt_bound = "cone"` set it to 0.
-    pub max_tilt_rate_deg_s: f64,
-    /// `[controller.estimator]`: the baselines' state source
-    /// ([`EstimatorConfig`]; fmpc and pd only).
-    pub estimator: EstimatorConfig,
-}
-
-impl Default for ControllerConfig {
-    fn default() -> Self {
-        Self {
-            kind: ControllerKind::DfMpc,
-            rate_hz: 50.0,
-            tick: TickMode::Pose,
-            pose_wait_ms: 3.0,
-            horizon: 100,
-            fmpc_horizon: 75,
-            q: [1.0, 1.0, 1.0],
-            r_jerk: [0.003, 0.003, 0.003],
-            smoothness_weight: [50.0, 50.0, 0.0],
-            multi_rate: true,
-            multi_rate_window: 25,
-            sample_sigma: 0.02,
-            fmpc_r_jerk: [0.01, 0.01, 0.01],
-            pd_kp: 2.0,
-            pd_kd: 2.5,
-            pd_corner_radius: 1.0,
-            pd_corner_acceleration: 3.0,
-            constraint_tilt_deg: 30.0,
-            constraint_speed: 0.0,
-            qp_solver: QpSolver::Banded,
-            plan_tilt_bound: PlanTiltBound::Box,
-            disturbance: false,
-            disturbance_bandwidth_hz: 0.1,
-            disturbance_window: 50,
-            disturbance_max_acceleration: 3.0,
-            disturbance_thrust_scale_range: [0.5, 2.0],
-            disturbance_max_step: 1.0,
-            max_tilt_rate_deg_s: 150.0,
-            estimator: EstimatorConfig::default(),
-        }
-    }
-}
-
 /// What the daemon does once it has pose.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "snake_case")]
@@ -724,6 +565,17 @@ impl Config {
 
     /// Parses and validates TOML text; `file` is used in error messages.
     pub fn parse(text: &str, file: &Path) -> Result<Self, ConfigError> {
+        // Old keys first: `controller.disturbance = true` would otherwise
+        // read as a type error of the new sub-table.
+        if let Ok(doc) = toml::from_str::<toml::Table>(text) {
+            let moved = migrate::moved_keys(&doc);
+            if !moved.is_empty() {
+                return Err(ConfigError::Moved {
+                    file: file.to_owned(),
+                    moved,
+                });
+            }
+        }
         let cfg: Config = toml::from_str(text).map_err(|e| ConfigError::Parse {
             file: file.to_owned(),
             message: e.to_string().trim_end().to_owned(),
@@ -738,10 +590,16 @@ impl Config {
     }
 }
 
+mod controller;
 mod estimator;
+pub mod migrate;
 mod records;
 mod validate;
 
+pub use controller::{
+    ControllerConfig, ControllerKind, DfMpcConfig, DisturbanceConfig, FmpcConfig, PdConfig,
+    TickMode,
+};
 pub use estimator::{EstimatorConfig, StateSourceKind};
 pub use records::{MIB, RecordsConfig};
 

@@ -21,10 +21,10 @@ fn unknown_field_is_refused_with_its_name() {
 fn out_of_range_names_field_and_range() {
     let e = parse("[vehicle]\ntau = 5.0\n").unwrap_err().to_string();
     assert!(e.contains("vehicle.tau") && e.contains("0.02 to 2"), "{e}");
-    let e = parse("[controller]\nq = [1.0, -1.0, 1.0]\n")
+    let e = parse("[controller.dfmpc]\nq = [1.0, -1.0, 1.0]\n")
         .unwrap_err()
         .to_string();
-    assert!(e.contains("controller.q[1]"), "{e}");
+    assert!(e.contains("controller.dfmpc.q[1]"), "{e}");
 }
 
 #[test]
@@ -97,4 +97,191 @@ fn signing_fields_are_validated() {
 fn effective_config_round_trips() {
     let c = Config::default();
     assert_eq!(parse(&c.to_toml()).unwrap(), c);
+}
+
+#[test]
+fn controller_fields_are_named_by_their_full_path() {
+    for (text, field, allowed) in [
+        (
+            "[controller.dfmpc]\nhorizon = 5",
+            "controller.dfmpc.horizon",
+            "10 to 2000 ticks",
+        ),
+        (
+            "[controller.dfmpc]\nhorizon = 2001",
+            "controller.dfmpc.horizon",
+            "10 to 2000 ticks",
+        ),
+        (
+            "[controller.fmpc]\nhorizon = 9",
+            "controller.fmpc.horizon",
+            "10 to 2000 ticks",
+        ),
+        (
+            "[controller.dfmpc]\nq = [1.0, 0.0, 1.0]",
+            "controller.dfmpc.q[1]",
+            "> 0",
+        ),
+        (
+            "[controller.fmpc]\nr_jerk = [1.0, 1.0, -1.0]",
+            "controller.fmpc.r_jerk[2]",
+            "> 0",
+        ),
+        ("[controller.pd]\nkd = 0.0", "controller.pd.kd", "> 0"),
+        (
+            "[controller.pd]\ncorner_radius = 51.0",
+            "controller.pd.corner_radius",
+            "0 (off) or > 0 to 50 m",
+        ),
+        (
+            "[controller.pd]\ncorner_acceleration = 0.05",
+            "controller.pd.corner_acceleration",
+            "0.1 to 20",
+        ),
+        (
+            "[controller.disturbance]\nwindow = 5",
+            "controller.disturbance.window",
+            "10 to 2000",
+        ),
+        (
+            "[controller.disturbance]\nbandwidth_hz = 6.0",
+            "controller.disturbance.bandwidth_hz",
+            "0.001 to 5",
+        ),
+        (
+            "[controller.disturbance]\nmax_step = 0.0",
+            "controller.disturbance.max_step",
+            "0.01 to 100",
+        ),
+        (
+            "[controller.dfmpc]\nmax_tilt_rate_deg_s = 5.0",
+            "controller.dfmpc.max_tilt_rate_deg_s",
+            "10 to 1000",
+        ),
+        (
+            "[controller.dfmpc]\nconstraint_speed = 60.0",
+            "controller.dfmpc.constraint_speed",
+            "50",
+        ),
+        (
+            "[controller.dfmpc]\nmulti_rate_window = 1",
+            "controller.dfmpc.multi_rate_window",
+            "2 to 250",
+        ),
+        (
+            "[controller]\nconstraint_tilt_deg = 61.0",
+            "controller.constraint_tilt_deg",
+            "1 to 60 deg",
+        ),
+        (
+            "[controller]\nsample_sigma = 2.0",
+            "controller.sample_sigma",
+            "0.0001 to 1 m",
+        ),
+        (
+            "[controller.estimator]\njerk_psd = 1e7",
+            "controller.estimator.jerk_psd",
+            "1000000 m²/s⁵",
+        ),
+    ] {
+        let e = parse(text).unwrap_err().to_string();
+        assert!(
+            e.contains(&format!("field `{field}`")) && e.contains(allowed),
+            "{text}: {e}"
+        );
+    }
+    // 0 is "off" where documented.
+    assert!(
+        parse("[controller]\nconstraint_tilt_deg = 0.0\n[controller.dfmpc]\nconstraint_speed = 0.0\nmax_tilt_rate_deg_s = 0.0\n[controller.pd]\ncorner_radius = 0.0")
+            .is_ok()
+    );
+}
+
+/// The daemon's limit is the core's: a value the file accepts builds the
+/// controller, one it refuses the core refuses too.
+#[test]
+fn the_file_and_the_core_share_one_range() {
+    use dflat_control::dfmpc::DfMpcSettings;
+    use dflat_control::fmpc::FmpcSettings;
+    for n in [9usize, 10, 2000, 2001] {
+        let file = parse(&format!("[controller.dfmpc]\nhorizon = {n}")).is_ok();
+        let core = DfMpcSettings {
+            horizon: n,
+            ..DfMpcSettings::default()
+        }
+        .validate()
+        .is_ok();
+        assert_eq!(file, core, "df-mpc horizon {n}");
+        assert_eq!(file, (10..=2000).contains(&n));
+        let file = parse(&format!("[controller.fmpc]\nhorizon = {n}")).is_ok();
+        let core = FmpcSettings {
+            horizon: n,
+            ..FmpcSettings::default()
+        }
+        .validate()
+        .is_ok();
+        assert_eq!(file, core, "fmpc horizon {n}");
+    }
+}
+
+#[test]
+fn old_flat_keys_are_refused_with_their_new_place() {
+    let e = parse("[controller]\nfmpc_horizon = 80\npd_corner_radius = 0.0\ndisturbance = true\n")
+        .unwrap_err();
+    let ConfigError::Moved { moved, .. } = &e else {
+        panic!("{e}");
+    };
+    assert_eq!(moved.len(), 3);
+    let e = e.to_string();
+    for part in [
+        "test.toml",
+        "controller.fmpc_horizon has moved to controller.fmpc.horizon",
+        "controller.pd_corner_radius has moved to controller.pd.corner_radius",
+        "controller.disturbance has moved to controller.disturbance.enabled",
+        "dflat check-config --migrate test.toml",
+    ] {
+        assert!(e.contains(part), "{part}: {e}");
+    }
+    // Every old key, one at a time.
+    for (old, new) in super::migrate::MOVES {
+        let value = if *old == "disturbance" { "false" } else { "1" };
+        let e = parse(&format!("[controller]\n{old} = {value}\n"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains(&format!(
+                "controller.{old} has moved to controller.{}",
+                new[0]
+            )),
+            "{old}: {e}"
+        );
+    }
+}
+
+#[test]
+fn defaults_are_the_cores_where_the_core_has_the_daemons() {
+    let c = ControllerConfig::default();
+    let d = dflat_control::disturbance::DisturbanceSettings::default();
+    assert_eq!(
+        DisturbanceConfig {
+            enabled: true,
+            ..c.disturbance.clone()
+        }
+        .settings(),
+        Some(d)
+    );
+    assert_eq!(
+        c.fmpc.horizon,
+        dflat_control::fmpc::FmpcSettings::default().horizon
+    );
+    assert_eq!(
+        c.fmpc.r_jerk,
+        dflat_control::fmpc::FmpcSettings::default().r
+    );
+    assert_eq!(
+        c.dfmpc.horizon,
+        dflat_control::dfmpc::DfMpcSettings::default().horizon
+    );
+    let mr = c.multi_rate().unwrap();
+    assert_eq!(mr, dflat_control::window::MultiRateSettings::default());
 }

@@ -2,6 +2,8 @@
 
 use std::path::Path;
 
+use dflat_control::Limit;
+
 use super::*;
 
 impl Config {
@@ -129,9 +131,6 @@ impl Config {
                 "\"normalized\" with model = \"spatial\" (the spatial model commands thrust)",
             ));
         }
-        let c = &self.controller;
-        v.range("controller.rate_hz", c.rate_hz, 10.0, 200.0)?;
-        v.range("controller.pose_wait_ms", c.pose_wait_ms, 0.0, 10.0)?;
         self.records
             .validate(|field, x, allowed| v.err(field, &x.to_string(), allowed))?;
         let rt = &self.realtime;
@@ -141,104 +140,7 @@ impl Config {
             0.0,
             99.0,
         )?;
-        v.range("controller.horizon", c.horizon as f64, 10.0, 2000.0)?;
-        v.range(
-            "controller.fmpc_horizon",
-            c.fmpc_horizon as f64,
-            10.0,
-            2000.0,
-        )?;
-        for i in 0..3 {
-            v.positive(&format!("controller.q[{i}]"), c.q[i])?;
-            v.positive(&format!("controller.r_jerk[{i}]"), c.r_jerk[i])?;
-            v.positive(&format!("controller.fmpc_r_jerk[{i}]"), c.fmpc_r_jerk[i])?;
-        }
-        v.positive("controller.pd_kp", c.pd_kp)?;
-        v.positive("controller.pd_kd", c.pd_kd)?;
-        v.range("controller.pd_corner_radius", c.pd_corner_radius, 0.0, 50.0)?;
-        v.range(
-            "controller.pd_corner_acceleration",
-            c.pd_corner_acceleration,
-            0.1,
-            20.0,
-        )?;
-        if c.constraint_tilt_deg != 0.0 {
-            v.range(
-                "controller.constraint_tilt_deg",
-                c.constraint_tilt_deg,
-                1.0,
-                60.0,
-            )?;
-        }
-        v.range("controller.constraint_speed", c.constraint_speed, 0.0, 50.0)?;
-        if c.max_tilt_rate_deg_s != 0.0 {
-            v.range(
-                "controller.max_tilt_rate_deg_s",
-                c.max_tilt_rate_deg_s,
-                10.0,
-                1000.0,
-            )?;
-            if c.plan_tilt_bound == PlanTiltBound::Cone && c.constraint_tilt_deg > 0.0 {
-                return Err(v.err(
-                    "controller.max_tilt_rate_deg_s",
-                    &c.max_tilt_rate_deg_s.to_string(),
-                    "0 with plan_tilt_bound = \"cone\" (the tilt-rate bound is in the box solvers only)",
-                ));
-            }
-        }
-        for i in 0..3 {
-            v.range(
-                &format!("controller.smoothness_weight[{i}]"),
-                c.smoothness_weight[i],
-                0.0,
-                1e4,
-            )?;
-        }
-        v.range(
-            "controller.multi_rate_window",
-            c.multi_rate_window as f64,
-            2.0,
-            250.0,
-        )?;
-        v.range("controller.sample_sigma", c.sample_sigma, 1e-4, 1.0)?;
-        c.estimator.validate(&mut v)?;
-        v.range(
-            "controller.disturbance_bandwidth_hz",
-            c.disturbance_bandwidth_hz,
-            0.001,
-            c.rate_hz / 10.0,
-        )?;
-        v.range(
-            "controller.disturbance_window",
-            c.disturbance_window as f64,
-            10.0,
-            2000.0,
-        )?;
-        v.range(
-            "controller.disturbance_max_acceleration",
-            c.disturbance_max_acceleration,
-            0.0,
-            10.0,
-        )?;
-        let [kmin, kmax] = c.disturbance_thrust_scale_range;
-        v.range(
-            "controller.disturbance_thrust_scale_range[0]",
-            kmin,
-            0.1,
-            1.0,
-        )?;
-        v.range(
-            "controller.disturbance_thrust_scale_range[1]",
-            kmax,
-            1.0,
-            10.0,
-        )?;
-        v.range(
-            "controller.disturbance_max_step",
-            c.disturbance_max_step,
-            0.01,
-            100.0,
-        )?;
+        self.controller.validate(&mut v)?;
         let m = &self.mission;
         v.range("mission.speed", m.speed, 0.1, 20.0)?;
         v.range("mission.brake_fraction", m.brake_fraction, 0.1, 1.0)?;
@@ -350,7 +252,7 @@ pub(super) struct Validator<'a> {
 }
 
 impl Validator<'_> {
-    fn err(&self, field: &str, value: &str, allowed: &str) -> ConfigError {
+    pub(super) fn err(&self, field: &str, value: &str, allowed: &str) -> ConfigError {
         ConfigError::Range {
             file: self.file.to_owned(),
             field: field.to_owned(),
@@ -370,6 +272,42 @@ impl Validator<'_> {
             Ok(())
         } else {
             Err(self.err(field, &x.to_string(), &format!("{lo} to {hi}")))
+        }
+    }
+
+    /// `x` inside the core's `limit` ([`dflat_control::Limit`]).
+    pub(super) fn limit(&mut self, field: &str, x: f64, limit: Limit) -> Result<(), ConfigError> {
+        if limit.contains(x) {
+            Ok(())
+        } else {
+            Err(self.err(field, &x.to_string(), &limit.to_string()))
+        }
+    }
+
+    /// Each element of `xs` inside `limit`, named `field[i]`.
+    pub(super) fn limits(
+        &mut self,
+        field: &str,
+        xs: &[f64],
+        limit: Limit,
+    ) -> Result<(), ConfigError> {
+        for (i, x) in xs.iter().enumerate() {
+            self.limit(&format!("{field}[{i}]"), *x, limit)?;
+        }
+        Ok(())
+    }
+
+    /// `x` exactly 0 ("off") or inside `limit`.
+    pub(super) fn limit_or_off(
+        &mut self,
+        field: &str,
+        x: f64,
+        limit: Limit,
+    ) -> Result<(), ConfigError> {
+        if x == 0.0 || limit.contains(x) {
+            Ok(())
+        } else {
+            Err(self.err(field, &x.to_string(), &super::controller::or_off(limit)))
         }
     }
 

@@ -21,7 +21,7 @@
 //! Pose times: each pose is stamped with its capture time on this
 //! computer's clock, from its own timestamp and a clock-offset estimate
 //! ([`crate::clock`], `link.pose_time`). A multi-rate DF-MPC
-//! (`controller.multi_rate`) gets every pose through
+//! (`controller.dfmpc.multi_rate`) gets every pose through
 //! [`Controller::observe`] at its capture time and, per tick,
 //! [`Controller::update`] with the tick's wake time. The other controllers
 //! get, per tick, the newest pose with its capture time; a tick that finds
