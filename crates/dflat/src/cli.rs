@@ -159,8 +159,8 @@ fn migrate_config(file: &std::path::Path) -> Result<()> {
         eprintln!("{}: {m}", file.display());
     }
     dflat_daemon::config::Config::parse(&migrated.text, file)?;
-    #[cfg(feature = "lab")]
-    dflat_sim::sitl::SitlSettings::parse(&migrated.text, file)?;
+    #[cfg(feature = "sitl")]
+    dflat_sitl::SitlSettings::parse(&migrated.text, file)?;
     Ok(())
 }
 
