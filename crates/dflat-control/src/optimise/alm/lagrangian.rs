@@ -1,0 +1,319 @@
+//! The augmented Lagrangian's terms (module docs of [`super`]): the
+//! stage sets' projections, the row sides' clamped multipliers, the
+//! gradient and its residuals, the line search's merit and the generalised
+//! Hessian.
+
+use super::{BandedAlm, D2, StageSet};
+
+impl BandedAlm {
+    /// `w − Π_f(w)` and the generalised Jacobian `I − ∂Π_f(w)` when `w`
+    /// lies outside stage f's set (the disc's: `(1 − A/‖w‖)·w`).
+    #[inline]
+    pub(super) fn excess(&self, w: [f64; 2], f: usize) -> Option<([f64; 2], [[f64; 2]; 2])> {
+        match &self.stages {
+            StageSet::Disc(radius) => {
+                let n2 = w[0] * w[0] + w[1] * w[1];
+                let r = radius[f];
+                if n2 <= r * r {
+                    return None;
+                }
+                let norm = n2.sqrt();
+                let t = r / norm;
+                let (wx, wy) = (w[0] / norm, w[1] / norm);
+                let k = 1.0 - t;
+                Some((
+                    [k * w[0], k * w[1]],
+                    [
+                        [1.0 - t + t * wx * wx, t * wx * wy],
+                        [t * wx * wy, 1.0 - t + t * wy * wy],
+                    ],
+                ))
+            }
+            StageSet::Interval(bounds) => {
+                let mut e = [0.0; 2];
+                let mut j = [[0.0; 2]; 2];
+                let mut any = false;
+                for i in 0..self.k {
+                    let [lo, hi] = bounds[f][i];
+                    let out = w[i] - w[i].clamp(lo, hi);
+                    if out != 0.0 {
+                        e[i] = out;
+                        j[i][i] = 1.0;
+                        any = true;
+                    }
+                }
+                any.then_some((e, j))
+            }
+        }
+    }
+
+    /// The stage bounds' scale [m/s²] for the residual's tolerance.
+    pub(super) fn stage_scale(&self) -> f64 {
+        match &self.stages {
+            StageSet::Disc(r) => r.iter().fold(0.0f64, |a, b| a.max(*b)),
+            StageSet::Interval(b) => b
+                .iter()
+                .flat_map(|s| s.iter().take(self.k).flatten())
+                .filter(|v| v.is_finite())
+                .fold(0.0f64, |a, b| a.max(b.abs())),
+        }
+    }
+
+    /// σ on row k, in its units.
+    pub(super) fn sigma_row(&self, k: usize) -> f64 {
+        self.sigma * self.row_scale[k]
+    }
+
+    /// Row k's side multiplier after the update, `clamp(v + σ_h·t, 0, ρ)`.
+    pub(super) fn side_multiplier(&self, k: usize, v: f64, t: f64) -> f64 {
+        (v + self.sigma_row(k) * t).clamp(0.0, self.row_penalty[k])
+    }
+
+    /// `out[f] = G_f·v` per axis for every stage (outputs before the
+    /// horizon are 0), without a_0.
+    pub(super) fn accelerations(k: usize, inv_dt2: f64, v: &[f64], out: &mut [[f64; 2]]) {
+        let (mut p1, mut p2) = ([0.0; 2], [0.0; 2]);
+        for (f, o) in out.iter_mut().enumerate() {
+            let mut p0 = [0.0; 2];
+            for i in 0..k {
+                p0[i] = v[k * f + i];
+                o[i] = (p0[i] - 2.0 * p1[i] + p2[i]) * inv_dt2;
+            }
+            p2 = p1;
+            p1 = p0;
+        }
+    }
+
+    /// `out += Σ_f G_fᵀ·e_f`.
+    pub(super) fn add_transposed(k: usize, inv_dt2: f64, e: &[[f64; 2]], out: &mut [f64]) {
+        let n = e.len();
+        let (mut e1, mut e2) = ([0.0; 2], [0.0; 2]);
+        for f in (0..n).rev() {
+            let e0 = e[f];
+            for i in 0..k {
+                out[k * f + i] += (e0[i] - 2.0 * e1[i] + e2[i]) * inv_dt2;
+            }
+            e2 = e1;
+            e1 = e0;
+        }
+    }
+
+    /// `out = P·v` by differencing.
+    pub(super) fn apply_p(&mut self, which: Vector) {
+        let k = self.k;
+        for i in 0..k {
+            let src = match which {
+                Vector::X => &self.x,
+                Vector::D => &self.d,
+            };
+            for f in 0..self.n {
+                self.axis_in[f] = src[k * f + i];
+            }
+            self.axes[i].apply_hessian(&self.axis_in, &mut self.axis_out);
+            let dst = match which {
+                Vector::X => &mut self.px,
+                Vector::D => &mut self.pd,
+            };
+            for f in 0..self.n {
+                dst[k * f + i] = 2.0 * self.axis_out[f];
+            }
+        }
+    }
+
+    /// The side `t` of row k at h (upper side j = 0: h − hi, lower: lo − h).
+    #[inline]
+    pub(super) fn side(j: usize, h: f64, lo: f64, hi: f64) -> f64 {
+        if j == 0 { h - hi } else { lo - h }
+    }
+
+    /// The Lagrangian's non-quadratic part at `x + α·d` (`u`, `du`, `hx`,
+    /// `hd` current), without its constant `−Σ‖y_f‖²/(2σ)`.
+    pub(super) fn penalty_terms(&self, alpha: f64, lo: &[f64], hi: &[f64]) -> f64 {
+        let s = self.sigma;
+        let mut value = 0.0;
+        for f in 0..self.n {
+            let w = [
+                self.u[f][0] + alpha * self.du[f][0] + self.y[f][0] / s,
+                self.u[f][1] + alpha * self.du[f][1] + self.y[f][1] / s,
+            ];
+            if let Some((e, _)) = self.excess(w, f) {
+                value += 0.5 * s * (e[0] * e[0] + e[1] * e[1]);
+            }
+        }
+        for (k, v) in self.v.iter().enumerate() {
+            let h = self.hx[k] + alpha * self.hd[k];
+            let ss = self.sigma_row(k);
+            for (j, &vj) in v.iter().enumerate() {
+                let t = Self::side(j, h, lo[k], hi[k]);
+                let vn = self.side_multiplier(k, vj, t);
+                value += vn * t - (vn - vj) * (vn - vj) / (2.0 * ss);
+            }
+        }
+        value
+    }
+
+    /// u, h·x and the gradient `g = P·x + c + Σ G_fᵀy'_f + Σ ±h·v'` at x,
+    /// with the updated stage multipliers y' (`y_next`), the penalty part
+    /// of L (`penalty_value`) and the active set (`active`); returns
+    /// `(‖g‖∞, stage residual, row residual)`, the residuals being the
+    /// largest multiplier change `‖y' − y‖/σ` (stages, m/s²) and `|v' −
+    /// v|/σ_h` (rows, their units) the update would make.
+    pub(super) fn gradient(&mut self, a0: [f64; 2], lo: &[f64], hi: &[f64]) -> (f64, f64, f64) {
+        if !self.px_current {
+            self.apply_p(Vector::X);
+            self.px_current = true;
+        }
+        for ((g, p), c) in self.g.iter_mut().zip(&self.px).zip(&self.c) {
+            *g = p + c;
+        }
+        let s = self.sigma;
+        let k = self.k;
+        Self::accelerations(k, self.inv_dt2, &self.x, &mut self.u);
+        let mut res2: f64 = 0.0;
+        let mut value = 0.0;
+        for f in 0..self.n {
+            let mut u = self.u[f];
+            for i in 0..k {
+                u[i] += a0[i];
+            }
+            self.u[f] = u;
+            let y = self.y[f];
+            let w = [u[0] + y[0] / s, u[1] + y[1] / s];
+            let yn = match self.excess(w, f) {
+                Some((e, _)) => {
+                    value += 0.5 * s * (e[0] * e[0] + e[1] * e[1]);
+                    [s * e[0], s * e[1]]
+                }
+                None => [0.0; 2],
+            };
+            self.active[f] = yn != [0.0; 2];
+            let (ex, ey) = (yn[0] - y[0], yn[1] - y[1]);
+            res2 = res2.max(ex * ex + ey * ey);
+            self.y_next[f] = yn;
+        }
+        let stage_res = res2.sqrt() / s;
+        Self::add_transposed(k, self.inv_dt2, &self.y_next, &mut self.g);
+        let mut row_res: f64 = 0.0;
+        for r in 0..self.rows.len() {
+            let h = self.rows[r].dot(&self.x);
+            self.hx[r] = h;
+            let ss = self.sigma_row(r);
+            let rho = self.row_penalty[r];
+            let mut e = 0.0;
+            for j in 0..2 {
+                let vj = self.v[r][j];
+                let t = Self::side(j, h, lo[r], hi[r]);
+                let vn = self.side_multiplier(r, vj, t);
+                let raw = vj + ss * t;
+                self.active[self.n + 2 * r + j] = raw > 0.0 && raw < rho;
+                value += vn * t - (vn - vj) * (vn - vj) / (2.0 * ss);
+                row_res = row_res.max((vn - vj).abs() / ss);
+                e += if j == 0 { vn } else { -vn };
+            }
+            if e != 0.0 {
+                self.rows[r].axpy(e, &mut self.g);
+            }
+        }
+        self.penalty_value = value;
+        let gn = self.g.iter().fold(0.0f64, |a, b| a.max(b.abs()));
+        (gn, stage_res, row_res)
+    }
+
+    /// What the constraints' residuals can cost at x (`y_next`, `hx`
+    /// current, the multipliers not yet updated):
+    /// `Σ ‖y'_f‖·‖y'_f − y_f‖/σ + Σ v'·|v' − v|/σ_h` — a stage inside its
+    /// set by δ where the optimum is on its boundary costs ‖y‖·δ. Only the
+    /// stop needs it, once per multiplier update.
+    pub(super) fn residual_cost(&self, lo: &[f64], hi: &[f64]) -> f64 {
+        let s = self.sigma;
+        let mut gap = 0.0;
+        for (yn, y) in self.y_next.iter().zip(&self.y) {
+            let (ex, ey) = (yn[0] - y[0], yn[1] - y[1]);
+            let e2 = ex * ex + ey * ey;
+            if e2 > 0.0 {
+                gap += (yn[0] * yn[0] + yn[1] * yn[1]).sqrt() * e2.sqrt() / s;
+            }
+        }
+        for (r, v) in self.v.iter().enumerate() {
+            let h = self.hx[r];
+            let ss = self.sigma_row(r);
+            for (j, &vj) in v.iter().enumerate() {
+                let t = Self::side(j, h, lo[r], hi[r]);
+                let vn = self.side_multiplier(r, vj, t);
+                gap += vn * (vn - vj).abs() / ss;
+            }
+        }
+        gap
+    }
+
+    /// The generalised Hessian `P + σ·Σ G_fᵀ J_f G_f + σ_h·Σ hhᵀ` at x.
+    pub(super) fn assemble(&mut self, lo: &[f64], hi: &[f64]) {
+        self.kkt.clone_from(&self.base);
+        let s = self.sigma;
+        let k = self.k;
+        let k2 = self.inv_dt2 * self.inv_dt2;
+        for f in 0..self.n {
+            let w = [
+                self.u[f][0] + self.y[f][0] / s,
+                self.u[f][1] + self.y[f][1] / s,
+            ];
+            let Some((_, j)) = self.excess(w, f) else {
+                continue;
+            };
+            // G_fᵀ(σ·k2·J)G_f into the band: entry (at(i, f − ka),
+            // at(jj, f − kb)) at row·w + (row − col), lower triangle only.
+            let w = self.kkt.bandwidth() + 1;
+            let lower = self.kkt.lower_mut();
+            for (ka, &ca) in D2.iter().enumerate() {
+                let Some(ga) = f.checked_sub(ka) else {
+                    continue;
+                };
+                for (kb, &cb) in D2.iter().enumerate() {
+                    let Some(gb) = f.checked_sub(kb) else {
+                        continue;
+                    };
+                    let scale = s * k2 * ca * cb;
+                    for (i, ji) in j.iter().enumerate().take(k) {
+                        for (jj, &jv) in ji.iter().enumerate().take(k) {
+                            let (r, c) = (k * ga + i, k * gb + jj);
+                            if r >= c && jv != 0.0 {
+                                lower[r * w + (r - c)] += scale * jv;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        for r in 0..self.rows.len() {
+            let h = self.hx[r];
+            let ss = self.sigma_row(r);
+            let rho = self.row_penalty[r];
+            let mut active = 0.0;
+            for j in 0..2 {
+                let raw = self.v[r][j] + ss * Self::side(j, h, lo[r], hi[r]);
+                if raw > 0.0 && raw < rho {
+                    active += ss;
+                }
+            }
+            if active == 0.0 {
+                continue;
+            }
+            let row = self.rows[r];
+            for a in 0..row.len {
+                for b in 0..row.len {
+                    if row.idx[a] >= row.idx[b] {
+                        self.kkt
+                            .add(row.idx[a], row.idx[b], active * row.coef[a] * row.coef[b]);
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Which vector [`BandedAlm::apply_p`] multiplies.
+#[derive(Debug, Clone, Copy)]
+pub(super) enum Vector {
+    X,
+    D,
+}
