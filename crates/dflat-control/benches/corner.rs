@@ -9,12 +9,18 @@
 //! commands enter its window), every tick timed; `REPEATS` replays per
 //! configuration. Reported per horizon N: median, p99 and max over all
 //! timed ticks, over the ticks that solved a constrained QP, the ratios
-//! the budgets are stated in (`docs/performance.md`), and the banded cone
-//! solver's work, warm and cold (Newton steps, factorisations, fallbacks).
+//! the budgets are stated in (`docs/performance.md`), and the cascades'
+//! work (Newton steps, factorisations, fallbacks).
 //!
 //! The tilt-rate bound (`max_tilt_rate`, [`RATE_DEG_S`]) is timed with the
 //! box (the daemon's set-up: box + tilt rate), alone, and with clarabel
 //! solving the same box + tilt-rate QP.
+//!
+//! Each banded configuration runs DF-MPC's cascade (`optimise/cascade.rs`);
+//! the work line per configuration gives what its augmented Lagrangian did
+//! (Newton steps, factorisations), how many solves fell to the interior
+//! point or clarabel, and the times of the first ticks of constrained
+//! bursts. `CORNER_ONLY=box,cone` limits the configurations by name.
 //!
 //! Run: `cargo bench -p dflat-control --bench corner` (a horizon list as
 //! argument, e.g. `-- 200`, limits the run).
@@ -183,7 +189,7 @@ impl ConeWork {
 }
 
 /// Tick times \[s\] of `repeats` replays, which ticks were constrained,
-/// and the banded cone solver's work on them.
+/// and the cascades' work on them.
 fn replay(
     config: Config,
     n: usize,
@@ -268,7 +274,13 @@ fn main() {
                 config,
                 Config::Fast | Config::ConeClarabel | Config::BoxRateClarabel
             ) {
-                let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+                let mean = |v: &[f64]| {
+                    if v.is_empty() {
+                        f64::NAN
+                    } else {
+                        v.iter().sum::<f64>() / v.len() as f64
+                    }
+                };
                 let bursts = work.burst_starts.len();
                 cone_work.push(format!(
                     "{}: ALM per solve: Newton steps mean {:.2}, p99 {}, max {}; \
