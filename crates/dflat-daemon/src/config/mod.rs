@@ -80,7 +80,7 @@ pub struct Config {
     /// Crash safety and disk quotas of the flight records.
     pub records: RecordsConfig,
     /// The SITL autopilot stand-in's `[sitl]` table, kept unparsed: the
-    /// daemon does not read it (the SITL lives in `dflat-sim`, which parses
+    /// daemon does not read it (the SITL lives in `dflat-sitl`, which parses
     /// and validates it for `dflat sitl`, `dflat demo` and `dflat
     /// check-config`), so one file can configure both.
     #[serde(skip_serializing_if = "Option::is_none")]
