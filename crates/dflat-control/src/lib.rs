@@ -94,13 +94,15 @@ pub struct TickOutput {
     /// True when a bound was violated by the unconstrained plan and the
     /// inequality-constrained QP was solved.
     pub constrained: bool,
-    /// True when the banded constrained solver did not converge on some
-    /// axis and clarabel solved it instead (DF-MPC with
-    /// `QpSolver::Banded`; see `DfMpcSettings::qp_solver`).
+    /// True when the banded solvers of a constrained cascade did not
+    /// converge on some axis (or the cone pair) and clarabel, the last of
+    /// the cascade, solved it instead (DF-MPC with `QpSolver::Banded`; see
+    /// `optimise::Cascade`).
     pub qp_fallback: bool,
-    /// True when the tilt cone's augmented Lagrangian did not converge and
-    /// its banded interior point solved instead (DF-MPC with the cone and
-    /// `QpSolver::Banded`; see `optimise::BandedConeSolver`).
+    /// True when a cascade's first solver did not converge and a banded
+    /// interior point solved instead: the cone's or the box's augmented
+    /// Lagrangian falling back (the name predates the box's; see
+    /// `optimise::Cascade`).
     pub cone_interior_point: bool,
 }
 
