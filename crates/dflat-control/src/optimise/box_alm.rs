@@ -6,7 +6,7 @@
 
 use super::alm::{AlmTuning, BandedAlm, RowBlock, StageSet};
 use super::bounds::Row;
-use super::{AxisBounds, AxisProblem, FastBandedSolver, Smoothness, baseline, check_lengths};
+use super::{AxisBounds, AxisProblem, FastBandedSolver, Smoothness, check_lengths, shifted_plan};
 use crate::ControlError;
 
 /// One axis's box-bounded plan by the augmented Lagrangian
@@ -230,15 +230,7 @@ impl BoxAlmSolver {
         for f in 0..n {
             let b = self.base[f];
             self.p[f] = if warm {
-                // The previous plan one step on.
-                let j = f + 4;
-                let prev = &self.previous;
-                let guess = if j <= horizon {
-                    prev[j]
-                } else {
-                    2.0 * prev[horizon] - prev[horizon - 1]
-                };
-                guess - b
+                shifted_plan(&self.previous, f) - b
             } else {
                 plan[f + 3] - b
             };
@@ -256,7 +248,7 @@ impl BoxAlmSolver {
             return Err(e);
         }
         for f in 0..n {
-            let v = baseline(fixed, f + 3) + self.alm.p(0, f);
+            let v = self.base[f] + self.alm.p(0, f);
             if !v.is_finite() {
                 self.alm.reset_multipliers();
                 return Err(ControlError::Solver("non-finite solution".to_string()));

@@ -7,7 +7,9 @@ use super::alm::{AlmTuning, BandedAlm, RowBlock, StageSet};
 use super::bounds::Row;
 use super::cone_qp::{ConeAxis, ConeQp, STAGE, a_at, p_at};
 use super::smoothness::{accel_block, sent_linear_term};
-use super::{AxisProblem, ConeBounds, FastBandedSolver, Smoothness, baseline, check_lengths};
+use super::{
+    AxisProblem, ConeBounds, FastBandedSolver, Smoothness, baseline, check_lengths, shifted_plan,
+};
 use crate::ControlError;
 
 /// Weights of one axis: tracking q ≥ 0 [1/m²], jerk r > 0 [s⁶/m²], and
@@ -291,14 +293,7 @@ impl BandedConeSolver {
                 self.c[p_at(i, f)] = 2.0 * q * (b - a.reference[f + 3]);
                 self.p[i][f] = a.plan[f + 3] - b;
                 // The warm guess: the previous plan one step on.
-                let j = f + 4;
-                let prev = &self.previous[i];
-                let guess = if j <= self.horizon {
-                    prev[j]
-                } else {
-                    2.0 * prev[self.horizon] - prev[self.horizon - 1]
-                };
-                self.warm[i][f] = guess - b;
+                self.warm[i][f] = shifted_plan(&self.previous[i], f) - b;
                 // ½xᵀ(2H)x − 2·rhsᵀx: the fast path's objective, doubled
                 // (p_{i, f} at 2f + i).
                 self.c_alm[2 * f + i] = -2.0 * self.rhs[f];

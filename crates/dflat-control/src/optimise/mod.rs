@@ -201,6 +201,21 @@ pub(crate) fn baseline(fixed: &[f64; 3], j: usize) -> f64 {
     fixed[0] + jf * d1 + 0.5 * jf * (jf - 1.0) * d2
 }
 
+/// The next tick's start for its free output f (`y_{f+3}` then): the
+/// previous plan `y*_0..y*_N` \[m\] one step on, `y*_{f+4}`, continued
+/// linearly past the horizon (the warm starts of the augmented
+/// Lagrangian's solvers).
+#[inline]
+pub(crate) fn shifted_plan(previous: &[f64], f: usize) -> f64 {
+    let horizon = previous.len() - 1;
+    let j = f + 4;
+    if j <= horizon {
+        previous[j]
+    } else {
+        2.0 * previous[horizon] - previous[horizon - 1]
+    }
+}
+
 /// One axis's data for [`FastBandedSolver::solve_pair`]: `fixed` = `[y_0, y_1,
 /// y_2]` \[m\], `reference` = `ref_0..ref_N` \[m\], `plan` receives `y*_0..y*_N`.
 #[derive(Debug)]
