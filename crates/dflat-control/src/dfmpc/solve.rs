@@ -48,11 +48,14 @@ pub(super) struct SolveReport {
 
 impl SolveReport {
     /// Notes which solver of a cascade solved (its place and method).
-    fn solved(&mut self, cascade: &Cascade, method: SolverMethod) {
+    fn solved(&mut self, cascade: &Cascade) {
         self.constrained = true;
-        let first = cascade.solved_by().is_some_and(|(i, _)| i == 0);
-        self.qp_fallback |= method == SolverMethod::Clarabel && !first;
-        self.interior_point |= method == SolverMethod::InteriorPoint && !first;
+        if let Some((place, solver)) = cascade.solved_by()
+            && place > 0
+        {
+            self.qp_fallback |= solver.method() == SolverMethod::Clarabel;
+            self.interior_point |= solver.method() == SolverMethod::InteriorPoint;
+        }
     }
 }
 
@@ -323,13 +326,13 @@ impl DfMpc {
                 cascade.skip();
                 continue;
             }
-            let method = cascade.solve(&mut [AxisProblem {
+            cascade.solve(&mut [AxisProblem {
                 fixed: &fixed_axis[axis],
                 sent: sent(axis),
                 reference: &p.reference,
                 plan: &mut p.plan,
             }])?;
-            report.solved(cascade, method);
+            report.solved(cascade);
         }
         if let Some(cone) = &mut self.cone {
             let [ax, ay, rest @ ..] = self.axes.as_mut_slice() else {
@@ -348,7 +351,7 @@ impl DfMpc {
                 cone.cascade.skip();
                 return Ok(report);
             }
-            let method = cone.cascade.solve(&mut [
+            cone.cascade.solve(&mut [
                 AxisProblem {
                     fixed: &fixed_axis[0],
                     sent: sent(0),
@@ -362,7 +365,7 @@ impl DfMpc {
                     plan: &mut ay.plan,
                 },
             ])?;
-            report.solved(&cone.cascade, method);
+            report.solved(&cone.cascade);
         }
         Ok(report)
     }
