@@ -204,14 +204,16 @@ pub struct DisturbanceConfig {
 }
 
 impl Default for DisturbanceConfig {
+    /// Off, with the core's defaults ([`DisturbanceSettings::default`]).
     fn default() -> Self {
+        let d = DisturbanceSettings::default();
         Self {
             enabled: false,
-            bandwidth_hz: 0.1,
-            window: 50,
-            max_acceleration: 3.0,
-            thrust_scale_range: [0.5, 2.0],
-            max_step: 1.0,
+            bandwidth_hz: d.bandwidth_hz,
+            window: d.fit_span,
+            max_acceleration: d.max_acceleration,
+            thrust_scale_range: d.thrust_scale_range,
+            max_step: d.max_step,
         }
     }
 }
