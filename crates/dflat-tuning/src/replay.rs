@@ -6,19 +6,25 @@
 //! another one (what that tuning would have commanded, drawn into the
 //! review page).
 //!
-//! Not bit for bit: the daemon stamps an event's arrival on its monotonic
-//! clock, the tlog on the wall clock at nearly the same instant, in whole
-//! microseconds; the offset between the two is estimated from the sent
-//! commands (the earliest send after its tick). An event that arrived
-//! within that error of a tick's wake may land one tick off, and the pose
-//! clock's offset (hence the capture times) moves by the same few
-//! microseconds. The CSV also holds the tick's scheduled time to 0.1 ms and
-//! its jitter in whole µs (a CSV with the `t_wake` column has the exact tick
-//! time). A CSV with the `events` column (the events each tick had
-//! applied so far) fixes which frames each tick saw exactly: a pose that
-//! arrived within microseconds of its tick's wake (every pose-locked tick)
-//! lands in the same tick as in flight. The report counts the ticks
-//! reproduced exactly at the CSV's resolution and the largest difference.
+//! **The clocks.** The daemon stamps each received frame's arrival in whole
+//! microseconds since its epoch ([`dflat_daemon::tick::arrival_secs`]) and
+//! logs the frame at the epoch's UNIX time plus that arrival, so a log
+//! stamp is the arrival plus one constant, the epoch. The replay finds the
+//! epoch in two passes: first from the sent commands (the earliest send
+//! after its tick), to within the send latency; then to the microsecond
+//! from the CSV's pose ages (1 µs resolution), which move one for one with
+//! it. With the epoch exact every arrival, and so the pose clock's capture
+//! times, are the flight's bit for bit. (A log written before 2026-11-27
+//! stamped frames on the wall clock at nearly the same instant: its
+//! arrivals are off by a few microseconds each, and a sample near the edge
+//! of the multi-rate window may fall on the other side.)
+//!
+//! **The ticks.** A CSV with the `t_wake` column has each tick's exact time
+//! (older ones: the scheduled time to 0.1 ms plus the jitter in whole µs).
+//! A CSV with the `events` column (the events each tick had applied so
+//! far) fixes which frames each tick saw exactly. The report counts the
+//! ticks reproduced exactly at the CSV's resolution and the largest
+//! difference.
 
 use std::io::BufReader;
 use std::path::{Path, PathBuf};
@@ -29,7 +35,9 @@ use crate::flightlog::FlightCsv;
 use dflat_daemon::config::Config;
 use dflat_daemon::control::{build_controller, thrust_mapping};
 use dflat_daemon::csv_schema::Column;
-use dflat_daemon::tick::{ControlCore, Event, TickTime, event_from, pose_source, source_filter};
+use dflat_daemon::tick::{
+    ControlCore, Event, TickTime, arrival_secs, event_from, pose_source, source_filter,
+};
 use dflat_link::tlog::TlogReader;
 use dflat_link::{LinkRx, MavMessage, RxOutcome};
 
@@ -71,42 +79,58 @@ pub struct ReplayReport {
     pub overlay: Overlay,
 }
 
-/// The received frames of a tlog as daemon events, arrival on the log's
-/// clock (seconds since its first record), and the sent
-/// SET_ATTITUDE_TARGET times with their `time_boot_ms`.
-/// Sent SET_ATTITUDE_TARGET: (log time \[s\], `time_boot_ms`).
-type Sent = Vec<(f64, u32)>;
+/// A flight's logged frames.
+struct Logged {
+    /// The received frames the daemon's filter accepts, as daemon events,
+    /// with their log stamps \[µs since 1970\] (the events' arrival is set
+    /// by the clock mapping).
+    received: Vec<(u64, Event)>,
+    /// Sent SET_ATTITUDE_TARGET: (log stamp \[µs since 1970\],
+    /// `time_boot_ms`).
+    sent: Vec<(u64, u32)>,
+}
 
-fn tlog_events(path: &Path, cfg: &Config) -> Result<(Vec<Event>, Sent)> {
+/// Reads the tlog at `path` (see [`Logged`]).
+fn tlog_frames(path: &Path, cfg: &Config) -> Result<Logged> {
     let file =
         std::fs::File::open(path).with_context(|| format!("cannot read {}", path.display()))?;
     let mut link = LinkRx::new(source_filter(&cfg.link));
     let source = pose_source(cfg.link.pose_source);
-    let mut events = Vec::new();
+    let mut received = Vec::new();
     let mut sent = Vec::new();
-    let mut start = None;
+    let mut any = false;
     for record in TlogReader::new(BufReader::new(file)) {
         let record = match record {
             Ok(r) => r,
-            Err(dflat_link::tlog::TlogError::Truncated { .. }) if start.is_some() => break,
+            Err(dflat_link::tlog::TlogError::Truncated { .. }) if any => break,
             Err(e) => bail!("{}: {e}", path.display()),
         };
-        let t0 = *start.get_or_insert(record.timestamp_us);
-        let t = record.timestamp_us.saturating_sub(t0) as f64 * 1e-6;
+        any = true;
+        let stamp = record.timestamp_us;
         let Ok(frame) = record.parse() else { continue };
         if let MavMessage::SET_ATTITUDE_TARGET(d) = &frame.message
             && frame.header.component_id == cfg.link.component_id
         {
-            sent.push((t, d.time_boot_ms));
+            sent.push((stamp, d.time_boot_ms));
             continue;
         }
         if let RxOutcome::Accepted(inbound) = link.handle(&frame.header, &frame.message)
-            && let Some(e) = event_from(&inbound, source, t)
+            && let Some(e) = event_from(&inbound, source, 0.0)
         {
-            events.push(e);
+            received.push((stamp, e));
         }
     }
-    Ok((events, sent))
+    Ok(Logged { received, sent })
+}
+
+/// The arrival \[s since the daemon's epoch\] of a frame logged at
+/// `stamp` when the epoch is at `epoch` on the log's clock (both µs since
+/// 1970): exactly the daemon's own value for a frame it logged.
+fn arrival_at(stamp: u64, epoch: u64) -> f64 {
+    match stamp.checked_sub(epoch) {
+        Some(us) => arrival_secs(us),
+        None => -arrival_secs(epoch - stamp),
+    }
 }
 
 /// Re-runs the flight of `csv` (with its `.tlog` beside it) under `cfg`.
@@ -131,7 +155,7 @@ pub fn replay(csv_path: &Path, csv: &FlightCsv, cfg: &Config) -> Result<ReplayRe
             bail!("{}: no `{needed}` column", csv_path.display());
         }
     }
-    let (events, sent) = tlog_events(&tlog, cfg)?;
+    let logged = tlog_frames(&tlog, cfg)?;
     let t_sched = csv.numbers(Column::T);
     let jitter = csv.numbers(Column::JitterUs);
     // The exact tick time when the CSV has it (`t_wake`), else scheduled
@@ -143,41 +167,48 @@ pub fn replay(csv_path: &Path, csv: &FlightCsv, cfg: &Config) -> Result<ReplayRe
         .zip(&exact)
         .map(|((t, j), w)| w.unwrap_or(t.unwrap_or(f64::NAN) + j.unwrap_or(0.0) * 1e-6))
         .collect();
-    // Log clock → daemon clock: the earliest send after its tick.
+    // The daemon's epoch on the log's clock, first from the sends: a
+    // command is logged after its tick, the earliest send the closest.
     let by_ms: std::collections::HashMap<u32, f64> = wake
         .iter()
         .map(|w| ((w * 1000.0) as u64 as u32, *w))
         .collect();
-    let offset = sent
+    let epoch = logged
+        .sent
         .iter()
-        .filter_map(|(t, ms)| by_ms.get(ms).map(|w| w - t))
-        .fold(f64::NEG_INFINITY, f64::max);
-    if !offset.is_finite() {
+        .filter_map(|(stamp, ms)| by_ms.get(ms).map(|w| *stamp as f64 - w * 1e6))
+        .fold(f64::INFINITY, f64::min);
+    if !epoch.is_finite() || epoch < 0.0 {
         bail!(
             "{}: no sent command matches a tick of {} (not the same flight?)",
             tlog.display(),
             csv_path.display()
         );
     }
-    // Pass 1 with the send-side estimate; the CSV's pose ages (µs) then
-    // tell how far the capture times are off, and pass 2 corrects it.
-    let first = run_pass(csv, cfg, &events, &wake, offset)?;
+    let epoch = epoch.round() as u64;
+    // Pass 1 with that epoch; the CSV's pose ages (µs) then move one for
+    // one with its error, and pass 2 runs on the corrected epoch.
+    let first = run_pass(csv, cfg, &logged.received, &wake, epoch)?;
     match first.1 {
         Some(shift) if csv.has(Column::PoseAgeMs) => {
-            Ok(run_pass(csv, cfg, &events, &wake, offset + shift)?.0)
+            // Replay ages larger than the logged: the arrivals are early,
+            // the epoch too late.
+            let corrected = epoch.saturating_add_signed(-((shift * 1e6).round() as i64));
+            Ok(run_pass(csv, cfg, &logged.received, &wake, corrected)?.0)
         }
         _ => Ok(first.0),
     }
 }
 
-/// One re-run with events shifted by `offset` \[s\]: the report and the
-/// median (re-run − logged) pose age \[s\], if the CSV has pose ages.
+/// One re-run with the daemon's epoch at `epoch` on the log's clock \[µs
+/// since 1970\]: the report and the median (re-run − logged) pose age
+/// \[s\], if the CSV has pose ages.
 fn run_pass(
     csv: &FlightCsv,
     cfg: &Config,
-    events: &[Event],
+    received: &[(u64, Event)],
     wake: &[f64],
-    offset: f64,
+    epoch: u64,
 ) -> Result<(ReplayReport, Option<f64>)> {
     let ticks = csv.numbers(Column::Tick);
     // Each tick's cutoff in the events, when logged.
@@ -188,7 +219,10 @@ fn run_pass(
     let mut age_diffs = Vec::new();
     let controller = build_controller(cfg).context("cannot build the controller")?;
     let mut core = ControlCore::new(cfg, controller, thrust_mapping(cfg));
-    let mut pending = events.iter().map(|e| e.shifted(offset)).peekable();
+    let mut pending = received
+        .iter()
+        .map(|(stamp, e)| e.arriving_at(arrival_at(*stamp, epoch)))
+        .peekable();
     let logged = [Column::Roll, Column::Pitch, Column::Yaw, Column::Thrust].map(|c| csv.numbers(c));
     let mut report = ReplayReport {
         ticks: csv.rows.len(),
@@ -199,7 +233,7 @@ fn run_pass(
         ..ReplayReport::default()
     };
     let mut diffs = Vec::new();
-    let mut zero = || 0.0;
+    let solve_us = csv.numbers(Column::SolveUs);
     let mut taken: u64 = 0;
     for i in 0..csv.rows.len() {
         let w = wake[i];
@@ -221,7 +255,19 @@ fn run_pass(
             scheduled: t_sched[i].unwrap_or(w),
             jitter_us: jitter[i].unwrap_or(0.0) as u32,
         };
-        let out = core.step(&time, batch, &mut zero);
+        // The stopwatch around the solve reads the logged solve time, so a
+        // deadline overrun in flight is one here too.
+        let solve = solve_us[i].unwrap_or(0.0) * 1e-6;
+        let mut readings = 0u32;
+        let mut stopwatch = || {
+            readings += 1;
+            if readings.is_multiple_of(2) {
+                solve
+            } else {
+                0.0
+            }
+        };
+        let out = core.step(&time, batch, &mut stopwatch);
         if let (Some(a), Some(b)) = (out.row.pose_age_ms, ages[i]) {
             age_diffs.push((a - b) * 1e-3);
         }

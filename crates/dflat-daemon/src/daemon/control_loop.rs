@@ -28,7 +28,7 @@ use crate::realtime::{RealtimeApplied, RealtimeConfig, RealtimeError, apply_to_c
 use crate::records::CsvRecorder;
 use crate::schedule::{TickCause, TickPlanner};
 use crate::summary::Histogram;
-use crate::tick::{ControlCore, Event, TickTime};
+use crate::tick::{BATCH_MARGIN, ControlCore, Event, TickTime};
 
 /// The control thread's parts.
 pub(super) struct ControlLoop {
@@ -69,10 +69,6 @@ pub(super) struct ControlLoop {
     pub realtime_result:
         Option<tokio::sync::oneshot::Sender<Result<RealtimeApplied, RealtimeError>>>,
 }
-
-/// A pose tick's time is its pose's arrival plus this \[s\]: a margin
-/// for the µs-scale error of a replay's log-clock mapping.
-const BATCH_MARGIN: f64 = 20e-6;
 
 impl ControlLoop {
     /// An event for the next tick; a pose also tells the planner.

@@ -31,7 +31,7 @@ use crate::link_health::{
 use crate::mission::{ItemRules, Mission, MissionChange, MissionProtocol};
 use crate::signing::{PERSIST_INTERVAL, TimestampStore};
 use crate::supervisor::FlightState;
-use crate::tick::{Event, event_from};
+use crate::tick::{Event, arrival_secs, event_from};
 use dflat_link::dialect::MavResult;
 use dflat_link::refusal::{RefusalLimiter, Say};
 
@@ -40,6 +40,9 @@ use dflat_link::refusal::{RefusalLimiter, Say};
 pub(super) struct RxContext {
     /// The daemon's epoch: event times are seconds since it.
     pub epoch: Instant,
+    /// The epoch on the system clock \[µs since 1970\]: a received frame
+    /// is logged in the tlog at this plus its arrival in whole µs.
+    pub epoch_unix_us: u64,
     /// The pose message the controller uses.
     pub pose_source: PoseSource,
     /// The daemon's (system, component).
@@ -207,10 +210,16 @@ pub(super) async fn receive_task(
                 continue;
             }
         };
-        let arrival = frame
-            .arrival
-            .saturating_duration_since(ctx.epoch)
-            .as_secs_f64();
+        // Whole µs since the epoch: the tlog records the same instant, so a
+        // replay finds the arrival bit for bit (`tick::arrival_secs`).
+        let arrival_us = u64::try_from(
+            frame
+                .arrival
+                .saturating_duration_since(ctx.epoch)
+                .as_micros(),
+        )
+        .unwrap_or(u64::MAX);
+        let arrival = arrival_secs(arrival_us);
         let is_setpoint = matches!(frame.message, MavMessage::SET_POSITION_TARGET_LOCAL_NED(_));
         // udpin without a peer yet: only the autopilot's HEARTBEAT (signed,
         // with signing on) is looked at; it locks the peer.
@@ -274,7 +283,7 @@ pub(super) async fn receive_task(
         if let Some(tap) = transport.tap()
             && matches!(outcome, RxOutcome::Accepted(_) | RxOutcome::Rejected(_))
         {
-            tap.record_received(&frame);
+            tap.record_received_at(&frame, ctx.epoch_unix_us.saturating_add(arrival_us));
         }
         let sender = (frame.header.system_id as u8, frame.header.component_id);
         let event = match &outcome {

@@ -541,6 +541,7 @@ pub async fn spawn_with_controller(
     let ticks = Arc::new(AtomicU64::new(0));
     let fault = Arc::new(std::sync::Mutex::new(None));
     let epoch = Instant::now();
+    let epoch_unix_us = dflat_link::transport::unix_time_us();
     let cpu_at_start = process_cpu_seconds();
 
     let (event_tx, event_rx) = std::sync::mpsc::sync_channel::<Event>(EVENT_QUEUE);
@@ -570,6 +571,7 @@ pub async fn spawn_with_controller(
     link_rx.signing = signing.as_ref().map(|(s, _)| s.clone());
     let rx_ctx = link_tasks::RxContext {
         epoch,
+        epoch_unix_us,
         pose_source: pose_source(config.link.pose_source),
         own,
         autopilot_component: config.link.autopilot_component,

@@ -91,16 +91,16 @@ impl Event {
         }
     }
 
-    /// The same event arriving `by` \[s\] later (a replay maps a log's
-    /// clock to the daemon's this way).
-    pub fn shifted(mut self, by: f64) -> Self {
+    /// The same event arriving at `t` \[s since the daemon's epoch\] (a
+    /// replay maps a log's stamps to the daemon's clock this way).
+    pub fn arriving_at(mut self, t: f64) -> Self {
         match &mut self {
             Event::Pose { arrival, .. }
             | Event::Attitude { arrival, .. }
             | Event::Heartbeat { arrival, .. }
             | Event::Param { arrival, .. }
             | Event::Setpoint { arrival, .. }
-            | Event::Mission { arrival, .. } => *arrival += by,
+            | Event::Mission { arrival, .. } => *arrival = t,
         }
         self
     }

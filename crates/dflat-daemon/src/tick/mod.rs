@@ -71,6 +71,20 @@ pub use inputs::{
 /// Smallest interval between two "setpoint refused" STATUSTEXTs \[s\].
 pub const REFUSAL_TEXT_INTERVAL: f64 = 1.0;
 
+/// A pose-locked tick's time is its pose's arrival plus this \[s\]: the
+/// tick takes the events that arrived up to it (the ATTITUDE sent just
+/// before the pose among them).
+pub const BATCH_MARGIN: f64 = 20e-6;
+
+/// An event's arrival \[s since the daemon's epoch\] from its arrival in
+/// whole microseconds since the epoch. The daemon stamps every received
+/// frame in whole µs and its `.tlog` records the same µs (plus the epoch's
+/// UNIX time), so `dflat replay` recovers each arrival bit for bit through
+/// this one function.
+pub fn arrival_secs(us: u64) -> f64 {
+    us as f64 / 1e6
+}
+
 /// The time of one tick.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TickTime {

@@ -204,7 +204,13 @@ impl TlogTap {
     /// [`TapOptions::inbound`] off): its own bytes when signed, else
     /// re-serialized (MAVLink 2), stamped now.
     pub fn record_received(&self, frame: &Received) {
-        let ts = unix_time_us();
+        self.record_received_at(frame, unix_time_us());
+    }
+
+    /// [`record_received`](Self::record_received) stamped `ts` \[µs since
+    /// the UNIX epoch\] (the daemon stamps the frame's own arrival, so a
+    /// replay recovers it exactly).
+    pub fn record_received_at(&self, frame: &Received, ts: u64) {
         match &frame.signed {
             Some(signed) => self.record(ts, signed.as_bytes()),
             None => self.record_message(ts, &frame.header, &frame.message),
