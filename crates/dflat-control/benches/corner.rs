@@ -20,7 +20,8 @@
 //! the work line per configuration gives what its augmented Lagrangian did
 //! (Newton steps, factorisations), how many solves fell to the interior
 //! point or clarabel, and the times of the first ticks of constrained
-//! bursts. `CORNER_ONLY=box,cone` limits the configurations by name.
+//! bursts. `CORNER_ONLY="box, ALM|cone, ALM, warm"` limits the configurations
+//! to those whose names contain one of the `|`-separated parts.
 //!
 //! Run: `cargo bench -p dflat-control --bench corner` (a horizon list as
 //! argument, e.g. `-- 200`, limits the run).
@@ -262,7 +263,7 @@ fn main() {
         let mut cone_work = Vec::new();
         let only: Option<Vec<String>> = std::env::var("CORNER_ONLY")
             .ok()
-            .map(|v| v.split(',').map(String::from).collect());
+            .map(|v| v.split('|').map(String::from).collect());
         for config in Config::ALL {
             if let Some(only) = &only
                 && !only.iter().any(|o| config.name().contains(o.as_str()))
