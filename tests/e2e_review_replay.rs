@@ -218,54 +218,14 @@ fn a_flight_reviewed_replayed_and_its_tlog_read_by_the_mavlink_crate() {
         quantile_of(solves, 1.0)
     );
 
-    // 3. Replay with the flight's own configuration.
-    let out = dflat(&[
-        "replay",
-        csv_path.to_str().unwrap(),
-        "--config",
-        config.to_str().unwrap(),
-        "--out",
-        dir.join("replay.html").to_str().unwrap(),
-    ]);
-    eprintln!("{out}");
-    let field = |key: &str| -> f64 {
-        out.split(key)
-            .next()
-            .unwrap()
-            .split_whitespace()
-            .last()
-            .unwrap()
-            .trim_end_matches(',')
-            .parse()
-            .unwrap()
-    };
-    let compared = field(" commands compared");
-    let identical = field(" identical at");
-    assert!(compared > 200.0, "{out}");
-    // Every tick reproduced to the CSV's resolution (1 µrad): the tlog
-    // stamps each received frame at the daemon's own arrival (whole µs
-    // past its epoch), the `events` column cuts the batches, `t_wake` is
-    // the exact tick time and `solve_us` the stopwatch. (Before the
-    // stamps were shared, 2026-11-26: 232 to 401 of 401, and one flight
-    // in five off by up to 0.6 mrad from a pose sample at the edge of the
-    // multi-rate window.)
-    assert!(
-        identical == compared && field(" ticks where only one side streamed") == 0.0,
-        "own config: {identical} of {compared} identical\n{out}"
-    );
-    let largest: f64 = out
-        .split("largest attitude difference ")
-        .nth(1)
-        .unwrap()
-        .split_whitespace()
-        .next()
-        .unwrap()
-        .parse()
-        .unwrap();
-    assert!(
-        largest <= 0.5e-6 + 1e-12,
-        "own config: largest difference {largest:e} rad\n{out}"
-    );
+    // 3. Replay with the flight's own configuration: every command, to the
+    // CSV's resolution (1 µrad). The tlog stamps each received frame at
+    // the daemon's own arrival (whole µs past its epoch), the `events`
+    // column cuts the batches, `t_wake` is the exact tick time and
+    // `solve_us` the stopwatch. (Before the stamps were shared,
+    // 2026-11-26: 232 to 401 of 401, and one flight in five off by up to
+    // 0.6 mrad from a pose sample at the edge of the multi-rate window.)
+    let compared = assert_replays_exactly(&csv_path, &config, &dir.join("replay.html"));
     let replay_html = std::fs::read_to_string(dir.join("replay.html")).unwrap();
     assert!(
         replay_html.contains("data-name=\"roll, replay with"),
@@ -296,5 +256,67 @@ fn a_flight_reviewed_replayed_and_its_tlog_read_by_the_mavlink_crate() {
     assert!(
         identical_other < 0.2 * compared,
         "τ 0.35: {identical_other} identical\n{out}"
+    );
+}
+
+/// `dflat replay` of `csv` with `config` reproduces every logged command
+/// to the CSV's resolution; returns the commands compared.
+fn assert_replays_exactly(csv: &Path, config: &Path, out_html: &Path) -> f64 {
+    let out = dflat(&[
+        "replay",
+        csv.to_str().unwrap(),
+        "--config",
+        config.to_str().unwrap(),
+        "--out",
+        out_html.to_str().unwrap(),
+    ]);
+    eprintln!("{out}");
+    let field = |key: &str| -> f64 {
+        out.split(key)
+            .next()
+            .unwrap()
+            .split_whitespace()
+            .last()
+            .unwrap()
+            .trim_end_matches(',')
+            .parse()
+            .unwrap()
+    };
+    let compared = field(" commands compared");
+    let identical = field(" identical at");
+    assert!(compared > 200.0, "{out}");
+    assert!(
+        identical == compared && field(" ticks where only one side streamed") == 0.0,
+        "own config: {identical} of {compared} identical\n{out}"
+    );
+    let largest: f64 = out
+        .split("largest attitude difference ")
+        .nth(1)
+        .unwrap()
+        .split_whitespace()
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert!(
+        largest <= 0.5e-6 + 1e-12,
+        "own config: largest difference {largest:e} rad\n{out}"
+    );
+    compared
+}
+
+/// A clock-ticked flight (ticks on the deadline, poses whenever they
+/// arrive, the pose clock mapping every capture time) replays exactly too.
+#[test]
+fn a_clock_ticked_flight_replays_exactly() {
+    let name = "review-replay-clock";
+    let config = CONFIG.replace("tick = \"pose\"", "tick = \"clock\"");
+    assert_ne!(config, CONFIG);
+    let _flight = fly_in_process(name, &config, Duration::from_secs(8));
+    let dir = scratch_dir(name);
+    assert_replays_exactly(
+        &newest(&dir, "csv"),
+        &dir.join(format!("{name}.toml")),
+        &dir.join("replay.html"),
     );
 }
