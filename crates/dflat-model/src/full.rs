@@ -19,7 +19,8 @@
 //! with the ZYX Euler-rate matrix `W = [[cψcθ, −sψ, 0], [sψcθ, cψ, 0],
 //! [−sθ, 0, 1]]` on `[φ̇, θ̇, ψ̇]`: world angular velocity
 //! `ω = W·[φ̇, θ̇, ψ̇] = R·[p, q, r]`. (The paper prints the ZXY matrix; with
-//! its ZYX pitch/roll formulas the ZYX one is correct, see `DESIGN.md`.)
+//! its ZYX pitch/roll formulas the ZYX one is correct: erratum 2 of
+//! `docs/errata.md`.)
 //! `W` is singular at cos θ = 0; see [`crate::attitude::euler_rates`].
 //!
 //! ## Flatness maps
