@@ -263,7 +263,20 @@ async fn streams_at_50_hz_stops_on_stale_pose_and_resumes() {
     assert!(summary.time_in_state_s.failsafe > 0.3);
     assert_eq!(summary.final_state, FlightState::Holding);
     assert_eq!(summary.link_stats.inbound_errors(), 0);
-    assert!(summary.link_stats.sent.set_attitude_target >= summary.commands - 1);
+    // Every command the ticks produced was sent, or replaced in the send
+    // task's slot by a newer one before it went out (a late link task
+    // under load), or dropped there as stale; one may still sit in the
+    // slot at shutdown.
+    let lg = &summary.link_guard;
+    let sent = summary.link_stats.sent.set_attitude_target;
+    let accounted = sent + lg.commands_replaced + lg.commands_stale;
+    assert!(
+        accounted + 1 >= summary.commands && sent <= summary.commands,
+        "commands {}: sent {sent}, replaced {}, stale {}",
+        summary.commands,
+        lg.commands_replaced,
+        lg.commands_stale
+    );
     assert!(summary.latency_us.samples > 0);
     let csv = summary.csv.as_ref().unwrap();
     assert_eq!((csv.rows, csv.dropped), (summary.ticks, 0));
