@@ -38,7 +38,7 @@
 //! or, while the multipliers are far off, below σ·(0.1·residual)², the
 //! change the next update makes (inexact inner solves). The solve stops
 //! when the constraint residual (the multipliers' change in the update,
-//! over σ) is below 1e-8 of the bounds' scale and what the residuals can
+//! over σ) is below 1e-8 of the bounds' scale (hard rows 1e-9) and what the residuals can
 //! cost, `Σ‖y_f‖·residual_f`, is below 3e-9 of the objective's scale (a
 //! stage strictly inside its set where the optimum is on its boundary
 //! costs ‖y_f‖ per m/s²: with many active stages the residual test alone
@@ -88,6 +88,13 @@ const REUSE_DECREMENT: f64 = 1e-7;
 const LOCAL_STOP: f64 = 1e-11;
 /// Relative tolerance of the constraint residual.
 const PRIMAL_TOLERANCE: f64 = 1e-8;
+/// Relative tolerance of the residual of hard rows, a tenth of the
+/// stages' (soft rows: the stages' over their penalty ρ): a
+/// tilt-rate row's interval can sit within 0.01 m/s² of zero, and a plan
+/// keeps it when it is within 1e-6 of its bound plus 1e-9 m/s²
+/// (`TiltRate::violated_by`); at 1e-8 of the bounds' scale a draw broke
+/// one by 1.5e-8 m/s².
+const ROW_TOLERANCE: f64 = 1e-9;
 /// Tolerance of the residuals' cost (`residual_cost`) relative to the
 /// objective's scale `|c|·|x|`: with many active stages and large
 /// multipliers the residual tolerance alone left the cost 1e-7 above the
@@ -477,7 +484,11 @@ impl BandedAlm {
             .iter()
             .filter(|r| r.is_finite())
             .fold(1.0f64, |a, b| a.max(*b));
-        let row_tol = PRIMAL_TOLERANCE * b_scale / rho;
+        let row_tol = if self.row_penalty.iter().all(|r| r.is_infinite()) {
+            ROW_TOLERANCE * b_scale
+        } else {
+            PRIMAL_TOLERANCE * b_scale / rho
+        };
         self.newton_steps = 0;
         let mut previous_res = f64::INFINITY;
         for _outer in 0..MAX_OUTER {
