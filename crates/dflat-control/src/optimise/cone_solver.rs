@@ -4,8 +4,9 @@
 //! interior point of [`super::cone_qp`] as its fallback.
 
 use super::alm::{AlmTuning, BandedAlm, RowBlock, StageSet};
+use super::banded_ip::AxisCost;
 use super::bounds::Row;
-use super::cone_qp::{ConeAxis, ConeQp, STAGE, a_at, p_at};
+use super::cone_qp::{ConeQp, STAGE, a_at, p_at};
 use super::smoothness::{accel_block, sent_linear_term};
 use super::{
     AxisProblem, ConeBounds, FastBandedSolver, Smoothness, baseline, check_lengths, shifted_plan,
@@ -112,7 +113,7 @@ impl BandedConeSolver {
             return Err(super::invalid("cone solver", "at least one method"));
         }
         let n = horizon - 2;
-        let axes = weights.map(|w| ConeAxis {
+        let axes = weights.map(|w| AxisCost {
             q: w.q,
             accel: accel_block(n, w.r, dt, &w.smoothness),
         });

@@ -100,6 +100,7 @@
 
 pub mod alm;
 pub mod banded;
+pub mod banded_ip;
 pub mod bounds;
 pub mod box_alm;
 pub mod cascade;
