@@ -11,14 +11,14 @@
 //! smoothness term with ã_{f−2} (12), the cone ã_x with ã_y (1): the KKT
 //! matrix has half-bandwidth 8 (12 with smoothness) over 6n rows.
 //!
-//! The cone is a disc per stage ([`Discs`]), the speed rows are soft
-//! interval rows (or hard, with an infinite penalty; [`Intervals`]).
+//! The cone is a disc per stage, the speed rows are soft interval rows
+//! (or hard, with an infinite penalty).
 //!
 //! Always started cold: the warm path of
 //! [`BandedConeSolver`](super::BandedConeSolver) is the
 //! augmented Lagrangian ([`super::alm`]), this its fallback.
 
-use super::banded_ip::{AxisCost, BandedIp, Discs, Intervals, Stages};
+use super::banded_ip::{AxisCost, BandedIp, Stages};
 use super::bounds::{Row, check_row_data};
 use crate::ControlError;
 
@@ -41,7 +41,8 @@ pub(super) fn p_at(axis: usize, f: usize) -> usize {
 /// The two-axis cone QP's interior-point solver (module docs).
 #[derive(Debug, Clone)]
 pub struct ConeQp {
-    ip: BandedIp,
+    /// The interior point (its iterate, radius and start are set on it).
+    pub(super) ip: BandedIp,
 }
 
 impl ConeQp {
@@ -65,44 +66,18 @@ impl ConeQp {
             n,
             dt,
             &axes,
-            Intervals::new(rows, speed_penalty),
-            Discs::new(STAGES, n, limit),
+            rows,
+            speed_penalty,
+            Some(limit),
             MAX_ITERATIONS,
         );
         Self { ip }
     }
 
-    /// Iterations of the last solve (converged or not).
-    pub fn iterations(&self) -> usize {
-        self.ip.iterations()
-    }
-
-    /// Number of speed rows (n per axis, or none).
-    pub fn rows(&self) -> usize {
-        self.ip.intervals.len()
-    }
-
-    /// The deviation `p_{axis, f}` of the current iterate.
-    pub fn p(&self, axis: usize, f: usize) -> f64 {
-        self.ip.p(axis, f)
-    }
-
-    /// Sets the primal start from `p` (per axis, length n): ã from the
-    /// equality, λ = 0.
-    pub fn set_start(&mut self, p: [&[f64]; 2], dt: f64) {
-        self.ip.set_start(&p, dt);
-    }
-
-    /// Sets the cone's radius per stage A_f [m/s²] (n entries, finite and
-    /// > 0) for the next solves.
-    pub fn set_radius(&mut self, radius: &[f64]) -> Result<(), ControlError> {
-        self.ip.discs.set_radius(radius)
-    }
-
     /// Solves for the linear term `c` (full KKT length: on p and ã; zero on
     /// λ), relative fixed accelerations `a0` [m/s²] (u = ã + a0) and speed
     /// row bounds `lo ≤ g·x ≤ hi`. The primal start must be set
-    /// ([`ConeQp::set_start`]); slacks and multipliers start cold. Returns
+    /// ([`BandedIp::set_start`]); slacks and multipliers start cold. Returns
     /// the iterations.
     pub fn solve(
         &mut self,
@@ -111,7 +86,7 @@ impl ConeQp {
         lo: &[f64],
         hi: &[f64],
     ) -> Result<usize, ControlError> {
-        let m = self.rows();
+        let m = self.ip.rows();
         check_row_data(
             "cone QP",
             c.len() == STAGE * self.ip.n() && lo.len() == m && hi.len() == m,
@@ -121,8 +96,7 @@ impl ConeQp {
             hi,
         )?;
         self.ip.linear_mut().copy_from_slice(c);
-        self.ip.discs.set_origin(a0);
-        self.ip.intervals.set_bounds(lo, hi);
+        self.ip.set_bounds(lo, hi, a0);
         self.ip.solve()
     }
 }

@@ -146,7 +146,7 @@ impl BandedConeSolver {
                 AlmTuning::default(),
             )
         });
-        let m = qp.rows();
+        let m = qp.ip.rows();
         Ok(Self {
             horizon,
             dt,
@@ -211,7 +211,7 @@ impl BandedConeSolver {
             alm.set_radius(radius)?;
         }
         if let Some(qp) = &mut self.qp {
-            qp.set_radius(radius)?;
+            qp.ip.set_radius(radius)?;
         }
         self.radius.copy_from_slice(radius);
         Ok(())
@@ -347,12 +347,12 @@ impl BandedConeSolver {
         if solved.is_none()
             && let Some(qp) = &mut self.qp
         {
-            qp.set_start([&self.p[0], &self.p[1]], dt);
+            qp.ip.set_start(&[&self.p[0], &self.p[1]], dt);
             match qp.solve(&self.c, a0, &self.lo, &self.hi) {
                 Ok(_) => solved = Some(ConeMethod::InteriorPoint),
                 Err(e) => error = Some(e),
             }
-            self.iterations += qp.iterations();
+            self.iterations += qp.ip.iterations();
         }
         let Some(method) = solved else {
             return Err(error
@@ -361,7 +361,7 @@ impl BandedConeSolver {
         self.method = method;
         let solution = |i: usize, f: usize| match method {
             ConeMethod::Alm => self.alm.as_ref().map_or(f64::NAN, |a| a.p(i, f)),
-            ConeMethod::InteriorPoint => self.qp.as_ref().map_or(f64::NAN, |q| q.p(i, f)),
+            ConeMethod::InteriorPoint => self.qp.as_ref().map_or(f64::NAN, |q| q.ip.p(i, f)),
         };
         for (i, fx) in fixed.into_iter().enumerate() {
             let prev = &mut self.previous[i];

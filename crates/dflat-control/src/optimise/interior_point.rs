@@ -3,7 +3,7 @@
 //! (one axis: stage `[λ_f, ã_f, p_f]`), and
 //! [`BandedInteriorPointSolver`], the box's member of the cascade.
 //!
-//! Bound rows ([`Intervals`], all hard): the acceleration bounds act on
+//! Bound rows (all hard): the acceleration bounds act on
 //! single ã entries, the speed bounds on two p entries, the tilt-rate
 //! rows on three ã entries ([`Row::tilt_rate`]). The KKT matrix has
 //! half-bandwidth 4 (λ_f reaches back to p_{f−2}), 6 with the smoothness
@@ -11,7 +11,7 @@
 //!
 //! All storage is allocated in [`StageQp::new`].
 
-use super::banded_ip::{AxisCost, BandedIp, Discs, Intervals, Stages};
+use super::banded_ip::{AxisCost, BandedIp, Stages};
 use super::bounds::{Row, check_row_data};
 use super::smoothness::{accel_block, sent_linear_term};
 use super::{AxisBounds, AxisProblem, FastBandedSolver, Smoothness, baseline};
@@ -85,8 +85,9 @@ impl StageQp {
             n,
             dt,
             &[&cost],
-            Intervals::new(rows, None),
-            Discs::none(),
+            rows,
+            None,
+            None,
             max_iterations,
         );
         Self { ip, dt }
@@ -94,13 +95,13 @@ impl StageQp {
 
     /// Number of bound rows.
     pub fn rows(&self) -> usize {
-        self.ip.intervals.len()
+        self.ip.rows()
     }
 
     /// The rows' multipliers `[upper, lower]` of the last iterate (≥ 0;
     /// the Lagrangian's `z_u·(g·x − hi) + z_l·(lo − g·x)`), in row order.
     pub fn duals(&self, out: &mut [[f64; 2]]) {
-        self.ip.intervals.duals(out);
+        self.ip.duals(out);
     }
 
     /// Solves for the linear terms `c_p` (on p, length n) and `c_a0` (on
@@ -131,7 +132,7 @@ impl StageQp {
         }
         c[a_at(0)] = c_a0;
         self.ip.set_start(&[p], self.dt);
-        self.ip.intervals.set_bounds(lo, hi);
+        self.ip.set_bounds(lo, hi, [0.0; 2]);
         let iterations = self.ip.solve()?;
         for (f, pf) in p.iter_mut().enumerate() {
             *pf = self.ip.p(0, f);

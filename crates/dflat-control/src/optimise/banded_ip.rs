@@ -30,15 +30,15 @@
 //! refinement step against the unregularised matrix changed no digit of
 //! the first planned jerk and cost a third of the time, so there is none).
 //!
-//! # Inequality families ([`Constraints`])
+//! # Inequality families (data of [`BandedIp`])
 //!
-//! * [`Intervals`]: rows `lo ≤ g·x ≤ hi` (a few entries each, [`Row`]),
+//! * Interval rows `lo ≤ g·x ≤ hi` (a few entries each, [`Row`]),
 //!   one slack and multiplier per side, adding `(z_u/s_u + z_l/s_l)·ggᵀ`.
 //!   A soft side `h·x ≤ b + σ` (σ ≥ 0, exact penalty ρσ; slack s,
 //!   multipliers z of the row and w of σ ≥ 0) is eliminated in closed
 //!   form: it adds `d·hhᵀ` with `d = (z/s)(w/σ)/(z/s + w/σ)` — the hard
 //!   row's `z/s` in series with the penalty's `w/σ`.
-//! * [`Discs`]: per stage the disc `c_f = ½(‖u_f‖² − A_f²) ≤ 0`,
+//! * Discs: per stage the disc `c_f = ½(‖u_f‖² − A_f²) ≤ 0`,
 //!   `u_f = ã_f + a_0` on the two axes' accelerations, with slack s_f and
 //!   multiplier z_f, adding `z_f·I + (z_f/s_f)·u_f·u_fᵀ` to the (ã_x, ã_y)
 //!   block of stage f: 2×2, inside the band.
@@ -59,14 +59,11 @@
 //!
 //! All storage is allocated in [`BandedIp::new`].
 
-mod discs;
-mod intervals;
+use super::banded::SymBand;
+use super::bounds::Row;
+use crate::ControlError;
 
 pub use super::banded::BandedLdl;
-use super::banded::SymBand;
-use crate::ControlError;
-pub use discs::Discs;
-pub use intervals::Intervals;
 
 /// Iterations without a better iterate after which the best one is taken.
 const STALL_ITERATIONS: usize = 4;
@@ -123,72 +120,39 @@ pub struct AxisCost {
     pub accel: Vec<[f64; 3]>,
 }
 
-/// The complementarity target of a Newton step: `s·z` (the affine
-/// predictor) or `s·z + Δs·Δz − σμ` (the corrector, with the predictor's
-/// steps).
-#[derive(Debug, Clone, Copy)]
-pub enum Centring {
-    /// The predictor.
-    Affine,
-    /// The corrector with target σμ.
-    Corrector(f64),
+/// One stage's disc: slack, multiplier, residual `c + s`, steps, and
+/// `u = ã + a_0` at the current iterate.
+#[derive(Debug, Clone, Copy, Default)]
+struct Disc {
+    s: f64,
+    z: f64,
+    r: f64,
+    ds: f64,
+    dz: f64,
+    u: [f64; 2],
 }
 
-impl Centring {
-    /// The complementarity residual of a pair `(s, z)` whose predictor
-    /// steps multiply to `dsdz`.
-    fn rc(self, s: f64, z: f64, dsdz: f64) -> f64 {
-        match self {
-            Self::Affine => s * z,
-            Self::Corrector(target) => s * z + dsdz - target,
-        }
-    }
-}
-
-/// `limit` shortened to the step that keeps `v + α·dv` ≥ 0.
-fn limit(alpha: &mut f64, v: f64, dv: f64) {
-    if dv < 0.0 {
-        *alpha = alpha.min(-v / dv);
-    }
-}
-
-/// A family of inequality constraints of [`BandedIp`]: its slacks and
-/// multipliers, their residuals, and their Newton elimination into the
-/// KKT system.
-pub trait Constraints {
-    /// Its complementarity pairs (μ is the gap over all pairs).
-    fn pairs(&self) -> usize;
-    /// Cold-start slacks and multipliers for the primal iterate `v`.
-    fn start(&mut self, v: &[f64]);
-    /// At the iterate `v`: adds its multipliers' term to the dual residual
-    /// `r` and its complementarity to `gap`, and stores its primal
-    /// residuals. Returns its merit: its largest residual over its
-    /// tolerance.
-    fn residuals(&mut self, v: &[f64], r: &mut [f64], gap: &mut f64) -> f64;
-    /// Adds its barrier terms to the KKT matrix.
-    fn assemble(&self, kkt: &mut SymBand);
-    /// Adds its eliminated part of the Newton right-hand side for the
-    /// complementarity target `rc`.
-    fn eliminate(&mut self, rc: Centring, rhs: &mut [f64]);
-    /// Its slack and multiplier steps from the primal step `dv`.
-    fn recover(&mut self, dv: &[f64], rc: Centring);
-    /// Shortens `alpha` to the step to its boundary.
-    fn limit(&self, alpha: &mut f64);
-    /// Adds its complementarity after a step `alpha` to `gap`.
-    fn gap_after(&self, alpha: f64, gap: &mut f64);
-    /// Takes the step `alpha`.
-    fn step(&mut self, alpha: f64);
-}
-
-/// The families of [`BandedIp`], in the order they are visited: discs
-/// first.
-fn families<'a>(discs: &'a mut Discs, rows: &'a mut Intervals) -> [&'a mut dyn Constraints; 2] {
-    [discs, rows]
+/// One side `h·x − σ + s = b` of a row (σ = 0, w unused when hard).
+#[derive(Debug, Clone, Copy, Default)]
+struct Side {
+    s: f64,
+    z: f64,
+    sig: f64,
+    w: f64,
+    /// Primal residual `h·x − σ + s − b`.
+    r: f64,
+    ds: f64,
+    dz: f64,
+    dsig: f64,
+    dw: f64,
+    /// Newton elimination: `Δz = k0 + d·hΔx`, `Δσ = (e0 + d1·hΔx)/S`.
+    k0: f64,
+    e0: f64,
 }
 
 /// The banded primal-dual interior point (module docs): the KKT system of
-/// the cost and equality rows of [`Stages`], and two constraint families,
-/// [`Intervals`] and [`Discs`] (either may be empty).
+/// the cost and equality rows of [`Stages`], interval rows and per-stage
+/// discs (either may be absent).
 #[derive(Debug, Clone)]
 pub struct BandedIp {
     /// Name in its errors.
@@ -201,10 +165,18 @@ pub struct BandedIp {
     base: SymBand,
     kkt: SymBand,
     ldl: BandedLdl,
-    /// The interval rows.
-    pub(in crate::optimise) intervals: Intervals,
-    /// The per-stage discs.
-    pub(in crate::optimise) discs: Discs,
+    /// Disc radius per stage A_f [m/s²] (empty: no discs), the discs, and
+    /// the fixed accelerations a_0 [m/s²] (u = ã + a_0).
+    radius: Vec<f64>,
+    discs: Vec<Disc>,
+    a0: [f64; 2],
+    rows: Vec<Row>,
+    /// `[upper, lower]` per row; upper `g·x ≤ hi`, lower `−g·x ≤ −lo`.
+    sides: Vec<[Side; 2]>,
+    lo: Vec<f64>,
+    hi: Vec<f64>,
+    /// The exact penalty ρ of soft rows (`None`: hard).
+    soft: Option<f64>,
     /// Iterate, linear term, residual, step, right-hand side, best
     /// iterate.
     v: Vec<f64>,
@@ -219,15 +191,19 @@ pub struct BandedIp {
 
 impl BandedIp {
     /// The interior point `name` (its errors say it) for n ≥ 1 stages of
-    /// `costs.len()` axes at step δt, with the constraint families, at
-    /// most `max_iterations` iterations.
+    /// `costs.len()` axes at step δt: the bound `rows`, soft with the
+    /// exact penalty ρ when `penalty` is finite, and discs of radius
+    /// `disc` on the first two axes' accelerations; at most
+    /// `max_iterations` iterations.
+    #[allow(clippy::too_many_arguments)]
     pub(in crate::optimise) fn new(
         name: &'static str,
         n: usize,
         dt: f64,
         costs: &[&AxisCost],
-        intervals: Intervals,
-        discs: Discs,
+        rows: Vec<Row>,
+        penalty: Option<f64>,
+        disc: Option<f64>,
         max_iterations: usize,
     ) -> Self {
         let stages = Stages { axes: costs.len() };
@@ -235,14 +211,10 @@ impl BandedIp {
         let smooth = costs.iter().any(|a| a.accel.iter().any(|c| c[2] != 0.0));
         let bandwidth = (4 * stages.axes)
             .max(if smooth { 6 * stages.axes } else { 0 })
-            .max(intervals.span());
+            .max(rows.iter().map(Row::span).max().unwrap_or(0));
         let mut base = SymBand::zeros(size, bandwidth);
         let inv_dt2 = 1.0 / (dt * dt);
-        let (l_at, a_at, p_at) = (
-            |i, f| stages.lambda(i, f),
-            |i, f| stages.accel(i, f),
-            |i, f| stages.output(i, f),
-        );
+        let (a_at, p_at) = (|i, f| stages.accel(i, f), |i, f| stages.output(i, f));
         for (i, ax) in costs.iter().enumerate() {
             for (f, &[d0, d1, d2]) in ax.accel.iter().enumerate().take(n) {
                 base.add(p_at(i, f), p_at(i, f), 2.0 * ax.q);
@@ -254,16 +226,15 @@ impl BandedIp {
                     base.add(a_at(i, f - 2), a_at(i, f), d2);
                 }
                 // Δ²p_f/δt² − ã_f = 0 (p before the horizon is 0).
-                base.add(l_at(i, f), p_at(i, f), inv_dt2);
-                if f >= 1 {
-                    base.add(l_at(i, f), p_at(i, f - 1), -2.0 * inv_dt2);
+                let l = stages.lambda(i, f);
+                for (back, w) in [1.0, -2.0, 1.0].into_iter().enumerate().take(f + 1) {
+                    base.add(l, p_at(i, f - back), w * inv_dt2);
                 }
-                if f >= 2 {
-                    base.add(l_at(i, f), p_at(i, f - 2), inv_dt2);
-                }
-                base.add(l_at(i, f), a_at(i, f), -1.0);
+                base.add(l, a_at(i, f), -1.0);
             }
         }
+        let m = rows.len();
+        let discs = if disc.is_some() { n } else { 0 };
         Self {
             name,
             stages,
@@ -272,8 +243,14 @@ impl BandedIp {
             kkt: base.clone(),
             base,
             ldl: BandedLdl::new(size, bandwidth),
-            intervals,
-            discs,
+            radius: vec![disc.unwrap_or(0.0); discs],
+            discs: vec![Disc::default(); discs],
+            a0: [0.0; 2],
+            rows,
+            sides: vec![[Side::default(); 2]; m],
+            lo: vec![0.0; m],
+            hi: vec![0.0; m],
+            soft: penalty.filter(|p| p.is_finite()),
             v: vec![0.0; size],
             c: vec![0.0; size],
             r: vec![0.0; size],
@@ -284,25 +261,25 @@ impl BandedIp {
         }
     }
 
-    /// The stage order of its KKT vector.
-    pub fn stages(&self) -> Stages {
-        self.stages
-    }
-
     /// Iterations of the last solve (converged or not).
     pub fn iterations(&self) -> usize {
         self.iterations
+    }
+
+    /// Stages n (free outputs per axis).
+    pub fn n(&self) -> usize {
+        self.n
+    }
+
+    /// Number of bound rows.
+    pub fn rows(&self) -> usize {
+        self.rows.len()
     }
 
     /// The deviation `p_{axis, f}` of the current iterate (the solution
     /// after a successful solve).
     pub fn p(&self, axis: usize, f: usize) -> f64 {
         self.v[self.stages.output(axis, f)]
-    }
-
-    /// Stages n (free outputs per axis).
-    pub fn n(&self) -> usize {
-        self.n
     }
 
     /// The current iterate (KKT order).
@@ -314,6 +291,14 @@ impl BandedIp {
     /// before a solve.
     pub fn linear_mut(&mut self) -> &mut [f64] {
         &mut self.c
+    }
+
+    /// The rows' multipliers `[upper, lower]` of the last iterate (≥ 0;
+    /// the Lagrangian's `z_u·(g·x − hi) + z_l·(lo − g·x)`), in row order.
+    pub fn duals(&self, out: &mut [[f64; 2]]) {
+        for (o, [up, low]) in out.iter_mut().zip(&self.sides) {
+            *o = [up.z, low.z];
+        }
     }
 
     /// Sets the primal start from `p` (per axis, length n): ã from the
@@ -332,36 +317,104 @@ impl BandedIp {
         }
     }
 
-    /// Solves from the primal start ([`BandedIp::set_start`]), the linear
-    /// term ([`BandedIp::linear_mut`]) and the families' data; slacks and
-    /// multipliers start cold. On success the iterate is the solution and
-    /// the result its iteration; [`ControlError::Solver`] when it does not
-    /// converge.
-    pub fn solve(&mut self) -> Result<usize, ControlError> {
-        let c_scale = 1.0 + norm(&self.c);
-        let v = &self.v;
-        let mut pairs = 0;
-        for family in families(&mut self.discs, &mut self.intervals) {
-            family.start(v);
-            pairs += family.pairs();
+    /// Sets the discs' radius per stage A_f [m/s²] (n entries, finite and
+    /// > 0) for the next solves.
+    pub fn set_radius(&mut self, radius: &[f64]) -> Result<(), ControlError> {
+        super::cone::check_radius(radius, self.radius.len())?;
+        self.radius.copy_from_slice(radius);
+        Ok(())
+    }
+
+    /// Sets the rows' bounds (one pair per row, checked by the caller)
+    /// and the discs' fixed accelerations a_0 [m/s²] for the next solve.
+    pub fn set_bounds(&mut self, lo: &[f64], hi: &[f64], a0: [f64; 2]) {
+        self.lo.copy_from_slice(lo);
+        self.hi.copy_from_slice(hi);
+        self.a0 = a0;
+    }
+
+    /// Cold-start slacks and multipliers for the current primal iterate.
+    fn cold_duals(&mut self, b_scale: f64) {
+        for (c, r) in self.discs.iter_mut().zip(&self.radius) {
+            let a2 = 0.5 * r * r;
+            c.s = a2;
+            c.z = 1.0 / a2;
         }
-        let pairs = pairs.max(1) as f64;
+        for (k, (row, side)) in self.rows.iter().zip(self.sides.iter_mut()).enumerate() {
+            let g = row.dot(&self.v);
+            let floor = (0.1 * (self.hi[k] - self.lo[k])).max(1e-3 * b_scale);
+            for (j, sd) in side.iter_mut().enumerate() {
+                // Distance to the bound along this side's direction.
+                let room = if j == 0 {
+                    self.hi[k] - g
+                } else {
+                    g - self.lo[k]
+                };
+                *sd = Side {
+                    s: room.max(floor),
+                    z: 1.0,
+                    ..Side::default()
+                };
+                if let Some(rho) = self.soft {
+                    sd.w = (rho - 1.0).max(1.0);
+                    sd.sig = (-room).max(0.0) + floor / sd.w;
+                }
+            }
+        }
+    }
+
+    /// Solves from the primal start ([`BandedIp::set_start`]), the linear
+    /// term ([`BandedIp::linear_mut`]) and the bounds
+    /// ([`BandedIp::set_bounds`]); slacks and multipliers start cold. On
+    /// success the iterate is the solution and the result its iteration;
+    /// [`ControlError::Solver`] when it does not converge.
+    pub fn solve(&mut self) -> Result<usize, ControlError> {
         let (s, n) = (self.stages, self.n);
+        let c_scale = 1.0 + norm(&self.c);
+        let b_scale = 1.0 + norm(&self.lo).max(norm(&self.hi));
+        let cone_scale = 1.0 + self.radius.iter().fold(0.0f64, |a, r| a.max(r * r));
+        let soft = self.soft.is_some();
+        let rho = self.soft.unwrap_or(0.0);
+        self.cold_duals(b_scale);
+        let pairs = (self.discs.len() + self.rows.len() * if soft { 4 } else { 2 }).max(1) as f64;
 
         // (lowest merit, its iteration); the iterate is in `best`.
         let mut best = (f64::INFINITY, 0usize);
         for iteration in 0..self.max_iterations {
             self.iterations = iteration;
-            // r = M·v + c + the families' terms: the dual residual on p, ã;
-            // the equality residual A·x on λ.
+            // r = M·v + c + Σ z_f·u_f + Σ hᵀz: the dual residual on p, ã;
+            // the equality residual A·x on λ. Then the primal residuals.
             self.base.mul_vec(&self.v, &mut self.r);
             for (r, c) in self.r.iter_mut().zip(&self.c) {
                 *r += c;
             }
             let mut gap = 0.0;
-            let mut primal: f64 = 0.0;
-            for family in families(&mut self.discs, &mut self.intervals) {
-                primal = primal.max(family.residuals(&self.v, &mut self.r, &mut gap));
+            let mut rp_cone: f64 = 0.0;
+            for (f, cs) in self.discs.iter_mut().enumerate() {
+                let (ix, iy) = (s.accel(0, f), s.accel(1, f));
+                cs.u = [self.v[ix] + self.a0[0], self.v[iy] + self.a0[1]];
+                let a2 = self.radius[f] * self.radius[f];
+                cs.r = 0.5 * (cs.u[0] * cs.u[0] + cs.u[1] * cs.u[1] - a2) + cs.s;
+                rp_cone = rp_cone.max(cs.r.abs());
+                self.r[ix] += cs.z * cs.u[0];
+                self.r[iy] += cs.z * cs.u[1];
+                gap += cs.s * cs.z;
+            }
+            let (mut rp, mut rsig): (f64, f64) = (0.0, 0.0);
+            for (k, (row, side)) in self.rows.iter().zip(self.sides.iter_mut()).enumerate() {
+                let g = row.dot(&self.v);
+                let [up, low] = side;
+                row.axpy(up.z - low.z, &mut self.r);
+                up.r = g - up.sig + up.s - self.hi[k];
+                low.r = -g - low.sig + low.s + self.lo[k];
+                rp = rp.max(up.r.abs()).max(low.r.abs());
+                gap += up.s * up.z + low.s * low.z;
+                if soft {
+                    gap += up.sig * up.w + low.sig * low.w;
+                    rsig = rsig
+                        .max((rho - up.z - up.w).abs())
+                        .max((rho - low.z - low.w).abs());
+                }
             }
             let (mut rd, mut req, mut a_max): (f64, f64, f64) = (0.0, 0.0, 0.0);
             for f in 0..n {
@@ -386,13 +439,15 @@ impl BandedIp {
                         .sum::<f64>()
                 })
                 .sum();
-            if !(gap.is_finite() && rd.is_finite() && req.is_finite() && primal.is_finite()) {
+            if !(gap.is_finite() && rd.is_finite() && req.is_finite() && rp_cone.is_finite()) {
                 return Err(self.error("non-finite iterate"));
             }
             // Each residual over its tolerance; converged at ≤ 1.
             let merit = (rd / (1e-8 * c_scale))
+                .max(rsig / (1e-8 * (1.0 + rho)))
                 .max(req / (TOLERANCE * (1.0 + a_max)))
-                .max(primal)
+                .max(rp / (TOLERANCE * b_scale))
+                .max(rp_cone / (TOLERANCE * cone_scale))
                 .max(gap / (1e-9 * (1.0 + objective.abs())));
             if merit < best.0 {
                 best = (merit, iteration);
@@ -410,17 +465,28 @@ impl BandedIp {
             }
             let mu = gap / pairs;
 
-            // K = M + the families' barrier terms ± ε.
+            // K = M + the discs' 2×2 blocks + Σ d·hhᵀ ± ε.
             self.kkt.clone_from(&self.base);
-            self.discs.assemble(&mut self.kkt);
-            self.intervals.assemble(&mut self.kkt);
-            for f in 0..n {
-                for i in 0..s.axes {
-                    self.kkt.add(s.output(i, f), s.output(i, f), REGULARISATION);
-                    self.kkt.add(s.accel(i, f), s.accel(i, f), REGULARISATION);
-                    self.kkt
-                        .add(s.lambda(i, f), s.lambda(i, f), -REGULARISATION);
+            for (f, cs) in self.discs.iter().enumerate() {
+                let d = cs.z / cs.s;
+                let [ux, uy] = cs.u;
+                let (ix, iy) = (s.accel(0, f), s.accel(1, f));
+                self.kkt.add(ix, ix, cs.z + d * ux * ux);
+                self.kkt.add(iy, iy, cs.z + d * uy * uy);
+                self.kkt.add(iy, ix, d * ux * uy);
+            }
+            for (row, side) in self.rows.iter().zip(&self.sides) {
+                let d: f64 = side.iter().map(|sd| Self::side_weight(sd, soft)).sum();
+                for a in 0..row.len {
+                    for b in 0..=a {
+                        self.kkt
+                            .add(row.idx[a], row.idx[b], d * row.coef[a] * row.coef[b]);
+                    }
                 }
+            }
+            for k in 0..s.width() * n {
+                let sign = if k % s.width() < s.axes { -1.0 } else { 1.0 };
+                self.kkt.add(k, k, sign * REGULARISATION);
             }
             if self.ldl.factor(&self.kkt).is_err() {
                 // The end game's barrier terms (z/s up to ~1e20) can make
@@ -434,20 +500,41 @@ impl BandedIp {
             }
 
             // Predictor (affine), then Mehrotra's corrector.
-            self.direction(Centring::Affine);
+            self.direction(rho, soft, |s, z, _| s * z);
             let alpha = self.step_length();
             let mut gap_aff = 0.0;
-            for family in families(&mut self.discs, &mut self.intervals) {
-                family.gap_after(alpha, &mut gap_aff);
+            for cs in &self.discs {
+                gap_aff += (cs.s + alpha * cs.ds) * (cs.z + alpha * cs.dz);
+            }
+            let after = |sd: &Side| {
+                let hard = (sd.s + alpha * sd.ds) * (sd.z + alpha * sd.dz);
+                if soft {
+                    hard + (sd.sig + alpha * sd.dsig) * (sd.w + alpha * sd.dw)
+                } else {
+                    hard
+                }
+            };
+            for [up, low] in &self.sides {
+                gap_aff += after(up) + after(low);
             }
             let sigma = (gap_aff / gap).clamp(0.0, 1.0).powi(3);
-            self.direction(Centring::Corrector(sigma * mu));
+            let target = sigma * mu;
+            self.direction(rho, soft, |s, z, dsdz| s * z + dsdz - target);
             let alpha = (STEP_FRACTION * self.step_length()).min(1.0);
             for (v, dv) in self.v.iter_mut().zip(&self.dv) {
                 *v += alpha * dv;
             }
-            for family in families(&mut self.discs, &mut self.intervals) {
-                family.step(alpha);
+            for cs in &mut self.discs {
+                cs.s += alpha * cs.ds;
+                cs.z += alpha * cs.dz;
+            }
+            for sd in self.sides.iter_mut().flatten() {
+                sd.s += alpha * sd.ds;
+                sd.z += alpha * sd.dz;
+                if soft {
+                    sd.sig += alpha * sd.dsig;
+                    sd.w += alpha * sd.dw;
+                }
             }
         }
         Err(self.error(&format!("no convergence (best merit {:.1e})", best.0)))
@@ -458,26 +545,93 @@ impl BandedIp {
         ControlError::Solver(format!("{}: {what}", self.name))
     }
 
-    /// The Newton step for the complementarity target `rc`.
-    fn direction(&mut self, rc: Centring) {
-        for (o, r) in self.rhs.iter_mut().zip(&self.r) {
-            *o = -r;
-        }
-        for family in families(&mut self.discs, &mut self.intervals) {
-            family.eliminate(rc, &mut self.rhs);
-        }
-        self.dv.copy_from_slice(&self.rhs);
-        self.ldl.solve(&mut self.dv);
-        for family in families(&mut self.discs, &mut self.intervals) {
-            family.recover(&self.dv, rc);
+    /// The weight `d` a side adds to `hhᵀ` in the KKT matrix.
+    fn side_weight(sd: &Side, soft: bool) -> f64 {
+        if soft {
+            // z/s in series with w/σ, in the form that stays finite when
+            // either ratio is huge.
+            1.0 / (sd.s / sd.z + sd.sig / sd.w)
+        } else {
+            sd.z / sd.s
         }
     }
 
-    /// The step to the families' boundary (at most 1).
+    /// The Newton step for complementarity targets `rc(s, z, Δs·Δz)` (the
+    /// last argument is the predictor's product, unused by the predictor).
+    fn direction(&mut self, rho: f64, soft: bool, rc: impl Fn(f64, f64, f64) -> f64) {
+        let s = self.stages;
+        for (o, r) in self.rhs.iter_mut().zip(&self.r) {
+            *o = -r;
+        }
+        // Discs: rhs −= u·(z·r − rc)/s on (ã_x, ã_y).
+        for (f, cs) in self.discs.iter().enumerate() {
+            let e = (cs.z * cs.r - rc(cs.s, cs.z, cs.ds * cs.dz)) / cs.s;
+            self.rhs[s.accel(0, f)] -= cs.u[0] * e;
+            self.rhs[s.accel(1, f)] -= cs.u[1] * e;
+        }
+        // Sides: Δz = k0 + d·hΔx, rhs −= hᵀk0 (h = ±g).
+        for (row, side) in self.rows.iter().zip(self.sides.iter_mut()) {
+            for sd in side.iter_mut() {
+                let rcs = rc(sd.s, sd.z, sd.ds * sd.dz);
+                sd.k0 = if soft {
+                    let rcw = rc(sd.sig, sd.w, sd.dsig * sd.dw);
+                    let (d1, d2) = (sd.z / sd.s, sd.w / sd.sig);
+                    let rs = rho - sd.z - sd.w;
+                    sd.e0 = -rs - rcs / sd.s - rcw / sd.sig + d1 * sd.r;
+                    -rcs / sd.s + d1 * sd.r - d1 * sd.e0 / (d1 + d2)
+                } else {
+                    (sd.z * sd.r - rcs) / sd.s
+                };
+            }
+            row.axpy(-(side[0].k0 - side[1].k0), &mut self.rhs);
+        }
+        self.dv.copy_from_slice(&self.rhs);
+        self.ldl.solve(&mut self.dv);
+        for (f, cs) in self.discs.iter_mut().enumerate() {
+            let du = cs.u[0] * self.dv[s.accel(0, f)] + cs.u[1] * self.dv[s.accel(1, f)];
+            let rcs = rc(cs.s, cs.z, cs.ds * cs.dz);
+            cs.ds = -cs.r - du;
+            cs.dz = -(rcs + cs.z * cs.ds) / cs.s;
+        }
+        for (row, side) in self.rows.iter().zip(self.sides.iter_mut()) {
+            let gdx = row.dot(&self.dv);
+            for (j, sd) in side.iter_mut().enumerate() {
+                let hdx = if j == 0 { gdx } else { -gdx };
+                let rcs = rc(sd.s, sd.z, sd.ds * sd.dz);
+                if soft {
+                    let rcw = rc(sd.sig, sd.w, sd.dsig * sd.dw);
+                    let (d1, d2) = (sd.z / sd.s, sd.w / sd.sig);
+                    let dsig = (sd.e0 + d1 * hdx) / (d1 + d2);
+                    sd.ds = -sd.r - hdx + dsig;
+                    sd.dz = -(rcs + sd.z * sd.ds) / sd.s;
+                    sd.dw = -(rcw + sd.w * dsig) / sd.sig;
+                    sd.dsig = dsig;
+                } else {
+                    sd.ds = -sd.r - hdx;
+                    sd.dz = -(rcs + sd.z * sd.ds) / sd.s;
+                }
+            }
+        }
+    }
+
+    /// The step to the boundary of the slacks and multipliers (at most 1).
     fn step_length(&self) -> f64 {
         let mut alpha: f64 = 1.0;
-        self.discs.limit(&mut alpha);
-        self.intervals.limit(&mut alpha);
+        let mut limit = |v: f64, dv: f64| {
+            if dv < 0.0 {
+                alpha = alpha.min(-v / dv);
+            }
+        };
+        for cs in &self.discs {
+            limit(cs.s, cs.ds);
+            limit(cs.z, cs.dz);
+        }
+        for sd in self.sides.iter().flatten() {
+            limit(sd.s, sd.ds);
+            limit(sd.z, sd.dz);
+            limit(sd.sig, sd.dsig);
+            limit(sd.w, sd.dw);
+        }
         alpha
     }
 }
