@@ -32,7 +32,7 @@
 //!
 //! # Inequality families (data of [`BandedIp`])
 //!
-//! * Interval rows `lo ≤ g·x ≤ hi` (a few entries each, [`Row`]),
+//! * Interval rows `lo ≤ g·x ≤ hi` (a few entries each, `Row`),
 //!   one slack and multiplier per side, adding `(z_u/s_u + z_l/s_l)·ggᵀ`.
 //!   A soft side `h·x ≤ b + σ` (σ ≥ 0, exact penalty ρσ; slack s,
 //!   multipliers z of the row and w of σ ≥ 0) is eliminated in closed
@@ -57,7 +57,7 @@
 //! or when the end game's barrier terms make the KKT matrix numerically
 //! singular.
 //!
-//! All storage is allocated in [`BandedIp::new`].
+//! All storage is allocated in `BandedIp::new`.
 
 use super::banded::SymBand;
 use super::bounds::Row;

@@ -5,7 +5,7 @@
 //!
 //! Bound rows (all hard): the acceleration bounds act on
 //! single ã entries, the speed bounds on two p entries, the tilt-rate
-//! rows on three ã entries ([`Row::tilt_rate`]). The KKT matrix has
+//! rows on three ã entries (`Row::tilt_rate`). The KKT matrix has
 //! half-bandwidth 4 (λ_f reaches back to p_{f−2}), 6 with the smoothness
 //! term or the tilt-rate rows (ã_f with ã_{f−2}).
 //!
