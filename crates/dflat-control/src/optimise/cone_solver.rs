@@ -4,8 +4,9 @@
 //! interior point of [`super::cone_qp`] as its fallback.
 
 use super::alm::{AlmTuning, BandedAlm, RowBlock, StageSet};
+use super::banded_ip::AxisCost;
 use super::bounds::Row;
-use super::cone_qp::{ConeAxis, ConeQp, STAGE, a_at, p_at};
+use super::cone_qp::{ConeQp, STAGE, a_at, p_at};
 use super::smoothness::{accel_block, sent_linear_term};
 use super::{
     AxisProblem, ConeBounds, FastBandedSolver, Smoothness, baseline, check_lengths, shifted_plan,
@@ -112,7 +113,7 @@ impl BandedConeSolver {
             return Err(super::invalid("cone solver", "at least one method"));
         }
         let n = horizon - 2;
-        let axes = weights.map(|w| ConeAxis {
+        let axes = weights.map(|w| AxisCost {
             q: w.q,
             accel: accel_block(n, w.r, dt, &w.smoothness),
         });
@@ -145,7 +146,7 @@ impl BandedConeSolver {
                 AlmTuning::default(),
             )
         });
-        let m = qp.rows();
+        let m = qp.ip.rows();
         Ok(Self {
             horizon,
             dt,
@@ -210,7 +211,7 @@ impl BandedConeSolver {
             alm.set_radius(radius)?;
         }
         if let Some(qp) = &mut self.qp {
-            qp.set_radius(radius)?;
+            qp.ip.set_radius(radius)?;
         }
         self.radius.copy_from_slice(radius);
         Ok(())
@@ -346,12 +347,12 @@ impl BandedConeSolver {
         if solved.is_none()
             && let Some(qp) = &mut self.qp
         {
-            qp.set_start([&self.p[0], &self.p[1]], dt);
+            qp.ip.set_start(&[&self.p[0], &self.p[1]], dt);
             match qp.solve(&self.c, a0, &self.lo, &self.hi) {
                 Ok(_) => solved = Some(ConeMethod::InteriorPoint),
                 Err(e) => error = Some(e),
             }
-            self.iterations += qp.iterations();
+            self.iterations += qp.ip.iterations();
         }
         let Some(method) = solved else {
             return Err(error
@@ -360,7 +361,7 @@ impl BandedConeSolver {
         self.method = method;
         let solution = |i: usize, f: usize| match method {
             ConeMethod::Alm => self.alm.as_ref().map_or(f64::NAN, |a| a.p(i, f)),
-            ConeMethod::InteriorPoint => self.qp.as_ref().map_or(f64::NAN, |q| q.p(i, f)),
+            ConeMethod::InteriorPoint => self.qp.as_ref().map_or(f64::NAN, |q| q.ip.p(i, f)),
         };
         for (i, fx) in fixed.into_iter().enumerate() {
             let prev = &mut self.previous[i];

@@ -83,8 +83,13 @@
 //!   constrained families; [`box_alm`] — [`BoxAlmSolver`], one axis's box
 //!   with it; [`cone_solver`] — [`BandedConeSolver`], the pair's cone with
 //!   it (or with the cone's interior point, [`cone_qp`]).
-//! * [`interior_point`] — [`BandedInteriorPointSolver`]: the box by a
-//!   primal-dual interior point on the stage-ordered (banded) KKT system.
+//! * [`banded_ip`] — [`banded_ip::BandedIp`]: the one banded primal-dual
+//!   interior point (Mehrotra's predictor-corrector on the stage-ordered
+//!   KKT system; interval rows, hard or soft, and per-stage discs as
+//!   data), serving two problems: [`interior_point`] —
+//!   [`interior_point::StageQp`], one axis's box, and
+//!   [`BandedInteriorPointSolver`], the box's cascade member; and
+//!   [`cone_qp`] — [`cone_qp::ConeQp`], the pair's cone.
 //! * [`clarabel`], [`clarabel_cone`] — [`ClarabelSolver`],
 //!   [`ClarabelConeSolver`]: the same problems in clarabel, the last
 //!   fallback (and [`KktTuning`]).
@@ -96,10 +101,12 @@
 //!   the jerk and smoothness terms' targets (streams).
 //! * [`tilt_rate`] — [`TiltRate`]: the tilt-rate bound, rows on the
 //!   command's change per tick (the box's solvers).
-//! * [`banded`] — banded symmetric matrices, Cholesky and LDLᵀ factors.
+//! * [`banded`] — banded symmetric matrices, Cholesky and LDLᵀ factors
+//!   ([`banded::BandedLdl`], the interior point's).
 
 pub mod alm;
 pub mod banded;
+pub mod banded_ip;
 pub mod bounds;
 pub mod box_alm;
 pub mod cascade;
