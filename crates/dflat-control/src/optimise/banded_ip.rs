@@ -301,6 +301,21 @@ impl BandedIp {
         }
     }
 
+    /// The discs' multipliers of the last iterate as stage multipliers
+    /// on the accelerations, `z_f·u_f` per stage (`u_f = ã_f + a_0`
+    /// [m/s²], the gradient of `c_f`): the augmented Lagrangian's `y_f`
+    /// at the same optimum. No effect without discs.
+    pub fn disc_duals(&self, out: &mut [[f64; 2]]) {
+        let s = self.stages;
+        for (f, (o, d)) in out.iter_mut().zip(&self.discs).enumerate() {
+            let u = [
+                self.v[s.accel(0, f)] + self.a0[0],
+                self.v[s.accel(1, f)] + self.a0[1],
+            ];
+            *o = [d.z * u[0], d.z * u[1]];
+        }
+    }
+
     /// Sets the primal start from `p` (per axis, length n): ã from the
     /// equality, λ = 0.
     pub fn set_start(&mut self, p: &[&[f64]], dt: f64) {

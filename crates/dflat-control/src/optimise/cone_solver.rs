@@ -47,6 +47,10 @@ pub struct BandedConeSolver {
     alm: Option<BandedAlm>,
     /// ALM linear term (2n, interleaved) and scratch.
     c_alm: Vec<f64>,
+    /// The interior point's disc and row multipliers after it solved: the
+    /// augmented Lagrangian's warm start for the next tick.
+    ip_stage_duals: Vec<[f64; 2]>,
+    ip_row_duals: Vec<[f64; 2]>,
     base: Vec<f64>,
     rhs: Vec<f64>,
     c: Vec<f64>,
@@ -157,6 +161,8 @@ impl BandedConeSolver {
             fast,
             radius: vec![bounds.acceleration; n],
             c_alm: vec![0.0; 2 * n],
+            ip_stage_duals: vec![[0.0; 2]; n],
+            ip_row_duals: vec![[0.0; 2]; m],
             base: vec![0.0; n],
             rhs: vec![0.0; n],
             c: vec![0.0; STAGE * n],
@@ -250,6 +256,12 @@ impl BandedConeSolver {
             }
             self.previous_valid = true;
         }
+    }
+
+    /// The augmented Lagrangian, if this solver runs it (tests).
+    #[cfg(test)]
+    pub(super) fn alm_mut(&mut self) -> Option<&mut BandedAlm> {
+        self.alm.as_mut()
     }
 
     /// Forgets everything carried between ticks (a controller reset).
@@ -349,7 +361,17 @@ impl BandedConeSolver {
         {
             qp.ip.set_start(&[&self.p[0], &self.p[1]], dt);
             match qp.solve(&self.c, a0, &self.lo, &self.hi) {
-                Ok(_) => solved = Some(ConeMethod::InteriorPoint),
+                Ok(_) => {
+                    solved = Some(ConeMethod::InteriorPoint);
+                    // The next tick's augmented Lagrangian starts from its
+                    // multipliers (shifted with the plan), not from zero.
+                    if let Some(alm) = &mut self.alm {
+                        qp.ip.disc_duals(&mut self.ip_stage_duals);
+                        qp.ip.duals(&mut self.ip_row_duals);
+                        let stage = &self.ip_stage_duals;
+                        alm.set_multipliers(|f| stage[f], &self.ip_row_duals);
+                    }
+                }
                 Err(e) => error = Some(e),
             }
             self.iterations += qp.ip.iterations();

@@ -223,6 +223,65 @@ fn cone_binds_and_matches_clarabel_from_rest() {
     assert!(og <= ow + 1e-7 * (1.0 + ow.abs()), "{og} vs {ow}");
 }
 
+/// After the interior point solved a tick (the augmented Lagrangian gave
+/// up), the next tick's augmented Lagrangian starts from the interior
+/// point's multipliers — the discs' `z_f·u_f` — shifted with the plan: it
+/// reaches the same plan in fewer Newton steps than from zero multipliers.
+#[test]
+fn the_cone_interior_points_duals_start_the_next_ticks_augmented_lagrangian() {
+    let horizon = 100;
+    let w = AxisWeights {
+        q: 5.0,
+        r: 0.01,
+        smoothness: Smoothness::default(),
+    };
+    let bounds = ConeBounds::new(G * 15f64.to_radians().tan(), None);
+    let tick0 = from_rest(horizon, [8.0, -6.0]);
+    // Tick 0 by the interior point (the ALM allowed one Newton step), then
+    // tick 1 — the plan flown one step — with the ALM's full budget:
+    // seeded from the interior point (`zeroed`: its multipliers cleared
+    // before tick 1, the old behaviour).
+    let run = |zeroed: bool| {
+        let mut solver = BandedConeSolver::new(horizon, DT, [w, w], bounds, true).unwrap();
+        solver.alm_mut().unwrap().set_max_newton_steps(1);
+        let plans = banded_plans(&mut solver, [w, w], &tick0);
+        assert_eq!(solver.method(), ConeMethod::InteriorPoint);
+        let alm = solver.alm_mut().unwrap();
+        alm.set_max_newton_steps(alm::MAX_NEWTON_STEPS);
+        if zeroed {
+            alm.reset_multipliers();
+        }
+        let tick1: [Axis; 2] = std::array::from_fn(|i| Axis {
+            fixed: [plans[i][1], plans[i][2], plans[i][3]],
+            sent: None,
+            reference: tick0[i].reference.clone(),
+        });
+        let next = banded_plans(&mut solver, [w, w], &tick1);
+        assert_eq!(solver.method(), ConeMethod::Alm);
+        assert!(solver.warm_started());
+        (next, solver.iterations())
+    };
+    let (seeded, seeded_steps) = run(false);
+    let (zeroed, zeroed_steps) = run(true);
+    for i in 0..2 {
+        for j in 0..=horizon {
+            assert!(
+                (seeded[i][j] - zeroed[i][j]).abs() < 1e-5,
+                "axis {i} y_{j}: {} vs {}",
+                seeded[i][j],
+                zeroed[i][j]
+            );
+        }
+    }
+    assert!(
+        seeded_steps < zeroed_steps,
+        "seeded {seeded_steps} Newton steps, from zero {zeroed_steps}"
+    );
+    eprintln!(
+        "tick after a fallback: {seeded_steps} Newton steps seeded, {zeroed_steps} from zero"
+    );
+}
+
 proptest::proptest! {
     #![proptest_config(proptest::test_runner::Config::with_cases(128))]
     /// The banded cone solver ([`BandedConeSolver`], cold start)

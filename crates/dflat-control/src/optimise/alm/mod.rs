@@ -337,6 +337,12 @@ impl BandedAlm {
         }
     }
 
+    /// Sets the Newton-step budget (tests: make the method give up).
+    #[cfg(test)]
+    pub(crate) fn set_max_newton_steps(&mut self, steps: usize) {
+        self.tuning.max_newton_steps = steps;
+    }
+
     /// Forgets the multipliers and σ (a cold start).
     pub fn reset_multipliers(&mut self) {
         self.y.iter_mut().for_each(|y| *y = [0.0; 2]);
