@@ -286,6 +286,7 @@ pub struct SitlHandle {
     /// The hooks' way into the step.
     inputs: Sender<SitlInput>,
     /// Outgoing frames are signed.
+    #[cfg(test)]
     signed: bool,
     local_addr: SocketAddr,
     gcs_addr: Option<SocketAddr>,
@@ -475,6 +476,7 @@ pub fn spawn(cfg: &SitlSettings, options: SitlOptions) -> Result<SitlHandle, Sit
     Ok(SitlHandle {
         shared,
         inputs,
+        #[cfg(test)]
         signed,
         local_addr,
         gcs_addr,
@@ -625,11 +627,14 @@ impl SitlHandle {
         if let Some(e) = first_error {
             return Err(e);
         }
-        let status = self.status();
+        let mut published = lock(&self.shared.published);
+        let (status, last) = (published.status, published.truth);
+        let trace = std::mem::take(&mut published.trace);
+        drop(published);
         Ok(SitlReport {
             counters: self.counters(),
-            trace: std::mem::take(&mut lock(&self.shared.published).trace),
-            last: self.truth(),
+            trace,
+            last,
             diverged: status.diverged,
             planner_start: status.planner_start,
         })

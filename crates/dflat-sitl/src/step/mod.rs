@@ -27,7 +27,6 @@
 use std::collections::VecDeque;
 
 use dflat_link::command::Addressing;
-use dflat_link::refusal::RefusalLimiter;
 use dflat_link::{MavHeader, MavMessage};
 use dflat_sim::plant::{Plant, PlantOptions, PlantState, build_plant};
 use dflat_sim::sensing::{GaussianOptions, GaussianSensor, Sensor};
@@ -48,6 +47,7 @@ mod flight;
 mod services;
 mod telemetry;
 
+#[cfg(test)]
 pub(crate) use flight::hold_law;
 pub use services::{addressing, served};
 
