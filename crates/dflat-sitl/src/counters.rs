@@ -3,8 +3,6 @@
 
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use super::step::StepCounts;
-
 /// The SITL's own frames of one destination, by kind.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct SentCounts {
@@ -201,8 +199,9 @@ fn get(c: &AtomicU64) -> u64 {
 }
 
 impl Counters {
-    /// Adds the increments of one step.
-    pub(super) fn add(&self, c: &StepCounts) {
+    /// Adds the increments of one step ([`super::SitlOutput::counts`]:
+    /// the counters the step keeps).
+    pub(super) fn add(&self, c: &SitlCounters) {
         let add = |a: &AtomicU64, n: u64| {
             if n > 0 {
                 a.fetch_add(n, Ordering::Relaxed);
@@ -220,8 +219,8 @@ impl Counters {
         add(&self.params_refused, c.params_refused);
         add(&self.ftp_answered, c.ftp_answered);
         add(&self.signing_setups_refused, c.signing_setups_refused);
-        add(&self.poses_dropped, c.poses_dropped);
-        add(&self.poses_delayed, c.poses_delayed);
+        add(&self.poses_dropped, c.pose_latency.poses_dropped);
+        add(&self.poses_delayed, c.pose_latency.poses_delayed);
     }
 
     /// The counters now, with the latency probe's figures `latency`.

@@ -94,7 +94,9 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant, SystemTime};
 
-use dflat_link::{LinkRx, MavHeader, MavMessage, Signing, SourceFilter, timestamp_from_system_time};
+use dflat_link::{
+    LinkRx, MavHeader, MavMessage, Signing, SourceFilter, timestamp_from_system_time,
+};
 use dflat_sim::plant::{PlantKind, PlantOptions, RigidBodyOptions};
 
 use dflat_link::transport::Endpoint;

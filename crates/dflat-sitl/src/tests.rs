@@ -2,10 +2,10 @@
 //! what it answers a ground station.
 
 use super::step::hold_law;
-use dflat_sim::plant::{PlantState, build_plant};
-use nalgebra::Vector3;
 use super::*;
 use dflat_link::{frames, serialize_v2};
+use dflat_sim::plant::{PlantState, build_plant};
+use nalgebra::Vector3;
 
 #[test]
 fn udpin_parses_and_others_are_refused() {

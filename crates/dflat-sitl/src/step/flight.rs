@@ -158,8 +158,7 @@ impl SitlCore {
     /// at most every [`dflat_link::refusal::REFUSAL_REPEAT_S`].
     fn tell_both(&mut self, out: &mut SitlOutput) {
         let now = self.clock;
-        if now - self.told_both.unwrap_or(f64::NEG_INFINITY)
-            < dflat_link::refusal::REFUSAL_REPEAT_S
+        if now - self.told_both.unwrap_or(f64::NEG_INFINITY) < dflat_link::refusal::REFUSAL_REPEAT_S
         {
             return;
         }

@@ -39,8 +39,8 @@ use crate::params::ParamTable;
 use crate::pilot::ModeMachine;
 use crate::planner::Planner;
 use crate::{
-    GRAVITY, ReceivedCommand, SitlAutopilot, SitlError, SitlMode, SitlSettings, TILT_LIMIT_DEG,
-    TruthSample, plant_kind, plant_options,
+    GRAVITY, ReceivedCommand, SitlAutopilot, SitlCounters, SitlError, SitlMode, SitlSettings,
+    TILT_LIMIT_DEG, TruthSample, plant_kind, plant_options,
 };
 
 mod flight;
@@ -159,39 +159,6 @@ pub struct SitlStatus {
     pub diverged: bool,
 }
 
-/// Counter increments of one step (added to [`crate::SitlCounters`]).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub struct StepCounts {
-    /// Plant integration steps taken.
-    pub plant_steps: u64,
-    /// Of those, steps the clock said were missed (late).
-    pub late_steps: u64,
-    /// Entries into position mode from another mode.
-    pub hold_entries: u64,
-    /// Mode changes.
-    pub mode_changes: u64,
-    /// Offboard requests refused (no live stream).
-    pub offboard_refused: u64,
-    /// Commands acknowledged.
-    pub commands_acked: u64,
-    /// … of those UNSUPPORTED.
-    pub commands_unsupported: u64,
-    /// … of those DENIED.
-    pub commands_denied: u64,
-    /// PARAM_SETs applied.
-    pub params_set: u64,
-    /// PARAM_SETs and PARAM_REQUEST_READs refused.
-    pub params_refused: u64,
-    /// FTP requests answered.
-    pub ftp_answered: u64,
-    /// SETUP_SIGNING refused.
-    pub signing_setups_refused: u64,
-    /// Poses dropped by the one-shot fault.
-    pub poses_dropped: u64,
-    /// Poses delayed by the one-shot fault.
-    pub poses_delayed: u64,
-}
-
 /// Something that happened at a step.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum SitlEvent {
@@ -217,8 +184,11 @@ pub struct SitlOutput {
     /// The true state, on telemetry steps (for the handle, the trace and
     /// the truth CSV).
     pub truth: Option<TruthSample>,
-    /// Counter increments.
-    pub counts: StepCounts,
+    /// Counter increments: only the counters the step keeps are set
+    /// (plant and late steps, mode changes, hold entries, offboard
+    /// refusals, the answers' counts, the pose faults'); the shell counts
+    /// what it receives and sends.
+    pub counts: SitlCounters,
     /// What happened.
     pub events: Vec<SitlEvent>,
     /// The status after the step.
@@ -447,7 +417,7 @@ impl SitlCore {
         let mut out = SitlOutput {
             messages: Vec::new(),
             truth: None,
-            counts: StepCounts::default(),
+            counts: SitlCounters::default(),
             events: Vec::new(),
             status: self.status(),
         };

@@ -15,12 +15,12 @@ use dflat_link::refusal::Say;
 use dflat_link::{MavHeader, MavMessage, statustext};
 
 use super::{Dest, Link, SitlCore, SitlEvent, SitlOutput};
+use crate::SitlMode;
 use crate::commands::{CommandContext, SitlMessage, answer, ftp_reply};
 use crate::counters::SentKind;
 use crate::params::ParamError;
 use crate::position_control::position_target;
 use crate::px4_face;
-use crate::SitlMode;
 
 /// Whom `msg` addresses, seen from `own` (system, component); `None`: no
 /// target.

@@ -200,8 +200,8 @@ impl SitlCore {
                     let measured_pose = self.vision.is_none();
                     self.push_pose(out, msg, SentKind::Position, measured_pose);
                 }
-                PoseFate::Drop => out.counts.poses_dropped += 1,
-                PoseFate::Delay => out.counts.poses_delayed += 1,
+                PoseFate::Drop => out.counts.pose_latency.poses_dropped += 1,
+                PoseFate::Delay => out.counts.pose_latency.poses_delayed += 1,
             }
         }
     }

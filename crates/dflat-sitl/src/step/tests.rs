@@ -67,13 +67,22 @@ fn streaming(cfg: &SitlSettings, pitch: f64) -> impl FnMut(f64) -> Vec<SitlInput
     }
 }
 
+/// `input` at the first step, nothing after.
+fn once(input: SitlInput) -> impl FnMut(f64) -> Vec<SitlInput> {
+    let mut input = Some(input);
+    move |_| input.take().into_iter().collect()
+}
+
 fn silence(_: f64) -> Vec<SitlInput> {
     vec![]
 }
 
 /// The names of the messages of `out`, in order.
 fn names(out: &SitlOutput) -> Vec<&'static str> {
-    out.messages.iter().map(|m| m.message.message_name()).collect()
+    out.messages
+        .iter()
+        .map(|m| m.message.message_name())
+        .collect()
 }
 
 fn all_names(outs: &[SitlOutput]) -> Vec<&'static str> {
@@ -186,13 +195,7 @@ fn attitude_goes_before_the_local_position_on_a_telemetry_step() {
 fn a_paused_pose_stream_sends_heartbeats_but_no_pose() {
     let cfg = config();
     let mut core = SitlCore::new(&cfg).unwrap();
-    let mut first = true;
-    let outs = run(&mut core, 2.5, |_| {
-        std::mem::take(&mut first)
-            .then_some(SitlInput::PausePose(true))
-            .into_iter()
-            .collect()
-    });
+    let outs = run(&mut core, 2.5, once(SitlInput::PausePose(true)));
     assert!(outs.iter().all(|o| o.status.pose_paused));
     let sent = all_names(&outs);
     let heartbeats = sent.iter().filter(|m| **m == "HEARTBEAT").count();
@@ -275,7 +278,10 @@ fn the_same_inputs_fly_the_same_flight() {
     assert_eq!(a.len(), 100);
     assert_eq!(a, b);
     // The reported position is noisy (σ = sitl.noise_sigma), the truth not.
-    assert!(a.iter().any(|(t, p)| (f64::from(p[0]) - t.position[0]).abs() > 1e-4));
+    assert!(
+        a.iter()
+            .any(|(t, p)| (f64::from(p[0]) - t.position[0]).abs() > 1e-4)
+    );
 }
 
 #[test]
@@ -345,7 +351,11 @@ fn a_disarm_is_acked_on_its_link_and_heard_in_the_status() {
     assert_eq!(ack, (Dest::Only(Link::Gcs), MavResult::MAV_RESULT_ACCEPTED));
     // Disarmed, a stream is not flown.
     let outs = run(&mut core, 0.3, streaming(&cfg, -0.3));
-    assert!(outs.iter().filter_map(|o| o.truth).all(|t| t.command.is_none()));
+    assert!(
+        outs.iter()
+            .filter_map(|o| o.truth)
+            .all(|t| t.command.is_none())
+    );
 }
 
 #[test]
@@ -373,27 +383,18 @@ fn one_shot_pose_faults_drop_and_delay_the_next_poses() {
             .filter(|m| **m == "LOCAL_POSITION_NED")
             .count()
     };
-    let mut first = true;
-    let outs = run(&mut core, 0.2, |_| {
-        std::mem::take(&mut first)
-            .then_some(SitlInput::DropNextPoses(3))
-            .into_iter()
-            .collect()
-    });
+    let outs = run(&mut core, 0.2, once(SitlInput::DropNextPoses(3)));
     // 10 telemetry steps in 0.2 s, the first 3 poses dropped.
     assert_eq!(positions(&outs), 7);
-    let dropped: u64 = outs.iter().map(|o| o.counts.poses_dropped).sum();
+    let dropped: u64 = outs
+        .iter()
+        .map(|o| o.counts.pose_latency.poses_dropped)
+        .sum();
     assert_eq!(dropped, 3);
     // A pose 12 ms late goes out 3 plant steps after its telemetry step.
-    let mut first = true;
-    let outs = run(&mut core, 0.04, |_| {
-        std::mem::take(&mut first)
-            .then_some(SitlInput::DelayNextPose(0.012))
-            .into_iter()
-            .collect()
-    });
+    let outs = run(&mut core, 0.04, once(SitlInput::DelayNextPose(0.012)));
     let with_truth = outs.iter().position(|o| o.truth.is_some()).unwrap();
-    assert_eq!(outs[with_truth].counts.poses_delayed, 1);
+    assert_eq!(outs[with_truth].counts.pose_latency.poses_delayed, 1);
     assert!(!names(&outs[with_truth]).contains(&"LOCAL_POSITION_NED"));
     let late = outs
         .iter()
