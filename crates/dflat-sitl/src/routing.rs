@@ -272,7 +272,7 @@ impl VehicleRx {
                 at: sitl_time(&self.shared, at),
                 link: Link::Vehicle,
                 header: *header,
-                message: msg.clone(),
+                message: Box::new(msg.clone()),
             });
         }
         let is_command = matches!(msg, MavMessage::SET_ATTITUDE_TARGET(_));
@@ -348,7 +348,7 @@ impl GcsRx {
                         at,
                         link: Link::Gcs,
                         header: frame.header,
-                        message: frame.message.clone(),
+                        message: Box::new(frame.message.clone()),
                     });
                 }
                 if addressing(self.own, &frame.message) == Some(Addressing::ToUs) {

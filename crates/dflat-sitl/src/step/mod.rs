@@ -125,8 +125,9 @@ pub enum SitlInput {
         link: Link,
         /// Its header (the sender).
         header: MavHeader,
-        /// The message.
-        message: MavMessage,
+        /// The message (boxed: a MAVLink message is large, the other
+        /// inputs small).
+        message: Box<MavMessage>,
     },
     /// The pilot switches to this mode ([`crate::SitlHandle::request_mode`]).
     ModeRequest(SitlMode),

@@ -33,7 +33,7 @@ fn from_gcs(at: f64, message: MavMessage) -> SitlInput {
         at,
         link: Link::Gcs,
         header: dflat_link::header(255, 190, 0),
-        message,
+        message: Box::new(message),
     }
 }
 
