@@ -1,19 +1,13 @@
-//! The state of the SITL's PX4 face shared between its threads: armed,
-//! the position setpoint stream to the autopilot, the goal of hold / goto
-//! / RTL, the message intervals, home, and the rate limit of refusals.
-//! The receive threads write it ([`super::services`]), the plant loop
-//! reads it.
-
-use std::sync::Mutex;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::time::{Duration, Instant};
+//! The state of the SITL's PX4 face, owned by the pure step
+//! ([`super::step::SitlCore`]): armed, the position setpoint stream to the
+//! autopilot, the message intervals, home, and the rate limit of refusals.
+//! Times are seconds on the SITL clock.
 
 use dflat_link::refusal::RefusalLimiter;
 
-use super::lock;
 use super::position_control::PositionTarget;
 use super::px4_face::{GeoOrigin, Streams};
-use super::routing::Link;
+use super::step::Link;
 
 /// Which setpoint stream flies in OFFBOARD (the latest type wins, as PX4).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -24,20 +18,19 @@ pub(super) enum Flown<C> {
     Position(PositionTarget),
 }
 
-/// What the SITL's PX4 face shares between threads.
+/// The SITL's PX4 face.
 pub(super) struct Px4State {
     /// Armed (HEARTBEAT); disarm is accepted, arm re-arms.
-    pub(super) armed: AtomicBool,
-    /// The latest position setpoint addressed to the autopilot.
-    pub(super) setpoint: Mutex<Option<(Instant, PositionTarget)>>,
+    pub(super) armed: bool,
+    /// The latest position setpoint addressed to the autopilot, with its
+    /// arrival \[s\].
+    setpoint: Option<(f64, PositionTarget)>,
     /// Position setpoints accepted.
-    pub(super) setpoints_accepted: AtomicU64,
-    /// A goal for hold / goto / RTL, taken by the plant loop.
-    pub(super) goal: Mutex<Option<[f64; 3]>>,
+    pub(super) setpoints_accepted: u64,
     /// Stream intervals (SET_MESSAGE_INTERVAL).
-    pub(super) streams: Mutex<Streams>,
+    pub(super) streams: Streams,
     /// Refusal texts, per link and reason.
-    pub(super) refusals: Mutex<RefusalLimiter<Link>>,
+    pub(super) refusals: RefusalLimiter<Link>,
     /// Home: the start point, local NED \[m\].
     pub(super) home: [f64; 3],
     /// The local frame's geodetic origin.
@@ -48,39 +41,34 @@ impl Px4State {
     /// Armed, home at `home`, default streams.
     pub(super) fn new(home: [f64; 3]) -> Self {
         Self {
-            armed: AtomicBool::new(true),
-            setpoint: Mutex::new(None),
-            setpoints_accepted: AtomicU64::new(0),
-            goal: Mutex::new(None),
-            streams: Mutex::new(Streams::default()),
-            refusals: Mutex::new(RefusalLimiter::default()),
+            armed: true,
+            setpoint: None,
+            setpoints_accepted: 0,
+            streams: Streams::default(),
+            refusals: RefusalLimiter::default(),
             home,
             origin: GeoOrigin::PX4_SITL,
         }
     }
 
-    /// Whether the vehicle is armed.
-    pub(super) fn armed(&self) -> bool {
-        self.armed.load(Ordering::Relaxed)
+    /// Stores a position setpoint received at `at` \[s\].
+    pub(super) fn set_setpoint(&mut self, at: f64, t: PositionTarget) {
+        self.setpoint = Some((at, t));
+        self.setpoints_accepted += 1;
     }
 
-    /// Stores a position setpoint received at `at`.
-    pub(super) fn set_setpoint(&self, at: Instant, t: PositionTarget) {
-        *lock(&self.setpoint) = Some((at, t));
-        self.setpoints_accepted.fetch_add(1, Ordering::Relaxed);
-    }
-
-    /// The position setpoint younger than `timeout`, with its arrival.
-    pub(super) fn fresh_setpoint(&self, timeout: Duration) -> Option<(Instant, PositionTarget)> {
-        (*lock(&self.setpoint)).filter(|(at, _)| at.elapsed() < timeout)
+    /// The position setpoint younger than `timeout` \[s\] at `now` \[s\],
+    /// with its arrival.
+    pub(super) fn fresh_setpoint(&self, now: f64, timeout: f64) -> Option<(f64, PositionTarget)> {
+        self.setpoint.filter(|(at, _)| now - at < timeout)
     }
 }
 
 /// The stream that flies in OFFBOARD: the one whose latest message is the
 /// newer; `both` when both are alive.
 pub(super) fn latest_wins<C: Copy>(
-    attitude: Option<(Instant, C)>,
-    position: Option<(Instant, PositionTarget)>,
+    attitude: Option<(f64, C)>,
+    position: Option<(f64, PositionTarget)>,
 ) -> (Option<Flown<C>>, bool) {
     match (attitude, position) {
         (Some((ta, c)), Some((tp, p))) => (
@@ -103,8 +91,8 @@ mod tests {
 
     #[test]
     fn the_latest_setpoint_type_wins() {
-        let t0 = Instant::now();
-        let t1 = t0 + Duration::from_millis(10);
+        let t0 = 1.0;
+        let t1 = t0 + 0.01;
         let p = PositionTarget::hold([1.0, 0.0, 0.0]);
         assert_eq!(
             latest_wins(Some((t0, 7u8)), Some((t1, p))),
@@ -115,9 +103,9 @@ mod tests {
             (Some(Flown::Attitude(7)), true)
         );
         assert_eq!(
-            latest_wins(None::<(Instant, u8)>, Some((t0, p))),
+            latest_wins(None::<(f64, u8)>, Some((t0, p))),
             (Some(Flown::Position(p)), false)
         );
-        assert_eq!(latest_wins(None::<(Instant, u8)>, None), (None, false));
+        assert_eq!(latest_wins(None::<(f64, u8)>, None), (None, false));
     }
 }

@@ -107,14 +107,21 @@ pub struct SitlCounters {
     pub pose_latency: super::PoseLatency,
 }
 
-/// What kind of own frame was sent (for the per-destination counts).
+/// What kind of own frame is sent (for the per-destination counts,
+/// [`SentCounts`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(super) enum Kind {
+pub enum SentKind {
+    /// HEARTBEAT.
     Heartbeat,
+    /// LOCAL_POSITION_NED.
     Position,
+    /// VISION_POSITION_ESTIMATE.
     Vision,
+    /// ATTITUDE.
     Attitude,
+    /// SYS_STATUS.
     SysStatus,
+    /// Anything else: answers, STATUSTEXT, the PX4 face's streams.
     Reply,
 }
 
@@ -129,14 +136,14 @@ pub(super) struct SentAtomics {
 }
 
 impl SentAtomics {
-    pub(super) fn count(&self, kind: Kind) {
+    pub(super) fn count(&self, kind: SentKind) {
         bump(match kind {
-            Kind::Heartbeat => &self.heartbeats,
-            Kind::Position => &self.positions,
-            Kind::Vision => &self.visions,
-            Kind::Attitude => &self.attitudes,
-            Kind::SysStatus => &self.sys_status,
-            Kind::Reply => &self.replies,
+            SentKind::Heartbeat => &self.heartbeats,
+            SentKind::Position => &self.positions,
+            SentKind::Vision => &self.visions,
+            SentKind::Attitude => &self.attitudes,
+            SentKind::SysStatus => &self.sys_status,
+            SentKind::Reply => &self.replies,
         });
     }
 
@@ -179,6 +186,8 @@ pub(super) struct Counters {
     pub(super) plant_steps: AtomicU64,
     pub(super) late_steps: AtomicU64,
     pub(super) send_errors: AtomicU64,
+    pub(super) poses_dropped: AtomicU64,
+    pub(super) poses_delayed: AtomicU64,
 }
 
 pub(super) fn bump(c: &AtomicU64) {
@@ -190,7 +199,32 @@ fn get(c: &AtomicU64) -> u64 {
 }
 
 impl Counters {
-    pub(super) fn snapshot(&self) -> SitlCounters {
+    /// Adds the increments of one step ([`super::SitlOutput::counts`]:
+    /// the counters the step keeps).
+    pub(super) fn add(&self, c: &SitlCounters) {
+        let add = |a: &AtomicU64, n: u64| {
+            if n > 0 {
+                a.fetch_add(n, Ordering::Relaxed);
+            }
+        };
+        add(&self.plant_steps, c.plant_steps);
+        add(&self.late_steps, c.late_steps);
+        add(&self.hold_entries, c.hold_entries);
+        add(&self.mode_changes, c.mode_changes);
+        add(&self.offboard_refused, c.offboard_refused);
+        add(&self.commands_acked, c.commands_acked);
+        add(&self.commands_unsupported, c.commands_unsupported);
+        add(&self.commands_denied, c.commands_denied);
+        add(&self.params_set, c.params_set);
+        add(&self.params_refused, c.params_refused);
+        add(&self.ftp_answered, c.ftp_answered);
+        add(&self.signing_setups_refused, c.signing_setups_refused);
+        add(&self.poses_dropped, c.pose_latency.poses_dropped);
+        add(&self.poses_delayed, c.pose_latency.poses_delayed);
+    }
+
+    /// The counters now, with the latency probe's figures `latency`.
+    pub(super) fn snapshot(&self, latency: super::PoseLatency) -> SitlCounters {
         let v = self.to_vehicle.snapshot();
         let to_gcs = self.to_gcs.snapshot();
         let routed = get(&self.gcs_frames_routed);
@@ -226,7 +260,11 @@ impl Counters {
             plant_steps: get(&self.plant_steps),
             late_steps: get(&self.late_steps),
             send_errors: get(&self.send_errors),
-            pose_latency: super::PoseLatency::default(),
+            pose_latency: super::PoseLatency {
+                poses_dropped: get(&self.poses_dropped),
+                poses_delayed: get(&self.poses_delayed),
+                ..latency
+            },
         }
     }
 }

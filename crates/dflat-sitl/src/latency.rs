@@ -1,6 +1,8 @@
 //! What the autopilot sees of the controller's timing: pose departure →
-//! command arrival, the command stream's inter-arrival jitter, and one-shot
-//! pose faults (a late pose, dropped poses) for the tests.
+//! command arrival and the command stream's inter-arrival jitter, measured
+//! by the shell at the sockets ([`LatencyProbe`]); and the one-shot pose
+//! faults (a late pose, dropped poses) for the tests, owned by the pure
+//! step on the SITL clock ([`PoseFaults`]).
 //!
 //! **Matching a command to its pose.** The SITL knows when it sent each
 //! pose. A command arriving at `c` is matched to the newest pose that
@@ -68,22 +70,6 @@ struct Inner {
     interval_us: Vec<u32>,
     matched: u64,
     unmatched: u64,
-    drop_next: u32,
-    delay_next: Option<Duration>,
-    delayed: Option<(Instant, MavMessage)>,
-    poses_dropped: u64,
-    poses_delayed: u64,
-}
-
-/// What to do with the pose about to be sent ([`LatencyProbe::pose_fate`]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(super) enum PoseFate {
-    /// Send it now.
-    Send,
-    /// Do not send it (dropped).
-    Drop,
-    /// Hold it; [`LatencyProbe::due_delayed`] returns it when due.
-    Delay,
 }
 
 /// The shared probe (one per SITL).
@@ -144,49 +130,12 @@ impl LatencyProbe {
         }
     }
 
-    /// Whether the LOCAL_POSITION_NED about to be sent goes now, is
-    /// dropped or delayed (`msg` is kept for later then).
-    pub(super) fn pose_fate(&self, now: Instant, msg: &MavMessage) -> PoseFate {
-        let mut g = self.lock();
-        if g.drop_next > 0 {
-            g.drop_next -= 1;
-            g.poses_dropped += 1;
-            return PoseFate::Drop;
-        }
-        if let Some(delay) = g.delay_next.take() {
-            g.poses_delayed += 1;
-            g.delayed = Some((now + delay, msg.clone()));
-            return PoseFate::Delay;
-        }
-        PoseFate::Send
-    }
-
-    /// The delayed pose, once due at `now`.
-    pub(super) fn due_delayed(&self, now: Instant) -> Option<MavMessage> {
-        let mut g = self.lock();
-        match &g.delayed {
-            Some((due, _)) if *due <= now => g.delayed.take().map(|(_, m)| m),
-            _ => None,
-        }
-    }
-
-    /// Drop the next `n` poses.
-    pub(super) fn drop_next(&self, n: u32) {
-        self.lock().drop_next = n;
-    }
-
-    /// Send the next pose `delay` late.
-    pub(super) fn delay_next(&self, delay: Duration) {
-        self.lock().delay_next = Some(delay);
-    }
-
-    /// The figures so far.
+    /// The figures so far (the pose faults' counts are the step's, 0 here).
     pub(super) fn snapshot(&self) -> PoseLatency {
         let g = self.lock();
         let mut lat = g.latency_us.clone();
         let mut iv = g.interval_us.clone();
-        let (matched, unmatched, dropped, delayed) =
-            (g.matched, g.unmatched, g.poses_dropped, g.poses_delayed);
+        let (matched, unmatched) = (g.matched, g.unmatched);
         drop(g);
         lat.sort_unstable();
         iv.sort_unstable();
@@ -206,9 +155,63 @@ impl LatencyProbe {
             interval_p50_us: median,
             jitter_p99_us: percentile(&dev, 0.99),
             interval_max_us: iv.last().map_or(0, |x| u64::from(*x)),
-            poses_dropped: dropped,
-            poses_delayed: delayed,
+            poses_dropped: 0,
+            poses_delayed: 0,
         }
+    }
+}
+
+/// What to do with the pose about to be sent ([`PoseFaults::pose_fate`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum PoseFate {
+    /// Send it now.
+    Send,
+    /// Do not send it (dropped).
+    Drop,
+    /// Hold it; [`PoseFaults::due_delayed`] returns it when due.
+    Delay,
+}
+
+/// The one-shot pose faults, owned by the pure step (times: seconds on the
+/// SITL clock).
+#[derive(Debug, Default)]
+pub(super) struct PoseFaults {
+    drop_next: u32,
+    delay_next: Option<f64>,
+    delayed: Option<(f64, MavMessage)>,
+}
+
+impl PoseFaults {
+    /// Whether the LOCAL_POSITION_NED about to be sent at `now` \[s\] goes
+    /// now, is dropped or delayed (`msg` is kept for later then).
+    pub(super) fn pose_fate(&mut self, now: f64, msg: &MavMessage) -> PoseFate {
+        if self.drop_next > 0 {
+            self.drop_next -= 1;
+            return PoseFate::Drop;
+        }
+        if let Some(delay) = self.delay_next.take() {
+            self.delayed = Some((now + delay, msg.clone()));
+            return PoseFate::Delay;
+        }
+        PoseFate::Send
+    }
+
+    /// The delayed pose, once due at `now` \[s\].
+    pub(super) fn due_delayed(&mut self, now: f64) -> Option<MavMessage> {
+        match &self.delayed {
+            Some((due, _)) if *due <= now + 1e-9 => self.delayed.take().map(|(_, m)| m),
+            _ => None,
+        }
+    }
+
+    /// Drop the next `n` poses.
+    pub(super) fn drop_next(&mut self, n: u32) {
+        self.drop_next = n;
+    }
+
+    /// Send the next pose `delay` \[s\] late.
+    pub(super) fn delay_next(&mut self, delay: f64) {
+        self.delay_next = Some(delay);
     }
 }
 
@@ -243,20 +246,17 @@ mod tests {
 
     #[test]
     fn drop_and_delay_are_one_shot() {
-        let p = LatencyProbe::default();
-        let now = Instant::now();
+        let mut p = PoseFaults::default();
         let msg = MavMessage::HEARTBEAT(Default::default());
         p.drop_next(2);
-        assert_eq!(p.pose_fate(now, &msg), PoseFate::Drop);
-        assert_eq!(p.pose_fate(now, &msg), PoseFate::Drop);
-        assert_eq!(p.pose_fate(now, &msg), PoseFate::Send);
-        p.delay_next(ms(8));
-        assert_eq!(p.pose_fate(now, &msg), PoseFate::Delay);
-        assert_eq!(p.pose_fate(now, &msg), PoseFate::Send);
-        assert!(p.due_delayed(now + ms(7)).is_none());
-        assert!(p.due_delayed(now + ms(8)).is_some());
-        assert!(p.due_delayed(now + ms(9)).is_none());
-        let s = p.snapshot();
-        assert_eq!((s.poses_dropped, s.poses_delayed), (2, 1));
+        assert_eq!(p.pose_fate(1.0, &msg), PoseFate::Drop);
+        assert_eq!(p.pose_fate(1.0, &msg), PoseFate::Drop);
+        assert_eq!(p.pose_fate(1.0, &msg), PoseFate::Send);
+        p.delay_next(0.008);
+        assert_eq!(p.pose_fate(1.0, &msg), PoseFate::Delay);
+        assert_eq!(p.pose_fate(1.0, &msg), PoseFate::Send);
+        assert!(p.due_delayed(1.007).is_none());
+        assert!(p.due_delayed(1.008).is_some());
+        assert!(p.due_delayed(1.009).is_none());
     }
 }

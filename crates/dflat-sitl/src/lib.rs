@@ -62,32 +62,42 @@
 //! Signed frames are routed as received (their bytes, signature included);
 //! the SITL does not check frames from the GCS, the daemon does.
 //!
+//! Shape: the autopilot and its plant are one pure step,
+//! [`SitlCore::step`] (module [`step`]): the SITL clock and what arrived
+//! since the last step ([`SitlInput`]: decoded commands and requests with
+//! their arrival times, the hooks' switches) in; the messages to send with
+//! their destination, the truth sample, counter increments and events out
+//! ([`SitlOutput`]). No socket, clock, thread or lock inside. Three
+//! threads are its thin I/O: the plant thread (sleeps to the next plant
+//! step, reads the clock, drains the input channel, steps, publishes the
+//! status and truth for the handle, encodes, signs and sends), and the
+//! receive threads of the vehicle link (frames parsed, signatures checked,
+//! SET_ATTITUDE_TARGET decoded, requests passed to the step, routing to the
+//! GCS) and of the GCS port. Answers to requests therefore leave at the next
+//! plant step (within 1/`sitl.plant_rate_hz`).
+//!
 //! In-process hooks ([`SitlHandle`]): the true state and an optional trace,
 //! counters, the current mode, a tap of every received frame, a pose pause
 //! switch (the pose stream stops, HEARTBEAT goes on) and a pose offset (an
-//! estimator jump as the daemon sees it). `dflat sitl` (the binary crate's shell) maps
+//! estimator jump as the daemon sees it); the switches act from the next
+//! plant step, the state is the latest step's. `dflat sitl` (the binary crate's shell) maps
 //! SIGUSR1 / SIGUSR2 to pause / resume and prints its bound addresses and
 //! mode changes on stdout.
 
-use std::f64::consts::PI;
 use std::fs::File;
 use std::io::{BufWriter, Write as _};
 use std::net::{SocketAddr, ToSocketAddrs, UdpSocket};
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU64, Ordering};
-use std::sync::mpsc::Sender;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{Receiver, Sender};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant, SystemTime};
 
-use dflat_control::AttitudeCommand as PlantCommand;
-use dflat_link::dialect::{MavAutopilot, MavState};
 use dflat_link::{
-    LinkRx, MavHeader, MavMessage, Signing, SourceFilter, serialize_v2, timestamp_from_system_time,
+    LinkRx, MavHeader, MavMessage, Signing, SourceFilter, timestamp_from_system_time,
 };
-use dflat_sim::plant::{Plant, PlantKind, PlantOptions, PlantState, RigidBodyOptions, build_plant};
-use dflat_sim::sensing::{GaussianOptions, GaussianSensor, Sensor};
-use nalgebra::Vector3;
+use dflat_sim::plant::{PlantKind, PlantOptions, RigidBodyOptions};
 
 use dflat_link::transport::Endpoint;
 
@@ -105,22 +115,22 @@ mod plant_loop;
 pub mod position_control;
 pub mod px4_face;
 mod routing;
-mod services;
+pub mod step;
 mod truth;
 pub use config::{SitlAutopilot, SitlConfig, SitlConfigError, SitlIds, SitlPlant, SitlSettings};
-pub use counters::{SentCounts, SitlCounters};
+pub use counters::{SentCounts, SentKind, SitlCounters};
 pub use error::SitlError;
 pub use latency::PoseLatency;
 pub use mode::SitlMode;
 pub use params::{ParamError, ParamTable, SitlParam};
 pub use pilot::{ModeMachine, PilotAction, PilotMode, SitlEngage};
-use plant_loop::{PlantLoop, VISION_QUEUE, VISION_SEED, VisionStream};
+use plant_loop::PlantLoop;
+pub use step::{SitlCore, SitlInput, SitlOutput, SitlStatus};
 pub use truth::{TruthRow, read_truth_csv};
 use truth::{create_truth_csv, write_truth_row};
 
-use counters::{Counters, Kind, bump};
-use routing::{Dest, GcsRx, Links, Peers, VehicleRx};
-use services::Latest;
+use counters::Counters;
+use routing::{GcsRx, Links, Outbox, Peers, VehicleRx};
 
 /// Gravity of the simulated world [m/s²].
 pub const GRAVITY: f64 = 9.81;
@@ -136,19 +146,6 @@ pub const ARDUPILOT_MODE_LOITER: u32 = 5;
 pub const ARDUPILOT_MODE_RTL: u32 = 6;
 /// ArduPilot Copter GUIDED_NOGPS, reported in offboard mode.
 pub const ARDUPILOT_MODE_GUIDED_NOGPS: u32 = 20;
-/// Deceleration the position mode brakes at when it takes over \[m/s²\]
-/// (its stop point is held, not the point where it took over).
-const HOLD_BRAKE: f64 = 2.5;
-
-/// Horizontal gains of the hold loop: `a = KP·(p_hold − p) − KD·v`. With the
-/// 0.2 s attitude lag the closed loop is well damped (≈ 1 rad/s).
-const HOLD_KP: f64 = 1.0;
-const HOLD_KD: f64 = 1.6;
-/// Vertical gains of the hold loop (spatial and full plants).
-const HOLD_KP_Z: f64 = 2.0;
-const HOLD_KD_Z: f64 = 2.5;
-/// Tilt the hold loop asks for at most \[deg\].
-const HOLD_MAX_TILT_DEG: f64 = 20.0;
 /// Read timeout of the receive threads: how fast they notice a stop.
 const RX_POLL: Duration = Duration::from_millis(50);
 /// Truth rows buffered between flushes of the truth CSV.
@@ -237,83 +234,31 @@ pub struct SitlReport {
     pub planner_start: Option<f64>,
 }
 
+/// What the plant thread publishes after each step for the handle.
+struct Published {
+    /// The status after the latest step.
+    status: SitlStatus,
+    /// The latest true state (telemetry rate).
+    truth: TruthSample,
+    /// The recorded trace (with [`SitlOptions::record_trace`]).
+    trace: Vec<TruthSample>,
+}
+
+/// What the SITL's threads and its handle share.
 struct Shared {
+    /// The SITL clock's origin.
     start: Instant,
-    /// SITL time the planner's trajectory started \[s\].
-    planner_start: Mutex<Option<f64>>,
     stop: AtomicBool,
-    pose_paused: AtomicBool,
-    diverged: AtomicBool,
-    mode: AtomicU8,
-    seq: AtomicU8,
-    system_id: u8,
-    component_id: u8,
-    pose_offset: Mutex<[f64; 3]>,
-    truth: Mutex<TruthSample>,
-    trace: Mutex<Vec<TruthSample>>,
-    command: Mutex<Option<(Instant, ReceivedCommand)>>,
-    /// A mode request from the in-process hook, taken by the plant loop.
-    mode_request: Mutex<Option<SitlMode>>,
-    /// A stick velocity from the in-process hook, taken by the plant loop.
-    pilot_velocity: Mutex<Option<[f64; 3]>>,
     links: Links,
     counters: Counters,
-    /// Pose → command latency, one-shot pose faults.
+    /// Pose → command latency, measured at the sockets.
     latency: latency::LatencyProbe,
-    /// The flavour (mode numbers, parameter names).
-    autopilot: SitlAutopilot,
-    /// The parameter table (`PARAM_*`).
-    params: Mutex<ParamTable>,
-    /// The offboard-loss timeout \[µs\] (`sitl.command_timeout_s`, or
-    /// `COM_OF_LOSS_T` / `GUID_TIMEOUT` set over MAVLink).
-    command_timeout_us: AtomicU64,
-    /// The latest periodic messages, for MAV_CMD_REQUEST_MESSAGE.
-    latest: Mutex<Latest>,
-    /// Signing of outgoing frames (`None` = unsigned). Shared because any
-    /// thread may send the SITL's own frames.
-    signing: Option<Mutex<Signing>>,
-    /// The PX4 face: armed, position setpoints, goals, streams, home.
-    px4: autopilot_state::Px4State,
+    published: Mutex<Published>,
 }
 
 /// Locks a mutex, recovering the data if a thread panicked while holding it.
 fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
     m.lock().unwrap_or_else(|e| e.into_inner())
-}
-
-impl Shared {
-    fn header(&self) -> MavHeader {
-        dflat_link::header(
-            self.system_id,
-            self.component_id,
-            self.seq.fetch_add(1, Ordering::Relaxed),
-        )
-    }
-
-    fn elapsed(&self) -> f64 {
-        self.start.elapsed().as_secs_f64()
-    }
-
-    /// `msg` as an outgoing frame of the SITL: signed when signing is on.
-    fn encode(&self, msg: &MavMessage) -> Result<dflat_link::EncodedFrame, dflat_link::LinkError> {
-        self.encode_as(self.header(), msg)
-    }
-
-    /// `msg` with `header` (the SITL's own, or the planner's): signed when
-    /// signing is on.
-    fn encode_as(
-        &self,
-        header: MavHeader,
-        msg: &MavMessage,
-    ) -> Result<dflat_link::EncodedFrame, dflat_link::LinkError> {
-        match &self.signing {
-            Some(s) => {
-                let now = timestamp_from_system_time(SystemTime::now());
-                lock(s).sign(&header, msg, now)
-            }
-            None => serialize_v2(&header, msg),
-        }
-    }
 }
 
 /// The SITL's signing: [`SitlOptions::signing`], else a key from
@@ -340,6 +285,11 @@ fn sitl_signing(cfg: &SitlSettings, options: &SitlOptions) -> Result<Option<Sign
 /// A running SITL: the in-process hooks. Dropping it stops the SITL.
 pub struct SitlHandle {
     shared: Arc<Shared>,
+    /// The hooks' way into the step.
+    inputs: Sender<SitlInput>,
+    /// Outgoing frames are signed.
+    #[cfg(test)]
+    signed: bool,
     local_addr: SocketAddr,
     gcs_addr: Option<SocketAddr>,
     threads: Vec<(&'static str, JoinHandle<Result<(), SitlError>>)>,
@@ -404,6 +354,7 @@ pub fn plant_options(cfg: &SitlSettings) -> PlantOptions {
     }
 }
 
+/// The `dflat-sim` plant of `sitl.plant`.
 fn plant_kind(p: SitlPlant) -> PlantKind {
     match p {
         SitlPlant::Planar => PlantKind::Planar,
@@ -428,58 +379,16 @@ pub fn spawn(cfg: &SitlSettings, options: SitlOptions) -> Result<SitlHandle, Sit
     };
     let gcs_addr = gcs_socket.as_ref().and_then(|s| s.local_addr().ok());
 
-    let popts = plant_options(cfg);
-    let mut plant = build_plant(plant_kind(cfg.sitl.plant), &popts, cfg.sitl.seed)?;
-    let start = Vector3::from(cfg.sitl.start);
-    plant.reset(&PlantState::hover(start, GRAVITY));
-    let sensor = GaussianSensor::new(
-        GaussianOptions::isotropic(cfg.sitl.noise_sigma),
-        cfg.sitl.seed,
-    )?;
-    let vision = if cfg.sitl.vision_rate_hz > 0.0 {
-        Some(VisionStream {
-            sensor: GaussianSensor::new(
-                GaussianOptions::isotropic(cfg.sitl.vision_noise_sigma),
-                cfg.sitl.seed ^ VISION_SEED,
-            )?,
-            period: 1.0 / cfg.sitl.vision_rate_hz,
-            latency: cfg.sitl.vision_latency_ms / 1000.0,
-            next_capture: 1.0 / cfg.sitl.vision_rate_hz,
-            pending: std::collections::VecDeque::with_capacity(VISION_QUEUE),
-        })
-    } else {
-        None
-    };
-
+    let core = SitlCore::new(cfg)?;
+    let first = core.truth();
+    let status = core.status();
     let truth_file = match &options.truth_csv {
         Some(path) => Some((path.clone(), create_truth_csv(path)?)),
         None => None,
     };
-
-    let first = TruthSample {
-        t: 0.0,
-        position: cfg.sitl.start,
-        velocity: [0.0; 3],
-        euler: [0.0; 3],
-        command: None,
-        mode: SitlMode::Hold,
-    };
     let shared = Arc::new(Shared {
         start: Instant::now(),
-        planner_start: Mutex::new(None),
         stop: AtomicBool::new(false),
-        pose_paused: AtomicBool::new(false),
-        diverged: AtomicBool::new(false),
-        mode: AtomicU8::new(0),
-        seq: AtomicU8::new(0),
-        system_id: cfg.ids.system_id,
-        component_id: cfg.ids.autopilot_component,
-        pose_offset: Mutex::new([0.0; 3]),
-        truth: Mutex::new(first),
-        trace: Mutex::new(Vec::new()),
-        command: Mutex::new(None),
-        mode_request: Mutex::new(None),
-        pilot_velocity: Mutex::new(None),
         links: Links {
             vehicle: Arc::new(socket),
             gcs: gcs_socket.map(Arc::new),
@@ -487,19 +396,14 @@ pub fn spawn(cfg: &SitlSettings, options: SitlOptions) -> Result<SitlHandle, Sit
         },
         counters: Counters::default(),
         latency: latency::LatencyProbe::default(),
-        autopilot: cfg.sitl.autopilot,
-        params: Mutex::new(ParamTable::new(
-            cfg.sitl.autopilot,
-            cfg.sitl.hover_thrust,
-            TILT_LIMIT_DEG,
-            cfg.sitl.command_timeout_s,
-            cfg.ids.system_id,
-        )),
-        command_timeout_us: AtomicU64::new((cfg.sitl.command_timeout_s * 1e6).round() as u64),
-        latest: Mutex::new(Latest::default()),
-        signing: signing.clone().map(Mutex::new),
-        px4: autopilot_state::Px4State::new(cfg.sitl.start),
+        published: Mutex::new(Published {
+            status,
+            truth: first,
+            trace: Vec::new(),
+        }),
     });
+    let (inputs, inputs_rx) = std::sync::mpsc::channel();
+    let own = (cfg.ids.system_id, cfg.ids.autopilot_component);
 
     let mut threads = Vec::new();
 
@@ -511,14 +415,17 @@ pub fn spawn(cfg: &SitlSettings, options: SitlOptions) -> Result<SitlHandle, Sit
         ..SourceFilter::default()
     };
     // The receive side verifies with its own copy (per-stream timestamps);
-    // the shared one signs.
+    // the plant thread's signs.
+    let signed = signing.is_some();
     let mut link = LinkRx::new(filter);
-    link.signing = signing;
+    link.signing = signing.clone();
     let rx = VehicleRx {
         shared: shared.clone(),
         link,
         tap: options.tap.clone(),
         hover_thrust: cfg.sitl.hover_thrust,
+        own,
+        inputs: inputs.clone(),
     };
     // If a later thread cannot start, the earlier ones must stop.
     let stop_on_err = |e: SitlError| {
@@ -534,6 +441,8 @@ pub fn spawn(cfg: &SitlSettings, options: SitlOptions) -> Result<SitlHandle, Sit
         let gcs = GcsRx {
             shared: shared.clone(),
             socket: gs,
+            own,
+            inputs: inputs.clone(),
         };
         threads.push((
             "gcs",
@@ -543,19 +452,16 @@ pub fn spawn(cfg: &SitlSettings, options: SitlOptions) -> Result<SitlHandle, Sit
 
     let sim = PlantLoop {
         shared: shared.clone(),
-        plant,
-        sensor,
-        vision,
-        options: popts,
-        plant_rate_hz: cfg.sitl.plant_rate_hz,
-        telemetry_rate_hz: cfg.sitl.telemetry_rate_hz,
-        hover_thrust: cfg.sitl.hover_thrust,
-        autopilot: cfg.sitl.autopilot,
-        modes: ModeMachine::new(cfg.sitl.engage, cfg.sitl.pilot.clone()),
-        pose_clock_rate: cfg.sitl.pose_clock_rate,
+        core,
+        inputs: inputs_rx,
+        outbox: Outbox {
+            shared: shared.clone(),
+            signing,
+            own,
+            seq: 0,
+        },
         record_trace: options.record_trace,
         truth_file,
-        planner: cfg.sitl.planner.clone().map(planner::Planner::new),
     };
     threads.push((
         "plant",
@@ -566,11 +472,14 @@ pub fn spawn(cfg: &SitlSettings, options: SitlOptions) -> Result<SitlHandle, Sit
         %local_addr,
         gcs = ?gcs_addr,
         plant = ?cfg.sitl.plant,
-        signing = shared.signing.is_some(),
+        signing = signed,
         "sitl started"
     );
     Ok(SitlHandle {
         shared,
+        inputs,
+        #[cfg(test)]
+        signed,
         local_addr,
         gcs_addr,
         threads,
@@ -600,91 +509,105 @@ impl SitlHandle {
 
     /// The latest true state (telemetry rate).
     pub fn truth(&self) -> TruthSample {
-        *lock(&self.shared.truth)
+        lock(&self.shared.published).truth
     }
 
     /// A copy of the truth trace so far (empty unless recorded).
     pub fn trace(&self) -> Vec<TruthSample> {
-        lock(&self.shared.trace).clone()
+        lock(&self.shared.published).trace.clone()
+    }
+
+    /// The status after the latest plant step.
+    fn status(&self) -> SitlStatus {
+        lock(&self.shared.published).status
+    }
+
+    /// Passes `input` to the plant thread's next step (dropped once it
+    /// has stopped).
+    fn hook(&self, input: SitlInput) {
+        // A closed channel only means the plant thread has stopped.
+        let _ = self.inputs.send(input);
     }
 
     /// The counters now.
     pub fn counters(&self) -> SitlCounters {
-        let mut c = self.shared.counters.snapshot();
-        c.pose_latency = self.shared.latency.snapshot();
-        c
+        self.shared
+            .counters
+            .snapshot(self.shared.latency.snapshot())
     }
 
-    /// Drops the next `n` LOCAL_POSITION_NED (one-shot; ATTITUDE goes on).
+    /// Drops the next `n` LOCAL_POSITION_NED from the next plant step
+    /// (one-shot; ATTITUDE goes on).
     pub fn drop_next_poses(&self, n: u32) {
-        self.shared.latency.drop_next(n);
+        self.hook(SitlInput::DropNextPoses(n));
     }
 
     /// Sends the next LOCAL_POSITION_NED `delay` late (one-shot; to the
     /// plant step's resolution).
     pub fn delay_next_pose(&self, delay: Duration) {
-        self.shared.latency.delay_next(delay);
+        self.hook(SitlInput::DelayNextPose(delay.as_secs_f64()));
     }
 
-    /// The current mode.
+    /// The current mode (as of the latest plant step).
     pub fn mode(&self) -> SitlMode {
-        SitlMode::from_u8(self.shared.mode.load(Ordering::Relaxed))
+        self.status().mode
     }
 
     /// Seconds since the SITL started (its `time_boot_ms` clock).
     pub fn elapsed(&self) -> f64 {
-        self.shared.elapsed()
+        self.shared.start.elapsed().as_secs_f64()
     }
 
     /// The pilot switches modes at the next plant step: to position mode
     /// (an override) or to offboard (engage / hand back; refused without a
     /// live stream, [`SitlCounters::offboard_refused`]).
     pub fn request_mode(&self, mode: SitlMode) {
-        *lock(&self.shared.mode_request) = Some(mode);
+        self.hook(SitlInput::ModeRequest(mode));
     }
 
     /// The pilot's stick: fly at `velocity` (local NED \[m/s\]) in position
     /// mode from the next plant step (`[0, 0, 0]`: brake and hold).
     pub fn set_pilot_velocity(&self, velocity: [f64; 3]) {
-        *lock(&self.shared.pilot_velocity) = Some(velocity);
+        self.hook(SitlInput::PilotVelocity(velocity));
     }
 
-    /// Stops the pose stream (LOCAL_POSITION_NED and ATTITUDE); HEARTBEAT
-    /// and the plant go on.
+    /// Stops the pose stream (LOCAL_POSITION_NED and ATTITUDE) from the
+    /// next plant step; HEARTBEAT and the plant go on.
     pub fn pause_pose(&self) {
-        self.shared.pose_paused.store(true, Ordering::Relaxed);
+        self.hook(SitlInput::PausePose(true));
     }
 
-    /// Resumes the pose stream.
+    /// Resumes the pose stream from the next plant step.
     pub fn resume_pose(&self) {
-        self.shared.pose_paused.store(false, Ordering::Relaxed);
+        self.hook(SitlInput::PausePose(false));
     }
 
     /// Position setpoints addressed to the autopilot accepted so far
     /// (flown in OFFBOARD by the SITL's position loop).
     pub fn position_setpoints_accepted(&self) -> u64 {
-        self.shared.px4.setpoints_accepted.load(Ordering::Relaxed)
+        self.status().setpoints_accepted
     }
 
     /// Whether the vehicle is armed (disarm is accepted over MAVLink).
     pub fn armed(&self) -> bool {
-        self.shared.px4.armed()
+        self.status().armed
     }
 
-    /// Whether the pose stream is paused.
+    /// Whether the pose stream is paused (as of the latest plant step).
     pub fn pose_paused(&self) -> bool {
-        self.shared.pose_paused.load(Ordering::Relaxed)
+        self.status().pose_paused
     }
 
-    /// Adds `offset` (NED \[m\]) to every reported position from now on: a
-    /// pose jump as an estimator reset would cause. The truth is unchanged.
+    /// Adds `offset` (NED \[m\]) to every reported position from the next
+    /// plant step on: a pose jump as an estimator reset would cause. The
+    /// truth is unchanged.
     pub fn set_pose_offset(&self, offset: [f64; 3]) {
-        *lock(&self.shared.pose_offset) = offset;
+        self.hook(SitlInput::PoseOffset(offset));
     }
 
     /// True when the plant state became non-finite.
     pub fn diverged(&self) -> bool {
-        self.shared.diverged.load(Ordering::Relaxed)
+        self.status().diverged
     }
 
     /// Asks the threads to stop without waiting.
@@ -706,12 +629,16 @@ impl SitlHandle {
         if let Some(e) = first_error {
             return Err(e);
         }
+        let mut published = lock(&self.shared.published);
+        let (status, last) = (published.status, published.truth);
+        let trace = std::mem::take(&mut published.trace);
+        drop(published);
         Ok(SitlReport {
             counters: self.counters(),
-            trace: std::mem::take(&mut *lock(&self.shared.trace)),
-            last: self.truth(),
-            diverged: self.diverged(),
-            planner_start: *lock(&self.shared.planner_start),
+            trace,
+            last,
+            diverged: status.diverged,
+            planner_start: status.planner_start,
         })
     }
 }

@@ -47,22 +47,4 @@ impl SitlMode {
             (SitlAutopilot::Ardupilot, SitlMode::Rtl) => ARDUPILOT_MODE_RTL,
         }
     }
-
-    pub(crate) fn from_u8(v: u8) -> Self {
-        match v {
-            1 => SitlMode::Offboard,
-            2 => SitlMode::Loiter,
-            3 => SitlMode::Rtl,
-            _ => SitlMode::Hold,
-        }
-    }
-
-    pub(crate) fn as_u8(self) -> u8 {
-        match self {
-            SitlMode::Hold => 0,
-            SitlMode::Offboard => 1,
-            SitlMode::Loiter => 2,
-            SitlMode::Rtl => 3,
-        }
-    }
 }

@@ -75,7 +75,7 @@ impl PlannerConfig {
     }
 }
 
-/// The planner's state in the SITL's plant loop.
+/// The planner's state in the SITL's step ([`crate::SitlCore`]).
 #[derive(Debug, Clone)]
 pub struct Planner {
     config: PlannerConfig,

@@ -1,6 +1,6 @@
 //! What a PX4 an SDK can script sends and answers, beyond the pose stream
-//! (pure message builders and tables; the shell is in `services` and the
-//! plant loop):
+//! (pure message builders and tables; the state and the answers are the
+//! step's, [`super::step`]):
 //!
 //! * HOME_POSITION (the start point), EXTENDED_SYS_STATE (in air,
 //!   multicopter), ATTITUDE_QUATERNION, GLOBAL_POSITION_INT and

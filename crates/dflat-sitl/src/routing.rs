@@ -1,13 +1,16 @@
 //! The SITL's links: the vehicle link and the optional ground-station
-//! port, the receive threads of both, what is routed where, and how the
-//! SITL sends its own frames.
+//! port, the receive threads of both (they pass commands and requests to
+//! the step, [`super::step`], through the input channel), what is routed
+//! where, and how the plant thread sends what the step returns
+//! ([`Outbox`]).
 //!
 //! Routing, as PX4 does it:
 //! * vehicle link → GCS: every frame except those addressed to the
 //!   SITL's own system and component;
 //! * GCS → vehicle link: every frame except those addressed to the SITL's
-//!   own system and component (handled here, [`super::services`], counted
-//!   in `gcs_frames_kept`); broadcasts are handled *and* routed;
+//!   own system and component (handled by the step,
+//!   [`super::step::SitlInput::Frame`], counted in `gcs_frames_kept`);
+//!   broadcasts are handled *and* routed;
 //! * the SITL's telemetry goes to both; its answers go back on the link
 //!   the request came from.
 //!
@@ -23,30 +26,13 @@ use std::time::{Instant, SystemTime};
 
 use dflat_link::command::Addressing;
 use dflat_link::{
-    Frame, Inbound, LinkRx, MavHeader, MavMessage, RxOutcome, euler_from_quaternion, frames,
+    Frame, Inbound, LinkRx, MavMessage, RxOutcome, Signing, euler_from_quaternion, frames,
     serialize_v2, timestamp_from_system_time,
 };
 
-use super::counters::{Kind, bump};
-use super::{RX_POLL, ReceivedCommand, Shared, SitlError, TapFrame, lock, services};
-
-/// One of the SITL's two links.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub(super) enum Link {
-    /// The vehicle link (the daemon).
-    Vehicle,
-    /// The ground-station port.
-    Gcs,
-}
-
-/// Where one of the SITL's own frames goes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(super) enum Dest {
-    /// Both links (telemetry).
-    Both,
-    /// One link (an answer).
-    Only(Link),
-}
+use super::counters::bump;
+use super::step::{Dest, Link, Origin, Outgoing, SitlInput, addressing, served};
+use super::{RX_POLL, ReceivedCommand, Shared, SitlError, TapFrame, lock};
 
 /// The sockets and their last peers.
 pub(super) struct Links {
@@ -72,67 +58,66 @@ impl Links {
     }
 }
 
-impl Shared {
-    /// Sends the SITL's own `msg` (signed when signing is on) to `dest`,
-    /// counted per destination as `kind`. True when it went to the vehicle
-    /// link.
-    pub(super) fn send_own(&self, msg: &MavMessage, dest: Dest, kind: Kind) -> bool {
-        let frame = match self.encode(msg) {
-            Ok(f) => f,
-            Err(_) => {
-                bump(&self.counters.send_errors);
-                return false;
+/// The sending side of the plant thread: encodes (and signs, when signing
+/// is on) what the step returns and sends it to its links' peers.
+pub(super) struct Outbox {
+    pub(super) shared: Arc<Shared>,
+    /// Signing of outgoing frames (`None` = unsigned).
+    pub(super) signing: Option<Signing>,
+    /// The SITL's (system, component).
+    pub(super) own: (u8, u8),
+    /// The SITL's own sequence.
+    pub(super) seq: u8,
+}
+
+impl Outbox {
+    /// Sends `out`: the SITL's own frames (with its header and next
+    /// sequence) to their destinations, counted per destination and kind;
+    /// the planner's with its header to the vehicle link, counted in
+    /// `planner_samples`. True when it went to the vehicle link.
+    pub(super) fn send(&mut self, out: &Outgoing) -> bool {
+        let header = match out.origin {
+            Origin::Own(_) => {
+                let h = dflat_link::header(self.own.0, self.own.1, self.seq);
+                self.seq = self.seq.wrapping_add(1);
+                h
             }
+            Origin::Planner(h) => h,
+        };
+        let counters = &self.shared.counters;
+        let encoded = match &mut self.signing {
+            Some(s) => {
+                let now = timestamp_from_system_time(SystemTime::now());
+                s.sign(&header, &out.message, now)
+            }
+            None => serialize_v2(&header, &out.message),
+        };
+        let Ok(frame) = encoded else {
+            bump(&counters.send_errors);
+            return false;
         };
         let mut to_vehicle = false;
         for link in [Link::Vehicle, Link::Gcs] {
-            if dest != Dest::Both && dest != Dest::Only(link) {
+            if out.to != Dest::Both && out.to != Dest::Only(link) {
                 continue;
             }
-            let Some((socket, peer)) = self.links.socket_and_peer(link) else {
+            let Some((socket, peer)) = self.shared.links.socket_and_peer(link) else {
                 continue;
             };
-            match socket.send_to(frame.as_bytes(), peer) {
-                Ok(_) if link == Link::Vehicle => {
+            match (socket.send_to(frame.as_bytes(), peer), out.origin) {
+                (Err(_), _) => bump(&counters.send_errors),
+                (Ok(_), Origin::Own(kind)) if link == Link::Vehicle => {
                     to_vehicle = true;
-                    self.counters.to_vehicle.count(kind);
+                    counters.to_vehicle.count(kind);
                 }
-                Ok(_) => self.counters.to_gcs.count(kind),
-                Err(_) => bump(&self.counters.send_errors),
+                (Ok(_), Origin::Own(kind)) => counters.to_gcs.count(kind),
+                (Ok(_), Origin::Planner(_)) => {
+                    to_vehicle |= link == Link::Vehicle;
+                    bump(&counters.planner_samples);
+                }
             }
         }
         to_vehicle
-    }
-
-    /// `msg` from another sender on this machine (`header`: the planner's
-    /// ids) to the vehicle link's peer (the daemon). Whether it left.
-    pub(super) fn send_to_vehicle_as(&self, header: MavHeader, msg: &MavMessage) -> bool {
-        let Ok(frame) = self.encode_as(header, msg) else {
-            bump(&self.counters.send_errors);
-            return false;
-        };
-        let Some((socket, peer)) = self.links.socket_and_peer(Link::Vehicle) else {
-            return false;
-        };
-        match socket.send_to(frame.as_bytes(), peer) {
-            Ok(_) => true,
-            Err(_) => {
-                bump(&self.counters.send_errors);
-                false
-            }
-        }
-    }
-
-    /// Whom `msg` addresses, seen from the SITL (`None`: no target).
-    pub(super) fn addressing(&self, msg: &MavMessage) -> Option<Addressing> {
-        use dflat_link::mavlink::Message as _;
-        let system = msg.target_system_id()?;
-        let component = msg.target_component_id().unwrap_or(0);
-        Some(Addressing::of(
-            system,
-            component,
-            (self.system_id, self.component_id),
-        ))
     }
 }
 
@@ -175,13 +160,22 @@ fn append_routed(out: &mut Vec<u8>, frame: &Frame) {
     }
 }
 
-/// Receives on the vehicle link: commands in, requests answered, routing
-/// to the GCS.
+/// Seconds from the SITL's start to `at` (its clock).
+fn sitl_time(shared: &Shared, at: Instant) -> f64 {
+    at.saturating_duration_since(shared.start).as_secs_f64()
+}
+
+/// Receives on the vehicle link: commands and requests to the plant
+/// thread's step, routing to the GCS.
 pub(super) struct VehicleRx {
     pub(super) shared: Arc<Shared>,
     pub(super) link: LinkRx,
     pub(super) tap: Option<Sender<TapFrame>>,
     pub(super) hover_thrust: f64,
+    /// The SITL's (system, component).
+    pub(super) own: (u8, u8),
+    /// Into the step.
+    pub(super) inputs: Sender<SitlInput>,
 }
 
 impl VehicleRx {
@@ -218,9 +212,8 @@ impl VehicleRx {
                 if !self.authenticate(&frame) {
                     continue;
                 }
-                self.handle(at, &frame.header, &frame.message);
-                let addressing =
-                    services::serve(&self.shared, Link::Vehicle, &frame.header, &frame.message);
+                self.handle(at, &frame);
+                let addressing = addressing(self.own, &frame.message);
                 if self.shared.links.gcs.is_some() && addressing != Some(Addressing::ToUs) {
                     append_routed(&mut forward, &frame);
                     routed += 1;
@@ -269,7 +262,19 @@ impl VehicleRx {
         }
     }
 
-    fn handle(&mut self, at: Instant, header: &MavHeader, msg: &MavMessage) {
+    /// A SET_ATTITUDE_TARGET decoded into the step (counted accepted,
+    /// ignored or rejected); a request to the autopilot passed on to it.
+    fn handle(&mut self, at: Instant, frame: &Frame) {
+        let (header, msg) = (&frame.header, &frame.message);
+        if served(self.own, header, msg) {
+            // A closed channel only means the plant thread has stopped.
+            let _ = self.inputs.send(SitlInput::Frame {
+                at: sitl_time(&self.shared, at),
+                link: Link::Vehicle,
+                header: *header,
+                message: Box::new(msg.clone()),
+            });
+        }
         let is_command = matches!(msg, MavMessage::SET_ATTITUDE_TARGET(_));
         let counters = &self.shared.counters;
         match self.link.handle(header, msg) {
@@ -284,15 +289,15 @@ impl VehicleRx {
                     bump(&counters.commands_rejected);
                     return;
                 }
-                *lock(&self.shared.command) = Some((
-                    at,
-                    ReceivedCommand {
+                let _ = self.inputs.send(SitlInput::Command {
+                    at: sitl_time(&self.shared, at),
+                    command: ReceivedCommand {
                         roll,
                         pitch,
                         yaw,
                         thrust: thrust.clamp(0.0, 1.0),
                     },
-                ));
+                });
                 bump(&counters.commands_accepted);
                 self.shared.latency.command(at);
             }
@@ -307,11 +312,15 @@ impl VehicleRx {
     }
 }
 
-/// Receives on the GCS port: requests to the SITL answered, the rest
-/// routed to the vehicle link.
+/// Receives on the GCS port: requests to the SITL passed to the step, the
+/// rest routed to the vehicle link.
 pub(super) struct GcsRx {
     pub(super) shared: Arc<Shared>,
     pub(super) socket: Arc<UdpSocket>,
+    /// The SITL's (system, component).
+    pub(super) own: (u8, u8),
+    /// Into the step.
+    pub(super) inputs: Sender<SitlInput>,
 }
 
 impl GcsRx {
@@ -322,6 +331,7 @@ impl GcsRx {
             let Some((n, from)) = recv(&self.socket, &mut buf) else {
                 continue;
             };
+            let at = sitl_time(&self.shared, Instant::now());
             lock(&self.shared.links.peers).gcs = Some(from);
             forward.clear();
             for item in frames(&buf[..n]) {
@@ -333,9 +343,15 @@ impl GcsRx {
                     }
                 };
                 bump(&self.shared.counters.gcs_frames_in);
-                let addressing =
-                    services::serve(&self.shared, Link::Gcs, &frame.header, &frame.message);
-                if addressing == Some(Addressing::ToUs) {
+                if served(self.own, &frame.header, &frame.message) {
+                    let _ = self.inputs.send(SitlInput::Frame {
+                        at,
+                        link: Link::Gcs,
+                        header: frame.header,
+                        message: Box::new(frame.message.clone()),
+                    });
+                }
+                if addressing(self.own, &frame.message) == Some(Addressing::ToUs) {
                     bump(&self.shared.counters.gcs_frames_kept);
                 } else {
                     append_routed(&mut forward, &frame);

@@ -1,9 +1,11 @@
 //! The SITL's own tests: telemetry, hold, commands, routing, signing, and
 //! what it answers a ground station.
 
-use super::plant_loop::hold_law;
+use super::step::hold_law;
 use super::*;
-use dflat_link::frames;
+use dflat_link::{frames, serialize_v2};
+use dflat_sim::plant::{PlantState, build_plant};
+use nalgebra::Vector3;
 
 #[test]
 fn udpin_parses_and_others_are_refused() {
@@ -422,7 +424,7 @@ fn sitl_key_file_is_checked_at_start() {
     assert!(!err.contains("link.signing_key_file"), "{err}");
     std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o600)).unwrap();
     let sitl = spawn(&cfg, SitlOptions::default()).unwrap();
-    assert!(sitl.shared.signing.is_some());
+    assert!(sitl.signed);
     sitl.stop().unwrap();
     let _ = std::fs::remove_dir_all(&dir);
 }
