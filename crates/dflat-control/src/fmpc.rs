@@ -93,7 +93,7 @@ fn invalid(field: &'static str, reason: impl Into<String>) -> ControlError {
 }
 
 impl FmpcSettings {
-    /// `horizon` [steps]: at least 10, at most [`MAX_HORIZON`].
+    /// `horizon` \[steps\]: at least 10, at most [`MAX_HORIZON`].
     pub const HORIZON: Limit = Limit::closed(10.0, MAX_HORIZON as f64, "ticks");
     /// Each of `q` \[1/m²\].
     pub const Q: Limit = Limit::positive("1/m²");

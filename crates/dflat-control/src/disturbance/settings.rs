@@ -12,7 +12,7 @@ pub const MIN_WINDOW: usize = 10;
 /// holds this many times L; beyond that the oldest are dropped).
 pub const SAMPLES_PER_TICK: usize = 4;
 
-/// Settings of [`DisturbanceEstimator`], checked by
+/// Settings of [`DisturbanceEstimator`](super::DisturbanceEstimator), checked by
 /// [`DisturbanceSettings::validate`].
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -80,7 +80,7 @@ impl DisturbanceSettings {
     /// Checks every field; the error names the first invalid one (as
     /// `disturbance.<field>`). The bandwidth is checked against the control
     /// step ([`DisturbanceSettings::bandwidth_limit`]) in
-    /// [`DisturbanceEstimator::new`]; here only that it is positive.
+    /// [`DisturbanceEstimator::new`](super::DisturbanceEstimator::new); here only that it is positive.
     pub fn validate(&self) -> Result<(), ControlError> {
         Limit::positive("Hz").check("disturbance.bandwidth_hz", self.bandwidth_hz)?;
         Self::WINDOW.check("disturbance.fit_span", self.fit_span as f64)?;

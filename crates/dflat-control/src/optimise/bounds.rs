@@ -121,7 +121,7 @@ impl AxisBounds {
     }
 
     /// [`AxisBounds::violated_by`], or the tilt-rate bound violated
-    /// ([`TiltRate::violated_by`], `sent` as in [`AxisBounds::row_bounds`]):
+    /// ([`TiltRate::violated_by`], `sent` as in `AxisBounds::row_bounds`):
     /// the check of the fast plan.
     pub fn violated(&self, plan: &[f64], sent: Option<f64>, dt: f64) -> bool {
         self.violated_by(plan, dt)

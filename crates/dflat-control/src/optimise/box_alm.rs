@@ -142,7 +142,7 @@ impl BoxAlmSolver {
 
     /// Takes `plan` (`y*_0..y*_N` \[m\], another solver's solution of this
     /// tick) as the previous solution, and `duals` (its rows' multipliers
-    /// `[upper, lower]` in [`AxisBounds::row_bounds`]' order, when it has
+    /// `[upper, lower]` in `AxisBounds::row_bounds`' order, when it has
     /// them: the interior point's) as the multipliers: the next tick starts
     /// from them, so that one fallback does not make the next.
     pub fn accept_plan(&mut self, plan: &[f64], duals: &[[f64; 2]]) {

@@ -57,7 +57,7 @@ pub trait ConstrainedSolver: std::fmt::Debug + Send {
     }
 
     /// Its rows' multipliers `[upper, lower]` after its last solve, in
-    /// [`AxisBounds::row_bounds`](super::AxisBounds::row_bounds)' order
+    /// `AxisBounds::row_bounds`' order
     /// (empty when it does not give them).
     fn row_duals(&self) -> &[[f64; 2]] {
         &[]

@@ -50,7 +50,7 @@ impl StageQp {
     /// clarabel's), and bound rows on ã_f for `acceleration` and on
     /// `(p_{f} − p_{f−1})/δt`, f = −1..n−2 (p_{−1} = 0), for `speed`, and
     /// with `tilt_rate = Some(κ)` the tilt-rate rows on ã
-    /// ([`Row::tilt_rate`]).
+    /// (`Row::tilt_rate`).
     pub fn new(
         n: usize,
         q: f64,
@@ -210,7 +210,7 @@ impl BandedInteriorPointSolver {
     }
 
     /// The rows' multipliers `[upper, lower]` of the last solve, in the
-    /// order of [`AxisBounds::row_bounds`] (acceleration, speed, tilt
+    /// order of `AxisBounds::row_bounds` (acceleration, speed, tilt
     /// rate): a warm start for the augmented Lagrangian.
     pub fn row_duals(&self) -> &[[f64; 2]] {
         &self.duals

@@ -34,7 +34,7 @@
 //! the accelerations its first-order response `a_{j+1} = a_j + (c_j −
 //! a_j)/κ` — satisfies every tilt-rate row by construction; the
 //! acceleration bound of stage j is widened to contain it
-//! ([`TiltRate::funnel`]), so the problem stays feasible (the witness is a
+//! (`TiltRate::funnel`), so the problem stays feasible (the witness is a
 //! feasible point) and the bound is the plain one once the witness is in.
 
 use super::invalid;

@@ -30,7 +30,7 @@
 //! σ grows tenfold when the constraint residual did not fall tenfold
 //! (below). A row side `h·x ≤ b` with exact penalty ρ (∞ when hard) has its
 //! multiplier clamped to [0, ρ]: `v ← clamp(v + σ_h·t, 0, ρ)`, σ_h the
-//! stage σ in the row's units ([`RowBlock::scale`]).
+//! stage σ in the row's units (`RowBlock::scale`).
 //!
 //! Each inner solve stops when the gradient is below 1e-8 of the linear
 //! term's scale or the Newton decrement `−gᵀd` below 1e-13 of the
