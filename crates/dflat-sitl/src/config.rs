@@ -222,7 +222,7 @@ pub struct SitlConfig {
     /// 1, timestamps from the wall clock, nothing persisted), refuses
     /// SET_ATTITUDE_TARGET without a valid signature and drops badly signed
     /// or replayed frames; other unsigned messages are still accepted. See
-    /// [`crate::sitl`].
+    /// the crate root.
     pub signing_key_file: String,
     /// The autopilot played: `px4` or `ardupilot` (see [`SitlAutopilot`]).
     pub autopilot: SitlAutopilot,

@@ -5,7 +5,7 @@
 //! a planner (`[sitl.planner]`): once the autopilot is in offboard it
 //! streams SET_POSITION_TARGET_LOCAL_NED with position, velocity,
 //! acceleration and yaw along a circle (radius 6 m at `--speed`, 20 Hz)
-//! that starts where the vehicle holds, for [`STREAM_S`]; then the stream
+//! that starts where the vehicle holds, for `STREAM_S`; then the stream
 //! ends and the daemon stops smoothly and holds. The demo reports the
 //! horizontal error against the planner's own trajectory at the same SITL
 //! time (at full speed), the largest command step, the heading's lag and

@@ -3,7 +3,7 @@
 //!
 //! Set-up (as [`super::vision_rate`] unless stated):
 //!
-//! * The L path ([`paths::l`] at z = −10 m) at 5 and 9 m/s, start at rest
+//! * The L path ([`paths::l`](dflat_control::reference::paths::l) at z = −10 m) at 5 and 9 m/s, start at rest
 //!   at the path start, end 2 s after first coming within 1 m of the path
 //!   end (or length/speed + 20 s; diverged beyond 15 m of path error).
 //! * Planar plant, RK4 at 200 Hz, τ = 0.2 s, k̃ = 1, ±35° attitude

@@ -12,7 +12,7 @@ pub enum Endpoint {
     UdpIn {
         /// Host name or address to bind (e.g. `0.0.0.0`, `127.0.0.1`).
         host: String,
-        /// UDP port (0 = any free port, see [`Transport::local_addr`]).
+        /// UDP port (0 = any free port, see [`Transport::local_addr`](super::Transport::local_addr)).
         port: u16,
     },
     /// `udpout:HOST:PORT` — send to the address and receive replies.

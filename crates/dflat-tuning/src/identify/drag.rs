@@ -16,7 +16,7 @@
 //! x(t) − I₂[a_att](t) = α + β·t − D·I₁[x](t) + c·t²/2
 //! ```
 //!
-//! with I₁[x] the integral of the measured position (no differentiation of
+//! with I₁\[x\] the integral of the measured position (no differentiation of
 //! noisy positions anywhere) and I₂ the double integral of a_att. The
 //! affine part is projected out per chunk and (D, c_x, c_y) follow by
 //! linear least squares over both axes.

@@ -17,7 +17,7 @@
 //!   (the paper used STEAM).
 //! * DF-MPC with N = 100 (2 s lookahead), Flatness MPC with N = 75 (1.5 s),
 //!   PD (non-predictive: closest point + desired velocity), reference as in
-//!   §VII-C ([`Reference`]).
+//!   §VII-C (`dflat_control::reference::Reference`).
 //! * Seeds: trial t at speed index i has seed `seed_base + 1000·i + t`,
 //!   shared by the three controllers.
 //!
