@@ -260,19 +260,24 @@ fn a_flight_reviewed_replayed_and_its_tlog_read_by_the_mavlink_crate() {
         "--config",
         other.to_str().unwrap(),
     ]);
-    let identical_other: f64 = out
-        .split(" identical at")
+    let identical_other = replay_field(&out, " identical at");
+    assert!(
+        identical_other < 0.2 * compared,
+        "τ 0.35: {identical_other} identical\n{out}"
+    );
+}
+
+/// The number just before `key` in `dflat replay`'s report line.
+fn replay_field(out: &str, key: &str) -> f64 {
+    out.split(key)
         .next()
         .unwrap()
         .split_whitespace()
         .last()
         .unwrap()
+        .trim_end_matches(',')
         .parse()
-        .unwrap();
-    assert!(
-        identical_other < 0.2 * compared,
-        "τ 0.35: {identical_other} identical\n{out}"
-    );
+        .unwrap()
 }
 
 /// `dflat replay` of `csv` with `config` reproduces every logged command
@@ -287,17 +292,7 @@ fn assert_replays_exactly(csv: &Path, config: &Path, out_html: &Path) -> f64 {
         out_html.to_str().unwrap(),
     ]);
     eprintln!("{out}");
-    let field = |key: &str| -> f64 {
-        out.split(key)
-            .next()
-            .unwrap()
-            .split_whitespace()
-            .last()
-            .unwrap()
-            .trim_end_matches(',')
-            .parse()
-            .unwrap()
-    };
+    let field = |key: &str| replay_field(&out, key);
     let compared = field(" commands compared");
     let identical = field(" identical at");
     assert!(compared > 200.0, "{out}");

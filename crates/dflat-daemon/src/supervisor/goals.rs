@@ -6,20 +6,30 @@
 use super::{Cause, FlightState, Goal, Refusal, SetpointOutcome, Supervisor, Transition};
 
 impl Supervisor {
-    /// A position setpoint (local NED \[m\]) arrived at `t` \[s\].
-    pub fn on_setpoint(&mut self, t: f64, position: [f64; 3]) -> SetpointOutcome {
+    /// Why a setpoint or stream sample at `position` (local NED \[m\]) is
+    /// refused, if it is: not finite, outside the fence, or the daemon not
+    /// in control.
+    fn refusal(&self, position: [f64; 3]) -> Option<Refusal> {
         if !position.iter().all(|v| v.is_finite()) {
-            return SetpointOutcome::Refused(Refusal::NonFinite);
+            return Some(Refusal::NonFinite);
         }
         if position
             .iter()
             .zip(&self.cfg.geofence)
             .any(|(p, fence)| p.abs() > *fence)
         {
-            return SetpointOutcome::Refused(Refusal::Geofence { position });
+            return Some(Refusal::Geofence { position });
         }
         if !self.state.streams() {
-            return SetpointOutcome::Refused(Refusal::NotInControl(self.state));
+            return Some(Refusal::NotInControl(self.state));
+        }
+        None
+    }
+
+    /// A position setpoint (local NED \[m\]) arrived at `t` \[s\].
+    pub fn on_setpoint(&mut self, t: f64, position: [f64; 3]) -> SetpointOutcome {
+        if let Some(refusal) = self.refusal(position) {
+            return SetpointOutcome::Refused(refusal);
         }
         if self.last_setpoint == Some(position) {
             return SetpointOutcome::Unchanged;
@@ -60,18 +70,8 @@ impl Supervisor {
     /// after the next engagement, once braked. Engaged: the goal becomes
     /// [`Goal::Stream`] (a new generation only when it was not already).
     pub fn on_stream(&mut self, t: f64, position: [f64; 3]) -> SetpointOutcome {
-        if !position.iter().all(|v| v.is_finite()) {
-            return SetpointOutcome::Refused(Refusal::NonFinite);
-        }
-        if position
-            .iter()
-            .zip(&self.cfg.geofence)
-            .any(|(p, fence)| p.abs() > *fence)
-        {
-            return SetpointOutcome::Refused(Refusal::Geofence { position });
-        }
-        if !self.state.streams() {
-            return SetpointOutcome::Refused(Refusal::NotInControl(self.state));
+        if let Some(refusal) = self.refusal(position) {
+            return SetpointOutcome::Refused(refusal);
         }
         // A position setpoint after the stream is a new request.
         self.last_setpoint = None;
