@@ -198,6 +198,8 @@ impl BandedCholesky {
     fn factor_held(&mut self) -> Result<(), ControlError> {
         self.factored = false;
         match self.b {
+            3 => self.factor_band::<3>()?,
+            4 => self.factor_band::<4>()?,
             7 => self.factor_band::<7>()?,
             9 => self.factor_band::<9>()?,
             _ => {
@@ -209,55 +211,65 @@ impl BandedCholesky {
         Ok(())
     }
 
-    /// The band-limited LLᵀ of `l` in place, for a compile-time bandwidth
-    /// (the two-axis cone problems: 7, 9 with smoothness), right-looking:
-    /// each column, once scaled, updates the B(B+1)/2 entries of the block
-    /// after it — independent multiply-adds, where the row-oriented
-    /// [`BandedCholesky::factor_generic`] chains its dot products. Rounding
-    /// differs from the generic loop's in the last bits. Writes the
-    /// substitution rows as it goes (row j of L is final once column j is
-    /// pivoted).
+    /// The square-root-free factorisation `A = L·D·Lᵀ` (L unit lower) of
+    /// `l` in place, for a compile-time bandwidth (3, 4: one axis, without
+    /// and with the smoothness term; 7, 9: the two-axis cone problems),
+    /// right-looking: each pivot `d_j`, once inverted, scales its column to
+    /// `l_{j+t,j} = a_{j+t,j}/d_j` and updates the B(B+1)/2 entries of the
+    /// block after it, `a_{j+t1,j+t2} −= l_{j+t1,j}·a_{j+t2,j}` —
+    /// independent multiply-adds, with one division and no square root on
+    /// the chain from pivot to pivot (the row-oriented
+    /// [`BandedCholesky::factor_generic`] chains its dot products, a
+    /// division per entry and a square root per row). Row t1 of the block
+    /// is updated as one contiguous run against the unscaled column held
+    /// in reverse, so the loops have compile-time bounds and vectorise
+    /// without index checks. Writes the substitution rows as it goes:
+    /// forward `[1, l_{j,j−1}, …, l_{j,j−B}]` (row j of L is final once
+    /// column j is pivoted), backward `[1/d_j, l_{j+1,j}, …, l_{j+B,j}]`,
+    /// so [`BandedCholesky::solve_in_place`] runs `L·z = b`, then
+    /// `Lᵀ·x = D⁻¹·z` in one pass.
     fn factor_band<const B: usize>(&mut self) -> Result<(), ControlError> {
         let n = self.n;
         let w = B + 1;
         let l = &mut self.l;
+        // ra[B − t] = a_{j+t, j} before scaling, rl[B − t] = l_{j+t, j}
+        // (0 past the matrix's end).
+        let (mut ra, mut rl) = ([0.0f64; B], [0.0f64; B]);
         for j in 0..n {
             let d = l[j * w];
             if !(d > 0.0 && d.is_finite()) {
                 return Err(ControlError::NotPositiveDefinite);
             }
-            let pivot = d.sqrt();
-            l[j * w] = pivot;
-            let inv = 1.0 / pivot;
-            let mut col = [0.0f64; B];
+            let inv = 1.0 / d;
             if j + B < n {
                 // The bulk: a full column, every bound known at compile
-                // time (the update unrolls without index checks).
+                // time.
                 let block = &mut l[j * w..(j + B + 1) * w];
                 for t in 1..=B {
-                    let v = block[t * w + t] * inv;
+                    let a = block[t * w + t];
+                    let v = a * inv;
                     block[t * w + t] = v;
-                    col[t - 1] = v;
+                    ra[B - t] = a;
+                    rl[B - t] = v;
                 }
-                // Entry (j + t1, j + t2), t1 ≥ t2, at block[t1·w + t1 − t2].
-                for t1 in 1..=B {
-                    let c1 = col[t1 - 1];
-                    for t2 in 1..=t1 {
-                        block[t1 * w + t1 - t2] -= c1 * col[t2 - 1];
-                    }
-                }
+                Self::update_block::<B>(block, &ra, &rl);
             } else {
+                // The last B columns: a shorter block.
                 let span = n - 1 - j;
+                ra = [0.0; B];
+                rl = [0.0; B];
                 for t in 1..=span {
-                    let v = l[(j + t) * w + t] * inv;
+                    let a = l[(j + t) * w + t];
+                    let v = a * inv;
                     l[(j + t) * w + t] = v;
-                    col[t - 1] = v;
+                    ra[B - t] = a;
+                    rl[B - t] = v;
                 }
                 for t1 in 1..=span {
-                    let row = &mut l[(j + t1) * w..(j + t1) * w + w];
-                    let c1 = col[t1 - 1];
-                    for t2 in 1..=t1 {
-                        row[t1 - t2] -= c1 * col[t2 - 1];
+                    let c1 = rl[B - t1];
+                    let row = &mut l[(j + t1) * w..(j + t1) * w + t1];
+                    for (r, c) in row.iter_mut().zip(&ra[B - t1..]) {
+                        *r -= c1 * c;
                     }
                 }
             }
@@ -265,14 +277,30 @@ impl BandedCholesky {
                 &mut self.fwd[j * w..j * w + w],
                 &mut self.bwd[j * w..j * w + w],
             );
-            fwd[0] = inv;
+            fwd[0] = 1.0;
             bwd[0] = inv;
-            for d in 1..=B {
-                fwd[d] = if d <= j { l[j * w + d] * inv } else { 0.0 };
-                bwd[d] = col[d - 1] * inv;
+            for t in 1..=B {
+                fwd[t] = if t <= j { l[j * w + t] } else { 0.0 };
+                bwd[t] = rl[B - t];
             }
         }
         Ok(())
+    }
+
+    /// The update of the (B + 1)² block after a full column: entry
+    /// (j + t1, j + t2), t1 ≥ t2, at `block[t1·w + t1 − t2]` loses
+    /// `l_{j+t1,j}·a_{j+t2,j}`; row t1's run s = 0..t1 takes t2 = t1 − s,
+    /// i.e. `ra[B − t1 + s]`.
+    #[inline(always)]
+    fn update_block<const B: usize>(block: &mut [f64], ra: &[f64; B], rl: &[f64; B]) {
+        let w = B + 1;
+        for t1 in 1..=B {
+            let c1 = rl[B - t1];
+            let row = &mut block[t1 * w..t1 * w + t1];
+            for (r, c) in row.iter_mut().zip(&ra[B - t1..]) {
+                *r -= c1 * c;
+            }
+        }
     }
 
     /// The band-limited LLᵀ of `l` in place, any bandwidth.

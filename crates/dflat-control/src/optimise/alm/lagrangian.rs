@@ -3,50 +3,9 @@
 //! gradient and its residuals, the line search's merit and the generalised
 //! Hessian.
 
-use super::{BandedAlm, D2, StageSet};
+use super::{BandedAlm, StageSet};
 
 impl BandedAlm {
-    /// `w − Π_f(w)` and the generalised Jacobian `I − ∂Π_f(w)` when `w`
-    /// lies outside stage f's set (the disc's: `(1 − A/‖w‖)·w`).
-    #[inline]
-    pub(super) fn excess(&self, w: [f64; 2], f: usize) -> Option<([f64; 2], [[f64; 2]; 2])> {
-        match &self.stages {
-            StageSet::Disc(radius) => {
-                let n2 = w[0] * w[0] + w[1] * w[1];
-                let r = radius[f];
-                if n2 <= r * r {
-                    return None;
-                }
-                let norm = n2.sqrt();
-                let t = r / norm;
-                let (wx, wy) = (w[0] / norm, w[1] / norm);
-                let k = 1.0 - t;
-                Some((
-                    [k * w[0], k * w[1]],
-                    [
-                        [1.0 - t + t * wx * wx, t * wx * wy],
-                        [t * wx * wy, 1.0 - t + t * wy * wy],
-                    ],
-                ))
-            }
-            StageSet::Interval(bounds) => {
-                let mut e = [0.0; 2];
-                let mut j = [[0.0; 2]; 2];
-                let mut any = false;
-                for i in 0..self.k {
-                    let [lo, hi] = bounds[f][i];
-                    let out = w[i] - w[i].clamp(lo, hi);
-                    if out != 0.0 {
-                        e[i] = out;
-                        j[i][i] = 1.0;
-                        any = true;
-                    }
-                }
-                any.then_some((e, j))
-            }
-        }
-    }
-
     /// The stage bounds' scale [m/s²] for the residual's tolerance.
     pub(super) fn stage_scale(&self) -> f64 {
         match &self.stages {
@@ -130,16 +89,25 @@ impl BandedAlm {
     /// `hd` current), without its constant `−Σ‖y_f‖²/(2σ)`.
     pub(super) fn penalty_terms(&self, alpha: f64, lo: &[f64], hi: &[f64]) -> f64 {
         let s = self.sigma;
-        let mut value = 0.0;
-        for f in 0..self.n {
-            let w = [
+        let at = |f: usize| {
+            [
                 self.u[f][0] + alpha * self.du[f][0] + self.y[f][0] / s,
                 self.u[f][1] + alpha * self.du[f][1] + self.y[f][1] / s,
-            ];
-            if let Some((e, _)) = self.excess(w, f) {
-                value += 0.5 * s * (e[0] * e[0] + e[1] * e[1]);
-            }
-        }
+            ]
+        };
+        let dist2: f64 = match &self.stages {
+            StageSet::Disc(radius) => radius
+                .iter()
+                .enumerate()
+                .map(|(f, &r)| disc_dist2(at(f), r))
+                .sum(),
+            StageSet::Interval(bounds) => bounds
+                .iter()
+                .enumerate()
+                .map(|(f, b)| interval_dist2(at(f), b, self.k))
+                .sum(),
+        };
+        let mut value = 0.5 * s * dist2;
         for (k, v) in self.v.iter().enumerate() {
             let h = self.hx[k] + alpha * self.hd[k];
             let ss = self.sigma_row(k);
@@ -171,25 +139,51 @@ impl BandedAlm {
         Self::accelerations(k, self.inv_dt2, &self.x, &mut self.u);
         let mut res2: f64 = 0.0;
         let mut value = 0.0;
-        for f in 0..self.n {
-            let mut u = self.u[f];
-            for i in 0..k {
-                u[i] += a0[i];
-            }
-            self.u[f] = u;
-            let y = self.y[f];
-            let w = [u[0] + y[0] / s, u[1] + y[1] / s];
-            let yn = match self.excess(w, f) {
-                Some((e, _)) => {
+        let Self {
+            stages,
+            u: us,
+            y,
+            y_next,
+            jac,
+            active,
+            ..
+        } = self;
+        let mut stage = |f: usize, out: Option<([f64; 2], [[f64; 2]; 2])>| {
+            let yn = match out {
+                Some((e, j)) => {
                     value += 0.5 * s * (e[0] * e[0] + e[1] * e[1]);
+                    jac[f] = j;
                     [s * e[0], s * e[1]]
                 }
                 None => [0.0; 2],
             };
-            self.active[f] = yn != [0.0; 2];
-            let (ex, ey) = (yn[0] - y[0], yn[1] - y[1]);
+            active[f] = yn != [0.0; 2];
+            let (ex, ey) = (yn[0] - y[f][0], yn[1] - y[f][1]);
             res2 = res2.max(ex * ex + ey * ey);
-            self.y_next[f] = yn;
+            y_next[f] = yn;
+        };
+        let mut shifted = |f: usize| {
+            let mut u = us[f];
+            for i in 0..k {
+                u[i] += a0[i];
+            }
+            us[f] = u;
+            [u[0] + y[f][0] / s, u[1] + y[f][1] / s]
+        };
+        // One loop per kind of set, so the projection inlines.
+        match stages {
+            StageSet::Disc(radius) => {
+                for (f, &r) in radius.iter().enumerate() {
+                    let w = shifted(f);
+                    stage(f, disc_excess(w, r));
+                }
+            }
+            StageSet::Interval(bounds) => {
+                for (f, b) in bounds.iter().enumerate() {
+                    let w = shifted(f);
+                    stage(f, interval_excess(w, b, k));
+                }
+            }
         }
         let stage_res = res2.sqrt() / s;
         Self::add_transposed(k, self.inv_dt2, &self.y_next, &mut self.g);
@@ -252,33 +246,37 @@ impl BandedAlm {
         let s = self.sigma;
         let k = self.k;
         let k2 = self.inv_dt2 * self.inv_dt2;
+        let w = self.kkt.bandwidth() + 1;
+        let lower = self.kkt.lower_mut();
         for f in 0..self.n {
-            let w = [
-                self.u[f][0] + self.y[f][0] / s,
-                self.u[f][1] + self.y[f][1] / s,
-            ];
-            let Some((_, j)) = self.excess(w, f) else {
+            if !self.active[f] {
                 continue;
-            };
-            // G_fᵀ(σ·k2·J)G_f into the band: entry (at(i, f − ka),
-            // at(jj, f − kb)) at row·w + (row − col), lower triangle only.
-            let w = self.kkt.bandwidth() + 1;
-            let lower = self.kkt.lower_mut();
-            for (ka, &ca) in D2.iter().enumerate() {
-                let Some(ga) = f.checked_sub(ka) else {
-                    continue;
-                };
-                for (kb, &cb) in D2.iter().enumerate() {
-                    let Some(gb) = f.checked_sub(kb) else {
-                        continue;
-                    };
-                    let scale = s * k2 * ca * cb;
-                    for (i, ji) in j.iter().enumerate().take(k) {
-                        for (jj, &jv) in ji.iter().enumerate().take(k) {
-                            let (r, c) = (k * ga + i, k * gb + jj);
-                            if r >= c && jv != 0.0 {
-                                lower[r * w + (r - c)] += scale * jv;
-                            }
+            }
+            // G_fᵀ(σ·k2·J)G_f into the lower band: stages g_a = f − a ≥
+            // g_b = f − b (a ≤ b) only; entry (k·g_a + i, k·g_b + j) at
+            // row·w + (row − col). On one stage (a = b) the 2×2 block's
+            // lower half, across stages the whole block.
+            let j = self.jac[f];
+            let sc = s * k2;
+            for a in 0..3.min(f + 1) {
+                let ga = f - a;
+                for b in a..3.min(f + 1) {
+                    let gb = f - b;
+                    let c = sc * D2D2[a][b];
+                    if k == 1 {
+                        lower[ga * w + (ga - gb)] += c * j[0][0];
+                    } else {
+                        let (r0, c0) = (2 * ga, 2 * gb);
+                        if a == b {
+                            lower[r0 * w] += c * j[0][0];
+                            lower[(r0 + 1) * w + 1] += c * j[1][0];
+                            lower[(r0 + 1) * w] += c * j[1][1];
+                        } else {
+                            let d = r0 - c0;
+                            lower[r0 * w + d] += c * j[0][0];
+                            lower[r0 * w + d - 1] += c * j[0][1];
+                            lower[(r0 + 1) * w + d + 1] += c * j[1][0];
+                            lower[(r0 + 1) * w + d] += c * j[1][1];
                         }
                     }
                 }
@@ -310,6 +308,71 @@ impl BandedAlm {
         }
     }
 }
+
+/// `w − Π(w)` and `I − ∂Π(w)` for the disc of radius `r` when `w` lies
+/// outside it (`(1 − r/‖w‖)·w`, `(1 − t)·I + t·ŵŵᵀ` with t = r/‖w‖).
+#[inline(always)]
+fn disc_excess(w: [f64; 2], r: f64) -> Option<([f64; 2], [[f64; 2]; 2])> {
+    let n2 = w[0] * w[0] + w[1] * w[1];
+    if n2 <= r * r {
+        return None;
+    }
+    let norm = n2.sqrt();
+    let t = r / norm;
+    let (wx, wy) = (w[0] / norm, w[1] / norm);
+    let k = 1.0 - t;
+    let off = t * wx * wy;
+    Some((
+        [k * w[0], k * w[1]],
+        [[k + t * wx * wx, off], [off, k + t * wy * wy]],
+    ))
+}
+
+/// `w − Π(w)` and `I − ∂Π(w)` for the first `k` axes' intervals
+/// `[lo, hi]` when `w` lies outside one of them.
+#[inline(always)]
+fn interval_excess(w: [f64; 2], b: &[[f64; 2]; 2], k: usize) -> Option<([f64; 2], [[f64; 2]; 2])> {
+    let mut e = [0.0; 2];
+    let mut j = [[0.0; 2]; 2];
+    let mut any = false;
+    for i in 0..k {
+        let [lo, hi] = b[i];
+        let out = w[i] - w[i].clamp(lo, hi);
+        if out != 0.0 {
+            e[i] = out;
+            j[i][i] = 1.0;
+            any = true;
+        }
+    }
+    any.then_some((e, j))
+}
+
+/// `½·dist²(w, D)·2` for the disc of radius r: `(‖w‖ − r)²` outside, 0
+/// inside (the line search's value only).
+#[inline(always)]
+fn disc_dist2(w: [f64; 2], r: f64) -> f64 {
+    let n2 = w[0] * w[0] + w[1] * w[1];
+    if n2 <= r * r {
+        return 0.0;
+    }
+    let d = n2.sqrt() - r;
+    d * d
+}
+
+/// `dist²(w, D)` for the first `k` axes' intervals.
+#[inline(always)]
+fn interval_dist2(w: [f64; 2], b: &[[f64; 2]; 2], k: usize) -> f64 {
+    let mut v = 0.0;
+    for i in 0..k {
+        let [lo, hi] = b[i];
+        let out = w[i] - w[i].clamp(lo, hi);
+        v += out * out;
+    }
+    v
+}
+
+/// The products `D2[a]·D2[b]` of the second difference's coefficients.
+const D2D2: [[f64; 3]; 3] = [[1.0, -2.0, 1.0], [-2.0, 4.0, -2.0], [1.0, -2.0, 1.0]];
 
 /// Which vector [`BandedAlm::apply_p`] multiplies.
 #[derive(Debug, Clone, Copy)]

@@ -106,9 +106,6 @@ const INEXACT: f64 = 0.1;
 /// Growth of σ when the constraint residual stalls.
 const SIGMA_GROWTH: f64 = 10.0;
 
-/// The second difference `(1, −2, 1)` on p_f, p_{f−1}, p_{f−2}.
-const D2: [f64; 3] = [1.0, -2.0, 1.0];
-
 /// Tuning of [`BandedAlm`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct AlmTuning {
@@ -195,6 +192,9 @@ pub struct BandedAlm {
     px: Vec<f64>,
     /// Per-stage u_f and G_f·d.
     u: Vec<[f64; 2]>,
+    /// Per stage `I − ∂Π_f(w_f)` at x (set by `gradient` for the stages
+    /// outside their set, read by `assemble`).
+    jac: Vec<[[f64; 2]; 2]>,
     du: Vec<[f64; 2]>,
     /// Per-row h·x and h·d.
     hx: Vec<f64>,
@@ -295,6 +295,7 @@ impl BandedAlm {
             pd: vec![0.0; size],
             px: vec![0.0; size],
             u: vec![[0.0; 2]; n],
+            jac: vec![[[0.0; 2]; 2]; n],
             du: vec![[0.0; 2]; n],
             hx: vec![0.0; m],
             hd: vec![0.0; m],
