@@ -258,11 +258,12 @@ impl BandedAlm {
             // lower half, across stages the whole block.
             let j = self.jac[f];
             let sc = s * k2;
-            for a in 0..3.min(f + 1) {
+            let reach = 3.min(f + 1);
+            for (a, coef) in D2D2.iter().enumerate().take(reach) {
                 let ga = f - a;
-                for b in a..3.min(f + 1) {
+                for (b, &cab) in coef.iter().enumerate().take(reach).skip(a) {
                     let gb = f - b;
-                    let c = sc * D2D2[a][b];
+                    let c = sc * cab;
                     if k == 1 {
                         lower[ga * w + (ga - gb)] += c * j[0][0];
                     } else {
@@ -317,9 +318,9 @@ fn disc_excess(w: [f64; 2], r: f64) -> Option<([f64; 2], [[f64; 2]; 2])> {
     if n2 <= r * r {
         return None;
     }
-    let norm = n2.sqrt();
-    let t = r / norm;
-    let (wx, wy) = (w[0] / norm, w[1] / norm);
+    let inv = 1.0 / n2.sqrt();
+    let t = r * inv;
+    let (wx, wy) = (w[0] * inv, w[1] * inv);
     let k = 1.0 - t;
     let off = t * wx * wy;
     Some((

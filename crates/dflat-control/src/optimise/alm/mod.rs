@@ -581,7 +581,7 @@ impl BandedAlm {
                     (_, stage_res, row_res) = self.gradient(a0, lo, hi);
                     break;
                 }
-                last_full = self.line_search(lo, hi)?;
+                last_full = self.line_search(decrement, lo, hi)?;
                 if last_full && !reuse && decrement <= LOCAL_STOP * c_scale * x_scale {
                     // A full step from a small decrement: the next one is
                     // of its square (Newton's local rate), below tolerance.
@@ -622,9 +622,15 @@ impl BandedAlm {
 
     /// Armijo backtracking on L along d from x (u, hx, g current); moves x.
     /// Returns whether the full step was taken.
-    fn line_search(&mut self, lo: &[f64], hi: &[f64]) -> Result<bool, ControlError> {
+    fn line_search(
+        &mut self,
+        decrement: f64,
+        lo: &[f64],
+        hi: &[f64],
+    ) -> Result<bool, ControlError> {
         self.apply_p(Vector::D);
-        let slope: f64 = self.g.iter().zip(&self.d).map(|(g, d)| g * d).sum();
+        // gᵀd = −(Newton decrement).
+        let slope = -decrement;
         if slope.is_nan() || slope >= 0.0 {
             // Not a descent direction: the factor is too inexact to go on.
             return Err(ControlError::Solver(format!(
@@ -632,14 +638,11 @@ impl BandedAlm {
             )));
         }
         // Quadratic part along d: α·(Px + c)·d + ½α²·dᵀPd.
-        let lin: f64 = self
-            .px
-            .iter()
-            .zip(&self.c)
-            .zip(&self.d)
-            .map(|((p, c), d)| (p + c) * d)
-            .sum();
-        let curv: f64 = self.pd.iter().zip(&self.d).map(|(p, d)| p * d).sum();
+        let (mut lin, mut curv) = (0.0, 0.0);
+        for (((p, c), d), pd) in self.px.iter().zip(&self.c).zip(&self.d).zip(&self.pd) {
+            lin += (p + c) * d;
+            curv += pd * d;
+        }
         Self::accelerations(self.k, self.inv_dt2, &self.d, &mut self.du);
         for r in 0..self.rows.len() {
             self.hd[r] = self.rows[r].dot(&self.d);
@@ -664,11 +667,9 @@ impl BandedAlm {
     /// `x += α·d`, and `P·x` with it from `P·d` (both by differencing,
     /// so the sum keeps their accuracy).
     fn step(&mut self, alpha: f64) {
-        for (x, d) in self.x.iter_mut().zip(&self.d) {
+        for (((x, d), p), pd) in self.x.iter_mut().zip(&self.d).zip(&mut self.px).zip(&self.pd) {
             *x += alpha * d;
-        }
-        for (p, d) in self.px.iter_mut().zip(&self.pd) {
-            *p += alpha * d;
+            *p += alpha * pd;
         }
     }
 }
