@@ -89,10 +89,11 @@ impl BandedAlm {
     /// `hd` current), without its constant `−Σ‖y_f‖²/(2σ)`.
     pub(super) fn penalty_terms(&self, alpha: f64, lo: &[f64], hi: &[f64]) -> f64 {
         let s = self.sigma;
+        let inv_s = 1.0 / s;
         let at = |f: usize| {
             [
-                self.u[f][0] + alpha * self.du[f][0] + self.y[f][0] / s,
-                self.u[f][1] + alpha * self.du[f][1] + self.y[f][1] / s,
+                self.u[f][0] + alpha * self.du[f][0] + self.y[f][0] * inv_s,
+                self.u[f][1] + alpha * self.du[f][1] + self.y[f][1] * inv_s,
             ]
         };
         let dist2: f64 = match &self.stages {
@@ -137,54 +138,32 @@ impl BandedAlm {
         let s = self.sigma;
         let k = self.k;
         Self::accelerations(k, self.inv_dt2, &self.x, &mut self.u);
-        let mut res2: f64 = 0.0;
-        let mut value = 0.0;
-        let Self {
-            stages,
-            u: us,
-            y,
-            y_next,
-            jac,
-            active,
-            ..
-        } = self;
-        let mut stage = |f: usize, out: Option<([f64; 2], [[f64; 2]; 2])>| {
-            let yn = match out {
-                Some((e, j)) => {
-                    value += 0.5 * s * (e[0] * e[0] + e[1] * e[1]);
-                    jac[f] = j;
-                    [s * e[0], s * e[1]]
-                }
-                None => [0.0; 2],
-            };
-            active[f] = yn != [0.0; 2];
-            let (ex, ey) = (yn[0] - y[f][0], yn[1] - y[f][1]);
-            res2 = res2.max(ex * ex + ey * ey);
-            y_next[f] = yn;
+        // One pass per kind of set, so the projection inlines.
+        let (res2, value) = match &self.stages {
+            StageSet::Disc(radius) => stage_pass(
+                &mut self.u,
+                &self.y,
+                &mut self.y_next,
+                &mut self.jac,
+                &mut self.active,
+                a0,
+                s,
+                k,
+                |f, w| disc_excess(w, radius[f]),
+            ),
+            StageSet::Interval(bounds) => stage_pass(
+                &mut self.u,
+                &self.y,
+                &mut self.y_next,
+                &mut self.jac,
+                &mut self.active,
+                a0,
+                s,
+                k,
+                |f, w| interval_excess(w, &bounds[f], k),
+            ),
         };
-        let mut shifted = |f: usize| {
-            let mut u = us[f];
-            for i in 0..k {
-                u[i] += a0[i];
-            }
-            us[f] = u;
-            [u[0] + y[f][0] / s, u[1] + y[f][1] / s]
-        };
-        // One loop per kind of set, so the projection inlines.
-        match stages {
-            StageSet::Disc(radius) => {
-                for (f, &r) in radius.iter().enumerate() {
-                    let w = shifted(f);
-                    stage(f, disc_excess(w, r));
-                }
-            }
-            StageSet::Interval(bounds) => {
-                for (f, b) in bounds.iter().enumerate() {
-                    let w = shifted(f);
-                    stage(f, interval_excess(w, b, k));
-                }
-            }
-        }
+        let mut value = value;
         let stage_res = res2.sqrt() / s;
         Self::add_transposed(k, self.inv_dt2, &self.y_next, &mut self.g);
         let mut row_res: f64 = 0.0;
@@ -308,6 +287,48 @@ impl BandedAlm {
             }
         }
     }
+}
+
+/// The gradient's pass over the stages: `u_f += a_0` (u holds G_f·x on
+/// entry), `w_f = u_f + y_f/σ`, the updated multipliers `y'_f = σ·(w_f −
+/// Π_f(w_f))`, `I − ∂Π_f` of the stages outside their set (`jac`) and
+/// which they are (`active`, first n entries); returns the largest
+/// `‖y' − y‖²` and the penalty `Σ σ/2·‖w_f − Π_f(w_f)‖²`. Generic over
+/// the projection so that it inlines.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn stage_pass(
+    u: &mut [[f64; 2]],
+    y: &[[f64; 2]],
+    y_next: &mut [[f64; 2]],
+    jac: &mut [[[f64; 2]; 2]],
+    active: &mut [bool],
+    a0: [f64; 2],
+    s: f64,
+    k: usize,
+    excess: impl Fn(usize, [f64; 2]) -> Option<([f64; 2], [[f64; 2]; 2])>,
+) -> (f64, f64) {
+    let inv_s = 1.0 / s;
+    let (mut res2, mut value) = (0.0f64, 0.0);
+    let a0 = if k == 1 { [a0[0], 0.0] } else { a0 };
+    for (f, ((uf, yf), ynf)) in u.iter_mut().zip(y).zip(y_next.iter_mut()).enumerate() {
+        let uu = [uf[0] + a0[0], uf[1] + a0[1]];
+        *uf = uu;
+        let w = [uu[0] + yf[0] * inv_s, uu[1] + yf[1] * inv_s];
+        let yn = match excess(f, w) {
+            Some((e, j)) => {
+                value += 0.5 * s * (e[0] * e[0] + e[1] * e[1]);
+                jac[f] = j;
+                [s * e[0], s * e[1]]
+            }
+            None => [0.0; 2],
+        };
+        active[f] = yn != [0.0; 2];
+        let (ex, ey) = (yn[0] - yf[0], yn[1] - yf[1]);
+        res2 = res2.max(ex * ex + ey * ey);
+        *ynf = yn;
+    }
+    (res2, value)
 }
 
 /// `w − Π(w)` and `I − ∂Π(w)` for the disc of radius `r` when `w` lies

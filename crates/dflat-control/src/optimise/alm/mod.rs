@@ -667,7 +667,13 @@ impl BandedAlm {
     /// `x += α·d`, and `P·x` with it from `P·d` (both by differencing,
     /// so the sum keeps their accuracy).
     fn step(&mut self, alpha: f64) {
-        for (((x, d), p), pd) in self.x.iter_mut().zip(&self.d).zip(&mut self.px).zip(&self.pd) {
+        for (((x, d), p), pd) in self
+            .x
+            .iter_mut()
+            .zip(&self.d)
+            .zip(&mut self.px)
+            .zip(&self.pd)
+        {
             *x += alpha * d;
             *p += alpha * pd;
         }
