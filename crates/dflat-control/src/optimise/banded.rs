@@ -136,9 +136,13 @@ pub struct BandedCholesky {
     b: usize,
     /// L, lower band, row-major as in [`SymBand`].
     l: Vec<f64>,
-    /// Forward-substitution rows: `[1/L_ii, L_{i,i−1}/L_ii, …, L_{i,i−b}/L_ii]`.
+    /// Forward substitution, per unknown i in order: its scale and the
+    /// column below it, `[1/L_ii, L_{i+1,i}, …, L_{i+b,i}]` (the LDLᵀ
+    /// kernels: `[1/d_i, d_i·l_{i+1,i}, …]`); 0 past the end.
     fwd: Vec<f64>,
-    /// Back-substitution rows: `[1/L_ii, L_{i+1,i}/L_ii, …, L_{i+b,i}/L_ii]`.
+    /// Back substitution, per unknown i from the last: its scale and the
+    /// row before it, `[1/L_ii, L_{i,i−1}, …, L_{i,i−b}]` (LDLᵀ: `[1,
+    /// l_{i,i−1}, …]`); 0 before the start.
     bwd: Vec<f64>,
     factored: bool,
 }
@@ -277,11 +281,11 @@ impl BandedCholesky {
                 &mut self.fwd[j * w..j * w + w],
                 &mut self.bwd[j * w..j * w + w],
             );
-            fwd[0] = 1.0;
-            bwd[0] = inv;
+            fwd[0] = inv;
+            bwd[0] = 1.0;
             for t in 1..=B {
-                fwd[t] = if t <= j { l[j * w + t] } else { 0.0 };
-                bwd[t] = rl[B - t];
+                fwd[t] = ra[B - t];
+                bwd[t] = if t <= j { l[j * w + t] } else { 0.0 };
             }
         }
         Ok(())
@@ -331,23 +335,22 @@ impl BandedCholesky {
         Ok(())
     }
 
-    /// The pre-divided rows of the substitutions from `l`.
+    /// The substitutions' data from `l` (the generic LLᵀ): per unknown
+    /// `1/L_ii`, the column below it (forward) and the row before it
+    /// (backward).
     fn substitution_rows(&mut self) {
         let (n, b, w) = (self.n, self.b, self.b + 1);
-        // Pre-divided rows for the substitutions: no division in the
-        // sequential recurrences, and the newest unknown enters last so the
-        // critical path per row is one multiply-subtract.
         for i in 0..n {
             let inv = 1.0 / self.l[i * w];
             self.fwd[i * w] = inv;
             self.bwd[i * w] = inv;
             for d in 1..=b {
-                self.fwd[i * w + d] = if d <= i { self.l[i * w + d] * inv } else { 0.0 };
-                self.bwd[i * w + d] = if i + d < n {
-                    self.l[(i + d) * w + d] * inv
+                self.fwd[i * w + d] = if i + d < n {
+                    self.l[(i + d) * w + d]
                 } else {
                     0.0
                 };
+                self.bwd[i * w + d] = if d <= i { self.l[i * w + d] } else { 0.0 };
             }
         }
     }
@@ -383,37 +386,17 @@ impl BandedCholesky {
         }
         match self.b {
             3 => {
-                self.run_band::<3, 2>(&self.fwd, [&mut *x, &mut *y], false);
-                self.run_band::<3, 2>(&self.bwd, [x, y], true);
-                return Ok(());
+                Self::run_band::<3, 2>(&self.fwd, [&mut *x, &mut *y], false);
+                Self::run_band::<3, 2>(&self.bwd, [x, y], true);
             }
             4 => {
-                self.run_band::<4, 2>(&self.fwd, [&mut *x, &mut *y], false);
-                self.run_band::<4, 2>(&self.bwd, [x, y], true);
-                return Ok(());
+                Self::run_band::<4, 2>(&self.fwd, [&mut *x, &mut *y], false);
+                Self::run_band::<4, 2>(&self.bwd, [x, y], true);
             }
-            _ => {}
-        }
-        let (n, b, w) = (self.n, self.b, self.b + 1);
-        for i in 0..n {
-            let row = &self.fwd[i * w..(i + 1) * w];
-            let (mut s, mut t) = (x[i] * row[0], y[i] * row[0]);
-            for k in i.saturating_sub(b)..i {
-                s -= row[i - k] * x[k];
-                t -= row[i - k] * y[k];
+            _ => {
+                self.solve_in_place(x)?;
+                self.solve_in_place(y)?;
             }
-            x[i] = s;
-            y[i] = t;
-        }
-        for i in (0..n).rev() {
-            let row = &self.bwd[i * w..(i + 1) * w];
-            let (mut s, mut t) = (x[i] * row[0], y[i] * row[0]);
-            for k in (i + 1..(i + b + 1).min(n)).rev() {
-                s -= row[k - i] * x[k];
-                t -= row[k - i] * y[k];
-            }
-            x[i] = s;
-            y[i] = t;
         }
         Ok(())
     }
@@ -421,76 +404,76 @@ impl BandedCholesky {
     /// `x ← L⁻¹·x`.
     fn forward(&self, x: &mut [f64]) {
         match self.b {
-            3 => return self.run_band::<3, 1>(&self.fwd, [x], false),
-            4 => return self.run_band::<4, 1>(&self.fwd, [x], false),
-            7 => return self.run_band::<7, 1>(&self.fwd, [x], false),
-            9 => return self.run_band::<9, 1>(&self.fwd, [x], false),
-            _ => {}
-        }
-        let (n, b, w) = (self.n, self.b, self.b + 1);
-        for i in 0..n {
-            let row = &self.fwd[i * w..(i + 1) * w];
-            let mut s = x[i] * row[0];
-            for k in i.saturating_sub(b)..i {
-                s -= row[i - k] * x[k];
-            }
-            x[i] = s;
+            3 => Self::run_band::<3, 1>(&self.fwd, [x], false),
+            4 => Self::run_band::<4, 1>(&self.fwd, [x], false),
+            7 => Self::run_band::<7, 1>(&self.fwd, [x], false),
+            9 => Self::run_band::<9, 1>(&self.fwd, [x], false),
+            _ => Self::run_generic(self.b, &self.fwd, x, false),
         }
     }
 
     /// `x ← L⁻ᵀ·x`.
     fn backward(&self, x: &mut [f64]) {
         match self.b {
-            3 => return self.run_band::<3, 1>(&self.bwd, [x], true),
-            4 => return self.run_band::<4, 1>(&self.bwd, [x], true),
-            7 => return self.run_band::<7, 1>(&self.bwd, [x], true),
-            9 => return self.run_band::<9, 1>(&self.bwd, [x], true),
-            _ => {}
-        }
-        let (n, b, w) = (self.n, self.b, self.b + 1);
-        for i in (0..n).rev() {
-            let row = &self.bwd[i * w..(i + 1) * w];
-            let mut s = x[i] * row[0];
-            for k in (i + 1..(i + b + 1).min(n)).rev() {
-                s -= row[k - i] * x[k];
-            }
-            x[i] = s;
+            3 => Self::run_band::<3, 1>(&self.bwd, [x], true),
+            4 => Self::run_band::<4, 1>(&self.bwd, [x], true),
+            7 => Self::run_band::<7, 1>(&self.bwd, [x], true),
+            9 => Self::run_band::<9, 1>(&self.bwd, [x], true),
+            _ => Self::run_generic(self.b, &self.bwd, x, true),
         }
     }
 
-    // Fixed-bandwidth specialisation (B = 3: the DF-MPC; B = 4: with the
-    // command-smoothness term): the last B unknowns stay in registers, K
-    // right-hand sides interleave. Same operation order as the generic
-    // loops (oldest neighbour first), so results are bit-identical.
+    /// A substitution by columns, any bandwidth: in processing order
+    /// (ascending, or descending when `reverse`) each unknown is scaled
+    /// (`x_i ← r₀·x_i`) and then removed from the b unknowns after it
+    /// (`x_{i±t} −= r_t·x_i`).
+    fn run_generic(b: usize, data: &[f64], x: &mut [f64], reverse: bool) {
+        let (n, w) = (x.len(), b + 1);
+        for s in 0..n {
+            let i = if reverse { n - 1 - s } else { s };
+            let r = &data[i * w..(i + 1) * w];
+            let v = x[i] * r[0];
+            x[i] = v;
+            for t in 1..=b.min(n - 1 - s) {
+                let k = if reverse { i - t } else { i + t };
+                x[k] -= r[t] * v;
+            }
+        }
+    }
 
-    /// Runs the bandwidth-B recurrence over `rows` (`[1/L_ii, f1, …, fB]`)
-    /// in processing order (ascending, or descending when `reverse`).
-    fn run_band<const B: usize, const K: usize>(
-        &self,
-        rows: &[f64],
-        xs: [&mut [f64]; K],
-        reverse: bool,
-    ) {
-        debug_assert_eq!(self.b, B);
-        let n = self.n;
+    // Fixed-bandwidth specialisation (B = 3: the DF-MPC; 4: with the
+    // command-smoothness term; 7, 9: the cone's pairs). The partial sums
+    // of the next B unknowns stay in registers (a window shifted by hand);
+    // each step's B multiply-subtracts are independent, and only the next
+    // unknown's waits for this one. K right-hand sides interleave, each
+    // exactly as alone.
+
+    /// Runs the bandwidth-B substitution over `data` (`[r₀, r₁, …, r_B]`
+    /// per unknown) in processing order (ascending, or descending when
+    /// `reverse`), as [`BandedCholesky::run_generic`].
+    fn run_band<const B: usize, const K: usize>(data: &[f64], xs: [&mut [f64]; K], reverse: bool) {
         let mut xs = xs;
-        // state[d − 1] = the unknown d steps back (newest first).
-        let mut state = [[0.0f64; B]; K];
-        for t in 0..n {
-            let i = if reverse { n - 1 - t } else { t };
-            let r = &rows[(B + 1) * i..(B + 1) * (i + 1)];
-            for (x, st) in xs.iter_mut().zip(state.iter_mut()) {
-                let mut v = x[i] * r[0];
-                for d in (1..=B).rev() {
-                    v -= r[d] * st[d - 1];
-                }
+        let n = xs[0].len();
+        let at = |s: usize| if reverse { n - 1 - s } else { s };
+        // win[t] = the partial sum of the unknown t steps ahead.
+        let mut win = [[0.0f64; B]; K];
+        for (x, wk) in xs.iter().zip(win.iter_mut()) {
+            for (t, v) in wk.iter_mut().enumerate().take(n) {
+                *v = x[at(t)];
+            }
+        }
+        for s in 0..n {
+            let i = at(s);
+            let r = &data[(B + 1) * i..(B + 1) * (i + 1)];
+            let ahead = s + B < n;
+            for (x, wk) in xs.iter_mut().zip(win.iter_mut()) {
+                let v = wk[0] * r[0];
                 x[i] = v;
-                // Shift the register window by hand: a const-bounded loop the
-                // compiler unrolls (`copy_within` became a memmove call).
-                for d in (1..B).rev() {
-                    st[d] = st[d - 1];
+                let next = if ahead { x[at(s + B)] } else { 0.0 };
+                for t in 0..B - 1 {
+                    wk[t] = wk[t + 1] - r[t + 1] * v;
                 }
-                st[0] = v;
+                wk[B - 1] = next - r[B] * v;
             }
         }
     }
