@@ -434,9 +434,9 @@ impl BandedCholesky {
             let r = &data[i * w..(i + 1) * w];
             let v = x[i] * r[0];
             x[i] = v;
-            for t in 1..=b.min(n - 1 - s) {
+            for (t, &rt) in r.iter().enumerate().take(b.min(n - 1 - s) + 1).skip(1) {
                 let k = if reverse { i - t } else { i + t };
-                x[k] -= r[t] * v;
+                x[k] -= rt * v;
             }
         }
     }
