@@ -31,29 +31,17 @@ impl BandedAlm {
     /// `out[f] = G_f·v` per axis for every stage (outputs before the
     /// horizon are 0), without a_0.
     pub(super) fn accelerations(k: usize, inv_dt2: f64, v: &[f64], out: &mut [[f64; 2]]) {
-        let (mut p1, mut p2) = ([0.0; 2], [0.0; 2]);
-        for (f, o) in out.iter_mut().enumerate() {
-            let mut p0 = [0.0; 2];
-            for i in 0..k {
-                p0[i] = v[k * f + i];
-                o[i] = (p0[i] - 2.0 * p1[i] + p2[i]) * inv_dt2;
-            }
-            p2 = p1;
-            p1 = p0;
+        match k {
+            1 => accelerations_k::<1>(inv_dt2, v, out),
+            _ => accelerations_k::<2>(inv_dt2, v, out),
         }
     }
 
     /// `out += Σ_f G_fᵀ·e_f`.
     pub(super) fn add_transposed(k: usize, inv_dt2: f64, e: &[[f64; 2]], out: &mut [f64]) {
-        let n = e.len();
-        let (mut e1, mut e2) = ([0.0; 2], [0.0; 2]);
-        for f in (0..n).rev() {
-            let e0 = e[f];
-            for i in 0..k {
-                out[k * f + i] += (e0[i] - 2.0 * e1[i] + e2[i]) * inv_dt2;
-            }
-            e2 = e1;
-            e1 = e0;
+        match k {
+            1 => add_transposed_k::<1>(inv_dt2, e, out),
+            _ => add_transposed_k::<2>(inv_dt2, e, out),
         }
     }
 
@@ -286,6 +274,34 @@ impl BandedAlm {
                 }
             }
         }
+    }
+}
+
+/// [`BandedAlm::accelerations`] for K axes (1 or 2).
+#[inline(always)]
+fn accelerations_k<const K: usize>(inv_dt2: f64, v: &[f64], out: &mut [[f64; 2]]) {
+    let (mut p1, mut p2) = ([0.0; K], [0.0; K]);
+    for (o, p) in out.iter_mut().zip(v.chunks_exact(K)) {
+        let mut p0 = [0.0; K];
+        for i in 0..K {
+            p0[i] = p[i];
+            o[i] = (p0[i] - 2.0 * p1[i] + p2[i]) * inv_dt2;
+        }
+        p2 = p1;
+        p1 = p0;
+    }
+}
+
+/// [`BandedAlm::add_transposed`] for K axes (1 or 2).
+#[inline(always)]
+fn add_transposed_k<const K: usize>(inv_dt2: f64, e: &[[f64; 2]], out: &mut [f64]) {
+    let (mut e1, mut e2) = ([0.0; 2], [0.0; 2]);
+    for (e0, o) in e.iter().zip(out.chunks_exact_mut(K)).rev() {
+        for i in 0..K {
+            o[i] += (e0[i] - 2.0 * e1[i] + e2[i]) * inv_dt2;
+        }
+        e2 = e1;
+        e1 = *e0;
     }
 }
 
