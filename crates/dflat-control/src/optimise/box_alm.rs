@@ -36,6 +36,14 @@ pub struct BoxAlmSolver {
     warm_used: bool,
 }
 
+/// The box's initial σ on warm solves. Its stage sets are intervals, on
+/// which the semismooth Newton step is exact while the active set holds,
+/// so a stiffer penalty costs no extra steps there and each multiplier
+/// update gains tenfold more: on the corner bench at N = 200, 7.28 → 6.57
+/// Newton steps per solve against the cone's 1e4 (1e6: the same steps,
+/// and the first tick fell to the interior point).
+const BOX_SIGMA: f64 = 1e5;
+
 impl BoxAlmSolver {
     /// Builds the solver for horizon N ≥ 3, weights `(q, r, δt)` as
     /// [`FastBandedSolver::with_smoothness`], the bounds and the
@@ -47,7 +55,10 @@ impl BoxAlmSolver {
         smoothness: Smoothness,
         warm_start: bool,
     ) -> Result<Self, ControlError> {
-        let tuning = AlmTuning::default();
+        let tuning = AlmTuning {
+            sigma: BOX_SIGMA,
+            ..AlmTuning::default()
+        };
         Self::with_tuning(horizon, weights, bounds, smoothness, warm_start, tuning)
     }
 
