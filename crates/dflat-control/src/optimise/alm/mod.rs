@@ -83,6 +83,10 @@ const DECREMENT_TOLERANCE: f64 = 1e-13;
 /// Decrement (relative, as [`DECREMENT_TOLERANCE`]) below which a full
 /// step counts as the local phase, where the next step reuses the factor.
 const REUSE_DECREMENT: f64 = 1e-7;
+/// Multiple of the inexact inner tolerance (`loose`, below) under which
+/// the last decrement lets the next step reuse the factor: the step then
+/// only has to bring an already small decrement below `loose`.
+const LOOSE_REUSE: f64 = 10.0;
 /// Decrement (relative, as [`DECREMENT_TOLERANCE`]) after whose full step
 /// the inner loop stops without a confirming step.
 const LOCAL_STOP: f64 = 1e-11;
@@ -533,10 +537,20 @@ impl BandedAlm {
                 // In the local phase (last step full, its decrement small,
                 // the active set the one factored) the matrix changes only
                 // in the active stages' curvature: its factor is reused.
+                // Inexact inner solves while the multipliers are far off:
+                // the subproblem's error (≈ decrement/2) need only be small
+                // against the change the next update will make, σ·res².
+                let row_sigma = self
+                    .row_scale
+                    .iter()
+                    .fold(0.0f64, |a, b| a.max(*b * self.sigma));
+                let loose = self.sigma * (INEXACT * stage_res).powi(2)
+                    + row_sigma * (INEXACT * row_res).powi(2);
                 let reuse = reuse_allowed
                     && last_full
                     && factor_current
-                    && last_decrement <= REUSE_DECREMENT * c_scale * x_scale
+                    && last_decrement
+                        <= (REUSE_DECREMENT * c_scale * x_scale).max(LOOSE_REUSE * loose)
                     && self.active == self.factored_active;
                 reuse_allowed = true;
                 if !reuse {
@@ -562,15 +576,6 @@ impl BandedAlm {
                 }
                 last_decrement = decrement;
                 compare_decrement = decrement;
-                // Inexact inner solves while the multipliers are far off:
-                // the subproblem's error (≈ decrement/2) need only be small
-                // against the change the next update will make, σ·res².
-                let row_sigma = self
-                    .row_scale
-                    .iter()
-                    .fold(0.0f64, |a, b| a.max(*b * self.sigma));
-                let loose = self.sigma * (INEXACT * stage_res).powi(2)
-                    + row_sigma * (INEXACT * row_res).powi(2);
                 if decrement <= inner_tol.max(loose) {
                     // Converged to rounding (or enough for this update):
                     // the full step, and done.
