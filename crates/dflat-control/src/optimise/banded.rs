@@ -294,15 +294,39 @@ impl BandedCholesky {
     /// The update of the (B + 1)² block after a full column: entry
     /// (j + t1, j + t2), t1 ≥ t2, at `block[t1·w + t1 − t2]` loses
     /// `l_{j+t1,j}·a_{j+t2,j}`; row t1's run s = 0..t1 takes t2 = t1 − s,
-    /// i.e. `ra[B − t1 + s]`.
+    /// i.e. `ra[B − t1 + s]`. Written out for the bandwidths the solvers
+    /// use (every index a constant: no loop, no index check), a loop for
+    /// the others.
     #[inline(always)]
     fn update_block<const B: usize>(block: &mut [f64], ra: &[f64; B], rl: &[f64; B]) {
-        let w = B + 1;
-        for t1 in 1..=B {
-            let c1 = rl[B - t1];
-            let row = &mut block[t1 * w..t1 * w + t1];
-            for (r, c) in row.iter_mut().zip(&ra[B - t1..]) {
-                *r -= c1 * c;
+        /// `$t1: [$s …]` — row t1's entries s.
+        macro_rules! unrolled {
+            ($($t1:literal : [$($s:literal)*])*) => {{
+                let w = B + 1;
+                $(
+                    let c1 = rl[B - $t1];
+                    $( block[$t1 * w + $s] -= c1 * ra[B - $t1 + $s]; )*
+                )*
+            }};
+        }
+        match B {
+            3 => unrolled!(1: [0] 2: [0 1] 3: [0 1 2]),
+            4 => unrolled!(1: [0] 2: [0 1] 3: [0 1 2] 4: [0 1 2 3]),
+            7 => {
+                unrolled!(1: [0] 2: [0 1] 3: [0 1 2] 4: [0 1 2 3] 5: [0 1 2 3 4] 6: [0 1 2 3 4 5] 7: [0 1 2 3 4 5 6])
+            }
+            9 => {
+                unrolled!(1: [0] 2: [0 1] 3: [0 1 2] 4: [0 1 2 3] 5: [0 1 2 3 4] 6: [0 1 2 3 4 5] 7: [0 1 2 3 4 5 6] 8: [0 1 2 3 4 5 6 7] 9: [0 1 2 3 4 5 6 7 8])
+            }
+            _ => {
+                let w = B + 1;
+                for t1 in 1..=B {
+                    let c1 = rl[B - t1];
+                    let row = &mut block[t1 * w..t1 * w + t1];
+                    for (r, c) in row.iter_mut().zip(&ra[B - t1..]) {
+                        *r -= c1 * c;
+                    }
+                }
             }
         }
     }
