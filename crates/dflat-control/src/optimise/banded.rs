@@ -285,7 +285,13 @@ impl BandedCholesky {
             bwd[0] = 1.0;
             for t in 1..=B {
                 fwd[t] = ra[B - t];
-                bwd[t] = if t <= j { l[j * w + t] } else { 0.0 };
+            }
+            if j >= B {
+                bwd[1..].copy_from_slice(&l[j * w + 1..j * w + w]);
+            } else {
+                for t in 1..=B {
+                    bwd[t] = if t <= j { l[j * w + t] } else { 0.0 };
+                }
             }
         }
         Ok(())
