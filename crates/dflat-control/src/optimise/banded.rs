@@ -482,9 +482,22 @@ impl BandedCholesky {
     /// per unknown) in processing order (ascending, or descending when
     /// `reverse`), as [`BandedCholesky::run_generic`].
     fn run_band<const B: usize, const K: usize>(data: &[f64], xs: [&mut [f64]; K], reverse: bool) {
+        if reverse {
+            Self::run_band_in::<B, K, true>(data, xs);
+        } else {
+            Self::run_band_in::<B, K, false>(data, xs);
+        }
+    }
+
+    /// [`BandedCholesky::run_band`] with the direction at compile time.
+    #[inline(always)]
+    fn run_band_in<const B: usize, const K: usize, const REVERSE: bool>(
+        data: &[f64],
+        xs: [&mut [f64]; K],
+    ) {
         let mut xs = xs;
         let n = xs[0].len();
-        let at = |s: usize| if reverse { n - 1 - s } else { s };
+        let at = |s: usize| if REVERSE { n - 1 - s } else { s };
         // win[t] = the partial sum of the unknown t steps ahead.
         let mut win = [[0.0f64; B]; K];
         for (x, wk) in xs.iter().zip(win.iter_mut()) {
@@ -492,18 +505,30 @@ impl BandedCholesky {
                 *v = x[at(t)];
             }
         }
-        for s in 0..n {
+        let step = |r: &[f64], x: &mut [f64], wk: &mut [f64; B], i: usize, next: f64| {
+            let v = wk[0] * r[0];
+            x[i] = v;
+            for t in 0..B - 1 {
+                wk[t] = wk[t + 1] - r[t + 1] * v;
+            }
+            wk[B - 1] = next - r[B] * v;
+        };
+        // The bulk, where the unknown B ahead exists, then the last B.
+        let bulk = n.saturating_sub(B);
+        for s in 0..bulk {
             let i = at(s);
             let r = &data[(B + 1) * i..(B + 1) * (i + 1)];
-            let ahead = s + B < n;
+            let ahead = at(s + B);
             for (x, wk) in xs.iter_mut().zip(win.iter_mut()) {
-                let v = wk[0] * r[0];
-                x[i] = v;
-                let next = if ahead { x[at(s + B)] } else { 0.0 };
-                for t in 0..B - 1 {
-                    wk[t] = wk[t + 1] - r[t + 1] * v;
-                }
-                wk[B - 1] = next - r[B] * v;
+                let next = x[ahead];
+                step(r, x, wk, i, next);
+            }
+        }
+        for s in bulk..n {
+            let i = at(s);
+            let r = &data[(B + 1) * i..(B + 1) * (i + 1)];
+            for (x, wk) in xs.iter_mut().zip(win.iter_mut()) {
+                step(r, x, wk, i, 0.0);
             }
         }
     }
