@@ -594,7 +594,10 @@ impl BandedAlm {
                     break;
                 }
             }
-            let gap = self.residual_cost(lo, hi);
+            // What the residuals can cost, needed only once they are small
+            // (before the multipliers move).
+            let residuals_small = stage_res <= stage_tol && row_res <= row_tol;
+            let gap_small = residuals_small && self.residual_cost(lo, hi) <= gap_tol;
             // Multiplier update (the gradient above is the Lagrangian's
             // with the updated multipliers: stationarity holds).
             self.y.copy_from_slice(&self.y_next);
@@ -605,7 +608,7 @@ impl BandedAlm {
                     self.v[r][j] = self.side_multiplier(r, self.v[r][j], t);
                 }
             }
-            if stage_res <= stage_tol && row_res <= row_tol && gap <= gap_tol {
+            if gap_small {
                 if self.x.iter().any(|v| !v.is_finite()) {
                     return Err(ControlError::Solver("ALM: non-finite iterate".into()));
                 }
