@@ -217,51 +217,87 @@ impl FastBandedSolver {
         rhs: Option<&[f64]>,
         out: &mut [f64],
     ) {
+        let b = |k: usize| rhs.map_or(0.0, |rhs| rhs[k]);
+        Self::residual_with(q, w, smooth, |k| p[k], b, out, |x, k, v| x[k] = v);
+    }
+
+    /// `rhs_k − (H·p)_k` for k = n−1 … 0 handed to `put(x, k, ·)`, p and
+    /// rhs read through `p(k)`, `rhs(k)`; `x` (length n) holds the
+    /// middle factor's output `M·D·p` meanwhile, and `put` may overwrite
+    /// `x[k]` (read before). Generic so that each caller's access inlines.
+    #[inline(always)]
+    fn residual_with(
+        q: f64,
+        w: f64,
+        smooth: (f64, f64),
+        p: impl Fn(usize) -> f64,
+        rhs: impl Fn(usize) -> f64,
+        x: &mut [f64],
+        mut put: impl FnMut(&mut [f64], usize, f64),
+    ) {
         let (s, kappa) = smooth;
         // x = w·D·p: third backward difference by three first differences,
         // fused in one pass (p before the horizon is 0).
         let (mut p1, mut e1, mut f1) = (0.0, 0.0, 0.0);
         let scale = if s > 0.0 { 1.0 } else { w };
-        for (x, &p) in out.iter_mut().zip(p) {
-            let e = p - p1;
+        for (k, xk) in x.iter_mut().enumerate() {
+            let pk = p(k);
+            let e = pk - p1;
             let f = e - e1;
-            *x = scale * (f - f1);
-            (p1, e1, f1) = (p, e, f);
+            *xk = scale * (f - f1);
+            (p1, e1, f1) = (pk, e, f);
         }
         if s > 0.0 {
             // x = (w·I + s·TᵀT)·d in place, backwards: g_f = (T·d)_f needs
             // d_{f−1} (not yet overwritten), (Tᵀg)_f needs g_{f+1} (carried).
             let mut g_next = 0.0;
-            for f in (0..out.len()).rev() {
-                let d = out[f];
-                let d_prev = if f > 0 { out[f - 1] } else { 0.0 };
+            for f in (0..x.len()).rev() {
+                let d = x[f];
+                let d_prev = if f > 0 { x[f - 1] } else { 0.0 };
                 let g = d_prev + kappa * (d - d_prev);
                 let tg = g_next + kappa * (g - g_next);
-                out[f] = w * d + s * tg;
+                x[f] = w * d + s * tg;
                 g_next = g;
             }
         }
-        // work = rhs − q·p − Dᵀ·x: three forward differences (x beyond
-        // the horizon is 0), fused with the combination, in one pass.
+        // rhs − q·p − Dᵀ·x: three forward differences (x beyond the
+        // horizon is 0), fused with the combination, in one pass.
         let (mut x1, mut e1, mut f1) = (0.0, 0.0, 0.0);
-        for (k, (r, &p)) in out.iter_mut().zip(p).enumerate().rev() {
-            let b = rhs.map_or(0.0, |rhs| rhs[k]);
-            let x = *r;
-            let e = x - x1;
+        for k in (0..x.len()).rev() {
+            let xv = x[k];
+            let e = xv - x1;
             let f = e - e1;
             let g = f - f1;
-            (x1, e1, f1) = (x, e, f);
-            *r = b - q * p - g;
+            (x1, e1, f1) = (xv, e, f);
+            put(x, k, rhs(k) - q * p(k) - g);
         }
     }
 
     /// `out = H·p` (the Hessian of [`FastBandedSolver::hessian`]) by
     /// differencing, accurate to ~ε·|H·p| where the assembled band is not
-    /// (see [`FastBandedSolver::residual`]). Lengths n.
-    pub(crate) fn apply_hessian(&self, p: &[f64], out: &mut [f64]) {
+    /// (see [`FastBandedSolver::residual`]), on interleaved storage:
+    /// `p_f = v[stride·f + axis]`, `out[stride·f + axis] = scale·(H·p)_f`;
+    /// `work` (length n) is scratch.
+    pub(crate) fn apply_hessian_strided(
+        &self,
+        v: &[f64],
+        stride: usize,
+        axis: usize,
+        scale: f64,
+        work: &mut [f64],
+        out: &mut [f64],
+    ) {
         let smooth = (self.s, self.smoothness.kappa);
-        Self::residual_of(self.q, self.w, smooth, p, None, out);
-        out.iter_mut().for_each(|v| *v = -*v);
+        // put gets rhs − H·p with rhs = 0, i.e. −(q·p + Dᵀx) exactly.
+        Self::residual_with(
+            self.q,
+            self.w,
+            smooth,
+            |k| v[stride * k + axis],
+            |_| 0.0,
+            work,
+            |_, k, r| out[stride * k + axis] = -scale * r,
+        );
     }
 
     /// The assembled Hessian `q·I + w·DᵀD (+ s·EᵀE)` (n × n, band 3 or 4).

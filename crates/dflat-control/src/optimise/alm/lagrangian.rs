@@ -45,25 +45,15 @@ impl BandedAlm {
         }
     }
 
-    /// `out = P·v` by differencing.
+    /// `out = P·v` by differencing, per axis on the interleaved vectors.
     pub(super) fn apply_p(&mut self, which: Vector) {
         let k = self.k;
-        for i in 0..k {
-            let src = match which {
-                Vector::X => &self.x,
-                Vector::D => &self.d,
-            };
-            for f in 0..self.n {
-                self.axis_in[f] = src[k * f + i];
-            }
-            self.axes[i].apply_hessian(&self.axis_in, &mut self.axis_out);
-            let dst = match which {
-                Vector::X => &mut self.px,
-                Vector::D => &mut self.pd,
-            };
-            for f in 0..self.n {
-                dst[k * f + i] = 2.0 * self.axis_out[f];
-            }
+        let (src, dst) = match which {
+            Vector::X => (&self.x, &mut self.px),
+            Vector::D => (&self.d, &mut self.pd),
+        };
+        for (i, axis) in self.axes.iter().enumerate() {
+            axis.apply_hessian_strided(src, k, i, 2.0, &mut self.p_work, dst);
         }
     }
 

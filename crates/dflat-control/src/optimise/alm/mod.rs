@@ -48,7 +48,7 @@
 //! set (stages outside their set, row sides in their quadratic range) the
 //! one factored; once a reused factor stops converging tenfold per step,
 //! the next step refactors. `P·x` is evaluated by differencing
-//! (`FastBandedSolver::apply_hessian`) and then updated by `α·P·d`.
+//! (`FastBandedSolver::apply_hessian_strided`) and then updated by `α·P·d`.
 //!
 //! Warm start ([`BandedAlm::shift`]): the multipliers one stage on, σ from
 //! its initial value (1e4). Between constrained bursts the multipliers are
@@ -203,8 +203,8 @@ pub struct BandedAlm {
     /// Per-row h·x and h·d.
     hx: Vec<f64>,
     hd: Vec<f64>,
-    axis_in: Vec<f64>,
-    axis_out: Vec<f64>,
+    /// Scratch of `apply_p` (one axis, n).
+    p_work: Vec<f64>,
     newton_steps: usize,
     /// Factorisations of the last solve.
     factorisations: usize,
@@ -303,8 +303,7 @@ impl BandedAlm {
             du: vec![[0.0; 2]; n],
             hx: vec![0.0; m],
             hd: vec![0.0; m],
-            axis_in: vec![0.0; n],
-            axis_out: vec![0.0; n],
+            p_work: vec![0.0; n],
             newton_steps: 0,
             factorisations: 0,
             px_current: false,
