@@ -202,8 +202,8 @@ impl BandedCholesky {
     fn factor_held(&mut self) -> Result<(), ControlError> {
         self.factored = false;
         match self.b {
-            3 => self.factor_band::<3>()?,
-            4 => self.factor_band::<4>()?,
+            3 => self.factor_window::<3>()?,
+            4 => self.factor_window::<4>()?,
             7 => self.factor_band::<7>()?,
             9 => self.factor_band::<9>()?,
             _ => {
@@ -292,6 +292,71 @@ impl BandedCholesky {
                 for t in 1..=B {
                     bwd[t] = if t <= j { l[j * w + t] } else { 0.0 };
                 }
+            }
+        }
+        Ok(())
+    }
+
+    /// [`BandedCholesky::factor_band`] for the narrow bands (3, 4: one
+    /// axis), with the (B + 1)² lower triangle of rows j … j + B held in
+    /// a local window that the compiler keeps in registers: the chain
+    /// from pivot to pivot (a division, two multiplications, a
+    /// subtraction) no longer passes through memory, where the wide
+    /// kernel's each column stores what the next loads. Rows past the
+    /// matrix's end enter as zeros, so every column runs the same code.
+    /// Same operations in the same order as `factor_band`.
+    fn factor_window<const B: usize>(&mut self) -> Result<(), ControlError> {
+        let n = self.n;
+        let w = B + 1;
+        let l = &mut self.l;
+        // win[r][c] = the current entry (j + r, j + c), c ≤ r ≤ B.
+        let mut win = [[0.0f64; 5]; 5];
+        let row_of = |l: &[f64], i: usize, win_row: &mut [f64; 5], r: usize| {
+            for c in 0..=r {
+                win_row[c] = if i < n { l[i * w + (r - c)] } else { 0.0 };
+            }
+        };
+        for (r, wr) in win.iter_mut().enumerate().take(B + 1) {
+            row_of(l, r, wr, r);
+        }
+        for j in 0..n {
+            let d = win[0][0];
+            if !(d > 0.0 && d.is_finite()) {
+                return Err(ControlError::NotPositiveDefinite);
+            }
+            let inv = 1.0 / d;
+            let (mut a, mut lt) = ([0.0f64; 5], [0.0f64; 5]);
+            for t in 1..=B {
+                a[t] = win[t][0];
+                lt[t] = a[t] * inv;
+            }
+            // Entry (j + t1, j + t2) loses l_{j+t1,j}·a_{j+t2,j}; the
+            // window moves one row and column on, row j + 1 + B entering.
+            let mut next = [[0.0f64; 5]; 5];
+            for r in 0..B {
+                for c in 0..=r {
+                    next[r][c] = win[r + 1][c + 1] - lt[r + 1] * a[c + 1];
+                }
+            }
+            let mut row = [0.0; 5];
+            row_of(l, j + 1 + B, &mut row, B);
+            next[B] = row;
+            win = next;
+            // L's column j into the storage (row j + t, slot t), then the
+            // substitutions' data.
+            l[j * w] = d;
+            for t in 1..=B.min(n - 1 - j) {
+                l[(j + t) * w + t] = lt[t];
+            }
+            let (fwd, bwd) = (
+                &mut self.fwd[j * w..j * w + w],
+                &mut self.bwd[j * w..j * w + w],
+            );
+            fwd[0] = inv;
+            bwd[0] = 1.0;
+            for t in 1..=B {
+                fwd[t] = a[t];
+                bwd[t] = if t <= j { l[j * w + t] } else { 0.0 };
             }
         }
         Ok(())
