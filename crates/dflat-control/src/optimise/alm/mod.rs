@@ -44,9 +44,10 @@
 //! costs ‖y_f‖ per m/s²: with many active stages the residual test alone
 //! left the cost 1e-7 above the optimum). σ grows tenfold only while the
 //! residual is above its tolerance and did not fall tenfold. The factor is
-//! reused while the last step was full, its decrement small and the active
-//! set (stages outside their set, row sides in their quadratic range) the
-//! one factored; once a reused factor stops converging tenfold per step,
+//! reused while the last step was full, its decrement small (below 1e-7
+//! of the objective's scale, or within 10× of the inexact inner
+//! tolerance) and the active set (stages outside their set, row sides in
+//! their quadratic range) the one factored; once a reused factor stops converging tenfold per step,
 //! the next step refactors. `P·x` is evaluated by differencing
 //! (`FastBandedSolver::apply_hessian_strided`) and then updated by `α·P·d`.
 //!
