@@ -48,8 +48,9 @@
 //! of the objective's scale, or within 10× of the inexact inner
 //! tolerance) and the active set (stages outside their set, row sides in
 //! their quadratic range) the one factored; once a reused factor stops
-//! converging tenfold per step, the next step refactors. `P·x` is evaluated by differencing
-//! (`FastBandedSolver::apply_hessian_strided`) and then updated by `α·P·d`.
+//! converging tenfold per step, the next step refactors. `P·x` is
+//! evaluated by differencing (`FastBandedSolver::apply_hessian_strided`)
+//! and then updated by `α·P·d`.
 //!
 //! Warm start ([`BandedAlm::shift`]): the multipliers one stage on, σ from
 //! its initial value (1e4). Between constrained bursts the multipliers are
