@@ -225,13 +225,10 @@ impl BandedCholesky {
     /// the chain from pivot to pivot (the row-oriented
     /// [`BandedCholesky::factor_generic`] chains its dot products, a
     /// division per entry and a square root per row). Row t1 of the block
-    /// is updated as one contiguous run against the unscaled column held
-    /// in reverse, so the loops have compile-time bounds and vectorise
-    /// without index checks. Writes the substitution rows as it goes:
-    /// forward `[1, l_{j,j−1}, …, l_{j,j−B}]` (row j of L is final once
-    /// column j is pivoted), backward `[1/d_j, l_{j+1,j}, …, l_{j+B,j}]`,
-    /// so [`BandedCholesky::solve_in_place`] runs `L·z = b`, then
-    /// `Lᵀ·x = D⁻¹·z` in one pass.
+    /// is updated as one run against the unscaled column held in reverse
+    /// ([`BandedCholesky::update_block`], written out with constant
+    /// indices). Writes the substitutions' data as it goes
+    /// ([`BandedCholesky::ldl_rows`]).
     fn factor_band<const B: usize>(&mut self) -> Result<(), ControlError> {
         let n = self.n;
         let w = B + 1;
@@ -277,22 +274,14 @@ impl BandedCholesky {
                     }
                 }
             }
-            let (fwd, bwd) = (
+            Self::ldl_rows::<B>(
                 &mut self.fwd[j * w..j * w + w],
                 &mut self.bwd[j * w..j * w + w],
+                &l[j * w..j * w + w],
+                j,
+                inv,
+                |t| ra[B - t],
             );
-            fwd[0] = inv;
-            bwd[0] = 1.0;
-            for t in 1..=B {
-                fwd[t] = ra[B - t];
-            }
-            if j >= B {
-                bwd[1..].copy_from_slice(&l[j * w + 1..j * w + w]);
-            } else {
-                for t in 1..=B {
-                    bwd[t] = if t <= j { l[j * w + t] } else { 0.0 };
-                }
-            }
         }
         Ok(())
     }
@@ -306,6 +295,7 @@ impl BandedCholesky {
     /// matrix's end enter as zeros, so every column runs the same code.
     /// Same operations in the same order as `factor_band`.
     fn factor_window<const B: usize>(&mut self) -> Result<(), ControlError> {
+        const { assert!(B <= 4, "the window holds five rows") };
         let n = self.n;
         let w = B + 1;
         let l = &mut self.l;
@@ -348,18 +338,45 @@ impl BandedCholesky {
             for t in 1..=B.min(n - 1 - j) {
                 l[(j + t) * w + t] = lt[t];
             }
-            let (fwd, bwd) = (
+            Self::ldl_rows::<B>(
                 &mut self.fwd[j * w..j * w + w],
                 &mut self.bwd[j * w..j * w + w],
+                &l[j * w..j * w + w],
+                j,
+                inv,
+                |t| a[t],
             );
-            fwd[0] = inv;
-            bwd[0] = 1.0;
-            for t in 1..=B {
-                fwd[t] = a[t];
-                bwd[t] = if t <= j { l[j * w + t] } else { 0.0 };
-            }
         }
         Ok(())
+    }
+
+    /// Column j's data of the substitutions of an LDLᵀ factor: forward
+    /// `[1/d_j, a_{j+1,j}, …, a_{j+B,j}]` (the column before scaling,
+    /// `a(t)`; 0 past the end), backward `[1, l_{j,j−1}, …, l_{j,j−B}]`
+    /// (row j of L, `row_j` its storage: final once column j is pivoted;
+    /// 0 before the start), so [`BandedCholesky::solve_in_place`] runs
+    /// `(L·D)·z = b`, then `Lᵀ·x = z`.
+    #[inline(always)]
+    fn ldl_rows<const B: usize>(
+        fwd: &mut [f64],
+        bwd: &mut [f64],
+        row_j: &[f64],
+        j: usize,
+        inv: f64,
+        a: impl Fn(usize) -> f64,
+    ) {
+        fwd[0] = inv;
+        bwd[0] = 1.0;
+        for (t, f) in fwd.iter_mut().enumerate().take(B + 1).skip(1) {
+            *f = a(t);
+        }
+        if j >= B {
+            bwd[1..].copy_from_slice(&row_j[1..]);
+        } else {
+            for t in 1..=B {
+                bwd[t] = if t <= j { row_j[t] } else { 0.0 };
+            }
+        }
     }
 
     /// The update of the (B + 1)² block after a full column: entry

@@ -117,29 +117,24 @@ impl BandedAlm {
         let k = self.k;
         Self::accelerations(k, self.inv_dt2, &self.x, &mut self.u);
         // One pass per kind of set, so the projection inlines.
+        macro_rules! pass {
+            ($excess:expr) => {
+                stage_pass(
+                    &mut self.u,
+                    &self.y,
+                    &mut self.y_next,
+                    &mut self.jac,
+                    &mut self.active,
+                    a0,
+                    s,
+                    k,
+                    $excess,
+                )
+            };
+        }
         let (res2, value) = match &self.stages {
-            StageSet::Disc(radius) => stage_pass(
-                &mut self.u,
-                &self.y,
-                &mut self.y_next,
-                &mut self.jac,
-                &mut self.active,
-                a0,
-                s,
-                k,
-                |f, w| disc_excess(w, radius[f]),
-            ),
-            StageSet::Interval(bounds) => stage_pass(
-                &mut self.u,
-                &self.y,
-                &mut self.y_next,
-                &mut self.jac,
-                &mut self.active,
-                a0,
-                s,
-                k,
-                |f, w| interval_excess(w, &bounds[f], k),
-            ),
+            StageSet::Disc(radius) => pass!(|f, w| disc_excess(w, radius[f])),
+            StageSet::Interval(bounds) => pass!(|f, w| interval_excess(w, &bounds[f], k)),
         };
         let mut value = value;
         let stage_res = res2.sqrt() / s;
@@ -387,7 +382,9 @@ fn disc_dist2(w: [f64; 2], r: f64) -> f64 {
     d * d
 }
 
-/// `dist²(w, D)` for the first `k` axes' intervals.
+/// `dist²(w, D)` for the first `k` axes' intervals (the line search's
+/// value only: written apart from [`interval_excess`], whose Jacobian cost
+/// the box 3 % more instructions here).
 #[inline(always)]
 fn interval_dist2(w: [f64; 2], b: &[[f64; 2]; 2], k: usize) -> f64 {
     let mut v = 0.0;

@@ -535,9 +535,6 @@ impl BandedAlm {
                     )));
                 }
                 self.newton_steps += 1;
-                // In the local phase (last step full, its decrement small,
-                // the active set the one factored) the matrix changes only
-                // in the active stages' curvature: its factor is reused.
                 // Inexact inner solves while the multipliers are far off:
                 // the subproblem's error (≈ decrement/2) need only be small
                 // against the change the next update will make, σ·res².
@@ -547,6 +544,9 @@ impl BandedAlm {
                     .fold(0.0f64, |a, b| a.max(*b * self.sigma));
                 let loose = self.sigma * (INEXACT * stage_res).powi(2)
                     + row_sigma * (INEXACT * row_res).powi(2);
+                // In the local phase (last step full, its decrement small,
+                // the active set the one factored) the matrix changes only
+                // in the active stages' curvature: its factor is reused.
                 let reuse = reuse_allowed
                     && last_full
                     && factor_current
