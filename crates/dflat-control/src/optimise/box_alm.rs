@@ -95,11 +95,7 @@ impl BoxAlmSolver {
                 rows: (0..n)
                     .map(|f| Row::tilt_rate(f, k, |s| s).on_outputs(inv_dt2, |k| k))
                     .collect(),
-                scale: std::env::var("DFLAT_RATE_SCALE")
-                    .ok()
-                    .and_then(|v| v.parse::<f64>().ok())
-                    .unwrap_or(1.0)
-                    / norm2.max(1.0),
+                scale: 1.0 / norm2.max(1.0),
                 penalty: f64::INFINITY,
             });
         }

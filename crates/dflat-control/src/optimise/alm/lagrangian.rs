@@ -151,7 +151,7 @@ impl BandedAlm {
                 let t = Self::side(j, h, lo[r], hi[r]);
                 let vn = self.side_multiplier(r, vj, t);
                 let raw = vj + ss * t;
-                self.active[self.n + 2 * r + j] = raw > 0.0 && raw < rho;
+                self.active[self.n + 2 * r + j] = u8::from(raw > 0.0 && raw < rho);
                 value += vn * t - (vn - vj) * (vn - vj) / (2.0 * ss);
                 row_res = row_res.max((vn - vj).abs() / ss);
                 e += if j == 0 { vn } else { -vn };
@@ -201,7 +201,7 @@ impl BandedAlm {
         let w = self.kkt.bandwidth() + 1;
         let lower = self.kkt.lower_mut();
         for f in 0..self.n {
-            if !self.active[f] {
+            if self.active[f] == 0 {
                 continue;
             }
             // G_fᵀ(σ·k2·J)G_f into the lower band: stages g_a = f − a ≥
@@ -303,7 +303,7 @@ fn stage_pass(
     y: &[[f64; 2]],
     y_next: &mut [[f64; 2]],
     jac: &mut [[[f64; 2]; 2]],
-    active: &mut [bool],
+    active: &mut [u8],
     a0: [f64; 2],
     s: f64,
     k: usize,
@@ -324,7 +324,7 @@ fn stage_pass(
             }
             None => [0.0; 2],
         };
-        active[f] = yn != [0.0; 2];
+        active[f] = u8::from(yn[0] != 0.0) | (u8::from(yn[1] != 0.0) << 1);
         let (ex, ey) = (yn[0] - yf[0], yn[1] - yf[1]);
         res2 = res2.max(ex * ex + ey * ey);
         *ynf = yn;
