@@ -80,10 +80,15 @@ impl BandedAlm {
                 .enumerate()
                 .map(|(f, &r)| disc_dist2(at(f), r))
                 .sum(),
+            StageSet::Interval(bounds) if self.k == 1 => bounds
+                .iter()
+                .enumerate()
+                .map(|(f, b)| interval_dist2::<1>(at(f), b))
+                .sum(),
             StageSet::Interval(bounds) => bounds
                 .iter()
                 .enumerate()
-                .map(|(f, b)| interval_dist2(at(f), b, self.k))
+                .map(|(f, b)| interval_dist2::<2>(at(f), b))
                 .sum(),
         };
         let mut value = 0.5 * s * dist2;
@@ -118,8 +123,8 @@ impl BandedAlm {
         Self::accelerations(k, self.inv_dt2, &self.x, &mut self.u);
         // One pass per kind of set, so the projection inlines.
         macro_rules! pass {
-            ($excess:expr) => {
-                stage_pass(
+            ($k:literal, $excess:expr) => {
+                stage_pass::<$k>(
                     &mut self.u,
                     &self.y,
                     &mut self.y_next,
@@ -127,14 +132,14 @@ impl BandedAlm {
                     &mut self.active,
                     a0,
                     s,
-                    k,
                     $excess,
                 )
             };
         }
-        let (res2, value) = match &self.stages {
-            StageSet::Disc(radius) => pass!(|f, w| disc_excess(w, radius[f])),
-            StageSet::Interval(bounds) => pass!(|f, w| interval_excess(w, &bounds[f], k)),
+        let (res2, value) = match (&self.stages, k) {
+            (StageSet::Disc(radius), _) => pass!(2, |f, w| disc_excess(w, radius[f])),
+            (StageSet::Interval(bounds), 1) => pass!(1, |f, w| interval_excess::<1>(w, &bounds[f])),
+            (StageSet::Interval(bounds), _) => pass!(2, |f, w| interval_excess::<2>(w, &bounds[f])),
         };
         let mut value = value;
         let stage_res = res2.sqrt() / s;
@@ -195,45 +200,12 @@ impl BandedAlm {
     /// The generalised Hessian `P + σ·Σ G_fᵀ J_f G_f + σ_h·Σ hhᵀ` at x.
     pub(super) fn assemble(&mut self, lo: &[f64], hi: &[f64]) {
         self.kkt.clone_from(&self.base);
-        let s = self.sigma;
-        let k = self.k;
-        let k2 = self.inv_dt2 * self.inv_dt2;
+        let sc = self.sigma * self.inv_dt2 * self.inv_dt2;
         let w = self.kkt.bandwidth() + 1;
         let lower = self.kkt.lower_mut();
-        for f in 0..self.n {
-            if self.active[f] == 0 {
-                continue;
-            }
-            // G_fᵀ(σ·k2·J)G_f into the lower band: stages g_a = f − a ≥
-            // g_b = f − b (a ≤ b) only; entry (k·g_a + i, k·g_b + j) at
-            // row·w + (row − col). On one stage (a = b) the 2×2 block's
-            // lower half, across stages the whole block.
-            let j = self.jac[f];
-            let sc = s * k2;
-            let reach = 3.min(f + 1);
-            for (a, coef) in D2D2.iter().enumerate().take(reach) {
-                let ga = f - a;
-                for (b, &cab) in coef.iter().enumerate().take(reach).skip(a) {
-                    let gb = f - b;
-                    let c = sc * cab;
-                    if k == 1 {
-                        lower[ga * w + (ga - gb)] += c * j[0][0];
-                    } else {
-                        let (r0, c0) = (2 * ga, 2 * gb);
-                        if a == b {
-                            lower[r0 * w] += c * j[0][0];
-                            lower[(r0 + 1) * w + 1] += c * j[1][0];
-                            lower[(r0 + 1) * w] += c * j[1][1];
-                        } else {
-                            let d = r0 - c0;
-                            lower[r0 * w + d] += c * j[0][0];
-                            lower[r0 * w + d - 1] += c * j[0][1];
-                            lower[(r0 + 1) * w + d + 1] += c * j[1][0];
-                            lower[(r0 + 1) * w + d] += c * j[1][1];
-                        }
-                    }
-                }
-            }
+        match self.k {
+            1 => add_stage_blocks::<1>(&self.jac, sc, w, lower),
+            _ => add_stage_blocks::<2>(&self.jac, sc, w, lower),
         }
         for r in 0..self.rows.len() {
             let h = self.hx[r];
@@ -298,7 +270,7 @@ fn add_transposed_k<const K: usize>(inv_dt2: f64, e: &[[f64; 2]], out: &mut [f64
 /// the projection so that it inlines.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn stage_pass(
+fn stage_pass<const K: usize>(
     u: &mut [[f64; 2]],
     y: &[[f64; 2]],
     y_next: &mut [[f64; 2]],
@@ -306,12 +278,11 @@ fn stage_pass(
     active: &mut [u8],
     a0: [f64; 2],
     s: f64,
-    k: usize,
     excess: impl Fn(usize, [f64; 2]) -> Option<([f64; 2], [[f64; 2]; 2])>,
 ) -> (f64, f64) {
     let inv_s = 1.0 / s;
     let (mut res2, mut value) = (0.0f64, 0.0);
-    let a0 = if k == 1 { [a0[0], 0.0] } else { a0 };
+    let a0 = if K == 1 { [a0[0], 0.0] } else { a0 };
     for (f, ((uf, yf), ynf)) in u.iter_mut().zip(y).zip(y_next.iter_mut()).enumerate() {
         let uu = [uf[0] + a0[0], uf[1] + a0[1]];
         *uf = uu;
@@ -322,7 +293,10 @@ fn stage_pass(
                 jac[f] = j;
                 [s * e[0], s * e[1]]
             }
-            None => [0.0; 2],
+            None => {
+                jac[f] = [[0.0; 2]; 2];
+                [0.0; 2]
+            }
         };
         active[f] = u8::from(yn[0] != 0.0) | (u8::from(yn[1] != 0.0) << 1);
         let (ex, ey) = (yn[0] - yf[0], yn[1] - yf[1]);
@@ -351,14 +325,17 @@ fn disc_excess(w: [f64; 2], r: f64) -> Option<([f64; 2], [[f64; 2]; 2])> {
     ))
 }
 
-/// `w − Π(w)` and `I − ∂Π(w)` for the first `k` axes' intervals
+/// `w − Π(w)` and `I − ∂Π(w)` for the first `K` axes' intervals
 /// `[lo, hi]` when `w` lies outside one of them.
 #[inline(always)]
-fn interval_excess(w: [f64; 2], b: &[[f64; 2]; 2], k: usize) -> Option<([f64; 2], [[f64; 2]; 2])> {
+fn interval_excess<const K: usize>(
+    w: [f64; 2],
+    b: &[[f64; 2]; 2],
+) -> Option<([f64; 2], [[f64; 2]; 2])> {
     let mut e = [0.0; 2];
     let mut j = [[0.0; 2]; 2];
     let mut any = false;
-    for i in 0..k {
+    for i in 0..K {
         let [lo, hi] = b[i];
         let out = w[i] - w[i].clamp(lo, hi);
         if out != 0.0 {
@@ -382,13 +359,13 @@ fn disc_dist2(w: [f64; 2], r: f64) -> f64 {
     d * d
 }
 
-/// `dist²(w, D)` for the first `k` axes' intervals (the line search's
+/// `dist²(w, D)` for the first `K` axes' intervals (the line search's
 /// value only: written apart from [`interval_excess`], whose Jacobian cost
 /// the box 3 % more instructions here).
 #[inline(always)]
-fn interval_dist2(w: [f64; 2], b: &[[f64; 2]; 2], k: usize) -> f64 {
+fn interval_dist2<const K: usize>(w: [f64; 2], b: &[[f64; 2]; 2]) -> f64 {
     let mut v = 0.0;
-    for i in 0..k {
+    for i in 0..K {
         let [lo, hi] = b[i];
         let out = w[i] - w[i].clamp(lo, hi);
         v += out * out;
@@ -396,8 +373,47 @@ fn interval_dist2(w: [f64; 2], b: &[[f64; 2]; 2], k: usize) -> f64 {
     v
 }
 
-/// The products `D2[a]·D2[b]` of the second difference's coefficients.
-const D2D2: [[f64; 3]; 3] = [[1.0, -2.0, 1.0], [-2.0, 4.0, -2.0], [1.0, -2.0, 1.0]];
+/// `lower += σ·k2·Σ_f G_fᵀ J_f G_f` (`sc` = σ/δt⁴, `w` the band's row
+/// stride) for K axes, gathered by rows: the block of stages g and g − e
+/// is `S_e = Σ_a D2[a]·D2[a+e]·J_{g+a}` (D2 = (1, −2, 1), the second
+/// difference's coefficients of p_f, p_{f−1}, p_{f−2}), i.e. `S_0 = J_g +
+/// 4J_{g+1} + J_{g+2}`, `S_1 = −2(J_g + J_{g+1})`, `S_2 = J_g` — each
+/// entry written once, in order. `jac` is 0 at the stages inside their
+/// set.
+#[inline(always)]
+fn add_stage_blocks<const K: usize>(jac: &[[[f64; 2]; 2]], sc: f64, w: usize, lower: &mut [f64]) {
+    let n = jac.len();
+    let at = |f: usize| if f < n { jac[f] } else { [[0.0; 2]; 2] };
+    let comb = |a: [[f64; 2]; 2], ca: f64, b: [[f64; 2]; 2], cb: f64, c: [[f64; 2]; 2], cc: f64| {
+        let mut m = [[0.0; 2]; 2];
+        for i in 0..K {
+            for j in 0..K {
+                m[i][j] = sc * (ca * a[i][j] + cb * b[i][j] + cc * c[i][j]);
+            }
+        }
+        m
+    };
+    for (g, rows) in lower.chunks_exact_mut(K * w).enumerate().take(n) {
+        let (j0, j1, j2) = (at(g), at(g + 1), at(g + 2));
+        let zero = [[0.0; 2]; 2];
+        let s = [
+            comb(j0, 1.0, j1, 4.0, j2, 1.0),
+            comb(j0, -2.0, j1, -2.0, zero, 0.0),
+            comb(j0, 1.0, zero, 0.0, zero, 0.0),
+        ];
+        // Row K·g + i, column K·(g − e) + j: slot K·e + i − j.
+        for (e, se) in s.iter().enumerate().take(g.min(2) + 1) {
+            for i in 0..K {
+                let row = &mut rows[i * w..(i + 1) * w];
+                for j in 0..K {
+                    if e > 0 || j <= i {
+                        row[K * e + i - j] += se[i][j];
+                    }
+                }
+            }
+        }
+    }
+}
 
 /// Which vector [`BandedAlm::apply_p`] multiplies.
 #[derive(Debug, Clone, Copy)]
