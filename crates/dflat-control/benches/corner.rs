@@ -23,6 +23,13 @@
 //! bursts. `CORNER_ONLY="box, ALM|cone, ALM, warm"` limits the configurations
 //! to those whose names contain one of the `|`-separated parts.
 //!
+//! A second flight, the course of corners (five 60 m legs), has each
+//! corner bind in a burst of its own: its table gives, per horizon, the
+//! first ticks of the bursts (each a cold solve: the unconstrained plan
+//! and, the last burst's having aged out, no multipliers), their Newton
+//! steps, and the other constrained ticks, for the warm cone, the cone
+//! with warm starts off and the box.
+//!
 //! Run: `cargo bench -p dflat-control --bench corner` (a horizon list as
 //! argument, e.g. `-- 200`, limits the run).
 
@@ -54,9 +61,44 @@ fn plant() -> PlanarModel {
     .unwrap()
 }
 
-fn path() -> Reference {
-    let w = [[0.0, 0.0], [20.0, 0.0], [20.0, 20.0]].map(|[x, y]| Vector3::new(x, y, -2.0));
-    Reference::path(&w, SPEED).unwrap()
+/// The flown course: the L of the corner, or the course of corners (five
+/// 60 m legs, [`COURSE_TICKS`]), whose corners the horizon meets one at a
+/// time, so that each binds in a burst of its own.
+#[derive(Clone, Copy, PartialEq)]
+enum Course {
+    Corner,
+    Corners,
+}
+
+/// Ticks of the course of corners (40 s: 300 m at 8 m/s and the stop).
+const COURSE_TICKS: usize = 2000;
+
+impl Course {
+    fn reference(self) -> Reference {
+        let corners: &[[f64; 2]] = match self {
+            Self::Corner => &[[0.0, 0.0], [20.0, 0.0], [20.0, 20.0]],
+            Self::Corners => &[
+                [0.0, 0.0],
+                [60.0, 0.0],
+                [60.0, 60.0],
+                [120.0, 60.0],
+                [120.0, 120.0],
+                [180.0, 120.0],
+            ],
+        };
+        let w: Vec<Vector3<f64>> = corners
+            .iter()
+            .map(|[x, y]| Vector3::new(*x, *y, -2.0))
+            .collect();
+        Reference::path(&w, SPEED).unwrap()
+    }
+
+    fn ticks(self) -> usize {
+        match self {
+            Self::Corner => TICKS,
+            Self::Corners => COURSE_TICKS,
+        }
+    }
 }
 
 #[derive(Clone, Copy)]
@@ -131,14 +173,15 @@ impl Config {
     }
 }
 
-/// The measurements of one closed-loop flight with the warm cone.
-fn record(n: usize) -> Vec<Measurement> {
+/// The measurements of one closed-loop flight of the course with the warm
+/// cone.
+fn record(n: usize, course: Course) -> Vec<Measurement> {
     let plant = plant();
     let mut ctrl = DfMpc::new(ControlModel::Planar(plant), Config::ConeWarm.settings(n)).unwrap();
-    let mut reference = path();
+    let mut reference = course.reference();
     let mut x = SVector::<f64, 6>::zeros();
-    let mut out = Vec::with_capacity(TICKS);
-    for k in 0..TICKS {
+    let mut out = Vec::with_capacity(course.ticks());
+    for k in 0..course.ticks() {
         let y = plant.output(&x);
         let m = Measurement {
             t: k as f64 * DT,
@@ -169,6 +212,10 @@ struct ConeWork {
     solves: usize,
     /// Times of the first constrained tick after an unconstrained one \[s\].
     burst_starts: Vec<f64>,
+    /// Times of the other constrained ticks \[s\].
+    burst_rest: Vec<f64>,
+    /// Newton steps of the first ticks' augmented Lagrangians (all axes).
+    burst_steps: Vec<f64>,
 }
 
 impl ConeWork {
@@ -194,14 +241,14 @@ impl ConeWork {
 fn replay(
     config: Config,
     n: usize,
-    flight: &[Measurement],
+    (course, flight): (Course, &[Measurement]),
     repeats: usize,
 ) -> (Vec<f64>, Vec<f64>, ConeWork) {
     let (mut all, mut constrained) = (Vec::new(), Vec::new());
     let mut work = ConeWork::default();
     for _ in 0..repeats {
         let mut ctrl = DfMpc::new(ControlModel::Planar(plant()), config.settings(n)).unwrap();
-        let mut reference = path();
+        let mut reference = course.reference();
         let mut was_constrained = false;
         for m in flight {
             let start = Instant::now();
@@ -211,12 +258,19 @@ fn replay(
             all.push(t);
             if out.constrained {
                 constrained.push(t);
-                if !was_constrained {
+                if was_constrained {
+                    work.burst_rest.push(t);
+                } else {
                     work.burst_starts.push(t);
                 }
+                let before = work.iterations.len();
                 work.note(ctrl.cone_cascade());
                 for axis in 0..2 {
                     work.note(ctrl.box_cascade(axis));
+                }
+                if !was_constrained {
+                    let steps = work.iterations[before..].iter().sum();
+                    work.burst_steps.push(steps);
                 }
             }
             was_constrained = out.constrained;
@@ -251,8 +305,15 @@ fn main() {
     println!(
         "corner manoeuvre: L path at {SPEED} m/s, {TILT_DEG}° cone, {TICKS} ticks; times in µs"
     );
-    for n in horizons {
-        let flight = record(n);
+    let only: Option<Vec<String>> = std::env::var("CORNER_ONLY")
+        .ok()
+        .map(|v| v.split('|').map(String::from).collect());
+    let chosen = |config: Config| {
+        only.as_ref()
+            .is_none_or(|o| o.iter().any(|o| config.name().contains(o.as_str())))
+    };
+    for &n in &horizons {
+        let flight = record(n, Course::Corner);
         let repeats = if n >= 800 { 2 } else { 5 };
         println!("\nN = {n} ({repeats} replays)");
         println!(
@@ -261,16 +322,12 @@ fn main() {
         println!("|---|---|---|---|---|---|---|---|");
         let mut stats = Vec::new();
         let mut cone_work = Vec::new();
-        let only: Option<Vec<String>> = std::env::var("CORNER_ONLY")
-            .ok()
-            .map(|v| v.split('|').map(String::from).collect());
         for config in Config::ALL {
-            if let Some(only) = &only
-                && !only.iter().any(|o| config.name().contains(o.as_str()))
-            {
+            if !chosen(config) {
                 continue;
             }
-            let (mut all, mut con, mut work) = replay(config, n, &flight, repeats);
+            let (mut all, mut con, mut work) =
+                replay(config, n, (Course::Corner, &flight), repeats);
             if !matches!(
                 config,
                 Config::Fast | Config::ConeClarabel | Config::BoxRateClarabel
@@ -346,6 +403,51 @@ fn main() {
         );
         for line in cone_work {
             println!("{line}");
+        }
+    }
+    course_of_corners(&horizons, &chosen);
+}
+
+/// The course of corners: each corner binds in a burst of its own, whose
+/// first tick starts from the plan given (the multipliers aged over the
+/// unconstrained ticks before it) — the cold solves of a flight, which the
+/// corner's single burst shows only once. Reported per horizon and
+/// configuration: the bursts per flight, their first ticks and the other
+/// constrained ticks (median / p99 / max µs).
+fn course_of_corners(horizons: &[usize], chosen: &dyn Fn(Config) -> bool) {
+    const REPEATS: usize = 3;
+    let configs = [Config::ConeWarm, Config::ConeCold, Config::BoxBanded];
+    if !configs.iter().any(|&c| chosen(c)) {
+        return;
+    }
+    println!(
+        "\ncourse of corners: five 60 m legs at {SPEED} m/s, {TILT_DEG}° cone, \
+         {COURSE_TICKS} ticks, {REPEATS} replays; constrained ticks, µs"
+    );
+    println!(
+        "| N | configuration | bursts per flight | first ticks: median | p99 | max | \
+         their Newton steps: median | max | other constrained ticks: median | p99 | max |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|---|");
+    for &n in horizons {
+        let flight = record(n, Course::Corners);
+        for config in configs.into_iter().filter(|&c| chosen(c)) {
+            let (_, _, mut work) = replay(config, n, (Course::Corners, &flight), REPEATS);
+            let bursts = work.burst_starts.len() / REPEATS;
+            let (first, rest) = (&mut work.burst_starts, &mut work.burst_rest);
+            let steps = &mut work.burst_steps;
+            println!(
+                "| {n} | {} | {bursts} | {} | {} | {} | {} | {} | {} | {} | {} |",
+                config.name(),
+                us(percentile(first, 50.0)),
+                us(percentile(first, 99.0)),
+                us(percentile(first, 100.0)),
+                percentile(steps, 50.0),
+                percentile(steps, 100.0),
+                us(percentile(rest, 50.0)),
+                us(percentile(rest, 99.0)),
+                us(percentile(rest, 100.0)),
+            );
         }
     }
 }
