@@ -29,6 +29,7 @@
 //! and, the last burst's having aged out, no multipliers), their Newton
 //! steps, and the other constrained ticks, for the warm cone, the cone
 //! with warm starts off and the box.
+//! `CORNER_ONLY` runs the course only when one of its parts is `course`.
 //!
 //! Run: `cargo bench -p dflat-control --bench corner` (a horizon list as
 //! argument, e.g. `-- 200`, limits the run).
@@ -405,7 +406,14 @@ fn main() {
             println!("{line}");
         }
     }
-    course_of_corners(&horizons, &chosen);
+    // The course runs unfiltered, or when the filter names it
+    // (`CORNER_ONLY="course|cone, ALM, warm"`).
+    if only
+        .as_ref()
+        .is_none_or(|o| o.iter().any(|o| o == "course"))
+    {
+        course_of_corners(&horizons, &chosen);
+    }
 }
 
 /// The course of corners: each corner binds in a burst of its own, whose
