@@ -91,7 +91,12 @@ impl BandedAlm {
                 .map(|(f, b)| interval_dist2::<2>(at(f), b))
                 .sum(),
         };
-        let mut value = 0.5 * s * dist2;
+        0.5 * s * dist2 + self.row_terms(alpha, lo, hi)
+    }
+
+    /// The rows' part of [`BandedAlm::penalty_terms`] at `x + α·d`.
+    pub(super) fn row_terms(&self, alpha: f64, lo: &[f64], hi: &[f64]) -> f64 {
+        let mut value = 0.0;
         for (k, v) in self.v.iter().enumerate() {
             let h = self.hx[k] + alpha * self.hd[k];
             let ss = self.sigma_row(k);
@@ -120,28 +125,16 @@ impl BandedAlm {
         }
         let s = self.sigma;
         let k = self.k;
-        Self::accelerations(k, self.inv_dt2, &self.x, &mut self.u);
-        // One pass per kind of set, so the projection inlines.
-        macro_rules! pass {
-            ($k:literal, $excess:expr) => {
-                stage_pass::<$k>(
-                    &mut self.u,
-                    &self.y,
-                    &mut self.y_next,
-                    &mut self.jac,
-                    &mut self.active,
-                    a0,
-                    s,
-                    $excess,
-                )
-            };
-        }
-        let (res2, value) = match (&self.stages, k) {
-            (StageSet::Disc(radius), _) => pass!(2, |f, w| disc_excess(w, radius[f])),
-            (StageSet::Interval(bounds), 1) => pass!(1, |f, w| interval_excess::<1>(w, &bounds[f])),
-            (StageSet::Interval(bounds), _) => pass!(2, |f, w| interval_excess::<2>(w, &bounds[f])),
+        let (res2, mut value) = match self.full_step.take() {
+            // The line search's full step left u, y', I − ∂Π and the
+            // active stages at this x.
+            Some(done) => done,
+            None => {
+                Self::accelerations(k, self.inv_dt2, &self.x, &mut self.u);
+                let a0 = if k == 1 { [a0[0], 0.0] } else { a0 };
+                self.stage_values(false, |_| a0)
+            }
         };
-        let mut value = value;
         let stage_res = res2.sqrt() / s;
         Self::add_transposed(k, self.inv_dt2, &self.y_next, &mut self.g);
         let mut row_res: f64 = 0.0;
@@ -168,6 +161,50 @@ impl BandedAlm {
         self.penalty_value = value;
         let gn = self.g.iter().fold(0.0f64, |a, b| a.max(b.abs()));
         (gn, stage_res, row_res)
+    }
+
+    /// The stage pass ([`stage_pass`]) over `u` (`trial`: `u_trial`) moved
+    /// by `delta(f)`, one pass per kind of set so that the projection
+    /// inlines; returns the largest `‖y' − y‖²` and the stages' penalty.
+    fn stage_values(&mut self, trial: bool, delta: impl Fn(usize) -> [f64; 2]) -> (f64, f64) {
+        let s = self.sigma;
+        let u = if trial {
+            &mut self.u_trial
+        } else {
+            &mut self.u
+        };
+        macro_rules! pass {
+            ($k:literal, $excess:expr) => {
+                stage_pass::<$k>(
+                    u,
+                    &delta,
+                    &self.y,
+                    &mut self.y_next,
+                    &mut self.jac,
+                    &mut self.active,
+                    s,
+                    $excess,
+                )
+            };
+        }
+        match (&self.stages, self.k) {
+            (StageSet::Disc(radius), _) => pass!(2, |f, w| disc_excess(w, radius[f])),
+            (StageSet::Interval(bounds), 1) => pass!(1, |f, w| interval_excess::<1>(w, &bounds[f])),
+            (StageSet::Interval(bounds), _) => pass!(2, |f, w| interval_excess::<2>(w, &bounds[f])),
+        }
+    }
+
+    /// The Lagrangian's non-quadratic part at the full step `x + d` (`u`,
+    /// `du`, `hx`, `hd` current), as [`BandedAlm::penalty_terms`] at α = 1,
+    /// by the gradient's stage pass into `u_trial`, `y_next`, `jac` and
+    /// `active`: should the line search take the full step, the next
+    /// gradient starts from them ([`BandedAlm::accept_full_step`]).
+    pub(super) fn full_step_terms(&mut self, lo: &[f64], hi: &[f64]) -> (f64, (f64, f64)) {
+        self.u_trial.copy_from_slice(&self.u);
+        let du = std::mem::take(&mut self.du);
+        let done = self.stage_values(true, |f| du[f]);
+        self.du = du;
+        (done.1 + self.row_terms(1.0, lo, hi), done)
     }
 
     /// What the constraints' residuals can cost at x (`y_next`, `hx`
@@ -262,8 +299,9 @@ fn add_transposed_k<const K: usize>(inv_dt2: f64, e: &[[f64; 2]], out: &mut [f64
     }
 }
 
-/// The gradient's pass over the stages: `u_f += a_0` (u holds G_f·x on
-/// entry), `w_f = u_f + y_f/σ`, the updated multipliers `y'_f = σ·(w_f −
+/// The gradient's pass over the stages: `u_f += delta(f)` (u holds G_f·x
+/// and delta gives a_0, or u the last iterate's accelerations and delta
+/// the step's), `w_f = u_f + y_f/σ`, the updated multipliers `y'_f = σ·(w_f −
 /// Π_f(w_f))`, `I − ∂Π_f` of the stages outside their set (`jac`) and
 /// which they are (`active`, first n entries); returns the largest
 /// `‖y' − y‖²` and the penalty `Σ σ/2·‖w_f − Π_f(w_f)‖²`. Generic over
@@ -272,19 +310,19 @@ fn add_transposed_k<const K: usize>(inv_dt2: f64, e: &[[f64; 2]], out: &mut [f64
 #[inline(always)]
 fn stage_pass<const K: usize>(
     u: &mut [[f64; 2]],
+    delta: impl Fn(usize) -> [f64; 2],
     y: &[[f64; 2]],
     y_next: &mut [[f64; 2]],
     jac: &mut [[[f64; 2]; 2]],
     active: &mut [u8],
-    a0: [f64; 2],
     s: f64,
     excess: impl Fn(usize, [f64; 2]) -> Option<([f64; 2], [[f64; 2]; 2])>,
 ) -> (f64, f64) {
     let inv_s = 1.0 / s;
     let (mut res2, mut value) = (0.0f64, 0.0);
-    let a0 = if K == 1 { [a0[0], 0.0] } else { a0 };
     for (f, ((uf, yf), ynf)) in u.iter_mut().zip(y).zip(y_next.iter_mut()).enumerate() {
-        let uu = [uf[0] + a0[0], uf[1] + a0[1]];
+        let e = delta(f);
+        let uu = [uf[0] + e[0], uf[1] + e[1]];
         *uf = uu;
         let w = [uu[0] + yf[0] * inv_s, uu[1] + yf[1] * inv_s];
         let yn = match excess(f, w) {
