@@ -204,7 +204,9 @@ impl BandedCholesky {
         match self.b {
             3 => self.factor_window::<3>()?,
             4 => self.factor_window::<4>()?,
+            6 => self.factor_band::<6>()?,
             7 => self.factor_band::<7>()?,
+            8 => self.factor_band::<8>()?,
             9 => self.factor_band::<9>()?,
             _ => {
                 self.factor_generic()?;
@@ -217,7 +219,8 @@ impl BandedCholesky {
 
     /// The square-root-free factorisation `A = L·D·Lᵀ` (L unit lower) of
     /// `l` in place, for a compile-time bandwidth (3, 4: one axis, without
-    /// and with the smoothness term; 7, 9: the two-axis cone problems),
+    /// and with the smoothness term; 6, 8: the two-axis cone problems; 7,
+    /// 9: the same with the band one wider, as it was built before),
     /// right-looking: each pivot `d_j`, once inverted, scales its column to
     /// `l_{j+t,j} = a_{j+t,j}/d_j` and updates the B(B+1)/2 entries of the
     /// block after it, `a_{j+t1,j+t2} −= l_{j+t1,j}·a_{j+t2,j}` —
@@ -400,8 +403,14 @@ impl BandedCholesky {
         match B {
             3 => unrolled!(1: [0] 2: [0 1] 3: [0 1 2]),
             4 => unrolled!(1: [0] 2: [0 1] 3: [0 1 2] 4: [0 1 2 3]),
+            6 => {
+                unrolled!(1: [0] 2: [0 1] 3: [0 1 2] 4: [0 1 2 3] 5: [0 1 2 3 4] 6: [0 1 2 3 4 5])
+            }
             7 => {
                 unrolled!(1: [0] 2: [0 1] 3: [0 1 2] 4: [0 1 2 3] 5: [0 1 2 3 4] 6: [0 1 2 3 4 5] 7: [0 1 2 3 4 5 6])
+            }
+            8 => {
+                unrolled!(1: [0] 2: [0 1] 3: [0 1 2] 4: [0 1 2 3] 5: [0 1 2 3 4] 6: [0 1 2 3 4 5] 7: [0 1 2 3 4 5 6] 8: [0 1 2 3 4 5 6 7])
             }
             9 => {
                 unrolled!(1: [0] 2: [0 1] 3: [0 1 2] 4: [0 1 2 3] 5: [0 1 2 3 4] 6: [0 1 2 3 4 5] 7: [0 1 2 3 4 5 6] 8: [0 1 2 3 4 5 6 7] 9: [0 1 2 3 4 5 6 7 8])
@@ -518,7 +527,9 @@ impl BandedCholesky {
         match self.b {
             3 => Self::run_band::<3, 1>(&self.fwd, [x], false),
             4 => Self::run_band::<4, 1>(&self.fwd, [x], false),
+            6 => Self::run_band::<6, 1>(&self.fwd, [x], false),
             7 => Self::run_band::<7, 1>(&self.fwd, [x], false),
+            8 => Self::run_band::<8, 1>(&self.fwd, [x], false),
             9 => Self::run_band::<9, 1>(&self.fwd, [x], false),
             _ => Self::run_generic(self.b, &self.fwd, x, false),
         }
@@ -529,7 +540,9 @@ impl BandedCholesky {
         match self.b {
             3 => Self::run_band::<3, 1>(&self.bwd, [x], true),
             4 => Self::run_band::<4, 1>(&self.bwd, [x], true),
+            6 => Self::run_band::<6, 1>(&self.bwd, [x], true),
             7 => Self::run_band::<7, 1>(&self.bwd, [x], true),
+            8 => Self::run_band::<8, 1>(&self.bwd, [x], true),
             9 => Self::run_band::<9, 1>(&self.bwd, [x], true),
             _ => Self::run_generic(self.b, &self.bwd, x, true),
         }
@@ -837,7 +850,7 @@ mod tests {
             prop_assert_eq!(&y1, &x);
             prop_assert_eq!(&y2, &x2);
             // Taking the matrix's storage factors the same matrix
-            // (b = 7, 9 run the fixed-bandwidth factorisation).
+            // (b = 6 … 9 run the fixed-bandwidth factorisation).
             let mut g = BandedCholesky::new(n, b);
             let mut taken = a.clone();
             g.factor_taking(&mut taken).unwrap();

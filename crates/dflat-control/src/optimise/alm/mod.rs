@@ -286,7 +286,12 @@ impl BandedAlm {
             .map(|a| a.hessian_band().bandwidth())
             .max()
             .unwrap_or(3);
-        let mut bandwidth = k * axis_b + (k - 1);
+        // Interleaved, P couples each axis with itself only (offsets
+        // 2·(f − g) ≤ 2·axis_b), and the stage blocks reach two stages
+        // back (offsets ≤ 2·2 + 1): the band is 2·axis_b wide, not
+        // 2·axis_b + 1 — the entry one further, across the axes, is always
+        // 0, and a banded factor fills nothing outside the band.
+        let mut bandwidth = if k == 1 { axis_b } else { (2 * axis_b).max(5) };
         let mut rows = Vec::new();
         let (mut row_scale, mut row_penalty, mut ranges) = (Vec::new(), Vec::new(), Vec::new());
         for block in blocks {
