@@ -524,27 +524,27 @@ impl BandedCholesky {
 
     /// `x ← L⁻¹·x`.
     fn forward(&self, x: &mut [f64]) {
-        match self.b {
-            3 => Self::run_band::<3, 1>(&self.fwd, [x], false),
-            4 => Self::run_band::<4, 1>(&self.fwd, [x], false),
-            6 => Self::run_band::<6, 1>(&self.fwd, [x], false),
-            7 => Self::run_band::<7, 1>(&self.fwd, [x], false),
-            8 => Self::run_band::<8, 1>(&self.fwd, [x], false),
-            9 => Self::run_band::<9, 1>(&self.fwd, [x], false),
-            _ => Self::run_generic(self.b, &self.fwd, x, false),
-        }
+        self.substitute(&self.fwd, x, false);
     }
 
     /// `x ← L⁻ᵀ·x`.
     fn backward(&self, x: &mut [f64]) {
+        self.substitute(&self.bwd, x, true);
+    }
+
+    /// One substitution over `data` (`fwd` or `bwd`), by the kernel of
+    /// this factor's bandwidth (inlined, so that each caller's direction
+    /// is known at compile time).
+    #[inline(always)]
+    fn substitute(&self, data: &[f64], x: &mut [f64], reverse: bool) {
         match self.b {
-            3 => Self::run_band::<3, 1>(&self.bwd, [x], true),
-            4 => Self::run_band::<4, 1>(&self.bwd, [x], true),
-            6 => Self::run_band::<6, 1>(&self.bwd, [x], true),
-            7 => Self::run_band::<7, 1>(&self.bwd, [x], true),
-            8 => Self::run_band::<8, 1>(&self.bwd, [x], true),
-            9 => Self::run_band::<9, 1>(&self.bwd, [x], true),
-            _ => Self::run_generic(self.b, &self.bwd, x, true),
+            3 => Self::run_band::<3, 1>(data, [x], reverse),
+            4 => Self::run_band::<4, 1>(data, [x], reverse),
+            6 => Self::run_band::<6, 1>(data, [x], reverse),
+            7 => Self::run_band::<7, 1>(data, [x], reverse),
+            8 => Self::run_band::<8, 1>(data, [x], reverse),
+            9 => Self::run_band::<9, 1>(data, [x], reverse),
+            _ => Self::run_generic(self.b, data, x, reverse),
         }
     }
 
@@ -567,7 +567,8 @@ impl BandedCholesky {
     }
 
     // Fixed-bandwidth specialisation (B = 3: the DF-MPC; 4: with the
-    // command-smoothness term; 7, 9: the cone's pairs). The partial sums
+    // command-smoothness term; 6, 8: the cone's pairs; 7, 9: the same one
+    // wider). The partial sums
     // of the next B unknowns stay in registers (a window shifted by hand);
     // each step's B multiply-subtracts are independent, and only the next
     // unknown's waits for this one. K right-hand sides interleave, each
