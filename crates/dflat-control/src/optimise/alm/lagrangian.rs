@@ -321,8 +321,8 @@ fn stage_pass<const K: usize>(
     let inv_s = 1.0 / s;
     let (mut res2, mut value) = (0.0f64, 0.0);
     for (f, ((uf, yf), ynf)) in u.iter_mut().zip(y).zip(y_next.iter_mut()).enumerate() {
-        let e = delta(f);
-        let uu = [uf[0] + e[0], uf[1] + e[1]];
+        let du = delta(f);
+        let uu = [uf[0] + du[0], uf[1] + du[1]];
         *uf = uu;
         let w = [uu[0] + yf[0] * inv_s, uu[1] + yf[1] * inv_s];
         let yn = match excess(f, w) {
@@ -422,22 +422,22 @@ fn interval_dist2<const K: usize>(w: [f64; 2], b: &[[f64; 2]; 2]) -> f64 {
 fn add_stage_blocks<const K: usize>(jac: &[[[f64; 2]; 2]], sc: f64, w: usize, lower: &mut [f64]) {
     let n = jac.len();
     let at = |f: usize| if f < n { jac[f] } else { [[0.0; 2]; 2] };
-    let comb = |a: [[f64; 2]; 2], ca: f64, b: [[f64; 2]; 2], cb: f64, c: [[f64; 2]; 2], cc: f64| {
+    // sc·Σ c·J over the terms given.
+    let sum = |terms: &[(f64, [[f64; 2]; 2])]| {
         let mut m = [[0.0; 2]; 2];
         for i in 0..K {
             for j in 0..K {
-                m[i][j] = sc * (ca * a[i][j] + cb * b[i][j] + cc * c[i][j]);
+                m[i][j] = sc * terms.iter().map(|(c, a)| c * a[i][j]).sum::<f64>();
             }
         }
         m
     };
     for (g, rows) in lower.chunks_exact_mut(K * w).enumerate().take(n) {
         let (j0, j1, j2) = (at(g), at(g + 1), at(g + 2));
-        let zero = [[0.0; 2]; 2];
         let s = [
-            comb(j0, 1.0, j1, 4.0, j2, 1.0),
-            comb(j0, -2.0, j1, -2.0, zero, 0.0),
-            comb(j0, 1.0, zero, 0.0, zero, 0.0),
+            sum(&[(1.0, j0), (4.0, j1), (1.0, j2)]),
+            sum(&[(-2.0, j0), (-2.0, j1)]),
+            sum(&[(1.0, j0)]),
         ];
         // Row K·g + i, column K·(g − e) + j: slot K·e + i − j.
         for (e, se) in s.iter().enumerate().take(g.min(2) + 1) {

@@ -73,8 +73,7 @@
 use std::ops::Range;
 
 mod lagrangian;
-
-use lagrangian::Vector;
+mod line_search;
 
 use super::FastBandedSolver;
 use super::banded::{BandedCholesky, SymBand};
@@ -389,7 +388,6 @@ impl BandedAlm {
     /// Sets the primal start from `p` (per axis, length n).
     pub fn set_start(&mut self, p: &[&[f64]]) {
         self.px_current = false;
-        self.full_step = None;
         for (i, p) in p.iter().enumerate().take(self.k) {
             for (f, &v) in p.iter().enumerate().take(self.n) {
                 self.x[self.k * f + i] = v;
@@ -551,6 +549,9 @@ impl BandedAlm {
         }
         self.c.copy_from_slice(c);
         self.px_current = false;
+        // Held only from a line search's full step to the gradient right
+        // after it, so None here; cleared all the same, the one place a
+        // stale stage pass could enter.
         self.full_step = None;
         let mut cold = false;
         if self.y.iter().all(|y| *y == [0.0; 2]) && self.v.iter().all(|v| *v == [0.0; 2]) {
@@ -586,6 +587,9 @@ impl BandedAlm {
         // Whether the last step was a full Newton step on a fresh factor.
         let mut exact_full = false;
         let exact_reuse = matches!(self.stages, StageSet::Interval(_));
+        // The rows' largest σ scale (σ_h = scale·σ), for the inexact
+        // tolerance.
+        let row_scale_max = self.row_scale.iter().fold(0.0f64, |a, b| a.max(*b));
         let inner_tol = decrement_tol;
         let stage_tol = PRIMAL_TOLERANCE * (1.0 + self.stage_scale());
         let gap_tol = GAP_TOLERANCE * c_scale * x_scale;
@@ -626,10 +630,7 @@ impl BandedAlm {
                 // Inexact inner solves while the multipliers are far off:
                 // the subproblem's error (≈ decrement/2) need only be small
                 // against the change the next update will make, σ·res².
-                let row_sigma = self
-                    .row_scale
-                    .iter()
-                    .fold(0.0f64, |a, b| a.max(*b * self.sigma));
+                let row_sigma = row_scale_max * self.sigma;
                 let loose = self.sigma * (INEXACT * stage_res).powi(2)
                     + row_sigma * (INEXACT * row_res).powi(2);
                 // Intervals: the matrix is fixed by σ and the active set,
@@ -677,7 +678,6 @@ impl BandedAlm {
                         *x += d;
                     }
                     self.px_current = false;
-                    self.full_step = None;
                     (_, stage_res, row_res) = self.gradient(a0, lo, hi);
                     break;
                 }
@@ -697,7 +697,6 @@ impl BandedAlm {
             // Multiplier update (the gradient above is the Lagrangian's
             // with the updated multipliers: stationarity holds).
             self.y.copy_from_slice(&self.y_next);
-            self.full_step = None;
             for r in 0..m {
                 let h = self.hx[r];
                 for j in 0..2 {
@@ -733,83 +732,6 @@ impl BandedAlm {
         Err(ControlError::Solver(
             "ALM: no convergence in the multiplier updates".into(),
         ))
-    }
-
-    /// Armijo backtracking on L along d from x (u, hx, g current); moves x.
-    /// Returns whether the full step was taken.
-    fn line_search(
-        &mut self,
-        decrement: f64,
-        lo: &[f64],
-        hi: &[f64],
-    ) -> Result<bool, ControlError> {
-        self.apply_p(Vector::D);
-        // gᵀd = −(Newton decrement).
-        let slope = -decrement;
-        if slope.is_nan() || slope >= 0.0 {
-            // Not a descent direction: the factor is too inexact to go on.
-            return Err(ControlError::Solver(format!(
-                "ALM: no descent (slope {slope:.1e})"
-            )));
-        }
-        // Quadratic part along d: α·(Px + c)·d + ½α²·dᵀPd.
-        let (mut lin, mut curv) = (0.0, 0.0);
-        for (((p, c), d), pd) in self.px.iter().zip(&self.c).zip(&self.d).zip(&self.pd) {
-            lin += (p + c) * d;
-            curv += pd * d;
-        }
-        Self::accelerations(self.k, self.inv_dt2, &self.d, &mut self.du);
-        for r in 0..self.rows.len() {
-            self.hd[r] = self.rows[r].dot(&self.d);
-        }
-        let base = self.penalty_value;
-        let (full, done) = self.full_step_terms(lo, hi);
-        let mut alpha = 1.0;
-        for _ in 0..MAX_HALVINGS {
-            let penalty = if alpha == 1.0 {
-                full
-            } else {
-                self.penalty_terms(alpha, lo, hi)
-            };
-            let value = alpha * lin + 0.5 * alpha * alpha * curv + penalty;
-            if value <= base + ARMIJO * alpha * slope {
-                self.step(alpha);
-                if alpha == 1.0 {
-                    self.accept_full_step(done);
-                }
-                return Ok(alpha == 1.0);
-            }
-            alpha *= 0.5;
-        }
-        // No decrease measurable: the merit is flat to rounding here, where
-        // the full Newton step is the best guess.
-        self.step(1.0);
-        self.accept_full_step(done);
-        Ok(true)
-    }
-
-    /// After the full step: its accelerations (`u_trial`) become u, and
-    /// the next gradient takes its stage pass (`done`: the largest `‖y' −
-    /// y‖²` and the stages' penalty; `y_next`, `jac`, `active` set by
-    /// [`BandedAlm::full_step_terms`]).
-    fn accept_full_step(&mut self, done: (f64, f64)) {
-        std::mem::swap(&mut self.u, &mut self.u_trial);
-        self.full_step = Some(done);
-    }
-
-    /// `x += α·d`, and `P·x` with it from `P·d` (both by differencing,
-    /// so the sum keeps their accuracy).
-    fn step(&mut self, alpha: f64) {
-        for (((x, d), p), pd) in self
-            .x
-            .iter_mut()
-            .zip(&self.d)
-            .zip(&mut self.px)
-            .zip(&self.pd)
-        {
-            *x += alpha * d;
-            *p += alpha * pd;
-        }
     }
 }
 
