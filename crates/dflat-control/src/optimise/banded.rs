@@ -145,6 +145,11 @@ pub struct BandedCholesky {
     /// l_{i,i−1}, …]`); 0 before the start.
     bwd: Vec<f64>,
     factored: bool,
+    /// The matrix of the held factor (lower band, as `l`), when it was
+    /// factored by [`BandedCholesky::refactor`]: what the next refactor
+    /// compares against.
+    held: Vec<f64>,
+    held_valid: bool,
 }
 
 impl BandedCholesky {
@@ -157,6 +162,8 @@ impl BandedCholesky {
             fwd: vec![0.0; n * (bandwidth + 1)],
             bwd: vec![0.0; n * (bandwidth + 1)],
             factored: false,
+            held: vec![0.0; n * (bandwidth + 1)],
+            held_valid: false,
         }
     }
 
@@ -186,6 +193,86 @@ impl BandedCholesky {
         self.factor_held()
     }
 
+    /// As [`BandedCholesky::factor_taking`], keeping the columns of the
+    /// held factor before the first column j0 in which `a` differs (bit
+    /// for bit) from the matrix that factor is of: only columns j0 … n − 1
+    /// are factored again, after the b×b block at j0 has taken what the
+    /// kept columns contribute to it (rebuilt from their L and D, O(b³)).
+    /// A matrix that changed only in its last rows — the Newton matrix of
+    /// a plan whose constraints bind near the horizon's end — costs that
+    /// fraction of a factorisation. The result is bit-identical to
+    /// [`BandedCholesky::factor`]'s: the same operations in the same
+    /// order. `a`'s storage is kept as the held matrix, and `a` left
+    /// holding unspecified values. Returns j0 (0: factored afresh, n: `a`
+    /// is the held matrix). The compiled bandwidths (3, 4, 6–9) restart at
+    /// j0, the others factor afresh when anything changed.
+    ///
+    /// # Panics
+    /// If `a` has another dimension or bandwidth than this factor.
+    pub fn refactor_taking(&mut self, a: &mut SymBand) -> Result<usize, ControlError> {
+        assert!(a.n == self.n && a.b == self.b, "shape mismatch");
+        let (n, b, w) = (self.n, self.b, self.b + 1);
+        let mut j0 = if self.factored && self.held_valid {
+            first_changed_column(&self.held, &a.lower, n, b)
+        } else {
+            0
+        };
+        if j0 == n {
+            return Ok(n);
+        }
+        if !matches!(b, 3 | 4 | 6..=9) {
+            j0 = 0;
+        }
+        self.held_valid = false;
+        self.factored = false;
+        if j0 == 0 {
+            self.l.copy_from_slice(&a.lower);
+            std::mem::swap(&mut self.held, &mut a.lower);
+            self.factor_held()?;
+        } else {
+            // Rows j0 … n − 1, columns j0 and after, from a; the columns
+            // before j0 keep L. (Rows j0 + b and after are whole rows: one
+            // copy.)
+            let whole = (j0 + b).min(n);
+            for i in j0..whole {
+                let r = i * w..i * w + (i - j0) + 1;
+                self.l[r.clone()].copy_from_slice(&a.lower[r]);
+            }
+            self.l[whole * w..].copy_from_slice(&a.lower[whole * w..]);
+            std::mem::swap(&mut self.held, &mut a.lower);
+            self.schur_window(j0);
+            match b {
+                3 => self.factor_window_from::<3>(j0)?,
+                4 => self.factor_window_from::<4>(j0)?,
+                6 => self.factor_band_from::<6>(j0)?,
+                7 => self.factor_band_from::<7>(j0)?,
+                8 => self.factor_band_from::<8>(j0)?,
+                _ => self.factor_band_from::<9>(j0)?,
+            }
+            self.factored = true;
+        }
+        self.held_valid = true;
+        Ok(j0)
+    }
+
+    /// Entry (i, k) of the b×b block at j0 (j0 ≤ k ≤ i < j0 + b) loses
+    /// what the kept columns j < j0 subtract from it in the factorisation,
+    /// `l_{i,j}·a_{k,j}` (a_{k,j} the column before scaling, held in
+    /// `fwd`), in the order of the columns — as the right-looking kernels
+    /// do.
+    fn schur_window(&mut self, j0: usize) {
+        let (n, b, w) = (self.n, self.b, self.b + 1);
+        for i in j0..(j0 + b).min(n) {
+            for k in j0..=i {
+                let mut v = self.l[i * w + (i - k)];
+                for j in i.saturating_sub(b)..j0 {
+                    v -= self.l[i * w + (i - j)] * self.fwd[j * w + (k - j)];
+                }
+                self.l[i * w + (i - k)] = v;
+            }
+        }
+    }
+
     /// As [`BandedCholesky::factor`], taking `a`'s storage instead of
     /// copying it: `a` is left holding unspecified values (for a matrix
     /// assembled afresh before every factorisation).
@@ -201,13 +288,14 @@ impl BandedCholesky {
     /// Factors the matrix held in `l`.
     fn factor_held(&mut self) -> Result<(), ControlError> {
         self.factored = false;
+        self.held_valid = false;
         match self.b {
-            3 => self.factor_window::<3>()?,
-            4 => self.factor_window::<4>()?,
-            6 => self.factor_band::<6>()?,
-            7 => self.factor_band::<7>()?,
-            8 => self.factor_band::<8>()?,
-            9 => self.factor_band::<9>()?,
+            3 => self.factor_window_from::<3>(0)?,
+            4 => self.factor_window_from::<4>(0)?,
+            6 => self.factor_band_from::<6>(0)?,
+            7 => self.factor_band_from::<7>(0)?,
+            8 => self.factor_band_from::<8>(0)?,
+            9 => self.factor_band_from::<9>(0)?,
             _ => {
                 self.factor_generic()?;
                 self.substitution_rows();
@@ -231,15 +319,17 @@ impl BandedCholesky {
     /// is updated as one run against the unscaled column held in reverse
     /// ([`BandedCholesky::update_block`], written out with constant
     /// indices). Writes the substitutions' data as it goes
-    /// ([`BandedCholesky::ldl_rows`]).
-    fn factor_band<const B: usize>(&mut self) -> Result<(), ControlError> {
+    /// ([`BandedCholesky::ldl_rows`]). Starts at column j0 (0: all; else
+    /// columns before it are kept and the block at j0 holds what they
+    /// subtract from it, [`BandedCholesky::schur_window`]).
+    fn factor_band_from<const B: usize>(&mut self, j0: usize) -> Result<(), ControlError> {
         let n = self.n;
         let w = B + 1;
         let l = &mut self.l;
         // ra[B − t] = a_{j+t, j} before scaling, rl[B − t] = l_{j+t, j}
         // (0 past the matrix's end).
         let (mut ra, mut rl) = ([0.0f64; B], [0.0f64; B]);
-        for j in 0..n {
+        for j in j0..n {
             let d = l[j * w];
             if !(d > 0.0 && d.is_finite()) {
                 return Err(ControlError::NotPositiveDefinite);
@@ -296,8 +386,9 @@ impl BandedCholesky {
     /// subtraction) no longer passes through memory, where the wide
     /// kernel's each column stores what the next loads. Rows past the
     /// matrix's end enter as zeros, so every column runs the same code.
-    /// Same operations in the same order as `factor_band`.
-    fn factor_window<const B: usize>(&mut self) -> Result<(), ControlError> {
+    /// Same operations in the same order as `factor_band_from`, and as it
+    /// starts at column j0.
+    fn factor_window_from<const B: usize>(&mut self, j0: usize) -> Result<(), ControlError> {
         const { assert!(B <= 4, "the window holds five rows") };
         let n = self.n;
         let w = B + 1;
@@ -310,9 +401,9 @@ impl BandedCholesky {
             }
         };
         for (r, wr) in win.iter_mut().enumerate().take(B + 1) {
-            row_of(l, r, wr, r);
+            row_of(l, j0 + r, wr, r);
         }
-        for j in 0..n {
+        for j in j0..n {
             let d = win[0][0];
             if !(d > 0.0 && d.is_finite()) {
                 return Err(ControlError::NotPositiveDefinite);
@@ -630,6 +721,30 @@ impl BandedCholesky {
     }
 }
 
+/// The first column in which the lower bands `old` and `new` (n rows,
+/// half-bandwidth b, row-major as [`SymBand`]) differ bit for bit; n when
+/// they are equal. A changed entry of row i lies in column i − b or later,
+/// so the scan stops once rows can no longer lower the answer.
+fn first_changed_column(old: &[f64], new: &[f64], n: usize, b: usize) -> usize {
+    let w = b + 1;
+    let mut first = n;
+    for i in 0..n {
+        if i.saturating_sub(b) >= first {
+            break;
+        }
+        let (o, m) = (&old[i * w..(i + 1) * w], &new[i * w..(i + 1) * w]);
+        // Slot s is column i − s: the largest differing slot is the row's
+        // first changed column.
+        if let Some(s) = (0..=b.min(i))
+            .rev()
+            .find(|&s| o[s].to_bits() != m[s].to_bits())
+        {
+            first = first.min(i - s);
+        }
+    }
+    first
+}
+
 /// LDLᵀ of a symmetric banded matrix without pivoting (for quasi-definite
 /// matrices), L unit lower triangular with the same band.
 #[derive(Debug, Clone)]
@@ -805,6 +920,95 @@ mod tests {
         let yd = to_dense(&a) * DVector::from_row_slice(&x);
         for i in 0..5 {
             assert!((y[i] - yd[i]).abs() < 1e-12);
+        }
+    }
+
+    /// `M·Mᵀ + I` in a band, M lower-banded from `seed` (10 per row).
+    fn spd_band(n: usize, b: usize, seed: &[f64]) -> SymBand {
+        let mut m = DMatrix::<f64>::zeros(n, n);
+        for i in 0..n {
+            for d in 0..=b.min(i) {
+                m[(i, i - d)] = seed[i * 10 + d];
+            }
+        }
+        let dense = &m * m.transpose() + DMatrix::identity(n, n);
+        let mut a = SymBand::zeros(n, b);
+        for i in 0..n {
+            for j in i.saturating_sub(b)..=i {
+                a.set(i, j, dense[(i, j)]);
+            }
+        }
+        a
+    }
+
+    proptest! {
+        /// `refactor_taking` after a change in the trailing block (rows and
+        /// columns j0 and after, kept SPD) reports j0 — the first changed
+        /// column — and holds bit for bit the factor a fresh `factor` of
+        /// the changed matrix gives: L, D and the substitutions' data. The
+        /// same matrix again is recognised (n), and a solve agrees.
+        #[test]
+        fn refactor_from_the_first_changed_column_is_a_fresh_factor(
+            n in 1usize..60,
+            b in prop::sample::select(vec![1usize, 3, 4, 6, 7, 8, 9]),
+            cut in 0.0f64..1.0,
+            seed in proptest::collection::vec(-1.0f64..1.0, 60 * 10),
+            change in proptest::collection::vec(-1.0f64..1.0, 60 * 10),
+        ) {
+            let a = spd_band(n, b, &seed);
+            let mut f = BandedCholesky::new(n, b);
+            prop_assert_eq!(f.refactor_taking(&mut a.clone()).unwrap(), 0);
+            prop_assert_eq!(f.refactor_taking(&mut a.clone()).unwrap(), n);
+            // A second SPD band added on the trailing block only.
+            let j0 = ((n as f64) * cut) as usize;
+            let t = spd_band(n - j0, b, &change);
+            let mut a2 = a.clone();
+            for i in j0..n {
+                for j in i.saturating_sub(b).max(j0)..=i {
+                    a2.add(i, j, t.get(i - j0, j - j0));
+                }
+            }
+            let got = f.refactor_taking(&mut a2.clone()).unwrap();
+            // The reported column is the first changed one (j0: the
+            // trailing block's diagonal grew by at least 1), or 0 for the
+            // bandwidths that factor afresh.
+            let first = (0..n)
+                .flat_map(|i| (i.saturating_sub(b)..=i).map(move |j| (i, j)))
+                .filter(|&(i, j)| a.get(i, j).to_bits() != a2.get(i, j).to_bits())
+                .map(|(_, j)| j)
+                .min()
+                .unwrap();
+            prop_assert_eq!(first, j0);
+            prop_assert_eq!(got, if [3, 4, 6, 7, 8, 9].contains(&b) { j0 } else { 0 });
+            let mut fresh = BandedCholesky::new(n, b);
+            fresh.factor(&a2).unwrap();
+            let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            prop_assert_eq!(bits(&f.l), bits(&fresh.l));
+            prop_assert_eq!(bits(&f.fwd), bits(&fresh.fwd));
+            prop_assert_eq!(bits(&f.bwd), bits(&fresh.bwd));
+            let mut x: Vec<f64> = change[..n].to_vec();
+            let mut y = x.clone();
+            f.solve_in_place(&mut x).unwrap();
+            fresh.solve_in_place(&mut y).unwrap();
+            prop_assert_eq!(bits(&x), bits(&y));
+        }
+
+        /// A factor that failed (not positive definite) is not reused: the
+        /// next refactor starts afresh.
+        #[test]
+        fn refactor_after_a_failure_starts_afresh(
+            n in 2usize..30,
+            seed in proptest::collection::vec(-1.0f64..1.0, 30 * 10),
+        ) {
+            let a = spd_band(n, 6, &seed);
+            let mut f = BandedCholesky::new(n, 6);
+            f.refactor_taking(&mut a.clone()).unwrap();
+            let mut bad = a.clone();
+            bad.set(n - 1, n - 1, -1.0);
+            prop_assert_eq!(f.refactor_taking(&mut bad.clone()), Err(ControlError::NotPositiveDefinite));
+            prop_assert!(!f.is_factored());
+            prop_assert_eq!(f.refactor_taking(&mut a.clone()).unwrap(), 0);
+            prop_assert!(f.is_factored());
         }
     }
 

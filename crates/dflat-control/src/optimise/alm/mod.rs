@@ -54,7 +54,11 @@
 //! decrement small (below 1e-7 of the objective's scale, or within 10× of
 //! the inexact inner tolerance) and the active set the one factored; once
 //! a reused factor stops converging tenfold per step, the next step
-//! refactors. `P·x` is evaluated by differencing
+//! refactors. A factorisation keeps the held factor's columns before the
+//! first one the matrix changed in ([`BandedCholesky::refactor_taking`],
+//! bit-identical to a fresh factor): where the set changes only near the
+//! horizon's end — the first tick of a constrained burst, whose arc enters
+//! there — a factorisation costs that tail's share. `P·x` is evaluated by differencing
 //! (`FastBandedSolver::apply_hessian_strided`) and then updated by `α·P·d`.
 //! The stages' accelerations likewise: the line search evaluates the full
 //! step by the gradient's own stage pass (projections, multipliers, I −
@@ -649,7 +653,7 @@ impl BandedAlm {
                 reuse_allowed = true;
                 if !reuse {
                     self.assemble(lo, hi);
-                    self.chol.factor_taking(&mut self.kkt)?;
+                    self.chol.refactor_taking(&mut self.kkt)?;
                     self.factorisations += 1;
                     self.factored_active.clone_from(&self.active);
                     factor_current = true;
