@@ -134,16 +134,23 @@ impl SymBand {
 pub struct BandedCholesky {
     n: usize,
     b: usize,
-    /// L, lower band, row-major as in [`SymBand`].
+    /// L, lower band, row-major as in [`SymBand`] (the LDLᵀ kernels: d_i
+    /// on the diagonal, unit L's entries below; row i, `[d_i, l_{i,i−1},
+    /// …, l_{i,i−b}]`, is the back substitution's data).
     l: Vec<f64>,
     /// Forward substitution, per unknown i in order: its scale and the
     /// column below it, `[1/L_ii, L_{i+1,i}, …, L_{i+b,i}]` (the LDLᵀ
-    /// kernels: `[1/d_i, d_i·l_{i+1,i}, …]`); 0 past the end.
+    /// kernels: `[1/d_i, l_{i+1,i}, …]`); 0 past the end.
     fwd: Vec<f64>,
-    /// Back substitution, per unknown i from the last: its scale and the
-    /// row before it, `[1/L_ii, L_{i,i−1}, …, L_{i,i−b}]` (LDLᵀ: `[1,
-    /// l_{i,i−1}, …]`); 0 before the start.
+    /// Back substitution of the generic LLᵀ, per unknown i from the last:
+    /// its scale and the row before it, `[1/L_ii, L_{i,i−1}, …,
+    /// L_{i,i−b}]`; 0 before the start. (The LDLᵀ kernels read `l`.)
     bwd: Vec<f64>,
+    /// The LDLᵀ kernels' columns before scaling, `[·, a_{j+1,j}, …,
+    /// a_{j+b,j}]` (`a_{j+t,j} = d_j·l_{j+t,j}` as the factorisation
+    /// rounded it): what [`BandedCholesky::refactor_taking`] rebuilds the
+    /// block at j0 from.
+    cols: Vec<f64>,
     factored: bool,
     /// The matrix of the held factor (lower band, as `l`), when it was
     /// factored by [`BandedCholesky::refactor`]: what the next refactor
@@ -161,6 +168,7 @@ impl BandedCholesky {
             l: vec![0.0; n * (bandwidth + 1)],
             fwd: vec![0.0; n * (bandwidth + 1)],
             bwd: vec![0.0; n * (bandwidth + 1)],
+            cols: vec![0.0; n * (bandwidth + 1)],
             factored: false,
             held: vec![0.0; n * (bandwidth + 1)],
             held_valid: false,
@@ -258,7 +266,7 @@ impl BandedCholesky {
     /// Entry (i, k) of the b×b block at j0 (j0 ≤ k ≤ i < j0 + b) loses
     /// what the kept columns j < j0 subtract from it in the factorisation,
     /// `l_{i,j}·a_{k,j}` (a_{k,j} the column before scaling, held in
-    /// `fwd`), in the order of the columns — as the right-looking kernels
+    /// `cols`), in the order of the columns — as the right-looking kernels
     /// do.
     fn schur_window(&mut self, j0: usize) {
         let (n, b, w) = (self.n, self.b, self.b + 1);
@@ -266,7 +274,7 @@ impl BandedCholesky {
             for k in j0..=i {
                 let mut v = self.l[i * w + (i - k)];
                 for j in i.saturating_sub(b)..j0 {
-                    v -= self.l[i * w + (i - j)] * self.fwd[j * w + (k - j)];
+                    v -= self.l[i * w + (i - j)] * self.cols[j * w + (k - j)];
                 }
                 self.l[i * w + (i - k)] = v;
             }
@@ -369,11 +377,10 @@ impl BandedCholesky {
             }
             Self::ldl_rows::<B>(
                 &mut self.fwd[j * w..j * w + w],
-                &mut self.bwd[j * w..j * w + w],
-                &l[j * w..j * w + w],
-                j,
+                &mut self.cols[j * w..j * w + w],
                 inv,
                 |t| ra[B - t],
+                |t| rl[B - t],
             );
         }
         Ok(())
@@ -434,42 +441,32 @@ impl BandedCholesky {
             }
             Self::ldl_rows::<B>(
                 &mut self.fwd[j * w..j * w + w],
-                &mut self.bwd[j * w..j * w + w],
-                &l[j * w..j * w + w],
-                j,
+                &mut self.cols[j * w..j * w + w],
                 inv,
                 |t| a[t],
+                |t| lt[t],
             );
         }
         Ok(())
     }
 
-    /// Column j's data of the substitutions of an LDLᵀ factor: forward
-    /// `[1/d_j, a_{j+1,j}, …, a_{j+B,j}]` (the column before scaling,
-    /// `a(t)`; 0 past the end), backward `[1, l_{j,j−1}, …, l_{j,j−B}]`
-    /// (row j of L, `row_j` its storage: final once column j is pivoted;
-    /// 0 before the start), so [`BandedCholesky::solve_in_place`] runs
-    /// `(L·D)·z = b`, then `Lᵀ·x = z`.
+    /// Column j's data of an LDLᵀ factor's forward substitution, `[1/d_j,
+    /// l_{j+1,j}, …, l_{j+B,j}]` (`l(t)`; 0 past the end), and its column
+    /// before scaling into `cols` (`a(t)`), so that
+    /// [`BandedCholesky::solve_in_place`] runs `L·y = b`, `z = D⁻¹·y`, then
+    /// `Lᵀ·x = z` on the rows of L.
     #[inline(always)]
     fn ldl_rows<const B: usize>(
         fwd: &mut [f64],
-        bwd: &mut [f64],
-        row_j: &[f64],
-        j: usize,
+        cols: &mut [f64],
         inv: f64,
         a: impl Fn(usize) -> f64,
+        l: impl Fn(usize) -> f64,
     ) {
         fwd[0] = inv;
-        bwd[0] = 1.0;
-        for (t, f) in fwd.iter_mut().enumerate().take(B + 1).skip(1) {
-            *f = a(t);
-        }
-        if j >= B {
-            bwd[1..].copy_from_slice(&row_j[1..]);
-        } else {
-            for t in 1..=B {
-                bwd[t] = if t <= j { row_j[t] } else { 0.0 };
-            }
+        for t in 1..=B {
+            fwd[t] = l(t);
+            cols[t] = a(t);
         }
     }
 
@@ -599,11 +596,11 @@ impl BandedCholesky {
         match self.b {
             3 => {
                 Self::run_band::<3, 2>(&self.fwd, [&mut *x, &mut *y], false);
-                Self::run_band::<3, 2>(&self.bwd, [x, y], true);
+                Self::run_band::<3, 2>(&self.l, [x, y], true);
             }
             4 => {
                 Self::run_band::<4, 2>(&self.fwd, [&mut *x, &mut *y], false);
-                Self::run_band::<4, 2>(&self.bwd, [x, y], true);
+                Self::run_band::<4, 2>(&self.l, [x, y], true);
             }
             _ => {
                 self.solve_in_place(x)?;
@@ -613,21 +610,23 @@ impl BandedCholesky {
         Ok(())
     }
 
-    /// `x ← L⁻¹·x`.
+    /// `x ← L⁻¹·x` (LDLᵀ: `x ← D⁻¹·L⁻¹·x`).
     fn forward(&self, x: &mut [f64]) {
-        self.substitute(&self.fwd, x, false);
+        self.substitute(x, false);
     }
 
     /// `x ← L⁻ᵀ·x`.
     fn backward(&self, x: &mut [f64]) {
-        self.substitute(&self.bwd, x, true);
+        self.substitute(x, true);
     }
 
-    /// One substitution over `data` (`fwd` or `bwd`), by the kernel of
-    /// this factor's bandwidth (inlined, so that each caller's direction
-    /// is known at compile time).
+    /// One substitution, by the kernel of this factor's bandwidth over its
+    /// data (LDLᵀ kernels: `fwd`, or the rows of `l` when `reverse`; the
+    /// generic LLᵀ: `fwd` or `bwd`), inlined, so that each caller's
+    /// direction is known at compile time.
     #[inline(always)]
-    fn substitute(&self, data: &[f64], x: &mut [f64], reverse: bool) {
+    fn substitute(&self, x: &mut [f64], reverse: bool) {
+        let data = if reverse { &self.l } else { &self.fwd };
         match self.b {
             3 => Self::run_band::<3, 1>(data, [x], reverse),
             4 => Self::run_band::<4, 1>(data, [x], reverse),
@@ -635,7 +634,10 @@ impl BandedCholesky {
             7 => Self::run_band::<7, 1>(data, [x], reverse),
             8 => Self::run_band::<8, 1>(data, [x], reverse),
             9 => Self::run_band::<9, 1>(data, [x], reverse),
-            _ => Self::run_generic(self.b, data, x, reverse),
+            _ => {
+                let data = if reverse { &self.bwd } else { &self.fwd };
+                Self::run_generic(self.b, data, x, reverse)
+            }
         }
     }
 
@@ -659,15 +661,23 @@ impl BandedCholesky {
 
     // Fixed-bandwidth specialisation (B = 3: the DF-MPC; 4: with the
     // command-smoothness term; 6, 8: the cone's pairs; 7, 9: the same one
-    // wider). The partial sums
+    // wider), on the unit L of an LDLᵀ factor. The partial sums
     // of the next B unknowns stay in registers (a window shifted by hand);
     // each step's B multiply-subtracts are independent, and only the next
-    // unknown's waits for this one. K right-hand sides interleave, each
-    // exactly as alone.
+    // unknown's waits for this one — through one multiply-subtract, since
+    // L's diagonal is 1: the pivot's scale `1/d_i` (forward) is applied
+    // to the output only, off the chain (with the scale on the chain, as
+    // `run_generic` does, each unknown waited for a second multiplication:
+    // `cargo bench -p dflat-control --bench banded`, fastest solve of 100,
+    // two alternating runs: (198, 3) 1.94–1.99 → 1.57–1.60 µs, (396, 6)
+    // 4.2–4.7 → 3.7–3.8 µs, (396, 8) 6.8–7.5 → 4.8–5.0 µs). K right-hand
+    // sides interleave, each exactly as alone.
 
     /// Runs the bandwidth-B substitution over `data` (`[r₀, r₁, …, r_B]`
     /// per unknown) in processing order (ascending, or descending when
-    /// `reverse`), as [`BandedCholesky::run_generic`].
+    /// `reverse`): unit-diagonal, `x_{i±t} −= r_t·x_i`, then `x_i ← r₀·x_i`
+    /// going forward (`1/d_i`) and `x_i` as it is going back (r₀ ignored:
+    /// `l`'s diagonal slot holds d_i).
     fn run_band<const B: usize, const K: usize>(data: &[f64], xs: [&mut [f64]; K], reverse: bool) {
         if reverse {
             Self::run_band_in::<B, K, true>(data, xs);
@@ -693,8 +703,8 @@ impl BandedCholesky {
             }
         }
         let step = |r: &[f64], x: &mut [f64], wk: &mut [f64; B], i: usize, next: f64| {
-            let v = wk[0] * r[0];
-            x[i] = v;
+            let v = wk[0];
+            x[i] = if REVERSE { v } else { v * r[0] };
             for t in 0..B - 1 {
                 wk[t] = wk[t + 1] - r[t + 1] * v;
             }
@@ -986,6 +996,7 @@ mod tests {
             prop_assert_eq!(bits(&f.l), bits(&fresh.l));
             prop_assert_eq!(bits(&f.fwd), bits(&fresh.fwd));
             prop_assert_eq!(bits(&f.bwd), bits(&fresh.bwd));
+            prop_assert_eq!(bits(&f.cols), bits(&fresh.cols));
             let mut x: Vec<f64> = change[..n].to_vec();
             let mut y = x.clone();
             f.solve_in_place(&mut x).unwrap();
