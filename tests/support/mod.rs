@@ -564,3 +564,23 @@ impl dflat_control::Controller for Faulty {
         self.inner.disturbance()
     }
 }
+
+/// Every command the daemon's ticks produced (`summary.commands`) reached
+/// the SITL, accounted for on the daemon's own counters: each was sent
+/// (and the SITL, `accepted`, flew exactly those sent), or replaced in
+/// the send task's slot by a newer one before it went out (a link task
+/// late under load: the newer command is what flies), or dropped there as
+/// stale; one may still sit in the slot at shutdown.
+pub fn assert_commands_delivered(summary: &dflat_daemon::FlightSummary, accepted: u64) {
+    let lg = &summary.link_guard;
+    let sent = summary.link_stats.sent.set_attitude_target;
+    assert_eq!(accepted, sent, "the SITL flew {accepted} of {sent} sent");
+    let accounted = sent + lg.commands_replaced + lg.commands_stale;
+    assert!(
+        accounted <= summary.commands && accounted + 1 >= summary.commands,
+        "commands {}: sent {sent}, replaced {}, stale {}",
+        summary.commands,
+        lg.commands_replaced,
+        lg.commands_stale
+    );
+}
