@@ -268,7 +268,9 @@ proptest::proptest! {
         // accepts from a stalled iterate: the measure of a QP solution), the first jerk to 1e-3 relative (near a
         // bound the cost can be flat in it too: 2000 cases showed 1.1e-4,
         // 0.035° of command at −269 m/s³), the first ten outputs to
-        // 1e-5 m.
+        // 1e-5 m. The two clarabel tunings' first jerks, a third
+        // difference over δt³ (1.25e5 per metre), differ by up to 1.2e-6
+        // relative (1000 cases, `PROPTEST_RNG_SEED=12`): held to 3e-6.
         let objective = |plan: &[f64]| {
             qp_objective(horizon, (q, r, DT), &smoothness, &fixed, sent, &reference, plan)
         };
@@ -283,7 +285,7 @@ proptest::proptest! {
         // (name, plan, first-jerk tolerance (relative), tolerance on
         // the first ten outputs, on the rest [m]).
         let cases = [
-            ("clarabel shipped", &got, 1e-6, 1e-6, 1e-5),
+            ("clarabel shipped", &got, 3e-6, 1e-6, 1e-5),
             ("banded", &got_banded, 1e-3, 1e-5, 1e-3),
             ("ALM", &got_alm, 1e-3, 1e-5, 1e-3),
         ];
