@@ -12,7 +12,10 @@
 //! vehicle stops during the pause; the heading follows the commanded yaw
 //! within the yaw loop's lag and the commanded yaw turns no faster than
 //! `vehicle.max_yaw_rate_deg_s`; the cross-track error to the mission's
-//! polyline; the largest tilt step per command.
+//! polyline; the largest tilt step per command. Then the flight's records
+//! (CSV and tlog) re-run by `dflat replay` with its configuration: every
+//! command reproduced — the uploads, the refused and the timed-out ones,
+//! and the mission commands included.
 
 use std::time::{Duration, Instant};
 
@@ -121,6 +124,10 @@ fn yaw_of(q: [f32; 4]) -> f64 {
 async fn a_mission_is_uploaded_started_paused_continued_and_its_yaw_flown() {
     let (mut cfg, plant) = support::sitl_flight("mission-yaw", dflat_sitl::SitlEngage::Auto);
     cfg.mission.start = MissionStart::Hold;
+    let records = std::env::temp_dir().join(format!("dflat-mission-yaw-{}", std::process::id()));
+    cfg.logging.dir = records.to_string_lossy().into_owned();
+    cfg.logging.tlog = true;
+    let flown = cfg.clone();
     let max_yaw_rate = cfg.vehicle.max_yaw_rate_deg_s.to_radians();
     let start = plant.sitl.start;
     let (tx, tap) = std::sync::mpsc::channel();
@@ -298,8 +305,20 @@ async fn a_mission_is_uploaded_started_paused_continued_and_its_yaw_flown() {
     eprintln!("MISSION_CURRENT (seq, total, state): {current:?}");
     tokio::time::sleep(Duration::from_millis(500)).await;
     daemon.shutdown();
-    daemon.join().await.unwrap();
+    let summary = daemon.join().await.unwrap();
     let report = sim.stop().unwrap();
+    // The replay of the flight's records reproduces every command.
+    let csv_path = summary.csv.as_ref().expect("the flight's CSV").path.clone();
+    let csv = dflat_tuning::read_csv(&csv_path).unwrap();
+    let replayed = dflat_tuning::replay::replay(&csv_path, &csv, &flown).unwrap();
+    eprintln!(
+        "replay: {} of {} commands identical, {} ticks where one side streamed, largest difference {:.2e} rad",
+        replayed.identical, replayed.compared, replayed.stream_differs, replayed.max_angle_diff
+    );
+    assert!(replayed.compared > 500, "{} compared", replayed.compared);
+    assert_eq!(replayed.identical, replayed.compared);
+    assert_eq!(replayed.stream_differs, 0);
+    let _ = std::fs::remove_dir_all(&records);
     assert!(last.is_some(), "the mission's last item was not reached");
     assert_eq!(reached, vec![1, 2, 3]);
     assert_eq!(

@@ -25,6 +25,16 @@
 //! far) fixes which frames each tick saw exactly. The report counts the
 //! ticks reproduced exactly at the CSV's resolution and the largest
 //! difference.
+//!
+//! **Missions.** The logged mission protocol frames (MISSION_COUNT,
+//! MISSION_ITEM_INT, …) run through the daemon's own [`MissionProtocol`],
+//! and an upload it accepts is loaded at the next tick, as the control
+//! thread does; each logged COMMAND_LONG/INT is answered as the receive
+//! task answers it ([`dflat_daemon::commands::answer`], with the flight
+//! state of the re-run's last tick and the protocol's mission), and a
+//! mission command it accepts (start, pause, continue, speed) enters the
+//! tick's events where the daemon's did. A mission flight is re-run
+//! through its uploads and commands.
 
 use std::io::BufReader;
 use std::path::{Path, PathBuf};
@@ -32,14 +42,17 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context as _, Result, bail};
 
 use crate::flightlog::FlightCsv;
+use dflat_daemon::commands::{CommandContext, answer};
 use dflat_daemon::config::Config;
 use dflat_daemon::control::{build_controller, thrust_mapping};
 use dflat_daemon::csv_schema::Column;
+use dflat_daemon::mission::{ItemRules, Mission, MissionChange, MissionProtocol};
+use dflat_daemon::supervisor::FlightState;
 use dflat_daemon::tick::{
     ControlCore, Event, TickTime, arrival_secs, event_from, pose_source, source_filter,
 };
 use dflat_link::tlog::TlogReader;
-use dflat_link::{LinkRx, MavMessage, RxOutcome};
+use dflat_link::{CommandRequest, Inbound, LinkRx, MavMessage, RxOutcome};
 
 use crate::review::{Overlay, load_tlog_beside, quantile, render};
 
@@ -79,12 +92,23 @@ pub struct ReplayReport {
     pub overlay: Overlay,
 }
 
+/// A received frame as the daemon's receive task acts on it.
+#[derive(Debug, Clone)]
+enum Received {
+    /// A daemon event (its arrival set by the clock mapping).
+    Event(Event),
+    /// A command (COMMAND_LONG/INT) to answer; a mission command the
+    /// answer accepts becomes an event.
+    Command(CommandRequest),
+    /// A frame for the mission protocol, from (system, component).
+    Protocol(MavMessage, (u8, u8)),
+}
+
 /// A flight's logged frames.
 struct Logged {
-    /// The received frames the daemon's filter accepts, as daemon events,
-    /// with their log stamps \[µs since 1970\] (the events' arrival is set
-    /// by the clock mapping).
-    received: Vec<(u64, Event)>,
+    /// The received frames the daemon's filter accepts, in the order the
+    /// receive task handled them, with their log stamps \[µs since 1970\].
+    received: Vec<(u64, Received)>,
     /// Sent SET_ATTITUDE_TARGET: (log stamp \[µs since 1970\],
     /// `time_boot_ms`).
     sent: Vec<(u64, u32)>,
@@ -114,10 +138,19 @@ fn tlog_frames(path: &Path, cfg: &Config) -> Result<Logged> {
             sent.push((stamp, d.time_boot_ms));
             continue;
         }
-        if let RxOutcome::Accepted(inbound) = link.handle(&frame.header, &frame.message)
-            && let Some(e) = event_from(&inbound, source, 0.0)
-        {
-            received.push((stamp, e));
+        // As the receive task: the command answered first, then the
+        // mission protocol, then the event.
+        if let RxOutcome::Accepted(inbound) = link.handle(&frame.header, &frame.message) {
+            let sender = (frame.header.system_id as u8, frame.header.component_id);
+            if let Some(req) = CommandRequest::from_message(&frame.message, sender.0, sender.1) {
+                received.push((stamp, Received::Command(req)));
+            }
+            if matches!(inbound, Inbound::Other(_)) {
+                received.push((stamp, Received::Protocol(frame.message.clone(), sender)));
+            }
+            if let Some(e) = event_from(&inbound, source, 0.0) {
+                received.push((stamp, Received::Event(e)));
+            }
         }
     }
     Ok(Logged { received, sent })
@@ -200,13 +233,66 @@ pub fn replay(csv_path: &Path, csv: &FlightCsv, cfg: &Config) -> Result<ReplayRe
     }
 }
 
+/// The receive task's mission side, re-run: the protocol, the uploads it
+/// accepted for the next tick, and the flight state the control thread
+/// last published (what a command is answered against).
+struct MissionSide {
+    own: (u8, u8),
+    protocol: MissionProtocol,
+    loaded: Vec<Option<Mission>>,
+    state: Option<FlightState>,
+}
+
+impl MissionSide {
+    fn new(cfg: &Config) -> Self {
+        let own = (cfg.link.system_id, cfg.link.component_id);
+        let rules = ItemRules {
+            int_scale: cfg.mission.local_xy_scale,
+            geofence: cfg.mission.geofence,
+            acceptance_radius: cfg.mission.acceptance_radius_m,
+        };
+        Self {
+            own,
+            protocol: MissionProtocol::new(own, rules),
+            loaded: Vec::new(),
+            state: None,
+        }
+    }
+
+    /// A protocol frame at `t` \[s\] (its timeouts polled first).
+    fn protocol_frame(&mut self, msg: &MavMessage, sender: (u8, u8), t: f64) {
+        let polled = self.protocol.poll(t).change;
+        self.change(polled);
+        let change = self.protocol.handle(msg, sender, t).change;
+        self.change(change);
+    }
+
+    fn change(&mut self, change: Option<MissionChange>) {
+        match change {
+            Some(MissionChange::Uploaded(m)) => self.loaded.push(Some(m)),
+            Some(MissionChange::Cleared) => self.loaded.push(None),
+            None => {}
+        }
+    }
+
+    /// The mission command the receive task would pass on for `req`.
+    fn action(&self, req: &CommandRequest) -> Option<dflat_daemon::tick::MissionAction> {
+        let context = CommandContext {
+            has_mission: self.protocol.mission().has_navigation(),
+            streaming: self.state.is_some_and(FlightState::streams),
+            engaged: self.state.is_some_and(FlightState::engaged),
+        };
+        answer(req, self.own, &context)?.action
+    }
+}
+
 /// One re-run with the daemon's epoch at `epoch` on the log's clock \[µs
 /// since 1970\]: the report and the median (re-run − logged) pose age
 /// \[s\], if the CSV has pose ages.
 fn run_pass(
     csv: &FlightCsv,
     cfg: &Config,
-    received: &[(u64, Event)],
+    received: &[(u64, Received)],
     wake: &[f64],
     epoch: u64,
 ) -> Result<(ReplayReport, Option<f64>)> {
@@ -221,8 +307,15 @@ fn run_pass(
     let mut core = ControlCore::new(cfg, controller, thrust_mapping(cfg));
     let mut pending = received
         .iter()
-        .map(|(stamp, e)| e.arriving_at(arrival_at(*stamp, epoch)))
+        .map(|(stamp, r)| {
+            let arrival = arrival_at(*stamp, epoch);
+            match r {
+                Received::Event(e) => (arrival, Received::Event(e.arriving_at(arrival))),
+                other => (arrival, other.clone()),
+            }
+        })
         .peekable();
+    let mut missions = MissionSide::new(cfg);
     let logged = [Column::Roll, Column::Pitch, Column::Yaw, Column::Thrust].map(|c| csv.numbers(c));
     let mut report = ReplayReport {
         ticks: csv.rows.len(),
@@ -238,16 +331,45 @@ fn run_pass(
     for i in 0..csv.rows.len() {
         let w = wake[i];
         let mut batch = Vec::new();
-        while let Some(e) = pending.peek() {
-            let due = match cutoff[i] {
-                Some(n) => (taken as f64) < n,
-                None => e.arrival() <= w,
-            };
-            if !due {
-                break;
+        // An event is due by the tick's cutoff (the count of events it
+        // had applied), or by its arrival; mission events and what the
+        // receive task handles without an event (protocol frames,
+        // commands answered without a mission action) by their arrival.
+        // Order is kept.
+        let event_due = |arrival: f64, taken: u64| match cutoff[i] {
+            Some(n) => (taken as f64) < n,
+            None => arrival <= w,
+        };
+        while let Some((arrival, r)) = pending.peek() {
+            let arrival = *arrival;
+            match r {
+                Received::Event(e) => {
+                    if !event_due(arrival, taken) {
+                        break;
+                    }
+                    batch.push(e.clone());
+                    taken += 1;
+                }
+                // A mission event is not among the events the cutoff
+                // counts (`ControlCore::step`): due by its arrival.
+                Received::Command(req) => match missions.action(req) {
+                    Some(action) => {
+                        if arrival > w {
+                            break;
+                        }
+                        batch.push(Event::Mission { arrival, action });
+                    }
+                    None if arrival <= w => {}
+                    None => break,
+                },
+                Received::Protocol(msg, sender) => {
+                    if arrival > w {
+                        break;
+                    }
+                    missions.protocol_frame(msg, *sender, arrival);
+                }
             }
-            batch.extend(pending.next());
-            taken += 1;
+            pending.next();
         }
         let time = TickTime {
             tick: ticks[i].unwrap_or(0.0) as u64,
@@ -267,7 +389,13 @@ fn run_pass(
                 0.0
             }
         };
+        for mission in missions.loaded.drain(..) {
+            core.load_mission(w, mission);
+        }
         let out = core.step(&time, batch, &mut stopwatch);
+        if let Some(tr) = out.transitions.last() {
+            missions.state = Some(tr.to);
+        }
         if let (Some(a), Some(b)) = (out.row.pose_age_ms, ages[i]) {
             age_diffs.push((a - b) * 1e-3);
         }
