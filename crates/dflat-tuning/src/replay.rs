@@ -347,7 +347,7 @@ fn run_pass(
                     if !event_due(arrival, taken) {
                         break;
                     }
-                    batch.push(e.clone());
+                    batch.push(*e);
                     taken += 1;
                 }
                 // A mission event is not among the events the cutoff
