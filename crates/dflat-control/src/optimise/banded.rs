@@ -263,6 +263,70 @@ impl BandedCholesky {
         Ok(j0)
     }
 
+    /// As [`BandedCholesky::refactor_taking`] for a matrix given by its
+    /// rows `from` … n − 1 only: the rows before `from` are the held
+    /// matrix's (the caller's guarantee; `a`'s are not read), and `a` is
+    /// copied, not taken. An error when no valid factor is held.
+    ///
+    /// # Panics
+    /// If `a` has another dimension or bandwidth than this factor, or
+    /// `from` > n.
+    pub fn refactor_rows_from(&mut self, a: &SymBand, from: usize) -> Result<usize, ControlError> {
+        assert!(
+            a.n == self.n && a.b == self.b && from <= self.n,
+            "shape mismatch"
+        );
+        if !(self.factored && self.held_valid) {
+            return Err(ControlError::NotPositiveDefinite);
+        }
+        let (n, b, w) = (self.n, self.b, self.b + 1);
+        let first = first_changed_column(&self.held[from * w..], &a.lower[from * w..], n - from, b);
+        // Row i of the slices is row from + i; its slot s column from + i − s,
+        // so a change found at "column" c of the slices (c may be
+        // negative there, clamped by the scan to ≥ 0) is at from + c or,
+        // within b before from, earlier: rescan the first b rows exactly.
+        let mut j0 = if first == n - from { n } else { from + first };
+        for i in from..(from + b).min(n) {
+            for s in (i - from + 1)..=b.min(i) {
+                if self.held[i * w + s].to_bits() != a.lower[i * w + s].to_bits() {
+                    j0 = j0.min(i - s);
+                }
+            }
+        }
+        if j0 == n {
+            return Ok(n);
+        }
+        self.held_valid = false;
+        self.factored = false;
+        // Rows from … n − 1 into the held matrix; then L's rows j0 … n − 1,
+        // columns j0 and after, from it.
+        self.held[from * w..].copy_from_slice(&a.lower[from * w..]);
+        let restartable = matches!(b, 3 | 4 | 6..=9);
+        if !restartable || j0 == 0 {
+            self.l.copy_from_slice(&self.held);
+            self.factor_held()?;
+        } else {
+            let whole = (j0 + b).min(n);
+            for i in j0..whole {
+                let r = i * w..i * w + (i - j0) + 1;
+                self.l[r.clone()].copy_from_slice(&self.held[r]);
+            }
+            self.l[whole * w..].copy_from_slice(&self.held[whole * w..]);
+            self.schur_window(j0);
+            match b {
+                3 => self.factor_window_from::<3>(j0)?,
+                4 => self.factor_window_from::<4>(j0)?,
+                6 => self.factor_band_from::<6>(j0)?,
+                7 => self.factor_band_from::<7>(j0)?,
+                8 => self.factor_band_from::<8>(j0)?,
+                _ => self.factor_band_from::<9>(j0)?,
+            }
+            self.factored = true;
+        }
+        self.held_valid = true;
+        Ok(j0)
+    }
+
     /// Entry (i, k) of the b×b block at j0 (j0 ≤ k ≤ i < j0 + b) loses
     /// what the kept columns j < j0 subtract from it in the factorisation,
     /// `l_{i,j}·a_{k,j}` (a_{k,j} the column before scaling, held in
@@ -577,6 +641,36 @@ impl BandedCholesky {
             return Err(ControlError::NotPositiveDefinite);
         }
         self.forward(x);
+        self.backward(x);
+        Ok(())
+    }
+
+    /// As [`BandedCholesky::solve_in_place`] for a right-hand side that is
+    /// 0 before index `j0` (its entries there are not read): the forward
+    /// substitution starts at j0, where the unknowns before it are 0, and
+    /// the back substitution runs over all. The same result as the full
+    /// solve of that right-hand side.
+    ///
+    /// # Panics
+    /// If `x` does not have length n or j0 > n.
+    pub fn solve_in_place_from(&self, x: &mut [f64], j0: usize) -> Result<(), ControlError> {
+        assert!(x.len() == self.n && j0 <= self.n, "length mismatch");
+        if !self.factored {
+            return Err(ControlError::NotPositiveDefinite);
+        }
+        x[..j0].fill(0.0);
+        let w = self.b + 1;
+        let data = &self.fwd[j0 * w..];
+        let tail = &mut x[j0..];
+        match self.b {
+            3 => Self::run_band::<3, 1>(data, [tail], false),
+            4 => Self::run_band::<4, 1>(data, [tail], false),
+            6 => Self::run_band::<6, 1>(data, [tail], false),
+            7 => Self::run_band::<7, 1>(data, [tail], false),
+            8 => Self::run_band::<8, 1>(data, [tail], false),
+            9 => Self::run_band::<9, 1>(data, [tail], false),
+            _ => Self::run_generic(self.b, data, tail, false),
+        }
         self.backward(x);
         Ok(())
     }

@@ -206,6 +206,20 @@ impl BandedConeSolver {
         self.alm.as_ref().map_or(0, BandedAlm::factorisations)
     }
 
+    /// The first stage of the window the augmented Lagrangian's last solve
+    /// iterated on with the horizon's head eliminated (0: none).
+    pub fn eliminated_head(&self) -> usize {
+        self.alm.as_ref().map_or(0, BandedAlm::last_window)
+    }
+
+    /// Turns the augmented Lagrangian's head elimination on or off (tests).
+    #[cfg(test)]
+    pub(crate) fn set_eliminate_head(&mut self, on: bool) {
+        if let Some(alm) = &mut self.alm {
+            alm.set_eliminate_head(on);
+        }
+    }
+
     /// Sets the cone's radius per stage A_f [m/s²] (N − 2 entries, finite
     /// and > 0; stage f bounds the acceleration of output f + 2) for the
     /// next solves, instead of the bounds' constant A: the spatial

@@ -223,6 +223,69 @@ fn cone_binds_and_matches_clarabel_from_rest() {
     assert!(og <= ow + 1e-7 * (1.0 + ow.abs()), "{og} vs {ow}");
 }
 
+/// A corner at the horizon's end, from the unconstrained plan with no
+/// multipliers (a constrained burst's first tick): the plan leaves the cone
+/// only in the last stages, the augmented Lagrangian iterates on that
+/// window with the head eliminated, and reaches clarabel's plan — and the
+/// same plan as the same solve over the whole horizon.
+#[test]
+fn a_late_corner_is_solved_on_the_window_and_matches_clarabel() {
+    let horizon = 200;
+    let w = AxisWeights {
+        q: 5.0,
+        r: 0.01,
+        smoothness: Smoothness::default(),
+    };
+    let a = G * 20f64.to_radians().tan();
+    let bounds = ConeBounds::new(a, None);
+    // Flying x at 8 m/s on the reference; 20 stages before the horizon's
+    // end the reference turns into y at the same speed.
+    let v = 8.0;
+    let turn = horizon - 20;
+    let along = |j: usize| v * DT * j.min(turn) as f64;
+    let across = |j: usize| v * DT * j.saturating_sub(turn) as f64;
+    let axis = |f: &dyn Fn(usize) -> f64, v0: f64| Axis {
+        fixed: [0.0, v0 * DT, 2.0 * v0 * DT],
+        sent: None,
+        reference: (0..=horizon).map(f).collect(),
+    };
+    let axes = [axis(&along, v), axis(&across, 0.0)];
+    let want = clarabel_plans(horizon, [w, w], bounds, &axes, None).unwrap();
+    let mut solver = BandedConeSolver::new(horizon, DT, [w, w], bounds, false).unwrap();
+    let got = banded_plans(&mut solver, [w, w], &axes);
+    let window = solver.eliminated_head();
+    assert!(window > horizon / 2, "the window opened at stage {window}");
+    let mut whole = BandedConeSolver::new(horizon, DT, [w, w], bounds, false).unwrap();
+    whole.set_eliminate_head(false);
+    let got_whole = banded_plans(&mut whole, [w, w], &axes);
+    assert_eq!(whole.eliminated_head(), 0);
+    assert!(!bounds.violated_by(&got[0], &got[1], DT));
+    let peak = ConeBounds::peak_acceleration(&got[0], &got[1], DT);
+    assert!(
+        (peak - a).abs() < 1e-6 * a,
+        "the cone binds: peak {peak} vs {a}"
+    );
+    for i in 0..2 {
+        for j in 0..=horizon {
+            assert!(
+                (got[i][j] - want[i][j]).abs() < 1e-5,
+                "axis {i} y_{j}: {} vs clarabel {}",
+                got[i][j],
+                want[i][j]
+            );
+            assert!(
+                (got[i][j] - got_whole[i][j]).abs() < 1e-7,
+                "axis {i} y_{j}: {} vs the whole horizon's {}",
+                got[i][j],
+                got_whole[i][j]
+            );
+        }
+    }
+    let obj = |p: &Plans| objective(horizon, &[w, w], &bounds, &axes, [&p[0], &p[1]], &[]);
+    let (ow, og) = (obj(&want), obj(&got));
+    assert!(og <= ow + 1e-7 * (1.0 + ow.abs()), "{og} vs {ow}");
+}
+
 /// After the interior point solved a tick (the augmented Lagrangian gave
 /// up), the next tick's augmented Lagrangian starts from the interior
 /// point's multipliers — the discs' `z_f·u_f` — shifted with the plan: it

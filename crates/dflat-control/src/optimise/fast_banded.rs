@@ -218,13 +218,17 @@ impl FastBandedSolver {
         out: &mut [f64],
     ) {
         let b = |k: usize| rhs.map_or(0.0, |rhs| rhs[k]);
-        Self::residual_with(q, w, smooth, |k| p[k], b, out, |x, k, v| x[k] = v);
+        Self::residual_with(q, w, smooth, |k| p[k], b, out, 0, |x, k, v| x[k] = v);
     }
 
-    /// `rhs_k − (H·p)_k` for k = n−1 … 0 handed to `put(x, k, ·)`, p and
-    /// rhs read through `p(k)`, `rhs(k)`; `x` (length n) holds the
-    /// middle factor's output `M·D·p` meanwhile, and `put` may overwrite
-    /// `x[k]` (read before). Generic so that each caller's access inlines.
+    /// `rhs_k − (H·p)_k` for k = n−1 … `start` handed to `put(x, k, ·)`,
+    /// p and rhs read through `p(k)`, `rhs(k)`; `x` (length n) holds the
+    /// middle factor's output `M·D·p` meanwhile (from `start − 1` on), and
+    /// `put` may overwrite `x[k]` (read before). With `start` = 0 the
+    /// whole of it; later starts compute only what rows `start` and after
+    /// need (p from `start − 4` on), the same operations for them. Generic
+    /// so that each caller's access inlines.
+    #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn residual_with(
         q: f64,
@@ -233,15 +237,25 @@ impl FastBandedSolver {
         p: impl Fn(usize) -> f64,
         rhs: impl Fn(usize) -> f64,
         x: &mut [f64],
+        start: usize,
         mut put: impl FnMut(&mut [f64], usize, f64),
     ) {
         let (s, kappa) = smooth;
         // x = w·D·p: third backward difference by three first differences,
-        // fused in one pass (p before the horizon is 0).
+        // fused in one pass (p before the horizon is 0), from s0 = start − 1
+        // (the smoothing filter of row `start` reads d one before it).
+        let s0 = start.saturating_sub(1);
         let (mut p1, mut e1, mut f1) = (0.0, 0.0, 0.0);
+        if s0 > 0 {
+            let at = |k: usize| if k < s0 { p(s0 - 1 - k) } else { 0.0 };
+            // p_{s0−1}, p_{s0−2}, p_{s0−3} (0 before the horizon).
+            let (a, b, c) = (at(0), at(1), at(2));
+            let (ea, eb) = (a - b, b - c);
+            (p1, e1, f1) = (a, ea, ea - eb);
+        }
         let scale = if s > 0.0 { 1.0 } else { w };
-        for (k, xk) in x.iter_mut().enumerate() {
-            let pk = p(k);
+        for (i, xk) in x[s0..].iter_mut().enumerate() {
+            let pk = p(s0 + i);
             let e = pk - p1;
             let f = e - e1;
             *xk = scale * (f - f1);
@@ -251,7 +265,7 @@ impl FastBandedSolver {
             // x = (w·I + s·TᵀT)·d in place, backwards: g_f = (T·d)_f needs
             // d_{f−1} (not yet overwritten), (Tᵀg)_f needs g_{f+1} (carried).
             let mut g_next = 0.0;
-            for f in (0..x.len()).rev() {
+            for f in (start..x.len()).rev() {
                 let d = x[f];
                 let d_prev = if f > 0 { x[f - 1] } else { 0.0 };
                 let g = d_prev + kappa * (d - d_prev);
@@ -263,7 +277,7 @@ impl FastBandedSolver {
         // rhs − q·p − Dᵀ·x: three forward differences (x beyond the
         // horizon is 0), fused with the combination, in one pass.
         let (mut x1, mut e1, mut f1) = (0.0, 0.0, 0.0);
-        for k in (0..x.len()).rev() {
+        for k in (start..x.len()).rev() {
             let xv = x[k];
             let e = xv - x1;
             let f = e - e1;
@@ -276,14 +290,17 @@ impl FastBandedSolver {
     /// `out = H·p` (the Hessian of [`FastBandedSolver::hessian`]) by
     /// differencing, accurate to ~ε·|H·p| where the assembled band is not
     /// (see [`FastBandedSolver::residual`]), on interleaved storage:
-    /// `p_f = v[stride·f + axis]`, `out[stride·f + axis] = scale·(H·p)_f`;
-    /// `work` (length n) is scratch.
+    /// `p_f = v[stride·f + axis]`, `out[stride·f + axis] = scale·(H·p)_f`
+    /// for the rows f ≥ `start` (the others untouched); `work` (length n)
+    /// is scratch.
+    #[allow(clippy::too_many_arguments)]
     pub(crate) fn apply_hessian_strided(
         &self,
         v: &[f64],
         stride: usize,
         axis: usize,
         scale: f64,
+        start: usize,
         work: &mut [f64],
         out: &mut [f64],
     ) {
@@ -296,6 +313,7 @@ impl FastBandedSolver {
             |k| v[stride * k + axis],
             |_| 0.0,
             work,
+            start,
             |_, k, r| out[stride * k + axis] = -scale * r,
         );
     }

@@ -28,33 +28,63 @@ impl BandedAlm {
         (v + self.sigma_row(k) * t).clamp(0.0, self.row_penalty[k])
     }
 
-    /// `out[f] = G_f·v` per axis for every stage (outputs before the
-    /// horizon are 0), without a_0.
-    pub(super) fn accelerations(k: usize, inv_dt2: f64, v: &[f64], out: &mut [[f64; 2]]) {
+    /// `out[f] = G_f·v` per axis for the stages f ≥ `from` (outputs
+    /// before the horizon are 0), without a_0.
+    #[inline]
+    pub(super) fn accelerations(
+        k: usize,
+        inv_dt2: f64,
+        v: &[f64],
+        out: &mut [[f64; 2]],
+        from: usize,
+    ) {
         match k {
-            1 => accelerations_k::<1>(inv_dt2, v, out),
-            _ => accelerations_k::<2>(inv_dt2, v, out),
+            1 => accelerations_k::<1>(inv_dt2, v, out, from),
+            _ => accelerations_k::<2>(inv_dt2, v, out, from),
         }
     }
 
-    /// `out += Σ_f G_fᵀ·e_f`.
-    pub(super) fn add_transposed(k: usize, inv_dt2: f64, e: &[[f64; 2]], out: &mut [f64]) {
+    /// `out += Σ_f G_fᵀ·e_f` on the outputs f ≥ `from` (the stages' e
+    /// before `from + 2` must be 0 for the rest to be whole).
+    pub(super) fn add_transposed(
+        k: usize,
+        inv_dt2: f64,
+        e: &[[f64; 2]],
+        out: &mut [f64],
+        from: usize,
+    ) {
         match k {
-            1 => add_transposed_k::<1>(inv_dt2, e, out),
-            _ => add_transposed_k::<2>(inv_dt2, e, out),
+            1 => add_transposed_k::<1>(inv_dt2, e, out, from),
+            _ => add_transposed_k::<2>(inv_dt2, e, out, from),
         }
     }
 
-    /// `out = P·v` by differencing, per axis on the interleaved vectors.
+    /// `out = P·v` by differencing, per axis on the interleaved vectors,
+    /// on the unknowns of the outputs f ≥ `from` (the window's, below).
     pub(super) fn apply_p(&mut self, which: Vector) {
         let k = self.k;
+        let from = self.window_output();
         let (src, dst) = match which {
             Vector::X => (&self.x, &mut self.px),
             Vector::D => (&self.d, &mut self.pd),
         };
         for (i, axis) in self.axes.iter().enumerate() {
-            axis.apply_hessian_strided(src, k, i, 2.0, &mut self.p_work, dst);
+            axis.apply_hessian_strided(src, k, i, 2.0, from, &mut self.p_work, dst);
         }
+    }
+
+    /// The first output of the window (`window − 2`, 0 for the whole
+    /// horizon): the unknowns from `k·window_output()` on are iterated,
+    /// those before are the eliminated head's (module docs of [`super`]).
+    #[inline]
+    pub(super) fn window_output(&self) -> usize {
+        self.window.saturating_sub(2)
+    }
+
+    /// The first unknown of the window.
+    #[inline]
+    pub(super) fn window_unknown(&self) -> usize {
+        self.k * self.window_output()
     }
 
     /// The side `t` of row k at h (upper side j = 0: h − hi, lower: lo − h).
@@ -78,16 +108,19 @@ impl BandedAlm {
             StageSet::Disc(radius) => radius
                 .iter()
                 .enumerate()
+                .skip(self.window)
                 .map(|(f, &r)| disc_dist2(at(f), r))
                 .sum(),
             StageSet::Interval(bounds) if self.k == 1 => bounds
                 .iter()
                 .enumerate()
+                .skip(self.window)
                 .map(|(f, b)| interval_dist2::<1>(at(f), b))
                 .sum(),
             StageSet::Interval(bounds) => bounds
                 .iter()
                 .enumerate()
+                .skip(self.window)
                 .map(|(f, b)| interval_dist2::<2>(at(f), b))
                 .sum(),
         };
@@ -98,6 +131,9 @@ impl BandedAlm {
     pub(super) fn row_terms(&self, alpha: f64, lo: &[f64], hi: &[f64]) -> f64 {
         let mut value = 0.0;
         for (k, v) in self.v.iter().enumerate() {
+            if self.row_first[k] < self.window_unknown() {
+                continue;
+            }
             let h = self.hx[k] + alpha * self.hd[k];
             let ss = self.sigma_row(k);
             for (j, &vj) in v.iter().enumerate() {
@@ -120,7 +156,12 @@ impl BandedAlm {
             self.apply_p(Vector::X);
             self.px_current = true;
         }
-        for ((g, p), c) in self.g.iter_mut().zip(&self.px).zip(&self.c) {
+        let j0 = self.window_unknown();
+        for ((g, p), c) in self.g[j0..]
+            .iter_mut()
+            .zip(&self.px[j0..])
+            .zip(&self.c[j0..])
+        {
             *g = p + c;
         }
         let s = self.sigma;
@@ -130,15 +171,21 @@ impl BandedAlm {
             // active stages at this x.
             Some(done) => done,
             None => {
-                Self::accelerations(k, self.inv_dt2, &self.x, &mut self.u);
+                Self::accelerations(k, self.inv_dt2, &self.x, &mut self.u, self.window);
                 let a0 = if k == 1 { [a0[0], 0.0] } else { a0 };
                 self.stage_values(false, |_| a0)
             }
         };
         let stage_res = res2.sqrt() / s;
-        Self::add_transposed(k, self.inv_dt2, &self.y_next, &mut self.g);
+        let from = self.window_output();
+        Self::add_transposed(k, self.inv_dt2, &self.y_next, &mut self.g, from);
         let mut row_res: f64 = 0.0;
         for r in 0..self.rows.len() {
+            if self.row_first[r] < j0 {
+                // The eliminated head's rows are not iterated (a row
+                // that binds there ends the window: `solve`).
+                continue;
+            }
             let h = self.rows[r].dot(&self.x);
             self.hx[r] = h;
             let ss = self.sigma_row(r);
@@ -159,7 +206,7 @@ impl BandedAlm {
             }
         }
         self.penalty_value = value;
-        let gn = self.g.iter().fold(0.0f64, |a, b| a.max(b.abs()));
+        let gn = self.g[j0..].iter().fold(0.0f64, |a, b| a.max(b.abs()));
         (gn, stage_res, row_res)
     }
 
@@ -173,9 +220,11 @@ impl BandedAlm {
         } else {
             &mut self.u
         };
+        let from = self.window;
         macro_rules! pass {
             ($k:literal, $excess:expr) => {
                 stage_pass::<$k>(
+                    from,
                     u,
                     &delta,
                     &self.y,
@@ -200,7 +249,8 @@ impl BandedAlm {
     /// `active`: should the line search take the full step, the next
     /// gradient starts from them ([`BandedAlm::accept_full_step`]).
     pub(super) fn full_step_terms(&mut self, lo: &[f64], hi: &[f64]) -> (f64, (f64, f64)) {
-        self.u_trial.copy_from_slice(&self.u);
+        let from = self.window;
+        self.u_trial[from..].copy_from_slice(&self.u[from..]);
         let du = std::mem::take(&mut self.du);
         let done = self.stage_values(true, |f| du[f]);
         self.du = du;
@@ -234,17 +284,29 @@ impl BandedAlm {
         gap
     }
 
-    /// The generalised Hessian `P + σ·Σ G_fᵀ J_f G_f + σ_h·Σ hhᵀ` at x.
-    pub(super) fn assemble(&mut self, lo: &[f64], hi: &[f64]) {
-        self.kkt.clone_from(&self.base);
-        let sc = self.sigma * self.inv_dt2 * self.inv_dt2;
+    /// The generalised Hessian `P + σ·Σ G_fᵀ J_f G_f + σ_h·Σ hhᵀ` at x,
+    /// its rows `from` and after (a multiple of K; 0: all, the others
+    /// left unspecified).
+    #[inline]
+    pub(super) fn assemble(&mut self, lo: &[f64], hi: &[f64], from: usize) {
         let w = self.kkt.bandwidth() + 1;
-        let lower = self.kkt.lower_mut();
-        match self.k {
-            1 => add_stage_blocks::<1>(&self.jac, sc, w, lower),
-            _ => add_stage_blocks::<2>(&self.jac, sc, w, lower),
+        if from == 0 {
+            self.kkt.clone_from(&self.base);
+        } else {
+            self.kkt.lower_mut()[from * w..].copy_from_slice(&self.base.lower()[from * w..]);
         }
+        let sc = self.sigma * self.inv_dt2 * self.inv_dt2;
+        let lower = self.kkt.lower_mut();
+        let position = from / self.k;
+        match self.k {
+            1 => add_stage_blocks::<1>(&self.jac, sc, w, lower, position),
+            _ => add_stage_blocks::<2>(&self.jac, sc, w, lower, position),
+        }
+        let j0 = self.window_unknown();
         for r in 0..self.rows.len() {
+            if self.row_first[r] < j0 {
+                continue;
+            }
             let h = self.hx[r];
             let ss = self.sigma_row(r);
             let rho = self.row_penalty[r];
@@ -273,9 +335,17 @@ impl BandedAlm {
 
 /// [`BandedAlm::accelerations`] for K axes (1 or 2).
 #[inline(always)]
-fn accelerations_k<const K: usize>(inv_dt2: f64, v: &[f64], out: &mut [[f64; 2]]) {
+fn accelerations_k<const K: usize>(inv_dt2: f64, v: &[f64], out: &mut [[f64; 2]], from: usize) {
     let (mut p1, mut p2) = ([0.0; K], [0.0; K]);
-    for (o, p) in out.iter_mut().zip(v.chunks_exact(K)) {
+    for i in 0..K {
+        if from >= 1 {
+            p1[i] = v[K * (from - 1) + i];
+        }
+        if from >= 2 {
+            p2[i] = v[K * (from - 2) + i];
+        }
+    }
+    for (o, p) in out[from..].iter_mut().zip(v[K * from..].chunks_exact(K)) {
         let mut p0 = [0.0; K];
         for i in 0..K {
             p0[i] = p[i];
@@ -288,9 +358,13 @@ fn accelerations_k<const K: usize>(inv_dt2: f64, v: &[f64], out: &mut [[f64; 2]]
 
 /// [`BandedAlm::add_transposed`] for K axes (1 or 2).
 #[inline(always)]
-fn add_transposed_k<const K: usize>(inv_dt2: f64, e: &[[f64; 2]], out: &mut [f64]) {
+fn add_transposed_k<const K: usize>(inv_dt2: f64, e: &[[f64; 2]], out: &mut [f64], from: usize) {
     let (mut e1, mut e2) = ([0.0; 2], [0.0; 2]);
-    for (e0, o) in e.iter().zip(out.chunks_exact_mut(K)).rev() {
+    for (e0, o) in e[from..]
+        .iter()
+        .zip(out[K * from..].chunks_exact_mut(K))
+        .rev()
+    {
         for i in 0..K {
             o[i] += (e0[i] - 2.0 * e1[i] + e2[i]) * inv_dt2;
         }
@@ -309,6 +383,7 @@ fn add_transposed_k<const K: usize>(inv_dt2: f64, e: &[[f64; 2]], out: &mut [f64
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn stage_pass<const K: usize>(
+    from: usize,
     u: &mut [[f64; 2]],
     delta: impl Fn(usize) -> [f64; 2],
     y: &[[f64; 2]],
@@ -320,7 +395,11 @@ fn stage_pass<const K: usize>(
 ) -> (f64, f64) {
     let inv_s = 1.0 / s;
     let (mut res2, mut value) = (0.0f64, 0.0);
-    for (f, ((uf, yf), ynf)) in u.iter_mut().zip(y).zip(y_next.iter_mut()).enumerate() {
+    let stages = u[from..]
+        .iter_mut()
+        .zip(&y[from..])
+        .zip(&mut y_next[from..]);
+    for (f, ((uf, yf), ynf)) in stages.enumerate().map(|(i, s)| (i + from, s)) {
         let du = delta(f);
         let uu = [uf[0] + du[0], uf[1] + du[1]];
         *uf = uu;
@@ -419,7 +498,13 @@ fn interval_dist2<const K: usize>(w: [f64; 2], b: &[[f64; 2]; 2]) -> f64 {
 /// entry written once, in order. `jac` is 0 at the stages inside their
 /// set.
 #[inline(always)]
-fn add_stage_blocks<const K: usize>(jac: &[[[f64; 2]; 2]], sc: f64, w: usize, lower: &mut [f64]) {
+fn add_stage_blocks<const K: usize>(
+    jac: &[[[f64; 2]; 2]],
+    sc: f64,
+    w: usize,
+    lower: &mut [f64],
+    from: usize,
+) {
     let n = jac.len();
     let at = |f: usize| if f < n { jac[f] } else { [[0.0; 2]; 2] };
     // sc·Σ c·J over the terms given.
@@ -433,6 +518,9 @@ fn add_stage_blocks<const K: usize>(jac: &[[[f64; 2]; 2]], sc: f64, w: usize, lo
         m
     };
     for (g, rows) in lower.chunks_exact_mut(K * w).enumerate().take(n) {
+        if g < from {
+            continue;
+        }
         let (j0, j1, j2) = (at(g), at(g + 1), at(g + 2));
         let s = [
             sum(&[(1.0, j0), (4.0, j1), (1.0, j2)]),

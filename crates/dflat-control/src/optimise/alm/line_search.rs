@@ -25,15 +25,24 @@ impl BandedAlm {
                 "ALM: no descent (slope {slope:.1e})"
             )));
         }
-        // Quadratic part along d: α·(Px + c)·d + ½α²·dᵀPd.
+        // Quadratic part along d: α·(Px + c)·d + ½α²·dᵀPd (on the window:
+        // the eliminated head's (Px + c) and (P·d) are 0).
         let (mut lin, mut curv) = (0.0, 0.0);
-        for (((p, c), d), pd) in self.px.iter().zip(&self.c).zip(&self.d).zip(&self.pd) {
+        let j0 = self.window_unknown();
+        let window = self.px[j0..]
+            .iter()
+            .zip(&self.c[j0..])
+            .zip(&self.d[j0..])
+            .zip(&self.pd[j0..]);
+        for (((p, c), d), pd) in window {
             lin += (p + c) * d;
             curv += pd * d;
         }
-        Self::accelerations(self.k, self.inv_dt2, &self.d, &mut self.du);
+        Self::accelerations(self.k, self.inv_dt2, &self.d, &mut self.du, self.window);
         for r in 0..self.rows.len() {
-            self.hd[r] = self.rows[r].dot(&self.d);
+            if self.row_first[r] >= j0 {
+                self.hd[r] = self.rows[r].dot(&self.d);
+            }
         }
         let base = self.penalty_value;
         let (full, done) = self.full_step_terms(lo, hi);
@@ -71,16 +80,14 @@ impl BandedAlm {
     }
 
     /// `x += α·d`, and `P·x` with it from `P·d` (both by differencing,
-    /// so the sum keeps their accuracy).
+    /// so the sum keeps their accuracy; on the window only, the head's
+    /// P·d being 0).
     fn step(&mut self, alpha: f64) {
-        for (((x, d), p), pd) in self
-            .x
-            .iter_mut()
-            .zip(&self.d)
-            .zip(&mut self.px)
-            .zip(&self.pd)
-        {
+        for (x, d) in self.x.iter_mut().zip(&self.d) {
             *x += alpha * d;
+        }
+        let j0 = self.window_unknown();
+        for (p, pd) in self.px[j0..].iter_mut().zip(&self.pd[j0..]) {
             *p += alpha * pd;
         }
     }

@@ -134,6 +134,13 @@ const STALL_TOLERANCE: f64 = 100.0;
 /// Fraction of the constraint residual within which an inner solve is
 /// accurate enough for the next multiplier update.
 const INEXACT: f64 = 0.1;
+/// Stages before the first one outside its set that the window keeps
+/// (`BandedAlm::open_window`): the arc's start moves a few stages during
+/// a solve.
+const WINDOW_MARGIN: usize = 6;
+/// Share of the horizon the eliminated head must have at least for the
+/// window to open (a shorter head saves less than its checks cost).
+const WINDOW_MIN_SHARE: f64 = 0.25;
 /// Growth of σ when the constraint residual stalls.
 const SIGMA_GROWTH: f64 = 10.0;
 
@@ -158,6 +165,10 @@ pub struct AlmTuning {
     /// took 42 and fell to the interior point at 40: 13–17 ms against
     /// 2.9 ms.
     pub max_newton_steps: usize,
+    /// Whether a cold solve whose plan leaves its sets only late in the
+    /// horizon iterates on that window alone, the head eliminated (module
+    /// docs, "The eliminated head").
+    pub eliminate_head: bool,
 }
 
 impl Default for AlmTuning {
@@ -167,6 +178,7 @@ impl Default for AlmTuning {
             sigma_cold: 1e2,
             sigma_max: 1e8,
             max_newton_steps: MAX_NEWTON_STEPS,
+            eliminate_head: true,
         }
     }
 }
@@ -262,6 +274,16 @@ pub struct BandedAlm {
     y_last: Vec<[f64; 2]>,
     y_older: Vec<[f64; 2]>,
     y_last_valid: bool,
+    /// The first stage of the window iterated on (0: the whole horizon;
+    /// module docs, "The eliminated head"), and per row its first unknown.
+    window: usize,
+    row_first: Vec<usize>,
+    /// Whether the held factor is of a matrix assembled in this window
+    /// (its head the base's: later factorisations assemble and compare
+    /// the window's rows only).
+    window_held: bool,
+    /// The window the last solve opened (0: none).
+    last_window: usize,
 }
 
 impl BandedAlm {
@@ -322,6 +344,10 @@ impl BandedAlm {
         }
         let diag_max = (0..size).fold(0.0f64, |a, i| a.max(base.get(i, i)));
         let m = rows.len();
+        let row_first = rows
+            .iter()
+            .map(|r| r.idx[..r.len].iter().copied().min().unwrap_or(0))
+            .collect();
         Self {
             k,
             n,
@@ -364,6 +390,10 @@ impl BandedAlm {
             y_last: vec![[0.0; 2]; n],
             y_older: vec![[0.0; 2]; n],
             y_last_valid: false,
+            window: 0,
+            row_first,
+            window_held: false,
+            last_window: 0,
         }
     }
 
@@ -380,6 +410,12 @@ impl BandedAlm {
     /// Newton steps of the last solve.
     pub fn newton_steps(&self) -> usize {
         self.newton_steps
+    }
+
+    /// The first stage of the window the last solve iterated on before the
+    /// whole horizon (0: none; module docs, "The eliminated head").
+    pub fn last_window(&self) -> usize {
+        self.last_window
     }
 
     /// Factorisations of the last solve (Newton steps in the local phase
@@ -407,6 +443,13 @@ impl BandedAlm {
     #[cfg(test)]
     pub(crate) fn set_max_newton_steps(&mut self, steps: usize) {
         self.tuning.max_newton_steps = steps;
+    }
+
+    /// Turns the head's elimination on or off (tests: the same solve both
+    /// ways).
+    #[cfg(test)]
+    pub(crate) fn set_eliminate_head(&mut self, on: bool) {
+        self.tuning.eliminate_head = on;
     }
 
     /// Forgets the multipliers and σ (a cold start).
@@ -527,6 +570,55 @@ impl BandedAlm {
         }
     }
 
+    /// Opens the window on a cold solve whose plan leaves its sets only
+    /// late in the horizon (module docs, "The eliminated head"): from the
+    /// first gradient over the whole horizon, the first stage outside its
+    /// set less [`WINDOW_MARGIN`], if that is at least [`WINDOW_MIN_SHARE`]
+    /// of the horizon in, no row of the head binds and the head's gradient
+    /// is within `head_tol` (the start is the unconstrained optimum there).
+    /// Returns that gradient's `(‖g‖∞, stage residual, row residual)`,
+    /// ‖g‖∞ on the window when it opened.
+    fn open_window(
+        &mut self,
+        a0: [f64; 2],
+        lo: &[f64],
+        hi: &[f64],
+        head_tol: f64,
+    ) -> (f64, f64, f64) {
+        let done = self.gradient(a0, lo, hi);
+        let n = self.n;
+        let Some(first) = self.active[..n].iter().position(|a| *a != 0) else {
+            return done;
+        };
+        let window = first.saturating_sub(WINDOW_MARGIN);
+        if window < 2 || (window as f64) < WINDOW_MIN_SHARE * n as f64 {
+            return done;
+        }
+        let j0 = self.k * (window - 2);
+        let rows_quiet = (0..self.rows.len()).all(|r| {
+            self.row_first[r] >= j0
+                || self.active[n + 2 * r] == 0 && self.active[n + 2 * r + 1] == 0
+        });
+        let head_g = self.g[..j0].iter().fold(0.0f64, |a, b| a.max(b.abs()));
+        if !(rows_quiet && head_g <= head_tol) {
+            return done;
+        }
+        self.window = window;
+        self.window_held = false;
+        self.last_window = window;
+        let gn = self.g[j0..].iter().fold(0.0f64, |a, b| a.max(b.abs()));
+        (gn, done.1, done.2)
+    }
+
+    /// Back to the whole horizon: P·x and the stages' accelerations
+    /// evaluated afresh on it by the next gradient.
+    fn close_window(&mut self) {
+        self.window = 0;
+        self.window_held = false;
+        self.full_step = None;
+        self.px_current = false;
+    }
+
     /// Solves for the linear term `c` (K·n, interleaved), fixed relative
     /// accelerations `a0` [m/s²] and row bounds `lo ≤ h·x ≤ hi` from the
     /// primal start ([`BandedAlm::set_start`]) and the multipliers held
@@ -557,6 +649,8 @@ impl BandedAlm {
         }
         self.c.copy_from_slice(c);
         self.px_current = false;
+        self.window = 0;
+        self.last_window = 0;
         // Held only from a line search's full step to the gradient right
         // after it, so None here; cleared all the same, the one place a
         // stale stage pass could enter.
@@ -615,6 +709,11 @@ impl BandedAlm {
             PRIMAL_TOLERANCE * b_scale / rho
         };
         self.newton_steps = 0;
+        // The window's first gradient is the loop's first.
+        let mut first_gradient = None;
+        if cold && self.tuning.eliminate_head {
+            first_gradient = Some(self.open_window(a0, lo, hi, 10.0 * floor.max(dual_tol)));
+        }
         let mut previous_res = f64::INFINITY;
         for _outer in 0..MAX_OUTER {
             // Inner: minimise L(·; y, v, σ) by semismooth Newton, until
@@ -622,7 +721,10 @@ impl BandedAlm {
             let (mut stage_res, mut row_res);
             loop {
                 let gn;
-                (gn, stage_res, row_res) = self.gradient(a0, lo, hi);
+                (gn, stage_res, row_res) = match first_gradient.take() {
+                    Some(done) => done,
+                    None => self.gradient(a0, lo, hi),
+                };
                 if gn <= dual_tol || (gn <= floor && exact_full) {
                     break;
                 }
@@ -655,18 +757,35 @@ impl BandedAlm {
                             && last_decrement
                                 <= (REUSE_DECREMENT * c_scale * x_scale).max(LOOSE_REUSE * loose));
                 reuse_allowed = true;
-                if !reuse {
-                    self.assemble(lo, hi);
+                if !reuse && self.window_held {
+                    // In the window, past its first factorisation: its rows
+                    // only (the head's are the base's, held).
+                    let from = self.window_unknown();
+                    self.assemble(lo, hi, from);
+                    self.chol.refactor_rows_from(&self.kkt, from)?;
+                    self.factorisations += 1;
+                    self.factored_active.clone_from(&self.active);
+                    factor_current = true;
+                } else if !reuse {
+                    self.assemble(lo, hi, 0);
                     self.chol.refactor_taking(&mut self.kkt)?;
+                    self.window_held = self.window > 0;
                     self.factorisations += 1;
                     self.factored_active.clone_from(&self.active);
                     factor_current = true;
                 }
-                for (d, g) in self.d.iter_mut().zip(&self.g) {
+                // −g on the window (the eliminated head's gradient is 0).
+                let j0 = self.window_unknown();
+                self.d[..j0].fill(0.0);
+                for (d, g) in self.d[j0..].iter_mut().zip(&self.g[j0..]) {
                     *d = -g;
                 }
-                self.chol.solve_in_place(&mut self.d)?;
-                let decrement: f64 = -self.g.iter().zip(&self.d).map(|(g, d)| g * d).sum::<f64>();
+                self.chol.solve_in_place_from(&mut self.d, j0)?;
+                let decrement: f64 = -self.g[j0..]
+                    .iter()
+                    .zip(&self.d[j0..])
+                    .map(|(g, d)| g * d)
+                    .sum::<f64>();
                 if (decrement.is_nan() || decrement <= 0.0) && reuse {
                     // The old factor no longer gives a descent direction.
                     last_full = false;
@@ -723,6 +842,14 @@ impl BandedAlm {
                     self.v[r][j] = self.side_multiplier(r, self.v[r][j], t);
                 }
             }
+            if gap_small && self.window > 0 {
+                // The window converged: on to the whole horizon, whose
+                // first gradient finds whether a stage or row of the head
+                // binds after all (then the solve goes on there).
+                self.close_window();
+                compare_decrement = f64::INFINITY;
+                continue;
+            }
             if gap_small {
                 if self.x.iter().any(|v| !v.is_finite()) {
                     return Err(ControlError::Solver("ALM: non-finite iterate".into()));
@@ -765,6 +892,7 @@ pub(crate) const COLD_TUNING: AlmTuning = AlmTuning {
     sigma_cold: 1e2,
     sigma_max: 1e8,
     max_newton_steps: 1000,
+    eliminate_head: true,
 };
 
 #[cfg(test)]
