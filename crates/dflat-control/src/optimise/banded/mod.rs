@@ -19,6 +19,11 @@
 
 use crate::ControlError;
 
+mod ldl;
+mod refactor;
+
+pub use ldl::BandedLdl;
+
 /// A symmetric n×n matrix with half-bandwidth b: `A[i][j] = 0` for `|i − j| > b`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SymBand {
@@ -199,150 +204,6 @@ impl BandedCholesky {
         assert!(a.n == self.n && a.b == self.b, "shape mismatch");
         self.l.copy_from_slice(&a.lower);
         self.factor_held()
-    }
-
-    /// As [`BandedCholesky::factor_taking`], keeping the columns of the
-    /// held factor before the first column j0 in which `a` differs (bit
-    /// for bit) from the matrix that factor is of: only columns j0 … n − 1
-    /// are factored again, after the b×b block at j0 has taken what the
-    /// kept columns contribute to it (rebuilt from their L and D, O(b³)).
-    /// A matrix that changed only in its last rows — the Newton matrix of
-    /// a plan whose constraints bind near the horizon's end — costs that
-    /// fraction of a factorisation. The result is bit-identical to
-    /// [`BandedCholesky::factor`]'s: the same operations in the same
-    /// order. `a`'s storage is kept as the held matrix, and `a` left
-    /// holding unspecified values. Returns j0 (0: factored afresh, n: `a`
-    /// is the held matrix). The compiled bandwidths (3, 4, 6–9) restart at
-    /// j0, the others factor afresh when anything changed.
-    ///
-    /// # Panics
-    /// If `a` has another dimension or bandwidth than this factor.
-    pub fn refactor_taking(&mut self, a: &mut SymBand) -> Result<usize, ControlError> {
-        assert!(a.n == self.n && a.b == self.b, "shape mismatch");
-        let (n, b, w) = (self.n, self.b, self.b + 1);
-        let mut j0 = if self.factored && self.held_valid {
-            first_changed_column(&self.held, &a.lower, n, b)
-        } else {
-            0
-        };
-        if j0 == n {
-            return Ok(n);
-        }
-        if !matches!(b, 3 | 4 | 6..=9) {
-            j0 = 0;
-        }
-        self.held_valid = false;
-        self.factored = false;
-        if j0 == 0 {
-            self.l.copy_from_slice(&a.lower);
-            std::mem::swap(&mut self.held, &mut a.lower);
-            self.factor_held()?;
-        } else {
-            // Rows j0 … n − 1, columns j0 and after, from a; the columns
-            // before j0 keep L. (Rows j0 + b and after are whole rows: one
-            // copy.)
-            let whole = (j0 + b).min(n);
-            for i in j0..whole {
-                let r = i * w..i * w + (i - j0) + 1;
-                self.l[r.clone()].copy_from_slice(&a.lower[r]);
-            }
-            self.l[whole * w..].copy_from_slice(&a.lower[whole * w..]);
-            std::mem::swap(&mut self.held, &mut a.lower);
-            self.schur_window(j0);
-            match b {
-                3 => self.factor_window_from::<3>(j0)?,
-                4 => self.factor_window_from::<4>(j0)?,
-                6 => self.factor_band_from::<6>(j0)?,
-                7 => self.factor_band_from::<7>(j0)?,
-                8 => self.factor_band_from::<8>(j0)?,
-                _ => self.factor_band_from::<9>(j0)?,
-            }
-            self.factored = true;
-        }
-        self.held_valid = true;
-        Ok(j0)
-    }
-
-    /// As [`BandedCholesky::refactor_taking`] for a matrix given by its
-    /// rows `from` … n − 1 only: the rows before `from` are the held
-    /// matrix's (the caller's guarantee; `a`'s are not read), and `a` is
-    /// copied, not taken. An error when no valid factor is held.
-    ///
-    /// # Panics
-    /// If `a` has another dimension or bandwidth than this factor, or
-    /// `from` > n.
-    pub fn refactor_rows_from(&mut self, a: &SymBand, from: usize) -> Result<usize, ControlError> {
-        assert!(
-            a.n == self.n && a.b == self.b && from <= self.n,
-            "shape mismatch"
-        );
-        if !(self.factored && self.held_valid) {
-            return Err(ControlError::NotPositiveDefinite);
-        }
-        let (n, b, w) = (self.n, self.b, self.b + 1);
-        let first = first_changed_column(&self.held[from * w..], &a.lower[from * w..], n - from, b);
-        // Row i of the slices is row from + i; its slot s column from + i − s,
-        // so a change found at "column" c of the slices (c may be
-        // negative there, clamped by the scan to ≥ 0) is at from + c or,
-        // within b before from, earlier: rescan the first b rows exactly.
-        let mut j0 = if first == n - from { n } else { from + first };
-        for i in from..(from + b).min(n) {
-            for s in (i - from + 1)..=b.min(i) {
-                if self.held[i * w + s].to_bits() != a.lower[i * w + s].to_bits() {
-                    j0 = j0.min(i - s);
-                }
-            }
-        }
-        if j0 == n {
-            return Ok(n);
-        }
-        self.held_valid = false;
-        self.factored = false;
-        // Rows from … n − 1 into the held matrix; then L's rows j0 … n − 1,
-        // columns j0 and after, from it.
-        self.held[from * w..].copy_from_slice(&a.lower[from * w..]);
-        let restartable = matches!(b, 3 | 4 | 6..=9);
-        if !restartable || j0 == 0 {
-            self.l.copy_from_slice(&self.held);
-            self.factor_held()?;
-        } else {
-            let whole = (j0 + b).min(n);
-            for i in j0..whole {
-                let r = i * w..i * w + (i - j0) + 1;
-                self.l[r.clone()].copy_from_slice(&self.held[r]);
-            }
-            self.l[whole * w..].copy_from_slice(&self.held[whole * w..]);
-            self.schur_window(j0);
-            match b {
-                3 => self.factor_window_from::<3>(j0)?,
-                4 => self.factor_window_from::<4>(j0)?,
-                6 => self.factor_band_from::<6>(j0)?,
-                7 => self.factor_band_from::<7>(j0)?,
-                8 => self.factor_band_from::<8>(j0)?,
-                _ => self.factor_band_from::<9>(j0)?,
-            }
-            self.factored = true;
-        }
-        self.held_valid = true;
-        Ok(j0)
-    }
-
-    /// Entry (i, k) of the b×b block at j0 (j0 ≤ k ≤ i < j0 + b) loses
-    /// what the kept columns j < j0 subtract from it in the factorisation,
-    /// `l_{i,j}·a_{k,j}` (a_{k,j} the column before scaling, held in
-    /// `cols`), in the order of the columns — as the right-looking kernels
-    /// do.
-    fn schur_window(&mut self, j0: usize) {
-        let (n, b, w) = (self.n, self.b, self.b + 1);
-        for i in j0..(j0 + b).min(n) {
-            for k in j0..=i {
-                let mut v = self.l[i * w + (i - k)];
-                for j in i.saturating_sub(b)..j0 {
-                    v -= self.l[i * w + (i - j)] * self.cols[j * w + (k - j)];
-                }
-                self.l[i * w + (i - k)] = v;
-            }
-        }
     }
 
     /// As [`BandedCholesky::factor`], taking `a`'s storage instead of
@@ -825,140 +686,6 @@ impl BandedCholesky {
     }
 }
 
-/// The first column in which the lower bands `old` and `new` (n rows,
-/// half-bandwidth b, row-major as [`SymBand`]) differ bit for bit; n when
-/// they are equal. A changed entry of row i lies in column i − b or later,
-/// so the scan stops once rows can no longer lower the answer.
-fn first_changed_column(old: &[f64], new: &[f64], n: usize, b: usize) -> usize {
-    let w = b + 1;
-    let mut first = n;
-    for i in 0..n {
-        if i.saturating_sub(b) >= first {
-            break;
-        }
-        let (o, m) = (&old[i * w..(i + 1) * w], &new[i * w..(i + 1) * w]);
-        // Slot s is column i − s: the largest differing slot is the row's
-        // first changed column.
-        if let Some(s) = (0..=b.min(i))
-            .rev()
-            .find(|&s| o[s].to_bits() != m[s].to_bits())
-        {
-            first = first.min(i - s);
-        }
-    }
-    first
-}
-
-/// LDLᵀ of a symmetric banded matrix without pivoting (for quasi-definite
-/// matrices), L unit lower triangular with the same band.
-#[derive(Debug, Clone)]
-pub struct BandedLdl {
-    n: usize,
-    b: usize,
-    /// Strictly lower part of L by row, column-aligned: `L[i][i − b + t]`
-    /// at `i·b + t`, t = 0..b (zero before column 0).
-    l: Vec<f64>,
-    /// The same transposed for the back substitution: `L[i + d][i]` at
-    /// `i·b + d − 1`, d = 1..=b (zero past row n − 1).
-    lt: Vec<f64>,
-    d: Vec<f64>,
-    inv_d: Vec<f64>,
-    /// Row i of L times D, scratch of the factorisation.
-    work: Vec<f64>,
-}
-
-impl BandedLdl {
-    /// Storage for n×n matrices of half-bandwidth b ≥ 1.
-    pub fn new(n: usize, b: usize) -> Self {
-        Self {
-            n,
-            b,
-            l: vec![0.0; n * b],
-            lt: vec![0.0; n * b],
-            d: vec![0.0; n],
-            inv_d: vec![0.0; n],
-            work: vec![0.0; b],
-        }
-    }
-
-    /// Factors `a` (same n and b). A pivot that is not finite or whose
-    /// magnitude is below 1e-300 is [`ControlError::NotPositiveDefinite`].
-    ///
-    /// # Panics
-    /// If `a` has another shape.
-    pub fn factor(&mut self, a: &SymBand) -> Result<(), ControlError> {
-        let (n, b) = (self.n, self.b);
-        assert!(a.n() == n && a.bandwidth() == b, "shape mismatch");
-        let lower = a.lower();
-        let w = b + 1;
-        for i in 0..n {
-            let t0 = b.saturating_sub(i);
-            let (done, rest) = self.l.split_at_mut(i * b);
-            let row = &mut rest[..b];
-            row[..t0].fill(0.0);
-            for t in t0..b {
-                // Column j = i − b + t; Σ over k in [i − b, j): in row i at
-                // t' = 0..t, in row j at t' + b − t.
-                let j = i + t - b;
-                let rj = &done[j * b..(j + 1) * b];
-                let mut s = lower[i * w + (b - t)];
-                for (wk, lj) in self.work[t0..t].iter().zip(&rj[t0 + b - t..]) {
-                    s -= wk * lj;
-                }
-                self.work[t] = s;
-                row[t] = s * self.inv_d[j];
-            }
-            let mut dii = lower[i * w];
-            for (wk, li) in self.work[t0..].iter().zip(&row[t0..]) {
-                dii -= wk * li;
-            }
-            if !(dii.is_finite() && dii.abs() > 1e-300) {
-                return Err(ControlError::NotPositiveDefinite);
-            }
-            self.d[i] = dii;
-            self.inv_d[i] = 1.0 / dii;
-        }
-        for i in 0..n {
-            for d in 1..=b {
-                self.lt[i * b + d - 1] = if i + d < n {
-                    self.l[(i + d) * b + b - d]
-                } else {
-                    0.0
-                };
-            }
-        }
-        Ok(())
-    }
-
-    /// Solves `L·D·Lᵀ·x = rhs` in place.
-    ///
-    /// # Panics
-    /// If `x` does not have length n.
-    pub fn solve(&self, x: &mut [f64]) {
-        let (n, b) = (self.n, self.b);
-        assert!(x.len() == n, "length mismatch");
-        for i in 0..n {
-            let t0 = b.saturating_sub(i);
-            let row = &self.l[i * b + t0..(i + 1) * b];
-            let s: f64 = row.iter().zip(&x[i + t0 - b..i]).map(|(l, v)| l * v).sum();
-            x[i] -= s;
-        }
-        for (xi, di) in x.iter_mut().zip(&self.inv_d) {
-            *xi *= di;
-        }
-        for i in (0..n).rev() {
-            let m = b.min(n - 1 - i);
-            let col = &self.lt[i * b..i * b + m];
-            let s: f64 = col
-                .iter()
-                .zip(&x[i + 1..i + 1 + m])
-                .map(|(l, v)| l * v)
-                .sum();
-            x[i] -= s;
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1096,6 +823,67 @@ mod tests {
             f.solve_in_place(&mut x).unwrap();
             fresh.solve_in_place(&mut y).unwrap();
             prop_assert_eq!(bits(&x), bits(&y));
+        }
+
+        /// `refactor_rows_from(a, from)` reads only `a`'s rows from `from`
+        /// on (the rows before are garbage here): with the held matrix's
+        /// rows before them, it holds bit for bit the fresh factor of the
+        /// whole, and reports the first changed column (≥ from − b).
+        #[test]
+        fn refactor_rows_from_reads_the_rows_given(
+            n in 2usize..60,
+            b in prop::sample::select(vec![3usize, 4, 6, 8]),
+            cut in 0.0f64..1.0,
+            seed in proptest::collection::vec(-1.0f64..1.0, 60 * 10),
+            change in proptest::collection::vec(-1.0f64..1.0, 60 * 10),
+        ) {
+            let a = spd_band(n, b, &seed);
+            let mut f = BandedCholesky::new(n, b);
+            f.refactor_taking(&mut a.clone()).unwrap();
+            let from = ((n as f64) * cut) as usize;
+            let t = spd_band(n - from, b, &change);
+            let mut a2 = a.clone();
+            for i in from..n {
+                for j in i.saturating_sub(b).max(from)..=i {
+                    a2.add(i, j, t.get(i - from, j - from));
+                }
+            }
+            let mut given = a2.clone();
+            let w = b + 1;
+            given.lower_mut()[..from * w].fill(f64::NAN);
+            let got = f.refactor_rows_from(&given, from).unwrap();
+            prop_assert_eq!(got, from);
+            let mut fresh = BandedCholesky::new(n, b);
+            fresh.factor(&a2).unwrap();
+            let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            prop_assert_eq!(bits(&f.l), bits(&fresh.l));
+            prop_assert_eq!(bits(&f.fwd), bits(&fresh.fwd));
+            prop_assert_eq!(bits(&f.cols), bits(&fresh.cols));
+            // The same rows again: nothing to do.
+            prop_assert_eq!(f.refactor_rows_from(&given, from).unwrap(), n);
+        }
+
+        /// `solve_in_place_from(x, j0)` is the full solve of the
+        /// right-hand side that is 0 before j0.
+        #[test]
+        fn a_solve_from_j0_is_the_full_solve_of_a_zero_head(
+            n in 1usize..60,
+            b in prop::sample::select(vec![1usize, 3, 4, 6, 8]),
+            cut in 0.0f64..1.0,
+            seed in proptest::collection::vec(-1.0f64..1.0, 60 * 10),
+            rhs in proptest::collection::vec(-10.0f64..10.0, 60),
+        ) {
+            let a = spd_band(n, b, &seed);
+            let mut f = BandedCholesky::new(n, b);
+            f.factor(&a).unwrap();
+            let j0 = ((n as f64) * cut) as usize;
+            let mut full: Vec<f64> = rhs[..n].to_vec();
+            full[..j0].fill(0.0);
+            let mut from = rhs[..n].to_vec();
+            f.solve_in_place(&mut full).unwrap();
+            f.solve_in_place_from(&mut from, j0).unwrap();
+            let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            prop_assert_eq!(bits(&from), bits(&full));
         }
 
         /// A factor that failed (not positive definite) is not reused: the

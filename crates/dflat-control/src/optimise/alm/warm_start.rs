@@ -1,0 +1,88 @@
+//! The augmented Lagrangian's multipliers between solves (module docs of
+//! [`super`], "Warm start"): forgotten, set from another method's, shifted
+//! (and extrapolated) one stage on, or aged over a tick without a solve.
+
+use super::BandedAlm;
+
+impl BandedAlm {
+    /// Forgets the multipliers and σ (a cold start).
+    pub fn reset_multipliers(&mut self) {
+        self.y_last_valid = false;
+        self.y.iter_mut().for_each(|y| *y = [0.0; 2]);
+        self.v.iter_mut().for_each(|v| *v = [0.0; 2]);
+        self.sigma = self.tuning.sigma;
+    }
+
+    /// Sets the multipliers from another method's: the stage multipliers
+    /// per stage (`stage(f)`, signed per axis, cost per m/s²) and the rows'
+    /// `[upper, lower]` in row order; σ from its initial value.
+    pub fn set_multipliers(&mut self, stage: impl Fn(usize) -> [f64; 2], rows: &[[f64; 2]]) {
+        self.y_last_valid = false;
+        self.sigma = self.tuning.sigma;
+        for (f, y) in self.y.iter_mut().enumerate() {
+            *y = stage(f);
+        }
+        for (v, r) in self.v.iter_mut().zip(rows) {
+            *v = [r[0].max(0.0), r[1].max(0.0)];
+        }
+    }
+
+    /// Moves the multipliers one stage earlier (the last stage keeps its
+    /// own) and restarts σ from its initial value: the warm start of the
+    /// next tick. (A σ grown on a hard tick and kept makes the next ticks'
+    /// subproblems stiff: their semismooth Newton then zigzags.) When the
+    /// last tick was warm too, each stage multiplier is extrapolated
+    /// linearly along the ticks, `y_f ← 2·y^k_{f+1} − y^{k−1}_{f+2}` (the
+    /// same instant of the plan in the last two solutions), where both are
+    /// non-zero and no axis changes sign; else it is the shifted one. On
+    /// the corner bench at N = 200 the warm cone then takes 5.75 Newton
+    /// steps and 3.30 factorisations per solve instead of 6.43 and 3.87.
+    pub fn shift(&mut self) {
+        let extrapolate = self.y_last_valid;
+        // y_older ← last tick's solution, y_last ← this one's (unshifted).
+        std::mem::swap(&mut self.y_last, &mut self.y_older);
+        self.y_last.copy_from_slice(&self.y);
+        self.shift_multipliers(false);
+        if extrapolate {
+            let n = self.n;
+            for f in 0..n.saturating_sub(2) {
+                let (a, b) = (self.y_last[f + 1], self.y_older[f + 2]);
+                if a != [0.0; 2] && b != [0.0; 2] {
+                    let p = [2.0 * a[0] - b[0], 2.0 * a[1] - b[1]];
+                    if p[0] * a[0] >= 0.0 && p[1] * a[1] >= 0.0 {
+                        self.y[f] = p;
+                    }
+                }
+            }
+        }
+        self.y_last_valid = true;
+    }
+
+    /// Moves the multipliers one stage earlier with nothing entering at the
+    /// end: a tick that did not solve, so that the first tick of the next
+    /// constrained burst starts from the last burst's multipliers where
+    /// they still apply.
+    pub fn age(&mut self) {
+        self.y_last_valid = false;
+        self.shift_multipliers(true);
+    }
+
+    fn shift_multipliers(&mut self, clear_last: bool) {
+        self.sigma = self.tuning.sigma;
+        let n = self.n;
+        if n >= 2 {
+            self.y.copy_within(1..n, 0);
+        }
+        if clear_last && n >= 1 {
+            self.y[n - 1] = [0.0; 2];
+        }
+        for r in &self.blocks {
+            if r.len() >= 2 {
+                self.v.copy_within(r.start + 1..r.end, r.start);
+            }
+            if clear_last && !r.is_empty() {
+                self.v[r.end - 1] = [0.0; 2];
+            }
+        }
+    }
+}
