@@ -19,6 +19,7 @@ mod common;
 use std::time::Duration;
 
 use common::*;
+use dflat_link::MavMessage;
 
 const PATH: [[f64; 3]; 3] = [
     [-20.0, -30.0, -10.0],
@@ -130,6 +131,21 @@ fn fly(kind: &str) -> Figures {
         .iter()
         .map(|s| path_distance(&PATH, s.position))
         .collect();
+    if end.is_none() {
+        // What the daemon said (state changes, failsafes): the diagnosis of
+        // a flight that did not get to the end (seen once under the full
+        // suite's load, 2026-11-26: DF-MPC stayed on the first leg).
+        let texts: Vec<String> = flight
+            .frames
+            .iter()
+            .filter_map(|f| match &f.message {
+                MavMessage::STATUSTEXT(d) => Some(d.text.to_str().unwrap_or("").to_owned()),
+                _ => None,
+            })
+            .collect();
+        let last = trace.last().map(|s| s.position);
+        eprintln!("{kind}: not at the end; last position {last:?}; the daemon said {texts:?}");
+    }
     Figures {
         mean: errors.iter().sum::<f64>() / errors.len().max(1) as f64,
         p95: quantile(&errors, 0.95),
