@@ -521,17 +521,7 @@ impl BandedCholesky {
         }
         x[..j0].fill(0.0);
         let w = self.b + 1;
-        let data = &self.fwd[j0 * w..];
-        let tail = &mut x[j0..];
-        match self.b {
-            3 => Self::run_band::<3, 1>(data, [tail], false),
-            4 => Self::run_band::<4, 1>(data, [tail], false),
-            6 => Self::run_band::<6, 1>(data, [tail], false),
-            7 => Self::run_band::<7, 1>(data, [tail], false),
-            8 => Self::run_band::<8, 1>(data, [tail], false),
-            9 => Self::run_band::<9, 1>(data, [tail], false),
-            _ => Self::run_generic(self.b, data, tail, false),
-        }
+        Self::run(self.b, &self.fwd[j0 * w..], &mut x[j0..], false);
         self.backward(x);
         Ok(())
     }
@@ -581,18 +571,27 @@ impl BandedCholesky {
     /// direction is known at compile time.
     #[inline(always)]
     fn substitute(&self, x: &mut [f64], reverse: bool) {
-        let data = if reverse { &self.l } else { &self.fwd };
-        match self.b {
+        let data = match (reverse, matches!(self.b, 3 | 4 | 6..=9)) {
+            (false, _) => &self.fwd,
+            (true, true) => &self.l,
+            (true, false) => &self.bwd,
+        };
+        Self::run(self.b, data, x, reverse);
+    }
+
+    /// One substitution over `data` (its unknowns' rows, from x's first)
+    /// by the kernel of bandwidth b: compiled for 3, 4 and 6–9, else
+    /// [`BandedCholesky::run_generic`].
+    #[inline(always)]
+    fn run(b: usize, data: &[f64], x: &mut [f64], reverse: bool) {
+        match b {
             3 => Self::run_band::<3, 1>(data, [x], reverse),
             4 => Self::run_band::<4, 1>(data, [x], reverse),
             6 => Self::run_band::<6, 1>(data, [x], reverse),
             7 => Self::run_band::<7, 1>(data, [x], reverse),
             8 => Self::run_band::<8, 1>(data, [x], reverse),
             9 => Self::run_band::<9, 1>(data, [x], reverse),
-            _ => {
-                let data = if reverse { &self.bwd } else { &self.fwd };
-                Self::run_generic(self.b, data, x, reverse)
-            }
+            _ => Self::run_generic(b, data, x, reverse),
         }
     }
 
@@ -754,15 +753,21 @@ mod tests {
         }
     }
 
-    /// `M·Mᵀ + I` in a band, M lower-banded from `seed` (10 per row).
-    fn spd_band(n: usize, b: usize, seed: &[f64]) -> SymBand {
+    /// `M·Mᵀ + I`, SPD with half-bandwidth b, M lower-banded from `seed`
+    /// (10 per row).
+    fn spd_dense(n: usize, b: usize, seed: &[f64]) -> DMatrix<f64> {
         let mut m = DMatrix::<f64>::zeros(n, n);
         for i in 0..n {
             for d in 0..=b.min(i) {
                 m[(i, i - d)] = seed[i * 10 + d];
             }
         }
-        let dense = &m * m.transpose() + DMatrix::identity(n, n);
+        &m * m.transpose() + DMatrix::identity(n, n)
+    }
+
+    /// The band of half-width b of `dense`.
+    fn band_of(dense: &DMatrix<f64>, b: usize) -> SymBand {
+        let n = dense.nrows();
         let mut a = SymBand::zeros(n, b);
         for i in 0..n {
             for j in i.saturating_sub(b)..=i {
@@ -770,6 +775,26 @@ mod tests {
             }
         }
         a
+    }
+
+    /// [`spd_dense`] in a band.
+    fn spd_band(n: usize, b: usize, seed: &[f64]) -> SymBand {
+        band_of(&spd_dense(n, b, seed), b)
+    }
+
+    /// `a` plus an SPD band from `change` on its trailing block (rows and
+    /// columns j0 and after): still SPD, changed from column j0 on (its
+    /// diagonal there grows by at least 1).
+    fn with_trailing_change(a: &SymBand, j0: usize, change: &[f64]) -> SymBand {
+        let (n, b) = (a.n(), a.bandwidth());
+        let t = spd_band(n - j0, b, change);
+        let mut a2 = a.clone();
+        for i in j0..n {
+            for j in i.saturating_sub(b).max(j0)..=i {
+                a2.add(i, j, t.get(i - j0, j - j0));
+            }
+        }
+        a2
     }
 
     proptest! {
@@ -792,13 +817,7 @@ mod tests {
             prop_assert_eq!(f.refactor_taking(&mut a.clone()).unwrap(), n);
             // A second SPD band added on the trailing block only.
             let j0 = ((n as f64) * cut) as usize;
-            let t = spd_band(n - j0, b, &change);
-            let mut a2 = a.clone();
-            for i in j0..n {
-                for j in i.saturating_sub(b).max(j0)..=i {
-                    a2.add(i, j, t.get(i - j0, j - j0));
-                }
-            }
+            let a2 = with_trailing_change(&a, j0, &change);
             let got = f.refactor_taking(&mut a2.clone()).unwrap();
             // The reported column is the first changed one (j0: the
             // trailing block's diagonal grew by at least 1), or 0 for the
@@ -841,13 +860,7 @@ mod tests {
             let mut f = BandedCholesky::new(n, b);
             f.refactor_taking(&mut a.clone()).unwrap();
             let from = ((n as f64) * cut) as usize;
-            let t = spd_band(n - from, b, &change);
-            let mut a2 = a.clone();
-            for i in from..n {
-                for j in i.saturating_sub(b).max(from)..=i {
-                    a2.add(i, j, t.get(i - from, j - from));
-                }
-            }
+            let a2 = with_trailing_change(&a, from, &change);
             let mut given = a2.clone();
             let w = b + 1;
             given.lower_mut()[..from * w].fill(f64::NAN);
@@ -915,19 +928,8 @@ mod tests {
             seed in proptest::collection::vec(-1.0f64..1.0, 40 * 10),
             rhs in proptest::collection::vec(-10.0f64..10.0, 40),
         ) {
-            let mut m = DMatrix::<f64>::zeros(n, n);
-            for i in 0..n {
-                for d in 0..=b.min(i) {
-                    m[(i, i - d)] = seed[i * 10 + d];
-                }
-            }
-            let dense = &m * m.transpose() + DMatrix::identity(n, n);
-            let mut a = SymBand::zeros(n, b);
-            for i in 0..n {
-                for j in i.saturating_sub(b)..=i {
-                    a.set(i, j, dense[(i, j)]);
-                }
-            }
+            let dense = spd_dense(n, b, &seed);
+            let a = band_of(&dense, b);
             prop_assert_eq!(to_dense(&a), dense.clone());
             let mut f = BandedCholesky::new(n, b);
             f.factor(&a).unwrap();

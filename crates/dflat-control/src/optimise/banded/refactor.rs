@@ -25,7 +25,7 @@ impl BandedCholesky {
     /// If `a` has another dimension or bandwidth than this factor.
     pub fn refactor_taking(&mut self, a: &mut SymBand) -> Result<usize, ControlError> {
         assert!(a.n == self.n && a.b == self.b, "shape mismatch");
-        let (n, b, w) = (self.n, self.b, self.b + 1);
+        let (n, b) = (self.n, self.b);
         let mut j0 = if self.factored && self.held_valid {
             first_changed_column(&self.held, &a.lower, n, b)
         } else {
@@ -37,35 +37,8 @@ impl BandedCholesky {
         if !matches!(b, 3 | 4 | 6..=9) {
             j0 = 0;
         }
-        self.held_valid = false;
-        self.factored = false;
-        if j0 == 0 {
-            self.l.copy_from_slice(&a.lower);
-            std::mem::swap(&mut self.held, &mut a.lower);
-            self.factor_held()?;
-        } else {
-            // Rows j0 … n − 1, columns j0 and after, from a; the columns
-            // before j0 keep L. (Rows j0 + b and after are whole rows: one
-            // copy.)
-            let whole = (j0 + b).min(n);
-            for i in j0..whole {
-                let r = i * w..i * w + (i - j0) + 1;
-                self.l[r.clone()].copy_from_slice(&a.lower[r]);
-            }
-            self.l[whole * w..].copy_from_slice(&a.lower[whole * w..]);
-            std::mem::swap(&mut self.held, &mut a.lower);
-            self.schur_window(j0);
-            match b {
-                3 => self.factor_window_from::<3>(j0)?,
-                4 => self.factor_window_from::<4>(j0)?,
-                6 => self.factor_band_from::<6>(j0)?,
-                7 => self.factor_band_from::<7>(j0)?,
-                8 => self.factor_band_from::<8>(j0)?,
-                _ => self.factor_band_from::<9>(j0)?,
-            }
-            self.factored = true;
-        }
-        self.held_valid = true;
+        std::mem::swap(&mut self.held, &mut a.lower);
+        self.factor_held_from(j0)?;
         Ok(j0)
     }
 
@@ -102,16 +75,26 @@ impl BandedCholesky {
         if j0 == n {
             return Ok(n);
         }
+        // Rows from … n − 1 into the held matrix.
+        self.held[from * w..].copy_from_slice(&a.lower[from * w..]);
+        self.factor_held_from(j0)?;
+        Ok(j0)
+    }
+
+    /// Factors the held matrix (`held`, just replaced), keeping L's
+    /// columns before j0 (those of the matrix factored before, which
+    /// agrees with it there): L's rows j0 … n − 1, columns j0 and after,
+    /// from `held`, the block at j0 rebuilt, the rest factored
+    /// (bandwidths without a compiled kernel, and j0 = 0: afresh).
+    fn factor_held_from(&mut self, j0: usize) -> Result<(), ControlError> {
+        let (n, b, w) = (self.n, self.b, self.b + 1);
         self.held_valid = false;
         self.factored = false;
-        // Rows from … n − 1 into the held matrix; then L's rows j0 … n − 1,
-        // columns j0 and after, from it.
-        self.held[from * w..].copy_from_slice(&a.lower[from * w..]);
-        let restartable = matches!(b, 3 | 4 | 6..=9);
-        if !restartable || j0 == 0 {
+        if j0 == 0 || !matches!(b, 3 | 4 | 6..=9) {
             self.l.copy_from_slice(&self.held);
             self.factor_held()?;
         } else {
+            // (Rows j0 + b and after are whole rows: one copy.)
             let whole = (j0 + b).min(n);
             for i in j0..whole {
                 let r = i * w..i * w + (i - j0) + 1;
@@ -130,7 +113,7 @@ impl BandedCholesky {
             self.factored = true;
         }
         self.held_valid = true;
-        Ok(j0)
+        Ok(())
     }
 
     /// Entry (i, k) of the b×b block at j0 (j0 ≤ k ≤ i < j0 + b) loses
