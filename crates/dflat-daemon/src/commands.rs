@@ -71,6 +71,18 @@ pub struct CommandContext {
     pub engaged: bool,
 }
 
+impl CommandContext {
+    /// The context of a command answered in flight state `state` (`None`:
+    /// before the first tick) with or without a navigable mission.
+    pub fn new(has_mission: bool, state: Option<crate::supervisor::FlightState>) -> Self {
+        Self {
+            has_mission,
+            streaming: state.is_some_and(crate::supervisor::FlightState::streams),
+            engaged: state.is_some_and(crate::supervisor::FlightState::engaged),
+        }
+    }
+}
+
 /// The daemon's answer to `req` (`None`: not addressed to it, or a
 /// broadcast it does not support). `own` = (system, component).
 pub fn answer(req: &CommandRequest, own: (u8, u8), ctx: &CommandContext) -> Option<CommandAnswer> {

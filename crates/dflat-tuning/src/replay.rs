@@ -246,14 +246,9 @@ struct MissionSide {
 impl MissionSide {
     fn new(cfg: &Config) -> Self {
         let own = (cfg.link.system_id, cfg.link.component_id);
-        let rules = ItemRules {
-            int_scale: cfg.mission.local_xy_scale,
-            geofence: cfg.mission.geofence,
-            acceptance_radius: cfg.mission.acceptance_radius_m,
-        };
         Self {
             own,
-            protocol: MissionProtocol::new(own, rules),
+            protocol: MissionProtocol::new(own, ItemRules::of(&cfg.mission)),
             loaded: Vec::new(),
             state: None,
         }
@@ -277,11 +272,7 @@ impl MissionSide {
 
     /// The mission command the receive task would pass on for `req`.
     fn action(&self, req: &CommandRequest) -> Option<dflat_daemon::tick::MissionAction> {
-        let context = CommandContext {
-            has_mission: self.protocol.mission().has_navigation(),
-            streaming: self.state.is_some_and(FlightState::streams),
-            engaged: self.state.is_some_and(FlightState::engaged),
-        };
+        let context = CommandContext::new(self.protocol.mission().has_navigation(), self.state);
         answer(req, self.own, &context)?.action
     }
 }

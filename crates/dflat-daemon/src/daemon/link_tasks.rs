@@ -30,7 +30,6 @@ use crate::link_health::{
 };
 use crate::mission::{ItemRules, Mission, MissionChange, MissionProtocol};
 use crate::signing::{PERSIST_INTERVAL, TimestampStore};
-use crate::supervisor::FlightState;
 use crate::tick::{Event, arrival_secs, event_from};
 use dflat_link::dialect::MavResult;
 use dflat_link::refusal::{RefusalLimiter, Say};
@@ -419,12 +418,7 @@ fn answer_command(
     refusals: &mut RefusalLimiter<(u8, u8)>,
 ) -> Option<crate::tick::MissionAction> {
     let state = ctx.state.load(Ordering::Relaxed);
-    let flight = decode_state(state);
-    let context = CommandContext {
-        has_mission,
-        streaming: flight.is_some_and(FlightState::streams),
-        engaged: flight.is_some_and(FlightState::engaged),
-    };
+    let context = CommandContext::new(has_mission, decode_state(state));
     let reply = answer(req, ctx.own, &context)?;
     debug!(command = ?req.command, "command answered");
     out.send(reply.ack);

@@ -578,11 +578,7 @@ pub async fn spawn_with_controller(
         yaw: config.vehicle.yaw_deg.to_radians(),
         yaw_fixed: config.vehicle.yaw_mode == crate::config::YawMode::Fixed,
         state: state.clone(),
-        mission_rules: crate::mission::ItemRules {
-            int_scale: config.mission.local_xy_scale,
-            geofence: config.mission.geofence,
-            acceptance_radius: config.mission.acceptance_radius_m,
-        },
+        mission_rules: crate::mission::ItemRules::of(&config.mission),
         missions: mission_tx,
         health: health.clone(),
         stall,

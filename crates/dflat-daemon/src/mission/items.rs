@@ -17,6 +17,19 @@ pub struct ItemRules {
     pub acceptance_radius: f64,
 }
 
+impl ItemRules {
+    /// The rules of the `[mission]` table (`local_xy_scale`, `geofence`,
+    /// `acceptance_radius_m`), as the receive task and a replay read
+    /// uploads.
+    pub fn of(mission: &crate::config::MissionConfig) -> Self {
+        Self {
+            int_scale: mission.local_xy_scale,
+            geofence: mission.geofence,
+            acceptance_radius: mission.acceptance_radius_m,
+        }
+    }
+}
+
 /// One supported item.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum MissionItem {
