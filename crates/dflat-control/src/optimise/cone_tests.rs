@@ -180,6 +180,16 @@ fn solve_both(
     Some((banded_plans(&mut solver, weights, axes), want))
 }
 
+/// Asserts every output of `got` within `tol` \[m\] of `want`'s
+/// (`against` names what `want` is).
+fn assert_plans_within(got: &Plans, want: &Plans, tol: f64, against: &str) {
+    for i in 0..2 {
+        for (j, (g, w)) in got[i].iter().zip(&want[i]).enumerate() {
+            assert!((g - w).abs() < tol, "axis {i} y_{j}: {g} vs {against} {w}");
+        }
+    }
+}
+
 fn from_rest(horizon: usize, target: [f64; 2]) -> [Axis; 2] {
     target.map(|t| Axis {
         fixed: [0.0; 3],
@@ -206,16 +216,7 @@ fn cone_binds_and_matches_clarabel_from_rest() {
     let peak = ConeBounds::peak_acceleration(&got[0], &got[1], DT);
     assert!((peak - a).abs() < 1e-6 * a, "peak {peak} vs {a}");
     assert!(!bounds.violated_by(&got[0], &got[1], DT));
-    for i in 0..2 {
-        for j in 0..=horizon {
-            assert!(
-                (got[i][j] - want[i][j]).abs() < 1e-5,
-                "axis {i} y_{j}: {} vs {}",
-                got[i][j],
-                want[i][j]
-            );
-        }
-    }
+    assert_plans_within(&got, &want, 1e-5, "clarabel");
     let (ow, og) = (
         objective(horizon, &[w, w], &bounds, &axes, [&want[0], &want[1]], &[]),
         objective(horizon, &[w, w], &bounds, &axes, [&got[0], &got[1]], &[]),
@@ -265,22 +266,8 @@ fn a_late_corner_is_solved_on_the_window_and_matches_clarabel() {
         (peak - a).abs() < 1e-6 * a,
         "the cone binds: peak {peak} vs {a}"
     );
-    for i in 0..2 {
-        for j in 0..=horizon {
-            assert!(
-                (got[i][j] - want[i][j]).abs() < 1e-5,
-                "axis {i} y_{j}: {} vs clarabel {}",
-                got[i][j],
-                want[i][j]
-            );
-            assert!(
-                (got[i][j] - got_whole[i][j]).abs() < 1e-7,
-                "axis {i} y_{j}: {} vs the whole horizon's {}",
-                got[i][j],
-                got_whole[i][j]
-            );
-        }
-    }
+    assert_plans_within(&got, &want, 1e-5, "clarabel");
+    assert_plans_within(&got, &got_whole, 1e-7, "the whole horizon's");
     let obj = |p: &Plans| objective(horizon, &[w, w], &bounds, &axes, [&p[0], &p[1]], &[]);
     let (ow, og) = (obj(&want), obj(&got));
     assert!(og <= ow + 1e-7 * (1.0 + ow.abs()), "{og} vs {ow}");
@@ -326,16 +313,7 @@ fn the_cone_interior_points_duals_start_the_next_ticks_augmented_lagrangian() {
     };
     let (seeded, seeded_steps) = run(false);
     let (zeroed, zeroed_steps) = run(true);
-    for i in 0..2 {
-        for j in 0..=horizon {
-            assert!(
-                (seeded[i][j] - zeroed[i][j]).abs() < 1e-5,
-                "axis {i} y_{j}: {} vs {}",
-                seeded[i][j],
-                zeroed[i][j]
-            );
-        }
-    }
+    assert_plans_within(&seeded, &zeroed, 1e-5, "from zero multipliers");
     assert!(
         seeded_steps < zeroed_steps,
         "seeded {seeded_steps} Newton steps, from zero {zeroed_steps}"
