@@ -510,6 +510,24 @@ impl BandedAlm {
         }
     }
 
+    /// Assembles and factors the generalised Hessian at x: in the window,
+    /// past its first factorisation, its rows only (the head's are the
+    /// base's, held); else all of it.
+    fn factor_newton_matrix(&mut self, lo: &[f64], hi: &[f64]) -> Result<(), ControlError> {
+        if self.window_held {
+            let from = self.window_unknown();
+            self.assemble(lo, hi, from);
+            self.chol.refactor_rows_from(&self.kkt, from)?;
+        } else {
+            self.assemble(lo, hi, 0);
+            self.chol.refactor_taking(&mut self.kkt)?;
+            self.window_held = self.window > 0;
+        }
+        self.factorisations += 1;
+        self.factored_active.clone_from(&self.active);
+        Ok(())
+    }
+
     /// Solves for the linear term `c` (K·n, interleaved), fixed relative
     /// accelerations `a0` [m/s²] and row bounds `lo ≤ h·x ≤ hi` from the
     /// primal start ([`BandedAlm::set_start`]) and the multipliers held
@@ -648,26 +666,13 @@ impl BandedAlm {
                             && last_decrement
                                 <= (REUSE_DECREMENT * c_scale * x_scale).max(LOOSE_REUSE * loose));
                 reuse_allowed = true;
-                if !reuse && self.window_held {
-                    // In the window, past its first factorisation: its rows
-                    // only (the head's are the base's, held).
-                    let from = self.window_unknown();
-                    self.assemble(lo, hi, from);
-                    self.chol.refactor_rows_from(&self.kkt, from)?;
-                    self.factorisations += 1;
-                    self.factored_active.clone_from(&self.active);
-                    factor_current = true;
-                } else if !reuse {
-                    self.assemble(lo, hi, 0);
-                    self.chol.refactor_taking(&mut self.kkt)?;
-                    self.window_held = self.window > 0;
-                    self.factorisations += 1;
-                    self.factored_active.clone_from(&self.active);
+                if !reuse {
+                    self.factor_newton_matrix(lo, hi)?;
                     factor_current = true;
                 }
-                // −g on the window (the eliminated head's gradient is 0).
+                // −g on the window (the eliminated head's gradient is 0;
+                // the solve sets d there).
                 let j0 = self.window_unknown();
-                self.d[..j0].fill(0.0);
                 for (d, g) in self.d[j0..].iter_mut().zip(&self.g[j0..]) {
                     *d = -g;
                 }
