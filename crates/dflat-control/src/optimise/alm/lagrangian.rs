@@ -87,6 +87,14 @@ impl BandedAlm {
         self.k * self.window_output()
     }
 
+    /// Whether row r lies in the window (all of it without one); the
+    /// eliminated head's rows are not iterated: should one bind, the
+    /// whole horizon's check as the window closes finds it.
+    #[inline]
+    pub(super) fn row_in_window(&self, r: usize) -> bool {
+        self.row_first[r] >= self.window_unknown()
+    }
+
     /// The side `t` of row k at h (upper side j = 0: h − hi, lower: lo − h).
     #[inline]
     pub(super) fn side(j: usize, h: f64, lo: f64, hi: f64) -> f64 {
@@ -131,7 +139,7 @@ impl BandedAlm {
     pub(super) fn row_terms(&self, alpha: f64, lo: &[f64], hi: &[f64]) -> f64 {
         let mut value = 0.0;
         for (k, v) in self.v.iter().enumerate() {
-            if self.row_first[k] < self.window_unknown() {
+            if !self.row_in_window(k) {
                 continue;
             }
             let h = self.hx[k] + alpha * self.hd[k];
@@ -181,9 +189,7 @@ impl BandedAlm {
         Self::add_transposed(k, self.inv_dt2, &self.y_next, &mut self.g, from);
         let mut row_res: f64 = 0.0;
         for r in 0..self.rows.len() {
-            if self.row_first[r] < j0 {
-                // The eliminated head's rows are not iterated (a row
-                // that binds there ends the window: `solve`).
+            if !self.row_in_window(r) {
                 continue;
             }
             let h = self.rows[r].dot(&self.x);
@@ -302,9 +308,8 @@ impl BandedAlm {
             1 => add_stage_blocks::<1>(&self.jac, sc, w, lower, position),
             _ => add_stage_blocks::<2>(&self.jac, sc, w, lower, position),
         }
-        let j0 = self.window_unknown();
         for r in 0..self.rows.len() {
-            if self.row_first[r] < j0 {
+            if !self.row_in_window(r) {
                 continue;
             }
             let h = self.hx[r];

@@ -40,7 +40,7 @@ impl BandedAlm {
         }
         Self::accelerations(self.k, self.inv_dt2, &self.d, &mut self.du, self.window);
         for r in 0..self.rows.len() {
-            if self.row_first[r] >= j0 {
+            if self.row_in_window(r) {
                 self.hd[r] = self.rows[r].dot(&self.d);
             }
         }
