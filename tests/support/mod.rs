@@ -327,6 +327,34 @@ impl Flight {
 /// `config_text` (a short path mission), tapping every frame the daemon
 /// sends, for `fly` after its first attitude target (at most 20 s).
 pub fn fly_in_process(name: &str, config_text: &str, fly: Duration) -> Flight {
+    let end = FlightEnd {
+        fly,
+        cap: Duration::from_secs(20),
+        settle: Duration::ZERO,
+    };
+    fly_in_process_until(name, config_text, end, |_| false)
+}
+
+/// When [`fly_in_process_until`] ends a flight: `fly` after the daemon's
+/// first attitude target, `cap` after the start, or `settle` after its
+/// condition first held, whichever comes first.
+#[derive(Debug, Clone, Copy)]
+pub struct FlightEnd {
+    pub fly: Duration,
+    pub cap: Duration,
+    pub settle: Duration,
+}
+
+/// As [`fly_in_process`], ending also `end.settle` after `done` first
+/// holds for the SITL's true position (NED, m): a flight judged on
+/// reaching its path's end flies until it does, however slowly a loaded
+/// machine brought the daemon up and engaged it.
+pub fn fly_in_process_until(
+    name: &str,
+    config_text: &str,
+    end: FlightEnd,
+    done: impl Fn([f64; 3]) -> bool,
+) -> Flight {
     let dir = scratch(name);
     let text = config_text.replace("@DIR@", &dir.display().to_string());
     let config = write_config(&dir, &format!("{name}.toml"), &text);
@@ -346,14 +374,19 @@ pub fn fly_in_process(name: &str, config_text: &str, fly: Duration) -> Flight {
     let start = Instant::now();
     let mut frames = Vec::new();
     let mut first_target: Option<Instant> = None;
-    while start.elapsed() < Duration::from_secs(20)
-        && first_target.is_none_or(|t| t.elapsed() < fly)
+    let mut done_at: Option<Instant> = None;
+    while start.elapsed() < end.cap
+        && first_target.is_none_or(|t| t.elapsed() < end.fly)
+        && done_at.is_none_or(|t| t.elapsed() < end.settle)
     {
         if let Ok(f) = tap.recv_timeout(Duration::from_millis(100)) {
             if matches!(f.message, MavMessage::SET_ATTITUDE_TARGET(_)) {
                 first_target.get_or_insert(f.at);
             }
             frames.push(f);
+        }
+        if done_at.is_none() && done(sim.truth().position) {
+            done_at = Some(Instant::now());
         }
     }
     let streamed_for = first_target.map_or(Duration::ZERO, |t| t.elapsed());
