@@ -94,12 +94,12 @@ fn fly(kind: &str) -> Figures {
     // ends 3 s after the end is reached (as the fixed 15 s did), or at 40 s
     // after the first command should it never be (under the full suite's
     // load, a fixed 15 s once ended DF-MPC's flight on its first leg).
-    let end = FlightEnd {
+    let until = FlightEnd {
         fly: Duration::from_secs(40),
         cap: Duration::from_secs(50),
         settle: Duration::from_secs(3),
     };
-    let flight = fly_in_process_until(&format!("fair-{kind}"), &config(kind), end, |p| {
+    let flight = fly_in_process_until(&format!("fair-{kind}"), &config(kind), until, |p| {
         dist(p, PATH[2]) < ARRIVAL
     });
     assert!(flight.clean_exit, "{kind}: the daemon did not exit cleanly");

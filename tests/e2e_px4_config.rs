@@ -9,6 +9,9 @@
 //! single excursion to 0.109 m (mean 0.047 m); alone the worst is
 //! 0.02–0.05 m.
 
+#[path = "support/mod.rs"]
+mod common;
+
 use std::path::Path;
 use std::time::{Duration, Instant};
 
@@ -88,20 +91,17 @@ async fn hold_altitude_with(disturbance: bool, autopilot_hover: bool) -> Altitud
     eprintln!("{summary}");
     assert_eq!(summary.final_state, FlightState::Holding, "{summary}");
     let end = engaged + FLY_S;
-    let mut errs: Vec<f64> = report
+    let errs: Vec<f64> = report
         .trace
         .iter()
         .filter(|s| s.t >= end - CHECK_S && s.t <= end)
         .map(|s| (s.position[2] - z0).abs())
         .collect();
     assert!(errs.len() > 100, "{} samples", errs.len());
-    errs.sort_by(f64::total_cmp);
-    let p95 = errs[(0.95 * (errs.len() - 1) as f64).round() as usize];
-    let mean = errs.iter().sum::<f64>() / errs.len() as f64;
     AltitudeError {
-        mean,
-        p95,
-        worst: errs[errs.len() - 1],
+        mean: errs.iter().sum::<f64>() / errs.len() as f64,
+        p95: common::quantile(&errs, 0.95),
+        worst: errs.iter().copied().fold(0.0, f64::max),
     }
 }
 
