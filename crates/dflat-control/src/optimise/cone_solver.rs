@@ -220,6 +220,20 @@ impl BandedConeSolver {
         }
     }
 
+    /// Whether the augmented Lagrangian's last solve started from the
+    /// saturated rollout ([`BandedAlm::rollout_started`]).
+    pub fn rollout_started(&self) -> bool {
+        self.alm.as_ref().is_some_and(BandedAlm::rollout_started)
+    }
+
+    /// Turns the augmented Lagrangian's rollout start on or off (tests).
+    #[cfg(test)]
+    pub(crate) fn set_rollout_start(&mut self, on: bool) {
+        if let Some(alm) = &mut self.alm {
+            alm.set_rollout_start(on);
+        }
+    }
+
     /// Sets the cone's radius per stage A_f [m/s²] (N − 2 entries, finite
     /// and > 0; stage f bounds the acceleration of output f + 2) for the
     /// next solves, instead of the bounds' constant A: the spatial

@@ -273,6 +273,133 @@ fn a_late_corner_is_solved_on_the_window_and_matches_clarabel() {
     assert!(og <= ow + 1e-7 * (1.0 + ow.abs()), "{og} vs {ow}");
 }
 
+/// The flight's first tick, from rest, with the reference already moving
+/// at 8 m/s 3 m to the side (the corner bench's): the plan binds at once,
+/// so the augmented Lagrangian starts from the saturated rollout and the
+/// multipliers that hold it. It reaches clarabel's plan, and the plan of
+/// the same solve from the unconstrained plan with zero multipliers, in
+/// fewer Newton steps.
+#[test]
+fn the_tick_from_rest_starts_from_the_rollout_and_matches_clarabel() {
+    let horizon = 200;
+    let w = AxisWeights {
+        q: 5.0,
+        r: 0.01,
+        smoothness: Smoothness::default(),
+    };
+    let a = G * 20f64.to_radians().tan();
+    let bounds = ConeBounds::new(a, None);
+    let axis = |f: &dyn Fn(usize) -> f64| Axis {
+        fixed: [0.0; 3],
+        sent: None,
+        reference: (0..=horizon).map(f).collect(),
+    };
+    let axes = [axis(&|j| 8.0 * DT * j as f64), axis(&|_| 3.0)];
+    let want = clarabel_plans(horizon, [w, w], bounds, &axes, None).unwrap();
+    let mut started = BandedConeSolver::new(horizon, DT, [w, w], bounds, true).unwrap();
+    let got = banded_plans(&mut started, [w, w], &axes);
+    assert!(started.rollout_started());
+    assert_eq!(started.method(), ConeMethod::Alm);
+    let mut plain = BandedConeSolver::new(horizon, DT, [w, w], bounds, true).unwrap();
+    plain.set_rollout_start(false);
+    let got_plain = banded_plans(&mut plain, [w, w], &axes);
+    assert!(!plain.rollout_started());
+    assert_eq!(plain.method(), ConeMethod::Alm);
+    assert!(!bounds.violated_by(&got[0], &got[1], DT));
+    assert_plans_within(&got, &want, 1e-5, "clarabel");
+    assert_plans_within(&got, &got_plain, 1e-6, "the unconstrained start's");
+    let obj = |p: &Plans| objective(horizon, &[w, w], &bounds, &axes, [&p[0], &p[1]], &[]);
+    let (ow, og) = (obj(&want), obj(&got));
+    assert!(og <= ow + 1e-7 * (1.0 + ow.abs()), "{og} vs {ow}");
+    let (steps, plain_steps) = (started.iterations(), plain.iterations());
+    eprintln!("tick from rest: {steps} Newton steps from the rollout, {plain_steps} without");
+    assert!(steps < plain_steps, "{steps} vs {plain_steps}");
+}
+
+/// Cold solves of random instances in motion (speeds and reference slopes
+/// to 8 m/s, the vehicle's acceleration within 0.4 of the disc per axis,
+/// tilt 5–35°, N = 50–200, with and without speed rows), each solved with
+/// the rollout start and without: where the start applies, the interior
+/// point finishes fewer of them and the augmented Lagrangian needs fewer
+/// Newton steps on those both solve. Prints the figures (1000 instances,
+/// proptest's deterministic runner).
+#[test]
+fn the_rollout_start_saves_newton_steps_on_random_cold_instances() {
+    use proptest::strategy::{Strategy, ValueTree};
+    let mut runner = proptest::test_runner::TestRunner::deterministic();
+    let instances = (
+        50usize..=200,
+        proptest::array::uniform2(0.5f64..10.0),
+        proptest::array::uniform2(1e-3f64..0.1),
+        5.0f64..35.0,
+        proptest::option::of(2.0f64..8.0),
+        proptest::array::uniform2(-8.0f64..8.0),
+        proptest::array::uniform2(-0.4f64..0.4),
+        proptest::array::uniform2(-20.0f64..20.0),
+        proptest::array::uniform2(-8.0f64..8.0),
+    );
+    let (mut applied, mut both) = (0, 0);
+    let (mut ip_started, mut ip_plain) = (0, 0);
+    let (mut steps_started, mut steps_plain) = (0, 0);
+    for _ in 0..1000 {
+        let (horizon, q, r, tilt, speed, v0, a0, target, slope) =
+            instances.new_tree(&mut runner).unwrap().current();
+        let a = G * tilt.to_radians().tan();
+        let bounds = ConeBounds::new(a, speed);
+        let weights = std::array::from_fn(|i| AxisWeights {
+            q: q[i],
+            r: r[i],
+            smoothness: Smoothness::default(),
+        });
+        let axes: [Axis; 2] = std::array::from_fn(|i| Axis {
+            fixed: [0.0, v0[i] * DT, (2.0 * v0[i] + a0[i] * a * DT) * DT],
+            sent: None,
+            reference: (0..=horizon)
+                .map(|j| target[i] + slope[i] * DT * j as f64)
+                .collect(),
+        });
+        let solve = |rollout: bool| {
+            let mut solver = BandedConeSolver::new(horizon, DT, weights, bounds, false).unwrap();
+            solver.set_rollout_start(rollout);
+            let _ = banded_plans(&mut solver, weights, &axes);
+            (
+                solver.rollout_started(),
+                solver.method(),
+                solver.iterations(),
+            )
+        };
+        let (started, method, steps) = solve(true);
+        if !started {
+            continue;
+        }
+        applied += 1;
+        let (_, plain_method, plain_steps) = solve(false);
+        ip_started += usize::from(method == ConeMethod::InteriorPoint);
+        ip_plain += usize::from(plain_method == ConeMethod::InteriorPoint);
+        if method == ConeMethod::Alm && plain_method == ConeMethod::Alm {
+            both += 1;
+            steps_started += steps;
+            steps_plain += plain_steps;
+        }
+    }
+    let mean = |s: usize| s as f64 / both as f64;
+    eprintln!(
+        "rollout start on {applied} of 1000 cold instances: interior point {ip_started} with it, \
+         {ip_plain} without; Newton steps where the ALM solved both ({both}): {:.1} with it, {:.1} without",
+        mean(steps_started),
+        mean(steps_plain)
+    );
+    assert!(applied >= 100, "the start applied to {applied} instances");
+    assert!(
+        ip_started < ip_plain,
+        "interior point {ip_started} vs {ip_plain}"
+    );
+    assert!(
+        steps_started < steps_plain,
+        "{steps_started} vs {steps_plain}"
+    );
+}
+
 /// After the interior point solved a tick (the augmented Lagrangian gave
 /// up), the next tick's augmented Lagrangian starts from the interior
 /// point's multipliers — the discs' `z_f·u_f` — shifted with the plan: it
