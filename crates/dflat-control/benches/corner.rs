@@ -217,6 +217,10 @@ struct ConeWork {
     burst_rest: Vec<f64>,
     /// Newton steps of the first ticks' augmented Lagrangians (all axes).
     burst_steps: Vec<f64>,
+    /// Ticks whose update failed (every solver of the cascade; the
+    /// daemon's plan fallback flies them), and the first one's error.
+    failed: usize,
+    first_failure: Option<String>,
 }
 
 impl ConeWork {
@@ -253,10 +257,18 @@ fn replay(
         let mut was_constrained = false;
         for m in flight {
             let start = Instant::now();
-            let out =
-                std::hint::black_box(ctrl.update(std::hint::black_box(m), &mut reference)).unwrap();
+            let out = std::hint::black_box(ctrl.update(std::hint::black_box(m), &mut reference));
             let t = start.elapsed().as_secs_f64();
             all.push(t);
+            let out = match out {
+                Ok(out) => out,
+                Err(e) => {
+                    work.failed += 1;
+                    work.first_failure.get_or_insert_with(|| e.to_string());
+                    was_constrained = false;
+                    continue;
+                }
+            };
             if out.constrained {
                 constrained.push(t);
                 if was_constrained {
@@ -329,6 +341,14 @@ fn main() {
             }
             let (mut all, mut con, mut work) =
                 replay(config, n, (Course::Corner, &flight), repeats);
+            if let Some(e) = &work.first_failure {
+                cone_work.push(format!(
+                    "{}: {} of {} ticks failed (the first: {e})",
+                    config.name(),
+                    work.failed,
+                    all.len()
+                ));
+            }
             if !matches!(
                 config,
                 Config::Fast | Config::ConeClarabel | Config::BoxRateClarabel
@@ -456,6 +476,13 @@ fn course_of_corners(horizons: &[usize], chosen: &dyn Fn(Config) -> bool) {
                 us(percentile(rest, 99.0)),
                 us(percentile(rest, 100.0)),
             );
+            if let Some(e) = &work.first_failure {
+                println!(
+                    "({}: {} ticks failed, the first: {e})",
+                    config.name(),
+                    work.failed
+                );
+            }
         }
     }
 }
