@@ -273,6 +273,61 @@ fn a_late_corner_is_solved_on_the_window_and_matches_clarabel() {
     assert!(og <= ow + 1e-7 * (1.0 + ow.abs()), "{og} vs {ow}");
 }
 
+/// One solver through cold solves whose windows open at different stages
+/// (a corner 20, 45 and 10 stages before the horizon's end, then 45
+/// again): each window's factorisation restores the rows the last window
+/// changed before its own to P's, so every solve takes the same Newton
+/// steps to the same plan as a fresh solver's (a stale row would still
+/// converge, on a worse Newton matrix: the steps tell), and that plan is
+/// the one the whole horizon gives.
+#[test]
+fn successive_windows_solve_as_the_whole_horizon_does() {
+    let horizon = 200;
+    let w = AxisWeights {
+        q: 5.0,
+        r: 0.01,
+        smoothness: Smoothness::default(),
+    };
+    let bounds = ConeBounds::new(G * 20f64.to_radians().tan(), None);
+    let v = 8.0;
+    let corner = |before_end: usize| {
+        let turn = horizon - before_end;
+        let along = move |j: usize| v * DT * j.min(turn) as f64;
+        let across = move |j: usize| v * DT * j.saturating_sub(turn) as f64;
+        let axis = |f: &dyn Fn(usize) -> f64, v0: f64| Axis {
+            fixed: [0.0, v0 * DT, 2.0 * v0 * DT],
+            sent: None,
+            reference: (0..=horizon).map(f).collect(),
+        };
+        [axis(&along, v), axis(&across, 0.0)]
+    };
+    let mut solver = BandedConeSolver::new(horizon, DT, [w, w], bounds, false).unwrap();
+    let mut windows = Vec::new();
+    for before_end in [20, 45, 10, 45] {
+        let axes = corner(before_end);
+        let got = banded_plans(&mut solver, [w, w], &axes);
+        windows.push(solver.eliminated_head());
+        let mut fresh = BandedConeSolver::new(horizon, DT, [w, w], bounds, false).unwrap();
+        let first = banded_plans(&mut fresh, [w, w], &axes);
+        assert_eq!(
+            solver.iterations(),
+            fresh.iterations(),
+            "corner {before_end} before the end"
+        );
+        assert_plans_within(&got, &first, 1e-12, "a fresh solver's");
+        let mut whole = BandedConeSolver::new(horizon, DT, [w, w], bounds, false).unwrap();
+        whole.set_eliminate_head(false);
+        let want = banded_plans(&mut whole, [w, w], &axes);
+        assert_plans_within(&got, &want, 1e-7, "the whole horizon's");
+    }
+    assert!(
+        windows.iter().all(|&s| s > horizon / 2)
+            && windows[0] != windows[1]
+            && windows[1] != windows[2],
+        "windows {windows:?}"
+    );
+}
+
 /// The flight's first tick, from rest, with the reference already moving
 /// at 8 m/s 3 m to the side (the corner bench's): the plan binds at once,
 /// so the augmented Lagrangian starts from the saturated rollout and the

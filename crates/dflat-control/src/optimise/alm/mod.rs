@@ -79,13 +79,20 @@
 //! response to the window's, `d_H = −P_HH⁻¹·P_HT·d_T` — what the back
 //! substitution gives from a right-hand side 0 on the head — and `P·d` is
 //! 0 there. The gradient, stage pass, line search, `P·d`, the forward
-//! substitution and (after the window's first factorisation, whose head
-//! is P's) the assembly and the factor
+//! substitution, the assembly and the factor
 //! ([`BandedCholesky::refactor_rows_from`]) then run on the window's rows;
-//! x is moved whole. When the window converges, the whole horizon's
-//! gradient checks it, and the solve goes on there should a stage or row
-//! of the head bind after all. On the course of corners at N = 200 a
-//! burst's first tick went from ~270–460 µs to ~130–140 µs.
+//! x is moved whole. The windows' factorisations go into a factor of
+//! their own (`head`), factored from P once, at construction: its rows
+//! before any window are P's, and a window's first factorisation restores
+//! to P's the rows a later-opening window before it changed, so it too
+//! refactors the window's rows only, not the whole horizon as into the
+//! factor the last warm solve left. When the window converges, the whole
+//! horizon's gradient checks it, and the solve goes on there should a
+//! stage or row of the head bind after all. On the course of corners at
+//! N = 200 a burst's first tick went from ~270–460 µs to ~130–140 µs;
+//! the head's own factor took a late corner's cold solve after a solve
+//! over the whole horizon from ~162 to ~153 µs (median of 400, five
+//! alternating runs).
 //!
 //! **The rollout start.** A cold solve whose unconstrained plan leaves its
 //! disc within the first four stages while the vehicle's present
@@ -325,10 +332,14 @@ pub struct BandedAlm {
     /// module docs, "The eliminated head"), and per row its first unknown.
     window: usize,
     row_first: Vec<usize>,
-    /// Whether the held factor is of a matrix assembled in this window
-    /// (its head the base's: later factorisations assemble and compare
-    /// the window's rows only).
-    window_held: bool,
+    /// The factor of the windows' Newton matrices: its held matrix is P's
+    /// on the unknowns before `head_base_until`, so a window's
+    /// factorisation refactors its rows only; `head_valid` (else no window
+    /// opens); `head_factored`: the last factorisation was into it.
+    head: BandedCholesky,
+    head_base_until: usize,
+    head_valid: bool,
+    head_factored: bool,
     /// The window the last solve opened (0: none).
     last_window: usize,
     /// Whether the last solve started from the rollout (module docs).
@@ -392,6 +403,10 @@ impl BandedAlm {
             }
         }
         let diag_max = (0..size).fold(0.0f64, |a, i| a.max(base.get(i, i)));
+        // P's factor, the head of every window's (P is positive definite
+        // for valid weights; should it not factor, no window opens).
+        let mut head = BandedCholesky::new(size, bandwidth);
+        let head_valid = head.refactor_taking(&mut base.clone()).is_ok();
         let m = rows.len();
         let row_first = rows
             .iter()
@@ -441,7 +456,10 @@ impl BandedAlm {
             y_last_valid: false,
             window: 0,
             row_first,
-            window_held: false,
+            head,
+            head_base_until: size,
+            head_valid,
+            head_factored: false,
             last_window: 0,
             rollout_started: false,
         }
@@ -552,17 +570,25 @@ impl BandedAlm {
     }
 
     /// Assembles and factors the generalised Hessian at x: in the window,
-    /// past its first factorisation, its rows only (the head's are the
-    /// base's, held); else all of it.
+    /// its rows only, into the head's factor (`head`, whose rows before
+    /// the window are P's: module docs, "The eliminated head"); else all
+    /// of it.
     fn factor_newton_matrix(&mut self, lo: &[f64], hi: &[f64]) -> Result<(), ControlError> {
-        if self.window_held {
+        if self.window > 0 {
             let from = self.window_unknown();
-            self.assemble(lo, hi, from);
-            self.chol.refactor_rows_from(&self.kkt, from)?;
+            // Rows the last window changed before this one's are P's again.
+            let start = from.min(self.head_base_until);
+            self.assemble(lo, hi, start);
+            if let Err(e) = self.head.refactor_rows_from(&self.kkt, start) {
+                self.head_valid = false;
+                return Err(e);
+            }
+            self.head_base_until = from;
+            self.head_factored = true;
         } else {
             self.assemble(lo, hi, 0);
             self.chol.refactor_taking(&mut self.kkt)?;
-            self.window_held = self.window > 0;
+            self.head_factored = false;
         }
         self.factorisations += 1;
         self.factored_active.clone_from(&self.active);
@@ -724,7 +750,12 @@ impl BandedAlm {
                 for (d, g) in self.d[j0..].iter_mut().zip(&self.g[j0..]) {
                     *d = -g;
                 }
-                self.chol.solve_in_place_from(&mut self.d, j0)?;
+                let factor = if self.head_factored {
+                    &self.head
+                } else {
+                    &self.chol
+                };
+                factor.solve_in_place_from(&mut self.d, j0)?;
                 let decrement: f64 = -self.g[j0..]
                     .iter()
                     .zip(&self.d[j0..])

@@ -26,7 +26,7 @@ impl BandedAlm {
             return done;
         };
         let window = first.saturating_sub(WINDOW_MARGIN);
-        if window < 2 || (window as f64) < WINDOW_MIN_SHARE * n as f64 {
+        if window < 2 || (window as f64) < WINDOW_MIN_SHARE * n as f64 || !self.head_valid {
             return done;
         }
         let j0 = self.k * (window - 2);
@@ -39,7 +39,6 @@ impl BandedAlm {
             return done;
         }
         self.window = window;
-        self.window_held = false;
         self.last_window = window;
         let gn = self.g[j0..].iter().fold(0.0f64, |a, b| a.max(b.abs()));
         (gn, done.1, done.2)
@@ -49,7 +48,6 @@ impl BandedAlm {
     /// evaluated afresh on it by the next gradient.
     pub(super) fn close_window(&mut self) {
         self.window = 0;
-        self.window_held = false;
         self.full_step = None;
         self.px_current = false;
     }
