@@ -268,6 +268,15 @@ fn a_late_corner_is_solved_on_the_window_and_matches_clarabel() {
     );
     assert_plans_within(&got, &want, 1e-5, "clarabel");
     assert_plans_within(&got, &got_whole, 1e-7, "the whole horizon's");
+    // The window's steps with the back substitution over the whole horizon
+    // every step: the same steps (a wrong move of the head at the close
+    // would cost whole-horizon steps after it) to the same plan.
+    let mut uncut = BandedConeSolver::new(horizon, DT, [w, w], bounds, false).unwrap();
+    uncut.alm_mut().unwrap().set_no_cut(true);
+    let got_uncut = banded_plans(&mut uncut, [w, w], &axes);
+    assert_eq!(uncut.eliminated_head(), window);
+    assert_eq!(uncut.iterations(), solver.iterations());
+    assert_plans_within(&got, &got_uncut, 1e-9, "the uncut back substitution's");
     let obj = |p: &Plans| objective(horizon, &[w, w], &bounds, &axes, [&p[0], &p[1]], &[]);
     let (ow, og) = (obj(&want), obj(&got));
     assert!(og <= ow + 1e-7 * (1.0 + ow.abs()), "{og} vs {ow}");

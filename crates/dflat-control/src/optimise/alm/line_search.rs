@@ -83,9 +83,7 @@ impl BandedAlm {
     /// so the sum keeps their accuracy; on the window only, the head's
     /// P·d being 0).
     fn step(&mut self, alpha: f64) {
-        for (x, d) in self.x.iter_mut().zip(&self.d) {
-            *x += alpha * d;
-        }
+        self.move_x(alpha);
         let j0 = self.window_unknown();
         for (p, pd) in self.px[j0..].iter_mut().zip(&self.pd[j0..]) {
             *p += alpha * pd;

@@ -86,7 +86,14 @@
 //! before any window are P's, and a window's first factorisation restores
 //! to P's the rows a later-opening window before it changed, so it too
 //! refactors the window's rows only, not the whole horizon as into the
-//! factor the last warm solve left. When the window converges, the whole
+//! factor the last warm solve left. Each step's back substitution stops
+//! eight stages before the window ([`BandedCholesky::solve_in_place_cut`]):
+//! nothing reads the unknowns before that until the window closes, when
+//! they move once, by the steps' sum extended back
+//! ([`BandedCholesky::extend_back`]; linear, the head's factor being P's
+//! throughout). On the course of corners at N = 200 the window solves
+//! took 71 µs on average against 83 µs without the cut (eight
+//! alternating runs). When the window converges, the whole
 //! horizon's gradient checks it, and the solve goes on there should a
 //! stage or row of the head bind after all. On the course of corners at
 //! N = 200 a burst's first tick went from ~270–460 µs to ~130–140 µs;
@@ -338,6 +345,14 @@ pub struct BandedAlm {
     /// opens); `head_factored`: the last factorisation was into it.
     head: BandedCholesky,
     head_base_until: usize,
+    /// While a window is open: the first unknown whose steps are taken
+    /// (0: all); those before it move once, as the window closes, by the
+    /// steps' sum at the b unknowns from `cut` on (`cut_seed`).
+    cut: usize,
+    cut_seed: Vec<f64>,
+    /// Tests: every step's back substitution over the whole horizon.
+    #[cfg(test)]
+    no_cut: bool,
     head_valid: bool,
     head_factored: bool,
     /// The window the last solve opened (0: none).
@@ -458,6 +473,10 @@ impl BandedAlm {
             row_first,
             head,
             head_base_until: size,
+            cut: 0,
+            cut_seed: vec![0.0; bandwidth],
+            #[cfg(test)]
+            no_cut: false,
             head_valid,
             head_factored: false,
             last_window: 0,
@@ -490,6 +509,13 @@ impl BandedAlm {
     /// docs, "The rollout start").
     pub fn rollout_started(&self) -> bool {
         self.rollout_started
+    }
+
+    /// Turns the window's cut back substitution off (tests: the same solve
+    /// both ways).
+    #[cfg(test)]
+    pub(crate) fn set_no_cut(&mut self, on: bool) {
+        self.no_cut = on;
     }
 
     /// Turns the rollout start on or off (tests: the same solve both ways).
@@ -755,7 +781,7 @@ impl BandedAlm {
                 } else {
                     &self.chol
                 };
-                factor.solve_in_place_from(&mut self.d, j0)?;
+                factor.solve_in_place_cut(&mut self.d, j0, self.cut)?;
                 let decrement: f64 = -self.g[j0..]
                     .iter()
                     .zip(&self.d[j0..])
@@ -776,9 +802,7 @@ impl BandedAlm {
                 if decrement <= inner_tol.max(loose) {
                     // Converged to rounding (or enough for this update):
                     // the full step, and done.
-                    for (x, d) in self.x.iter_mut().zip(&self.d) {
-                        *x += d;
-                    }
+                    self.move_x(1.0);
                     self.px_current = false;
                     (_, stage_res, row_res) = self.gradient(a0, lo, hi);
                     break;

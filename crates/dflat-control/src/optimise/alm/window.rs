@@ -4,6 +4,10 @@
 
 use super::{BandedAlm, WINDOW_MARGIN, WINDOW_MIN_SHARE};
 
+/// Stages before the window from which its steps move the head's
+/// unknowns at once ([`BandedAlm::move_x`]).
+const CUT_MARGIN: usize = 8;
+
 impl BandedAlm {
     /// Opens the window on a cold solve whose plan leaves its sets only
     /// late in the horizon (module docs, "The eliminated head"): from the
@@ -40,6 +44,15 @@ impl BandedAlm {
         }
         self.window = window;
         self.last_window = window;
+        // The head's unknowns P·x and the window's stages read reach
+        // 2 + 4 stages before the window (P's half-bandwidth per axis is at
+        // most 4); two more for margin.
+        self.cut = if self.head.can_cut() && !self.cut_off() {
+            self.k * window.saturating_sub(CUT_MARGIN)
+        } else {
+            0
+        };
+        self.cut_seed.fill(0.0);
         let gn = self.g[j0..].iter().fold(0.0f64, |a, b| a.max(b.abs()));
         (gn, done.1, done.2)
     }
@@ -47,8 +60,42 @@ impl BandedAlm {
     /// Back to the whole horizon: P·x and the stages' accelerations
     /// evaluated afresh on it by the next gradient.
     pub(super) fn close_window(&mut self) {
+        if self.cut > 0 {
+            // The head's unknowns before the cut move by the steps' sum,
+            // extended back from its b unknowns at the cut (d is free
+            // until the next step).
+            let (cut, b) = (self.cut, self.cut_seed.len());
+            self.d[cut..cut + b].copy_from_slice(&self.cut_seed);
+            self.head.extend_back(&mut self.d, cut);
+            for (x, d) in self.x[..cut].iter_mut().zip(&self.d[..cut]) {
+                *x += d;
+            }
+            self.cut = 0;
+        }
         self.window = 0;
         self.full_step = None;
         self.px_current = false;
+    }
+
+    /// `x += α·d`; while the window is open, from the cut on, with the
+    /// step's b unknowns at the cut added to the seed of the head's move.
+    pub(super) fn move_x(&mut self, alpha: f64) {
+        let cut = self.cut;
+        for (x, d) in self.x[cut..].iter_mut().zip(&self.d[cut..]) {
+            *x += alpha * d;
+        }
+        if cut > 0 {
+            for (s, d) in self.cut_seed.iter_mut().zip(&self.d[cut..]) {
+                *s += alpha * d;
+            }
+        }
+    }
+
+    /// Whether the cut is switched off (tests only).
+    fn cut_off(&self) -> bool {
+        #[cfg(test)]
+        return self.no_cut;
+        #[cfg(not(test))]
+        false
     }
 }

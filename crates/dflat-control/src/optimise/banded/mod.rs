@@ -21,6 +21,7 @@ use crate::ControlError;
 
 mod ldl;
 mod refactor;
+mod truncated;
 
 pub use ldl::BandedLdl;
 
