@@ -81,25 +81,25 @@
 //! 0 there. The gradient, stage pass, line search, `P·d`, the forward
 //! substitution, the assembly and the factor
 //! ([`BandedCholesky::refactor_rows_from`]) then run on the window's rows;
-//! x is moved whole. The windows' factorisations go into a factor of
-//! their own (`head`), factored from P once, at construction: its rows
-//! before any window are P's, and a window's first factorisation restores
-//! to P's the rows a later-opening window before it changed, so it too
-//! refactors the window's rows only, not the whole horizon as into the
-//! factor the last warm solve left. Each step's back substitution stops
-//! eight stages before the window ([`BandedCholesky::solve_in_place_cut`]):
-//! nothing reads the unknowns before that until the window closes, when
-//! they move once, by the steps' sum extended back
-//! ([`BandedCholesky::extend_back`]; linear, the head's factor being P's
-//! throughout). On the course of corners at N = 200 the window solves
-//! took 71 µs on average against 83 µs without the cut (eight
-//! alternating runs). When the window converges, the whole
-//! horizon's gradient checks it, and the solve goes on there should a
-//! stage or row of the head bind after all. On the course of corners at
-//! N = 200 a burst's first tick went from ~270–460 µs to ~130–140 µs;
-//! the head's own factor took a late corner's cold solve after a solve
-//! over the whole horizon from ~162 to ~153 µs (median of 400, five
-//! alternating runs).
+//! x is moved whole. When the window converges, the whole horizon's
+//! gradient checks it, and the solve goes on there should a stage or row
+//! of the head bind after all. On the course of corners at N = 200 a
+//! burst's first tick went from ~270–460 µs to ~130–140 µs.
+//!
+//! The windows' factorisations go into a factor of their own (`head`),
+//! factored from P once, at construction: its rows before any window are
+//! P's — a window's first factorisation restores to P's the rows that an
+//! earlier-starting window changed before its own start — so it too
+//! refactors the window's rows only, not the whole horizon as it would
+//! into the factor the last warm solve left (a late corner's cold solve
+//! after one over the whole horizon: ~162 → ~153 µs, median of 400, five
+//! alternating runs). Each step's back substitution stops eight stages
+//! before the window ([`BandedCholesky::solve_in_place_cut`]): nothing
+//! reads the unknowns before that until the window closes, when they move
+//! once, by the steps' sum extended back ([`BandedCholesky::extend_back`];
+//! linear, the head's factor being P's throughout). On the course of
+//! corners at N = 200 the window solves took 71 µs on average against
+//! 83 µs without the cut (eight alternating runs).
 //!
 //! **The rollout start.** A cold solve whose unconstrained plan leaves its
 //! disc within the first four stages while the vehicle's present
@@ -345,6 +345,8 @@ pub struct BandedAlm {
     /// opens); `head_factored`: the last factorisation was into it.
     head: BandedCholesky,
     head_base_until: usize,
+    head_valid: bool,
+    head_factored: bool,
     /// While a window is open: the first unknown whose steps are taken
     /// (0: all); those before it move once, as the window closes, by the
     /// steps' sum at the b unknowns from `cut` on (`cut_seed`).
@@ -353,8 +355,6 @@ pub struct BandedAlm {
     /// Tests: every step's back substitution over the whole horizon.
     #[cfg(test)]
     no_cut: bool,
-    head_valid: bool,
-    head_factored: bool,
     /// The window the last solve opened (0: none).
     last_window: usize,
     /// Whether the last solve started from the rollout (module docs).
