@@ -418,3 +418,49 @@ fn a_read_only_records_directory_at_start_does_not_ground_the_vehicle() {
     kept_flying(&commands, stopped);
     said_once(&texts, &stderr, "disk trouble");
 }
+
+/// A start that fails at the link (its `udpin` port taken) exits with the
+/// link's error and leaves the records directory as it found it: no empty
+/// flight of its own, and the old flight that `records.keep_mb` would have
+/// pruned for it still there.
+#[test]
+fn a_start_whose_link_does_not_open_leaves_the_records_as_they_were() {
+    let dir = std::env::temp_dir().join(format!("dflat-failed-start-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let old = dir.join("flight-20260101-000000.csv");
+    std::fs::write(&old, vec![b'x'; 3 * 1024 * 1024]).unwrap();
+    let config = dir.join("daemon.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "[logging]\ndir = \"{}\"\ntlog = true\ncsv = true\n[records]\nmax_mb = 1.0\nkeep_mb = 2.0\n",
+            dir.display()
+        ),
+    )
+    .unwrap();
+    let taken = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    let link = format!("udpin:{}", taken.local_addr().unwrap());
+    let out = Command::new(bin())
+        .args(["daemon", "--config"])
+        .arg(&config)
+        .args(["--link", &link])
+        .output()
+        .expect("run dflat daemon");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "the daemon started: {stderr}");
+    assert!(stderr.contains("link"), "{stderr}");
+    let mut left: Vec<String> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    left.sort();
+    assert_eq!(
+        left,
+        ["daemon.toml", "flight-20260101-000000.csv"],
+        "{stderr}"
+    );
+    assert_eq!(std::fs::metadata(&old).unwrap().len(), 3 * 1024 * 1024);
+    drop(taken);
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -1,10 +1,13 @@
 //! Where the flight records go, and what happens when the disk says no.
 //!
-//! [`open`] prepares one flight's records: it creates `logging.dir`,
-//! deletes the oldest flights until the directory plus this flight's quota
-//! fits `records.keep_mb` ([`plan_pruning`], pure), and creates the CSV
-//! and the `.tlog` tap with the flight's [`RecordBudget`]
-//! (`records.max_mb`) and sync cadence (`records.sync_ms`).
+//! [`open`] prepares one flight's records: it creates `logging.dir` and
+//! the CSV and the `.tlog` tap with the flight's [`RecordBudget`]
+//! (`records.max_mb`) and sync cadence (`records.sync_ms`). Once the
+//! daemon's link is open, [`OpenRecords::prune`] deletes the oldest flights
+//! until the directory plus this flight's quota fits `records.keep_mb`
+//! ([`plan_pruning`], pure); a start whose link does not open deletes the
+//! files it created instead ([`OpenRecords::discard`]), so a failed start
+//! leaves the directory as it found it (but for `logging.dir` itself).
 //!
 //! **Disk trouble never grounds the vehicle.** A directory that cannot be
 //! created or written (read-only, no permission, full) does not stop the
@@ -62,6 +65,50 @@ pub struct OpenRecords {
     pub budget: Arc<RecordBudget>,
     /// What [`open`] did (completed by [`finish_summary`]).
     pub summary: RecordsSummary,
+    /// This flight's stem (`flight-…`) and the files [`open`] created.
+    stem: Option<String>,
+    files: Vec<PathBuf>,
+}
+
+impl OpenRecords {
+    /// Deletes the oldest flights of the records directory until what
+    /// stays plus this flight's quota fits `records.keep_mb` (never this
+    /// flight), into the summary (`deleted`, `deleted_bytes`). Called once
+    /// the daemon is sure to fly: its link is open.
+    pub fn prune(&mut self, config: &Config) {
+        let r = &config.records;
+        let (Some(keep), Some(dir)) = (r.keep_bytes(), self.summary.dir.clone()) else {
+            return;
+        };
+        if self.stem.is_none() {
+            // The directory could not be made.
+            return;
+        }
+        match prune(&dir, keep, r.max_bytes().unwrap_or(0), self.stem.as_deref()) {
+            Ok((deleted, freed)) => {
+                self.summary.deleted = deleted;
+                self.summary.deleted_bytes = freed;
+            }
+            Err(e) => warn!(dir = %dir.display(), error = %e, "records.keep_mb: cannot prune"),
+        }
+    }
+
+    /// Stops the writers and deletes the files [`open`] created: the start
+    /// failed after them (the link would not open), and a failed start
+    /// leaves no empty flight behind.
+    pub fn discard(self) {
+        if let Some(csv) = self.csv {
+            drop(csv.finish());
+        }
+        if let Some(tap) = self.tap {
+            drop(tap.close_blocking());
+        }
+        for f in &self.files {
+            if let Err(e) = std::fs::remove_file(f) {
+                warn!(file = %f.display(), error = %e, "cannot delete the records of a failed start");
+            }
+        }
+    }
 }
 
 /// One flight in the records directory: its stem (`flight-…`) and the
@@ -114,10 +161,17 @@ pub fn stored_flights(dir: &Path) -> std::io::Result<Vec<StoredFlight>> {
         .collect())
 }
 
-/// Deletes every `flight-…` file of the flights `plan_pruning` picks.
-/// Returns the stems deleted and the bytes freed.
-fn prune(dir: &Path, keep: u64, reserve: u64) -> std::io::Result<(Vec<String>, u64)> {
-    let flights = stored_flights(dir)?;
+/// Deletes every `flight-…` file of the flights `plan_pruning` picks,
+/// never those of the flight `current`. Returns the stems deleted and the
+/// bytes freed.
+fn prune(
+    dir: &Path,
+    keep: u64,
+    reserve: u64,
+    current: Option<&str>,
+) -> std::io::Result<(Vec<String>, u64)> {
+    let mut flights = stored_flights(dir)?;
+    flights.retain(|f| Some(f.stem.as_str()) != current);
     let victims = plan_pruning(&flights, keep, reserve);
     let mut deleted = Vec::new();
     let mut freed = 0;
@@ -152,6 +206,8 @@ pub fn open(config: &Config, started: SystemTime) -> OpenRecords {
         tap: None,
         budget: budget.clone(),
         summary: RecordsSummary::default(),
+        stem: None,
+        files: Vec::new(),
     };
     if config.logging.dir.trim().is_empty() {
         out.summary = summary;
@@ -169,21 +225,16 @@ pub fn open(config: &Config, started: SystemTime) -> OpenRecords {
         out.summary = summary;
         return out;
     }
-    if let Some(keep) = r.keep_bytes() {
-        match prune(&dir, keep, r.max_bytes().unwrap_or(0)) {
-            Ok((deleted, freed)) => {
-                summary.deleted = deleted;
-                summary.deleted_bytes = freed;
-            }
-            Err(e) => warn!(dir = %dir.display(), error = %e, "records.keep_mb: cannot prune"),
-        }
-    }
     let stem = flight_stem(&dir, started);
+    out.stem = stem.file_name().and_then(|n| n.to_str()).map(str::to_owned);
     let mut failures = Vec::new();
     if config.logging.csv {
         let path = stem.with_extension("csv");
         match CsvRecorder::create_with(&path, budget.clone(), r.sync_every()) {
-            Ok(c) => out.csv = Some(c),
+            Ok(c) => {
+                out.csv = Some(c);
+                out.files.push(path);
+            }
             Err(e) => failures.push(format!("{}: {e}", path.display())),
         }
     }
@@ -197,7 +248,10 @@ pub fn open(config: &Config, started: SystemTime) -> OpenRecords {
             inbound: false,
         };
         match TlogTap::create_with(&path, options) {
-            Ok(t) => out.tap = Some(t),
+            Ok(t) => {
+                out.tap = Some(t);
+                out.files.push(path);
+            }
             Err(TransportError::Io { source, .. }) => {
                 failures.push(format!("{}: {source}", path.display()));
             }
@@ -341,8 +395,13 @@ mod tests {
         cfg.logging.dir = dir.display().to_string();
         cfg.records.max_mb = 2.0;
         cfg.records.keep_mb = 5.0;
-        let rec = open(&cfg, SystemTime::now());
-        // 7 MiB stored + 2 reserved > 5: the two oldest go (1 + 2 ≤ 5).
+        let mut rec = open(&cfg, SystemTime::now());
+        // Opening prunes nothing; the daemon prunes once its link is open.
+        assert!(rec.summary.deleted.is_empty());
+        assert!(dir.join("flight-20260101-000000.csv").exists());
+        rec.prune(&cfg);
+        // 7 MiB stored + 2 reserved > 5: the two oldest go (1 + 2 ≤ 5),
+        // never the flight just opened.
         assert_eq!(
             rec.summary.deleted,
             vec!["flight-20260101-000000", "flight-20260102-000000"]

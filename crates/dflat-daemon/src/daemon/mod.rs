@@ -480,12 +480,6 @@ pub async fn spawn_with_controller(
         .validate()
         .map_err(|e| DaemonError::Internal(format!("thrust mapping: {e}")))?;
 
-    // Records: never a reason not to fly (disk trouble is noticed).
-    let records = crate::record_store::open(&config, SystemTime::now());
-    let (csv, tap) = (records.csv, records.tap);
-    let records_budget = records.budget;
-    let records_summary = records.summary;
-
     let controller_name = controller.name().to_owned();
     // udpin: one peer (link.peer, or the first sender of the autopilot's
     // HEARTBEAT); udpout connects; tcp / serial reconnect.
@@ -501,16 +495,34 @@ pub async fn spawn_with_controller(
     if peer.is_some() && !matches!(endpoint, Endpoint::UdpIn { .. }) {
         warn!(link = %endpoint, "link.peer applies to udpin links only: ignored");
     }
-    let transport = Transport::open_with(
+
+    // Records: never a reason not to fly (disk trouble is noticed). The
+    // link records into the tap from its first frame, so they open first;
+    // should the link not open, they are deleted again, and the oldest
+    // flights are pruned only once it has.
+    let mut records = crate::record_store::open(&config, SystemTime::now());
+    let opened = Transport::open_with(
         &endpoint,
         OpenOptions {
-            tap: tap.clone(),
+            tap: records.tap.clone(),
             udpin_peer: UdpInPeer::Lock(peer),
             reconnect: true,
         },
     )
-    .await
-    .map_err(DaemonError::Link)?;
+    .await;
+    let transport = match opened {
+        Ok(t) => t,
+        Err(e) => {
+            tokio::task::spawn_blocking(move || records.discard())
+                .await
+                .map_err(|j| DaemonError::Internal(format!("records: {j}")))?;
+            return Err(DaemonError::Link(e));
+        }
+    };
+    records.prune(&config);
+    let (csv, tap) = (records.csv.take(), records.tap.take());
+    let records_budget = records.budget.clone();
+    let records_summary = std::mem::take(&mut records.summary);
     let local_addr = transport.local_addr();
     info!(
         link = %endpoint,
