@@ -513,9 +513,9 @@ pub async fn spawn_with_controller(
     let transport = match opened {
         Ok(t) => t,
         Err(e) => {
-            tokio::task::spawn_blocking(move || records.discard())
-                .await
-                .map_err(|j| DaemonError::Internal(format!("records: {j}")))?;
+            // The link's error is the one to report, whatever the clean-up
+            // did (it logs its own trouble).
+            let _ = tokio::task::spawn_blocking(move || records.discard()).await;
             return Err(DaemonError::Link(e));
         }
     };
