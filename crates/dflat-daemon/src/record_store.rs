@@ -77,14 +77,15 @@ impl OpenRecords {
     /// the daemon is sure to fly: its link is open.
     pub fn prune(&mut self, config: &Config) {
         let r = &config.records;
-        let (Some(keep), Some(dir)) = (r.keep_bytes(), self.summary.dir.clone()) else {
+        // No stem: no directory (`logging.dir` empty, or it could not be made).
+        let (Some(keep), Some(dir), Some(stem)) = (
+            r.keep_bytes(),
+            self.summary.dir.clone(),
+            self.stem.as_deref(),
+        ) else {
             return;
         };
-        if self.stem.is_none() {
-            // The directory could not be made.
-            return;
-        }
-        match prune(&dir, keep, r.max_bytes().unwrap_or(0), self.stem.as_deref()) {
+        match prune(&dir, keep, r.max_bytes().unwrap_or(0), stem) {
             Ok((deleted, freed)) => {
                 self.summary.deleted = deleted;
                 self.summary.deleted_bytes = freed;
@@ -168,10 +169,10 @@ fn prune(
     dir: &Path,
     keep: u64,
     reserve: u64,
-    current: Option<&str>,
+    current: &str,
 ) -> std::io::Result<(Vec<String>, u64)> {
     let mut flights = stored_flights(dir)?;
-    flights.retain(|f| Some(f.stem.as_str()) != current);
+    flights.retain(|f| f.stem != current);
     let victims = plan_pruning(&flights, keep, reserve);
     let mut deleted = Vec::new();
     let mut freed = 0;

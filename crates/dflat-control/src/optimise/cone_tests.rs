@@ -190,6 +190,33 @@ fn assert_plans_within(got: &Plans, want: &Plans, tol: f64, against: &str) {
     }
 }
 
+/// The weights of the deterministic cone tests (q = 5, r = 0.01, no
+/// smoothness term).
+fn tracking_weights() -> AxisWeights {
+    AxisWeights {
+        q: 5.0,
+        r: 0.01,
+        smoothness: Smoothness::default(),
+    }
+}
+
+/// Flying x at 8 m/s on the reference from its start; `before_end` stages
+/// before the horizon's end the reference turns into y at the same speed
+/// (a constrained burst's first tick: the plan leaves the cone only late).
+fn late_corner(horizon: usize, before_end: usize) -> [Axis; 2] {
+    let v = 8.0;
+    let turn = horizon - before_end;
+    let axis = |f: &dyn Fn(usize) -> f64, v0: f64| Axis {
+        fixed: [0.0, v0 * DT, 2.0 * v0 * DT],
+        sent: None,
+        reference: (0..=horizon).map(f).collect(),
+    };
+    [
+        axis(&|j| v * DT * j.min(turn) as f64, v),
+        axis(&|j| v * DT * j.saturating_sub(turn) as f64, 0.0),
+    ]
+}
+
 fn from_rest(horizon: usize, target: [f64; 2]) -> [Axis; 2] {
     target.map(|t| Axis {
         fixed: [0.0; 3],
@@ -201,11 +228,7 @@ fn from_rest(horizon: usize, target: [f64; 2]) -> [Axis; 2] {
 #[test]
 fn cone_binds_and_matches_clarabel_from_rest() {
     let horizon = 100;
-    let w = AxisWeights {
-        q: 5.0,
-        r: 0.01,
-        smoothness: Smoothness::default(),
-    };
+    let w = tracking_weights();
     let a = G * 15f64.to_radians().tan();
     let bounds = ConeBounds::new(a, None);
     let axes = from_rest(horizon, [8.0, -6.0]);
@@ -232,25 +255,10 @@ fn cone_binds_and_matches_clarabel_from_rest() {
 #[test]
 fn a_late_corner_is_solved_on_the_window_and_matches_clarabel() {
     let horizon = 200;
-    let w = AxisWeights {
-        q: 5.0,
-        r: 0.01,
-        smoothness: Smoothness::default(),
-    };
+    let w = tracking_weights();
     let a = G * 20f64.to_radians().tan();
     let bounds = ConeBounds::new(a, None);
-    // Flying x at 8 m/s on the reference; 20 stages before the horizon's
-    // end the reference turns into y at the same speed.
-    let v = 8.0;
-    let turn = horizon - 20;
-    let along = |j: usize| v * DT * j.min(turn) as f64;
-    let across = |j: usize| v * DT * j.saturating_sub(turn) as f64;
-    let axis = |f: &dyn Fn(usize) -> f64, v0: f64| Axis {
-        fixed: [0.0, v0 * DT, 2.0 * v0 * DT],
-        sent: None,
-        reference: (0..=horizon).map(f).collect(),
-    };
-    let axes = [axis(&along, v), axis(&across, 0.0)];
+    let axes = late_corner(horizon, 20);
     let want = clarabel_plans(horizon, [w, w], bounds, &axes, None).unwrap();
     let mut solver = BandedConeSolver::new(horizon, DT, [w, w], bounds, false).unwrap();
     let got = banded_plans(&mut solver, [w, w], &axes);
@@ -292,28 +300,12 @@ fn a_late_corner_is_solved_on_the_window_and_matches_clarabel() {
 #[test]
 fn successive_windows_solve_as_the_whole_horizon_does() {
     let horizon = 200;
-    let w = AxisWeights {
-        q: 5.0,
-        r: 0.01,
-        smoothness: Smoothness::default(),
-    };
+    let w = tracking_weights();
     let bounds = ConeBounds::new(G * 20f64.to_radians().tan(), None);
-    let v = 8.0;
-    let corner = |before_end: usize| {
-        let turn = horizon - before_end;
-        let along = move |j: usize| v * DT * j.min(turn) as f64;
-        let across = move |j: usize| v * DT * j.saturating_sub(turn) as f64;
-        let axis = |f: &dyn Fn(usize) -> f64, v0: f64| Axis {
-            fixed: [0.0, v0 * DT, 2.0 * v0 * DT],
-            sent: None,
-            reference: (0..=horizon).map(f).collect(),
-        };
-        [axis(&along, v), axis(&across, 0.0)]
-    };
     let mut solver = BandedConeSolver::new(horizon, DT, [w, w], bounds, false).unwrap();
     let mut windows = Vec::new();
     for before_end in [20, 45, 10, 45] {
-        let axes = corner(before_end);
+        let axes = late_corner(horizon, before_end);
         let got = banded_plans(&mut solver, [w, w], &axes);
         windows.push(solver.eliminated_head());
         let mut fresh = BandedConeSolver::new(horizon, DT, [w, w], bounds, false).unwrap();
@@ -346,11 +338,7 @@ fn successive_windows_solve_as_the_whole_horizon_does() {
 #[test]
 fn the_tick_from_rest_starts_from_the_rollout_and_matches_clarabel() {
     let horizon = 200;
-    let w = AxisWeights {
-        q: 5.0,
-        r: 0.01,
-        smoothness: Smoothness::default(),
-    };
+    let w = tracking_weights();
     let a = G * 20f64.to_radians().tan();
     let bounds = ConeBounds::new(a, None);
     let axis = |f: &dyn Fn(usize) -> f64| Axis {
@@ -471,11 +459,7 @@ fn the_rollout_start_saves_newton_steps_on_random_cold_instances() {
 #[test]
 fn the_cone_interior_points_duals_start_the_next_ticks_augmented_lagrangian() {
     let horizon = 100;
-    let w = AxisWeights {
-        q: 5.0,
-        r: 0.01,
-        smoothness: Smoothness::default(),
-    };
+    let w = tracking_weights();
     let bounds = ConeBounds::new(G * 15f64.to_radians().tan(), None);
     let tick0 = from_rest(horizon, [8.0, -6.0]);
     // Tick 0 by the interior point (the ALM allowed one Newton step), then

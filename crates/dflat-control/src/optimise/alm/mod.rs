@@ -86,40 +86,11 @@
 //! of the head bind after all. On the course of corners at N = 200 a
 //! burst's first tick went from ~270–460 µs to ~130–140 µs.
 //!
-//! The windows' factorisations go into a factor of their own (`head`),
-//! factored from P once, at construction: its rows before any window are
-//! P's — a window's first factorisation restores to P's the rows that an
-//! earlier-starting window changed before its own start — so it too
-//! refactors the window's rows only, not the whole horizon as it would
-//! into the factor the last warm solve left (a late corner's cold solve
-//! after one over the whole horizon: ~162 → ~153 µs, median of 400, five
-//! alternating runs). Each step's back substitution stops eight stages
-//! before the window ([`BandedCholesky::solve_in_place_cut`]): nothing
-//! reads the unknowns before that until the window closes, when they move
-//! once, by the steps' sum extended back ([`BandedCholesky::extend_back`];
-//! linear, the head's factor being P's throughout). On the course of
-//! corners at N = 200 the window solves took 71 µs on average against
-//! 83 µs without the cut (eight alternating runs).
+//! The window's own factor and its cut back substitution: `window.rs`.
 //!
-//! **The rollout start.** A cold solve whose unconstrained plan leaves its
-//! disc within the first four stages while the vehicle's present
-//! acceleration is within half the first disc (the flight's first tick,
-//! from rest; an engagement far from the reference) starts instead from a
-//! feasible plan and multipliers that hold it: the unconstrained plan
-//! tracked stage by stage by a saturated law (its acceleration, plus
-//! ω = 3 rad/s, ζ = 1 feedback towards it, clipped to the disc), and
-//! `y = −G⁻ᵀ(P·x + c)` — the multipliers for which that plan is stationary
-//! — kept on the stages at their disc's edge, along the outward normal
-//! only. σ starts at the cold σ and grows only when the residual stalls.
-//! The soft phase from the unconstrained plan leaves multipliers 0.2–0.5
-//! of the final ones and the plan far from the constrained one; this
-//! start is near both. On the course of corners at N = 200 the flight's
-//! first tick went from 26 to 14 Newton steps (the L corner's from 31 to
-//! 24). Over 1000 random cold instances in motion it applied to 881: the
-//! interior point finished 29 of them instead of 106, and where the
-//! augmented Lagrangian solved both ways, 28.6 Newton steps instead of
-//! 34.7 (test `the_rollout_start_saves_newton_steps_on_random_cold_instances`
-//! prints them).
+//! **The rollout start.** A cold solve whose plan leaves its discs at once
+//! (the flight's first tick, from rest) starts near the constrained plan
+//! and its multipliers instead (`rollout_start.rs`).
 //!
 //! Warm start ([`BandedAlm::shift`]): the multipliers one stage on,
 //! extrapolated linearly from the last two solves, σ from its initial
@@ -132,12 +103,13 @@ use std::ops::Range;
 mod lagrangian;
 mod line_search;
 mod rollout_start;
+mod solve;
 mod warm_start;
 mod window;
 
 use super::FastBandedSolver;
 use super::banded::{BandedCholesky, SymBand};
-use super::bounds::{Row, check_row_data};
+use super::bounds::Row;
 use crate::ControlError;
 
 /// Newton steps per warm solve, over all outer iterations (the default of
@@ -226,8 +198,8 @@ pub struct AlmTuning {
     /// docs, "The eliminated head").
     pub eliminate_head: bool,
     /// Whether a cold solve whose plan leaves its discs at once starts
-    /// from the saturated rollout and the multipliers that hold it (module
-    /// docs, "The rollout start"). Discs only.
+    /// from the saturated rollout and the multipliers that hold it
+    /// (`rollout_start.rs`). Discs only.
     pub rollout_start: bool,
 }
 
@@ -357,7 +329,7 @@ pub struct BandedAlm {
     no_cut: bool,
     /// The window the last solve opened (0: none).
     last_window: usize,
-    /// Whether the last solve started from the rollout (module docs).
+    /// Whether the last solve started from the rollout (`rollout_start.rs`).
     rollout_started: bool,
 }
 
@@ -506,7 +478,7 @@ impl BandedAlm {
     }
 
     /// Whether the last solve started from the saturated rollout (module
-    /// docs, "The rollout start").
+    /// docs, "The rollout start"; `rollout_start.rs`).
     pub fn rollout_started(&self) -> bool {
         self.rollout_started
     }
@@ -593,290 +565,6 @@ impl BandedAlm {
             StageSet::Interval(b) => Some(b),
             StageSet::Disc(_) => None,
         }
-    }
-
-    /// Assembles and factors the generalised Hessian at x: in the window,
-    /// its rows only, into the head's factor (`head`, whose rows before
-    /// the window are P's: module docs, "The eliminated head"); else all
-    /// of it.
-    fn factor_newton_matrix(&mut self, lo: &[f64], hi: &[f64]) -> Result<(), ControlError> {
-        if self.window > 0 {
-            let from = self.window_unknown();
-            // Rows the last window changed before this one's are P's again.
-            let start = from.min(self.head_base_until);
-            self.assemble(lo, hi, start);
-            if let Err(e) = self.head.refactor_rows_from(&self.kkt, start) {
-                self.head_valid = false;
-                return Err(e);
-            }
-            self.head_base_until = from;
-            self.head_factored = true;
-        } else {
-            self.assemble(lo, hi, 0);
-            self.chol.refactor_taking(&mut self.kkt)?;
-            self.head_factored = false;
-        }
-        self.factorisations += 1;
-        self.factored_active.clone_from(&self.active);
-        Ok(())
-    }
-
-    /// Solves for the linear term `c` (K·n, interleaved), fixed relative
-    /// accelerations `a0` [m/s²] and row bounds `lo ≤ h·x ≤ hi` from the
-    /// primal start ([`BandedAlm::set_start`]) and the multipliers held
-    /// (zero, or shifted from the last solve). Returns the Newton steps;
-    /// errors when it does not converge within [`MAX_NEWTON_STEPS`].
-    pub fn solve(
-        &mut self,
-        c: &[f64],
-        a0: [f64; 2],
-        lo: &[f64],
-        hi: &[f64],
-    ) -> Result<usize, ControlError> {
-        let m = self.rows.len();
-        check_row_data(
-            "ALM",
-            c.len() == self.k * self.n && lo.len() == m && hi.len() == m,
-            "c needs K·n entries, lo and hi one per row",
-            &[c, &self.x, &a0],
-            lo,
-            hi,
-        )?;
-        if let StageSet::Interval(b) = &self.stages
-            && b.iter()
-                .flat_map(|s| s.iter().take(self.k))
-                .any(|[l, h]| l.is_nan() || h.is_nan() || l > h)
-        {
-            return Err(super::invalid("ALM", "stage intervals with lo ≤ hi"));
-        }
-        self.c.copy_from_slice(c);
-        self.px_current = false;
-        self.window = 0;
-        self.last_window = 0;
-        self.rollout_started = false;
-        // Held only from a line search's full step to the gradient right
-        // after it, so None here; cleared all the same, the one place a
-        // stale stage pass could enter.
-        self.full_step = None;
-        let mut cold = false;
-        if self.y.iter().all(|y| *y == [0.0; 2]) && self.v.iter().all(|v| *v == [0.0; 2]) {
-            // Cold: a softer first subproblem (AlmTuning::sigma_cold).
-            self.sigma = self.tuning.sigma_cold;
-            cold = true;
-        }
-        let max_steps = if cold {
-            2 * self.tuning.max_newton_steps
-        } else {
-            self.tuning.max_newton_steps
-        };
-        let c_scale = 1.0 + c.iter().fold(0.0f64, |a, b| a.max(b.abs()));
-        // P·x has entries ~1e10 even by differencing: its rounding floor,
-        // ε·max|P_ii|·|x| (1e-5 at δt = 0.02 s, r = 0.01), bounds how
-        // small a freshly computed gradient can be made. The gradient
-        // carried along full steps (P·x and u updated by the step's) goes
-        // below it, and after a step on a reused factor (a chord step,
-        // which converges linearly) a gradient below it can still hide a
-        // decrement above tolerance in the cost's flat directions: the
-        // floor ends the inner solve only right after a full Newton step
-        // on a fresh factor, whose next decrement is of its square.
-        let x_scale = 1.0 + self.x.iter().fold(0.0f64, |a, b| a.max(b.abs()));
-        let floor = 16.0 * f64::EPSILON * self.diag_max * x_scale;
-        let dual_tol = DUAL_TOLERANCE * c_scale;
-        let decrement_tol = DECREMENT_TOLERANCE * c_scale * x_scale;
-        self.factorisations = 0;
-        let (mut last_full, mut last_decrement) = (false, f64::INFINITY);
-        let mut reuse_allowed = true;
-        let mut compare_decrement = f64::INFINITY;
-        // Whether the factor is of this solve's matrix at the current σ.
-        let mut factor_current = false;
-        // Whether the last step was a full Newton step on a fresh factor.
-        let mut exact_full = false;
-        let exact_reuse = matches!(self.stages, StageSet::Interval(_));
-        // The rows' largest σ scale (σ_h = scale·σ), for the inexact
-        // tolerance.
-        let row_scale_max = self.row_scale.iter().fold(0.0f64, |a, b| a.max(*b));
-        let inner_tol = decrement_tol;
-        let stage_tol = PRIMAL_TOLERANCE * (1.0 + self.stage_scale());
-        let gap_tol = GAP_TOLERANCE * c_scale * x_scale;
-        let b_scale = 1.0 + lo.iter().chain(hi).fold(0.0f64, |a, b| a.max(b.abs()));
-        // A soft side's violation costs ρ per unit: its tolerance is ρ
-        // times tighter so that the cost is as accurate as the stages'.
-        let rho = self
-            .row_penalty
-            .iter()
-            .filter(|r| r.is_finite())
-            .fold(1.0f64, |a, b| a.max(*b));
-        let row_tol = if self.row_penalty.iter().all(|r| r.is_infinite()) {
-            ROW_TOLERANCE * b_scale
-        } else {
-            PRIMAL_TOLERANCE * b_scale / rho
-        };
-        self.newton_steps = 0;
-        // The window's first gradient is the loop's first.
-        let mut first_gradient = None;
-        // Whether σ climbs to the warm σ after each update (module docs):
-        // a cold solve's, unless the rollout start gave it multipliers.
-        let mut climb = cold;
-        if cold && self.tuning.rollout_start && self.rollout_start(a0) {
-            climb = false;
-            self.rollout_started = true;
-        } else if cold && self.tuning.eliminate_head {
-            first_gradient = Some(self.open_window(a0, lo, hi, 10.0 * floor.max(dual_tol)));
-        }
-        let mut previous_res = f64::INFINITY;
-        for _outer in 0..MAX_OUTER {
-            // Inner: minimise L(·; y, v, σ) by semismooth Newton, until
-            // the gradient or the Newton decrement −gᵀd is negligible.
-            let (mut stage_res, mut row_res);
-            loop {
-                let gn;
-                (gn, stage_res, row_res) = match first_gradient.take() {
-                    Some(done) => done,
-                    None => self.gradient(a0, lo, hi),
-                };
-                if gn <= dual_tol || (gn <= floor && exact_full) {
-                    break;
-                }
-                if self.newton_steps == max_steps {
-                    return Err(ControlError::Solver(format!(
-                        "ALM: no convergence in {} Newton steps \
-                         (gradient {gn:.1e}, residual {:.1e})",
-                        max_steps,
-                        stage_res.max(row_res)
-                    )));
-                }
-                self.newton_steps += 1;
-                // Inexact inner solves while the multipliers are far off:
-                // the subproblem's error (≈ decrement/2) need only be small
-                // against the change the next update will make, σ·res².
-                let row_sigma = row_scale_max * self.sigma;
-                let loose = self.sigma * (INEXACT * stage_res).powi(2)
-                    + row_sigma * (INEXACT * row_res).powi(2);
-                // Intervals: the matrix is fixed by σ and the active set,
-                // so with the active set the one factored the factor is
-                // exact. Discs: in the local phase (last step full, its
-                // decrement small, the active set the one factored) the
-                // matrix changes only in the active stages' curvature: its
-                // factor is reused.
-                let same_set = factor_current && self.active == self.factored_active;
-                let reuse = same_set
-                    && reuse_allowed
-                    && (exact_reuse
-                        || last_full
-                            && last_decrement
-                                <= (REUSE_DECREMENT * c_scale * x_scale).max(LOOSE_REUSE * loose));
-                reuse_allowed = true;
-                if !reuse {
-                    self.factor_newton_matrix(lo, hi)?;
-                    factor_current = true;
-                }
-                // −g on the window (the eliminated head's gradient is 0;
-                // the solve sets d there).
-                let j0 = self.window_unknown();
-                for (d, g) in self.d[j0..].iter_mut().zip(&self.g[j0..]) {
-                    *d = -g;
-                }
-                let factor = if self.head_factored {
-                    &self.head
-                } else {
-                    &self.chol
-                };
-                factor.solve_in_place_cut(&mut self.d, j0, self.cut)?;
-                let decrement: f64 = -self.g[j0..]
-                    .iter()
-                    .zip(&self.d[j0..])
-                    .map(|(g, d)| g * d)
-                    .sum::<f64>();
-                if (decrement.is_nan() || decrement <= 0.0) && reuse {
-                    // The old factor no longer gives a descent direction.
-                    last_full = false;
-                    reuse_allowed = false;
-                    continue;
-                }
-                if reuse && !exact_reuse && decrement > 0.1 * compare_decrement {
-                    // The old factor converges slowly here: refactor next.
-                    reuse_allowed = false;
-                }
-                last_decrement = decrement;
-                compare_decrement = decrement;
-                if decrement <= inner_tol.max(loose) {
-                    // Converged to rounding (or enough for this update):
-                    // the full step, and done.
-                    self.move_x(1.0);
-                    self.px_current = false;
-                    (_, stage_res, row_res) = self.gradient(a0, lo, hi);
-                    break;
-                }
-                last_full = self.line_search(decrement, lo, hi)?;
-                exact_full = last_full && !reuse;
-                if last_full && !reuse && decrement <= LOCAL_STOP * c_scale * x_scale {
-                    // A full step from a small decrement: the next one is
-                    // of its square (Newton's local rate), below tolerance.
-                    (_, stage_res, row_res) = self.gradient(a0, lo, hi);
-                    break;
-                }
-            }
-            // What the residuals can cost, needed only once they are small
-            // (before the multipliers move).
-            let residuals_small = stage_res <= stage_tol && row_res <= row_tol;
-            // At the largest σ the residual can stall at rounding: a
-            // stage on its boundary with a vanishing multiplier flipped
-            // in and out of the set with every update (a 2-cycle at 17×
-            // the tolerance, 7e-7 m/s², `PROPTEST_RNG_SEED=15`), σ unable
-            // to grow. There a stage residual within STALL_TOLERANCE× its
-            // tolerance ends the solve, if what it can cost is as small
-            // (the rows, whose hard bounds are checked to 1e-9, keep
-            // theirs).
-            let stalled = self.sigma >= self.tuning.sigma_max
-                && stage_res <= STALL_TOLERANCE * stage_tol
-                && row_res <= row_tol;
-            let gap_small = (residuals_small || stalled) && self.residual_cost(lo, hi) <= gap_tol;
-            // Multiplier update (the gradient above is the Lagrangian's
-            // with the updated multipliers: stationarity holds).
-            self.y.copy_from_slice(&self.y_next);
-            for r in 0..m {
-                let h = self.hx[r];
-                for j in 0..2 {
-                    let t = Self::side(j, h, lo[r], hi[r]);
-                    self.v[r][j] = self.side_multiplier(r, self.v[r][j], t);
-                }
-            }
-            if gap_small && self.window > 0 {
-                // The window converged: on to the whole horizon, whose
-                // first gradient finds whether a stage or row of the head
-                // binds after all (then the solve goes on there).
-                self.close_window();
-                compare_decrement = f64::INFINITY;
-                continue;
-            }
-            if gap_small {
-                if self.x.iter().any(|v| !v.is_finite()) {
-                    return Err(ControlError::Solver("ALM: non-finite iterate".into()));
-                }
-                return Ok(self.newton_steps);
-            }
-            let res = (stage_res / stage_tol).max(row_res / row_tol);
-            // σ grows tenfold when the residual stalls, and on a cold
-            // solve after every update until it reaches the warm σ: the
-            // soft first subproblem found the active set, and at σ = 1e2
-            // an update gains only ~3× (corner bench, N = 200, warm starts
-            // off: 8.53 → 7.81 G instructions, interior-point fallbacks
-            // 10 → 0 of 1905).
-            let climbing = climb && self.sigma < self.tuning.sigma;
-            if res > 1.0
-                && (climbing || res > 0.1 * previous_res)
-                && self.sigma < self.tuning.sigma_max
-            {
-                self.sigma = (self.sigma * SIGMA_GROWTH).min(self.tuning.sigma_max);
-                factor_current = false;
-            }
-            // The multipliers moved: the next decrement is not comparable.
-            compare_decrement = f64::INFINITY;
-            previous_res = res;
-        }
-        Err(ControlError::Solver(
-            "ALM: no convergence in the multiplier updates".into(),
-        ))
     }
 }
 

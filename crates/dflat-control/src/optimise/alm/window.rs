@@ -1,6 +1,21 @@
 //! The window of a cold solve with the horizon's head eliminated (module
 //! docs of [`super`], "The eliminated head"): opened from the first
 //! gradient, closed when it converged.
+//!
+//! The windows' factorisations go into a factor of their own (`head`),
+//! factored from P once, at construction: its rows before any window are
+//! P's — a window's first factorisation restores to P's the rows that an
+//! earlier-starting window changed before its own start — so it too
+//! refactors the window's rows only, not the whole horizon as it would
+//! into the factor the last warm solve left (a late corner's cold solve
+//! after one over the whole horizon: ~162 → ~153 µs, median of 400, five
+//! alternating runs). Each step's back substitution stops eight stages
+//! before the window (`BandedCholesky::solve_in_place_cut`): nothing
+//! reads the unknowns before that until the window closes, when they move
+//! once, by the steps' sum extended back (`BandedCholesky::extend_back`;
+//! linear, the head's factor being P's throughout). On the course of
+//! corners at N = 200 the window solves took 71 µs on average against
+//! 83 µs without the cut (eight alternating runs).
 
 use super::{BandedAlm, WINDOW_MARGIN, WINDOW_MIN_SHARE};
 

@@ -516,15 +516,7 @@ impl BandedCholesky {
     /// # Panics
     /// If `x` does not have length n or j0 > n.
     pub fn solve_in_place_from(&self, x: &mut [f64], j0: usize) -> Result<(), ControlError> {
-        assert!(x.len() == self.n && j0 <= self.n, "length mismatch");
-        if !self.factored {
-            return Err(ControlError::NotPositiveDefinite);
-        }
-        x[..j0].fill(0.0);
-        let w = self.b + 1;
-        Self::run(self.b, &self.fwd[j0 * w..], &mut x[j0..], false);
-        self.backward(x);
-        Ok(())
+        self.solve_in_place_cut(x, j0, 0)
     }
 
     /// Solves `A·x = a` and `A·y = b` in place together: the two

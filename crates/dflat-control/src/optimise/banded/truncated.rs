@@ -18,7 +18,7 @@ impl BandedCholesky {
     /// entries from `cut` on are that solve's, bit for bit, those before
     /// it 0. Their values are linear in x's b entries from `cut` on
     /// ([`BandedCholesky::extend_back`]). Without [`BandedCholesky::can_cut`]
-    /// the whole solve.
+    /// the whole solve; `cut` = 0 is the whole solve.
     ///
     /// # Panics
     /// If `x` does not have length n, or cut > j0 > n.
@@ -28,18 +28,21 @@ impl BandedCholesky {
         j0: usize,
         cut: usize,
     ) -> Result<(), ControlError> {
-        assert!(cut <= j0, "cut after j0");
-        if !self.can_cut() || cut == 0 {
-            return self.solve_in_place_from(x, j0);
-        }
-        assert!(x.len() == self.n && j0 <= self.n, "length mismatch");
+        assert!(
+            x.len() == self.n && cut <= j0 && j0 <= self.n,
+            "length mismatch"
+        );
         if !self.factored {
             return Err(ControlError::NotPositiveDefinite);
         }
         x[..j0].fill(0.0);
         let w = self.b + 1;
         Self::run(self.b, &self.fwd[j0 * w..], &mut x[j0..], false);
-        Self::run(self.b, &self.l[cut * w..], &mut x[cut..], true);
+        if self.can_cut() {
+            Self::run(self.b, &self.l[cut * w..], &mut x[cut..], true);
+        } else {
+            self.backward(x);
+        }
         Ok(())
     }
 
