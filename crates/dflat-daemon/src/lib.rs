@@ -32,6 +32,7 @@ pub mod config;
 pub mod control;
 pub mod csv_schema;
 pub mod daemon;
+pub mod envelope;
 pub mod guard;
 pub mod link_health;
 pub mod mission;

@@ -205,11 +205,20 @@ fn finite(message: &'static str, field: &'static str, v: f32) -> Result<f64, Lin
     }
 }
 
+/// Three finite components; the error names the component (`z`, `vx`,
+/// `afy`, `yawspeed`: the message's own field names).
 fn finite3(message: &'static str, field: &'static str, v: [f32; 3]) -> Result<[f64; 3], LinkError> {
+    let names: [&'static str; 3] = match field {
+        "position" => ["x", "y", "z"],
+        "velocity" => ["vx", "vy", "vz"],
+        "acceleration" => ["afx", "afy", "afz"],
+        "rates" => ["rollspeed", "pitchspeed", "yawspeed"],
+        other => [other; 3],
+    };
     Ok([
-        finite(message, field, v[0])?,
-        finite(message, field, v[1])?,
-        finite(message, field, v[2])?,
+        finite(message, names[0], v[0])?,
+        finite(message, names[1], v[1])?,
+        finite(message, names[2], v[2])?,
     ])
 }
 

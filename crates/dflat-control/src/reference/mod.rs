@@ -97,6 +97,8 @@ use brake::Brake;
 use path::{Path, Ramp};
 use route::Route;
 pub use route::{MIN_BLEND_TIME, RouteSpec, Waypoint};
+mod bounds;
+pub use bounds::Bounds;
 use stream::Stream;
 pub use stream::{IMPLIED_MIN_GAP, StreamSample, StreamSettings, TURN_MIN_SPEED};
 
@@ -110,6 +112,10 @@ pub const MIN_LOOKAHEAD: f64 = 5.0;
 #[derive(Debug, Clone, PartialEq)]
 pub struct Reference {
     kind: Kind,
+    /// The flight envelope's box (`None`: unbounded).
+    bounds: Option<Bounds>,
+    /// The last horizon was clamped into `bounds` somewhere.
+    clipped: bool,
 }
 
 #[derive(Debug, Clone, PartialEq)]
@@ -133,15 +139,47 @@ fn is_finite3(v: &Vector3<f64>) -> bool {
 }
 
 impl Reference {
+    fn of(kind: Kind) -> Self {
+        Self {
+            kind,
+            bounds: None,
+            clipped: false,
+        }
+    }
+
+    /// The same reference with every position it hands out (horizon,
+    /// closest point, current point, rest point) clamped into `bounds`:
+    /// the flight envelope's fence ([`Bounds`]).
+    pub fn with_bounds(mut self, bounds: Bounds) -> Self {
+        self.bounds = Some(bounds);
+        self
+    }
+
+    /// Sets (or with `None` removes) the box every position is clamped into.
+    pub fn set_bounds(&mut self, bounds: Option<Bounds>) {
+        self.bounds = bounds;
+    }
+
+    /// The envelope's box, if one bounds this reference.
+    pub fn bounds(&self) -> Option<&Bounds> {
+        self.bounds.as_ref()
+    }
+
+    /// True when the last horizon was clamped into the bounds somewhere.
+    pub fn clipped(&self) -> bool {
+        self.clipped
+    }
+
+    fn bounded(&self, p: Vector3<f64>) -> Vector3<f64> {
+        self.bounds.map_or(p, |b| b.clamp(&p).0)
+    }
     /// A fixed setpoint `p` (NED \[m\]); every horizon step is `p`, the
     /// reference velocity zero. Errors when `p` is not finite.
     pub fn setpoint(p: Vector3<f64>) -> Result<Self, ControlError> {
         if !is_finite3(&p) {
             return Err(invalid("setpoint", "all components must be finite"));
         }
-        Ok(Self {
-            kind: Kind::Setpoint(p),
-        })
+        Ok(Self::of(Kind::Setpoint(p)))
     }
 
     /// A path through `waypoints` (NED \[m\]; at least two, consecutive ones
@@ -186,18 +224,16 @@ impl Reference {
             dirs.push(d / len);
             cum.push(cum[i] + len);
         }
-        Ok(Self {
-            kind: Kind::Path(Path {
-                points: waypoints.to_vec(),
-                cum,
-                dirs,
-                speed,
-                lookahead: MIN_LOOKAHEAD.max(LOOKAHEAD_TIME * speed),
-                progress: 0.0,
-                seg: 0,
-                ramp: None,
-            }),
-        })
+        Ok(Self::of(Kind::Path(Path {
+            points: waypoints.to_vec(),
+            cum,
+            dirs,
+            speed,
+            lookahead: MIN_LOOKAHEAD.max(LOOKAHEAD_TIME * speed),
+            progress: 0.0,
+            seg: 0,
+            ramp: None,
+        })))
     }
 
     /// A stop: from `start` (NED \[m\]) moving at `velocity` (NED [m/s]),
@@ -241,18 +277,16 @@ impl Reference {
             return Self::setpoint(start);
         }
         let length = speed * lag + speed * speed / (2.0 * decel);
-        Ok(Self {
-            kind: Kind::Brake(Brake {
-                start,
-                dir: velocity / speed,
-                speed,
-                decel,
-                coast: speed * lag,
-                length,
-                max_length: 2.0 * length,
-                progress: 0.0,
-            }),
-        })
+        Ok(Self::of(Kind::Brake(Brake {
+            start,
+            dir: velocity / speed,
+            speed,
+            decel,
+            coast: speed * lag,
+            length,
+            max_length: 2.0 * length,
+            progress: 0.0,
+        })))
     }
 
     /// A smooth start for a path: the reference speed rises from `v0`
@@ -391,9 +425,7 @@ impl Reference {
     /// velocity, per-leg speeds, stops at holds and at the end, then a
     /// hold). Errors name the offending field.
     pub fn route(spec: &RouteSpec) -> Result<Self, ControlError> {
-        Ok(Self {
-            kind: Kind::Route(Route::new(spec)?),
-        })
+        Ok(Self::of(Kind::Route(Route::new(spec)?)))
     }
 
     /// A setpoint flown as a route: a straight line from `from` (NED \[m\],
@@ -421,9 +453,7 @@ impl Reference {
     /// module docs, "Streams"). Errors on non-finite sample fields or
     /// settings out of range.
     pub fn stream(settings: StreamSettings, sample: &StreamSample) -> Result<Self, ControlError> {
-        Ok(Self {
-            kind: Kind::Stream(Stream::new(settings, sample)?),
-        })
+        Ok(Self::of(Kind::Stream(Stream::new(settings, sample)?)))
     }
 
     /// A new sample for a stream: the prediction restarts from it. Errors
@@ -471,6 +501,10 @@ impl Reference {
     /// point after its decay, a route's end, a stop's stop point, a
     /// setpoint; a path's end.
     pub fn rest_point(&self) -> Vector3<f64> {
+        self.bounded(self.rest_point_unbounded())
+    }
+
+    fn rest_point_unbounded(&self) -> Vector3<f64> {
         match &self.kind {
             Kind::Setpoint(p) => *p,
             Kind::Stream(s) => s.stop_point(),
@@ -484,6 +518,11 @@ impl Reference {
     /// moving any progress: a route's or a stream's at its clock; a
     /// path's or a stop's at its current progress.
     pub fn current(&self) -> (Vector3<f64>, Vector3<f64>) {
+        let (p, v) = self.current_unbounded();
+        (self.bounded(p), v)
+    }
+
+    fn current_unbounded(&self) -> (Vector3<f64>, Vector3<f64>) {
         match &self.kind {
             Kind::Setpoint(p) => (*p, Vector3::zeros()),
             Kind::Stream(s) => s.closest(),
@@ -551,13 +590,42 @@ impl ReferenceSource for Reference {
     /// coordinated turn) is flyable as it is; paths (corners), routes
     /// (corners between legs), setpoints and stops are not.
     fn flyable(&self) -> bool {
-        self.is_stream()
+        self.is_stream() && !self.clipped
     }
 
     /// `out[0]` is the closest point (advancing the progress); `out[j]` lies
     /// `j·δt·speed` further along the path, held at the end. A non-positive
     /// or non-finite `dt` \[s\] holds the closest point over the horizon.
     fn horizon(&mut self, measured: &Vector3<f64>, dt: f64, out: &mut [Vector3<f64>]) {
+        self.horizon_unbounded(measured, dt, out);
+        self.clipped = false;
+        if let Some(b) = self.bounds {
+            for o in out.iter_mut() {
+                let (q, moved) = b.clamp(o);
+                *o = q;
+                self.clipped |= moved;
+            }
+        }
+    }
+
+    /// A path's corner speed at its progress (`Path::corner_speed`);
+    /// no limit for every other kind (their profiles are their own).
+    fn corner_speed(&self, radius: f64, acceleration: f64) -> Option<(f64, f64)> {
+        self.corner_speed_of(radius, acceleration)
+    }
+
+    /// The closest point (advancing the progress, clamped into the
+    /// bounds) and the reference velocity there, speed × direction of the
+    /// segment toward the next waypoint [m/s]; zero at the path end and
+    /// for a setpoint.
+    fn closest(&mut self, measured: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
+        let (p, v) = self.closest_unbounded(measured);
+        (self.bounded(p), v)
+    }
+}
+
+impl Reference {
+    fn horizon_unbounded(&mut self, measured: &Vector3<f64>, dt: f64, out: &mut [Vector3<f64>]) {
         match &mut self.kind {
             Kind::Setpoint(p) => out.fill(*p),
             Kind::Route(r) => r.horizon(dt, out),
@@ -594,9 +662,7 @@ impl ReferenceSource for Reference {
         }
     }
 
-    /// A path's corner speed at its progress (`Path::corner_speed`);
-    /// no limit for every other kind (their profiles are their own).
-    fn corner_speed(&self, radius: f64, acceleration: f64) -> Option<(f64, f64)> {
+    fn corner_speed_of(&self, radius: f64, acceleration: f64) -> Option<(f64, f64)> {
         match &self.kind {
             Kind::Path(p) if radius.is_finite() && radius >= 0.0 && acceleration > 0.0 => {
                 Some(p.corner_speed(radius, acceleration))
@@ -605,10 +671,7 @@ impl ReferenceSource for Reference {
         }
     }
 
-    /// The closest point (advancing the progress) and the reference velocity
-    /// there, speed × direction of the segment toward the next waypoint
-    /// [m/s]; zero at the path end and for a setpoint.
-    fn closest(&mut self, measured: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
+    fn closest_unbounded(&mut self, measured: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
         match &mut self.kind {
             Kind::Setpoint(p) => (*p, Vector3::zeros()),
             Kind::Route(r) => r.state(r.elapsed, &mut (0, 0)),

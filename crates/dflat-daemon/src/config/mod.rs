@@ -395,9 +395,13 @@ pub struct MissionConfig {
     /// A SET_POSITION_TARGET_LOCAL_NED whose position equals the first
     /// waypoint within this distance \[m\] starts the path (0 = never).
     pub path_trigger_radius: f64,
-    /// Geofence half-widths around the origin \[m\]: setpoints outside are
-    /// refused (x, y, z).
+    /// The fence around the local origin \[m\]: half-widths in x and y, and
+    /// how far above the origin (z ≥ −geofence\[2\]). Goals outside are
+    /// refused and every reference is clamped inside ([`crate::envelope`]).
     pub geofence: [f64; 3],
+    /// The fence's floor: how far below the local origin \[m\] a goal may
+    /// lie (z ≤ this; 0–1000, default 5).
+    pub geofence_down_m: f64,
     /// Fly the path again and again (a closed path: its last waypoint must
     /// equal its first) instead of holding its end (soak tests, patrols).
     pub repeat: bool,
@@ -453,6 +457,7 @@ impl Default for MissionConfig {
             speed: 5.0,
             path_trigger_radius: 0.5,
             geofence: [500.0, 500.0, 200.0],
+            geofence_down_m: 5.0,
             repeat: false,
             on_engage: OnEngage::Resume,
             brake_fraction: 1.0,
@@ -471,12 +476,31 @@ pub struct SafetyConfig {
     pub pose_timeout_ms: f64,
     /// No autopilot HEARTBEAT for this long \[ms\] stops the stream (100–10000).
     pub autopilot_timeout_ms: f64,
-    /// Fastest the vehicle can move [m/s] (0.5–100): a pose further from the
-    /// previous one than this speed allows (plus `pose_jump_margin_m`) is a
-    /// pose jump → the controller and the reference re-anchor (hold there).
+    /// The speed limit [m/s] (0.5–100): no goal flies faster (stream
+    /// samples above it are refused, `mission.speed` and DO_CHANGE_SPEED
+    /// are at most this), and a vehicle measured faster while engaged is
+    /// braked to a stop ([`crate::envelope`]).
     pub max_speed_mps: f64,
-    /// Noise margin of the pose-jump test \[m\] (0–10).
+    /// Noise margin of the pose-jump test \[m\] (0–10): a pose further than
+    /// this (plus what the tilt limit's acceleration allows) from where the
+    /// previous pose and the measured velocity predict it is a pose jump →
+    /// the controller and the reference re-anchor (hold there).
     pub pose_jump_margin_m: f64,
+    /// Stopping the daemon (SIGTERM / SIGINT) while engaged: the controller
+    /// brakes the vehicle to a stop for at most this long \[ms\] (0–10000;
+    /// over sooner once slower than 0.3 m/s), then levels.
+    pub stop_brake_ms: f64,
+    /// Then a level attitude at hover thrust is streamed for this long
+    /// \[ms\] (0–5000) before the stream stops, so the autopilot holds a
+    /// level command until its own offboard-loss action. Both 0: the
+    /// stream stops at once.
+    pub stop_level_ms: f64,
+    /// Stopping the daemon while engaged first asks the autopilot for its
+    /// own position hold (MAV_CMD_DO_SET_MODE: PX4 AUTO.LOITER, ArduPilot
+    /// LOITER), as PX4's and ArduPilot's offboard-loss actions would; the
+    /// brake and level are streamed meanwhile and end as soon as the
+    /// autopilot leaves its offboard mode.
+    pub stop_requests_hold: bool,
     /// After a controller failure or deadline overrun, DF-MPC flies its
     /// previous plan shifted one step per tick, PD and Flatness MPC hold the
     /// last good command, for at most this many ticks (0–50); then level
@@ -509,6 +533,9 @@ impl Default for SafetyConfig {
             autopilot_timeout_ms: 3000.0,
             max_speed_mps: 15.0,
             pose_jump_margin_m: 0.5,
+            stop_brake_ms: 1000.0,
+            stop_level_ms: 500.0,
+            stop_requests_hold: false,
             hold_last_ticks: 5,
             residual_failsafe_m: 0.0,
             level_hover_max_ms: 1000.0,

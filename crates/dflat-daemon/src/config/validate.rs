@@ -12,6 +12,14 @@ impl Config {
         let mut v = Validator { file };
         let l = &self.link;
         v.nonempty("link.url", &l.url)?;
+        // The daemon opens exactly what this parses (one parser for both).
+        if let Err(e) = dflat_link::transport::Endpoint::parse(&l.url) {
+            let reason = match e {
+                dflat_link::transport::TransportError::BadUrl { reason, .. } => reason,
+                other => other.to_string(),
+            };
+            return Err(v.err("link.url", &format!("{:?}", l.url), &reason));
+        }
         for (name, id) in [
             ("link.system_id", l.system_id),
             ("link.autopilot_component", l.autopilot_component),
@@ -174,6 +182,7 @@ impl Config {
         for i in 0..3 {
             v.positive(&format!("mission.geofence[{i}]"), m.geofence[i])?;
         }
+        v.range("mission.geofence_down_m", m.geofence_down_m, 0.0, 1000.0)?;
         if m.start == MissionStart::Path && m.path.len() < 2 {
             return Err(v.err(
                 "mission.path",
@@ -181,13 +190,38 @@ impl Config {
                 "at least 2 waypoints when mission.start = \"path\"",
             ));
         }
+        if m.path.len() == 1 {
+            // A path of one waypoint has no leg to fly: a hold point is a
+            // setpoint (SET_POSITION_TARGET_LOCAL_NED), not a path.
+            return Err(v.err(
+                "mission.path",
+                "1 waypoint",
+                "none, or at least 2 waypoints (a single point is a setpoint, not a path)",
+            ));
+        }
+        if m.speed > self.safety.max_speed_mps {
+            return Err(v.err(
+                "mission.speed",
+                &m.speed.to_string(),
+                &format!(
+                    "at most safety.max_speed_mps ({})",
+                    self.safety.max_speed_mps
+                ),
+            ));
+        }
+        // One fence for every goal: the box of crate::envelope (a floor
+        // `geofence_down_m` below the origin, a ceiling `geofence[2]` above).
+        let (lo, hi) = (
+            [-m.geofence[0], -m.geofence[1], -m.geofence[2]],
+            [m.geofence[0], m.geofence[1], m.geofence_down_m],
+        );
         for (i, w) in m.path.iter().enumerate() {
             for (j, x) in w.iter().enumerate() {
-                if !x.is_finite() || x.abs() > m.geofence[j] {
+                if !x.is_finite() || *x < lo[j] || *x > hi[j] {
                     return Err(v.err(
                         &format!("mission.path[{i}][{j}]"),
                         &x.to_string(),
-                        &format!("finite and inside the geofence ±{}", m.geofence[j]),
+                        &format!("finite and inside the fence [{}, {}]", lo[j], hi[j]),
                     ));
                 }
             }
@@ -216,6 +250,8 @@ impl Config {
         )?;
         v.range("safety.max_speed_mps", s.max_speed_mps, 0.5, 100.0)?;
         v.range("safety.pose_jump_margin_m", s.pose_jump_margin_m, 0.0, 10.0)?;
+        v.range("safety.stop_brake_ms", s.stop_brake_ms, 0.0, 10000.0)?;
+        v.range("safety.stop_level_ms", s.stop_level_ms, 0.0, 5000.0)?;
         v.range(
             "safety.hold_last_ticks",
             f64::from(s.hold_last_ticks),

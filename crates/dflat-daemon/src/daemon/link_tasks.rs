@@ -123,10 +123,33 @@ pub fn setpoint_refusal_text(e: &LinkError) -> String {
         LinkError::SetpointRejected(SetpointRejection::PositionIgnored { type_mask }) => {
             format!("dflat: setpoint refused: x/y/z ignored {type_mask:#06x}")
         }
+        // Each field its own words (and its own rate limit): a NaN x said
+        // does not hide an infinite z or a NaN yaw after it.
+        LinkError::NonFinite { field, .. } => {
+            format!("dflat: setpoint refused: {field} not finite")
+        }
         e if e.category() == ErrorCategory::NonFinite => {
             "dflat: setpoint refused: not finite".to_owned()
         }
         _ => "dflat: setpoint refused: malformed".to_owned(),
+    }
+}
+
+/// The STATUSTEXT for a SET_POSITION_TARGET_LOCAL_NED (84) whose payload
+/// did not decode (e.g. coordinate_frame 99); `None` for other frames.
+pub fn undecodable_setpoint_text(e: &dflat_link::FrameError) -> Option<String> {
+    match e {
+        dflat_link::FrameError::Payload {
+            msg_id: 84,
+            fault: dflat_link::PayloadFault::InvalidEnum { enum_type, value },
+        } => Some(format!(
+            "dflat: setpoint refused: {} {value} unknown",
+            enum_type.trim_start_matches("Mav")
+        )),
+        dflat_link::FrameError::Payload { msg_id: 84, .. } => {
+            Some("dflat: setpoint refused: malformed".to_owned())
+        }
+        _ => None,
     }
 }
 
@@ -191,6 +214,14 @@ pub(super) async fn receive_task(
             Ok(RecvEvent::Error(e)) => {
                 debug!(error = %e, "frame error");
                 link.frame_error(&e);
+                // A SET_POSITION_TARGET_LOCAL_NED whose payload does not
+                // decode (a coordinate_frame the dialect does not define):
+                // say why, rate-limited (its sender is not known: the
+                // frame never decoded, so one key for all of them).
+                if let Some(text) = undecodable_setpoint_text(&e) {
+                    let say = refusals.refuse((0, 0), &text, ctx.epoch.elapsed().as_secs_f64());
+                    say_refusal(&out, say, &text, || info!(error = %e, "setpoint refused"));
+                }
                 continue;
             }
             Err(e @ TransportError::Closed { .. }) => {

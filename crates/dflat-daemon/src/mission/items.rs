@@ -11,8 +11,10 @@ pub struct ItemRules {
     /// (`mission.local_xy_scale`: 1e4 per the specification; pymavlink's
     /// `mavwp` and MAVProxy's `wp` send metres × 1e7).
     pub int_scale: f64,
-    /// Geofence half-widths around the origin \[m\] (x, y, z).
-    pub geofence: [f64; 3],
+    /// The fence's smallest x, y, z \[m\] (NED: z's is the ceiling).
+    pub fence_min: [f64; 3],
+    /// The fence's largest x, y, z \[m\] (NED: z's is the floor).
+    pub fence_max: [f64; 3],
     /// Acceptance radius \[m\] of a waypoint whose param2 is 0.
     pub acceptance_radius: f64,
 }
@@ -24,7 +26,16 @@ impl ItemRules {
     pub fn of(mission: &crate::config::MissionConfig) -> Self {
         Self {
             int_scale: mission.local_xy_scale,
-            geofence: mission.geofence,
+            fence_min: [
+                -mission.geofence[0],
+                -mission.geofence[1],
+                -mission.geofence[2],
+            ],
+            fence_max: [
+                mission.geofence[0],
+                mission.geofence[1],
+                mission.geofence_down_m,
+            ],
             acceptance_radius: mission.acceptance_radius_m,
         }
     }
@@ -150,7 +161,7 @@ pub fn parse_item(fields: &ItemFields, rules: &ItemRules) -> Result<MissionItem,
         ])
         .enumerate()
     {
-        if !v.is_finite() || v.abs() > rules.geofence[i] {
+        if !v.is_finite() || *v < rules.fence_min[i] || *v > rules.fence_max[i] {
             return Err(refuse(
                 result,
                 format!(
@@ -214,7 +225,8 @@ mod tests {
 
     const RULES: ItemRules = ItemRules {
         int_scale: 1e4,
-        geofence: [100.0, 100.0, 50.0],
+        fence_min: [-100.0, -100.0, -50.0],
+        fence_max: [100.0, 100.0, 50.0],
         acceptance_radius: 1.0,
     };
 

@@ -80,6 +80,8 @@ pub struct MissionRunner {
     hold_until: Option<f64>,
     finished_since: Option<f64>,
     speed_override: Option<f64>,
+    /// The envelope's speed limit [m/s] ([`MissionRunner::with_speed_limit`]).
+    max_speed: f64,
     status: MissionStatus,
     yaw: Option<f64>,
 }
@@ -131,6 +133,7 @@ impl MissionRunner {
             hold_until: None,
             finished_since: None,
             speed_override: None,
+            max_speed: f64::INFINITY,
             status: MissionStatus::NotStarted,
             yaw: None,
         })
@@ -190,8 +193,17 @@ impl MissionRunner {
         self.legs[self.legs.len() - 1].position
     }
 
+    /// The flight envelope's speed limit [m/s]: every leg, and every
+    /// DO_CHANGE_SPEED, is flown at most this fast.
+    pub fn with_speed_limit(mut self, max_speed: f64) -> Self {
+        self.max_speed = max_speed;
+        self
+    }
+
     fn speed_of(&self, leg: usize) -> f64 {
-        self.speed_override.unwrap_or(self.legs[leg].speed)
+        self.speed_override
+            .unwrap_or(self.legs[leg].speed)
+            .min(self.max_speed)
     }
 
     fn take_yaw(&mut self) {

@@ -13,12 +13,11 @@ impl Supervisor {
         if !position.iter().all(|v| v.is_finite()) {
             return Some(Refusal::NonFinite);
         }
-        if position
-            .iter()
-            .zip(&self.cfg.geofence)
-            .any(|(p, fence)| p.abs() > *fence)
-        {
+        if !self.cfg.envelope.contains(position) {
             return Some(Refusal::Geofence { position });
+        }
+        if self.stopping {
+            return Some(Refusal::Stopping);
         }
         if !self.state.streams() {
             return Some(Refusal::NotInControl(self.state));
@@ -39,6 +38,9 @@ impl Supervisor {
             && self.cfg.path_ends.is_some_and(|(first, _)| {
                 distance(&first, &position) <= self.cfg.path_trigger_radius
             });
+        if triggers_path {
+            self.path_started = true;
+        }
         let (goal, cause) = if triggers_path {
             (Goal::Path, Cause::PathTrigger)
         } else {
@@ -125,6 +127,9 @@ impl Supervisor {
     /// standby it is flown after the next engagement, once braked. Refused
     /// when not streaming.
     pub fn on_mission_start(&mut self, t: f64) -> Result<Option<Transition>, Refusal> {
+        if self.stopping {
+            return Err(Refusal::Stopping);
+        }
         if !self.state.streams() {
             return Err(Refusal::NotInControl(self.state));
         }
@@ -174,7 +179,7 @@ impl Supervisor {
     /// MAV_CMD_DO_PAUSE_CONTINUE 1 at `t`: the paused goal goes on (a path
     /// from its closest point). `None` when not paused.
     pub fn resume(&mut self, t: f64) -> Option<Transition> {
-        if !(self.paused && self.state == FlightState::Holding) {
+        if self.stopping || !(self.paused && self.state == FlightState::Holding) {
             return None;
         }
         self.paused = false;

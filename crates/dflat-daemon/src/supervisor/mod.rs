@@ -104,6 +104,11 @@ pub struct Supervisor {
     disengagements: u64,
     /// Paused (MAV_CMD_DO_PAUSE_CONTINUE): `pending` goes on at a continue.
     paused: bool,
+    /// The configured path was started (`mission.start = "path"` starts it
+    /// once, at an engagement the daemon saw happen).
+    path_started: bool,
+    /// Stopping (SIGTERM / SIGINT): no goal is accepted.
+    stopping: bool,
 }
 
 impl Supervisor {
@@ -128,6 +133,8 @@ impl Supervisor {
             engagements: 0,
             disengagements: 0,
             paused: false,
+            path_started: false,
+            stopping: false,
         }
     }
 
@@ -220,6 +227,51 @@ impl Supervisor {
         Some(self.enter(FlightState::Holding, Cause::PoseJump, t))
     }
 
+    /// The vehicle is faster than the speed limit at `t`: while engaged,
+    /// brake from its motion now and hold the stop point (the goal flown
+    /// is abandoned; a new goal is needed). `None` when not engaged.
+    pub fn overspeed(&mut self, t: f64) -> Option<Transition> {
+        if !self.state.engaged() {
+            return None;
+        }
+        if let Some(g) = self.stop_goal() {
+            self.set_goal(g);
+        }
+        self.braking = None;
+        self.pending = Goal::None;
+        self.paused = false;
+        self.last_setpoint = None;
+        Some(self.enter(FlightState::Holding, Cause::Overspeed, t))
+    }
+
+    /// The daemon is stopping at `t` (SIGTERM / SIGINT): from now on no
+    /// goal is accepted; while engaged the goal becomes a stop from the
+    /// vehicle's motion (the control core then levels and stops the
+    /// stream). `None` when not engaged (nothing to brake).
+    pub fn begin_stop(&mut self, t: f64) -> Option<Transition> {
+        self.stopping = true;
+        if !self.state.engaged() {
+            return None;
+        }
+        if let Some(g) = self.stop_goal() {
+            self.set_goal(g);
+        }
+        self.braking = None;
+        self.pending = Goal::None;
+        Some(self.enter(FlightState::Holding, Cause::Shutdown, t))
+    }
+
+    /// True once [`Supervisor::begin_stop`] was called.
+    pub fn stopping(&self) -> bool {
+        self.stopping
+    }
+
+    /// The vehicle's speed now [m/s], from the pose stream's motion
+    /// estimate (`None` without one).
+    pub fn speed(&self) -> Option<f64> {
+        self.motion.map(|m| m.speed())
+    }
+
     /// Forces failsafe at `t` for `cause` (the model residual, the
     /// controller failing). `None` when not streaming. How long recovery
     /// waits is the failsafe machine's (`tick/failsafe.rs`): see
@@ -292,12 +344,24 @@ impl Supervisor {
         let engaged = self.autopilot_engaged();
         let transition = match (self.state, pose) {
             (FlightState::WaitingForPose, Some(_)) if autopilot_alive => {
-                if self.cfg.start_path && self.cfg.path_ends.is_some() {
-                    self.pending = Goal::Path;
+                if engaged {
+                    // Applied from the first command: a restart mid-flight
+                    // (or `link.engagement = "always"`). Never take the
+                    // vehicle anywhere by ourselves: brake and hold until a
+                    // goal is given after this start.
+                    Some(self.engage(t, Cause::FoundEngaged))
+                } else {
+                    // The path waits for the engagement the daemon will see.
+                    if self.cfg.start_path && self.cfg.path_ends.is_some() {
+                        self.pending = Goal::Path;
+                    }
+                    self.follow();
+                    Some(self.enter(FlightState::Standby, Cause::PoseFresh, t))
                 }
-                Some(self.start_streaming(t, engaged))
             }
-            (FlightState::Failsafe, Some(_)) if autopilot_alive && may_recover => {
+            (FlightState::Failsafe, Some(_))
+                if autopilot_alive && may_recover && !self.stopping =>
+            {
                 // A failsafe abandons the mission: hold (or stand by).
                 self.pending = Goal::None;
                 Some(self.start_streaming(t, engaged))
@@ -314,7 +378,18 @@ impl Supervisor {
                 };
                 Some(self.enter(FlightState::Failsafe, cause, t))
             }
-            (FlightState::Standby, _) if engaged => Some(self.engage(t, Cause::Engaged)),
+            (FlightState::Standby, _) if engaged => {
+                // An engagement the daemon saw happen: the explicit start
+                // `mission.start = "path"` waits for.
+                if self.cfg.start_path
+                    && self.cfg.path_ends.is_some()
+                    && !self.path_started
+                    && self.pending == Goal::None
+                {
+                    self.pending = Goal::Path;
+                }
+                Some(self.engage(t, Cause::Engaged))
+            }
             (FlightState::Standby, _) => {
                 self.follow();
                 None
@@ -340,12 +415,15 @@ impl Supervisor {
                 match self.pending {
                     g @ (Goal::Path | Goal::Setpoint(_) | Goal::Mission | Goal::Stream) => {
                         self.set_goal(g);
-                        let cause =
-                            if g == Goal::Path && self.cfg.start_path && self.engagements == 1 {
-                                Cause::MissionStart
-                            } else {
-                                Cause::Resume
-                            };
+                        let cause = if g == Goal::Path && self.cfg.start_path && !self.path_started
+                        {
+                            Cause::MissionStart
+                        } else {
+                            Cause::Resume
+                        };
+                        if g == Goal::Path {
+                            self.path_started = true;
+                        }
                         self.path_resumed = cause == Cause::Resume;
                         Some(self.enter(FlightState::Tracking, cause, t))
                     }

@@ -140,6 +140,17 @@ pub enum Cause {
     Stream,
     /// The stream went silent: stopping smoothly, then holding.
     StreamTimeout,
+    /// The daemon found the autopilot already applying its commands at
+    /// start (a restart mid-flight): brake and hold where the vehicle is,
+    /// until a goal is given after the start.
+    FoundEngaged,
+    /// The vehicle is faster than `safety.max_speed_mps`: braking to a stop.
+    Overspeed,
+    /// The daemon is stopping (SIGTERM / SIGINT): braking to a stop.
+    Shutdown,
+    /// The daemon is stopping: braked (or out of time), level, then the
+    /// stream stops.
+    ShutdownLevel,
 }
 
 impl Cause {
@@ -164,6 +175,10 @@ impl Cause {
             Cause::Continued => "continue",
             Cause::Stream => "trajectory stream",
             Cause::StreamTimeout => "stream lost, stopping",
+            Cause::FoundEngaged => "engaged at start, holding",
+            Cause::Overspeed => "overspeed, braking",
+            Cause::Shutdown => "stopping, braking",
+            Cause::ShutdownLevel => "stopping, level, stream off",
         }
     }
 }
@@ -187,9 +202,10 @@ impl Transition {
         format!("dflat: {} ({})", self.to.name(), self.cause.words())
     }
 
-    /// True for transitions into failsafe (sent with a higher severity).
+    /// True for transitions into failsafe, and for a brake the envelope
+    /// forces (overspeed): sent with a higher severity.
     pub fn is_failsafe(&self) -> bool {
-        self.to == FlightState::Failsafe
+        self.to == FlightState::Failsafe || self.cause == Cause::Overspeed
     }
 }
 
@@ -198,11 +214,24 @@ impl Transition {
 pub enum Refusal {
     /// A coordinate is NaN or infinite.
     NonFinite,
-    /// Outside the geofence half-widths around the origin.
+    /// Outside the fence (`mission.geofence`, `mission.geofence_down_m`).
     Geofence {
         /// The refused position \[m\].
         position: [f64; 3],
     },
+    /// A stream sample faster than `safety.max_speed_mps`.
+    Speed {
+        /// The sample's speed [m/s].
+        speed: f64,
+    },
+    /// A stream sample whose horizontal acceleration needs more tilt than
+    /// `vehicle.max_tilt_deg`.
+    Acceleration {
+        /// The sample's horizontal acceleration \[m/s²\].
+        acceleration: f64,
+    },
+    /// The daemon is stopping (SIGTERM / SIGINT): braking, no new goal.
+    Stopping,
     /// No control (waiting for pose, or failsafe).
     NotInControl(FlightState),
     /// A stream sample further than `stream.max_jump_m` from where the
@@ -214,6 +243,23 @@ pub enum Refusal {
 }
 
 impl Refusal {
+    /// The kind of refusal, for rate-limiting each kind on its own (a fence
+    /// refusal said does not hide a speed refusal after it).
+    pub fn kind(&self) -> usize {
+        match self {
+            Refusal::NonFinite => 0,
+            Refusal::Geofence { .. } => 1,
+            Refusal::NotInControl(_) => 2,
+            Refusal::StreamJump { .. } => 3,
+            Refusal::Speed { .. } => 4,
+            Refusal::Acceleration { .. } => 5,
+            Refusal::Stopping => 6,
+        }
+    }
+
+    /// Number of [`Refusal::kind`]s.
+    pub const KINDS: usize = 7;
+
     /// STATUSTEXT text (≤ 50 bytes).
     pub fn text(&self) -> String {
         match self {
@@ -225,6 +271,13 @@ impl Refusal {
                 )
             }
             Refusal::NotInControl(s) => format!("dflat: setpoint refused: {}", s.name()),
+            Refusal::Speed { speed } => {
+                format!("dflat: stream refused: speed {speed:.0} m/s > limit")
+            }
+            Refusal::Acceleration { acceleration } => {
+                format!("dflat: stream refused: accel {acceleration:.0} > tilt")
+            }
+            Refusal::Stopping => "dflat: setpoint refused: stopping".into(),
             Refusal::StreamJump { distance } => {
                 format!("dflat: stream refused: jumps {distance:.1} m")
             }
@@ -267,8 +320,9 @@ pub struct SupervisorConfig {
     pub pose_timeout: f64,
     /// No autopilot HEARTBEAT for this long \[s\] means it is silent.
     pub autopilot_timeout: f64,
-    /// Geofence half-widths around the origin \[m\] (x, y, z).
-    pub geofence: [f64; 3],
+    /// The flight envelope: the fence every goal must lie in
+    /// ([`crate::envelope`]).
+    pub envelope: crate::envelope::Envelope,
     /// The configured path's first and last waypoints, if a path is configured.
     pub path_ends: Option<([f64; 3], [f64; 3])>,
     /// A setpoint within this distance \[m\] of the path's first waypoint

@@ -10,7 +10,7 @@ fn cfg() -> SupervisorConfig {
     SupervisorConfig {
         pose_timeout: 0.1,
         autopilot_timeout: 3.0,
-        geofence: [500.0, 500.0, 200.0],
+        envelope: crate::envelope::Envelope::from_config(&crate::config::Config::default()),
         path_ends: Some((START, END)),
         path_trigger_radius: 0.5,
         start_path: false,
@@ -73,7 +73,7 @@ fn waits_for_pose_and_heartbeat_then_holds_the_first_position() {
     let tr = d.transition.unwrap();
     assert_eq!(
         (tr.from, tr.to, tr.cause),
-        (WaitingForPose, Holding, Cause::PoseFresh)
+        (WaitingForPose, Holding, Cause::FoundEngaged)
     );
     assert_eq!(s.goal(), Goal::Hold(P0));
     assert!(tr.text().len() <= 50, "{}", tr.text());
@@ -235,27 +235,33 @@ fn setpoints_track_refuse_and_trigger_the_path() {
 fn mission_start_path_tracks_at_once_and_time_in_states_adds_up() {
     let mut s = Supervisor::new(SupervisorConfig {
         start_path: true,
-        ..cfg()
+        ..cfg_mode()
     });
     s.tick(0.0, true);
     s.on_pose(0.5, P0);
     s.on_heartbeat(0.5);
-    // At rest: engaged (holding) at once, the path at the next tick.
+    s.on_mode(false);
+    // At rest, the pilot flying: standby, the path pending.
     s.set_motion(moving(0.5, P0[0], 0.0));
     let tr = s.tick(0.5, true).transition.unwrap();
-    assert_eq!((tr.to, tr.cause), (Holding, Cause::PoseFresh));
+    assert_eq!((tr.to, tr.cause), (Standby, Cause::PoseFresh));
     assert_eq!(s.pending_goal(), Goal::Path);
+    // The engagement the daemon sees: holding, the path at the next tick.
+    s.on_mode(true);
     let tr = s.tick(0.52, true).transition.unwrap();
+    assert_eq!((tr.to, tr.cause), (Holding, Cause::Engaged));
+    let tr = s.tick(0.54, true).transition.unwrap();
     assert_eq!((tr.to, tr.cause), (Tracking, Cause::MissionStart));
     assert_eq!(s.goal(), Goal::Path);
     let tr = s.tick(0.7, true).transition.unwrap(); // pose 0.2 s old
     assert_eq!(tr.to, Failsafe);
     let t = s.time_in_states(1.0);
     assert!((t[WaitingForPose.index()] - 0.5).abs() < 1e-12);
+    assert!((t[Standby.index()] - 0.02).abs() < 1e-12);
     assert!((t[Holding.index()] - 0.02).abs() < 1e-12);
-    assert!((t[Tracking.index()] - 0.18).abs() < 1e-12);
+    assert!((t[Tracking.index()] - 0.16).abs() < 1e-12);
     assert!((t[Failsafe.index()] - 0.3).abs() < 1e-12);
-    assert_eq!(s.transitions(), 3);
+    assert_eq!(s.transitions(), 4);
     // Recovery holds (does not restart the path).
     s.on_pose(1.0, P0);
     s.on_heartbeat(1.0);
@@ -349,9 +355,11 @@ fn hold_on_engage_forgets_the_goal_before_the_override() {
         ..cfg_mode()
     });
     s.on_heartbeat(0.0);
-    s.on_mode(true);
+    s.on_mode(false);
     s.on_pose(0.0, P0);
     s.set_motion(moving(0.0, P0[0], 0.0));
+    assert_eq!(s.tick(0.0, true).transition.unwrap().to, Standby);
+    s.on_mode(true);
     assert_eq!(s.tick(0.0, true).transition.unwrap().to, Holding);
     // The mission start flies the path at the first engagement.
     assert_eq!(s.tick(0.02, true).transition.unwrap().to, Tracking);
@@ -373,12 +381,15 @@ fn hold_on_engage_forgets_the_goal_before_the_override() {
 fn braking_ends_after_its_time_even_if_never_slow() {
     let mut s = Supervisor::new(SupervisorConfig {
         start_path: true,
-        ..cfg()
+        ..cfg_mode()
     });
     s.on_heartbeat(0.0);
     s.on_pose(0.0, P0);
+    s.on_mode(false);
     // 2 m/s at a = 4 m/s²: 0.5 s of braking, + BRAKE_SETTLE.
     s.set_motion(moving(0.0, P0[0], 2.0));
+    assert_eq!(s.tick(0.0, true).transition.unwrap().to, Standby);
+    s.on_mode(true);
     assert_eq!(s.tick(0.0, true).transition.unwrap().to, Holding);
     let end = 0.5 + BRAKE_SETTLE;
     let mut t = 0.02;
@@ -398,9 +409,12 @@ fn repeated_path_starts_again_instead_of_holding() {
     let mut s = Supervisor::new(SupervisorConfig {
         start_path: true,
         repeat_path: true,
-        ..cfg()
+        ..cfg_mode()
     });
-    fly(&mut s, 0.0, 0.2, true, true);
+    s.on_mode(false);
+    fly(&mut s, 0.0, 0.1, true, true);
+    s.on_mode(true);
+    fly(&mut s, 0.1, 0.2, true, true);
     assert_eq!((s.state(), s.goal()), (Tracking, Goal::Path));
     let g = s.goal_generation();
     assert!(s.on_path_finished(5.0).is_none());
@@ -468,4 +482,85 @@ fn a_stream_is_tracked_kept_across_a_hand_back_and_held_when_lost() {
             .text()
             .contains("12.3 m")
     );
+}
+
+/// A daemon (re)started while the autopilot already applies its commands
+/// (ArduPilot stays in GUIDED; PX4 within COM_OF_LOSS_T) brakes and holds
+/// where the vehicle is: `mission.start = "path"` waits for an engagement
+/// it sees happen, a setpoint or a mission start.
+#[test]
+fn a_start_found_engaged_holds_and_the_path_waits_for_an_explicit_start() {
+    let mut s = Supervisor::new(SupervisorConfig {
+        start_path: true,
+        ..cfg_mode()
+    });
+    s.on_mode(true);
+    let d = fly(&mut s, 0.0, 1.0, true, true);
+    let tr = d.iter().find_map(|d| d.transition).unwrap();
+    assert_eq!((tr.to, tr.cause), (Holding, Cause::FoundEngaged));
+    assert!(tr.text().len() <= 50, "{}", tr.text());
+    // (The motion's position: x of P0, y = 0.)
+    assert_eq!(
+        (s.state(), s.goal()),
+        (Holding, Goal::Hold([P0[0], 0.0, -10.0]))
+    );
+    assert_eq!(s.pending_goal(), Goal::None);
+    // The pilot takes over and hands back: that start is explicit.
+    s.on_mode(false);
+    fly(&mut s, 1.0, 1.1, true, true);
+    assert_eq!(s.state(), Standby);
+    s.on_mode(true);
+    fly(&mut s, 1.1, 1.2, true, true);
+    assert_eq!((s.state(), s.goal()), (Tracking, Goal::Path));
+}
+
+/// A vehicle faster than the limit is braked from its motion; a stop
+/// refuses every goal after it and, engaged, brakes.
+#[test]
+fn overspeed_brakes_and_a_stop_refuses_goals() {
+    let mut s = Supervisor::new(cfg());
+    fly(&mut s, 0.0, 0.1, true, true);
+    assert!(matches!(
+        s.on_setpoint(0.1, [5.0, 0.0, -10.0]),
+        SetpointOutcome::Accepted { .. }
+    ));
+    s.set_motion(moving(0.12, 3.0, 20.0));
+    let tr = s.overspeed(0.12).unwrap();
+    assert_eq!((tr.to, tr.cause), (Holding, Cause::Overspeed));
+    assert!(tr.is_failsafe(), "said as critical");
+    assert_eq!(
+        s.goal(),
+        Goal::Brake {
+            from: [3.0, 0.0, -10.0],
+            velocity: [20.0, 0.0, 0.0]
+        }
+    );
+    let tr = s.begin_stop(0.2).unwrap();
+    assert_eq!((tr.to, tr.cause), (Holding, Cause::Shutdown));
+    assert_eq!(
+        s.on_setpoint(0.21, [5.0, 0.0, -10.0]),
+        SetpointOutcome::Refused(Refusal::Stopping)
+    );
+    assert_eq!(s.on_mission_start(0.22), Err(Refusal::Stopping));
+    // The level phase is a failsafe that does not recover on fresh pose.
+    s.force_failsafe(0.3, Cause::ShutdownLevel).unwrap();
+    fly(&mut s, 0.3, 0.5, true, true);
+    assert_eq!(s.state(), Failsafe);
+}
+
+/// The fence has a floor apart from its ceiling: 150 m below the origin
+/// is refused although a symmetric ±200 m fence would take it.
+#[test]
+fn a_setpoint_below_the_floor_is_refused() {
+    let mut s = Supervisor::new(cfg());
+    fly(&mut s, 0.0, 0.1, true, true);
+    let below = [0.0, 0.0, 150.0];
+    assert_eq!(
+        s.on_setpoint(0.1, below),
+        SetpointOutcome::Refused(Refusal::Geofence { position: below })
+    );
+    assert!(matches!(
+        s.on_setpoint(0.1, [0.0, 0.0, -150.0]),
+        SetpointOutcome::Accepted { .. }
+    ));
 }

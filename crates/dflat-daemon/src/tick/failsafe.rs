@@ -295,16 +295,23 @@ pub fn next(state: Failsafe, event: Event, limits: &Limits) -> (Failsafe, Action
                 (cause == Cause::ResidualDiverged).then_some(t + RESIDUAL_FAILSAFE_LATCH);
             match cause {
                 Cause::ControlFailed => (S::Trial { good: 0 }, Action::None),
-                Cause::PoseStale | Cause::AutopilotSilent | Cause::ResidualDiverged if engaged => (
-                    S::FailsafeLevel {
-                        since: t,
-                        plan: level,
-                        latched_until,
-                    },
-                    Action::StartLevel {
-                        announce: limits.level_hover_max > 0.0,
-                    },
-                ),
+                Cause::PoseStale
+                | Cause::AutopilotSilent
+                | Cause::ResidualDiverged
+                | Cause::ShutdownLevel
+                    if engaged =>
+                {
+                    (
+                        S::FailsafeLevel {
+                            since: t,
+                            plan: level,
+                            latched_until,
+                        },
+                        Action::StartLevel {
+                            announce: limits.level_hover_max > 0.0,
+                        },
+                    )
+                }
                 _ => (S::LetGo { latched_until }, Action::None),
             }
         }

@@ -95,13 +95,15 @@ impl ControlCore {
         t
     }
 
+    /// Counts a refused goal and says why, each kind of refusal at most
+    /// once per [`REFUSAL_TEXT_INTERVAL`] (a fence refusal said does not
+    /// hide a speed refusal after it).
     fn refuse(&mut self, t: f64, refusal: Refusal) {
         self.counts.setpoints_refused += 1;
-        let due = self
-            .last_refusal_text
-            .is_none_or(|last| t - last >= REFUSAL_TEXT_INTERVAL);
+        let last = &mut self.last_refusal_text[refusal.kind()];
+        let due = last.is_none_or(|last| t - last >= REFUSAL_TEXT_INTERVAL);
         if due {
-            self.last_refusal_text = Some(t);
+            *last = Some(t);
             info!(?refusal, "setpoint refused");
             self.text(MavSeverity::MAV_SEVERITY_WARNING, &refusal.text());
         }
@@ -126,6 +128,26 @@ impl ControlCore {
     /// A stream sample (arrived at `arrival`); `seed` is the position-only
     /// setpoint before it (implied velocity).
     fn apply_sample(&mut self, arrival: f64, sample: StreamSample, seed: Option<(f64, [f64; 3])>) {
+        // A trajectory the vehicle cannot have (the envelope's speed and
+        // tilt limits) is refused in words, before it can fly anything.
+        let motion = |v: Option<Vector3<f64>>| v.map(|v| [v.x, v.y, v.z]);
+        if let Err(breach) = self
+            .envelope
+            .check_motion(motion(sample.velocity), motion(sample.acceleration))
+        {
+            let refusal = match breach {
+                crate::envelope::Breach::Speed(speed) => Refusal::Speed { speed },
+                crate::envelope::Breach::Acceleration(acceleration) => {
+                    Refusal::Acceleration { acceleration }
+                }
+                crate::envelope::Breach::Fence => Refusal::Geofence {
+                    position: [sample.position.x, sample.position.y, sample.position.z],
+                },
+            };
+            warn!(?refusal, "stream sample outside the envelope: refused");
+            self.refuse(arrival, refusal);
+            return;
+        }
         let flying_stream = self.supervisor.goal() == Goal::Stream
             && self.reference.as_ref().is_some_and(Reference::is_stream);
         // The jump check: from the stream's own prediction, else from the
@@ -211,6 +233,8 @@ impl ControlCore {
         if t - last <= self.config.stream.timeout_s {
             return;
         }
+        // Where the stream stops lies inside the fence.
+        self.bound_reference();
         let Some(rest) = self.reference.as_ref().map(Reference::rest_point) else {
             return;
         };

@@ -214,7 +214,7 @@ pub fn supervisor_config(cfg: &Config) -> SupervisorConfig {
     SupervisorConfig {
         pose_timeout: cfg.safety.pose_timeout_ms / 1000.0,
         autopilot_timeout: cfg.safety.autopilot_timeout_ms / 1000.0,
-        geofence: m.geofence,
+        envelope: crate::envelope::Envelope::from_config(cfg),
         path_ends,
         path_trigger_radius: m.path_trigger_radius,
         start_path: m.start == crate::config::MissionStart::Path,

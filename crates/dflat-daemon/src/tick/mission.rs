@@ -64,7 +64,8 @@ impl ControlCore {
                 let runner = self
                     .mission
                     .as_ref()
-                    .and_then(|m| MissionRunner::new(m, self.config.mission.speed));
+                    .and_then(|m| MissionRunner::new(m, self.config.mission.speed))
+                    .map(|r| r.with_speed_limit(self.config.safety.max_speed_mps));
                 let Some(mut runner) = runner else {
                     self.text(
                         MavSeverity::MAV_SEVERITY_WARNING,
@@ -110,6 +111,17 @@ impl ControlCore {
             }
             MissionAction::Speed(speed) => {
                 info!(speed, "mission speed");
+                let limit = self.config.safety.max_speed_mps;
+                if speed > limit {
+                    warn!(
+                        speed,
+                        limit, "DO_CHANGE_SPEED above safety.max_speed_mps: flown at the limit"
+                    );
+                    self.text(
+                        MavSeverity::MAV_SEVERITY_WARNING,
+                        &format!("dflat: speed {speed:.1} > limit, flying {limit:.1}"),
+                    );
+                }
                 if let Some(r) = self.runner.as_mut() {
                     r.set_speed(speed);
                 }

@@ -46,9 +46,10 @@ use crate::guard::{CommandGuard, Fallback, GuardCounts, ResidualMonitor};
 use crate::motion::MotionEstimator;
 use crate::records::CsvRow;
 use crate::summary::{DisturbanceSummary, SolveCounts};
-use crate::supervisor::{Cause, FlightState, Supervisor, Transition};
+use crate::supervisor::{Cause, FlightState, Refusal, Supervisor, Transition};
 
 mod control;
+mod envelope;
 mod exit;
 pub mod failsafe;
 mod failsafe_level;
@@ -144,6 +145,9 @@ pub struct CoreCounts {
     pub setpoints_refused: u64,
     /// Streams lost (no sample for `stream.timeout_s`).
     pub stream_timeouts: u64,
+    /// Times the vehicle was braked for flying faster than
+    /// `safety.max_speed_mps`.
+    pub overspeed_brakes: u64,
 }
 
 /// Everything the control thread decides with (see the module docs).
@@ -194,7 +198,14 @@ pub struct ControlCore {
     last_used_arrival: Option<f64>,
     reference: Option<Reference>,
     reference_generation: u64,
-    last_refusal_text: Option<f64>,
+    /// When each kind of refusal was last said \[s\] ([`Refusal::kind`]).
+    last_refusal_text: [Option<f64>; Refusal::KINDS],
+    /// The flight envelope (fence, speed limit).
+    envelope: crate::envelope::Envelope,
+    /// Braking for overspeed (said once per excursion).
+    overspeed: bool,
+    /// The stop sequence, once asked for (`tick/envelope.rs`).
+    stop: Option<envelope::Stop>,
     guard_note: Option<&'static str>,
     counts: CoreCounts,
     /// Outputs produced between steps (by [`ControlCore::apply`]).
@@ -286,7 +297,10 @@ impl ControlCore {
             last_used_arrival: None,
             reference: None,
             reference_generation,
-            last_refusal_text: None,
+            last_refusal_text: [None; Refusal::KINDS],
+            envelope: crate::envelope::Envelope::from_config(config),
+            overspeed: false,
+            stop: None,
             guard_note: None,
             counts: CoreCounts::default(),
             pending_texts: Vec::new(),
@@ -359,6 +373,7 @@ impl ControlCore {
         let level = self.failsafe_level_command();
         self.check_stream_timeout(t);
         self.supervisor.set_motion(self.motion.estimate());
+        self.check_overspeed(t);
         let decision = self.supervisor.tick(t, !self.failsafe.latched(t));
         if decision.reset_controller {
             self.reset_controller();
@@ -367,7 +382,9 @@ impl ControlCore {
         if let Some(tr) = decision.transition {
             self.on_transition(t, tr, level);
         }
+        self.stop_tick(t, level);
         self.refresh_reference();
+        self.bound_reference();
         self.commanded_yaw = self.heading(t);
 
         // 3. Control.

@@ -10,7 +10,8 @@ const OWN: (u8, u8) = (1, 191);
 const GCS: (u8, u8) = (255, 190);
 const RULES: ItemRules = ItemRules {
     int_scale: 1e4,
-    geofence: [100.0, 100.0, 50.0],
+    fence_min: [-100.0, -100.0, -50.0],
+    fence_max: [100.0, 100.0, 50.0],
     acceptance_radius: 1.0,
 };
 

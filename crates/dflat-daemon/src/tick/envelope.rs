@@ -1,0 +1,192 @@
+//! The flight envelope in the core ([`crate::envelope`]): every reference
+//! clamped into the fence, a vehicle faster than the speed limit braked,
+//! and the stop sequence that leaves the autopilot a level command when
+//! the daemon is asked to stop.
+//!
+//! **The stop** (SIGTERM / SIGINT, [`ControlCore::begin_stop`]): while
+//! engaged, (optionally) the autopilot is asked for its own position hold;
+//! the supervisor's goal becomes a stop from the vehicle's motion, flown by
+//! the controller on live poses for at most `safety.stop_brake_ms` (over
+//! sooner once slower than [`crate::supervisor::BRAKED_SPEED`]); then the
+//! failsafe's level hover for `safety.stop_level_ms`; then the stream
+//! stops ([`ControlCore::stop_done`]). Not engaged, or the autopilot left
+//! its offboard mode: done at once.
+
+use dflat_link::dialect::{COMMAND_LONG_DATA, MavCmd, MavSeverity};
+use dflat_link::{AutopilotFamily, MavMessage};
+use tracing::{info, warn};
+
+use super::ControlCore;
+use crate::supervisor::{BRAKED_SPEED, Cause, FlightState};
+
+/// Speeds above the limit by less than this fraction are measurement noise
+/// (the motion estimate of a vehicle flying at the limit).
+pub const OVERSPEED_MARGIN: f64 = 0.1;
+
+/// Where the stop sequence stands.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct Stop {
+    /// When the stop was asked for \[s\].
+    started: f64,
+    /// When the level hover began \[s\] (`None`: still braking).
+    level_since: Option<f64>,
+    /// Nothing to brake (not engaged when asked, or the autopilot left
+    /// offboard): the stream may stop now.
+    done: bool,
+}
+
+impl ControlCore {
+    /// Clamps the reference about to be flown into the fence (idempotent).
+    pub(super) fn bound_reference(&mut self) {
+        let bounds = self.envelope.bounds;
+        if let Some(r) = self.reference.as_mut()
+            && r.bounds().is_none()
+        {
+            r.set_bounds(Some(bounds));
+        }
+    }
+
+    /// A vehicle measured faster than the speed limit while engaged is
+    /// braked to a stop (said once per excursion, counted).
+    pub(super) fn check_overspeed(&mut self, t: f64) {
+        let Some(speed) = self.motion.estimate().map(|m| m.speed()) else {
+            return;
+        };
+        let limit = self.envelope.max_speed;
+        if speed <= limit {
+            self.overspeed = false;
+            return;
+        }
+        if self.overspeed || speed <= limit * (1.0 + OVERSPEED_MARGIN) {
+            return;
+        }
+        if let Some(tr) = self.supervisor.overspeed(t) {
+            self.overspeed = true;
+            self.counts.overspeed_brakes += 1;
+            warn!(speed, limit, "faster than safety.max_speed_mps: braking");
+            self.announce(tr);
+            self.text(
+                MavSeverity::MAV_SEVERITY_CRITICAL,
+                &format!("dflat: speed {speed:.1} > limit {limit:.1} m/s"),
+            );
+            self.refresh_reference();
+        }
+    }
+
+    /// Begins the stop sequence at `t` (module docs). Idempotent.
+    pub fn begin_stop(&mut self, t: f64) {
+        if self.stop.is_some() {
+            return;
+        }
+        let engaged = self.supervisor.state().engaged();
+        let brakes =
+            self.config.safety.stop_brake_ms > 0.0 || self.config.safety.stop_level_ms > 0.0;
+        if !engaged || !brakes {
+            self.supervisor.begin_stop(t).map(|_| ());
+            self.stop = Some(Stop {
+                started: t,
+                level_since: None,
+                done: true,
+            });
+            return;
+        }
+        info!("stopping: brake, level, then the stream stops");
+        if self.config.safety.stop_requests_hold
+            && let Some(request) = self.hold_request()
+        {
+            self.text(
+                MavSeverity::MAV_SEVERITY_NOTICE,
+                "dflat: stopping, asking the autopilot to hold",
+            );
+            self.pending_texts.push(request);
+        }
+        if let Some(tr) = self.supervisor.begin_stop(t) {
+            self.announce(tr);
+            self.refresh_reference();
+        }
+        self.stop = Some(Stop {
+            started: t,
+            level_since: None,
+            done: false,
+        });
+    }
+
+    /// True once the stop sequence has run: the stream may stop. `false`
+    /// before [`ControlCore::begin_stop`].
+    pub fn stop_done(&self, t: f64) -> bool {
+        let Some(stop) = self.stop else {
+            return false;
+        };
+        if stop.done {
+            return true;
+        }
+        let s = &self.config.safety;
+        match stop.level_since {
+            Some(since) => t - since >= s.stop_level_ms / 1000.0,
+            // Braking ran out, and no level is asked for.
+            None => s.stop_level_ms <= 0.0 && t - stop.started >= s.stop_brake_ms / 1000.0,
+        }
+    }
+
+    /// The stop sequence at tick `t`: from braking to level when braked or
+    /// out of time; done when the autopilot no longer applies our commands
+    /// or the stream stopped anyway (a failsafe let go).
+    pub(super) fn stop_tick(&mut self, t: f64, level: dflat_link::AttitudeCommand) {
+        let Some(mut stop) = self.stop else {
+            return;
+        };
+        if stop.done {
+            return;
+        }
+        let state = self.supervisor.state();
+        let streaming_level = matches!(
+            self.failsafe,
+            super::failsafe::Failsafe::FailsafeLevel { .. }
+        );
+        if !state.streams() || (state == FlightState::Failsafe && !streaming_level) {
+            stop.done = true;
+        } else if state == FlightState::Standby {
+            // The autopilot left offboard (its own hold): nothing to brake.
+            stop.done = true;
+        } else if stop.level_since.is_none() {
+            let s = &self.config.safety;
+            let braked = self.supervisor.speed().is_some_and(|v| v < BRAKED_SPEED);
+            let out_of_time = t - stop.started >= s.stop_brake_ms / 1000.0;
+            if (braked || out_of_time) && s.stop_level_ms > 0.0 {
+                if let Some(tr) = self.supervisor.force_failsafe(t, Cause::ShutdownLevel) {
+                    self.reset_controller();
+                    self.last_used_arrival = None;
+                    self.on_transition(t, tr, level);
+                }
+                stop.level_since = Some(t);
+            }
+        }
+        self.stop = Some(stop);
+    }
+
+    /// MAV_CMD_DO_SET_MODE to the autopilot's own position hold (PX4
+    /// AUTO.LOITER, ArduPilot LOITER); `None` for an autopilot of unknown
+    /// family.
+    fn hold_request(&self) -> Option<MavMessage> {
+        use dflat_link::dialect::MavModeFlag;
+        let custom = MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED.bits() as f32;
+        let (param2, param3) = match self.mode.map(|m| m.family)? {
+            AutopilotFamily::Px4 => (
+                f32::from(dflat_link::modes::px4::AUTO),
+                3.0, // AUTO_LOITER
+            ),
+            AutopilotFamily::ArduPilot => (dflat_link::modes::ardupilot::LOITER as f32, 0.0),
+            AutopilotFamily::Other => return None,
+        };
+        Some(MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
+            target_system: self.target.system,
+            target_component: self.target.component,
+            command: MavCmd::MAV_CMD_DO_SET_MODE,
+            confirmation: 0,
+            param1: custom,
+            param2,
+            param3,
+            ..COMMAND_LONG_DATA::default()
+        }))
+    }
+}
