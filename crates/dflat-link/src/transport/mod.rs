@@ -28,14 +28,17 @@
 //! * `tcpout` connects; with [`OpenOptions::reconnect`] a lost connection
 //!   is re-established with [`Backoff`] (each reconnect logged and counted),
 //!   otherwise it is [`TransportError::Closed`].
-//! * `serial` opens the port with the mavlink crate's direct-serial
-//!   transport (8N1, no flow control) in two blocking threads (reader,
-//!   writer; the writer's queue is bounded, [`SERIAL_TX_QUEUE`], beyond it
-//!   frames are dropped and counted). The mavlink reader verifies checksums
-//!   itself and skips bad frames, so on serial links CRC failures are *not*
-//!   counted; payload decoding errors still are. With
-//!   [`OpenOptions::reconnect`] a port that closes is reopened with
-//!   [`Backoff`].
+//! * `serial` opens the port (8N1, no flow control) and reads and writes it
+//!   in two blocking threads (the writer's queue is bounded,
+//!   [`SERIAL_TX_QUEUE`], beyond it frames are dropped and counted). The
+//!   bytes go through [`FrameParser`] as on TCP, so CRC failures and garbage
+//!   are counted, and bytes without any valid frame are named in one warning
+//!   as a likely wrong baud rate. A port that goes away (a USB adapter
+//!   unplugged, a pty closed) is one warning per outage; sends are dropped
+//!   and counted while it lasts ([`SendOutcome::NoPeer`]), and with
+//!   [`OpenOptions::reconnect`] the path is reopened with [`Backoff`]
+//!   (at most [`serial::REOPEN_MAX`] between attempts), else it is
+//!   [`TransportError::Closed`]. See [`serial`].
 //!
 //! An optional [`TlogTap`] records every frame sent and received, with a µs
 //! UNIX timestamp, in a `.tlog` file, written by its own thread so socket
@@ -60,7 +63,7 @@ use tokio::sync::{Mutex, mpsc};
 
 mod endpoint;
 mod rx_state;
-mod serial;
+pub mod serial;
 mod tlog_tap;
 
 pub use endpoint::Endpoint;
@@ -273,6 +276,8 @@ enum Io {
         tx: std::sync::mpsc::SyncSender<mavlink::MAVLinkV2MessageRaw>,
         /// Events from the reader thread.
         rx: Mutex<mpsc::Receiver<Result<RecvEvent, TransportError>>>,
+        /// The port is open (false during an outage: sends are dropped).
+        up: Arc<std::sync::atomic::AtomicBool>,
     },
 }
 
@@ -538,6 +543,13 @@ impl Transport {
                     }
                     return Err(io_err("send", e));
                 }
+            }
+            Io::Serial { up, .. } if !up.load(Ordering::Acquire) => {
+                self.inner
+                    .counters
+                    .send_dropped
+                    .fetch_add(1, Ordering::Relaxed);
+                return Ok(SendOutcome::NoPeer);
             }
             Io::Serial { tx, .. } => match tx.try_send(*frame.raw()) {
                 Ok(()) => {}
