@@ -175,6 +175,42 @@ impl Fallback {
     }
 }
 
+/// True when `new` departs from where the previous pose `prev` and the
+/// vehicle's measured `velocity` \[m/s\] put it after `dt` \[s\] (at least
+/// `min_dt`) by more than `margin` \[m\] (noise) plus what
+/// `max_acceleration` \[m/s²\] can change in between (½·a·dt²), or when the
+/// estimator's reset counter changed. A fast vehicle is not a jump: its
+/// poses follow its motion, whatever its speed.
+#[allow(clippy::too_many_arguments)]
+pub fn departs_from_motion(
+    prev: [f64; 3],
+    velocity: [f64; 3],
+    new: [f64; 3],
+    dt: f64,
+    min_dt: f64,
+    max_acceleration: f64,
+    margin: f64,
+    reset_counters: (Option<u8>, Option<u8>),
+) -> bool {
+    if let (Some(a), Some(b)) = reset_counters
+        && a != b
+    {
+        return true;
+    }
+    let dt = if dt.is_finite() {
+        dt.max(min_dt)
+    } else {
+        min_dt
+    };
+    let predicted = [
+        prev[0] + velocity[0] * dt,
+        prev[1] + velocity[1] * dt,
+        prev[2] + velocity[2] * dt,
+    ];
+    let d = distance(predicted, new);
+    !(d <= margin + 0.5 * max_acceleration * dt * dt)
+}
+
 /// True when `new` is further from `prev` than the vehicle can fly at
 /// `max_speed` \[m/s\] in `dt` \[s\] (at least `min_dt`) plus `margin` \[m\]
 /// (noise), or when the estimator's reset counter changed.
@@ -364,6 +400,83 @@ mod tests {
         f.forget();
         assert_eq!(f.held(), None);
         assert_eq!(f.level_command(), cmd(0.0, 0.0, 0.2, 0.45));
+    }
+
+    /// A vehicle at 41 m/s (the coasting vehicle, 0.8 m per tick)
+    /// is not a jump when its poses follow its motion; a 5 m jump is one
+    /// whatever the speed; at 15 Hz vision, 22.5 m/s is not a jump either.
+    #[test]
+    fn a_fast_vehicle_is_not_a_pose_jump() {
+        let p = [0.0, 0.0, -10.0];
+        let a = 6.87; // g·tan(35°)
+        let fast = [41.0, 0.0, 0.0];
+        let next = [0.82, 0.0, -10.0];
+        assert!(!departs_from_motion(
+            p,
+            fast,
+            next,
+            0.02,
+            0.02,
+            a,
+            0.5,
+            (None, None)
+        ));
+        assert!(is_pose_jump(p, next, 0.02, 15.0, 0.02, 0.5, (None, None)));
+        let jumped = [5.82, 0.0, -10.0];
+        assert!(departs_from_motion(
+            p,
+            fast,
+            jumped,
+            0.02,
+            0.02,
+            a,
+            0.5,
+            (None, None)
+        ));
+        let vision = [22.5 / 15.0, 0.0, -10.0];
+        assert!(!departs_from_motion(
+            p,
+            [22.5, 0.0, 0.0],
+            vision,
+            1.0 / 15.0,
+            0.02,
+            a,
+            0.5,
+            (None, None)
+        ));
+        // Braking at the tilt limit for 1 s without pose: inside.
+        let braked = [41.0 - 0.5 * a, 0.0, -10.0];
+        assert!(!departs_from_motion(
+            p,
+            fast,
+            braked,
+            1.0,
+            0.02,
+            a,
+            0.5,
+            (None, None)
+        ));
+        // NaN and a reset counter change are jumps.
+        assert!(departs_from_motion(
+            p,
+            fast,
+            [f64::NAN; 3],
+            0.02,
+            0.02,
+            a,
+            0.5,
+            (None, None)
+        ));
+        assert!(departs_from_motion(
+            p,
+            [0.0; 3],
+            p,
+            0.02,
+            0.02,
+            a,
+            0.5,
+            (Some(1), Some(2))
+        ));
     }
 
     #[test]

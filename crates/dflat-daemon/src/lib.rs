@@ -47,5 +47,7 @@ pub mod supervisor;
 pub mod tick;
 pub mod yaw;
 
-pub use daemon::{DaemonError, DaemonHandle, run, shutdown_signal, spawn, spawn_with_controller};
+pub use daemon::{
+    DaemonError, DaemonHandle, daemon_signals, run, shutdown_signal, spawn, spawn_with_controller,
+};
 pub use summary::FlightSummary;

@@ -213,6 +213,18 @@ pub struct SitlConfig {
     pub start: [f64; 3],
     /// Seconds without SET_ATTITUDE_TARGET after which the SITL holds position.
     pub command_timeout_s: f64,
+    /// After `command_timeout_s` without a stream, stay in the offboard
+    /// mode and fly level at hover thrust instead of falling back to
+    /// position mode: ArduPilot Copter, which stays in GUIDED / GUIDED_NOGPS
+    /// after GUID_TIMEOUT (its attitude target times out to level). A
+    /// daemon (re)started then finds the autopilot applying its commands.
+    pub stays_offboard: bool,
+    /// A gust (an impulse of velocity, local NED [m/s], each within ±50) added
+    /// to the vehicle `gust_at_s` seconds after the SITL started (0 = none;
+    /// 0–3600): a vehicle pushed past the daemon's speed limit.
+    pub gust_velocity: [f64; 3],
+    /// When the gust hits \[s\] since the SITL started (0 = never).
+    pub gust_at_s: f64,
     /// Random seed.
     pub seed: u64,
     /// MAVLink 2 signing key file of the SITL; empty = signing off. Same
@@ -274,6 +286,9 @@ impl Default for SitlConfig {
             vision_noise_sigma: 0.02,
             start: [-20.0, -30.0, -10.0],
             command_timeout_s: 0.5,
+            stays_offboard: false,
+            gust_velocity: [0.0; 3],
+            gust_at_s: 0.0,
             seed: 1,
             signing_key_file: String::new(),
             autopilot: SitlAutopilot::Px4,
@@ -335,6 +350,10 @@ impl SitlConfig {
         range("sitl.vision_latency_ms", si.vision_latency_ms, 0.0, 500.0)?;
         range("sitl.vision_noise_sigma", si.vision_noise_sigma, 0.0, 1.0)?;
         range("sitl.command_timeout_s", si.command_timeout_s, 0.05, 10.0)?;
+        range("sitl.gust_at_s", si.gust_at_s, 0.0, 3600.0)?;
+        for (i, v) in si.gust_velocity.iter().enumerate() {
+            range(&format!("sitl.gust_velocity[{i}]"), *v, -50.0, 50.0)?;
+        }
         for i in 0..3 {
             range(&format!("sitl.start[{i}]"), si.start[i], -1e4, 1e4)?;
         }

@@ -100,9 +100,18 @@ pub struct ModeMachine {
     mode: SitlMode,
     overridden: bool,
     velocity: [f64; 3],
+    /// Offboard survives the stream's loss (`sitl.stays_offboard`).
+    stays_offboard: bool,
 }
 
 impl ModeMachine {
+    /// Offboard stays when the stream is lost (ArduPilot's GUIDED after
+    /// GUID_TIMEOUT) instead of falling back to position mode.
+    pub fn with_stays_offboard(mut self, stays: bool) -> Self {
+        self.stays_offboard = stays;
+        self
+    }
+
     /// In position mode, sticks centred; `script` sorted by time here.
     pub fn new(engage: SitlEngage, mut script: Vec<PilotAction>) -> Self {
         script.sort_by(|a, b| a.at_s.total_cmp(&b.at_s));
@@ -113,6 +122,7 @@ impl ModeMachine {
             mode: SitlMode::Hold,
             overridden: false,
             velocity: [0.0; 3],
+            stays_offboard: false,
         }
     }
 
@@ -154,7 +164,9 @@ impl ModeMachine {
             out.refused |= self.request(m, stream_alive);
         }
         match self.mode {
-            SitlMode::Offboard if !stream_alive => self.mode = SitlMode::Hold,
+            SitlMode::Offboard if !stream_alive && !self.stays_offboard => {
+                self.mode = SitlMode::Hold
+            }
             SitlMode::Hold
                 if stream_alive && self.engage == SitlEngage::Auto && !self.overridden =>
             {

@@ -12,6 +12,23 @@
 //! The functions below are the shells of `dflat identify` and the readers
 //! the review and the replay share.
 
+/// `print!` that never panics: with stdout gone (`dflat … | head -1`, a
+/// closed terminal) the text is lost, not the process or what follows it.
+macro_rules! out {
+    ($($t:tt)*) => {{
+        use std::io::Write as _;
+        let _ = write!(std::io::stdout(), $($t)*);
+    }};
+}
+
+/// `println!` that never panics (see `out!`).
+macro_rules! outln {
+    ($($t:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stdout(), $($t)*);
+    }};
+}
+
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, Result, bail};
@@ -119,7 +136,7 @@ pub fn flown_vehicle(config: &Path) -> Result<FlownVehicle> {
 pub fn run_identify(args: IdentifyArgs) -> Result<()> {
     if args.manoeuvre {
         let at = [args.at[0], args.at[1], args.at[2]];
-        print!("{}", identify::manoeuvre_mission(at));
+        out!("{}", identify::manoeuvre_mission(at));
         return Ok(());
     }
     let Some(flight) = args.flight else {
@@ -130,13 +147,13 @@ pub fn run_identify(args: IdentifyArgs) -> Result<()> {
     let flown = args.config.as_deref().map(flown_vehicle).transpose()?;
     let found = identify::identify(&log).with_context(|| format!("{}", tlog.display()))?;
     let name = tlog.display().to_string();
-    print!("{}", found.report(&name, flown.as_ref()));
+    out!("{}", found.report(&name, flown.as_ref()));
     let snippet = found.vehicle_snippet(&name, flown.as_ref());
     let out = args
         .out
         .unwrap_or_else(|| tlog.with_extension("vehicle.toml"));
     std::fs::write(&out, &snippet).with_context(|| format!("cannot write {}", out.display()))?;
-    println!("\n{snippet}\n(written to {})", out.display());
+    outln!("\n{snippet}\n(written to {})", out.display());
     if let Some(json) = args.json {
         let text = serde_json::to_string_pretty(&found).context("identification as JSON")?;
         std::fs::write(&json, text + "\n")

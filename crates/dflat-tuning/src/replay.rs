@@ -428,7 +428,7 @@ pub fn run(args: ReplayArgs) -> Result<()> {
     let cfg = Config::load(&args.config)?;
     let mut report = replay(&csv_path, &csv, &cfg)?;
     report.overlay.label = format!("replay with {}", args.config.display());
-    println!(
+    outln!(
         "replayed {} ticks with {}: {} commands compared, {} identical at the CSV's resolution, \
          {} ticks where only one side streamed; largest attitude difference {:.2e} rad (p99 {:.2e}), thrust {:.2e}",
         report.ticks,
@@ -446,6 +446,6 @@ pub fn run(args: ReplayArgs) -> Result<()> {
         .out
         .unwrap_or_else(|| csv_path.with_extension("replay.html"));
     std::fs::write(&out, html).with_context(|| format!("cannot write {}", out.display()))?;
-    println!("{}", out.display());
+    outln!("{}", out.display());
     Ok(())
 }

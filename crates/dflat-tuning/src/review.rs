@@ -59,7 +59,7 @@ pub fn run(args: ReviewArgs) -> Result<()> {
     let html = render_with(&csv_path, &csv, log.as_ref(), None, &header);
     let out = args.out.unwrap_or_else(|| csv_path.with_extension("html"));
     std::fs::write(&out, html).with_context(|| format!("cannot write {}", out.display()))?;
-    println!("{}", out.display());
+    outln!("{}", out.display());
     Ok(())
 }
 

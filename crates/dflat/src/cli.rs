@@ -121,10 +121,10 @@ fn run(cli: Cli) -> Result<()> {
                 // with its defaults filled in.
                 let sitl = dflat_sitl::SitlSettings::load(&file)?;
                 cfg.sitl = None;
-                print!("{}\n{}", cfg.to_toml(), sitl.to_toml());
+                out!("{}\n{}", cfg.to_toml(), sitl.to_toml());
             }
             #[cfg(not(feature = "sitl"))]
-            print!("{}", cfg.to_toml());
+            out!("{}", cfg.to_toml());
             Ok(())
         }
         #[cfg(feature = "lab")]
@@ -151,7 +151,7 @@ fn migrate_config(file: &std::path::Path) -> Result<()> {
         .with_context(|| format!("{}: cannot read", file.display()))?;
     let migrated = dflat_daemon::config::migrate::migrate(&text)
         .with_context(|| format!("{}: cannot migrate", file.display()))?;
-    print!("{}", migrated.text);
+    out!("{}", migrated.text);
     if migrated.moved.is_empty() {
         eprintln!("{}: no key to move", file.display());
     }
@@ -209,14 +209,15 @@ fn run_daemon(args: DaemonArgs) -> Result<()> {
     let summary = runtime.block_on(dflat_daemon::run(
         cfg,
         args.link,
-        dflat_daemon::shutdown_signal(),
+        dflat_daemon::daemon_signals(),
     ))?;
-    println!("{summary}");
+    // The file first: it must not depend on stdout being there.
     if let Some(path) = args.summary_json {
         let json = serde_json::to_string_pretty(&summary).context("summary as JSON")?;
         std::fs::write(&path, json + "\n")
             .with_context(|| format!("cannot write {}", path.display()))?;
     }
+    outln!("{summary}");
     Ok(())
 }
 

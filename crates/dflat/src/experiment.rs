@@ -251,7 +251,7 @@ pub fn run(command: ExperimentCommand) -> Result<()> {
             let out =
                 OutputPaths::resolve(&a.common.out, "noise_sweep", a.common.json, a.common.plot);
             let result = run_noise_sweep(&config, !a.common.no_progress).context("noise sweep")?;
-            print!("{}", result.table());
+            out!("{}", result.table());
             write_noise_sweep(&result, &out).context("writing the noise sweep's outputs")?
         }
         ExperimentCommand::Mismatch(a) => {
@@ -281,7 +281,7 @@ pub fn run(command: ExperimentCommand) -> Result<()> {
             }
             let out = OutputPaths::resolve(&a.common.out, "mismatch", a.common.json, a.common.plot);
             let result = run_mismatch(&config, !a.common.no_progress).context("mismatch study")?;
-            print!("{}", result.table());
+            out!("{}", result.table());
             write_mismatch(&result, &out).context("writing the mismatch study's outputs")?
         }
         ExperimentCommand::VisionRate(a) => {
@@ -294,7 +294,7 @@ pub fn run(command: ExperimentCommand) -> Result<()> {
             };
             let out = OutputPaths::resolve(&a.out, "vision_rate", a.json, a.plot);
             let result = run_vision_rate(&config, !a.no_progress).context("vision-rate study")?;
-            print!("{}", result.table());
+            out!("{}", result.table());
             write_vision_rate(&result, &out).context("writing the vision-rate study's outputs")?
         }
         ExperimentCommand::Paths(a) => {
@@ -309,7 +309,7 @@ pub fn run(command: ExperimentCommand) -> Result<()> {
             config.dsl = !a.no_dsl;
             let out = OutputPaths::resolve(&a.common.out, "paths", a.common.json, a.common.plot);
             let result = run_paths(&config, !a.common.no_progress).context("paths comparison")?;
-            print!("{}", result.table());
+            out!("{}", result.table());
             write_paths(&result, &out).context("writing the paths comparison's outputs")?
         }
         ExperimentCommand::TiltCone(a) => {
@@ -325,7 +325,7 @@ pub fn run(command: ExperimentCommand) -> Result<()> {
                 ..TiltConeConfig::default()
             };
             let result = run_tilt_cone(&config, !a.no_progress).context("tilt-cone study")?;
-            print!("{}", result.table());
+            out!("{}", result.table());
             write_tilt_cone(&result, &a.json).context("writing the tilt-cone study")?;
             vec![a.json]
         }
@@ -340,7 +340,7 @@ pub fn run(command: ExperimentCommand) -> Result<()> {
                 ..PhaseConfig::default()
             };
             let result = run_phase(&config, !a.no_progress).context("phase study")?;
-            print!("{}", result.table());
+            out!("{}", result.table());
             write_phase(&result, &a.json).context("writing the phase study")?
         }
     };

@@ -16,6 +16,23 @@
 //! with `daemon` and `check-config` only (what `deploy/install.sh`
 //! installs).
 
+/// `print!` that never panics: with stdout gone (`dflat … | head -1`, a
+/// closed terminal) the text is lost, not the process or what follows it.
+macro_rules! out {
+    ($($t:tt)*) => {{
+        use std::io::Write as _;
+        let _ = write!(std::io::stdout(), $($t)*);
+    }};
+}
+
+/// `println!` that never panics (see `out!`).
+macro_rules! outln {
+    ($($t:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stdout(), $($t)*);
+    }};
+}
+
 pub mod cli;
 #[cfg(feature = "lab")]
 pub mod demo;

@@ -108,14 +108,14 @@ pub fn run_demo(args: DemoArgs) -> Result<()> {
     };
     if args.stream {
         let outcome = runtime()?.block_on(crate::stream_demo::run(&options))?;
-        print!("{}", outcome.summary_text());
+        out!("{}", outcome.summary_text());
         if let Some(failure) = outcome.failure() {
             bail!("stream demo failed: {failure}");
         }
         return Ok(());
     }
     let outcome = runtime()?.block_on(demo::run(&options))?;
-    print!("{}", outcome.summary_text());
+    out!("{}", outcome.summary_text());
     if let Some(failure) = outcome.failure() {
         bail!("demo flight failed: {failure}");
     }

@@ -30,6 +30,10 @@ use crate::schedule::{TickCause, TickPlanner};
 use crate::summary::Histogram;
 use crate::tick::{BATCH_MARGIN, ControlCore, Event, TickTime};
 
+/// A graceful stop ends at the latest this long \[s\] after its brake
+/// and level were due (a failsafe or a stalled pose stream meanwhile).
+pub const STOP_MARGIN: f64 = 0.5;
+
 /// The control thread's parts.
 pub(super) struct ControlLoop {
     /// The pure step and its state.
@@ -132,6 +136,9 @@ impl ControlLoop {
         let epoch = self.epoch;
         let mut stopwatch = move || epoch.elapsed().as_secs_f64();
 
+        // The graceful stop's bound \[s\] after it was asked for.
+        let stop_bound = self.core.stop_bound() + STOP_MARGIN;
+        let mut stop_asked_at: Option<f64> = None;
         while !self.stop.requested() {
             // Wait: for events (pose-locked: a pose may run the tick now)
             // until the planner's next wake time.
@@ -218,6 +225,10 @@ impl ControlLoop {
             while let Ok(mission) = self.missions.try_recv() {
                 self.core.load_mission(t, mission);
             }
+            if self.stop.asked() && stop_asked_at.is_none() {
+                stop_asked_at = Some(t);
+                self.core.begin_stop(t);
+            }
             let step = self.core.step(&time, batch.drain(..taken), &mut stopwatch);
             for tr in &step.transitions {
                 self.state.store(encode_state(tr.to), Ordering::Relaxed);
@@ -253,6 +264,11 @@ impl ControlLoop {
                 csv.record(&step.row);
             }
             self.ticks.fetch_add(1, Ordering::Relaxed);
+            if let Some(asked) = stop_asked_at
+                && (self.core.stop_done(t) || t - asked >= stop_bound)
+            {
+                break;
+            }
         }
 
         // Shutdown: the stream has stopped (this loop no longer runs).
@@ -262,6 +278,9 @@ impl ControlLoop {
             self.send(Outgoing::plain(text), &mut outbound_dropped);
         }
         self.state.store(ST_SHUTDOWN, Ordering::Relaxed);
+        // The stream is over: the link tasks may stop (a graceful stop ends
+        // here, after its brake and level).
+        self.stop.request();
         let csv = self.csv.take().map(CsvRecorder::finish);
         let counts = self.core.counts().clone();
         let supervisor = self.core.supervisor();

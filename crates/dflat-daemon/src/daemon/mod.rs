@@ -155,14 +155,26 @@ fn daemon_status(v: u8) -> DaemonStatus {
 }
 
 /// Stop request shared by all parts: a flag for the control thread and a
-/// watch for the tasks.
+/// watch for the tasks; and the graceful stop the control thread carries
+/// out first (brake, level: `tick/envelope.rs`), after which it requests
+/// the stop of the other parts itself.
 #[derive(Debug)]
 struct Stop {
     flag: AtomicBool,
     tx: watch::Sender<bool>,
+    graceful: AtomicBool,
 }
 
 impl Stop {
+    /// Asks for the graceful stop (SIGTERM, SIGINT, [`DaemonHandle::shutdown`]).
+    fn ask(&self) {
+        self.graceful.store(true, Ordering::SeqCst);
+    }
+
+    fn asked(&self) -> bool {
+        self.graceful.load(Ordering::SeqCst)
+    }
+
     fn request(&self) {
         self.flag.store(true, Ordering::SeqCst);
         self.tx.send_replace(true);
@@ -270,8 +282,16 @@ impl DaemonHandle {
     }
 
     /// Asks the daemon to stop (idempotent); then [`join`](Self::join) it.
+    /// While engaged the control thread first brakes and levels the
+    /// vehicle (`safety.stop_brake_ms`, `safety.stop_level_ms`), then the
+    /// stream and the other parts stop.
     pub fn shutdown(&self) {
-        self.stop.request();
+        self.stop.ask();
+    }
+
+    /// True once a stop was asked for ([`shutdown`](Self::shutdown)).
+    pub fn stop_asked(&self) -> bool {
+        self.stop.asked()
     }
 
     /// Resolves once a stop was requested — by [`shutdown`](Self::shutdown)
@@ -285,7 +305,8 @@ impl DaemonHandle {
     /// Stops the daemon (if not yet stopped), waits for all parts, flushes
     /// the records and returns the summary. Errors if the link failed.
     pub async fn join(self) -> Result<FlightSummary, DaemonError> {
-        self.stop.request();
+        // The control thread brakes and levels first, then stops the rest.
+        self.stop.ask();
         let Parts {
             link,
             controller,
@@ -308,7 +329,10 @@ impl DaemonHandle {
         let control = tokio::task::spawn_blocking(move || control.join())
             .await
             .map_err(|e| DaemonError::Internal(format!("control thread join: {e}")))?
-            .map_err(|_| DaemonError::Internal("control thread panicked".into()))?;
+            .map_err(|_| DaemonError::Internal("control thread panicked".into()));
+        // Whatever the control thread did, the tasks stop now.
+        self.stop.request();
+        let control = control?;
         let join_err = |what: &str, e: tokio::task::JoinError| {
             DaemonError::Internal(format!("{what} task: {e}"))
         };
@@ -406,6 +430,71 @@ pub async fn run(
     }
     let _ = sd_notify::notify(&[sd_notify::NotifyState::Stopping]);
     handle.join().await
+}
+
+/// The daemon's signals: resolves on SIGINT or SIGTERM (the graceful
+/// stop: brake, level, stream off, records and summary written). SIGHUP,
+/// SIGUSR1 and SIGUSR2 never stop the daemon: each is logged (WARN) and
+/// otherwise ignored — the configuration is read at start only, so a
+/// terminal that hangs up, a `kill -HUP` or a `systemctl kill -s USR1`
+/// leaves the flight alone (restart the service to re-read the config).
+/// Ctrl-C only on non-Unix systems.
+pub async fn daemon_signals() {
+    #[cfg(unix)]
+    {
+        use tokio::signal::unix::{SignalKind, signal};
+        let kept = [
+            ("SIGHUP", SignalKind::hangup()),
+            ("SIGUSR1", SignalKind::user_defined1()),
+            ("SIGUSR2", SignalKind::user_defined2()),
+        ];
+        let mut handlers = Vec::new();
+        for (name, kind) in kept {
+            match signal(kind) {
+                Ok(s) => handlers.push((name, s)),
+                Err(e) => error!(error = %e, signal = name, "cannot install the signal handler"),
+            }
+        }
+        let ignore = async move {
+            let streams: Vec<_> = handlers
+                .into_iter()
+                .map(|(name, mut s)| {
+                    Box::pin(async move {
+                        loop {
+                            if s.recv().await.is_none() {
+                                return;
+                            }
+                            warn!(
+                                signal = name,
+                                "{name} ignored: the daemon keeps flying (the configuration is read at start only)"
+                            );
+                        }
+                    })
+                })
+                .collect();
+            futures_join_all(streams).await;
+        };
+        tokio::select! {
+            () = shutdown_signal() => {}
+            () = ignore => std::future::pending::<()>().await,
+        }
+    }
+    #[cfg(not(unix))]
+    shutdown_signal().await
+}
+
+/// Polls every future to its end (each here runs for ever).
+#[cfg(unix)]
+async fn futures_join_all<F: Future<Output = ()> + Unpin>(mut futures: Vec<F>) {
+    std::future::poll_fn(|cx| {
+        futures.retain_mut(|f| std::pin::Pin::new(f).poll(cx).is_pending());
+        if futures.is_empty() {
+            std::task::Poll::Ready(())
+        } else {
+            std::task::Poll::Pending
+        }
+    })
+    .await
 }
 
 /// Resolves on SIGINT or SIGTERM (Ctrl-C only on non-Unix systems). If the
@@ -548,6 +637,7 @@ pub async fn spawn_with_controller(
     let stop = Arc::new(Stop {
         flag: AtomicBool::new(false),
         tx: stop_tx,
+        graceful: AtomicBool::new(false),
     });
     let state = Arc::new(AtomicU8::new(ST_BOOT));
     let ticks = Arc::new(AtomicU64::new(0));

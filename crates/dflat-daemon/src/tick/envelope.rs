@@ -111,6 +111,13 @@ impl ControlCore {
         });
     }
 
+    /// How long the stop sequence may take \[s\]: `safety.stop_brake_ms`
+    /// plus `safety.stop_level_ms`.
+    pub fn stop_bound(&self) -> f64 {
+        let s = &self.config.safety;
+        (s.stop_brake_ms + s.stop_level_ms) / 1000.0
+    }
+
     /// True once the stop sequence has run: the stream may stop. `false`
     /// before [`ControlCore::begin_stop`].
     pub fn stop_done(&self, t: f64) -> bool {
@@ -143,7 +150,12 @@ impl ControlCore {
             self.failsafe,
             super::failsafe::Failsafe::FailsafeLevel { .. }
         );
-        if !state.streams() || (state == FlightState::Failsafe && !streaming_level) {
+        let stream_off = if state == FlightState::Failsafe {
+            !streaming_level
+        } else {
+            !state.streams()
+        };
+        if stream_off {
             stop.done = true;
         } else if state == FlightState::Standby {
             // The autopilot left offboard (its own hold): nothing to brake.

@@ -9,7 +9,7 @@ use tracing::warn;
 
 use super::ControlCore;
 use crate::config::PoseSourceKind;
-use crate::guard::is_pose_jump;
+use crate::guard::{departs_from_motion, is_pose_jump};
 
 /// One pose as the control core keeps it.
 #[derive(Debug, Clone, Copy)]
@@ -51,18 +51,36 @@ impl ControlCore {
         };
         // A jump from the newest pose (further than the vehicle can fly in
         // between, or an estimator reset): re-anchor below.
+        // Judged against the motion the poses show (a fast vehicle is not
+        // a jump); without a motion estimate yet, against the speed limit.
         let s = &self.config.safety;
+        let velocity = self.motion.estimate().map(|m| m.velocity);
+        let max_acceleration = self.envelope.max_acceleration;
         let jump = self.pose.is_some_and(|p| {
+            let dt = capture - p.capture;
+            let counters = (p.reset_counter, reset_counter);
             capture >= p.capture
-                && is_pose_jump(
-                    p.position,
-                    position,
-                    capture - p.capture,
-                    s.max_speed_mps,
-                    self.period,
-                    s.pose_jump_margin_m,
-                    (p.reset_counter, reset_counter),
-                )
+                && match velocity {
+                    Some(v) => departs_from_motion(
+                        p.position,
+                        v,
+                        position,
+                        dt,
+                        self.period,
+                        max_acceleration,
+                        s.pose_jump_margin_m,
+                        counters,
+                    ),
+                    None => is_pose_jump(
+                        p.position,
+                        position,
+                        dt,
+                        s.max_speed_mps,
+                        self.period,
+                        s.pose_jump_margin_m,
+                        counters,
+                    ),
+                }
         });
         // Every sample to a multi-rate controller (late ones too).
         // The motion estimate restarts at a jump (the old poses are

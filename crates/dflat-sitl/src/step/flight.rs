@@ -126,6 +126,14 @@ impl SitlCore {
                     &self.plant.true_state(),
                 )
             }
+            // Offboard without a live stream (`sitl.stays_offboard`,
+            // ArduPilot's GUIDED after GUID_TIMEOUT): level at hover thrust.
+            None if self.mode == SitlMode::Offboard => PlantCommand {
+                pitch: 0.0,
+                roll: 0.0,
+                yaw: self.plant.true_state().yaw,
+                thrust: GRAVITY,
+            },
             None => {
                 let v = Vector3::from(self.modes.velocity());
                 self.hold_target += v * span;
@@ -138,6 +146,15 @@ impl SitlCore {
                 )
             }
         };
+        if let Some((at, dv)) = self.gust
+            && self.time() >= at
+        {
+            self.gust = None;
+            let mut s = self.plant.true_state();
+            s.velocity += dv;
+            self.plant.reset(&s);
+            tracing::info!(velocity = ?dv, "sitl: gust");
+        }
         self.plant.apply(&command);
         self.plant.advance(span);
         self.steps += n;

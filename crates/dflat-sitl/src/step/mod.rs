@@ -271,6 +271,8 @@ pub struct SitlCore {
     /// The offboard-loss timeout \[s\] (`sitl.command_timeout_s`, or
     /// `COM_OF_LOSS_T` / `GUID_TIMEOUT` set over MAVLink).
     command_timeout: f64,
+    /// The gust still to come: when \[s\] and its velocity [m/s].
+    gust: Option<(f64, Vector3<f64>)>,
     /// A mode request of this step (the latest wins).
     request: Option<SitlMode>,
     /// A goal of this step (goto).
@@ -338,7 +340,9 @@ impl SitlCore {
             sensor,
             vision,
             steps: 0,
-            modes: ModeMachine::new(s.engage, s.pilot.clone()),
+            modes: ModeMachine::new(s.engage, s.pilot.clone())
+                .with_stays_offboard(s.stays_offboard),
+            gust: (s.gust_at_s > 0.0).then_some((s.gust_at_s, Vector3::from(s.gust_velocity))),
             mode: SitlMode::Hold,
             hold_target,
             mover: (hold_target.into(), [0.0; 3]),
