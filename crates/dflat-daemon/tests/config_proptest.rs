@@ -326,6 +326,20 @@ const FIELDS: &[(&str, Kind, f64, f64, Set)] = &[
         10000.0,
         |c, v| c.safety.autopilot_timeout_ms = v,
     ),
+    (
+        "safety.stop_brake_ms",
+        Kind::Float,
+        0.0,
+        10000.0,
+        |c, v| c.safety.stop_brake_ms = v,
+    ),
+    (
+        "safety.stop_level_ms",
+        Kind::Float,
+        0.0,
+        5000.0,
+        |c, v| c.safety.stop_level_ms = v,
+    ),
 ];
 
 /// False where the table's `hi` is not the validator's limit.
@@ -357,7 +371,8 @@ fn valid_config() -> impl Strategy<Value = Config> {
     );
     let path = prop::collection::vec(prop::array::uniform3(-30.0..=30.0f64), 0..6);
     let strings = (
-        "[a-z]{2,8}:[[:alnum:]./:_-]{1,30}|\\PC{0,12}[a-z]\\PC{0,12}",
+        // What the daemon opens (check-config parses link.url the same way).
+        "(udpin|udpout|tcpout):(127\\.0\\.0\\.1|[a-z]{1,8}):[0-9]{1,4}|serial:/dev/tty[A-Z]{1,4}[0-9]:(57600|115200|921600)",
         "\\PC{0,16}",
         prop::collection::vec(1..=255u8, 0..4),
         any::<u64>(),
@@ -370,6 +385,10 @@ fn valid_config() -> impl Strategy<Value = Config> {
                 set(&mut c, in_range(*k, *lo, *hi, *u));
             }
             c.link.url = url;
+            // The envelope: paths fly at most at the speed limit, and the
+            // fence's floor lies below the generated paths (|z| ≤ 30).
+            c.mission.speed = c.mission.speed.min(c.safety.max_speed_mps);
+            c.mission.geofence_down_m = 31.0;
             c.link.pose_source = [
                 PoseSourceKind::LocalPositionNed,
                 PoseSourceKind::Odometry,
@@ -412,6 +431,10 @@ fn valid_config() -> impl Strategy<Value = Config> {
             } else {
                 MissionStart::Hold
             };
+            // One waypoint is not a path (a setpoint is): none, or ≥ 2.
+            if waypoints.len() == 1 {
+                waypoints.clear();
+            }
             c.mission.path = waypoints;
             c.logging.dir = dir;
             c.logging.csv = flags[4];
