@@ -115,3 +115,69 @@ fn check_config_refuses_old_keys_and_migrates_them() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// `check-config` refuses exactly what a daemon start refuses (issue 38):
+/// each bad file is refused by both, with the field named, and a start
+/// refused creates no records.
+#[test]
+fn check_config_refuses_what_the_daemon_refuses() {
+    let dir = std::env::temp_dir().join(format!("dflat-check-vs-start-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let records = dir.join("records");
+    let cases = [
+        ("url", "[link]\nurl = \"udp-bad\"\n", "link.url"),
+        (
+            "url-port",
+            "[link]\nurl = \"udpout:127.0.0.1:99999\"\n",
+            "link.url",
+        ),
+        (
+            "one-waypoint",
+            "[mission]\npath = [[1.0, 2.0, -3.0]]\n",
+            "mission.path",
+        ),
+        (
+            "below-the-floor",
+            "[mission]\npath = [[0.0, 0.0, -3.0], [0.0, 0.0, 150.0]]\n",
+            "mission.path[1][2]",
+        ),
+        (
+            "too-fast",
+            "[mission]\nspeed = 18.0\n[safety]\nmax_speed_mps = 15.0\n",
+            "mission.speed",
+        ),
+    ];
+    for (name, body, field) in cases {
+        let file = dir.join(format!("{name}.toml"));
+        let text = format!("{body}[logging]\ndir = \"{}\"\n", records.display());
+        std::fs::write(&file, text).unwrap();
+        let check = Command::new(env!("CARGO_BIN_EXE_dflat-under-test"))
+            .arg("check-config")
+            .arg(&file)
+            .output()
+            .unwrap();
+        let start = Command::new(env!("CARGO_BIN_EXE_dflat-under-test"))
+            .arg("daemon")
+            .arg("--config")
+            .arg(&file)
+            .output()
+            .unwrap();
+        let (check_err, start_err) = (
+            String::from_utf8_lossy(&check.stderr),
+            String::from_utf8_lossy(&start.stderr),
+        );
+        assert!(!check.status.success(), "{name}: check-config accepted it");
+        assert!(!start.status.success(), "{name}: the daemon started");
+        assert!(
+            check_err.contains(field),
+            "{name}: check-config: {check_err}"
+        );
+        assert!(start_err.contains(field), "{name}: daemon: {start_err}");
+    }
+    assert!(
+        !records.exists(),
+        "a refused start made its records directory"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -115,6 +115,9 @@ fn run(cli: Cli) -> Result<()> {
         Command::CheckConfig { file, .. } => {
             #[allow(unused_mut)]
             let mut cfg = dflat_daemon::config::Config::load(&file)?;
+            // What a start checks beyond the ranges (one validation).
+            dflat_daemon::daemon::preflight(&cfg, None)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", file.display()))?;
             #[cfg(feature = "sitl")]
             {
                 // The [sitl] table is the SITL's: validate it and print it

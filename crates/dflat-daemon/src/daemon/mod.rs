@@ -528,6 +528,40 @@ pub async fn shutdown_signal() {
     }
 }
 
+/// What the daemon checks before it opens anything, beyond
+/// [`Config::validate`]: the connection string (`link_override` or
+/// `link.url`) and `link.peer`, the configured path, the controller, the
+/// thrust mapping and the signing key (read, not used). `dflat
+/// check-config` runs the same checks, so it refuses exactly what a start
+/// refuses (run it as the daemon's user: the key's owner is checked).
+/// Creates and writes nothing.
+pub fn preflight(config: &Config, link_override: Option<&str>) -> Result<(), DaemonError> {
+    let url = link_override.unwrap_or(&config.link.url);
+    let endpoint = Endpoint::parse(url).map_err(DaemonError::Link)?;
+    let peer = config.link.peer.trim();
+    if !peer.is_empty() {
+        peer.parse::<SocketAddr>().map_err(|e| {
+            DaemonError::Link(TransportError::BadUrl {
+                url: peer.to_owned(),
+                reason: format!("link.peer: {e}"),
+            })
+        })?;
+    }
+    let _ = endpoint;
+    if let Some(path) = configured_path(config) {
+        path?;
+    }
+    build_controller(config)?;
+    thrust_mapping(config)
+        .validate()
+        .map_err(|e| DaemonError::Internal(format!("thrust mapping: {e}")))?;
+    let key = config.link.signing_key_file.trim();
+    if !key.is_empty() {
+        crate::signing::load_key(std::path::Path::new(key))?;
+    }
+    Ok(())
+}
+
 /// Opens the link, creates the records and starts all parts. Returns once
 /// the daemon is running (state `WaitingForPose` after the first tick).
 pub async fn spawn(
