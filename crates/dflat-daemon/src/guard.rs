@@ -47,6 +47,9 @@ pub struct GuardCounts {
     /// (`safety.pose_max_latency_ms`) and its poses re-stamped with their
     /// arrival time.
     pub pose_clock_faults: u64,
+    /// Times the vehicle was braked for flying faster than
+    /// `safety.max_speed_mps` (the envelope).
+    pub overspeed_brakes: u64,
 }
 
 /// Why [`CommandGuard::check`] refused a command.

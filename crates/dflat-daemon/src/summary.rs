@@ -351,7 +351,8 @@ pub struct FlightSummary {
     /// Disengagements: the autopilot stopped applying them (pilot
     /// override, mode change, disarm) while engaged.
     pub disengagements: u64,
-    /// State at shutdown.
+    /// The flight state when the stop was asked for (before the stop's own
+    /// brake and level; the state at shutdown when the link failed).
     pub final_state: FlightState,
     /// Process CPU time (user + system) over wall time \[%\] (100 = one core).
     pub cpu_percent: Option<f64>,
@@ -509,7 +510,7 @@ impl fmt::Display for FlightSummary {
         let g = &self.guards;
         writeln!(
             f,
-            "  guards        {} non-finite, {} tilt / {} thrust saturated, {} failures, {} overruns, {} plan / {} held / {} level fallbacks, {} pose jumps, {} residual failsafes, {} control failsafes (stream stopped), {} pose clock faults",
+            "  guards        {} non-finite, {} tilt / {} thrust saturated, {} failures, {} overruns, {} plan / {} held / {} level fallbacks, {} pose jumps, {} residual failsafes, {} control failsafes (stream stopped), {} pose clock faults, {} overspeed brakes",
             g.non_finite,
             g.tilt_saturated,
             g.thrust_saturated,
@@ -521,7 +522,8 @@ impl fmt::Display for FlightSummary {
             g.pose_jumps,
             g.residual_failsafes,
             g.control_failsafes,
-            g.pose_clock_faults
+            g.pose_clock_faults,
+            g.overspeed_brakes
         )?;
         let s = &self.solves;
         writeln!(

@@ -326,20 +326,12 @@ const FIELDS: &[(&str, Kind, f64, f64, Set)] = &[
         10000.0,
         |c, v| c.safety.autopilot_timeout_ms = v,
     ),
-    (
-        "safety.stop_brake_ms",
-        Kind::Float,
-        0.0,
-        10000.0,
-        |c, v| c.safety.stop_brake_ms = v,
-    ),
-    (
-        "safety.stop_level_ms",
-        Kind::Float,
-        0.0,
-        5000.0,
-        |c, v| c.safety.stop_level_ms = v,
-    ),
+    ("safety.stop_brake_ms", Kind::Float, 0.0, 10000.0, |c, v| {
+        c.safety.stop_brake_ms = v
+    }),
+    ("safety.stop_level_ms", Kind::Float, 0.0, 5000.0, |c, v| {
+        c.safety.stop_level_ms = v
+    }),
 ];
 
 /// False where the table's `hi` is not the validator's limit.

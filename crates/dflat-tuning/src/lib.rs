@@ -21,6 +21,14 @@ macro_rules! out {
     }};
 }
 
+/// `eprintln!` that never panics (see `out!`): a closed stderr loses the text.
+macro_rules! errln {
+    ($($t:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stderr(), $($t)*);
+    }};
+}
+
 /// `println!` that never panics (see `out!`).
 macro_rules! outln {
     ($($t:tt)*) => {{
@@ -94,7 +102,7 @@ pub fn tlog_of(flight: &Path) -> Result<PathBuf> {
 pub fn read_csv(path: &Path) -> Result<FlightCsv> {
     let csv = FlightCsv::read(path)?;
     if let Some(torn) = &csv.torn_tail {
-        eprintln!(
+        errln!(
             "warning: {}: {torn} dropped (the daemon was stopped mid-write); using the {} complete rows",
             path.display(),
             csv.rows.len()
@@ -108,7 +116,7 @@ pub fn read_csv(path: &Path) -> Result<FlightCsv> {
 pub fn read_tlog(path: &Path) -> Result<FlightLog> {
     let log = FlightLog::read_tlog(path)?;
     if log.torn_tail {
-        eprintln!(
+        errln!(
             "warning: {}: a torn last record dropped (the daemon was stopped mid-write); using the {} complete records",
             path.display(),
             log.records

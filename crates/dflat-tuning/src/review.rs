@@ -124,7 +124,7 @@ pub fn load_tlog_beside(csv: &Path) -> Result<Option<FlightLog>> {
         Ok(log) => Ok(Some(log)),
         Err(e) => match e.downcast_ref::<crate::flightlog::FlightLogError>() {
             Some(empty @ crate::flightlog::FlightLogError::EmptyTlog { .. }) => {
-                eprintln!("warning: {empty}: reviewing from the CSV alone");
+                errln!("warning: {empty}: reviewing from the CSV alone");
                 Ok(None)
             }
             _ => Err(e),

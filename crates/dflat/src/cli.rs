@@ -82,7 +82,7 @@ pub fn main() -> std::process::ExitCode {
     match run(cli) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {}", error_text(&e));
+            errln!("error: {}", error_text(&e));
             std::process::ExitCode::from(2)
         }
     }
@@ -156,10 +156,10 @@ fn migrate_config(file: &std::path::Path) -> Result<()> {
         .with_context(|| format!("{}: cannot migrate", file.display()))?;
     out!("{}", migrated.text);
     if migrated.moved.is_empty() {
-        eprintln!("{}: no key to move", file.display());
+        errln!("{}: no key to move", file.display());
     }
     for m in &migrated.moved {
-        eprintln!("{}: {m}", file.display());
+        errln!("{}: {m}", file.display());
     }
     dflat_daemon::config::Config::parse(&migrated.text, file)?;
     #[cfg(feature = "sitl")]

@@ -345,8 +345,8 @@ pub fn run(command: ExperimentCommand) -> Result<()> {
         }
     };
     for f in &files {
-        eprintln!("wrote {}", f.display());
+        errln!("wrote {}", f.display());
     }
-    eprintln!("wall time {:.1} s", start.elapsed().as_secs_f64());
+    errln!("wall time {:.1} s", start.elapsed().as_secs_f64());
     Ok(())
 }

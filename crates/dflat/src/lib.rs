@@ -25,6 +25,14 @@ macro_rules! out {
     }};
 }
 
+/// `eprintln!` that never panics (see `out!`): a closed stderr loses the text.
+macro_rules! errln {
+    ($($t:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stderr(), $($t)*);
+    }};
+}
+
 /// `println!` that never panics (see `out!`).
 macro_rules! outln {
     ($($t:tt)*) => {{

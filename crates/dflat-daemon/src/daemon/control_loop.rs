@@ -299,7 +299,7 @@ impl ControlLoop {
             state_changes: supervisor.transitions(),
             engagements,
             disengagements,
-            final_state: supervisor.state(),
+            final_state: self.core.state_at_stop().unwrap_or(supervisor.state()),
             csv,
             disturbance: counts.disturbance,
             guards: counts.guards,

@@ -684,3 +684,39 @@ pub(super) async fn heartbeat_task(
     }
     let _ = out.try_send(Outgoing::plain(heartbeat_onboard(DaemonStatus::Poweroff)));
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Each refused field has its own words (and so its own rate limit): a
+    /// NaN x said does not hide an infinite z or a NaN yaw after it; a
+    /// coordinate frame the dialect does not define is said too.
+    #[test]
+    fn refusals_name_the_field_and_the_unknown_frame() {
+        let text = |field| {
+            setpoint_refusal_text(&LinkError::NonFinite {
+                message: "SET_POSITION_TARGET_LOCAL_NED",
+                field,
+            })
+        };
+        let (x, z, yaw) = (text("x"), text("z"), text("yaw"));
+        assert_eq!(z, "dflat: setpoint refused: z not finite");
+        assert!(x != z && z != yaw && x != yaw);
+        let frame = dflat_link::FrameError::Payload {
+            msg_id: 84,
+            fault: dflat_link::PayloadFault::InvalidEnum {
+                enum_type: "MavFrame",
+                value: 99,
+            },
+        };
+        let said = undecodable_setpoint_text(&frame).unwrap();
+        assert_eq!(said, "dflat: setpoint refused: Frame 99 unknown");
+        assert!(said.len() <= 50);
+        let other = dflat_link::FrameError::Payload {
+            msg_id: 33,
+            fault: dflat_link::PayloadFault::Other,
+        };
+        assert_eq!(undecodable_setpoint_text(&other), None);
+    }
+}

@@ -28,6 +28,8 @@ pub const OVERSPEED_MARGIN: f64 = 0.1;
 pub(super) struct Stop {
     /// When the stop was asked for \[s\].
     started: f64,
+    /// The flight state then (the flight's last state before the stop).
+    state: FlightState,
     /// When the level hover began \[s\] (`None`: still braking).
     level_since: Option<f64>,
     /// Nothing to brake (not engaged when asked, or the autopilot left
@@ -62,7 +64,7 @@ impl ControlCore {
         }
         if let Some(tr) = self.supervisor.overspeed(t) {
             self.overspeed = true;
-            self.counts.overspeed_brakes += 1;
+            self.counts.guards.overspeed_brakes += 1;
             warn!(speed, limit, "faster than safety.max_speed_mps: braking");
             self.announce(tr);
             self.text(
@@ -78,13 +80,15 @@ impl ControlCore {
         if self.stop.is_some() {
             return;
         }
-        let engaged = self.supervisor.state().engaged();
+        let state = self.supervisor.state();
+        let engaged = state.engaged();
         let brakes =
             self.config.safety.stop_brake_ms > 0.0 || self.config.safety.stop_level_ms > 0.0;
         if !engaged || !brakes {
             self.supervisor.begin_stop(t).map(|_| ());
             self.stop = Some(Stop {
                 started: t,
+                state,
                 level_since: None,
                 done: true,
             });
@@ -106,9 +110,16 @@ impl ControlCore {
         }
         self.stop = Some(Stop {
             started: t,
+            state,
             level_since: None,
             done: false,
         });
+    }
+
+    /// The flight state when the stop was asked for (`None` before):
+    /// the summary's final state (the stop's own brake and level follow it).
+    pub fn state_at_stop(&self) -> Option<FlightState> {
+        self.stop.map(|s| s.state)
     }
 
     /// How long the stop sequence may take \[s\]: `safety.stop_brake_ms`

@@ -145,9 +145,6 @@ pub struct CoreCounts {
     pub setpoints_refused: u64,
     /// Streams lost (no sample for `stream.timeout_s`).
     pub stream_timeouts: u64,
-    /// Times the vehicle was braked for flying faster than
-    /// `safety.max_speed_mps`.
-    pub overspeed_brakes: u64,
 }
 
 /// Everything the control thread decides with (see the module docs).
