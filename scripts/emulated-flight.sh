@@ -17,7 +17,9 @@
 #
 # Exit status: 0 within the budget, 1 outside it (or a run failed), 3
 # skipped: qemu-aarch64 or the cross linker (gcc-aarch64-linux-gnu) is not
-# installed — the reason is printed.
+# installed — the reason is printed; 4 inconclusive: the native run missed
+# the same budget (the machine was too loaded for the figures to mean
+# anything about the arm64 build).
 #
 # --no-build flies the onboard binaries already built (by an earlier run or
 # scripts/build-onboard.sh) instead of building them first.
@@ -145,9 +147,19 @@ print(f"  flight: {qemu['time_in_state_s']['tracking']:.1f} s tracking the path 
       f"{native['engagements']}, control errors {qemu['control_errors']} / {native['control_errors']}, "
       f"CPU {cpu(qemu)} / {cpu(native)} (qemu-user does not emulate the process's CPU time), "
       f"peak RSS {qemu['peak_rss_kib']} / {native['peak_rss_kib']} KiB")
+def within(s):
+    return (round(rate(s), 1) >= 50.0 and s["missed_ticks"] == 0
+            and s["latency_us"]["p99"] <= 5000 and s["engagements"] >= 1)
 r, missed, p99 = rate(qemu), qemu["missed_ticks"], qemu["latency_us"]["p99"]
-ok = round(r, 1) >= 50.0 and missed == 0 and p99 <= 5000 and qemu["engagements"] >= 1
+ok = within(qemu)
 print(f"budget under qemu: 50.0 Hz (got {r:.1f}), 0 missed ticks (got {missed}), "
       f"pose→command p99 <= 5000 µs (got {p99}, margin {5000 - p99} µs): {'PASS' if ok else 'FAIL'}")
+if not ok and not within(native):
+    # The native run is the control: when it misses the same budget, the
+    # host was too busy for the figures to say anything about the build.
+    print("inconclusive: the native daemon missed the same budget in this run "
+          f"({native['missed_ticks']} missed ticks, pose→command p99 {native['latency_us']['p99']} µs): "
+          "the machine is loaded; run again on a quiet one")
+    sys.exit(4)
 sys.exit(0 if ok else 1)
 EOF

@@ -164,9 +164,18 @@ fn a_replugged_serial_port_is_reopened_and_the_commands_resume() {
         .expect("no command after the port came back");
     let resume_s = (first_after - back_us) as f64 / 1e6;
     let after = written.iter().filter(|&&t| t >= back_us).count();
+    let last_before = written
+        .iter()
+        .copied()
+        .filter(|&t| t < back_us)
+        .max()
+        .unwrap_or(0);
     eprintln!(
         "commands written: {before} before the outage, {during} during it, {after} after; \
-         first {resume_s:.3} s after the port came back"
+         first {resume_s:.3} s after the port came back; the autopilot went {:.3} s without one \
+         (the port gone {:.3} s)",
+        (first_after - last_before) as f64 / 1e6,
+        (back_us - unplugged_us) as f64 / 1e6
     );
     assert!(before > 50, "only {before} commands before the outage");
     assert_eq!(

@@ -115,8 +115,9 @@ pub struct TransportCounters {
     pub foreign_datagrams: u64,
     /// Connections re-established (TCP, serial).
     pub reconnects: u64,
-    /// Frames dropped because the serial writer's queue was full, or the
-    /// link was down (TCP, serial reconnecting).
+    /// Frames dropped because the serial writer's queue was full, the
+    /// link was down (TCP, serial reconnecting), or a serial write failed
+    /// or timed out.
     pub send_dropped: u64,
 }
 
