@@ -9,8 +9,9 @@
 # twice against the native SITL (`dflat sitl`) on loopback, SECONDS each
 # (at least 20): once with the native onboard daemon, once with the arm64
 # one under qemu-aarch64 (Debian's qemu-user, `-L /usr/aarch64-linux-gnu`).
-# Every figure is the daemon's own (`dflat daemon --summary-json`): the
-# rate it held (commands per second streamed once it had a pose), missed
+# The rate held is the autopilot's view: 1 / the SITL's median interval
+# between the commands it received (and the longest gap); every other
+# figure is the daemon's own (`dflat daemon --summary-json`): missed
 # ticks, solve time and pose→command latency, p50 / p99, side by side with
 # the slow-down factor; then the budget under qemu: 50.0 Hz, 0 missed
 # ticks, pose→command p99 <= 5 ms.
@@ -109,20 +110,26 @@ fly native "$native_bin"
 echo "flying ${secs} s with the arm64 daemon under qemu-aarch64 ..."
 fly qemu qemu-aarch64 -L "$sysroot" "$arm_bin"
 
-python3 - "$out/native.json" "$out/qemu.json" "$secs" <<'EOF'
-import json, sys
+python3 - "$out/native.json" "$out/qemu.json" "$secs" "$out/native.sitl.out" "$out/qemu.sitl.out" <<'EOF'
+import json, re, sys
 native, qemu = (json.load(open(p)) for p in sys.argv[1:3])
 secs = sys.argv[3]
+# The autopilot's view of the stream: the SITL's median command interval
+# (its last line, "... command interval p50 N µs, ... max interval M µs").
+for s, path in ((native, sys.argv[4]), (qemu, sys.argv[5])):
+    text = open(path).read()
+    m = re.search(r"command interval p50 (\d+) µs, jitter p99 (\d+) µs, max interval (\d+) µs", text)
+    s["sitl_interval"] = tuple(int(x) for x in m.groups()) if m else (0, 0, 0)
 
 def rate(s):
-    # Commands per second of the states that stream (standby, holding,
-    # tracking, failsafe's brake and level): the rate the autopilot saw.
-    t = s["time_in_state_s"]
-    live = t["standby"] + t["holding"] + t["tracking"] + t["failsafe"]
-    return s["commands"] / live if live > 0 else 0.0
+    # The rate the autopilot saw: 1 / the median interval between the
+    # commands it received.
+    p50 = s["sitl_interval"][0]
+    return 1e6 / p50 if p50 else 0.0
 
 rows = [
     ("rate held [Hz]", rate, "{:.1f}", False),
+    ("longest gap [ms]", lambda s: s["sitl_interval"][2] / 1000, "{:.1f}", False),
     ("missed ticks", lambda s: s["missed_ticks"], "{}", False),
     ("solve p50 [µs]", lambda s: s["solve_us"]["p50"], "{}", True),
     ("solve p99 [µs]", lambda s: s["solve_us"]["p99"], "{}", True),

@@ -30,8 +30,10 @@ check() { # $1 = what, then a command
     if "$@" >/dev/null 2>&1; then echo "  ok   $what"; else echo "  FAIL $what"; fails=$((fails + 1)); fi
 }
 
-scripts/package.sh "$@" | tee /dev/stderr | sed -n 's/^package: \([^ ]*\).*/\1/p' >"${TMPDIR:-/tmp}/dflat-deb.$$"
-deb=$(cat "${TMPDIR:-/tmp}/dflat-deb.$$"); rm -f "${TMPDIR:-/tmp}/dflat-deb.$$"
+log=$(mktemp)
+trap 'rm -f "$log"' EXIT
+scripts/package.sh "$@" 2>&1 | tee "$log"
+deb=$(sed -n 's/^package: \([^ ]*\).*/\1/p' "$log" | tail -1)
 [ -f "$deb" ] || { echo "package round trip: no package built" >&2; exit 1; }
 arch=$(dpkg-deb -f "$deb" Architecture)
 if [ "$arch" != "$(dpkg --print-architecture)" ]; then
