@@ -64,6 +64,12 @@ fn open_pty() -> Pty {
     }
 }
 
+/// Whether this machine can make pseudo-terminals (a container without
+/// `/dev/ptmx` cannot): the serial tests skip, saying so, where it cannot.
+pub fn ptys_available() -> bool {
+    nix::pty::openpty(None, None).is_ok()
+}
+
 /// Baud rates of the two ends when [`PtyBridge::wrong_baud`] is set: the
 /// autopilot's side (`from`) and the daemon's (`to`).
 #[derive(Debug, Clone, Copy)]
