@@ -196,6 +196,23 @@ struct Garbage {
     warned: bool,
 }
 
+impl Garbage {
+    /// Counts a chunk of `bytes` that held `frames` valid frames and
+    /// `errors` framing errors; `true` when the baud-rate warning is due
+    /// (once until a valid frame re-arms it).
+    fn count(&mut self, bytes: u64, frames: usize, errors: usize) -> bool {
+        if frames > 0 {
+            *self = Self::default();
+            return false;
+        }
+        self.bytes += bytes;
+        self.errors += errors as u64;
+        let due = !self.warned && self.bytes >= GARBAGE_WARN_BYTES && self.errors > 0;
+        self.warned |= due;
+        due
+    }
+}
+
 /// The reader thread's state.
 struct Reader {
     port: Arc<Port>,
@@ -258,26 +275,19 @@ impl Reader {
             .ingest(n, false, Instant::now(), None, self.tap.as_ref());
         let frames = self.state.pending.len() - self.state.errors_queued();
         let errors = self.state.errors_queued() - errors_before;
-        if frames > 0 {
-            self.garbage = Garbage::default();
-        } else {
-            self.garbage.bytes += n as u64;
-            self.garbage.errors += errors as u64;
-            let g = &mut self.garbage;
-            if !g.warned && g.bytes >= GARBAGE_WARN_BYTES && g.errors > 0 {
-                g.warned = true;
-                tracing::warn!(
-                    endpoint = %self.port.name,
-                    bytes = g.bytes,
-                    framing_errors = g.errors,
-                    baud = self.baud,
-                    "serial link: bytes but no valid MAVLink frame: wrong baud rate? \
-                     This end runs at {} baud; the autopilot's port (PX4 SER_TEL2_BAUD, \
-                     ArduPilot SERIALn_BAUD) must be set to the same (counted as malformed / crc \
-                     in the link errors; said once until a frame arrives)",
-                    self.baud
-                );
-            }
+        if self.garbage.count(n as u64, frames, errors) {
+            let g = &self.garbage;
+            tracing::warn!(
+                endpoint = %self.port.name,
+                bytes = g.bytes,
+                framing_errors = g.errors,
+                baud = self.baud,
+                "serial link: bytes but no valid MAVLink frame: wrong baud rate? \
+                 This end runs at {} baud; the autopilot's port (PX4 SER_TEL2_BAUD, \
+                 ArduPilot SERIALn_BAUD) must be set to the same (counted as malformed / crc \
+                 in the link errors; said once until a frame arrives)",
+                self.baud
+            );
         }
         while let Some(event) = self.state.pending.pop_front() {
             if self.events.blocking_send(Ok(event)).is_err() {
@@ -331,5 +341,34 @@ impl Reader {
                 }
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn garbage_warns_once_until_a_frame_rearms_it() {
+        let mut g = Garbage::default();
+        // Bytes without errors (a frame still arriving) never warn.
+        assert!(!g.count(2 * GARBAGE_WARN_BYTES, 0, 0));
+        let mut g = Garbage::default();
+        assert!(!g.count(GARBAGE_WARN_BYTES / 2, 0, 3));
+        assert!(g.count(GARBAGE_WARN_BYTES / 2, 0, 3), "1 KiB of garbage");
+        assert!(!g.count(GARBAGE_WARN_BYTES, 0, 9), "said once");
+        assert!(!g.count(100, 1, 0), "a frame re-arms");
+        assert_eq!((g.bytes, g.errors), (0, 0));
+        assert!(!g.count(GARBAGE_WARN_BYTES - 1, 0, 1));
+        assert!(g.count(1, 0, 0), "and it warns again");
+    }
+
+    #[test]
+    fn timeouts_are_not_losses() {
+        use std::io::{Error, ErrorKind};
+        assert!(!is_loss(&Error::from(ErrorKind::TimedOut)));
+        assert!(!is_loss(&Error::from(ErrorKind::Interrupted)));
+        assert!(is_loss(&Error::from(ErrorKind::BrokenPipe)));
+        assert!(is_loss(&Error::other("EIO")));
     }
 }
