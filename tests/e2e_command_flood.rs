@@ -112,7 +112,9 @@ async fn hold(with_flood: bool) -> (FlightSummary, f64) {
 /// Commands sent per second of streaming (the daemon's own counters).
 fn command_rate(s: &FlightSummary) -> f64 {
     let t = &s.time_in_state_s;
-    s.link_stats.sent.set_attitude_target as f64 / (t.standby + t.holding + t.tracking)
+    // The stop's brake and level (after the states' times) apart.
+    let stop = s.stop.map_or(0, |s| s.commands);
+    (s.link_stats.sent.set_attitude_target - stop) as f64 / (t.standby + t.holding + t.tracking)
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -22,6 +22,9 @@ const CONFIG: &str = r#"
 start = "path"
 path = [[0.0, 0.0, -10.0], [10.0, 0.0, -10.0]]
 speed = 20.0
+[safety]
+# The path's speed is within the envelope's limit (issue 38).
+max_speed_mps = 20.0
 [logging]
 dir = "@DIR@"
 tlog = false

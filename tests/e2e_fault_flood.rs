@@ -236,6 +236,11 @@ noise_sigma = 0.01
         rows.len() - first
     );
     assert!(gap <= MAX_TICK_GAP, "tick gap {gap}");
-    // Streaming continuously once holding: no FAILSAFE row.
-    assert!(rows.iter().all(|r| r["state"] != "FAILSAFE"));
+    // Streaming continuously once holding: no FAILSAFE row before the stop
+    // (whose level phase is one, `guard` = "stop" marks where it began).
+    let stop = rows
+        .iter()
+        .position(|r| r.get("guard").is_some_and(|g| g == "stop"))
+        .unwrap_or(rows.len());
+    assert!(rows[..stop].iter().all(|r| r["state"] != "FAILSAFE"));
 }

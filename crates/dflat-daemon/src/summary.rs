@@ -341,10 +341,14 @@ pub struct FlightSummary {
     pub events_dropped: u64,
     /// Outbound messages dropped because the send queue was full.
     pub outbound_dropped: u64,
-    /// Time in each state \[s\].
+    /// Time in each state \[s\], up to the stop (the stop's own brake and
+    /// level are [`FlightSummary::stop`]).
     pub time_in_state_s: StateTimes,
-    /// Number of state changes.
+    /// Number of state changes up to the stop.
     pub state_changes: u64,
+    /// The stop sequence (SIGTERM / SIGINT / shutdown while engaged: brake,
+    /// level, stream off), when one ran.
+    pub stop: Option<StopSummary>,
     /// Engagements: the autopilot started applying our commands (standby
     /// → holding, braking).
     pub engagements: u64,
@@ -421,6 +425,15 @@ pub struct DisturbanceSummary {
     pub hover_thrust_normalized: Option<f64>,
 }
 
+/// What the stop sequence did (`docs/safety.md`, "Stopping the daemon").
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct StopSummary {
+    /// From the stop request to the last command \[s\].
+    pub duration_s: f64,
+    /// Commands streamed meanwhile (brake and level).
+    pub commands: u64,
+}
+
 impl fmt::Display for FlightSummary {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let l = &self.link_stats;
@@ -468,6 +481,13 @@ impl fmt::Display for FlightSummary {
             self.disengagements,
             self.final_state.name()
         )?;
+        if let Some(s) = &self.stop {
+            writeln!(
+                f,
+                "  stop          brake and level for {:.2} s ({} commands), then the stream stopped",
+                s.duration_s, s.commands
+            )?;
+        }
         writeln!(
             f,
             "  link          rx {} (pose {} att {} hb {} setpoint {}), tx {} (att_tgt {} hb {} text {})",

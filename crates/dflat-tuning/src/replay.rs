@@ -318,6 +318,8 @@ fn run_pass(
     };
     let mut diffs = Vec::new();
     let solve_us = csv.numbers(Column::SolveUs);
+    // The tick at which the flight's stop (SIGTERM) was asked for.
+    let guards = csv.texts(Column::Guard);
     let mut taken: u64 = 0;
     for i in 0..csv.rows.len() {
         let w = wake[i];
@@ -382,6 +384,12 @@ fn run_pass(
         };
         for mission in missions.loaded.drain(..) {
             core.load_mission(w, mission);
+        }
+        if guards
+            .get(i)
+            .is_some_and(|g| *g == dflat_daemon::tick::STOP_GUARD)
+        {
+            core.begin_stop(w);
         }
         let out = core.step(&time, batch, &mut stopwatch);
         if let Some(tr) = out.transitions.last() {

@@ -23,6 +23,9 @@ use crate::supervisor::{BRAKED_SPEED, Cause, FlightState};
 /// (the motion estimate of a vehicle flying at the limit).
 pub const OVERSPEED_MARGIN: f64 = 0.1;
 
+/// The CSV `guard` of the tick at which the stop was asked for.
+pub const STOP_GUARD: &str = "stop";
+
 /// Where the stop sequence stands.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(super) struct Stop {
@@ -35,6 +38,12 @@ pub(super) struct Stop {
     /// Nothing to brake (not engaged when asked, or the autopilot left
     /// offboard): the stream may stop now.
     done: bool,
+    /// The supervisor's time in states and transitions when asked.
+    times: [f64; 5],
+    transitions: u64,
+    /// Commands sent since, and the last one's tick time \[s\].
+    pub(super) commands: u64,
+    pub(super) last_command: Option<f64>,
 }
 
 impl ControlCore {
@@ -80,8 +89,14 @@ impl ControlCore {
         if self.stop.is_some() {
             return;
         }
+        // The records say where the stop began (a replay begins it there).
+        self.stop_marked = true;
         let state = self.supervisor.state();
         let engaged = state.engaged();
+        let (times, transitions) = (
+            self.supervisor.time_in_states(t),
+            self.supervisor.transitions(),
+        );
         let brakes =
             self.config.safety.stop_brake_ms > 0.0 || self.config.safety.stop_level_ms > 0.0;
         if !engaged || !brakes {
@@ -91,6 +106,10 @@ impl ControlCore {
                 state,
                 level_since: None,
                 done: true,
+                times,
+                transitions,
+                commands: 0,
+                last_command: None,
             });
             return;
         }
@@ -113,6 +132,10 @@ impl ControlCore {
             state,
             level_since: None,
             done: false,
+            times,
+            transitions,
+            commands: 0,
+            last_command: None,
         });
     }
 
@@ -120,6 +143,27 @@ impl ControlCore {
     /// the summary's final state (the stop's own brake and level follow it).
     pub fn state_at_stop(&self) -> Option<FlightState> {
         self.stop.map(|s| s.state)
+    }
+
+    /// Time in each state up to the stop (`now` without one) \[s\].
+    pub fn time_in_states_before_stop(&self, now: f64) -> [f64; 5] {
+        self.stop
+            .map_or_else(|| self.supervisor.time_in_states(now), |s| s.times)
+    }
+
+    /// State changes up to the stop.
+    pub fn transitions_before_stop(&self) -> u64 {
+        self.stop
+            .map_or_else(|| self.supervisor.transitions(), |s| s.transitions)
+    }
+
+    /// What the stop sequence did, if one streamed anything.
+    pub fn stop_summary(&self) -> Option<crate::summary::StopSummary> {
+        let s = self.stop?;
+        Some(crate::summary::StopSummary {
+            duration_s: s.last_command.map_or(0.0, |t| (t - s.started).max(0.0)),
+            commands: s.commands,
+        })
     }
 
     /// How long the stop sequence may take \[s\]: `safety.stop_brake_ms`

@@ -206,7 +206,11 @@ impl ControlCore {
                 return None;
             }
         };
-        self.counts.guards.level_hover += 1;
+        // The stop's own level (SIGTERM) is not a fallback: the summary's
+        // `stop` counts it.
+        if self.stop.is_none() {
+            self.counts.guards.level_hover += 1;
+        }
         self.counts.commands += 1;
         row.guard = Some(if braking { "brake" } else { "level" });
         row.command = Some([command.roll, command.pitch, command.yaw, command.thrust]);

@@ -50,6 +50,7 @@ use crate::supervisor::{Cause, FlightState, Refusal, Supervisor, Transition};
 
 mod control;
 mod envelope;
+pub use envelope::STOP_GUARD;
 mod exit;
 pub mod failsafe;
 mod failsafe_level;
@@ -203,6 +204,8 @@ pub struct ControlCore {
     overspeed: bool,
     /// The stop sequence, once asked for (`tick/envelope.rs`).
     stop: Option<envelope::Stop>,
+    /// The next step's CSV row carries [`STOP_GUARD`] (the stop began).
+    stop_marked: bool,
     guard_note: Option<&'static str>,
     counts: CoreCounts,
     /// Outputs produced between steps (by [`ControlCore::apply`]).
@@ -298,6 +301,7 @@ impl ControlCore {
             envelope: crate::envelope::Envelope::from_config(config),
             overspeed: false,
             stop: None,
+            stop_marked: false,
             guard_note: None,
             counts: CoreCounts::default(),
             pending_texts: Vec::new(),
@@ -439,7 +443,16 @@ impl ControlCore {
             self.idle_tick(t, &mut row)
         };
         self.mission_tick(t);
+        if command.is_some()
+            && let Some(stop) = self.stop.as_mut()
+        {
+            stop.commands += 1;
+            stop.last_command = Some(t);
+        }
         row.state = self.supervisor.state();
+        if std::mem::take(&mut self.stop_marked) {
+            row.guard = Some(STOP_GUARD);
+        }
         StepOutput {
             command,
             texts: std::mem::take(&mut self.pending_texts),
