@@ -2,7 +2,7 @@
 # The arm64 onboard daemon, under emulation, flies the SITL: a check anyone
 # can run without an arm64 board.
 #
-#   scripts/emulated-flight.sh [--no-build] [SECONDS=25]
+#   scripts/emulated-flight.sh [--no-build] [--glibc VERSION] [SECONDS=25]
 #
 # Builds the onboard binary for aarch64-unknown-linux-gnu and for the host
 # (scripts/build-onboard.sh), then flies the L path of config/sitl.toml
@@ -22,6 +22,8 @@
 # the same budget (the machine was too loaded for the figures to mean
 # anything about the arm64 build).
 #
+# --glibc VERSION builds the arm64 binary against that glibc's symbols
+# (build-onboard.sh --glibc: cargo-zigbuild), as for an older companion.
 # --no-build flies the onboard binaries already built (by an earlier run or
 # scripts/build-onboard.sh) instead of building them first.
 # DFLAT_SITL_BIN: the `dflat` that runs the SITL (default: the release
@@ -30,7 +32,14 @@
 # $CARGO_TARGET_DIR/emulated-flight/ (default target/emulated-flight/).
 set -euo pipefail
 no_build=""
-if [ "${1:-}" = --no-build ]; then no_build=1; shift; fi
+glibc=()
+while [ $# -gt 0 ]; do
+    case "$1" in
+        --no-build) no_build=1; shift ;;
+        --glibc) glibc=(--glibc "${2:?--glibc needs a version}"); shift 2 ;;
+        *) break ;;
+    esac
+done
 secs=${1:-25}
 cd "$(dirname "$0")/.."
 if [ "$secs" -lt 20 ]; then
@@ -59,7 +68,7 @@ if [ -n "$no_build" ]; then
     done
 else
     echo "building the onboard daemon for $target and for the host ..."
-    arm_bin=$(build --target "$target")
+    arm_bin=$(build --target "$target" ${glibc[@]+"${glibc[@]}"})
     native_bin=$(build)
 fi
 if [ -n "${DFLAT_SITL_BIN:-}" ]; then

@@ -4,6 +4,8 @@
 #
 #   scripts/package.sh                                   # host (amd64 here)
 #   scripts/package.sh --target aarch64-unknown-linux-gnu # arm64 companion
+#   scripts/package.sh --target aarch64-unknown-linux-gnu --glibc 2.27
+#                                  # for an older companion (build-onboard.sh --glibc)
 #   scripts/package.sh --bin PATH [--target TRIPLE]      # package a built binary
 #
 # -> target/debian/dflat_<version>_<arch>.deb (CARGO_TARGET_DIR respected),
@@ -26,13 +28,15 @@
 # logs (/var/lib/dflat: flight records, /var/log/dflat).
 set -euo pipefail
 target=""
+glibc=""
 bin=""
 while [ $# -gt 0 ]; do
     case "$1" in
         --target) target=${2:?--target needs a triple}; shift 2 ;;
         --target=*) target=${1#--target=}; shift ;;
         --bin) bin=${2:?--bin needs a path}; shift 2 ;;
-        -h|--help) sed -n '2,27p' "$0"; exit 0 ;;
+        --glibc) glibc=${2:?--glibc needs a version}; shift 2 ;;
+        -h|--help) awk 'NR > 1 && /^#/ { sub(/^# ?/, ""); print; next } NR > 1 { exit }' "$0"; exit 0 ;;
         *) echo "package.sh: unknown argument '$1' (try --help)" >&2; exit 2 ;;
     esac
 done
@@ -51,7 +55,7 @@ esac
 if [ -z "$bin" ]; then
     log=$(mktemp)
     trap 'rm -f "$log"' EXIT
-    scripts/build-onboard.sh ${target:+--target "$target"} 2>&1 | tee "$log" >&2
+    scripts/build-onboard.sh ${target:+--target "$target"} ${glibc:+--glibc "$glibc"} 2>&1 | tee "$log" >&2
     bin=$(sed -n 's/^onboard binary: //p' "$log" | tail -1)
 fi
 [ -x "$bin" ] || { echo "package.sh: no binary at '$bin'" >&2; exit 1; }
