@@ -4,12 +4,13 @@
 //! MAVLink router bridges a UART; no socat needed).
 //!
 //! * The "adapter" is pulled mid-flight (the pty closes, its name goes) and
-//!   plugged back 0.5 s later (a new pty behind the same name): the daemon
-//!   says so in one warning, reopens the port with backoff, and its
-//!   commands resume within 2 s of the port's return — judged from the
-//!   daemon's own `.tlog` (the first SET_ATTITUDE_TARGET it wrote after the
-//!   return) and its summary (`reconnects`). The outage is shorter than the
-//!   autopilot's command timeout, so the autopilot never leaves OFFBOARD.
+//!   plugged back 0.5 s later (a new pty behind the same name), then again
+//!   for 1 s: the daemon says so in one warning per outage, reopens the
+//!   port with backoff, and its commands resume within 2 s of the port's
+//!   return — judged from the daemon's own `.tlog` (the first
+//!   SET_ATTITUDE_TARGET it wrote after the return) and its summary
+//!   (`reconnects`). The outages are shorter than the autopilot's command
+//!   timeout, so the autopilot never leaves OFFBOARD.
 //! * A wrong baud rate (the autopilot's port at 57600, the daemon's at
 //!   921600, modelled bit by bit by the bridge): no frame, the bytes counted
 //!   as link errors, and one warning that names the baud rate.
@@ -118,14 +119,17 @@ fn a_replugged_serial_port_is_reopened_and_the_commands_resume() {
             .is_some(),
         "the daemon never took control over the serial link"
     );
+    // Pull the adapter twice, for 0.5 s and for 1 s, 2 s of flight around
+    // each outage: (when it was pulled, when it was back) in UNIX µs.
+    let mut outages = Vec::new();
+    for gone in [500, 1000] {
+        std::thread::sleep(Duration::from_secs(2));
+        bridge.unplug();
+        let unplugged_us = pty_bridge::unix_us();
+        std::thread::sleep(Duration::from_millis(gone));
+        outages.push((unplugged_us, bridge.replug()));
+    }
     std::thread::sleep(Duration::from_secs(2));
-
-    // Pull the adapter for half a second, then plug it back in.
-    bridge.unplug();
-    let unplugged_us = pty_bridge::unix_us();
-    std::thread::sleep(Duration::from_millis(500));
-    let back_us = bridge.replug();
-    std::thread::sleep(Duration::from_secs(3));
     let mode_changes: Vec<String> = sitl.lines.try_iter().collect();
     assert!(
         daemon.interrupt_and_wait(Duration::from_secs(5)),
@@ -136,7 +140,7 @@ fn a_replugged_serial_port_is_reopened_and_the_commands_resume() {
 
     let summary = read_summary(&summary_path);
     let reconnects = summary["link_guard"]["reconnects"].as_u64().unwrap();
-    assert_eq!(reconnects, 1, "one outage, one reopen: {summary:#}");
+    assert_eq!(reconnects, 2, "two outages, two reopens: {summary:#}");
 
     let stderr = daemon.stderr_text();
     let lost = stderr.matches("serial port lost").count();
@@ -147,50 +151,60 @@ fn a_replugged_serial_port_is_reopened_and_the_commands_resume() {
         "stderr: {lost} 'serial port lost', {reopened} 'reopened', {broken} 'Broken pipe', {} lines",
         stderr.lines().count()
     );
-    assert_eq!(lost, 1, "one warning per outage:\n{stderr}");
-    assert_eq!(reopened, 1, "the reopen said once:\n{stderr}");
+    assert_eq!(lost, 2, "one warning per outage:\n{stderr}");
+    assert_eq!(reopened, 2, "each reopen said once:\n{stderr}");
     assert!(
-        broken <= 1 && write_failed == 0,
+        broken <= 2 && write_failed == 0,
         "per-frame errors:\n{stderr}"
     );
 
     // The daemon's own record of what it wrote to the port.
     let written = commands_written(&dir);
-    let before = written.iter().filter(|&&t| t < unplugged_us).count();
-    let during = written
-        .iter()
-        .filter(|&&t| t > unplugged_us + 50_000 && t < back_us)
-        .count();
-    let first_after = written
-        .iter()
-        .copied()
-        .find(|&t| t >= back_us)
-        .expect("no command after the port came back");
-    let resume_s = (first_after - back_us) as f64 / 1e6;
-    let after = written.iter().filter(|&&t| t >= back_us).count();
-    let last_before = written
-        .iter()
-        .copied()
-        .filter(|&t| t < back_us)
-        .max()
-        .unwrap_or(0);
-    eprintln!(
-        "commands written: {before} before the outage, {during} during it, {after} after; \
-         first {resume_s:.3} s after the port came back; the autopilot went {:.3} s without one \
-         (the port gone {:.3} s)",
-        (first_after - last_before) as f64 / 1e6,
-        (back_us - unplugged_us) as f64 / 1e6
-    );
-    assert!(before > 50, "only {before} commands before the outage");
-    assert_eq!(
-        during, 0,
-        "commands recorded as written while the port was gone"
-    );
+    let before = written.iter().filter(|&&t| t < outages[0].0).count();
     assert!(
-        resume_s <= 2.0,
-        "commands resumed {resume_s:.3} s after the port came back (budget 2 s)"
+        before > 50,
+        "only {before} commands before the first outage"
     );
-    assert!(after > 50, "only {after} commands after the outage");
+    for (i, &(unplugged_us, back_us)) in outages.iter().enumerate() {
+        let next = outages.get(i + 1).map_or(u64::MAX, |o| o.0);
+        let during = written
+            .iter()
+            .filter(|&&t| t > unplugged_us + 50_000 && t < back_us)
+            .count();
+        let first_after = written
+            .iter()
+            .copied()
+            .find(|&t| t >= back_us)
+            .expect("no command after the port came back");
+        let last_before = written
+            .iter()
+            .copied()
+            .filter(|&t| t < back_us)
+            .max()
+            .unwrap_or(0);
+        let after = written
+            .iter()
+            .filter(|&&t| t >= back_us && t < next)
+            .count();
+        let resume_s = (first_after - back_us) as f64 / 1e6;
+        eprintln!(
+            "outage {}: port gone {:.3} s; {during} commands written meanwhile; the first \
+             {resume_s:.3} s after the port came back, the autopilot {:.3} s without one; \
+             {after} commands until the next outage or the end",
+            i + 1,
+            (back_us - unplugged_us) as f64 / 1e6,
+            (first_after - last_before) as f64 / 1e6,
+        );
+        assert_eq!(
+            during, 0,
+            "commands recorded as written while the port was gone"
+        );
+        assert!(
+            resume_s <= 2.0,
+            "commands resumed {resume_s:.3} s after the port came back (budget 2 s)"
+        );
+        assert!(after > 50, "only {after} commands after outage {}", i + 1);
+    }
 
     // The autopilot never fell into its failsafe: no mode change after the
     // daemon took control.
