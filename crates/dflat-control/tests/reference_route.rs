@@ -351,3 +351,84 @@ fn a_silent_stream_stops_smoothly_and_holds() {
     assert!(r.push_sample(&bad).is_err());
     assert_eq!(r, before);
 }
+
+/// The stream's own jerk (issue 39): from 20 Hz p/v/a samples of a figure
+/// eight (x = 8 sin θ, y = 4 sin 2θ, θ̇ = 0.5 rad/s: curvature and speed
+/// changing all along), the prediction with the jerk is several times
+/// closer to the true trajectory over the attitude lag and the next half
+/// second than the coordinated turn at constant curvature; on a circle the
+/// jerk changes nothing (it stays exact to the table's interpolation).
+#[test]
+fn the_jerk_prediction_follows_a_figure_eight_and_keeps_the_circle() {
+    let w = 0.5;
+    let eight = |t: f64| {
+        let th = w * t;
+        (
+            v(8.0 * th.sin(), 4.0 * (2.0 * th).sin(), -10.0),
+            v(8.0 * w * th.cos(), 8.0 * w * (2.0 * th).cos(), 0.0),
+            v(
+                -8.0 * w * w * th.sin(),
+                -16.0 * w * w * (2.0 * th).sin(),
+                0.0,
+            ),
+        )
+    };
+    let circle6 = |t: f64| {
+        let (r, om) = (6.0, 4.0 / 6.0);
+        let th = om * t;
+        (
+            v(r * th.cos(), r * th.sin(), -10.0),
+            v(-r * om * th.sin(), r * om * th.cos(), 0.0),
+            v(-r * om * om * th.cos(), -r * om * om * th.sin(), 0.0),
+        )
+    };
+    let worst_over = |truth: &dyn Fn(f64) -> (Vector3<f64>, Vector3<f64>, Vector3<f64>),
+                      jerk: f64,
+                      ahead: f64|
+     -> f64 {
+        let settings = StreamSettings {
+            jerk_horizon_s: jerk,
+            ..StreamSettings::default()
+        };
+        let sample = |t: f64| {
+            let (p, vel, a) = truth(t);
+            StreamSample {
+                t,
+                position: p,
+                velocity: Some(vel),
+                acceleration: Some(a),
+                yaw: None,
+                yaw_rate: None,
+            }
+        };
+        let mut r = Reference::stream(settings, &sample(0.0)).unwrap();
+        let mut worst: f64 = 0.0;
+        for k in 1..260 {
+            let ts = k as f64 * 0.05;
+            r.push_sample(&sample(ts)).unwrap();
+            r.set_time(ts);
+            let n = (ahead / DT).round() as usize + 1;
+            let mut out = vec![Vector3::zeros(); n];
+            r.horizon(&Vector3::zeros(), DT, &mut out);
+            for (j, o) in out.iter().enumerate() {
+                worst = worst.max((o - truth(ts + j as f64 * DT).0).norm());
+            }
+        }
+        worst
+    };
+    for (ahead, factor) in [(0.2, 4.0), (0.5, 2.0)] {
+        let (turn, jerk) = (
+            worst_over(&eight, 0.0, ahead),
+            worst_over(&eight, 0.5, ahead),
+        );
+        println!("eight, {ahead} s ahead: turn {turn:.4} m, with the jerk {jerk:.4} m");
+        assert!(jerk * factor < turn, "{ahead} s: jerk {jerk}, turn {turn}");
+    }
+    let (turn, jerk) = (
+        worst_over(&circle6, 0.0, 1.0),
+        worst_over(&circle6, 0.5, 1.0),
+    );
+    println!("circle, 1 s ahead: turn {turn:.2e} m, with the jerk {jerk:.2e} m");
+    assert!(turn < 1e-9, "{turn}");
+    assert!(jerk < 5e-3, "{jerk}");
+}

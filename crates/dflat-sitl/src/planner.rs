@@ -40,6 +40,13 @@ pub struct PlannerConfig {
     pub target_component: u8,
     /// Send the heading along the velocity (else the yaw field is masked).
     pub yaw: bool,
+    /// The anchor: the autopilot flies the samples itself, with its own
+    /// position loop (PD with velocity and acceleration feed-forward, as
+    /// PX4's in OFFBOARD with position setpoints) — nothing is sent; the
+    /// stream starts `start_after_s` after the SITL does, and its live
+    /// setpoints engage offboard. The same stream on the same plant, for
+    /// comparing the daemon against.
+    pub anchor: bool,
 }
 
 impl Default for PlannerConfig {
@@ -56,6 +63,7 @@ impl Default for PlannerConfig {
             component_id: 190,
             target_component: 191,
             yaw: true,
+            anchor: false,
         }
     }
 }
@@ -107,6 +115,11 @@ impl Planner {
     /// SITL time \[s\] the trajectory started (t = 0), once streaming.
     pub fn started_at(&self) -> Option<f64> {
         self.stream.map(|(_, t0)| t0)
+    }
+
+    /// The autopilot flies the samples itself ([`PlannerConfig::anchor`]).
+    pub fn anchor(&self) -> bool {
+        self.config.anchor
     }
 
     /// The planner's (system, component) ids.

@@ -81,6 +81,11 @@ pub struct StreamSettings {
     /// Largest deceleration of the decay's stop [m/s²] (> 0): the decay
     /// is lengthened for a fast stream (module docs).
     pub stop_acceleration: f64,
+    /// How long \[s\] the stream's own jerk (the change of acceleration
+    /// between consecutive samples) is extrapolated (≥ 0; 0 = the
+    /// coordinated turn at constant curvature alone). See the module docs,
+    /// "The jerk".
+    pub jerk_horizon_s: f64,
 }
 
 impl Default for StreamSettings {
@@ -93,6 +98,7 @@ impl Default for StreamSettings {
             implied_velocity: false,
             implied_max_gap_s: 0.25,
             stop_acceleration: 2.0,
+            jerk_horizon_s: 0.5,
         }
     }
 }
@@ -112,22 +118,140 @@ impl StreamSettings {
         if !(self.stop_acceleration.is_finite() && self.stop_acceleration > 0.0) {
             return Err(invalid("stop_acceleration", "must be finite and > 0 m/s²"));
         }
+        if !(self.jerk_horizon_s.is_finite() && self.jerk_horizon_s >= 0.0) {
+            return Err(invalid("jerk_horizon_s", "must be finite and ≥ 0 s"));
+        }
         Ok(())
     }
 }
 
+/// Nodes of the jerk prediction's table (over `σ ∈ [0, σ_max]`).
+const JERK_NODES: usize = 256;
+
 /// The prediction from one sample.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 struct Prediction {
     t: f64,
     p: Vector3<f64>,
     v: Vector3<f64>,
     a: Vector3<f64>,
+    /// The horizontal prediction with the stream's jerk, tabulated (module
+    /// docs, "The jerk"); `None`: the closed-form turn.
+    jerk: Option<JerkTable>,
+}
+
+/// Positions and velocities of the jerk prediction at `σ = k·step`.
+#[derive(Debug, Clone, PartialEq)]
+struct JerkTable {
+    step: f64,
+    p: [[f64; 2]; JERK_NODES + 1],
+    v: [[f64; 2]; JERK_NODES + 1],
+}
+
+impl JerkTable {
+    /// Integrates the horizontal motion from `p`, `v`, `a` with jerk `j`
+    /// over `[0, sigma_max]`: speed and heading rate move at their rates
+    /// (from `j`) for `horizon` \[s\], then stay (a turn at the curvature
+    /// reached); below [`TURN_MIN_SPEED`], acceleration moves at `j` for
+    /// `horizon`, then stays.
+    fn new(
+        p: Vector3<f64>,
+        v: Vector3<f64>,
+        a: Vector3<f64>,
+        j: Vector3<f64>,
+        horizon: f64,
+        sigma_max: f64,
+    ) -> Self {
+        let step = (sigma_max / JERK_NODES as f64).max(1e-9);
+        // The planar velocity at σ.
+        let speed = v.x.hypot(v.y);
+        let vel = |s: f64| -> [f64; 2] {
+            let sj = s.min(horizon);
+            if speed < TURN_MIN_SPEED {
+                // a(σ) = a + j·min(σ, T): v = v + a σ + j (σ_j²/2 + σ_j (σ − σ_j)).
+                let jj = 0.5 * sj * sj + sj * (s - sj);
+                return [v.x + a.x * s + j.x * jj, v.y + a.y * s + j.y * jj];
+            }
+            let at = (v.x * a.x + v.y * a.y) / speed;
+            let omega = (v.x * a.y - v.y * a.x) / (speed * speed);
+            // Rates of the tangential acceleration and the turn rate.
+            let a2 = a.x * a.x + a.y * a.y;
+            let at_dot = (v.x * j.x + v.y * j.y + a2 - at * at) / speed;
+            let omega_dot = (v.x * j.y - v.y * j.x) / (speed * speed) - 2.0 * omega * at / speed;
+            let spd = speed + at * s + at_dot * (0.5 * sj * sj + sj * (s - sj));
+            let th = v.y.atan2(v.x) + omega * s + omega_dot * (0.5 * sj * sj + sj * (s - sj));
+            let spd = spd.max(0.0);
+            [spd * th.cos(), spd * th.sin()]
+        };
+        let mut t = Self {
+            step,
+            p: [[0.0; 2]; JERK_NODES + 1],
+            v: [[0.0; 2]; JERK_NODES + 1],
+        };
+        t.p[0] = [p.x, p.y];
+        t.v[0] = vel(0.0);
+        for k in 1..=JERK_NODES {
+            let s0 = (k - 1) as f64 * step;
+            // Simpson over the interval.
+            let (va, vm, vb) = (vel(s0), vel(s0 + 0.5 * step), vel(s0 + step));
+            for i in 0..2 {
+                t.p[k][i] = t.p[k - 1][i] + step / 6.0 * (va[i] + 4.0 * vm[i] + vb[i]);
+            }
+            t.v[k] = vb;
+        }
+        t
+    }
+
+    /// Position and velocity at `sigma` (cubic Hermite between nodes; held
+    /// at the last node's motion beyond it).
+    fn at(&self, sigma: f64) -> ([f64; 2], [f64; 2]) {
+        let x = (sigma / self.step).max(0.0);
+        if x >= JERK_NODES as f64 {
+            let extra = (x - JERK_NODES as f64) * self.step;
+            let (p, v) = (self.p[JERK_NODES], self.v[JERK_NODES]);
+            return ([p[0] + v[0] * extra, p[1] + v[1] * extra], v);
+        }
+        let k = x.floor() as usize;
+        let u = x - k as f64;
+        let h = self.step;
+        let (p0, p1, v0, v1) = (self.p[k], self.p[k + 1], self.v[k], self.v[k + 1]);
+        let (h00, h10, h01, h11) = (
+            2.0 * u * u * u - 3.0 * u * u + 1.0,
+            u * u * u - 2.0 * u * u + u,
+            -2.0 * u * u * u + 3.0 * u * u,
+            u * u * u - u * u,
+        );
+        let (d00, d10, d01, d11) = (
+            (6.0 * u * u - 6.0 * u) / h,
+            3.0 * u * u - 4.0 * u + 1.0,
+            (-6.0 * u * u + 6.0 * u) / h,
+            3.0 * u * u - 2.0 * u,
+        );
+        let mut p = [0.0; 2];
+        let mut v = [0.0; 2];
+        for i in 0..2 {
+            p[i] = h00 * p0[i] + h10 * h * v0[i] + h01 * p1[i] + h11 * h * v1[i];
+            v[i] = d00 * p0[i] + d10 * v0[i] + d01 * p1[i] + d11 * v1[i];
+        }
+        (p, v)
+    }
 }
 
 impl Prediction {
     /// Position and velocity `sigma` \[s\] along the extrapolation.
     fn at(&self, sigma: f64) -> (Vector3<f64>, Vector3<f64>) {
+        if let Some(table) = &self.jerk {
+            let s = sigma;
+            let z = self.p.z + self.v.z * s + 0.5 * self.a.z * s * s;
+            let vz = self.v.z + self.a.z * s;
+            let (p, v) = table.at(s);
+            return (Vector3::new(p[0], p[1], z), Vector3::new(v[0], v[1], vz));
+        }
+        self.closed_form(sigma)
+    }
+
+    /// The coordinated turn (or constant acceleration) in closed form.
+    fn closed_form(&self, sigma: f64) -> (Vector3<f64>, Vector3<f64>) {
         let s = sigma;
         let z = self.p.z + self.v.z * s + 0.5 * self.a.z * s * s;
         let vz = self.v.z + self.a.z * s;
@@ -182,6 +306,9 @@ pub(super) struct Stream {
     last: StreamSample,
     /// Times and positions of the previous position-only samples.
     history: [Option<(f64, Vector3<f64>)>; 2],
+    /// Time and acceleration of the previous sample that gave one (the
+    /// jerk's finite difference).
+    prev_accel: Option<(f64, Vector3<f64>)>,
     /// Controller time now \[s\] (set by `set_time`, else advanced by δt).
     now: f64,
     driven: bool,
@@ -215,10 +342,12 @@ impl Stream {
                 p: sample.position,
                 v: Vector3::zeros(),
                 a: Vector3::zeros(),
+                jerk: None,
             },
             decay: settings.decay_s,
             last: *sample,
             history: [None, None],
+            prev_accel: None,
             now: sample.t,
             driven: false,
         };
@@ -256,17 +385,43 @@ impl Stream {
         } else {
             self.history = [None, None];
         }
+        // The jerk: the change of the sender's acceleration since its
+        // previous sample, when recent (the implied gap's bounds).
+        let jerk = match (sample.acceleration, self.prev_accel) {
+            (Some(a1), Some((t0, a0))) => {
+                let h = sample.t - t0;
+                (h >= IMPLIED_MIN_GAP && h <= self.settings.implied_max_gap_s)
+                    .then(|| (a1 - a0) / h)
+            }
+            _ => None,
+        };
+        self.prev_accel = sample.acceleration.map(|a| (sample.t, a));
         self.pred = Prediction {
             t: sample.t,
             p: sample.position,
             v,
             a,
+            jerk: None,
         };
         let speed = self.pred.at(self.settings.extrapolation_s).1.norm();
         self.decay = self
             .settings
             .decay_s
             .max(std::f64::consts::FRAC_PI_2 * speed / self.settings.stop_acceleration);
+        if let Some(j) = jerk
+            && self.settings.jerk_horizon_s > 0.0
+            && j.iter().all(|c| c.is_finite())
+        {
+            let sigma_max = self.settings.extrapolation_s + 0.5 * self.decay;
+            self.pred.jerk = Some(JerkTable::new(
+                sample.position,
+                v,
+                a,
+                j,
+                self.settings.jerk_horizon_s,
+                sigma_max,
+            ));
+        }
         self.last = *sample;
         Ok(())
     }

@@ -30,6 +30,11 @@ pub struct StreamConfig {
     /// Largest spacing \[s\] of position-only setpoints that counts as a
     /// stream with `implied_velocity` (0.02–1; 0.25 s = 4 Hz).
     pub implied_max_gap_s: f64,
+    /// How long \[s\] the stream's own jerk (the change of acceleration
+    /// between consecutive p/v/a samples) is extrapolated before the
+    /// prediction continues as a turn at the curvature reached (0–2; 0 =
+    /// constant curvature from each sample).
+    pub jerk_horizon_s: f64,
     /// Peak acceleration \[m/s²\] of a setpoint's route (start and stop
     /// ramps) and of a lost stream's stop (its decay is lengthened to keep
     /// within it; 0.2–10).
@@ -45,6 +50,7 @@ impl Default for StreamConfig {
             decay_s: 1.0,
             implied_velocity: false,
             implied_max_gap_s: 0.25,
+            jerk_horizon_s: 0.5,
             route_acceleration: 2.0,
         }
     }
@@ -58,6 +64,7 @@ impl StreamConfig {
             ("stream.max_jump_m", self.max_jump_m, 0.1, 100.0),
             ("stream.extrapolation_s", self.extrapolation_s, 0.0, 5.0),
             ("stream.decay_s", self.decay_s, 0.1, 5.0),
+            ("stream.jerk_horizon_s", self.jerk_horizon_s, 0.0, 2.0),
             (
                 "stream.implied_max_gap_s",
                 self.implied_max_gap_s,
@@ -90,6 +97,7 @@ impl StreamConfig {
             decay_s: self.decay_s,
             implied_velocity: self.implied_velocity,
             implied_max_gap_s: self.implied_max_gap_s,
+            jerk_horizon_s: self.jerk_horizon_s,
             stop_acceleration: self.route_acceleration,
         }
     }

@@ -13,7 +13,7 @@
 //! its offboard mode: done at once.
 
 use dflat_link::dialect::{COMMAND_LONG_DATA, MavCmd, MavSeverity};
-use dflat_link::{AutopilotFamily, MavMessage};
+use dflat_link::{AttitudeCommand, AutopilotFamily, MavMessage};
 use tracing::{info, warn};
 
 use super::ControlCore;
@@ -44,7 +44,13 @@ pub(super) struct Stop {
     /// Commands sent since, and the last one's tick time \[s\].
     pub(super) commands: u64,
     pub(super) last_command: Option<f64>,
+    /// The last command sent (the level phase ramps from it).
+    pub(super) last_sent: Option<AttitudeCommand>,
 }
+
+/// The stop's level phase moves roll and pitch towards level by at most
+/// this much per tick \[rad\] (4°: under the 5°/tick of any goal change).
+pub const STOP_LEVEL_RAMP: f64 = 4.0 * std::f64::consts::PI / 180.0;
 
 impl ControlCore {
     /// Clamps the reference about to be flown into the fence (idempotent).
@@ -110,6 +116,7 @@ impl ControlCore {
                 transitions,
                 commands: 0,
                 last_command: None,
+                last_sent: None,
             });
             return;
         }
@@ -136,7 +143,24 @@ impl ControlCore {
             transitions,
             commands: 0,
             last_command: None,
+            last_sent: None,
         });
+    }
+
+    /// During the stop, `level` reached from the last command sent at most
+    /// [`STOP_LEVEL_RAMP`] per tick in roll and in pitch (no step); else
+    /// `level` unchanged.
+    pub(super) fn stop_ramp(&self, level: AttitudeCommand) -> AttitudeCommand {
+        let Some(last) = self.stop.and_then(|s| s.last_sent) else {
+            return level;
+        };
+        let toward =
+            |from: f64, to: f64| from + (to - from).clamp(-STOP_LEVEL_RAMP, STOP_LEVEL_RAMP);
+        AttitudeCommand {
+            roll: toward(last.roll, level.roll),
+            pitch: toward(last.pitch, level.pitch),
+            ..level
+        }
     }
 
     /// The flight state when the stop was asked for (`None` before):

@@ -18,9 +18,16 @@ use crate::supervisor::{Cause, FlightState, Transition};
 impl ControlCore {
     /// The failsafe machine's settings, from the configuration.
     fn failsafe_limits(&self) -> Limits {
+        // The stop's level lasts `safety.stop_level_ms` (its own setting),
+        // whatever `level_hover_max_ms` says of failures.
+        let level_ms = if self.stop.is_some() {
+            self.config.safety.stop_level_ms
+        } else {
+            self.config.safety.level_hover_max_ms
+        };
         Limits {
             hold_ticks: self.fallback.hold_ticks,
-            level_hover_max: self.config.safety.level_hover_max_ms / 1000.0,
+            level_hover_max: level_ms / 1000.0,
             period: self.period,
         }
     }
@@ -47,11 +54,21 @@ impl ControlCore {
     pub(super) fn on_transition(&mut self, t: f64, tr: Transition, level: AttitudeCommand) {
         self.announce(tr);
         if tr.to == FlightState::Failsafe {
+            // The stop's level follows a brake flown on live poses: no
+            // velocity to cancel, only a ramp to level (`idle_tick`).
+            let plan = if tr.cause == Cause::ShutdownLevel {
+                LevelPlan {
+                    command: level,
+                    brake: None,
+                }
+            } else {
+                self.level_plan(t, level)
+            };
             let event = Event::FailsafeEntered {
                 t,
                 cause: tr.cause,
                 engaged: tr.from.engaged(),
-                level: self.level_plan(t, level),
+                level: plan,
             };
             if let Action::StartLevel { announce } = self.failsafe_on(event) {
                 self.start_level(announce);
@@ -171,7 +188,7 @@ impl ControlCore {
     /// like every command; counted as level hover.
     pub(super) fn idle_tick(&mut self, t: f64, row: &mut CsvRow) -> Option<SentCommand> {
         let (wanted, braking) = match self.failsafe_on(Event::Idle { t }) {
-            Action::SendLevel { command, braking } => (command, braking),
+            Action::SendLevel { command, braking } => (self.stop_ramp(command), braking),
             Action::LevelOver { announce } => {
                 if announce {
                     info!(

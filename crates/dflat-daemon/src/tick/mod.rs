@@ -443,11 +443,12 @@ impl ControlCore {
             self.idle_tick(t, &mut row)
         };
         self.mission_tick(t);
-        if command.is_some()
+        if let Some(sent) = &command
             && let Some(stop) = self.stop.as_mut()
         {
             stop.commands += 1;
             stop.last_command = Some(t);
+            stop.last_sent = Some(sent.command);
         }
         row.state = self.supervisor.state();
         if std::mem::take(&mut self.stop_marked) {

@@ -117,9 +117,19 @@ impl SitlCore {
         let Some(planner) = self.planner.as_mut() else {
             return;
         };
-        let Some(message) = planner.due(t, offboard, state.position, time_boot_ms, system) else {
+        let anchor = planner.anchor();
+        let Some(message) =
+            planner.due(t, offboard || anchor, state.position, time_boot_ms, system)
+        else {
             return;
         };
+        if anchor {
+            // Flown by the autopilot's own position loop, as received.
+            if let Some(Ok(target)) = crate::position_control::position_target(&message) {
+                self.px4.set_setpoint(self.clock, target);
+            }
+            return;
+        }
         let (sys, comp) = planner.ids();
         let header = dflat_link::header(sys, comp, planner.sequence());
         out.messages.push(Outgoing {
