@@ -201,7 +201,10 @@ proptest! {
     }
 
     /// A stream of an exact circle sampled at 20 Hz with p, v, a predicts
-    /// the circle to within 1e-6 m over the first 0.5 s after each sample.
+    /// the circle to within 1e-6 m over the first 0.5 s after each sample
+    /// as a coordinated turn (`jerk_horizon_s = 0`); with the stream's
+    /// jerk (a finite difference of the samples' accelerations, second
+    /// order) within 1 % of the distance flown in that time.
     #[test]
     fn stream_of_a_circle_predicts_the_circle(
         radius in 2.0..20.0f64, speed in 0.5..8.0f64, phase in 0.0..std::f64::consts::TAU,
@@ -219,21 +222,25 @@ proptest! {
             let (p, vel, a) = circle(t);
             StreamSample { t, position: p, velocity: Some(vel), acceleration: Some(a), yaw: None, yaw_rate: None }
         };
-        let mut r = Reference::stream(StreamSettings::default(), &sample(0.0)).unwrap();
-        let mut worst: f64 = 0.0;
-        for k in 1..40 {
-            let ts = k as f64 * 0.05;
-            r.push_sample(&sample(ts)).unwrap();
-            // The tick 0.013 s after the sample, 25 steps (0.5 s) ahead.
-            let now = ts + 0.013;
-            r.set_time(now);
-            let mut out = [Vector3::zeros(); 26];
-            r.horizon(&Vector3::zeros(), DT, &mut out);
-            for (j, o) in out.iter().enumerate() {
-                worst = worst.max((o - circle(now + j as f64 * DT).0).norm());
+        for jerk in [0.0, 0.5] {
+            let settings = StreamSettings { jerk_horizon_s: jerk, ..StreamSettings::default() };
+            let mut r = Reference::stream(settings, &sample(0.0)).unwrap();
+            let mut worst: f64 = 0.0;
+            for k in 1..40 {
+                let ts = k as f64 * 0.05;
+                r.push_sample(&sample(ts)).unwrap();
+                // The tick 0.013 s after the sample, 25 steps (0.5 s) ahead.
+                let now = ts + 0.013;
+                r.set_time(now);
+                let mut out = [Vector3::zeros(); 26];
+                r.horizon(&Vector3::zeros(), DT, &mut out);
+                for (j, o) in out.iter().enumerate() {
+                    worst = worst.max((o - circle(now + j as f64 * DT).0).norm());
+                }
             }
+            let bound = if jerk == 0.0 { 1e-6 } else { 0.01 * speed * 0.5 };
+            prop_assert!(worst < bound, "jerk {jerk}: worst {worst} (bound {bound})");
         }
-        prop_assert!(worst < 1e-6, "worst {worst}");
     }
 }
 
@@ -406,6 +413,10 @@ fn the_jerk_prediction_follows_a_figure_eight_and_keeps_the_circle() {
         for k in 1..260 {
             let ts = k as f64 * 0.05;
             r.push_sample(&sample(ts)).unwrap();
+            if k < 2 {
+                // The jerk needs three samples' accelerations.
+                continue;
+            }
             r.set_time(ts);
             let n = (ahead / DT).round() as usize + 1;
             let mut out = vec![Vector3::zeros(); n];
@@ -430,5 +441,5 @@ fn the_jerk_prediction_follows_a_figure_eight_and_keeps_the_circle() {
     );
     println!("circle, 1 s ahead: turn {turn:.2e} m, with the jerk {jerk:.2e} m");
     assert!(turn < 1e-9, "{turn}");
-    assert!(jerk < 5e-3, "{jerk}");
+    assert!(jerk < 5e-4, "{jerk}");
 }

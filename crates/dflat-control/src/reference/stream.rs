@@ -306,9 +306,9 @@ pub(super) struct Stream {
     last: StreamSample,
     /// Times and positions of the previous position-only samples.
     history: [Option<(f64, Vector3<f64>)>; 2],
-    /// Time and acceleration of the previous sample that gave one (the
-    /// jerk's finite difference).
-    prev_accel: Option<(f64, Vector3<f64>)>,
+    /// Times and accelerations of the two previous samples that gave one
+    /// (the jerk's finite difference), the newer last.
+    prev_accel: [Option<(f64, Vector3<f64>)>; 2],
     /// Controller time now \[s\] (set by `set_time`, else advanced by δt).
     now: f64,
     driven: bool,
@@ -347,7 +347,7 @@ impl Stream {
             decay: settings.decay_s,
             last: *sample,
             history: [None, None],
-            prev_accel: None,
+            prev_accel: [None, None],
             now: sample.t,
             driven: false,
         };
@@ -387,15 +387,11 @@ impl Stream {
         }
         // The jerk: the change of the sender's acceleration since its
         // previous sample, when recent (the implied gap's bounds).
-        let jerk = match (sample.acceleration, self.prev_accel) {
-            (Some(a1), Some((t0, a0))) => {
-                let h = sample.t - t0;
-                (h >= IMPLIED_MIN_GAP && h <= self.settings.implied_max_gap_s)
-                    .then(|| (a1 - a0) / h)
-            }
-            _ => None,
-        };
-        self.prev_accel = sample.acceleration.map(|a| (sample.t, a));
+        let jerk = sample.acceleration.and_then(|a| self.jerk(sample.t, a));
+        match sample.acceleration {
+            Some(a) => self.prev_accel = [self.prev_accel[1], Some((sample.t, a))],
+            None => self.prev_accel = [None, None],
+        }
         self.pred = Prediction {
             t: sample.t,
             p: sample.position,
@@ -424,6 +420,32 @@ impl Stream {
         }
         self.last = *sample;
         Ok(())
+    }
+
+    /// The jerk at `t` from acceleration `a` and the previous samples'
+    /// (spacing within the implied gap's bounds): the derivative at `t` of
+    /// the quadratic through three accelerations (second order: a steady
+    /// turn's jerk to O(h²)); `None` before three.
+    fn jerk(&self, t: f64, a: Vector3<f64>) -> Option<Vector3<f64>> {
+        let (lo, hi) = (IMPLIED_MIN_GAP, self.settings.implied_max_gap_s);
+        let ok = |h: f64| h >= lo && h <= hi;
+        let (t1, a1) = self.prev_accel[1]?;
+        let h2 = t - t1;
+        if !ok(h2) {
+            return None;
+        }
+        let d21 = (a - a1) / h2;
+        match self.prev_accel[0] {
+            Some((t0, a0)) if ok(t1 - t0) => {
+                let h1 = t1 - t0;
+                let d10 = (a1 - a0) / h1;
+                let c = (d21 - d10) * (2.0 / (h1 + h2));
+                Some(d21 + c * (0.5 * h2))
+            }
+            // Two samples only: a first-order difference lags by h/2 (on a
+            // tight fast turn, tenths of a metre half a second ahead).
+            _ => None,
+        }
     }
 
     /// Velocity and acceleration of the quadratic through the two previous
