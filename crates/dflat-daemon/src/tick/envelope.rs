@@ -44,8 +44,6 @@ pub(super) struct Stop {
     /// Commands sent since, and the last one's tick time \[s\].
     pub(super) commands: u64,
     pub(super) last_command: Option<f64>,
-    /// The last command sent (the level phase ramps from it).
-    pub(super) last_sent: Option<AttitudeCommand>,
 }
 
 /// The stop's level phase moves roll and pitch towards level by at most
@@ -116,7 +114,6 @@ impl ControlCore {
                 transitions,
                 commands: 0,
                 last_command: None,
-                last_sent: None,
             });
             return;
         }
@@ -143,7 +140,6 @@ impl ControlCore {
             transitions,
             commands: 0,
             last_command: None,
-            last_sent: None,
         });
     }
 
@@ -151,7 +147,10 @@ impl ControlCore {
     /// [`STOP_LEVEL_RAMP`] per tick in roll and in pitch (no step); else
     /// `level` unchanged.
     pub(super) fn stop_ramp(&self, level: AttitudeCommand) -> AttitudeCommand {
-        let Some(last) = self.stop.and_then(|s| s.last_sent) else {
+        if self.stop.is_none() {
+            return level;
+        }
+        let Some(last) = self.last_sent else {
             return level;
         };
         let toward =

@@ -206,6 +206,8 @@ pub struct ControlCore {
     stop: Option<envelope::Stop>,
     /// The next step's CSV row carries [`STOP_GUARD`] (the stop began).
     stop_marked: bool,
+    /// The last command sent (the stop's level ramps from it).
+    last_sent: Option<dflat_link::AttitudeCommand>,
     guard_note: Option<&'static str>,
     counts: CoreCounts,
     /// Outputs produced between steps (by [`ControlCore::apply`]).
@@ -302,6 +304,7 @@ impl ControlCore {
             overspeed: false,
             stop: None,
             stop_marked: false,
+            last_sent: None,
             guard_note: None,
             counts: CoreCounts::default(),
             pending_texts: Vec::new(),
@@ -443,12 +446,12 @@ impl ControlCore {
             self.idle_tick(t, &mut row)
         };
         self.mission_tick(t);
-        if let Some(sent) = &command
+        self.last_sent = command.as_ref().map(|c| c.command);
+        if command.is_some()
             && let Some(stop) = self.stop.as_mut()
         {
             stop.commands += 1;
             stop.last_command = Some(t);
-            stop.last_sent = Some(sent.command);
         }
         row.state = self.supervisor.state();
         if std::mem::take(&mut self.stop_marked) {

@@ -641,3 +641,82 @@ fn flies_the_autopilots_hover_thrust_only_when_asked_and_before_engaging() {
     let (thrust, _) = run(false, 3);
     assert!((thrust - 0.5).abs() < 1e-9, "{thrust}");
 }
+
+/// The stop (SIGTERM): asked while engaged with 20° of roll commanded, at
+/// rest (braked at once): the autopilot is asked for its own hold
+/// (`safety.stop_requests_hold`), the level phase ramps to level at
+/// [`envelope::STOP_LEVEL_RAMP`] per tick and lasts `stop_level_ms`, no
+/// setpoint is taken meanwhile, and the stop is done after it; the
+/// summary's figures stop at the stop.
+#[test]
+fn the_stop_asks_for_a_hold_ramps_to_level_and_ends() {
+    let tilt = 20f64.to_radians();
+    let mut cfg = Config::default();
+    cfg.safety.stop_requests_hold = true;
+    let controller = Scripted {
+        script: vec![Script::Command(tilt, 0.0)],
+        tick: 0,
+        updates: Arc::new(AtomicUsize::new(0)),
+    };
+    let mut core = ControlCore::new(&cfg, Box::new(controller), thrust_mapping(&cfg));
+    let out = fly(&mut core, 50);
+    assert!(core.state().engaged());
+    assert_eq!(out[49].command.as_ref().unwrap().command.roll, tilt);
+    let transitions = core.supervisor().transitions();
+    core.begin_stop(50.0 * DT);
+    assert!(!core.stop_done(50.0 * DT));
+    let first = step_at(&mut core, 50, None, vec![]);
+    // The hold request, to the autopilot, PX4 AUTO.LOITER.
+    let request = first.texts.iter().find_map(|m| match m {
+        MavMessage::COMMAND_LONG(c) => Some(c.clone()),
+        _ => None,
+    });
+    let c = request.expect("no MAV_CMD_DO_SET_MODE");
+    assert_eq!(c.command, dflat_link::dialect::MavCmd::MAV_CMD_DO_SET_MODE);
+    assert_eq!((c.target_system, c.target_component), (1, 1));
+    assert_eq!((c.param2, c.param3), (4.0, 3.0));
+    assert_eq!(first.row.guard, Some(envelope::STOP_GUARD));
+    // A setpoint during the stop is refused.
+    let refused = core.counts().setpoints_refused;
+    let sp = Event::Setpoint {
+        arrival: 51.0 * DT - 0.001,
+        position: [5.0, 0.0, -10.0],
+        yaw: None,
+        source_time: None,
+        velocity: None,
+        acceleration: None,
+    };
+    let mut outs = vec![first, step_at(&mut core, 51, None, vec![sp])];
+    assert_eq!(core.counts().setpoints_refused, refused + 1);
+    let mut k = 52;
+    while !core.stop_done(k as f64 * DT) && k < 200 {
+        outs.push(step_at(&mut core, k, None, vec![]));
+        k += 1;
+    }
+    let rolls: Vec<f64> = outs
+        .iter()
+        .filter_map(|o| o.command.as_ref().map(|c| c.command.roll))
+        .collect();
+    // From 20°: no step larger than the ramp, level at the end.
+    let mut last = tilt;
+    for r in &rolls {
+        assert!(
+            (r - last).abs() <= envelope::STOP_LEVEL_RAMP + 1e-12,
+            "{r} after {last}"
+        );
+        last = *r;
+    }
+    assert_eq!(*rolls.last().unwrap(), 0.0);
+    let level_ticks = (cfg.safety.stop_level_ms / 1000.0 / DT).round() as usize;
+    assert!(
+        (level_ticks..=level_ticks + 2).contains(&rolls.len()),
+        "{} commands for {level_ticks} level ticks",
+        rolls.len()
+    );
+    assert_eq!(core.state_at_stop(), Some(FlightState::Holding));
+    assert_eq!(core.transitions_before_stop(), transitions);
+    let stop = core.stop_summary().unwrap();
+    assert_eq!(stop.commands, rolls.len() as u64);
+    // The stop's level is not a level-hover fallback.
+    assert_eq!(core.counts().guards.level_hover, 0);
+}
