@@ -263,6 +263,17 @@ impl DfMpc {
         self.axes.get(axis).and_then(|a| a.bounded.as_ref())
     }
 
+    /// The tilt cone's cascade, mutable: for a solver inserted to observe
+    /// its problems ([`Cascade::insert`]; the corner bench's OSQP anchor).
+    pub fn cone_cascade_mut(&mut self) -> Option<&mut Cascade> {
+        self.cone.as_mut().map(|c| &mut c.cascade)
+    }
+
+    /// The box cascade of `axis`, mutable (as [`DfMpc::cone_cascade_mut`]).
+    pub fn box_cascade_mut(&mut self, axis: usize) -> Option<&mut Cascade> {
+        self.axes.get_mut(axis).and_then(|a| a.bounded.as_mut())
+    }
+
     /// The per-axis bounds derived from the constraints (x, y, z order);
     /// with the cone, the horizontal axes' are in [`DfMpc::cone_bounds`].
     pub fn bounds(&self, axis: usize) -> Option<&AxisBounds> {

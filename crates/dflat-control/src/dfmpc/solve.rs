@@ -64,7 +64,7 @@ impl SolveReport {
 /// (warm-started), the banded interior point, then clarabel's SOCP.
 #[derive(Debug)]
 pub(super) struct HorizontalCone {
-    cascade: Cascade,
+    pub(super) cascade: Cascade,
     bounds: ConeBounds,
     /// tan(max_tilt).
     tilt_tan: f64,

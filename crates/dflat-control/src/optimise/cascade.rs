@@ -107,6 +107,27 @@ impl Cascade {
         })
     }
 
+    /// Inserts `solver` at `place` (0: first; at most the number of
+    /// solvers) — a solver of the same problem size. A solver that returns
+    /// an error from its `solve` passes the tick on to the next: the corner
+    /// bench inserts one first that times another method on the same
+    /// problem and leaves the plan to the cascade.
+    pub fn insert(
+        &mut self,
+        place: usize,
+        solver: Box<dyn ConstrainedSolver>,
+    ) -> Result<(), ControlError> {
+        if place > self.solvers.len() {
+            return Err(super::invalid("cascade", "a place within the cascade"));
+        }
+        if solver.axes() != self.solvers[0].axes() {
+            return Err(super::invalid("cascade", "solvers of one problem size"));
+        }
+        self.solvers.insert(place, solver);
+        self.solved_by = None;
+        Ok(())
+    }
+
     /// Tries each solver in turn; returns the method of the one that
     /// converged. The solvers before it are told the solution
     /// ([`ConstrainedSolver::accept`]). The last solver's error is the

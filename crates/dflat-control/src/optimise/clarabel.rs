@@ -353,6 +353,31 @@ impl ClarabelSolver {
             plan,
         } = a;
         check_lengths(self.horizon, reference, plan)?;
+        self.fill(fixed, sent, reference);
+        self.solver
+            .update_q(&self.qvec)
+            .and_then(|()| self.solver.update_b(&self.bvec))
+            .map_err(|e| ControlError::Solver(format!("update: {e}")))?;
+        self.solver.solve();
+        let status = self.solver.solution.status;
+        if status != SolverStatus::Solved {
+            return Err(ControlError::Solver(format!("{status:?}")));
+        }
+        let x = &self.solver.solution.x;
+        let n = self.horizon - 2;
+        plan[..3].copy_from_slice(fixed);
+        for f in 0..n {
+            plan[f + 3] = baseline(fixed, f + 3) + x[f];
+        }
+        if plan.iter().any(|v| !v.is_finite()) {
+            return Err(ControlError::Solver("non-finite solution".to_string()));
+        }
+        Ok(())
+    }
+
+    /// This tick's `q` and `b` (lengths checked by the caller) into the
+    /// solver's own vectors, not yet handed to clarabel.
+    fn fill(&mut self, fixed: &[f64; 3], sent: Option<f64>, reference: &[f64]) {
         let n = self.horizon - 2;
         for f in 0..n {
             self.qvec[f] = 2.0 * self.q * (baseline(fixed, f + 3) - reference[f + 3]);
@@ -369,23 +394,21 @@ impl ClarabelSolver {
                 bvec[m + 1] = -lo;
                 m += 2;
             });
-        self.solver
-            .update_q(&self.qvec)
-            .and_then(|()| self.solver.update_b(&self.bvec))
-            .map_err(|e| ControlError::Solver(format!("update: {e}")))?;
-        self.solver.solve();
-        let status = self.solver.solution.status;
-        if status != SolverStatus::Solved {
-            return Err(ControlError::Solver(format!("{status:?}")));
-        }
-        let x = &self.solver.solution.x;
-        plan[..3].copy_from_slice(fixed);
-        for f in 0..n {
-            plan[f + 3] = baseline(fixed, f + 3) + x[f];
-        }
-        if plan.iter().any(|v| !v.is_finite()) {
-            return Err(ControlError::Solver("non-finite solution".to_string()));
-        }
-        Ok(())
+    }
+
+    /// The QP clarabel is given (`½xᵀPx + qᵀx`, `A·x + s = b`, s in the
+    /// cones: the first `m_eq` rows zero, the rest nonnegative) for this
+    /// tick's problem, without solving it: P (upper triangle), q, A, b and
+    /// `m_eq` (the OSQP anchor of the corner bench takes the same data).
+    #[cfg(feature = "osqp-bench")]
+    pub(crate) fn qp_for(
+        &mut self,
+        fixed: &[f64; 3],
+        sent: Option<f64>,
+        reference: &[f64],
+    ) -> (&CscMatrix<f64>, &[f64], &CscMatrix<f64>, &[f64], usize) {
+        self.fill(fixed, sent, reference);
+        let data = &self.solver.data;
+        (&data.P, &self.qvec, &data.A, &self.bvec, self.m_eq)
     }
 }

@@ -120,6 +120,8 @@ mod cone_tests;
 pub mod fast_banded;
 pub mod feed_forward;
 pub mod interior_point;
+#[cfg(feature = "osqp-bench")]
+pub mod osqp_anchor;
 pub mod smoothness;
 pub mod tilt_rate;
 #[cfg(test)]
