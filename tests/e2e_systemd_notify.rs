@@ -66,7 +66,7 @@ fn ready_status_watchdog_and_stopping_reach_the_notify_socket() {
     let mut messages: Vec<(Instant, String)> = Vec::new();
     // Messages after SIGINT are drained at once once the daemon exited (its
     // stop brakes and levels first): their arrival times say nothing.
-    let mut interrupted: Option<Instant> = None;
+    let interrupted: Instant;
     let mut buf = [0u8; 4096];
     let start = Instant::now();
     loop {
@@ -77,7 +77,7 @@ fn ready_status_watchdog_and_stopping_reach_the_notify_socket() {
             }
         }
         if start.elapsed() > Duration::from_secs(3) {
-            interrupted = Some(Instant::now());
+            interrupted = Instant::now();
             assert!(daemon.interrupt_and_wait(Duration::from_secs(5)));
             // Drain what is left.
             while let Ok(n) = sock.recv(&mut buf) {
@@ -101,7 +101,7 @@ fn ready_status_watchdog_and_stopping_reach_the_notify_socket() {
         .iter()
         .filter(|m| m.1 == "WATCHDOG=1")
         .map(|m| m.0)
-        .filter(|t| interrupted.is_none_or(|i| *t <= i))
+        .filter(|t| *t <= interrupted)
         .collect();
     let longest = watchdogs
         .windows(2)

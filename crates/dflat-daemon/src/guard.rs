@@ -211,7 +211,8 @@ pub fn departs_from_motion(
         prev[2] + velocity[2] * dt,
     ];
     let d = distance(predicted, new);
-    !(d <= margin + 0.5 * max_acceleration * dt * dt)
+    // NaN (a non-finite pose) departs too.
+    d.is_nan() || d > margin + 0.5 * max_acceleration * dt * dt
 }
 
 /// True when `new` is further from `prev` than the vehicle can fly at

@@ -124,7 +124,8 @@ enum Kind {
     Path(Path),
     Brake(Brake),
     Route(Route),
-    Stream(Stream),
+    /// Boxed: its prediction carries a table of the jerk's motion (8 KiB).
+    Stream(Box<Stream>),
 }
 
 fn invalid(field: &'static str, reason: impl Into<String>) -> ControlError {
@@ -453,7 +454,9 @@ impl Reference {
     /// module docs, "Streams"). Errors on non-finite sample fields or
     /// settings out of range.
     pub fn stream(settings: StreamSettings, sample: &StreamSample) -> Result<Self, ControlError> {
-        Ok(Self::of(Kind::Stream(Stream::new(settings, sample)?)))
+        Ok(Self::of(Kind::Stream(Box::new(Stream::new(
+            settings, sample,
+        )?))))
     }
 
     /// A new sample for a stream: the prediction restarts from it. Errors

@@ -104,7 +104,8 @@ impl ControlCore {
         let brakes =
             self.config.safety.stop_brake_ms > 0.0 || self.config.safety.stop_level_ms > 0.0;
         if !engaged || !brakes {
-            self.supervisor.begin_stop(t).map(|_| ());
+            // Not engaged: no transition, nothing to brake.
+            let _ = self.supervisor.begin_stop(t);
             self.stop = Some(Stop {
                 started: t,
                 state,
