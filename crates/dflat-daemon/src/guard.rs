@@ -178,22 +178,17 @@ impl Fallback {
     }
 }
 
-/// True when `new` departs from where the previous pose `prev` and the
-/// vehicle's measured `velocity` \[m/s\] put it after `dt` \[s\] (at least
-/// `min_dt`) by more than `margin` \[m\] (noise) plus what
-/// `max_acceleration` \[m/s²\] can change in between (½·a·dt²), or when the
-/// estimator's reset counter changed. A fast vehicle is not a jump: its
-/// poses follow its motion, whatever its speed.
-#[allow(clippy::too_many_arguments)]
-pub fn departs_from_motion(
-    prev: [f64; 3],
-    velocity: [f64; 3],
-    new: [f64; 3],
+/// The test both pose-jump rules share: a reset counter that changed, or
+/// `new` further than `margin + reach(dt)` \[m\] from `prev` moved on by
+/// `velocity` \[m/s\] for `dt` \[s\] (at least `min_dt`; a NaN distance
+/// departs too).
+fn departs(
+    (prev, velocity, new): ([f64; 3], [f64; 3], [f64; 3]),
     dt: f64,
     min_dt: f64,
-    max_acceleration: f64,
     margin: f64,
     reset_counters: (Option<u8>, Option<u8>),
+    reach: impl Fn(f64) -> f64,
 ) -> bool {
     if let (Some(a), Some(b)) = reset_counters
         && a != b
@@ -211,13 +206,40 @@ pub fn departs_from_motion(
         prev[2] + velocity[2] * dt,
     ];
     let d = distance(predicted, new);
-    // NaN (a non-finite pose) departs too.
-    d.is_nan() || d > margin + 0.5 * max_acceleration * dt * dt
+    d.is_nan() || d > margin + reach(dt)
+}
+
+/// True when `new` departs from where the previous pose `prev` and the
+/// vehicle's measured `velocity` \[m/s\] put it after `dt` \[s\] (at least
+/// `min_dt`) by more than `margin` \[m\] (noise) plus what
+/// `max_acceleration` \[m/s²\] can change in between (½·a·dt²), or when the
+/// estimator's reset counter changed. A fast vehicle is not a jump: its
+/// poses follow its motion, whatever its speed.
+#[allow(clippy::too_many_arguments)]
+pub fn departs_from_motion(
+    prev: [f64; 3],
+    velocity: [f64; 3],
+    new: [f64; 3],
+    dt: f64,
+    min_dt: f64,
+    max_acceleration: f64,
+    margin: f64,
+    reset_counters: (Option<u8>, Option<u8>),
+) -> bool {
+    departs(
+        (prev, velocity, new),
+        dt,
+        min_dt,
+        margin,
+        reset_counters,
+        |dt| 0.5 * max_acceleration * dt * dt,
+    )
 }
 
 /// True when `new` is further from `prev` than the vehicle can fly at
 /// `max_speed` \[m/s\] in `dt` \[s\] (at least `min_dt`) plus `margin` \[m\]
-/// (noise), or when the estimator's reset counter changed.
+/// (noise), or when the estimator's reset counter changed (the rule before
+/// a velocity is known).
 pub fn is_pose_jump(
     prev: [f64; 3],
     new: [f64; 3],
@@ -227,18 +249,14 @@ pub fn is_pose_jump(
     margin: f64,
     reset_counters: (Option<u8>, Option<u8>),
 ) -> bool {
-    if let (Some(a), Some(b)) = reset_counters
-        && a != b
-    {
-        return true;
-    }
-    let d = distance(prev, new);
-    let dt = if dt.is_finite() {
-        dt.max(min_dt)
-    } else {
-        min_dt
-    };
-    d > max_speed * dt + margin
+    departs(
+        (prev, [0.0; 3], new),
+        dt,
+        min_dt,
+        margin,
+        reset_counters,
+        |dt| max_speed * dt,
+    )
 }
 
 /// Euclidean distance \[m\].

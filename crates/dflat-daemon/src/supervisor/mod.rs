@@ -234,14 +234,9 @@ impl Supervisor {
         if !self.state.engaged() {
             return None;
         }
-        if let Some(g) = self.stop_goal() {
-            self.set_goal(g);
-        }
-        self.braking = None;
-        self.pending = Goal::None;
         self.paused = false;
         self.last_setpoint = None;
-        Some(self.enter(FlightState::Holding, Cause::Overspeed, t))
+        Some(self.brake_to_a_stop(t, Cause::Overspeed))
     }
 
     /// The daemon is stopping at `t` (SIGTERM / SIGINT): from now on no
@@ -253,12 +248,18 @@ impl Supervisor {
         if !self.state.engaged() {
             return None;
         }
+        Some(self.brake_to_a_stop(t, Cause::Shutdown))
+    }
+
+    /// Holding at `t` for `cause`: a stop from the vehicle's motion, the
+    /// goal flown before abandoned.
+    fn brake_to_a_stop(&mut self, t: f64, cause: Cause) -> Transition {
         if let Some(g) = self.stop_goal() {
             self.set_goal(g);
         }
         self.braking = None;
         self.pending = Goal::None;
-        Some(self.enter(FlightState::Holding, Cause::Shutdown, t))
+        self.enter(FlightState::Holding, cause, t)
     }
 
     /// True once [`Supervisor::begin_stop`] was called.
