@@ -31,8 +31,19 @@
 //! with warm starts off and the box.
 //! `CORNER_ONLY` runs the course only when one of its parts is `course`.
 //!
+//! With the feature `osqp-bench` (off by default: the `osqp` crate builds
+//! OSQP's C through cmake), a table per horizon gives OSQP on the same box
+//! QPs as clarabel's, warm-started, beside our solver of the same ticks:
+//! its times, iterations, the share of solves it did not finish
+//! (`Solved`) and its plan's distance from ours (module `anchor` below;
+//! `docs/performance.md`, "OSQP beside clarabel"). The row "box,
+//! clarabel" is clarabel alone on the box (no tilt rate).
+//!
 //! Run: `cargo bench -p dflat-control --bench corner` (a horizon list as
-//! argument, e.g. `-- 200`, limits the run).
+//! argument, e.g. `-- 200`, limits the run); with OSQP: `eval "$(bash
+//! crates/dflat-control/benches/osqp-qdldl.sh)"` (offline, OSQP's cmake
+//! cannot fetch its QDLDL: the script points it at PyPI's copy), then
+//! `cargo bench -p dflat-control --features osqp-bench --bench corner`.
 
 #![allow(missing_docs)]
 
