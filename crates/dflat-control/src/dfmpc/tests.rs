@@ -606,3 +606,80 @@ fn warm_cone_flies_the_corner_as_clarabel_does() {
     assert!(constrained > 100, "{constrained}");
     assert!(warm * 10 >= constrained * 8, "{warm} of {constrained}");
 }
+
+/// A solver that sees each problem and passes it on (the corner bench's
+/// OSQP anchor is one): the cascade still solves with its own solvers.
+#[derive(Debug, Default)]
+struct Observer {
+    seen: usize,
+    accepted: usize,
+}
+
+impl crate::optimise::ConstrainedSolver for Observer {
+    fn method(&self) -> crate::optimise::SolverMethod {
+        crate::optimise::SolverMethod::Clarabel
+    }
+    fn axes(&self) -> usize {
+        1
+    }
+    fn solve(&mut self, _axes: &mut [AxisProblem<'_>]) -> Result<(), ControlError> {
+        self.seen += 1;
+        Err(ControlError::Solver("observer".to_string()))
+    }
+    fn iterations(&self) -> usize {
+        0
+    }
+    fn accept(&mut self, _axes: &[AxisProblem<'_>], _duals: &[[f64; 2]]) {
+        self.accepted += 1;
+    }
+}
+
+/// `Cascade::insert` checks its place and the problem size; a solver
+/// inserted first that declines every tick leaves the commands as they
+/// were and is told each accepted solution.
+#[test]
+fn an_inserted_observer_leaves_the_commands_unchanged() {
+    let plant = dflat_model::PlanarModel::new(dflat_model::PlanarParams::default()).unwrap();
+    let settings = DfMpcSettings {
+        constraints: OutputConstraints {
+            max_tilt: Some(10f64.to_radians()),
+            ..Default::default()
+        },
+        plan_tilt_bound: PlanTiltBound::Box,
+        solver_time_limit: f64::INFINITY,
+        ..Default::default()
+    };
+    let mut plain = DfMpc::new(ControlModel::Planar(plant), settings).unwrap();
+    let mut observed = DfMpc::new(ControlModel::Planar(plant), settings).unwrap();
+    let cascade = observed.box_cascade_mut(0).unwrap();
+    let len = cascade.solvers().count();
+    assert!(
+        cascade
+            .insert(len + 1, Box::new(Observer::default()))
+            .is_err()
+    );
+    cascade.insert(0, Box::new(Observer::default())).unwrap();
+    assert_eq!(cascade.solvers().count(), len + 1);
+    let path = [Vector3::new(0.0, 0.0, -2.0), Vector3::new(20.0, 0.0, -2.0)];
+    let (mut ra, mut rb) = (
+        crate::reference::Reference::path(&path, 8.0).unwrap(),
+        crate::reference::Reference::path(&path, 8.0).unwrap(),
+    );
+    let mut constrained = 0;
+    for k in 0..60 {
+        let m = Measurement {
+            t: k as f64 * DT,
+            position: Vector3::new(0.0, 0.0, -2.0),
+            yaw: 0.0,
+        };
+        let (a, b) = (
+            plain.update(&m, &mut ra).unwrap(),
+            observed.update(&m, &mut rb).unwrap(),
+        );
+        assert_eq!(a.command, b.command, "tick {k}");
+        constrained += usize::from(b.constrained);
+    }
+    assert!(constrained > 0, "the bound bound");
+    let (place, _) = observed.box_cascade(0).unwrap().solved_by().unwrap();
+    assert!(place >= 1, "the observer never solves");
+}
