@@ -103,9 +103,15 @@ noise_sigma = 0.01
     let (n, worst) = check_csv_commands(&rows, MAX_TILT_DEG);
     eprintln!("{n} commands, largest tilt {worst:.2}°, failsafe {failsafe_s:.2} s");
     assert!(n > 100, "only {n} commands");
-    // No command while in failsafe.
+    // No command while in failsafe (before the stop, whose level phase is
+    // one: `guard` = "stop" marks where it began).
+    let stop = rows
+        .iter()
+        .position(|r| r.get("guard").is_some_and(|g| g == "stop"))
+        .unwrap_or(rows.len());
     assert!(
-        rows.iter()
+        rows[..stop]
+            .iter()
             .filter(|r| r["state"] == "FAILSAFE")
             .all(|r| field(r, "roll").is_none()),
         "a command was sent in FAILSAFE"

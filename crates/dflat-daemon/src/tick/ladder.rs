@@ -19,9 +19,11 @@ impl ControlCore {
     /// The failsafe machine's settings, from the configuration.
     fn failsafe_limits(&self) -> Limits {
         // The stop's level lasts `safety.stop_level_ms` (its own setting),
-        // whatever `level_hover_max_ms` says of failures.
+        // whatever `level_hover_max_ms` says of failures; the stop ends it
+        // (`stop_done`), two ticks before the machine would let go, so the
+        // stream has no silent tick before it stops.
         let level_ms = if self.stop.is_some() {
-            self.config.safety.stop_level_ms
+            self.config.safety.stop_level_ms + 2000.0 * self.period
         } else {
             self.config.safety.level_hover_max_ms
         };
