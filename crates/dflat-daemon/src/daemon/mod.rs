@@ -43,7 +43,9 @@ use std::time::{Duration, Instant, SystemTime};
 
 use dflat_control::Controller;
 use dflat_link::transport::{Endpoint, OpenOptions, TlogTap, Transport, TransportError, UdpInPeer};
-use dflat_link::{DaemonStatus, LinkRx, LinkStats, MavMessage, timestamp_from_system_time};
+use dflat_link::{
+    DaemonStatus, LinkRx, LinkStats, MavMessage, ThrustMapping, timestamp_from_system_time,
+};
 use thiserror::Error;
 use tokio::sync::{mpsc, watch};
 use tracing::{error, info, warn};
@@ -538,30 +540,41 @@ pub async fn shutdown_signal() {
 /// refuses (run it as the daemon's user: the key's owner is checked).
 /// Creates and writes nothing.
 pub fn preflight(config: &Config, link_override: Option<&str>) -> Result<(), DaemonError> {
-    let url = link_override.unwrap_or(&config.link.url);
-    let endpoint = Endpoint::parse(url).map_err(DaemonError::Link)?;
-    let peer = config.link.peer.trim();
-    if !peer.is_empty() {
-        peer.parse::<SocketAddr>().map_err(|e| {
-            DaemonError::Link(TransportError::BadUrl {
-                url: peer.to_owned(),
-                reason: format!("link.peer: {e}"),
-            })
-        })?;
-    }
-    let _ = endpoint;
-    if let Some(path) = configured_path(config) {
-        path?;
-    }
+    start_checks(config, link_override)?;
     build_controller(config)?;
-    thrust_mapping(config)
-        .validate()
-        .map_err(|e| DaemonError::Internal(format!("thrust mapping: {e}")))?;
     let key = config.link.signing_key_file.trim();
     if !key.is_empty() {
         crate::signing::load_key(std::path::Path::new(key))?;
     }
     Ok(())
+}
+
+/// The checks a start makes before it opens anything, whatever the
+/// controller: the connection string and `link.peer` (parsed), the
+/// configured path, the thrust mapping.
+fn start_checks(
+    config: &Config,
+    link_override: Option<&str>,
+) -> Result<(Endpoint, Option<SocketAddr>, ThrustMapping), DaemonError> {
+    let url = link_override.unwrap_or(&config.link.url);
+    let endpoint = Endpoint::parse(url).map_err(DaemonError::Link)?;
+    let peer = match config.link.peer.trim() {
+        "" => None,
+        p => Some(p.parse::<SocketAddr>().map_err(|e| {
+            DaemonError::Link(TransportError::BadUrl {
+                url: p.to_owned(),
+                reason: format!("link.peer: {e}"),
+            })
+        })?),
+    };
+    if let Some(path) = configured_path(config) {
+        path?;
+    }
+    let mapping = thrust_mapping(config);
+    mapping
+        .validate()
+        .map_err(|e| DaemonError::Internal(format!("thrust mapping: {e}")))?;
+    Ok((endpoint, peer, mapping))
 }
 
 /// Opens the link, creates the records and starts all parts. Returns once
@@ -584,11 +597,7 @@ pub async fn spawn_with_controller(
     link_override: Option<String>,
     controller: Box<dyn Controller>,
 ) -> Result<DaemonHandle, DaemonError> {
-    let url = link_override.unwrap_or_else(|| config.link.url.clone());
-    let endpoint = Endpoint::parse(&url).map_err(DaemonError::Link)?;
-    if let Some(path) = configured_path(&config) {
-        path?;
-    }
+    let (endpoint, peer, mapping) = start_checks(&config, link_override.as_deref())?;
     let signing =
         crate::signing::setup(&config.link, timestamp_from_system_time(SystemTime::now()))?;
     if let Some((s, store)) = &signing {
@@ -600,23 +609,10 @@ pub async fn spawn_with_controller(
             "MAVLink 2 signing on"
         );
     }
-    let mapping = thrust_mapping(&config);
-    mapping
-        .validate()
-        .map_err(|e| DaemonError::Internal(format!("thrust mapping: {e}")))?;
 
     let controller_name = controller.name().to_owned();
     // udpin: one peer (link.peer, or the first sender of the autopilot's
     // HEARTBEAT); udpout connects; tcp / serial reconnect.
-    let peer = match config.link.peer.trim() {
-        "" => None,
-        p => Some(p.parse::<SocketAddr>().map_err(|e| {
-            DaemonError::Link(TransportError::BadUrl {
-                url: p.to_owned(),
-                reason: format!("link.peer: {e}"),
-            })
-        })?),
-    };
     if peer.is_some() && !matches!(endpoint, Endpoint::UdpIn { .. }) {
         warn!(link = %endpoint, "link.peer applies to udpin links only: ignored");
     }
