@@ -211,10 +211,8 @@ impl Config {
         }
         // One fence for every goal: the box of crate::envelope (a floor
         // `geofence_down_m` below the origin, a ceiling `geofence[2]` above).
-        let (lo, hi) = (
-            [-m.geofence[0], -m.geofence[1], -m.geofence[2]],
-            [m.geofence[0], m.geofence[1], m.geofence_down_m],
-        );
+        let fence = crate::envelope::Envelope::from_config(self).bounds;
+        let (lo, hi) = (fence.min, fence.max);
         for (i, w) in m.path.iter().enumerate() {
             for (j, x) in w.iter().enumerate() {
                 if !x.is_finite() || *x < lo[j] || *x > hi[j] {
