@@ -255,6 +255,15 @@ pub struct SitlConfig {
     /// Linear aerodynamic drag of the plant \[1/s\] on every axis (0–2,
     /// default 0): `v̇ = … − drag·v`. The truth `dflat identify` should find.
     pub drag: f64,
+    /// Quadratic parasitic drag of the plant \[1/m\] (0–1, default 0):
+    /// `v̇ = … − quadratic_drag·|v|·v` (the spatial and full plants in 3-D;
+    /// the planar plant on its horizontal velocity). No parametric term of
+    /// the daemon's model has it: `dflat learn` fits it.
+    pub quadratic_drag: f64,
+    /// Rotor drag of the plant in the body plane \[1/s\] (0–2, default 0):
+    /// `v̇ = … − rotor_drag·R·diag(1, 1, 0)·Rᵀ·v`, the velocity's part across
+    /// the thrust axis (induced drag of the rotors, blade flapping).
+    pub rotor_drag: f64,
     /// The full plant's autopilot limits its roll and pitch rate setpoints
     /// to this \[deg/s\] (PX4's MC_ROLLRATE_MAX / MC_PITCHRATE_MAX,
     /// ArduPilot's ATC_RATE_R_MAX / ATC_RATE_P_MAX; 0 = no limit, the
@@ -296,6 +305,8 @@ impl Default for SitlConfig {
             pilot: Vec::new(),
             max_yaw_rate_deg_s: 90.0,
             drag: 0.0,
+            quadratic_drag: 0.0,
+            rotor_drag: 0.0,
             max_tilt_rate_deg_s: 0.0,
             planner: None,
         }
@@ -335,6 +346,8 @@ impl SitlConfig {
         range("sitl.max_yaw_rate_deg_s", si.max_yaw_rate_deg_s, 0.0, 720.0)?;
         range("sitl.command_delay_ms", si.command_delay_ms, 0.0, 500.0)?;
         range("sitl.drag", si.drag, 0.0, 2.0)?;
+        range("sitl.quadratic_drag", si.quadratic_drag, 0.0, 1.0)?;
+        range("sitl.rotor_drag", si.rotor_drag, 0.0, 2.0)?;
         range(
             "sitl.max_tilt_rate_deg_s",
             si.max_tilt_rate_deg_s,

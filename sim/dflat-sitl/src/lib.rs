@@ -328,7 +328,7 @@ fn bind(what: &'static str, addr: SocketAddr) -> Result<UdpSocket, SitlError> {
 }
 
 /// The plant options of `[sitl]`: 1/`plant_rate_hz` step, τ, k̃, τ_T, the
-/// command delay, mass factor, ±35° saturation, g = 9.81 m/s².
+/// command delay, mass factor, the drags (linear, quadratic, rotor), ±35° saturation, g = 9.81 m/s².
 pub fn plant_options(cfg: &SitlSettings) -> PlantOptions {
     let s = &cfg.sitl;
     PlantOptions {
@@ -342,6 +342,8 @@ pub fn plant_options(cfg: &SitlSettings) -> PlantOptions {
         mass_factor: s.mass_factor,
         max_yaw_rate: s.max_yaw_rate_deg_s.to_radians(),
         drag: s.drag,
+        quadratic_drag: s.quadratic_drag,
+        rotor_drag: s.rotor_drag,
         rigid: RigidBodyOptions {
             max_rate: [
                 s.max_tilt_rate_deg_s.to_radians(),

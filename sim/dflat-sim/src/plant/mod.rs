@@ -7,8 +7,16 @@
 //! body FRD, ZYX Euler angles, thrust along −z body:
 //!
 //! ```text
-//! v̇ = g·e3 − T·R·e3 − c·(v − w)        (T specific thrust [m/s²], c drag [1/s], w wind)
+//! v̇ = g·e3 − T·R·e3 + a_aero(v − w)    (T specific thrust [m/s²], w wind)
+//! a_aero(u) = −c·u − c_q·|u|·u − d·R·diag(1, 1, 0)·Rᵀ·u
 //! ```
+//!
+//! with `u` the air-relative velocity, `c` linear drag [1/s]
+//! ([`PlantOptions::drag`]), `c_q` quadratic parasitic drag [1/m]
+//! ([`PlantOptions::quadratic_drag`]) and `d` rotor drag in the body plane
+//! [1/s] ([`PlantOptions::rotor_drag`]; `R·diag(1, 1, 0)·Rᵀ = I − n·nᵀ` with
+//! `n = R·e3` the thrust axis, so it does not depend on the heading): see
+//! [`aero_acceleration`].
 //!
 //! so at ψ = 0 and constant altitude `ẍ = −g·R13/R33 = −g·tanθ` (nose down
 //! accelerates north) and `ÿ = −g·R23/R33 = g·tanφ/cosθ`.
@@ -202,6 +210,13 @@ pub struct PlantOptions {
     pub mass_factor: f64,
     /// Linear drag coefficient c [1/s] on the air-relative velocity.
     pub drag: f64,
+    /// Quadratic parasitic drag c_q [1/m]: `−c_q·|u|·u` on the air-relative
+    /// velocity `u` (0 = none, the default).
+    pub quadratic_drag: f64,
+    /// Rotor drag d [1/s] in the body plane: `−d·R·diag(1, 1, 0)·Rᵀ·u`, the
+    /// air-relative velocity's part across the thrust axis (0 = none, the
+    /// default).
+    pub rotor_drag: f64,
     /// Mean wind, local NED [m/s].
     pub wind: [f64; 3],
     /// Gust standard deviation per NED axis [m/s] (0 = no gusts).
@@ -237,6 +252,8 @@ impl Default for PlantOptions {
             thrust_gain: 1.0,
             mass_factor: 1.0,
             drag: 0.0,
+            quadratic_drag: 0.0,
+            rotor_drag: 0.0,
             wind: [0.0; 3],
             gust_std: [0.0; 3],
             gust_tau: 1.0,
@@ -274,6 +291,14 @@ impl PlantOptions {
         check_positive("thrust_gain", self.thrust_gain)?;
         check_positive("mass_factor", self.mass_factor)?;
         check_range("drag", self.drag, 0.0, f64::MAX, ">= 0 1/s")?;
+        check_range(
+            "quadratic_drag",
+            self.quadratic_drag,
+            0.0,
+            10.0,
+            "0 ..= 10 1/m",
+        )?;
+        check_range("rotor_drag", self.rotor_drag, 0.0, 10.0, "0 ..= 10 1/s")?;
         for w in self.wind {
             check_range("wind", w, -1e3, 1e3, "finite, |w| <= 1000 m/s")?;
         }
@@ -466,6 +491,20 @@ pub fn thrust_axis(roll: f64, pitch: f64, yaw: f64) -> Vector3<f64> {
     Vector3::new(cs * st * cp + ss * sp, ss * st * cp - cs * sp, ct * cp)
 }
 
+/// Aerodynamic acceleration [m/s²] (local NED) on a vehicle moving at
+/// `air_velocity` (relative to the air mass, NED [m/s]) with thrust axis
+/// `axis` (unit `R·e3`, NED): linear drag `−c·u`, quadratic parasitic drag
+/// `−c_q·|u|·u` and rotor drag `−d·(u − n·(n·u))` (= `−d·R·diag(1, 1, 0)·Rᵀ·u`).
+pub fn aero_acceleration(
+    options: &PlantOptions,
+    air_velocity: &Vector3<f64>,
+    axis: &Vector3<f64>,
+) -> Vector3<f64> {
+    let u = air_velocity;
+    let across = u - axis * axis.dot(u);
+    -u * options.drag - u * (options.quadratic_drag * u.norm()) - across * options.rotor_drag
+}
+
 /// Horizontal NED acceleration at constant altitude [m/s²]:
 /// `[−g·R13/R33, −g·R23/R33]` (non-finite at 90° tilt).
 /// Body rates p, q, r (FRD [rad/s]) of ZYX Euler angles `roll`, `pitch`
@@ -561,6 +600,77 @@ mod tests {
             assert!(
                 (p - droll).abs() < 0.05 * droll.abs(),
                 "{kind:?}: p {p} vs {droll}"
+            );
+        }
+    }
+
+    use proptest::prelude::*;
+
+    proptest! {
+        /// The rotor drag is `−d·R·diag(1, 1, 0)·Rᵀ·u` with the full ZYX
+        /// rotation (any heading), and the quadratic drag `−c_q·|u|·u`.
+        #[test]
+        fn aero_acceleration_is_the_body_plane_form(
+            roll in -0.6f64..0.6, pitch in -0.6f64..0.6, yaw in -3.1f64..3.1,
+            ux in -15.0f64..15.0, uy in -15.0f64..15.0, uz in -5.0f64..5.0,
+            c in 0.0f64..0.5, cq in 0.0f64..0.1, d in 0.0f64..0.5,
+        ) {
+            let options = PlantOptions { drag: c, quadratic_drag: cq, rotor_drag: d,
+                ..PlantOptions::default() };
+            let u = Vector3::new(ux, uy, uz);
+            let r = rotation(roll, pitch, yaw);
+            let body_plane = r * Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, 0.0)) * r.transpose();
+            let want = -u * c - u * (cq * u.norm()) - body_plane * u * d;
+            let got = aero_acceleration(&options, &u, &thrust_axis(roll, pitch, yaw));
+            prop_assert!((got - want).norm() < 1e-9 * (1.0 + want.norm()), "{got} vs {want}");
+        }
+    }
+
+    /// Each plant flown at a constant pitch θ at constant altitude settles
+    /// at the speed where the pull of the tilt meets the aerodynamics. The
+    /// rotor drag acts on the velocity's part across the thrust axis,
+    /// `v·cosθ·(cosθ, 0, −sinθ)`: with thrust holding the altitude (spatial,
+    /// rigid body) its vertical part lowers the thrust, and
+    /// `g·tan|θ| = c_q·v² + d·v`; the planar plant's altitude is held
+    /// without thrust, so `g·tan|θ| = c_q·v² + d·v·cos²θ`.
+    #[test]
+    fn the_plants_settle_at_the_aerodynamic_terminal_speed() {
+        let (cq, d, pitch) = (0.03, 0.2, -0.25f64);
+        let options = PlantOptions {
+            quadratic_drag: cq,
+            rotor_drag: d,
+            ..PlantOptions::default()
+        };
+        let terminal = |b: f64| {
+            let k = options.g * (-pitch).tan();
+            (-b + (b * b + 4.0 * cq * k).sqrt()) / (2.0 * cq)
+        };
+        for kind in [PlantKind::Planar, PlantKind::Spatial, PlantKind::RigidBody] {
+            let v_star = match kind {
+                PlantKind::Planar => terminal(d * pitch.cos().powi(2)),
+                _ => terminal(d),
+            };
+            let mut plant = build_plant(kind, &options, 1).unwrap();
+            plant.reset(&PlantState::hover(Vector3::zeros(), options.g));
+            for _ in 0..(60 * 50) {
+                // Thrust that holds the altitude against gravity and the
+                // vertical part of the aerodynamics, fed back on the climb rate.
+                let s = plant.true_state();
+                let axis = thrust_axis(s.roll, s.pitch, s.yaw);
+                let aero = aero_acceleration(&options, &s.velocity, &axis);
+                let thrust = (options.g + aero.z + 2.0 * s.velocity.z) / axis.z;
+                plant.apply(&AttitudeCommand {
+                    pitch,
+                    roll: 0.0,
+                    yaw: 0.0,
+                    thrust: options.thrust_command_for(thrust),
+                });
+                plant.advance(0.02);
+            }
+            let v = plant.velocity();
+            assert!(
+                (v.x - v_star).abs() < 0.01 * v_star && v.y.abs() < 1e-3 && v.z.abs() < 1e-3,
+                "{kind:?}: {v} vs {v_star}"
             );
         }
     }

@@ -5,7 +5,7 @@ use nalgebra::{SVector, Vector3};
 
 use super::{
     HeldCommand, Plant, PlantKind, PlantOptions, PlantState, Wind, integrate,
-    level_flight_acceleration,
+    level_flight_acceleration, thrust_axis,
 };
 use crate::SimError;
 
@@ -14,10 +14,13 @@ use crate::SimError;
 /// State vector `[x, ẋ, y, ẏ, θ, φ]` (NED m, m/s, rad):
 ///
 /// ```text
-/// ẍ = −g·R13/R33 − c·(ẋ − w_x),  ÿ = −g·R23/R33 − c·(ẏ − w_y)
+/// ẍ = −g·R13/R33 + a_x,  ÿ = −g·R23/R33 + a_y
 /// θ̇ = (k̃·θ_cmd − θ)/τ,            φ̇ = (k̃·φ_cmd − φ)/τ
 /// ```
 ///
+/// with `a` the horizontal part of [`super::aero_acceleration`] on the
+/// horizontal air-relative velocity `(ẋ − w_x, ẏ − w_y, 0)` (linear,
+/// quadratic and rotor drag).
 /// Altitude stays at its reset value and the thrust command is ignored (the
 /// autopilot holds altitude). The heading follows the yaw command through
 /// the yaw loop of [`PlantOptions::max_yaw_rate`] (`plant/yaw.rs`; off by
@@ -67,11 +70,13 @@ impl PlanarPlant {
         let (ax, ay) = level_flight_acceleration(o.g, x[5], x[4], self.yaw_ref);
         let c = &self.held.command;
         let (cp, cr) = super::yaw::command_tilt(o, c, self.yaw, self.yaw_ref);
+        let air = Vector3::new(x[1] - w.x, x[3] - w.y, 0.0);
+        let aero = super::aero_acceleration(o, &air, &thrust_axis(x[5], x[4], self.yaw_ref));
         SVector::from([
             x[1],
-            ax - o.drag * (x[1] - w.x),
+            ax + aero.x,
             x[3],
-            ay - o.drag * (x[3] - w.y),
+            ay + aero.y,
             (o.attitude_gain * cp - x[4]) / o.attitude_tau,
             (o.attitude_gain * cr - x[5]) / o.attitude_tau,
         ])

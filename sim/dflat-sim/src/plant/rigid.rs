@@ -23,7 +23,7 @@ const N: usize = 19;
 /// rate integrators \[rad\], the three rate-filter states [rad/s].
 ///
 /// ```text
-/// v̇ = g·e3 − T·R·e3 − c·(v − w)
+/// v̇ = g·e3 − T·R·e3 + a_aero(v − w)              (super::aero_acceleration)
 /// [φ̇, θ̇, ψ̇] = W(φ, θ)⁻¹·[p, q, r]                   (ZYX kinematics)
 /// J_true·ω̇ = J_nom·α − ω × J_true·ω                  (α from the rate PID)
 /// Ṫ = (k_T·T_cmd − T)/τ_T,  k_T = thrust_gain / mass_factor
@@ -75,8 +75,9 @@ impl RigidBodyPlant {
 
         // Translation.
         let v = Vector3::new(x[1], x[3], x[5]);
-        let a =
-            Vector3::new(0.0, 0.0, o.g) - thrust_axis(phi, theta, psi) * thrust - (v - w) * o.drag;
+        let axis = thrust_axis(phi, theta, psi);
+        let a = Vector3::new(0.0, 0.0, o.g) - axis * thrust
+            + super::aero_acceleration(o, &(v - w), &axis);
 
         // ZYX kinematics: Euler rates from body rates.
         let (sp, cp) = phi.sin_cos();

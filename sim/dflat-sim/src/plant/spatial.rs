@@ -14,7 +14,7 @@ use crate::SimError;
 /// State vector `[x, ẋ, y, ẏ, z, ż, θ, φ, T]` (NED m, m/s, rad, m/s²):
 ///
 /// ```text
-/// v̇ = g·e3 − T·R·e3 − c·(v − w)
+/// v̇ = g·e3 − T·R·e3 + a_aero(v − w)       (super::aero_acceleration)
 /// θ̇ = (k̃·θ_cmd − θ)/τ,  φ̇ = (k̃·φ_cmd − φ)/τ
 /// Ṫ = (k_T·T_cmd − T)/τ_T,  k_T = thrust_gain / mass_factor
 /// ```
@@ -66,7 +66,8 @@ impl SpatialPlant {
         let axis = thrust_axis(x[7], x[6], self.yaw_ref);
         let (cp, cr) = super::yaw::command_tilt(o, c, self.yaw, self.yaw_ref);
         let v = Vector3::new(x[1], x[3], x[5]);
-        let a = Vector3::new(0.0, 0.0, o.g) - axis * x[8] - (v - w) * o.drag;
+        let a = Vector3::new(0.0, 0.0, o.g) - axis * x[8]
+            + super::aero_acceleration(o, &(v - w), &axis);
         let k_t = o.thrust_gain / o.mass_factor;
         SVector::from([
             x[1],
