@@ -10,6 +10,10 @@
 //! * the horizontal linear drag D, from the acceleration that the measured
 //!   tilt does not explain against the velocity ([`drag`]).
 //!
+//! Each value is recommended only when the flight excited it
+//! ([`excitation`]): its regressor moved and its interval is small against
+//! it; otherwise it is kept and said to be unexcited.
+//!
 //! The pure delay is its own term (`vehicle.delay_ms`): the model has one.
 //!
 //! Only *engaged* data are used (the autopilot armed in its offboard mode
@@ -21,6 +25,7 @@
 
 pub mod attitude;
 pub mod drag;
+pub mod excitation;
 pub mod stats;
 pub mod vertical;
 
@@ -173,6 +178,10 @@ pub struct Identification {
     pub vertical: VerticalResult,
     /// Horizontal linear drag.
     pub drag: DragResult,
+    /// Standard deviation of the commanded vertical specific thrust over
+    /// the engaged time \[m/s²\] (the regressor of τ_T; 0 without the
+    /// vertical fit): [`excitation::vertical_accel_std`].
+    pub vertical_excitation: f64,
 }
 
 impl Identification {
@@ -309,6 +318,21 @@ pub fn identify(log: &FlightLog) -> Result<Identification, IdentifyError> {
     };
     let vertical = vertical_fit(log, &segments, &engaged_cmds, delay.value);
     let drag = drag_fit(log, &segments, &vertical, delay.value);
+    let vertical_excitation = match &vertical {
+        VerticalResult::Fitted(v) => excitation::vertical_accel_std(
+            &engaged_cmds
+                .iter()
+                .map(|c| (c.t, c.thrust))
+                .collect::<Vec<_>>(),
+            &log.attitude
+                .iter()
+                .map(|a| (a.t, a.euler[0].cos() * a.euler[1].cos()))
+                .collect::<Vec<_>>(),
+            v.hover_thrust,
+            GRAVITY,
+        ),
+        VerticalResult::Skipped(_) => 0.0,
+    };
     Ok(Identification {
         segments,
         engaged_s,
@@ -319,6 +343,7 @@ pub fn identify(log: &FlightLog) -> Result<Identification, IdentifyError> {
         delay,
         vertical,
         drag,
+        vertical_excitation,
     })
 }
 

@@ -6,6 +6,7 @@ use std::fmt::Write as _;
 
 use serde::Serialize;
 
+use super::excitation::{self, Excitation, MIN_VERTICAL_ACCEL_STD, Regressor};
 use super::{AxisResult, DragResult, Estimate, Identification, VerticalResult};
 
 /// The `[vehicle]` values a flight was flown with (from its configuration).
@@ -27,6 +28,22 @@ pub struct FlownVehicle {
     pub drag_h: f64,
 }
 
+impl FlownVehicle {
+    /// The flown value of a `[vehicle]` field named as in [`Change::field`]
+    /// (NaN for a name it does not hold).
+    pub fn value_of(&self, field: &str) -> f64 {
+        match field {
+            "tau" => self.tau,
+            "k" => self.k,
+            "tau_thrust" => self.tau_thrust,
+            "hover_thrust" => self.hover_thrust,
+            "delay_ms" => self.delay_ms,
+            "drag_h" => self.drag_h,
+            _ => f64::NAN,
+        }
+    }
+}
+
 /// One field's comparison.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Change {
@@ -38,9 +55,32 @@ pub struct Change {
     pub identified: f64,
     /// 95 % half-width of the identified value.
     pub ci: f64,
-    /// Whether the flown value should change: it lies outside the
-    /// interval and more than 5 % away.
+    /// Whether the flight excited it ([`excitation`]).
+    pub excitation: Excitation,
+    /// Whether the flown value should change: the flight excited it, and it
+    /// lies outside the interval and more than 5 % away.
     pub change: bool,
+}
+
+/// One identified `[vehicle]` field, as it would be configured.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Parameter {
+    /// `[vehicle]` field.
+    pub field: &'static str,
+    /// The value and its 95 % half-width (in the field's unit).
+    pub estimate: Estimate,
+    /// Whether the flight excited it.
+    pub excitation: Excitation,
+}
+
+/// Absolute half-width below which a field counts as determined whatever
+/// its value (in the field's unit): 5 ms of delay, 0.02 /s of drag.
+fn floor_of(field: &str) -> f64 {
+    match field {
+        "delay_ms" => 5.0,
+        "drag_h" => 0.02,
+        _ => 0.0,
+    }
 }
 
 /// Relative difference below which a value is kept.
@@ -76,35 +116,62 @@ impl Identification {
         }
     }
 
-    /// The comparison with the configuration flown, one row per field.
-    pub fn compare(&self, flown: &FlownVehicle) -> Vec<Change> {
-        let row = |field, flown: f64, e: Estimate| {
-            let off = (e.value - flown).abs();
-            Change {
-                field,
-                flown,
-                identified: e.value,
-                ci: e.ci,
-                change: e.ci.is_finite() && off > e.ci && off > KEEP_FRACTION * flown.abs(),
-            }
+    /// The identified fields with their excitation, in snippet order
+    /// (`tau`, `k`, `delay_ms`, then `drag_h`, `hover_thrust`, `tau_thrust`
+    /// where fitted).
+    pub fn parameters(&self) -> Vec<Parameter> {
+        let param = |field: &'static str, e: Estimate, regressor: Option<Regressor>| Parameter {
+            field,
+            estimate: e,
+            excitation: excitation::check(e.value, e.ci, floor_of(field), regressor),
         };
         let delay_ms = Estimate {
             value: self.delay.value * 1e3,
             ci: self.delay.ci * 1e3,
         };
         let mut out = vec![
-            row("tau", flown.tau, self.tau),
-            row("k", flown.k, self.gain),
-            row("delay_ms", flown.delay_ms, delay_ms),
+            param("tau", self.tau, None),
+            param("k", self.gain, None),
+            param("delay_ms", delay_ms, None),
         ];
         if let Some(d) = self.drag_estimate() {
-            out.push(row("drag_h", flown.drag_h, d));
+            out.push(param("drag_h", d, None));
         }
         if let Some((hover, tau_t)) = self.vertical_estimates() {
-            out.push(row("hover_thrust", flown.hover_thrust, hover));
-            out.push(row("tau_thrust", flown.tau_thrust, tau_t));
+            out.push(param("hover_thrust", hover, None));
+            let climbs = Regressor {
+                what: "commanded vertical specific thrust std",
+                value: self.vertical_excitation,
+                needed: MIN_VERTICAL_ACCEL_STD,
+                unit: "m/s²",
+            };
+            out.push(param("tau_thrust", tau_t, Some(climbs)));
         }
         out
+    }
+
+    /// The comparison with the configuration flown, one row per field: a
+    /// field changes only when the flight excited it, the flown value lies
+    /// outside its interval and more than 5 % away.
+    pub fn compare(&self, flown: &FlownVehicle) -> Vec<Change> {
+        self.parameters()
+            .into_iter()
+            .map(|p| {
+                let flown = flown.value_of(p.field);
+                let e = p.estimate;
+                let off = (e.value - flown).abs();
+                Change {
+                    field: p.field,
+                    flown,
+                    identified: e.value,
+                    ci: e.ci,
+                    change: p.excitation.is_excited()
+                        && off > e.ci
+                        && off > KEEP_FRACTION * flown.abs(),
+                    excitation: p.excitation,
+                }
+            })
+            .collect()
     }
 
     /// The human-readable report (`source` names the log).
@@ -220,8 +287,8 @@ impl Identification {
         if let Some(flown) = flown {
             let _ = writeln!(s, "\ncompared with the configuration flown:");
             for c in self.compare(flown) {
-                let verdict = if !c.ci.is_finite() {
-                    "keep (not determined by this flight)".to_owned()
+                let verdict = if let Excitation::Unexcited(why) = &c.excitation {
+                    format!("keep: unexcited ({why})")
                 } else if c.change {
                     format!(
                         "change to {:.3} ({:+.0} %)",
@@ -259,48 +326,151 @@ impl Identification {
             fmt_ci(&self.delay, 1e3, 1)
         );
         let _ = writeln!(s, "[vehicle]");
-        let _ = writeln!(s, "tau = {:.3}", self.vehicle_tau());
-        let _ = writeln!(s, "k = {:.3}", self.gain.value);
-        let _ = writeln!(s, "delay_ms = {:.1}", (self.delay.value * 1e3).max(0.0));
-        match self.drag_estimate() {
-            Some(d) if d.ci.is_finite() => {
+        let params = self.parameters();
+        for p in &params {
+            if p.field == "drag_h" && p.excitation.is_excited() {
                 let _ = writeln!(
                     s,
                     "# Horizontal drag {} /s (acceleration the tilt does not explain,\n\
-                     # against velocity).\ndrag_h = {:.3}",
-                    fmt_ci(&d, 1.0, 3),
-                    d.value.clamp(0.0, 2.0)
+                     # against velocity).",
+                    fmt_ci(&p.estimate, 1.0, 3)
                 );
             }
-            _ => {
-                let _ = writeln!(s, "# drag_h: not determined by this flight.");
-            }
+            write_field(&mut s, p, flown);
         }
-        match self.vertical_estimates() {
-            Some((hover, tau_t)) => {
-                let _ = writeln!(s, "hover_thrust = {:.3}", hover.value);
-                if tau_t.ci.is_finite() && tau_t.ci < tau_t.value {
-                    let _ = writeln!(s, "tau_thrust = {:.3}", tau_t.value);
-                } else if let Some(f) = flown {
-                    let _ = writeln!(
-                        s,
-                        "# τ_T not determined by this flight: the value flown.\ntau_thrust = {:.3}",
-                        f.tau_thrust
-                    );
-                } else {
-                    let _ = writeln!(
-                        s,
-                        "# tau_thrust: not determined by this flight (thrust barely varied)."
-                    );
-                }
-            }
-            None => {
-                let _ = writeln!(
-                    s,
-                    "# hover_thrust, tau_thrust: not identified (no thrust variation: planar model?)."
-                );
-            }
+        if !params.iter().any(|p| p.field == "drag_h") {
+            let _ = writeln!(s, "# drag_h: not determined by this flight.");
+        }
+        if !params.iter().any(|p| p.field == "hover_thrust") {
+            let _ = writeln!(
+                s,
+                "# hover_thrust, tau_thrust: not identified (no thrust variation: planar model?)."
+            );
         }
         s
+    }
+}
+
+/// One `[vehicle]` line of the snippet: the identified value when the
+/// flight excited it; else the value flown (when known) under a comment
+/// that says why, or only the comment.
+fn write_field(s: &mut String, p: &Parameter, flown: Option<&FlownVehicle>) {
+    let digits = if p.field == "delay_ms" { 1 } else { 3 };
+    let configured = |v: f64| match p.field {
+        "delay_ms" => v.max(0.0),
+        "drag_h" => v.clamp(0.0, 2.0),
+        _ => v,
+    };
+    match (&p.excitation, flown) {
+        (Excitation::Excited, _) => {
+            let _ = writeln!(s, "{} = {:.digits$}", p.field, configured(p.estimate.value));
+        }
+        (Excitation::Unexcited(why), Some(f)) => {
+            let _ = writeln!(
+                s,
+                "# {}: unexcited by this flight ({why}): the value flown.\n{} = {:.digits$}",
+                p.field,
+                p.field,
+                f.value_of(p.field)
+            );
+        }
+        (Excitation::Unexcited(why), None) => {
+            let _ = writeln!(
+                s,
+                "# {}: unexcited by this flight ({why}): keep yours (identified {:.digits$}).",
+                p.field, p.estimate.value
+            );
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::identify::stats::Whiteness;
+    use crate::identify::vertical::VerticalFit;
+
+    /// What identify found on an independent vehicle's level flight: τ_T
+    /// 0.456 ± 0.136 s from thrust that only compensated the tilt.
+    fn level_flight(tau_thrust_ci: f64, vertical_excitation: f64) -> Identification {
+        let e = |value, ci| Estimate { value, ci };
+        Identification {
+            segments: vec![(0.0, 30.0)],
+            engaged_s: 30.0,
+            roll: AxisResult::Skipped("test".into()),
+            pitch: AxisResult::Skipped("test".into()),
+            tau: e(0.1, 0.005),
+            gain: e(1.0, 0.02),
+            delay: e(0.03, 0.002),
+            vertical: VerticalResult::Fitted(VerticalFit {
+                hover_thrust: 0.45,
+                hover_thrust_ci: 0.004,
+                tau_thrust: 0.456,
+                tau_thrust_ci,
+                samples: 1500,
+                variance_explained: 0.9,
+                rms: 0.02,
+                whiteness: Whiteness {
+                    lag1: 0.1,
+                    ljung_box: 10.0,
+                    white: true,
+                },
+            }),
+            drag: DragResult::Skipped("test".into()),
+            vertical_excitation,
+        }
+    }
+
+    fn flown() -> FlownVehicle {
+        FlownVehicle {
+            tau: 0.2,
+            k: 1.0,
+            tau_thrust: 0.04,
+            hover_thrust: 0.5,
+            spatial: true,
+            delay_ms: 0.0,
+            drag_h: 0.0,
+        }
+    }
+
+    fn tau_thrust(found: &Identification) -> Change {
+        found
+            .compare(&flown())
+            .into_iter()
+            .find(|c| c.field == "tau_thrust")
+            .unwrap()
+    }
+
+    /// A level flight must not change `tau_thrust`: neither with its 30 %
+    /// interval, nor with a tight one when the vertical was never excited;
+    /// the snippet keeps the value flown and says why.
+    #[test]
+    fn a_level_flight_does_not_change_tau_thrust() {
+        for found in [level_flight(0.136, 0.05), level_flight(0.01, 0.05)] {
+            let c = tau_thrust(&found);
+            assert!(!c.change && !c.excitation.is_excited(), "{c:?}");
+            let snippet = found.vehicle_snippet("level.tlog", Some(&flown()));
+            assert!(snippet.contains("\ntau_thrust = 0.040\n"), "{snippet}");
+            assert!(snippet.contains("tau_thrust: unexcited"), "{snippet}");
+            let report = found.report("level.tlog", Some(&flown()));
+            assert!(report.contains("keep: unexcited"), "{report}");
+            // The parameters it did excite still change.
+            assert!(
+                found
+                    .compare(&flown())
+                    .iter()
+                    .any(|c| c.field == "tau" && c.change)
+            );
+        }
+    }
+
+    /// Climbs with a tight interval: τ_T is recommended.
+    #[test]
+    fn climbs_change_tau_thrust() {
+        let found = level_flight(0.03, 1.2);
+        let c = tau_thrust(&found);
+        assert!(c.change && c.excitation.is_excited(), "{c:?}");
+        let snippet = found.vehicle_snippet("climbs.tlog", Some(&flown()));
+        assert!(snippet.contains("\ntau_thrust = 0.456\n"), "{snippet}");
     }
 }
