@@ -145,8 +145,8 @@ impl Config {
             Self::ConeCold => "cone, ALM, cold (warm starts off)",
             Self::ConeClarabel => "cone, clarabel SOCP",
             Self::BoxBanded => "box, ALM, warm",
-            Self::BoxRate => "box + tilt rate, IP (ALM next)",
-            Self::RateAlone => "tilt rate alone, IP (ALM next)",
+            Self::BoxRate => "box + tilt rate, ALM",
+            Self::RateAlone => "tilt rate alone, ALM",
             Self::BoxRateClarabel => "box + tilt rate, clarabel",
             Self::BoxClarabel => "box, clarabel",
         }

@@ -182,15 +182,10 @@ pub(super) fn build_pipelines(
                     bounds,
                     smoothness,
                 )?);
-                // The tilt-rate rows chain the stages over the horizon: on
-                // them the augmented Lagrangian needs 15–50 Newton steps a
-                // tick and falls back often (`benches/corner.rs`), the
-                // interior point does not: it goes first there.
-                if bounds.tilt_rate.is_some() {
-                    solvers.extend([ip, alm]);
-                } else {
-                    solvers.extend([alm, ip]);
-                }
+                // With tilt-rate rows too: the augmented Lagrangian ends
+                // there in the active-set polish (`optimise/alm/polish.rs`),
+                // the interior point is the fallback.
+                solvers.extend([alm, ip]);
             }
             solvers.push(Box::new(ClarabelSolver::with_smoothness(
                 n,

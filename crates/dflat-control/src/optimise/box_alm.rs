@@ -44,6 +44,13 @@ pub struct BoxAlmSolver {
 /// and the first tick fell to the interior point).
 const BOX_SIGMA: f64 = 1e5;
 
+/// The Newton-step budget of a warm solve with tilt-rate rows. Their
+/// solves end in the active-set polish (`alm/polish.rs`) after a few
+/// steps, or not at all: on the corner bench at N = 200 a budget of 20
+/// instead of 40 left the median where it was and cut what a tick that
+/// falls to the interior point spends first.
+const TILT_RATE_NEWTON_STEPS: usize = 20;
+
 impl BoxAlmSolver {
     /// Builds the solver for horizon N ≥ 3, weights `(q, r, δt)` as
     /// [`FastBandedSolver::with_smoothness`], the bounds and the
@@ -57,6 +64,11 @@ impl BoxAlmSolver {
     ) -> Result<Self, ControlError> {
         let tuning = AlmTuning {
             sigma: BOX_SIGMA,
+            max_newton_steps: if bounds.tilt_rate.is_some() {
+                TILT_RATE_NEWTON_STEPS
+            } else {
+                super::alm::MAX_NEWTON_STEPS
+            },
             ..AlmTuning::default()
         };
         Self::with_tuning(horizon, weights, bounds, smoothness, warm_start, tuning)

@@ -291,3 +291,91 @@ fn the_interior_points_duals_start_the_augmented_lagrangian() {
         );
     }
 }
+
+proptest::proptest! {
+    #![proptest_config(proptest::test_runner::Config::with_cases(100))]
+    /// The augmented Lagrangian alone ([`BoxAlmSolver`], no interior point
+    /// behind it) on tilt-rate rows: a cold solve, then the next tick's
+    /// problem (the window one step on along its own plan, the reference
+    /// moved on) warm-started from it — the path of the active-set polish
+    /// — each against clarabel to the tolerances of
+    /// `banded_tilt_rate_matches_clarabel`: cost no higher than 1e-7
+    /// relative, the first ten outputs to 1e-5 m, every row kept. (A
+    /// solve that gives up ends the case: the cascade's interior point
+    /// takes those ticks.)
+    #[test]
+    fn alm_tilt_rate_rows_match_clarabel_cold_and_warm(
+        horizon in 20usize..=160,
+        q in 0.5f64..10.0,
+        r in 1e-3f64..0.1,
+        step_deg in 0.5f64..5.0,
+        kappa in 1.0f64..12.0,
+        a_max in proptest::option::of(2.0f64..7.0),
+        speed in proptest::option::of(2.0f64..8.0),
+        v0 in -5.0f64..5.0,
+        a0 in -5.0f64..5.0,
+        target in -20.0f64..20.0,
+        slope in -3.0f64..3.0,
+    ) {
+        let rate = TiltRate { step: step_deg.to_radians(), kappa, gain: 1.0, gravity: G };
+        let bounds = AxisBounds {
+            acceleration: a_max.map(|a| [-a, a]),
+            speed,
+            tilt_rate: Some(rate),
+            drag: 0.0,
+        };
+        let smoothness = Smoothness::default();
+        let mut reference_solver = ClarabelSolver::with_tuning(
+            horizon, (q, r, DT), bounds, f64::INFINITY, smoothness, KktTuning::REFERENCE,
+        )
+        .unwrap();
+        let mut alm = BoxAlmSolver::with_tuning(
+            horizon, (q, r, DT), bounds, smoothness, true, crate::optimise::alm::COLD_TUNING,
+        )
+        .unwrap();
+        let y0 = 0.3;
+        let mut fixed = [y0, y0 + v0 * DT, y0 + 2.0 * v0 * DT + a0 * DT * DT];
+        let mut sent = Some(a0);
+        for tick in 0..2 {
+            let reference: Vec<f64> = (0..=horizon)
+                .map(|j| target + slope * DT * (j + tick) as f64)
+                .collect();
+            let mut want = vec![0.0; horizon + 1];
+            let solved = reference_solver.solve_problem(AxisProblem {
+                fixed: &fixed, sent, reference: &reference, plan: &mut want,
+            });
+            proptest::prop_assume!(solved.is_ok());
+            let mut got = vec![0.0; horizon + 1];
+            FastBandedSolver::with_smoothness(horizon, q, r, DT, smoothness)
+                .unwrap()
+                .solve_problem(AxisProblem { fixed: &fixed, sent, reference: &reference, plan: &mut got })
+                .unwrap();
+            // Where the augmented Lagrangian gives up, the cascade's
+            // interior point solves (`banded_tilt_rate_matches_clarabel`):
+            // what it does return is held to clarabel's plan.
+            if alm
+                .solve_problem(AxisProblem { fixed: &fixed, sent, reference: &reference, plan: &mut got })
+                .is_err()
+            {
+                return Ok(());
+            }
+            proptest::prop_assert!(alm.warm_started() == (tick > 0));
+            let cw = cost((q, r), &smoothness, sent, &reference, &want);
+            let cg = cost((q, r), &smoothness, sent, &reference, &got);
+            proptest::prop_assert!(
+                cg <= cw + 1e-7 * (1.0 + cw.abs()),
+                "tick {tick}: cost {cg} above clarabel's {cw}"
+            );
+            for (j, (g, w)) in got.iter().zip(&want).take(11).enumerate() {
+                proptest::prop_assert!((g - w).abs() <= 1e-5, "tick {tick}: y_{j}: {g} vs {w}");
+            }
+            proptest::prop_assert!(!rate.violated_by(&got, sent, DT), "tick {tick}: rows broken");
+            // The next tick: the window one step on along this plan, the
+            // command its first stage asks for sent.
+            let dt2 = DT * DT;
+            let acc = |j: usize| (got[j + 2] - 2.0 * got[j + 1] + got[j]) / dt2;
+            sent = Some(acc(0) + kappa * (acc(1) - acc(0)));
+            fixed = [got[1], got[2], got[3]];
+        }
+    }
+}

@@ -431,7 +431,7 @@ fn stage_pass<const K: usize>(
 /// `w − Π(w)` and `I − ∂Π(w)` for the disc of radius `r` when `w` lies
 /// outside it (`(1 − r/‖w‖)·w`, `(1 − t)·I + t·ŵŵᵀ` with t = r/‖w‖).
 #[inline(always)]
-fn disc_excess(w: [f64; 2], r: f64) -> Option<([f64; 2], [[f64; 2]; 2])> {
+pub(super) fn disc_excess(w: [f64; 2], r: f64) -> Option<([f64; 2], [[f64; 2]; 2])> {
     let n2 = w[0] * w[0] + w[1] * w[1];
     if n2 <= r * r {
         return None;
@@ -450,7 +450,7 @@ fn disc_excess(w: [f64; 2], r: f64) -> Option<([f64; 2], [[f64; 2]; 2])> {
 /// `w − Π(w)` and `I − ∂Π(w)` for the first `K` axes' intervals
 /// `[lo, hi]` when `w` lies outside one of them.
 #[inline(always)]
-fn interval_excess<const K: usize>(
+pub(super) fn interval_excess<const K: usize>(
     w: [f64; 2],
     b: &[[f64; 2]; 2],
 ) -> Option<([f64; 2], [[f64; 2]; 2])> {

@@ -4,7 +4,8 @@
 //! can take it.
 
 use super::lagrangian::Vector;
-use super::{ARMIJO, BandedAlm, MAX_HALVINGS};
+use super::lagrangian::{disc_excess, interval_excess};
+use super::{ARMIJO, BandedAlm, MAX_HALVINGS, StageSet};
 use crate::ControlError;
 
 impl BandedAlm {
@@ -61,6 +62,13 @@ impl BandedAlm {
                 }
                 return Ok(alpha == 1.0);
             }
+            if alpha == 1.0 && matches!(self.stages, StageSet::Interval(_)) {
+                // Intervals: L along d is piecewise quadratic; its
+                // minimiser on (0, 1) in place of the halvings.
+                alpha = self.exact_step(lin, curv, slope, lo, hi);
+                self.step(alpha);
+                return Ok(false);
+            }
             alpha *= 0.5;
         }
         // No decrease measurable: the merit is flat to rounding here, where
@@ -88,5 +96,85 @@ impl BandedAlm {
         for (p, pd) in self.px[j0..].iter_mut().zip(&self.pd[j0..]) {
             *p += alpha * pd;
         }
+    }
+}
+
+/// Iterations of the exact line search's root finding.
+const EXACT_ITERATIONS: usize = 12;
+
+impl BandedAlm {
+    /// The minimiser on (0, 1) of L along d (convex, its derivative
+    /// `lin + α·curv + Σ y'_f(α)·du_f + Σ (v'_up(α) − v'_lo(α))·hd_r`
+    /// increasing and piecewise linear for intervals), by Newton's method
+    /// on the derivative kept inside the bracket `[0, 1]` (bisection where
+    /// it leaves it), to 1e-3 of the slope at 0.
+    fn exact_step(&self, lin: f64, curv: f64, slope: f64, lo: &[f64], hi: &[f64]) -> f64 {
+        let (mut a_lo, mut a_hi) = (0.0, 1.0);
+        let mut alpha = 1.0;
+        let (mut d1, mut d2) = self.derivatives(alpha, lin, curv, lo, hi);
+        for _ in 0..EXACT_ITERATIONS {
+            if d1.abs() <= 1e-3 * slope.abs() {
+                break;
+            }
+            if d1 > 0.0 {
+                a_hi = alpha;
+            } else {
+                a_lo = alpha;
+            }
+            let newton = alpha - d1 / d2;
+            alpha = if d2 > 0.0 && newton > a_lo && newton < a_hi {
+                newton
+            } else {
+                0.5 * (a_lo + a_hi)
+            };
+            (d1, d2) = self.derivatives(alpha, lin, curv, lo, hi);
+        }
+        alpha.max(1e-6)
+    }
+
+    /// L's first and second derivatives along d at `x + α·d`.
+    fn derivatives(&self, alpha: f64, lin: f64, curv: f64, lo: &[f64], hi: &[f64]) -> (f64, f64) {
+        let s = self.sigma;
+        let inv_s = 1.0 / s;
+        let (mut d1, mut d2) = (lin + alpha * curv, curv);
+        for f in self.window..self.n {
+            let (u, du, y) = (self.u[f], self.du[f], self.y[f]);
+            let w = [
+                u[0] + alpha * du[0] + y[0] * inv_s,
+                u[1] + alpha * du[1] + y[1] * inv_s,
+            ];
+            let ex = match &self.stages {
+                StageSet::Disc(r) => disc_excess(w, r[f]),
+                StageSet::Interval(b) if self.k == 1 => interval_excess::<1>(w, &b[f]),
+                StageSet::Interval(b) => interval_excess::<2>(w, &b[f]),
+            };
+            if let Some((e, j)) = ex {
+                d1 += s * (e[0] * du[0] + e[1] * du[1]);
+                let jd = [
+                    j[0][0] * du[0] + j[0][1] * du[1],
+                    j[1][0] * du[0] + j[1][1] * du[1],
+                ];
+                d2 += s * (du[0] * jd[0] + du[1] * jd[1]);
+            }
+        }
+        for (r, v) in self.v.iter().enumerate() {
+            if !self.row_in_window(r) {
+                continue;
+            }
+            let h = self.hx[r] + alpha * self.hd[r];
+            let ss = self.sigma_row(r);
+            let rho = self.row_penalty[r];
+            for (j, &vj) in v.iter().enumerate() {
+                let t = Self::side(j, h, lo[r], hi[r]);
+                let vn = self.side_multiplier(r, vj, t);
+                let sign = if j == 0 { 1.0 } else { -1.0 };
+                d1 += sign * vn * self.hd[r];
+                let raw = vj + ss * t;
+                if raw > 0.0 && raw < rho {
+                    d2 += ss * self.hd[r] * self.hd[r];
+                }
+            }
+        }
+        (d1, d2)
     }
 }

@@ -102,6 +102,7 @@ use std::ops::Range;
 
 mod lagrangian;
 mod line_search;
+mod polish;
 mod rollout_start;
 mod solve;
 mod warm_start;
@@ -331,6 +332,9 @@ pub struct BandedAlm {
     last_window: usize,
     /// Whether the last solve started from the rollout (`rollout_start.rs`).
     rollout_started: bool,
+    /// The active-set polish (`polish.rs`): one axis with intervals and
+    /// rows.
+    polish: Option<polish::Polish>,
 }
 
 impl BandedAlm {
@@ -395,6 +399,16 @@ impl BandedAlm {
         let mut head = BandedCholesky::new(size, bandwidth);
         let head_valid = head.refactor_taking(&mut base.clone()).is_ok();
         let m = rows.len();
+        let polish = (k == 1 && m > 0 && matches!(stages, StageSet::Interval(_))).then(|| {
+            polish::Polish::new(
+                n,
+                base.bandwidth(),
+                diag_max,
+                &rows,
+                &ranges,
+                1.0 / (dt * dt),
+            )
+        });
         let row_first = rows
             .iter()
             .map(|r| r.idx[..r.len].iter().copied().min().unwrap_or(0))
@@ -453,6 +467,7 @@ impl BandedAlm {
             head_factored: false,
             last_window: 0,
             rollout_started: false,
+            polish,
         }
     }
 
