@@ -73,9 +73,23 @@ pub struct IdentifyArgs {
     /// Print a `[mission]` for a short identification flight and exit.
     #[arg(long)]
     pub manoeuvre: bool,
-    /// Start of the manoeuvre, local NED `X,Y,Z` \[m\].
-    #[arg(long, value_delimiter = ',', num_args = 3, default_values_t = [0.0, 0.0, -10.0])]
-    pub at: Vec<f64>,
+    /// Start of the manoeuvre, local NED `X,Y,Z` \[m\] (z negative: up;
+    /// `--at 0,0,-10`, also `--at -5,0,-10`).
+    #[arg(long, value_name = "X,Y,Z", default_value = "0,0,-10", allow_hyphen_values = true, value_parser = parse_xyz)]
+    pub at: [f64; 3],
+}
+
+/// `X,Y,Z` \[m\]: three finite numbers, comma-separated.
+fn parse_xyz(text: &str) -> std::result::Result<[f64; 3], String> {
+    let parts: Vec<&str> = text.split(',').map(str::trim).collect();
+    let [x, y, z] = parts.as_slice() else {
+        return Err(format!("`{text}`: expected X,Y,Z (three numbers)"));
+    };
+    let num = |s: &str| match s.parse::<f64>() {
+        Ok(v) if v.is_finite() => Ok(v),
+        _ => Err(format!("`{s}` is not a finite number")),
+    };
+    Ok([num(x)?, num(y)?, num(z)?])
 }
 
 /// The `.tlog` of a flight given as its `.tlog` or `.csv`.
@@ -143,8 +157,7 @@ pub fn flown_vehicle(config: &Path) -> Result<FlownVehicle> {
 /// `dflat identify`.
 pub fn run_identify(args: IdentifyArgs) -> Result<()> {
     if args.manoeuvre {
-        let at = [args.at[0], args.at[1], args.at[2]];
-        out!("{}", identify::manoeuvre_mission(at));
+        out!("{}", identify::manoeuvre_mission(args.at));
         return Ok(());
     }
     let Some(flight) = args.flight else {

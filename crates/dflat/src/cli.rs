@@ -233,6 +233,48 @@ mod tests {
     struct Read {
         source: std::io::Error,
     }
+    use clap::Parser as _;
+
+    /// `dflat identify --manoeuvre --at 0,0,-10` (docs/tuning.md): a NED
+    /// altitude is negative, and `--at` takes it.
+    #[cfg(feature = "tuning")]
+    #[test]
+    fn at_takes_a_negative_z() {
+        for at in [
+            ["--at", "0,0,-10"],
+            ["--at=-1,2,-10", ""],
+            ["--at", "-1,2,-10"],
+        ] {
+            let args = ["dflat", "identify", "--manoeuvre"]
+                .into_iter()
+                .chain(at.into_iter().filter(|a| !a.is_empty()));
+            let cli = super::Cli::try_parse_from(args).expect("parses");
+            let super::Command::Identify(a) = cli.command else {
+                panic!("not identify: {cli:?}");
+            };
+            assert!(a.manoeuvre);
+            assert_eq!(a.at[2], -10.0);
+        }
+        let default =
+            super::Cli::try_parse_from(["dflat", "identify", "--manoeuvre"]).expect("parses");
+        let super::Command::Identify(a) = default.command else {
+            panic!("not identify");
+        };
+        assert_eq!(a.at, [0.0, 0.0, -10.0]);
+        for bad in ["0,0", "0,0,x", "0,0,-10,1"] {
+            let r = super::Cli::try_parse_from(["dflat", "identify", "--manoeuvre", "--at", bad]);
+            assert!(r.is_err(), "{bad}");
+        }
+    }
+
+    /// `dflat sitl --gcs udpin:0.0.0.0:14550` (README): no `--config`
+    /// needed, the built-in defaults fly.
+    #[cfg(feature = "sitl")]
+    #[test]
+    fn sitl_runs_without_a_config() {
+        let cli = super::Cli::try_parse_from(["dflat", "sitl", "--gcs", "udpin:0.0.0.0:14550"]);
+        assert!(cli.is_ok(), "{cli:?}");
+    }
 
     #[test]
     fn a_cause_already_in_the_message_is_said_once() {

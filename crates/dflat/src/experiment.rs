@@ -34,25 +34,25 @@ pub enum ExperimentCommand {
     /// extrapolated), DF-MPC (2 s) vs Flatness MPC (1.5 s) vs PD after a
     /// small weight search; plus the DSL demonstration (DF-MPC).
     Paths(PathsArgs),
-    /// Issue 6: the L path at 3–9 m/s with vision at 10/15/30 Hz (60 ms,
+    /// The L path at 3–9 m/s with vision at 10/15/30 Hz (60 ms,
     /// 2 cm): DF-MPC extrapolated (paper) vs multi-rate windows vs
     /// multi-rate + command smoothness vs Flatness MPC vs PD; path error,
     /// mean |Δu|, saturated share; budgets at 15 Hz. Markdown table on
     /// stdout, JSON + plots.
     VisionRate(VisionRateArgs),
-    /// Issue 5: steady-state error of a 10 m step under model mismatch
+    /// Steady-state error of a 10 m step under model mismatch
     /// (wind with drag, mass +20 %, hover thrust 0.4 vs 0.5, k̃ 0.8, τ 0.3 s;
     /// σ = 1 cm) on the spatial plant; DF-MPC with and without the
     /// disturbance estimator vs Flatness MPC vs PD; plus the noise check
     /// (noise-sweep error of DF with / without the estimator).
     Mismatch(MismatchArgs),
-    /// Issue 17: the plan's tilt bound as the cone vs a box per axis
+    /// The plan's tilt bound as the cone vs a box per axis
     /// (DF-MPC, plan 30°, command 35° on the combined tilt) on the L path
     /// and the DSL letters at 7–9 m/s, vision-like sensing: planned and
     /// flown tilt, path error, saturated share. Markdown table on stdout,
     /// JSON.
     TiltCone(TiltConeArgs),
-    /// Issue 15: the L path at 5 and 9 m/s with 50 Hz poses (20 ms, 2 mm)
+    /// The L path at 5 and 9 m/s with 50 Hz poses (20 ms, 2 mm)
     /// arriving a fixed offset (0, 5, 10, 19 ms) before the 50 Hz tick that
     /// uses them; the paper's DF-MPC on the classic window (extrapolated,
     /// held) vs the shipped tuning on the multi-rate window: median / p95

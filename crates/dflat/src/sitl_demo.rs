@@ -20,9 +20,11 @@ use crate::demo;
 /// `dflat sitl` arguments.
 #[derive(Debug, Args)]
 pub struct SitlArgs {
-    /// Configuration file (reads [link] ids and [sitl]).
+    /// Configuration file (reads [link] ids and [sitl]); without it the
+    /// built-in defaults (those of config/default.toml: the vehicle link
+    /// udpin:127.0.0.1:14540, where the daemon's default link sends).
     #[arg(long)]
-    config: PathBuf,
+    config: Option<PathBuf>,
     /// Vehicle link, overriding sitl.url: udpin:HOST:PORT (port 0 = any
     /// free port; the bound address is printed on stdout).
     #[arg(long)]
@@ -81,8 +83,13 @@ pub fn run_sitl(args: SitlArgs) -> Result<()> {
     init_logs("info");
     // The daemon's tables are not the SITL's business, but a file both read
     // must be valid for both.
-    dflat_daemon::config::Config::load(&args.config)?;
-    let cfg = SitlSettings::load(&args.config)?;
+    let cfg = match &args.config {
+        Some(path) => {
+            dflat_daemon::config::Config::load(path)?;
+            SitlSettings::load(path)?
+        }
+        None => SitlSettings::default(),
+    };
     let options = sitl::SitlOptions {
         link: args.link,
         gcs: args.gcs,

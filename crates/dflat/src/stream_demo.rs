@@ -36,7 +36,7 @@ pub const RADIUS: f64 = 6.0;
 pub const RAMP_S: f64 = 3.0;
 /// Flown after the stream ends: its stop and the hold \[s\].
 pub const AFTER_S: f64 = 7.0;
-/// A p95 error above this fails the demo \[m\] (issue 22's budget).
+/// A p95 error above this fails the demo \[m\] (the stream's budget).
 pub const MAX_P95: f64 = 0.098;
 
 /// What the stream demo measured.

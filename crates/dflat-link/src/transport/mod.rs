@@ -18,9 +18,11 @@
 //!   last sender; with [`UdpInPeer::Lock`] (the daemon) it talks to one
 //!   peer: the configured address, or the one the caller locks with
 //!   [`Transport::lock_peer`] (the daemon: the first sender of the
-//!   autopilot's HEARTBEAT); datagrams from any other address are dropped
-//!   and counted ([`TransportCounters::foreign_datagrams`], said once in
-//!   the log). Sends before there is a peer are dropped
+//!   autopilot's HEARTBEAT) and `connect()`s the socket to it, so the
+//!   kernel drops datagrams from any other address from then on; those
+//!   read before the lock are dropped here and counted
+//!   ([`TransportCounters::foreign_datagrams`], said once in the log: a
+//!   lower bound of what other senders sent). Sends before there is a peer are dropped
 //!   ([`SendOutcome::NoPeer`]).
 //! * `udpout` binds the address of the interface that routes to `HOST:PORT`
 //!   (ephemeral port) and `connect()`s the socket to it, so the kernel
