@@ -19,6 +19,9 @@
 //!   to the tick through the sent inputs.
 //! * [`disturbance::DisturbanceEstimator`] — acceleration-offset and
 //!   thrust-scale estimation for offset-free DF-MPC (optional).
+//! * [`learned::LearnedResidual`] — the flat maps' residual learned from
+//!   flight records (`dflat learn`): the acceleration the parametric model
+//!   does not explain, faded outside the support of its data.
 //!
 //! All three implement [`Controller`], so shells choose one by configuration.
 //! Positions are local NED \[m\]; angles ZYX \[rad\]; thrust is specific
@@ -28,6 +31,7 @@ pub mod dfmpc;
 pub mod disturbance;
 pub mod estimator;
 pub mod fmpc;
+pub mod learned;
 pub mod limits;
 pub mod model;
 pub mod optimise;

@@ -32,6 +32,9 @@
 //! above.
 
 mod delay;
+mod learned_hook;
+#[cfg(test)]
+mod learned_tests;
 mod settings;
 mod solve;
 #[cfg(test)]
@@ -109,6 +112,10 @@ pub struct DfMpc {
     record: RecordState,
     /// The inputs sent and not yet in effect (input delay).
     delay: DelayLine,
+    /// The learned residual, when flown ([`DfMpc::set_learned`]).
+    learned: Option<crate::learned::LearnedTerm>,
+    /// What scoring the learned term needs between ticks.
+    learned_score: learned_hook::Score,
 }
 
 /// The plan DF-MPC can fly without a new solve ([`Controller::plan_fallback`]).
@@ -196,6 +203,8 @@ impl DfMpc {
             plan: PlanState::Empty,
             record: RecordState::Recorded,
             delay: DelayLine::new(settings.delay_ticks, model.hover_input()),
+            learned: None,
+            learned_score: learned_hook::Score::default(),
         })
     }
 
@@ -514,6 +523,7 @@ impl Controller for DfMpc {
             e.begin_tick();
         }
         let d = self.disturbance_estimate();
+        let d = self.learned_disturbance(d, measurement);
         let axes = self.model.axes();
         // Multi-rate mode takes only the tick time (and checks the yaw).
         let position_ok = self.multi.is_some()
@@ -563,6 +573,7 @@ impl Controller for DfMpc {
         let (sent, saturated) = self.saturate(u);
         self.commit(window, measurement.t, &fixed, &sent, saturated);
         self.keep_plan(y0);
+        self.learned_after_tick(&plan4, &sent);
         Ok(TickOutput {
             command: self.model.command(&sent),
             plan: plan4,
@@ -690,6 +701,7 @@ impl Controller for DfMpc {
         if let Some(e) = &mut self.estimator {
             e.reset();
         }
+        self.learned_reset();
         if let Some(c) = &mut self.cone {
             c.reset();
         }

@@ -1,0 +1,123 @@
+//! DF-MPC's hook points for the learned residual
+//! ([`crate::learned::LearnedTerm`]): the offset added to the maps'
+//! acceleration offset each tick, the score of the residual against the
+//! acceleration the parametric model leaves unexplained, and the plan it is
+//! evaluated along.
+
+use nalgebra::Vector3;
+
+use super::{DfMpc, commanded_acceleration};
+use crate::Measurement;
+use crate::disturbance::DisturbanceEstimate;
+use crate::learned::{LearnedResidual, LearnedTerm, thrust_axis};
+use crate::model::ControlModel;
+
+/// What scoring the residual needs between ticks (classic mode).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub(super) struct Score {
+    /// The newest measured outputs, oldest first \[m\].
+    recent: [Vector3<f64>; 3],
+    /// How many of `recent` are filled (up to 3).
+    filled: usize,
+    /// The parametric model's acceleration (no drag) at the previous tick
+    /// and at this one: the commands' through the attitude lag τ [m/s²].
+    previous: Vector3<f64>,
+    now: Option<Vector3<f64>>,
+}
+
+impl DfMpc {
+    /// Flies with a learned residual (`None`: the parametric model alone).
+    /// The shell validates the model and checks its `[vehicle]` table
+    /// ([`LearnedResidual::validate`], [`LearnedResidual::check_vehicle`])
+    /// first. The residual is in the model frame (local NED in flight).
+    pub fn set_learned(&mut self, model: Option<LearnedResidual>) {
+        self.learned = model.map(LearnedTerm::new);
+        self.learned_score = Score::default();
+    }
+
+    /// The learned term with its fade state, when one is flown.
+    pub fn learned(&self) -> Option<&LearnedTerm> {
+        self.learned.as_ref()
+    }
+
+    /// The tick's estimate with the learned offset added, after scoring the
+    /// residual on a new measurement (classic mode): the measured
+    /// acceleration `(y_k − 2y_{k−1} + y_{k−2})/δt²` less the parametric
+    /// model's (the commands' through the lag, less the drag) is what the
+    /// residual should have predicted.
+    pub(super) fn learned_disturbance(
+        &mut self,
+        d: DisturbanceEstimate,
+        measurement: &Measurement,
+    ) -> DisturbanceEstimate {
+        let Some(term) = &mut self.learned else {
+            return d;
+        };
+        let fresh = self.multi.is_none()
+            && measurement.t > self.last_t
+            && self.record == super::RecordState::Pending;
+        let s = &mut self.learned_score;
+        if fresh {
+            s.recent = [s.recent[1], s.recent[2], measurement.position];
+            s.filled = (s.filled + 1).min(3);
+            if s.filled == 3 && s.now.is_some() {
+                let dt = self.model.dt();
+                let [y2, y1, y0] = s.recent;
+                let measured = (y0 - y1 * 2.0 + y2) / (dt * dt);
+                let v = (y0 - y2) / (2.0 * dt);
+                let mut unexplained = measured - (s.previous - self.model.drag().component_mul(&v));
+                if let ControlModel::Planar(_) = self.model {
+                    unexplained.z = 0.0;
+                }
+                term.observe(&unexplained);
+            }
+        } else {
+            s.filled = 0;
+        }
+        DisturbanceEstimate {
+            acceleration: d.acceleration + term.offset(),
+            ..d
+        }
+    }
+
+    /// After a good tick: the residual for the next tick, along this plan
+    /// and the command sent; the parametric acceleration moved on by the
+    /// command through the attitude lag.
+    pub(super) fn learned_after_tick(&mut self, plan: &[Vector3<f64>; 4], sent: &Vector3<f64>) {
+        if self.learned.is_none() {
+            return;
+        }
+        let dt = self.model.dt();
+        let tau = match &self.model {
+            ControlModel::Planar(m) => m.params().tau,
+            ControlModel::Spatial(m) => m.params().tau,
+        };
+        let commanded = commanded_acceleration(&self.model, sent).ok();
+        let s = &mut self.learned_score;
+        match (s.now, commanded) {
+            (Some(now), Some(a)) => {
+                s.previous = now;
+                s.now = Some(now + (a - now) * (dt / tau).min(1.0));
+            }
+            (None, Some(a)) => s.now = Some(a),
+            (_, None) => s.now = None,
+        }
+        let c = self.model.command(sent);
+        let n = thrust_axis(c.roll, c.pitch, c.yaw);
+        let thrust = match self.model {
+            ControlModel::Planar(_) => c.thrust / n.z.max(0.1),
+            ControlModel::Spatial(_) => c.thrust,
+        };
+        if let Some(term) = &mut self.learned {
+            term.after_tick(plan, &n, thrust, dt);
+        }
+    }
+
+    /// Forgets the scoring history (a reset).
+    pub(super) fn learned_reset(&mut self) {
+        self.learned_score = Score::default();
+        if let Some(l) = &mut self.learned {
+            l.reset();
+        }
+    }
+}
