@@ -18,8 +18,9 @@
 //! An active constraint `a·x = β` enters scaled by `√P_max/|a|` (entries
 //! of P's size), with `−δ` on its diagonal (δ = [`REGULARISATION`]: the
 //! matrix is quasi-definite, so LDLᵀ needs no pivoting); an inactive one
-//! is the row `−λ = 0`. Two steps of iterative refinement on the
-//! unregularised system remove δ's error.
+//! is the row `−λ = 0`. One step of iterative refinement on the
+//! unregularised system removes δ's error. A correction refactors
+//! from the first slot whose side changed ([`BandedLdl::factor_from`]).
 
 // The passes index several per-stage arrays (KKT slots, intervals,
 // multipliers) by the stage.
@@ -32,7 +33,7 @@ use crate::ControlError;
 /// The multipliers' diagonal in the scaled KKT matrix.
 const REGULARISATION: f64 = 1e-10;
 /// Steps of iterative refinement per KKT solve.
-const REFINEMENTS: usize = 2;
+const REFINEMENTS: usize = 1;
 /// Active-set corrections per polish.
 const MAX_CORRECTIONS: usize = 5;
 
@@ -64,6 +65,8 @@ pub(super) struct Polish {
     work: Vec<f64>,
     /// The iterate before the polish (restored when it fails).
     saved: Vec<f64>,
+    /// The first KKT slot whose side the last correction changed.
+    first_change: usize,
     /// Attempts and successes (tests, benches).
     pub(super) tried: usize,
     pub(super) solved: usize,
@@ -116,6 +119,7 @@ impl Polish {
             px: vec![0.0; n],
             work: vec![0.0; n],
             saved: vec![0.0; n],
+            first_change: 0,
             tried: 0,
             solved: 0,
         }
@@ -146,11 +150,13 @@ impl BandedAlm {
             *side = side_of(v[0], v[1]);
         }
         let mut done = false;
+        pol.first_change = 0;
         for _ in 0..MAX_CORRECTIONS {
             self.polish_assemble(&mut pol, lo, hi, a0);
-            if pol.ldl.factor(&pol.kkt).is_err() {
+            if pol.ldl.factor_from(&pol.kkt, pol.first_change).is_err() {
                 break;
             }
+            pol.first_change = usize::MAX;
             pol.sol.copy_from_slice(&pol.res);
             pol.ldl.solve(&mut pol.sol);
             // Iterative refinement on the unregularised system.
@@ -325,6 +331,9 @@ impl BandedAlm {
             let uf = stage_acceleration(&self.x, f, self.inv_dt2) + a0;
             let [l, h] = intervals[f][0];
             let next = step(pol.stage_side[f], pol.sol[s * f + 1], uf, l, h, stage_tol);
+            if next != pol.stage_side[f] {
+                pol.first_change = pol.first_change.min(s * f + 1);
+            }
             changed |= next != pol.stage_side[f];
             pol.stage_side[f] = next;
         }
@@ -332,6 +341,9 @@ impl BandedAlm {
             let hx = row.dot(&self.x);
             let lam = pol.sol[pol.row_slot[r]];
             let next = step(pol.row_side[r], lam, hx, lo[r], hi[r], row_tol);
+            if next != pol.row_side[r] {
+                pol.first_change = pol.first_change.min(pol.row_slot[r]);
+            }
             changed |= next != pol.row_side[r];
             pol.row_side[r] = next;
         }

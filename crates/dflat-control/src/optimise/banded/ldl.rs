@@ -42,11 +42,22 @@ impl BandedLdl {
     /// # Panics
     /// If `a` has another shape.
     pub fn factor(&mut self, a: &SymBand) -> Result<(), ControlError> {
+        self.factor_from(a, 0)
+    }
+
+    /// As [`BandedLdl::factor`], keeping the held factor's rows before
+    /// `start`: valid when the matrix factored last had the same rows
+    /// before `start` as `a` (the rows of L and D before it depend on
+    /// those alone).
+    ///
+    /// # Panics
+    /// If `a` has another shape.
+    pub fn factor_from(&mut self, a: &SymBand, start: usize) -> Result<(), ControlError> {
         let (n, b) = (self.n, self.b);
         assert!(a.n() == n && a.bandwidth() == b, "shape mismatch");
         let lower = a.lower();
         let w = b + 1;
-        for i in 0..n {
+        for i in start.min(n)..n {
             let t0 = b.saturating_sub(i);
             let (done, rest) = self.l.split_at_mut(i * b);
             let row = &mut rest[..b];
@@ -73,7 +84,7 @@ impl BandedLdl {
             self.d[i] = dii;
             self.inv_d[i] = 1.0 / dii;
         }
-        for i in 0..n {
+        for i in start.saturating_sub(b)..n {
             for d in 1..=b {
                 self.lt[i * b + d - 1] = if i + d < n {
                     self.l[(i + d) * b + b - d]
