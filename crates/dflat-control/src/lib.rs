@@ -219,6 +219,12 @@ pub trait Controller: Send {
     fn disturbance(&self) -> Option<disturbance::DisturbanceReport> {
         None
     }
+    /// The learned residual's state ([`learned::LearnedStatus`]: acting, or
+    /// faded and why) when the controller flies one; `None` otherwise (the
+    /// default).
+    fn learned_status(&self) -> Option<learned::LearnedStatus> {
+        None
+    }
 }
 
 /// A source of reference positions over a horizon.

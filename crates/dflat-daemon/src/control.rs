@@ -76,7 +76,8 @@ pub fn delay_ticks(cfg: &Config) -> usize {
 /// for df-mpc (`[controller.dfmpc]`) also the smoothness weight, the
 /// multi-rate window (`controller.dfmpc.multi_rate`, then the shell feeds
 /// every pose through [`Controller::observe`]) and the disturbance
-/// estimator (`[controller.disturbance]`).
+/// estimator (`[controller.disturbance]`), and the learned residual
+/// (`controller.dfmpc.learned_model`, [`crate::learned::configured`]).
 pub fn build_controller(cfg: &Config) -> Result<Box<dyn Controller>, ControlError> {
     let model = control_model(cfg)?;
     let c = &cfg.controller;
@@ -106,7 +107,9 @@ pub fn build_controller(cfg: &Config) -> Result<Box<dyn Controller>, ControlErro
                 delay_ticks: delay_ticks(cfg),
                 ..DfMpcSettings::default()
             };
-            Box::new(DfMpc::new(model, settings)?)
+            let mut mpc = DfMpc::new(model, settings)?;
+            mpc.set_learned(crate::learned::configured(cfg)?);
+            Box::new(mpc)
         }
         ControllerKind::Fmpc => Box::new(FlatnessMpc::new(
             model,

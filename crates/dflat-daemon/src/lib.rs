@@ -34,6 +34,7 @@ pub mod csv_schema;
 pub mod daemon;
 pub mod envelope;
 pub mod guard;
+pub mod learned;
 pub mod link_health;
 pub mod mission;
 pub mod motion;

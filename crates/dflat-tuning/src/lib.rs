@@ -4,6 +4,8 @@
 //!   and its per-tick CSV (columns from `dflat_daemon::records`' schema).
 //! * [`identify`] — system identification from a flight log (`dflat
 //!   identify`): τ, k̃ and delay per axis, hover thrust and τ_T, drag.
+//! * [`learn`] — the flat maps' residual over the parametric model,
+//!   learned from flight records (`dflat learn`).
 //! * [`review`] — `dflat review`: a flight's report as one self-contained
 //!   HTML page (inline SVG).
 //! * [`replay`] — `dflat replay`: the daemon's pure tick re-run on a
@@ -43,9 +45,12 @@ use anyhow::{Context as _, Result, bail};
 
 use crate::flightlog::{FlightCsv, FlightLog};
 use crate::identify::FlownVehicle;
+pub use crate::learn_shell::{LearnArgs, read_model, run_learn, write_model};
 
 pub mod flightlog;
 pub mod identify;
+pub mod learn;
+mod learn_shell;
 mod page;
 pub mod replay;
 pub mod review;

@@ -45,6 +45,10 @@ enum Command {
     /// hover thrust and τ_T, with intervals; writes a `[vehicle]` snippet.
     #[cfg(feature = "tuning")]
     Identify(crate::tuning::IdentifyArgs),
+    /// Learn the flat maps' residual over the parametric model from one or
+    /// more flights' CSVs; reports held-out errors, writes a model file.
+    #[cfg(feature = "tuning")]
+    Learn(crate::tuning::LearnArgs),
     /// A flight's report as one self-contained HTML page (inline SVG).
     #[cfg(feature = "tuning")]
     Review(crate::tuning::review::ReviewArgs),
@@ -138,6 +142,8 @@ fn run(cli: Cli) -> Result<()> {
         Command::Demo(args) => crate::sitl_demo::run_demo(args),
         #[cfg(feature = "tuning")]
         Command::Identify(args) => crate::tuning::run_identify(args),
+        #[cfg(feature = "tuning")]
+        Command::Learn(args) => crate::tuning::run_learn(args),
         #[cfg(feature = "tuning")]
         Command::Review(args) => crate::tuning::review::run(args),
         #[cfg(feature = "tuning")]

@@ -715,4 +715,8 @@ impl Controller for DfMpc {
     fn disturbance(&self) -> Option<crate::disturbance::DisturbanceReport> {
         self.estimator.as_ref().map(|e| e.report())
     }
+
+    fn learned_status(&self) -> Option<crate::learned::LearnedStatus> {
+        self.learned.as_ref().map(|l| l.status())
+    }
 }

@@ -160,6 +160,14 @@ pub struct DfMpcConfig {
     /// vehicle's real limit — solved warm by a banded augmented Lagrangian;
     /// docs/results.md, docs/performance.md). Default "box".
     pub plan_tilt_bound: PlanTiltBound,
+    /// A residual of the flat maps learned by `dflat learn` (its model
+    /// file, TOML); empty (the default): the parametric model alone. The
+    /// file is validated and refused unless it was learned with this
+    /// `[vehicle]` table; DF-MPC adds the residual to its maps'
+    /// acceleration offset, faded outside its data's support and when its
+    /// running prediction error grows (docs/controllers.md, "The learned
+    /// residual").
+    pub learned_model: String,
 }
 
 impl Default for DfMpcConfig {
@@ -175,6 +183,7 @@ impl Default for DfMpcConfig {
             max_tilt_rate_deg_s: 150.0,
             qp_solver: QpSolver::Banded,
             plan_tilt_bound: PlanTiltBound::Box,
+            learned_model: String::new(),
         }
     }
 }

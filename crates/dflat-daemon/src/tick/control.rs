@@ -101,6 +101,7 @@ impl ControlCore {
             }
         };
         if let Some(out) = out {
+            self.say_learned();
             row.plan = Some(out.plan.map(|p| [p.x, p.y, p.z]));
             row.reference = Some([out.reference.x, out.reference.y, out.reference.z]);
             if let Some(report) = self.controller.disturbance() {
@@ -125,6 +126,29 @@ impl ControlCore {
             self.refresh_reference();
         }
         (sent, solve_us)
+    }
+
+    /// Says in words when the learned residual starts acting, fades (out of
+    /// its data's support, or its running error grew) or comes back.
+    fn say_learned(&mut self) {
+        use dflat_control::learned::LearnedStatus;
+        let status = self.controller.learned_status();
+        if status == self.learned_said {
+            return;
+        }
+        if let Some(s) = status {
+            let words = match s {
+                LearnedStatus::Active => "learned residual: acting",
+                LearnedStatus::OutOfSupport => {
+                    "learned residual: outside its data's speed, tilt or thrust: fading to the parametric model"
+                }
+                LearnedStatus::ErrorGrew => {
+                    "learned residual: it explains the flight worse than the parametric model: fading to the parametric model"
+                }
+            };
+            info!(status = ?s, "{words}");
+        }
+        self.learned_said = status;
     }
 
     /// The measurement a tick at `t` hands the controller: multi-rate, the

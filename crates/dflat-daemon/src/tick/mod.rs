@@ -209,6 +209,8 @@ pub struct ControlCore {
     /// The last command sent (the stop's level ramps from it).
     last_sent: Option<dflat_link::AttitudeCommand>,
     guard_note: Option<&'static str>,
+    /// The learned residual's state last said (`tick/control.rs`).
+    learned_said: Option<dflat_control::learned::LearnedStatus>,
     counts: CoreCounts,
     /// Outputs produced between steps (by [`ControlCore::apply`]).
     pending_texts: Vec<MavMessage>,
@@ -306,6 +308,7 @@ impl ControlCore {
             stop_marked: false,
             last_sent: None,
             guard_note: None,
+            learned_said: None,
             counts: CoreCounts::default(),
             pending_texts: Vec::new(),
             events_applied: 0,
