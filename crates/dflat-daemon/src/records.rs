@@ -15,7 +15,7 @@ use std::io::{self, Write};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::time::{Duration, SystemTime, UNIX_EPOCH};
+use std::time::Duration;
 
 use dflat_link::records::{RecordBudget, RecordFile};
 
@@ -30,54 +30,7 @@ use crate::supervisor::FlightState;
 /// (80 s at 50 Hz).
 const CSV_QUEUE: usize = 4096;
 
-/// `YYYYmmdd-HHMMSS` (UTC) of `t`, e.g. `20261102-134501`.
-pub fn utc_stamp(t: SystemTime) -> String {
-    let secs = t
-        .duration_since(UNIX_EPOCH)
-        .map(|d| d.as_secs())
-        .unwrap_or(0);
-    let days = (secs / 86_400) as i64;
-    let rem = secs % 86_400;
-    let (y, m, d) = civil_from_days(days);
-    format!(
-        "{y:04}{m:02}{d:02}-{:02}{:02}{:02}",
-        rem / 3600,
-        (rem / 60) % 60,
-        rem % 60
-    )
-}
-
-/// Proleptic Gregorian date (year, month 1–12, day 1–31) of a day count
-/// since 1970-01-01 (H. Hinnant's algorithm).
-fn civil_from_days(z: i64) -> (i64, u32, u32) {
-    let z = z + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z.rem_euclid(146_097);
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let y = yoe + era * 400;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let d = (doy - (153 * mp + 2) / 5 + 1) as u32;
-    let m = if mp < 10 { mp + 3 } else { mp - 9 } as u32;
-    (if m <= 2 { y + 1 } else { y }, m, d)
-}
-
-/// `dir/flight-YYYYmmdd-HHMMSS` (UTC, no extension) for a flight starting
-/// at `t`; adds `-2`, `-3`, … if a `.csv` or `.tlog` of that name exists.
-pub fn flight_stem(dir: &Path, t: SystemTime) -> PathBuf {
-    let base = format!("flight-{}", utc_stamp(t));
-    let taken = |stem: &str| {
-        dir.join(format!("{stem}.csv")).exists() || dir.join(format!("{stem}.tlog")).exists()
-    };
-    if !taken(&base) {
-        return dir.join(base);
-    }
-    (2..)
-        .map(|i| format!("{base}-{i}"))
-        .find(|s| !taken(s))
-        .map(|s| dir.join(s))
-        .unwrap_or_else(|| dir.join(base))
-}
+pub use dflat_records::names::{flight_stem, utc_stamp};
 
 /// One control tick as recorded. Positions local NED \[m\], angles ZYX \[rad\].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -329,7 +282,7 @@ impl CsvRecorder {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use std::time::Duration;
+    use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
     #[test]
     fn utc_stamps() {

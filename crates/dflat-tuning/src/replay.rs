@@ -45,7 +45,7 @@ use crate::flightlog::FlightCsv;
 use dflat_daemon::commands::{CommandContext, answer};
 use dflat_daemon::config::Config;
 use dflat_daemon::control::{build_controller, thrust_mapping};
-use dflat_daemon::csv_schema::Column;
+use dflat_records::Column;
 use dflat_daemon::mission::{ItemRules, Mission, MissionChange, MissionProtocol};
 use dflat_daemon::supervisor::FlightState;
 use dflat_daemon::tick::{

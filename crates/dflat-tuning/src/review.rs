@@ -19,7 +19,7 @@ use anyhow::{Context as _, Result};
 use crate::flightlog::{FlightCsv, FlightLog};
 use crate::page::{self, Header};
 use crate::svg::{Chart, Marker, Series, esc};
-use dflat_daemon::csv_schema::Column;
+use dflat_records::Column;
 
 /// Arguments of `dflat review`.
 #[derive(Debug, clap::Args)]

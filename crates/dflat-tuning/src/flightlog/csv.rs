@@ -1,9 +1,8 @@
 //! The daemon's per-tick CSV, read by column: the columns are
-//! `dflat_daemon::csv_schema`'s [`Column`]s, the list the daemon writes by.
+//! `dflat_records`' [`Column`](dflat_records::Column)s, the list the daemon
+//! writes by.
 
 use std::path::Path;
-
-use dflat_daemon::csv_schema::Column;
 
 use super::FlightLogError;
 
@@ -59,19 +58,11 @@ impl FlightCsv {
         let mut lines = text.lines();
         let header: Vec<String> = lines
             .next()
-            .filter(|h| !h.trim().is_empty())
-            .ok_or_else(|| err(1, "empty: no header line".into()))?
+            .unwrap_or("")
             .split(',')
             .map(|s| s.trim().to_owned())
             .collect();
-        for needed in [Column::Tick, Column::T, Column::State] {
-            if !header.iter().any(|h| h == needed.name()) {
-                return Err(err(
-                    1,
-                    format!("no `{needed}` column: not a dflat flight CSV"),
-                ));
-            }
-        }
+        dflat_records::check_header(&header).map_err(|e| err(1, e.to_string()))?;
         let mut rows = Vec::new();
         for (i, line) in lines.enumerate() {
             if line.trim().is_empty() {
@@ -97,7 +88,7 @@ impl FlightCsv {
         })
     }
 
-    /// Index of a column (a [`Column`], or a name).
+    /// Index of a column (a [`Column`](dflat_records::Column), or a name).
     pub fn index(&self, column: impl AsRef<str>) -> Option<usize> {
         let name = column.as_ref();
         self.header.iter().position(|h| h == name)
@@ -133,6 +124,7 @@ impl FlightCsv {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use dflat_records::Column;
 
     #[test]
     fn columns_by_name_and_errors_name_the_line() {
