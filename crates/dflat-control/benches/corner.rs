@@ -14,7 +14,9 @@
 //!
 //! The tilt-rate bound (`max_tilt_rate`, [`RATE_DEG_S`]) is timed with the
 //! box (the daemon's set-up: box + tilt rate), alone, and with clarabel
-//! solving the same box + tilt-rate QP.
+//! solving the same box + tilt-rate QP; its banded rows run the box's
+//! cascade (the augmented Lagrangian with its active-set polish, then the
+//! interior point).
 //!
 //! Each banded configuration runs DF-MPC's cascade (`optimise/cascade.rs`);
 //! the work line per configuration gives what its augmented Lagrangian did
@@ -750,7 +752,7 @@ mod anchor {
                 config
                     .name()
                     .replace(", ALM, warm", "")
-                    .replace(", IP (ALM next)", ""),
+                    .replace(", ALM", ""),
                 ours.len() / repeats,
                 us(om),
                 us(op),

@@ -92,6 +92,19 @@
 //! (the flight's first tick, from rest) starts near the constrained plan
 //! and its multipliers instead (`rollout_start.rs`).
 //!
+//! **The active-set polish** (`polish.rs`; one axis with rows: speed and
+//! tilt-rate rows). A warm solve first, and every multiplier update after,
+//! takes the active set the multipliers name (below 1e-6 of the largest:
+//! none), solves the QP with those constraints as equalities exactly (a
+//! banded LDLᵀ of the KKT matrix ordered by stage) and corrects the set
+//! (free the wrong-signed, then bind the broken) up to eight times; a KKT
+//! point whose multipliers have their signs and that breaks no bound is
+//! the optimum, and the solve ends there. Chains of tilt-rate rows are
+//! what it is for: their multipliers' slow modes fall a few times per
+//! update, and each rise of σ reshuffles the chain a row per Newton step.
+//! Intervals also take the exact minimiser along the Newton direction
+//! (L is piecewise quadratic there) where the full step fails Armijo.
+//!
 //! Warm start ([`BandedAlm::shift`]): the multipliers one stage on,
 //! extrapolated linearly from the last two solves, σ from its initial
 //! value (1e4). Between constrained bursts the multipliers are

@@ -35,7 +35,7 @@ const REGULARISATION: f64 = 1e-10;
 /// Steps of iterative refinement per KKT solve.
 const REFINEMENTS: usize = 1;
 /// Active-set corrections per polish.
-const MAX_CORRECTIONS: usize = 5;
+const MAX_CORRECTIONS: usize = 8;
 
 /// Which side of a constraint the guess holds at its bound.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -143,11 +143,17 @@ impl BandedAlm {
         };
         pol.tried += 1;
         pol.saved.copy_from_slice(&self.x);
+        // Multipliers below 1e-6 of the largest count as 0: an interior
+        // point's (handed over after a fallback) are positive on every
+        // row.
+        let big = |m: f64, v: f64| if v.abs() > 1e-6 * m { v } else { 0.0 };
+        let ymax = self.y.iter().fold(0.0f64, |a, y| a.max(y[0].abs()));
         for (side, y) in pol.stage_side.iter_mut().zip(&self.y) {
-            *side = side_of(y[0], 0.0);
+            *side = side_of(big(ymax, y[0]), 0.0);
         }
+        let vmax = self.v.iter().flatten().fold(0.0f64, |a, v| a.max(*v));
         for (side, v) in pol.row_side.iter_mut().zip(&self.v) {
-            *side = side_of(v[0], v[1]);
+            *side = side_of(big(vmax, v[0]), big(vmax, v[1]));
         }
         let mut done = false;
         pol.first_change = 0;

@@ -10,10 +10,6 @@ use super::{
 };
 use crate::ControlError;
 
-/// Multiplier updates after which the active-set polish is tried (a
-/// failed polish costs up to five banded LDLᵀ factorisations).
-const MAX_POLISH_OUTER: usize = 2;
-
 impl BandedAlm {
     /// Assembles and factors the generalised Hessian at x: in the window,
     /// its rows only, into the head's factor (`head`, whose rows before
@@ -260,9 +256,8 @@ impl BandedAlm {
             // that ended it was the model's with the active set it
             // started from (a warm start whose rows all let go at once
             // stopped there 0.6 % above the optimum's cost).
-            let gap_small = inner_done
-                && (residuals_small || stalled)
-                && self.residual_cost(lo, hi) <= gap_tol;
+            let gap_small =
+                inner_done && (residuals_small || stalled) && self.residual_cost(lo, hi) <= gap_tol;
             // Multiplier update (the gradient above is the Lagrangian's
             // with the updated multipliers: stationarity holds).
             self.y.copy_from_slice(&self.y_next);
@@ -274,7 +269,6 @@ impl BandedAlm {
                 }
             }
             if !gap_small
-                && _outer < MAX_POLISH_OUTER
                 && self.window == 0
                 && self.polish.is_some()
                 && self.polish(a0[0], (lo, hi), (stage_tol, row_tol))?
