@@ -23,6 +23,8 @@ pub(super) struct Score {
     /// and at this one: the commands' through the attitude lag τ [m/s²].
     previous: Vector3<f64>,
     now: Option<Vector3<f64>>,
+    /// The model's pitch and roll \[rad\]: the commands through the lag.
+    attitude: Option<(f64, f64)>,
 }
 
 impl DfMpc {
@@ -81,29 +83,37 @@ impl DfMpc {
     }
 
     /// After a good tick: the residual for the next tick, along this plan
-    /// and the command sent; the parametric acceleration moved on by the
-    /// command through the attitude lag.
+    /// and the model's attitude (the commands through its lag τ and gain
+    /// k̃); the parametric acceleration moved on by the command through the
+    /// same lag.
     pub(super) fn learned_after_tick(&mut self, plan: &[Vector3<f64>; 4], sent: &Vector3<f64>) {
         if self.learned.is_none() {
             return;
         }
         let dt = self.model.dt();
-        let tau = match &self.model {
-            ControlModel::Planar(m) => m.params().tau,
-            ControlModel::Spatial(m) => m.params().tau,
+        let (tau, gain) = match &self.model {
+            ControlModel::Planar(m) => (m.params().tau, m.params().k),
+            ControlModel::Spatial(m) => (m.params().tau, m.params().k),
         };
+        let step = (dt / tau).min(1.0);
         let commanded = commanded_acceleration(&self.model, sent).ok();
+        let c = self.model.command(sent);
         let s = &mut self.learned_score;
         match (s.now, commanded) {
             (Some(now), Some(a)) => {
                 s.previous = now;
-                s.now = Some(now + (a - now) * (dt / tau).min(1.0));
+                s.now = Some(now + (a - now) * step);
             }
             (None, Some(a)) => s.now = Some(a),
             (_, None) => s.now = None,
         }
-        let c = self.model.command(sent);
-        let n = thrust_axis(c.roll, c.pitch, c.yaw);
+        let target = (gain * c.pitch, gain * c.roll);
+        let (pitch, roll) = match s.attitude {
+            Some((p, r)) => (p + (target.0 - p) * step, r + (target.1 - r) * step),
+            None => target,
+        };
+        s.attitude = Some((pitch, roll));
+        let n = thrust_axis(roll, pitch, c.yaw);
         let thrust = match self.model {
             ControlModel::Planar(_) => c.thrust / n.z.max(0.1),
             ControlModel::Spatial(_) => c.thrust,

@@ -72,6 +72,7 @@ fn fly_on(learned: Option<LearnedResidual>, speed: f64, aero: f64) -> (f64, Opti
     let mut x = nalgebra::SVector::<f64, 6>::zeros();
     x[1] = speed;
     let mut errors = Vec::new();
+    let mut min_weight = 1.0f64;
     for k in 0..1000 {
         let y = plant.output(&x);
         let m = Measurement {
@@ -84,6 +85,9 @@ fn fly_on(learned: Option<LearnedResidual>, speed: f64, aero: f64) -> (f64, Opti
         assert!(out.command.is_finite(), "tick {k}");
         if k >= 500 {
             errors.push((m.position - target).norm());
+            if let Some(l) = mpc.learned() {
+                min_weight = min_weight.min(l.weight());
+            }
         }
         x = plant.step(
             &x,
@@ -96,6 +100,7 @@ fn fly_on(learned: Option<LearnedResidual>, speed: f64, aero: f64) -> (f64, Opti
         x[1] += DT * a.x;
         x[3] += DT * a.y;
     }
+    eprintln!("smallest weight over the last 10 s: {min_weight:.3}");
     errors.sort_by(f64::total_cmp);
     let p95 = errors[errors.len() * 95 / 100];
     (p95, mpc.learned().map(|l| l.status()))

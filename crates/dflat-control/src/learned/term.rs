@@ -5,9 +5,9 @@
 //! Each tick the controller adds [`LearnedTerm::offset`] to the maps'
 //! acceleration offset (the input-to-output map that predicts from the
 //! window, and the output-to-input map that turns the plan into the
-//! command). The offset is the residual at the previous plan's start
-//! velocity `(y*_1 − y*_0)/δt` and the previous command's thrust axis and
-//! thrust ([`LearnedTerm::after_tick`]): frozen over the tick, so the
+//! command). The offset is the residual at the previous plan's velocity
+//! `(y*_3 − y*_2)/δt` and the model's thrust axis and thrust (the commands
+//! through its lag) ([`LearnedTerm::after_tick`]): frozen over the tick, so the
 //! optimisation stays the banded QP of the parametric model (the offset
 //! enters only its fixed outputs and the map), and every solver serves it.
 //!
@@ -156,8 +156,11 @@ impl LearnedTerm {
     }
 
     /// After a tick: the plan `y*_k … y*_{k+3}` (NED \[m\]), the thrust axis
-    /// (unit, NED) and specific thrust [m/s²] of the command sent, and the
-    /// step δt \[s\]. The next tick's offset is the residual there.
+    /// (unit, NED) and specific thrust [m/s²] the model expects at the next
+    /// tick, and the step δt \[s\]. The next tick's offset is the residual
+    /// there, at the plan's velocity `(y*_{k+3} − y*_{k+2})/δt`: the velocity
+    /// at the tick after the next, in the middle of the outputs the next
+    /// tick's maps span.
     pub fn after_tick(
         &mut self,
         plan: &[Vector3<f64>; 4],
@@ -165,7 +168,7 @@ impl LearnedTerm {
         thrust: f64,
         dt: f64,
     ) {
-        let v = (plan[1] - plan[0]) / dt;
+        let v = (plan[3] - plan[2]) / dt;
         let tilt = axis.z.clamp(-1.0, 1.0).acos();
         let support = self.model.support_weight(v.norm(), tilt, thrust);
         let rho = self.model.residual(&v, axis);
@@ -251,7 +254,7 @@ mod tests {
         t.observe(&Vector3::new(f64::NAN, 0.0, 0.0));
         assert_eq!(t.errors().count, 0);
         let mut plan = plan_at(2.0);
-        plan[1].x = f64::NAN;
+        plan[3].x = f64::NAN;
         t.after_tick(&plan, &Vector3::z(), 9.81, 0.02);
         assert_eq!(t.offset(), Vector3::zeros());
     }
