@@ -1,7 +1,7 @@
 //! The records `dflat learn` reads: engaged runs of ticks from the daemon's
 //! per-tick CSV (the commands sent and the poses measured; nothing else).
 
-use dflat_daemon::csv_schema::Column;
+use dflat_records::Column;
 use nalgebra::Vector3;
 
 use super::LearnError;
@@ -85,4 +85,51 @@ pub fn runs(csv: &FlightCsv, name: &str, dt: f64) -> Result<Vec<Run>, LearnError
     out.push(run);
     out.retain(|r| !r.ticks.is_empty());
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::path::Path;
+
+    const HEADER: &str = "tick,t,state,x,y,z,roll,pitch,yaw,thrust";
+
+    fn csv(rows: &[&str]) -> FlightCsv {
+        let text = format!("{HEADER}\n{}\n", rows.join("\n"));
+        FlightCsv::parse(&text, Path::new("f.csv")).unwrap()
+    }
+
+    /// Only engaged ticks count; a standby tick, an empty field or a missing
+    /// tick splits the runs.
+    #[test]
+    fn engaged_runs_split_at_gaps_and_other_states() {
+        let c = csv(&[
+            "0,0.00,STANDBY,0,0,-10,0,0,0,0.5",
+            "1,0.02,TRACKING,0,0,-10,0,0,0,0.5",
+            "2,0.04,TRACKING,0.1,0,-10,0,-0.1,0,0.5",
+            "3,0.06,HOLDING,0.2,0,-10,0,-0.1,0,0.5",
+            "4,0.08,TRACKING,,0,-10,0,-0.1,0,0.5",
+            "5,0.10,TRACKING,0.4,0,-10,0,-0.1,0,0.5",
+            "7,0.14,TRACKING,0.6,0,-10,0,-0.1,0,0.5",
+            "8,0.16,TRACKING,0.7,0,-10,0.05,-0.1,0.2,0.52",
+        ]);
+        let runs = runs(&c, "f.csv", 0.02).unwrap();
+        let lengths: Vec<usize> = runs.iter().map(|r| r.ticks.len()).collect();
+        assert_eq!(lengths, vec![3, 1, 2]);
+        let last = runs[2].ticks[1];
+        assert_eq!(last.euler, [0.05, -0.1, 0.2]);
+        assert_eq!(last.thrust, 0.52);
+        assert_eq!(last.y, Vector3::new(0.7, 0.0, -10.0));
+    }
+
+    #[test]
+    fn a_missing_column_is_named() {
+        let c = FlightCsv::parse(
+            "tick,t,state,x,y,z\n0,0,TRACKING,0,0,0\n",
+            Path::new("f.csv"),
+        )
+        .unwrap();
+        let err = runs(&c, "f.csv", 0.02).unwrap_err().to_string();
+        assert!(err.contains("f.csv") && err.contains("`roll`"), "{err}");
+    }
 }
