@@ -25,7 +25,16 @@ pub(super) struct Score {
     now: Option<Vector3<f64>>,
     /// The model's pitch and roll \[rad\]: the commands through the lag.
     attitude: Option<(f64, f64)>,
+    /// The newest pose samples (multi-rate mode), oldest first: time \[s\]
+    /// and position \[m\].
+    samples: [(f64, Vector3<f64>); 3],
+    /// How many of `samples` are filled (up to 3).
+    sampled: usize,
 }
+
+/// Longest span \[s\] of three pose samples whose second difference
+/// scores the residual (multi-rate mode): a dropout does not.
+const SAMPLE_SPAN_S: f64 = 0.3;
 
 impl DfMpc {
     /// Flies with a learned residual (`None`: the parametric model alone).
@@ -121,6 +130,38 @@ impl DfMpc {
         if let Some(term) = &mut self.learned {
             term.after_tick(plan, &n, thrust, dt);
         }
+    }
+
+    /// Scores the residual on a pose sample (multi-rate mode, where poses
+    /// come at their own rate): the second difference of the last three
+    /// samples over their times, `2·((y₂ − y₁)/(t₂ − t₁) − (y₁ − y₀)/(t₁ −
+    /// t₀))/(t₂ − t₀)`, less the parametric model's acceleration of the tick
+    /// (the commands' through the lag, less the drag at the samples'
+    /// velocity), is what the residual should have predicted.
+    pub(super) fn learned_observe(&mut self, sample: &Measurement) {
+        let Some(term) = &mut self.learned else {
+            return;
+        };
+        let s = &mut self.learned_score;
+        if !(sample.t.is_finite() && sample.position.iter().all(|v| v.is_finite())) {
+            return;
+        }
+        if s.sampled > 0 && sample.t <= s.samples[2].0 {
+            return;
+        }
+        s.samples = [s.samples[1], s.samples[2], (sample.t, sample.position)];
+        s.sampled = (s.sampled + 1).min(3);
+        let [(t0, y0), (t1, y1), (t2, y2)] = s.samples;
+        let (Some(now), true) = (s.now, s.sampled == 3 && t2 - t0 <= SAMPLE_SPAN_S) else {
+            return;
+        };
+        let measured = ((y2 - y1) / (t2 - t1) - (y1 - y0) / (t1 - t0)) * (2.0 / (t2 - t0));
+        let v = (y2 - y0) / (t2 - t0);
+        let mut unexplained = measured - (now - self.model.drag().component_mul(&v));
+        if let ControlModel::Planar(_) = self.model {
+            unexplained.z = 0.0;
+        }
+        term.observe(&unexplained);
     }
 
     /// Forgets the scoring history (a reset).

@@ -49,12 +49,17 @@ fn residual(cq: f64, d: f64, speed_max: f64) -> LearnedResidual {
 /// flight at `speed` (started on the circle at its speed), and the learned
 /// term's last status.
 fn fly(learned: Option<LearnedResidual>, speed: f64) -> (f64, Option<LearnedStatus>) {
-    fly_on(learned, speed, 1.0)
+    fly_on(learned, speed, 1.0, false)
 }
 
 /// As [`fly`], with the plant's aerodynamics scaled by `aero` (0: the
 /// matched plant, the model's own dynamics).
-fn fly_on(learned: Option<LearnedResidual>, speed: f64, aero: f64) -> (f64, Option<LearnedStatus>) {
+fn fly_on(
+    learned: Option<LearnedResidual>,
+    speed: f64,
+    aero: f64,
+    multi_rate: bool,
+) -> (f64, Option<LearnedStatus>) {
     let params = dflat_model::PlanarParams {
         psi: 0.0,
         frame: crate::Frame::Ned,
@@ -64,6 +69,7 @@ fn fly_on(learned: Option<LearnedResidual>, speed: f64, aero: f64) -> (f64, Opti
     let settings = DfMpcSettings {
         horizon: 100,
         solver_time_limit: f64::INFINITY,
+        multi_rate: multi_rate.then(crate::window::MultiRateSettings::default),
         ..Default::default()
     };
     let mut mpc = DfMpc::new(ControlModel::Planar(plant), settings).unwrap();
@@ -81,6 +87,9 @@ fn fly_on(learned: Option<LearnedResidual>, speed: f64, aero: f64) -> (f64, Opti
             yaw: 0.0,
         };
         let target = reference.at(reference.k);
+        if multi_rate {
+            mpc.observe(&m);
+        }
         let out = mpc.update(&m, &mut reference).unwrap();
         assert!(out.command.is_finite(), "tick {k}");
         if k >= 500 {
@@ -113,7 +122,7 @@ fn fly_on(learned: Option<LearnedResidual>, speed: f64, aero: f64) -> (f64, Opti
 #[test]
 fn a_learned_residual_helps_inside_its_support_and_is_inert_outside() {
     let (stock, _) = fly(None, 9.0);
-    let (plant_matched, _) = fly_on(None, 9.0, 0.0);
+    let (plant_matched, _) = fly_on(None, 9.0, 0.0, false);
     let (matched, status) = fly(Some(residual(0.03, 0.2, 12.0)), 9.0);
     let (slow, slow_status) = fly(Some(residual(0.03, 0.2, 3.0)), 9.0);
     eprintln!(
@@ -136,5 +145,22 @@ fn another_airframes_residual_does_not_make_it_worse() {
     eprintln!(
         "circle 9 m/s p95: stock {stock:.4} m, another airframe's residual {other:.4} m ({status:?})"
     );
+    assert!(other <= 1.05 * stock, "{other} vs {stock}");
+}
+
+/// With multi-rate windows (the daemon's default: poses observed at their
+/// own times) the residual is scored on the pose samples: another
+/// airframe's fades there too, and the matched one helps.
+#[test]
+fn multi_rate_windows_score_the_residual_too() {
+    let (stock, _) = fly_on(None, 9.0, 1.0, true);
+    let (matched, matched_status) = fly_on(Some(residual(0.03, 0.2, 12.0)), 9.0, 1.0, true);
+    let (other, status) = fly_on(Some(residual(0.09, 0.6, 12.0)), 9.0, 1.0, true);
+    eprintln!(
+        "multi-rate, circle 9 m/s p95: stock {stock:.4} m, learned {matched:.4} m \
+         ({matched_status:?}), another airframe's {other:.4} m ({status:?})"
+    );
+    assert!(matched < 0.7 * stock, "{matched} vs {stock}");
+    assert_eq!(status, Some(LearnedStatus::ErrorGrew));
     assert!(other <= 1.05 * stock, "{other} vs {stock}");
 }

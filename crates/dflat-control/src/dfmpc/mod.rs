@@ -681,6 +681,9 @@ impl Controller for DfMpc {
     }
 
     fn observe(&mut self, sample: &Measurement) {
+        if self.multi.is_some() {
+            self.learned_observe(sample);
+        }
         if let Some(multi) = &mut self.multi {
             multi.observe(sample.t, &sample.position);
             if let Some(e) = &mut self.estimator {
