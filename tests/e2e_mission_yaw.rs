@@ -309,8 +309,8 @@ async fn a_mission_is_uploaded_started_paused_continued_and_its_yaw_flown() {
     let report = sim.stop().unwrap();
     // The replay of the flight's records reproduces every command.
     let csv_path = summary.csv.as_ref().expect("the flight's CSV").path.clone();
-    let csv = dflat_tuning::read_csv(&csv_path).unwrap();
-    let replayed = dflat_tuning::replay::replay(&csv_path, &csv, &flown).unwrap();
+    let csv = dflat::tools::read_csv(&csv_path).unwrap();
+    let replayed = dflat::tools::replay::replay(&csv_path, &csv, &flown).unwrap();
     eprintln!(
         "replay: {} of {} commands identical, {} ticks where one side streamed, largest difference {:.2e} rad",
         replayed.identical, replayed.compared, replayed.stream_differs, replayed.max_angle_diff

@@ -46,6 +46,7 @@ pub mod refusal;
 mod signing;
 mod stats;
 pub mod tlog;
+#[cfg(feature = "transport")]
 pub mod transport;
 
 /// The mavlink crate this contract is built on (same version for all users).

@@ -1,4 +1,4 @@
-//! `dflat review`: a flight's report as one self-contained HTML page
+//! The review: a flight's report as one self-contained HTML page
 //! (inline SVG and a small inline script; no CDN, no network, opens
 //! offline): a header saying what flew (version, date, config and
 //! `[vehicle]`, sim or real), summary numbers and statistics per phase
@@ -12,29 +12,12 @@
 //! alone. Long series are min/max thinned (`svg::thin`).
 
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use anyhow::{Context as _, Result};
-
-use crate::flightlog::{FlightCsv, FlightLog};
+use crate::flightlog::{FlightCsv, FlightLog, FlightLogError};
 use crate::page::{self, Header};
 use crate::svg::{Chart, Marker, Series, esc};
 use dflat_records::Column;
-
-/// Arguments of `dflat review`.
-#[derive(Debug, clap::Args)]
-pub struct ReviewArgs {
-    /// The flight's `.csv` (its `.tlog` beside it adds the measured
-    /// attitude and the STATUSTEXTs).
-    pub flight: PathBuf,
-    /// The HTML file to write (default `<flight>.html`).
-    #[arg(long)]
-    pub out: Option<PathBuf>,
-    /// The configuration the flight was flown with: its `[vehicle]` table
-    /// goes into the page's header.
-    #[arg(long)]
-    pub config: Option<PathBuf>,
-}
 
 /// Commands of an offline re-run, drawn over the flown ones.
 #[derive(Debug, Clone, Default)]
@@ -47,26 +30,14 @@ pub struct Overlay {
     pub command: Vec<[f64; 3]>,
 }
 
-/// `dflat review`.
-pub fn run(args: ReviewArgs) -> Result<()> {
-    let csv_path = match args.flight.extension().and_then(|e| e.to_str()) {
-        Some("tlog") => args.flight.with_extension("csv"),
-        _ => args.flight.clone(),
-    };
-    let csv = crate::read_csv(&csv_path)?;
-    let log = load_tlog_beside(&csv_path)?;
-    let header = header_for(&csv_path, log.as_ref(), args.config.as_deref())?;
-    let html = render_with(&csv_path, &csv, log.as_ref(), None, &header);
-    let out = args.out.unwrap_or_else(|| csv_path.with_extension("html"));
-    std::fs::write(&out, html).with_context(|| format!("cannot write {}", out.display()))?;
-    outln!("{}", out.display());
-    Ok(())
-}
-
 /// What the header says: the date from the .tlog, the configuration's
 /// `[vehicle]` table, and sim or real (a configuration with `[sitl]` flew
 /// in simulation).
-pub fn header_for(csv: &Path, log: Option<&FlightLog>, config: Option<&Path>) -> Result<Header> {
+pub fn header_for(
+    csv: &Path,
+    log: Option<&FlightLog>,
+    config: Option<&Path>,
+) -> Result<Header, FlightLogError> {
     let mut h = Header {
         flight: csv.display().to_string(),
         date: log
@@ -76,8 +47,10 @@ pub fn header_for(csv: &Path, log: Option<&FlightLog>, config: Option<&Path>) ->
         ..Header::default()
     };
     if let Some(path) = config {
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("cannot read {}", path.display()))?;
+        let text = std::fs::read_to_string(path).map_err(|source| FlightLogError::Io {
+            file: path.to_owned(),
+            source,
+        })?;
         // The tables as written (the daemon validated the file when it flew).
         let table_of = |name: &str| -> Option<String> {
             let mut out = None::<String>;
@@ -110,26 +83,6 @@ pub fn header_for(csv: &Path, log: Option<&FlightLog>, config: Option<&Path>) ->
         };
     }
     Ok(h)
-}
-
-/// The `.tlog` beside a CSV, if there is one with a complete record (an
-/// empty one — the daemon killed before its first frame was whole — is
-/// left out with a warning; a torn tail is dropped with one).
-pub fn load_tlog_beside(csv: &Path) -> Result<Option<FlightLog>> {
-    let tlog = csv.with_extension("tlog");
-    if !tlog.exists() {
-        return Ok(None);
-    }
-    match crate::read_tlog(&tlog) {
-        Ok(log) => Ok(Some(log)),
-        Err(e) => match e.downcast_ref::<crate::flightlog::FlightLogError>() {
-            Some(empty @ crate::flightlog::FlightLogError::EmptyTlog { .. }) => {
-                errln!("warning: {empty}: reviewing from the CSV alone");
-                Ok(None)
-            }
-            _ => Err(e),
-        },
-    }
 }
 
 /// The `q` quantile (nearest rank) of the finite values, NaN if none.

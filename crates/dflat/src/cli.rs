@@ -44,18 +44,18 @@ enum Command {
     /// Identify the vehicle from a flight's .tlog: attitude τ, k̃ and delay,
     /// hover thrust and τ_T, with intervals; writes a `[vehicle]` snippet.
     #[cfg(feature = "tuning")]
-    Identify(crate::tuning::IdentifyArgs),
+    Identify(crate::tools::IdentifyArgs),
     /// Learn the flat maps' residual over the parametric model from one or
     /// more flights' CSVs; reports held-out errors, writes a model file.
     #[cfg(feature = "tuning")]
-    Learn(crate::tuning::LearnArgs),
+    Learn(crate::tools::LearnArgs),
     /// A flight's report as one self-contained HTML page (inline SVG).
     #[cfg(feature = "tuning")]
-    Review(crate::tuning::review::ReviewArgs),
+    Review(crate::tools::review::ReviewArgs),
     /// Re-run the controller offline on a flight's logged poses, setpoints
     /// and timing, with its own or another configuration.
     #[cfg(feature = "tuning")]
-    Replay(crate::tuning::replay::ReplayArgs),
+    Replay(crate::tools::replay::ReplayArgs),
     /// The flight-control daemon (systemd runs this): pose and setpoints in,
     /// attitude commands out, until SIGINT / SIGTERM; prints a summary.
     Daemon(DaemonArgs),
@@ -141,13 +141,13 @@ fn run(cli: Cli) -> Result<()> {
         #[cfg(feature = "lab")]
         Command::Demo(args) => crate::sitl_demo::run_demo(args),
         #[cfg(feature = "tuning")]
-        Command::Identify(args) => crate::tuning::run_identify(args),
+        Command::Identify(args) => crate::tools::run_identify(args),
         #[cfg(feature = "tuning")]
-        Command::Learn(args) => crate::tuning::run_learn(args),
+        Command::Learn(args) => crate::tools::run_learn(args),
         #[cfg(feature = "tuning")]
-        Command::Review(args) => crate::tuning::review::run(args),
+        Command::Review(args) => crate::tools::review::run(args),
         #[cfg(feature = "tuning")]
-        Command::Replay(args) => crate::tuning::replay::run(args),
+        Command::Replay(args) => crate::tools::replay::run(args),
         Command::Daemon(args) => run_daemon(args),
     }
 }

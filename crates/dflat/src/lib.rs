@@ -7,6 +7,10 @@
 //!   `identify`, `review` and `replay`).
 //! * [`demo`] (`lab`) — `dflat demo`: the SITL of `dflat-sitl` and the
 //!   daemon of `dflat-daemon` on loopback.
+//! * [`tools`] (`tuning`) — the shells of `identify`, `learn`, `review`
+//!   and `replay` around the library `dflat-tuning`; the replay re-runs the
+//!   daemon's pure tick, so it lives here, where the daemon and the tools
+//!   meet.
 //!
 //! Features (all three default): `sitl` links `dflat-sitl` (and its plants,
 //! `dflat-sim`), `lab` links `dflat-lab` (the harness, the experiments, the
@@ -51,8 +55,13 @@ mod sitl_demo;
 /// `dflat demo --stream`: a planner's stream flown on the SITL.
 #[cfg(feature = "lab")]
 pub mod stream_demo;
-/// The tuning tools (`dflat identify`, `dflat review`, `dflat replay`).
+/// The tuning tools' library (flight logs, identification, the learned
+/// residual, the review page).
 #[cfg(feature = "tuning")]
 pub use dflat_tuning as tuning;
+/// The tuning tools' shells (`dflat identify`, `learn`, `review`,
+/// `replay`) and the replay of the daemon's tick.
+#[cfg(feature = "tuning")]
+pub mod tools;
 
 pub use cli::main;

@@ -9,8 +9,8 @@ use anyhow::{Context as _, Result, bail};
 use dflat_control::learned::LearnedResidual;
 use dflat_daemon::config::{Config, ModelKind};
 
-use crate::learn::parametric::Parametric;
-use crate::learn::{self, Learned, VehicleTable, data::Run};
+use dflat_tuning::learn::parametric::Parametric;
+use dflat_tuning::learn::{self, Learned, VehicleTable, data::Run};
 
 /// Arguments of `dflat learn`.
 #[derive(Debug, clap::Args)]
@@ -55,7 +55,7 @@ pub fn vehicle_table(cfg: &Config, dt: f64) -> VehicleTable {
 }
 
 /// The control step \[s\] of a record: the median spacing of its ticks.
-fn tick_spacing(csv: &crate::flightlog::FlightCsv) -> Option<f64> {
+fn tick_spacing(csv: &dflat_tuning::flightlog::FlightCsv) -> Option<f64> {
     let t: Vec<f64> = csv.numbers("t").into_iter().flatten().collect();
     let mut d: Vec<f64> = t
         .windows(2)
@@ -71,7 +71,7 @@ fn read_runs(flights: &[PathBuf]) -> Result<(Vec<Run>, f64)> {
     let mut runs = Vec::new();
     let mut dt: Option<f64> = None;
     for f in flights {
-        let csv = crate::read_csv(f)?;
+        let csv = super::read_csv(f)?;
         let step =
             tick_spacing(&csv).with_context(|| format!("{}: fewer than two ticks", f.display()))?;
         match dt {

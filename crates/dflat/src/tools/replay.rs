@@ -41,11 +41,9 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, Result, bail};
 
-use crate::flightlog::FlightCsv;
 use dflat_daemon::commands::{CommandContext, answer};
 use dflat_daemon::config::Config;
 use dflat_daemon::control::{build_controller, thrust_mapping};
-use dflat_records::Column;
 use dflat_daemon::mission::{ItemRules, Mission, MissionChange, MissionProtocol};
 use dflat_daemon::supervisor::FlightState;
 use dflat_daemon::tick::{
@@ -53,8 +51,11 @@ use dflat_daemon::tick::{
 };
 use dflat_link::tlog::TlogReader;
 use dflat_link::{CommandRequest, Inbound, LinkRx, MavMessage, RxOutcome};
+use dflat_records::Column;
+use dflat_tuning::flightlog::FlightCsv;
 
-use crate::review::{Overlay, load_tlog_beside, quantile, render};
+use super::review::load_tlog_beside;
+use dflat_tuning::review::{Overlay, quantile, render};
 
 /// Arguments of `dflat replay`.
 #[derive(Debug, clap::Args)]
@@ -432,7 +433,7 @@ pub fn run(args: ReplayArgs) -> Result<()> {
         Some("tlog") => args.flight.with_extension("csv"),
         _ => args.flight.clone(),
     };
-    let csv = crate::read_csv(&csv_path)?;
+    let csv = super::read_csv(&csv_path)?;
     let cfg = Config::load(&args.config)?;
     let mut report = replay(&csv_path, &csv, &cfg)?;
     report.overlay.label = format!("replay with {}", args.config.display());
