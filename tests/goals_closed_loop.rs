@@ -123,6 +123,7 @@ fn fly(
                 arrival: g.t + 0.002,
                 position: g.position,
                 yaw: None,
+                yaw_rate: None,
                 source_time: Some(5.0 + g.t),
                 velocity: g.velocity,
                 acceleration: g.acceleration,

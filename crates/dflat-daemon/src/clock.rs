@@ -91,6 +91,14 @@ impl PoseClock {
         self.minima.front().map(|&(_, o)| o)
     }
 
+    /// The time on this computer's clock \[s\] of source time `source` \[s\]
+    /// by the current estimate, without updating it (`None` before any
+    /// estimate, or for a non-finite `source`).
+    pub fn map(&self, source: f64) -> Option<f64> {
+        let t = source + self.offset()? - self.min_latency;
+        t.is_finite().then_some(t)
+    }
+
     /// The capture time on this computer's clock \[s\] of a pose that arrived
     /// at `arrival` \[s\] with source timestamp `source` \[s\] (`None`: no
     /// timestamp, the arrival time is returned). Non-finite inputs return

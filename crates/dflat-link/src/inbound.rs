@@ -120,6 +120,9 @@ pub struct PositionSetpoint {
     pub position: [f64; 3],
     /// Target yaw \[rad\], `None` when the yaw-ignore bit (1024) is set.
     pub yaw: Option<f64>,
+    /// Target yaw rate \[rad/s\], `None` when the yaw-rate-ignore bit
+    /// (2048) is set.
+    pub yaw_rate: Option<f64>,
     /// Velocity, local NED [m/s], when bits 8–32 (vx, vy, vz ignore) are clear.
     pub velocity: Option<[f64; 3]>,
     /// Acceleration, local NED [m/s²], when bits 64–256 (ax, ay, az ignore)
@@ -331,6 +334,14 @@ fn decode_setpoint(d: &SET_POSITION_TARGET_LOCAL_NED_DATA) -> Result<PositionSet
     } else {
         Some(finite(M, "yaw", d.yaw)?)
     };
+    let yaw_rate = if d
+        .type_mask
+        .contains(PositionTargetTypemask::POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE)
+    {
+        None
+    } else {
+        Some(finite(M, "yaw_rate", d.yaw_rate)?)
+    };
     let velocity_ignore = PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VX_IGNORE
         | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VY_IGNORE
         | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VZ_IGNORE;
@@ -352,6 +363,7 @@ fn decode_setpoint(d: &SET_POSITION_TARGET_LOCAL_NED_DATA) -> Result<PositionSet
         time_boot_ms: d.time_boot_ms,
         position: finite3(M, "position", [d.x, d.y, d.z])?,
         yaw,
+        yaw_rate,
         velocity,
         acceleration,
         target_system: d.target_system,

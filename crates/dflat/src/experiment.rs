@@ -18,6 +18,7 @@ use dflat_lab::experiments::mismatch::{MismatchConfig, run_mismatch, write_misma
 use dflat_lab::experiments::noise_sweep::{NoiseSweepConfig, run_noise_sweep, write_noise_sweep};
 use dflat_lab::experiments::paths::{PathsConfig, run_paths, write_paths};
 use dflat_lab::experiments::phase::{PhaseConfig, run_phase, write_phase};
+use dflat_lab::experiments::preview::{PreviewConfig, run_preview, write_preview};
 use dflat_lab::experiments::tilt_cone::{TiltConeConfig, run_tilt_cone, write_tilt_cone};
 use dflat_lab::experiments::vision_rate::{VisionRateConfig, run_vision_rate, write_vision_rate};
 
@@ -58,6 +59,29 @@ pub enum ExperimentCommand {
     /// held) vs the shipped tuning on the multi-rate window: median / p95
     /// path error. Markdown table on stdout, JSON.
     Phase(PhaseArgs),
+    /// A planner's trajectories (circle, figure eight, racing line,
+    /// lemniscate) at 4, 6 and 8 m/s from its stream: 20 Hz p, p/v, p/v/a,
+    /// 50 Hz p/v/a, and p/v/a with 1.5 s sent ahead, under 50 and 15 Hz
+    /// vision poses; DF-MPC vs Flatness MPC (estimator): p95 and the
+    /// largest command step. Table on stdout, JSON.
+    Preview(PreviewArgs),
+}
+
+/// Options of `experiment preview`.
+#[derive(Debug, Args)]
+pub struct PreviewArgs {
+    /// Cruise speeds [m/s], comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "4,6,8")]
+    speeds: Vec<f64>,
+    /// Vision pose rates [Hz], comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "50,15")]
+    vision: Vec<f64>,
+    /// JSON results file.
+    #[arg(long, default_value = "docs/figures/preview.json")]
+    json: PathBuf,
+    /// No progress bar.
+    #[arg(long)]
+    no_progress: bool,
 }
 
 /// Options of `experiment phase`.
@@ -328,6 +352,16 @@ pub fn run(command: ExperimentCommand) -> Result<()> {
             out!("{}", result.table());
             write_tilt_cone(&result, &a.json).context("writing the tilt-cone study")?;
             vec![a.json]
+        }
+        ExperimentCommand::Preview(a) => {
+            let config = PreviewConfig {
+                speeds: a.speeds,
+                vision_rates: a.vision,
+                ..PreviewConfig::default()
+            };
+            let result = run_preview(&config, !a.no_progress).context("preview study")?;
+            out!("{}", result.table());
+            write_preview(&result, &a.json).context("writing the preview study")?
         }
         ExperimentCommand::Phase(a) => {
             let config = PhaseConfig {

@@ -1,21 +1,25 @@
 //! `[sitl.planner]`: the SITL as a planner. Once the autopilot is in
 //! offboard, it streams SET_POSITION_TARGET_LOCAL_NED to the daemon (1/191
-//! by default) with position, velocity, acceleration and yaw, as MAVROS,
-//! MAVSDK or any planner sends them, along a circle or a figure eight
-//! ([`dflat_sim::trajectory`]) that starts where the vehicle is.
+//! by default) with position, velocity and acceleration (or fewer:
+//! `fields`) and yaw with its rate, as MAVROS, MAVSDK or any planner sends
+//! them, along a shape of [`dflat_sim::trajectory`] that starts where the
+//! vehicle is. With `ahead_s > 0` each send is the present sample and the
+//! trajectory's next `ahead_s` seconds at the same spacing, stamped in the
+//! autopilot's boot time ahead of now: the trajectory sent ahead (the
+//! daemon with `stream.time_base = "autopilot"`).
 
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use dflat_link::MavMessage;
 use dflat_link::dialect::{MavFrame, PositionTargetTypemask, SET_POSITION_TARGET_LOCAL_NED_DATA};
-use dflat_sim::trajectory::{Shape, Trajectory};
+use dflat_sim::trajectory::{Shape, Trajectory, TrajectoryPoint};
 
 /// `[sitl.planner]`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct PlannerConfig {
-    /// `circle` or `figure_eight`.
+    /// `circle`, `figure_eight`, `racing_line` or `lemniscate`.
     pub shape: Shape,
     /// Radius (circle) or half-width (figure eight) \[m\] (0.5–100).
     pub size: f64,
@@ -38,8 +42,16 @@ pub struct PlannerConfig {
     pub component_id: u8,
     /// The component the samples are for (1–255; 191 = the daemon).
     pub target_component: u8,
-    /// Send the heading along the velocity (else the yaw field is masked).
+    /// Send the heading along the velocity and its rate (else the yaw and
+    /// yaw-rate fields are masked).
     pub yaw: bool,
+    /// The fields sent: `pva` (position, velocity, acceleration), `pv` or
+    /// `p` (the others masked).
+    pub fields: PlannerFields,
+    /// How far ahead \[s\] each send carries the trajectory (0–10; 0 = the
+    /// present sample only): the samples every `1/rate_hz` up to `ahead_s`
+    /// after now, stamped ahead in the autopilot's boot time.
+    pub ahead_s: f64,
     /// The anchor: the autopilot flies the samples itself, with its own
     /// position loop (PD with velocity and acceleration feed-forward, as
     /// PX4's in OFFBOARD with position setpoints) — nothing is sent; the
@@ -63,6 +75,8 @@ impl Default for PlannerConfig {
             component_id: 190,
             target_component: 191,
             yaw: true,
+            fields: PlannerFields::Pva,
+            ahead_s: 0.0,
             anchor: false,
         }
     }
@@ -71,7 +85,7 @@ impl Default for PlannerConfig {
 impl PlannerConfig {
     /// The ranges: `(field, value, lo, hi)` (checked by the `[sitl]`
     /// validation, which names the field).
-    pub fn ranges(&self) -> [(&'static str, f64, f64, f64); 6] {
+    pub fn ranges(&self) -> [(&'static str, f64, f64, f64); 7] {
         [
             ("sitl.planner.size", self.size, 0.5, 100.0),
             ("sitl.planner.speed", self.speed, 0.1, 20.0),
@@ -79,8 +93,22 @@ impl PlannerConfig {
             ("sitl.planner.rate_hz", self.rate_hz, 1.0, 100.0),
             ("sitl.planner.start_after_s", self.start_after_s, 0.0, 600.0),
             ("sitl.planner.duration_s", self.duration_s, 0.0, 3600.0),
+            ("sitl.planner.ahead_s", self.ahead_s, 0.0, 10.0),
         ]
     }
+}
+
+/// `sitl.planner.fields`: which fields each sample carries.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum PlannerFields {
+    /// Position, velocity and acceleration.
+    #[default]
+    Pva,
+    /// Position and velocity.
+    Pv,
+    /// Position only.
+    P,
 }
 
 /// The planner's state in the SITL's step ([`crate::SitlCore`]).
@@ -138,10 +166,11 @@ impl Planner {
         self.sent
     }
 
-    /// The sample due at SITL time `t` \[s\], if any: `offboard` says
+    /// The samples due at SITL time `t` \[s\], if any: the present one
+    /// first, then (`ahead_s > 0`) the trajectory ahead. `offboard` says
     /// whether the autopilot is in offboard, `position` is the vehicle's
     /// (NED \[m\]; the trajectory starts there), `time_boot_ms` the
-    /// autopilot clock the sample carries.
+    /// autopilot clock at `t` (the samples ahead are stamped ahead of it).
     pub fn due(
         &mut self,
         t: f64,
@@ -149,14 +178,16 @@ impl Planner {
         position: Vector3<f64>,
         time_boot_ms: u32,
         target_system: u8,
-    ) -> Option<MavMessage> {
+    ) -> Vec<MavMessage> {
         if offboard && self.offboard_since.is_none() {
             self.offboard_since = Some(t);
         }
-        let since = self.offboard_since?;
+        let Some(since) = self.offboard_since else {
+            return Vec::new();
+        };
         if self.stream.is_none() {
             if t < since + self.config.start_after_s {
-                return None;
+                return Vec::new();
             }
             let c = &self.config;
             self.stream = Some((
@@ -170,43 +201,65 @@ impl Planner {
                 t,
             ));
         }
-        let (trajectory, t0) = self.stream?;
+        let Some((trajectory, t0)) = self.stream else {
+            return Vec::new();
+        };
         if self.config.duration_s > 0.0 && t - t0 > self.config.duration_s {
-            return None;
+            return Vec::new();
         }
-        if self
-            .last_sent
-            .is_some_and(|last| t - last < 1.0 / self.config.rate_hz - 1e-9)
-        {
-            return None;
+        let period = 1.0 / self.config.rate_hz;
+        if self.last_sent.is_some_and(|last| t - last < period - 1e-9) {
+            return Vec::new();
         }
         self.last_sent = Some(t);
         self.sent += 1;
-        let p = trajectory.at(t - t0);
-        let mut mask = PositionTargetTypemask::POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE;
-        if !self.config.yaw {
-            mask |= PositionTargetTypemask::POSITION_TARGET_TYPEMASK_YAW_IGNORE;
+        let ahead = (self.config.ahead_s * self.config.rate_hz).round() as usize;
+        (0..=ahead)
+            .map(|k| {
+                let dt = k as f64 * period;
+                let stamp = time_boot_ms.wrapping_add((dt * 1e3).round() as u32);
+                self.sample(&trajectory.at(t - t0 + dt), stamp, target_system)
+            })
+            .collect()
+    }
+
+    /// One SET_POSITION_TARGET_LOCAL_NED of the trajectory's point `p`.
+    fn sample(&self, p: &TrajectoryPoint, time_boot_ms: u32, target_system: u8) -> MavMessage {
+        use PositionTargetTypemask as M;
+        let c = &self.config;
+        let mut mask = M::empty();
+        if !c.yaw {
+            mask |= M::POSITION_TARGET_TYPEMASK_YAW_IGNORE
+                | M::POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE;
         }
-        Some(MavMessage::SET_POSITION_TARGET_LOCAL_NED(
-            SET_POSITION_TARGET_LOCAL_NED_DATA {
-                time_boot_ms,
-                x: p.position.x as f32,
-                y: p.position.y as f32,
-                z: p.position.z as f32,
-                vx: p.velocity.x as f32,
-                vy: p.velocity.y as f32,
-                vz: p.velocity.z as f32,
-                afx: p.acceleration.x as f32,
-                afy: p.acceleration.y as f32,
-                afz: p.acceleration.z as f32,
-                yaw: if self.config.yaw { p.yaw as f32 } else { 0.0 },
-                yaw_rate: 0.0,
-                type_mask: mask,
-                target_system,
-                target_component: self.config.target_component,
-                coordinate_frame: MavFrame::MAV_FRAME_LOCAL_NED,
-            },
-        ))
+        if c.fields != PlannerFields::Pva {
+            mask |= M::POSITION_TARGET_TYPEMASK_AX_IGNORE
+                | M::POSITION_TARGET_TYPEMASK_AY_IGNORE
+                | M::POSITION_TARGET_TYPEMASK_AZ_IGNORE;
+        }
+        if c.fields == PlannerFields::P {
+            mask |= M::POSITION_TARGET_TYPEMASK_VX_IGNORE
+                | M::POSITION_TARGET_TYPEMASK_VY_IGNORE
+                | M::POSITION_TARGET_TYPEMASK_VZ_IGNORE;
+        }
+        MavMessage::SET_POSITION_TARGET_LOCAL_NED(SET_POSITION_TARGET_LOCAL_NED_DATA {
+            time_boot_ms,
+            x: p.position.x as f32,
+            y: p.position.y as f32,
+            z: p.position.z as f32,
+            vx: p.velocity.x as f32,
+            vy: p.velocity.y as f32,
+            vz: p.velocity.z as f32,
+            afx: p.acceleration.x as f32,
+            afy: p.acceleration.y as f32,
+            afz: p.acceleration.z as f32,
+            yaw: if c.yaw { p.yaw as f32 } else { 0.0 },
+            yaw_rate: if c.yaw { p.yaw_rate as f32 } else { 0.0 },
+            type_mask: mask,
+            target_system,
+            target_component: c.target_component,
+            coordinate_frame: MavFrame::MAV_FRAME_LOCAL_NED,
+        })
     }
 }
 
@@ -236,7 +289,7 @@ mod tests {
         let mut samples = Vec::new();
         for k in 0..1200 {
             let t = k as f64 * dt;
-            if let Some(m) = p.due(t, t >= 0.5, here, (t * 1e3) as u32, 1) {
+            for m in p.due(t, t >= 0.5, here, (t * 1e3) as u32, 1) {
                 samples.push((t, fields(&m)));
             }
         }

@@ -56,11 +56,14 @@
 //!
 //! A [`StreamSample`] (time on the controller's clock, position, optional
 //! velocity, acceleration, yaw, yaw rate) is extrapolated as a coordinated
-//! turn (exact on a circle flown at constant speed) for
+//! turn (exact on a circle flown at constant speed) with its own jerk for
+//! [`StreamSettings::jerk_horizon_s`], for
 //! [`StreamSettings::extrapolation_s`], then slowed to a stop over
 //! [`StreamSettings::decay_s`] with a cosine on the prediction's clock,
 //! so the horizon's tail stops smoothly and a stream that goes silent
 //! becomes a smooth stop and hold. [`Reference::push_sample`] refreshes it.
+//! Samples stamped ahead of the controller's time are the trajectory sent
+//! ahead: flown as sent up to the newest, predicted beyond it.
 //!
 //! # Paths and stops
 //!
@@ -459,9 +462,12 @@ impl Reference {
         )?))))
     }
 
-    /// A new sample for a stream: the prediction restarts from it. Errors
-    /// (and changes nothing) on a non-finite sample, one older than the
-    /// newest, or a reference that is not a stream.
+    /// A new sample for a stream: it replaces the stream's samples at or
+    /// after its time, and the prediction restarts from the newest. Errors
+    /// (and changes nothing) on a non-finite sample, one that would rewrite
+    /// the past (older than the newest and than the reference's time), one
+    /// further ahead than `max_ahead_s`, or a reference that is not a
+    /// stream.
     pub fn push_sample(&mut self, sample: &StreamSample) -> Result<(), ControlError> {
         match &mut self.kind {
             Kind::Stream(s) => s.push(sample),
@@ -566,7 +572,20 @@ impl Reference {
     pub fn yaw_target(&self) -> Option<f64> {
         match &self.kind {
             Kind::Route(r) => r.yaw_target(),
-            Kind::Stream(s) => s.last().yaw,
+            Kind::Stream(s) => s.yaw(0.0).map(|(yaw, _)| yaw),
+            _ => None,
+        }
+    }
+
+    /// A stream's heading \[rad\] (NED) and its rate [rad/s] `ahead` \[s\]
+    /// after the reference's current time: interpolated between samples
+    /// that give a heading (the trajectory sent ahead), else the newest
+    /// sample's carried on at its rate (0 when not given) for at most
+    /// `extrapolation_s`. `None` for other references and streams without
+    /// a heading.
+    pub fn yaw_reference(&self, ahead: f64) -> Option<(f64, f64)> {
+        match &self.kind {
+            Kind::Stream(s) => s.yaw(ahead),
             _ => None,
         }
     }

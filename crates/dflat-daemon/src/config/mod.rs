@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 mod stream;
-pub use stream::StreamConfig;
+pub use stream::{StreamConfig, TimeBase};
 use thiserror::Error;
 
 /// A configuration that could not be read or is out of range.
@@ -325,6 +325,12 @@ pub struct VehicleConfig {
     pub yaw_mode: YawMode,
     /// Largest commanded yaw rate \[deg/s\] (5–360).
     pub max_yaw_rate_deg_s: f64,
+    /// How far ahead \[s\] a stream's heading is commanded (0–1, default
+    /// 0.1): the autopilot's yaw loop lags its command by about its time
+    /// constant, so commanding the trajectory's heading that much later
+    /// feeds its rate forward (`ψ(t + T) ≈ ψ + ψ̇·T`; docs/controllers.md,
+    /// "Yaw from the trajectory").
+    pub yaw_lead_s: f64,
     /// Linear horizontal drag \[1/s\] in the world frame (0–2, default 0):
     /// the model's velocity loses `drag_h·v` of acceleration
     /// (docs/controllers.md, *Drag and delay*). `dflat identify` estimates it.
@@ -364,6 +370,7 @@ impl Default for VehicleConfig {
             hover_thrust_from_autopilot: false,
             yaw_mode: YawMode::Flown,
             max_yaw_rate_deg_s: 45.0,
+            yaw_lead_s: 0.1,
             drag_h: 0.0,
             drag_v: 0.0,
             delay_ms: 0.0,

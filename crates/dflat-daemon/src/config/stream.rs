@@ -35,10 +35,32 @@ pub struct StreamConfig {
     /// prediction continues as a turn at the curvature reached (0–2; 0 =
     /// constant curvature from each sample).
     pub jerk_horizon_s: f64,
+    /// Whose clock a sample's `time_boot_ms` is on (module docs of
+    /// `tick/goals.rs`): `"sender"` (the sender's own; each sample is
+    /// the planner's present) or `"autopilot"` (the autopilot's boot time,
+    /// as MAVROS stamps it: samples may lie ahead, the trajectory sent
+    /// ahead).
+    pub time_base: TimeBase,
+    /// How far ahead \[s\] of its arrival a sample may lie with
+    /// `time_base = "autopilot"` (0.1–30); further is refused.
+    pub max_ahead_s: f64,
     /// Peak acceleration \[m/s²\] of a setpoint's route (start and stop
     /// ramps) and of a lost stream's stop (its decay is lengthened to keep
     /// within it; 0.2–10).
     pub route_acceleration: f64,
+}
+
+/// `stream.time_base`: whose clock a sample's `time_boot_ms` is on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum TimeBase {
+    /// The sender's own clock, its offset estimated from the samples'
+    /// arrivals: every sample is the sender's present (none lies ahead).
+    #[default]
+    Sender,
+    /// The autopilot's boot time (as MAVROS stamps setpoints), mapped by
+    /// the pose clock: a sample may lie up to `max_ahead_s` ahead.
+    Autopilot,
 }
 
 impl Default for StreamConfig {
@@ -50,7 +72,9 @@ impl Default for StreamConfig {
             decay_s: 1.0,
             implied_velocity: false,
             implied_max_gap_s: 0.25,
-            jerk_horizon_s: 0.5,
+            jerk_horizon_s: 0.25,
+            time_base: TimeBase::Sender,
+            max_ahead_s: 10.0,
             route_acceleration: 2.0,
         }
     }
@@ -65,6 +89,7 @@ impl StreamConfig {
             ("stream.extrapolation_s", self.extrapolation_s, 0.0, 5.0),
             ("stream.decay_s", self.decay_s, 0.1, 5.0),
             ("stream.jerk_horizon_s", self.jerk_horizon_s, 0.0, 2.0),
+            ("stream.max_ahead_s", self.max_ahead_s, 0.1, 30.0),
             (
                 "stream.implied_max_gap_s",
                 self.implied_max_gap_s,
@@ -98,6 +123,7 @@ impl StreamConfig {
             implied_velocity: self.implied_velocity,
             implied_max_gap_s: self.implied_max_gap_s,
             jerk_horizon_s: self.jerk_horizon_s,
+            max_ahead_s: self.max_ahead_s,
             stop_acceleration: self.route_acceleration,
         }
     }

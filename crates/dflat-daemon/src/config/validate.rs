@@ -129,6 +129,7 @@ impl Config {
             5.0,
             360.0,
         )?;
+        v.range("vehicle.yaw_lead_s", ve.yaw_lead_s, 0.0, 1.0)?;
         v.range("vehicle.drag_h", ve.drag_h, 0.0, 2.0)?;
         v.range("vehicle.drag_v", ve.drag_v, 0.0, 2.0)?;
         v.range("vehicle.delay_ms", ve.delay_ms, 0.0, 500.0)?;

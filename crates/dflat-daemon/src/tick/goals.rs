@@ -20,6 +20,19 @@
 //! [`MAX_SAMPLE_AGE`] before it, is implausible (a sender reboot, a
 //! clock from another origin): the arrival time is used and the estimate
 //! restarts.
+//!
+//! With `stream.time_base = "autopilot"` the sender stamps its samples in
+//! the autopilot's boot time (as MAVROS does), and they are mapped by the
+//! pose clock (the autopilot's): a sample may then lie up to
+//! `stream.max_ahead_s` after its arrival — **the trajectory sent ahead**.
+//! Its samples are the knots of the reference (`dflat_control::reference`,
+//! streams): flown as sent, continuous across updates; a new sample
+//! replaces the stream's samples at and after its time (a replan). An
+//! implausible mapped time, or none yet (no pose), stamps the arrival.
+//!
+//! The stream's samples are kept from its first (`stream_buffer`), while
+//! it is flown and while it waits for engagement, so the stream flown at
+//! engagement has the whole future it was sent.
 
 use dflat_control::reference::{Reference, StreamSample};
 use dflat_link::dialect::MavSeverity;
@@ -27,6 +40,7 @@ use nalgebra::Vector3;
 use tracing::{debug, error, info, warn};
 
 use super::{ControlCore, REFUSAL_TEXT_INTERVAL};
+use crate::config::TimeBase;
 use crate::control::reference_for;
 use crate::supervisor::{Goal, Refusal, SetpointOutcome};
 
@@ -35,12 +49,13 @@ use crate::supervisor::{Goal, Refusal, SetpointOutcome};
 pub const MAX_SAMPLE_AGE: f64 = 1.0;
 
 impl ControlCore {
-    /// SET_POSITION_TARGET_LOCAL_NED arrived (see the module docs).
+    /// SET_POSITION_TARGET_LOCAL_NED arrived (see the module docs); `yaw`
+    /// is its heading \[rad\] and heading rate \[rad/s\], each when given.
     pub(super) fn apply_setpoint(
         &mut self,
         arrival: f64,
         position: [f64; 3],
-        yaw: Option<f64>,
+        (yaw, yaw_rate): (Option<f64>, Option<f64>),
         source_time: Option<f64>,
         velocity: Option<[f64; 3]>,
         acceleration: Option<[f64; 3]>,
@@ -69,7 +84,7 @@ impl ControlCore {
                 velocity: velocity.map(Vector3::from),
                 acceleration: acceleration.map(Vector3::from),
                 yaw,
-                yaw_rate: None,
+                yaw_rate,
             };
             let seed = if implied {
                 previous.map(|(_, p)| p)
@@ -87,6 +102,22 @@ impl ControlCore {
 
     /// The sample's time on this computer's clock (module docs).
     fn sample_time(&mut self, arrival: f64, source_time: Option<f64>) -> f64 {
+        if self.config.stream.time_base == TimeBase::Autopilot {
+            // The autopilot's clock, as the poses map it; a sample may lie
+            // ahead (the trajectory sent ahead).
+            let mapped = source_time
+                .filter(|_| !self.pose_latency.faulted())
+                .and_then(|s| self.clock.map(s));
+            return match mapped {
+                Some(t)
+                    if t <= arrival + self.config.stream.max_ahead_s
+                        && arrival - t <= MAX_SAMPLE_AGE =>
+                {
+                    t
+                }
+                _ => arrival,
+            };
+        }
         let t = self.stream_clock.capture_time(arrival, source_time);
         if t > arrival + 1e-9 || arrival - t > MAX_SAMPLE_AGE || !t.is_finite() {
             self.stream_clock.reset();
@@ -148,16 +179,17 @@ impl ControlCore {
             self.refuse(arrival, refusal);
             return;
         }
-        let flying_stream = self.supervisor.goal() == Goal::Stream
-            && self.reference.as_ref().is_some_and(Reference::is_stream);
-        // The jump check: from the stream's own prediction, else from the
+        // The stream's samples so far (a new stream starts here).
+        let streaming = self.supervisor.goal() == Goal::Stream
+            || self.supervisor.pending_goal() == Goal::Stream;
+        if !streaming {
+            self.stream_buffer = None;
+        }
+        // The jump check: from the stream's own trajectory, else from the
         // vehicle.
-        let from = if flying_stream {
-            self.reference
-                .as_ref()
-                .and_then(|r| r.stream_position_at(sample.t))
-        } else {
-            self.pose.map(|p| Vector3::from(p.position))
+        let from = match &self.stream_buffer {
+            Some(b) => b.stream_position_at(sample.t),
+            None => self.pose.map(|p| Vector3::from(p.position)),
         };
         if let Some(from) = from {
             let distance = (sample.position - from).norm();
@@ -167,24 +199,24 @@ impl ControlCore {
                 return;
             }
         }
+        if let Err(e) = self.buffer_sample(arrival, &sample, seed) {
+            debug!(error = %e, "stream sample not used");
+            return;
+        }
         let position = [sample.position.x, sample.position.y, sample.position.z];
         match self.supervisor.on_stream(arrival, position) {
             SetpointOutcome::Refused(refusal) => self.refuse(arrival, refusal),
             SetpointOutcome::Unchanged => {
                 self.last_sample_arrival = Some(arrival);
-                self.stream_seed = None;
-                if let Some(r) = self.reference.as_mut()
+                if let Some(r) = self.reference.as_mut().filter(|r| r.is_stream())
                     && let Err(e) = r.push_sample(&sample)
                 {
                     debug!(error = %e, "stream sample not used");
                 }
-                self.newest_sample = Some(sample);
             }
             SetpointOutcome::Accepted { goal, transition } => {
                 debug!(?goal, "stream accepted");
                 self.last_sample_arrival = Some(arrival);
-                self.newest_sample = Some(sample);
-                self.stream_seed = seed;
                 if let Some(tr) = transition {
                     self.announce(tr);
                 }
@@ -193,43 +225,67 @@ impl ControlCore {
         }
     }
 
-    /// The stream's reference from its newest sample (`None`: no sample).
-    pub(super) fn stream_reference(&self) -> Option<Reference> {
-        let sample = self.newest_sample?;
-        let settings = self.config.stream.settings();
-        let built = match self.stream_seed {
-            Some((t, p)) if t < sample.t => Reference::stream(
-                settings,
-                &StreamSample {
-                    t,
-                    position: Vector3::from(p),
-                    velocity: None,
-                    acceleration: None,
-                    yaw: None,
-                    yaw_rate: None,
-                },
-            )
-            .and_then(|mut r| r.push_sample(&sample).map(|()| r)),
-            _ => Reference::stream(settings, &sample),
-        };
-        match built {
-            Ok(r) => Some(r),
-            Err(e) => {
-                warn!(error = %e, "cannot build the stream reference");
-                None
-            }
+    /// Adds `sample`, arrived at `arrival` \[s\], to the stream's samples (a
+    /// new stream from it, after
+    /// `seed`, the position-only setpoint before it, if any). An error
+    /// changes nothing.
+    fn buffer_sample(
+        &mut self,
+        arrival: f64,
+        sample: &StreamSample,
+        seed: Option<(f64, [f64; 3])>,
+    ) -> Result<(), dflat_control::ControlError> {
+        if let Some(b) = self.stream_buffer.as_mut() {
+            b.set_time(arrival);
+            return b.push_sample(sample);
         }
+        let settings = self.config.stream.settings();
+        let mut b = match seed {
+            Some((t, p)) if t < sample.t => {
+                let mut b = Reference::stream(
+                    settings,
+                    &StreamSample {
+                        t,
+                        position: Vector3::from(p),
+                        velocity: None,
+                        acceleration: None,
+                        yaw: None,
+                        yaw_rate: None,
+                    },
+                )?;
+                b.set_time(arrival);
+                b.push_sample(sample)?;
+                b
+            }
+            _ => Reference::stream(settings, sample)?,
+        };
+        b.set_time(arrival);
+        self.stream_buffer = Some(b);
+        Ok(())
     }
 
-    /// A flown stream without samples for `stream.timeout_s`: stop
-    /// smoothly where the extrapolation stops, and hold there.
+    /// The stream's reference: its samples so far (`None`: no sample).
+    pub(super) fn stream_reference(&self) -> Option<Reference> {
+        self.stream_buffer.clone()
+    }
+
+    /// A flown stream without samples for `stream.timeout_s` (and past the
+    /// end of any trajectory sent ahead for as long): stop smoothly where
+    /// the extrapolation stops, and hold there.
     pub(super) fn check_stream_timeout(&mut self, t: f64) {
         if self.supervisor.goal() != Goal::Stream {
             return;
         }
-        let Some(last) = self.last_sample_arrival else {
+        let Some(arrived) = self.last_sample_arrival else {
             return;
         };
+        // A trajectory sent ahead is flown to its end before it is lost.
+        let sent_until = self
+            .reference
+            .as_ref()
+            .and_then(Reference::last_sample)
+            .map_or(arrived, |s| s.t);
+        let last = arrived.max(sent_until);
         if t - last <= self.config.stream.timeout_s {
             return;
         }

@@ -73,6 +73,7 @@ fn run(yaw_mode: YawMode, heading: impl Fn(u64) -> f64, setpoint_yaw: Option<f64
                     arrival: t - 0.0005,
                     position: [3.0, 1.0, -10.0],
                     yaw: setpoint_yaw,
+                    yaw_rate: None,
                     source_time: None,
                     velocity: None,
                     acceleration: None,

@@ -62,6 +62,8 @@ pub enum Event {
         position: [f64; 3],
         /// Yaw \[rad\], when the setpoint sets one.
         yaw: Option<f64>,
+        /// Yaw rate \[rad/s\], when the setpoint sets one.
+        yaw_rate: Option<f64>,
         /// The sender's `time_boot_ms` \[s\] (`None`: 0).
         source_time: Option<f64>,
         /// Velocity, local NED [m/s], when given.
@@ -169,6 +171,7 @@ pub fn event_from(inbound: &Inbound, pose_source: PoseSource, arrival: f64) -> O
             arrival,
             position: s.position,
             yaw: s.yaw,
+            yaw_rate: s.yaw_rate,
             source_time: (s.time_boot_ms > 0).then(|| f64::from(s.time_boot_ms) * 1e-3),
             velocity: s.velocity,
             acceleration: s.acceleration,

@@ -214,8 +214,9 @@ impl ControlCore {
 
     /// The heading the tick commands \[rad\]: `vehicle.yaw_deg` with
     /// `yaw_mode = "fixed"`; else, streaming engaged, one rate-limited step
-    /// towards the goal's yaw (a setpoint's, the mission's; none: the
-    /// heading is kept); in standby the vehicle's own heading.
+    /// towards the goal's yaw (a setpoint's, the mission's, a stream's
+    /// trajectory's `vehicle.yaw_lead_s` ahead; none: the heading is kept);
+    /// in standby the vehicle's own heading.
     pub(super) fn heading(&mut self, t: f64) -> f64 {
         let fixed = self.config.vehicle.yaw_deg.to_radians();
         if self.config.vehicle.yaw_mode == YawMode::Fixed {
@@ -230,7 +231,15 @@ impl ControlCore {
         }
         let target = match self.supervisor.goal() {
             Goal::Mission => self.runner.as_ref().and_then(MissionRunner::yaw),
-            Goal::Setpoint(_) | Goal::Stream => self.setpoint_yaw,
+            // A stream's heading from its trajectory, its rate fed
+            // forward by commanding it `yaw_lead_s` ahead.
+            Goal::Stream => self
+                .reference
+                .as_ref()
+                .and_then(|r| r.yaw_reference(self.config.vehicle.yaw_lead_s))
+                .map(|(yaw, _)| yaw)
+                .or(self.setpoint_yaw),
+            Goal::Setpoint(_) => self.setpoint_yaw,
             _ => None,
         };
         self.yaw_command.step(t, target, measured.unwrap_or(fixed))

@@ -229,11 +229,9 @@ pub struct ControlCore {
     commanded_yaw: f64,
     /// Maps stream senders' `time_boot_ms` onto this computer's clock.
     stream_clock: PoseClock,
-    /// The newest accepted stream sample (a stream is built from it).
-    newest_sample: Option<dflat_control::reference::StreamSample>,
-    /// The position-only setpoint before the stream's first sample
-    /// (implied velocity): (time \[s\], position \[m\]).
-    stream_seed: Option<(f64, [f64; 3])>,
+    /// The stream's samples so far (the flown stream is built from them;
+    /// kept while a stream is flown or pending).
+    stream_buffer: Option<Reference>,
     /// Arrival of the newest stream sample \[s\].
     last_sample_arrival: Option<f64>,
     /// The newest position-only setpoint: arrival \[s\], (time \[s\], position \[m\]).
@@ -322,8 +320,7 @@ impl ControlCore {
             ),
             commanded_yaw: config.vehicle.yaw_deg.to_radians(),
             stream_clock: PoseClock::new(config.link.pose_clock_window_s, 0.0),
-            newest_sample: None,
-            stream_seed: None,
+            stream_buffer: None,
             last_sample_arrival: None,
             last_position_setpoint: None,
         }
@@ -540,10 +537,18 @@ impl ControlCore {
                 arrival,
                 position,
                 yaw,
+                yaw_rate,
                 source_time,
                 velocity,
                 acceleration,
-            } => self.apply_setpoint(arrival, position, yaw, source_time, velocity, acceleration),
+            } => self.apply_setpoint(
+                arrival,
+                position,
+                (yaw, yaw_rate),
+                source_time,
+                velocity,
+                acceleration,
+            ),
         }
     }
 

@@ -682,6 +682,7 @@ fn the_stop_asks_for_a_hold_ramps_to_level_and_ends() {
         arrival: 51.0 * DT - 0.001,
         position: [5.0, 0.0, -10.0],
         yaw: None,
+        yaw_rate: None,
         source_time: None,
         velocity: None,
         acceleration: None,

@@ -28,6 +28,7 @@ pub mod mismatch;
 pub mod noise_sweep;
 pub mod paths;
 pub mod phase;
+pub mod preview;
 pub mod tilt_cone;
 mod trial;
 pub mod vision_rate;

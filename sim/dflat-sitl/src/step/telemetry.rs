@@ -118,26 +118,28 @@ impl SitlCore {
             return;
         };
         let anchor = planner.anchor();
-        let Some(message) =
-            planner.due(t, offboard || anchor, state.position, time_boot_ms, system)
-        else {
-            return;
-        };
+        let messages = planner.due(t, offboard || anchor, state.position, time_boot_ms, system);
         if anchor {
-            // Flown by the autopilot's own position loop, as received.
-            if let Some(Ok(target)) = crate::position_control::position_target(&message) {
+            // Flown by the autopilot's own position loop, as received: the
+            // present sample (a position loop has no use for the future).
+            if let Some(Ok(target)) = messages
+                .first()
+                .and_then(crate::position_control::position_target)
+            {
                 self.px4.set_setpoint(self.clock, target);
             }
             return;
         }
-        let (sys, comp) = planner.ids();
-        let header = dflat_link::header(sys, comp, planner.sequence());
-        out.messages.push(Outgoing {
-            message,
-            to: Dest::Only(Link::Vehicle),
-            origin: Origin::Planner(header),
-            measured_pose: false,
-        });
+        for message in messages {
+            let (sys, comp) = planner.ids();
+            let header = dflat_link::header(sys, comp, planner.sequence());
+            out.messages.push(Outgoing {
+                message,
+                to: Dest::Only(Link::Vehicle),
+                origin: Origin::Planner(header),
+                measured_pose: false,
+            });
+        }
     }
 
     /// The vision stand-in at SITL time `t`: capture when due, send what

@@ -1,6 +1,25 @@
 //! Streamed trajectories: a planner's samples (time, position, optional
-//! velocity, acceleration, yaw, yaw rate) → the reference over the horizon,
-//! predicted from the newest sample.
+//! velocity, acceleration, yaw, yaw rate) → the reference over the horizon:
+//! the trajectory the samples give up to the newest, predicted beyond it.
+//!
+//! # The trajectory sent ahead
+//!
+//! The samples are the knots of the trajectory the planner has committed
+//! to. A sample may lie ahead of the controller's time (up to
+//! `max_ahead_s`): a planner that sends the next seconds of its trajectory
+//! as samples stamped in the future gives the reference its true future.
+//! Between knots the reference is the Hermite interpolant of what they give
+//! (`knots`: quintic with p/v/a, cubic with p/v, and for positions alone
+//! the velocity of the quadratic through each knot and its neighbours),
+//! continuous in position and velocity (and acceleration with p/v/a);
+//! after the newest knot, the prediction below takes over. A sample
+//! **replaces every knot at or after its time**: a planner that replans
+//! sends its new trajectory from its present on, and the old future is
+//! dropped — so a batch re-sent each cycle is continuous across updates
+//! when the plans agree. A sample that would rewrite the past (older than
+//! both the newest knot and the controller's time) is refused. Past knots
+//! are kept for [`KEEP_PAST_S`] (at least the three newest), at most
+//! [`MAX_KNOTS`] in all, allocated once.
 //!
 //! # The prediction
 //!
@@ -37,11 +56,29 @@
 //! samples, `v = (3p_k − 4p_{k−1} + p_{k−2})/(2h)`, `a = (p_k − 2p_{k−1} +
 //! p_{k−2})/h²` (for unequal spacing, the derivatives of the quadratic
 //! through them). Without an acceleration, `a = 0`.
+//!
+//! # The jerk
+//!
+//! With three recent p/v/a knots (spacing within the implied gap's
+//! bounds) the stream's own jerk `j` is the derivative of the quadratic
+//! through their accelerations (second order). The prediction then lets
+//! the speed and the turn rate change at the rates `j` gives them,
+//! `ȧ_t = (v_h·j_h + |a_h|² − a_t²)/|v_h|` and
+//! `ω̇ = (v_x j_y − v_y j_x)/|v_h|² − 2ω a_t/|v_h|`, for
+//! `jerk_horizon_s`, then goes on as a turn at the speed rate and
+//! curvature reached (integrated on a 256-node table, Simpson). The jerk
+//! is known over about the attitude lag; carried further it runs away (a
+//! figure eight's turn rate reverses within a second), so the default is
+//! 0.25 s (docs/controllers.md, "Preview").
 
 use nalgebra::Vector3;
 
+mod knots;
+mod prediction;
+
 use super::{invalid, is_finite3};
 use crate::ControlError;
+use prediction::{JerkTable, Prediction};
 
 /// Slower than this [m/s] the horizontal prediction is constant
 /// acceleration instead of a coordinated turn.
@@ -86,6 +123,9 @@ pub struct StreamSettings {
     /// coordinated turn at constant curvature alone). See the module docs,
     /// "The jerk".
     pub jerk_horizon_s: f64,
+    /// How far ahead of the controller's time \[s\] a sample may lie (> 0):
+    /// the trajectory sent ahead (module docs).
+    pub max_ahead_s: f64,
 }
 
 impl Default for StreamSettings {
@@ -98,7 +138,8 @@ impl Default for StreamSettings {
             implied_velocity: false,
             implied_max_gap_s: 0.25,
             stop_acceleration: 2.0,
-            jerk_horizon_s: 0.5,
+            jerk_horizon_s: 0.25,
+            max_ahead_s: 10.0,
         }
     }
 }
@@ -121,194 +162,31 @@ impl StreamSettings {
         if !(self.jerk_horizon_s.is_finite() && self.jerk_horizon_s >= 0.0) {
             return Err(invalid("jerk_horizon_s", "must be finite and ≥ 0 s"));
         }
+        if !(self.max_ahead_s.is_finite() && self.max_ahead_s > 0.0) {
+            return Err(invalid("max_ahead_s", "must be finite and > 0 s"));
+        }
         Ok(())
     }
 }
 
-/// Nodes of the jerk prediction's table (over `σ ∈ [0, σ_max]`).
-const JERK_NODES: usize = 256;
+/// Samples a stream keeps at most (the past it needs and the future sent
+/// ahead: 20 s at 50 Hz); allocated once.
+pub const MAX_KNOTS: usize = 1024;
+/// Past samples are kept this long \[s\] behind the controller's time (at
+/// least the three newest are kept: the jerk and the implied velocity).
+const KEEP_PAST_S: f64 = 1.0;
 
-/// The prediction from one sample.
-#[derive(Debug, Clone, PartialEq)]
-struct Prediction {
-    t: f64,
-    p: Vector3<f64>,
-    v: Vector3<f64>,
-    a: Vector3<f64>,
-    /// The horizontal prediction with the stream's jerk, tabulated (module
-    /// docs, "The jerk"); `None`: the closed-form turn.
-    jerk: Option<JerkTable>,
-}
-
-/// Positions and velocities of the jerk prediction at `σ = k·step`.
-#[derive(Debug, Clone, PartialEq)]
-struct JerkTable {
-    step: f64,
-    p: [[f64; 2]; JERK_NODES + 1],
-    v: [[f64; 2]; JERK_NODES + 1],
-}
-
-impl JerkTable {
-    /// Integrates the horizontal motion from `p`, `v`, `a` with jerk `j`
-    /// over `[0, sigma_max]`: speed and heading rate move at their rates
-    /// (from `j`) for `horizon` \[s\], then stay (a turn at the curvature
-    /// reached); below [`TURN_MIN_SPEED`], acceleration moves at `j` for
-    /// `horizon`, then stays.
-    fn new(
-        p: Vector3<f64>,
-        v: Vector3<f64>,
-        a: Vector3<f64>,
-        j: Vector3<f64>,
-        horizon: f64,
-        sigma_max: f64,
-    ) -> Self {
-        let step = (sigma_max / JERK_NODES as f64).max(1e-9);
-        // The planar velocity at σ.
-        let speed = v.x.hypot(v.y);
-        let vel = |s: f64| -> [f64; 2] {
-            let sj = s.min(horizon);
-            if speed < TURN_MIN_SPEED {
-                // a(σ) = a + j·min(σ, T): v = v + a σ + j (σ_j²/2 + σ_j (σ − σ_j)).
-                let jj = 0.5 * sj * sj + sj * (s - sj);
-                return [v.x + a.x * s + j.x * jj, v.y + a.y * s + j.y * jj];
-            }
-            let at = (v.x * a.x + v.y * a.y) / speed;
-            let omega = (v.x * a.y - v.y * a.x) / (speed * speed);
-            // Rates of the tangential acceleration and the turn rate.
-            let a2 = a.x * a.x + a.y * a.y;
-            let at_dot = (v.x * j.x + v.y * j.y + a2 - at * at) / speed;
-            let omega_dot = (v.x * j.y - v.y * j.x) / (speed * speed) - 2.0 * omega * at / speed;
-            let spd = speed + at * s + at_dot * (0.5 * sj * sj + sj * (s - sj));
-            let th = v.y.atan2(v.x) + omega * s + omega_dot * (0.5 * sj * sj + sj * (s - sj));
-            let spd = spd.max(0.0);
-            [spd * th.cos(), spd * th.sin()]
-        };
-        let mut t = Self {
-            step,
-            p: [[0.0; 2]; JERK_NODES + 1],
-            v: [[0.0; 2]; JERK_NODES + 1],
-        };
-        t.p[0] = [p.x, p.y];
-        t.v[0] = vel(0.0);
-        for k in 1..=JERK_NODES {
-            let s0 = (k - 1) as f64 * step;
-            // Simpson over the interval.
-            let (va, vm, vb) = (vel(s0), vel(s0 + 0.5 * step), vel(s0 + step));
-            for i in 0..2 {
-                t.p[k][i] = t.p[k - 1][i] + step / 6.0 * (va[i] + 4.0 * vm[i] + vb[i]);
-            }
-            t.v[k] = vb;
-        }
-        t
-    }
-
-    /// Position and velocity at `sigma` (cubic Hermite between nodes; held
-    /// at the last node's motion beyond it).
-    fn at(&self, sigma: f64) -> ([f64; 2], [f64; 2]) {
-        let x = (sigma / self.step).max(0.0);
-        if x >= JERK_NODES as f64 {
-            let extra = (x - JERK_NODES as f64) * self.step;
-            let (p, v) = (self.p[JERK_NODES], self.v[JERK_NODES]);
-            return ([p[0] + v[0] * extra, p[1] + v[1] * extra], v);
-        }
-        let k = x.floor() as usize;
-        let u = x - k as f64;
-        let h = self.step;
-        let (p0, p1, v0, v1) = (self.p[k], self.p[k + 1], self.v[k], self.v[k + 1]);
-        let (h00, h10, h01, h11) = (
-            2.0 * u * u * u - 3.0 * u * u + 1.0,
-            u * u * u - 2.0 * u * u + u,
-            -2.0 * u * u * u + 3.0 * u * u,
-            u * u * u - u * u,
-        );
-        let (d00, d10, d01, d11) = (
-            (6.0 * u * u - 6.0 * u) / h,
-            3.0 * u * u - 4.0 * u + 1.0,
-            (-6.0 * u * u + 6.0 * u) / h,
-            3.0 * u * u - 2.0 * u,
-        );
-        let mut p = [0.0; 2];
-        let mut v = [0.0; 2];
-        for i in 0..2 {
-            p[i] = h00 * p0[i] + h10 * h * v0[i] + h01 * p1[i] + h11 * h * v1[i];
-            v[i] = d00 * p0[i] + d10 * v0[i] + d01 * p1[i] + d11 * v1[i];
-        }
-        (p, v)
-    }
-}
-
-impl Prediction {
-    /// Position and velocity `sigma` \[s\] along the extrapolation.
-    fn at(&self, sigma: f64) -> (Vector3<f64>, Vector3<f64>) {
-        if let Some(table) = &self.jerk {
-            let s = sigma;
-            let z = self.p.z + self.v.z * s + 0.5 * self.a.z * s * s;
-            let vz = self.v.z + self.a.z * s;
-            let (p, v) = table.at(s);
-            return (Vector3::new(p[0], p[1], z), Vector3::new(v[0], v[1], vz));
-        }
-        self.closed_form(sigma)
-    }
-
-    /// The coordinated turn (or constant acceleration) in closed form.
-    fn closed_form(&self, sigma: f64) -> (Vector3<f64>, Vector3<f64>) {
-        let s = sigma;
-        let z = self.p.z + self.v.z * s + 0.5 * self.a.z * s * s;
-        let vz = self.v.z + self.a.z * s;
-        let speed = self.v.x.hypot(self.v.y);
-        if speed < TURN_MIN_SPEED {
-            let x = self.p.x + self.v.x * s + 0.5 * self.a.x * s * s;
-            let y = self.p.y + self.v.y * s + 0.5 * self.a.y * s * s;
-            return (
-                Vector3::new(x, y, z),
-                Vector3::new(self.v.x + self.a.x * s, self.v.y + self.a.y * s, vz),
-            );
-        }
-        let omega = (self.v.x * self.a.y - self.v.y * self.a.x) / (speed * speed);
-        let at = (self.v.x * self.a.x + self.v.y * self.a.y) / speed;
-        let th0 = self.v.y.atan2(self.v.x);
-        let th = th0 + omega * s;
-        let spd = speed + at * s;
-        let (c0, s0) = (th0.cos(), th0.sin());
-        let (c1, s1) = (th.cos(), th.sin());
-        // U(σ) = ∫₀^σ u(θ0 + ωσ') dσ', IU = ∫₀^σ U; small ω: series.
-        let (ux, uy, iux, iuy) = if (omega * s).abs() < 1e-4 {
-            let w = omega;
-            (
-                s * c0 - 0.5 * w * s * s * s0,
-                s * s0 + 0.5 * w * s * s * c0,
-                0.5 * s * s * c0 - w * s * s * s / 6.0 * s0,
-                0.5 * s * s * s0 + w * s * s * s / 6.0 * c0,
-            )
-        } else {
-            let w = omega;
-            let ux = (s1 - s0) / w;
-            let uy = (c0 - c1) / w;
-            let iux = (-(c1 - c0) / w - s * s0) / w;
-            let iuy = (s * c0 - (s1 - s0) / w) / w;
-            (ux, uy, iux, iuy)
-        };
-        // ∫ (speed + a_t σ') u dσ' = speed·U + a_t (σU − IU).
-        let x = self.p.x + speed * ux + at * (s * ux - iux);
-        let y = self.p.y + speed * uy + at * (s * uy - iuy);
-        (Vector3::new(x, y, z), Vector3::new(spd * c1, spd * s1, vz))
-    }
-}
-
-/// A streamed trajectory: the newest prediction and the samples before it.
+/// A streamed trajectory: the samples it has (the knots: the recent past
+/// and any future sent ahead) and the prediction from the newest.
 #[derive(Debug, Clone, PartialEq)]
 pub(super) struct Stream {
     settings: StreamSettings,
+    /// The samples, in time order (capacity [`MAX_KNOTS`]).
+    knots: Vec<StreamSample>,
+    /// The prediction from the newest knot.
     pred: Prediction,
     /// This prediction's decay time \[s\] (≥ `decay_s`; module docs).
     decay: f64,
-    /// The newest sample (yaw carried).
-    last: StreamSample,
-    /// Times and positions of the previous position-only samples.
-    history: [Option<(f64, Vector3<f64>)>; 2],
-    /// Times and accelerations of the two previous samples that gave one
-    /// (the jerk's finite difference), the newer last.
-    prev_accel: [Option<(f64, Vector3<f64>)>; 2],
     /// Controller time now \[s\] (set by `set_time`, else advanced by δt).
     now: f64,
     driven: bool,
@@ -337,6 +215,7 @@ impl Stream {
         check_sample(sample)?;
         let mut s = Self {
             settings,
+            knots: Vec::with_capacity(MAX_KNOTS),
             pred: Prediction {
                 t: sample.t,
                 p: sample.position,
@@ -345,9 +224,6 @@ impl Stream {
                 jerk: None,
             },
             decay: settings.decay_s,
-            last: *sample,
-            history: [None, None],
-            prev_accel: [None, None],
             now: sample.t,
             driven: false,
         };
@@ -355,15 +231,50 @@ impl Stream {
         Ok(s)
     }
 
-    /// Replaces the prediction with one from `sample`. A sample older than
-    /// the newest is refused.
+    /// Adds a sample (module docs, "The trajectory sent ahead"): it
+    /// replaces every sample at or after its time, and the prediction
+    /// restarts from the newest. A sample older than both the newest and
+    /// the controller's time (it would rewrite the past), or more than
+    /// `max_ahead_s` ahead, is refused and changes nothing.
     pub(super) fn push(&mut self, sample: &StreamSample) -> Result<(), ControlError> {
         check_sample(sample)?;
-        if sample.t < self.pred.t {
+        let newest = self.knots.last().map_or(f64::NEG_INFINITY, |k| k.t);
+        if sample.t < newest && sample.t < self.now {
             return Err(invalid("stream sample", "older than the newest sample"));
         }
+        if sample.t > self.now + self.settings.max_ahead_s {
+            return Err(invalid("stream sample", "further ahead than max_ahead_s"));
+        }
+        let keep = self.knots.partition_point(|k| k.t < sample.t);
+        self.knots.truncate(keep);
+        self.prune();
+        if self.knots.len() == MAX_KNOTS {
+            return Err(invalid(
+                "stream sample",
+                "more samples ahead than a stream keeps",
+            ));
+        }
+        self.knots.push(*sample);
+        self.predict();
+        Ok(())
+    }
+
+    /// Drops past knots older than [`KEEP_PAST_S`] (keeping the three
+    /// newest).
+    fn prune(&mut self) {
+        let old = self.knots.partition_point(|k| k.t < self.now - KEEP_PAST_S);
+        let drop = old.min(self.knots.len().saturating_sub(3));
+        if drop > 0 {
+            self.knots.drain(..drop);
+        }
+    }
+
+    /// The prediction from the newest knot (module docs, "The prediction").
+    fn predict(&mut self) {
+        let n = self.knots.len();
+        let sample = self.knots[n - 1];
         let implied = if sample.velocity.is_none() && self.settings.implied_velocity {
-            self.implied(sample)
+            self.implied()
         } else {
             None
         };
@@ -375,23 +286,6 @@ impl Stream {
                 sample.acceleration.unwrap_or_else(Vector3::zeros),
             ),
         };
-        if sample.velocity.is_none() {
-            if self.history[1].is_some_and(|(t, _)| t >= sample.t) {
-                // Same time as the previous one: replace it.
-                self.history[1] = Some((sample.t, sample.position));
-            } else {
-                self.history = [self.history[1], Some((sample.t, sample.position))];
-            }
-        } else {
-            self.history = [None, None];
-        }
-        // The jerk: the change of the sender's acceleration since its
-        // previous sample, when recent (the implied gap's bounds).
-        let jerk = sample.acceleration.and_then(|a| self.jerk(sample.t, a));
-        match sample.acceleration {
-            Some(a) => self.prev_accel = [self.prev_accel[1], Some((sample.t, a))],
-            None => self.prev_accel = [None, None],
-        }
         self.pred = Prediction {
             t: sample.t,
             p: sample.position,
@@ -404,7 +298,11 @@ impl Stream {
             .settings
             .decay_s
             .max(std::f64::consts::FRAC_PI_2 * speed / self.settings.stop_acceleration);
-        if let Some(j) = jerk
+        // A sample at rest ends the trajectory: it holds, whatever the
+        // jerk that brought it there.
+        let at_rest = v.norm() < 1e-9 && a.norm() < 1e-9;
+        if let Some(j) = self.jerk()
+            && !at_rest
             && self.settings.jerk_horizon_s > 0.0
             && j.iter().all(|c| c.is_finite())
         {
@@ -418,49 +316,43 @@ impl Stream {
                 sigma_max,
             ));
         }
-        self.last = *sample;
-        Ok(())
     }
 
-    /// The jerk at `t` from acceleration `a` and the previous samples'
-    /// (spacing within the implied gap's bounds): the derivative at `t` of
-    /// the quadratic through three accelerations (second order: a steady
-    /// turn's jerk to O(h²)); `None` before three.
-    fn jerk(&self, t: f64, a: Vector3<f64>) -> Option<Vector3<f64>> {
+    /// The three newest knots, when they are spaced within the implied
+    /// gap's bounds.
+    fn last_three(&self) -> Option<[&StreamSample; 3]> {
+        let n = self.knots.len();
+        if n < 3 {
+            return None;
+        }
+        let (k0, k1, k2) = (&self.knots[n - 3], &self.knots[n - 2], &self.knots[n - 1]);
         let (lo, hi) = (IMPLIED_MIN_GAP, self.settings.implied_max_gap_s);
         let ok = |h: f64| h >= lo && h <= hi;
-        let (t1, a1) = self.prev_accel[1]?;
-        let h2 = t - t1;
-        if !ok(h2) {
-            return None;
-        }
-        let d21 = (a - a1) / h2;
-        match self.prev_accel[0] {
-            Some((t0, a0)) if ok(t1 - t0) => {
-                let h1 = t1 - t0;
-                let d10 = (a1 - a0) / h1;
-                let c = (d21 - d10) * (2.0 / (h1 + h2));
-                Some(d21 + c * (0.5 * h2))
-            }
-            // Two samples only: a first-order difference lags by h/2 (on a
-            // tight fast turn, tenths of a metre half a second ahead).
-            _ => None,
-        }
+        (ok(k2.t - k1.t) && ok(k1.t - k0.t)).then_some([k0, k1, k2])
     }
 
-    /// Velocity and acceleration of the quadratic through the two previous
-    /// samples and `sample`, at `sample`'s time.
-    fn implied(&self, sample: &StreamSample) -> Option<(Vector3<f64>, Vector3<f64>)> {
-        let (t1, p1) = self.history[1]?;
-        let (t0, p0) = self.history[0]?;
-        let (h2, h1) = (sample.t - t1, t1 - t0);
-        let (lo, hi) = (IMPLIED_MIN_GAP, self.settings.implied_max_gap_s);
-        if !(h2 >= lo && h2 <= hi && h1 >= lo && h1 <= hi) {
-            return None;
-        }
-        // Divided differences of the quadratic through (t0,p0),(t1,p1),(t2,p2).
-        let d21 = (sample.position - p1) / h2;
-        let d10 = (p1 - p0) / h1;
+    /// The jerk at the newest knot: the derivative at its time of the
+    /// quadratic through the three newest knots' accelerations (second
+    /// order: a steady turn's jerk to O(h²)); `None` unless all three give
+    /// one, spaced within the implied gap's bounds.
+    fn jerk(&self) -> Option<Vector3<f64>> {
+        let [k0, k1, k2] = self.last_three()?;
+        let (a0, a1, a2) = (k0.acceleration?, k1.acceleration?, k2.acceleration?);
+        let (h1, h2) = (k1.t - k0.t, k2.t - k1.t);
+        let d21 = (a2 - a1) / h2;
+        let d10 = (a1 - a0) / h1;
+        let c = (d21 - d10) * (2.0 / (h1 + h2));
+        Some(d21 + c * (0.5 * h2))
+    }
+
+    /// Velocity and acceleration of the quadratic through the three newest
+    /// knots, at the newest's time.
+    fn implied(&self) -> Option<(Vector3<f64>, Vector3<f64>)> {
+        let [k0, k1, k2] = self.last_three()?;
+        let (h2, h1) = (k2.t - k1.t, k1.t - k0.t);
+        // Divided differences of the quadratic through the three.
+        let d21 = (k2.position - k1.position) / h2;
+        let d10 = (k1.position - k0.position) / h1;
         let a = (d21 - d10) * (2.0 / (h1 + h2));
         let v = d21 + a * (0.5 * h2);
         Some((v, a))
@@ -474,7 +366,7 @@ impl Stream {
         }
     }
 
-    /// The decay's clock `σ` for time `tau` \[s\] after the sample, and
+    /// The decay's clock `σ` for time `tau` \[s\] after the newest knot, and
     /// its rate `dσ/dτ`.
     fn sigma(&self, tau: f64) -> (f64, f64) {
         let (tc, td) = (self.settings.extrapolation_s, self.decay);
@@ -493,8 +385,18 @@ impl Stream {
         )
     }
 
-    /// Position and velocity at controller time `t`.
+    /// Position and velocity at controller time `t`: between knots, the
+    /// trajectory sent; after the newest, its prediction; before the
+    /// oldest, the oldest knot's.
     pub(super) fn state(&self, t: f64) -> (Vector3<f64>, Vector3<f64>) {
+        let n = self.knots.len();
+        if n >= 2 && t < self.pred.t {
+            let k = self.knots.partition_point(|k| k.t <= t);
+            if k == 0 {
+                return (self.knots[0].position, knots::velocity_at(&self.knots, 0));
+            }
+            return knots::between(&self.knots, k - 1, t);
+        }
         let (sigma, rate) = self.sigma(t - self.pred.t);
         let (p, v) = self.pred.at(sigma);
         (p, v * rate)
@@ -522,11 +424,64 @@ impl Stream {
 
     /// The newest sample.
     pub(super) fn last(&self) -> &StreamSample {
-        &self.last
+        &self.knots[self.knots.len() - 1]
     }
 
-    /// Time since the newest sample \[s\] at the current time.
+    /// Time since the newest sample \[s\] at the current time (negative
+    /// while the trajectory sent ahead lasts).
     pub(super) fn age(&self) -> f64 {
         self.now - self.pred.t
     }
+
+    /// The heading \[rad\] and its rate [rad/s] `ahead` \[s\] after the
+    /// current time: between knots that give a heading, interpolated (cubic
+    /// Hermite with their rates, else at the mean rate; the shorter way
+    /// round); after the newest, carried on at its rate (0 when not
+    /// given) for at most `extrapolation_s`. `None`: no heading.
+    pub(super) fn yaw(&self, ahead: f64) -> Option<(f64, f64)> {
+        let t = self.now + ahead.max(0.0);
+        let k = self.knots.partition_point(|k| k.t <= t);
+        let before = self.knots[..k].iter().rev().find(|k| k.yaw.is_some());
+        let after = self.knots[k..].iter().find(|k| k.yaw.is_some());
+        match (before, after) {
+            (Some(b), Some(a)) if a.t > b.t => Some(yaw_between(b, a, t)),
+            (Some(b), _) => {
+                let rate = b.yaw_rate.unwrap_or(0.0);
+                let dt = (t - b.t).clamp(0.0, self.settings.extrapolation_s);
+                let y = b.yaw? + rate * dt;
+                Some((wrap(y), rate))
+            }
+            (None, Some(a)) => Some((a.yaw?, a.yaw_rate.unwrap_or(0.0))),
+            (None, None) => None,
+        }
+    }
+}
+
+/// The heading between two knots that give one, at `t` (module docs of
+/// [`Stream::yaw`]).
+fn yaw_between(b: &StreamSample, a: &StreamSample, t: f64) -> (f64, f64) {
+    use std::f64::consts::{PI, TAU};
+    let (y0, y1) = (b.yaw.unwrap_or(0.0), a.yaw.unwrap_or(0.0));
+    let d = (y1 - y0 + PI).rem_euclid(TAU) - PI;
+    let h = a.t - b.t;
+    let u = ((t - b.t) / h).clamp(0.0, 1.0);
+    let (r0, r1) = match (b.yaw_rate, a.yaw_rate) {
+        (Some(r0), Some(r1)) => (r0, r1),
+        _ => (d / h, d / h),
+    };
+    let (u2, u3) = (u * u, u * u * u);
+    let y = y0 + (-2.0 * u3 + 3.0 * u2) * d + (u3 - 2.0 * u2 + u) * h * r0 + (u3 - u2) * h * r1;
+    let r =
+        (-6.0 * u2 + 6.0 * u) * d / h + (3.0 * u2 - 4.0 * u + 1.0) * r0 + (3.0 * u2 - 2.0 * u) * r1;
+    (wrap(y), r)
+}
+
+/// `a` \[rad\] in (−π, π] (unchanged when it already is).
+fn wrap(a: f64) -> f64 {
+    use std::f64::consts::{PI, TAU};
+    if a > -PI && a <= PI {
+        return a;
+    }
+    let w = (a + PI).rem_euclid(TAU) - PI;
+    if w <= -PI { w + TAU } else { w }
 }
