@@ -9,7 +9,9 @@
 //! * A 3 s pilot override in the middle of the L path, then a hand-back:
 //!   the path completes, and from the first command of the hand-back the
 //!   command moves by at most 5° per tick for 1 s (no kick from a stale
-//!   window).
+//!   window). Judged on the daemon's own records: the hand-back is the
+//!   CSV's tick where STANDBY becomes engaged again, and the second after
+//!   it is counted in the CSV's tick times, not on the test's clock.
 //! * A dead stream: the SITL refuses OFFBOARD.
 //! * The ArduPilot flavour (LOITER → GUIDED_NOGPS, mode numbers as
 //!   ArduPilot reports them) end to end.
@@ -181,7 +183,11 @@ async fn engaging_while_the_pilot_flies_brakes_where_it_was_engaged() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn override_and_hand_back_on_the_l_path_without_a_kick() {
-    let (cfg, plant) = setup("override", MissionStart::Path, SitlAutopilot::Px4);
+    let (mut cfg, plant) = setup("override", MissionStart::Path, SitlAutopilot::Px4);
+    // The daemon's records: the hand-back is judged from them.
+    let records = std::env::temp_dir().join(format!("dflat-override-{}", std::process::id()));
+    cfg.logging.dir = records.to_string_lossy().into_owned();
+    cfg.logging.tlog = false;
     let (sitl, taps) = tap_sitl(&plant);
     let link = format!("udpout:127.0.0.1:{}", sitl.local_addr().port());
     let daemon = dflat_daemon::spawn(cfg.clone(), Some(link)).await.unwrap();
@@ -200,7 +206,6 @@ async fn override_and_hand_back_on_the_l_path_without_a_kick() {
         .await
         .expect("standby after the override");
     tokio::time::sleep(Duration::from_secs(2)).await;
-    let handback = Instant::now();
     sitl.request_mode(SitlMode::Offboard);
     // The rest of the path (≤ 50 m at 5 m/s) and 1 s more.
     let end = *cfg.mission.path.last().unwrap();
@@ -224,23 +229,42 @@ async fn override_and_hand_back_on_the_l_path_without_a_kick() {
     assert_eq!(summary.engagements, 2, "{summary}");
     assert_eq!(summary.disengagements, 1, "{summary}");
 
-    let cmds = commands(&taps);
-    let after: Vec<_> = cmds
-        .iter()
-        .filter(|(at, _, _)| *at >= handback && at.duration_since(handback).as_secs_f64() <= 1.0)
+    // The hand-back in the daemon's CSV: the last tick where STANDBY
+    // becomes engaged (TRACKING or HOLDING); its second by the CSV's tick
+    // times, from the last standby command (the step into the engagement
+    // counts too).
+    let csv_path = summary.csv.as_ref().expect("the flight's CSV").path.clone();
+    let csv = dflat_tuning::flightlog::FlightCsv::read(&csv_path).unwrap();
+    let _ = std::fs::remove_dir_all(&records);
+    let state = csv.index("state").expect("state column");
+    let engaged = |i: usize| matches!(csv.rows[i][state].as_str(), "TRACKING" | "HOLDING");
+    let handback = (1..csv.rows.len())
+        .rev()
+        .find(|&i| csv.rows[i - 1][state] == "STANDBY" && engaged(i))
+        .expect("a hand-back in the CSV");
+    let t = csv.numbers("t");
+    let (roll, pitch) = (csv.numbers("roll"), csv.numbers("pitch"));
+    let t0 = t[handback].expect("tick time");
+    let after: Vec<(f64, f64)> = (handback - 1..csv.rows.len())
+        .take_while(|&i| t[i].is_some_and(|ti| ti <= t0 + 1.0))
+        .filter_map(|i| Some((roll[i]?, pitch[i]?)))
         .collect();
+    let in_second = (handback..csv.rows.len())
+        .take_while(|&i| t[i].is_some_and(|ti| ti <= t0 + 1.0))
+        .filter(|&i| roll[i].is_some())
+        .count();
     assert!(
-        after.len() >= 40,
-        "{} commands in the second after",
-        after.len()
+        in_second >= 40,
+        "{in_second} commands in the second after the hand-back (CSV tick times from {t0:.3} s)"
     );
     let steps: Vec<f64> = after
         .windows(2)
         .map(|w| {
-            let d = ((w[1].1 - w[0].1).powi(2) + (w[1].2 - w[0].2).powi(2)).sqrt();
+            let d = ((w[1].0 - w[0].0).powi(2) + (w[1].1 - w[0].1).powi(2)).sqrt();
             d.to_degrees()
         })
         .collect();
+    let cmds = commands(&taps);
     let worst = steps.iter().copied().fold(0.0, f64::max);
     let normal: Vec<f64> = cmds
         .windows(2)
