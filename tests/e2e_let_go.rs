@@ -1,8 +1,10 @@
-//! When the daemon cannot fly, it lets go (issue 13): a controller that
-//! fails on every tick from some point on. The daemon flies its plan
-//! fallback, then level hover for at most `safety.level_hover_max_ms`,
-//! then stops the stream — the SITL's own position hold takes over — and
-//! says why (STATUSTEXT). No level hover beyond the configured period.
+//! When the daemon cannot fly, it lets go: a controller that fails on
+//! every tick from some point on. The daemon flies its plan fallback, then
+//! level hover for at most `safety.level_hover_max_ms`, then stops the
+//! stream — the SITL's own position hold takes over — and says why
+//! (STATUSTEXT). No level hover beyond the configured period. How long it
+//! streamed after the failure is read from the daemon's CSV (tick times
+//! from the first failed tick to the last command), not the test's clock.
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -27,6 +29,9 @@ async fn a_controller_that_fails_every_tick_stops_the_stream_in_time() {
     let (mut cfg, plant) = support::sitl_flight("let-go", SitlEngage::Auto);
     cfg.mission.start = MissionStart::Hold;
     cfg.safety.level_hover_max_ms = LEVEL_HOVER_MAX_MS;
+    let records = std::env::temp_dir().join(format!("dflat-let-go-{}", std::process::id()));
+    cfg.logging.dir = records.to_string_lossy().into_owned();
+    cfg.logging.tlog = false;
     let (tx, taps) = mpsc::channel();
     let sitl = sitl::spawn(
         &plant,
@@ -56,7 +61,6 @@ async fn a_controller_that_fails_every_tick_stops_the_stream_in_time() {
     }
     tokio::time::sleep(Duration::from_secs(1)).await;
     broken.store(true, Ordering::Relaxed);
-    let broke_at = Instant::now();
     tokio::time::sleep(Duration::from_secs(3)).await;
     let state = daemon.state();
     let mode = sitl.mode();
@@ -75,15 +79,26 @@ async fn a_controller_that_fails_every_tick_stops_the_stream_in_time() {
         g.level_hover
     );
     assert!(g.level_hover > 0, "{g:?}");
-    // The last command the SITL received, and the cause said.
-    let frames: Vec<_> = taps.try_iter().collect();
-    let last_command = frames
+    // In the daemon's CSV: the first tick the controller failed (the plan
+    // fallback flown, guard `plan`) and the last command sent.
+    let csv_path = summary.csv.as_ref().expect("the flight's CSV").path.clone();
+    let csv = dflat_tuning::flightlog::FlightCsv::read(&csv_path).unwrap();
+    let _ = std::fs::remove_dir_all(&records);
+    let guard = csv.index("guard").expect("guard column");
+    let (t, roll) = (csv.numbers("t"), csv.numbers("roll"));
+    let failed = (0..csv.rows.len())
+        .find(|&i| csv.rows[i][guard] == "plan")
+        .expect("a plan-fallback tick in the CSV");
+    let last_command = (0..csv.rows.len())
+        .rev()
+        .find(|&i| roll[i].is_some())
+        .expect("a command in the CSV");
+    let guards: Vec<&str> = csv.rows[failed..=last_command]
         .iter()
-        .filter(|f| matches!(f.message, MavMessage::SET_ATTITUDE_TARGET(_)))
-        .map(|f| f.at)
-        .max()
-        .unwrap();
-    let streamed_after = last_command.duration_since(broke_at).as_secs_f64();
+        .map(|r| r[guard].as_str())
+        .collect();
+    let streamed_after = t[last_command].unwrap() - t[failed].unwrap();
+    let frames: Vec<_> = taps.try_iter().collect();
     let plan = f64::from(cfg.safety.hold_last_ticks) * 0.02;
     eprintln!(
         "stream stopped {streamed_after:.2} s after the controller broke (plan {plan:.2} s + level hover ≤ {:.2} s), {} level-hover ticks",
@@ -92,7 +107,7 @@ async fn a_controller_that_fails_every_tick_stops_the_stream_in_time() {
     );
     assert!(
         streamed_after <= plan + LEVEL_HOVER_MAX_MS / 1000.0 + 0.1,
-        "streamed {streamed_after:.2} s"
+        "streamed {streamed_after:.2} s: {guards:?}"
     );
     let said = frames.iter().any(|f| match &f.message {
         MavMessage::STATUSTEXT(d) => d.text.to_str().unwrap_or("").contains("control failed"),
