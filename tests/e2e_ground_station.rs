@@ -100,6 +100,7 @@ fn with_gcs(plant: &SitlSettings) -> SitlHandle {
 fn a_lone_ground_station_gets_heartbeats_at_1_hz() {
     let (_, plant) = plant("gcs-alone");
     let sitl = with_gcs(&plant);
+    let start = Instant::now();
     let gcs = Gcs::new(sitl.gcs_addr().unwrap(), 255);
     std::thread::sleep(Duration::from_millis(300));
     let since = Instant::now();
@@ -154,20 +155,40 @@ fn a_lone_ground_station_gets_heartbeats_at_1_hz() {
     assert_eq!(set_value, Some(1.5));
     assert!(read_only.is_some() && signing.is_some());
     assert_eq!(nak, Some((129, 10)), "FTP NAK FileNotFound");
-    let hb = gcs.from((1, 1), since, heartbeats).len();
+    // The rates on the SITL's own clock (its plant steps) and counters,
+    // not on the test's sleep: 1 Hz each, and the GCS got what was sent.
+    let hb = gcs.from((1, 1), start, heartbeats).len() as u64;
     let status = gcs
-        .from((1, 1), since, |m| {
+        .from((1, 1), start, |m| {
             matches!(m, MavMessage::SYS_STATUS(_)).then_some(())
         })
-        .len();
+        .len() as u64;
     let c = sitl.stop().unwrap().counters;
+    let sitl_s = c.plant_steps as f64 / plant.sitl.plant_rate_hz;
     eprintln!(
-        "lone GCS: {hb} HEARTBEATs, {status} SYS_STATUS in 4 s; counters to_gcs {:?}, vehicle hb {}",
+        "lone GCS: {hb} HEARTBEATs, {status} SYS_STATUS received; in {sitl_s:.2} s of SITL time counters to_gcs {:?}, vehicle hb {}",
         c.to_gcs, c.heartbeats_sent
     );
-    assert!((3..=6).contains(&hb), "{hb} HEARTBEATs in 4 s");
-    assert!((3..=6).contains(&status), "{status} SYS_STATUS in 4 s");
-    assert!((4..=7).contains(&c.to_gcs.heartbeats), "{c:?}");
+    for (what, sent) in [
+        ("HEARTBEAT", c.to_gcs.heartbeats),
+        ("SYS_STATUS", c.to_gcs.sys_status),
+    ] {
+        assert!(
+            (sent as f64 - sitl_s).abs() <= 1.5,
+            "{sent} {what}s in {sitl_s:.2} s of SITL time: {c:?}"
+        );
+    }
+    // Sent after the count are not received; none is lost on loopback.
+    assert!(
+        hb <= c.to_gcs.heartbeats && hb + 2 >= c.to_gcs.heartbeats,
+        "{hb} HEARTBEATs received of {}",
+        c.to_gcs.heartbeats
+    );
+    assert!(
+        status <= c.to_gcs.sys_status && status + 2 >= c.to_gcs.sys_status,
+        "{status} SYS_STATUS received of {}",
+        c.to_gcs.sys_status
+    );
     assert_eq!(c.heartbeats_sent, 0, "no vehicle peer: {c:?}");
     assert!(
         c.to_gcs.positions > 100,
