@@ -273,19 +273,7 @@ impl Stream {
     fn predict(&mut self) {
         let n = self.knots.len();
         let sample = self.knots[n - 1];
-        let implied = if sample.velocity.is_none() && self.settings.implied_velocity {
-            self.implied()
-        } else {
-            None
-        };
-        let (v, a) = match (sample.velocity, implied) {
-            (Some(v), _) => (v, sample.acceleration.unwrap_or_else(Vector3::zeros)),
-            (None, Some(va)) => va,
-            (None, None) => (
-                Vector3::zeros(),
-                sample.acceleration.unwrap_or_else(Vector3::zeros),
-            ),
-        };
+        let (v, a, jerk) = self.motion();
         self.pred = Prediction {
             t: sample.t,
             p: sample.position,
@@ -301,7 +289,7 @@ impl Stream {
         // A sample at rest ends the trajectory: it holds, whatever the
         // jerk that brought it there.
         let at_rest = v.norm() < 1e-9 && a.norm() < 1e-9;
-        if let Some(j) = self.jerk()
+        if let Some(j) = jerk
             && !at_rest
             && self.settings.jerk_horizon_s > 0.0
             && j.iter().all(|c| c.is_finite())
@@ -318,44 +306,92 @@ impl Stream {
         }
     }
 
-    /// The three newest knots, when they are spaced within the implied
-    /// gap's bounds.
-    fn last_three(&self) -> Option<[&StreamSample; 3]> {
+    /// Velocity, acceleration and jerk at the newest knot (module docs,
+    /// "The prediction" and "The jerk"): what the sample gives, the rest
+    /// from the polynomial through the newest knots that give the highest
+    /// field it has (spacing within the implied gap's bounds): with p/v/a
+    /// the jerk from three accelerations; with p/v the acceleration and
+    /// jerk from three velocities (two: the acceleration alone); with
+    /// positions alone and `implied_velocity`, velocity, acceleration and
+    /// jerk from four positions (three: no jerk). Position alone without
+    /// `implied_velocity`: a point, `v = a = 0`.
+    fn motion(&self) -> (Vector3<f64>, Vector3<f64>, Option<Vector3<f64>>) {
+        let s = self.knots[self.knots.len() - 1];
+        let zero = Vector3::zeros();
+        match (s.velocity, s.acceleration) {
+            (Some(v), Some(a)) => {
+                let d = self.derivatives(3, |k| k.acceleration);
+                (v, a, d.map(|d| d[1]))
+            }
+            (Some(v), None) => match self.derivatives(3, |k| k.velocity) {
+                Some(d) => (v, d[1], Some(d[2])),
+                None => match self.derivatives(2, |k| k.velocity) {
+                    Some(d) => (v, d[1], None),
+                    None => (v, zero, None),
+                },
+            },
+            (None, a) if self.settings.implied_velocity => {
+                let p = |k: &StreamSample| Some(k.position);
+                match self.derivatives(4, p) {
+                    Some(d) => (d[1], d[2], Some(d[3])),
+                    None => match self.derivatives(3, p) {
+                        Some(d) => (d[1], d[2], None),
+                        None => (zero, a.unwrap_or(zero), None),
+                    },
+                }
+            }
+            (None, a) => (zero, a.unwrap_or(zero), None),
+        }
+    }
+
+    /// The value and first three derivatives at the newest knot's time of
+    /// the polynomial through the `m` newest knots' `field` (Newton's
+    /// divided differences); `None` unless each of them gives it and they
+    /// are spaced within the implied gap's bounds.
+    fn derivatives(
+        &self,
+        m: usize,
+        field: impl Fn(&StreamSample) -> Option<Vector3<f64>>,
+    ) -> Option<[Vector3<f64>; 4]> {
         let n = self.knots.len();
-        if n < 3 {
+        if n < m || m == 0 {
             return None;
         }
-        let (k0, k1, k2) = (&self.knots[n - 3], &self.knots[n - 2], &self.knots[n - 1]);
+        let knots = &self.knots[n - m..];
         let (lo, hi) = (IMPLIED_MIN_GAP, self.settings.implied_max_gap_s);
-        let ok = |h: f64| h >= lo && h <= hi;
-        (ok(k2.t - k1.t) && ok(k1.t - k0.t)).then_some([k0, k1, k2])
-    }
-
-    /// The jerk at the newest knot: the derivative at its time of the
-    /// quadratic through the three newest knots' accelerations (second
-    /// order: a steady turn's jerk to O(h²)); `None` unless all three give
-    /// one, spaced within the implied gap's bounds.
-    fn jerk(&self) -> Option<Vector3<f64>> {
-        let [k0, k1, k2] = self.last_three()?;
-        let (a0, a1, a2) = (k0.acceleration?, k1.acceleration?, k2.acceleration?);
-        let (h1, h2) = (k1.t - k0.t, k2.t - k1.t);
-        let d21 = (a2 - a1) / h2;
-        let d10 = (a1 - a0) / h1;
-        let c = (d21 - d10) * (2.0 / (h1 + h2));
-        Some(d21 + c * (0.5 * h2))
-    }
-
-    /// Velocity and acceleration of the quadratic through the three newest
-    /// knots, at the newest's time.
-    fn implied(&self) -> Option<(Vector3<f64>, Vector3<f64>)> {
-        let [k0, k1, k2] = self.last_three()?;
-        let (h2, h1) = (k2.t - k1.t, k1.t - k0.t);
-        // Divided differences of the quadratic through the three.
-        let d21 = (k2.position - k1.position) / h2;
-        let d10 = (k1.position - k0.position) / h1;
-        let a = (d21 - d10) * (2.0 / (h1 + h2));
-        let v = d21 + a * (0.5 * h2);
-        Some((v, a))
+        if knots
+            .windows(2)
+            .any(|w| !(w[1].t - w[0].t >= lo && w[1].t - w[0].t <= hi))
+        {
+            return None;
+        }
+        let t: [f64; 4] = std::array::from_fn(|i| knots.get(i).map_or(0.0, |k| k.t));
+        let mut c = [Vector3::zeros(); 4];
+        for (ci, k) in c.iter_mut().zip(knots) {
+            *ci = field(k)?;
+        }
+        // Divided differences in place: c[i] = f[t_0 … t_i].
+        for order in 1..m {
+            for i in (order..m).rev() {
+                c[i] = (c[i] - c[i - 1]) / (t[i] - t[i - order]);
+            }
+        }
+        // Horner on the Newton form, with the derivatives, at the newest.
+        let x = t[m - 1];
+        let mut d = [
+            c[m - 1],
+            Vector3::zeros(),
+            Vector3::zeros(),
+            Vector3::zeros(),
+        ];
+        for k in (0..m - 1).rev() {
+            let h = x - t[k];
+            d[3] = d[3] * h + d[2] * 3.0;
+            d[2] = d[2] * h + d[1] * 2.0;
+            d[1] = d[1] * h + d[0];
+            d[0] = d[0] * h + c[k];
+        }
+        Some(d)
     }
 
     /// Sets the controller time now \[s\].
