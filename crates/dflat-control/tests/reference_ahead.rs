@@ -165,3 +165,36 @@ fn the_heading_is_interpolated_and_led_by_its_rate() {
         assert!(wrap(ahead - want(t + 0.1)).abs() < 2e-3, "ahead at {t}");
     }
 }
+
+/// Samples without an acceleration imply it (and the jerk) from their
+/// velocities; positions alone (implied velocity) all three from their
+/// positions: a circle from 20 Hz p/v samples, or from positions alone,
+/// is predicted to millimetres half a second ahead (a straight line
+/// would be 0.4 m off).
+#[test]
+fn samples_imply_what_they_do_not_give() {
+    let f = |t: f64| circle(6.0, 4.0, t);
+    for (name, velocity, implied) in [("p/v", true, false), ("p", false, true)] {
+        let settings = StreamSettings {
+            implied_velocity: implied,
+            ..StreamSettings::default()
+        };
+        let sample = |t: f64| {
+            let (p, v, _) = f(t);
+            StreamSample {
+                t,
+                position: p,
+                velocity: velocity.then_some(v),
+                acceleration: None,
+                yaw: None,
+                yaw_rate: None,
+            }
+        };
+        let mut r = Reference::stream(settings, &sample(0.0)).unwrap();
+        for k in 1..=20 {
+            r.push_sample(&sample(k as f64 * 0.05)).unwrap();
+        }
+        let err = (r.stream_position_at(1.5).unwrap() - f(1.5).0).norm();
+        assert!(err < 5e-3, "{name}: 0.5 s ahead off by {err} m");
+    }
+}
