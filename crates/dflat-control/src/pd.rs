@@ -62,6 +62,12 @@ pub struct PdSettings {
     /// [`StateSource::FiniteDifference`]; the daemon and the lab's path
     /// study default to the estimator (`velocity_cutoff_hz` then unused).
     pub state: StateSource,
+    /// Feed the reference's acceleration forward (its second difference
+    /// over the next two control steps), for a reference the vehicle can
+    /// fly as it is ([`ReferenceSource::flyable`]: a planner's stream) —
+    /// an autopilot's position loop with velocity and acceleration
+    /// feed-forward. Default off (the paper's PD).
+    pub acceleration_feed_forward: bool,
 }
 
 /// How PD rounds a path's corners: the reference speed is limited so that a
@@ -99,6 +105,7 @@ impl Default for PdSettings {
             tilt_limit: TiltLimit::PerAxis,
             corners: None,
             state: StateSource::FiniteDifference,
+            acceleration_feed_forward: false,
         }
     }
 }
@@ -293,12 +300,19 @@ impl Controller for Pd {
         // One control step of the reference first: a path's start ramp
         // advances only with `horizon` (its speed would stay at the ramp's
         // v0 = 0 and PD would hover at the start).
-        let mut step = [Vector3::zeros()];
-        reference.horizon(&y, self.dt, &mut step);
+        let mut step = [Vector3::zeros(); 3];
+        let feed_forward = self.settings.acceleration_feed_forward && reference.flyable();
+        let steps = if feed_forward { 3 } else { 1 };
+        reference.horizon(&y, self.dt, &mut step[..steps]);
         let (p_ref, mut v_ref) = reference.closest(&y);
+        // A flyable reference's acceleration, fed forward.
+        let mut a_ff = if feed_forward {
+            (step[2] - step[1] * 2.0 + step[0]) / (self.dt * self.dt)
+        } else {
+            Vector3::zeros()
+        };
         // Slowing for a corner: the limited speed, and its rate along the
         // path fed forward (PD alone lags the braking).
-        let mut a_ff = Vector3::zeros();
         if let Some(c) = self.settings.corners
             && let Some((limit, rate)) = reference.corner_speed(c.radius, c.acceleration)
         {
@@ -309,7 +323,12 @@ impl Controller for Pd {
                 a_ff = dir * rate;
             }
         }
-        if !(p_ref.iter().chain(v_ref.iter()).all(|c| c.is_finite())) {
+        if !(p_ref
+            .iter()
+            .chain(v_ref.iter())
+            .chain(a_ff.iter())
+            .all(|c| c.is_finite()))
+        {
             return Err(ControlError::NonFiniteReference);
         }
         let velocity = if let Some(s) = &estimate {

@@ -134,6 +134,7 @@ pub fn build_controller(cfg: &Config) -> Result<Box<dyn Controller>, ControlErro
                 tilt_limit: TiltLimit::Cone,
                 corners: c.pd.corners(),
                 state: c.estimator.state_source(c, v),
+                acceleration_feed_forward: false,
             },
         )?),
     })

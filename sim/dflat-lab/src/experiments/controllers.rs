@@ -301,7 +301,7 @@ impl ControllerSpec {
 }
 
 /// The planar control model with the lab's nominal parameters.
-fn planar_model() -> Result<ControlModel, ControlError> {
+pub(crate) fn planar_model() -> Result<ControlModel, ControlError> {
     Ok(ControlModel::Planar(PlanarModel::new(
         PlanarParams::default(),
     )?))

@@ -2,11 +2,11 @@
 //! (circle, figure eight, racing line, lemniscate) at three speeds, flown
 //! from its stream — position only, p/v, p/v/a at 20 and 50 Hz, and p/v/a
 //! with 1.5 s of the trajectory sent ahead — under 50 Hz and 15 Hz vision
-//! poses (60 ms latency, 2 cm noise): DF-MPC against Flatness MPC fed by
-//! the lab's state estimator, on the planar plant. The autopilot's own PD
-//! with feed-forward (the third party of the comparison) flies in the
-//! SITL, not in the lab: `tests/e2e_preview.rs` flies it beside the
-//! daemon on the same stream.
+//! poses (60 ms latency, 2 cm noise): DF-MPC against the autopilot's
+//! position loop (PD with velocity and acceleration feed-forward, the
+//! SITL's gains, on the lab's state estimator) and Flatness MPC fed by the
+//! same estimator, on the planar plant. `tests/e2e_preview.rs` flies the
+//! SITL's own loop (on its true state) beside the daemon.
 
 mod feed;
 
@@ -14,6 +14,8 @@ pub use feed::{Fields, StreamFeed, StreamForm};
 
 use std::sync::Arc;
 
+use dflat_control::estimator::StateSource;
+use dflat_control::pd::{Pd, PdSettings};
 use dflat_control::reference::StreamSettings;
 use dflat_sim::plant::{PlantKind, PlantState};
 use dflat_sim::sensing::{SensorSpec, VisionOptions};
@@ -65,13 +67,63 @@ pub fn fmpc_estimator() -> ControllerSpec {
     }
 }
 
+/// A controller of the study.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum PreviewController {
+    /// One of the lab's ([`ControllerSpec`]).
+    Lab(ControllerSpec),
+    /// The autopilot's position loop as the SITL flies it: PD (k_p 3, k_d
+    /// 3, the SITL's OFFBOARD gains) with velocity and acceleration
+    /// feed-forward from the stream, on the lab's state estimator, its
+    /// tilt limited to 30°.
+    PdFeedForward,
+}
+
+impl PreviewController {
+    fn factory(&self) -> Result<crate::harness::ControllerFactory, ExperimentError> {
+        match self {
+            Self::Lab(spec) => spec.factory(),
+            Self::PdFeedForward => {
+                let build = || -> Result<Box<dyn dflat_control::Controller>, ExperimentError> {
+                    let model = super::controllers::planar_model().map_err(|source| {
+                        ExperimentError::Controller {
+                            controller: "pd-ff",
+                            source,
+                        }
+                    })?;
+                    let tilt = 30f64.to_radians();
+                    let pd = Pd::new(
+                        model,
+                        PdSettings {
+                            kp: [3.0; 3],
+                            kd: [3.0; 3],
+                            max_horizontal_acceleration: 9.81 * tilt.tan(),
+                            max_tilt: tilt,
+                            state: StateSource::Estimator(super::fair::lab_estimator()),
+                            acceleration_feed_forward: true,
+                            ..PdSettings::default()
+                        },
+                    )
+                    .map_err(|source| ExperimentError::Controller {
+                        controller: "pd-ff",
+                        source,
+                    })?;
+                    Ok(Box::new(pd))
+                };
+                build()?;
+                Ok(Arc::new(move || build().expect("built once before")))
+            }
+        }
+    }
+}
+
 /// The trial that flies `trajectory` from its stream in `form` with
 /// `controller` on the planar plant for `duration` \[s\] with `sensor`.
 pub fn spec(
     trajectory: Trajectory,
     form: StreamForm,
     settings: StreamSettings,
-    controller: &ControllerSpec,
+    controller: &PreviewController,
     sensor: SensorSpec,
     duration: f64,
 ) -> Result<TrialSpec, ExperimentError> {
@@ -121,7 +173,7 @@ pub fn fly(
     trajectory: Trajectory,
     form: StreamForm,
     settings: StreamSettings,
-    controller: &ControllerSpec,
+    controller: &PreviewController,
     sensor: SensorSpec,
     duration: f64,
 ) -> Result<Flown, ExperimentError> {
@@ -201,6 +253,8 @@ pub struct PreviewRow {
     pub vision_hz: f64,
     /// DF-MPC's figures.
     pub dfmpc: Flown,
+    /// The PD with velocity and acceleration feed-forward's figures.
+    pub pd_feed_forward: Flown,
     /// Flatness MPC's (estimator) figures.
     pub fmpc_estimator: Flown,
 }
@@ -218,16 +272,17 @@ impl PreviewResult {
     /// The table (p95 \[m\], DF-MPC / Flatness MPC (estimator)).
     pub fn table(&self) -> String {
         let mut t = String::from(
-            "shape        speed  vision  form                       DF-MPC p95  FMPC-est p95  DF step\n",
+            "shape        speed  vision  form                       DF-MPC p95  PD+FF p95  FMPC-est p95  DF step\n",
         );
         for r in &self.rows {
             t += &format!(
-                "{:12} {:5.1}  {:4.0} Hz  {:26} {:9.3} m  {:10.3} m  {:5.2}°\n",
+                "{:12} {:5.1}  {:4.0} Hz  {:26} {:9.3} m  {:7.3} m  {:10.3} m  {:5.2}°\n",
                 r.shape,
                 r.speed,
                 r.vision_hz,
                 r.form,
                 r.dfmpc.p95,
+                r.pd_feed_forward.p95,
                 r.fmpc_estimator.p95,
                 r.dfmpc.max_step_deg
             );
@@ -242,7 +297,11 @@ pub fn run_preview(
     progress: bool,
 ) -> Result<PreviewResult, ExperimentError> {
     let settings = StreamSettings::default();
-    let controllers = [shipped_dfmpc(), fmpc_estimator()];
+    let controllers = [
+        PreviewController::Lab(shipped_dfmpc()),
+        PreviewController::PdFeedForward,
+        PreviewController::Lab(fmpc_estimator()),
+    ];
     let mut specs = Vec::new();
     let mut keys = Vec::new();
     for &(name, shape, size) in &SHAPES {
@@ -279,6 +338,7 @@ pub fn run_preview(
             Ok(judge(&r, &tr))
         };
         let dfmpc = judged()?;
+        let pd_feed_forward = judged()?;
         let fmpc_estimator = judged()?;
         rows.push(PreviewRow {
             shape,
@@ -286,6 +346,7 @@ pub fn run_preview(
             form,
             vision_hz,
             dfmpc,
+            pd_feed_forward,
             fmpc_estimator,
         });
     }
@@ -318,7 +379,7 @@ mod tests {
             trajectory,
             form,
             settings,
-            &shipped_dfmpc(),
+            &PreviewController::Lab(shipped_dfmpc()),
             SensorSpec::Perfect,
             16.0,
         )
@@ -350,5 +411,39 @@ mod tests {
             assert_eq!(f.errors, 0);
             assert!(f.max_step_deg < 5.0, "{f:?}");
         }
+    }
+
+    /// The autopilot's loop with the stream's acceleration fed forward
+    /// tracks the circle (a PD alone lags it by metres) and DF-MPC cuts its
+    /// error on the eight several times over.
+    #[test]
+    fn the_pd_with_feed_forward_is_a_fair_anchor() {
+        let form = StreamForm {
+            rate_hz: 20.0,
+            fields: Fields::Pva,
+            ahead_s: 0.0,
+            yaw: false,
+        };
+        let fly_with = |shape, size, c: &PreviewController| {
+            let tr = trajectory(shape, size, 4.0);
+            fly(
+                tr,
+                form,
+                StreamSettings::default(),
+                c,
+                SensorSpec::Perfect,
+                16.0,
+            )
+            .unwrap()
+        };
+        let pd = PreviewController::PdFeedForward;
+        let df = PreviewController::Lab(shipped_dfmpc());
+        let circle = fly_with(Shape::Circle, 6.0, &pd);
+        assert!(circle.p95 < 0.2, "{circle:?}");
+        let (pd8, df8) = (
+            fly_with(Shape::FigureEight, 8.0, &pd),
+            fly_with(Shape::FigureEight, 8.0, &df),
+        );
+        assert!(df8.p95 < 0.5 * pd8.p95, "{df8:?} vs {pd8:?}");
     }
 }
