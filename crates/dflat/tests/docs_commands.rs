@@ -6,6 +6,9 @@
 //! --example NAME` names a workspace package and a target it has, and a
 //! `--lib FILTER` names a module or function the package has.
 //!
+//! The pages and every subcommand's `--help` name no issue numbers or
+//! work sessions (the docs speak of the product as it is).
+//!
 //! The extractor and the checker are unit-tested below on made-up commands
 //! (a made-up flag, subcommand, package and test target each fail).
 
@@ -648,4 +651,62 @@ fn a_made_up_package_or_target_fails() {
     assert!(problems_of("`cargo test -p dflat-tuning --lib review_tests`").is_empty());
     // Another binary's arguments are not dflat's.
     assert!(problems_of("`cargo run -p dflat-tuning --bin other -- --any`").is_empty());
+}
+
+/// The words that tie a text to the project's history instead of the
+/// product: an issue number, a work session, what was removed.
+fn history_words(text: &str) -> Vec<String> {
+    let lower = text.to_lowercase();
+    let mut found = Vec::new();
+    for (i, _) in lower.match_indices("issue") {
+        let rest = &lower[i + 5..];
+        let rest = rest.strip_prefix(['-', ' ', '#']).unwrap_or("");
+        if rest.starts_with(|c: char| c.is_ascii_digit()) {
+            found.push(lower[i..(i + 8).min(lower.len())].to_owned());
+        }
+    }
+    for phrase in ["this session", "since removed", "before this change"] {
+        if lower.contains(phrase) {
+            found.push(phrase.to_owned());
+        }
+    }
+    found
+}
+
+#[test]
+fn the_docs_and_the_help_name_no_issue_or_session() {
+    let root = root();
+    let mut problems = Vec::new();
+    for page in pages(&root) {
+        let text = std::fs::read_to_string(&page).expect("page");
+        for (n, line) in text.lines().enumerate() {
+            for w in history_words(line) {
+                problems.push(format!("{}:{}: {w}", page.display(), n + 1));
+            }
+        }
+    }
+    let mut help = binary_help();
+    let top = help(&[]).expect("dflat --help");
+    for sub in subcommands(&top) {
+        let path = vec![sub.clone()];
+        let Some(text) = help(&path) else { continue };
+        for w in history_words(&text) {
+            problems.push(format!("dflat {sub} --help: {w}"));
+        }
+        for nested in subcommands(&text) {
+            let p = vec![sub.clone(), nested.clone()];
+            for w in history_words(&help(&p).unwrap_or_default()) {
+                problems.push(format!("dflat {sub} {nested} --help: {w}"));
+            }
+        }
+    }
+    assert!(problems.is_empty(), "{}", problems.join("\n"));
+}
+
+#[test]
+fn history_words_are_found() {
+    assert_eq!(history_words("the tilt cone (issue 17)"), ["issue 17"]);
+    assert_eq!(history_words("#preview-issue-39-first"), ["issue-39"]);
+    assert_eq!(history_words("a switch since removed"), ["since removed"]);
+    assert!(history_words("the issue's budget; no issues here").is_empty());
 }
