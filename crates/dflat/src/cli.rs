@@ -233,12 +233,6 @@ fn run_daemon(args: DaemonArgs) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::error_text;
-
-    #[derive(Debug, thiserror::Error)]
-    #[error("cfg.toml: cannot read: {source}")]
-    struct Read {
-        source: std::io::Error,
-    }
     use clap::Parser as _;
 
     /// `dflat identify --manoeuvre --at 0,0,-10` (docs/tuning.md): a NED
@@ -280,6 +274,12 @@ mod tests {
     fn sitl_runs_without_a_config() {
         let cli = super::Cli::try_parse_from(["dflat", "sitl", "--gcs", "udpin:0.0.0.0:14550"]);
         assert!(cli.is_ok(), "{cli:?}");
+    }
+
+    #[derive(Debug, thiserror::Error)]
+    #[error("cfg.toml: cannot read: {source}")]
+    struct Read {
+        source: std::io::Error,
     }
 
     #[test]
