@@ -23,4 +23,3 @@ pub mod review;
 #[cfg(test)]
 mod review_tests;
 mod svg;
-

@@ -30,7 +30,8 @@
 mod term;
 
 pub use term::{
-    ERROR_FLOOR, ERROR_RATIO_FULL, ERROR_RATIO_OFF, ERROR_TICKS, LearnedStatus, LearnedTerm, RunningError,
+    ERROR_FLOOR, ERROR_RATIO_FULL, ERROR_RATIO_OFF, ERROR_TICKS, LearnedStatus, LearnedTerm,
+    RunningError,
 };
 
 use std::collections::BTreeMap;
