@@ -182,9 +182,7 @@ fn daemon_flight(name: &str, form: &Form) -> (Judged, f64) {
         .attitude_targets()
         .filter(|(f, _)| f.at <= stream_end)
         .map(|(_, d)| {
-            let [w, x, y, z] = d.q.map(f64::from);
-            let roll = (2.0 * (w * x + y * z)).atan2(1.0 - 2.0 * (x * x + y * y));
-            let pitch = (2.0 * (w * y - z * x)).clamp(-1.0, 1.0).asin();
+            let [roll, pitch, _] = dflat_link::euler_from_quaternion(d.q.map(f64::from));
             (roll, pitch)
         })
         .collect();

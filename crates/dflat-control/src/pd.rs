@@ -239,6 +239,52 @@ impl Pd {
     pub fn velocity(&self) -> Vector3<f64> {
         self.velocity
     }
+
+    /// The reference the tick flies from the position `y`: its point,
+    /// velocity and the acceleration fed forward (a flyable reference's
+    /// own with `acceleration_feed_forward`; a corner's braking with
+    /// `corners`). Errors on a non-finite reference.
+    fn reference_at(
+        &self,
+        y: &Vector3<f64>,
+        reference: &mut dyn ReferenceSource,
+    ) -> Result<[Vector3<f64>; 3], ControlError> {
+        // One control step of the reference first: a path's start ramp
+        // advances only with `horizon` (its speed would stay at the ramp's
+        // v0 = 0 and PD would hover at the start).
+        let mut step = [Vector3::zeros(); 3];
+        let feed_forward = self.settings.acceleration_feed_forward && reference.flyable();
+        let steps = if feed_forward { 3 } else { 1 };
+        reference.horizon(y, self.dt, &mut step[..steps]);
+        let (p_ref, mut v_ref) = reference.closest(y);
+        // A flyable reference's acceleration, fed forward.
+        let mut a_ff = if feed_forward {
+            (step[2] - step[1] * 2.0 + step[0]) / (self.dt * self.dt)
+        } else {
+            Vector3::zeros()
+        };
+        // Slowing for a corner: the limited speed, and its rate along the
+        // path fed forward (PD alone lags the braking).
+        if let Some(c) = self.settings.corners
+            && let Some((limit, rate)) = reference.corner_speed(c.radius, c.acceleration)
+        {
+            let speed = v_ref.norm();
+            if speed > limit {
+                let dir = v_ref / speed;
+                v_ref = dir * limit;
+                a_ff = dir * rate;
+            }
+        }
+        if !(p_ref
+            .iter()
+            .chain(v_ref.iter())
+            .chain(a_ff.iter())
+            .all(|c| c.is_finite()))
+        {
+            return Err(ControlError::NonFiniteReference);
+        }
+        Ok([p_ref, v_ref, a_ff])
+    }
 }
 
 /// Limits the horizontal part of `a` to `max` [m/s²] keeping its direction.
@@ -297,40 +343,7 @@ impl Controller for Pd {
         } else {
             measurement.position
         };
-        // One control step of the reference first: a path's start ramp
-        // advances only with `horizon` (its speed would stay at the ramp's
-        // v0 = 0 and PD would hover at the start).
-        let mut step = [Vector3::zeros(); 3];
-        let feed_forward = self.settings.acceleration_feed_forward && reference.flyable();
-        let steps = if feed_forward { 3 } else { 1 };
-        reference.horizon(&y, self.dt, &mut step[..steps]);
-        let (p_ref, mut v_ref) = reference.closest(&y);
-        // A flyable reference's acceleration, fed forward.
-        let mut a_ff = if feed_forward {
-            (step[2] - step[1] * 2.0 + step[0]) / (self.dt * self.dt)
-        } else {
-            Vector3::zeros()
-        };
-        // Slowing for a corner: the limited speed, and its rate along the
-        // path fed forward (PD alone lags the braking).
-        if let Some(c) = self.settings.corners
-            && let Some((limit, rate)) = reference.corner_speed(c.radius, c.acceleration)
-        {
-            let speed = v_ref.norm();
-            if speed > limit {
-                let dir = v_ref / speed;
-                v_ref = dir * limit;
-                a_ff = dir * rate;
-            }
-        }
-        if !(p_ref
-            .iter()
-            .chain(v_ref.iter())
-            .chain(a_ff.iter())
-            .all(|c| c.is_finite()))
-        {
-            return Err(ControlError::NonFiniteReference);
-        }
+        let [p_ref, v_ref, a_ff] = self.reference_at(&y, reference)?;
         let velocity = if let Some(s) = &estimate {
             Vector3::new(s[0][1], s[1][1], s[2][1])
         } else if stale {

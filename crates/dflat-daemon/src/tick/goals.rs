@@ -240,26 +240,22 @@ impl ControlCore {
             return b.push_sample(sample);
         }
         let settings = self.config.stream.settings();
-        let mut b = match seed {
-            Some((t, p)) if t < sample.t => {
-                let mut b = Reference::stream(
-                    settings,
-                    &StreamSample {
-                        t,
-                        position: Vector3::from(p),
-                        velocity: None,
-                        acceleration: None,
-                        yaw: None,
-                        yaw_rate: None,
-                    },
-                )?;
-                b.set_time(arrival);
-                b.push_sample(sample)?;
-                b
-            }
-            _ => Reference::stream(settings, sample)?,
-        };
+        // A seed before the sample starts the stream; the sample follows.
+        let seed = seed
+            .filter(|&(t, _)| t < sample.t)
+            .map(|(t, p)| StreamSample {
+                t,
+                position: Vector3::from(p),
+                velocity: None,
+                acceleration: None,
+                yaw: None,
+                yaw_rate: None,
+            });
+        let mut b = Reference::stream(settings, seed.as_ref().unwrap_or(sample))?;
         b.set_time(arrival);
+        if seed.is_some() {
+            b.push_sample(sample)?;
+        }
         self.stream_buffer = Some(b);
         Ok(())
     }

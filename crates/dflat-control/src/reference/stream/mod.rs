@@ -71,6 +71,7 @@
 //! figure eight's turn rate reverses within a second), so the default is
 //! 0.25 s (docs/controllers.md, "Preview").
 
+use dflat_model::attitude::wrap_angle_difference;
 use nalgebra::Vector3;
 
 mod knots;
@@ -485,7 +486,7 @@ impl Stream {
                 let rate = b.yaw_rate.unwrap_or(0.0);
                 let dt = (t - b.t).clamp(0.0, self.settings.extrapolation_s);
                 let y = b.yaw? + rate * dt;
-                Some((wrap(y), rate))
+                Some((wrap_angle_difference(y), rate))
             }
             (None, Some(a)) => Some((a.yaw?, a.yaw_rate.unwrap_or(0.0))),
             (None, None) => None,
@@ -496,9 +497,8 @@ impl Stream {
 /// The heading between two knots that give one, at `t` (module docs of
 /// [`Stream::yaw`]).
 fn yaw_between(b: &StreamSample, a: &StreamSample, t: f64) -> (f64, f64) {
-    use std::f64::consts::{PI, TAU};
     let (y0, y1) = (b.yaw.unwrap_or(0.0), a.yaw.unwrap_or(0.0));
-    let d = (y1 - y0 + PI).rem_euclid(TAU) - PI;
+    let d = wrap_angle_difference(y1 - y0);
     let h = a.t - b.t;
     let u = ((t - b.t) / h).clamp(0.0, 1.0);
     let (r0, r1) = match (b.yaw_rate, a.yaw_rate) {
@@ -509,15 +509,5 @@ fn yaw_between(b: &StreamSample, a: &StreamSample, t: f64) -> (f64, f64) {
     let y = y0 + (-2.0 * u3 + 3.0 * u2) * d + (u3 - 2.0 * u2 + u) * h * r0 + (u3 - u2) * h * r1;
     let r =
         (-6.0 * u2 + 6.0 * u) * d / h + (3.0 * u2 - 4.0 * u + 1.0) * r0 + (3.0 * u2 - 2.0 * u) * r1;
-    (wrap(y), r)
-}
-
-/// `a` \[rad\] in (−π, π] (unchanged when it already is).
-fn wrap(a: f64) -> f64 {
-    use std::f64::consts::{PI, TAU};
-    if a > -PI && a <= PI {
-        return a;
-    }
-    let w = (a + PI).rem_euclid(TAU) - PI;
-    if w <= -PI { w + TAU } else { w }
+    (wrap_angle_difference(y), r)
 }

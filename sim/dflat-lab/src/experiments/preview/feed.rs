@@ -60,8 +60,6 @@ pub struct StreamFeed {
     t: f64,
     /// The next send's time \[s\].
     next_send: f64,
-    /// Samples the reference refused (0 for a planner's own trajectory).
-    pub refused: u64,
 }
 
 impl StreamFeed {
@@ -74,7 +72,6 @@ impl StreamFeed {
             reference: None,
             t: 0.0,
             next_send: 0.0,
-            refused: 0,
         }
     }
 
@@ -95,18 +92,15 @@ impl StreamFeed {
         }
     }
 
+    /// Adds a sample. A planner's own trajectory is never refused (finite,
+    /// in time order, within `max_ahead_s`: `tests/reference_ahead.rs`), so
+    /// an error here would be the lab's bug: it is debug-asserted.
     fn push(&mut self, s: StreamSample) {
-        match &mut self.reference {
-            None => match Reference::stream(self.settings, &s) {
-                Ok(r) => self.reference = Some(r),
-                Err(_) => self.refused += 1,
-            },
-            Some(r) => {
-                if r.push_sample(&s).is_err() {
-                    self.refused += 1;
-                }
-            }
-        }
+        let pushed = match &mut self.reference {
+            None => Reference::stream(self.settings, &s).map(|r| self.reference = Some(r)),
+            Some(r) => r.push_sample(&s),
+        };
+        debug_assert!(pushed.is_ok(), "{pushed:?}");
     }
 
     /// Sends what is due by the tick's time and sets the reference's clock.

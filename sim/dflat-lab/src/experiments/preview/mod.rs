@@ -111,7 +111,13 @@ impl PreviewController {
                     Ok(Box::new(pd))
                 };
                 build()?;
-                Ok(Arc::new(move || build().expect("built once before")))
+                // As the lab's own factories: a later failure is an
+                // unbuildable controller that errs every tick, not a panic.
+                Ok(Arc::new(move || {
+                    build().unwrap_or_else(|e| {
+                        Box::new(super::controllers::Unbuildable::new("pd-ff", &e))
+                    })
+                }))
             }
         }
     }
