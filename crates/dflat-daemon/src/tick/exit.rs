@@ -75,7 +75,7 @@ impl ControlCore {
         failure: &TickError,
         row: &mut CsvRow,
     ) -> Option<AttitudeCommand> {
-        let first = self.failsafe == Failsafe::Nominal;
+        let first = self.failsafe.state == Failsafe::Nominal;
         match failure {
             TickError::DeadlineOverrun { solve_us } => {
                 self.counts.guards.deadline_overruns += 1;
@@ -93,19 +93,19 @@ impl ControlCore {
         }
         let planned = self
             .controller
-            .plan_fallback(measurement, self.fallback.hold_ticks as usize)
+            .plan_fallback(measurement, self.failsafe.fallback.hold_ticks as usize)
             .and_then(|out| {
                 let command = self.guarded(&out.command).ok()?;
                 Some((command, out.plan[1]))
             });
         match planned {
-            Some((_, next)) => self.residual.predict([next.x, next.y, next.z]),
-            None => self.residual.forget(),
+            Some((_, next)) => self.failsafe.residual.predict([next.x, next.y, next.z]),
+            None => self.failsafe.residual.forget(),
         }
         let event = Event::Failed {
             t,
             planned: planned.is_some(),
-            can_hold: self.fallback.held().is_some(),
+            can_hold: self.failsafe.fallback.held().is_some(),
         };
         let (kind, announce) = match self.failsafe_on(event) {
             Action::Fallback { kind, announce } => (kind, announce),
@@ -120,11 +120,11 @@ impl ControlCore {
         let command = match kind {
             FallbackKind::Plan => {
                 let command = planned.map(|(c, _)| c)?;
-                self.fallback.planned(command);
+                self.failsafe.fallback.planned(command);
                 command
             }
-            FallbackKind::Held => self.fallback.held()?,
-            FallbackKind::LevelHover => self.fallback.level_command(),
+            FallbackKind::Held => self.failsafe.fallback.held()?,
+            FallbackKind::LevelHover => self.failsafe.fallback.level_command(),
         };
         let (counter, note, text) = match kind {
             FallbackKind::Plan => (

@@ -10,10 +10,25 @@ use tracing::{debug, error, info};
 
 use super::exit::update_caught;
 use super::failsafe::{self, Action, Event, Failsafe, LevelPlan, Limits};
-use super::failsafe_level::brake_command;
+use super::failsafe_level::{TiltSincePose, brake_command};
 use super::{ControlCore, SentCommand};
+use crate::guard::{Fallback, ResidualMonitor};
 use crate::records::CsvRow;
 use crate::supervisor::{Cause, FlightState, Transition};
+
+/// The failsafe: the core's part that owns the failsafe machine's state
+/// and what its fallbacks and its brake need.
+#[derive(Debug)]
+pub(super) struct FailsafePart {
+    /// The failsafe machine's state (`tick/failsafe.rs`).
+    pub(super) state: Failsafe,
+    /// The fallback commands: the plan's step, the held command, level.
+    pub(super) fallback: Fallback,
+    /// The model-consistency residual.
+    pub(super) residual: ResidualMonitor,
+    /// The autopilot's tilt integrated since the newest pose (the brake).
+    pub(super) tilt_since_pose: TiltSincePose,
+}
 
 impl ControlCore {
     /// The failsafe machine's settings, from the configuration.
@@ -22,30 +37,31 @@ impl ControlCore {
         // whatever `level_hover_max_ms` says of failures; the stop ends it
         // (`stop_done`), two ticks before the machine would let go, so the
         // stream has no silent tick before it stops.
-        let level_ms = if self.stop.is_some() {
-            self.config.safety.stop_level_ms + 2000.0 * self.period
+        let f = &self.settings.failsafe;
+        let level_hover_max = if self.engagement.stop.is_some() {
+            f.stop_level + 2.0 * self.settings.period
         } else {
-            self.config.safety.level_hover_max_ms
+            f.level_hover_max
         };
         Limits {
-            hold_ticks: self.fallback.hold_ticks,
-            level_hover_max: level_ms / 1000.0,
-            period: self.period,
+            hold_ticks: self.failsafe.fallback.hold_ticks,
+            level_hover_max,
+            period: self.settings.period,
         }
     }
 
     /// Feeds `event` to the failsafe machine: the state moves on; returns
     /// what to do.
     pub(super) fn failsafe_on(&mut self, event: Event) -> Action {
-        let (state, action) = failsafe::next(self.failsafe, event, &self.failsafe_limits());
-        if state.name() != self.failsafe.name() {
+        let (state, action) = failsafe::next(self.failsafe.state, event, &self.failsafe_limits());
+        if state.name() != self.failsafe.state.name() {
             debug!(
-                from = self.failsafe.name(),
+                from = self.failsafe.state.name(),
                 to = state.name(),
                 "failsafe state"
             );
         }
-        self.failsafe = state;
+        self.failsafe.state = state;
         action
     }
 
@@ -85,7 +101,7 @@ impl ControlCore {
     /// disturbance estimate's when it has a usable one, else the
     /// configured one. Taken before a failsafe resets the controller.
     pub(super) fn failsafe_level_command(&self) -> AttitudeCommand {
-        let mut command = self.fallback.level_command();
+        let mut command = self.failsafe.fallback.level_command();
         if let Some(hover) = self
             .controller
             .disturbance()
@@ -100,17 +116,21 @@ impl ControlCore {
     /// What a failsafe entered at `t` streams: `command`, after the brake
     /// that cancels the velocity gained since the newest pose.
     fn level_plan(&self, t: f64, command: AttitudeCommand) -> LevelPlan {
-        let v = &self.config.vehicle;
-        let brake = self.tilt_since_pose.at(t).and_then(|(integral, attitude)| {
-            brake_command(
-                integral,
-                attitude,
-                v.tau,
-                v.k,
-                self.guard.max_tilt,
-                0.5 * self.config.safety.level_hover_max_ms / 1000.0,
-            )
-        });
+        let v = &self.settings.vehicle;
+        let brake = self
+            .failsafe
+            .tilt_since_pose
+            .at(t)
+            .and_then(|(integral, attitude)| {
+                brake_command(
+                    integral,
+                    attitude,
+                    v.tau,
+                    v.k,
+                    self.guard.max_tilt,
+                    0.5 * self.settings.failsafe.level_hover_max,
+                )
+            });
         LevelPlan { command, brake }
     }
 
@@ -124,7 +144,7 @@ impl ControlCore {
                     ..
                 },
             ..
-        } = self.failsafe
+        } = self.failsafe.state
         {
             info!(
                 pitch_deg = c[0].to_degrees(),
@@ -135,7 +155,7 @@ impl ControlCore {
         }
         if announce {
             info!(
-                max_ms = self.config.safety.level_hover_max_ms,
+                max_s = self.settings.failsafe.level_hover_max,
                 "failsafe: level hover, then the attitude stream stops"
             );
             self.text(
@@ -153,11 +173,11 @@ impl ControlCore {
         if let Some(tr) = self.supervisor.force_failsafe(t, Cause::ControlFailed) {
             self.counts.guards.control_failsafes += 1;
             error!(
-                level_hover_ms = self.config.safety.level_hover_max_ms,
+                level_hover_s = self.settings.failsafe.level_hover_max,
                 "controller cannot fly: stream stopped, the autopilot's failsafe takes over"
             );
             self.reset_controller();
-            self.last_used_arrival = None;
+            self.poses.last_used_arrival = None;
             self.announce(tr);
         }
     }
@@ -167,7 +187,8 @@ impl ControlCore {
     /// window). After [`failsafe::TRIAL_TICKS`] good ones in a row the
     /// latch is lifted and the stream resumes at the next tick.
     pub(super) fn trial(&mut self, t: f64) {
-        let (Some(pose), Some(reference)) = (self.pose, self.reference.as_ref()) else {
+        let (Some(pose), Some(reference)) = (self.poses.newest, self.goals.reference.as_ref())
+        else {
             return;
         };
         // On a copy: a trial must not move a path's progress.
@@ -217,7 +238,7 @@ impl ControlCore {
             }
         };
         let time_boot_ms = (t * 1000.0) as u64 as u32;
-        let message = match set_attitude_target(self.target, time_boot_ms, &command) {
+        let message = match set_attitude_target(self.settings.target, time_boot_ms, &command) {
             Ok(m) => m,
             Err(e) => {
                 error!(error = %e, "failsafe level command not encodable: stream off");
@@ -227,7 +248,7 @@ impl ControlCore {
         };
         // The stop's own level (SIGTERM) is not a fallback: the summary's
         // `stop` counts it.
-        if self.stop.is_none() {
+        if self.engagement.stop.is_none() {
             self.counts.guards.level_hover += 1;
         }
         self.counts.commands += 1;
