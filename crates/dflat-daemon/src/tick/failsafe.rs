@@ -47,6 +47,56 @@ pub struct LevelPlan {
     pub brake: Option<([f64; 2], f64)>,
 }
 
+/// When a failsafe that stopped the controller may clear (as PX4's
+/// failsafe framework's clear conditions).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Clear {
+    /// When its cause clears (fresh pose, the autopilot alive).
+    WhenCauseClears,
+    /// When its cause clears, not before this time \[s\] (a residual
+    /// failsafe: [`RESIDUAL_FAILSAFE_LATCH`] after it began).
+    NotBefore(f64),
+}
+
+impl Clear {
+    /// The clear condition of a failsafe for `cause` entered at `t` \[s\].
+    pub fn for_cause(cause: Cause, t: f64) -> Self {
+        match cause {
+            Cause::ResidualDiverged => Clear::NotBefore(t + RESIDUAL_FAILSAFE_LATCH),
+            _ => Clear::WhenCauseClears,
+        }
+    }
+
+    /// True while it may not clear at `t` \[s\].
+    pub fn latched(&self, t: f64) -> bool {
+        match *self {
+            Clear::WhenCauseClears => false,
+            Clear::NotBefore(until) => t < until,
+        }
+    }
+}
+
+/// The failsafe states by severity, least first: when two causes are
+/// active the more severe state wins (a failed tick never lowers a
+/// supervisor's failsafe; a second failsafe never lowers the first).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Severity {
+    /// The controller flies.
+    Nominal,
+    /// Its previous plan.
+    PlanFallback,
+    /// The last good command, held.
+    HeldCommand,
+    /// Level attitude at hover thrust.
+    LevelHover,
+    /// The supervisor's failsafe: brake, then level.
+    FailsafeLevel,
+    /// Stream off.
+    LetGo,
+    /// Stream off, the controller on trial.
+    Trial,
+}
+
 /// The failsafe state of the control core.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Failsafe {
@@ -81,14 +131,15 @@ pub enum Failsafe {
         since: f64,
         /// What is streamed.
         plan: LevelPlan,
-        /// No recovery before this time \[s\] (residual failsafe).
-        latched_until: Option<f64>,
+        /// When it may clear.
+        clear: Clear,
     },
     /// Stream off: the autopilot's own failsafe flies. The supervisor
-    /// recovers on fresh pose and a live autopilot, once not latched.
+    /// recovers on fresh pose and a live autopilot, once its clear
+    /// condition allows.
     LetGo {
-        /// No recovery before this time \[s\] (residual failsafe).
-        latched_until: Option<f64>,
+        /// When it may clear.
+        clear: Clear,
     },
     /// The controller could not fly (level hover ran out): stream off, and
     /// the controller is tried each tick on the newest pose (not sent).
@@ -231,13 +282,24 @@ impl Failsafe {
         }
     }
 
+    /// Its place in the severity order.
+    pub fn severity(&self) -> Severity {
+        match self {
+            Failsafe::Nominal => Severity::Nominal,
+            Failsafe::PlanFallback { .. } => Severity::PlanFallback,
+            Failsafe::HeldCommand { .. } => Severity::HeldCommand,
+            Failsafe::LevelHover { .. } => Severity::LevelHover,
+            Failsafe::FailsafeLevel { .. } => Severity::FailsafeLevel,
+            Failsafe::LetGo { .. } => Severity::LetGo,
+            Failsafe::Trial { .. } => Severity::Trial,
+        }
+    }
+
     /// True while the supervisor may not recover at `t` \[s\] (a residual
     /// failsafe's latch, or the controller not yet trialled).
     pub fn latched(&self, t: f64) -> bool {
         match *self {
-            Failsafe::FailsafeLevel { latched_until, .. } | Failsafe::LetGo { latched_until } => {
-                latched_until.is_some_and(|u| t < u)
-            }
+            Failsafe::FailsafeLevel { clear, .. } | Failsafe::LetGo { clear } => clear.latched(t),
             Failsafe::Trial { .. } => true,
             _ => false,
         }
@@ -254,15 +316,10 @@ impl Failsafe {
     }
 
     /// True in the states the controller flies in (a failure here starts
-    /// or continues a fallback streak).
+    /// or continues a fallback streak): below the supervisor's failsafe,
+    /// which a failed tick or a second failsafe never lowers.
     fn flying(&self) -> bool {
-        matches!(
-            self,
-            Failsafe::Nominal
-                | Failsafe::PlanFallback { .. }
-                | Failsafe::HeldCommand { .. }
-                | Failsafe::LevelHover { .. }
-        )
+        self.severity() < Severity::FailsafeLevel
     }
 }
 
@@ -291,8 +348,7 @@ pub fn next(state: Failsafe, event: Event, limits: &Limits) -> (Failsafe, Action
                 level,
             },
         ) if s.flying() => {
-            let latched_until =
-                (cause == Cause::ResidualDiverged).then_some(t + RESIDUAL_FAILSAFE_LATCH);
+            let clear = Clear::for_cause(cause, t);
             match cause {
                 Cause::ControlFailed => (S::Trial { good: 0 }, Action::None),
                 Cause::PoseStale
@@ -305,28 +361,21 @@ pub fn next(state: Failsafe, event: Event, limits: &Limits) -> (Failsafe, Action
                         S::FailsafeLevel {
                             since: t,
                             plan: level,
-                            latched_until,
+                            clear,
                         },
                         Action::StartLevel {
                             announce: limits.level_hover_max > 0.0,
                         },
                     )
                 }
-                _ => (S::LetGo { latched_until }, Action::None),
+                _ => (S::LetGo { clear }, Action::None),
             }
         }
         (_, Event::Recovered) => (S::Nominal, Action::None),
-        (
-            S::FailsafeLevel {
-                since,
-                plan,
-                latched_until,
-            },
-            Event::Idle { t },
-        ) => {
+        (S::FailsafeLevel { since, plan, clear }, Event::Idle { t }) => {
             if limits.ran_out(since, t) {
                 (
-                    S::LetGo { latched_until },
+                    S::LetGo { clear },
                     Action::LevelOver {
                         announce: limits.level_hover_max > 0.0,
                     },
@@ -349,15 +398,13 @@ pub fn next(state: Failsafe, event: Event, limits: &Limits) -> (Failsafe, Action
                 )
             }
         }
-        (S::FailsafeLevel { latched_until, .. }, Event::LevelRefused) => {
-            (S::LetGo { latched_until }, Action::None)
-        }
+        (S::FailsafeLevel { clear, .. }, Event::LevelRefused) => (S::LetGo { clear }, Action::None),
         (S::Trial { good }, Event::TrialSolve { ok }) => {
             let good = if ok { good + 1 } else { 0 };
             if good >= TRIAL_TICKS {
                 (
                     S::LetGo {
-                        latched_until: None,
+                        clear: Clear::WhenCauseClears,
                     },
                     Action::FliesAgain,
                 )

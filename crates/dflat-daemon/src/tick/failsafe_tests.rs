@@ -45,25 +45,25 @@ const L: S = S::LevelHover {
 const FL: S = S::FailsafeLevel {
     since: 1.0,
     plan: PLAN,
-    latched_until: None,
+    clear: Clear::WhenCauseClears,
 };
 const FL_LATCHED: S = S::FailsafeLevel {
     since: 1.0,
     plan: PLAN,
-    latched_until: Some(3.0),
+    clear: Clear::NotBefore(3.0),
 };
 const G: S = S::LetGo {
-    latched_until: None,
+    clear: Clear::WhenCauseClears,
 };
 const G_LATCHED: S = S::LetGo {
-    latched_until: Some(3.0),
+    clear: Clear::NotBefore(3.0),
 };
 const T: S = S::Trial { good: 2 };
 const T_LAST: S = S::Trial {
     good: TRIAL_TICKS - 1,
 };
 
-fn failed(t: f64, planned: bool, can_hold: bool) -> Event {
+const fn failed(t: f64, planned: bool, can_hold: bool) -> Event {
     Event::Failed {
         t,
         planned,
@@ -71,7 +71,7 @@ fn failed(t: f64, planned: bool, can_hold: bool) -> Event {
     }
 }
 
-fn entered(cause: Cause, engaged: bool) -> Event {
+const fn entered(cause: Cause, engaged: bool) -> Event {
     Event::FailsafeEntered {
         t: 1.04,
         cause,
@@ -92,237 +92,241 @@ fn event_name(e: &Event) -> &'static str {
     }
 }
 
-fn fallback(kind: FallbackKind, announce: bool) -> Action {
+const fn fallback(kind: FallbackKind, announce: bool) -> Action {
     Action::Fallback { kind, announce }
 }
 
+use Action as A;
+use FallbackKind::{Held, LevelHover, Plan};
+
+/// A residual failsafe entered at 1.04 s.
+const LATCH: Clear = Clear::NotBefore(1.04 + RESIDUAL_FAILSAFE_LATCH);
+const FL_AT: S = S::FailsafeLevel {
+    since: 1.04,
+    plan: PLAN,
+    clear: Clear::WhenCauseClears,
+};
+const FL_AT_LATCHED: S = S::FailsafeLevel {
+    since: 1.04,
+    plan: PLAN,
+    clear: LATCH,
+};
+const START: Action = A::StartLevel { announce: true };
+const PLAN_FAIL: Event = failed(1.04, true, true);
+const HOLD_FAIL: Event = failed(1.04, false, true);
+const BARE_FAIL: Event = failed(1.04, false, false);
+const LATE_FAIL: Event = failed(1.09, false, true);
+
 /// (state, event, next state, action).
-fn table() -> Vec<(S, Event, S, Action)> {
-    use Action as A;
-    use FallbackKind::{Held, LevelHover, Plan};
-    let latch = Some(1.04 + RESIDUAL_FAILSAFE_LATCH);
-    let fl_at = |latched_until| S::FailsafeLevel {
-        since: 1.04,
-        plan: PLAN,
-        latched_until,
-    };
-    let start = A::StartLevel { announce: true };
-    let plan_fail = failed(1.04, true, true);
-    let hold_fail = failed(1.04, false, true);
-    let bare_fail = failed(1.04, false, false);
-    let late_fail = failed(1.09, false, true);
-    vec![
-        // A good tick ends any fallback streak.
-        (N, Event::Solved, N, A::None),
-        (P, Event::Solved, N, A::Recovered { failed: 3 }),
-        (H, Event::Solved, N, A::Recovered { failed: 1 }),
-        (L, Event::Solved, N, A::Recovered { failed: 4 }),
-        (FL, Event::Solved, FL, A::None),
-        (G, Event::Solved, G, A::None),
-        (T, Event::Solved, T, A::None),
-        // A failed tick with a plan to fly: the plan.
-        (
-            N,
-            plan_fail,
-            S::PlanFallback { failed: 1 },
-            fallback(Plan, true),
-        ),
-        (
-            P,
-            plan_fail,
-            S::PlanFallback { failed: 4 },
-            fallback(Plan, false),
-        ),
-        (
-            H,
-            plan_fail,
-            S::PlanFallback { failed: 2 },
-            fallback(Plan, true),
-        ),
-        (
-            L,
-            plan_fail,
-            S::PlanFallback { failed: 5 },
-            fallback(Plan, true),
-        ),
-        (FL, plan_fail, FL, A::None),
-        (G, plan_fail, G, A::None),
-        (T, plan_fail, T, A::None),
-        // No plan, a good command remembered: held (never after a plan),
-        // for at most hold_ticks, then level hover.
-        (
-            N,
-            hold_fail,
-            S::HeldCommand { failed: 1, held: 1 },
-            fallback(Held, true),
-        ),
-        (
-            H,
-            hold_fail,
-            S::HeldCommand { failed: 2, held: 2 },
-            fallback(Held, false),
-        ),
-        (
-            H_OUT,
-            hold_fail,
-            S::LevelHover {
-                failed: 3,
-                since: 1.04,
-            },
-            fallback(LevelHover, true),
-        ),
-        (
-            P,
-            hold_fail,
-            S::LevelHover {
-                failed: 4,
-                since: 1.04,
-            },
-            fallback(LevelHover, true),
-        ),
-        (
-            L,
-            hold_fail,
-            S::LevelHover {
-                failed: 5,
-                since: 1.0,
-            },
-            fallback(LevelHover, false),
-        ),
-        (FL, hold_fail, FL, A::None),
-        (G, hold_fail, G, A::None),
-        (T, hold_fail, T, A::None),
-        // Nothing to hold: level hover at once.
-        (
-            N,
-            bare_fail,
-            S::LevelHover {
-                failed: 1,
-                since: 1.04,
-            },
-            fallback(LevelHover, true),
-        ),
-        (
-            H,
-            bare_fail,
-            S::LevelHover {
-                failed: 2,
-                since: 1.04,
-            },
-            fallback(LevelHover, true),
-        ),
-        // Level hover ran out (1.09 − 1.0 + half a period ≥ 0.1 s): let go.
-        (L, late_fail, S::Trial { good: 0 }, A::LetGo),
-        // The supervisor's failsafe: level (brake first) when it left an
-        // engaged state for pose, autopilot or residual; latched 2 s after
-        // a residual; a control failure goes to the trial.
-        (N, entered(Cause::PoseStale, true), fl_at(None), start),
-        (N, entered(Cause::PoseStale, false), G, A::None),
-        (P, entered(Cause::AutopilotSilent, true), fl_at(None), start),
-        (
-            H,
-            entered(Cause::ResidualDiverged, true),
-            fl_at(latch),
-            start,
-        ),
-        (
-            L,
-            entered(Cause::ResidualDiverged, false),
-            S::LetGo {
-                latched_until: latch,
-            },
-            A::None,
-        ),
-        (
-            N,
-            entered(Cause::ControlFailed, true),
-            S::Trial { good: 0 },
-            A::None,
-        ),
-        (FL, entered(Cause::PoseStale, true), FL, A::None),
-        (G, entered(Cause::PoseStale, true), G, A::None),
-        (T, entered(Cause::PoseStale, true), T, A::None),
-        // Recovery (fresh pose, not latched) starts afresh from any state.
-        (N, Event::Recovered, N, A::None),
-        (P, Event::Recovered, N, A::None),
-        (H, Event::Recovered, N, A::None),
-        (L, Event::Recovered, N, A::None),
-        (FL, Event::Recovered, N, A::None),
-        (G_LATCHED, Event::Recovered, N, A::None),
-        (T, Event::Recovered, N, A::None),
-        // A tick without the controller: the failsafe's brake, its level
-        // hover, then stream off.
-        (
-            FL,
-            Event::Idle { t: 1.02 },
-            FL,
-            A::SendLevel {
-                command: BRAKE,
-                braking: true,
-            },
-        ),
-        (
-            FL,
-            Event::Idle { t: 1.04 },
-            FL,
-            A::SendLevel {
-                command: LEVEL,
-                braking: false,
-            },
-        ),
-        (
-            FL,
-            Event::Idle { t: 1.09 },
-            G,
-            A::LevelOver { announce: true },
-        ),
-        (
-            FL_LATCHED,
-            Event::Idle { t: 1.09 },
-            G_LATCHED,
-            A::LevelOver { announce: true },
-        ),
-        (N, Event::Idle { t: 1.04 }, N, A::None),
-        (P, Event::Idle { t: 1.04 }, P, A::None),
-        (H, Event::Idle { t: 1.04 }, H, A::None),
-        (L, Event::Idle { t: 1.04 }, L, A::None),
-        (G, Event::Idle { t: 1.04 }, G, A::None),
-        (T, Event::Idle { t: 1.04 }, T, A::None),
-        // Trial solves: TRIAL_TICKS good ones in a row lift the latch.
-        (
-            T,
-            Event::TrialSolve { ok: true },
-            S::Trial { good: 3 },
-            A::None,
-        ),
-        (
-            T,
-            Event::TrialSolve { ok: false },
-            S::Trial { good: 0 },
-            A::None,
-        ),
-        (T_LAST, Event::TrialSolve { ok: true }, G, A::FliesAgain),
-        (N, Event::TrialSolve { ok: true }, N, A::None),
-        (P, Event::TrialSolve { ok: true }, P, A::None),
-        (H, Event::TrialSolve { ok: true }, H, A::None),
-        (L, Event::TrialSolve { ok: true }, L, A::None),
-        (FL, Event::TrialSolve { ok: true }, FL, A::None),
-        (G, Event::TrialSolve { ok: true }, G, A::None),
-        // The level command could not be sent: stream off (latch kept).
-        (FL, Event::LevelRefused, G, A::None),
-        (FL_LATCHED, Event::LevelRefused, G_LATCHED, A::None),
-        (N, Event::LevelRefused, N, A::None),
-        (P, Event::LevelRefused, P, A::None),
-        (H, Event::LevelRefused, H, A::None),
-        (L, Event::LevelRefused, L, A::None),
-        (G, Event::LevelRefused, G, A::None),
-        (T, Event::LevelRefused, T, A::None),
-    ]
-}
+const TABLE: &[(S, Event, S, Action)] = &[
+    // A good tick ends any fallback streak.
+    (N, Event::Solved, N, A::None),
+    (P, Event::Solved, N, A::Recovered { failed: 3 }),
+    (H, Event::Solved, N, A::Recovered { failed: 1 }),
+    (L, Event::Solved, N, A::Recovered { failed: 4 }),
+    (FL, Event::Solved, FL, A::None),
+    (G, Event::Solved, G, A::None),
+    (T, Event::Solved, T, A::None),
+    // A failed tick with a plan to fly: the plan.
+    (
+        N,
+        PLAN_FAIL,
+        S::PlanFallback { failed: 1 },
+        fallback(Plan, true),
+    ),
+    (
+        P,
+        PLAN_FAIL,
+        S::PlanFallback { failed: 4 },
+        fallback(Plan, false),
+    ),
+    (
+        H,
+        PLAN_FAIL,
+        S::PlanFallback { failed: 2 },
+        fallback(Plan, true),
+    ),
+    (
+        L,
+        PLAN_FAIL,
+        S::PlanFallback { failed: 5 },
+        fallback(Plan, true),
+    ),
+    (FL, PLAN_FAIL, FL, A::None),
+    (G, PLAN_FAIL, G, A::None),
+    (T, PLAN_FAIL, T, A::None),
+    // No plan, a good command remembered: held (never after a plan),
+    // for at most hold_ticks, then level hover.
+    (
+        N,
+        HOLD_FAIL,
+        S::HeldCommand { failed: 1, held: 1 },
+        fallback(Held, true),
+    ),
+    (
+        H,
+        HOLD_FAIL,
+        S::HeldCommand { failed: 2, held: 2 },
+        fallback(Held, false),
+    ),
+    (
+        H_OUT,
+        HOLD_FAIL,
+        S::LevelHover {
+            failed: 3,
+            since: 1.04,
+        },
+        fallback(LevelHover, true),
+    ),
+    (
+        P,
+        HOLD_FAIL,
+        S::LevelHover {
+            failed: 4,
+            since: 1.04,
+        },
+        fallback(LevelHover, true),
+    ),
+    (
+        L,
+        HOLD_FAIL,
+        S::LevelHover {
+            failed: 5,
+            since: 1.0,
+        },
+        fallback(LevelHover, false),
+    ),
+    (FL, HOLD_FAIL, FL, A::None),
+    (G, HOLD_FAIL, G, A::None),
+    (T, HOLD_FAIL, T, A::None),
+    // Nothing to hold: level hover at once.
+    (
+        N,
+        BARE_FAIL,
+        S::LevelHover {
+            failed: 1,
+            since: 1.04,
+        },
+        fallback(LevelHover, true),
+    ),
+    (
+        H,
+        BARE_FAIL,
+        S::LevelHover {
+            failed: 2,
+            since: 1.04,
+        },
+        fallback(LevelHover, true),
+    ),
+    // Level hover ran out (1.09 − 1.0 + half a period ≥ 0.1 s): let go.
+    (L, LATE_FAIL, S::Trial { good: 0 }, A::LetGo),
+    // The supervisor's failsafe: level (brake first) when it left an
+    // engaged state for pose, autopilot or residual; latched 2 s after
+    // a residual; a control failure goes to the trial.
+    (N, entered(Cause::PoseStale, true), FL_AT, START),
+    (N, entered(Cause::PoseStale, false), G, A::None),
+    (P, entered(Cause::AutopilotSilent, true), FL_AT, START),
+    (
+        H,
+        entered(Cause::ResidualDiverged, true),
+        FL_AT_LATCHED,
+        START,
+    ),
+    (
+        L,
+        entered(Cause::ResidualDiverged, false),
+        S::LetGo { clear: LATCH },
+        A::None,
+    ),
+    (
+        N,
+        entered(Cause::ControlFailed, true),
+        S::Trial { good: 0 },
+        A::None,
+    ),
+    (FL, entered(Cause::PoseStale, true), FL, A::None),
+    (G, entered(Cause::PoseStale, true), G, A::None),
+    (T, entered(Cause::PoseStale, true), T, A::None),
+    // Recovery (fresh pose, not latched) starts afresh from any state.
+    (N, Event::Recovered, N, A::None),
+    (P, Event::Recovered, N, A::None),
+    (H, Event::Recovered, N, A::None),
+    (L, Event::Recovered, N, A::None),
+    (FL, Event::Recovered, N, A::None),
+    (G_LATCHED, Event::Recovered, N, A::None),
+    (T, Event::Recovered, N, A::None),
+    // A tick without the controller: the failsafe's brake, its level
+    // hover, then stream off.
+    (
+        FL,
+        Event::Idle { t: 1.02 },
+        FL,
+        A::SendLevel {
+            command: BRAKE,
+            braking: true,
+        },
+    ),
+    (
+        FL,
+        Event::Idle { t: 1.04 },
+        FL,
+        A::SendLevel {
+            command: LEVEL,
+            braking: false,
+        },
+    ),
+    (
+        FL,
+        Event::Idle { t: 1.09 },
+        G,
+        A::LevelOver { announce: true },
+    ),
+    (
+        FL_LATCHED,
+        Event::Idle { t: 1.09 },
+        G_LATCHED,
+        A::LevelOver { announce: true },
+    ),
+    (N, Event::Idle { t: 1.04 }, N, A::None),
+    (P, Event::Idle { t: 1.04 }, P, A::None),
+    (H, Event::Idle { t: 1.04 }, H, A::None),
+    (L, Event::Idle { t: 1.04 }, L, A::None),
+    (G, Event::Idle { t: 1.04 }, G, A::None),
+    (T, Event::Idle { t: 1.04 }, T, A::None),
+    // Trial solves: TRIAL_TICKS good ones in a row lift the latch.
+    (
+        T,
+        Event::TrialSolve { ok: true },
+        S::Trial { good: 3 },
+        A::None,
+    ),
+    (
+        T,
+        Event::TrialSolve { ok: false },
+        S::Trial { good: 0 },
+        A::None,
+    ),
+    (T_LAST, Event::TrialSolve { ok: true }, G, A::FliesAgain),
+    (N, Event::TrialSolve { ok: true }, N, A::None),
+    (P, Event::TrialSolve { ok: true }, P, A::None),
+    (H, Event::TrialSolve { ok: true }, H, A::None),
+    (L, Event::TrialSolve { ok: true }, L, A::None),
+    (FL, Event::TrialSolve { ok: true }, FL, A::None),
+    (G, Event::TrialSolve { ok: true }, G, A::None),
+    // The level command could not be sent: stream off (latch kept).
+    (FL, Event::LevelRefused, G, A::None),
+    (FL_LATCHED, Event::LevelRefused, G_LATCHED, A::None),
+    (N, Event::LevelRefused, N, A::None),
+    (P, Event::LevelRefused, P, A::None),
+    (H, Event::LevelRefused, H, A::None),
+    (L, Event::LevelRefused, L, A::None),
+    (G, Event::LevelRefused, G, A::None),
+    (T, Event::LevelRefused, T, A::None),
+];
 
 #[test]
 fn the_transition_table() {
-    let table = table();
+    let table = TABLE;
     for (i, (state, event, want_state, want_action)) in table.iter().enumerate() {
         let (got_state, got_action) = next(*state, *event, &LIMITS);
         assert_eq!(
@@ -455,4 +459,30 @@ fn a_long_streak_walks_the_ladder() {
     }
     assert!(!s.latched(t));
     assert_eq!(next(s, Event::Recovered, &LIMITS).0, N);
+}
+
+#[test]
+fn a_second_cause_never_lowers_a_failsafe() {
+    // Severity orders the states as the ladder climbs.
+    let order = [N, P, H, L, FL, G, T].map(|s| s.severity());
+    assert!(order.windows(2).all(|w| w[0] < w[1]));
+    // In the supervisor's failsafe or beyond, a failed tick or another
+    // failsafe leaves the state as severe as it was.
+    for (state, event, after, _) in TABLE {
+        let cause = matches!(event, Event::Failed { .. } | Event::FailsafeEntered { .. });
+        if cause && state.severity() >= Severity::FailsafeLevel {
+            assert!(
+                after.severity() >= state.severity(),
+                "{state:?} on {event:?}"
+            );
+        }
+    }
+}
+
+#[test]
+fn clear_conditions() {
+    assert!(!Clear::for_cause(Cause::PoseStale, 1.0).latched(1.0));
+    let residual = Clear::for_cause(Cause::ResidualDiverged, 1.0);
+    assert!(residual.latched(1.0 + RESIDUAL_FAILSAFE_LATCH - 1e-9));
+    assert!(!residual.latched(1.0 + RESIDUAL_FAILSAFE_LATCH));
 }
