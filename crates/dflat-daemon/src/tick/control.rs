@@ -8,7 +8,7 @@ use nalgebra::Vector3;
 use tracing::{error, info};
 
 use super::exit::{TickError, update_caught};
-use super::failsafe::{Action, Event};
+use super::failsafe::Event;
 use super::pose::PoseSample;
 use super::{ControlCore, SentCommand};
 use crate::records::{CsvDisturbance, CsvRow};
@@ -63,9 +63,7 @@ impl ControlCore {
         // (the previous plan, the held command, then level hover).
         let (command, out) = match produced {
             Ok((out, command)) => {
-                if let Action::Recovered { failed } = self.failsafe_on(Event::Solved) {
-                    info!(ticks = failed, "controller recovered");
-                }
+                self.failsafe_on(t, Event::Solved, None, &mut row.guard);
                 self.counts.solves.record(&out);
                 self.failsafe.fallback.good(command);
                 self.failsafe

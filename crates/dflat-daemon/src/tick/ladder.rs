@@ -6,10 +6,10 @@
 
 use dflat_link::dialect::MavSeverity;
 use dflat_link::{AttitudeCommand, set_attitude_target};
-use tracing::{debug, error, info};
+use tracing::{error, info};
 
 use super::exit::update_caught;
-use super::failsafe::{self, Action, Event, Failsafe, LevelPlan, Limits};
+use super::failsafe::{Event, Failsafe, LevelPlan, Limits};
 use super::failsafe_level::{TiltSincePose, brake_command};
 use super::{ControlCore, SentCommand};
 use crate::guard::{Fallback, ResidualMonitor};
@@ -32,7 +32,7 @@ pub(super) struct FailsafePart {
 
 impl ControlCore {
     /// The failsafe machine's settings, from the configuration.
-    fn failsafe_limits(&self) -> Limits {
+    pub(super) fn failsafe_limits(&self) -> Limits {
         // The stop's level lasts `safety.stop_level_ms` (its own setting),
         // whatever `level_hover_max_ms` says of failures; the stop ends it
         // (`stop_done`), two ticks before the machine would let go, so the
@@ -48,21 +48,6 @@ impl ControlCore {
             level_hover_max,
             period: self.settings.period,
         }
-    }
-
-    /// Feeds `event` to the failsafe machine: the state moves on; returns
-    /// what to do.
-    pub(super) fn failsafe_on(&mut self, event: Event) -> Action {
-        let (state, action) = failsafe::next(self.failsafe.state, event, &self.failsafe_limits());
-        if state.name() != self.failsafe.state.name() {
-            debug!(
-                from = self.failsafe.state.name(),
-                to = state.name(),
-                "failsafe state"
-            );
-        }
-        self.failsafe.state = state;
-        action
     }
 
     /// A state change of the supervisor at `t`: announced, and reported to
@@ -88,11 +73,9 @@ impl ControlCore {
                 engaged: tr.from.engaged(),
                 level: plan,
             };
-            if let Action::StartLevel { announce } = self.failsafe_on(event) {
-                self.start_level(announce);
-            }
+            self.failsafe_on(t, event, None, &mut None);
         } else if tr.from == FlightState::Failsafe {
-            self.failsafe_on(Event::Recovered);
+            self.failsafe_on(t, Event::Recovered, None, &mut None);
         }
     }
 
@@ -136,7 +119,7 @@ impl ControlCore {
 
     /// A levelling failsafe started: logged, and said unless level hover
     /// is off (`announce`).
-    fn start_level(&mut self, announce: bool) {
+    pub(super) fn start_level(&mut self, announce: bool) {
         if let Failsafe::FailsafeLevel {
             plan:
                 LevelPlan {
@@ -196,13 +179,7 @@ impl ControlCore {
         let measurement = self.tick_measurement(t, &pose);
         let ok = update_caught(self.controller.as_mut(), &measurement, &mut reference).is_ok();
         self.reset_controller();
-        if self.failsafe_on(Event::TrialSolve { ok }) == Action::FliesAgain {
-            info!("controller solves again: the stream may resume");
-            self.text(
-                MavSeverity::MAV_SEVERITY_NOTICE,
-                "dflat: controller flies again",
-            );
-        }
+        self.failsafe_on(t, Event::TrialSolve { ok }, None, &mut None);
     }
 
     /// A tick on which the controller does not fly: a failsafe's brake or
@@ -210,30 +187,17 @@ impl ControlCore {
     /// `safety.level_hover_max_ms` has run out: the stream stops). Guarded
     /// like every command; counted as level hover.
     pub(super) fn idle_tick(&mut self, t: f64, row: &mut CsvRow) -> Option<SentCommand> {
-        let (wanted, braking) = match self.failsafe_on(Event::Idle { t }) {
-            Action::SendLevel { command, braking } => (self.stop_ramp(command), braking),
-            Action::LevelOver { announce } => {
-                if announce {
-                    info!(
-                        "failsafe level hover over: attitude stream off, the autopilot's failsafe takes over"
-                    );
-                    self.text(
-                        MavSeverity::MAV_SEVERITY_CRITICAL,
-                        "dflat: level hover over, stream off",
-                    );
-                }
-                row.guard = Some("let_go");
-                return None;
-            }
-            _ => return None,
-        };
+        // The record's note before this tick's brake or level.
+        let before = row.guard;
+        let wanted = self.failsafe_on(t, Event::Idle { t }, None, &mut row.guard)?;
         let command = match self.guard.check(wanted, &mut self.counts.guards) {
             Ok(c) => c,
             Err(e) => {
                 // Level at a configured hover thrust always passes; if not,
                 // silence is the only safe answer.
                 error!(error = %e, "failsafe level command refused by the guard: stream off");
-                self.failsafe_on(Event::LevelRefused);
+                row.guard = before;
+                self.failsafe_on(t, Event::LevelRefused, None, &mut row.guard);
                 return None;
             }
         };
@@ -242,7 +206,8 @@ impl ControlCore {
             Ok(m) => m,
             Err(e) => {
                 error!(error = %e, "failsafe level command not encodable: stream off");
-                self.failsafe_on(Event::LevelRefused);
+                row.guard = before;
+                self.failsafe_on(t, Event::LevelRefused, None, &mut row.guard);
                 return None;
             }
         };
@@ -252,7 +217,6 @@ impl ControlCore {
             self.counts.guards.level_hover += 1;
         }
         self.counts.commands += 1;
-        row.guard = Some(if braking { "brake" } else { "level" });
         row.command = Some([command.roll, command.pitch, command.yaw, command.thrust]);
         Some(SentCommand {
             message,

@@ -24,9 +24,11 @@
 //! one state machine, [`failsafe::Failsafe`], with its transitions in one
 //! function (`tick/failsafe.rs`).
 //!
-//! Rooms: `control.rs` the controller's tick, `exit.rs` the exit path and
-//! why a tick failed, `failsafe.rs` the failsafe machine, `ladder.rs` the
-//! core carrying out its actions, `failsafe_level.rs` the brake,
+//! Rooms: `settings.rs` the core's typed settings, `control.rs` the
+//! controller's tick, `exit.rs` the exit path and why a tick failed,
+//! `failsafe.rs` the failsafe machine, `act.rs` the one place its actions
+//! become behaviour, `ladder.rs` the failsafe part and what the core
+//! reports to the machine, `failsafe_level.rs` the brake,
 //! `pose.rs` and `pose_clock.rs` poses in, `standby.rs` standby and
 //! engagement, `params.rs` the autopilot's parameters, `goals.rs`
 //! setpoints, streams and the reference, `mission.rs` missions and the
@@ -44,6 +46,7 @@ use crate::records::CsvRow;
 use crate::summary::{DisturbanceSummary, SolveCounts};
 use crate::supervisor::{Cause, FlightState, Supervisor, Transition};
 
+mod act;
 mod control;
 mod envelope;
 pub use envelope::STOP_GUARD;
