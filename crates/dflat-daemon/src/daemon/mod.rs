@@ -33,6 +33,7 @@
 
 mod control_loop;
 mod link_tasks;
+mod receive;
 
 use std::future::Future;
 use std::net::SocketAddr;
