@@ -436,7 +436,6 @@ pub struct StopSummary {
 
 impl fmt::Display for FlightSummary {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let l = &self.link_stats;
         writeln!(
             f,
             "dflat daemon summary: {} ({} model) at {} Hz on {}",
@@ -463,6 +462,16 @@ impl fmt::Display for FlightSummary {
                 rt.fifo_priority, rt.cpus, rt.memory_locked
             )?;
         }
+        self.fmt_timing_and_states(f)?;
+        self.fmt_link(f)?;
+        self.fmt_guards(f)?;
+        self.fmt_resources_and_records(f)
+    }
+}
+
+impl FlightSummary {
+    /// The summary's timing and flight-state lines.
+    fn fmt_timing_and_states(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         writeln!(f, "  solve time    {}", self.solve_us)?;
         writeln!(f, "  tick jitter   {}", self.jitter_us)?;
         writeln!(f, "  pose→command  {}", self.latency_us)?;
@@ -488,6 +497,12 @@ impl fmt::Display for FlightSummary {
                 s.duration_s, s.commands
             )?;
         }
+        Ok(())
+    }
+
+    /// The link's counters.
+    fn fmt_link(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let l = &self.link_stats;
         writeln!(
             f,
             "  link          rx {} (pose {} att {} hb {} setpoint {}), tx {} (att_tgt {} hb {} text {})",
@@ -521,12 +536,11 @@ impl fmt::Display for FlightSummary {
             self.events_dropped,
             self.outbound_dropped
         )?;
-        let cpu = self
-            .cpu_percent
-            .map_or("n/a".to_owned(), |c| format!("{c:.1} %"));
-        let rss = self.peak_rss_kib.map_or("n/a".to_owned(), |r| {
-            format!("{:.1} MiB", r as f64 / 1024.0)
-        });
+        Ok(())
+    }
+
+    /// What the guards and the solver did, and the link guard.
+    fn fmt_guards(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let g = &self.guards;
         writeln!(
             f,
@@ -566,6 +580,18 @@ impl fmt::Display for FlightSummary {
             lg.replies_dropped,
             lg.link_stalls
         )?;
+        Ok(())
+    }
+
+    /// Resources, the records and the disturbance estimate (no newline at
+    /// the end).
+    fn fmt_resources_and_records(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let cpu = self
+            .cpu_percent
+            .map_or("n/a".to_owned(), |c| format!("{c:.1} %"));
+        let rss = self.peak_rss_kib.map_or("n/a".to_owned(), |r| {
+            format!("{:.1} MiB", r as f64 / 1024.0)
+        });
         write!(f, "  resources     CPU {cpu}, peak RSS {rss}")?;
         if let Some(c) = &self.csv {
             write!(
