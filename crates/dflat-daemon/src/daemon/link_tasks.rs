@@ -297,7 +297,7 @@ pub(super) async fn send_task(
     inputs: SendInputs,
     stop: Arc<Stop>,
     (system_id, component_id): (u8, u8),
-    mut signing: Option<(Signing, TimestampStore)>,
+    signing: Option<(Signing, TimestampStore)>,
 ) -> TxReport {
     let SendInputs {
         commands,
@@ -309,14 +309,14 @@ pub(super) async fn send_task(
         epoch,
     } = inputs;
     let mut report = TxReport::default();
-    let mut persisted = Instant::now();
-    let persist = |s: &Signing, store: &TimestampStore| {
-        if let Err(e) = store.store(s.timestamp()) {
-            warn!(error = %e, "cannot persist the signing timestamp");
-        }
+    let mut sender = Sender {
+        transport,
+        ids: (system_id, component_id),
+        sequence: 0,
+        signing,
+        persisted: Instant::now(),
+        no_peer: 0,
     };
-    let mut sequence: u8 = 0;
-    let mut no_peer = 0u64;
     let mut budget = ReplyBudget::new(REPLY_RATE_HZ, REPLY_BURST, 0.0);
     let mut beat = tokio::time::interval(BEAT_INTERVAL / 2);
     beat.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
@@ -366,19 +366,56 @@ pub(super) async fn send_task(
             report.commands_stale += 1;
             continue;
         }
+        sender.send(&item, &mut report).await;
+    }
+    while replies.try_recv().is_ok() {
+        report.replies_pending += 1;
+    }
+    if let Some((s, store)) = &sender.signing {
+        persist(s, store);
+    }
+    report
+}
+
+/// Persists the signing timestamp (a failure is logged).
+fn persist(s: &Signing, store: &TimestampStore) {
+    if let Err(e) = store.store(s.timestamp()) {
+        warn!(error = %e, "cannot persist the signing timestamp");
+    }
+}
+
+/// The send task's writer: header and sequence, signing (the timestamp
+/// persisted every [`PERSIST_INTERVAL`]), counters and latencies.
+struct Sender {
+    transport: Transport,
+    /// The daemon's (system, component).
+    ids: (u8, u8),
+    sequence: u8,
+    signing: Option<(Signing, TimestampStore)>,
+    /// When the signing timestamp was last persisted.
+    persisted: Instant,
+    /// Messages dropped without a peer (or with the serial queue full).
+    no_peer: u64,
+}
+
+impl Sender {
+    /// Sends `item` (signed with signing on), counted into `report`.
+    async fn send(&mut self, item: &Outgoing, report: &mut TxReport) {
+        let (system_id, component_id) = self.ids;
+        let transport = &self.transport;
         let header = MavHeader {
             system_id: u32::from(system_id),
             component_id,
-            sequence,
+            sequence: self.sequence,
         };
-        sequence = sequence.wrapping_add(1);
-        let sent = match signing.as_mut() {
+        self.sequence = self.sequence.wrapping_add(1);
+        let sent = match self.signing.as_mut() {
             Some((s, store)) => {
                 let now = timestamp_from_system_time(SystemTime::now());
                 let frame = s.sign(&header, &item.message, now);
-                if persisted.elapsed() >= PERSIST_INTERVAL {
+                if self.persisted.elapsed() >= PERSIST_INTERVAL {
                     persist(s, store);
-                    persisted = Instant::now();
+                    self.persisted = Instant::now();
                 }
                 match frame {
                     Ok(frame) => transport.send_frame(&frame).await,
@@ -399,8 +436,8 @@ pub(super) async fn send_task(
                 }
             }
             Ok(SendOutcome::NoPeer | SendOutcome::QueueFull) => {
-                no_peer += 1;
-                if no_peer == 1 {
+                self.no_peer += 1;
+                if self.no_peer == 1 {
                     warn!(
                         "no peer (udpin before the lock, or the link is reconnecting) or the serial queue is full: outbound messages dropped"
                     );
@@ -414,13 +451,6 @@ pub(super) async fn send_task(
             }
         }
     }
-    while replies.try_recv().is_ok() {
-        report.replies_pending += 1;
-    }
-    if let Some((s, store)) = &signing {
-        persist(s, store);
-    }
-    report
 }
 
 /// HEARTBEAT at 1 Hz with the daemon's status; POWEROFF when stopping.
