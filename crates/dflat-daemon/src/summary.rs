@@ -611,7 +611,12 @@ impl FlightSummary {
                 t.dropped
             )?;
         }
-        crate::record_store::write_summary(f, self)?;
+        crate::record_store::write_summary(
+            f,
+            &self.records,
+            self.csv.as_ref(),
+            self.tlog.as_ref(),
+        )?;
         if let Some(d) = &self.disturbance {
             let r = &d.report;
             let hover = d
