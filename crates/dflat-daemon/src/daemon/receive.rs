@@ -482,13 +482,11 @@ mod tests {
             target_system: target.0,
             target_component: target.1,
             coordinate_frame: MavFrame::MAV_FRAME_LOCAL_NED,
-            type_mask: PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VX_IGNORE
-                | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VY_IGNORE
-                | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VZ_IGNORE
-                | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_AX_IGNORE
-                | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_AY_IGNORE
-                | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_AZ_IGNORE
-                | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE,
+            // Position and yaw: velocity (8, 16, 32), acceleration (64,
+            // 128, 256) and yaw rate (2048) ignored.
+            type_mask: PositionTargetTypemask::from_bits_truncate(
+                8 | 16 | 32 | 64 | 128 | 256 | 2048,
+            ),
             x: 5.0,
             z: -2.0,
             yaw,
