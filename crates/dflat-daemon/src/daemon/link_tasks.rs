@@ -14,51 +14,20 @@ use std::time::{Duration, Instant, SystemTime};
 
 use dflat_link::transport::{RecvEvent, SendOutcome, Transport, TransportError};
 use dflat_link::{
-    DaemonStatus, ErrorCategory, LinkError, LinkRx, MavHeader, MavMessage, PoseSource,
-    SetpointRejection, Signing, heartbeat_onboard, timestamp_from_system_time,
+    DaemonStatus, LinkRx, MavHeader, MavMessage, Signing, heartbeat_onboard,
+    timestamp_from_system_time,
 };
 use tokio::sync::mpsc;
 use tracing::{debug, error, warn};
 
-use super::receive::{FrameTime, Gate, ReceiveCore, RxOutput};
+use super::receive::{FrameTime, Gate, ReceiveCore, RxContext, RxOutput};
 use super::{Outgoing, RxReport, Stop, TxReport, daemon_status};
 use crate::link_health::{
     BEAT_INTERVAL, CommandSlot, LinkHealth, LinkTask, REPLY_BURST, REPLY_RATE_HZ, ReplyBudget,
     StallHook,
 };
-use crate::mission::{ItemRules, Mission};
 use crate::signing::{PERSIST_INTERVAL, TimestampStore};
 use crate::tick::Event;
-
-/// What the receive task needs to know of the daemon.
-#[derive(Debug, Clone)]
-pub(super) struct RxContext {
-    /// The daemon's epoch: event times are seconds since it.
-    pub epoch: Instant,
-    /// The epoch on the system clock \[µs since 1970\]: a received frame
-    /// is logged in the tlog at this plus its arrival in whole µs.
-    pub epoch_unix_us: u64,
-    /// The pose message the controller uses.
-    pub pose_source: PoseSource,
-    /// The daemon's (system, component).
-    pub own: (u8, u8),
-    /// The autopilot's component id.
-    pub autopilot_component: u8,
-    /// The fixed yaw ψ⋆ the model flies \[rad\].
-    pub yaw: f64,
-    /// `vehicle.yaw_mode = "fixed"`: a setpoint's yaw is not flown.
-    pub yaw_fixed: bool,
-    /// The published flight state (for the answers to REQUEST_MESSAGE).
-    pub state: Arc<AtomicU8>,
-    /// How uploaded mission items are read.
-    pub mission_rules: ItemRules,
-    /// Missions accepted by the protocol, to the control thread.
-    pub missions: std::sync::mpsc::Sender<Option<Mission>>,
-    /// Link-task liveness (a stall makes the HEARTBEAT answer CRITICAL).
-    pub health: Arc<LinkHealth>,
-    /// The test-only stall hook.
-    pub stall: Option<StallHook>,
-}
 
 /// The replies queue (bounded) and its drop counter.
 #[derive(Debug, Clone)]
@@ -74,55 +43,6 @@ impl Replies {
         if self.tx.try_send(Outgoing::plain(message)).is_err() {
             self.dropped.fetch_add(1, Ordering::Relaxed);
         }
-    }
-}
-
-/// The STATUSTEXT that says why a trusted SET_POSITION_TARGET_LOCAL_NED was
-/// refused; each cause has its own words (a ground station hides repeats).
-pub fn setpoint_refusal_text(e: &LinkError) -> String {
-    const VELOCITY_BITS: u16 = 8 | 16 | 32;
-    match e {
-        LinkError::SetpointRejected(SetpointRejection::Frame(frame)) => {
-            format!(
-                "dflat: setpoint refused: frame {} not LOCAL_NED",
-                *frame as u32
-            )
-        }
-        LinkError::SetpointRejected(SetpointRejection::PositionIgnored { type_mask })
-            if type_mask & VELOCITY_BITS != VELOCITY_BITS =>
-        {
-            "dflat: setpoint refused: velocity-only unsupported".to_owned()
-        }
-        LinkError::SetpointRejected(SetpointRejection::PositionIgnored { type_mask }) => {
-            format!("dflat: setpoint refused: x/y/z ignored {type_mask:#06x}")
-        }
-        // Each field its own words (and its own rate limit): a NaN x said
-        // does not hide an infinite z or a NaN yaw after it.
-        LinkError::NonFinite { field, .. } => {
-            format!("dflat: setpoint refused: {field} not finite")
-        }
-        e if e.category() == ErrorCategory::NonFinite => {
-            "dflat: setpoint refused: not finite".to_owned()
-        }
-        _ => "dflat: setpoint refused: malformed".to_owned(),
-    }
-}
-
-/// The STATUSTEXT for a SET_POSITION_TARGET_LOCAL_NED (84) whose payload
-/// did not decode (e.g. coordinate_frame 99); `None` for other frames.
-pub fn undecodable_setpoint_text(e: &dflat_link::FrameError) -> Option<String> {
-    match e {
-        dflat_link::FrameError::Payload {
-            msg_id: 84,
-            fault: dflat_link::PayloadFault::InvalidEnum { enum_type, value },
-        } => Some(format!(
-            "dflat: setpoint refused: {} {value} unknown",
-            enum_type.trim_start_matches("Mav")
-        )),
-        dflat_link::FrameError::Payload { msg_id: 84, .. } => {
-            Some("dflat: setpoint refused: malformed".to_owned())
-        }
-        _ => None,
     }
 }
 
@@ -499,40 +419,4 @@ pub(super) async fn heartbeat_task(
         }
     }
     let _ = out.try_send(Outgoing::plain(heartbeat_onboard(DaemonStatus::Poweroff)));
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// Each refused field has its own words (and so its own rate limit): a
-    /// NaN x said does not hide an infinite z or a NaN yaw after it; a
-    /// coordinate frame the dialect does not define is said too.
-    #[test]
-    fn refusals_name_the_field_and_the_unknown_frame() {
-        let text = |field| {
-            setpoint_refusal_text(&LinkError::NonFinite {
-                message: "SET_POSITION_TARGET_LOCAL_NED",
-                field,
-            })
-        };
-        let (x, z, yaw) = (text("x"), text("z"), text("yaw"));
-        assert_eq!(z, "dflat: setpoint refused: z not finite");
-        assert!(x != z && z != yaw && x != yaw);
-        let frame = dflat_link::FrameError::Payload {
-            msg_id: 84,
-            fault: dflat_link::PayloadFault::InvalidEnum {
-                enum_type: "MavFrame",
-                value: 99,
-            },
-        };
-        let said = undecodable_setpoint_text(&frame).unwrap();
-        assert_eq!(said, "dflat: setpoint refused: Frame 99 unknown");
-        assert!(said.len() <= 50);
-        let other = dflat_link::FrameError::Payload {
-            msg_id: 33,
-            fault: dflat_link::PayloadFault::Other,
-        };
-        assert_eq!(undecodable_setpoint_text(&other), None);
-    }
 }

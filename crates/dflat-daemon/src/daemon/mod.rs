@@ -64,7 +64,7 @@ use crate::summary::{
 use crate::supervisor::FlightState;
 use crate::tick::ControlCore;
 pub use crate::tick::supervisor_config;
-pub use link_tasks::setpoint_refusal_text;
+pub use receive::setpoint_refusal_text;
 
 /// Capacity of the receive task → control thread queue \[events\].
 const EVENT_QUEUE: usize = 1024;

@@ -235,7 +235,7 @@ impl LinkTasks {
         let signing = link.signing.take();
         let mut link_rx = LinkRx::new(source_filter(&config.link));
         link_rx.signing = signing.as_ref().map(|(s, _)| s.clone());
-        let rx_ctx = link_tasks::RxContext {
+        let rx_ctx = super::receive::RxContext {
             epoch: shared.epoch,
             epoch_unix_us,
             pose_source: pose_source(config.link.pose_source),
