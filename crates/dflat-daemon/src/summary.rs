@@ -176,44 +176,29 @@ impl StateTimes {
     }
 }
 
-/// Message counts by type (a serializable copy of dflat-link's [`MessageCounts`]).
+/// Message counts: the total, and dflat-link's [`MessageCounts`] by type (serialized flat).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
 pub struct Counts {
     /// All types.
     pub total: u64,
-    /// HEARTBEAT.
-    pub heartbeat: u64,
-    /// ATTITUDE.
-    pub attitude: u64,
-    /// LOCAL_POSITION_NED.
-    pub local_position_ned: u64,
-    /// SET_ATTITUDE_TARGET.
-    pub set_attitude_target: u64,
-    /// SET_POSITION_TARGET_LOCAL_NED.
-    pub set_position_target_local_ned: u64,
-    /// VISION_POSITION_ESTIMATE.
-    pub vision_position_estimate: u64,
-    /// STATUSTEXT.
-    pub statustext: u64,
-    /// ODOMETRY.
-    pub odometry: u64,
-    /// Anything else.
-    pub other: u64,
+    /// Per type (read through `Deref`: `counts.heartbeat`).
+    #[serde(flatten)]
+    pub by_type: MessageCounts,
+}
+
+impl std::ops::Deref for Counts {
+    type Target = MessageCounts;
+
+    fn deref(&self) -> &MessageCounts {
+        &self.by_type
+    }
 }
 
 impl From<&MessageCounts> for Counts {
     fn from(c: &MessageCounts) -> Self {
         Self {
             total: c.total(),
-            heartbeat: c.heartbeat,
-            attitude: c.attitude,
-            local_position_ned: c.local_position_ned,
-            set_attitude_target: c.set_attitude_target,
-            set_position_target_local_ned: c.set_position_target_local_ned,
-            vision_position_estimate: c.vision_position_estimate,
-            statustext: c.statustext,
-            odometry: c.odometry,
-            other: c.other,
+            by_type: *c,
         }
     }
 }
