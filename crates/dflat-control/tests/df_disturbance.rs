@@ -15,24 +15,12 @@ use dflat_control::dfmpc::{DfMpc, DfMpcSettings};
 use dflat_control::disturbance::{
     DisturbanceEstimate, DisturbanceEstimator, DisturbanceSettings, EstimatorStatus,
 };
-use dflat_control::{ControlModel, Controller, Frame, Measurement, ReferenceSource};
-use dflat_model::{FlatModel, PlanarModel, PlanarParams, SpatialModel, SpatialParams};
+use dflat_control::{ControlModel, Controller, Frame, Measurement};
+use dflat_model::{FlatModel, PlanarModel, SpatialModel, SpatialParams};
 use nalgebra::{SVector, Vector2, Vector3};
 
-const DT: f64 = 0.02;
-const G: f64 = 9.81;
-
-/// Constant setpoint.
-struct Setpoint(Vector3<f64>);
-
-impl ReferenceSource for Setpoint {
-    fn horizon(&mut self, _measured: &Vector3<f64>, _dt: f64, out: &mut [Vector3<f64>]) {
-        out.iter_mut().for_each(|o| *o = self.0);
-    }
-    fn closest(&mut self, _measured: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
-        (self.0, Vector3::zeros())
-    }
-}
+mod common;
+use common::{DT, G, Setpoint, planar_ned};
 
 /// Deterministic standard normals (xorshift64 + Box–Muller), no dependency.
 struct Normal(u64);
@@ -51,12 +39,7 @@ impl Normal {
 }
 
 fn planar_model() -> PlanarModel {
-    PlanarModel::new(PlanarParams {
-        psi: 0.3,
-        frame: Frame::Ned,
-        ..Default::default()
-    })
-    .unwrap()
+    planar_ned(0.3)
 }
 
 fn spatial_model() -> SpatialModel {
