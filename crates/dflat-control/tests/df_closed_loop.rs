@@ -490,28 +490,20 @@ fn df_settings_validation_names_the_field() {
         }),
         "tracking_weight"
     );
-    let c = OutputConstraints {
+    let nan_tilt = OutputConstraints {
         max_tilt: Some(f64::NAN),
         ..Default::default()
     };
-    assert_eq!(
-        field(DfMpcSettings {
-            constraints: c,
-            ..d
-        }),
-        "constraints.max_tilt"
-    );
-    let c = OutputConstraints {
+    let both_signs = OutputConstraints {
         vertical_acceleration: Some([-3.0, 3.0]),
         ..Default::default()
     };
-    assert_eq!(
-        field(DfMpcSettings {
-            constraints: c,
-            ..d
-        }),
-        "constraints.vertical_acceleration"
-    );
+    for (constraints, name) in [
+        (nan_tilt, "constraints.max_tilt"),
+        (both_signs, "constraints.vertical_acceleration"),
+    ] {
+        assert_eq!(field(DfMpcSettings { constraints, ..d }), name);
+    }
     let e = DfMpc::new(model, DfMpcSettings { horizon: 0, ..d }).unwrap_err();
     assert!(e.to_string().contains("horizon"), "{e}");
 }

@@ -302,12 +302,31 @@ fn planar_closed_loop(d: Vector2<f64>, estimator: Option<DisturbanceSettings>) -
     };
     let mut ctrl = DfMpc::new(ControlModel::Planar(m), settings).unwrap();
     let target = Vector3::new(3.0, -2.0, -1.5);
+    let error = mean_final_error(
+        &mut ctrl,
+        target,
+        SVector::<f64, 6>::zeros(),
+        |x| Vector3::new(x[0], x[2], -1.5),
+        |x, u| planar_step(&m, x, u, &d),
+    );
+    (error, ctrl)
+}
+
+/// Flies `ctrl` to the setpoint `target` for 20 s on a plant from state
+/// `x` (its position `output`, its `step` under the command (pitch, roll,
+/// thrust)); returns the mean distance to the target over the last 5 s \[m\].
+fn mean_final_error<S>(
+    ctrl: &mut DfMpc,
+    target: Vector3<f64>,
+    mut x: S,
+    output: impl Fn(&S) -> Vector3<f64>,
+    step: impl Fn(&S, &Vector3<f64>) -> S,
+) -> f64 {
     let mut reference = Setpoint(target);
-    let mut x = SVector::<f64, 6>::zeros();
     let ticks = 1000; // 20 s
     let (mut sum, mut n) = (0.0, 0);
     for k in 0..ticks {
-        let p = Vector3::new(x[0], x[2], -1.5);
+        let p = output(&x);
         if k >= ticks - 250 {
             sum += (p - target).norm();
             n += 1;
@@ -319,9 +338,9 @@ fn planar_closed_loop(d: Vector2<f64>, estimator: Option<DisturbanceSettings>) -
         };
         let out = ctrl.update(&m_k, &mut reference).unwrap();
         let u = Vector3::new(out.command.pitch, out.command.roll, out.command.thrust);
-        x = planar_step(&m, &x, &u, &d);
+        x = step(&x, &u);
     }
-    (sum / n as f64, ctrl)
+    sum / n as f64
 }
 
 #[test]
@@ -359,27 +378,16 @@ fn spatial_closed_loop(kappa: f64, estimator: Option<DisturbanceSettings>) -> (f
     let mut ctrl = DfMpc::new(ControlModel::Spatial(m), settings).unwrap();
     let target = Vector3::new(2.0, 1.0, -3.0);
     let start = Vector3::new(2.0, 1.0, -1.0);
-    let mut reference = Setpoint(target);
     let mut x = SVector::<f64, 9>::zeros();
     (x[0], x[2], x[4], x[8]) = (start.x, start.y, start.z, G);
-    let ticks = 1000;
-    let (mut sum, mut n) = (0.0, 0);
-    for k in 0..ticks {
-        let p = m.output(&x);
-        if k >= ticks - 250 {
-            sum += (p - target).norm();
-            n += 1;
-        }
-        let m_k = Measurement {
-            t: k as f64 * DT,
-            position: p,
-            yaw: 0.3,
-        };
-        let out = ctrl.update(&m_k, &mut reference).unwrap();
-        let u = Vector3::new(out.command.pitch, out.command.roll, out.command.thrust);
-        x = spatial_step(&m, &x, &u, kappa, &Vector2::zeros());
-    }
-    (sum / n as f64, ctrl)
+    let error = mean_final_error(
+        &mut ctrl,
+        target,
+        x,
+        |x| m.output(x),
+        |x, u| spatial_step(&m, x, u, kappa, &Vector2::zeros()),
+    );
+    (error, ctrl)
 }
 
 #[test]
