@@ -225,10 +225,6 @@ pub(crate) fn limit_pair(
     }
 }
 
-pub(crate) fn measurement_is_finite(m: &Measurement) -> bool {
-    m.t.is_finite() && m.yaw.is_finite() && m.position.iter().all(|c| c.is_finite())
-}
-
 impl FlatnessMpc {
     /// Builds the controller for `model` (its δt is the control step) and
     /// factors the constant Hessian of every axis. Errors name an invalid

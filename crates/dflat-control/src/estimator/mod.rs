@@ -562,7 +562,8 @@ impl BaselineEstimator {
         estimator: Option<&Self>,
         measurement: &crate::Measurement,
     ) -> Result<Option<[Vector3<f64>; 3]>, ControlError> {
-        if !crate::fmpc::measurement_is_finite(measurement) {
+        let m = measurement;
+        if !(m.t.is_finite() && m.yaw.is_finite() && m.position.iter().all(|c| c.is_finite())) {
             return Err(ControlError::NonFiniteMeasurement);
         }
         estimator.map(|e| e.state_at(measurement.t)).transpose()
