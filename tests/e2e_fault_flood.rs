@@ -19,16 +19,12 @@
 mod common;
 
 use std::net::UdpSocket;
-use std::sync::mpsc::channel;
 use std::time::{Duration, Instant};
 
 use common::*;
-use dflat_daemon::config::Config;
 use dflat_link::MavMessage;
 use dflat_link::dialect::LOCAL_POSITION_NED_DATA;
-use dflat_sitl::{self as sitl, SitlOptions};
 
-const MAX_TILT_DEG: f64 = 35.0;
 /// Messages per second of the flood.
 const RATE: u64 = 10_000;
 /// Flood duration (as paced; a loaded machine may take longer, and sends
@@ -44,36 +40,20 @@ const MAX_TICK_GAP: u64 = 3;
 #[test]
 fn a_10k_per_second_flood_does_not_disturb_the_50_hz_tick() {
     let dir = scratch("flood");
-    let text = format!(
-        r#"
-[mission]
-start = "hold"
-geofence = [100.0, 100.0, 50.0]
-[vehicle]
-max_tilt_deg = {MAX_TILT_DEG}
-[logging]
-dir = "{}"
-tlog = false
-[sitl]
-start = [0.0, 0.0, -10.0]
-noise_sigma = 0.01
-"#,
-        dir.display()
+    let text = hold_config(
+        &dir,
+        "geofence = [100.0, 100.0, 50.0]",
+        "noise_sigma = 0.01",
     );
-    let config = write_config(&dir, "flood.toml", &text);
+    let (config, _) = write_daemon_config(&dir, "flood.toml", &text);
     let summary_path = dir.join("summary.json");
-    Config::load(&config).expect("daemon config");
-    let (tx, tap) = channel();
-    let sim = sitl::spawn(
-        &dflat_sitl::SitlSettings::load(&config).expect("sitl config"),
-        SitlOptions {
-            link: Some("udpin:127.0.0.1:0".into()),
-            gcs: Some("udpin:127.0.0.1:0".into()),
-            tap: Some(tx),
-            ..SitlOptions::default()
+    let (sim, tap) = tapped_sitl(
+        &config,
+        TapOptions {
+            gcs: true,
+            ..TapOptions::default()
         },
-    )
-    .expect("sitl");
+    );
     let mut daemon = spawn_daemon_with(
         &dir,
         &config,

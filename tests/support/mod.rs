@@ -357,19 +357,12 @@ pub fn fly_in_process_until(
 ) -> Flight {
     let dir = scratch(name);
     let text = config_text.replace("@DIR@", &dir.display().to_string());
-    let config = write_config(&dir, &format!("{name}.toml"), &text);
-    Config::load(&config).expect("daemon config");
-    let (tx, tap) = channel();
-    let sim = sitl::spawn(
-        &dflat_sitl::SitlSettings::load(&config).expect("sitl config"),
-        SitlOptions {
-            link: Some("udpin:127.0.0.1:0".into()),
-            tap: Some(tx),
-            record_trace: true,
-            ..SitlOptions::default()
-        },
-    )
-    .expect("sitl");
+    let (config, _) = write_daemon_config(&dir, &format!("{name}.toml"), &text);
+    let options = TapOptions {
+        record_trace: true,
+        ..TapOptions::default()
+    };
+    let (sim, tap) = tapped_sitl(&config, options);
     let mut daemon = spawn_daemon(&dir, &config, sim.local_addr());
     let start = Instant::now();
     let mut frames = Vec::new();
@@ -399,6 +392,86 @@ pub fn fly_in_process_until(
         report,
         clean_exit,
     }
+}
+
+/// A flight's configuration (TOML): `tables`, then the records (CSV, no
+/// tlog) in `dir` and the SITL's table, its vehicle at rest at NED
+/// (0, 0, −10) m, with the further keys `sitl`.
+pub fn flight_config(dir: &Path, tables: &str, sitl: &str) -> String {
+    format!(
+        "{tables}\n[logging]\ndir = \"{}\"\ntlog = false\n[sitl]\nstart = [0.0, 0.0, -10.0]\n{sitl}\n",
+        dir.display()
+    )
+}
+
+/// The tilt limit of the flights of [`hold_config`] \[deg\] (the
+/// daemon's default, written out).
+pub const MAX_TILT_DEG: f64 = 35.0;
+
+/// As [`flight_config`] for a vehicle that holds where it starts, at the
+/// tilt limit [`MAX_TILT_DEG`]: `mission` holds the mission table's
+/// further keys and any more tables.
+pub fn hold_config(dir: &Path, mission: &str, sitl: &str) -> String {
+    let vehicle = format!("[vehicle]\nmax_tilt_deg = {MAX_TILT_DEG}");
+    let tables = format!("[mission]\nstart = \"hold\"\n{mission}\n{vehicle}");
+    flight_config(dir, &tables, sitl)
+}
+
+/// The SITL's keys for the shipped tuning with realistic sensing: the
+/// planar plant, 1 cm position noise.
+pub const PLANAR_NOISY: &str = "plant = \"planar\"\nnoise_sigma = 0.01";
+
+/// Writes the configuration `text` as `dir/file`, starts the SITL (with
+/// its ground-station port if `gcs`) writing its truth to
+/// `dir/truth.csv`, and the daemon against it; returns them and the truth
+/// file once the daemon commands the SITL (its offboard mode, within 15 s).
+pub fn start_flight(dir: &Path, file: &str, text: &str, gcs: bool) -> (Sitl, Proc, PathBuf) {
+    let config = write_config(dir, file, text);
+    let truth = dir.join("truth.csv");
+    let sitl = spawn_sitl(dir, &config, gcs, &truth);
+    let daemon = spawn_daemon(dir, &config, sitl.link);
+    assert!(
+        sitl.wait_for_line("sitl mode offboard", Duration::from_secs(15))
+            .is_some(),
+        "the daemon never commanded the SITL"
+    );
+    (sitl, daemon, truth)
+}
+
+/// Which ports and records the in-process SITL of [`tapped_sitl`] opens.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct TapOptions {
+    /// Open its ground-station port too (loopback, port 0).
+    pub gcs: bool,
+    /// Keep its truth trace for the report.
+    pub record_trace: bool,
+}
+
+/// The in-process SITL with the settings of `config`, listening on
+/// loopback (port 0), and the tap on which it hands over every frame the
+/// daemon sends it.
+pub fn tapped_sitl(config: &Path, options: TapOptions) -> (sitl::SitlHandle, Receiver<TapFrame>) {
+    let (tx, tap) = channel();
+    let sim = sitl::spawn(
+        &dflat_sitl::SitlSettings::load(config).expect("sitl config"),
+        SitlOptions {
+            link: Some("udpin:127.0.0.1:0".into()),
+            gcs: options.gcs.then(|| "udpin:127.0.0.1:0".into()),
+            tap: Some(tx),
+            record_trace: options.record_trace,
+            ..SitlOptions::default()
+        },
+    )
+    .expect("sitl");
+    (sim, tap)
+}
+
+/// Writes `text` as `dir/file` (as [`write_config`]) and loads it as the
+/// daemon's configuration, which must be valid.
+pub fn write_daemon_config(dir: &Path, file: &str, text: &str) -> (PathBuf, Config) {
+    let config = write_config(dir, file, text);
+    let cfg = Config::load(&config).expect("daemon config");
+    (config, cfg)
 }
 
 /// The daemon's per-flight CSV in `dir` (the newest `*.csv`) as rows of
@@ -440,6 +513,12 @@ pub fn field(row: &std::collections::HashMap<String, String>, name: &str) -> Opt
     row.get(name)
         .filter(|v| !v.is_empty())
         .map(|v| v.parse().unwrap_or(f64::NAN))
+}
+
+/// The capture time of the newest pose a CSV row's tick had, on the
+/// daemon's clock: the tick's `t_wake` less the pose's age \[s\].
+pub fn pose_capture(row: &std::collections::HashMap<String, String>) -> Option<f64> {
+    Some(field(row, "t_wake")? - field(row, "pose_age_ms")? / 1e3)
 }
 
 /// Checks every command in the CSV rows: finite, tilt ≤ `max_tilt_deg`,
