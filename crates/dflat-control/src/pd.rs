@@ -354,18 +354,12 @@ impl Controller for Pd {
         limit_horizontal(&mut a, s.max_horizontal_acceleration, &mut saturated);
         let limit = Some(s.max_tilt);
 
-        let command = match &self.model {
+        // The flat attitude and thrust, then the attitude loop's gain k̃.
+        let (theta, phi, thrust, k, psi) = match &self.model {
             ControlModel::Planar(m) => {
                 let p = m.params();
                 let (theta, phi) = m.attitude(&Vector2::new(a.x, a.y));
-                let (pitch, roll) =
-                    limit_pair(theta / p.k, phi / p.k, limit, s.tilt_limit, &mut saturated);
-                AttitudeCommand {
-                    pitch,
-                    roll,
-                    yaw: p.psi,
-                    thrust: p.g,
-                }
+                (theta, phi, p.g, p.k, p.psi)
             }
             ControlModel::Spatial(m) => {
                 let p = m.params();
@@ -376,15 +370,15 @@ impl Controller for Pd {
                 }
                 let t = spatial_thrust_vector(p.frame, p.g, &a);
                 let (thrust, theta, phi) = thrust_pitch_roll(t, p.psi)?;
-                let (pitch, roll) =
-                    limit_pair(theta / p.k, phi / p.k, limit, s.tilt_limit, &mut saturated);
-                AttitudeCommand {
-                    pitch,
-                    roll,
-                    yaw: p.psi,
-                    thrust,
-                }
+                (theta, phi, thrust, p.k, p.psi)
             }
+        };
+        let (pitch, roll) = limit_pair(theta / k, phi / k, limit, s.tilt_limit, &mut saturated);
+        let command = AttitudeCommand {
+            pitch,
+            roll,
+            yaw: psi,
+            thrust,
         };
         if !command.is_finite() {
             return Err(ControlError::Flat(FlatError::NonFinite("PD command")));

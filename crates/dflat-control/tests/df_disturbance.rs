@@ -143,6 +143,17 @@ impl OpenLoop {
     }
 }
 
+/// The spatial model's input at `t` \[s\] for identifying the thrust scale
+/// `kappa`: slow pitch and roll waves and a thrust wave about the hover
+/// thrust the vehicle needs (pitch, roll \[rad\], thrust \[m/s²\]).
+fn exciting_input(t: f64, kappa: f64) -> Vector3<f64> {
+    Vector3::new(
+        0.1 * (0.7 * t).sin(),
+        0.05 * (1.3 * t).cos(),
+        G / kappa + 0.5 * (0.9 * t).sin(),
+    )
+}
+
 fn planar_estimator() -> DisturbanceEstimator {
     DisturbanceEstimator::new(
         ControlModel::Planar(planar_model()),
@@ -196,12 +207,7 @@ fn estimator_converges_to_thrust_scale_on_spatial_step() {
     let mut x = SVector::<f64, 9>::zeros();
     x[8] = G;
     for k in 0..1500 {
-        let t = k as f64 * DT;
-        let u = Vector3::new(
-            0.1 * (0.7 * t).sin(),
-            0.05 * (1.3 * t).cos(),
-            G / kappa + 0.5 * (0.9 * t).sin(),
-        );
+        let u = exciting_input(k as f64 * DT, kappa);
         est.begin_tick();
         est.record(&m.output(&x), &u, false);
         x = spatial_step(&m, &x, &u, kappa, &d);
@@ -427,11 +433,7 @@ fn multi_rate_estimator_converges_with_1cm_noise_on_spatial_step() {
         let mut next_capture = 0.0;
         for k in 0..1500 {
             let t = k as f64 * DT;
-            let u = Vector3::new(
-                0.1 * (0.7 * t).sin(),
-                0.05 * (1.3 * t).cos(),
-                G / kappa + 0.5 * (0.9 * t).sin(),
-            );
+            let u = exciting_input(t, kappa);
             let next = spatial_step(&m, &x, &u, kappa, &d);
             // Captures in [t, t + δt): the model's outputs lerped.
             while next_capture < t + DT - 1e-12 {
