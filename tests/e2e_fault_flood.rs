@@ -65,19 +65,10 @@ fn a_10k_per_second_flood_does_not_disturb_the_50_hz_tick() {
     let target = sim.gcs_addr().expect("the SITL's GCS port");
 
     // Holding for 1 s.
-    let until = Instant::now() + Duration::from_secs(15);
-    let mut since = None;
-    while Instant::now() < until {
-        std::thread::sleep(Duration::from_millis(50));
-        let n = tap
-            .try_iter()
-            .filter(|f| matches!(f.message, MavMessage::SET_ATTITUDE_TARGET(_)))
-            .count();
-        if n > 0 && since.get_or_insert_with(Instant::now).elapsed() > Duration::from_secs(1) {
-            break;
-        }
-    }
-    assert!(since.is_some(), "the daemon never streamed");
+    assert!(
+        wait_streaming(&tap, Duration::from_secs(1)),
+        "the daemon never streamed"
+    );
 
     // The flood: 100 datagrams every 10 ms.
     let wrong_pose = MavMessage::LOCAL_POSITION_NED(LOCAL_POSITION_NED_DATA {

@@ -13,7 +13,7 @@
 #[path = "support/mod.rs"]
 mod common;
 
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use common::*;
 use dflat_link::MavMessage;
@@ -34,19 +34,10 @@ fn pose_jump_re_anchors_without_a_tilt_spike() {
     let mut daemon = spawn_daemon(&dir, &config, sim.local_addr());
 
     // Holding steadily for 2 s.
-    let until = Instant::now() + Duration::from_secs(15);
-    let mut since = None;
-    while Instant::now() < until {
-        std::thread::sleep(Duration::from_millis(50));
-        let n = tap
-            .try_iter()
-            .filter(|f| matches!(f.message, MavMessage::SET_ATTITUDE_TARGET(_)))
-            .count();
-        if n > 0 && since.get_or_insert_with(Instant::now).elapsed() > Duration::from_secs(2) {
-            break;
-        }
-    }
-    assert!(since.is_some(), "the daemon never streamed");
+    assert!(
+        wait_streaming(&tap, Duration::from_secs(2)),
+        "the daemon never streamed"
+    );
     let before = sim.truth().position;
     sim.set_pose_offset([JUMP, 0.0, 0.0]);
     std::thread::sleep(Duration::from_secs(3));

@@ -33,18 +33,7 @@ const ARRIVAL: f64 = 0.5;
 #[test]
 fn short_l_path_stays_within_the_stated_path_error() {
     let dir = scratch("lpath");
-    let text = flight_config(
-        &dir,
-        &format!(
-            r#"
-[mission]
-start = "path"
-path = [[0.0, 0.0, -10.0], [15.0, 0.0, -10.0], [15.0, 10.0, -10.0]]
-speed = {SPEED}
-"#
-        ),
-        PLANAR_NOISY,
-    );
+    let text = path_config(&dir, &PATH, SPEED, "", PLANAR_NOISY);
     let (mut sitl, mut daemon, truth) = start_flight(&dir, "lpath.toml", &text, false);
     // Path time 25 m / 3 m/s ≈ 8.3 s; stop at arrival + 1 s or after 20 s.
     let started = Instant::now();

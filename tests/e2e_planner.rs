@@ -100,18 +100,7 @@ fn fly(yaw: bool) -> Figures {
     assert!(errors.len() > 300, "{} samples judged", errors.len());
     let e95 = p95(errors);
     // The commands the daemon sent: largest step per tick of the tilt.
-    let tilts: Vec<(f64, f64)> = flight
-        .attitude_targets()
-        .map(|(_, d)| {
-            let [roll, pitch, _] = dflat_link::euler_from_quaternion(d.q.map(f64::from));
-            (roll, pitch)
-        })
-        .collect();
-    let step = tilts
-        .windows(2)
-        .map(|w| (w[1].0 - w[0].0).abs().max((w[1].1 - w[0].1).abs()))
-        .fold(0.0, f64::max)
-        .to_degrees();
+    let step = largest_tilt_step_deg(flight.attitude_targets().map(|(_, d)| d));
     // The heading follows the stream's yaw (along the velocity).
     let last_streamed = offboard
         .iter()

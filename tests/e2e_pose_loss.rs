@@ -101,18 +101,10 @@ fn pose_loss_stops_the_stream_after_the_level_hover_and_pose_return_resumes_it()
     let mut daemon = spawn_daemon(&dir, &config, sim.local_addr());
 
     // Streaming steadily for 1 s.
-    let until = Instant::now() + Duration::from_secs(15);
-    let mut streaming_since = None;
-    while Instant::now() < until {
-        std::thread::sleep(Duration::from_millis(50));
-        if attitude_targets(&tap) > 0 {
-            let since = *streaming_since.get_or_insert_with(Instant::now);
-            if since.elapsed() > Duration::from_secs(1) {
-                break;
-            }
-        }
-    }
-    assert!(streaming_since.is_some(), "the daemon never streamed");
+    assert!(
+        wait_streaming(&tap, Duration::from_secs(1)),
+        "the daemon never streamed"
+    );
 
     // Two outages: the pose stops for 1.8 s, returns, and the stream runs
     // on for a second from its return (at most 3 s to return).

@@ -45,21 +45,10 @@ struct Loss {
 
 fn fly_and_lose_pose(name: &str, level_hover_ms: f64) -> Loss {
     let dir = scratch(name);
-    let text = flight_config(
-        &dir,
-        &format!(
-            r#"
-[mission]
-start = "path"
-path = [[0.0, 0.0, -10.0], [80.0, 0.0, -10.0]]
-speed = 8.0
-[safety]
-level_hover_max_ms = {level_hover_ms}
-"#
-        ),
-        "command_timeout_s = 1.0",
-    );
-    let (config, cfg) = write_daemon_config(&dir, "loss.toml", &text);
+    let path = [[0.0, 0.0, -10.0], [80.0, 0.0, -10.0]];
+    let safety = format!("[safety]\nlevel_hover_max_ms = {level_hover_ms:?}");
+    let text = path_config(&dir, &path, 8.0, &safety, "command_timeout_s = 1.0");
+    let (config, _) = write_daemon_config(&dir, "loss.toml", &text);
     let (sim, _tap) = tapped_sitl(
         &config,
         TapOptions {
