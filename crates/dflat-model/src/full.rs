@@ -338,9 +338,12 @@ impl FlatModel for FullModel {
 mod tests {
     use super::*;
 
+    /// A parameter's name and what makes it invalid.
+    type Spoiler = (&'static str, fn(&mut FullParams));
+
     #[test]
     fn rejects_bad_parameters() {
-        let spoilers: [(&str, fn(&mut FullParams)); 6] = [
+        let spoilers: [Spoiler; 6] = [
             ("dt", |p| p.dt = 0.0),
             ("m", |p| p.m = -1.0),
             ("g", |p| p.g = f64::NAN),

@@ -331,9 +331,12 @@ impl FlatModel for SpatialModel {
 mod tests {
     use super::*;
 
+    /// A parameter's name and what makes it invalid.
+    type Spoiler = (&'static str, fn(&mut SpatialParams));
+
     #[test]
     fn rejects_bad_parameters() {
-        let spoilers: [(&str, fn(&mut SpatialParams)); 6] = [
+        let spoilers: [Spoiler; 6] = [
             ("dt", |p| p.dt = 0.0),
             ("tau", |p| p.tau = -1.0),
             ("k", |p| p.k = f64::NAN),

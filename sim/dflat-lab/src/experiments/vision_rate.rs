@@ -74,7 +74,7 @@
 use std::path::PathBuf;
 use std::sync::Arc;
 
-use dflat_control::dfmpc::{DfMpc, DfMpcSettings, InputSaturation, OutputConstraints};
+use dflat_control::dfmpc::{DfMpc, DfMpcSettings};
 use dflat_control::estimator::EstimatorSettings;
 use dflat_control::reference::paths;
 use dflat_control::window::MultiRateSettings;
