@@ -209,23 +209,12 @@ async fn override_and_hand_back_on_the_l_path_without_a_kick() {
     sitl.request_mode(SitlMode::Offboard);
     // The rest of the path (≤ 50 m at 5 m/s) and 1 s more.
     let end = *cfg.mission.path.last().unwrap();
-    let until = Instant::now() + Duration::from_secs(25);
-    let mut arrived = None;
-    while Instant::now() < until {
-        tokio::time::sleep(Duration::from_millis(20)).await;
-        let p = sitl.truth().position;
-        if arrived.is_none() && support::dist(p, end) < 0.5 {
-            arrived = Some(Instant::now());
-        }
-        if arrived.is_some_and(|t| t.elapsed() > Duration::from_secs(1)) {
-            break;
-        }
-    }
+    let arrived = support::arrive_and_linger(&sitl, end, 0.5, Duration::from_secs(25)).await;
     daemon.shutdown();
     let summary = daemon.join().await.unwrap();
     let report = sitl.stop().unwrap();
     assert!(!report.diverged);
-    assert!(arrived.is_some(), "path not completed: {summary}");
+    assert!(arrived, "path not completed: {summary}");
     assert_eq!(summary.engagements, 2, "{summary}");
     assert_eq!(summary.disengagements, 1, "{summary}");
 

@@ -24,12 +24,11 @@ mod common;
 
 use std::path::PathBuf;
 use std::process::{Command, Stdio};
-use std::sync::mpsc::{Receiver, channel};
+use std::sync::mpsc::Receiver;
 use std::time::{Duration, Instant};
 
 use common::gcs::Gcs;
 use common::*;
-use dflat_daemon::config::Config;
 use dflat_link::MavMessage;
 use dflat_link::dialect::{MavFrame, PositionTargetTypemask, SET_POSITION_TARGET_LOCAL_NED_DATA};
 use dflat_sitl::{self as sitl, SitlHandle, SitlMode, SitlOptions, TapFrame, TruthSample};
@@ -48,20 +47,14 @@ impl Rig {
     fn new(name: &str, text: &str) -> Self {
         let dir = scratch(name);
         let text = text.replace("@DIR@", &dir.display().to_string());
-        let config = write_config(&dir, &format!("{name}.toml"), &text);
-        Config::load(&config).expect("daemon config");
-        let (tx, tap) = channel();
-        let sim = sitl::spawn(
-            &dflat_sitl::SitlSettings::load(&config).expect("sitl config"),
-            SitlOptions {
-                link: Some("udpin:127.0.0.1:0".into()),
-                gcs: Some("udpin:127.0.0.1:0".into()),
-                tap: Some(tx),
+        let (config, _) = write_daemon_config(&dir, &format!("{name}.toml"), &text);
+        let (sim, tap) = tapped_sitl(
+            &config,
+            TapOptions {
+                gcs: true,
                 record_trace: true,
-                ..SitlOptions::default()
             },
-        )
-        .expect("sitl");
+        );
         Self {
             dir,
             config,

@@ -210,14 +210,7 @@ fn circle(start: [f64; 3], r: f64, v: f64, t: f64) -> ([f64; 3], [f64; 3], [f64;
 #[test]
 fn the_sitl_flies_a_streamed_circle_with_its_position_loop() {
     let (_, plant) = plant("sitl-circle");
-    let sitl = sitl::spawn(
-        &plant,
-        SitlOptions {
-            record_trace: true,
-            ..SitlOptions::default()
-        },
-    )
-    .unwrap();
+    let sitl = support::traced_sitl(&plant);
     // A companion on the vehicle link streams to the autopilot (1/1).
     let socket = UdpSocket::bind("127.0.0.1:0").unwrap();
     let to = sitl.local_addr();

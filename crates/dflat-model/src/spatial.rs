@@ -331,52 +331,22 @@ impl FlatModel for SpatialModel {
 mod tests {
     use super::*;
 
+    /// A parameter's name and what makes it invalid.
+    type Spoiler = (&'static str, fn(&mut SpatialParams));
+
     #[test]
     fn rejects_bad_parameters() {
-        for (name, p) in [
-            (
-                "dt",
-                SpatialParams {
-                    dt: 0.0,
-                    ..Default::default()
-                },
-            ),
-            (
-                "tau",
-                SpatialParams {
-                    tau: -1.0,
-                    ..Default::default()
-                },
-            ),
-            (
-                "k",
-                SpatialParams {
-                    k: f64::NAN,
-                    ..Default::default()
-                },
-            ),
-            (
-                "tau_thrust",
-                SpatialParams {
-                    tau_thrust: 0.0,
-                    ..Default::default()
-                },
-            ),
-            (
-                "g",
-                SpatialParams {
-                    g: f64::INFINITY,
-                    ..Default::default()
-                },
-            ),
-            (
-                "psi",
-                SpatialParams {
-                    psi: f64::NAN,
-                    ..Default::default()
-                },
-            ),
-        ] {
+        let spoilers: [Spoiler; 6] = [
+            ("dt", |p| p.dt = 0.0),
+            ("tau", |p| p.tau = -1.0),
+            ("k", |p| p.k = f64::NAN),
+            ("tau_thrust", |p| p.tau_thrust = 0.0),
+            ("g", |p| p.g = f64::INFINITY),
+            ("psi", |p| p.psi = f64::NAN),
+        ];
+        for (name, spoil) in spoilers {
+            let mut p = SpatialParams::default();
+            spoil(&mut p);
             match SpatialModel::new(p) {
                 Err(FlatError::InvalidParameter { name: got, .. }) => assert_eq!(got, name),
                 other => panic!("{name}: {other:?}"),

@@ -54,17 +54,22 @@ fn gravity(frame: Frame, g: f64) -> [f64; 3] {
     }
 }
 
+/// World accelerations that need a thrust no multirotor gives in `frame`:
+/// free fall (no thrust direction), gravity plus 5 m/s² sideways along
+/// horizontal `axis` (tilt 90°) and twice gravity (inverted, tilt 180°).
+fn beyond_thrust(frame: Frame, g: f64, axis: usize) -> [[f64; 3]; 3] {
+    let down = gravity(frame, g);
+    let mut sideways = down;
+    sideways[axis] = 5.0;
+    [down, sideways, [0.0, 0.0, 2.0 * down[2]]]
+}
+
 #[test]
 fn spatial_free_fall_and_tilt_beyond_90_are_errors() {
     for frame in [Frame::Ned, Frame::Zup] {
         let m = spatial(frame);
-        let g = m.params().g;
-        let dt = m.params().dt;
-        let down = gravity(frame, g);
-        // Free fall: the second difference equals gravity, no thrust direction.
-        // Horizontal thrust (tilt 90°): gravity plus a sideways acceleration.
-        // Inverted (tilt 180°): twice gravity.
-        for a in [down, [5.0, 0.0, down[2]], [0.0, 0.0, 2.0 * down[2]]] {
+        let (g, dt) = (m.params().g, m.params().dt);
+        for a in beyond_thrust(frame, g, 0) {
             let y: Vec<SpatialOutput> = parabola(a, dt, 4)
                 .into_iter()
                 .map(SpatialOutput::from)
@@ -88,10 +93,8 @@ fn spatial_free_fall_and_tilt_beyond_90_are_errors() {
 fn full_free_fall_tilt_and_gimbal_lock_are_errors() {
     for frame in [Frame::Ned, Frame::Zup] {
         let m = full(frame);
-        let g = m.params().g;
-        let dt = m.params().dt;
-        let down = gravity(frame, g);
-        for a in [down, [0.0, 5.0, down[2]], [0.0, 0.0, 2.0 * down[2]]] {
+        for a in beyond_thrust(frame, m.params().g, 1) {
+            let dt = m.params().dt;
             let y: Vec<FullOutput> = parabola(a, dt, 6)
                 .into_iter()
                 .enumerate()

@@ -106,17 +106,8 @@ pub struct PhaseArgs {
     /// JSON results file.
     #[arg(long, default_value = "docs/figures/phase.json")]
     json: PathBuf,
-    /// Base of the seed rule.
-    #[arg(long, default_value_t = 0)]
-    seed: u64,
-    /// Solve the constrained plans with clarabel alone instead of the
-    /// banded solvers (the same problems: tells the problem's behaviour
-    /// from the solver's).
-    #[arg(long)]
-    clarabel: bool,
-    /// No progress bar.
-    #[arg(long)]
-    no_progress: bool,
+    #[command(flatten)]
+    run: RunArgs,
 }
 
 /// Options of `experiment tilt-cone`.
@@ -131,6 +122,13 @@ pub struct TiltConeArgs {
     /// JSON results file.
     #[arg(long, default_value = "docs/figures/tilt_cone.json")]
     json: PathBuf,
+    #[command(flatten)]
+    run: RunArgs,
+}
+
+/// How a study runs: its seeds, its solvers and its progress bar.
+#[derive(Debug, Args)]
+pub struct RunArgs {
     /// Base of the seed rule.
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -244,17 +242,8 @@ pub struct VisionRateArgs {
     /// Output directory.
     #[arg(long, default_value = "docs/figures")]
     out: PathBuf,
-    /// Base of the seed rule.
-    #[arg(long, default_value_t = 0)]
-    seed: u64,
-    /// Solve the constrained plans with clarabel alone instead of the
-    /// banded solvers (the same problems: tells the problem's behaviour
-    /// from the solver's).
-    #[arg(long)]
-    clarabel: bool,
-    /// No progress bar.
-    #[arg(long)]
-    no_progress: bool,
+    #[command(flatten)]
+    run: RunArgs,
 }
 
 /// Runs one study, prints its table (stdout) and the files written and the
@@ -313,11 +302,12 @@ pub fn run(command: ExperimentCommand) -> Result<()> {
                 speeds: a.speeds,
                 rates: a.rates,
                 trials: a.trials,
-                seed_base: a.seed,
+                seed_base: a.run.seed,
                 ..VisionRateConfig::default()
             };
             let out = OutputPaths::resolve(&a.out, "vision_rate", a.json, a.plot);
-            let result = run_vision_rate(&config, !a.no_progress).context("vision-rate study")?;
+            let result =
+                run_vision_rate(&config, !a.run.no_progress).context("vision-rate study")?;
             out!("{}", result.table());
             write_vision_rate(&result, &out).context("writing the vision-rate study's outputs")?
         }
@@ -340,15 +330,15 @@ pub fn run(command: ExperimentCommand) -> Result<()> {
             let config = TiltConeConfig {
                 speeds: a.speeds,
                 trials: a.trials,
-                seed_base: a.seed,
-                qp_solver: if a.clarabel {
+                seed_base: a.run.seed,
+                qp_solver: if a.run.clarabel {
                     QpSolver::Clarabel
                 } else {
                     QpSolver::Banded
                 },
                 ..TiltConeConfig::default()
             };
-            let result = run_tilt_cone(&config, !a.no_progress).context("tilt-cone study")?;
+            let result = run_tilt_cone(&config, !a.run.no_progress).context("tilt-cone study")?;
             out!("{}", result.table());
             write_tilt_cone(&result, &a.json).context("writing the tilt-cone study")?;
             vec![a.json]
@@ -370,10 +360,10 @@ pub fn run(command: ExperimentCommand) -> Result<()> {
                 trials: a.trials,
                 latency: a.latency * 1e-3,
                 sigma: a.sigma,
-                seed_base: a.seed,
+                seed_base: a.run.seed,
                 ..PhaseConfig::default()
             };
-            let result = run_phase(&config, !a.no_progress).context("phase study")?;
+            let result = run_phase(&config, !a.run.no_progress).context("phase study")?;
             out!("{}", result.table());
             write_phase(&result, &a.json).context("writing the phase study")?
         }

@@ -379,6 +379,87 @@ fn title_font() -> TextStyle<'static> {
     (FONT, 24).into_font().color(&BLACK)
 }
 
+/// A chart builder on `root` with the plots' common frame: `title`
+/// above, margins and label areas.
+fn framed<'a, 'b, DB: DrawingBackend>(
+    root: &'a DrawingArea<DB, Shift>,
+    title: &str,
+) -> ChartBuilder<'a, 'b, DB> {
+    let mut builder = ChartBuilder::on(root);
+    builder
+        .caption(title, title_font())
+        .margin(15)
+        .x_label_area_size(50)
+        .y_label_area_size(70);
+    builder
+}
+
+/// The plots' axis labels and their fonts on `mesh`.
+fn labelled<'m, 'a, 'b, X, Y, DB>(
+    mesh: &'m mut plotters::chart::MeshStyle<'a, 'b, X, Y, DB>,
+    x_label: &'m str,
+    y_label: &'m str,
+) -> &'m mut plotters::chart::MeshStyle<'a, 'b, X, Y, DB>
+where
+    X: Ranged<ValueType: std::fmt::Debug>,
+    Y: Ranged<ValueType: std::fmt::Debug>,
+    DB: DrawingBackend,
+{
+    mesh.x_desc(x_label)
+        .y_desc(y_label)
+        .label_style((FONT, 14))
+        .axis_desc_style((FONT, 16))
+}
+
+/// Draws `s` through its points `pts` (2 px; its markers when it has
+/// them) with its legend entry when it has a name; returns whether it had
+/// one.
+fn draw_line_series<'a, DB, CT>(
+    chart: &mut ChartContext<'a, DB, CT>,
+    s: &Series,
+    pts: Vec<(f64, f64)>,
+) -> Result<bool, String>
+where
+    DB: DrawingBackend + 'a,
+    CT: CoordTranslate<From = (f64, f64)>,
+{
+    let color = s.color;
+    let anno = chart
+        .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))
+        .map_err(err)?;
+    let named = !s.name.is_empty();
+    if named {
+        anno.label(s.name.as_str()).legend(move |(x, y)| {
+            PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+        });
+    }
+    if s.markers {
+        chart
+            .draw_series(pts.iter().map(|p| Circle::new(*p, 3, color.filled())))
+            .map_err(err)?;
+    }
+    Ok(named)
+}
+
+/// The legend box at `position`.
+fn draw_legend<'a, DB, CT>(
+    chart: &mut ChartContext<'a, DB, CT>,
+    position: SeriesLabelPosition,
+) -> DrawResult
+where
+    DB: DrawingBackend + 'a,
+    CT: CoordTranslate,
+{
+    chart
+        .configure_series_labels()
+        .label_font((FONT, 14))
+        .border_style(BLACK)
+        .background_style(WHITE.mix(0.85))
+        .position(position)
+        .draw()
+        .map_err(err)
+}
+
 fn draw_line_plot<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
     plot: &LinePlot,
@@ -419,49 +500,19 @@ where
     YR::CoordDescType: ValueFormatter<f64>,
 {
     root.fill(&WHITE).map_err(err)?;
-    let mut chart = ChartBuilder::on(root)
-        .caption(&plot.title, title_font())
-        .margin(15)
-        .x_label_area_size(50)
-        .y_label_area_size(70)
+    let mut chart = framed(root, &plot.title)
         .build_cartesian_2d(xr, yr)
         .map_err(err)?;
-    chart
-        .configure_mesh()
-        .x_desc(plot.x_label.as_str())
-        .y_desc(plot.y_label.as_str())
-        .label_style((FONT, 14))
-        .axis_desc_style((FONT, 16))
+    labelled(&mut chart.configure_mesh(), &plot.x_label, &plot.y_label)
         .draw()
         .map_err(err)?;
     let mut named = false;
     for s in &plot.series {
         let pts: Vec<(f64, f64)> = s.points.iter().copied().filter(|p| keep(p)).collect();
-        let color = s.color;
-        let anno = chart
-            .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))
-            .map_err(err)?;
-        if !s.name.is_empty() {
-            named = true;
-            anno.label(s.name.as_str()).legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
-            });
-        }
-        if s.markers {
-            chart
-                .draw_series(pts.iter().map(|p| Circle::new(*p, 3, color.filled())))
-                .map_err(err)?;
-        }
+        named |= draw_line_series(&mut chart, s, pts)?;
     }
     if named {
-        chart
-            .configure_series_labels()
-            .label_font((FONT, 14))
-            .border_style(BLACK)
-            .background_style(WHITE.mix(0.85))
-            .position(SeriesLabelPosition::UpperRight)
-            .draw()
-            .map_err(err)?;
+        draw_legend(&mut chart, SeriesLabelPosition::UpperRight)?;
     }
     Ok(())
 }
@@ -490,19 +541,10 @@ fn draw_path_plot<DB: DrawingBackend>(
     xr = cx - scale * area_w / 2.0..cx + scale * area_w / 2.0;
     yr = cy - scale * area_h / 2.0..cy + scale * area_h / 2.0;
 
-    let mut chart = ChartBuilder::on(root)
-        .caption(&plot.title, title_font())
-        .margin(15)
-        .x_label_area_size(50)
-        .y_label_area_size(70)
+    let mut chart = framed(root, &plot.title)
         .build_cartesian_2d(xr, yr)
         .map_err(err)?;
-    chart
-        .configure_mesh()
-        .x_desc(plot.x_label.as_str())
-        .y_desc(plot.y_label.as_str())
-        .label_style((FONT, 14))
-        .axis_desc_style((FONT, 16))
+    labelled(&mut chart.configure_mesh(), &plot.x_label, &plot.y_label)
         .draw()
         .map_err(err)?;
     if !plot.reference.is_empty() {
@@ -518,36 +560,15 @@ fn draw_path_plot<DB: DrawingBackend>(
             });
     }
     for s in &plot.series {
-        let color = s.color;
         let pts: Vec<(f64, f64)> = s
             .points
             .iter()
             .copied()
             .filter(|p| p.0.is_finite() && p.1.is_finite())
             .collect();
-        let anno = chart
-            .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))
-            .map_err(err)?;
-        if !s.name.is_empty() {
-            anno.label(s.name.as_str()).legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
-            });
-        }
-        if s.markers {
-            chart
-                .draw_series(pts.iter().map(|p| Circle::new(*p, 3, color.filled())))
-                .map_err(err)?;
-        }
+        draw_line_series(&mut chart, s, pts)?;
     }
-    chart
-        .configure_series_labels()
-        .label_font((FONT, 14))
-        .border_style(BLACK)
-        .background_style(WHITE.mix(0.85))
-        .position(SeriesLabelPosition::UpperLeft)
-        .draw()
-        .map_err(err)?;
-    Ok(())
+    draw_legend(&mut chart, SeriesLabelPosition::UpperLeft)
 }
 
 fn draw_box_plot<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, plot: &BoxPlot) -> DrawResult {
@@ -577,24 +598,20 @@ where
 {
     root.fill(&WHITE).map_err(err)?;
     let n_cat = plot.categories.len().max(1);
-    let mut chart = ChartBuilder::on(root)
-        .caption(&plot.title, title_font())
-        .margin(15)
-        .x_label_area_size(50)
-        .y_label_area_size(70)
+    let mut chart = framed(root, &plot.title)
         .build_cartesian_2d(0.0..n_cat as f64, yr)
         .map_err(err)?;
-    chart
-        .configure_mesh()
-        .disable_x_mesh()
-        .x_labels(0)
-        .x_label_formatter(&|_| String::new())
-        .x_desc(plot.x_label.as_str())
-        .y_desc(plot.y_label.as_str())
-        .label_style((FONT, 14))
-        .axis_desc_style((FONT, 16))
-        .draw()
-        .map_err(err)?;
+    labelled(
+        chart
+            .configure_mesh()
+            .disable_x_mesh()
+            .x_labels(0)
+            .x_label_formatter(&|_| String::new()),
+        &plot.x_label,
+        &plot.y_label,
+    )
+    .draw()
+    .map_err(err)?;
     // Category names under the axis, centred on each category.
     let y_low = chart.y_range().start;
     for (g, name) in plot.categories.iter().enumerate() {
@@ -648,14 +665,7 @@ where
             });
     }
     if !plot.series.is_empty() {
-        chart
-            .configure_series_labels()
-            .label_font((FONT, 14))
-            .border_style(BLACK)
-            .background_style(WHITE.mix(0.85))
-            .position(SeriesLabelPosition::UpperLeft)
-            .draw()
-            .map_err(err)?;
+        draw_legend(&mut chart, SeriesLabelPosition::UpperLeft)?;
     }
     Ok(())
 }

@@ -152,7 +152,7 @@ fn position_at(samples: &[(f64, [f64; 2])], t: f64) -> [f64; 2] {
 }
 
 /// `v` minus its least-squares line in `t`.
-fn project(t: &[f64], v: &[f64]) -> Vec<f64> {
+pub(super) fn project(t: &[f64], v: &[f64]) -> Vec<f64> {
     let n = t.len() as f64;
     let (mt, mv) = (t.iter().sum::<f64>() / n, v.iter().sum::<f64>() / n);
     let stt: f64 = t.iter().map(|x| (x - mt).powi(2)).sum();

@@ -74,7 +74,7 @@
 use std::path::PathBuf;
 use std::sync::Arc;
 
-use dflat_control::dfmpc::{DfMpc, DfMpcSettings, InputSaturation, OutputConstraints};
+use dflat_control::dfmpc::{DfMpc, DfMpcSettings};
 use dflat_control::estimator::EstimatorSettings;
 use dflat_control::reference::paths;
 use dflat_control::window::MultiRateSettings;
@@ -206,24 +206,12 @@ impl VisionController {
                 let model = ControlModel::Planar(
                     PlanarModel::new(PlanarParams::default()).map_err(|e| wrap(e.into()))?,
                 );
-                let settings = DfMpcSettings {
-                    horizon,
-                    tracking_weight: [q; 3],
-                    jerk_weight: [r; 3],
-                    smoothness_weight: [smoothness, smoothness, 0.0],
+                let settings = super::controllers::smooth_dfmpc_settings(
+                    (horizon, q, r, smoothness),
                     multi_rate,
-                    constraints: OutputConstraints {
-                        max_tilt: plan_tilt_deg.map(f64::to_radians),
-                        ..OutputConstraints::default()
-                    },
-                    saturation: Some(InputSaturation {
-                        max_tilt: max_tilt_deg.to_radians(),
-                        ..InputSaturation::default()
-                    }),
-                    // The lab is deterministic: no wall-clock limit.
-                    solver_time_limit: f64::INFINITY,
-                    ..DfMpcSettings::default()
-                };
+                    plan_tilt_deg,
+                    max_tilt_deg,
+                );
                 Ok(Box::new(DfMpc::new(model, settings).map_err(wrap)?))
             }
             Self::Baseline(c) => c.build(),

@@ -84,10 +84,7 @@ impl TrialResult {
 
     /// The per-tick log as a CSV string.
     pub fn ticks_csv(&self) -> String {
-        let mut buf = Vec::new();
-        // Writing to a Vec cannot fail.
-        let _ = self.write_ticks_csv(&mut buf);
-        String::from_utf8_lossy(&buf).into_owned()
+        written(|buf| self.write_ticks_csv(buf))
     }
 
     /// Writes the plant-rate trace as CSV (header [`TRACE_HEADER`]).
@@ -113,9 +110,7 @@ impl TrialResult {
 
     /// The plant-rate trace as a CSV string.
     pub fn trace_csv(&self) -> String {
-        let mut buf = Vec::new();
-        let _ = self.write_trace_csv(&mut buf);
-        String::from_utf8_lossy(&buf).into_owned()
+        written(|buf| self.write_trace_csv(buf))
     }
 
     /// Writes the delivered sensor samples as CSV (header [`SAMPLES_HEADER`]).
@@ -135,4 +130,11 @@ impl TrialResult {
     pub fn metrics_json(&self) -> String {
         serde_json::to_string_pretty(&self.metrics).unwrap_or_default()
     }
+}
+
+/// What `write` writes, as a string (writing to a `Vec` cannot fail).
+fn written(write: impl FnOnce(&mut Vec<u8>) -> io::Result<()>) -> String {
+    let mut buf = Vec::new();
+    let _ = write(&mut buf);
+    String::from_utf8_lossy(&buf).into_owned()
 }

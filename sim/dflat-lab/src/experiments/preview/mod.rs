@@ -44,16 +44,9 @@ pub struct Flown {
     pub errors: u64,
 }
 
-/// The shipped DF-MPC (`df-mr-smooth`).
+/// The shipped DF-MPC (`df-mr-smooth`) at the shipped 35° tilt limit.
 pub fn shipped_dfmpc() -> ControllerSpec {
-    ControllerSpec::DfMrSmooth {
-        horizon: 100,
-        q: 1.0,
-        r: 0.003,
-        smoothness: 50.0,
-        plan_tilt_deg: 30.0,
-        max_tilt_deg: 35.0,
-    }
+    ControllerSpec::shipped_dfmpc(35.0)
 }
 
 /// Flatness MPC fed by the lab's state estimator (the fair baseline).
