@@ -42,14 +42,12 @@ impl ControlCore {
                 None
             }
             Action::Fallback { kind, announce } => self.fallback_of(kind, announce, planned, note),
-            Action::LetGo => {
-                // Stop the stream so the autopilot's own failsafe takes over.
-                self.let_go(t);
-                *note = Some("let_go");
+            Action::Enter { cause, level } => {
+                self.enter_failsafe(t, cause, level, note);
                 None
             }
-            Action::StartLevel { announce } => {
-                self.start_level(announce);
+            Action::Recover => {
+                self.recover(t);
                 None
             }
             Action::SendLevel { command, braking } => {

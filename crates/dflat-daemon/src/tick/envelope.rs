@@ -246,11 +246,18 @@ impl ControlCore {
             let braked = self.supervisor.speed().is_some_and(|v| v < BRAKED_SPEED);
             let out_of_time = t - stop.started >= f.stop_brake;
             if (braked || out_of_time) && f.stop_level > 0.0 {
-                if let Some(tr) = self.supervisor.force_failsafe(t, Cause::ShutdownLevel) {
-                    self.reset_controller();
-                    self.poses.last_used_arrival = None;
-                    self.on_transition(t, tr, level);
-                }
+                // The stop's level follows a brake flown on live poses: no
+                // velocity to cancel, only a ramp to level (`idle_tick`).
+                let tripped = super::failsafe::Event::Tripped {
+                    t,
+                    cause: Cause::ShutdownLevel,
+                    engaged: state.engaged(),
+                    level: super::failsafe::LevelPlan {
+                        command: level,
+                        brake: None,
+                    },
+                };
+                self.failsafe_on(t, tripped, None, &mut None);
                 stop.level_since = Some(t);
             }
         }

@@ -71,8 +71,8 @@ const fn failed(t: f64, planned: bool, can_hold: bool) -> Event {
     }
 }
 
-const fn entered(cause: Cause, engaged: bool) -> Event {
-    Event::FailsafeEntered {
+const fn tripped(cause: Cause, engaged: bool) -> Event {
+    Event::Tripped {
         t: 1.04,
         cause,
         engaged,
@@ -80,17 +80,73 @@ const fn entered(cause: Cause, engaged: bool) -> Event {
     }
 }
 
+/// The facts of a tick at 1.04 s.
+const fn health(pose_fresh: bool, autopilot_alive: bool, streaming: bool, engaged: bool) -> Event {
+    Event::Health(Health {
+        t: 1.04,
+        pose_fresh,
+        autopilot_alive,
+        streaming,
+        engaged,
+        stopping: false,
+        level: PLAN,
+    })
+}
+
+/// Engaged, the pose stale.
+const STALE: Event = health(false, true, true, true);
+/// Standing by (streaming, not engaged), the pose stale.
+const STALE_STANDBY: Event = health(false, true, true, false);
+/// Engaged, the autopilot silent.
+const SILENT: Event = health(true, false, true, true);
+/// Not streaming (waiting, or in the failsafe), the pose stale.
+const OFF_STALE: Event = health(false, true, false, false);
+/// Fresh pose, the autopilot alive, not streaming (in the failsafe).
+const FINE: Event = health(true, true, false, false);
+/// As [`FINE`], the daemon stopping.
+const STOPPING: Event = Event::Health(Health {
+    t: 1.04,
+    pose_fresh: true,
+    autopilot_alive: true,
+    streaming: false,
+    engaged: false,
+    stopping: true,
+    level: PLAN,
+});
+
+/// The kind of an event, for the coverage check: the facts of a tick by
+/// what they say.
 fn event_name(e: &Event) -> &'static str {
     match e {
         Event::Solved => "solved",
         Event::Failed { .. } => "failed",
-        Event::FailsafeEntered { .. } => "failsafe_entered",
-        Event::Recovered => "recovered",
+        Event::Tripped { .. } => "tripped",
+        Event::Health(h) => match (h.cause(), h.streaming, h.stopping) {
+            (Some(Cause::PoseStale), true, _) => "pose_stale",
+            (Some(_), true, _) => "autopilot_silent",
+            (Some(_), false, _) => "stale_not_streaming",
+            (None, _, true) => "fine_stopping",
+            (None, _, false) => "fine",
+        },
         Event::Idle { .. } => "idle",
         Event::TrialSolve { .. } => "trial_solve",
         Event::LevelRefused => "level_refused",
     }
 }
+
+/// Enter the failsafe for `cause`, levelling (announced) or not.
+const fn enter(cause: Cause, level: bool) -> Action {
+    Action::Enter {
+        cause,
+        level: if level { Some(true) } else { None },
+    }
+}
+
+/// The fallback ladder ran out: let go.
+const LET_GO: Action = Action::Enter {
+    cause: Cause::ControlFailed,
+    level: None,
+};
 
 const fn fallback(kind: FallbackKind, announce: bool) -> Action {
     Action::Fallback { kind, announce }
@@ -111,7 +167,6 @@ const FL_AT_LATCHED: S = S::FailsafeLevel {
     plan: PLAN,
     clear: LATCH,
 };
-const START: Action = A::StartLevel { announce: true };
 const PLAN_FAIL: Event = failed(1.04, true, true);
 const HOLD_FAIL: Event = failed(1.04, false, true);
 const BARE_FAIL: Event = failed(1.04, false, false);
@@ -219,42 +274,89 @@ const TABLE: &[(S, Event, S, Action)] = &[
         fallback(LevelHover, true),
     ),
     // Level hover ran out (1.09 − 1.0 + half a period ≥ 0.1 s): let go.
-    (L, LATE_FAIL, S::Trial { good: 0 }, A::LetGo),
-    // The supervisor's failsafe: level (brake first) when it left an
-    // engaged state for pose, autopilot or residual; latched 2 s after
-    // a residual; a control failure goes to the trial.
-    (N, entered(Cause::PoseStale, true), FL_AT, START),
-    (N, entered(Cause::PoseStale, false), G, A::None),
-    (P, entered(Cause::AutopilotSilent, true), FL_AT, START),
+    (L, LATE_FAIL, S::Trial { good: 0 }, LET_GO),
+    // A cause the core found (residual, the stop's level): level (brake
+    // first) when engaged; latched 2 s after a residual; a control
+    // failure goes to the trial. A failsafe is never entered twice.
+    (
+        N,
+        tripped(Cause::ResidualDiverged, true),
+        FL_AT_LATCHED,
+        enter(Cause::ResidualDiverged, true),
+    ),
     (
         H,
-        entered(Cause::ResidualDiverged, true),
+        tripped(Cause::ResidualDiverged, true),
         FL_AT_LATCHED,
-        START,
+        enter(Cause::ResidualDiverged, true),
     ),
     (
         L,
-        entered(Cause::ResidualDiverged, false),
+        tripped(Cause::ResidualDiverged, false),
         S::LetGo { clear: LATCH },
-        A::None,
+        enter(Cause::ResidualDiverged, false),
+    ),
+    (
+        P,
+        tripped(Cause::ShutdownLevel, true),
+        FL_AT,
+        enter(Cause::ShutdownLevel, true),
     ),
     (
         N,
-        entered(Cause::ControlFailed, true),
+        tripped(Cause::ControlFailed, true),
         S::Trial { good: 0 },
-        A::None,
+        LET_GO,
     ),
-    (FL, entered(Cause::PoseStale, true), FL, A::None),
-    (G, entered(Cause::PoseStale, true), G, A::None),
-    (T, entered(Cause::PoseStale, true), T, A::None),
-    // Recovery (fresh pose, not latched) starts afresh from any state.
-    (N, Event::Recovered, N, A::None),
-    (P, Event::Recovered, N, A::None),
-    (H, Event::Recovered, N, A::None),
-    (L, Event::Recovered, N, A::None),
-    (FL, Event::Recovered, N, A::None),
-    (G_LATCHED, Event::Recovered, N, A::None),
-    (T, Event::Recovered, N, A::None),
+    (FL, tripped(Cause::ResidualDiverged, true), FL, A::None),
+    (G, tripped(Cause::ResidualDiverged, true), G, A::None),
+    (T, tripped(Cause::ResidualDiverged, true), T, A::None),
+    // Stale pose while streaming: level (brake first) when engaged, else
+    // let go at once. The supervisor's failsafe is not entered twice.
+    (N, STALE, FL_AT, enter(Cause::PoseStale, true)),
+    (N, STALE_STANDBY, G, enter(Cause::PoseStale, false)),
+    (P, STALE, FL_AT, enter(Cause::PoseStale, true)),
+    (H, STALE, FL_AT, enter(Cause::PoseStale, true)),
+    (L, STALE, FL_AT, enter(Cause::PoseStale, true)),
+    (FL, STALE, FL, A::None),
+    (G, STALE, G, A::None),
+    (T, STALE, T, A::None),
+    // A silent autopilot: the same.
+    (N, SILENT, FL_AT, enter(Cause::AutopilotSilent, true)),
+    (P, SILENT, FL_AT, enter(Cause::AutopilotSilent, true)),
+    (H, SILENT, FL_AT, enter(Cause::AutopilotSilent, true)),
+    (L, SILENT, FL_AT, enter(Cause::AutopilotSilent, true)),
+    (FL, SILENT, FL, A::None),
+    (G, SILENT, G, A::None),
+    (T, SILENT, T, A::None),
+    // Not streaming (waiting for pose): nothing to enter; in the failsafe
+    // a stale pose does not clear it.
+    (N, OFF_STALE, N, A::None),
+    (P, OFF_STALE, P, A::None),
+    (H, OFF_STALE, H, A::None),
+    (L, OFF_STALE, L, A::None),
+    (FL, OFF_STALE, FL, A::None),
+    (G, OFF_STALE, G, A::None),
+    (T, OFF_STALE, T, A::None),
+    // The causes cleared: the failsafe clears unless its clear condition
+    // latches it (a residual's first 2 s, the trial).
+    (N, FINE, N, A::None),
+    (P, FINE, P, A::None),
+    (H, FINE, H, A::None),
+    (L, FINE, L, A::None),
+    (FL, FINE, N, A::Recover),
+    (FL_LATCHED, FINE, FL_LATCHED, A::None),
+    (G, FINE, N, A::Recover),
+    (G_LATCHED, FINE, G_LATCHED, A::None),
+    (T, FINE, T, A::None),
+    // Stopping: no failsafe clears.
+    (N, STOPPING, N, A::None),
+    (P, STOPPING, P, A::None),
+    (H, STOPPING, H, A::None),
+    (L, STOPPING, L, A::None),
+    (FL, STOPPING, FL, A::None),
+    (G, STOPPING, G, A::None),
+    (T, STOPPING, T, A::None),
     // A tick without the controller: the failsafe's brake, its level
     // hover, then stream off.
     (
@@ -341,8 +443,12 @@ fn the_transition_table() {
     let events = [
         Event::Solved,
         failed(1.0, false, false),
-        entered(Cause::PoseStale, true),
-        Event::Recovered,
+        tripped(Cause::ResidualDiverged, true),
+        STALE,
+        SILENT,
+        OFF_STALE,
+        FINE,
+        STOPPING,
         Event::Idle { t: 1.0 },
         Event::TrialSolve { ok: true },
         Event::LevelRefused,
@@ -372,7 +478,7 @@ fn level_hover_off_lets_go_at_the_first_level_tick() {
     };
     assert_eq!(
         next(N, failed(1.0, false, false), &off),
-        (S::Trial { good: 0 }, Action::LetGo)
+        (S::Trial { good: 0 }, LET_GO)
     );
     // A plan still flies.
     assert_eq!(
@@ -381,8 +487,11 @@ fn level_hover_off_lets_go_at_the_first_level_tick() {
     );
     // A levelling failsafe is entered silently and over at its first tick.
     assert_eq!(
-        next(N, entered(Cause::PoseStale, true), &off).1,
-        Action::StartLevel { announce: false }
+        next(N, STALE, &off).1,
+        Action::Enter {
+            cause: Cause::PoseStale,
+            level: Some(false)
+        }
     );
     assert_eq!(
         next(FL, Event::Idle { t: 1.0 }, &off),
@@ -425,7 +534,7 @@ fn a_long_streak_walks_the_ladder() {
         s = n;
         actions.push(a);
         t += 0.02;
-        if a == Action::LetGo {
+        if a == LET_GO {
             break;
         }
     }
@@ -433,6 +542,7 @@ fn a_long_streak_walks_the_ladder() {
         .iter()
         .map(|a| match a {
             Action::Fallback { kind, .. } => format!("{kind:?}"),
+            &LET_GO => "LetGo".to_string(),
             other => format!("{other:?}"),
         })
         .collect();
@@ -458,7 +568,7 @@ fn a_long_streak_walks_the_ladder() {
         assert_eq!(a == Action::FliesAgain, i + 1 == TRIAL_TICKS);
     }
     assert!(!s.latched(t));
-    assert_eq!(next(s, Event::Recovered, &LIMITS).0, N);
+    assert_eq!(next(s, FINE, &LIMITS), (N, Action::Recover));
 }
 
 #[test]
@@ -466,10 +576,14 @@ fn a_second_cause_never_lowers_a_failsafe() {
     // Severity orders the states as the ladder climbs.
     let order = [N, P, H, L, FL, G, T].map(|s| s.severity());
     assert!(order.windows(2).all(|w| w[0] < w[1]));
-    // In the supervisor's failsafe or beyond, a failed tick or another
-    // failsafe leaves the state as severe as it was.
+    // In the failsafe or beyond, a failed tick or another active cause
+    // leaves the state as severe as it was: the most severe wins.
     for (state, event, after, _) in TABLE {
-        let cause = matches!(event, Event::Failed { .. } | Event::FailsafeEntered { .. });
+        let cause = match event {
+            Event::Failed { .. } | Event::Tripped { .. } => true,
+            Event::Health(h) => h.cause().is_some(),
+            _ => false,
+        };
         if cause && state.severity() >= Severity::FailsafeLevel {
             assert!(
                 after.severity() >= state.severity(),

@@ -1,20 +1,21 @@
 //! The control core's side of the failsafe machine (`tick/failsafe.rs`):
-//! it reports what happened — a supervisor failsafe entered or left, a
+//! it reports what happened — each tick's health, a cause it found, a
 //! trial solve, a tick without the controller — and carries out what the
-//! machine decides: let go, say that the controller flies again, stream a
-//! failsafe's brake and level hover (`tick/failsafe_level.rs`) and stop.
+//! machine decides: enter the failsafe and clear it (the supervisor
+//! follows), say that the controller flies again, stream a failsafe's
+//! brake and level hover (`tick/failsafe_level.rs`) and stop.
 
 use dflat_link::dialect::MavSeverity;
 use dflat_link::{AttitudeCommand, set_attitude_target};
 use tracing::{error, info};
 
 use super::exit::update_caught;
-use super::failsafe::{Event, Failsafe, LevelPlan, Limits};
+use super::failsafe::{Event, Failsafe, Health, LevelPlan, Limits};
 use super::failsafe_level::{TiltSincePose, brake_command};
 use super::{ControlCore, SentCommand};
 use crate::guard::{Fallback, ResidualMonitor};
 use crate::records::CsvRow;
-use crate::supervisor::{Cause, FlightState, Transition};
+use crate::supervisor::Cause;
 
 /// The failsafe: the core's part that owns the failsafe machine's state
 /// and what its fallbacks and its brake need.
@@ -50,32 +51,66 @@ impl ControlCore {
         }
     }
 
-    /// A state change of the supervisor at `t`: announced, and reported to
-    /// the failsafe machine when it enters or leaves the failsafe. `level`
-    /// is the level command a failsafe would leave, taken before the
-    /// controller was reset.
-    pub(super) fn on_transition(&mut self, t: f64, tr: Transition, level: AttitudeCommand) {
+    /// Reports the tick's facts at `t` to the failsafe machine — fresh
+    /// pose, a live autopilot, the flight state — before the flight state
+    /// moves on; the machine enters or clears the failsafe. `level` is the
+    /// level command a failsafe would leave, taken before anything reset
+    /// the controller.
+    pub(super) fn report_health(&mut self, t: f64, level: AttitudeCommand) {
+        let health = Health::of(
+            t,
+            self.supervisor.links(t),
+            self.supervisor.state(),
+            self.supervisor.stopping(),
+            self.level_plan(t, level),
+        );
+        self.failsafe_on(t, Event::Health(health), None, &mut None);
+    }
+
+    /// The failsafe machine entered its failsafe at `t` for `cause`: the
+    /// flight state follows (said), the controller is reset, and a
+    /// levelling failsafe starts (`level`: `Some(announce)`). `note`
+    /// receives the record's guard note.
+    pub(super) fn enter_failsafe(
+        &mut self,
+        t: f64,
+        cause: Cause,
+        level: Option<bool>,
+        note: &mut Option<&'static str>,
+    ) {
+        if cause == Cause::ControlFailed {
+            *note = Some("let_go");
+        }
+        let Some(tr) = self.supervisor.enter_failsafe(t, cause) else {
+            return;
+        };
+        match cause {
+            Cause::ResidualDiverged => {
+                self.counts.guards.residual_failsafes += 1;
+                *note = Some("residual");
+            }
+            Cause::ControlFailed => {
+                // Stop the stream so the autopilot's own failsafe takes over.
+                self.counts.guards.control_failsafes += 1;
+                error!(
+                    level_hover_s = self.settings.failsafe.level_hover_max,
+                    "controller cannot fly: stream stopped, the autopilot's failsafe takes over"
+                );
+            }
+            _ => {}
+        }
+        self.reset_controller();
+        self.poses.last_used_arrival = None;
         self.announce(tr);
-        if tr.to == FlightState::Failsafe {
-            // The stop's level follows a brake flown on live poses: no
-            // velocity to cancel, only a ramp to level (`idle_tick`).
-            let plan = if tr.cause == Cause::ShutdownLevel {
-                LevelPlan {
-                    command: level,
-                    brake: None,
-                }
-            } else {
-                self.level_plan(t, level)
-            };
-            let event = Event::FailsafeEntered {
-                t,
-                cause: tr.cause,
-                engaged: tr.from.engaged(),
-                level: plan,
-            };
-            self.failsafe_on(t, event, None, &mut None);
-        } else if tr.from == FlightState::Failsafe {
-            self.failsafe_on(t, Event::Recovered, None, &mut None);
+        if let Some(announce) = level {
+            self.start_level(announce);
+        }
+    }
+
+    /// The failsafe cleared at `t`: the flight state streams again (said).
+    pub(super) fn recover(&mut self, t: f64) {
+        if let Some(tr) = self.supervisor.recover(t) {
+            self.announce(tr);
         }
     }
 
@@ -98,7 +133,7 @@ impl ControlCore {
 
     /// What a failsafe entered at `t` streams: `command`, after the brake
     /// that cancels the velocity gained since the newest pose.
-    fn level_plan(&self, t: f64, command: AttitudeCommand) -> LevelPlan {
+    pub(super) fn level_plan(&self, t: f64, command: AttitudeCommand) -> LevelPlan {
         let v = &self.settings.vehicle;
         let brake = self
             .failsafe
@@ -119,7 +154,7 @@ impl ControlCore {
 
     /// A levelling failsafe started: logged, and said unless level hover
     /// is off (`announce`).
-    pub(super) fn start_level(&mut self, announce: bool) {
+    fn start_level(&mut self, announce: bool) {
         if let Failsafe::FailsafeLevel {
             plan:
                 LevelPlan {
@@ -148,26 +183,9 @@ impl ControlCore {
         }
     }
 
-    /// The controller cannot fly (its level hover ran out): the
-    /// supervisor's failsafe, said (STATUSTEXT) and counted; the failsafe
-    /// machine tries the controller until it solves again
-    /// ([`ControlCore::trial`]).
-    pub(super) fn let_go(&mut self, t: f64) {
-        if let Some(tr) = self.supervisor.force_failsafe(t, Cause::ControlFailed) {
-            self.counts.guards.control_failsafes += 1;
-            error!(
-                level_hover_s = self.settings.failsafe.level_hover_max,
-                "controller cannot fly: stream stopped, the autopilot's failsafe takes over"
-            );
-            self.reset_controller();
-            self.poses.last_used_arrival = None;
-            self.announce(tr);
-        }
-    }
-
     /// In a control failsafe: one solve on the newest pose, not sent
     /// (the controller is reset afterwards, so nothing unsent stays in its
-    /// window). After [`failsafe::TRIAL_TICKS`] good ones in a row the
+    /// window). After [`super::failsafe::TRIAL_TICKS`] good ones in a row the
     /// latch is lifted and the stream resumes at the next tick.
     pub(super) fn trial(&mut self, t: f64) {
         let (Some(pose), Some(reference)) = (self.poses.newest, self.goals.reference.as_ref())

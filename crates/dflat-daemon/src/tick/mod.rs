@@ -19,10 +19,12 @@
 //! pass through it exactly once, so each guard counter counts a command at
 //! most once.
 //!
-//! What happens after a failure — the fallback ladder, letting go, the
-//! trial solves, a failsafe's brake and level hover, recovery latches — is
-//! one state machine, [`failsafe::Failsafe`], with its transitions in one
-//! function (`tick/failsafe.rs`).
+//! What happens after a failure — stale pose, a silent autopilot, the
+//! fallback ladder, the residual, letting go, the trial solves, a
+//! failsafe's brake and level hover, when the failsafe clears — is one
+//! state machine, [`failsafe::Failsafe`], with its transitions in one
+//! function (`tick/failsafe.rs`); the supervisor enters and leaves its
+//! `FAILSAFE` state only as that machine decides.
 //!
 //! Rooms: `settings.rs` the core's typed settings, `control.rs` the
 //! controller's tick, `exit.rs` the exit path and why a tick failed,
@@ -299,13 +301,14 @@ impl ControlCore {
         self.check_stream_timeout(t);
         self.supervisor.set_motion(self.poses.motion.estimate());
         self.check_overspeed(t);
-        let decision = self.supervisor.tick(t, !self.failsafe.state.latched(t));
-        if decision.reset_controller {
-            self.reset_controller();
-            self.poses.last_used_arrival = None;
-        }
-        if let Some(tr) = decision.transition {
-            self.on_transition(t, tr, level);
+        // The failsafe machine first (stale pose, a silent autopilot, its
+        // clearing); the flight state moves on when it changed nothing.
+        let transitions = self.supervisor.transitions();
+        self.report_health(t, level);
+        if self.supervisor.transitions() == transitions
+            && let Some(tr) = self.supervisor.tick(t).transition
+        {
+            self.announce(tr);
         }
         self.stop_tick(t, level);
         self.refresh_reference();
@@ -335,18 +338,18 @@ impl ControlCore {
         if !self.supervisor.state().engaged() {
             // Standby: the plan is not flown, so it predicts nothing.
             self.failsafe.residual.forget();
-        } else if decision.stream
-            && let Some(pose) = self.poses.newest
-        {
+        } else if let Some(pose) = self.poses.newest {
             let (r, trip) = self.failsafe.residual.measure(pose.position);
             row.residual = r;
-            if trip && let Some(tr) = self.supervisor.force_failsafe(t, Cause::ResidualDiverged) {
-                self.counts.guards.residual_failsafes += 1;
+            if trip {
                 warn!(residual = ?r, "model residual above the threshold: failsafe");
-                self.reset_controller();
-                self.poses.last_used_arrival = None;
-                self.on_transition(t, tr, level);
-                row.guard = Some("residual");
+                let tripped = failsafe::Event::Tripped {
+                    t,
+                    cause: Cause::ResidualDiverged,
+                    engaged: true,
+                    level: self.level_plan(t, level),
+                };
+                self.failsafe_on(t, tripped, None, &mut row.guard);
             }
         }
         if matches!(self.failsafe.state, failsafe::Failsafe::Trial { .. })
