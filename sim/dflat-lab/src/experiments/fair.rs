@@ -1,4 +1,4 @@
-//! The fair comparison of the paths study (issue 27): the paper's outdoor
+//! The fair comparison of the paths study: the paper's outdoor
 //! set-up (§VII) fed the baselines from a state estimator (STEAM), not
 //! from finite differences of the poses (its §VI simulation set-up). The
 //! paths study ([`super::paths`]) therefore flies, beside the paper-form
