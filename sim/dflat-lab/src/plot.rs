@@ -426,6 +426,9 @@ trait Axis: AsRangedCoord<Value = f64, CoordDescType: ValueFormatter<f64>> {}
 
 impl<T: AsRangedCoord<Value = f64, CoordDescType: ValueFormatter<f64>>> Axis for T {}
 
+/// A chart on `DB` over the x and y coordinates `X`, `Y`.
+type XyChart<'a, DB, X, Y> = ChartContext<'a, DB, Cartesian2d<X, Y>>;
+
 /// A [`framed`] chart on `root` over `xr` × `yr` with its mesh drawn,
 /// [`labelled`] `(x_label, y_label)`.
 fn labelled_chart<'a, DB, XR, YR>(
@@ -434,7 +437,7 @@ fn labelled_chart<'a, DB, XR, YR>(
     (x_label, y_label): (&str, &str),
     xr: XR,
     yr: YR,
-) -> Result<ChartContext<'a, DB, Cartesian2d<XR::CoordDescType, YR::CoordDescType>>, String>
+) -> Result<XyChart<'a, DB, XR::CoordDescType, YR::CoordDescType>, String>
 where
     DB: DrawingBackend,
     XR: Axis,
