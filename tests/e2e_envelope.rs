@@ -44,9 +44,14 @@ struct Rig {
 }
 
 impl Rig {
+    /// A rig for the daemon configuration `text` (logging into the rig's
+    /// directory, no tlog, added here).
     fn new(name: &str, text: &str) -> Self {
         let dir = scratch(name);
-        let text = text.replace("@DIR@", &dir.display().to_string());
+        let text = format!(
+            "[logging]\ndir = \"{}\"\ntlog = false\n{text}",
+            dir.display()
+        );
         let (config, _) = write_daemon_config(&dir, &format!("{name}.toml"), &text);
         let (sim, tap) = tapped_sitl(
             &config,
@@ -147,9 +152,6 @@ fn single_fast_samples_are_refused_and_a_stream_stops_at_the_fence() {
 [mission]
 start = "hold"
 geofence = [30.0, 30.0, 50.0]
-[logging]
-dir = "@DIR@"
-tlog = false
 [sitl]
 start = [0.0, 0.0, -10.0]
 drag = 0.3
@@ -252,9 +254,6 @@ fn a_vehicle_pushed_past_the_speed_limit_is_braked_not_levelled() {
 start = "hold"
 [safety]
 max_speed_mps = 15.0
-[logging]
-dir = "@DIR@"
-tlog = false
 [sitl]
 start = [0.0, 0.0, -10.0]
 gust_at_s = 12.0
@@ -320,9 +319,6 @@ const ROUTE: &str = r#"
 start = "path"
 path = [[0.0, 0.0, -10.0], [120.0, 0.0, -10.0]]
 speed = 8.0
-[logging]
-dir = "@DIR@"
-tlog = false
 [sitl]
 start = [0.0, 0.0, -10.0]
 drag = 0.3

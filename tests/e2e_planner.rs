@@ -10,13 +10,14 @@
 //! `cargo test --workspace --test e2e_planner -- --nocapture` prints the
 //! figures.
 
+#[path = "support/circle.rs"]
+mod circle;
 #[path = "support/mod.rs"]
 mod common;
 
 use std::time::Duration;
 
 use common::*;
-use dflat_sim::trajectory::{Shape, Trajectory};
 use dflat_sitl::SitlMode;
 use nalgebra::Vector3;
 
@@ -73,13 +74,7 @@ fn fly(yaw: bool) -> Figures {
         "{} samples",
         report.counters.planner_samples
     );
-    let circle = Trajectory {
-        shape: Shape::Circle,
-        size: 6.0,
-        speed: 4.0,
-        ramp_s: 3.0,
-        start: Vector3::from(START),
-    };
+    let circle = circle::circle(4.0, 3.0, START);
     // Position at the sample's start (the planner starts where the vehicle
     // is; the SITL holds START before offboard).
     let offboard: Vec<_> = report

@@ -23,6 +23,18 @@ use dflat_link::MavMessage;
 use dflat_link::dialect::{MavFrame, PositionTargetTypemask, SET_POSITION_TARGET_LOCAL_NED_DATA};
 use dflat_sitl::{self as sitl, SitlOptions, SitlReport, TapFrame};
 
+/// Runs `dflat args`, asserting it succeeds (its stderr in the message);
+/// its output.
+pub fn dflat_ok(args: &[&str]) -> std::process::Output {
+    let out = Command::new(bin()).args(args).output().expect("run dflat");
+    assert!(
+        out.status.success(),
+        "dflat {args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
 /// The binary under test.
 pub fn bin() -> &'static str {
     env!("CARGO_BIN_EXE_dflat-under-test")
@@ -216,14 +228,24 @@ pub fn spawn_daemon(dir: &Path, config: &Path, sitl: SocketAddr) -> Proc {
 
 /// [`spawn_daemon`] with extra arguments (e.g. `--summary-json FILE`).
 pub fn spawn_daemon_with(dir: &Path, config: &Path, sitl: SocketAddr, extra: &[&str]) -> Proc {
+    let mut args: Vec<std::ffi::OsString> = vec![
+        "--config".into(),
+        config.into(),
+        "--link".into(),
+        format!("udpout:{sitl}").into(),
+    ];
+    args.extend(extra.iter().map(Into::into));
+    spawn_daemon_args(dir, &args, &[])
+}
+
+/// `dflat daemon ARGS` with `env` added to its environment, its stderr in
+/// `dir/daemon.stderr`.
+pub fn spawn_daemon_args(dir: &Path, args: &[std::ffi::OsString], env: &[(&str, &str)]) -> Proc {
     let stderr = dir.join("daemon.stderr");
     let child = Command::new(bin())
         .arg("daemon")
-        .arg("--config")
-        .arg(config)
-        .arg("--link")
-        .arg(format!("udpout:{sitl}"))
-        .args(extra)
+        .args(args)
+        .envs(env.iter().copied())
         .stdin(Stdio::null())
         .stdout(Stdio::null())
         .stderr(std::fs::File::create(&stderr).expect("stderr file"))

@@ -201,95 +201,52 @@ fn non_finite_windows_are_errors() {
     }
 }
 
+/// The error of a window of `got` outputs where `expected` are needed.
+fn window(expected: usize, got: usize) -> FlatError {
+    FlatError::WindowLength { expected, got }
+}
+
 #[test]
 fn wrong_window_lengths_are_errors() {
     let m = planar();
     let y = [PlanarOutput::zeros(); 5];
     for n in [0, 2, 4, 5] {
-        assert_eq!(
-            m.state_from_outputs(&y[..n]),
-            Err(FlatError::WindowLength {
-                expected: 3,
-                got: n
-            })
-        );
+        assert_eq!(m.state_from_outputs(&y[..n]), Err(window(3, n)));
         assert_eq!(
             m.next_output(&y[..n], &PlanarInput::zeros()),
-            Err(FlatError::WindowLength {
-                expected: 3,
-                got: n
-            })
+            Err(window(3, n))
         );
     }
-    assert_eq!(
-        m.input_from_outputs(&y[..3]),
-        Err(FlatError::WindowLength {
-            expected: 4,
-            got: 3
-        })
-    );
+    assert_eq!(m.input_from_outputs(&y[..3]), Err(window(4, 3)));
 
     let m = spatial(Frame::Zup);
     let y = [SpatialOutput::zeros(); 5];
     for n in [0, 2, 4, 5] {
-        assert_eq!(
-            m.state_from_outputs(&y[..n]),
-            Err(FlatError::WindowLength {
-                expected: 3,
-                got: n
-            })
-        );
+        assert_eq!(m.state_from_outputs(&y[..n]), Err(window(3, n)));
         assert_eq!(
             m.next_output(&y[..n], &SpatialInput::zeros()),
-            Err(FlatError::WindowLength {
-                expected: 3,
-                got: n
-            })
+            Err(window(3, n))
         );
     }
-    assert_eq!(
-        m.input_from_outputs(&y),
-        Err(FlatError::WindowLength {
-            expected: 4,
-            got: 5
-        })
-    );
+    assert_eq!(m.input_from_outputs(&y), Err(window(4, 5)));
 
     let m = full(Frame::Ned);
     let y = [FullOutput::zeros(); 6];
     for n in [0, 3, 5] {
-        assert_eq!(
-            m.state_from_outputs(&y[..n]),
-            Err(FlatError::WindowLength {
-                expected: 4,
-                got: n
-            })
-        );
+        assert_eq!(m.state_from_outputs(&y[..n]), Err(window(4, n)));
     }
     for n in [0, 4, 6] {
-        assert_eq!(
-            m.input_from_outputs(&y[..n]),
-            Err(FlatError::WindowLength {
-                expected: 5,
-                got: n
-            })
-        );
+        assert_eq!(m.input_from_outputs(&y[..n]), Err(window(5, n)));
     }
     // predict_outputs needs out.len() + 2 inputs.
     let mut out = [FullOutput::zeros(); 2];
     assert_eq!(
         m.predict_outputs(&y[..4], &[FullInput::zeros(); 3], &mut out),
-        Err(FlatError::WindowLength {
-            expected: 4,
-            got: 3
-        })
+        Err(window(4, 3))
     );
     assert_eq!(
         m.predict_outputs(&y[..3], &[FullInput::zeros(); 4], &mut out),
-        Err(FlatError::WindowLength {
-            expected: 4,
-            got: 3
-        })
+        Err(window(4, 3))
     );
 }
 

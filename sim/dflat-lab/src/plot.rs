@@ -109,6 +109,26 @@ impl Series {
     }
 }
 
+/// A plot's `new(title, x_label, y_label)`, documented `$doc`, the other
+/// fields set as given.
+macro_rules! labelled_new {
+    ($doc:literal, $($field:ident: $value:expr),+ $(,)?) => {
+        #[doc = $doc]
+        pub fn new(
+            title: impl Into<String>,
+            x_label: impl Into<String>,
+            y_label: impl Into<String>,
+        ) -> Self {
+            Self {
+                title: title.into(),
+                x_label: x_label.into(),
+                y_label: y_label.into(),
+                $($field: $value),+
+            }
+        }
+    };
+}
+
 /// A line plot with several series.
 #[derive(Debug, Clone, PartialEq)]
 pub struct LinePlot {
@@ -129,22 +149,13 @@ pub struct LinePlot {
 }
 
 impl LinePlot {
-    /// An empty 900×600 linear plot.
-    pub fn new(
-        title: impl Into<String>,
-        x_label: impl Into<String>,
-        y_label: impl Into<String>,
-    ) -> Self {
-        Self {
-            title: title.into(),
-            x_label: x_label.into(),
-            y_label: y_label.into(),
-            log_x: false,
-            log_y: false,
-            series: Vec::new(),
-            size: (900, 600),
-        }
-    }
+    labelled_new!(
+        "An empty 900×600 linear plot.",
+        log_x: false,
+        log_y: false,
+        series: Vec::new(),
+        size: (900, 600),
+    );
 }
 
 /// An x-y path plot: reference in black, flown paths in colour, equal scales.
@@ -165,21 +176,12 @@ pub struct PathPlot {
 }
 
 impl PathPlot {
-    /// An empty 800×800 path plot.
-    pub fn new(
-        title: impl Into<String>,
-        x_label: impl Into<String>,
-        y_label: impl Into<String>,
-    ) -> Self {
-        Self {
-            title: title.into(),
-            x_label: x_label.into(),
-            y_label: y_label.into(),
-            reference: Vec::new(),
-            series: Vec::new(),
-            size: (800, 800),
-        }
-    }
+    labelled_new!(
+        "An empty 800×800 path plot.",
+        reference: Vec::new(),
+        series: Vec::new(),
+        size: (800, 800),
+    );
 }
 
 /// One series of a box plot: a sample of values per category.
@@ -213,22 +215,13 @@ pub struct BoxPlot {
 }
 
 impl BoxPlot {
-    /// An empty 900×600 box plot.
-    pub fn new(
-        title: impl Into<String>,
-        x_label: impl Into<String>,
-        y_label: impl Into<String>,
-    ) -> Self {
-        Self {
-            title: title.into(),
-            x_label: x_label.into(),
-            y_label: y_label.into(),
-            categories: Vec::new(),
-            series: Vec::new(),
-            log_y: false,
-            size: (900, 600),
-        }
-    }
+    labelled_new!(
+        "An empty 900×600 box plot.",
+        categories: Vec::new(),
+        series: Vec::new(),
+        log_y: false,
+        size: (900, 600),
+    );
 }
 
 /// Tukey box statistics of a sample.
@@ -286,42 +279,59 @@ impl BoxStats {
 
 /// Writes `plot` to `<stem>.svg` and `<stem>.png`; returns both paths.
 pub fn write_line_plot(stem: &Path, plot: &LinePlot) -> Result<[PathBuf; 2], SimError> {
-    render(
-        stem,
-        plot.size,
-        |r| draw_line_plot(r, plot),
-        |r| draw_line_plot(r, plot),
-    )
+    render(stem, plot)
 }
 
 /// Writes `plot` to `<stem>.svg` and `<stem>.png`; returns both paths.
 pub fn write_path_plot(stem: &Path, plot: &PathPlot) -> Result<[PathBuf; 2], SimError> {
-    render(
-        stem,
-        plot.size,
-        |r| draw_path_plot(r, plot),
-        |r| draw_path_plot(r, plot),
-    )
+    render(stem, plot)
 }
 
 /// Writes `plot` to `<stem>.svg` and `<stem>.png`; returns both paths.
 pub fn write_box_plot(stem: &Path, plot: &BoxPlot) -> Result<[PathBuf; 2], SimError> {
-    render(
-        stem,
-        plot.size,
-        |r| draw_box_plot(r, plot),
-        |r| draw_box_plot(r, plot),
-    )
+    render(stem, plot)
 }
 
 type DrawResult = Result<(), String>;
 
+/// A plot [`render`] can draw on any backend.
+trait Drawable {
+    /// Image size \[px\].
+    fn size(&self) -> (u32, u32);
+    /// Draws the plot on `root`.
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> DrawResult;
+}
+
+impl Drawable for LinePlot {
+    fn size(&self) -> (u32, u32) {
+        self.size
+    }
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> DrawResult {
+        draw_line_plot(root, self)
+    }
+}
+
+impl Drawable for PathPlot {
+    fn size(&self) -> (u32, u32) {
+        self.size
+    }
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> DrawResult {
+        draw_path_plot(root, self)
+    }
+}
+
+impl Drawable for BoxPlot {
+    fn size(&self) -> (u32, u32) {
+        self.size
+    }
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> DrawResult {
+        draw_box_plot(root, self)
+    }
+}
+
 /// Draws with an SVG and a bitmap backend, creating the parent directory.
-fn render<S, B>(stem: &Path, size: (u32, u32), svg: S, png: B) -> Result<[PathBuf; 2], SimError>
-where
-    S: FnOnce(&DrawingArea<SVGBackend<'_>, Shift>) -> DrawResult,
-    B: FnOnce(&DrawingArea<BitMapBackend<'_>, Shift>) -> DrawResult,
-{
+fn render(stem: &Path, plot: &impl Drawable) -> Result<[PathBuf; 2], SimError> {
+    let size = plot.size();
     register_font();
     if let Some(dir) = stem.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir)?;
@@ -334,13 +344,13 @@ where
     };
     {
         let root = SVGBackend::new(&svg_path, size).into_drawing_area();
-        svg(&root)
+        plot.draw(&root)
             .and_then(|()| root.present().map_err(|e| e.to_string()))
             .map_err(fail(&svg_path))?;
     }
     {
         let root = BitMapBackend::new(&png_path, size).into_drawing_area();
-        png(&root)
+        plot.draw(&root)
             .and_then(|()| root.present().map_err(|e| e.to_string()))
             .map_err(fail(&png_path))?;
     }
@@ -409,6 +419,37 @@ where
         .y_desc(y_label)
         .label_style((FONT, 14))
         .axis_desc_style((FONT, 16))
+}
+
+/// An `f64` axis range a chart can be built on and its mesh labelled.
+trait Axis: AsRangedCoord<Value = f64, CoordDescType: ValueFormatter<f64>> {}
+
+impl<T: AsRangedCoord<Value = f64, CoordDescType: ValueFormatter<f64>>> Axis for T {}
+
+/// A chart on `DB` over the x and y coordinates `X`, `Y`.
+type XyChart<'a, DB, X, Y> = ChartContext<'a, DB, Cartesian2d<X, Y>>;
+
+/// A [`framed`] chart on `root` over `xr` × `yr` with its mesh drawn,
+/// [`labelled`] `(x_label, y_label)`.
+fn labelled_chart<'a, DB, XR, YR>(
+    root: &'a DrawingArea<DB, Shift>,
+    title: &str,
+    (x_label, y_label): (&str, &str),
+    xr: XR,
+    yr: YR,
+) -> Result<XyChart<'a, DB, XR::CoordDescType, YR::CoordDescType>, String>
+where
+    DB: DrawingBackend,
+    XR: Axis,
+    YR: Axis,
+{
+    let mut chart = framed(root, title)
+        .build_cartesian_2d(xr, yr)
+        .map_err(err)?;
+    labelled(&mut chart.configure_mesh(), x_label, y_label)
+        .draw()
+        .map_err(err)?;
+    Ok(chart)
 }
 
 /// Draws `s` through its points `pts` (2 px; its markers when it has
@@ -494,18 +535,12 @@ fn line_chart<DB, XR, YR>(
 ) -> DrawResult
 where
     DB: DrawingBackend,
-    XR: AsRangedCoord<Value = f64>,
-    YR: AsRangedCoord<Value = f64>,
-    XR::CoordDescType: ValueFormatter<f64>,
-    YR::CoordDescType: ValueFormatter<f64>,
+    XR: Axis,
+    YR: Axis,
 {
     root.fill(&WHITE).map_err(err)?;
-    let mut chart = framed(root, &plot.title)
-        .build_cartesian_2d(xr, yr)
-        .map_err(err)?;
-    labelled(&mut chart.configure_mesh(), &plot.x_label, &plot.y_label)
-        .draw()
-        .map_err(err)?;
+    let labels = (plot.x_label.as_str(), plot.y_label.as_str());
+    let mut chart = labelled_chart(root, &plot.title, labels, xr, yr)?;
     let mut named = false;
     for s in &plot.series {
         let pts: Vec<(f64, f64)> = s.points.iter().copied().filter(|p| keep(p)).collect();
@@ -541,12 +576,8 @@ fn draw_path_plot<DB: DrawingBackend>(
     xr = cx - scale * area_w / 2.0..cx + scale * area_w / 2.0;
     yr = cy - scale * area_h / 2.0..cy + scale * area_h / 2.0;
 
-    let mut chart = framed(root, &plot.title)
-        .build_cartesian_2d(xr, yr)
-        .map_err(err)?;
-    labelled(&mut chart.configure_mesh(), &plot.x_label, &plot.y_label)
-        .draw()
-        .map_err(err)?;
+    let labels = (plot.x_label.as_str(), plot.y_label.as_str());
+    let mut chart = labelled_chart(root, &plot.title, labels, xr, yr)?;
     if !plot.reference.is_empty() {
         chart
             .draw_series(LineSeries::new(

@@ -84,7 +84,9 @@ use serde::{Deserialize, Serialize};
 
 use super::trial::TrialSetup;
 use super::{ControllerSpec, ExperimentError, OutputPaths, fair, invalid, mean, write_json};
-use crate::harness::{ControllerFactory, ErrorStats, StopReason, TrialSpec, run_trials};
+use crate::harness::{
+    ControllerFactory, ErrorStats, StopReason, TrialResult, TrialSpec, run_trials,
+};
 use crate::plot::{LinePlot, RGBColor, Series, write_line_plot};
 use dflat_sim::plant::PlantOptions;
 use dflat_sim::sensing::{SensorSpec, VisionMode, VisionOptions};
@@ -240,6 +242,15 @@ impl VisionController {
             ),
         }))
     }
+}
+
+/// The finite path errors of `r`'s ticks \[m\] (the pooled samples of the
+/// vision-rate and phase studies' rows).
+pub(super) fn finite_path_errors(r: &TrialResult) -> impl Iterator<Item = f64> + '_ {
+    r.ticks
+        .iter()
+        .map(|t| t.path_error)
+        .filter(|e| e.is_finite())
 }
 
 /// Configuration of the study. [`Default`] is the full study.
@@ -556,12 +567,7 @@ pub fn run_vision_rate(
         };
         let (row, errors, per_trial) = &mut rows[idx];
         row.trials += 1;
-        errors.extend(
-            r.ticks
-                .iter()
-                .map(|t| t.path_error)
-                .filter(|e| e.is_finite()),
-        );
+        errors.extend(finite_path_errors(&r));
         let m = &r.metrics;
         per_trial.push((m.smoothness_deg, m.saturation_share, m.max_tilt_deg));
         row.diverged += usize::from(m.diverged);

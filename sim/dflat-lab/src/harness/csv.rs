@@ -5,6 +5,8 @@
 use std::fmt::Write as _;
 use std::io::{self, Write};
 
+use nalgebra::Vector3;
+
 use super::TrialResult;
 
 /// Header of [`TrialResult::write_ticks_csv`].
@@ -27,6 +29,14 @@ fn push(line: &mut String, values: &[f64]) {
     }
 }
 
+/// Position, velocity (local NED) and roll, pitch: the columns
+/// `x,y,z,vx,vy,vz,roll,pitch` of the tick log and the trace.
+fn motion(position: &Vector3<f64>, velocity: &Vector3<f64>, roll: f64, pitch: f64) -> [f64; 8] {
+    [
+        position.x, position.y, position.z, velocity.x, velocity.y, velocity.z, roll, pitch,
+    ]
+}
+
 impl TrialResult {
     /// Writes the per-tick log as CSV (header [`TICKS_HEADER`]). Positions
     /// local NED \[m\], angles \[rad\], thrust [m/s²].
@@ -37,21 +47,12 @@ impl TrialResult {
             line.clear();
             let _ = write!(line, "{}", r.k);
             let s = &r.truth;
+            push(&mut line, &[r.t]);
             push(
                 &mut line,
-                &[
-                    r.t,
-                    s.position.x,
-                    s.position.y,
-                    s.position.z,
-                    s.velocity.x,
-                    s.velocity.y,
-                    s.velocity.z,
-                    s.roll,
-                    s.pitch,
-                    s.yaw,
-                ],
+                &motion(&s.position, &s.velocity, s.roll, s.pitch),
             );
+            push(&mut line, &[s.yaw]);
             let m = r.measurement.map_or([f64::NAN; 5], |m| {
                 [m.t, m.position.x, m.position.y, m.position.z, m.yaw]
             });
@@ -90,20 +91,15 @@ impl TrialResult {
     /// Writes the plant-rate trace as CSV (header [`TRACE_HEADER`]).
     pub fn write_trace_csv(&self, mut w: impl Write) -> io::Result<()> {
         writeln!(w, "{TRACE_HEADER}")?;
+        let mut line = String::with_capacity(256);
         for s in &self.trace {
-            writeln!(
-                w,
-                "{},{},{},{},{},{},{},{},{}",
-                s.t,
-                s.position.x,
-                s.position.y,
-                s.position.z,
-                s.velocity.x,
-                s.velocity.y,
-                s.velocity.z,
-                s.roll,
-                s.pitch
-            )?;
+            line.clear();
+            let _ = write!(line, "{}", s.t);
+            push(
+                &mut line,
+                &motion(&s.position, &s.velocity, s.roll, s.pitch),
+            );
+            writeln!(w, "{line}")?;
         }
         Ok(())
     }
