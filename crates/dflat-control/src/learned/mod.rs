@@ -271,7 +271,7 @@ impl LearnedResidual {
             });
         }
         finite_in("dt", self.dt, 1e-4, 1.0)?;
-        if !(3..=51).contains(&self.window) || self.window % 2 == 0 {
+        if !(3..=51).contains(&self.window) || self.window.is_multiple_of(2) {
             return Err(field_err("window", self.window, "odd, 3 ..= 51"));
         }
         let mut sorted = self.features.clone();

@@ -517,14 +517,14 @@ pub struct Errors {
 }
 
 impl Errors {
-    /// RMS one-step error \[m\].
+    /// RMS one-step error \[m\] (NaN without starts).
     pub fn one_step_rms(&self) -> f64 {
-        (self.one_step / self.count.max(1) as f64).sqrt()
+        (self.one_step / self.count as f64).sqrt()
     }
 
-    /// RMS horizon error \[m\].
+    /// RMS horizon error \[m\] (NaN without starts).
     pub fn horizon_rms(&self) -> f64 {
-        (self.horizon / self.count.max(1) as f64).sqrt()
+        (self.horizon / self.count as f64).sqrt()
     }
 }
 

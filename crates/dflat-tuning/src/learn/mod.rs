@@ -316,7 +316,7 @@ fn undetermined_group(features: &[Feature], fitted: &fit::Ridge) -> Option<(Feat
             .flat_map(|i| (0..3).map(move |axis| (axis, i)))
             .map(|(axis, i)| (fitted.weights[axis][i], fitted.half_width[axis][i]))
             .max_by(|a, b| (a.0.abs() / a.1).total_cmp(&(b.0.abs() / b.1)))?;
-        if !(best.1 <= MAX_RELATIVE_INTERVAL * best.0.abs()) {
+        if best.1.is_nan() || best.1 > MAX_RELATIVE_INTERVAL * best.0.abs() {
             return Some((
                 *f,
                 format!(

@@ -151,7 +151,7 @@ pub fn run_learn(args: LearnArgs) -> Result<()> {
     let (runs, dt) = read_runs(&args.flights)?;
     let vehicle = vehicle_table(&cfg, dt);
     if let Some(w) = args.window
-        && !((3..=51).contains(&w) && w % 2 == 1)
+        && (!(3..=51).contains(&w) || w.is_multiple_of(2))
     {
         bail!("--window {w}: odd, 3 ..= 51 poses");
     }

@@ -180,7 +180,11 @@ impl LearnedConfig {
         if !(5.0..=120.0).contains(&self.stream_s) {
             return Err(invalid("stream_s", "5 ..= 120 s"));
         }
-        if self.seconds.iter().any(|s| !(*s >= learn::MIN_SECONDS)) {
+        if self
+            .seconds
+            .iter()
+            .any(|s| s.is_nan() || *s < learn::MIN_SECONDS)
+        {
             return Err(invalid("seconds", "each at least dflat learn's 20 s"));
         }
         Ok(())

@@ -102,3 +102,45 @@ fn another_airframes_residual_fades() {
     eprintln!("racing line at 6 m/s: parametric {a:.4} m, another airframe's residual {b:.4} m");
     assert!(b <= 1.1 * a, "{b} vs {a}");
 }
+
+/// On the rigid body, the residual learned over the stock `[vehicle]`
+/// table from the stock flights alone (identify's first-order fit of its
+/// attitude loop left out): printed for docs/results.md.
+/// `cargo test -p dflat-lab --release --lib
+/// experiments::learned::tests::rigid_learned_over_the_stock_table -- --ignored --nocapture`
+#[test]
+#[ignore = "a report for docs/results.md"]
+fn rigid_learned_over_the_stock_table() {
+    let aero = (0.03, 0.2);
+    let mk = |shape, speed, learned: Option<LearnedResidual>, vehicle: Vehicle| Flight {
+        plant: AeroPlant::Rigid,
+        aero: true,
+        drag: aero,
+        shape,
+        speed,
+        vision_hz: 50.0,
+        vehicle,
+        learned,
+        stream_s: 20.0,
+    };
+    let mut train = Vec::new();
+    for s in [
+        LearnedShape::L,
+        LearnedShape::Eight,
+        LearnedShape::RacingLine,
+    ] {
+        for v in [5.0, 7.0, 9.0] {
+            train.push(mk(s, v, None, Vehicle::STOCK));
+        }
+    }
+    let results = fly_all(&train, false).unwrap();
+    let refs: Vec<&TrialResult> = results.iter().collect();
+    let (m, _) = learned(&records(&refs, G, None), &Vehicle::STOCK, true, G, None).unwrap();
+    eprintln!("over stock: r {} {:?}", m.window, m.features);
+    for s in [LearnedShape::Eight, LearnedShape::RacingLine] {
+        for v in [5.0, 7.0, 9.0] {
+            let f = mk(s, v, Some(m.clone()), Vehicle::STOCK);
+            eprintln!("rigid {s:?} {v}: learned over stock {:.4}", p95(&f));
+        }
+    }
+}
