@@ -14,6 +14,9 @@ use anyhow::{Context, Result};
 use clap::{Args, Subcommand};
 use dflat_control::dfmpc::QpSolver;
 use dflat_lab::experiments::OutputPaths;
+use dflat_lab::experiments::learned::{
+    AeroPlant, LearnedConfig, LearnedShape, run_learned, write_learned,
+};
 use dflat_lab::experiments::mismatch::{MismatchConfig, run_mismatch, write_mismatch};
 use dflat_lab::experiments::noise_sweep::{NoiseSweepConfig, run_noise_sweep, write_noise_sweep};
 use dflat_lab::experiments::paths::{PathsConfig, run_paths, write_paths};
@@ -65,6 +68,61 @@ pub enum ExperimentCommand {
     /// vision poses; DF-MPC vs Flatness MPC (estimator): p95 and the
     /// largest command step. Table on stdout, JSON.
     Preview(PreviewArgs),
+    /// The flat maps' residual learned from flight records and flown: the
+    /// planar, spatial and rigid plants with parasitic (0.03 |v|v) and
+    /// rotor drag (0.2 /s), the L, a figure eight and a racing line at 5, 7
+    /// and 9 m/s under 50 and 15 Hz vision poses; the matched plant, stock,
+    /// identify, learned (window 3) and learned (window from data); and the
+    /// seconds of records the learning needs. Tables on stdout, JSON.
+    Learned(LearnedArgs),
+}
+
+/// Options of `experiment learned`.
+#[derive(Debug, Args)]
+pub struct LearnedArgs {
+    /// Plants (planar, spatial, rigid), comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "planar,spatial,rigid")]
+    plants: Vec<String>,
+    /// Paths and streams (l, eight, racing-line), comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "l,eight,racing-line")]
+    shapes: Vec<String>,
+    /// Speeds [m/s], comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "5,7,9")]
+    speeds: Vec<f64>,
+    /// Vision pose rates [Hz], comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "50,15")]
+    vision: Vec<f64>,
+    /// Seconds of records the learning is given in the seconds study,
+    /// comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "20,40,80")]
+    seconds: Vec<f64>,
+    /// No seconds study.
+    #[arg(long)]
+    no_seconds: bool,
+    /// JSON results file.
+    #[arg(long, default_value = "docs/figures/learned.json")]
+    json: PathBuf,
+    /// No progress bar.
+    #[arg(long)]
+    no_progress: bool,
+}
+
+fn parse_plant(s: &str) -> Result<AeroPlant> {
+    Ok(match s.trim() {
+        "planar" => AeroPlant::Planar,
+        "spatial" => AeroPlant::Spatial,
+        "rigid" => AeroPlant::Rigid,
+        other => anyhow::bail!("--plants: {other:?} is none of planar, spatial, rigid"),
+    })
+}
+
+fn parse_shape(s: &str) -> Result<LearnedShape> {
+    Ok(match s.trim() {
+        "l" | "L" => LearnedShape::L,
+        "eight" => LearnedShape::Eight,
+        "racing-line" => LearnedShape::RacingLine,
+        other => anyhow::bail!("--shapes: {other:?} is none of l, eight, racing-line"),
+    })
 }
 
 /// Options of `experiment preview`.
@@ -352,6 +410,27 @@ pub fn run(command: ExperimentCommand) -> Result<()> {
             let result = run_preview(&config, !a.no_progress).context("preview study")?;
             out!("{}", result.table());
             write_preview(&result, &a.json).context("writing the preview study")?
+        }
+        ExperimentCommand::Learned(a) => {
+            let config = LearnedConfig {
+                plants: a
+                    .plants
+                    .iter()
+                    .map(|p| parse_plant(p))
+                    .collect::<Result<_>>()?,
+                shapes: a
+                    .shapes
+                    .iter()
+                    .map(|p| parse_shape(p))
+                    .collect::<Result<_>>()?,
+                speeds: a.speeds,
+                vision_rates: a.vision,
+                seconds: if a.no_seconds { Vec::new() } else { a.seconds },
+                ..LearnedConfig::default()
+            };
+            let result = run_learned(&config, !a.no_progress).context("learned study")?;
+            out!("{}", result.table());
+            write_learned(&result, &a.json).context("writing the learned study")?
         }
         ExperimentCommand::Phase(a) => {
             let config = PhaseConfig {

@@ -3,6 +3,7 @@
 //! failsafe machine chooses: `tick/exit.rs`).
 
 use dflat_control::Measurement;
+use dflat_link::dialect::MavSeverity;
 use dflat_link::set_attitude_target;
 use nalgebra::Vector3;
 use tracing::{error, info};
@@ -150,6 +151,21 @@ impl ControlCore {
                 }
             };
             info!(status = ?s, "{words}");
+            // To the ground station too (STATUSTEXT holds 50 characters).
+            let (severity, text) = match s {
+                LearnedStatus::Active => {
+                    (MavSeverity::MAV_SEVERITY_INFO, "learned residual acting")
+                }
+                LearnedStatus::OutOfSupport => (
+                    MavSeverity::MAV_SEVERITY_NOTICE,
+                    "learned residual faded: outside its data",
+                ),
+                LearnedStatus::ErrorGrew => (
+                    MavSeverity::MAV_SEVERITY_WARNING,
+                    "learned residual faded: its error grew",
+                ),
+            };
+            self.text(severity, text);
         }
         self.learned_said = status;
     }
