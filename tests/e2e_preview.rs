@@ -219,10 +219,19 @@ fn anchor_flight(name: &str, form: &Form) -> Judged {
 fn compare(name: &str, form: &Form) -> (Judged, Judged, f64) {
     let anchor = anchor_flight(&format!("{name}-anchor"), form);
     let (dflat, step) = daemon_flight(&format!("{name}-dflat"), form);
+    // Without a streamed yaw both fliers hold their heading: the error to
+    // the path's tangent is not a heading error, so it is not printed.
+    let heading = |j: &Judged| {
+        if form.yaw {
+            format!("{:.1}°", j.heading_p95)
+        } else {
+            "— (no yaw streamed)".to_string()
+        }
+    };
     println!(
-        "{name} ({}, size {} m, {} m/s, {} Hz {}, ahead {} s): dflat p95 {:.4} m, heading p95 {:.1}°, \
+        "{name} ({}, size {} m, {} m/s, {} Hz {}, ahead {} s): dflat p95 {:.4} m, heading p95 {}, \
          at the tilt limit {:.1} %, largest step {step:.2}°/tick | anchor PD+FF p95 {:.4} m, heading p95 \
-         {:.1}°, at the limit {:.1} % | ratio {:.2}",
+         {}, at the limit {:.1} % | ratio {:.2}",
         form.name(),
         form.size,
         form.speed,
@@ -230,10 +239,10 @@ fn compare(name: &str, form: &Form) -> (Judged, Judged, f64) {
         form.fields,
         form.ahead_s,
         dflat.p95,
-        dflat.heading_p95,
+        heading(&dflat),
         100.0 * dflat.at_limit,
         anchor.p95,
-        anchor.heading_p95,
+        heading(&anchor),
         100.0 * anchor.at_limit,
         dflat.p95 / anchor.p95,
     );

@@ -180,21 +180,21 @@ pub struct TiltConeArgs {
     /// JSON results file.
     #[arg(long, default_value = "docs/figures/tilt_cone.json")]
     json: PathBuf,
-    #[command(flatten)]
-    run: RunArgs,
-}
-
-/// How a study runs: its seeds, its solvers and its progress bar.
-#[derive(Debug, Args)]
-pub struct RunArgs {
-    /// Base of the seed rule.
-    #[arg(long, default_value_t = 0)]
-    seed: u64,
     /// Solve the constrained plans with clarabel alone instead of the
     /// banded solvers (the same problems: tells the problem's behaviour
     /// from the solver's).
     #[arg(long)]
     clarabel: bool,
+    #[command(flatten)]
+    run: RunArgs,
+}
+
+/// How a study runs: its seeds and its progress bar.
+#[derive(Debug, Args)]
+pub struct RunArgs {
+    /// Base of the seed rule.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
     /// No progress bar.
     #[arg(long)]
     no_progress: bool,
@@ -389,7 +389,7 @@ pub fn run(command: ExperimentCommand) -> Result<()> {
                 speeds: a.speeds,
                 trials: a.trials,
                 seed_base: a.run.seed,
-                qp_solver: if a.run.clarabel {
+                qp_solver: if a.clarabel {
                     QpSolver::Clarabel
                 } else {
                     QpSolver::Banded

@@ -53,7 +53,7 @@ impl Engagement {
 impl ControlCore {
     /// The input that explains the attitude change since the previous
     /// (standby) tick replaces the one recorded then
-    /// ([`Controller::correct_last_input`]). Thrust: the hover thrust
+    /// ([`dflat_control::Controller::correct_last_input`]). Thrust: the hover thrust
     /// (the autopilot's position mode holds altitude), with the disturbance
     /// estimate's thrust scale when there is one.
     pub(super) fn correct_standby_input(&mut self) {
