@@ -29,7 +29,7 @@ pub struct LearnArgs {
     /// is written beside it, `<out>` with the extension `.snippet.toml`.
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Learn through this window [poses] (odd, 3–51) instead of choosing
+    /// Learn through this window \[poses\] (odd, 3–51) instead of choosing
     /// it on held-out data.
     #[arg(long)]
     pub window: Option<usize>,
