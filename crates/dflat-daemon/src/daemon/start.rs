@@ -72,35 +72,54 @@ pub(super) fn start_checks(
 /// A flight's records, opened before the link (the link records into the
 /// tap from its first frame): kept once the link is open, else discarded
 /// (the writers stop and the files are deleted: a failed start leaves no
-/// empty flight behind). [`OpenLink::open`] consumes it either way.
+/// empty flight behind). [`OpenLink::open`] consumes it either way; if it
+/// is dropped unkept on any other path (an early return, a panic), `Drop`
+/// discards the records.
 #[derive(Debug)]
-pub(super) struct PendingRecords(OpenRecords);
+pub(super) struct PendingRecords(Option<OpenRecords>);
 
 impl PendingRecords {
     /// Opens the records of `config` (never a reason not to fly: disk
     /// trouble is noticed, not fatal).
     pub(super) fn open(config: &Config) -> Self {
-        Self(crate::record_store::open(config, SystemTime::now()))
+        Self(Some(crate::record_store::open(config, SystemTime::now())))
     }
 
     /// The tap the link records into.
     fn tap(&self) -> Option<dflat_link::transport::TlogTap> {
-        self.0.tap.clone()
+        self.0.as_ref().and_then(|r| r.tap.clone())
     }
 
     /// The start goes on: the oldest flights are pruned (`records.keep_mb`)
     /// and the records are kept.
-    fn keep(self, config: &Config) -> OpenRecords {
-        let mut records = self.0;
+    fn keep(mut self, config: &Config) -> OpenRecords {
+        let mut records = self.0.take().expect("pending records are kept once");
         records.prune(config);
         records
     }
 
     /// Deletes the records off the runtime's threads (the writers' close
     /// blocks) and waits for it.
-    async fn discard(self) {
-        let records = self.0;
-        let _ = tokio::task::spawn_blocking(move || records.discard()).await;
+    async fn discard(mut self) {
+        if let Some(records) = self.0.take() {
+            let _ = tokio::task::spawn_blocking(move || records.discard()).await;
+        }
+    }
+}
+
+impl Drop for PendingRecords {
+    /// Records neither kept nor discarded are discarded here, on a thread
+    /// of their own: the writers' close blocks on the runtime, which may be
+    /// the one dropping them (a failed start's path, not a flight's).
+    fn drop(&mut self) {
+        if let Some(records) = self.0.take() {
+            let spawned = std::thread::Builder::new()
+                .name("dflat-discard".into())
+                .spawn(move || records.discard());
+            if let Err(e) = spawned {
+                warn!(error = %e, "cannot discard the records of a failed start");
+            }
+        }
     }
 }
 
@@ -358,5 +377,58 @@ impl Drop for ControlThread {
             self.stop.request();
             let _ = handle.join();
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The flight files in `dir`.
+    fn flight_files(dir: &std::path::Path) -> Vec<std::path::PathBuf> {
+        std::fs::read_dir(dir)
+            .map(|d| {
+                d.filter_map(|e| e.ok().map(|e| e.path()))
+                    .filter(|p| p.to_string_lossy().contains("flight-"))
+                    .collect()
+            })
+            .unwrap_or_default()
+    }
+
+    #[tokio::test(flavor = "current_thread")]
+    async fn records_dropped_unkept_are_discarded() {
+        let dir = std::env::temp_dir().join(format!("dflat-pending-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut cfg = Config::default();
+        cfg.logging.dir = dir.display().to_string();
+        let pending = PendingRecords::open(&cfg);
+        assert!(!flight_files(&dir).is_empty(), "the records opened");
+        // Dropped inside the runtime whose task writes the tap: no panic,
+        // no deadlock, and the files go.
+        drop(pending);
+        for _ in 0..500 {
+            if flight_files(&dir).is_empty() {
+                break;
+            }
+            tokio::time::sleep(std::time::Duration::from_millis(10)).await;
+        }
+        assert!(flight_files(&dir).is_empty(), "{:?}", flight_files(&dir));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[tokio::test(flavor = "current_thread")]
+    async fn kept_records_stay() {
+        let dir = std::env::temp_dir().join(format!("dflat-kept-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut cfg = Config::default();
+        cfg.logging.dir = dir.display().to_string();
+        let records = PendingRecords::open(&cfg).keep(&cfg);
+        assert!(!flight_files(&dir).is_empty());
+        drop(records);
+        tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+        assert!(!flight_files(&dir).is_empty(), "kept records are not deleted");
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }
