@@ -34,6 +34,9 @@ pub struct BoxAlmSolver {
     previous_valid: bool,
     warm_start: bool,
     warm_used: bool,
+    /// Whether `base`, `lo` and `hi` hold this tick's data (set by a
+    /// solve, read by the `accept_plan` right after it).
+    tick_data: bool,
 }
 
 /// The box's initial σ on warm solves. Its stage sets are intervals, on
@@ -129,6 +132,7 @@ impl BoxAlmSolver {
             previous_valid: false,
             warm_start,
             warm_used: false,
+            tick_data: false,
         })
     }
 
@@ -137,9 +141,10 @@ impl BoxAlmSolver {
         &self.bounds
     }
 
-    /// Newton steps of the last solve.
+    /// Newton steps of the last solve (with rows: the active-set
+    /// method's KKT solves).
     pub fn iterations(&self) -> usize {
-        self.alm.newton_steps()
+        self.alm.newton_steps() + self.alm.active_set_work().solves
     }
 
     /// Factorisations of the last solve.
@@ -155,6 +160,7 @@ impl BoxAlmSolver {
     /// A tick that did not use this solver: the next solve starts from the
     /// plan it is given, with the multipliers aged a stage.
     pub fn skip(&mut self) {
+        self.tick_data = false;
         self.previous_valid = false;
         self.alm.age();
     }
@@ -184,7 +190,19 @@ impl BoxAlmSolver {
                 |f| stages.get(f).map_or([0.0; 2], |z| [z[0] - z[1], 0.0]),
                 rows,
             );
+            if self.tick_data {
+                // This tick's deviations p = plan − baseline (`base`,
+                // `lo`, `hi` are this tick's: this solver's attempt set
+                // them before the cascade went on).
+                for f in 0..n {
+                    self.p[f] = plan[f + 3] - self.base[f];
+                }
+                let a0 = (plan[2] - 2.0 * plan[1] + plan[0]) / (self.dt * self.dt);
+                self.alm
+                    .keep_active_multipliers(&self.p, a0, &self.lo, &self.hi);
+            }
         }
+        self.tick_data = false;
     }
 
     /// The next solve starts from the plan it is given, keeping the
@@ -243,6 +261,7 @@ impl BoxAlmSolver {
             }
             i += 1;
         });
+        self.tick_data = true;
         let warm = self.warm_start && self.previous_valid;
         self.warm_used = warm;
         self.previous_valid = false;

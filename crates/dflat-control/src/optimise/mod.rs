@@ -104,6 +104,7 @@
 //! * [`banded`] — banded symmetric matrices, Cholesky and LDLᵀ factors
 //!   ([`banded::BandedLdl`], the interior point's).
 
+pub mod active_set;
 pub mod alm;
 pub mod banded;
 pub mod banded_ip;

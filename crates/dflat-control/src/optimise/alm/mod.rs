@@ -215,6 +215,9 @@ pub struct AlmTuning {
     /// from the saturated rollout and the multipliers that hold it
     /// (`rollout_start.rs`). Discs only.
     pub rollout_start: bool,
+    /// KKT solves of the active-set method per solve (one axis with rows:
+    /// [`super::active_set`]); beyond them the solve fails.
+    pub max_kkt_solves: usize,
 }
 
 impl Default for AlmTuning {
@@ -226,6 +229,7 @@ impl Default for AlmTuning {
             max_newton_steps: MAX_NEWTON_STEPS,
             eliminate_head: true,
             rollout_start: true,
+            max_kkt_solves: super::active_set::MAX_SOLVES,
         }
     }
 }
@@ -347,7 +351,9 @@ pub struct BandedAlm {
     rollout_started: bool,
     /// The active-set polish (`polish.rs`): one axis with intervals and
     /// rows.
-    polish: Option<polish::Polish>,
+    polish: Option<super::active_set::ActiveSet>,
+    /// What the active-set method did in the last solve.
+    active_set_work: super::active_set::Work,
 }
 
 impl BandedAlm {
@@ -412,21 +418,12 @@ impl BandedAlm {
         let mut head = BandedCholesky::new(size, bandwidth);
         let head_valid = head.refactor_taking(&mut base.clone()).is_ok();
         let m = rows.len();
-        let polish = (k == 1 && m > 0 && matches!(stages, StageSet::Interval(_))).then(|| {
-            polish::Polish::new(
-                n,
-                base.bandwidth(),
-                diag_max,
-                &rows,
-                &ranges,
-                1.0 / (dt * dt),
-            )
-        });
+        let polish_on = k == 1 && m > 0 && matches!(stages, StageSet::Interval(_));
         let row_first = rows
             .iter()
             .map(|r| r.idx[..r.len].iter().copied().min().unwrap_or(0))
             .collect();
-        Self {
+        let mut alm = Self {
             k,
             n,
             inv_dt2: 1.0 / (dt * dt),
@@ -480,8 +477,13 @@ impl BandedAlm {
             head_factored: false,
             last_window: 0,
             rollout_started: false,
-            polish,
+            polish: None,
+            active_set_work: super::active_set::Work::default(),
+        };
+        if polish_on {
+            alm.polish = Some(alm.new_polish());
         }
+        alm
     }
 
     /// Index of `p_{axis, f}` in this solver's unknowns.
@@ -492,6 +494,12 @@ impl BandedAlm {
     /// The weights of axis i.
     pub fn axis(&self, i: usize) -> &FastBandedSolver {
         &self.axes[i]
+    }
+
+    /// What the active-set method did in the last solve (one axis with
+    /// rows; zero otherwise).
+    pub fn active_set_work(&self) -> super::active_set::Work {
+        self.active_set_work
     }
 
     /// Newton steps of the last solve.
@@ -609,6 +617,7 @@ pub(crate) const COLD_TUNING: AlmTuning = AlmTuning {
     max_newton_steps: 1000,
     eliminate_head: true,
     rollout_start: true,
+    max_kkt_solves: 1000,
 };
 
 #[cfg(test)]

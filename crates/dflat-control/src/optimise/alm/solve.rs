@@ -127,6 +127,16 @@ impl BandedAlm {
             PRIMAL_TOLERANCE * b_scale / rho
         };
         self.newton_steps = 0;
+        if self.polish.is_some() {
+            // One axis with rows: the active-set method alone (module docs).
+            return if self.polish(a0[0], (lo, hi), (stage_tol, row_tol))? {
+                Ok(0)
+            } else {
+                Err(ControlError::Solver(
+                    "active set: no convergence within its KKT solves".into(),
+                ))
+            };
+        }
         // The window's first gradient is the loop's first.
         let mut first_gradient = None;
         // Whether σ climbs to the warm σ after each update (module docs):
@@ -139,9 +149,6 @@ impl BandedAlm {
             first_gradient = Some(self.open_window(a0, lo, hi, 10.0 * floor.max(dual_tol)));
         }
         let mut previous_res = f64::INFINITY;
-        if !cold && self.polish.is_some() && self.polish(a0[0], (lo, hi), (stage_tol, row_tol))? {
-            return Ok(0);
-        }
         for _outer in 0..MAX_OUTER {
             // Inner: minimise L(·; y, v, σ) by semismooth Newton, until
             // the gradient or the Newton decrement −gᵀd is negligible.
@@ -267,13 +274,6 @@ impl BandedAlm {
                     let t = Self::side(j, h, lo[r], hi[r]);
                     self.v[r][j] = self.side_multiplier(r, self.v[r][j], t);
                 }
-            }
-            if !gap_small
-                && self.window == 0
-                && self.polish.is_some()
-                && self.polish(a0[0], (lo, hi), (stage_tol, row_tol))?
-            {
-                return Ok(self.newton_steps);
             }
             if gap_small && self.window > 0 {
                 // The window converged: on to the whole horizon, whose

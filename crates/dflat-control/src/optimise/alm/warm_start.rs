@@ -2,7 +2,7 @@
 //! [`super`], "Warm start"): forgotten, set from another method's, shifted
 //! (and extrapolated) one stage on, or aged over a tick without a solve.
 
-use super::BandedAlm;
+use super::{BandedAlm, StageSet};
 
 impl BandedAlm {
     /// Forgets the multipliers and σ (a cold start).
@@ -24,6 +24,37 @@ impl BandedAlm {
         }
         for (v, r) in self.v.iter_mut().zip(rows) {
             *v = [r[0].max(0.0), r[1].max(0.0)];
+        }
+    }
+
+    /// Keeps, of the multipliers set from another method's solution `p`
+    /// (one axis, the deviations; a_0 and the rows' bounds this tick's),
+    /// those of the constraints that `p` holds at a bound (within 1e-7 of
+    /// the bound's scale): an interior point's multipliers are positive on
+    /// every constraint, small on the inactive ones, and as the active-set
+    /// method's start they name a set far from the optimum.
+    pub fn keep_active_multipliers(&mut self, p: &[f64], a0: f64, lo: &[f64], hi: &[f64]) {
+        if self.k != 1 || p.len() != self.n {
+            return;
+        }
+        let near = |v: f64, b: f64| (v - b).abs() <= 1e-7 * (1.0 + b.abs());
+        if let StageSet::Interval(b) = &self.stages {
+            Self::accelerations(1, self.inv_dt2, p, &mut self.du, 0);
+            for ((y, du), b) in self.y.iter_mut().zip(&self.du).zip(b) {
+                let a = du[0] + a0;
+                let [l, h] = b[0];
+                if !((y[0] > 0.0 && near(a, h)) || (y[0] < 0.0 && near(a, l))) {
+                    *y = [0.0; 2];
+                }
+            }
+        }
+        for (r, row) in self.rows.iter().enumerate() {
+            let h = row.dot(p);
+            let [up, low] = self.v[r];
+            self.v[r] = [
+                if near(h, hi[r]) { up } else { 0.0 },
+                if near(h, lo[r]) { low } else { 0.0 },
+            ];
         }
     }
 
