@@ -24,6 +24,7 @@
 //! p_f's and their factor rows are the same: the factorisation restarts
 //! there ([`Kkt::build_from`]).
 
+use super::super::banded::dot;
 use super::super::bounds::Row;
 use crate::ControlError;
 
@@ -322,24 +323,4 @@ impl Kkt {
             }
         }
     }
-}
-
-/// `Σ a_k·b_k` with four partial sums (the profile's rows are short, but
-/// a single accumulator is latency-bound).
-#[inline(always)]
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    let n = a.len().min(b.len());
-    let (a, b) = (&a[..n], &b[..n]);
-    let mut s = [0.0; 4];
-    let chunks = n / 4;
-    for c in 0..chunks {
-        for k in 0..4 {
-            s[k] += a[4 * c + k] * b[4 * c + k];
-        }
-    }
-    let mut t = (s[0] + s[2]) + (s[1] + s[3]);
-    for k in 4 * chunks..n {
-        t += a[k] * b[k];
-    }
-    t
 }

@@ -419,8 +419,31 @@ impl ActiveSet {
         }
     }
 
-    /// Binds every constraint outside the set broken at x; returns
-    /// whether any.
+    /// Keeps a gap between opposite chains: binding `id` at `side` next
+    /// to a member of its family at the other side (not itself broken)
+    /// frees that member. A chain's junction a stage off is the warm
+    /// start's usual error, and opposite chains side by side make every
+    /// multiplier of both wrong-signed (on the corner bench at N = 200
+    /// the rate alone's KKT solves per solve: 3.43 → 3.07).
+    fn keep_gap(&mut self, prob: &Problem<'_>, id: usize, side: Side) {
+        let opposite = match side {
+            Side::Upper => Side::Lower,
+            Side::Lower => Side::Upper,
+            Side::Free => return,
+        };
+        for j in [id.wrapping_sub(1), id + 1] {
+            if j < self.cons.len()
+                && self.family[j] == self.family[id]
+                && self.side[j] == opposite
+                && self.broken(prob, j).0 == 0.0
+            {
+                self.release(j);
+            }
+        }
+    }
+
+    /// Binds every constraint outside the set broken at x (keeping gaps,
+    /// [`ActiveSet::keep_gap`]); returns whether any.
     fn bind_broken(&mut self, prob: &Problem<'_>) -> bool {
         let mut any = false;
         for id in 0..self.cons.len() {
@@ -432,6 +455,7 @@ impl ActiveSet {
                 self.lam[id] = 0.0;
                 self.set_side(id, side);
                 any = true;
+                self.keep_gap(prob, id, side);
             }
         }
         any

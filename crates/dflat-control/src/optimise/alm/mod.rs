@@ -218,7 +218,20 @@ pub struct AlmTuning {
     /// KKT solves of the active-set method per solve (one axis with rows:
     /// [`super::active_set`]); beyond them the solve fails.
     pub max_kkt_solves: usize,
+    /// One axis with rows: whether a cold solve whose plan breaks a stage
+    /// interval within its first [`FROM_REST_STAGES`] stages (the
+    /// flight's first tick, from rest) fails at once, for the interior
+    /// point. From there
+    /// the active set is far from the optimum's (a ramp of tens of rows,
+    /// the tilt held over most of the horizon): on the corner bench at
+    /// N = 200 the active-set method took 77–149 KKT solves for it,
+    /// beyond its budget.
+    pub interior_point_from_rest: bool,
 }
+
+/// Stages within which a cold plan that breaks a bound is from rest
+/// ([`AlmTuning::interior_point_from_rest`]).
+pub const FROM_REST_STAGES: usize = 4;
 
 impl Default for AlmTuning {
     fn default() -> Self {
@@ -230,6 +243,7 @@ impl Default for AlmTuning {
             eliminate_head: true,
             rollout_start: true,
             max_kkt_solves: super::active_set::MAX_SOLVES,
+            interior_point_from_rest: true,
         }
     }
 }
@@ -618,6 +632,7 @@ pub(crate) const COLD_TUNING: AlmTuning = AlmTuning {
     eliminate_head: true,
     rollout_start: true,
     max_kkt_solves: 1000,
+    interior_point_from_rest: false,
 };
 
 #[cfg(test)]

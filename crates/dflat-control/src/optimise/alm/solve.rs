@@ -128,7 +128,16 @@ impl BandedAlm {
         };
         self.newton_steps = 0;
         if self.polish.is_some() {
-            // One axis with rows: the active-set method alone (module docs).
+            // One axis with rows: the active-set method alone (module docs),
+            // or from rest the interior point.
+            if cold
+                && self.tuning.interior_point_from_rest
+                && self.breaks_early(a0[0], super::FROM_REST_STAGES)
+            {
+                return Err(ControlError::Solver(
+                    "active set: a cold start from rest".into(),
+                ));
+            }
             return if self.polish(a0[0], (lo, hi), (stage_tol, row_tol))? {
                 Ok(0)
             } else {
