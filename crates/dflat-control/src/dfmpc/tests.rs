@@ -2,10 +2,11 @@
 
 use super::*;
 use crate::optimise::alm::COLD_TUNING;
+use crate::optimise::problem::baseline;
 use crate::optimise::smoothness::accel_block;
 use crate::optimise::{
     AxisProblem, BandedInteriorPointSolver, BoxAlmSolver, ClarabelSolver, FastBandedSolver,
-    KktTuning, Smoothness, baseline,
+    KktTuning, Smoothness,
 };
 
 const DT: f64 = 0.02;

@@ -298,13 +298,13 @@ pub(super) fn check_row_data(
     hi: &[f64],
 ) -> Result<(), crate::ControlError> {
     if !shape_ok {
-        return Err(super::invalid(field, shape));
+        return Err(super::problem::invalid(field, shape));
     }
     let finite = |v: &[f64]| v.iter().all(|a| a.is_finite());
     if !(data.iter().all(|v| finite(v)) && finite(lo) && finite(hi))
         || lo.iter().zip(hi).any(|(l, h)| l > h)
     {
-        return Err(super::invalid(field, "finite data with lo ≤ hi"));
+        return Err(super::problem::invalid(field, "finite data with lo ≤ hi"));
     }
     Ok(())
 }

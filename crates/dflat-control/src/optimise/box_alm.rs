@@ -5,8 +5,11 @@
 //! their multipliers clamped at 0 — warm-started across ticks.
 
 use super::alm::{AlmTuning, BandedAlm, RowBlock, StageSet};
+use super::bounds::AxisBounds;
 use super::bounds::Row;
-use super::{AxisBounds, AxisProblem, FastBandedSolver, Smoothness, check_lengths, shifted_plan};
+use super::fast_banded::FastBandedSolver;
+use super::problem::{AxisProblem, check_lengths, shifted_plan};
+use super::smoothness::Smoothness;
 use crate::ControlError;
 
 /// One axis's box-bounded plan by the augmented Lagrangian

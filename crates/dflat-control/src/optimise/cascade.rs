@@ -10,10 +10,12 @@
 //! (with `qp_solver = clarabel`, clarabel alone). The augmented Lagrangian
 //! ([`super::alm`]) serves both families first.
 
-use super::{
-    AxisProblem, BandedConeSolver, BandedInteriorPointSolver, BoxAlmSolver, ClarabelConeSolver,
-    ClarabelSolver, ConeMethod,
-};
+use super::box_alm::BoxAlmSolver;
+use super::clarabel::ClarabelSolver;
+use super::clarabel_cone::ClarabelConeSolver;
+use super::cone_solver::{BandedConeSolver, ConeMethod};
+use super::interior_point::BandedInteriorPointSolver;
+use super::problem::AxisProblem;
 use crate::ControlError;
 
 /// The method of a constrained solver.
@@ -96,10 +98,13 @@ impl Cascade {
     /// problem size).
     pub fn new(solvers: Vec<Box<dyn ConstrainedSolver>>) -> Result<Self, ControlError> {
         let Some(first) = solvers.first() else {
-            return Err(super::invalid("cascade", "at least one solver"));
+            return Err(super::problem::invalid("cascade", "at least one solver"));
         };
         if solvers.iter().any(|s| s.axes() != first.axes()) {
-            return Err(super::invalid("cascade", "solvers of one problem size"));
+            return Err(super::problem::invalid(
+                "cascade",
+                "solvers of one problem size",
+            ));
         }
         Ok(Self {
             solvers,
@@ -118,10 +123,16 @@ impl Cascade {
         solver: Box<dyn ConstrainedSolver>,
     ) -> Result<(), ControlError> {
         if place > self.solvers.len() {
-            return Err(super::invalid("cascade", "a place within the cascade"));
+            return Err(super::problem::invalid(
+                "cascade",
+                "a place within the cascade",
+            ));
         }
         if solver.axes() != self.solvers[0].axes() {
-            return Err(super::invalid("cascade", "solvers of one problem size"));
+            return Err(super::problem::invalid(
+                "cascade",
+                "solvers of one problem size",
+            ));
         }
         self.solvers.insert(place, solver);
         self.solved_by = None;
@@ -183,23 +194,11 @@ impl Cascade {
     }
 }
 
-impl AxisProblem<'_> {
-    /// The same problem, borrowed again (for a solver taking it by value).
-    pub fn reborrow(&mut self) -> AxisProblem<'_> {
-        AxisProblem {
-            fixed: self.fixed,
-            sent: self.sent,
-            reference: self.reference,
-            plan: &mut *self.plan,
-        }
-    }
-}
-
 /// The one axis of a per-axis solver's problem.
 fn one<'a, 'b>(axes: &'a mut [AxisProblem<'b>]) -> Result<&'a mut AxisProblem<'b>, ControlError> {
     match axes {
         [a] => Ok(a),
-        _ => Err(super::invalid("axes", "one axis")),
+        _ => Err(super::problem::invalid("axes", "one axis")),
     }
 }
 
@@ -209,7 +208,7 @@ fn pair<'a, 'b>(
 ) -> Result<(&'a mut AxisProblem<'b>, &'a mut AxisProblem<'b>), ControlError> {
     match axes {
         [x, y] => Ok((x, y)),
-        _ => Err(super::invalid("axes", "the horizontal pair")),
+        _ => Err(super::problem::invalid("axes", "the horizontal pair")),
     }
 }
 

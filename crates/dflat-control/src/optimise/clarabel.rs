@@ -6,10 +6,11 @@ use clarabel::solver::{
     DefaultSettings, DefaultSettingsBuilder, DefaultSolver, IPSolver, SolverStatus, SupportedConeT,
 };
 
+use super::bounds::AxisBounds;
+use super::fast_banded::FastBandedSolver;
+use super::problem::{AxisProblem, baseline, check_lengths, invalid};
+use super::smoothness::Smoothness;
 use super::smoothness::{accel_block, sent_linear_term};
-use super::{
-    AxisBounds, AxisProblem, FastBandedSolver, Smoothness, baseline, check_lengths, invalid,
-};
 use crate::ControlError;
 
 /// The 1-D DF-MPC problem with inequality bounds, solved by clarabel.

@@ -6,8 +6,11 @@ use clarabel::algebra::CscMatrix;
 use clarabel::solver::{DefaultSolver, IPSolver, SolverStatus, SupportedConeT};
 
 use super::clarabel::{KktTuning, build_solver, push_axis_hessian};
+use super::cone::ConeBounds;
+use super::cone_solver::AxisWeights;
+use super::fast_banded::FastBandedSolver;
+use super::problem::{AxisProblem, baseline, check_lengths};
 use super::smoothness::{accel_block, sent_linear_term};
-use super::{AxisProblem, AxisWeights, ConeBounds, FastBandedSolver, baseline, check_lengths};
 use crate::ControlError;
 
 /// Both horizontal axes with the tilt cone, solved by clarabel.

@@ -6,11 +6,12 @@
 use super::alm::{AlmTuning, BandedAlm, RowBlock, StageSet};
 use super::banded_ip::AxisCost;
 use super::bounds::Row;
+use super::cone::ConeBounds;
 use super::cone_qp::{ConeQp, STAGE, a_at, p_at};
+use super::fast_banded::FastBandedSolver;
+use super::problem::{AxisProblem, baseline, check_lengths, shifted_plan};
+use super::smoothness::Smoothness;
 use super::smoothness::{accel_block, sent_linear_term};
-use super::{
-    AxisProblem, ConeBounds, FastBandedSolver, Smoothness, baseline, check_lengths, shifted_plan,
-};
 use crate::ControlError;
 
 /// Weights of one axis: tracking q ≥ 0 [1/m²], jerk r > 0 [s⁶/m²], and
@@ -114,7 +115,10 @@ impl BandedConeSolver {
         }
         bounds.check()?;
         if !(use_alm || use_ip) {
-            return Err(super::invalid("cone solver", "at least one method"));
+            return Err(super::problem::invalid(
+                "cone solver",
+                "at least one method",
+            ));
         }
         let n = horizon - 2;
         let axes = weights.map(|w| AxisCost {

@@ -3,7 +3,8 @@
 //! [`crate::optimise`]).
 
 use super::banded::{BandedCholesky, SymBand};
-use super::{AxisProblem, D3, Smoothness, check_lengths, check_problem};
+use super::problem::{AxisProblem, D3, check_lengths, check_problem};
+use super::smoothness::Smoothness;
 use crate::ControlError;
 
 /// Half-bandwidth of the fast-path Hessian.

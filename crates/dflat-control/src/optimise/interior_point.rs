@@ -12,9 +12,12 @@
 //! All storage is allocated in [`StageQp::new`].
 
 use super::banded_ip::{AxisCost, BandedIp, Stages};
+use super::bounds::AxisBounds;
 use super::bounds::{Row, check_row_data};
+use super::fast_banded::FastBandedSolver;
+use super::problem::{AxisProblem, baseline};
+use super::smoothness::Smoothness;
 use super::smoothness::{accel_block, sent_linear_term};
-use super::{AxisBounds, AxisProblem, FastBandedSolver, Smoothness, baseline};
 use crate::ControlError;
 
 pub use super::banded::BandedLdl;

@@ -22,7 +22,10 @@ use std::time::Duration;
 use clarabel::algebra::CscMatrix as ClarabelCsc;
 use osqp::{CscMatrix, Problem, Settings, Status};
 
-use super::{AxisBounds, AxisProblem, ClarabelSolver, KktTuning, Smoothness, baseline};
+use super::bounds::AxisBounds;
+use super::clarabel::{ClarabelSolver, KktTuning};
+use super::problem::{AxisProblem, baseline};
+use super::smoothness::Smoothness;
 use crate::ControlError;
 
 /// Bounds at or beyond this magnitude are infinite to OSQP.
@@ -293,7 +296,7 @@ impl OsqpBoxSolver {
             reference,
             plan,
         } = a;
-        super::check_lengths(self.horizon, reference, plan)?;
+        super::problem::check_lengths(self.horizon, reference, plan)?;
         let (_, q, _, b, _) = self.clarabel.qp_for(fixed, sent, reference);
         for (i, &(hi_row, lo_row, eq)) in self.rows.iter().enumerate() {
             let hi = b[hi_row];

@@ -3,10 +3,15 @@
 //! and the first command's step through the per-axis tilt is within the
 //! bound exactly.
 
-use super::{
-    AxisBounds, AxisProblem, BandedInteriorPointSolver, BoxAlmSolver, Cascade, ClarabelSolver,
-    FastBandedSolver, KktTuning, Smoothness, TiltRate,
-};
+use super::bounds::AxisBounds;
+use super::box_alm::BoxAlmSolver;
+use super::cascade::Cascade;
+use super::clarabel::{ClarabelSolver, KktTuning};
+use super::fast_banded::FastBandedSolver;
+use super::interior_point::BandedInteriorPointSolver;
+use super::problem::AxisProblem;
+use super::smoothness::Smoothness;
+use super::tilt_rate::TiltRate;
 
 const DT: f64 = 0.02;
 const G: f64 = 9.81;

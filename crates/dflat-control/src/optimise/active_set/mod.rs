@@ -1,7 +1,7 @@
 //! An active-set method for one axis's QP with stage intervals and rows
-//! ([`ActiveSet`]): the tilt-rate bound's problem (and the box with speed
+//! (`ActiveSet`): the tilt-rate bound's problem (and the box with speed
 //! rows). The equality-constrained QP on a working set is solved exactly
-//! through its compact KKT system ([`kkt`]); the set is corrected in
+//! through its compact KKT system (`kkt.rs`); the set is corrected in
 //! blocks while that converges, then by the dual method, which cannot
 //! cycle (`dual.rs`).
 //!
@@ -23,7 +23,7 @@
 //! active set's rule) breaks them all again next step, and the method
 //! cycles.
 //!
-//! **Block steps** ([`BLOCK_STEPS`]). From a guessed working set (the last
+//! **Block steps** (`BLOCK_STEPS`). From a guessed working set (the last
 //! tick's, shifted; or none), each step solves the KKT system of the set,
 //! then frees the wrong-signed constraints at the *ends* of their chains
 //! (a same-family neighbour outside the set or on the other side; the
@@ -48,7 +48,7 @@
 //! active too, is a combination of the rows: the KKT matrix is singular
 //! (regularised: its multipliers huge and of any sign). The factorisation
 //! finds such a constraint by its pivot (at the regularisation's level,
-//! [`kkt`]) and decouples it (multiplier 0); the methods then take it out
+//! `kkt.rs`) and decouples it (multiplier 0); the methods then take it out
 //! of the set, and a dependent constraint the dual method must add moves
 //! the others' multipliers instead (`ActiveSet::pure_dual_step`).
 

@@ -121,9 +121,9 @@ mod solve;
 mod warm_start;
 mod window;
 
-use super::FastBandedSolver;
 use super::banded::{BandedCholesky, SymBand};
 use super::bounds::Row;
+use super::fast_banded::FastBandedSolver;
 use crate::ControlError;
 
 /// Newton steps per warm solve, over all outer iterations (the default of
@@ -604,7 +604,10 @@ impl BandedAlm {
                 r.copy_from_slice(radius);
                 Ok(())
             }
-            StageSet::Interval(_) => Err(super::invalid("radius", "a disc's, not an interval's")),
+            StageSet::Interval(_) => Err(super::problem::invalid(
+                "radius",
+                "a disc's, not an interval's",
+            )),
         }
     }
 

@@ -62,7 +62,10 @@ impl BandedAlm {
                 .flat_map(|s| s.iter().take(self.k))
                 .any(|[l, h]| l.is_nan() || h.is_nan() || l > h)
         {
-            return Err(super::super::invalid("ALM", "stage intervals with lo ≤ hi"));
+            return Err(super::super::problem::invalid(
+                "ALM",
+                "stage intervals with lo ≤ hi",
+            ));
         }
         self.c.copy_from_slice(c);
         self.px_current = false;
