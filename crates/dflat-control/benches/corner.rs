@@ -52,7 +52,7 @@
 use std::time::Instant;
 
 use dflat_control::dfmpc::{DfMpc, DfMpcSettings, OutputConstraints, PlanTiltBound, QpSolver};
-use dflat_control::optimise::{Cascade, SolverMethod};
+use dflat_control::optimise::{SolveInfo, SolverMethod};
 use dflat_control::reference::Reference;
 use dflat_control::{ControlModel, Controller, Frame, Measurement};
 use dflat_model::{FlatModel, PlanarModel, PlanarParams};
@@ -244,16 +244,17 @@ struct ConeWork {
 }
 
 impl ConeWork {
-    /// Notes what `cascade` did on its last tick, if it ran.
-    fn note(&mut self, cascade: Option<&Cascade>) {
-        let Some((place, solver)) = cascade.and_then(Cascade::solved_by) else {
+    /// Notes what a cascade did on its last tick, if it ran (its
+    /// solver's place and what it did).
+    fn note(&mut self, solved_by: Option<(usize, SolveInfo)>) {
+        let Some((place, info)) = solved_by else {
             return;
         };
         self.solves += 1;
-        match solver.method() {
-            SolverMethod::Alm => {
-                self.iterations.push(solver.iterations() as f64);
-                self.factorisations.push(solver.factorisations() as f64);
+        match info.method {
+            SolverMethod::Alm | SolverMethod::ActiveSet => {
+                self.iterations.push(info.iterations as f64);
+                self.factorisations.push(info.factorisations as f64);
             }
             SolverMethod::InteriorPoint => self.interior_point += 1,
             SolverMethod::Clarabel => self.clarabel += usize::from(place > 0),
@@ -297,9 +298,9 @@ fn replay(
                     work.burst_starts.push(t);
                 }
                 let before = work.iterations.len();
-                work.note(ctrl.cone_cascade());
+                work.note(ctrl.cone_cascade().and_then(|c| c.solved_by()));
                 for axis in 0..2 {
-                    work.note(ctrl.box_cascade(axis));
+                    work.note(ctrl.box_cascade(axis).and_then(|c| c.solved_by()));
                 }
                 if !was_constrained {
                     let steps = work.iterations[before..].iter().sum();
@@ -524,9 +525,8 @@ mod anchor {
     use std::sync::{Arc, Mutex};
     use std::time::Instant;
 
-    use dflat_control::ControlError;
     use dflat_control::optimise::osqp_anchor::{OsqpBoxSolver, OsqpOutcome, OsqpTuning, OsqpWarm};
-    use dflat_control::optimise::{AxisProblem, ConstrainedSolver, SolverMethod};
+    use dflat_control::optimise::{AxisProblem, AxisSolver, Carry, SolveFailure};
 
     use super::*;
 
@@ -572,15 +572,8 @@ mod anchor {
         }
     }
 
-    impl ConstrainedSolver for Observer {
-        fn method(&self) -> SolverMethod {
-            SolverMethod::Clarabel
-        }
-        fn axes(&self) -> usize {
-            1
-        }
-        fn solve(&mut self, axes: &mut [AxisProblem<'_>]) -> Result<(), ControlError> {
-            let [a] = axes else { unreachable!("one axis") };
+    impl AxisSolver for Observer {
+        fn solve(&mut self, a: AxisProblem<'_>) -> Result<SolveInfo, SolveFailure> {
             self.scratch.copy_from_slice(a.plan);
             let start = Instant::now();
             let r = self.osqp.solve_axis(AxisProblem {
@@ -599,16 +592,22 @@ mod anchor {
                 log.unsolved += 1;
                 log.first_unsolved.get_or_insert(status);
             }
-            Err(ControlError::Solver("observer".to_string()))
+            Err(SolveFailure::Observer)
         }
-        fn iterations(&self) -> usize {
-            self.osqp.iterations() as usize
+
+        fn carry(&mut self, event: Carry<'_>) {
+            match event {
+                Carry::Accepted { plans: [ours], .. } if self.solved => self.compare(ours),
+                Carry::Accepted { .. } => {}
+                Carry::Skipped | Carry::Reset => self.osqp.forget(),
+            }
         }
-        fn accept(&mut self, axes: &[AxisProblem<'_>], _duals: &[[f64; 2]]) {
-            let ([a], true) = (axes, self.solved) else {
-                return;
-            };
-            let (ours, osqp) = (&*a.plan, &self.scratch);
+    }
+
+    impl Observer {
+        /// OSQP's plan against the accepted one (the log's accuracy).
+        fn compare(&self, ours: &[f64]) {
+            let osqp = &self.scratch;
             let near = ours
                 .iter()
                 .zip(osqp)
@@ -622,12 +621,6 @@ mod anchor {
             log.max_near = log.max_near.max(near);
             log.max_jerk_rel = log.max_jerk_rel.max(jerk_rel);
             log.over_tol += usize::from(near > NEAR_TOL);
-        }
-        fn skip(&mut self) {
-            self.osqp.forget();
-        }
-        fn reset(&mut self) {
-            self.osqp.forget();
         }
     }
 

@@ -516,8 +516,12 @@ fn banded_failure_falls_back_to_clarabel_and_says_so() {
         let ip = BandedInteriorPointSolver::new(10, (1.0, 0.08, DT), bounds, Smoothness::default())
             .unwrap();
         p.bounded = Some(
-            crate::optimise::Cascade::new(vec![Box::new(alm), Box::new(ip), Box::new(clarabel)])
-                .unwrap(),
+            crate::optimise::AxisCascade::new(vec![
+                Box::new(alm),
+                Box::new(ip),
+                Box::new(clarabel),
+            ])
+            .unwrap(),
         );
     }
     let m = Measurement {
@@ -590,16 +594,16 @@ fn warm_cone_flies_the_corner_as_clarabel_does() {
         let cascade = banded.cone_cascade().expect("the cone's cascade");
         if a.constrained {
             constrained += 1;
-            let (place, solver) = cascade.solved_by().expect("a solver solved");
-            warm += usize::from(solver.warm_started());
+            let (place, info) = cascade.solved_by().expect("a solver solved");
+            warm += usize::from(info.warm_started);
             assert_eq!(
                 a.cone_interior_point,
-                solver.method() == crate::optimise::SolverMethod::InteriorPoint,
+                info.method == crate::optimise::SolverMethod::InteriorPoint,
                 "tick {k}"
             );
             assert_eq!(
                 place == 0,
-                solver.method() == crate::optimise::SolverMethod::Alm
+                info.method == crate::optimise::SolverMethod::Alm
             );
             let cone = banded.cone_bounds().unwrap();
             assert!(!cone.violated_by(banded.plan(0).unwrap(), banded.plan(1).unwrap(), DT));
@@ -627,26 +631,22 @@ struct Observer {
     accepted: usize,
 }
 
-impl crate::optimise::ConstrainedSolver for Observer {
-    fn method(&self) -> crate::optimise::SolverMethod {
-        crate::optimise::SolverMethod::Clarabel
-    }
-    fn axes(&self) -> usize {
-        1
-    }
-    fn solve(&mut self, _axes: &mut [AxisProblem<'_>]) -> Result<(), ControlError> {
+impl crate::optimise::AxisSolver for Observer {
+    fn solve(
+        &mut self,
+        _axis: AxisProblem<'_>,
+    ) -> Result<crate::optimise::SolveInfo, crate::optimise::SolveFailure> {
         self.seen += 1;
-        Err(ControlError::Solver("observer".to_string()))
+        Err(crate::optimise::SolveFailure::Observer)
     }
-    fn iterations(&self) -> usize {
-        0
-    }
-    fn accept(&mut self, _axes: &[AxisProblem<'_>], _duals: &[[f64; 2]]) {
-        self.accepted += 1;
+    fn carry(&mut self, event: crate::optimise::Carry<'_>) {
+        if let crate::optimise::Carry::Accepted { .. } = event {
+            self.accepted += 1;
+        }
     }
 }
 
-/// `Cascade::insert` checks its place and the problem size; a solver
+/// `Cascade::insert` checks its place; a solver
 /// inserted first that declines every tick leaves the commands as they
 /// were and is told each accepted solution.
 #[test]

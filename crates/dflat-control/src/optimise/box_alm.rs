@@ -7,6 +7,7 @@
 use super::alm::{AlmTuning, BandedAlm, RowBlock, StageSet};
 use super::bounds::AxisBounds;
 use super::bounds::Row;
+use super::cascade::{AxisSolver, Carry, SolveFailure, SolveInfo, SolverMethod};
 use super::fast_banded::FastBandedSolver;
 use super::problem::{AxisProblem, check_lengths, shifted_plan};
 use super::smoothness::Smoothness;
@@ -301,5 +302,35 @@ impl BoxAlmSolver {
         self.previous.copy_from_slice(plan);
         self.previous_valid = true;
         Ok(())
+    }
+}
+
+impl AxisSolver for BoxAlmSolver {
+    fn solve(&mut self, axis: AxisProblem<'_>) -> Result<SolveInfo, SolveFailure> {
+        let method = if self.alm.has_active_set() {
+            SolverMethod::ActiveSet
+        } else {
+            SolverMethod::Alm
+        };
+        self.solve_problem(axis)
+            .map_err(|e| SolveFailure::from_error(method, self.iterations(), e))?;
+        Ok(SolveInfo {
+            method,
+            iterations: self.iterations(),
+            factorisations: self.factorisations(),
+            warm_started: self.warm_used,
+        })
+    }
+
+    fn carry(&mut self, event: Carry<'_>) {
+        match event {
+            Carry::Accepted {
+                plans: [plan],
+                duals,
+            } => self.accept_plan(plan, duals),
+            Carry::Accepted { .. } => {}
+            Carry::Skipped => self.skip(),
+            Carry::Reset => self.reset(),
+        }
     }
 }

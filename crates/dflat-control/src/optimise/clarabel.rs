@@ -7,6 +7,7 @@ use clarabel::solver::{
 };
 
 use super::bounds::AxisBounds;
+use super::cascade::{AxisSolver, SolveFailure, SolveInfo, SolverMethod};
 use super::fast_banded::FastBandedSolver;
 use super::problem::{AxisProblem, baseline, check_lengths, invalid};
 use super::smoothness::Smoothness;
@@ -411,5 +412,18 @@ impl ClarabelSolver {
         self.fill(fixed, sent, reference);
         let data = &self.solver.data;
         (&data.P, &self.qvec, &data.A, &self.bvec, self.m_eq)
+    }
+}
+
+impl AxisSolver for ClarabelSolver {
+    fn solve(&mut self, axis: AxisProblem<'_>) -> Result<SolveInfo, SolveFailure> {
+        let method = SolverMethod::Clarabel;
+        self.solve_problem(axis).map_err(|e| match e {
+            ControlError::Solver(_) if self.solver.solution.status != SolverStatus::Solved => {
+                SolveFailure::Clarabel(self.solver.solution.status)
+            }
+            e => SolveFailure::from_error(method, 0, e),
+        })?;
+        Ok(SolveInfo::of(method))
     }
 }

@@ -5,6 +5,7 @@
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{DefaultSolver, IPSolver, SolverStatus, SupportedConeT};
 
+use super::cascade::{PairSolver, SolveFailure, SolveInfo, SolverMethod};
 use super::clarabel::{KktTuning, build_solver, push_axis_hessian};
 use super::cone::ConeBounds;
 use super::cone_solver::AxisWeights;
@@ -244,5 +245,22 @@ impl ClarabelConeSolver {
             }
         }
         Ok(())
+    }
+}
+
+impl PairSolver for ClarabelConeSolver {
+    fn solve(&mut self, x: AxisProblem<'_>, y: AxisProblem<'_>) -> Result<SolveInfo, SolveFailure> {
+        let method = SolverMethod::Clarabel;
+        self.solve_pair(x, y).map_err(|e| match e {
+            ControlError::Solver(_) if self.solver.solution.status != SolverStatus::Solved => {
+                SolveFailure::Clarabel(self.solver.solution.status)
+            }
+            e => SolveFailure::from_error(method, 0, e),
+        })?;
+        Ok(SolveInfo::of(method))
+    }
+
+    fn set_radius(&mut self, radius: &[f64]) -> Result<(), ControlError> {
+        ClarabelConeSolver::set_radius(self, radius)
     }
 }

@@ -6,6 +6,7 @@
 use super::alm::{AlmTuning, BandedAlm, RowBlock, StageSet};
 use super::banded_ip::AxisCost;
 use super::bounds::Row;
+use super::cascade::{Carry, PairSolver, SolveFailure, SolveInfo, SolverMethod};
 use super::cone::ConeBounds;
 use super::cone_qp::{ConeQp, STAGE, a_at, p_at};
 use super::fast_banded::FastBandedSolver;
@@ -434,5 +435,35 @@ impl BandedConeSolver {
         y.plan.copy_from_slice(&self.previous[1]);
         self.previous_valid = true;
         Ok(())
+    }
+}
+
+impl PairSolver for BandedConeSolver {
+    fn solve(&mut self, x: AxisProblem<'_>, y: AxisProblem<'_>) -> Result<SolveInfo, SolveFailure> {
+        let method = match self.method() {
+            ConeMethod::Alm => SolverMethod::Alm,
+            ConeMethod::InteriorPoint => SolverMethod::InteriorPoint,
+        };
+        self.solve_pair(x, y)
+            .map_err(|e| SolveFailure::from_error(method, self.iterations(), e))?;
+        Ok(SolveInfo {
+            method,
+            iterations: self.iterations(),
+            factorisations: self.factorisations(),
+            warm_started: self.warm_started(),
+        })
+    }
+
+    fn carry(&mut self, event: Carry<'_>) {
+        match event {
+            Carry::Accepted { plans: [x, y], .. } => self.accept_plans([x, y]),
+            Carry::Accepted { .. } => {}
+            Carry::Skipped => self.forget(),
+            Carry::Reset => self.reset(),
+        }
+    }
+
+    fn set_radius(&mut self, radius: &[f64]) -> Result<(), ControlError> {
+        BandedConeSolver::set_radius(self, radius)
     }
 }

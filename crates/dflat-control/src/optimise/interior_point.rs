@@ -14,6 +14,7 @@
 use super::banded_ip::{AxisCost, BandedIp, Stages};
 use super::bounds::AxisBounds;
 use super::bounds::{Row, check_row_data};
+use super::cascade::{AxisSolver, SolveFailure, SolveInfo, SolverMethod};
 use super::fast_banded::FastBandedSolver;
 use super::problem::{AxisProblem, baseline};
 use super::smoothness::Smoothness;
@@ -288,5 +289,21 @@ impl BandedInteriorPointSolver {
             return Err(ControlError::Solver("non-finite solution".to_string()));
         }
         Ok(())
+    }
+}
+
+impl AxisSolver for BandedInteriorPointSolver {
+    fn solve(&mut self, axis: AxisProblem<'_>) -> Result<SolveInfo, SolveFailure> {
+        let method = SolverMethod::InteriorPoint;
+        self.solve_problem(axis)
+            .map_err(|e| SolveFailure::from_error(method, self.iterations(), e))?;
+        Ok(SolveInfo {
+            iterations: self.iterations(),
+            ..SolveInfo::of(method)
+        })
+    }
+
+    fn row_duals(&self) -> &[[f64; 2]] {
+        BandedInteriorPointSolver::row_duals(self)
     }
 }

@@ -22,15 +22,19 @@
 //!
 //! When inequality constraints are configured and the fast plan violates
 //! one, the axis (box bounds) or the horizontal pair (the tilt cone) is
-//! re-solved by a [`Cascade`]: an ordered list of [`ConstrainedSolver`]s
-//! tried until one converges. With
+//! re-solved by a [`Cascade`]: an ordered list of solvers of the axis's
+//! problem ([`AxisSolver`]) or of the pair's ([`PairSolver`]) tried until
+//! one converges. With
 //! [`QpSolver::Banded`](crate::dfmpc::QpSolver::Banded) (the default) the
 //! first is the augmented Lagrangian on the free outputs ([`alm`]: one
 //! banded Newton system per step, warm-started from the previous tick's
 //! plan and multipliers, and between bursts from the multipliers the last
-//! burst left), serving the box (an interval per stage, hard speed and
-//! tilt-rate rows with multipliers clamped at 0, [`BoxAlmSolver`]) and
-//! the cone (a disc per stage, soft speed rows, [`BandedConeSolver`]).
+//! burst left), serving the box (an interval per stage, [`BoxAlmSolver`])
+//! and the cone (a disc per stage, soft speed rows, [`BandedConeSolver`]).
+//! A box with rows — the tilt-rate bound's, speed rows — goes to the
+//! active-set method on its compact KKT system instead ([`active_set`],
+//! inside [`BoxAlmSolver`], warm-started from the last tick's working
+//! set).
 //! Should it not converge, a banded interior point solves the same QP in
 //! the deviation variables plus the planned accelerations (cost `q·(b + p
 //! − y_ref)² + r·(Δã/δt)²`, equality rows tie ã to Δ²p/δt², bounds on ã
@@ -77,8 +81,13 @@
 //!
 //! * [`fast_banded`] — [`FastBandedSolver`]: the unconstrained problem, a
 //!   banded Cholesky factor built once, O(N) per tick (the fast path).
-//! * [`cascade`] — [`ConstrainedSolver`] (one interface for the box's and
-//!   the cone's solvers) and [`Cascade`] (the fallback order, as data).
+//! * [`cascade`] — [`AxisSolver`] and [`PairSolver`] (the box's and the
+//!   cone's solvers' interfaces: [`SolveInfo`] or [`SolveFailure`]) and
+//!   [`Cascade`] (the fallback order, as data).
+//! * [`active_set`] — the active-set method of one axis with rows (the
+//!   tilt-rate bound's problem), on a compact KKT system in profile form.
+//! * [`problem`] — [`AxisProblem`] and the checks and helpers every solver
+//!   shares.
 //! * [`alm`] — [`alm::BandedAlm`]: the augmented Lagrangian of both
 //!   constrained families; [`box_alm`] — [`BoxAlmSolver`], one axis's box
 //!   with it; [`cone_solver`] — [`BandedConeSolver`], the pair's cone with
@@ -131,7 +140,10 @@ mod tilt_rate_tests;
 
 pub use bounds::AxisBounds;
 pub use box_alm::BoxAlmSolver;
-pub use cascade::{Cascade, ConstrainedSolver, SolverMethod};
+pub use cascade::{
+    AxisCascade, AxisSolver, Carry, Cascade, PairCascade, PairSolver, SolveFailure, SolveInfo,
+    SolverMethod,
+};
 pub use clarabel::{ClarabelSolver, KktTuning};
 pub use clarabel_cone::ClarabelConeSolver;
 pub use cone::ConeBounds;

@@ -5,7 +5,7 @@
 
 use super::bounds::AxisBounds;
 use super::box_alm::BoxAlmSolver;
-use super::cascade::Cascade;
+use super::cascade::AxisCascade;
 use super::clarabel::{ClarabelSolver, KktTuning};
 use super::fast_banded::FastBandedSolver;
 use super::interior_point::BandedInteriorPointSolver;
@@ -110,13 +110,13 @@ proptest::proptest! {
             .unwrap()
             .solve_problem(AxisProblem { fixed: &fixed, sent, reference: &reference, plan: &mut got_alm })
             .unwrap();
-        let mut cascade = Cascade::new(vec![
+        let mut cascade = AxisCascade::new(vec![
             Box::new(BoxAlmSolver::new(horizon, (q, r, DT), bounds, smoothness, true).unwrap()),
             Box::new(BandedInteriorPointSolver::new(horizon, (q, r, DT), bounds, smoothness).unwrap()),
         ])
         .unwrap();
         cascade
-            .solve(&mut [AxisProblem { fixed: &fixed, sent, reference: &reference, plan: &mut got_alm }])
+            .solve(AxisProblem { fixed: &fixed, sent, reference: &reference, plan: &mut got_alm })
             .unwrap();
         let cw = cost((q, r), &smoothness, sent, &reference, &want);
         for (name, plan) in [("banded", &got), ("cascade", &got_alm)] {

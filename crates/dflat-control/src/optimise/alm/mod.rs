@@ -510,6 +510,12 @@ impl BandedAlm {
         &self.axes[i]
     }
 
+    /// Whether this solver's problems go to the active-set method (one
+    /// axis with intervals and rows).
+    pub fn has_active_set(&self) -> bool {
+        self.polish.is_some()
+    }
+
     /// What the active-set method did in the last solve (one axis with
     /// rows; zero otherwise).
     pub fn active_set_work(&self) -> super::active_set::Work {
