@@ -15,7 +15,7 @@ impl BandedAlm {
         let super::StageSet::Interval(b) = &self.stages else {
             return false;
         };
-        let at = |k: usize| self.x.get(k).copied().unwrap_or(0.0);
+        let at = |k: usize| self.ws.x.get(k).copied().unwrap_or(0.0);
         (0..stages.min(self.n)).any(|f| {
             let u = (at(f) - 2.0 * at(f.wrapping_sub(1)) + at(f.wrapping_sub(2))) * self.inv_dt2;
             let [l, h] = b[f][0];
@@ -42,10 +42,10 @@ impl BandedAlm {
             return Ok(false);
         };
         let big = |m: f64, v: f64| v.abs() > 1e-6 * m;
-        let ymax = self.y.iter().fold(0.0f64, |a, y| a.max(y[0].abs()));
-        let vmax = self.v.iter().flatten().fold(0.0f64, |a, v| a.max(*v));
+        let ymax = self.warm.y.iter().fold(0.0f64, |a, y| a.max(y[0].abs()));
+        let vmax = self.warm.v.iter().flatten().fold(0.0f64, |a, v| a.max(*v));
         let n = self.n;
-        let (y, v) = (&self.y, &self.v);
+        let (y, v) = (&self.warm.y, &self.warm.v);
         let guess = |id: usize| {
             if id < n {
                 let y = y[id][0];
@@ -68,7 +68,7 @@ impl BandedAlm {
         };
         let prob = Problem {
             p: &self.base,
-            c: &self.c,
+            c: &self.ws.c,
             stages: match &self.stages {
                 super::StageSet::Interval(b) => b,
                 super::StageSet::Disc(_) => &[],
@@ -80,23 +80,23 @@ impl BandedAlm {
             row_tol,
         };
         let axis = &self.axes[0];
-        let work = &mut self.p_work;
+        let work = &mut self.ws.p_work;
         let result = set.solve(&prob, (guess, self.tuning.max_kkt_solves), |x, out| {
             axis.apply_hessian_strided(x, 1, 0, 2.0, 0, work, out)
         });
         let done = result.is_ok();
-        self.active_set_work = set.work();
-        self.factorisations = set.work().solves;
+        self.ws.active_set_work = set.work();
+        self.ws.factorisations = set.work().solves;
         if done {
-            self.x.copy_from_slice(set.x());
+            self.ws.x.copy_from_slice(set.x());
             for f in 0..n {
-                self.y[f] = [set.stage_multiplier(f), 0.0];
+                self.warm.y[f] = [set.stage_multiplier(f), 0.0];
             }
             for r in 0..self.rows.len() {
                 let lam = set.row_multiplier(r);
-                self.v[r] = [lam.max(0.0), (-lam).max(0.0)];
+                self.warm.v[r] = [lam.max(0.0), (-lam).max(0.0)];
             }
-            self.px_current = false;
+            self.ws.px_current = false;
         }
         self.polish = Some(set);
         Ok(done)
