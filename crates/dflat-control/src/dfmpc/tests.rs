@@ -88,7 +88,9 @@ fn clarabel_without_bounds_agrees_with_fast_path() {
     let fixed = [1.0, 1.05, 1.11];
     let (mut a, mut b) = (vec![0.0; 101], vec![0.0; 101]);
     fast.solve(&fixed, &reference, &mut a).unwrap();
-    generic.solve(&fixed, &reference, &mut b).unwrap();
+    generic
+        .solve_problem(AxisProblem::new(&fixed, &reference, &mut b))
+        .unwrap();
     for j in 0..=100 {
         assert!(
             (a[j] - b[j]).abs() < 1e-5 * (1.0 + a[j].abs()),
@@ -123,7 +125,8 @@ fn constrained_plan_respects_bounds() {
     let mut plan = vec![0.0; 101];
     fast.solve(&[0.0; 3], &reference, &mut plan).unwrap();
     assert!(bounds.violated_by(&plan, DT));
-    cs.solve(&[0.0; 3], &reference, &mut plan).unwrap();
+    cs.solve_problem(AxisProblem::new(&[0.0; 3], &reference, &mut plan))
+        .unwrap();
     assert!(
         !AxisBounds {
             acceleration: Some([-a_max * 1.0001, a_max * 1.0001]),
@@ -334,7 +337,8 @@ fn faster_than_the_speed_bound_brakes_in_a_funnel() {
     let mut cs = ClarabelSolver::new(n, 1.0, 0.08, DT, bounds, f64::INFINITY).unwrap();
     let mut plan = vec![0.0; n + 1];
     let fixed = [0.0, 0.1, 0.2];
-    cs.solve(&fixed, &vec![10.0; n + 1], &mut plan).unwrap();
+    cs.solve_problem(AxisProblem::new(&fixed, &vec![10.0; n + 1], &mut plan))
+        .unwrap();
     let speed = |j: usize| (plan[j + 1] - plan[j]) / DT;
     for j in 2..n {
         let funnel = v_max.max(5.0 - 0.9 * a_max * (j - 1) as f64 * DT);
@@ -362,7 +366,7 @@ fn solver_failure_is_an_error() {
     };
     let mut cs = ClarabelSolver::new(50, 1.0, 0.08, DT, bounds, 1e-12).unwrap();
     let mut plan = vec![0.0; 51];
-    let r = cs.solve(&[0.0, 0.1, 0.2], &[10.0; 51], &mut plan);
+    let r = cs.solve_problem(AxisProblem::new(&[0.0, 0.1, 0.2], &[10.0; 51], &mut plan));
     assert!(matches!(r, Err(ControlError::Solver(_))), "{r:?}");
 }
 

@@ -8,8 +8,7 @@ use super::alm::{AlmTuning, BandedAlm, RowBlock, StageSet};
 use super::bounds::AxisBounds;
 use super::bounds::Row;
 use super::cascade::{AxisSolver, Carry, SolveFailure, SolveInfo, SolverMethod};
-use super::fast_banded::FastBandedSolver;
-use super::problem::{AxisProblem, check_lengths, shifted_plan};
+use super::problem::{AxisProblem, shifted_plan};
 use super::smoothness::Smoothness;
 use crate::ControlError;
 
@@ -90,10 +89,7 @@ impl BoxAlmSolver {
         warm_start: bool,
         tuning: AlmTuning,
     ) -> Result<Self, ControlError> {
-        let fast = FastBandedSolver::with_smoothness(horizon, q, r, dt, smoothness)?;
-        if let Some(t) = &bounds.tilt_rate {
-            t.check()?;
-        }
+        let fast = bounds.fast_solver(horizon, (q, r, dt), smoothness)?;
         let n = horizon - 2;
         let inv_dt2 = 1.0 / (dt * dt);
         let mut blocks = Vec::new();
@@ -228,13 +224,7 @@ impl BoxAlmSolver {
     /// error `plan` is unchanged. Errors: wrong lengths, infeasible data,
     /// and [`ControlError::Solver`] when the method does not converge.
     pub fn solve_problem(&mut self, a: AxisProblem<'_>) -> Result<(), ControlError> {
-        let AxisProblem {
-            fixed,
-            sent,
-            reference,
-            plan,
-        } = a;
-        check_lengths(self.horizon, reference, plan)?;
+        let (fixed, sent, reference, plan) = a.checked(self.horizon)?;
         let (dt, n, horizon) = (self.dt, self.horizon - 2, self.horizon);
         self.alm
             .axis(0)

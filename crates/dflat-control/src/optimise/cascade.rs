@@ -161,6 +161,39 @@ pub type AxisCascade = Cascade<dyn AxisSolver>;
 /// The horizontal pair's cascade.
 pub type PairCascade = Cascade<dyn PairSolver>;
 
+/// What every solver of a cascade is told between ticks (both
+/// interfaces' `carry`).
+pub trait Carries {
+    /// Tells the solver `event`.
+    fn tell(&mut self, event: Carry<'_>);
+}
+
+impl Carries for dyn AxisSolver {
+    fn tell(&mut self, event: Carry<'_>) {
+        self.carry(event);
+    }
+}
+
+impl Carries for dyn PairSolver {
+    fn tell(&mut self, event: Carry<'_>) {
+        self.carry(event);
+    }
+}
+
+impl<S: ?Sized + Carries> Cascade<S> {
+    /// A tick that did not need the constrained plan (every solver).
+    pub fn skip(&mut self) {
+        self.solved_by = None;
+        self.solvers.iter_mut().for_each(|s| s.tell(Carry::Skipped));
+    }
+
+    /// A controller reset (every solver).
+    pub fn reset(&mut self) {
+        self.solved_by = None;
+        self.solvers.iter_mut().for_each(|s| s.tell(Carry::Reset));
+    }
+}
+
 impl<S: ?Sized> Cascade<S> {
     /// The cascade of `solvers`, in order (at least one).
     pub fn new(solvers: Vec<Box<S>>) -> Result<Self, ControlError> {
@@ -243,20 +276,6 @@ impl Cascade<dyn AxisSolver> {
         earlier.iter_mut().for_each(|s| s.carry(event));
         Ok(info)
     }
-
-    /// A tick that did not need the constrained plan (every solver).
-    pub fn skip(&mut self) {
-        self.solved_by = None;
-        self.solvers
-            .iter_mut()
-            .for_each(|s| s.carry(Carry::Skipped));
-    }
-
-    /// A controller reset (every solver).
-    pub fn reset(&mut self) {
-        self.solved_by = None;
-        self.solvers.iter_mut().for_each(|s| s.carry(Carry::Reset));
-    }
 }
 
 impl Cascade<dyn PairSolver> {
@@ -276,20 +295,6 @@ impl Cascade<dyn PairSolver> {
         };
         self.solvers[..i].iter_mut().for_each(|s| s.carry(event));
         Ok(info)
-    }
-
-    /// A tick that did not need the constrained plan (every solver).
-    pub fn skip(&mut self) {
-        self.solved_by = None;
-        self.solvers
-            .iter_mut()
-            .for_each(|s| s.carry(Carry::Skipped));
-    }
-
-    /// A controller reset (every solver).
-    pub fn reset(&mut self) {
-        self.solved_by = None;
-        self.solvers.iter_mut().for_each(|s| s.carry(Carry::Reset));
     }
 
     /// Sets the tilt cone's radius per stage on every solver.

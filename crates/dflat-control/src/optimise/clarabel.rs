@@ -9,7 +9,7 @@ use clarabel::solver::{
 use super::bounds::AxisBounds;
 use super::cascade::{AxisSolver, SolveFailure, SolveInfo, SolverMethod};
 use super::fast_banded::FastBandedSolver;
-use super::problem::{AxisProblem, baseline, check_lengths, invalid};
+use super::problem::{AxisProblem, baseline, invalid};
 use super::smoothness::Smoothness;
 use super::smoothness::{accel_block, sent_linear_term};
 use crate::ControlError;
@@ -45,16 +45,7 @@ pub struct ClarabelSolver {
     m_eq: usize,
 }
 
-impl std::fmt::Debug for ClarabelSolver {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("ClarabelSolver")
-            .field("horizon", &self.horizon)
-            .field("dt", &self.dt)
-            .field("q", &self.q)
-            .field("bounds", &self.bounds)
-            .finish_non_exhaustive()
-    }
-}
+crate::optimise::problem::debug_without!(ClarabelSolver: horizon, dt, q, bounds);
 
 /// Clarabel's KKT settings for [`ClarabelSolver`] (the rest of its
 /// settings are fixed: no presolve, no equilibration, QDLDL, one thread).
@@ -328,33 +319,12 @@ impl ClarabelSolver {
         &self.bounds
     }
 
-    /// Solves with the bounds; arguments as [`FastBandedSolver::solve`]. A status
-    /// other than `Solved` (infeasible bounds, time limit, numerical
-    /// trouble) is [`ControlError::Solver`].
-    pub fn solve(
-        &mut self,
-        fixed: &[f64; 3],
-        reference: &[f64],
-        plan: &mut [f64],
-    ) -> Result<(), ControlError> {
-        self.solve_problem(AxisProblem {
-            fixed,
-            sent: None,
-            reference,
-            plan,
-        })
-    }
-
-    /// As [`ClarabelSolver::solve`], with the previously sent
-    /// command ([`AxisProblem::sent`]) for the smoothness term.
+    /// Solves with the bounds; arguments as
+    /// [`FastBandedSolver::solve_problem`]. A status other than `Solved`
+    /// (infeasible bounds, time limit, numerical trouble) is
+    /// [`ControlError::Solver`].
     pub fn solve_problem(&mut self, a: AxisProblem<'_>) -> Result<(), ControlError> {
-        let AxisProblem {
-            fixed,
-            sent,
-            reference,
-            plan,
-        } = a;
-        check_lengths(self.horizon, reference, plan)?;
+        let (fixed, sent, reference, plan) = a.checked(self.horizon)?;
         self.fill(fixed, sent, reference);
         self.solver
             .update_q(&self.qvec)

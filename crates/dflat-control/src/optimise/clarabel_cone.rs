@@ -10,7 +10,7 @@ use super::clarabel::{KktTuning, build_solver, push_axis_hessian};
 use super::cone::ConeBounds;
 use super::cone_solver::AxisWeights;
 use super::fast_banded::FastBandedSolver;
-use super::problem::{AxisProblem, baseline, check_lengths};
+use super::problem::{AxisProblem, baseline};
 use super::smoothness::{accel_block, sent_linear_term};
 use crate::ControlError;
 
@@ -39,16 +39,7 @@ pub struct ClarabelConeSolver {
     m_cone: usize,
 }
 
-impl std::fmt::Debug for ClarabelConeSolver {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("ClarabelConeSolver")
-            .field("horizon", &self.horizon)
-            .field("dt", &self.dt)
-            .field("bounds", &self.bounds)
-            .field("soft", &self.soft)
-            .finish_non_exhaustive()
-    }
-}
+crate::optimise::problem::debug_without!(ClarabelConeSolver: horizon, dt, bounds, soft);
 
 impl ClarabelConeSolver {
     /// Builds the solver once for horizon N, step δt \[s\], per-axis
@@ -197,8 +188,7 @@ impl ClarabelConeSolver {
         x: AxisProblem<'_>,
         y: AxisProblem<'_>,
     ) -> Result<(), ControlError> {
-        check_lengths(self.horizon, x.reference, x.plan)?;
-        check_lengths(self.horizon, y.reference, y.plan)?;
+        super::problem::check_pair(self.horizon, &x, &y)?;
         let (n, dt) = (self.horizon - 2, self.dt);
         let fixed = [x.fixed, y.fixed];
         for (i, a) in [&x, &y].into_iter().enumerate() {

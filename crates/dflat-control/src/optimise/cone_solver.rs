@@ -10,7 +10,7 @@ use super::cascade::{Carry, PairSolver, SolveFailure, SolveInfo, SolverMethod};
 use super::cone::ConeBounds;
 use super::cone_qp::{ConeQp, STAGE, a_at, p_at};
 use super::fast_banded::FastBandedSolver;
-use super::problem::{AxisProblem, baseline, check_lengths, shifted_plan};
+use super::problem::{AxisProblem, baseline, shifted_plan};
 use super::smoothness::Smoothness;
 use super::smoothness::{accel_block, sent_linear_term};
 use crate::ControlError;
@@ -319,8 +319,7 @@ impl BandedConeSolver {
         x: AxisProblem<'_>,
         y: AxisProblem<'_>,
     ) -> Result<(), ControlError> {
-        check_lengths(self.horizon, x.reference, x.plan)?;
-        check_lengths(self.horizon, y.reference, y.plan)?;
+        super::problem::check_pair(self.horizon, &x, &y)?;
         let a0 = self.load(&x, &y);
         self.iterations = 0;
         let warm = self.warm_start && self.previous_valid;
@@ -418,7 +417,7 @@ impl BandedConeSolver {
             return Err(ControlError::Solver("cone ALM: no convergence".to_string()));
         };
         qp.ip.set_start(&[&self.p[0], &self.p[1]], self.dt);
-        let result = qp.solve(&self.c, a0, &self.lo, &self.hi);
+        let result = qp.solve(&self.c, a0, (&self.lo, &self.hi));
         self.iterations += qp.ip.iterations();
         result?;
         // The next tick's augmented Lagrangian starts from its multipliers

@@ -366,12 +366,7 @@ impl FastBandedSolver {
         reference: &[f64],
         plan: &mut [f64],
     ) -> Result<(), ControlError> {
-        self.solve_problem(AxisProblem {
-            fixed,
-            sent: None,
-            reference,
-            plan,
-        })
+        self.solve_problem(AxisProblem::new(fixed, reference, plan))
     }
 
     /// As [`FastBandedSolver::solve`], with the previously sent command

@@ -174,10 +174,7 @@ impl BandedInteriorPointSolver {
         bounds: AxisBounds,
         smoothness: Smoothness,
     ) -> Result<Self, ControlError> {
-        let fast = FastBandedSolver::with_smoothness(horizon, q, r, dt, smoothness)?;
-        if let Some(t) = &bounds.tilt_rate {
-            t.check()?;
-        }
+        let fast = bounds.fast_solver(horizon, (q, r, dt), smoothness)?;
         let n = horizon - 2;
         let accel = accel_block(n, r, dt, &smoothness);
         let qp = StageQp::new(
@@ -225,12 +222,7 @@ impl BandedInteriorPointSolver {
     /// the interior-point method does not converge (infeasible bounds,
     /// numerical trouble).
     pub fn solve_problem(&mut self, a: AxisProblem<'_>) -> Result<(), ControlError> {
-        let AxisProblem {
-            fixed,
-            sent,
-            reference,
-            plan,
-        } = a;
+        let (fixed, sent, reference, plan) = a.checked(self.fast.horizon())?;
         self.fast.solve_problem(AxisProblem {
             fixed,
             sent,

@@ -107,6 +107,53 @@ pub struct AxisProblem<'a> {
     pub plan: &'a mut [f64],
 }
 
+impl<'a> AxisProblem<'a> {
+    /// The problem without a previously sent command (`sent: None`).
+    pub fn new(fixed: &'a [f64; 3], reference: &'a [f64], plan: &'a mut [f64]) -> Self {
+        Self {
+            fixed,
+            sent: None,
+            reference,
+            plan,
+        }
+    }
+
+    /// Its parts `(fixed, sent, reference, plan)`, once the reference and
+    /// the plan are checked to have `horizon + 1` entries.
+    pub(crate) fn checked(self, horizon: usize) -> Result<Parts<'a>, ControlError> {
+        check_lengths(horizon, self.reference, self.plan)?;
+        Ok((self.fixed, self.sent, self.reference, self.plan))
+    }
+}
+
+/// Both axes' lengths checked (the pair's solvers).
+pub(crate) fn check_pair(
+    horizon: usize,
+    x: &AxisProblem<'_>,
+    y: &AxisProblem<'_>,
+) -> Result<(), ControlError> {
+    check_lengths(horizon, x.reference, x.plan)?;
+    check_lengths(horizon, y.reference, y.plan)
+}
+
+/// `Debug` for a solver holding a foreign solver that has none: its
+/// name and the fields listed (`debug_without!(Type: field, …)`).
+macro_rules! debug_without {
+    ($ty:ident: $($field:ident),+) => {
+        impl std::fmt::Debug for $ty {
+            fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                f.debug_struct(stringify!($ty))
+                    $(.field(stringify!($field), &self.$field))+
+                    .finish_non_exhaustive()
+            }
+        }
+    };
+}
+pub(crate) use debug_without;
+
+/// A one-axis solve's parts: `(fixed, sent, reference, plan)`.
+pub(crate) type Parts<'a> = (&'a [f64; 3], Option<f64>, &'a [f64], &'a mut [f64]);
+
 impl AxisProblem<'_> {
     /// The same problem, borrowed again (for a solver taking it by value).
     pub fn reborrow(&mut self) -> AxisProblem<'_> {

@@ -17,8 +17,7 @@ impl ActiveSet {
         loop {
             let Some((add, side)) = self.latest_broken(prob) else {
                 // (x, lam) are the last KKT solve's (a whole segment).
-                self.refine(p_times);
-                return Ok(());
+                return self.refine(prob, p_times);
             };
             if !self.add_block(prob)? {
                 self.add_one(prob, add, side)?;
@@ -34,18 +33,12 @@ impl ActiveSet {
     fn add_block(&mut self, prob: &Problem<'_>) -> Result<bool, ControlError> {
         self.adding.fill(false);
         let mut count = 0;
-        for id in 0..self.cons.len() {
-            if self.side[id] != Side::Free {
-                continue;
-            }
-            let (amount, side) = self.broken(prob, id);
-            if amount > 0.0 {
-                self.lam[id] = 0.0;
-                self.set_side(id, side);
-                self.adding[id] = true;
-                count += 1;
-            }
-        }
+        self.for_each_broken(prob, |set, id, side| {
+            set.lam[id] = 0.0;
+            set.set_side(id, side);
+            set.adding[id] = true;
+            count += 1;
+        });
         loop {
             self.kkt_solve(prob)?;
             self.work.dual += 1;

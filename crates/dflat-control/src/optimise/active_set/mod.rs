@@ -284,7 +284,7 @@ impl ActiveSet {
         if dependent || freed || bound || self.free_wrong_signed(tol) {
             return Ok(false);
         }
-        self.refine(p_times);
+        self.refine(prob, p_times)?;
         Ok(true)
     }
 
@@ -446,18 +446,26 @@ impl ActiveSet {
     /// [`ActiveSet::keep_gap`]); returns whether any.
     fn bind_broken(&mut self, prob: &Problem<'_>) -> bool {
         let mut any = false;
+        self.for_each_broken(prob, |set, id, side| {
+            set.lam[id] = 0.0;
+            set.set_side(id, side);
+            set.keep_gap(prob, id, side);
+            any = true;
+        });
+        any
+    }
+
+    /// Calls `f(self, id, side)` for each constraint outside the set that
+    /// x breaks (in order; f sees the changes of the earlier calls).
+    fn for_each_broken(&mut self, prob: &Problem<'_>, mut f: impl FnMut(&mut Self, usize, Side)) {
         for id in 0..self.cons.len() {
             if self.side[id] != Side::Free {
                 continue;
             }
             let (amount, side) = self.broken(prob, id);
             if amount > 0.0 {
-                self.lam[id] = 0.0;
-                self.set_side(id, side);
-                any = true;
-                self.keep_gap(prob, id, side);
+                f(self, id, side);
             }
         }
-        any
     }
 }

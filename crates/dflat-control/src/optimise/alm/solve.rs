@@ -6,7 +6,7 @@
 //! augmented Lagrangian ([`BandedAlm::inner_solve`]) and the multiplier
 //! and σ update with its stopping tests ([`BandedAlm::outer_update`]).
 
-use super::super::bounds::check_row_data;
+use super::super::bounds::check_solve_data;
 use super::{
     BandedAlm, DECREMENT_TOLERANCE, DUAL_TOLERANCE, Factored, GAP_TOLERANCE, INEXACT, LOCAL_STOP,
     LOOSE_REUSE, MAX_OUTER, PRIMAL_TOLERANCE, REUSE_DECREMENT, ROW_TOLERANCE, SIGMA_GROWTH,
@@ -127,14 +127,14 @@ impl BandedAlm {
         lo: &[f64],
         hi: &[f64],
     ) -> Result<(), ControlError> {
-        let m = self.rows.len();
-        check_row_data(
+        check_solve_data(
             "ALM",
-            c.len() == self.k * self.n && lo.len() == m && hi.len() == m,
+            (c, self.k * self.n),
+            self.rows.len(),
+            &self.ws.x,
+            &a0,
+            (lo, hi),
             "c needs K·n entries, lo and hi one per row",
-            &[c, &self.ws.x, &a0],
-            lo,
-            hi,
         )?;
         if let StageSet::Interval(b) = &self.stages
             && b.iter()
