@@ -4,6 +4,7 @@
 //! at a time when a block cannot, and the step without a primal move for
 //! a constraint the set's others determine.
 
+use super::kkt::Con;
 use super::{ActiveSet, Problem, Side};
 use crate::ControlError;
 
@@ -66,15 +67,32 @@ impl ActiveSet {
     /// Releases the members the others determine or, when there are
     /// none, those being added whose multiplier starts on the wrong side;
     /// returns how many being added left, and whether the set changed.
+    /// A member that was in the set before the block and that the block
+    /// made dependent stays; the members being added near it (the
+    /// dependence is local: constraints on overlapping outputs) leave,
+    /// or every one being added when none is near.
     fn drop_at_start(&mut self) -> (usize, bool) {
         let (mut left, mut changed) = (0, false);
+        let (mut old_dependent, mut near_left) = (false, false);
         let mut from = 0;
         while let Some(id) = self.dependent_member(from) {
-            left += usize::from(self.adding[id]);
-            self.release(id);
-            changed = true;
             from = id + 1;
+            if self.adding[id] {
+                left += 1;
+                self.release(id);
+                changed = true;
+            } else if self.side[id] != Side::Free {
+                old_dependent = true;
+                let k = self.cons[id];
+                let gone = self.release_adding(|c| near(c, &k));
+                left += gone;
+                near_left |= gone > 0;
+            }
         }
+        if old_dependent && !near_left {
+            left += self.release_adding(|_| true);
+        }
+        changed |= old_dependent;
         if changed {
             // The factor no longer matches the set: solve again first.
             return (left, true);
@@ -87,6 +105,19 @@ impl ActiveSet {
             }
         }
         (left, changed)
+    }
+
+    /// Releases the constraints being added that `pick` chooses; returns
+    /// how many.
+    fn release_adding(&mut self, pick: impl Fn(&Con) -> bool) -> usize {
+        let mut gone = 0;
+        for id in 0..self.cons.len() {
+            if self.adding[id] && pick(&self.cons[id]) {
+                self.release(id);
+                gone += 1;
+            }
+        }
+        gone
     }
 
     /// Moves (x, λ) along the segment to the KKT solution just solved
@@ -132,21 +163,20 @@ impl ActiveSet {
             self.kkt_solve(prob)?;
             self.work.dual += 1;
             self.take_solution(true);
-            let dependent = self.dependent_member(0);
-            if dependent == Some(add)
+            if self.dependent_member(0).is_some()
                 || (self.lam[add] == 0.0 && self.wrong(add, self.lam_next[add]))
             {
-                // Determined (or nearly) by the set: the others'
-                // multipliers move for it.
-                if !self.pure_dual_step(add) {
+                // Determined (or nearly) by the set (the factorisation may
+                // find the dependence at another member's slot): the
+                // set's factor without it, and the others' multipliers
+                // move for it.
+                self.set_side(add, Side::Free);
+                self.kkt_solve(prob)?;
+                if self.dependent_member(0).is_some() || !self.pure_dual_step(add, side) {
                     return Err(ControlError::Solver(
                         "active set: a dependent constraint cannot be met".into(),
                     ));
                 }
-                continue;
-            }
-            if let Some(id) = dependent {
-                self.release(id);
                 continue;
             }
             match self.segment_step(Some(add)) {
@@ -156,11 +186,12 @@ impl ActiveSet {
         }
     }
 
-    /// The dual method's step for a constraint `p` being added that the
-    /// set's others determine (`a_p = Σ r_k·a_k`): x stays, p's multiplier
-    /// grows and the others' change along −r until the first reaches
-    /// zero; that one leaves. Returns false when none can.
-    fn pure_dual_step(&mut self, p: usize) -> bool {
+    /// The dual method's step for a constraint `p` (at `side`, outside the
+    /// set whose factor is held) that the set determines (`a_p = Σ
+    /// r_k·a_k`): x stays, p's multiplier grows and the others' change
+    /// along −r until the first reaches zero; that one leaves and p joins
+    /// the set. Returns false when none can.
+    fn pure_dual_step(&mut self, p: usize, side: Side) -> bool {
         let m = self.kkt.len();
         self.res[..m].fill(0.0);
         let c = self.cons[p];
@@ -168,11 +199,7 @@ impl ActiveSet {
             self.res[self.kkt.slot_p(c.first + k)] = c.w * c.coef[k];
         }
         self.kkt.solve(&mut self.res);
-        let sign_p = if self.side[p] == Side::Upper {
-            1.0
-        } else {
-            -1.0
-        };
+        let sign_p = if side == Side::Upper { 1.0 } else { -1.0 };
         let r_of = |s: &Self, id: usize| {
             s.kkt
                 .slot_con(id)
@@ -204,6 +231,7 @@ impl ActiveSet {
         }
         self.lam[p] = sign_p * tau * self.cons[p].w;
         self.release(drop);
+        self.set_side(p, side);
         true
     }
 
@@ -227,4 +255,9 @@ impl ActiveSet {
         }
         None
     }
+}
+
+/// Whether two constraints' outputs are within four stages of each other.
+fn near(a: &Con, b: &Con) -> bool {
+    a.first <= b.last() + 4 && b.first <= a.last() + 4
 }

@@ -63,9 +63,6 @@ use super::bounds::Row;
 use crate::ControlError;
 
 /// Block steps before the dual method.
-/// KKT solves per solve, over both methods: beyond it the solve fails
-/// (the cascade's next solver takes the tick).
-/// Block steps before the dual method.
 const BLOCK_STEPS: usize = 2;
 /// KKT solves per solve, over both methods (the default budget): beyond
 /// it the solve fails (the cascade's next solver takes the tick).
