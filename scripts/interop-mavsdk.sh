@@ -30,12 +30,9 @@ if ! "$VENV/bin/python" -c 'import mavsdk' 2>/dev/null; then
 fi
 echo "interop-mavsdk: mavsdk $("$VENV/bin/python" -c 'import mavsdk; print(mavsdk.__version__)')"
 
-if [[ -z "${DFLAT_BIN:-}" ]]; then
-    cargo build -q -p dflat --bin dflat
-    TARGET=$(cargo metadata --format-version 1 --no-deps |
-        sed -n 's/.*"target_directory":"\([^"]*\)".*/\1/p')
-    DFLAT_BIN="$TARGET/debug/dflat"
-fi
+# shellcheck source=scripts/sitl-common.sh
+source scripts/sitl-common.sh
+need_dflat_bin
 
 cat >"$OUT/interop.toml" <<TOML
 # scripts/interop-mavsdk.sh: the daemon holds at the start point (the
@@ -50,11 +47,8 @@ tlog = false
 start = [0.0, 0.0, -10.0]
 TOML
 
-SITL_PID=
-DAEMON_PID=
 cleanup() {
-    [[ -n "$DAEMON_PID" ]] && kill -INT "$DAEMON_PID" 2>/dev/null || true
-    [[ -n "$SITL_PID" ]] && kill -INT "$SITL_PID" 2>/dev/null || true
+    stop_daemon_and_sitl
     wait 2>/dev/null || true
 }
 trap cleanup EXIT

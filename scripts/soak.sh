@@ -25,12 +25,9 @@ ROOT=$(pwd)
 mkdir -p "$OUT"
 OUT=$(cd "$OUT" && pwd)
 
-if [[ -z "${DFLAT_BIN:-}" ]]; then
-    cargo build -q -p dflat --bin dflat
-    TARGET=$(cargo metadata --format-version 1 --no-deps |
-        sed -n 's/.*"target_directory":"\([^"]*\)".*/\1/p')
-    DFLAT_BIN="$TARGET/debug/dflat"
-fi
+# shellcheck source=scripts/sitl-common.sh
+source scripts/sitl-common.sh
+need_dflat_bin
 cp "$DFLAT_BIN" "$OUT/dflat"
 BIN="$OUT/dflat"
 
@@ -57,13 +54,7 @@ vision_latency_ms = 60.0
 vision_noise_sigma = 0.02
 TOML
 
-SITL_PID=
-DAEMON_PID=
-cleanup() {
-    [[ -n "$DAEMON_PID" ]] && kill -INT "$DAEMON_PID" 2>/dev/null || true
-    [[ -n "$SITL_PID" ]] && kill -INT "$SITL_PID" 2>/dev/null || true
-}
-trap cleanup EXIT
+trap stop_daemon_and_sitl EXIT
 
 "$BIN" sitl --config "$OUT/soak.toml" --link udpin:127.0.0.1:0 \
     >"$OUT/sitl.out" 2>"$OUT/sitl.log" &

@@ -116,7 +116,7 @@ fn check_config_refuses_old_keys_and_migrates_them() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
-/// `check-config` refuses exactly what a daemon start refuses (issue 38):
+/// `check-config` refuses exactly what a daemon start refuses:
 /// each bad file is refused by both, with the field named, and a start
 /// refused creates no records.
 #[test]

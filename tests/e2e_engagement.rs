@@ -59,6 +59,21 @@ fn tap_sitl(plant: &SitlSettings) -> (SitlHandle, mpsc::Receiver<TapFrame>) {
     (sitl, rx)
 }
 
+/// Starts the daemon with `cfg` on `sitl` and waits (5 s at most) for
+/// standby; `what` the message should it not come.
+async fn daemon_in_standby(
+    cfg: &Config,
+    sitl: &SitlHandle,
+    what: &str,
+) -> dflat_daemon::DaemonHandle {
+    let link = format!("udpout:127.0.0.1:{}", sitl.local_addr().port());
+    let daemon = dflat_daemon::spawn(cfg.clone(), Some(link)).await.unwrap();
+    wait_for(&daemon, FlightState::Standby, Duration::from_secs(5))
+        .await
+        .expect(what);
+    daemon
+}
+
 async fn wait_for(
     daemon: &dflat_daemon::DaemonHandle,
     want: FlightState,
@@ -111,13 +126,8 @@ async fn engaging_while_the_pilot_flies_brakes_where_it_was_engaged() {
     let (cfg, mut plant) = setup("engage-moving", MissionStart::Hold, SitlAutopilot::Px4);
     plant.sitl.start = [0.0, 0.0, -10.0];
     let (sitl, taps) = tap_sitl(&plant);
-    let link = format!("udpout:127.0.0.1:{}", sitl.local_addr().port());
-    let daemon = dflat_daemon::spawn(cfg.clone(), Some(link)).await.unwrap();
-
     // Standby: streaming, the autopilot in position mode.
-    wait_for(&daemon, FlightState::Standby, Duration::from_secs(5))
-        .await
-        .expect("standby");
+    let daemon = daemon_in_standby(&cfg, &sitl, "standby").await;
     let first_seen = sitl.truth().position;
     // The pilot flies north at 2 m/s for 2.5 s (5 m), then engages.
     sitl.set_pilot_velocity([2.0, 0.0, 0.0]);
@@ -189,11 +199,7 @@ async fn override_and_hand_back_on_the_l_path_without_a_kick() {
     cfg.logging.dir = records.to_string_lossy().into_owned();
     cfg.logging.tlog = false;
     let (sitl, taps) = tap_sitl(&plant);
-    let link = format!("udpout:127.0.0.1:{}", sitl.local_addr().port());
-    let daemon = dflat_daemon::spawn(cfg.clone(), Some(link)).await.unwrap();
-    wait_for(&daemon, FlightState::Standby, Duration::from_secs(5))
-        .await
-        .expect("standby");
+    let daemon = daemon_in_standby(&cfg, &sitl, "standby").await;
     sitl.request_mode(SitlMode::Offboard);
     wait_for(&daemon, FlightState::Tracking, Duration::from_secs(5))
         .await
@@ -209,23 +215,12 @@ async fn override_and_hand_back_on_the_l_path_without_a_kick() {
     sitl.request_mode(SitlMode::Offboard);
     // The rest of the path (≤ 50 m at 5 m/s) and 1 s more.
     let end = *cfg.mission.path.last().unwrap();
-    let until = Instant::now() + Duration::from_secs(25);
-    let mut arrived = None;
-    while Instant::now() < until {
-        tokio::time::sleep(Duration::from_millis(20)).await;
-        let p = sitl.truth().position;
-        if arrived.is_none() && support::dist(p, end) < 0.5 {
-            arrived = Some(Instant::now());
-        }
-        if arrived.is_some_and(|t| t.elapsed() > Duration::from_secs(1)) {
-            break;
-        }
-    }
+    let arrived = support::arrive_and_linger(&sitl, end, 0.5, Duration::from_secs(25)).await;
     daemon.shutdown();
     let summary = daemon.join().await.unwrap();
     let report = sitl.stop().unwrap();
     assert!(!report.diverged);
-    assert!(arrived.is_some(), "path not completed: {summary}");
+    assert!(arrived, "path not completed: {summary}");
     assert_eq!(summary.engagements, 2, "{summary}");
     assert_eq!(summary.disengagements, 1, "{summary}");
 
@@ -302,11 +297,7 @@ async fn offboard_is_refused_without_a_stream_and_the_ardupilot_flavour_flies() 
     assert_eq!(sitl.mode(), SitlMode::Hold);
     assert_eq!(sitl.counters().offboard_refused, 1);
 
-    let link = format!("udpout:127.0.0.1:{}", sitl.local_addr().port());
-    let daemon = dflat_daemon::spawn(cfg.clone(), Some(link)).await.unwrap();
-    wait_for(&daemon, FlightState::Standby, Duration::from_secs(5))
-        .await
-        .expect("standby: LOITER is not GUIDED_NOGPS");
+    let daemon = daemon_in_standby(&cfg, &sitl, "standby: LOITER is not GUIDED_NOGPS").await;
     sitl.request_mode(SitlMode::Offboard);
     tokio::time::sleep(Duration::from_millis(50)).await;
     assert_eq!(sitl.mode(), SitlMode::Offboard);
@@ -336,11 +327,7 @@ async fn engagement_is_refused_above_the_autopilots_tilt_limit() {
     let (mut cfg, plant) = setup("tilt-refused", MissionStart::Hold, SitlAutopilot::Px4);
     cfg.vehicle.max_tilt_deg = 40.0;
     let (sitl, taps) = tap_sitl(&plant);
-    let link = format!("udpout:127.0.0.1:{}", sitl.local_addr().port());
-    let daemon = dflat_daemon::spawn(cfg.clone(), Some(link)).await.unwrap();
-    wait_for(&daemon, FlightState::Standby, Duration::from_secs(5))
-        .await
-        .expect("standby");
+    let daemon = daemon_in_standby(&cfg, &sitl, "standby").await;
     tokio::time::sleep(Duration::from_millis(500)).await;
     sitl.request_mode(SitlMode::Offboard);
     tokio::time::sleep(Duration::from_secs(3)).await;

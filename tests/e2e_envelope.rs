@@ -24,12 +24,11 @@ mod common;
 
 use std::path::PathBuf;
 use std::process::{Command, Stdio};
-use std::sync::mpsc::{Receiver, channel};
+use std::sync::mpsc::Receiver;
 use std::time::{Duration, Instant};
 
 use common::gcs::Gcs;
 use common::*;
-use dflat_daemon::config::Config;
 use dflat_link::MavMessage;
 use dflat_link::dialect::{MavFrame, PositionTargetTypemask, SET_POSITION_TARGET_LOCAL_NED_DATA};
 use dflat_sitl::{self as sitl, SitlHandle, SitlMode, SitlOptions, TapFrame, TruthSample};
@@ -45,23 +44,22 @@ struct Rig {
 }
 
 impl Rig {
+    /// A rig for the daemon configuration `text` (logging into the rig's
+    /// directory, no tlog, added here).
     fn new(name: &str, text: &str) -> Self {
         let dir = scratch(name);
-        let text = text.replace("@DIR@", &dir.display().to_string());
-        let config = write_config(&dir, &format!("{name}.toml"), &text);
-        Config::load(&config).expect("daemon config");
-        let (tx, tap) = channel();
-        let sim = sitl::spawn(
-            &dflat_sitl::SitlSettings::load(&config).expect("sitl config"),
-            SitlOptions {
-                link: Some("udpin:127.0.0.1:0".into()),
-                gcs: Some("udpin:127.0.0.1:0".into()),
-                tap: Some(tx),
+        let text = format!(
+            "[logging]\ndir = \"{}\"\ntlog = false\n{text}",
+            dir.display()
+        );
+        let (config, _) = write_daemon_config(&dir, &format!("{name}.toml"), &text);
+        let (sim, tap) = tapped_sitl(
+            &config,
+            TapOptions {
+                gcs: true,
                 record_trace: true,
-                ..SitlOptions::default()
             },
-        )
-        .expect("sitl");
+        );
         Self {
             dir,
             config,
@@ -154,9 +152,6 @@ fn single_fast_samples_are_refused_and_a_stream_stops_at_the_fence() {
 [mission]
 start = "hold"
 geofence = [30.0, 30.0, 50.0]
-[logging]
-dir = "@DIR@"
-tlog = false
 [sitl]
 start = [0.0, 0.0, -10.0]
 drag = 0.3
@@ -259,9 +254,6 @@ fn a_vehicle_pushed_past_the_speed_limit_is_braked_not_levelled() {
 start = "hold"
 [safety]
 max_speed_mps = 15.0
-[logging]
-dir = "@DIR@"
-tlog = false
 [sitl]
 start = [0.0, 0.0, -10.0]
 gust_at_s = 12.0
@@ -327,9 +319,6 @@ const ROUTE: &str = r#"
 start = "path"
 path = [[0.0, 0.0, -10.0], [120.0, 0.0, -10.0]]
 speed = 8.0
-[logging]
-dir = "@DIR@"
-tlog = false
 [sitl]
 start = [0.0, 0.0, -10.0]
 drag = 0.3

@@ -1,4 +1,4 @@
-//! End to end (issue 27): the daemon's baselines are flyable. The paper's
+//! End to end: the daemon's baselines are flyable. The paper's
 //! L path (`config/default.toml`'s: 20 m north, then 30 m east, z = −10 m)
 //! at 5 m/s against the in-process SITL with its vision stand-in — 15 Hz,
 //! 60 ms latency, σ = 2 cm — flown by DF-MPC (as shipped), Flatness MPC and
@@ -125,19 +125,8 @@ fn fly(kind: &str) -> Figures {
     let saturated = at_limit as f64 / commands.max(1) as f64;
 
     let trace = &flight.report.trace;
-    let first = trace
-        .iter()
-        .position(|s| s.command.is_some())
-        .unwrap_or(trace.len());
-    let end = trace[first..]
-        .iter()
-        .position(|s| dist(s.position, PATH[2]) < ARRIVAL)
-        .map(|i| first + i);
-    let errors: Vec<f64> = trace[first..end.unwrap_or(trace.len())]
-        .iter()
-        .map(|s| path_distance(&PATH, s.position))
-        .collect();
-    if end.is_none() {
+    let (errors, arrived) = path_errors(trace, &PATH, ARRIVAL);
+    if !arrived {
         // What the daemon said (state changes, failsafes): the diagnosis of
         // a flight that did not get to the end in 40 s.
         let texts: Vec<String> = flight
@@ -158,7 +147,7 @@ fn fly(kind: &str) -> Figures {
         mean_step_deg,
         saturated,
         commands,
-        arrived: end.is_some(),
+        arrived,
     }
 }
 

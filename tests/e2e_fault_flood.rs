@@ -19,16 +19,12 @@
 mod common;
 
 use std::net::UdpSocket;
-use std::sync::mpsc::channel;
 use std::time::{Duration, Instant};
 
 use common::*;
-use dflat_daemon::config::Config;
 use dflat_link::MavMessage;
 use dflat_link::dialect::LOCAL_POSITION_NED_DATA;
-use dflat_sitl::{self as sitl, SitlOptions};
 
-const MAX_TILT_DEG: f64 = 35.0;
 /// Messages per second of the flood.
 const RATE: u64 = 10_000;
 /// Flood duration (as paced; a loaded machine may take longer, and sends
@@ -44,36 +40,20 @@ const MAX_TICK_GAP: u64 = 3;
 #[test]
 fn a_10k_per_second_flood_does_not_disturb_the_50_hz_tick() {
     let dir = scratch("flood");
-    let text = format!(
-        r#"
-[mission]
-start = "hold"
-geofence = [100.0, 100.0, 50.0]
-[vehicle]
-max_tilt_deg = {MAX_TILT_DEG}
-[logging]
-dir = "{}"
-tlog = false
-[sitl]
-start = [0.0, 0.0, -10.0]
-noise_sigma = 0.01
-"#,
-        dir.display()
+    let text = hold_config(
+        &dir,
+        "geofence = [100.0, 100.0, 50.0]",
+        "noise_sigma = 0.01",
     );
-    let config = write_config(&dir, "flood.toml", &text);
+    let (config, _) = write_daemon_config(&dir, "flood.toml", &text);
     let summary_path = dir.join("summary.json");
-    Config::load(&config).expect("daemon config");
-    let (tx, tap) = channel();
-    let sim = sitl::spawn(
-        &dflat_sitl::SitlSettings::load(&config).expect("sitl config"),
-        SitlOptions {
-            link: Some("udpin:127.0.0.1:0".into()),
-            gcs: Some("udpin:127.0.0.1:0".into()),
-            tap: Some(tx),
-            ..SitlOptions::default()
+    let (sim, tap) = tapped_sitl(
+        &config,
+        TapOptions {
+            gcs: true,
+            ..TapOptions::default()
         },
-    )
-    .expect("sitl");
+    );
     let mut daemon = spawn_daemon_with(
         &dir,
         &config,
@@ -85,19 +65,10 @@ noise_sigma = 0.01
     let target = sim.gcs_addr().expect("the SITL's GCS port");
 
     // Holding for 1 s.
-    let until = Instant::now() + Duration::from_secs(15);
-    let mut since = None;
-    while Instant::now() < until {
-        std::thread::sleep(Duration::from_millis(50));
-        let n = tap
-            .try_iter()
-            .filter(|f| matches!(f.message, MavMessage::SET_ATTITUDE_TARGET(_)))
-            .count();
-        if n > 0 && since.get_or_insert_with(Instant::now).elapsed() > Duration::from_secs(1) {
-            break;
-        }
-    }
-    assert!(since.is_some(), "the daemon never streamed");
+    assert!(
+        wait_streaming(&tap, Duration::from_secs(1)),
+        "the daemon never streamed"
+    );
 
     // The flood: 100 datagrams every 10 ms.
     let wrong_pose = MavMessage::LOCAL_POSITION_NED(LOCAL_POSITION_NED_DATA {

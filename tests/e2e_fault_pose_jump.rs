@@ -13,15 +13,11 @@
 #[path = "support/mod.rs"]
 mod common;
 
-use std::sync::mpsc::channel;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use common::*;
-use dflat_daemon::config::Config;
 use dflat_link::MavMessage;
-use dflat_sitl::{self as sitl, SitlOptions};
 
-const MAX_TILT_DEG: f64 = 35.0;
 /// The jump \[m\] (north).
 const JUMP: f64 = 5.0;
 /// The true vehicle stays within this of where it was at the jump \[m\].
@@ -32,49 +28,16 @@ const TILT_AFTER_JUMP: f64 = 10.0;
 #[test]
 fn pose_jump_re_anchors_without_a_tilt_spike() {
     let dir = scratch("posejump");
-    let text = format!(
-        r#"
-[mission]
-start = "hold"
-[vehicle]
-max_tilt_deg = {MAX_TILT_DEG}
-[logging]
-dir = "{}"
-tlog = false
-[sitl]
-start = [0.0, 0.0, -10.0]
-noise_sigma = 0.01
-"#,
-        dir.display()
-    );
-    let config = write_config(&dir, "posejump.toml", &text);
-    Config::load(&config).expect("daemon config");
-    let (tx, tap) = channel();
-    let sim = sitl::spawn(
-        &dflat_sitl::SitlSettings::load(&config).expect("sitl config"),
-        SitlOptions {
-            link: Some("udpin:127.0.0.1:0".into()),
-            tap: Some(tx),
-            ..SitlOptions::default()
-        },
-    )
-    .expect("sitl");
+    let text = hold_config(&dir, "", "noise_sigma = 0.01");
+    let (config, _) = write_daemon_config(&dir, "posejump.toml", &text);
+    let (sim, tap) = tapped_sitl(&config, TapOptions::default());
     let mut daemon = spawn_daemon(&dir, &config, sim.local_addr());
 
     // Holding steadily for 2 s.
-    let until = Instant::now() + Duration::from_secs(15);
-    let mut since = None;
-    while Instant::now() < until {
-        std::thread::sleep(Duration::from_millis(50));
-        let n = tap
-            .try_iter()
-            .filter(|f| matches!(f.message, MavMessage::SET_ATTITUDE_TARGET(_)))
-            .count();
-        if n > 0 && since.get_or_insert_with(Instant::now).elapsed() > Duration::from_secs(2) {
-            break;
-        }
-    }
-    assert!(since.is_some(), "the daemon never streamed");
+    assert!(
+        wait_streaming(&tap, Duration::from_secs(2)),
+        "the daemon never streamed"
+    );
     let before = sim.truth().position;
     sim.set_pose_offset([JUMP, 0.0, 0.0]);
     std::thread::sleep(Duration::from_secs(3));

@@ -14,29 +14,18 @@ use std::time::{Duration, Instant};
 
 use common::*;
 
-const MAX_TILT_DEG: f64 = 35.0;
-
 #[test]
 fn killed_and_restarted_sitl_failsafe_then_recover_to_holding() {
     let dir = scratch("sitlrestart");
-    let text = format!(
+    let text = hold_config(
+        &dir,
         r#"
-[mission]
-start = "hold"
-[vehicle]
-max_tilt_deg = {MAX_TILT_DEG}
 [safety]
 # Silent at once in failsafe (the brake and level hover before it are
 # e2e_pose_loss_level's): this test is about the restart.
 level_hover_max_ms = 0.0
-[logging]
-dir = "{}"
-tlog = false
-[sitl]
-start = [0.0, 0.0, -10.0]
-noise_sigma = 0.01
 "#,
-        dir.display()
+        "noise_sigma = 0.01",
     );
     let config = write_config(&dir, "sitlrestart.toml", &text);
     let summary_path = dir.join("summary.json");

@@ -27,7 +27,7 @@ use dflat_daemon::summary::FlightSummary;
 use dflat_daemon::supervisor::FlightState;
 use dflat_link::dialect::{LOCAL_POSITION_NED_DATA, MavAutopilot, MavState};
 use dflat_link::{MavMessage, frames, heartbeat_autopilot};
-use dflat_sitl::{self as sitl, SitlOptions, SitlReport, SitlSettings};
+use dflat_sitl::{self as sitl, SitlReport, SitlSettings};
 use nalgebra::Vector3;
 
 mod support;
@@ -44,14 +44,7 @@ fn config(name: &str) -> (Config, SitlSettings) {
 }
 
 fn spawn_sitl(plant: &SitlSettings) -> sitl::SitlHandle {
-    sitl::spawn(
-        plant,
-        SitlOptions {
-            record_trace: true,
-            ..SitlOptions::default()
-        },
-    )
-    .unwrap()
+    support::traced_sitl(plant)
 }
 
 /// What the intruder received back (frames of any kind).

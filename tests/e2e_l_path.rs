@@ -33,35 +33,8 @@ const ARRIVAL: f64 = 0.5;
 #[test]
 fn short_l_path_stays_within_the_stated_path_error() {
     let dir = scratch("lpath");
-    let config = write_config(
-        &dir,
-        "lpath.toml",
-        &format!(
-            r#"
-[mission]
-start = "path"
-path = [[0.0, 0.0, -10.0], [15.0, 0.0, -10.0], [15.0, 10.0, -10.0]]
-speed = {SPEED}
-[logging]
-dir = "{}"
-tlog = false
-[sitl]
-plant = "planar"
-start = [0.0, 0.0, -10.0]
-# The shipped tuning with realistic sensing: 1 cm position noise.
-noise_sigma = 0.01
-"#,
-            dir.display()
-        ),
-    );
-    let truth = dir.join("truth.csv");
-    let mut sitl = spawn_sitl(&dir, &config, false, &truth);
-    let mut daemon = spawn_daemon(&dir, &config, sitl.link);
-    assert!(
-        sitl.wait_for_line("sitl mode offboard", Duration::from_secs(15))
-            .is_some(),
-        "the daemon never commanded the SITL"
-    );
+    let text = path_config(&dir, &PATH, SPEED, "", PLANAR_NOISY);
+    let (mut sitl, mut daemon, truth) = start_flight(&dir, "lpath.toml", &text, false);
     // Path time 25 m / 3 m/s ≈ 8.3 s; stop at arrival + 1 s or after 20 s.
     let started = Instant::now();
     let mut arrived: Option<Instant> = None;

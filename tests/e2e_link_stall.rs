@@ -18,14 +18,11 @@ mod common;
 
 use std::os::unix::net::UnixDatagram;
 use std::process::{Command, Stdio};
-use std::sync::mpsc::channel;
 use std::time::{Duration, Instant};
 
 use common::*;
-use dflat_daemon::config::Config;
 use dflat_link::MavMessage;
 use dflat_link::dialect::MavState;
-use dflat_sitl::{self as sitl, SitlOptions};
 
 /// `WATCHDOG_USEC` given to the daemon: 400 ms → one WATCHDOG=1 per 100 ms.
 const WATCHDOG_USEC: u64 = 400_000;
@@ -83,22 +80,9 @@ fn collect(sock: &UnixDatagram, window: Duration) -> Vec<(Instant, String)> {
 #[test]
 fn a_stalled_link_task_stops_the_watchdog_and_reports_critical() {
     let dir = scratch("link-stall");
-    let text = format!(
-        "[mission]\nstart = \"hold\"\n[logging]\ndir = \"{}\"\ntlog = false\n[sitl]\nstart = [0.0, 0.0, -10.0]\n",
-        dir.display()
-    );
-    let config = write_config(&dir, "stall.toml", &text);
-    Config::load(&config).expect("daemon config");
-    let (tx, tap) = channel();
-    let sim = sitl::spawn(
-        &dflat_sitl::SitlSettings::load(&config).expect("sitl config"),
-        SitlOptions {
-            link: Some("udpin:127.0.0.1:0".into()),
-            tap: Some(tx),
-            ..SitlOptions::default()
-        },
-    )
-    .expect("sitl");
+    let text = hold_config(&dir, "", "");
+    let (config, _) = write_daemon_config(&dir, "stall.toml", &text);
+    let (sim, tap) = tapped_sitl(&config, TapOptions::default());
     let sock_path = dir.join("notify.sock");
     let sock = UnixDatagram::bind(&sock_path).expect("bind notify socket");
     sock.set_read_timeout(Some(Duration::from_millis(50)))

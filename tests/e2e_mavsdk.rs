@@ -31,6 +31,14 @@ mod support;
 use support::gcs::Gcs;
 
 impl Gcs {
+    /// Sends `target` the COMMAND_LONG `cmd` with params 1–3 `p`; returns
+    /// when it was sent.
+    fn command(&mut self, target: (u8, u8), cmd: MavCmd, p: [f32; 3]) -> Instant {
+        let sent = Instant::now();
+        self.send(&command(target, cmd, p));
+        sent
+    }
+
     /// (command, result) of a COMMAND_ACK addressed to this ground station.
     fn ack(&self, who: (u32, u8), since: Instant, cmd: MavCmd) -> Option<MavResult> {
         let me = (self.id, 190);
@@ -126,13 +134,8 @@ async fn an_unknown_ground_station_is_refused_in_words_and_never_flown() {
     tokio::time::sleep(Duration::from_millis(500)).await;
 
     let start = sitl.truth().position;
-    let t0 = Instant::now();
     // MAVSDK's setpoints at 10 Hz for 2 s, 5 m north, and a command.
-    mavsdk.send(&command(
-        (1, 191),
-        MavCmd::MAV_CMD_REQUEST_MESSAGE,
-        [0.0; 3],
-    ));
+    let t0 = mavsdk.command((1, 191), MavCmd::MAV_CMD_REQUEST_MESSAGE, [0.0; 3]);
     for _ in 0..20 {
         let goal = [start[0] + 5.0, start[1], start[2]];
         mavsdk.send(&setpoint((1, 191), goal, [0.0; 3], [0.0; 3], POSITION_ONLY));
@@ -165,12 +168,7 @@ async fn mavsdk_245_is_heard_by_default() {
     let mut mavsdk = Gcs::new(sitl.gcs_addr().unwrap(), 245);
     tokio::time::sleep(Duration::from_millis(1500)).await;
     let start = sitl.truth().position;
-    let t0 = Instant::now();
-    mavsdk.send(&command(
-        (1, 191),
-        MavCmd::MAV_CMD_REQUEST_MESSAGE,
-        [0.0; 3],
-    ));
+    let t0 = mavsdk.command((1, 191), MavCmd::MAV_CMD_REQUEST_MESSAGE, [0.0; 3]);
     let goal = [start[0] + 4.0, start[1], start[2]];
     for _ in 0..3 {
         mavsdk.send(&setpoint((1, 191), goal, [0.0; 3], [0.0; 3], POSITION_ONLY));
@@ -210,14 +208,7 @@ fn circle(start: [f64; 3], r: f64, v: f64, t: f64) -> ([f64; 3], [f64; 3], [f64;
 #[test]
 fn the_sitl_flies_a_streamed_circle_with_its_position_loop() {
     let (_, plant) = plant("sitl-circle");
-    let sitl = sitl::spawn(
-        &plant,
-        SitlOptions {
-            record_trace: true,
-            ..SitlOptions::default()
-        },
-    )
-    .unwrap();
+    let sitl = support::traced_sitl(&plant);
     // A companion on the vehicle link streams to the autopilot (1/1).
     let socket = UdpSocket::bind("127.0.0.1:0").unwrap();
     let to = sitl.local_addr();
@@ -334,12 +325,11 @@ async fn the_sitl_answers_like_a_px4_an_sdk_can_script() {
     assert!(version.is_some_and(|(uid, v)| uid != 0 && v != 0));
 
     // SET_MESSAGE_INTERVAL: ATTITUDE_QUATERNION at 50 Hz for 1 s.
-    let t1 = Instant::now();
-    gcs.send(&command(
+    let t1 = gcs.command(
         (1, 1),
         MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
         [31.0, 20_000.0, 0.0],
-    ));
+    );
     assert_eq!(
         gcs.ack(ap, t1, MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL),
         Some(MavResult::MAV_RESULT_ACCEPTED)
@@ -364,12 +354,7 @@ async fn the_sitl_answers_like_a_px4_an_sdk_can_script() {
 
     // Hold (AUTO_LOITER), then goto 8 m north, then RTL: flown by the
     // SITL's position loop.
-    let t3 = Instant::now();
-    gcs.send(&command(
-        (1, 1),
-        MavCmd::MAV_CMD_DO_SET_MODE,
-        [1.0, 4.0, 3.0],
-    ));
+    let t3 = gcs.command((1, 1), MavCmd::MAV_CMD_DO_SET_MODE, [1.0, 4.0, 3.0]);
     assert_eq!(
         gcs.ack(ap, t3, MavCmd::MAV_CMD_DO_SET_MODE),
         Some(MavResult::MAV_RESULT_ACCEPTED)
@@ -403,12 +388,7 @@ async fn the_sitl_answers_like_a_px4_an_sdk_can_script() {
     let at_goal = horizontal(sitl.truth().position, goal);
     eprintln!("goto 8 m: {at_goal:.2} m from the goal");
     assert!(at_goal < 0.3, "{at_goal}");
-    let t5 = Instant::now();
-    gcs.send(&command(
-        (1, 1),
-        MavCmd::MAV_CMD_NAV_RETURN_TO_LAUNCH,
-        [0.0; 3],
-    ));
+    let t5 = gcs.command((1, 1), MavCmd::MAV_CMD_NAV_RETURN_TO_LAUNCH, [0.0; 3]);
     assert_eq!(
         gcs.ack(ap, t5, MavCmd::MAV_CMD_NAV_RETURN_TO_LAUNCH),
         Some(MavResult::MAV_RESULT_ACCEPTED)

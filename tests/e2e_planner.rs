@@ -10,14 +10,14 @@
 //! `cargo test --workspace --test e2e_planner -- --nocapture` prints the
 //! figures.
 
+#[path = "support/circle.rs"]
+mod circle;
 #[path = "support/mod.rs"]
 mod common;
 
 use std::time::Duration;
 
 use common::*;
-use dflat_link::MavMessage;
-use dflat_sim::trajectory::{Shape, Trajectory};
 use dflat_sitl::SitlMode;
 use nalgebra::Vector3;
 
@@ -74,13 +74,7 @@ fn fly(yaw: bool) -> Figures {
         "{} samples",
         report.counters.planner_samples
     );
-    let circle = Trajectory {
-        shape: Shape::Circle,
-        size: 6.0,
-        speed: 4.0,
-        ramp_s: 3.0,
-        start: Vector3::from(START),
-    };
+    let circle = circle::circle(4.0, 3.0, START);
     // Position at the sample's start (the planner starts where the vehicle
     // is; the SITL holds START before offboard).
     let offboard: Vec<_> = report
@@ -101,25 +95,7 @@ fn fly(yaw: bool) -> Figures {
     assert!(errors.len() > 300, "{} samples judged", errors.len());
     let e95 = p95(errors);
     // The commands the daemon sent: largest step per tick of the tilt.
-    let tilts: Vec<(f64, f64)> = flight
-        .frames
-        .iter()
-        .filter_map(|f| match &f.message {
-            MavMessage::SET_ATTITUDE_TARGET(d) => {
-                let [w, x, y, z] = d.q;
-                let (w, x, y, z) = (w as f64, x as f64, y as f64, z as f64);
-                let roll = (2.0 * (w * x + y * z)).atan2(1.0 - 2.0 * (x * x + y * y));
-                let pitch = (2.0 * (w * y - z * x)).clamp(-1.0, 1.0).asin();
-                Some((roll, pitch))
-            }
-            _ => None,
-        })
-        .collect();
-    let step = tilts
-        .windows(2)
-        .map(|w| (w[1].0 - w[0].0).abs().max((w[1].1 - w[0].1).abs()))
-        .fold(0.0, f64::max)
-        .to_degrees();
+    let step = largest_tilt_step_deg(flight.attitude_targets().map(|(_, d)| d));
     // The heading follows the stream's yaw (along the velocity).
     let last_streamed = offboard
         .iter()

@@ -1,31 +1,30 @@
 //! End to end: losing pose while the vehicle accelerates leaves nothing
-//! tilted (issue 23, item 4).
+//! tilted.
 //!
 //! The real `dflat daemon` against the in-process SITL, whose autopilot
 //! holds the last command for 1 s after the stream stops
 //! (`sitl.command_timeout_s = 1.0`, PX4's `COM_OF_LOSS_T`) and then holds
 //! position on its own. The vehicle flies a straight path from rest; while
 //! it accelerates (≥ 10° of true tilt) the pose stream stops. Judged from
-//! the SITL's true state and the commands it received:
+//! the SITL's true state and the daemon's records (its commands and their
+//! tick times from the newest pose's capture, on the daemon's clock):
 //! * the vehicle gains ≤ 0.5 m/s of speed in the 2 s after the loss;
 //! * the last command the daemon sent is within 2° of level, and the
 //!   stream stops within `safety.level_hover_max_ms` (+ the pose timeout).
 //!
-//! The same flight with `safety.level_hover_max_ms = 0` (silence at once,
-//! the behaviour before) is flown too, to show the test tells them apart:
+//! The same flight with `safety.level_hover_max_ms = 0` (silence at once)
+//! is flown too, to show the test tells them apart:
 //! there the last command is the tilt and the vehicle gains well over
 //! 0.5 m/s.
 
 #[path = "support/mod.rs"]
 mod common;
 
-use std::sync::mpsc::channel;
 use std::time::{Duration, Instant};
 
 use common::*;
 use dflat_daemon::config::Config;
-use dflat_link::MavMessage;
-use dflat_sitl::{self as sitl, SitlMode, SitlOptions};
+use dflat_sitl::SitlMode;
 
 /// What one pose loss did.
 #[derive(Debug)]
@@ -36,9 +35,9 @@ struct Loss {
     velocity_change: f64,
     /// True tilt at the loss \[deg\].
     tilt_at_loss: f64,
-    /// Tilt of the last SET_ATTITUDE_TARGET received \[deg\].
+    /// Tilt of the last command \[deg\].
     last_command_tilt: f64,
-    /// Its time after the loss \[s\].
+    /// Its time after the newest pose's capture (the daemon's clock) \[s\].
     last_command_after: f64,
     /// Largest tilt commanded after the loss \[deg\].
     max_command_tilt_after: f64,
@@ -46,36 +45,17 @@ struct Loss {
 
 fn fly_and_lose_pose(name: &str, level_hover_ms: f64) -> Loss {
     let dir = scratch(name);
-    let text = format!(
-        r#"
-[mission]
-start = "path"
-path = [[0.0, 0.0, -10.0], [80.0, 0.0, -10.0]]
-speed = 8.0
-[safety]
-level_hover_max_ms = {level_hover_ms}
-[logging]
-dir = "{}"
-tlog = false
-[sitl]
-start = [0.0, 0.0, -10.0]
-command_timeout_s = 1.0
-"#,
-        dir.display()
-    );
-    let config = write_config(&dir, "loss.toml", &text);
-    let cfg = Config::load(&config).expect("daemon config");
-    let (tx, tap) = channel();
-    let sim = sitl::spawn(
-        &dflat_sitl::SitlSettings::load(&config).expect("sitl config"),
-        SitlOptions {
-            link: Some("udpin:127.0.0.1:0".into()),
-            tap: Some(tx),
+    let path = [[0.0, 0.0, -10.0], [80.0, 0.0, -10.0]];
+    let safety = format!("[safety]\nlevel_hover_max_ms = {level_hover_ms:?}");
+    let text = path_config(&dir, &path, 8.0, &safety, "command_timeout_s = 1.0");
+    let (config, _) = write_daemon_config(&dir, "loss.toml", &text);
+    let (sim, _tap) = tapped_sitl(
+        &config,
+        TapOptions {
             record_trace: true,
-            ..SitlOptions::default()
+            ..TapOptions::default()
         },
-    )
-    .expect("sitl");
+    );
     let mut daemon = spawn_daemon(&dir, &config, sim.local_addr());
 
     // Wait until the vehicle accelerates along the path at ≥ 10° of tilt.
@@ -90,7 +70,6 @@ command_timeout_s = 1.0
         std::thread::sleep(Duration::from_millis(2));
     };
     sim.pause_pose();
-    let paused = Instant::now();
     let t0 = sim.elapsed();
     std::thread::sleep(Duration::from_millis(2600));
     let _ = daemon.interrupt_and_wait(Duration::from_secs(5));
@@ -116,27 +95,28 @@ command_timeout_s = 1.0
         .collect();
     let velocity_change = speed([dv[0], dv[1], dv[2]]);
 
-    let targets: Vec<(f64, f64)> = tap
-        .try_iter()
-        .filter_map(|f| match &f.message {
-            MavMessage::SET_ATTITUDE_TARGET(d)
-                if f.header.component_id == cfg.link.component_id =>
-            {
-                let after = if f.at >= paused {
-                    (f.at - paused).as_secs_f64()
-                } else {
-                    -(paused - f.at).as_secs_f64()
-                };
-                Some((after, quaternion_tilt_deg(d.q)))
-            }
-            _ => None,
-        })
-        .collect();
-    let (last_command_after, last_command_tilt) = *targets.last().expect("commands");
-    let max_command_tilt_after = targets
+    // The commands after the loss, on the daemon's clock: its records'
+    // tick times from the newest pose's capture.
+    let rows = read_flight_csv(&dir);
+    let lost = rows
         .iter()
-        .filter(|(a, _)| *a > 0.0)
-        .map(|(_, tilt)| *tilt)
+        .filter_map(pose_capture)
+        .fold(f64::NEG_INFINITY, f64::max);
+    let last = rows
+        .iter()
+        .rev()
+        .find(|r| field(r, "roll").is_some())
+        .expect("commands");
+    let last_command_after = field(last, "t_wake").expect("t_wake") - lost;
+    let tilt_of = |r: &std::collections::HashMap<String, String>| {
+        let (roll, pitch) = (field(r, "roll")?, field(r, "pitch")?);
+        Some(dflat_control::tilt::tilt(pitch, roll).to_degrees())
+    };
+    let last_command_tilt = tilt_of(last).expect("the last command's tilt");
+    let max_command_tilt_after = rows
+        .iter()
+        .filter(|r| field(r, "t_wake").is_some_and(|t| t > lost))
+        .filter_map(tilt_of)
         .fold(0.0, f64::max);
     let tilt_at_loss = (truth.euler[0].cos() * truth.euler[1].cos())
         .acos()

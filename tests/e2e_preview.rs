@@ -178,19 +178,12 @@ fn daemon_flight(name: &str, form: &Form) -> (Judged, f64) {
     );
     let first = flight.attitude_targets().next().map(|(f, _)| f.at).unwrap();
     let stream_end = first + Duration::from_secs_f64(DURATION_S + 1.0);
-    let tilts: Vec<(f64, f64)> = flight
-        .attitude_targets()
-        .filter(|(f, _)| f.at <= stream_end)
-        .map(|(_, d)| {
-            let [roll, pitch, _] = dflat_link::euler_from_quaternion(d.q.map(f64::from));
-            (roll, pitch)
-        })
-        .collect();
-    let step = tilts
-        .windows(2)
-        .map(|w| (w[1].0 - w[0].0).abs().max((w[1].1 - w[0].1).abs()))
-        .fold(0.0, f64::max)
-        .to_degrees();
+    let step = largest_tilt_step_deg(
+        flight
+            .attitude_targets()
+            .filter(|(f, _)| f.at <= stream_end)
+            .map(|(_, d)| d),
+    );
     (judge(&flight.report, &form.trajectory(), 35.0), step)
 }
 

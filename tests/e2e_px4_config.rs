@@ -17,7 +17,7 @@ use std::time::{Duration, Instant};
 
 use dflat_daemon::config::Config;
 use dflat_daemon::supervisor::FlightState;
-use dflat_sitl::{self as sitl, SitlOptions, SitlSettings};
+use dflat_sitl::SitlSettings;
 
 /// Altitude band after settling \[m\]: the 95th percentile of the error
 /// within it, the worst within twice it.
@@ -65,14 +65,7 @@ async fn hold_altitude_with(disturbance: bool, autopilot_hover: bool) -> Altitud
     let mut plant = SitlSettings::parse(&text, path).unwrap();
     plant.sitl.url = "udpin:127.0.0.1:0".into();
     plant.sitl.hover_thrust = 0.4;
-    let sitl = sitl::spawn(
-        &plant,
-        SitlOptions {
-            record_trace: true,
-            ..SitlOptions::default()
-        },
-    )
-    .unwrap();
+    let sitl = common::traced_sitl(&plant);
     let z0 = plant.sitl.start[2];
     let link = format!("udpout:127.0.0.1:{}", sitl.local_addr().port());
     let daemon = dflat_daemon::spawn(cfg, Some(link)).await.unwrap();

@@ -102,13 +102,7 @@ fn only_file(dir: &Path, ext: &str) -> PathBuf {
 }
 
 fn dflat(args: &[&str]) -> String {
-    let out = Command::new(bin()).args(args).output().expect("run dflat");
-    assert!(
-        out.status.success(),
-        "dflat {args:?}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8_lossy(&out.stderr).into_owned()
+    String::from_utf8_lossy(&common::dflat_ok(args).stderr).into_owned()
 }
 
 #[test]
@@ -283,6 +277,14 @@ fn daemon_args(config: &Path, sitl: std::net::SocketAddr, summary: &Path) -> Vec
     ]
 }
 
+impl Flown {
+    /// The daemon [`kept_flying`] past its trouble and [`said_once`] `what`.
+    fn kept_flying_and_said_once(&self, what: &str) {
+        kept_flying(&self.commands, self.stopped);
+        said_once(&self.texts, &self.stderr, what);
+    }
+}
+
 /// The daemon kept streaming to the end: commands in each of the last 2 s.
 fn kept_flying(commands: &[(Instant, u32)], stopped: Instant) {
     for (from, to) in [(2.0, 1.0), (1.0, 0.1)] {
@@ -323,13 +325,7 @@ fn a_full_disk_does_not_stop_the_flight() {
     let records = dir.join("small");
     std::fs::create_dir_all(&records).unwrap();
     let mount = can_mount();
-    let Flown {
-        json,
-        commands,
-        texts,
-        stderr,
-        stopped,
-    } = fly_wrapped(
+    let flown = fly_wrapped(
         "records-full-fly",
         7,
         &records,
@@ -356,6 +352,7 @@ fn a_full_disk_does_not_stop_the_flight() {
         },
     );
     eprintln!("mounted a tmpfs: {mount}");
+    let json = &flown.json;
     let r = &json["records"];
     eprintln!("records: {r}\ncsv: {}\ntlog: {}", json["csv"], json["tlog"]);
     assert_eq!(
@@ -371,8 +368,7 @@ fn a_full_disk_does_not_stop_the_flight() {
     // bounds each of the two files.
     let limit = if mount { 65_536 } else { 2 * 65_536 };
     assert!(written > 0 && written <= limit, "{written} bytes written");
-    kept_flying(&commands, stopped);
-    said_once(&texts, &stderr, "disk trouble");
+    flown.kept_flying_and_said_once("disk trouble");
     assert!(json["commands"].as_u64().unwrap() > 250);
 }
 
@@ -388,13 +384,7 @@ fn a_read_only_records_directory_at_start_does_not_ground_the_vehicle() {
         // Not even root can create a directory here.
         PathBuf::from(format!("/proc/dflat-records-{}", std::process::id()))
     };
-    let Flown {
-        json,
-        commands,
-        texts,
-        stderr,
-        stopped,
-    } = fly_wrapped("records-ro-fly", 4, &records, |d, config, sitl, summary| {
+    let flown = fly_wrapped("records-ro-fly", 4, &records, |d, config, sitl, summary| {
         let args = daemon_args(config, sitl, summary);
         if mount {
             let script = format!(
@@ -407,6 +397,7 @@ fn a_read_only_records_directory_at_start_does_not_ground_the_vehicle() {
         }
     });
     eprintln!("mounted a read-only tmpfs: {mount}");
+    let json = &flown.json;
     let r = &json["records"];
     eprintln!("records: {r}");
     assert!(
@@ -415,8 +406,7 @@ fn a_read_only_records_directory_at_start_does_not_ground_the_vehicle() {
     );
     assert!(json["csv"].is_null() && json["tlog"].is_null());
     assert_eq!(r["written_bytes"], 0);
-    kept_flying(&commands, stopped);
-    said_once(&texts, &stderr, "disk trouble");
+    flown.kept_flying_and_said_once("disk trouble");
 }
 
 /// A start that fails at the link (its `udpin` port taken) exits with the

@@ -12,7 +12,6 @@ mod common;
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 use std::time::Duration;
 
 use common::*;
@@ -56,13 +55,7 @@ fn newest(dir: &Path, ext: &str) -> PathBuf {
 }
 
 fn dflat(args: &[&str]) -> String {
-    let out = Command::new(bin()).args(args).output().expect("run dflat");
-    assert!(
-        out.status.success(),
-        "dflat {args:?}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8_lossy(&out.stdout).into_owned()
+    String::from_utf8_lossy(&common::dflat_ok(args).stdout).into_owned()
 }
 
 /// The value of `key` in the summary table (`data-key="…" data-value="…"`).

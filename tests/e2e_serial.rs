@@ -23,7 +23,6 @@ mod common;
 mod pty_bridge;
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
 use std::time::Duration;
 
 use common::*;
@@ -58,24 +57,13 @@ command_timeout_s = 2.0
 /// `dflat daemon --config CONFIG --summary-json SUMMARY` (the link from
 /// the configuration: the serial port).
 fn spawn_serial_daemon(dir: &Path, config: &Path, summary: &Path) -> Proc {
-    let stderr = dir.join("daemon.stderr");
-    let child = Command::new(bin())
-        .arg("daemon")
-        .arg("--config")
-        .arg(config)
-        .arg("--summary-json")
-        .arg(summary)
-        .env("RUST_LOG", "info")
-        .stdin(Stdio::null())
-        .stdout(Stdio::null())
-        .stderr(std::fs::File::create(&stderr).expect("stderr file"))
-        .spawn()
-        .expect("spawn dflat daemon");
-    Proc {
-        child,
-        name: "daemon",
-        stderr,
-    }
+    let args = [
+        "--config".into(),
+        config.into(),
+        "--summary-json".into(),
+        summary.into(),
+    ];
+    spawn_daemon_args(dir, &args, &[("RUST_LOG", "info")])
 }
 
 fn read_summary(path: &Path) -> serde_json::Value {

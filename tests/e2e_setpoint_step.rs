@@ -38,29 +38,9 @@ const OBSERVE: f64 = 10.0;
 #[test]
 fn ten_metre_setpoint_step_settles_within_0_3_m() {
     let dir = scratch("step");
-    let config = write_config(
-        &dir,
-        "step.toml",
-        &format!(
-            r#"
-[mission]
-start = "hold"
-[logging]
-dir = "{}"
-tlog = false
-[sitl]
-plant = "planar"
-start = [0.0, 0.0, -10.0]
-# The shipped tuning with realistic sensing: 1 cm position noise.
-noise_sigma = 0.01
-"#,
-            dir.display()
-        ),
-    );
-    let truth = dir.join("truth.csv");
-    let sitl = spawn_sitl(&dir, &config, true, &truth);
+    let text = hold_config(&dir, "", PLANAR_NOISY);
+    let (sitl, _daemon, truth) = start_flight(&dir, "step.toml", &text, true);
     let gcs_port = sitl.gcs.expect("gcs port");
-    let _daemon = spawn_daemon(&dir, &config, sitl.link);
 
     // The ground station says hello so the SITL knows where to route to.
     let gcs = UdpSocket::bind("127.0.0.1:0").unwrap();
@@ -68,13 +48,6 @@ noise_sigma = 0.01
         .unwrap();
     let hb = dflat_link::heartbeat_onboard(dflat_link::DaemonStatus::Active);
     send(&gcs, gcs_port, 255, 190, 0, &hb);
-
-    // The daemon holds: the SITL switches to offboard on its commands.
-    assert!(
-        sitl.wait_for_line("sitl mode offboard", Duration::from_secs(15))
-            .is_some(),
-        "the daemon never commanded the SITL"
-    );
     std::thread::sleep(Duration::from_millis(1000));
 
     let target = [STEP, 0.0, -10.0];

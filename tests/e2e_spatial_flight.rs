@@ -15,42 +15,33 @@ use std::time::Duration;
 
 use common::*;
 
-const CONFIG: &str = r#"
-[mission]
-start = "path"
-path = [[0.0, 0.0, -10.0], [8.0, 0.0, -10.0], [8.0, 6.0, -10.0]]
-speed = 4.0
-[logging]
-dir = "@DIR@"
-tlog = false
-[vehicle]
-model = "spatial"
-thrust_mode = "normalized"
-hover_thrust = 0.5
-[sitl]
-plant = "spatial"
-hover_thrust = 0.5
-start = [0.0, 0.0, -10.0]
-"#;
+/// The short L on the spatial model against a spatial plant, both at
+/// hover thrust 0.5.
+fn config() -> String {
+    format!(
+        "{SHORT_L}{SPATIAL_VEHICLE}[sitl]\nplant = \"spatial\"\nhover_thrust = 0.5\nstart = [0.0, 0.0, -10.0]\n"
+    )
+}
 
 /// Largest altitude error allowed while flying \[m\].
 const ALTITUDE_BOUND: f64 = 0.5;
 
 #[test]
 fn spatial_model_streams_at_50_hz_and_holds_altitude() {
-    check("spatial-flight", CONFIG);
+    check("spatial-flight", &config());
 }
 
 #[test]
 fn spatial_model_streams_at_50_hz_and_holds_altitude_classic_window() {
-    let config = format!("{CONFIG}[controller.dfmpc]\nmulti_rate = false\n");
+    let config = format!("{}[controller.dfmpc]\nmulti_rate = false\n", config());
     check("spatial-flight-classic", &config);
 }
 
 fn check(name: &str, config: &str) {
     let flight = fly_in_process(name, config, Duration::from_secs(6));
     let n = flight.attitude_targets().count();
-    let expected = flight.streamed_for.as_secs_f64() * 50.0;
+    let streamed_s = flight.streamed_s();
+    let expected = streamed_s * 50.0;
     let altitude_error = flight
         .report
         .trace
@@ -58,8 +49,7 @@ fn check(name: &str, config: &str) {
         .map(|s| (s.position[2] + 10.0).abs())
         .fold(0.0, f64::max);
     eprintln!(
-        "{name}: {n} attitude targets in {:?}, max altitude error {altitude_error:.3} m",
-        flight.streamed_for
+        "{name}: {n} attitude targets in {streamed_s:.2} s of the daemon's stream, max altitude error {altitude_error:.3} m"
     );
     assert!(
         n as f64 >= 0.9 * expected,

@@ -85,7 +85,7 @@ fn vision_at_15_hz_flies_the_short_l_with_valid_commands() {
         );
         tilts.push((roll, pitch));
     }
-    let expected = flight.streamed_for.as_secs_f64() * 50.0;
+    let expected = flight.streamed_s() * 50.0;
     assert!(
         n as f64 >= 0.9 * expected,
         "{n} attitude targets (≈ {expected:.0} at 50 Hz)"
@@ -98,19 +98,8 @@ fn vision_at_15_hz_flies_the_short_l_with_valid_commands() {
         / (tilts.len().max(2) - 1) as f64;
 
     // True path error while commanded, until the end is reached.
-    let trace = &flight.report.trace;
-    let first = trace
-        .iter()
-        .position(|s| s.command.is_some())
-        .expect("commanded samples");
-    let end = trace[first..]
-        .iter()
-        .position(|s| dist(s.position, PATH[2]) < ARRIVAL)
-        .map(|i| first + i);
-    let errors: Vec<f64> = trace[first..end.unwrap_or(trace.len())]
-        .iter()
-        .map(|s| path_distance(&PATH, s.position))
-        .collect();
+    let (errors, arrived) = path_errors(&flight.report.trace, &PATH, ARRIVAL);
+    assert!(!errors.is_empty(), "no commanded samples");
     let (median, p95, max) = (
         quantile(&errors, 0.5),
         quantile(&errors, 0.95),
@@ -121,7 +110,7 @@ fn vision_at_15_hz_flies_the_short_l_with_valid_commands() {
          p95 {p95:.3} m, max {max:.3} m; mean |Δtilt| {mean_step:.2}°/tick; {} vision samples",
         flight.report.counters.visions_sent
     );
-    assert!(end.is_some(), "the end of the path was not reached");
+    assert!(arrived, "the end of the path was not reached");
     assert!(median <= MEDIAN_BOUND, "median {median:.3} m");
     assert!(p95 <= P95_BOUND, "p95 {p95:.3} m");
     assert!(max <= MAX_BOUND, "max {max:.3} m");

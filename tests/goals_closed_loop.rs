@@ -17,13 +17,16 @@
 //! Run with `--nocapture` to see the figures:
 //! `cargo test -p dflat-e2e --test goals_closed_loop -- --nocapture`.
 
+#[path = "support/circle.rs"]
+mod circle;
+
 use dflat_control::AttitudeCommand;
 use dflat_daemon::config::Config;
 use dflat_daemon::control::{build_controller, thrust_mapping};
 use dflat_daemon::tick::{ControlCore, Event, TickTime};
 use dflat_link::{AutopilotFamily, AutopilotMode};
 use dflat_sim::plant::{Plant, PlantKind, PlantOptions, PlantState, build_plant};
-use dflat_sim::trajectory::{Shape, Trajectory};
+use dflat_sim::trajectory::Trajectory;
 use dflat_sitl::position_control::{self, PositionGains, PositionTarget};
 use nalgebra::Vector3;
 
@@ -366,13 +369,7 @@ fn anchor(circle: &Trajectory, goals: &[Goal], seconds: f64) -> Vec<Tick> {
 
 #[test]
 fn a_streamed_circle_is_tracked_within_the_anchor_budget() {
-    let circle = Trajectory {
-        shape: Shape::Circle,
-        size: 6.0,
-        speed: 4.0,
-        ramp_s: 3.0,
-        start: Vector3::from(START),
-    };
+    let circle = circle::circle(4.0, 3.0, START);
     let seconds = 16.0;
     // Full speed from 1 + 3 s; judged from 6 s (one lap ≈ 9.4 s).
     let from = 6.0;
@@ -429,13 +426,7 @@ fn a_streamed_circle_is_tracked_within_the_anchor_budget() {
 
 #[test]
 fn a_stream_that_stops_becomes_a_smooth_stop_and_hold() {
-    let circle = Trajectory {
-        shape: Shape::Circle,
-        size: 6.0,
-        speed: 3.0,
-        ramp_s: 2.0,
-        start: Vector3::from(START),
-    };
+    let circle = circle::circle(3.0, 2.0, START);
     let cfg = Config::default();
     // The stream stops at 6 s (at speed); flown until 12 s.
     let goals = circle_stream(&circle, 20.0, 6.0, Fields::Pva);

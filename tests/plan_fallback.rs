@@ -4,11 +4,10 @@
 //! demo's L path at 5 m/s against the built-in SITL, in-process, with the
 //! controller wrapped so that its update fails on chosen ticks.
 
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use dflat_daemon::control::build_controller;
-use dflat_sitl::{self as sitl, SitlEngage, SitlOptions};
-use nalgebra::Vector3;
+use dflat_sitl::SitlEngage;
 
 mod support;
 use support::{Fault, Faulty};
@@ -29,14 +28,7 @@ async fn failed_and_late_ticks_fly_the_previous_plan_then_level_hover_and_recove
     let failures: usize = fail.iter().map(|r| r.len()).sum();
     let slow = 400..403;
 
-    let sitl = sitl::spawn(
-        &plant,
-        SitlOptions {
-            record_trace: true,
-            ..SitlOptions::default()
-        },
-    )
-    .unwrap();
+    let sitl = support::traced_sitl(&plant);
     let link = format!("udpout:127.0.0.1:{}", sitl.local_addr().port());
     let slow_ticks = slow.clone();
     let controller = Faulty {
@@ -58,19 +50,8 @@ async fn failed_and_late_ticks_fly_the_previous_plan_then_level_hover_and_recove
         .unwrap();
 
     // The L path is 50 m: 10 s at 5 m/s. Wait for arrival and 1 s more.
-    let end = Vector3::from(*cfg.mission.path.last().unwrap());
-    let started = Instant::now();
-    let mut arrived: Option<Instant> = None;
-    while started.elapsed() < Duration::from_secs(25) {
-        tokio::time::sleep(Duration::from_millis(20)).await;
-        let truth = sitl.truth();
-        if arrived.is_none() && (Vector3::from(truth.position) - end).norm() < 0.3 {
-            arrived = Some(Instant::now());
-        }
-        if arrived.is_some_and(|t| t.elapsed() > Duration::from_secs(1)) {
-            break;
-        }
-    }
+    let end = *cfg.mission.path.last().unwrap();
+    let arrived = support::arrive_and_linger(&sitl, end, 0.3, Duration::from_secs(25)).await;
     daemon.shutdown();
     let summary = daemon.join().await.unwrap();
     let report = sitl.stop().unwrap();
@@ -106,7 +87,7 @@ async fn failed_and_late_ticks_fly_the_previous_plan_then_level_hover_and_recove
     assert_eq!(report.counters.commands_rejected, 0);
     assert!(!report.diverged);
     assert!(
-        arrived.is_some(),
+        arrived,
         "did not reach the path end; last {:?}",
         report.last.position
     );

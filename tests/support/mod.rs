@@ -23,6 +23,18 @@ use dflat_link::MavMessage;
 use dflat_link::dialect::{MavFrame, PositionTargetTypemask, SET_POSITION_TARGET_LOCAL_NED_DATA};
 use dflat_sitl::{self as sitl, SitlOptions, SitlReport, TapFrame};
 
+/// Runs `dflat args`, asserting it succeeds (its stderr in the message);
+/// its output.
+pub fn dflat_ok(args: &[&str]) -> std::process::Output {
+    let out = Command::new(bin()).args(args).output().expect("run dflat");
+    assert!(
+        out.status.success(),
+        "dflat {args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
 /// The binary under test.
 pub fn bin() -> &'static str {
     env!("CARGO_BIN_EXE_dflat-under-test")
@@ -216,14 +228,24 @@ pub fn spawn_daemon(dir: &Path, config: &Path, sitl: SocketAddr) -> Proc {
 
 /// [`spawn_daemon`] with extra arguments (e.g. `--summary-json FILE`).
 pub fn spawn_daemon_with(dir: &Path, config: &Path, sitl: SocketAddr, extra: &[&str]) -> Proc {
+    let mut args: Vec<std::ffi::OsString> = vec![
+        "--config".into(),
+        config.into(),
+        "--link".into(),
+        format!("udpout:{sitl}").into(),
+    ];
+    args.extend(extra.iter().map(Into::into));
+    spawn_daemon_args(dir, &args, &[])
+}
+
+/// `dflat daemon ARGS` with `env` added to its environment, its stderr in
+/// `dir/daemon.stderr`.
+pub fn spawn_daemon_args(dir: &Path, args: &[std::ffi::OsString], env: &[(&str, &str)]) -> Proc {
     let stderr = dir.join("daemon.stderr");
     let child = Command::new(bin())
         .arg("daemon")
-        .arg("--config")
-        .arg(config)
-        .arg("--link")
-        .arg(format!("udpout:{sitl}"))
-        .args(extra)
+        .args(args)
+        .envs(env.iter().copied())
         .stdin(Stdio::null())
         .stdout(Stdio::null())
         .stderr(std::fs::File::create(&stderr).expect("stderr file"))
@@ -284,6 +306,30 @@ pub fn path_distance(w: &[[f64; 3]], p: [f64; 3]) -> f64 {
         .fold(f64::INFINITY, f64::min)
 }
 
+/// The true distances to `path` (NED \[m\]) of the `trace`'s samples
+/// while commanded, from the first commanded one until the vehicle is
+/// within `arrival` \[m\] of the path's end; and whether it got there.
+pub fn path_errors(
+    trace: &[dflat_sitl::TruthSample],
+    path: &[[f64; 3]],
+    arrival: f64,
+) -> (Vec<f64>, bool) {
+    let end_point = *path.last().expect("a path");
+    let first = trace
+        .iter()
+        .position(|s| s.command.is_some())
+        .unwrap_or(trace.len());
+    let end = trace[first..]
+        .iter()
+        .position(|s| dist(s.position, end_point) < arrival)
+        .map(|i| first + i);
+    let errors = trace[first..end.unwrap_or(trace.len())]
+        .iter()
+        .map(|s| path_distance(path, s.position))
+        .collect();
+    (errors, end.is_some())
+}
+
 /// Euclidean distance \[m\].
 pub fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
     ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
@@ -303,8 +349,8 @@ pub fn quantile(v: &[f64], q: f64) -> f64 {
 pub struct Flight {
     /// Every frame the daemon sent, in arrival order.
     pub frames: Vec<TapFrame>,
-    /// From the first SET_ATTITUDE_TARGET to the end of observation.
-    pub streamed_for: Duration,
+    /// The flight's directory (its configuration and the daemon's records).
+    pub dir: PathBuf,
     /// The in-process SITL's report (with its truth trace).
     pub report: SitlReport,
     /// The daemon exited cleanly on SIGINT.
@@ -312,6 +358,21 @@ pub struct Flight {
 }
 
 impl Flight {
+    /// How long the daemon streamed, on its own clock: from its first
+    /// command to its last in its records (the flight CSV's tick wake
+    /// times) \[s\]; 0 without two.
+    pub fn streamed_s(&self) -> f64 {
+        let wakes: Vec<f64> = read_flight_csv(&self.dir)
+            .iter()
+            .filter(|r| field(r, "roll").is_some())
+            .filter_map(|r| field(r, "t_wake"))
+            .collect();
+        match (wakes.first(), wakes.last()) {
+            (Some(first), Some(last)) => last - first,
+            _ => 0.0,
+        }
+    }
+
     /// The SET_ATTITUDE_TARGET frames.
     pub fn attitude_targets(
         &self,
@@ -357,19 +418,12 @@ pub fn fly_in_process_until(
 ) -> Flight {
     let dir = scratch(name);
     let text = config_text.replace("@DIR@", &dir.display().to_string());
-    let config = write_config(&dir, &format!("{name}.toml"), &text);
-    Config::load(&config).expect("daemon config");
-    let (tx, tap) = channel();
-    let sim = sitl::spawn(
-        &dflat_sitl::SitlSettings::load(&config).expect("sitl config"),
-        SitlOptions {
-            link: Some("udpin:127.0.0.1:0".into()),
-            tap: Some(tx),
-            record_trace: true,
-            ..SitlOptions::default()
-        },
-    )
-    .expect("sitl");
+    let (config, _) = write_daemon_config(&dir, &format!("{name}.toml"), &text);
+    let options = TapOptions {
+        record_trace: true,
+        ..TapOptions::default()
+    };
+    let (sim, tap) = tapped_sitl(&config, options);
     let mut daemon = spawn_daemon(&dir, &config, sim.local_addr());
     let start = Instant::now();
     let mut frames = Vec::new();
@@ -389,16 +443,188 @@ pub fn fly_in_process_until(
             done_at = Some(Instant::now());
         }
     }
-    let streamed_for = first_target.map_or(Duration::ZERO, |t| t.elapsed());
     let clean_exit = daemon.interrupt_and_wait(Duration::from_secs(5));
     let report = sim.stop().expect("sitl stop");
     frames.extend(tap.try_iter());
     Flight {
         frames,
-        streamed_for,
+        dir,
         report,
         clean_exit,
     }
+}
+
+/// A flight's configuration (TOML): `tables`, then the records (CSV, no
+/// tlog) in `dir` and the SITL's table, its vehicle at rest at NED
+/// (0, 0, −10) m, with the further keys `sitl`.
+pub fn flight_config(dir: &Path, tables: &str, sitl: &str) -> String {
+    format!(
+        "{tables}\n[logging]\ndir = \"{}\"\ntlog = false\n[sitl]\nstart = [0.0, 0.0, -10.0]\n{sitl}\n",
+        dir.display()
+    )
+}
+
+/// As [`flight_config`] for a vehicle that flies `path` (NED \[m\]) at
+/// `speed` \[m/s\] from the start: `more` holds any more tables.
+pub fn path_config(dir: &Path, path: &[[f64; 3]], speed: f64, more: &str, sitl: &str) -> String {
+    let mission = format!("[mission]\nstart = \"path\"\npath = {path:?}\nspeed = {speed:?}");
+    flight_config(dir, &format!("{mission}\n{more}"), sitl)
+}
+
+/// The tilt limit of the flights of [`hold_config`] \[deg\] (the
+/// daemon's default, written out).
+pub const MAX_TILT_DEG: f64 = 35.0;
+
+/// As [`flight_config`] for a vehicle that holds where it starts, at the
+/// tilt limit [`MAX_TILT_DEG`]: `mission` holds the mission table's
+/// further keys and any more tables.
+pub fn hold_config(dir: &Path, mission: &str, sitl: &str) -> String {
+    let vehicle = format!("[vehicle]\nmax_tilt_deg = {MAX_TILT_DEG}");
+    let tables = format!("[mission]\nstart = \"hold\"\n{mission}\n{vehicle}");
+    flight_config(dir, &tables, sitl)
+}
+
+/// A short L (8 m north, then 6 m east, at 4 m/s) with the daemon's
+/// records in `@DIR@`, for [`fly_in_process`].
+pub const SHORT_L: &str = r#"
+[mission]
+start = "path"
+path = [[0.0, 0.0, -10.0], [8.0, 0.0, -10.0], [8.0, 6.0, -10.0]]
+speed = 4.0
+[logging]
+dir = "@DIR@"
+tlog = false
+"#;
+
+/// The daemon's spatial model with normalised thrust (PX4 style), hover
+/// at 0.5.
+pub const SPATIAL_VEHICLE: &str = r#"[vehicle]
+model = "spatial"
+thrust_mode = "normalized"
+hover_thrust = 0.5
+"#;
+
+/// The SITL's keys for the shipped tuning with realistic sensing: the
+/// planar plant, 1 cm position noise.
+pub const PLANAR_NOISY: &str = "plant = \"planar\"\nnoise_sigma = 0.01";
+
+/// Writes the configuration `text` as `dir/file`, starts the SITL (with
+/// its ground-station port if `gcs`) writing its truth to
+/// `dir/truth.csv`, and the daemon against it; returns them and the truth
+/// file once the daemon commands the SITL (its offboard mode, within 15 s).
+pub fn start_flight(dir: &Path, file: &str, text: &str, gcs: bool) -> (Sitl, Proc, PathBuf) {
+    let config = write_config(dir, file, text);
+    let truth = dir.join("truth.csv");
+    let sitl = spawn_sitl(dir, &config, gcs, &truth);
+    let daemon = spawn_daemon(dir, &config, sitl.link);
+    assert!(
+        sitl.wait_for_line("sitl mode offboard", Duration::from_secs(15))
+            .is_some(),
+        "the daemon never commanded the SITL"
+    );
+    (sitl, daemon, truth)
+}
+
+/// Which ports and records the in-process SITL of [`tapped_sitl`] opens.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct TapOptions {
+    /// Open its ground-station port too (loopback, port 0).
+    pub gcs: bool,
+    /// Keep its truth trace for the report.
+    pub record_trace: bool,
+}
+
+/// The in-process SITL with the settings of `config`, listening on
+/// loopback (port 0), and the tap on which it hands over every frame the
+/// daemon sends it.
+pub fn tapped_sitl(config: &Path, options: TapOptions) -> (sitl::SitlHandle, Receiver<TapFrame>) {
+    let (tx, tap) = channel();
+    let sim = sitl::spawn(
+        &dflat_sitl::SitlSettings::load(config).expect("sitl config"),
+        SitlOptions {
+            link: Some("udpin:127.0.0.1:0".into()),
+            gcs: options.gcs.then(|| "udpin:127.0.0.1:0".into()),
+            tap: Some(tx),
+            record_trace: options.record_trace,
+            ..SitlOptions::default()
+        },
+    )
+    .expect("sitl");
+    (sim, tap)
+}
+
+/// The in-process SITL with the settings `plant`, keeping its truth trace.
+pub fn traced_sitl(plant: &dflat_sitl::SitlSettings) -> sitl::SitlHandle {
+    let options = SitlOptions {
+        record_trace: true,
+        ..SitlOptions::default()
+    };
+    sitl::spawn(plant, options).expect("sitl")
+}
+
+/// Waits (at most `limit`) until the SITL's true position is within
+/// `within` \[m\] of `end` (NED \[m\]), and a second more; whether it got
+/// there.
+pub async fn arrive_and_linger(
+    sitl: &sitl::SitlHandle,
+    end: [f64; 3],
+    within: f64,
+    limit: Duration,
+) -> bool {
+    let until = Instant::now() + limit;
+    let mut arrived: Option<Instant> = None;
+    while Instant::now() < until {
+        tokio::time::sleep(Duration::from_millis(20)).await;
+        if arrived.is_none() && dist(sitl.truth().position, end) < within {
+            arrived = Some(Instant::now());
+        }
+        if arrived.is_some_and(|t| t.elapsed() > Duration::from_secs(1)) {
+            break;
+        }
+    }
+    arrived.is_some()
+}
+
+/// Writes `text` as `dir/file` (as [`write_config`]) and loads it as the
+/// daemon's configuration, which must be valid.
+pub fn write_daemon_config(dir: &Path, file: &str, text: &str) -> (PathBuf, Config) {
+    let config = write_config(dir, file, text);
+    let cfg = Config::load(&config).expect("daemon config");
+    (config, cfg)
+}
+
+/// Waits (at most 15 s) until the daemon has streamed attitude targets
+/// for `hold` on the `tap` (whose frames it takes); false if it never
+/// streamed.
+pub fn wait_streaming(tap: &Receiver<TapFrame>, hold: Duration) -> bool {
+    let until = Instant::now() + Duration::from_secs(15);
+    let mut since: Option<Instant> = None;
+    while Instant::now() < until {
+        std::thread::sleep(Duration::from_millis(50));
+        let n = tap
+            .try_iter()
+            .filter(|f| matches!(f.message, MavMessage::SET_ATTITUDE_TARGET(_)))
+            .count();
+        if n > 0 && since.get_or_insert_with(Instant::now).elapsed() > hold {
+            break;
+        }
+    }
+    since.is_some()
+}
+
+/// The largest step from one attitude target to the next of roll or
+/// pitch \[deg\].
+pub fn largest_tilt_step_deg<'a>(
+    targets: impl Iterator<Item = &'a dflat_link::dialect::SET_ATTITUDE_TARGET_DATA>,
+) -> f64 {
+    let tilts: Vec<[f64; 3]> = targets
+        .map(|d| dflat_link::euler_from_quaternion(d.q.map(f64::from)))
+        .collect();
+    tilts
+        .windows(2)
+        .map(|w| (w[1][0] - w[0][0]).abs().max((w[1][1] - w[0][1]).abs()))
+        .fold(0.0, f64::max)
+        .to_degrees()
 }
 
 /// The daemon's per-flight CSV in `dir` (the newest `*.csv`) as rows of
@@ -440,6 +666,12 @@ pub fn field(row: &std::collections::HashMap<String, String>, name: &str) -> Opt
     row.get(name)
         .filter(|v| !v.is_empty())
         .map(|v| v.parse().unwrap_or(f64::NAN))
+}
+
+/// The capture time of the newest pose a CSV row's tick had, on the
+/// daemon's clock: the tick's `t_wake` less the pose's age \[s\].
+pub fn pose_capture(row: &std::collections::HashMap<String, String>) -> Option<f64> {
+    Some(field(row, "t_wake")? - field(row, "pose_age_ms")? / 1e3)
 }
 
 /// Checks every command in the CSV rows: finite, tilt ≤ `max_tilt_deg`,

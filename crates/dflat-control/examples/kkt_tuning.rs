@@ -26,6 +26,18 @@ struct Case {
     target: f64,
 }
 
+/// The shipped tuning's horizon and weights, 30° tilt, moving start.
+const SMOOTH_100: Case = Case {
+    name: "N=100 smooth",
+    horizon: 100,
+    q: 1.0,
+    r: 0.003,
+    smoothness: 50.0,
+    tilt_deg: 30.0,
+    fixed: [0.0, 0.1, 0.2],
+    target: 10.0,
+};
+
 const CASES: [Case; 4] = [
     Case {
         name: "bench N=200",
@@ -37,25 +49,11 @@ const CASES: [Case; 4] = [
         fixed: [0.0; 3],
         target: 8.0,
     },
-    Case {
-        name: "N=100 smooth",
-        horizon: 100,
-        q: 1.0,
-        r: 0.003,
-        smoothness: 50.0,
-        tilt_deg: 30.0,
-        fixed: [0.0, 0.1, 0.2],
-        target: 10.0,
-    },
+    SMOOTH_100,
     Case {
         name: "N=100 smooth, turn",
-        horizon: 100,
-        q: 1.0,
-        r: 0.003,
-        smoothness: 50.0,
-        tilt_deg: 30.0,
-        fixed: [0.0, 0.1, 0.2],
         target: -3.0,
+        ..SMOOTH_100
     },
     Case {
         name: "N=100",

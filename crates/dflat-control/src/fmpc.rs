@@ -225,10 +225,6 @@ pub(crate) fn limit_pair(
     }
 }
 
-pub(crate) fn measurement_is_finite(m: &Measurement) -> bool {
-    m.t.is_finite() && m.yaw.is_finite() && m.position.iter().all(|c| c.is_finite())
-}
-
 impl FlatnessMpc {
     /// Builds the controller for `model` (its δt is the control step) and
     /// factors the constant Hessian of every axis. Errors name an invalid
@@ -295,86 +291,15 @@ impl FlatnessMpc {
     pub fn dt(&self) -> f64 {
         self.dt
     }
-}
 
-impl Controller for FlatnessMpc {
-    fn name(&self) -> &'static str {
-        "fmpc"
-    }
-
-    fn multi_rate(&self) -> bool {
-        self.estimator.is_some()
-    }
-
-    fn observe(&mut self, sample: &Measurement) {
-        if let Some(e) = &mut self.estimator {
-            // A refused sample (non-finite, out of order) is dropped.
-            let _ = e.estimator.observe(sample.t, &sample.position);
-        }
-    }
-
-    fn correct_last_input(&mut self, applied: &Vector3<f64>) {
-        if let Some(e) = &mut self.estimator {
-            e.correct(&self.model, applied);
-        }
-    }
-
-    fn update(
-        &mut self,
-        measurement: &Measurement,
-        reference: &mut dyn ReferenceSource,
-    ) -> Result<TickOutput, ControlError> {
-        if !measurement_is_finite(measurement) {
-            return Err(ControlError::NonFiniteMeasurement);
-        }
-        let estimate = match &self.estimator {
-            Some(e) => Some(e.state_at(measurement.t)?),
-            None => None,
-        };
-        let y = match &estimate {
-            Some(s) => Vector3::new(s[0][0], s[1][0], s[2][0]),
-            None => measurement.position,
-        };
-        let hist = if self.started {
-            [self.hist[1], self.hist[2], y]
-        } else {
-            [y; 3]
-        };
-        reference.horizon(&y, self.dt, &mut self.refs);
-        if !self.refs.iter().all(|r| r.iter().all(|c| c.is_finite())) {
-            return Err(ControlError::NonFiniteReference);
-        }
-
-        let dt = self.dt;
-        let mut z = [[0.0; 3]; 3]; // per axis: flat state
-        let mut v = [[0.0; 3]; 3]; // per axis: jerks v_0, v_1, v_2
-        for axis in 0..self.axes {
-            let (y2, y1, y0) = (hist[0][axis], hist[1][axis], hist[2][axis]);
-            let za = match &estimate {
-                Some(s) => [s[axis][0], s[axis][1], s[axis][2]],
-                None => [y0, (y0 - y1) / dt, (y0 - 2.0 * y1 + y2) / (dt * dt)],
-            };
-            let gains = &self.gains[axis];
-            let mut acc = [0.0; 3];
-            for (j, r) in self.refs[1..].iter().enumerate() {
-                let e = r[axis] - free(&za, j + 1, dt);
-                for (a, k) in acc.iter_mut().zip(&gains.k) {
-                    *a += k[j] * e;
-                }
-            }
-            z[axis] = za;
-            v[axis] = acc;
-        }
-
-        // Plan: predicted positions j = 0..3 from the triple integrator.
-        let mut plan = [y; 4];
-        for (j, p) in plan.iter_mut().enumerate().skip(1) {
-            for axis in 0..self.axes {
-                let forced: f64 = (0..j).map(|i| impulse(j - 1 - i, dt) * v[axis][i]).sum();
-                p[axis] = free(&z[axis], j, dt) + forced;
-            }
-        }
-
+    /// The attitude command from the flat state `z` and the planned jerks
+    /// `v` per axis (feedback linearisation with the attitude's lead, then
+    /// the tilt limit), and whether it saturated.
+    fn command(
+        &self,
+        z: &[[f64; 3]; 3],
+        v: &[[f64; 3]; 3],
+    ) -> Result<(AttitudeCommand, bool), ControlError> {
         let limit = self.settings.max_tilt;
         let mode = self.settings.tilt_limit;
         let mut saturated = false;
@@ -437,6 +362,80 @@ impl Controller for FlatnessMpc {
                 }
             }
         };
+        Ok((command, saturated))
+    }
+}
+
+impl Controller for FlatnessMpc {
+    fn name(&self) -> &'static str {
+        "fmpc"
+    }
+
+    fn multi_rate(&self) -> bool {
+        self.estimator.is_some()
+    }
+
+    fn observe(&mut self, sample: &Measurement) {
+        BaselineEstimator::observe(self.estimator.as_mut(), sample);
+    }
+
+    fn correct_last_input(&mut self, applied: &Vector3<f64>) {
+        if let Some(e) = &mut self.estimator {
+            e.correct(&self.model, applied);
+        }
+    }
+
+    fn update(
+        &mut self,
+        measurement: &Measurement,
+        reference: &mut dyn ReferenceSource,
+    ) -> Result<TickOutput, ControlError> {
+        let estimate = BaselineEstimator::checked_state(self.estimator.as_ref(), measurement)?;
+        let y = match &estimate {
+            Some(s) => Vector3::new(s[0][0], s[1][0], s[2][0]),
+            None => measurement.position,
+        };
+        let hist = if self.started {
+            [self.hist[1], self.hist[2], y]
+        } else {
+            [y; 3]
+        };
+        reference.horizon(&y, self.dt, &mut self.refs);
+        if !self.refs.iter().all(|r| r.iter().all(|c| c.is_finite())) {
+            return Err(ControlError::NonFiniteReference);
+        }
+
+        let dt = self.dt;
+        let mut z = [[0.0; 3]; 3]; // per axis: flat state
+        let mut v = [[0.0; 3]; 3]; // per axis: jerks v_0, v_1, v_2
+        for axis in 0..self.axes {
+            let (y2, y1, y0) = (hist[0][axis], hist[1][axis], hist[2][axis]);
+            let za = match &estimate {
+                Some(s) => [s[axis][0], s[axis][1], s[axis][2]],
+                None => [y0, (y0 - y1) / dt, (y0 - 2.0 * y1 + y2) / (dt * dt)],
+            };
+            let gains = &self.gains[axis];
+            let mut acc = [0.0; 3];
+            for (j, r) in self.refs[1..].iter().enumerate() {
+                let e = r[axis] - free(&za, j + 1, dt);
+                for (a, k) in acc.iter_mut().zip(&gains.k) {
+                    *a += k[j] * e;
+                }
+            }
+            z[axis] = za;
+            v[axis] = acc;
+        }
+
+        // Plan: predicted positions j = 0..3 from the triple integrator.
+        let mut plan = [y; 4];
+        for (j, p) in plan.iter_mut().enumerate().skip(1) {
+            for axis in 0..self.axes {
+                let forced: f64 = (0..j).map(|i| impulse(j - 1 - i, dt) * v[axis][i]).sum();
+                p[axis] = free(&z[axis], j, dt) + forced;
+            }
+        }
+
+        let (command, saturated) = self.command(&z, &v)?;
         if !command.is_finite() || !plan.iter().all(|p| p.iter().all(|c| c.is_finite())) {
             return Err(ControlError::Flat(FlatError::NonFinite("FMPC command")));
         }

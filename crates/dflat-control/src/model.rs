@@ -208,6 +208,71 @@ impl ControlModel {
         }
     }
 
+    /// F⁻¹ with a disturbance estimate and, on top of its offset, an
+    /// acceleration offset per step `steps` \[m/s²\] (model frame): `steps[0]`
+    /// in the step from `y_k` (the attitude there), `steps[1]` in the step
+    /// from `y_{k+1}` (the one `u_k` drives). The learned residual enters
+    /// here, evaluated at each step's velocity. Zero `steps` is
+    /// [`ControlModel::next_output_disturbed`], bit for bit.
+    pub fn next_output_stepped(
+        &self,
+        y: &[Vector3<f64>; 3],
+        u: &Vector3<f64>,
+        d: &DisturbanceEstimate,
+        steps: &[Vector3<f64>; 2],
+    ) -> Result<Vector3<f64>, FlatError> {
+        if steps.iter().all(|s| *s == Vector3::zeros()) {
+            return self.next_output_disturbed(y, u, d);
+        }
+        let q = self.offset(d);
+        match self {
+            ControlModel::Planar(m) => {
+                let w = [xy(&y[0]), xy(&y[1]), xy(&y[2])];
+                let qs = [xy(&(q + steps[0])), xy(&(q + steps[1]))];
+                let n = m.next_output_offsets(&w, &Vector2::new(u.x, u.y), &qs)?;
+                Ok(Vector3::new(n.x, n.y, y[2].z))
+            }
+            ControlModel::Spatial(m) => {
+                let u_eff = Vector3::new(u.x, u.y, u.z * d.thrust_scale);
+                m.next_output_offsets(y, &u_eff, &[q + steps[0], q + steps[1]])
+            }
+        }
+    }
+
+    /// F with a disturbance estimate and an acceleration offset per step
+    /// `steps` \[m/s²\] (model frame): `steps[0]` in the step from `y_k`,
+    /// `steps[1]` in the step from `y_{k+1}`. Zero `steps` is
+    /// [`ControlModel::input_from_outputs_disturbed`], bit for bit.
+    pub fn input_from_outputs_stepped(
+        &self,
+        y: &[Vector3<f64>; 4],
+        d: &DisturbanceEstimate,
+        steps: &[Vector3<f64>; 2],
+    ) -> Result<Vector3<f64>, FlatError> {
+        if steps.iter().all(|s| *s == Vector3::zeros()) {
+            return self.input_from_outputs_disturbed(y, d);
+        }
+        let q = self.offset(d);
+        let u = match self {
+            ControlModel::Planar(m) => {
+                let w = [xy(&y[0]), xy(&y[1]), xy(&y[2]), xy(&y[3])];
+                let qs = [xy(&(q + steps[0])), xy(&(q + steps[1]))];
+                let u = m.input_from_outputs_offsets(&w, &qs)?;
+                Vector3::new(u.x, u.y, m.params().g)
+            }
+            ControlModel::Spatial(m) => {
+                let mut u = m.input_from_outputs_offsets(y, &[q + steps[0], q + steps[1]])?;
+                u.z /= d.thrust_scale;
+                u
+            }
+        };
+        if u.iter().all(|v| v.is_finite()) {
+            Ok(u)
+        } else {
+            Err(FlatError::NonFinite("input"))
+        }
+    }
+
     /// The model's linear drag \[1/s\] per axis, `[D_h, D_h, D_v]` (planar:
     /// `D_v = 0`): the step subtracts `D·v` from the acceleration.
     pub fn drag(&self) -> Vector3<f64> {

@@ -19,7 +19,7 @@ use dflat_model::{FlatError, Frame};
 use nalgebra::{Vector2, Vector3};
 
 use crate::estimator::{BaselineEstimator, StateSource};
-use crate::fmpc::{limit_pair, measurement_is_finite};
+use crate::fmpc::limit_pair;
 use crate::{
     AttitudeCommand, ControlError, ControlModel, Controller, Measurement, ReferenceSource,
     TickOutput,
@@ -309,10 +309,7 @@ impl Controller for Pd {
     }
 
     fn observe(&mut self, sample: &Measurement) {
-        if let Some(e) = &mut self.estimator {
-            // A refused sample (non-finite, out of order) is dropped.
-            let _ = e.estimator.observe(sample.t, &sample.position);
-        }
+        BaselineEstimator::observe(self.estimator.as_mut(), sample);
     }
 
     fn correct_last_input(&mut self, applied: &Vector3<f64>) {
@@ -326,13 +323,7 @@ impl Controller for Pd {
         measurement: &Measurement,
         reference: &mut dyn ReferenceSource,
     ) -> Result<TickOutput, ControlError> {
-        if !measurement_is_finite(measurement) {
-            return Err(ControlError::NonFiniteMeasurement);
-        }
-        let estimate = match &self.estimator {
-            Some(e) => Some(e.state_at(measurement.t)?),
-            None => None,
-        };
+        let estimate = BaselineEstimator::checked_state(self.estimator.as_ref(), measurement)?;
         // No pose since the previous tick: extrapolate with the velocity
         // estimate instead of reading a repeated position as a stop.
         let stale = estimate.is_none() && self.started && measurement.t <= self.last_t;
@@ -363,18 +354,12 @@ impl Controller for Pd {
         limit_horizontal(&mut a, s.max_horizontal_acceleration, &mut saturated);
         let limit = Some(s.max_tilt);
 
-        let command = match &self.model {
+        // The flat attitude and thrust, then the attitude loop's gain k̃.
+        let (theta, phi, thrust, k, psi) = match &self.model {
             ControlModel::Planar(m) => {
                 let p = m.params();
                 let (theta, phi) = m.attitude(&Vector2::new(a.x, a.y));
-                let (pitch, roll) =
-                    limit_pair(theta / p.k, phi / p.k, limit, s.tilt_limit, &mut saturated);
-                AttitudeCommand {
-                    pitch,
-                    roll,
-                    yaw: p.psi,
-                    thrust: p.g,
-                }
+                (theta, phi, p.g, p.k, p.psi)
             }
             ControlModel::Spatial(m) => {
                 let p = m.params();
@@ -385,15 +370,15 @@ impl Controller for Pd {
                 }
                 let t = spatial_thrust_vector(p.frame, p.g, &a);
                 let (thrust, theta, phi) = thrust_pitch_roll(t, p.psi)?;
-                let (pitch, roll) =
-                    limit_pair(theta / p.k, phi / p.k, limit, s.tilt_limit, &mut saturated);
-                AttitudeCommand {
-                    pitch,
-                    roll,
-                    yaw: p.psi,
-                    thrust,
-                }
+                (theta, phi, thrust, p.k, p.psi)
             }
+        };
+        let (pitch, roll) = limit_pair(theta / k, phi / k, limit, s.tilt_limit, &mut saturated);
+        let command = AttitudeCommand {
+            pitch,
+            roll,
+            yaw: psi,
+            thrust,
         };
         if !command.is_finite() {
             return Err(ControlError::Flat(FlatError::NonFinite("PD command")));

@@ -9,23 +9,11 @@ use dflat_control::{
     ControlError, ControlModel, Controller, Frame, Measurement, ReferenceSource, TickOutput,
     TiltLimit,
 };
-use dflat_model::{FlatModel, PlanarModel, PlanarParams, SpatialModel, SpatialParams};
+use dflat_model::{FlatModel, PlanarModel, SpatialModel, SpatialParams};
 use nalgebra::{SVector, Vector2, Vector3};
 
-const DT: f64 = 0.02;
-const G: f64 = 9.81;
-
-/// Constant setpoint.
-struct Setpoint(Vector3<f64>);
-
-impl ReferenceSource for Setpoint {
-    fn horizon(&mut self, _measured: &Vector3<f64>, _dt: f64, out: &mut [Vector3<f64>]) {
-        out.iter_mut().for_each(|o| *o = self.0);
-    }
-    fn closest(&mut self, _measured: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
-        (self.0, Vector3::zeros())
-    }
-}
+mod common;
+use common::{DT, G, Setpoint, planar_ned};
 
 /// A polyline flown at constant speed from its first point, timed by the
 /// number of `horizon` calls (one per tick); stops at the last point.
@@ -64,15 +52,6 @@ impl ReferenceSource for TimedPath {
     }
 }
 
-fn planar(psi: f64) -> PlanarModel {
-    PlanarModel::new(PlanarParams {
-        psi,
-        frame: Frame::Ned,
-        ..Default::default()
-    })
-    .unwrap()
-}
-
 /// Runs the planar loop for `ticks`, calling `check(k, position, output)`.
 fn run_planar(
     plant: PlanarModel,
@@ -101,7 +80,7 @@ fn run_planar(
 
 #[test]
 fn df_planar_setpoint_reached_and_held() {
-    let plant = planar(0.6);
+    let plant = planar_ned(0.6);
     let mut ctrl = DfMpc::new(ControlModel::Planar(plant), DfMpcSettings::default()).unwrap();
     let target = Vector3::new(10.0, 0.0, -2.0); // 10 m north, yawed 34°
     let mut saturated = false;
@@ -136,7 +115,7 @@ fn df_planar_setpoint_reached_and_held() {
 /// cone the tilt stays within 35° and the step is still reached.
 #[test]
 fn df_cone_tilt_limit_bounds_the_combined_tilt() {
-    let plant = planar(0.0);
+    let plant = planar_ned(0.0);
     let max_tilt = 35f64.to_radians();
     let target = Vector3::new(10.0, -10.0, -2.0);
     let fly = |tilt_limit| {
@@ -307,7 +286,7 @@ fn df_spatial_cone_follows_the_vertical_plan() {
 
 #[test]
 fn df_planar_follows_straight_path() {
-    let plant = planar(-1.0);
+    let plant = planar_ned(-1.0);
     let mut ctrl = DfMpc::new(ControlModel::Planar(plant), DfMpcSettings::default()).unwrap();
     let dir = Vector3::new(0.6, 0.8, 0.0);
     let mut path = TimedPath {
@@ -334,7 +313,7 @@ fn df_planar_follows_straight_path() {
 
 #[test]
 fn df_planar_follows_l_path() {
-    let plant = planar(0.3);
+    let plant = planar_ned(0.3);
     let mut ctrl = DfMpc::new(ControlModel::Planar(plant), DfMpcSettings::default()).unwrap();
     let corner = Vector3::new(10.0, 0.0, -2.0);
     let end = Vector3::new(10.0, 10.0, -2.0);
@@ -362,7 +341,7 @@ fn df_planar_follows_l_path() {
 
 #[test]
 fn df_tilt_constraint_engages_and_bounds_the_plan() {
-    let plant = planar(0.6);
+    let plant = planar_ned(0.6);
     let tilt = 15f64.to_radians();
     let a_max = G * tilt.tan();
     let settings = DfMpcSettings {
@@ -418,7 +397,7 @@ fn df_tilt_constraint_engages_and_bounds_the_plan() {
 
 #[test]
 fn df_nan_measurement_is_an_error_and_nothing_is_recorded_then_the_window_restarts() {
-    let plant = planar(0.2);
+    let plant = planar_ned(0.2);
     let target = Vector3::new(3.0, 1.0, 0.0);
     let mut a = DfMpc::new(ControlModel::Planar(plant), DfMpcSettings::default()).unwrap();
     let mut b = DfMpc::new(ControlModel::Planar(plant), DfMpcSettings::default()).unwrap();
@@ -470,7 +449,7 @@ fn df_nan_measurement_is_an_error_and_nothing_is_recorded_then_the_window_restar
 
 #[test]
 fn df_reset_starts_over() {
-    let plant = planar(0.0);
+    let plant = planar_ned(0.0);
     let target = Vector3::new(1.0, 0.0, 0.0);
     let m = |x: f64| Measurement {
         t: 0.0,
@@ -490,7 +469,7 @@ fn df_reset_starts_over() {
 
 #[test]
 fn df_settings_validation_names_the_field() {
-    let model = ControlModel::Planar(planar(0.0));
+    let model = ControlModel::Planar(planar_ned(0.0));
     let field = |s: DfMpcSettings| match DfMpc::new(model, s) {
         Err(ControlError::InvalidSetting { field, .. }) => field,
         other => panic!("expected an invalid setting, got {other:?}"),
@@ -511,28 +490,20 @@ fn df_settings_validation_names_the_field() {
         }),
         "tracking_weight"
     );
-    let c = OutputConstraints {
+    let nan_tilt = OutputConstraints {
         max_tilt: Some(f64::NAN),
         ..Default::default()
     };
-    assert_eq!(
-        field(DfMpcSettings {
-            constraints: c,
-            ..d
-        }),
-        "constraints.max_tilt"
-    );
-    let c = OutputConstraints {
+    let both_signs = OutputConstraints {
         vertical_acceleration: Some([-3.0, 3.0]),
         ..Default::default()
     };
-    assert_eq!(
-        field(DfMpcSettings {
-            constraints: c,
-            ..d
-        }),
-        "constraints.vertical_acceleration"
-    );
+    for (constraints, name) in [
+        (nan_tilt, "constraints.max_tilt"),
+        (both_signs, "constraints.vertical_acceleration"),
+    ] {
+        assert_eq!(field(DfMpcSettings { constraints, ..d }), name);
+    }
     let e = DfMpc::new(model, DfMpcSettings { horizon: 0, ..d }).unwrap_err();
     assert!(e.to_string().contains("horizon"), "{e}");
 }

@@ -15,24 +15,12 @@ use dflat_control::dfmpc::{DfMpc, DfMpcSettings};
 use dflat_control::disturbance::{
     DisturbanceEstimate, DisturbanceEstimator, DisturbanceSettings, EstimatorStatus,
 };
-use dflat_control::{ControlModel, Controller, Frame, Measurement, ReferenceSource};
-use dflat_model::{FlatModel, PlanarModel, PlanarParams, SpatialModel, SpatialParams};
+use dflat_control::{ControlModel, Controller, Frame, Measurement};
+use dflat_model::{FlatModel, PlanarModel, SpatialModel, SpatialParams};
 use nalgebra::{SVector, Vector2, Vector3};
 
-const DT: f64 = 0.02;
-const G: f64 = 9.81;
-
-/// Constant setpoint.
-struct Setpoint(Vector3<f64>);
-
-impl ReferenceSource for Setpoint {
-    fn horizon(&mut self, _measured: &Vector3<f64>, _dt: f64, out: &mut [Vector3<f64>]) {
-        out.iter_mut().for_each(|o| *o = self.0);
-    }
-    fn closest(&mut self, _measured: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
-        (self.0, Vector3::zeros())
-    }
-}
+mod common;
+use common::{DT, G, Setpoint, planar_ned};
 
 /// Deterministic standard normals (xorshift64 + Box–Muller), no dependency.
 struct Normal(u64);
@@ -51,12 +39,7 @@ impl Normal {
 }
 
 fn planar_model() -> PlanarModel {
-    PlanarModel::new(PlanarParams {
-        psi: 0.3,
-        frame: Frame::Ned,
-        ..Default::default()
-    })
-    .unwrap()
+    planar_ned(0.3)
 }
 
 fn spatial_model() -> SpatialModel {
@@ -160,6 +143,17 @@ impl OpenLoop {
     }
 }
 
+/// The spatial model's input at `t` \[s\] for identifying the thrust scale
+/// `kappa`: slow pitch and roll waves and a thrust wave about the hover
+/// thrust the vehicle needs (pitch, roll \[rad\], thrust \[m/s²\]).
+fn exciting_input(t: f64, kappa: f64) -> Vector3<f64> {
+    Vector3::new(
+        0.1 * (0.7 * t).sin(),
+        0.05 * (1.3 * t).cos(),
+        G / kappa + 0.5 * (0.9 * t).sin(),
+    )
+}
+
 fn planar_estimator() -> DisturbanceEstimator {
     DisturbanceEstimator::new(
         ControlModel::Planar(planar_model()),
@@ -213,12 +207,7 @@ fn estimator_converges_to_thrust_scale_on_spatial_step() {
     let mut x = SVector::<f64, 9>::zeros();
     x[8] = G;
     for k in 0..1500 {
-        let t = k as f64 * DT;
-        let u = Vector3::new(
-            0.1 * (0.7 * t).sin(),
-            0.05 * (1.3 * t).cos(),
-            G / kappa + 0.5 * (0.9 * t).sin(),
-        );
+        let u = exciting_input(k as f64 * DT, kappa);
         est.begin_tick();
         est.record(&m.output(&x), &u, false);
         x = spatial_step(&m, &x, &u, kappa, &d);
@@ -319,12 +308,31 @@ fn planar_closed_loop(d: Vector2<f64>, estimator: Option<DisturbanceSettings>) -
     };
     let mut ctrl = DfMpc::new(ControlModel::Planar(m), settings).unwrap();
     let target = Vector3::new(3.0, -2.0, -1.5);
+    let error = mean_final_error(
+        &mut ctrl,
+        target,
+        SVector::<f64, 6>::zeros(),
+        |x| Vector3::new(x[0], x[2], -1.5),
+        |x, u| planar_step(&m, x, u, &d),
+    );
+    (error, ctrl)
+}
+
+/// Flies `ctrl` to the setpoint `target` for 20 s on a plant from state
+/// `x` (its position `output`, its `step` under the command (pitch, roll,
+/// thrust)); returns the mean distance to the target over the last 5 s \[m\].
+fn mean_final_error<S>(
+    ctrl: &mut DfMpc,
+    target: Vector3<f64>,
+    mut x: S,
+    output: impl Fn(&S) -> Vector3<f64>,
+    step: impl Fn(&S, &Vector3<f64>) -> S,
+) -> f64 {
     let mut reference = Setpoint(target);
-    let mut x = SVector::<f64, 6>::zeros();
     let ticks = 1000; // 20 s
     let (mut sum, mut n) = (0.0, 0);
     for k in 0..ticks {
-        let p = Vector3::new(x[0], x[2], -1.5);
+        let p = output(&x);
         if k >= ticks - 250 {
             sum += (p - target).norm();
             n += 1;
@@ -336,9 +344,9 @@ fn planar_closed_loop(d: Vector2<f64>, estimator: Option<DisturbanceSettings>) -
         };
         let out = ctrl.update(&m_k, &mut reference).unwrap();
         let u = Vector3::new(out.command.pitch, out.command.roll, out.command.thrust);
-        x = planar_step(&m, &x, &u, &d);
+        x = step(&x, &u);
     }
-    (sum / n as f64, ctrl)
+    sum / n as f64
 }
 
 #[test]
@@ -376,27 +384,16 @@ fn spatial_closed_loop(kappa: f64, estimator: Option<DisturbanceSettings>) -> (f
     let mut ctrl = DfMpc::new(ControlModel::Spatial(m), settings).unwrap();
     let target = Vector3::new(2.0, 1.0, -3.0);
     let start = Vector3::new(2.0, 1.0, -1.0);
-    let mut reference = Setpoint(target);
     let mut x = SVector::<f64, 9>::zeros();
     (x[0], x[2], x[4], x[8]) = (start.x, start.y, start.z, G);
-    let ticks = 1000;
-    let (mut sum, mut n) = (0.0, 0);
-    for k in 0..ticks {
-        let p = m.output(&x);
-        if k >= ticks - 250 {
-            sum += (p - target).norm();
-            n += 1;
-        }
-        let m_k = Measurement {
-            t: k as f64 * DT,
-            position: p,
-            yaw: 0.3,
-        };
-        let out = ctrl.update(&m_k, &mut reference).unwrap();
-        let u = Vector3::new(out.command.pitch, out.command.roll, out.command.thrust);
-        x = spatial_step(&m, &x, &u, kappa, &Vector2::zeros());
-    }
-    (sum / n as f64, ctrl)
+    let error = mean_final_error(
+        &mut ctrl,
+        target,
+        x,
+        |x| m.output(x),
+        |x, u| spatial_step(&m, x, u, kappa, &Vector2::zeros()),
+    );
+    (error, ctrl)
 }
 
 #[test]
@@ -436,11 +433,7 @@ fn multi_rate_estimator_converges_with_1cm_noise_on_spatial_step() {
         let mut next_capture = 0.0;
         for k in 0..1500 {
             let t = k as f64 * DT;
-            let u = Vector3::new(
-                0.1 * (0.7 * t).sin(),
-                0.05 * (1.3 * t).cos(),
-                G / kappa + 0.5 * (0.9 * t).sin(),
-            );
+            let u = exciting_input(t, kappa);
             let next = spatial_step(&m, &x, &u, kappa, &d);
             // Captures in [t, t + δt): the model's outputs lerped.
             while next_capture < t + DT - 1e-12 {

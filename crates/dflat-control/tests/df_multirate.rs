@@ -8,24 +8,14 @@
 
 use dflat_control::dfmpc::{DfMpc, DfMpcSettings};
 use dflat_control::window::{MultiRateSettings, MultiRateWindow};
-use dflat_control::{ControlError, ControlModel, Controller, Frame, Measurement, ReferenceSource};
-use dflat_model::{FlatModel, PlanarModel, PlanarParams};
+use dflat_control::{ControlError, ControlModel, Controller, Measurement, ReferenceSource};
+use dflat_model::FlatModel;
 use nalgebra::{SVector, Vector2, Vector3};
 
-const DT: f64 = 0.02;
+mod common;
+use common::{DT, Noise, Setpoint, planar_ned};
+
 const ALT: f64 = -2.0;
-
-/// Constant setpoint.
-struct Setpoint(Vector3<f64>);
-
-impl ReferenceSource for Setpoint {
-    fn horizon(&mut self, _measured: &Vector3<f64>, _dt: f64, out: &mut [Vector3<f64>]) {
-        out.iter_mut().for_each(|o| *o = self.0);
-    }
-    fn closest(&mut self, _measured: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
-        (self.0, Vector3::zeros())
-    }
-}
 
 /// A straight line flown at constant speed from the origin, timed by the
 /// number of `horizon` calls (one per tick).
@@ -49,34 +39,9 @@ impl ReferenceSource for Line {
     }
 }
 
-/// Deterministic standard-normal-ish noise (sum of uniforms from an LCG).
-struct Noise(u64);
-
-impl Noise {
-    fn uniform(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn normal(&mut self) -> f64 {
-        (0..12).map(|_| self.uniform()).sum::<f64>() - 6.0
-    }
-}
-
-fn planar(psi: f64) -> PlanarModel {
-    PlanarModel::new(PlanarParams {
-        psi,
-        frame: Frame::Ned,
-        ..Default::default()
-    })
-    .unwrap()
-}
-
 fn multi_rate(settings: MultiRateSettings, extra: DfMpcSettings, psi: f64) -> DfMpc {
     DfMpc::new(
-        ControlModel::Planar(planar(psi)),
+        ControlModel::Planar(planar_ned(psi)),
         DfMpcSettings {
             multi_rate: Some(settings),
             ..extra
@@ -105,7 +70,7 @@ fn multirate_reproduces_classic_every_tick_without_latency() {
         process_sigma: [f64::INFINITY; 3],
     };
     for smoothness in [0.0, 3.0] {
-        let plant = planar(0.6);
+        let plant = planar_ned(0.6);
         let settings = DfMpcSettings {
             smoothness_weight: [smoothness; 3],
             ..DfMpcSettings::default()
@@ -238,7 +203,7 @@ fn fly(
     ticks: usize,
     blind: (f64, f64),
 ) -> Run {
-    let plant = planar(0.6);
+    let plant = planar_ned(0.6);
     let mut x = SVector::<f64, 6>::zeros();
     let mut history = Vec::new();
     let mut run = Run {
@@ -428,7 +393,7 @@ fn multirate_rejects_bad_samples_and_needs_one() {
 
 #[test]
 fn multirate_settings_are_validated() {
-    let model = ControlModel::Planar(planar(0.0));
+    let model = ControlModel::Planar(planar_ned(0.0));
     let field = |m: MultiRateSettings| match MultiRateWindow::new(&model, m) {
         Err(ControlError::InvalidSetting { field, .. }) => field,
         other => panic!("expected an invalid setting, got {other:?}"),

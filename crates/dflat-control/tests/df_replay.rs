@@ -26,26 +26,17 @@
 //! residual differences measured here are the trace's.
 
 use dflat_control::dfmpc::{DfMpc, DfMpcSettings};
-use dflat_control::{ControlModel, Controller, Frame, Measurement, ReferenceSource};
+use dflat_control::{ControlModel, Controller, Frame, Measurement};
 use dflat_model::{PlanarModel, PlanarParams};
 use nalgebra::Vector3;
+
+mod common;
+use common::Setpoint;
 
 const TRACE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../reference/trace_1d.json");
 const RTOL: f64 = 1e-6;
 const FLOOR_Y: f64 = 1e-3;
 const FLOOR_U: f64 = 0.05;
-
-/// Constant setpoint.
-struct Setpoint(Vector3<f64>);
-
-impl ReferenceSource for Setpoint {
-    fn horizon(&mut self, _measured: &Vector3<f64>, _dt: f64, out: &mut [Vector3<f64>]) {
-        out.iter_mut().for_each(|o| *o = self.0);
-    }
-    fn closest(&mut self, _measured: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
-        (self.0, Vector3::zeros())
-    }
-}
 
 fn load() -> serde_json::Value {
     let text = std::fs::read_to_string(TRACE).unwrap_or_else(|e| {

@@ -7,42 +7,12 @@ use dflat_control::dfmpc::{DfMpc, DfMpcSettings};
 use dflat_control::optimise::{
     AxisBounds, AxisProblem, ClarabelSolver, FastBandedSolver, Smoothness,
 };
-use dflat_control::{ControlError, ControlModel, Controller, Frame, Measurement, ReferenceSource};
+use dflat_control::{ControlError, ControlModel, Controller, Frame, Measurement};
 use dflat_model::{FlatModel, PlanarModel, PlanarParams};
 use nalgebra::{DMatrix, DVector, SVector, Vector2, Vector3};
 
-const DT: f64 = 0.02;
-const G: f64 = 9.81;
-
-/// Constant setpoint.
-struct Setpoint(Vector3<f64>);
-
-impl ReferenceSource for Setpoint {
-    fn horizon(&mut self, _measured: &Vector3<f64>, _dt: f64, out: &mut [Vector3<f64>]) {
-        out.iter_mut().for_each(|o| *o = self.0);
-    }
-    fn closest(&mut self, _measured: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
-        (self.0, Vector3::zeros())
-    }
-}
-
-/// Deterministic standard-normal-ish noise (sum of uniforms from an LCG).
-struct Noise(u64);
-
-impl Noise {
-    fn normal(&mut self) -> f64 {
-        (0..12)
-            .map(|_| {
-                self.0 = self
-                    .0
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                (self.0 >> 11) as f64 / (1u64 << 53) as f64
-            })
-            .sum::<f64>()
-            - 6.0
-    }
-}
+mod common;
+use common::{DT, G, Noise, Setpoint};
 
 /// The optimum from the definition: stack every cost term as a weighted
 /// least-squares row over the free outputs y_3..y_N (y_0..y_2 moved to the

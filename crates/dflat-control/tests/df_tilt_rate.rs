@@ -14,13 +14,14 @@
 use dflat_control::dfmpc::{DfMpc, DfMpcSettings, InputSaturation, OutputConstraints};
 use dflat_control::reference::{Reference, paths};
 use dflat_control::{
-    ControlModel, Controller, Frame, Measurement, ReferenceSource, TickOutput, TiltLimit,
+    ControlModel, Controller, Measurement, ReferenceSource, TickOutput, TiltLimit,
 };
-use dflat_model::{FlatModel, PlanarModel, PlanarParams};
+use dflat_model::{FlatModel, PlanarModel};
 use nalgebra::{SVector, Vector2, Vector3};
 
-const DT: f64 = 0.02;
-const G: f64 = 9.81;
+mod common;
+use common::{DT, G, Setpoint, planar_ned};
+
 /// The daemon's default bound \[deg/s\] (`controller.dfmpc.max_tilt_rate_deg_s`).
 const RATE_DEG_S: f64 = 150.0;
 /// Slack on the bound per tick \[deg\] when one axis moves at a time (the
@@ -35,24 +36,8 @@ const COUPLED_FACTOR: f64 = 1.6;
 /// The budget for the command step after a goal change \[deg/tick\].
 const BUDGET_DEG: f64 = 5.0;
 
-/// Constant setpoint.
-struct Setpoint(Vector3<f64>);
-
-impl ReferenceSource for Setpoint {
-    fn horizon(&mut self, _measured: &Vector3<f64>, _dt: f64, out: &mut [Vector3<f64>]) {
-        out.iter_mut().for_each(|o| *o = self.0);
-    }
-    fn closest(&mut self, _measured: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
-        (self.0, Vector3::zeros())
-    }
-}
-
 fn planar() -> PlanarModel {
-    PlanarModel::new(PlanarParams {
-        frame: Frame::Ned,
-        ..Default::default()
-    })
-    .unwrap()
+    planar_ned(0.0)
 }
 
 /// The daemon's DF-MPC set-up (`config/default.toml`, classic window),

@@ -4,51 +4,12 @@
 use dflat_control::fmpc::{FlatnessMpc, FmpcSettings};
 use dflat_control::reference::{Reference, paths};
 use dflat_control::{ControlError, ControlModel, Controller, Frame, Measurement, ReferenceSource};
-use dflat_model::attitude::thrust_axis;
-use dflat_model::planar::{PlanarInput, PlanarState};
-use dflat_model::{FlatModel, PlanarModel, PlanarParams, SpatialModel, SpatialParams};
+use dflat_model::planar::PlanarState;
+use dflat_model::{SpatialModel, SpatialParams};
 use nalgebra::Vector3;
 
-const DT: f64 = 0.02;
-
-fn planar_ned(psi: f64) -> PlanarModel {
-    PlanarModel::new(PlanarParams {
-        psi,
-        frame: Frame::Ned,
-        ..Default::default()
-    })
-    .unwrap()
-}
-
-fn measure(k: usize, x: &PlanarState, z: f64) -> Measurement {
-    Measurement {
-        t: k as f64 * DT,
-        position: Vector3::new(x[0], x[2], z),
-        yaw: 0.7,
-    }
-}
-
-/// Runs `ticks` ticks of `ctrl` on the planar model's own Euler step from
-/// `x0`; returns the trajectory of positions (z = −10) after each step.
-fn run_planar(
-    model: &PlanarModel,
-    ctrl: &mut dyn Controller,
-    reference: &mut dyn ReferenceSource,
-    x0: PlanarState,
-    ticks: usize,
-) -> Vec<Vector3<f64>> {
-    let mut x = x0;
-    let mut out = Vec::with_capacity(ticks);
-    for k in 0..ticks {
-        let tick = ctrl.update(&measure(k, &x, -10.0), reference).unwrap();
-        assert!(tick.command.is_finite());
-        assert!(tick.command.pitch.abs() <= 35f64.to_radians() + 1e-12);
-        assert!(tick.command.roll.abs() <= 35f64.to_radians() + 1e-12);
-        x = model.step(&x, &PlanarInput::new(tick.command.pitch, tick.command.roll));
-        out.push(Vector3::new(x[0], x[2], -10.0));
-    }
-    out
-}
+mod common;
+use common::{DT, SpatialSim, field_of, planar_ned, run_planar};
 
 #[test]
 fn fmpc_planar_ned_reaches_and_holds_10_m_setpoint() {
@@ -62,6 +23,7 @@ fn fmpc_planar_ned_reaches_and_holds_10_m_setpoint() {
         &mut reference,
         PlanarState::zeros(),
         1500,
+        |_, _| {},
     );
     let err = |k: usize| (traj[k] - target).norm();
     // Reached within 10 s and held (to 1 cm) for the remaining 20 s.
@@ -85,7 +47,7 @@ fn fmpc_planar_ned_follows_the_l_path() {
     let mut fmpc = FlatnessMpc::new(ControlModel::Planar(model), FmpcSettings::default()).unwrap();
     let mut reference = paths::l(-10.0, 3.0).unwrap();
     let x0 = PlanarState::from([-20.0, 0.0, -30.0, 0.0, 0.0, 0.0]);
-    let traj = run_planar(&model, &mut fmpc, &mut reference, x0, 1500);
+    let traj = run_planar(&model, &mut fmpc, &mut reference, x0, 1500, |_, _| {});
     let worst = traj
         .iter()
         .map(|p| reference.distance_to_path(p))
@@ -180,13 +142,6 @@ fn fmpc_nan_reference_is_an_error() {
     );
 }
 
-fn field_of(e: ControlError) -> &'static str {
-    match e {
-        ControlError::InvalidSetting { field, .. } => field,
-        other => panic!("expected InvalidSetting, got {other:?}"),
-    }
-}
-
 #[test]
 fn fmpc_settings_validation_names_the_field() {
     let ok = FmpcSettings::default();
@@ -273,31 +228,6 @@ fn fmpc_planar_plan_starts_at_the_measurement_and_saturates() {
     assert!(!out.constrained);
 }
 
-/// Euler simulation of the spatial model's dynamics (state p, v, θ, φ, T),
-/// written from its documented equations so the test does not depend on
-/// `SpatialModel::step`.
-struct SpatialSim {
-    p: SpatialParams,
-    pos: Vector3<f64>,
-    vel: Vector3<f64>,
-    theta: f64,
-    phi: f64,
-    thrust: f64,
-}
-
-impl SpatialSim {
-    fn step(&mut self, theta_cmd: f64, phi_cmd: f64, thrust_cmd: f64) {
-        let p = &self.p;
-        let axis = thrust_axis(self.theta, self.phi, p.psi);
-        let a = p.frame.acceleration(axis.map(|c| c * self.thrust), p.g);
-        self.pos += self.vel * p.dt;
-        self.vel += Vector3::from(a) * p.dt;
-        self.theta += p.dt * (p.k * theta_cmd - self.theta) / p.tau;
-        self.phi += p.dt * (p.k * phi_cmd - self.phi) / p.tau;
-        self.thrust += p.dt * (thrust_cmd - self.thrust) / p.tau_thrust;
-    }
-}
-
 fn spatial(psi: f64, frame: Frame) -> (SpatialParams, SpatialModel) {
     let p = SpatialParams {
         psi,
@@ -354,14 +284,7 @@ fn fmpc_spatial_reaches_and_holds_setpoint_in_both_frames() {
             FlatnessMpc::new(ControlModel::Spatial(model), FmpcSettings::default()).unwrap();
         let target = Vector3::new(6.0, -6.0, 12.0 * up);
         let mut reference = Reference::setpoint(target).unwrap();
-        let mut sim = SpatialSim {
-            p,
-            pos: Vector3::new(0.0, 0.0, 10.0 * up),
-            vel: Vector3::zeros(),
-            theta: 0.0,
-            phi: 0.0,
-            thrust: p.g,
-        };
+        let mut sim = SpatialSim::at_rest(p, Vector3::new(0.0, 0.0, 10.0 * up));
         for k in 0..2000 {
             let m = Measurement {
                 t: k as f64 * DT,

@@ -4,48 +4,25 @@
 use dflat_control::pd::{CornerSlowdown, Pd, PdSettings};
 use dflat_control::reference::{Reference, paths};
 use dflat_control::{ControlError, ControlModel, Controller, Frame, Measurement, ReferenceSource};
-use dflat_model::attitude::thrust_axis;
-use dflat_model::planar::{PlanarInput, PlanarState};
-use dflat_model::{FlatModel, PlanarModel, PlanarParams, SpatialModel, SpatialParams};
+use dflat_model::planar::PlanarState;
+use dflat_model::{SpatialModel, SpatialParams};
 use nalgebra::Vector3;
 
-const DT: f64 = 0.02;
+mod common;
+use common::{DT, SpatialSim, field_of, planar_ned};
 
-fn planar_ned(psi: f64) -> PlanarModel {
-    PlanarModel::new(PlanarParams {
-        psi,
-        frame: Frame::Ned,
-        ..Default::default()
-    })
-    .unwrap()
-}
-
-/// Runs `ticks` ticks of `ctrl` on the planar model's own Euler step from
-/// `x0`; returns the positions (z = −10) after each step.
+/// The planar closed loop of `common::run_planar`; PD plans nothing, so its
+/// plan is the measured position at every tick.
 fn run_planar(
-    model: &PlanarModel,
+    model: &dflat_model::PlanarModel,
     ctrl: &mut dyn Controller,
     reference: &mut dyn ReferenceSource,
     x0: PlanarState,
     ticks: usize,
 ) -> Vec<Vector3<f64>> {
-    let mut x = x0;
-    let mut out = Vec::with_capacity(ticks);
-    for k in 0..ticks {
-        let m = Measurement {
-            t: k as f64 * DT,
-            position: Vector3::new(x[0], x[2], -10.0),
-            yaw: model.params().psi,
-        };
-        let tick = ctrl.update(&m, reference).unwrap();
-        assert!(tick.command.is_finite());
-        assert!(tick.command.pitch.abs() <= 35f64.to_radians() + 1e-12);
-        assert!(tick.command.roll.abs() <= 35f64.to_radians() + 1e-12);
+    common::run_planar(model, ctrl, reference, x0, ticks, |m, tick| {
         assert_eq!(tick.plan, [m.position; 4]);
-        x = model.step(&x, &PlanarInput::new(tick.command.pitch, tick.command.roll));
-        out.push(Vector3::new(x[0], x[2], -10.0));
-    }
-    out
+    })
 }
 
 #[test]
@@ -228,13 +205,6 @@ fn pd_nan_reference_is_an_error() {
     );
 }
 
-fn field_of(e: ControlError) -> &'static str {
-    match e {
-        ControlError::InvalidSetting { field, .. } => field,
-        other => panic!("expected InvalidSetting, got {other:?}"),
-    }
-}
-
 #[test]
 fn pd_settings_validation_names_the_field() {
     let ok = PdSettings::default();
@@ -382,31 +352,6 @@ fn pd_limits_acceleration_and_tilt() {
     assert_eq!(out.command.thrust, 9.81);
 }
 
-/// Euler simulation of the spatial model's dynamics (state p, v, θ, φ, T),
-/// written from its documented equations so the test does not depend on
-/// `SpatialModel::step`.
-struct SpatialSim {
-    p: SpatialParams,
-    pos: Vector3<f64>,
-    vel: Vector3<f64>,
-    theta: f64,
-    phi: f64,
-    thrust: f64,
-}
-
-impl SpatialSim {
-    fn step(&mut self, theta_cmd: f64, phi_cmd: f64, thrust_cmd: f64) {
-        let p = &self.p;
-        let axis = thrust_axis(self.theta, self.phi, p.psi);
-        let a = p.frame.acceleration(axis.map(|c| c * self.thrust), p.g);
-        self.pos += self.vel * p.dt;
-        self.vel += Vector3::from(a) * p.dt;
-        self.theta += p.dt * (p.k * theta_cmd - self.theta) / p.tau;
-        self.phi += p.dt * (p.k * phi_cmd - self.phi) / p.tau;
-        self.thrust += p.dt * (thrust_cmd - self.thrust) / p.tau_thrust;
-    }
-}
-
 #[test]
 fn pd_spatial_reaches_and_holds_setpoint_in_both_frames() {
     for frame in [Frame::Ned, Frame::Zup] {
@@ -420,14 +365,7 @@ fn pd_spatial_reaches_and_holds_setpoint_in_both_frames() {
         let mut pd = Pd::new(ControlModel::Spatial(model), PdSettings::default()).unwrap();
         let target = Vector3::new(-5.0, 7.0, 15.0 * up);
         let mut reference = Reference::setpoint(target).unwrap();
-        let mut sim = SpatialSim {
-            p,
-            pos: Vector3::new(0.0, 0.0, 10.0 * up),
-            vel: Vector3::zeros(),
-            theta: 0.0,
-            phi: 0.0,
-            thrust: p.g,
-        };
+        let mut sim = SpatialSim::at_rest(p, Vector3::new(0.0, 0.0, 10.0 * up));
         for k in 0..1000 {
             let m = Measurement {
                 t: k as f64 * DT,

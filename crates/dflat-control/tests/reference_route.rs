@@ -359,7 +359,7 @@ fn a_silent_stream_stops_smoothly_and_holds() {
     assert_eq!(r, before);
 }
 
-/// The stream's own jerk (issue 39): from 20 Hz p/v/a samples of a figure
+/// The stream's own jerk: from 20 Hz p/v/a samples of a figure
 /// eight (x = 8 sin θ, y = 4 sin 2θ, θ̇ = 0.5 rad/s: curvature and speed
 /// changing all along), the prediction with the jerk is several times
 /// closer to the true trajectory over the attitude lag and the next half

@@ -20,22 +20,12 @@
 
 use dflat_control::dfmpc::{DfMpc, DfMpcSettings};
 use dflat_control::pd::{Pd, PdSettings};
-use dflat_control::{ControlModel, Controller, Measurement, ReferenceSource};
+use dflat_control::{ControlModel, Controller, Measurement};
 use dflat_model::{FlatModel, Frame, PlanarModel, PlanarParams};
 use nalgebra::{Vector2, Vector3};
 
-const DT: f64 = 0.02;
-
-struct Setpoint(Vector3<f64>);
-
-impl ReferenceSource for Setpoint {
-    fn horizon(&mut self, _: &Vector3<f64>, _: f64, out: &mut [Vector3<f64>]) {
-        out.fill(self.0);
-    }
-    fn closest(&mut self, _: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
-        (self.0, Vector3::zeros())
-    }
-}
+mod common;
+use common::{DT, Setpoint};
 
 fn model() -> (PlanarModel, ControlModel) {
     let m = PlanarModel::new(PlanarParams {

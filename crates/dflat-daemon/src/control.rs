@@ -11,7 +11,6 @@ use dflat_model::{Frame, PlanarModel, PlanarParams, SpatialModel, SpatialParams}
 use nalgebra::Vector3;
 
 use crate::config::{Config, ControllerKind, ModelKind, ThrustMode};
-use crate::supervisor::Goal;
 
 /// Smallest specific thrust the spatial model may command \[m/s²\].
 const THRUST_MIN: f64 = 2.0;
@@ -156,48 +155,6 @@ pub fn configured_path(cfg: &Config) -> Option<Result<Reference, ControlError>> 
     })
 }
 
-/// The reference for a goal (`None` for [`Goal::None`], and for
-/// [`Goal::Stream`]: the tick builds a stream from its samples).
-///
-/// A setpoint is a route ([`Reference::setpoint_route`]) from `from`, the
-/// vehicle's position and velocity (local NED \[m\], [m/s]), at
-/// `mission.speed` with ramps of `stream.route_acceleration`; without
-/// `from`, or at the target already, it is a fixed point.
-pub fn reference_for(
-    cfg: &Config,
-    goal: Goal,
-    from: Option<([f64; 3], [f64; 3])>,
-) -> Option<Result<Reference, ControlError>> {
-    match goal {
-        // The mission's reference is the control core's (section by section);
-        // a stream's is built from its samples.
-        Goal::None | Goal::Mission | Goal::Stream => None,
-        Goal::Hold(p) => Some(Reference::setpoint(Vector3::from(p))),
-        Goal::Setpoint(p) => Some(match from {
-            Some((q, v)) if (Vector3::from(p) - Vector3::from(q)).norm() > 1e-6 => {
-                Reference::setpoint_route(
-                    Vector3::from(q),
-                    Vector3::from(v),
-                    Vector3::from(p),
-                    cfg.mission.speed,
-                    cfg.stream.route_acceleration,
-                )
-            }
-            _ => Reference::setpoint(Vector3::from(p)),
-        }),
-        Goal::Path => configured_path(cfg),
-        Goal::Brake { from, velocity } => Some(Reference::braking(
-            Vector3::from(from),
-            Vector3::from(velocity),
-            crate::tick::brake_acceleration(cfg),
-            // The attitude loop's response: half its time constant before
-            // the deceleration builds up (a first-order lag reaches half
-            // its step at 0.69 τ; the plan ramps the tilt in meanwhile).
-            0.5 * cfg.vehicle.tau,
-        )),
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -240,20 +197,11 @@ mod tests {
     }
 
     #[test]
-    fn thrust_and_references() {
+    fn thrust_mappings() {
         let mut cfg = Config::default();
         assert_eq!(thrust_mapping(&cfg), ThrustMapping::Fixed(0.5));
         cfg.vehicle.thrust_mode = ThrustMode::Normalized;
         let m = thrust_mapping(&cfg);
         assert!((m.normalized(cfg.vehicle.gravity).unwrap() - 0.5).abs() < 1e-12);
-        assert!(reference_for(&cfg, Goal::None, None).is_none());
-        assert!(reference_for(&cfg, Goal::Path, None).unwrap().is_ok());
-        assert!(
-            reference_for(&cfg, Goal::Hold([0.0; 3]), None)
-                .unwrap()
-                .is_ok()
-        );
-        cfg.mission.path.clear();
-        assert!(reference_for(&cfg, Goal::Path, None).is_none());
     }
 }

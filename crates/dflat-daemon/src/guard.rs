@@ -504,72 +504,21 @@ mod tests {
     #[test]
     fn pose_jumps() {
         let p = [0.0, 0.0, -10.0];
+        // At 15 m/s, a 20 ms tick and a 0.5 m margin, reset counters `c`.
+        let jump = |to: [f64; 3], dt: f64, c: (Option<u8>, Option<u8>)| {
+            is_pose_jump(p, to, dt, 15.0, 0.02, 0.5, c)
+        };
         // 15 m/s for 20 ms + 0.5 m margin = 0.8 m.
-        assert!(!is_pose_jump(
-            p,
-            [0.7, 0.0, -10.0],
-            0.02,
-            15.0,
-            0.02,
-            0.5,
-            (None, None)
-        ));
-        assert!(is_pose_jump(
-            p,
-            [5.0, 0.0, -10.0],
-            0.02,
-            15.0,
-            0.02,
-            0.5,
-            (None, None)
-        ));
+        assert!(!jump([0.7, 0.0, -10.0], 0.02, (None, None)));
+        assert!(jump([5.0, 0.0, -10.0], 0.02, (None, None)));
         // After 1 s without pose 5 m is possible.
-        assert!(!is_pose_jump(
-            p,
-            [5.0, 0.0, -10.0],
-            1.0,
-            15.0,
-            0.02,
-            0.5,
-            (None, None)
-        ));
+        assert!(!jump([5.0, 0.0, -10.0], 1.0, (None, None)));
         // dt below the tick (or not finite) counts as one tick.
-        assert!(is_pose_jump(
-            p,
-            [0.9, 0.0, -10.0],
-            0.0,
-            15.0,
-            0.02,
-            0.5,
-            (None, None)
-        ));
-        assert!(is_pose_jump(
-            p,
-            [0.9, 0.0, -10.0],
-            f64::NAN,
-            15.0,
-            0.02,
-            0.5,
-            (None, None)
-        ));
-        assert!(is_pose_jump(
-            p,
-            p,
-            0.02,
-            15.0,
-            0.02,
-            0.5,
-            (Some(1), Some(2))
-        ));
-        assert!(!is_pose_jump(
-            p,
-            p,
-            0.02,
-            15.0,
-            0.02,
-            0.5,
-            (Some(2), Some(2))
-        ));
+        assert!(jump([0.9, 0.0, -10.0], 0.0, (None, None)));
+        assert!(jump([0.9, 0.0, -10.0], f64::NAN, (None, None)));
+        // An estimator reset is a jump wherever the pose is.
+        assert!(jump(p, 0.02, (Some(1), Some(2))));
+        assert!(!jump(p, 0.02, (Some(2), Some(2))));
     }
 
     #[test]

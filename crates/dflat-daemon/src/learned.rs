@@ -79,7 +79,7 @@ mod tests {
             vehicle_model: kind.into(),
             vehicle: fields.iter().map(|(k, v)| ((*k).to_owned(), *v)).collect(),
             dt: 0.02,
-            window: 2,
+            window: 3,
             features: vec![Feature::Bias],
             lambda: 1e-6,
             weights: [vec![0.1], vec![0.0], vec![0.0]],
@@ -96,6 +96,8 @@ mod tests {
                 horizon_parametric_m: 0.1,
                 horizon_learned_m: 0.01,
                 samples: 10,
+                acceleration_parametric: 1.0,
+                acceleration_learned: 0.1,
             },
             seconds: 60.0,
         }

@@ -296,12 +296,14 @@ pub fn notice_texts(bits: u8) -> Vec<(MavSeverity, &'static str)> {
     out
 }
 
-/// The summary's records lines (after the CSV and `.tlog` lines).
+/// The summary's records lines (after the CSV and `.tlog` lines): what
+/// `r` says, with the writers' reports `csv` and `tlog`.
 pub fn write_summary(
     f: &mut std::fmt::Formatter<'_>,
-    s: &crate::summary::FlightSummary,
+    r: &RecordsSummary,
+    csv: Option<&crate::records::CsvReport>,
+    tlog: Option<&dflat_link::transport::TlogReport>,
 ) -> std::fmt::Result {
-    let r = &s.records;
     if r.dir.is_none() {
         return Ok(());
     }
@@ -320,8 +322,6 @@ pub fn write_summary(
         "\n  records       {:.2} MiB written (quota {quota})",
         mib(r.written_bytes)
     )?;
-    let csv = s.csv.as_ref();
-    let tlog = s.tlog.as_ref();
     if r.quota_reached {
         write!(
             f,

@@ -176,44 +176,29 @@ impl StateTimes {
     }
 }
 
-/// Message counts by type (a serializable copy of dflat-link's [`MessageCounts`]).
+/// Message counts: the total, and dflat-link's [`MessageCounts`] by type (serialized flat).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
 pub struct Counts {
     /// All types.
     pub total: u64,
-    /// HEARTBEAT.
-    pub heartbeat: u64,
-    /// ATTITUDE.
-    pub attitude: u64,
-    /// LOCAL_POSITION_NED.
-    pub local_position_ned: u64,
-    /// SET_ATTITUDE_TARGET.
-    pub set_attitude_target: u64,
-    /// SET_POSITION_TARGET_LOCAL_NED.
-    pub set_position_target_local_ned: u64,
-    /// VISION_POSITION_ESTIMATE.
-    pub vision_position_estimate: u64,
-    /// STATUSTEXT.
-    pub statustext: u64,
-    /// ODOMETRY.
-    pub odometry: u64,
-    /// Anything else.
-    pub other: u64,
+    /// Per type (read through `Deref`: `counts.heartbeat`).
+    #[serde(flatten)]
+    pub by_type: MessageCounts,
+}
+
+impl std::ops::Deref for Counts {
+    type Target = MessageCounts;
+
+    fn deref(&self) -> &MessageCounts {
+        &self.by_type
+    }
 }
 
 impl From<&MessageCounts> for Counts {
     fn from(c: &MessageCounts) -> Self {
         Self {
             total: c.total(),
-            heartbeat: c.heartbeat,
-            attitude: c.attitude,
-            local_position_ned: c.local_position_ned,
-            set_attitude_target: c.set_attitude_target,
-            set_position_target_local_ned: c.set_position_target_local_ned,
-            vision_position_estimate: c.vision_position_estimate,
-            statustext: c.statustext,
-            odometry: c.odometry,
-            other: c.other,
+            by_type: *c,
         }
     }
 }
@@ -436,7 +421,6 @@ pub struct StopSummary {
 
 impl fmt::Display for FlightSummary {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let l = &self.link_stats;
         writeln!(
             f,
             "dflat daemon summary: {} ({} model) at {} Hz on {}",
@@ -463,6 +447,16 @@ impl fmt::Display for FlightSummary {
                 rt.fifo_priority, rt.cpus, rt.memory_locked
             )?;
         }
+        self.fmt_timing_and_states(f)?;
+        self.fmt_link(f)?;
+        self.fmt_guards(f)?;
+        self.fmt_resources_and_records(f)
+    }
+}
+
+impl FlightSummary {
+    /// The summary's timing and flight-state lines.
+    fn fmt_timing_and_states(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         writeln!(f, "  solve time    {}", self.solve_us)?;
         writeln!(f, "  tick jitter   {}", self.jitter_us)?;
         writeln!(f, "  pose→command  {}", self.latency_us)?;
@@ -488,6 +482,12 @@ impl fmt::Display for FlightSummary {
                 s.duration_s, s.commands
             )?;
         }
+        Ok(())
+    }
+
+    /// The link's counters.
+    fn fmt_link(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let l = &self.link_stats;
         writeln!(
             f,
             "  link          rx {} (pose {} att {} hb {} setpoint {}), tx {} (att_tgt {} hb {} text {})",
@@ -521,12 +521,11 @@ impl fmt::Display for FlightSummary {
             self.events_dropped,
             self.outbound_dropped
         )?;
-        let cpu = self
-            .cpu_percent
-            .map_or("n/a".to_owned(), |c| format!("{c:.1} %"));
-        let rss = self.peak_rss_kib.map_or("n/a".to_owned(), |r| {
-            format!("{:.1} MiB", r as f64 / 1024.0)
-        });
+        Ok(())
+    }
+
+    /// What the guards and the solver did, and the link guard.
+    fn fmt_guards(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let g = &self.guards;
         writeln!(
             f,
@@ -566,6 +565,18 @@ impl fmt::Display for FlightSummary {
             lg.replies_dropped,
             lg.link_stalls
         )?;
+        Ok(())
+    }
+
+    /// Resources, the records and the disturbance estimate (no newline at
+    /// the end).
+    fn fmt_resources_and_records(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let cpu = self
+            .cpu_percent
+            .map_or("n/a".to_owned(), |c| format!("{c:.1} %"));
+        let rss = self.peak_rss_kib.map_or("n/a".to_owned(), |r| {
+            format!("{:.1} MiB", r as f64 / 1024.0)
+        });
         write!(f, "  resources     CPU {cpu}, peak RSS {rss}")?;
         if let Some(c) = &self.csv {
             write!(
@@ -585,7 +596,12 @@ impl fmt::Display for FlightSummary {
                 t.dropped
             )?;
         }
-        crate::record_store::write_summary(f, self)?;
+        crate::record_store::write_summary(
+            f,
+            &self.records,
+            self.csv.as_ref(),
+            self.tlog.as_ref(),
+        )?;
         if let Some(d) = &self.disturbance {
             let r = &d.report;
             let hover = d

@@ -21,6 +21,25 @@ use mavlink::dialects::common::{
     MavMissionResult, MavMissionType, MissionState,
 };
 
+/// The [`ItemFields`] of a MISSION_ITEM_INT (`int`: x and y are scaled
+/// integers) or MISSION_ITEM: the two messages share their field names.
+macro_rules! item_fields {
+    ($d:expr, $int:expr) => {
+        ItemFields {
+            seq: $d.seq,
+            frame: $d.frame,
+            command: $d.command,
+            params: [$d.param1, $d.param2, $d.param3, $d.param4],
+            x: f64::from($d.x),
+            y: f64::from($d.y),
+            z: $d.z,
+            current: $d.current,
+            autocontinue: $d.autocontinue,
+            int: $int,
+        }
+    };
+}
+
 /// One mission item as both MISSION_ITEM_INT and MISSION_ITEM carry it.
 ///
 /// `x` and `y` are kept as received: for MISSION_ITEM_INT integers
@@ -129,18 +148,7 @@ impl MissionMessage {
             ),
             MavMessage::MISSION_ITEM_INT(d) => (
                 Self::Item {
-                    item: ItemFields {
-                        seq: d.seq,
-                        frame: d.frame,
-                        command: d.command,
-                        params: [d.param1, d.param2, d.param3, d.param4],
-                        x: f64::from(d.x),
-                        y: f64::from(d.y),
-                        z: d.z,
-                        current: d.current,
-                        autocontinue: d.autocontinue,
-                        int: true,
-                    },
+                    item: item_fields!(d, true),
                     mission_type: d.mission_type,
                 },
                 (d.target_system, d.target_component),
@@ -148,18 +156,7 @@ impl MissionMessage {
             #[allow(deprecated)]
             MavMessage::MISSION_ITEM(d) => (
                 Self::Item {
-                    item: ItemFields {
-                        seq: d.seq,
-                        frame: d.frame,
-                        command: d.command,
-                        params: [d.param1, d.param2, d.param3, d.param4],
-                        x: f64::from(d.x),
-                        y: f64::from(d.y),
-                        z: d.z,
-                        current: d.current,
-                        autocontinue: d.autocontinue,
-                        int: false,
-                    },
+                    item: item_fields!(d, false),
                     mission_type: d.mission_type,
                 },
                 (d.target_system, d.target_component),

@@ -9,7 +9,7 @@ use crate::inbound::ids;
 use crate::{ErrorCategory, FrameError, LinkError};
 
 /// Per-message-type counters for the contract's messages.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
 pub struct MessageCounts {
     /// HEARTBEAT (0).
     pub heartbeat: u64,

@@ -338,52 +338,22 @@ impl FlatModel for FullModel {
 mod tests {
     use super::*;
 
+    /// A parameter's name and what makes it invalid.
+    type Spoiler = (&'static str, fn(&mut FullParams));
+
     #[test]
     fn rejects_bad_parameters() {
-        for (name, p) in [
-            (
-                "dt",
-                FullParams {
-                    dt: 0.0,
-                    ..Default::default()
-                },
-            ),
-            (
-                "m",
-                FullParams {
-                    m: -1.0,
-                    ..Default::default()
-                },
-            ),
-            (
-                "g",
-                FullParams {
-                    g: f64::NAN,
-                    ..Default::default()
-                },
-            ),
-            (
-                "ixx",
-                FullParams {
-                    ixx: 0.0,
-                    ..Default::default()
-                },
-            ),
-            (
-                "iyy",
-                FullParams {
-                    iyy: f64::INFINITY,
-                    ..Default::default()
-                },
-            ),
-            (
-                "izz",
-                FullParams {
-                    izz: -0.1,
-                    ..Default::default()
-                },
-            ),
-        ] {
+        let spoilers: [Spoiler; 6] = [
+            ("dt", |p| p.dt = 0.0),
+            ("m", |p| p.m = -1.0),
+            ("g", |p| p.g = f64::NAN),
+            ("ixx", |p| p.ixx = 0.0),
+            ("iyy", |p| p.iyy = f64::INFINITY),
+            ("izz", |p| p.izz = -0.1),
+        ];
+        for (name, spoil) in spoilers {
+            let mut p = FullParams::default();
+            spoil(&mut p);
             match FullModel::new(p) {
                 Err(FlatError::InvalidParameter { name: got, .. }) => assert_eq!(got, name),
                 other => panic!("{name}: {other:?}"),

@@ -138,10 +138,26 @@ impl PlanarModel {
         y: &[PlanarOutput],
         d: &Vector2<f64>,
     ) -> Result<PlanarInput, FlatError> {
+        self.input_from_outputs_offsets(y, &[*d, *d])
+    }
+
+    /// F with an acceleration offset per step [m/s²]: `d[0]` in the step
+    /// from the first output, `d[1]` in the step from the second (an offset
+    /// that depends on the outputs, such as a learned residual, evaluated
+    /// at each step's velocity). `[d, d]` is
+    /// [`PlanarModel::input_from_outputs_offset`].
+    pub fn input_from_outputs_offsets(
+        &self,
+        y: &[PlanarOutput],
+        d: &[Vector2<f64>; 2],
+    ) -> Result<PlanarInput, FlatError> {
         check_len(y.len(), 4)?;
-        check_finite(y.iter().flat_map(|v| v.iter()).chain(d.iter()), "outputs")?;
-        let (t0, p0) = self.attitude_at(&y[0], &y[1], &y[2], d);
-        let (t1, p1) = self.attitude_at(&y[1], &y[2], &y[3], d);
+        check_finite(
+            y.iter().flat_map(|v| v.iter()).chain(d.iter().flatten()),
+            "outputs",
+        )?;
+        let (t0, p0) = self.attitude_at(&y[0], &y[1], &y[2], &d[0]);
+        let (t1, p1) = self.attitude_at(&y[1], &y[2], &y[3], &d[1]);
         finite_result(
             PlanarInput::new(self.attitude_command(t0, t1), self.attitude_command(p0, p1)),
             "input",
@@ -157,20 +173,33 @@ impl PlanarModel {
         u: &PlanarInput,
         d: &Vector2<f64>,
     ) -> Result<PlanarOutput, FlatError> {
+        self.next_output_offsets(y, u, &[*d, *d])
+    }
+
+    /// F⁻¹ with an acceleration offset per step [m/s²]: `d[0]` in the step
+    /// from the first output (the attitude there), `d[1]` in the step from
+    /// the second (the one `u` drives). `[d, d]` is
+    /// [`PlanarModel::next_output_offset`].
+    pub fn next_output_offsets(
+        &self,
+        y: &[PlanarOutput],
+        u: &PlanarInput,
+        d: &[Vector2<f64>; 2],
+    ) -> Result<PlanarOutput, FlatError> {
         check_len(y.len(), 3)?;
         check_finite(
             y.iter()
                 .flat_map(|v| v.iter())
                 .chain(u.iter())
-                .chain(d.iter()),
+                .chain(d.iter().flatten()),
             "outputs and input",
         )?;
-        let (t0, p0) = self.attitude_at(&y[0], &y[1], &y[2], d);
+        let (t0, p0) = self.attitude_at(&y[0], &y[1], &y[2], &d[0]);
         let acc = self.acceleration(self.attitude_step(t0, u.x), self.attitude_step(p0, u.y))?;
         let dt = self.p.dt;
         let v1 = (y[2] - y[1]) / dt;
         finite_result(
-            2.0 * y[2] - y[1] + dt * dt * (acc - self.p.drag_h * v1 + d),
+            2.0 * y[2] - y[1] + dt * dt * (acc - self.p.drag_h * v1 + d[1]),
             "next output",
         )
     }

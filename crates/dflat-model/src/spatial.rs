@@ -203,10 +203,26 @@ impl SpatialModel {
         y: &[SpatialOutput],
         d: &Vector3<f64>,
     ) -> Result<SpatialInput, FlatError> {
+        self.input_from_outputs_offsets(y, &[*d, *d])
+    }
+
+    /// F with an acceleration offset per step \[m/s²\]: `d[0]` in the step
+    /// from the first output, `d[1]` in the step from the second (an offset
+    /// that depends on the outputs, such as a learned residual, evaluated
+    /// at each step's velocity). `[d, d]` is
+    /// [`SpatialModel::input_from_outputs_offset`].
+    pub fn input_from_outputs_offsets(
+        &self,
+        y: &[SpatialOutput],
+        d: &[Vector3<f64>; 2],
+    ) -> Result<SpatialInput, FlatError> {
         check_len(y.len(), 4)?;
-        check_finite(y.iter().flat_map(|v| v.iter()).chain(d.iter()), "outputs")?;
-        let (f0, t0, p0) = self.attitude_thrust_at(&y[0], &y[1], &y[2], d)?;
-        let (f1, t1, p1) = self.attitude_thrust_at(&y[1], &y[2], &y[3], d)?;
+        check_finite(
+            y.iter().flat_map(|v| v.iter()).chain(d.iter().flatten()),
+            "outputs",
+        )?;
+        let (f0, t0, p0) = self.attitude_thrust_at(&y[0], &y[1], &y[2], &d[0])?;
+        let (f1, t1, p1) = self.attitude_thrust_at(&y[1], &y[2], &y[3], &d[1])?;
         finite_result(
             SpatialInput::new(
                 self.attitude_command(t0, t1),
@@ -226,15 +242,28 @@ impl SpatialModel {
         u: &SpatialInput,
         d: &Vector3<f64>,
     ) -> Result<SpatialOutput, FlatError> {
+        self.next_output_offsets(y, u, &[*d, *d])
+    }
+
+    /// F⁻¹ with an acceleration offset per step \[m/s²\]: `d[0]` in the step
+    /// from the first output (the attitude and thrust there), `d[1]` in the
+    /// step from the second (the one `u` drives). `[d, d]` is
+    /// [`SpatialModel::next_output_offset`].
+    pub fn next_output_offsets(
+        &self,
+        y: &[SpatialOutput],
+        u: &SpatialInput,
+        d: &[Vector3<f64>; 2],
+    ) -> Result<SpatialOutput, FlatError> {
         check_len(y.len(), 3)?;
         check_finite(
             y.iter()
                 .flat_map(|v| v.iter())
                 .chain(u.iter())
-                .chain(d.iter()),
+                .chain(d.iter().flatten()),
             "outputs and input",
         )?;
-        let (f0, t0, p0) = self.attitude_thrust_at(&y[0], &y[1], &y[2], d)?;
+        let (f0, t0, p0) = self.attitude_thrust_at(&y[0], &y[1], &y[2], &d[0])?;
         let acc = self.acceleration(
             self.attitude_step(t0, u.x),
             self.attitude_step(p0, u.y),
@@ -243,7 +272,7 @@ impl SpatialModel {
         let dt = self.p.dt;
         let v1 = (y[2] - y[1]) / dt;
         finite_result(
-            2.0 * y[2] - y[1] + dt * dt * (acc - self.drag(&v1) + d),
+            2.0 * y[2] - y[1] + dt * dt * (acc - self.drag(&v1) + d[1]),
             "next output",
         )
     }
@@ -331,52 +360,22 @@ impl FlatModel for SpatialModel {
 mod tests {
     use super::*;
 
+    /// A parameter's name and what makes it invalid.
+    type Spoiler = (&'static str, fn(&mut SpatialParams));
+
     #[test]
     fn rejects_bad_parameters() {
-        for (name, p) in [
-            (
-                "dt",
-                SpatialParams {
-                    dt: 0.0,
-                    ..Default::default()
-                },
-            ),
-            (
-                "tau",
-                SpatialParams {
-                    tau: -1.0,
-                    ..Default::default()
-                },
-            ),
-            (
-                "k",
-                SpatialParams {
-                    k: f64::NAN,
-                    ..Default::default()
-                },
-            ),
-            (
-                "tau_thrust",
-                SpatialParams {
-                    tau_thrust: 0.0,
-                    ..Default::default()
-                },
-            ),
-            (
-                "g",
-                SpatialParams {
-                    g: f64::INFINITY,
-                    ..Default::default()
-                },
-            ),
-            (
-                "psi",
-                SpatialParams {
-                    psi: f64::NAN,
-                    ..Default::default()
-                },
-            ),
-        ] {
+        let spoilers: [Spoiler; 6] = [
+            ("dt", |p| p.dt = 0.0),
+            ("tau", |p| p.tau = -1.0),
+            ("k", |p| p.k = f64::NAN),
+            ("tau_thrust", |p| p.tau_thrust = 0.0),
+            ("g", |p| p.g = f64::INFINITY),
+            ("psi", |p| p.psi = f64::NAN),
+        ];
+        for (name, spoil) in spoilers {
+            let mut p = SpatialParams::default();
+            spoil(&mut p);
             match SpatialModel::new(p) {
                 Err(FlatError::InvalidParameter { name: got, .. }) => assert_eq!(got, name),
                 other => panic!("{name}: {other:?}"),

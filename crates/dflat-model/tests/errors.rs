@@ -54,17 +54,22 @@ fn gravity(frame: Frame, g: f64) -> [f64; 3] {
     }
 }
 
+/// World accelerations that need a thrust no multirotor gives in `frame`:
+/// free fall (no thrust direction), gravity plus 5 m/s² sideways along
+/// horizontal `axis` (tilt 90°) and twice gravity (inverted, tilt 180°).
+fn beyond_thrust(frame: Frame, g: f64, axis: usize) -> [[f64; 3]; 3] {
+    let down = gravity(frame, g);
+    let mut sideways = down;
+    sideways[axis] = 5.0;
+    [down, sideways, [0.0, 0.0, 2.0 * down[2]]]
+}
+
 #[test]
 fn spatial_free_fall_and_tilt_beyond_90_are_errors() {
     for frame in [Frame::Ned, Frame::Zup] {
         let m = spatial(frame);
-        let g = m.params().g;
-        let dt = m.params().dt;
-        let down = gravity(frame, g);
-        // Free fall: the second difference equals gravity, no thrust direction.
-        // Horizontal thrust (tilt 90°): gravity plus a sideways acceleration.
-        // Inverted (tilt 180°): twice gravity.
-        for a in [down, [5.0, 0.0, down[2]], [0.0, 0.0, 2.0 * down[2]]] {
+        let (g, dt) = (m.params().g, m.params().dt);
+        for a in beyond_thrust(frame, g, 0) {
             let y: Vec<SpatialOutput> = parabola(a, dt, 4)
                 .into_iter()
                 .map(SpatialOutput::from)
@@ -88,10 +93,8 @@ fn spatial_free_fall_and_tilt_beyond_90_are_errors() {
 fn full_free_fall_tilt_and_gimbal_lock_are_errors() {
     for frame in [Frame::Ned, Frame::Zup] {
         let m = full(frame);
-        let g = m.params().g;
-        let dt = m.params().dt;
-        let down = gravity(frame, g);
-        for a in [down, [0.0, 5.0, down[2]], [0.0, 0.0, 2.0 * down[2]]] {
+        for a in beyond_thrust(frame, m.params().g, 1) {
+            let dt = m.params().dt;
             let y: Vec<FullOutput> = parabola(a, dt, 6)
                 .into_iter()
                 .enumerate()
@@ -198,95 +201,52 @@ fn non_finite_windows_are_errors() {
     }
 }
 
+/// The error of a window of `got` outputs where `expected` are needed.
+fn window(expected: usize, got: usize) -> FlatError {
+    FlatError::WindowLength { expected, got }
+}
+
 #[test]
 fn wrong_window_lengths_are_errors() {
     let m = planar();
     let y = [PlanarOutput::zeros(); 5];
     for n in [0, 2, 4, 5] {
-        assert_eq!(
-            m.state_from_outputs(&y[..n]),
-            Err(FlatError::WindowLength {
-                expected: 3,
-                got: n
-            })
-        );
+        assert_eq!(m.state_from_outputs(&y[..n]), Err(window(3, n)));
         assert_eq!(
             m.next_output(&y[..n], &PlanarInput::zeros()),
-            Err(FlatError::WindowLength {
-                expected: 3,
-                got: n
-            })
+            Err(window(3, n))
         );
     }
-    assert_eq!(
-        m.input_from_outputs(&y[..3]),
-        Err(FlatError::WindowLength {
-            expected: 4,
-            got: 3
-        })
-    );
+    assert_eq!(m.input_from_outputs(&y[..3]), Err(window(4, 3)));
 
     let m = spatial(Frame::Zup);
     let y = [SpatialOutput::zeros(); 5];
     for n in [0, 2, 4, 5] {
-        assert_eq!(
-            m.state_from_outputs(&y[..n]),
-            Err(FlatError::WindowLength {
-                expected: 3,
-                got: n
-            })
-        );
+        assert_eq!(m.state_from_outputs(&y[..n]), Err(window(3, n)));
         assert_eq!(
             m.next_output(&y[..n], &SpatialInput::zeros()),
-            Err(FlatError::WindowLength {
-                expected: 3,
-                got: n
-            })
+            Err(window(3, n))
         );
     }
-    assert_eq!(
-        m.input_from_outputs(&y),
-        Err(FlatError::WindowLength {
-            expected: 4,
-            got: 5
-        })
-    );
+    assert_eq!(m.input_from_outputs(&y), Err(window(4, 5)));
 
     let m = full(Frame::Ned);
     let y = [FullOutput::zeros(); 6];
     for n in [0, 3, 5] {
-        assert_eq!(
-            m.state_from_outputs(&y[..n]),
-            Err(FlatError::WindowLength {
-                expected: 4,
-                got: n
-            })
-        );
+        assert_eq!(m.state_from_outputs(&y[..n]), Err(window(4, n)));
     }
     for n in [0, 4, 6] {
-        assert_eq!(
-            m.input_from_outputs(&y[..n]),
-            Err(FlatError::WindowLength {
-                expected: 5,
-                got: n
-            })
-        );
+        assert_eq!(m.input_from_outputs(&y[..n]), Err(window(5, n)));
     }
     // predict_outputs needs out.len() + 2 inputs.
     let mut out = [FullOutput::zeros(); 2];
     assert_eq!(
         m.predict_outputs(&y[..4], &[FullInput::zeros(); 3], &mut out),
-        Err(FlatError::WindowLength {
-            expected: 4,
-            got: 3
-        })
+        Err(window(4, 3))
     );
     assert_eq!(
         m.predict_outputs(&y[..3], &[FullInput::zeros(); 4], &mut out),
-        Err(FlatError::WindowLength {
-            expected: 4,
-            got: 3
-        })
+        Err(window(4, 3))
     );
 }
 

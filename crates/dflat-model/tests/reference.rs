@@ -17,13 +17,11 @@
 
 use std::path::PathBuf;
 
-use dflat_model::full::{FullInput, FullOutput, FullState};
-use dflat_model::planar::{PlanarInput, PlanarOutput, PlanarState};
-use dflat_model::spatial::{SpatialInput, SpatialOutput, SpatialState};
 use dflat_model::{
     FlatError, FlatModel, Frame, FullModel, FullParams, PlanarModel, PlanarParams, SpatialModel,
     SpatialParams,
 };
+use nalgebra::SVector;
 use serde::Deserialize;
 
 #[derive(Deserialize)]
@@ -31,17 +29,21 @@ struct File<V> {
     vectors: Vec<V>,
 }
 
+/// One reference vector of a model with parameters `P`: the outputs
+/// y_k..y_k+R and what the maps give for them.
 #[derive(Deserialize)]
-struct PlanarVector {
-    params: PlanarJsonParams,
-    outputs: Vec<[f64; 2]>,
-    state: [f64; 6],
-    input: [f64; 2],
-    next_output: Option<[f64; 2]>,
-    next_state: [f64; 6],
+struct Vector<P> {
+    params: P,
+    outputs: Vec<Vec<f64>>,
+    state: Vec<f64>,
+    input: Vec<f64>,
+    /// F⁻¹'s result; none for a model without F⁻¹ (the full one).
+    next_output: Option<Vec<f64>>,
+    next_state: Vec<f64>,
     float64_roundoff: f64,
 }
 
+/// The planar model's parameters (`drag_h` only in the drag file).
 #[derive(Deserialize)]
 struct PlanarJsonParams {
     dt: f64,
@@ -50,19 +52,11 @@ struct PlanarJsonParams {
     g: f64,
     psi: f64,
     frame: String,
+    #[serde(default)]
+    drag_h: f64,
 }
 
-#[derive(Deserialize)]
-struct SpatialVector {
-    params: SpatialJsonParams,
-    outputs: Vec<[f64; 3]>,
-    state: [f64; 9],
-    input: [f64; 3],
-    next_output: Option<[f64; 3]>,
-    next_state: [f64; 9],
-    float64_roundoff: f64,
-}
-
+/// The spatial model's parameters (the drags only in the drag file).
 #[derive(Deserialize)]
 struct SpatialJsonParams {
     dt: f64,
@@ -72,17 +66,10 @@ struct SpatialJsonParams {
     g: f64,
     psi: f64,
     frame: String,
-}
-
-#[derive(Deserialize)]
-struct FullVector {
-    params: FullJsonParams,
-    outputs: Vec<[f64; 4]>,
-    state: [f64; 12],
-    input: [f64; 4],
-    next_output: Option<[f64; 4]>,
-    next_state: [f64; 12],
-    float64_roundoff: f64,
+    #[serde(default)]
+    drag_h: f64,
+    #[serde(default)]
+    drag_v: f64,
 }
 
 #[derive(Deserialize)]
@@ -110,17 +97,19 @@ fn reference_dir() -> PathBuf {
     dir
 }
 
-fn load<V: for<'de> Deserialize<'de>>(name: &str) -> Vec<V> {
+/// The parsed reference file `name`.
+fn parse<T: for<'de> Deserialize<'de>>(name: &str) -> T {
     let path = reference_dir().join(name);
     let text = std::fs::read_to_string(&path)
         .unwrap_or_else(|e| panic!("cannot read reference file {}: {e}", path.display()));
-    let file: File<V> = serde_json::from_str(&text)
-        .unwrap_or_else(|e| panic!("cannot parse reference file {}: {e}", path.display()));
-    assert!(
-        !file.vectors.is_empty(),
-        "{} holds no vectors",
-        path.display()
-    );
+    serde_json::from_str(&text)
+        .unwrap_or_else(|e| panic!("cannot parse reference file {}: {e}", path.display()))
+}
+
+/// The vectors of the reference file `name`, which holds some.
+fn load<V: for<'de> Deserialize<'de>>(name: &str) -> Vec<V> {
+    let file: File<V> = parse(name);
+    assert!(!file.vectors.is_empty(), "{name} holds no vectors");
     file.vectors
 }
 
@@ -130,6 +119,47 @@ fn frame(name: &str) -> Frame {
         "ned" => Frame::Ned,
         other => panic!("unknown frame {other:?} in the reference vectors"),
     }
+}
+
+fn planar_model(p: &PlanarJsonParams) -> PlanarModel {
+    PlanarModel::new(PlanarParams {
+        dt: p.dt,
+        tau: p.tau,
+        k: p.k,
+        g: p.g,
+        psi: p.psi,
+        frame: frame(&p.frame),
+        drag_h: p.drag_h,
+    })
+    .expect("reference parameters are valid")
+}
+
+fn spatial_model(p: &SpatialJsonParams) -> SpatialModel {
+    SpatialModel::new(SpatialParams {
+        dt: p.dt,
+        tau: p.tau,
+        k: p.k,
+        tau_thrust: p.tau_t,
+        g: p.g,
+        psi: p.psi,
+        frame: frame(&p.frame),
+        drag_h: p.drag_h,
+        drag_v: p.drag_v,
+    })
+    .expect("reference parameters are valid")
+}
+
+fn full_model(p: &FullJsonParams) -> FullModel {
+    FullModel::new(FullParams {
+        dt: p.dt,
+        m: p.m,
+        g: p.g,
+        ixx: p.ixx,
+        iyy: p.iyy,
+        izz: p.izz,
+        frame: frame(&p.frame),
+    })
+    .expect("reference parameters are valid")
 }
 
 /// Compares component-wise by the README rule; returns the worst
@@ -149,38 +179,70 @@ fn check(case: usize, what: &str, got: &[f64], reference: &[f64], rtol: f64) -> 
     worst
 }
 
+/// Checks Λ, F, F⁻¹ (or, for a vector without a next output, that the
+/// model has no F⁻¹) and the step of `m` against vector `i`; returns the
+/// worst error / bound.
+fn check_vector<M, P, const NY: usize, const NU: usize, const NX: usize>(
+    m: &M,
+    i: usize,
+    v: &Vector<P>,
+) -> f64
+where
+    M: FlatModel<Output = SVector<f64, NY>, Input = SVector<f64, NU>, State = SVector<f64, NX>>,
+{
+    let r = M::R;
+    let rtol = (10.0 * v.float64_roundoff).max(1e-9);
+    let y: Vec<M::Output> = v
+        .outputs
+        .iter()
+        .map(|o| SVector::from_column_slice(o))
+        .collect();
+    assert_eq!(y.len(), r + 1, "vector {i}: the vectors hold y_k..y_k+R");
+    let u_ref = SVector::from_column_slice(&v.input);
+    let x_ref = SVector::from_column_slice(&v.state);
+
+    let x = m.state_from_outputs(&y[..r]).expect("Λ");
+    let mut worst = check(i, "state", x.as_slice(), &v.state, rtol);
+    let u = m.input_from_outputs(&y).expect("F");
+    worst = worst.max(check(i, "input", u.as_slice(), &v.input, rtol));
+    match &v.next_output {
+        Some(next) => {
+            let y_next = m.next_output(&y[..r], &u_ref).expect("F⁻¹");
+            worst = worst.max(check(i, "next_output", y_next.as_slice(), next, rtol));
+        }
+        None => assert_eq!(
+            m.next_output(&y[..r], &u_ref),
+            Err(FlatError::NoInputToOutputMap),
+            "vector {i}: no next output, so the model must have no F⁻¹"
+        ),
+    }
+    let x1 = m.step(&x_ref, &u_ref);
+    worst.max(check(i, "next_state", x1.as_slice(), &v.next_state, rtol))
+}
+
+/// The worst error / bound of `vectors`, each flown through its model.
+fn worst_of<P, M, const NY: usize, const NU: usize, const NX: usize>(
+    vectors: &[Vector<P>],
+    model: impl Fn(&P) -> M,
+) -> f64
+where
+    M: FlatModel<Output = SVector<f64, NY>, Input = SVector<f64, NU>, State = SVector<f64, NX>>,
+{
+    vectors
+        .iter()
+        .enumerate()
+        .map(|(i, v)| check_vector(&model(&v.params), i, v))
+        .fold(0.0, f64::max)
+}
+
 #[test]
 fn planar_matches_reference_vectors() {
-    let vectors: Vec<PlanarVector> = load("vectors_planar.json");
-    let mut worst: f64 = 0.0;
-    for (i, v) in vectors.iter().enumerate() {
-        let p = &v.params;
-        let m = PlanarModel::new(PlanarParams {
-            dt: p.dt,
-            tau: p.tau,
-            k: p.k,
-            g: p.g,
-            psi: p.psi,
-            frame: frame(&p.frame),
-            drag_h: 0.0,
-        })
-        .expect("reference parameters are valid");
-        let rtol = (10.0 * v.float64_roundoff).max(1e-9);
-        let y: Vec<PlanarOutput> = v.outputs.iter().map(|o| PlanarOutput::from(*o)).collect();
-        assert_eq!(y.len(), 4, "vector {i}: planar vectors hold y_k..y_k+3");
-        let u_ref = PlanarInput::from(v.input);
-        let x_ref = PlanarState::from(v.state);
-
-        let x = m.state_from_outputs(&y[..3]).expect("Λ");
-        worst = worst.max(check(i, "state", x.as_slice(), &v.state, rtol));
-        let u = m.input_from_outputs(&y).expect("F");
-        worst = worst.max(check(i, "input", u.as_slice(), &v.input, rtol));
-        let next = v.next_output.expect("planar vectors have a next_output");
-        let y3 = m.next_output(&y[..3], &u_ref).expect("F⁻¹");
-        worst = worst.max(check(i, "next_output", y3.as_slice(), &next, rtol));
-        let x1 = m.step(&x_ref, &u_ref);
-        worst = worst.max(check(i, "next_state", x1.as_slice(), &v.next_state, rtol));
-    }
+    let vectors: Vec<Vector<PlanarJsonParams>> = load("vectors_planar.json");
+    assert!(
+        vectors.iter().all(|v| v.next_output.is_some()),
+        "planar vectors have a next_output"
+    );
+    let worst = worst_of(&vectors, planar_model);
     println!(
         "planar: worst error / bound = {worst:.3e} over {} vectors",
         vectors.len()
@@ -189,41 +251,12 @@ fn planar_matches_reference_vectors() {
 
 #[test]
 fn full_matches_reference_vectors() {
-    let vectors: Vec<FullVector> = load("vectors_full.json");
-    let mut worst: f64 = 0.0;
-    for (i, v) in vectors.iter().enumerate() {
-        let p = &v.params;
-        let m = FullModel::new(FullParams {
-            dt: p.dt,
-            m: p.m,
-            g: p.g,
-            ixx: p.ixx,
-            iyy: p.iyy,
-            izz: p.izz,
-            frame: frame(&p.frame),
-        })
-        .expect("reference parameters are valid");
-        let rtol = (10.0 * v.float64_roundoff).max(1e-9);
-        let y: Vec<FullOutput> = v.outputs.iter().map(|o| FullOutput::from(*o)).collect();
-        assert_eq!(y.len(), 5, "vector {i}: full vectors hold y_k..y_k+4");
-        let u_ref = FullInput::from(v.input);
-        let x_ref = FullState::from(v.state);
-
-        let x = m.state_from_outputs(&y[..4]).expect("Λ");
-        worst = worst.max(check(i, "state", x.as_slice(), &v.state, rtol));
-        let u = m.input_from_outputs(&y).expect("F");
-        worst = worst.max(check(i, "input", u.as_slice(), &v.input, rtol));
-        assert!(
-            v.next_output.is_none(),
-            "vector {i}: the full model has no F⁻¹"
-        );
-        assert_eq!(
-            m.next_output(&y[..4], &u_ref),
-            Err(FlatError::NoInputToOutputMap)
-        );
-        let x1 = m.step(&x_ref, &u_ref);
-        worst = worst.max(check(i, "next_state", x1.as_slice(), &v.next_state, rtol));
-    }
+    let vectors: Vec<Vector<FullJsonParams>> = load("vectors_full.json");
+    assert!(
+        vectors.iter().all(|v| v.next_output.is_none()),
+        "the full model has no F⁻¹"
+    );
+    let worst = worst_of(&vectors, full_model);
     println!(
         "full: worst error / bound = {worst:.3e} over {} vectors",
         vectors.len()
@@ -235,7 +268,7 @@ fn full_matches_reference_vectors() {
 /// both frames are in the file).
 #[test]
 fn spatial_matches_reference_vectors() {
-    let vectors: Vec<SpatialVector> = load("vectors_spatial.json");
+    let vectors: Vec<Vector<SpatialJsonParams>> = load("vectors_spatial.json");
     assert!(vectors.len() >= 50, "{} vectors", vectors.len());
     let frames: std::collections::HashSet<&str> =
         vectors.iter().map(|v| v.params.frame.as_str()).collect();
@@ -243,37 +276,11 @@ fn spatial_matches_reference_vectors() {
         frames.contains("ned") && frames.contains("zup"),
         "{frames:?}"
     );
-    let mut worst: f64 = 0.0;
-    for (i, v) in vectors.iter().enumerate() {
-        let p = &v.params;
-        let m = SpatialModel::new(SpatialParams {
-            dt: p.dt,
-            tau: p.tau,
-            k: p.k,
-            tau_thrust: p.tau_t,
-            g: p.g,
-            psi: p.psi,
-            frame: frame(&p.frame),
-            drag_h: 0.0,
-            drag_v: 0.0,
-        })
-        .expect("reference parameters are valid");
-        let rtol = (10.0 * v.float64_roundoff).max(1e-9);
-        let y: Vec<SpatialOutput> = v.outputs.iter().map(|o| SpatialOutput::from(*o)).collect();
-        assert_eq!(y.len(), 4, "vector {i}: spatial vectors hold y_k..y_k+3");
-        let u_ref = SpatialInput::from(v.input);
-        let x_ref = SpatialState::from(v.state);
-
-        let x = m.state_from_outputs(&y[..3]).expect("Λ");
-        worst = worst.max(check(i, "state", x.as_slice(), &v.state, rtol));
-        let u = m.input_from_outputs(&y).expect("F");
-        worst = worst.max(check(i, "input", u.as_slice(), &v.input, rtol));
-        let next = v.next_output.expect("spatial vectors have a next_output");
-        let y3 = m.next_output(&y[..3], &u_ref).expect("F⁻¹");
-        worst = worst.max(check(i, "next_output", y3.as_slice(), &next, rtol));
-        let x1 = m.step(&x_ref, &u_ref);
-        worst = worst.max(check(i, "next_state", x1.as_slice(), &v.next_state, rtol));
-    }
+    assert!(
+        vectors.iter().all(|v| v.next_output.is_some()),
+        "spatial vectors have a next_output"
+    );
+    let worst = worst_of(&vectors, spatial_model);
     println!(
         "spatial: worst error / bound = {worst:.3e} over {} vectors",
         vectors.len()
@@ -284,71 +291,8 @@ fn spatial_matches_reference_vectors() {
 /// world frame (`drag_h`; `drag_v` for the spatial model).
 #[derive(Deserialize)]
 struct DragFile {
-    planar: Vec<DragVector>,
-    spatial: Vec<DragVector>,
-}
-
-#[derive(Deserialize)]
-struct DragVector {
-    params: DragJsonParams,
-    outputs: Vec<Vec<f64>>,
-    state: Vec<f64>,
-    input: Vec<f64>,
-    next_output: Vec<f64>,
-    next_state: Vec<f64>,
-    float64_roundoff: f64,
-}
-
-#[derive(Deserialize)]
-struct DragJsonParams {
-    dt: f64,
-    tau: f64,
-    k: f64,
-    g: f64,
-    psi: f64,
-    frame: String,
-    drag_h: f64,
-    drag_v: f64,
-    tau_t: Option<f64>,
-}
-
-fn load_drag() -> DragFile {
-    let path = reference_dir().join("vectors_drag.json");
-    let text = std::fs::read_to_string(&path)
-        .unwrap_or_else(|e| panic!("cannot read reference file {}: {e}", path.display()));
-    serde_json::from_str(&text)
-        .unwrap_or_else(|e| panic!("cannot parse reference file {}: {e}", path.display()))
-}
-
-/// Checks Λ, F, F⁻¹ and the step of `m` against one drag vector; returns
-/// the worst error / bound.
-#[allow(clippy::too_many_arguments)]
-fn check_drag_vector<M: FlatModel>(
-    m: &M,
-    i: usize,
-    v: &DragVector,
-    out: impl Fn(&[f64]) -> M::Output,
-    inp: impl Fn(&[f64]) -> M::Input,
-    st: impl Fn(&[f64]) -> M::State,
-    slice_s: impl Fn(&M::State) -> Vec<f64>,
-    slice_u: impl Fn(&M::Input) -> Vec<f64>,
-    slice_y: impl Fn(&M::Output) -> Vec<f64>,
-) -> f64 {
-    let rtol = (10.0 * v.float64_roundoff).max(1e-9);
-    let y: Vec<M::Output> = v.outputs.iter().map(|o| out(o)).collect();
-    assert_eq!(y.len(), 4, "vector {i}: drag vectors hold y_k..y_k+3");
-    let u_ref = inp(&v.input);
-    let x_ref = st(&v.state);
-    let mut worst: f64 = 0.0;
-    let x = m.state_from_outputs(&y[..3]).expect("Λ");
-    worst = worst.max(check(i, "state", &slice_s(&x), &v.state, rtol));
-    let u = m.input_from_outputs(&y).expect("F");
-    worst = worst.max(check(i, "input", &slice_u(&u), &v.input, rtol));
-    let y3 = m.next_output(&y[..3], &u_ref).expect("F⁻¹");
-    worst = worst.max(check(i, "next_output", &slice_y(&y3), &v.next_output, rtol));
-    let x1 = m.step(&x_ref, &u_ref);
-    worst = worst.max(check(i, "next_state", &slice_s(&x1), &v.next_state, rtol));
-    worst
+    planar: Vec<Vector<PlanarJsonParams>>,
+    spatial: Vec<Vector<SpatialJsonParams>>,
 }
 
 /// Both models with linear drag against `vectors_drag.json` (the
@@ -356,64 +300,19 @@ fn check_drag_vector<M: FlatModel>(
 /// drag 0.
 #[test]
 fn drag_matches_reference_vectors() {
-    let file = load_drag();
+    let file: DragFile = parse("vectors_drag.json");
     assert!(file.planar.len() >= 50 && file.spatial.len() >= 50);
     assert!(
         file.planar.iter().any(|v| v.params.drag_h > 0.0)
             && file.spatial.iter().any(|v| v.params.drag_v > 0.0),
         "the drag file holds cases with drag"
     );
-    let mut worst: f64 = 0.0;
-    for (i, v) in file.planar.iter().enumerate() {
-        let p = &v.params;
-        let m = PlanarModel::new(PlanarParams {
-            dt: p.dt,
-            tau: p.tau,
-            k: p.k,
-            g: p.g,
-            psi: p.psi,
-            frame: frame(&p.frame),
-            drag_h: p.drag_h,
-        })
-        .expect("reference parameters are valid");
-        worst = worst.max(check_drag_vector(
-            &m,
-            i,
-            v,
-            |o| PlanarOutput::new(o[0], o[1]),
-            |u| PlanarInput::new(u[0], u[1]),
-            PlanarState::from_column_slice,
-            |x| x.as_slice().to_vec(),
-            |u| u.as_slice().to_vec(),
-            |y| y.as_slice().to_vec(),
-        ));
-    }
-    for (i, v) in file.spatial.iter().enumerate() {
-        let p = &v.params;
-        let m = SpatialModel::new(SpatialParams {
-            dt: p.dt,
-            tau: p.tau,
-            k: p.k,
-            tau_thrust: p.tau_t.expect("spatial vectors give tau_t"),
-            g: p.g,
-            psi: p.psi,
-            frame: frame(&p.frame),
-            drag_h: p.drag_h,
-            drag_v: p.drag_v,
-        })
-        .expect("reference parameters are valid");
-        worst = worst.max(check_drag_vector(
-            &m,
-            i,
-            v,
-            |o| SpatialOutput::new(o[0], o[1], o[2]),
-            |u| SpatialInput::new(u[0], u[1], u[2]),
-            SpatialState::from_column_slice,
-            |x| x.as_slice().to_vec(),
-            |u| u.as_slice().to_vec(),
-            |y| y.as_slice().to_vec(),
-        ));
-    }
+    assert!(
+        file.planar.iter().all(|v| v.next_output.is_some())
+            && file.spatial.iter().all(|v| v.next_output.is_some()),
+        "drag vectors have a next_output"
+    );
+    let worst = worst_of(&file.planar, planar_model).max(worst_of(&file.spatial, spatial_model));
     println!(
         "drag: worst error / bound = {worst:.3e} over {} vectors",
         file.planar.len() + file.spatial.len()

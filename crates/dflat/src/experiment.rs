@@ -14,6 +14,9 @@ use anyhow::{Context, Result};
 use clap::{Args, Subcommand};
 use dflat_control::dfmpc::QpSolver;
 use dflat_lab::experiments::OutputPaths;
+use dflat_lab::experiments::learned::{
+    AeroPlant, LearnedConfig, LearnedShape, run_learned, write_learned,
+};
 use dflat_lab::experiments::mismatch::{MismatchConfig, run_mismatch, write_mismatch};
 use dflat_lab::experiments::noise_sweep::{NoiseSweepConfig, run_noise_sweep, write_noise_sweep};
 use dflat_lab::experiments::paths::{PathsConfig, run_paths, write_paths};
@@ -65,6 +68,61 @@ pub enum ExperimentCommand {
     /// vision poses; DF-MPC vs Flatness MPC (estimator): p95 and the
     /// largest command step. Table on stdout, JSON.
     Preview(PreviewArgs),
+    /// The flat maps' residual learned from flight records and flown: the
+    /// planar, spatial and rigid plants with parasitic (0.03 |v|v) and
+    /// rotor drag (0.2 /s), the L, a figure eight and a racing line at 5, 7
+    /// and 9 m/s under 50 and 15 Hz vision poses; the matched plant, stock,
+    /// identify, learned (window 3) and learned (window from data); and the
+    /// seconds of records the learning needs. Tables on stdout, JSON.
+    Learned(LearnedArgs),
+}
+
+/// Options of `experiment learned`.
+#[derive(Debug, Args)]
+pub struct LearnedArgs {
+    /// Plants (planar, spatial, rigid), comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "planar,spatial,rigid")]
+    plants: Vec<String>,
+    /// Paths and streams (l, eight, racing-line), comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "l,eight,racing-line")]
+    shapes: Vec<String>,
+    /// Speeds [m/s], comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "5,7,9")]
+    speeds: Vec<f64>,
+    /// Vision pose rates [Hz], comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "50,15")]
+    vision: Vec<f64>,
+    /// Seconds of records the learning is given in the seconds study,
+    /// comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "20,40,80")]
+    seconds: Vec<f64>,
+    /// No seconds study.
+    #[arg(long)]
+    no_seconds: bool,
+    /// JSON results file.
+    #[arg(long, default_value = "docs/figures/learned.json")]
+    json: PathBuf,
+    /// No progress bar.
+    #[arg(long)]
+    no_progress: bool,
+}
+
+fn parse_plant(s: &str) -> Result<AeroPlant> {
+    Ok(match s.trim() {
+        "planar" => AeroPlant::Planar,
+        "spatial" => AeroPlant::Spatial,
+        "rigid" => AeroPlant::Rigid,
+        other => anyhow::bail!("--plants: {other:?} is none of planar, spatial, rigid"),
+    })
+}
+
+fn parse_shape(s: &str) -> Result<LearnedShape> {
+    Ok(match s.trim() {
+        "l" | "L" => LearnedShape::L,
+        "eight" => LearnedShape::Eight,
+        "racing-line" => LearnedShape::RacingLine,
+        other => anyhow::bail!("--shapes: {other:?} is none of l, eight, racing-line"),
+    })
 }
 
 /// Options of `experiment preview`.
@@ -106,17 +164,8 @@ pub struct PhaseArgs {
     /// JSON results file.
     #[arg(long, default_value = "docs/figures/phase.json")]
     json: PathBuf,
-    /// Base of the seed rule.
-    #[arg(long, default_value_t = 0)]
-    seed: u64,
-    /// Solve the constrained plans with clarabel alone instead of the
-    /// banded solvers (the same problems: tells the problem's behaviour
-    /// from the solver's).
-    #[arg(long)]
-    clarabel: bool,
-    /// No progress bar.
-    #[arg(long)]
-    no_progress: bool,
+    #[command(flatten)]
+    run: RunArgs,
 }
 
 /// Options of `experiment tilt-cone`.
@@ -131,6 +180,13 @@ pub struct TiltConeArgs {
     /// JSON results file.
     #[arg(long, default_value = "docs/figures/tilt_cone.json")]
     json: PathBuf,
+    #[command(flatten)]
+    run: RunArgs,
+}
+
+/// How a study runs: its seeds, its solvers and its progress bar.
+#[derive(Debug, Args)]
+pub struct RunArgs {
     /// Base of the seed rule.
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -244,17 +300,8 @@ pub struct VisionRateArgs {
     /// Output directory.
     #[arg(long, default_value = "docs/figures")]
     out: PathBuf,
-    /// Base of the seed rule.
-    #[arg(long, default_value_t = 0)]
-    seed: u64,
-    /// Solve the constrained plans with clarabel alone instead of the
-    /// banded solvers (the same problems: tells the problem's behaviour
-    /// from the solver's).
-    #[arg(long)]
-    clarabel: bool,
-    /// No progress bar.
-    #[arg(long)]
-    no_progress: bool,
+    #[command(flatten)]
+    run: RunArgs,
 }
 
 /// Runs one study, prints its table (stdout) and the files written and the
@@ -313,11 +360,12 @@ pub fn run(command: ExperimentCommand) -> Result<()> {
                 speeds: a.speeds,
                 rates: a.rates,
                 trials: a.trials,
-                seed_base: a.seed,
+                seed_base: a.run.seed,
                 ..VisionRateConfig::default()
             };
             let out = OutputPaths::resolve(&a.out, "vision_rate", a.json, a.plot);
-            let result = run_vision_rate(&config, !a.no_progress).context("vision-rate study")?;
+            let result =
+                run_vision_rate(&config, !a.run.no_progress).context("vision-rate study")?;
             out!("{}", result.table());
             write_vision_rate(&result, &out).context("writing the vision-rate study's outputs")?
         }
@@ -340,15 +388,15 @@ pub fn run(command: ExperimentCommand) -> Result<()> {
             let config = TiltConeConfig {
                 speeds: a.speeds,
                 trials: a.trials,
-                seed_base: a.seed,
-                qp_solver: if a.clarabel {
+                seed_base: a.run.seed,
+                qp_solver: if a.run.clarabel {
                     QpSolver::Clarabel
                 } else {
                     QpSolver::Banded
                 },
                 ..TiltConeConfig::default()
             };
-            let result = run_tilt_cone(&config, !a.no_progress).context("tilt-cone study")?;
+            let result = run_tilt_cone(&config, !a.run.no_progress).context("tilt-cone study")?;
             out!("{}", result.table());
             write_tilt_cone(&result, &a.json).context("writing the tilt-cone study")?;
             vec![a.json]
@@ -363,6 +411,27 @@ pub fn run(command: ExperimentCommand) -> Result<()> {
             out!("{}", result.table());
             write_preview(&result, &a.json).context("writing the preview study")?
         }
+        ExperimentCommand::Learned(a) => {
+            let config = LearnedConfig {
+                plants: a
+                    .plants
+                    .iter()
+                    .map(|p| parse_plant(p))
+                    .collect::<Result<_>>()?,
+                shapes: a
+                    .shapes
+                    .iter()
+                    .map(|p| parse_shape(p))
+                    .collect::<Result<_>>()?,
+                speeds: a.speeds,
+                vision_rates: a.vision,
+                seconds: if a.no_seconds { Vec::new() } else { a.seconds },
+                ..LearnedConfig::default()
+            };
+            let result = run_learned(&config, !a.no_progress).context("learned study")?;
+            out!("{}", result.table());
+            write_learned(&result, &a.json).context("writing the learned study")?
+        }
         ExperimentCommand::Phase(a) => {
             let config = PhaseConfig {
                 speeds: a.speeds,
@@ -370,10 +439,10 @@ pub fn run(command: ExperimentCommand) -> Result<()> {
                 trials: a.trials,
                 latency: a.latency * 1e-3,
                 sigma: a.sigma,
-                seed_base: a.seed,
+                seed_base: a.run.seed,
                 ..PhaseConfig::default()
             };
-            let result = run_phase(&config, !a.no_progress).context("phase study")?;
+            let result = run_phase(&config, !a.run.no_progress).context("phase study")?;
             out!("{}", result.table());
             write_phase(&result, &a.json).context("writing the phase study")?
         }

@@ -109,6 +109,26 @@ impl Series {
     }
 }
 
+/// A plot's `new(title, x_label, y_label)`, documented `$doc`, the other
+/// fields set as given.
+macro_rules! labelled_new {
+    ($doc:literal, $($field:ident: $value:expr),+ $(,)?) => {
+        #[doc = $doc]
+        pub fn new(
+            title: impl Into<String>,
+            x_label: impl Into<String>,
+            y_label: impl Into<String>,
+        ) -> Self {
+            Self {
+                title: title.into(),
+                x_label: x_label.into(),
+                y_label: y_label.into(),
+                $($field: $value),+
+            }
+        }
+    };
+}
+
 /// A line plot with several series.
 #[derive(Debug, Clone, PartialEq)]
 pub struct LinePlot {
@@ -129,22 +149,13 @@ pub struct LinePlot {
 }
 
 impl LinePlot {
-    /// An empty 900×600 linear plot.
-    pub fn new(
-        title: impl Into<String>,
-        x_label: impl Into<String>,
-        y_label: impl Into<String>,
-    ) -> Self {
-        Self {
-            title: title.into(),
-            x_label: x_label.into(),
-            y_label: y_label.into(),
-            log_x: false,
-            log_y: false,
-            series: Vec::new(),
-            size: (900, 600),
-        }
-    }
+    labelled_new!(
+        "An empty 900×600 linear plot.",
+        log_x: false,
+        log_y: false,
+        series: Vec::new(),
+        size: (900, 600),
+    );
 }
 
 /// An x-y path plot: reference in black, flown paths in colour, equal scales.
@@ -165,21 +176,12 @@ pub struct PathPlot {
 }
 
 impl PathPlot {
-    /// An empty 800×800 path plot.
-    pub fn new(
-        title: impl Into<String>,
-        x_label: impl Into<String>,
-        y_label: impl Into<String>,
-    ) -> Self {
-        Self {
-            title: title.into(),
-            x_label: x_label.into(),
-            y_label: y_label.into(),
-            reference: Vec::new(),
-            series: Vec::new(),
-            size: (800, 800),
-        }
-    }
+    labelled_new!(
+        "An empty 800×800 path plot.",
+        reference: Vec::new(),
+        series: Vec::new(),
+        size: (800, 800),
+    );
 }
 
 /// One series of a box plot: a sample of values per category.
@@ -213,22 +215,13 @@ pub struct BoxPlot {
 }
 
 impl BoxPlot {
-    /// An empty 900×600 box plot.
-    pub fn new(
-        title: impl Into<String>,
-        x_label: impl Into<String>,
-        y_label: impl Into<String>,
-    ) -> Self {
-        Self {
-            title: title.into(),
-            x_label: x_label.into(),
-            y_label: y_label.into(),
-            categories: Vec::new(),
-            series: Vec::new(),
-            log_y: false,
-            size: (900, 600),
-        }
-    }
+    labelled_new!(
+        "An empty 900×600 box plot.",
+        categories: Vec::new(),
+        series: Vec::new(),
+        log_y: false,
+        size: (900, 600),
+    );
 }
 
 /// Tukey box statistics of a sample.
@@ -286,42 +279,59 @@ impl BoxStats {
 
 /// Writes `plot` to `<stem>.svg` and `<stem>.png`; returns both paths.
 pub fn write_line_plot(stem: &Path, plot: &LinePlot) -> Result<[PathBuf; 2], SimError> {
-    render(
-        stem,
-        plot.size,
-        |r| draw_line_plot(r, plot),
-        |r| draw_line_plot(r, plot),
-    )
+    render(stem, plot)
 }
 
 /// Writes `plot` to `<stem>.svg` and `<stem>.png`; returns both paths.
 pub fn write_path_plot(stem: &Path, plot: &PathPlot) -> Result<[PathBuf; 2], SimError> {
-    render(
-        stem,
-        plot.size,
-        |r| draw_path_plot(r, plot),
-        |r| draw_path_plot(r, plot),
-    )
+    render(stem, plot)
 }
 
 /// Writes `plot` to `<stem>.svg` and `<stem>.png`; returns both paths.
 pub fn write_box_plot(stem: &Path, plot: &BoxPlot) -> Result<[PathBuf; 2], SimError> {
-    render(
-        stem,
-        plot.size,
-        |r| draw_box_plot(r, plot),
-        |r| draw_box_plot(r, plot),
-    )
+    render(stem, plot)
 }
 
 type DrawResult = Result<(), String>;
 
+/// A plot [`render`] can draw on any backend.
+trait Drawable {
+    /// Image size \[px\].
+    fn size(&self) -> (u32, u32);
+    /// Draws the plot on `root`.
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> DrawResult;
+}
+
+impl Drawable for LinePlot {
+    fn size(&self) -> (u32, u32) {
+        self.size
+    }
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> DrawResult {
+        draw_line_plot(root, self)
+    }
+}
+
+impl Drawable for PathPlot {
+    fn size(&self) -> (u32, u32) {
+        self.size
+    }
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> DrawResult {
+        draw_path_plot(root, self)
+    }
+}
+
+impl Drawable for BoxPlot {
+    fn size(&self) -> (u32, u32) {
+        self.size
+    }
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> DrawResult {
+        draw_box_plot(root, self)
+    }
+}
+
 /// Draws with an SVG and a bitmap backend, creating the parent directory.
-fn render<S, B>(stem: &Path, size: (u32, u32), svg: S, png: B) -> Result<[PathBuf; 2], SimError>
-where
-    S: FnOnce(&DrawingArea<SVGBackend<'_>, Shift>) -> DrawResult,
-    B: FnOnce(&DrawingArea<BitMapBackend<'_>, Shift>) -> DrawResult,
-{
+fn render(stem: &Path, plot: &impl Drawable) -> Result<[PathBuf; 2], SimError> {
+    let size = plot.size();
     register_font();
     if let Some(dir) = stem.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir)?;
@@ -334,13 +344,13 @@ where
     };
     {
         let root = SVGBackend::new(&svg_path, size).into_drawing_area();
-        svg(&root)
+        plot.draw(&root)
             .and_then(|()| root.present().map_err(|e| e.to_string()))
             .map_err(fail(&svg_path))?;
     }
     {
         let root = BitMapBackend::new(&png_path, size).into_drawing_area();
-        png(&root)
+        plot.draw(&root)
             .and_then(|()| root.present().map_err(|e| e.to_string()))
             .map_err(fail(&png_path))?;
     }
@@ -379,6 +389,118 @@ fn title_font() -> TextStyle<'static> {
     (FONT, 24).into_font().color(&BLACK)
 }
 
+/// A chart builder on `root` with the plots' common frame: `title`
+/// above, margins and label areas.
+fn framed<'a, 'b, DB: DrawingBackend>(
+    root: &'a DrawingArea<DB, Shift>,
+    title: &str,
+) -> ChartBuilder<'a, 'b, DB> {
+    let mut builder = ChartBuilder::on(root);
+    builder
+        .caption(title, title_font())
+        .margin(15)
+        .x_label_area_size(50)
+        .y_label_area_size(70);
+    builder
+}
+
+/// The plots' axis labels and their fonts on `mesh`.
+fn labelled<'m, 'a, 'b, X, Y, DB>(
+    mesh: &'m mut plotters::chart::MeshStyle<'a, 'b, X, Y, DB>,
+    x_label: &'m str,
+    y_label: &'m str,
+) -> &'m mut plotters::chart::MeshStyle<'a, 'b, X, Y, DB>
+where
+    X: Ranged<ValueType: std::fmt::Debug>,
+    Y: Ranged<ValueType: std::fmt::Debug>,
+    DB: DrawingBackend,
+{
+    mesh.x_desc(x_label)
+        .y_desc(y_label)
+        .label_style((FONT, 14))
+        .axis_desc_style((FONT, 16))
+}
+
+/// An `f64` axis range a chart can be built on and its mesh labelled.
+trait Axis: AsRangedCoord<Value = f64, CoordDescType: ValueFormatter<f64>> {}
+
+impl<T: AsRangedCoord<Value = f64, CoordDescType: ValueFormatter<f64>>> Axis for T {}
+
+/// A chart on `DB` over the x and y coordinates `X`, `Y`.
+type XyChart<'a, DB, X, Y> = ChartContext<'a, DB, Cartesian2d<X, Y>>;
+
+/// A [`framed`] chart on `root` over `xr` × `yr` with its mesh drawn,
+/// [`labelled`] `(x_label, y_label)`.
+fn labelled_chart<'a, DB, XR, YR>(
+    root: &'a DrawingArea<DB, Shift>,
+    title: &str,
+    (x_label, y_label): (&str, &str),
+    xr: XR,
+    yr: YR,
+) -> Result<XyChart<'a, DB, XR::CoordDescType, YR::CoordDescType>, String>
+where
+    DB: DrawingBackend,
+    XR: Axis,
+    YR: Axis,
+{
+    let mut chart = framed(root, title)
+        .build_cartesian_2d(xr, yr)
+        .map_err(err)?;
+    labelled(&mut chart.configure_mesh(), x_label, y_label)
+        .draw()
+        .map_err(err)?;
+    Ok(chart)
+}
+
+/// Draws `s` through its points `pts` (2 px; its markers when it has
+/// them) with its legend entry when it has a name; returns whether it had
+/// one.
+fn draw_line_series<'a, DB, CT>(
+    chart: &mut ChartContext<'a, DB, CT>,
+    s: &Series,
+    pts: Vec<(f64, f64)>,
+) -> Result<bool, String>
+where
+    DB: DrawingBackend + 'a,
+    CT: CoordTranslate<From = (f64, f64)>,
+{
+    let color = s.color;
+    let anno = chart
+        .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))
+        .map_err(err)?;
+    let named = !s.name.is_empty();
+    if named {
+        anno.label(s.name.as_str()).legend(move |(x, y)| {
+            PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+        });
+    }
+    if s.markers {
+        chart
+            .draw_series(pts.iter().map(|p| Circle::new(*p, 3, color.filled())))
+            .map_err(err)?;
+    }
+    Ok(named)
+}
+
+/// The legend box at `position`.
+fn draw_legend<'a, DB, CT>(
+    chart: &mut ChartContext<'a, DB, CT>,
+    position: SeriesLabelPosition,
+) -> DrawResult
+where
+    DB: DrawingBackend + 'a,
+    CT: CoordTranslate,
+{
+    chart
+        .configure_series_labels()
+        .label_font((FONT, 14))
+        .border_style(BLACK)
+        .background_style(WHITE.mix(0.85))
+        .position(position)
+        .draw()
+        .map_err(err)
+}
+
 fn draw_line_plot<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
     plot: &LinePlot,
@@ -413,55 +535,19 @@ fn line_chart<DB, XR, YR>(
 ) -> DrawResult
 where
     DB: DrawingBackend,
-    XR: AsRangedCoord<Value = f64>,
-    YR: AsRangedCoord<Value = f64>,
-    XR::CoordDescType: ValueFormatter<f64>,
-    YR::CoordDescType: ValueFormatter<f64>,
+    XR: Axis,
+    YR: Axis,
 {
     root.fill(&WHITE).map_err(err)?;
-    let mut chart = ChartBuilder::on(root)
-        .caption(&plot.title, title_font())
-        .margin(15)
-        .x_label_area_size(50)
-        .y_label_area_size(70)
-        .build_cartesian_2d(xr, yr)
-        .map_err(err)?;
-    chart
-        .configure_mesh()
-        .x_desc(plot.x_label.as_str())
-        .y_desc(plot.y_label.as_str())
-        .label_style((FONT, 14))
-        .axis_desc_style((FONT, 16))
-        .draw()
-        .map_err(err)?;
+    let labels = (plot.x_label.as_str(), plot.y_label.as_str());
+    let mut chart = labelled_chart(root, &plot.title, labels, xr, yr)?;
     let mut named = false;
     for s in &plot.series {
         let pts: Vec<(f64, f64)> = s.points.iter().copied().filter(|p| keep(p)).collect();
-        let color = s.color;
-        let anno = chart
-            .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))
-            .map_err(err)?;
-        if !s.name.is_empty() {
-            named = true;
-            anno.label(s.name.as_str()).legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
-            });
-        }
-        if s.markers {
-            chart
-                .draw_series(pts.iter().map(|p| Circle::new(*p, 3, color.filled())))
-                .map_err(err)?;
-        }
+        named |= draw_line_series(&mut chart, s, pts)?;
     }
     if named {
-        chart
-            .configure_series_labels()
-            .label_font((FONT, 14))
-            .border_style(BLACK)
-            .background_style(WHITE.mix(0.85))
-            .position(SeriesLabelPosition::UpperRight)
-            .draw()
-            .map_err(err)?;
+        draw_legend(&mut chart, SeriesLabelPosition::UpperRight)?;
     }
     Ok(())
 }
@@ -490,21 +576,8 @@ fn draw_path_plot<DB: DrawingBackend>(
     xr = cx - scale * area_w / 2.0..cx + scale * area_w / 2.0;
     yr = cy - scale * area_h / 2.0..cy + scale * area_h / 2.0;
 
-    let mut chart = ChartBuilder::on(root)
-        .caption(&plot.title, title_font())
-        .margin(15)
-        .x_label_area_size(50)
-        .y_label_area_size(70)
-        .build_cartesian_2d(xr, yr)
-        .map_err(err)?;
-    chart
-        .configure_mesh()
-        .x_desc(plot.x_label.as_str())
-        .y_desc(plot.y_label.as_str())
-        .label_style((FONT, 14))
-        .axis_desc_style((FONT, 16))
-        .draw()
-        .map_err(err)?;
+    let labels = (plot.x_label.as_str(), plot.y_label.as_str());
+    let mut chart = labelled_chart(root, &plot.title, labels, xr, yr)?;
     if !plot.reference.is_empty() {
         chart
             .draw_series(LineSeries::new(
@@ -518,36 +591,15 @@ fn draw_path_plot<DB: DrawingBackend>(
             });
     }
     for s in &plot.series {
-        let color = s.color;
         let pts: Vec<(f64, f64)> = s
             .points
             .iter()
             .copied()
             .filter(|p| p.0.is_finite() && p.1.is_finite())
             .collect();
-        let anno = chart
-            .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))
-            .map_err(err)?;
-        if !s.name.is_empty() {
-            anno.label(s.name.as_str()).legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
-            });
-        }
-        if s.markers {
-            chart
-                .draw_series(pts.iter().map(|p| Circle::new(*p, 3, color.filled())))
-                .map_err(err)?;
-        }
+        draw_line_series(&mut chart, s, pts)?;
     }
-    chart
-        .configure_series_labels()
-        .label_font((FONT, 14))
-        .border_style(BLACK)
-        .background_style(WHITE.mix(0.85))
-        .position(SeriesLabelPosition::UpperLeft)
-        .draw()
-        .map_err(err)?;
-    Ok(())
+    draw_legend(&mut chart, SeriesLabelPosition::UpperLeft)
 }
 
 fn draw_box_plot<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, plot: &BoxPlot) -> DrawResult {
@@ -577,24 +629,20 @@ where
 {
     root.fill(&WHITE).map_err(err)?;
     let n_cat = plot.categories.len().max(1);
-    let mut chart = ChartBuilder::on(root)
-        .caption(&plot.title, title_font())
-        .margin(15)
-        .x_label_area_size(50)
-        .y_label_area_size(70)
+    let mut chart = framed(root, &plot.title)
         .build_cartesian_2d(0.0..n_cat as f64, yr)
         .map_err(err)?;
-    chart
-        .configure_mesh()
-        .disable_x_mesh()
-        .x_labels(0)
-        .x_label_formatter(&|_| String::new())
-        .x_desc(plot.x_label.as_str())
-        .y_desc(plot.y_label.as_str())
-        .label_style((FONT, 14))
-        .axis_desc_style((FONT, 16))
-        .draw()
-        .map_err(err)?;
+    labelled(
+        chart
+            .configure_mesh()
+            .disable_x_mesh()
+            .x_labels(0)
+            .x_label_formatter(&|_| String::new()),
+        &plot.x_label,
+        &plot.y_label,
+    )
+    .draw()
+    .map_err(err)?;
     // Category names under the axis, centred on each category.
     let y_low = chart.y_range().start;
     for (g, name) in plot.categories.iter().enumerate() {
@@ -648,14 +696,7 @@ where
             });
     }
     if !plot.series.is_empty() {
-        chart
-            .configure_series_labels()
-            .label_font((FONT, 14))
-            .border_style(BLACK)
-            .background_style(WHITE.mix(0.85))
-            .position(SeriesLabelPosition::UpperLeft)
-            .draw()
-            .map_err(err)?;
+        draw_legend(&mut chart, SeriesLabelPosition::UpperLeft)?;
     }
     Ok(())
 }

@@ -1,4 +1,4 @@
-//! Drag and delay in the model (issue 24), the mismatch study's airframe
+//! Drag and delay in the model, the mismatch study's airframe
 //! part: a reduced run (5 m/s, two trials) shows what the model terms buy
 //! on an airframe with drag 0.3 /s and a 40 ms delay.
 

@@ -1,4 +1,4 @@
-//! The mismatch study (issue 5): a reduced run (noise-free, two scenarios,
+//! The mismatch study: a reduced run (noise-free, two scenarios,
 //! one trial) shows the estimator removing the offsets that DF-MPC alone
 //! leaves, writes its JSON, table and plots, and the noise check runs.
 
@@ -112,7 +112,7 @@ fn noise_check_meets_its_budget_with_df() {
 
 #[test]
 fn multi_rate_df_with_estimator_meets_the_budget_at_1cm() {
-    // Issue 5's noise (σ = 1 cm at 50 Hz), the thrust and wind scenarios,
+    // The study's noise (σ = 1 cm at 50 Hz), the thrust and wind scenarios,
     // one trial: the classic DF diverges, the multi-rate DF keeps the
     // offsets, with the estimator it settles within the 5 cm budget.
     let sigma = 0.01;

@@ -1,4 +1,4 @@
-//! The pose-to-tick phase study (issue 15, item 4), reduced: 5 m/s, offsets
+//! The pose-to-tick phase study, reduced: 5 m/s, offsets
 //! 0 and 19 ms, one trial.
 
 use dflat_lab::experiments::phase::{PhaseConfig, run_phase, write_phase};

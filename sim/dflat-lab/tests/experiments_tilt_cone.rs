@@ -1,4 +1,4 @@
-//! The tilt-cone study (issue 17), reduced to one speed and one trial:
+//! The tilt-cone study, reduced to one speed and one trial:
 //! what the cone in the plan changes in flight, and bad options refused.
 
 use dflat_lab::experiments::tilt_cone::{TiltConeConfig, TiltConeRow, run_tilt_cone};

@@ -1,4 +1,4 @@
-//! The vision-rate study (issue 6), reduced, and the harness hook that
+//! The vision-rate study, reduced, and the harness hook that
 //! feeds raw timestamped samples to a multi-rate controller.
 
 use std::path::PathBuf;

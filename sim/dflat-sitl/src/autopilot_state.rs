@@ -5,9 +5,9 @@
 
 use dflat_link::refusal::RefusalLimiter;
 
+use super::links::Link;
 use super::position_control::PositionTarget;
 use super::px4_face::{GeoOrigin, Streams};
-use super::step::Link;
 
 /// Which setpoint stream flies in OFFBOARD (the latest type wins, as PX4).
 #[derive(Debug, Clone, Copy, PartialEq)]

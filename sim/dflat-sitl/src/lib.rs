@@ -107,6 +107,7 @@ mod config;
 mod counters;
 mod error;
 mod latency;
+mod links;
 mod mode;
 pub mod params;
 pub mod pilot;

@@ -475,7 +475,7 @@ mod tests {
     }
 
     #[test]
-    #[allow(deprecated)] // PARAM_FLOAT, asked for by issue 26
+    #[allow(deprecated)] // PARAM_FLOAT, asked for by MAVSDK's param plugin
     fn the_version_advertises_what_is_implemented() {
         let MavMessage::AUTOPILOT_VERSION(v) = autopilot_version(
             1,

@@ -387,7 +387,7 @@ fn signed_frames_are_routed_with_their_signature() {
     let seqs: Vec<u8> = at_gcs.iter().map(|f| f.header.sequence).collect();
     assert!(!seqs.contains(&7), "badly signed frame routed: {seqs:?}");
     // With signing on, HEARTBEAT is one of the messages that must be
-    // signed (issue 23: it carries the mode and armed state).
+    // signed (it carries the mode and armed state).
     assert!(!seqs.contains(&8), "unsigned heartbeat routed: {seqs:?}");
     let routed = at_gcs.iter().find(|f| f.header.sequence == 9);
     assert_eq!(

@@ -17,8 +17,9 @@
 
 use nalgebra::Vector3;
 
+use dflat_model::FlatError;
+
 use crate::ControlError;
-use crate::model::{ControlModel, DisturbanceEstimate};
 
 /// Most ticks of delay: 0.5 s at 50 Hz.
 pub const MAX_DELAY_TICKS: usize = 25;
@@ -73,16 +74,16 @@ impl DelayLine {
     }
 
     /// Carries the fixed outputs `[y_k, y_{k+1}, y_{k+2}]` across the d
-    /// pending inputs: `[y_{k+d}, y_{k+d+1}, y_{k+d+2}]`.
+    /// pending inputs through `next_output` (F⁻¹):
+    /// `[y_{k+d}, y_{k+d+1}, y_{k+d+2}]`.
     pub fn predict(
         &self,
-        model: &ControlModel,
         fixed: [Vector3<f64>; 3],
-        d: &DisturbanceEstimate,
+        next_output: impl Fn(&[Vector3<f64>; 3], &Vector3<f64>) -> Result<Vector3<f64>, FlatError>,
     ) -> Result<[Vector3<f64>; 3], ControlError> {
         let mut y = fixed;
         for i in 0..self.len {
-            let next = model.next_output_disturbed(&y, &self.get(i), d)?;
+            let next = next_output(&y, &self.get(i))?;
             y = [y[1], y[2], next];
         }
         Ok(y)

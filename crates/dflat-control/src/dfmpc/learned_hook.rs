@@ -1,16 +1,37 @@
 //! DF-MPC's hook points for the learned residual
-//! ([`crate::learned::LearnedTerm`]): the offset added to the maps'
-//! acceleration offset each tick, the score of the residual against the
-//! acceleration the parametric model leaves unexplained, and the plan it is
-//! evaluated along.
+//! ([`crate::learned::LearnedTerm`]): the maps with the residual in each
+//! step ([`DfMpc::f_inv`], [`DfMpc::f`]), the score of the residual against
+//! the acceleration the parametric model leaves unexplained, and the
+//! support at the plan's start.
 
 use nalgebra::Vector3;
+
+use dflat_model::FlatError;
 
 use super::{DfMpc, commanded_acceleration};
 use crate::Measurement;
 use crate::disturbance::DisturbanceEstimate;
-use crate::learned::{LearnedResidual, LearnedTerm, thrust_axis};
+use crate::learned::{LearnedResidual, LearnedTerm};
 use crate::model::ControlModel;
+
+/// F⁻¹ of `model` with the disturbance estimate `d` and, when flown, the
+/// learned residual in each of its two steps: `y_{k+3}` from `y_k..y_{k+2}`
+/// and `u_k`.
+pub(super) fn next_output(
+    model: &ControlModel,
+    learned: Option<&LearnedTerm>,
+    y: &[Vector3<f64>; 3],
+    u: &Vector3<f64>,
+    d: &DisturbanceEstimate,
+) -> Result<Vector3<f64>, FlatError> {
+    match learned {
+        Some(l) => {
+            let steps = l.step_offsets(model, y, &d.acceleration);
+            model.next_output_stepped(y, u, d, &steps)
+        }
+        None => model.next_output_disturbed(y, u, d),
+    }
+}
 
 /// What scoring the residual needs between ticks (classic mode).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -23,18 +44,42 @@ pub(super) struct Score {
     /// and at this one: the commands' through the attitude lag τ [m/s²].
     previous: Vector3<f64>,
     now: Option<Vector3<f64>>,
-    /// The model's pitch and roll \[rad\]: the commands through the lag.
-    attitude: Option<(f64, f64)>,
     /// The newest pose samples (multi-rate mode), oldest first: time \[s\]
     /// and position \[m\].
-    samples: [(f64, Vector3<f64>); 3],
-    /// How many of `samples` are filled (up to 3).
+    samples: [(f64, Vector3<f64>); RING],
+    /// How many of `samples` are filled (up to [`RING`]).
     sampled: usize,
+    /// The parametric acceleration at the newest ticks (multi-rate mode),
+    /// oldest first: tick time \[s\] and acceleration [m/s²].
+    ticks: [(f64, Vector3<f64>); RING],
+    /// How many of `ticks` are filled.
+    ticked: usize,
+    /// What the model adds to the thrust's acceleration in the command
+    /// sent last, in the plan's terms of the smoothness term and the
+    /// tilt-rate bound: `o_0 + κ·(o_1 − o_0)` over its plan's two steps,
+    /// `o_j = ρ_j − D·v_j` (κ = the input lag over δt, per axis) [m/s²];
+    /// None before a plan, after a reset or a replaced input.
+    sent_offset: Option<Vector3<f64>>,
 }
 
-/// Longest span \[s\] of three pose samples whose second difference
-/// scores the residual (multi-rate mode): a dropout does not.
-const SAMPLE_SPAN_S: f64 = 0.3;
+/// Pose samples and ticks the multi-rate scoring keeps.
+const RING: usize = 32;
+
+/// Spacing \[s\] of the three pose samples whose second difference scores
+/// the residual (multi-rate mode): wide, so the pose noise does not drown
+/// it (√6·σ/h², 2 m/s² at 2 cm, against 120 m/s² for 50 Hz neighbours).
+pub(crate) const SCORE_SPACING_S: f64 = 0.15;
+
+/// Pushes `x` into a ring kept oldest first (full: the oldest drops).
+fn push<T: Copy>(ring: &mut [T; RING], len: &mut usize, x: T) {
+    if *len == RING {
+        ring.copy_within(1.., 0);
+        ring[RING - 1] = x;
+    } else {
+        ring[*len] = x;
+        *len += 1;
+    }
+}
 
 impl DfMpc {
     /// Flies with a learned residual (`None`: the parametric model alone).
@@ -42,7 +87,13 @@ impl DfMpc {
     /// ([`LearnedResidual::validate`], [`LearnedResidual::check_vehicle`])
     /// first. The residual is in the model frame (local NED in flight).
     pub fn set_learned(&mut self, model: Option<LearnedResidual>) {
-        self.learned = model.map(LearnedTerm::new);
+        // Multi-rate: judged above the noise of the poses it assumes.
+        let sigma = self.settings.multi_rate.map(|m| m.sample_sigma);
+        let dt = self.model.dt();
+        self.learned = model.map(|m| match sigma {
+            Some(s) => LearnedTerm::with_pose_noise(m, s, SCORE_SPACING_S, dt),
+            None => LearnedTerm::new(m),
+        });
         self.learned_score = Score::default();
     }
 
@@ -51,18 +102,79 @@ impl DfMpc {
         self.learned.as_ref()
     }
 
-    /// The tick's estimate with the learned offset added, after scoring the
-    /// residual on a new measurement (classic mode): the measured
-    /// acceleration `(y_k − 2y_{k−1} + y_{k−2})/δt²` less the parametric
-    /// model's (the commands' through the lag, less the drag) is what the
-    /// residual should have predicted.
-    pub(super) fn learned_disturbance(
-        &mut self,
-        d: DisturbanceEstimate,
-        measurement: &Measurement,
-    ) -> DisturbanceEstimate {
+    /// F⁻¹ with the learned residual in each step (see [`next_output`]).
+    pub(super) fn f_inv(
+        &self,
+        y: &[Vector3<f64>; 3],
+        u: &Vector3<f64>,
+        d: &DisturbanceEstimate,
+    ) -> Result<Vector3<f64>, FlatError> {
+        next_output(&self.model, self.learned.as_ref(), y, u, d)
+    }
+
+    /// F with the learned residual in each of its two steps: the input
+    /// that flies `y_k..y_{k+3}`.
+    pub(super) fn f(
+        &self,
+        y: &[Vector3<f64>; 4],
+        d: &DisturbanceEstimate,
+    ) -> Result<Vector3<f64>, FlatError> {
+        match &self.learned {
+            Some(l) => {
+                let steps = l.step_offsets(&self.model, y, &d.acceleration);
+                self.model.input_from_outputs_stepped(y, d, &steps)
+            }
+            None => self.model.input_from_outputs_disturbed(y, d),
+        }
+    }
+
+    /// What the model adds to the command sent last in the plan's terms
+    /// of the smoothness term and the tilt-rate bound \[m/s²\]
+    /// (`velocity`: the plan's start velocity). With a learned residual: F
+    /// made that command from its plan's two steps with the drag `−D·v_j`
+    /// and the residual `ρ_j` in them, and those terms linearise a step's
+    /// command as `c_j = a_j + κ·(a_{j+1} − a_j)`: the sent command's
+    /// acceleration plus `o_0 + κ·(o_1 − o_0)`, `o_j = ρ_j − D·v_j`
+    /// ([`DfMpc::keep_sent_offset`]). Without the κ term the anchor missed
+    /// τ·ȯ, and the smoothness weight pulled every plan by it (the figure
+    /// eight at 5 m/s with the aerodynamics' residual: 0.08 m against
+    /// 0.009 m with it). Without a residual (and before a plan): `−D·v` at
+    /// the plan's start, as the parametric model always had it.
+    pub(super) fn sent_offset(&self, velocity: &Vector3<f64>) -> Vector3<f64> {
+        self.learned_score
+            .sent_offset
+            .filter(|_| self.learned.is_some())
+            .unwrap_or_else(|| -self.model.drag().component_mul(velocity))
+    }
+
+    /// Keeps what the model adds to the command F just made from `plan`
+    /// when a residual is flown (see [`DfMpc::sent_offset`]).
+    pub(super) fn keep_sent_offset(&mut self, plan: &[Vector3<f64>; 4], d: &DisturbanceEstimate) {
+        let Some(l) = &self.learned else {
+            return;
+        };
+        let dt = self.model.dt();
+        let drag = self.model.drag();
+        let [r0, r1] = l.step_offsets(&self.model, plan, &d.acceleration);
+        let o0 = r0 - drag.component_mul(&((plan[1] - plan[0]) / dt));
+        let o1 = r1 - drag.component_mul(&((plan[2] - plan[1]) / dt));
+        let kappa = crate::window::input_lags(&self.model).map(|lag| lag / dt);
+        let o = Vector3::from_fn(|i, _| o0[i] + kappa[i] * (o1[i] - o0[i]));
+        self.learned_score.sent_offset = o.iter().all(|x| x.is_finite()).then_some(o);
+    }
+
+    /// Forgets what the sent command's offset was (its input replaced).
+    pub(super) fn forget_sent_offset(&mut self) {
+        self.learned_score.sent_offset = None;
+    }
+
+    /// Scores the residual on a new measurement (classic mode): the
+    /// measured acceleration `(y_k − 2y_{k−1} + y_{k−2})/δt²` less the
+    /// parametric model's (the commands' through the lag, less the drag) is
+    /// what the residual should have predicted.
+    pub(super) fn learned_score_tick(&mut self, measurement: &Measurement) {
         let Some(term) = &mut self.learned else {
-            return d;
+            return;
         };
         let fresh = self.multi.is_none()
             && measurement.t > self.last_t
@@ -80,33 +192,33 @@ impl DfMpc {
                 if let ControlModel::Planar(_) = self.model {
                     unexplained.z = 0.0;
                 }
-                term.observe(&unexplained);
+                term.observe(&self.model, &unexplained, &v, &s.previous);
             }
         } else {
             s.filled = 0;
         }
-        DisturbanceEstimate {
-            acceleration: d.acceleration + term.offset(),
-            ..d
-        }
     }
 
-    /// After a good tick: the residual for the next tick, along this plan
-    /// and the model's attitude (the commands through its lag τ and gain
-    /// k̃); the parametric acceleration moved on by the command through the
-    /// same lag.
-    pub(super) fn learned_after_tick(&mut self, plan: &[Vector3<f64>; 4], sent: &Vector3<f64>) {
-        if self.learned.is_none() {
+    /// After a good tick: the support at the plan's start; the parametric
+    /// acceleration moved on by the command through the model's lag τ.
+    pub(super) fn learned_after_tick(
+        &mut self,
+        t: f64,
+        plan: &[Vector3<f64>; 4],
+        sent: &Vector3<f64>,
+        d: &DisturbanceEstimate,
+    ) {
+        let Some(term) = &mut self.learned else {
             return;
-        }
+        };
+        term.after_tick(&self.model, plan, &d.acceleration);
         let dt = self.model.dt();
-        let (tau, gain) = match &self.model {
-            ControlModel::Planar(m) => (m.params().tau, m.params().k),
-            ControlModel::Spatial(m) => (m.params().tau, m.params().k),
+        let tau = match &self.model {
+            ControlModel::Planar(m) => m.params().tau,
+            ControlModel::Spatial(m) => m.params().tau,
         };
         let step = (dt / tau).min(1.0);
         let commanded = commanded_acceleration(&self.model, sent).ok();
-        let c = self.model.command(sent);
         let s = &mut self.learned_score;
         match (s.now, commanded) {
             (Some(now), Some(a)) => {
@@ -116,28 +228,22 @@ impl DfMpc {
             (None, Some(a)) => s.now = Some(a),
             (_, None) => s.now = None,
         }
-        let target = (gain * c.pitch, gain * c.roll);
-        let (pitch, roll) = match s.attitude {
-            Some((p, r)) => (p + (target.0 - p) * step, r + (target.1 - r) * step),
-            None => target,
-        };
-        s.attitude = Some((pitch, roll));
-        let n = thrust_axis(roll, pitch, c.yaw);
-        let thrust = match self.model {
-            ControlModel::Planar(_) => c.thrust / n.z.max(0.1),
-            ControlModel::Spatial(_) => c.thrust,
-        };
-        if let Some(term) = &mut self.learned {
-            term.after_tick(plan, &n, thrust, dt);
+        if let Some(now) = s.now
+            && t.is_finite()
+            && (s.ticked == 0 || t > s.ticks[s.ticked - 1].0)
+        {
+            push(&mut s.ticks, &mut s.ticked, (t, now));
         }
     }
 
     /// Scores the residual on a pose sample (multi-rate mode, where poses
-    /// come at their own rate): the second difference of the last three
-    /// samples over their times, `2·((y₂ − y₁)/(t₂ − t₁) − (y₁ − y₀)/(t₁ −
-    /// t₀))/(t₂ − t₀)`, less the parametric model's acceleration of the tick
-    /// (the commands' through the lag, less the drag at the samples'
-    /// velocity), is what the residual should have predicted.
+    /// come at their own rate): the newest sample and the two nearest
+    /// [`SCORE_SPACING_S`] and twice that before it, their second
+    /// difference over their times `2·((y₂ − y₁)/(t₂ − t₁) − (y₁ − y₀)/(t₁ −
+    /// t₀))/(t₂ − t₀)`, less the parametric model's acceleration at the
+    /// middle sample's time (the commands' through the lag, interpolated
+    /// between ticks, less the drag at the samples' velocity), is what the
+    /// residual should have predicted.
     pub(super) fn learned_observe(&mut self, sample: &Measurement) {
         let Some(term) = &mut self.learned else {
             return;
@@ -146,25 +252,40 @@ impl DfMpc {
         if !(sample.t.is_finite() && sample.position.iter().all(|v| v.is_finite())) {
             return;
         }
-        if s.sampled > 0 && sample.t <= s.samples[2].0 {
+        if s.sampled > 0 && sample.t <= s.samples[s.sampled - 1].0 {
             return;
         }
-        s.samples = [s.samples[1], s.samples[2], (sample.t, sample.position)];
-        s.sampled = (s.sampled + 1).min(3);
-        let [(t0, y0), (t1, y1), (t2, y2)] = s.samples;
-        let (Some(now), true) = (s.now, s.sampled == 3 && t2 - t0 <= SAMPLE_SPAN_S) else {
+        push(&mut s.samples, &mut s.sampled, (sample.t, sample.position));
+        let h = SCORE_SPACING_S;
+        let (t2, y2) = (sample.t, sample.position);
+        let nearest = |want: f64| {
+            s.samples[..s.sampled]
+                .iter()
+                .copied()
+                .min_by(|a, b| (a.0 - want).abs().total_cmp(&(b.0 - want).abs()))
+                .filter(|(t, _)| (t - want).abs() <= h / 3.0)
+        };
+        let (Some((t1, y1)), Some((t0, y0))) = (nearest(t2 - h), nearest(t2 - 2.0 * h)) else {
             return;
         };
+        // The parametric acceleration at t1, between the ticks around it.
+        let ticks = &s.ticks[..s.ticked];
+        let i = ticks.partition_point(|(t, _)| *t <= t1);
+        if i == 0 || i == ticks.len() {
+            return;
+        }
+        let ((ta, aa), (tb, ab)) = (ticks[i - 1], ticks[i]);
+        let now = aa + (ab - aa) * ((t1 - ta) / (tb - ta));
         let measured = ((y2 - y1) / (t2 - t1) - (y1 - y0) / (t1 - t0)) * (2.0 / (t2 - t0));
         let v = (y2 - y0) / (t2 - t0);
         let mut unexplained = measured - (now - self.model.drag().component_mul(&v));
         if let ControlModel::Planar(_) = self.model {
             unexplained.z = 0.0;
         }
-        term.observe(&unexplained);
+        term.observe(&self.model, &unexplained, &v, &now);
     }
 
-    /// Forgets the scoring history (a reset).
+    /// Forgets the scoring history and the sent command's offset (a reset).
     pub(super) fn learned_reset(&mut self) {
         self.learned_score = Score::default();
         if let Some(l) = &mut self.learned {

@@ -98,14 +98,20 @@ fn fly_on(
                 min_weight = min_weight.min(l.weight());
             }
         }
+        let pre = x;
         x = plant.step(
             &x,
             &nalgebra::Vector2::new(out.command.pitch, out.command.roll),
         );
-        // The aerodynamics the model has no term for, at the attitude flown.
-        let v = Vector3::new(x[1], x[3], 0.0);
-        let n = thrust_axis(x[5], x[4], 0.0);
-        let a = (-v * (0.03 * v.norm()) - (v - n * n.dot(&v)) * 0.2) * aero;
+        // The aerodynamics the model has no term for, at the attitude
+        // flown: the mean of the step's ends, as a continuous airframe's
+        // acts at the middle of the step.
+        let aero_at = |s: &nalgebra::SVector<f64, 6>| {
+            let v = Vector3::new(s[1], s[3], 0.0);
+            let n = thrust_axis(s[5], s[4], 0.0);
+            -v * (0.03 * v.norm()) - (v - n * n.dot(&v)) * 0.2
+        };
+        let a = (aero_at(&pre) + aero_at(&x)) * (0.5 * aero);
         x[1] += DT * a.x;
         x[3] += DT * a.y;
     }

@@ -362,7 +362,7 @@ impl DfMpc {
                 p[axis] = pipeline.plan[j];
             }
         }
-        let u = self.model.input_from_outputs_disturbed(&plan4, d)?;
+        let u = self.f(&plan4, d)?;
         if !u.iter().all(|v| v.is_finite()) {
             return Err(ControlError::Flat(dflat_model::FlatError::NonFinite(
                 "input",
@@ -414,8 +414,10 @@ impl DfMpc {
             last_t = f64::NEG_INFINITY;
         }
         if let Some(multi) = &mut self.multi {
-            let model = self.model;
-            let e = multi.estimate(measurement.t, |y, u| model.next_output_disturbed(y, u, d))?;
+            let (model, learned) = (&self.model, self.learned.as_ref());
+            let e = multi.estimate(measurement.t, |y, u| {
+                learned_hook::next_output(model, learned, y, u, d)
+            })?;
             return Ok(FixedOutputs {
                 window,
                 fixed: e.fixed,
@@ -430,8 +432,8 @@ impl DfMpc {
         window.push_measurement(y_k);
         let [ym2, ym1, y0] = *window.outputs();
         let [u2, u1] = *window.inputs();
-        let y1 = self.model.next_output_disturbed(&[ym2, ym1, y0], &u2, d)?;
-        let y2 = self.model.next_output_disturbed(&[ym1, y0, y1], &u1, d)?;
+        let y1 = self.f_inv(&[ym2, ym1, y0], &u2, d)?;
+        let y2 = self.f_inv(&[ym1, y0, y1], &u1, d)?;
         Ok(FixedOutputs {
             window,
             fixed: [y0, y1, y2],
@@ -523,7 +525,7 @@ impl Controller for DfMpc {
             e.begin_tick();
         }
         let d = self.disturbance_estimate();
-        let d = self.learned_disturbance(d, measurement);
+        self.learned_score_tick(measurement);
         let axes = self.model.axes();
         // Multi-rate mode takes only the tick time (and checks the yaw).
         let position_ok = self.multi.is_some()
@@ -545,7 +547,7 @@ impl Controller for DfMpc {
         } = self.fixed_outputs(measurement, &d)?;
         // 2b. Across the inputs sent and not yet in effect (input delay):
         // the plan starts at k + d.
-        let planned = self.delay.predict(&self.model, fixed, &d)?;
+        let planned = self.delay.predict(fixed, |y, u| self.f_inv(y, u, &d))?;
         let previous_input = self.delay.newest().unwrap_or(previous_input);
         let y0 = planned[0];
         // The sent command's acceleration in the plan's terms (Δ²y/δt²):
@@ -557,8 +559,9 @@ impl Controller for DfMpc {
         {
             let velocity = (y0 - planned[1]) / -self.model.dt();
             Some(
-                commanded_acceleration(&self.model, &previous_input)? + d.acceleration
-                    - self.model.drag().component_mul(&velocity),
+                commanded_acceleration(&self.model, &previous_input)?
+                    + d.acceleration
+                    + self.sent_offset(&velocity),
             )
         } else {
             None
@@ -573,7 +576,8 @@ impl Controller for DfMpc {
         let (sent, saturated) = self.saturate(u);
         self.commit(window, measurement.t, &fixed, &sent, saturated);
         self.keep_plan(y0);
-        self.learned_after_tick(&plan4, &sent);
+        self.keep_sent_offset(&plan4, &d);
+        self.learned_after_tick(measurement.t, &plan4, &sent, &d);
         Ok(TickOutput {
             command: self.model.command(&sent),
             plan: plan4,
@@ -638,12 +642,13 @@ impl Controller for DfMpc {
             }
             p
         });
-        let u = self.model.input_from_outputs_disturbed(&plan4, &d).ok()?;
+        let u = self.f(&plan4, &d).ok()?;
         if !u.iter().all(|v| v.is_finite()) {
             return None;
         }
         let (sent, saturated) = self.saturate(u);
         self.commit(window, m.t, &fixed, &sent, saturated);
+        self.keep_sent_offset(&plan4, &d);
         self.plan = match previous {
             PlanState::Fresh { .. } => PlanState::Fresh { flown: step },
             _ => PlanState::Kept { flown: step },
@@ -678,6 +683,7 @@ impl Controller for DfMpc {
         // as what is pending.
         self.delay.fill(*applied);
         self.plan = PlanState::Empty;
+        self.forget_sent_offset();
     }
 
     fn observe(&mut self, sample: &Measurement) {

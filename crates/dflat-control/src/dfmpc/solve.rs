@@ -35,6 +35,25 @@ pub(super) struct AxisPipeline {
     pub(super) good_plan: Vec<f64>,
 }
 
+impl AxisPipeline {
+    /// This axis's fast path and its problem for this tick: the `fixed`
+    /// outputs, the sent command's acceleration `sent` and the axis's
+    /// reference and plan buffers.
+    fn problem<'a>(
+        &'a mut self,
+        fixed: &'a [f64; 3],
+        sent: Option<f64>,
+    ) -> (&'a mut FastBandedSolver, AxisProblem<'a>) {
+        let problem = AxisProblem {
+            fixed,
+            sent,
+            reference: &self.reference,
+            plan: &mut self.plan,
+        };
+        (&mut self.fast, problem)
+    }
+}
+
 /// What [`DfMpc::optimise`] reports of a tick's solve.
 #[derive(Debug, Clone, Copy, Default)]
 pub(super) struct SolveReport {
@@ -210,6 +229,20 @@ pub(super) fn build_pipelines(
         });
     }
 
+    let cone = horizontal_cone(model, settings, &pipelines)?;
+    Ok((pipelines, cone))
+}
+
+/// With the cone (`plan_tilt_bound = Cone` and a tilt limit), the
+/// horizontal pair's cone QP on the weights of the axes' `pipelines`.
+fn horizontal_cone(
+    model: &ControlModel,
+    settings: &DfMpcSettings,
+    pipelines: &[AxisPipeline],
+) -> Result<Option<HorizontalCone>, ControlError> {
+    let c = &settings.constraints;
+    let cone_mode = settings.plan_tilt_bound == PlanTiltBound::Cone && c.max_tilt.is_some();
+    let (dt, n) = (model.dt(), settings.horizon);
     let cone = match c.max_tilt {
         Some(t) if cone_mode => {
             let bounds = ConeBounds::new(model.gravity() * t.tan(), c.max_speed);
@@ -255,7 +288,7 @@ pub(super) fn build_pipelines(
         }
         _ => None,
     };
-    Ok((pipelines, cone))
+    Ok(cone)
 }
 
 impl DfMpc {
@@ -280,37 +313,18 @@ impl DfMpc {
         let paired =
             ax.fast.weights() == ay.fast.weights() && ax.fast.smoothness() == ay.fast.smoothness();
         if paired {
-            ax.fast.solve_pair(
-                AxisProblem {
-                    fixed: &fixed_axis[0],
-                    sent: sent(0),
-                    reference: &ax.reference,
-                    plan: &mut ax.plan,
-                },
-                AxisProblem {
-                    fixed: &fixed_axis[1],
-                    sent: sent(1),
-                    reference: &ay.reference,
-                    plan: &mut ay.plan,
-                },
-            )?;
+            let (fast, px) = ax.problem(&fixed_axis[0], sent(0));
+            let (_, py) = ay.problem(&fixed_axis[1], sent(1));
+            fast.solve_pair(px, py)?;
         } else {
             for (axis, p) in [(0, &mut *ax), (1, &mut *ay)] {
-                p.fast.solve_problem(AxisProblem {
-                    fixed: &fixed_axis[axis],
-                    sent: sent(axis),
-                    reference: &p.reference,
-                    plan: &mut p.plan,
-                })?;
+                let (fast, problem) = p.problem(&fixed_axis[axis], sent(axis));
+                fast.solve_problem(problem)?;
             }
         }
         if let Some(az) = rest.first_mut() {
-            az.fast.solve_problem(AxisProblem {
-                fixed: &fixed_axis[2],
-                sent: sent(2),
-                reference: &az.reference,
-                plan: &mut az.plan,
-            })?;
+            let (fast, problem) = az.problem(&fixed_axis[2], sent(2));
+            fast.solve_problem(problem)?;
         }
         let mut report = SolveReport::default();
         let dt = self.model.dt();
@@ -347,20 +361,9 @@ impl DfMpc {
                 cone.cascade.skip();
                 return Ok(report);
             }
-            cone.cascade.solve(
-                AxisProblem {
-                    fixed: &fixed_axis[0],
-                    sent: sent(0),
-                    reference: &ax.reference,
-                    plan: &mut ax.plan,
-                },
-                AxisProblem {
-                    fixed: &fixed_axis[1],
-                    sent: sent(1),
-                    reference: &ay.reference,
-                    plan: &mut ay.plan,
-                },
-            )?;
+            let (_, px) = ax.problem(&fixed_axis[0], sent(0));
+            let (_, py) = ay.problem(&fixed_axis[1], sent(1));
+            cone.cascade.solve(px, py)?;
             report.solved(cone.cascade.solved_by());
         }
         Ok(report)

@@ -14,7 +14,7 @@
 //! fit of (p_0, v_0, δ) is again linear with a fixed design per axis, so
 //! the weights h are precomputed per axis.
 
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::Vector3;
 
 /// The per-axis basis of the drag-aware fit, for a window of L ticks.
 #[derive(Debug, Clone)]
@@ -59,15 +59,7 @@ impl DragBasis {
         for axis in 0..3 {
             let (b, c) = basis(l, decay[axis]);
             let row = |j: usize| Vector3::new(1.0, b[j] / n, 2.0 * c[j] / (n * n));
-            let mut ata = Matrix3::zeros();
-            for j in 0..l {
-                let a = row(j);
-                ata += a * a.transpose();
-            }
-            let inv = ata.try_inverse()?;
-            let scale = 2.0 / (dt * dt * n * n);
-            let r2 = inv.row(2).transpose();
-            out.h[axis] = (0..l).map(|j| scale * r2.dot(&row(j))).collect();
+            out.h[axis] = super::weights_of_rows(l, dt, row)?;
             out.b[axis] = b;
             out.c[axis] = c;
         }

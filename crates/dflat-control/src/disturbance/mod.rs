@@ -236,17 +236,28 @@ pub struct DisturbanceEstimator {
 fn fit_weights(l: usize, dt: f64) -> Option<Vec<f64>> {
     // Scaled regressors [1, j/n, j(j−1)/n²] keep the normal matrix O(1).
     let n = (l - 1) as f64;
-    let row = |j: usize| {
+    weights_of_rows(l, dt, |j: usize| {
         let jf = j as f64;
         Vector3::new(1.0, jf / n, jf * (jf - 1.0) / (n * n))
-    };
+    })
+}
+
+/// The weights h_j of the third coefficient of the least-squares fit of
+/// `l` samples on the regressors `row(j)` (the third scaled by n²/2),
+/// scaled to an acceleration at step `dt` \[s\]: δ·c_j = β₂·(row's third)
+/// ⇒ δ = 2β₂/(δt²·n²), n = l − 1.
+pub(super) fn weights_of_rows(
+    l: usize,
+    dt: f64,
+    row: impl Fn(usize) -> Vector3<f64>,
+) -> Option<Vec<f64>> {
+    let n = (l - 1) as f64;
     let mut ata = Matrix3::zeros();
     for j in 0..l {
         let a = row(j);
         ata += a * a.transpose();
     }
     let inv = ata.try_inverse()?;
-    // δ·c_j = β₂·j(j−1)/n²  ⇒  δ = 2β₂/(δt²·n²).
     let scale = 2.0 / (dt * dt * n * n);
     let r2 = inv.row(2).transpose();
     Some((0..l).map(|j| scale * r2.dot(&row(j))).collect())
@@ -644,36 +655,21 @@ impl DisturbanceEstimator {
         if !free {
             return self.sample_fit_drag(dt);
         }
-        let t0 = self.tick_times[self.head];
         let n = (l - 1) as f64;
-        let reference = self.last_sample.map_or(Vector3::zeros(), |(_, y)| y);
         let mut ata = Matrix3::zeros();
         let mut atb = [Vector3::<f64>::zeros(); 3];
-        let (mut count, mut first, mut last) = (0usize, f64::INFINITY, f64::NEG_INFINITY);
-        let cap = self.samples.len();
-        for k in 0..self.sample_len {
-            let (ts, y) = self.samples[(self.sample_head + k) % cap];
-            let tau = (ts - t0) / dt;
-            if !(-1e-6..=n + 1e-6).contains(&tau) {
-                continue;
-            }
-            let tau = tau.clamp(0.0, n);
-            let j = (tau.floor() as usize).min(l - 2);
-            let a = tau - j as f64;
+        let mut spread = Spread::default();
+        for (tau, j, a, r) in self.window_residuals(dt) {
             let jf = j as f64;
-            let integral = self.integral[j] + a * (self.integral[j + 1] - self.integral[j]);
             let c = (jf * (jf - 1.0) + a * 2.0 * jf) / (n * n);
             let row = Vector3::new(1.0, tau / n, c);
             ata += row * row.transpose();
-            let r = y - reference - integral;
             for (axis, b) in atb.iter_mut().enumerate() {
                 *b += r[axis] * row;
             }
-            count += 1;
-            first = first.min(tau);
-            last = last.max(tau);
+            spread.add(tau);
         }
-        if count < 3 || first > n / 3.0 || last < 2.0 * n / 3.0 {
+        if !spread.covers(n) {
             return None;
         }
         let inv = ata.try_inverse()?;
@@ -686,40 +682,51 @@ impl DisturbanceEstimator {
         delta.iter().all(|v| v.is_finite()).then_some(delta)
     }
 
-    /// [`Self::sample_fit`] with the model's drag: the per-axis basis of
-    /// [`DragBasis`] at the samples' fractional ticks, one 3×3 normal system
-    /// per axis. `integral` holds the decayed double integral.
-    fn sample_fit_drag(&self, dt: f64) -> Option<Vector3<f64>> {
+    /// The samples in the fit window's span of tick times: each one's
+    /// fractional tick τ ∈ \[0, L − 1\], the tick j it follows with the
+    /// fraction a past it, and its position less the newest sample and the
+    /// double integral interpolated at τ \[m\].
+    fn window_residuals(
+        &self,
+        dt: f64,
+    ) -> impl Iterator<Item = (f64, usize, f64, Vector3<f64>)> + '_ {
         let l = self.settings.fit_span;
         let t0 = self.tick_times[self.head];
         let n = (l - 1) as f64;
         let reference = self.last_sample.map_or(Vector3::zeros(), |(_, y)| y);
-        let mut ata = [Matrix3::zeros(); 3];
-        let mut atb = [Vector3::<f64>::zeros(); 3];
-        let (mut count, mut first, mut last) = (0usize, f64::INFINITY, f64::NEG_INFINITY);
         let cap = self.samples.len();
-        for k in 0..self.sample_len {
+        (0..self.sample_len).filter_map(move |k| {
             let (ts, y) = self.samples[(self.sample_head + k) % cap];
             let tau = (ts - t0) / dt;
             if !(-1e-6..=n + 1e-6).contains(&tau) {
-                continue;
+                return None;
             }
             let tau = tau.clamp(0.0, n);
             let j = (tau.floor() as usize).min(l - 2);
             let a = tau - j as f64;
             let integral = self.integral[j] + a * (self.integral[j + 1] - self.integral[j]);
-            let r = y - reference - integral;
+            Some((tau, j, a, y - reference - integral))
+        })
+    }
+
+    /// [`Self::sample_fit`] with the model's drag: the per-axis basis of
+    /// [`DragBasis`] at the samples' fractional ticks, one 3×3 normal system
+    /// per axis. `integral` holds the decayed double integral.
+    fn sample_fit_drag(&self, dt: f64) -> Option<Vector3<f64>> {
+        let n = (self.settings.fit_span - 1) as f64;
+        let mut ata = [Matrix3::zeros(); 3];
+        let mut atb = [Vector3::<f64>::zeros(); 3];
+        let mut spread = Spread::default();
+        for (tau, _, _, r) in self.window_residuals(dt) {
             for axis in 0..3 {
                 let (b, c) = self.drag.at(axis, tau);
                 let row = Vector3::new(1.0, b / n, 2.0 * c / (n * n));
                 ata[axis] += row * row.transpose();
                 atb[axis] += r[axis] * row;
             }
-            count += 1;
-            first = first.min(tau);
-            last = last.max(tau);
+            spread.add(tau);
         }
-        if count < 3 || first > n / 3.0 || last < 2.0 * n / 3.0 {
+        if !spread.covers(n) {
             return None;
         }
         let scale = 2.0 / (dt * dt * n * n);
@@ -767,6 +774,42 @@ impl DisturbanceEstimator {
 
 mod drag;
 use drag::DragBasis;
+
+/// How the samples of a window fit spread over its ticks.
+#[derive(Debug, Clone, Copy)]
+struct Spread {
+    /// Samples counted.
+    count: usize,
+    /// The earliest fractional tick.
+    first: f64,
+    /// The latest fractional tick.
+    last: f64,
+}
+
+impl Default for Spread {
+    fn default() -> Self {
+        Self {
+            count: 0,
+            first: f64::INFINITY,
+            last: f64::NEG_INFINITY,
+        }
+    }
+}
+
+impl Spread {
+    /// Counts a sample at fractional tick `tau`.
+    fn add(&mut self, tau: f64) {
+        self.count += 1;
+        self.first = self.first.min(tau);
+        self.last = self.last.max(tau);
+    }
+
+    /// Whether the samples determine a fit over ticks 0..=n: at least
+    /// three, one in the first third and one in the last.
+    fn covers(&self, n: f64) -> bool {
+        self.count >= 3 && self.first <= n / 3.0 && self.last >= 2.0 * n / 3.0
+    }
+}
 
 #[cfg(test)]
 mod tests;

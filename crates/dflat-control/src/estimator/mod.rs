@@ -547,6 +547,28 @@ impl BaselineEstimator {
         }
     }
 
+    /// Feeds a pose sample to `estimator`, if there is one; a refused
+    /// sample (non-finite, out of order) is dropped.
+    pub(crate) fn observe(estimator: Option<&mut Self>, sample: &crate::Measurement) {
+        if let Some(e) = estimator {
+            let _ = e.estimator.observe(sample.t, &sample.position);
+        }
+    }
+
+    /// The state per axis at the time of `measurement` from `estimator`
+    /// (None without one); `NonFiniteMeasurement` for a measurement that is
+    /// not finite, `NoMeasurement` for an estimator without a sample.
+    pub(crate) fn checked_state(
+        estimator: Option<&Self>,
+        measurement: &crate::Measurement,
+    ) -> Result<Option<[Vector3<f64>; 3]>, ControlError> {
+        let m = measurement;
+        if !(m.t.is_finite() && m.yaw.is_finite() && m.position.iter().all(|c| c.is_finite())) {
+            return Err(ControlError::NonFiniteMeasurement);
+        }
+        estimator.map(|e| e.state_at(measurement.t)).transpose()
+    }
+
     /// The state per axis at tick time `t`, or `NoMeasurement`.
     pub(crate) fn state_at(&self, t: f64) -> Result<[Vector3<f64>; 3], ControlError> {
         self.estimator

@@ -19,9 +19,9 @@
 //! (`dflat learn`: commands sent and poses measured, no state estimate).
 //!
 //! A residual acts only inside the [`Support`] of its data: the speed, the
-//! tilt and the specific thrust it was learned over. Outside, its weight
-//! [`LearnedResidual::support_weight`] fades linearly to 0 over
-//! [`FADE_MARGIN`] of each range, so the prediction falls back to the
+//! tilt and the specific thrust it was learned over. Beyond [`FULL_MARGIN`]
+//! of an edge its weight [`LearnedResidual::support_weight`] fades
+//! linearly, to 0 at [`FADE_MARGIN`], so the prediction falls back to the
 //! parametric model.
 //!
 //! A residual is learned against one `[vehicle]` table (its parametric
@@ -42,11 +42,17 @@ use thiserror::Error;
 
 /// The `format` every learned-residual file carries.
 pub const FORMAT: &str = "dflat-learned-residual";
-/// The file version this build reads and writes.
-pub const VERSION: u32 = 1;
-/// Relative width beyond each edge of the support over which the residual
-/// fades to 0 (0.2: from 1 at the edge to 0 at 20 % of the range beyond it).
-pub const FADE_MARGIN: f64 = 0.2;
+/// The file version this build reads and writes (2: the window counts
+/// poses centred on the sample, the held-out acceleration reported).
+pub const VERSION: u32 = 2;
+/// Relative reach beyond each edge of the support where the residual still
+/// acts in full (0.1: a speed 10 % above the fastest flown, a thrust 10 %
+/// below the least): a smooth basis extrapolates that far, and a flight
+/// that tracks better than the ones learned from flies a little faster.
+pub const FULL_MARGIN: f64 = 0.1;
+/// Relative reach beyond each edge where it has faded to 0 (linearly from
+/// [`FULL_MARGIN`]).
+pub const FADE_MARGIN: f64 = 0.3;
 /// Relative difference of a `[vehicle]` value from the one the residual
 /// was learned with that still counts as the same table.
 pub const VEHICLE_TOLERANCE: f64 = 1e-6;
@@ -155,6 +161,11 @@ pub struct Validation {
     pub horizon_learned_m: f64,
     /// Held-out samples.
     pub samples: usize,
+    /// RMS acceleration the parametric model leaves on the test blocks
+    /// [m/s²].
+    pub acceleration_parametric: f64,
+    /// RMS acceleration the residual leaves there [m/s²].
+    pub acceleration_learned: f64,
 }
 
 /// A learned residual as stored in its file (TOML): versioned, with the
@@ -172,7 +183,8 @@ pub struct LearnedResidual {
     pub vehicle: BTreeMap<String, f64>,
     /// Control step δt \[s\] of the records.
     pub dt: f64,
-    /// Outputs in the window the velocity is taken from (≥ 2).
+    /// Poses in the window (centred on each sample) the velocity and the
+    /// acceleration were taken through when learning (odd, 3 ..= 51).
     pub window: usize,
     /// The basis, in column order.
     pub features: Vec<Feature>,
@@ -259,8 +271,8 @@ impl LearnedResidual {
             });
         }
         finite_in("dt", self.dt, 1e-4, 1.0)?;
-        if !(2..=50).contains(&self.window) {
-            return Err(field_err("window", self.window, "2 ..= 50"));
+        if !(3..=51).contains(&self.window) || self.window.is_multiple_of(2) {
+            return Err(field_err("window", self.window, "odd, 3 ..= 51"));
         }
         let mut sorted = self.features.clone();
         sorted.sort();
@@ -341,22 +353,26 @@ impl LearnedResidual {
     }
 
     /// The weight in [0, 1] of the residual at `speed` [m/s], `tilt` \[rad\]
-    /// and specific thrust `thrust` [m/s²]: 1 inside the support, falling
-    /// linearly to 0 at [`FADE_MARGIN`] of each range beyond its edge (the
-    /// product over the three ranges); 0 for non-finite arguments.
+    /// and specific thrust `thrust` [m/s²]: 1 inside the support and up to
+    /// [`FULL_MARGIN`] beyond an edge (relative to the edge's value: the
+    /// fastest speed, the largest tilt, the least and the largest thrust),
+    /// falling linearly to 0 at [`FADE_MARGIN`] beyond it (the product over
+    /// the three); 0 for non-finite arguments.
     pub fn support_weight(&self, speed: f64, tilt: f64, thrust: f64) -> f64 {
         let s = &self.support;
-        let fade = |x: f64, lo: f64, hi: f64| {
-            if !x.is_finite() {
-                return 0.0;
-            }
-            let margin = (FADE_MARGIN * (hi - lo)).max(1e-3);
-            let out = (lo - x).max(x - hi).max(0.0);
-            (1.0 - out / margin).clamp(0.0, 1.0)
+        let fade = |out: f64, edge: f64| {
+            let scale = edge.abs().max(1e-3);
+            let full = FULL_MARGIN * scale;
+            let zero = FADE_MARGIN * scale;
+            (1.0 - (out - full).max(0.0) / (zero - full)).clamp(0.0, 1.0)
         };
-        fade(speed, 0.0, s.speed_max)
-            * fade(tilt, 0.0, s.tilt_max)
-            * fade(thrust, s.thrust_min, s.thrust_max)
+        if !(speed.is_finite() && tilt.is_finite() && thrust.is_finite()) {
+            return 0.0;
+        }
+        fade((speed - s.speed_max).max(0.0), s.speed_max)
+            * fade((tilt - s.tilt_max).max(0.0), s.tilt_max)
+            * fade((s.thrust_min - thrust).max(0.0), s.thrust_min)
+            * fade((thrust - s.thrust_max).max(0.0), s.thrust_max)
     }
 
     /// The residual [m/s², NED] faded by [`Self::support_weight`]: the

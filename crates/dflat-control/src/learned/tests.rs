@@ -75,6 +75,8 @@ pub(crate) fn aero_residual(cq: f64, d: f64, speed_max: f64) -> LearnedResidual 
             horizon_parametric_m: 0.1,
             horizon_learned_m: 0.01,
             samples: 100,
+            acceleration_parametric: 1.0,
+            acceleration_learned: 0.1,
         },
         seconds: 60.0,
     }
@@ -190,10 +192,10 @@ fn a_bad_file_names_its_field() {
             .starts_with("weights[2]")
     );
     let mut m = good.clone();
-    m.version = 2;
+    m.version = 1;
     assert!(matches!(
         m.validate(),
-        Err(LearnedError::Version { found: 2 })
+        Err(LearnedError::Version { found: 1 })
     ));
     let mut m = good.clone();
     m.format = "x".into();

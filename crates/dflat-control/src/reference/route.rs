@@ -146,8 +146,22 @@ fn check_speed(field: &'static str, v: f64) -> Result<(), ControlError> {
     }
 }
 
-impl Route {
-    pub(super) fn new(spec: &RouteSpec) -> Result<Self, ControlError> {
+/// A route's vertices: the start, then each waypoint that does not stand
+/// where the previous vertex does.
+struct Vertices {
+    /// Positions \[m\].
+    points: Vec<Vector3<f64>>,
+    /// The speed of the leg arriving at each vertex after the first \[m/s\].
+    leg_speed: Vec<f64>,
+    /// The hold at each vertex \[s\].
+    hold: Vec<f64>,
+    /// Each waypoint's vertex.
+    vertex_of: Vec<usize>,
+}
+
+impl Vertices {
+    /// Checks `spec` and merges its zero-length legs.
+    fn of(spec: &RouteSpec) -> Result<Self, ControlError> {
         check_speed("cruise_speed", spec.cruise_speed)?;
         let acc = spec.acceleration;
         if !(acc.is_finite() && acc > 0.0) {
@@ -196,6 +210,63 @@ impl Route {
             }
             vertex_of.push(points.len() - 1);
         }
+        Ok(Self {
+            points,
+            leg_speed,
+            hold,
+            vertex_of,
+        })
+    }
+}
+
+/// The speeds at the vertices \[m/s\] (0 at stops and the end, the lower
+/// leg speed at corners, `along` at the start, each reachable from its
+/// neighbours at the acceleration) and each leg's acceleration \[m/s²\]
+/// (`acc`, more on a first leg too short to brake the start speed).
+fn boundary_speeds(
+    along: f64,
+    hold: &[f64],
+    leg_speed: &[f64],
+    cum: &[f64],
+    acc: f64,
+) -> (Vec<f64>, Vec<f64>) {
+    let n = leg_speed.len();
+    // Boundary speeds: 0 at stops and the end, the lower leg speed at
+    // corners, the along-track speed at the start.
+    let mut b = vec![0.0; n + 1];
+    b[0] = along;
+    for j in 1..n {
+        b[j] = if hold[j] > 0.0 {
+            0.0
+        } else {
+            leg_speed[j - 1].min(leg_speed[j])
+        };
+    }
+    // A first leg too short to brake the start speed brakes harder.
+    let mut leg_acc = vec![acc; n];
+    let reach = |u: f64, len: f64, a: f64| (u * u + 4.0 * a * len / std::f64::consts::PI).sqrt();
+    for j in (1..n).rev() {
+        b[j] = b[j].min(reach(b[j + 1], cum[j + 1] - cum[j], acc));
+    }
+    if n > 0 {
+        let need = std::f64::consts::PI * (b[0] * b[0] - b[1] * b[1]) / (4.0 * cum[1]);
+        leg_acc[0] = acc.max(need);
+    }
+    for j in 1..n {
+        b[j] = b[j].min(reach(b[j - 1], cum[j] - cum[j - 1], leg_acc[j - 1]));
+    }
+    (b, leg_acc)
+}
+
+impl Route {
+    pub(super) fn new(spec: &RouteSpec) -> Result<Self, ControlError> {
+        let acc = spec.acceleration;
+        let Vertices {
+            points,
+            leg_speed,
+            hold,
+            vertex_of,
+        } = Vertices::of(spec)?;
         let n = points.len() - 1; // legs
         let mut cum = vec![0.0];
         let mut dirs = Vec::with_capacity(n);
@@ -215,31 +286,7 @@ impl Route {
         let w_norm = blend_w.norm();
         let blend = (blend_w, (2.0 * w_norm / acc).max(MIN_BLEND_TIME));
 
-        // Boundary speeds: 0 at stops and the end, the lower leg speed at
-        // corners, the along-track speed at the start.
-        let mut b = vec![0.0; n + 1];
-        b[0] = along;
-        for j in 1..n {
-            b[j] = if hold[j] > 0.0 {
-                0.0
-            } else {
-                leg_speed[j - 1].min(leg_speed[j])
-            };
-        }
-        // A first leg too short to brake the start speed brakes harder.
-        let mut leg_acc = vec![acc; n];
-        let reach =
-            |u: f64, len: f64, a: f64| (u * u + 4.0 * a * len / std::f64::consts::PI).sqrt();
-        for j in (1..n).rev() {
-            b[j] = b[j].min(reach(b[j + 1], cum[j + 1] - cum[j], acc));
-        }
-        if n > 0 {
-            let need = std::f64::consts::PI * (b[0] * b[0] - b[1] * b[1]) / (4.0 * cum[1]);
-            leg_acc[0] = acc.max(need);
-        }
-        for j in 1..n {
-            b[j] = b[j].min(reach(b[j - 1], cum[j] - cum[j - 1], leg_acc[j - 1]));
-        }
+        let (b, leg_acc) = boundary_speeds(along, &hold, &leg_speed, &cum, acc);
         // Pieces, leg by leg.
         let mut pieces = Vec::new();
         let mut vertex_time = vec![0.0; n + 1];

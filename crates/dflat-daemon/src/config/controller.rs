@@ -11,7 +11,6 @@
 //!
 //! [`EstimatorSettings`]: dflat_control::estimator::EstimatorSettings
 
-use dflat_control::Limit;
 use dflat_control::dfmpc::{DfMpcSettings, OutputConstraints, PlanTiltBound, QpSolver};
 use dflat_control::disturbance::DisturbanceSettings;
 use dflat_control::fmpc::FmpcSettings;
@@ -440,9 +439,4 @@ impl ControllerConfig {
         )?;
         self.estimator.validate(v)
     }
-}
-
-/// `limit` shown for a field where 0 also means "off".
-pub(super) fn or_off(limit: Limit) -> String {
-    format!("0 (off) or {limit}")
 }

@@ -7,10 +7,127 @@ use dflat_control::Limit;
 use super::*;
 
 impl Config {
-    /// Checks every range; the error names the first offending field.
+    /// Checks every range, table by table; the error names the first
+    /// offending field (by its TOML key).
     pub fn validate(&self, file: &Path) -> Result<(), ConfigError> {
         let mut v = Validator { file };
-        let l = &self.link;
+        self.link.validate(&mut v)?;
+        self.vehicle.validate(&mut v)?;
+        self.records
+            .validate(|field, x, allowed| v.err(field, &x.to_string(), allowed))?;
+        let rt = &self.realtime;
+        v.range(
+            "realtime.fifo_priority",
+            f64::from(rt.fifo_priority),
+            0.0,
+            99.0,
+        )?;
+        self.controller.validate(&mut v)?;
+        self.validate_mission(&mut v)?;
+        self.safety.validate(&mut v)?;
+        self.stream.validate(file)?;
+        Ok(())
+    }
+
+    /// `[mission]`, against the fence and `safety.max_speed_mps`.
+    fn validate_mission(&self, v: &mut Validator<'_>) -> Result<(), ConfigError> {
+        let m = &self.mission;
+        v.range("mission.speed", m.speed, 0.1, 20.0)?;
+        v.range("mission.brake_fraction", m.brake_fraction, 0.1, 1.0)?;
+        v.range(
+            "mission.acceptance_radius_m",
+            m.acceptance_radius_m,
+            0.05,
+            50.0,
+        )?;
+        if m.local_xy_scale != 1e4 && m.local_xy_scale != 1e7 {
+            return Err(v.err(
+                "mission.local_xy_scale",
+                &m.local_xy_scale.to_string(),
+                "1e4 (the MAVLink specification) or 1e7 (MAVProxy, pymavlink mavwp)",
+            ));
+        }
+        if m.start_acceleration != 0.0 {
+            v.range(
+                "mission.start_acceleration",
+                m.start_acceleration,
+                0.5,
+                10.0,
+            )?;
+        }
+        v.range(
+            "mission.path_trigger_radius",
+            m.path_trigger_radius,
+            0.0,
+            100.0,
+        )?;
+        for i in 0..3 {
+            v.positive(&format!("mission.geofence[{i}]"), m.geofence[i])?;
+        }
+        v.range("mission.geofence_down_m", m.geofence_down_m, 0.0, 1000.0)?;
+        if m.start == MissionStart::Path && m.path.len() < 2 {
+            return Err(v.err(
+                "mission.path",
+                &format!("{} waypoints", m.path.len()),
+                "at least 2 waypoints when mission.start = \"path\"",
+            ));
+        }
+        if m.path.len() == 1 {
+            // A path of one waypoint has no leg to fly: a hold point is a
+            // setpoint (SET_POSITION_TARGET_LOCAL_NED), not a path.
+            return Err(v.err(
+                "mission.path",
+                "1 waypoint",
+                "none, or at least 2 waypoints (a single point is a setpoint, not a path)",
+            ));
+        }
+        if m.speed > self.safety.max_speed_mps {
+            return Err(v.err(
+                "mission.speed",
+                &m.speed.to_string(),
+                &format!(
+                    "at most safety.max_speed_mps ({})",
+                    self.safety.max_speed_mps
+                ),
+            ));
+        }
+        // One fence for every goal: the box of crate::envelope (a floor
+        // `geofence_down_m` below the origin, a ceiling `geofence[2]` above).
+        let fence = crate::envelope::Envelope::from_config(self).bounds;
+        let (lo, hi) = (fence.min, fence.max);
+        for (i, w) in m.path.iter().enumerate() {
+            for (j, x) in w.iter().enumerate() {
+                if !x.is_finite() || *x < lo[j] || *x > hi[j] {
+                    return Err(v.err(
+                        &format!("mission.path[{i}][{j}]"),
+                        &x.to_string(),
+                        &format!("finite and inside the fence [{}, {}]", lo[j], hi[j]),
+                    ));
+                }
+            }
+            if i > 0 && *w == m.path[i - 1] {
+                return Err(v.err(
+                    &format!("mission.path[{i}]"),
+                    &format!("{w:?}"),
+                    "distinct from the previous waypoint",
+                ));
+            }
+        }
+        if m.repeat && (m.path.len() < 3 || m.path.first() != m.path.last()) {
+            return Err(v.err(
+                "mission.repeat",
+                "true",
+                "a closed path (≥ 3 waypoints, the last equal to the first)",
+            ));
+        }
+        Ok(())
+    }
+}
+
+impl LinkConfig {
+    /// `[link]`: the connection, the ids, the pose clock, signing, the peer.
+    fn validate(&self, v: &mut Validator<'_>) -> Result<(), ConfigError> {
+        let l = self;
         v.nonempty("link.url", &l.url)?;
         // The daemon opens exactly what this parses (one parser for both).
         if let Err(e) = dflat_link::transport::Endpoint::parse(&l.url) {
@@ -113,7 +230,14 @@ impl Config {
                 ));
             }
         }
-        let ve = &self.vehicle;
+        Ok(())
+    }
+}
+
+impl VehicleConfig {
+    /// `[vehicle]`.
+    fn validate(&self, v: &mut Validator<'_>) -> Result<(), ConfigError> {
+        let ve = self;
         v.range("vehicle.tau", ve.tau, 0.02, 2.0)?;
         v.range("vehicle.k", ve.k, 0.2, 5.0)?;
         v.range("vehicle.tau_thrust", ve.tau_thrust, 0.005, 1.0)?;
@@ -140,106 +264,14 @@ impl Config {
                 "\"normalized\" with model = \"spatial\" (the spatial model commands thrust)",
             ));
         }
-        self.records
-            .validate(|field, x, allowed| v.err(field, &x.to_string(), allowed))?;
-        let rt = &self.realtime;
-        v.range(
-            "realtime.fifo_priority",
-            f64::from(rt.fifo_priority),
-            0.0,
-            99.0,
-        )?;
-        self.controller.validate(&mut v)?;
-        let m = &self.mission;
-        v.range("mission.speed", m.speed, 0.1, 20.0)?;
-        v.range("mission.brake_fraction", m.brake_fraction, 0.1, 1.0)?;
-        v.range(
-            "mission.acceptance_radius_m",
-            m.acceptance_radius_m,
-            0.05,
-            50.0,
-        )?;
-        if m.local_xy_scale != 1e4 && m.local_xy_scale != 1e7 {
-            return Err(v.err(
-                "mission.local_xy_scale",
-                &m.local_xy_scale.to_string(),
-                "1e4 (the MAVLink specification) or 1e7 (MAVProxy, pymavlink mavwp)",
-            ));
-        }
-        if m.start_acceleration != 0.0 {
-            v.range(
-                "mission.start_acceleration",
-                m.start_acceleration,
-                0.5,
-                10.0,
-            )?;
-        }
-        v.range(
-            "mission.path_trigger_radius",
-            m.path_trigger_radius,
-            0.0,
-            100.0,
-        )?;
-        for i in 0..3 {
-            v.positive(&format!("mission.geofence[{i}]"), m.geofence[i])?;
-        }
-        v.range("mission.geofence_down_m", m.geofence_down_m, 0.0, 1000.0)?;
-        if m.start == MissionStart::Path && m.path.len() < 2 {
-            return Err(v.err(
-                "mission.path",
-                &format!("{} waypoints", m.path.len()),
-                "at least 2 waypoints when mission.start = \"path\"",
-            ));
-        }
-        if m.path.len() == 1 {
-            // A path of one waypoint has no leg to fly: a hold point is a
-            // setpoint (SET_POSITION_TARGET_LOCAL_NED), not a path.
-            return Err(v.err(
-                "mission.path",
-                "1 waypoint",
-                "none, or at least 2 waypoints (a single point is a setpoint, not a path)",
-            ));
-        }
-        if m.speed > self.safety.max_speed_mps {
-            return Err(v.err(
-                "mission.speed",
-                &m.speed.to_string(),
-                &format!(
-                    "at most safety.max_speed_mps ({})",
-                    self.safety.max_speed_mps
-                ),
-            ));
-        }
-        // One fence for every goal: the box of crate::envelope (a floor
-        // `geofence_down_m` below the origin, a ceiling `geofence[2]` above).
-        let fence = crate::envelope::Envelope::from_config(self).bounds;
-        let (lo, hi) = (fence.min, fence.max);
-        for (i, w) in m.path.iter().enumerate() {
-            for (j, x) in w.iter().enumerate() {
-                if !x.is_finite() || *x < lo[j] || *x > hi[j] {
-                    return Err(v.err(
-                        &format!("mission.path[{i}][{j}]"),
-                        &x.to_string(),
-                        &format!("finite and inside the fence [{}, {}]", lo[j], hi[j]),
-                    ));
-                }
-            }
-            if i > 0 && *w == m.path[i - 1] {
-                return Err(v.err(
-                    &format!("mission.path[{i}]"),
-                    &format!("{w:?}"),
-                    "distinct from the previous waypoint",
-                ));
-            }
-        }
-        if m.repeat && (m.path.len() < 3 || m.path.first() != m.path.last()) {
-            return Err(v.err(
-                "mission.repeat",
-                "true",
-                "a closed path (≥ 3 waypoints, the last equal to the first)",
-            ));
-        }
-        let s = &self.safety;
+        Ok(())
+    }
+}
+
+impl SafetyConfig {
+    /// `[safety]`.
+    fn validate(&self, v: &mut Validator<'_>) -> Result<(), ConfigError> {
+        let s = self;
         v.range("safety.pose_timeout_ms", s.pose_timeout_ms, 5.0, 2000.0)?;
         v.range(
             "safety.autopilot_timeout_ms",
@@ -277,7 +309,6 @@ impl Config {
             10.0,
             5000.0,
         )?;
-        self.stream.validate(file)?;
         Ok(())
     }
 }
@@ -342,7 +373,7 @@ impl Validator<'_> {
         if x == 0.0 || limit.contains(x) {
             Ok(())
         } else {
-            Err(self.err(field, &x.to_string(), &super::controller::or_off(limit)))
+            Err(self.err(field, &x.to_string(), &format!("0 (off) or {limit}")))
         }
     }
 

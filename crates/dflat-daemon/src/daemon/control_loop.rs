@@ -28,7 +28,7 @@ use crate::realtime::{RealtimeApplied, RealtimeConfig, RealtimeError, apply_to_c
 use crate::records::CsvRecorder;
 use crate::schedule::{TickCause, TickPlanner};
 use crate::summary::Histogram;
-use crate::tick::{BATCH_MARGIN, ControlCore, Event, TickTime};
+use crate::tick::{BATCH_MARGIN, ControlCore, Event, StepOutput, TickTime};
 
 /// A graceful stop ends at the latest this long \[s\] after its brake
 /// and level were due (a failsafe or a stalled pose stream meanwhile).
@@ -74,6 +74,15 @@ pub(super) struct ControlLoop {
         Option<tokio::sync::oneshot::Sender<Result<RealtimeApplied, RealtimeError>>>,
 }
 
+/// What the loop measured, for its report.
+struct Meters {
+    planner: TickPlanner,
+    realtime: RealtimeApplied,
+    solve: Histogram,
+    jitter: Histogram,
+    outbound_dropped: u64,
+}
+
 impl ControlLoop {
     /// An event for the next tick; a pose also tells the planner.
     fn take(&self, event: Event, planner: &mut TickPlanner, batch: &mut Vec<Event>) {
@@ -96,18 +105,7 @@ impl ControlLoop {
     /// Runs until stopped; returns what it measured. Returns at once (no
     /// tick run) when `[realtime]` was refused.
     pub fn run(mut self) -> ControlReport {
-        let applied = apply_to_current_thread(&self.realtime);
-        let refused = applied.is_err();
-        let realtime = applied.clone().unwrap_or_default();
-        if let Some(tx) = self.realtime_result.take() {
-            let _ = tx.send(applied);
-        }
-        if refused {
-            // spawn() reports the refusal and stops the other parts.
-            self.stop.request();
-        } else if self.realtime.is_enabled() {
-            info!(?realtime, "control thread real-time settings applied");
-        }
+        let (realtime, refused) = self.apply_realtime();
         let period = self.period.as_secs_f64();
         let mut planner = TickPlanner::new(
             period,
@@ -140,25 +138,7 @@ impl ControlLoop {
         let stop_bound = self.core.stop_bound() + STOP_MARGIN;
         let mut stop_asked_at: Option<f64> = None;
         while !self.stop.requested() {
-            // Wait: for events (pose-locked: a pose may run the tick now)
-            // until the planner's next wake time.
-            let wake_at = self.epoch + Duration::from_secs_f64(planner.wake_at().max(0.0));
-            let now = Instant::now();
-            if now < wake_at {
-                if self.pose_lock {
-                    match self.events.recv_timeout(wake_at - now) {
-                        Ok(event) => self.take(event, &mut planner, &mut batch),
-                        Err(RecvTimeoutError::Timeout) => {}
-                        // The receive task is gone (shutdown): keep time.
-                        Err(RecvTimeoutError::Disconnected) => std::thread::sleep(wake_at - now),
-                    }
-                } else {
-                    std::thread::sleep(wake_at - now);
-                }
-            }
-            while let Ok(event) = self.events.try_recv() {
-                self.take(event, &mut planner, &mut batch);
-            }
+            self.wait(&mut planner, &mut batch);
             if self.stop.requested() {
                 break;
             }
@@ -166,29 +146,7 @@ impl ControlLoop {
             let Some(slot) = planner.poll(self.secs(wake)) else {
                 continue;
             };
-            // A stalled or dead link task: the watchdog is no longer fed
-            // (systemd restarts the daemon), HEARTBEAT says CRITICAL.
-            if !self.health.fault()
-                && let Some(task) = self.health.stalled(wake)
-            {
-                self.health.set_fault();
-                error!(
-                    task = task.name(),
-                    "link task stalled: watchdog no longer fed"
-                );
-                let _ = sd_notify::notify(&[sd_notify::NotifyState::WatchdogTrigger]);
-                let text = dflat_link::statustext(
-                    dflat_link::dialect::MavSeverity::MAV_SEVERITY_CRITICAL,
-                    &format!("dflat: link task {} stalled", task.name()),
-                );
-                self.send(Outgoing::plain(text), &mut outbound_dropped);
-            }
-            if !self.health.fault()
-                && let Some(w) = watchdog.as_mut()
-                && w.due(wake)
-            {
-                let _ = sd_notify::notify(&[sd_notify::NotifyState::Watchdog]);
-            }
+            self.check_health(wake, watchdog.as_mut(), &mut outbound_dropped);
             let _span = tracing::debug_span!("tick", k = slot.tick).entered();
             if slot.missed > 0 {
                 debug!(missed = slot.missed, "ticks skipped");
@@ -230,30 +188,7 @@ impl ControlLoop {
                 self.core.begin_stop(t);
             }
             let step = self.core.step(&time, batch.drain(..taken), &mut stopwatch);
-            for tr in &step.transitions {
-                self.state.store(encode_state(tr.to), Ordering::Relaxed);
-                notify_status(tr.to);
-            }
-            for text in step.texts {
-                self.send(Outgoing::plain(text), &mut outbound_dropped);
-            }
-            let notices = self.records.take_notices();
-            if notices != 0 {
-                for (severity, text) in crate::record_store::notice_texts(notices) {
-                    let text = dflat_link::statustext(severity, text);
-                    self.send(Outgoing::plain(text), &mut outbound_dropped);
-                }
-            }
-            if let Some(sent) = step.command {
-                let item = Outgoing {
-                    message: sent.message,
-                    tick: Some(wake),
-                    pose_arrival: sent
-                        .pose_arrival
-                        .map(|s| self.epoch + Duration::from_secs_f64(s)),
-                };
-                self.commands.put(item);
-            }
+            let step = self.publish(step, wake, &mut outbound_dropped);
             if let Some(us) = step.solve_us {
                 solve_hist.record(u64::from(us));
             }
@@ -271,6 +206,131 @@ impl ControlLoop {
             }
         }
 
+        self.finish(Meters {
+            planner,
+            realtime,
+            solve: solve_hist,
+            jitter,
+            outbound_dropped,
+        })
+    }
+
+    /// Applies `[realtime]` to this thread and reports the outcome to the
+    /// start; refused, the stop is requested. Returns what was applied and
+    /// whether it was refused.
+    fn apply_realtime(&mut self) -> (RealtimeApplied, bool) {
+        let applied = apply_to_current_thread(&self.realtime);
+        let refused = applied.is_err();
+        let realtime = applied.clone().unwrap_or_default();
+        if let Some(tx) = self.realtime_result.take() {
+            let _ = tx.send(applied);
+        }
+        if refused {
+            // spawn() reports the refusal and stops the other parts.
+            self.stop.request();
+        } else if self.realtime.is_enabled() {
+            info!(?realtime, "control thread real-time settings applied");
+        }
+        (realtime, refused)
+    }
+
+    /// Waits for events until the planner's next wake time (pose-locked: a
+    /// pose may run the tick now), then takes what is queued.
+    fn wait(&self, planner: &mut TickPlanner, batch: &mut Vec<Event>) {
+        // Wait: for events (pose-locked: a pose may run the tick now)
+        // until the planner's next wake time.
+        let wake_at = self.epoch + Duration::from_secs_f64(planner.wake_at().max(0.0));
+        let now = Instant::now();
+        if now < wake_at {
+            if self.pose_lock {
+                match self.events.recv_timeout(wake_at - now) {
+                    Ok(event) => self.take(event, planner, batch),
+                    Err(RecvTimeoutError::Timeout) => {}
+                    // The receive task is gone (shutdown): keep time.
+                    Err(RecvTimeoutError::Disconnected) => std::thread::sleep(wake_at - now),
+                }
+            } else {
+                std::thread::sleep(wake_at - now);
+            }
+        }
+        while let Ok(event) = self.events.try_recv() {
+            self.take(event, planner, batch);
+        }
+    }
+
+    /// A stalled or dead link task: the watchdog is no longer fed (systemd
+    /// restarts the daemon), HEARTBEAT says CRITICAL. Else the watchdog is
+    /// fed when due.
+    fn check_health(
+        &self,
+        wake: Instant,
+        watchdog: Option<&mut WatchdogCadence>,
+        outbound_dropped: &mut u64,
+    ) {
+        if !self.health.fault()
+            && let Some(task) = self.health.stalled(wake)
+        {
+            self.health.set_fault();
+            error!(
+                task = task.name(),
+                "link task stalled: watchdog no longer fed"
+            );
+            let _ = sd_notify::notify(&[sd_notify::NotifyState::WatchdogTrigger]);
+            let text = dflat_link::statustext(
+                dflat_link::dialect::MavSeverity::MAV_SEVERITY_CRITICAL,
+                &format!("dflat: link task {} stalled", task.name()),
+            );
+            self.send(Outgoing::plain(text), outbound_dropped);
+        }
+        if !self.health.fault()
+            && let Some(w) = watchdog
+            && w.due(wake)
+        {
+            let _ = sd_notify::notify(&[sd_notify::NotifyState::Watchdog]);
+        }
+    }
+
+    /// Hands a step's outputs on: state changes published, texts and the
+    /// records' notices queued, the command into its slot.
+    fn publish(&self, step: StepOutput, wake: Instant, outbound_dropped: &mut u64) -> StepOutput {
+        let mut step = step;
+        for tr in &step.transitions {
+            self.state.store(encode_state(tr.to), Ordering::Relaxed);
+            notify_status(tr.to);
+        }
+        for text in std::mem::take(&mut step.texts) {
+            self.send(Outgoing::plain(text), outbound_dropped);
+        }
+        let notices = self.records.take_notices();
+        if notices != 0 {
+            for (severity, text) in crate::record_store::notice_texts(notices) {
+                let text = dflat_link::statustext(severity, text);
+                self.send(Outgoing::plain(text), outbound_dropped);
+            }
+        }
+        if let Some(sent) = step.command.take() {
+            let item = Outgoing {
+                message: sent.message,
+                tick: Some(wake),
+                pose_arrival: sent
+                    .pose_arrival
+                    .map(|s| self.epoch + Duration::from_secs_f64(s)),
+            };
+            self.commands.put(item);
+        }
+        step
+    }
+
+    /// Shutdown, once the stream has stopped: the last texts, the state,
+    /// the stop request to the other parts, and the report.
+    fn finish(mut self, meters: Meters) -> ControlReport {
+        let Meters {
+            planner,
+            realtime,
+            solve: solve_hist,
+            jitter,
+            mut outbound_dropped,
+        } = meters;
         // Shutdown: the stream has stopped (this loop no longer runs).
         let now = self.secs(Instant::now());
         info!(state = self.core.state().name(), "control loop stopped");

@@ -12,80 +12,22 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicU8, AtomicU64, Ordering};
 use std::time::{Duration, Instant, SystemTime};
 
-use dflat_link::dialect::MavSeverity;
 use dflat_link::transport::{RecvEvent, SendOutcome, Transport, TransportError};
 use dflat_link::{
-    DaemonStatus, ErrorCategory, Inbound, LinkError, LinkRx, MavHeader, MavMessage, PoseSource,
-    RxOutcome, SetpointRejection, SignatureCheck, Signing, Verdict, heartbeat_onboard, statustext,
+    DaemonStatus, LinkRx, MavHeader, MavMessage, Signing, heartbeat_onboard,
     timestamp_from_system_time,
 };
 use tokio::sync::mpsc;
-use tracing::{debug, error, info, warn};
+use tracing::{debug, error, warn};
 
-use super::{Outgoing, RxReport, Stop, TxReport, daemon_status, decode_state};
-use crate::commands::{CommandContext, CommandRequest, RequestedMessage, answer, command_ack};
+use super::receive::{FrameTime, Gate, ReceiveCore, RxContext, RxOutput};
+use super::{Outgoing, RxReport, Stop, TxReport, daemon_status};
 use crate::link_health::{
     BEAT_INTERVAL, CommandSlot, LinkHealth, LinkTask, REPLY_BURST, REPLY_RATE_HZ, ReplyBudget,
     StallHook,
 };
-use crate::mission::{ItemRules, Mission, MissionChange, MissionProtocol};
 use crate::signing::{PERSIST_INTERVAL, TimestampStore};
-use crate::tick::{Event, arrival_secs, event_from};
-use dflat_link::dialect::MavResult;
-use dflat_link::refusal::{RefusalLimiter, Say};
-
-/// What the receive task needs to know of the daemon.
-#[derive(Debug, Clone)]
-pub(super) struct RxContext {
-    /// The daemon's epoch: event times are seconds since it.
-    pub epoch: Instant,
-    /// The epoch on the system clock \[µs since 1970\]: a received frame
-    /// is logged in the tlog at this plus its arrival in whole µs.
-    pub epoch_unix_us: u64,
-    /// The pose message the controller uses.
-    pub pose_source: PoseSource,
-    /// The daemon's (system, component).
-    pub own: (u8, u8),
-    /// The autopilot's component id.
-    pub autopilot_component: u8,
-    /// The fixed yaw ψ⋆ the model flies \[rad\].
-    pub yaw: f64,
-    /// `vehicle.yaw_mode = "fixed"`: a setpoint's yaw is not flown.
-    pub yaw_fixed: bool,
-    /// The published flight state (for the answers to REQUEST_MESSAGE).
-    pub state: Arc<AtomicU8>,
-    /// How uploaded mission items are read.
-    pub mission_rules: ItemRules,
-    /// Missions accepted by the protocol, to the control thread.
-    pub missions: std::sync::mpsc::Sender<Option<Mission>>,
-    /// Link-task liveness (a stall makes the HEARTBEAT answer CRITICAL).
-    pub health: Arc<LinkHealth>,
-    /// The test-only stall hook.
-    pub stall: Option<StallHook>,
-}
-
-/// Sends a mission-protocol reply; hands a changed mission to the control
-/// thread.
-fn send_reply(reply: crate::mission::Reply, ctx: &RxContext, out: &Replies) {
-    for m in reply.messages {
-        out.send(m);
-    }
-    for text in &reply.texts {
-        info!(text, "mission protocol");
-        send_text(out, MavSeverity::MAV_SEVERITY_WARNING, text);
-    }
-    match reply.change {
-        Some(MissionChange::Uploaded(m)) => {
-            info!(items = m.len(), "mission uploaded");
-            let _ = ctx.missions.send(Some(m));
-        }
-        Some(MissionChange::Cleared) => {
-            info!("mission cleared");
-            let _ = ctx.missions.send(None);
-        }
-        None => {}
-    }
-}
+use crate::tick::Event;
 
 /// The replies queue (bounded) and its drop counter.
 #[derive(Debug, Clone)]
@@ -104,70 +46,18 @@ impl Replies {
     }
 }
 
-/// The STATUSTEXT that says why a trusted SET_POSITION_TARGET_LOCAL_NED was
-/// refused; each cause has its own words (a ground station hides repeats).
-pub fn setpoint_refusal_text(e: &LinkError) -> String {
-    const VELOCITY_BITS: u16 = 8 | 16 | 32;
-    match e {
-        LinkError::SetpointRejected(SetpointRejection::Frame(frame)) => {
-            format!(
-                "dflat: setpoint refused: frame {} not LOCAL_NED",
-                *frame as u32
-            )
-        }
-        LinkError::SetpointRejected(SetpointRejection::PositionIgnored { type_mask })
-            if type_mask & VELOCITY_BITS != VELOCITY_BITS =>
-        {
-            "dflat: setpoint refused: velocity-only unsupported".to_owned()
-        }
-        LinkError::SetpointRejected(SetpointRejection::PositionIgnored { type_mask }) => {
-            format!("dflat: setpoint refused: x/y/z ignored {type_mask:#06x}")
-        }
-        // Each field its own words (and its own rate limit): a NaN x said
-        // does not hide an infinite z or a NaN yaw after it.
-        LinkError::NonFinite { field, .. } => {
-            format!("dflat: setpoint refused: {field} not finite")
-        }
-        e if e.category() == ErrorCategory::NonFinite => {
-            "dflat: setpoint refused: not finite".to_owned()
-        }
-        _ => "dflat: setpoint refused: malformed".to_owned(),
-    }
-}
-
-/// The STATUSTEXT for a SET_POSITION_TARGET_LOCAL_NED (84) whose payload
-/// did not decode (e.g. coordinate_frame 99); `None` for other frames.
-pub fn undecodable_setpoint_text(e: &dflat_link::FrameError) -> Option<String> {
-    match e {
-        dflat_link::FrameError::Payload {
-            msg_id: 84,
-            fault: dflat_link::PayloadFault::InvalidEnum { enum_type, value },
-        } => Some(format!(
-            "dflat: setpoint refused: {} {value} unknown",
-            enum_type.trim_start_matches("Mav")
-        )),
-        dflat_link::FrameError::Payload { msg_id: 84, .. } => {
-            Some("dflat: setpoint refused: malformed".to_owned())
-        }
-        _ => None,
-    }
-}
-
-fn send_text(out: &Replies, severity: MavSeverity, text: &str) {
-    out.send(statustext(severity, text));
-}
-
 /// Waits until stopped (a stalled task's last state: no work, no beats).
 async fn stalled(task: LinkTask, stop_rx: &mut tokio::sync::watch::Receiver<bool>) {
     warn!(task = task.name(), "test hook: link task stalled");
     let _ = stop_rx.wait_for(|s| *s).await;
 }
 
-/// Receives frames until stopped: signing check, filter and decode, events
-/// for the control thread, answers to commands, refusal texts.
+/// Receives frames until stopped: the I/O around the receive step
+/// ([`ReceiveCore`]): the transport, the clocks, the udpin lock, the tlog,
+/// and the step's outputs handed on (events, replies, missions).
 pub(super) async fn receive_task(
     transport: Transport,
-    mut link: LinkRx,
+    link: LinkRx,
     ctx: RxContext,
     events: std::sync::mpsc::SyncSender<Event>,
     out: Replies,
@@ -176,23 +66,18 @@ pub(super) async fn receive_task(
 ) -> RxReport {
     let mut stop_rx = stop.tx.subscribe();
     let mut report = RxReport::default();
-    // Refusals said once per sender and reason per 10 s, with a count.
-    let mut refusals: RefusalLimiter<(u8, u8)> = RefusalLimiter::default();
-    let mut told_addressing = false;
-    let mut told_yaw = false;
-    let mut missions = MissionProtocol::new(ctx.own, ctx.mission_rules);
+    let mut core = ReceiveCore::new(link, &ctx);
     let mut mission_timer = tokio::time::interval(Duration::from_millis(100));
     mission_timer.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
-    let mut told_unlocked = false;
     let mut beat = tokio::time::interval(BEAT_INTERVAL);
     beat.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    let now = || ctx.epoch.elapsed().as_secs_f64();
     loop {
         let received = tokio::select! {
             biased;
             _ = stop_rx.wait_for(|s| *s) => break,
             _ = mission_timer.tick() => {
-                let now = ctx.epoch.elapsed().as_secs_f64();
-                send_reply(missions.poll(now), &ctx, &out);
+                hand_on(core.poll(now()), &ctx, &events, &out, &mut report);
                 continue;
             }
             _ = beat.tick() => {
@@ -212,16 +97,13 @@ pub(super) async fn receive_task(
         let frame = match received {
             Ok(RecvEvent::Frame(frame)) => frame,
             Ok(RecvEvent::Error(e)) => {
-                debug!(error = %e, "frame error");
-                link.frame_error(&e);
-                // A SET_POSITION_TARGET_LOCAL_NED whose payload does not
-                // decode (a coordinate_frame the dialect does not define):
-                // say why, rate-limited (its sender is not known: the
-                // frame never decoded, so one key for all of them).
-                if let Some(text) = undecodable_setpoint_text(&e) {
-                    let say = refusals.refuse((0, 0), &text, ctx.epoch.elapsed().as_secs_f64());
-                    say_refusal(&out, say, &text, || info!(error = %e, "setpoint refused"));
-                }
+                hand_on(
+                    core.on_frame_error(&e, now()),
+                    &ctx,
+                    &events,
+                    &out,
+                    &mut report,
+                );
                 continue;
             }
             Err(e @ TransportError::Closed { .. }) => {
@@ -240,6 +122,22 @@ pub(super) async fn receive_task(
                 continue;
             }
         };
+        let signing_now = || timestamp_from_system_time(SystemTime::now());
+        let locked_now = match core.gate(&frame, transport.awaiting_peer(), signing_now()) {
+            Gate::Pass => false,
+            Gate::Lock(from) => {
+                if let Err(e) = transport.lock_peer(from).await {
+                    warn!(error = %e, "cannot lock the udpin peer");
+                    continue;
+                }
+                report.peer = Some(from);
+                true
+            }
+            Gate::Foreign => {
+                report.foreign_frames += 1;
+                continue;
+            }
+        };
         // Whole µs since the epoch: the tlog records the same instant, so a
         // replay finds the arrival bit for bit (`tick::arrival_secs`).
         let arrival_us = u64::try_from(
@@ -249,238 +147,46 @@ pub(super) async fn receive_task(
                 .as_micros(),
         )
         .unwrap_or(u64::MAX);
-        let arrival = arrival_secs(arrival_us);
-        let is_setpoint = matches!(frame.message, MavMessage::SET_POSITION_TARGET_LOCAL_NED(_));
-        // udpin without a peer yet: only the autopilot's HEARTBEAT (signed,
-        // with signing on) is looked at; it locks the peer.
-        let unlocked = transport.awaiting_peer();
-        if unlocked {
-            let from_autopilot = matches!(frame.message, MavMessage::HEARTBEAT(_))
-                && frame.header.system_id == u32::from(ctx.own.0)
-                && frame.header.component_id == ctx.autopilot_component;
-            let authentic = from_autopilot
-                && link.signing.as_mut().is_none_or(|s| {
-                    let now = timestamp_from_system_time(SystemTime::now());
-                    matches!(
-                        s.verify(&frame.header, frame.signed.as_ref(), now),
-                        SignatureCheck::Valid { .. }
-                    )
-                });
-            match frame.from {
-                Some(from) if authentic => {
-                    if let Err(e) = transport.lock_peer(from).await {
-                        warn!(error = %e, "cannot lock the udpin peer");
-                        continue;
-                    }
-                    report.peer = Some(from);
-                }
-                _ => {
-                    report.foreign_frames += 1;
-                    if !told_unlocked {
-                        told_unlocked = true;
-                        info!(
-                            from = ?frame.from,
-                            "udpin: frame dropped before the autopilot's HEARTBEAT locked the peer (said once)"
-                        );
-                    }
-                    continue;
-                }
-            }
-        }
-        if link.signing.is_some() && !unlocked {
-            let now = timestamp_from_system_time(SystemTime::now());
-            if let Err(check) =
-                link.authenticate(&frame.header, &frame.message, frame.signed.as_ref(), now)
-            {
-                if is_setpoint {
-                    let text = match check {
-                        SignatureCheck::Unsigned => "dflat: setpoint refused: unsigned",
-                        SignatureCheck::Replayed => "dflat: setpoint refused: replayed",
-                        _ => "dflat: setpoint refused: bad signature",
-                    };
-                    let sender = (frame.header.system_id as u8, frame.header.component_id);
-                    let say = refusals.refuse(sender, text, ctx.epoch.elapsed().as_secs_f64());
-                    say_refusal(&out, say, text, || {
-                        info!(?check, "setpoint refused by signing")
-                    });
-                }
-                continue;
-            }
-        }
-        let outcome = link.handle(&frame.header, &frame.message);
-        // The tlog holds only what passed the filter and authentication
-        // (the tap's `inbound` is off; the rest is counted in `link`).
-        if let Some(tap) = transport.tap()
-            && matches!(outcome, RxOutcome::Accepted(_) | RxOutcome::Rejected(_))
+        let time = FrameTime {
+            arrival_us,
+            now: now(),
+            signing_now: signing_now(),
+            state: ctx.state.load(Ordering::Relaxed),
+            fault: ctx.health.fault(),
+        };
+        let output = core.on_frame(&frame, locked_now, time);
+        if output.record
+            && let Some(tap) = transport.tap()
         {
             tap.record_received_at(&frame, ctx.epoch_unix_us.saturating_add(arrival_us));
         }
-        let sender = (frame.header.system_id as u8, frame.header.component_id);
-        let event = match &outcome {
-            RxOutcome::Accepted(inbound) => {
-                if let Inbound::PositionSetpoint(s) = inbound
-                    && let Some(yaw) = s.yaw
-                    && ctx.yaw_fixed
-                    && !told_yaw
-                    && (dflat_link::math::wrap_pi(yaw - ctx.yaw)).abs() > 1f64.to_radians()
-                {
-                    // The model flies a fixed yaw ψ⋆: the position is
-                    // flown, the yaw is not (said once).
-                    told_yaw = true;
-                    info!(yaw, "setpoint yaw ignored (fixed yaw)");
-                    let text = format!(
-                        "dflat: setpoint yaw ignored, yaw fixed {:.0} deg",
-                        ctx.yaw.to_degrees()
-                    );
-                    send_text(&out, MavSeverity::MAV_SEVERITY_NOTICE, &text);
-                }
-                if let Some(req) = CommandRequest::from_message(&frame.message, sender.0, sender.1)
-                {
-                    let has_mission = missions.mission().has_navigation();
-                    if let Some(action) =
-                        answer_command(&req, &ctx, has_mission, &out, &mut refusals)
-                        && events.try_send(Event::Mission { arrival, action }).is_err()
-                    {
-                        report.events_dropped += 1;
-                    }
-                }
-                if matches!(inbound, Inbound::Other(_)) {
-                    send_reply(missions.handle(&frame.message, sender, arrival), &ctx, &out);
-                }
-                event_from(inbound, ctx.pose_source, arrival)
-            }
-            RxOutcome::Ignored(Verdict::IgnoreNotAddressed) if is_setpoint => {
-                if let MavMessage::SET_POSITION_TARGET_LOCAL_NED(d) = &frame.message
-                    && d.target_system == ctx.own.0
-                    && d.target_component == ctx.autopilot_component
-                    && !told_addressing
-                {
-                    // Where PX4 and ArduPilot users send them: say where
-                    // they go instead (once).
-                    told_addressing = true;
-                    info!("setpoint addressed to the autopilot ignored");
-                    let text = format!(
-                        "dflat: setpoints go to {}/{}, not the autopilot",
-                        ctx.own.0, ctx.own.1
-                    );
-                    send_text(&out, MavSeverity::MAV_SEVERITY_WARNING, &text);
-                }
-                None
-            }
-            RxOutcome::Rejected(e) if is_setpoint => {
-                let text = setpoint_refusal_text(e);
-                let say = refusals.refuse(sender, &text, ctx.epoch.elapsed().as_secs_f64());
-                say_refusal(&out, say, &text, || info!(error = %e, "setpoint refused"));
-                None
-            }
-            RxOutcome::Ignored(Verdict::IgnoreWrongSource) => {
-                if let Some(id) = link
-                    .filter
-                    .unknown_ground_station(&frame.header, &frame.message)
-                {
-                    refuse_unknown_gcs(id, &frame.message, sender, &ctx, &mut refusals, &out);
-                }
-                None
-            }
-            _ => None,
-        };
-        if let Some(event) = event
-            && events.try_send(event).is_err()
-        {
-            report.events_dropped += 1;
-        }
+        hand_on(output, &ctx, &events, &out, &mut report);
     }
-    report.stats = link.stats;
+    report.stats = core.stats();
     report
 }
 
-/// Sends `text` as a WARNING STATUSTEXT as the limiter says: the first
-/// time (and `log`, the caller's INFO/WARN line), again with the count of
-/// repeats held back once the interval passed; repeats in between only at
-/// DEBUG.
-fn say_refusal(out: &Replies, say: Say, text: &str, log: impl FnOnce()) {
-    match say {
-        Say::First => log(),
-        Say::Again { held_back } => debug!(text, held_back, "refusal repeated"),
-        Say::Quiet => {
-            debug!(text, "refusal repeated (not said)");
-            return;
-        }
-    }
-    send_text(out, MavSeverity::MAV_SEVERITY_WARNING, &say.text(text));
-}
-
-/// The refusal of a request (setpoint, command, mission) from system `id`,
-/// a ground station `link.gcs_system_ids` does not name: never acted on; a
-/// command gets COMMAND_ACK DENIED every time; the STATUSTEXT naming the id
-/// and the key to set, and a WARN line, once per sender per 10 s.
-fn refuse_unknown_gcs(
-    id: u8,
-    msg: &MavMessage,
-    sender: (u8, u8),
+/// Hands a receive step's outputs on: replies to the send task, missions
+/// and events to the control thread (an event dropped when its queue is
+/// full is counted).
+fn hand_on(
+    output: RxOutput,
     ctx: &RxContext,
-    refusals: &mut RefusalLimiter<(u8, u8)>,
+    events: &std::sync::mpsc::SyncSender<Event>,
     out: &Replies,
+    report: &mut RxReport,
 ) {
-    if let Some(req) = CommandRequest::from_message(msg, sender.0, sender.1) {
-        out.send(command_ack(&req, MavResult::MAV_RESULT_DENIED));
+    for message in output.replies {
+        out.send(message);
     }
-    use dflat_link::mavlink::Message as _;
-    let text = format!("dflat: id {id} not in link.gcs_system_ids");
-    let say = refusals.refuse(sender, &text, ctx.epoch.elapsed().as_secs_f64());
-    say_refusal(out, say, &text, || {
-        warn!(
-            system = id,
-            component = sender.1,
-            message = msg.message_name(),
-            "request from a ground station not in link.gcs_system_ids refused; add its id there to accept it"
-        );
-    });
-}
-
-/// COMMAND_ACK (and what REQUEST_MESSAGE asked for) for a command the
-/// daemon answers ([`crate::commands`]); the mission command accepted, for
-/// the control thread.
-fn answer_command(
-    req: &CommandRequest,
-    ctx: &RxContext,
-    has_mission: bool,
-    out: &Replies,
-    refusals: &mut RefusalLimiter<(u8, u8)>,
-) -> Option<crate::tick::MissionAction> {
-    let state = ctx.state.load(Ordering::Relaxed);
-    let context = CommandContext::new(has_mission, decode_state(state));
-    let reply = answer(req, ctx.own, &context)?;
-    debug!(command = ?req.command, "command answered");
-    out.send(reply.ack);
-    if let Some(reason) = &reply.reason {
-        // Said once per sender and reason per 10 s (SDKs retry requests).
-        let sender = (req.sender_system, req.sender_component);
-        match refusals.refuse(sender, reason, ctx.epoch.elapsed().as_secs_f64()) {
-            Say::Quiet => debug!(reason, "command refusal repeated (not said)"),
-            say => send_text(out, MavSeverity::MAV_SEVERITY_INFO, &say.text(reason)),
+    for mission in output.missions {
+        let _ = ctx.missions.send(mission);
+    }
+    for event in output.events {
+        if events.try_send(event).is_err() {
+            report.events_dropped += 1;
         }
     }
-    match reply.then {
-        Some(RequestedMessage::Heartbeat) => {
-            let status = if ctx.health.fault() {
-                DaemonStatus::Critical
-            } else {
-                daemon_status(state)
-            };
-            out.send(heartbeat_onboard(status));
-        }
-        Some(RequestedMessage::Status) => {
-            let name = decode_state(state).map_or("starting", |s| s.name());
-            send_text(
-                out,
-                MavSeverity::MAV_SEVERITY_INFO,
-                &format!("dflat: state {name}"),
-            );
-        }
-        None => {}
-    }
-    reply.action
 }
 
 /// What the send task takes from: the command slot, the daemon's own
@@ -511,7 +217,7 @@ pub(super) async fn send_task(
     inputs: SendInputs,
     stop: Arc<Stop>,
     (system_id, component_id): (u8, u8),
-    mut signing: Option<(Signing, TimestampStore)>,
+    signing: Option<(Signing, TimestampStore)>,
 ) -> TxReport {
     let SendInputs {
         commands,
@@ -523,14 +229,14 @@ pub(super) async fn send_task(
         epoch,
     } = inputs;
     let mut report = TxReport::default();
-    let mut persisted = Instant::now();
-    let persist = |s: &Signing, store: &TimestampStore| {
-        if let Err(e) = store.store(s.timestamp()) {
-            warn!(error = %e, "cannot persist the signing timestamp");
-        }
+    let mut sender = Sender {
+        transport,
+        ids: (system_id, component_id),
+        sequence: 0,
+        signing,
+        persisted: Instant::now(),
+        no_peer: 0,
     };
-    let mut sequence: u8 = 0;
-    let mut no_peer = 0u64;
     let mut budget = ReplyBudget::new(REPLY_RATE_HZ, REPLY_BURST, 0.0);
     let mut beat = tokio::time::interval(BEAT_INTERVAL / 2);
     beat.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
@@ -580,19 +286,56 @@ pub(super) async fn send_task(
             report.commands_stale += 1;
             continue;
         }
+        sender.send(&item, &mut report).await;
+    }
+    while replies.try_recv().is_ok() {
+        report.replies_pending += 1;
+    }
+    if let Some((s, store)) = &sender.signing {
+        persist(s, store);
+    }
+    report
+}
+
+/// Persists the signing timestamp (a failure is logged).
+fn persist(s: &Signing, store: &TimestampStore) {
+    if let Err(e) = store.store(s.timestamp()) {
+        warn!(error = %e, "cannot persist the signing timestamp");
+    }
+}
+
+/// The send task's writer: header and sequence, signing (the timestamp
+/// persisted every [`PERSIST_INTERVAL`]), counters and latencies.
+struct Sender {
+    transport: Transport,
+    /// The daemon's (system, component).
+    ids: (u8, u8),
+    sequence: u8,
+    signing: Option<(Signing, TimestampStore)>,
+    /// When the signing timestamp was last persisted.
+    persisted: Instant,
+    /// Messages dropped without a peer (or with the serial queue full).
+    no_peer: u64,
+}
+
+impl Sender {
+    /// Sends `item` (signed with signing on), counted into `report`.
+    async fn send(&mut self, item: &Outgoing, report: &mut TxReport) {
+        let (system_id, component_id) = self.ids;
+        let transport = &self.transport;
         let header = MavHeader {
             system_id: u32::from(system_id),
             component_id,
-            sequence,
+            sequence: self.sequence,
         };
-        sequence = sequence.wrapping_add(1);
-        let sent = match signing.as_mut() {
+        self.sequence = self.sequence.wrapping_add(1);
+        let sent = match self.signing.as_mut() {
             Some((s, store)) => {
                 let now = timestamp_from_system_time(SystemTime::now());
                 let frame = s.sign(&header, &item.message, now);
-                if persisted.elapsed() >= PERSIST_INTERVAL {
+                if self.persisted.elapsed() >= PERSIST_INTERVAL {
                     persist(s, store);
-                    persisted = Instant::now();
+                    self.persisted = Instant::now();
                 }
                 match frame {
                     Ok(frame) => transport.send_frame(&frame).await,
@@ -613,8 +356,8 @@ pub(super) async fn send_task(
                 }
             }
             Ok(SendOutcome::NoPeer | SendOutcome::QueueFull) => {
-                no_peer += 1;
-                if no_peer == 1 {
+                self.no_peer += 1;
+                if self.no_peer == 1 {
                     warn!(
                         "no peer (udpin before the lock, or the link is reconnecting) or the serial queue is full: outbound messages dropped"
                     );
@@ -628,13 +371,6 @@ pub(super) async fn send_task(
             }
         }
     }
-    while replies.try_recv().is_ok() {
-        report.replies_pending += 1;
-    }
-    if let Some((s, store)) = &signing {
-        persist(s, store);
-    }
-    report
 }
 
 /// HEARTBEAT at 1 Hz with the daemon's status; POWEROFF when stopping.
@@ -683,40 +419,4 @@ pub(super) async fn heartbeat_task(
         }
     }
     let _ = out.try_send(Outgoing::plain(heartbeat_onboard(DaemonStatus::Poweroff)));
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// Each refused field has its own words (and so its own rate limit): a
-    /// NaN x said does not hide an infinite z or a NaN yaw after it; a
-    /// coordinate frame the dialect does not define is said too.
-    #[test]
-    fn refusals_name_the_field_and_the_unknown_frame() {
-        let text = |field| {
-            setpoint_refusal_text(&LinkError::NonFinite {
-                message: "SET_POSITION_TARGET_LOCAL_NED",
-                field,
-            })
-        };
-        let (x, z, yaw) = (text("x"), text("z"), text("yaw"));
-        assert_eq!(z, "dflat: setpoint refused: z not finite");
-        assert!(x != z && z != yaw && x != yaw);
-        let frame = dflat_link::FrameError::Payload {
-            msg_id: 84,
-            fault: dflat_link::PayloadFault::InvalidEnum {
-                enum_type: "MavFrame",
-                value: 99,
-            },
-        };
-        let said = undecodable_setpoint_text(&frame).unwrap();
-        assert_eq!(said, "dflat: setpoint refused: Frame 99 unknown");
-        assert!(said.len() <= 50);
-        let other = dflat_link::FrameError::Payload {
-            msg_id: 33,
-            fault: dflat_link::PayloadFault::Other,
-        };
-        assert_eq!(undecodable_setpoint_text(&other), None);
-    }
 }

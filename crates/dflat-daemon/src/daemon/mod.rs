@@ -33,27 +33,28 @@
 
 mod control_loop;
 mod link_tasks;
+mod receive;
+mod start;
+use start::{ControlThread, LinkTasks, OpenLink, PendingRecords, Shared, start_checks};
 
 use std::future::Future;
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU64, Ordering};
-use std::time::{Duration, Instant, SystemTime};
+use std::time::{Duration, Instant};
 
 use dflat_control::Controller;
-use dflat_link::transport::{Endpoint, OpenOptions, TlogTap, Transport, TransportError, UdpInPeer};
-use dflat_link::{
-    DaemonStatus, LinkRx, LinkStats, MavMessage, ThrustMapping, timestamp_from_system_time,
-};
+use dflat_link::transport::{TlogTap, Transport, TransportError};
+use dflat_link::{DaemonStatus, LinkStats, MavMessage};
 use thiserror::Error;
-use tokio::sync::{mpsc, watch};
+use tokio::sync::watch;
 use tracing::{error, info, warn};
 
 use crate::config::{Config, ModelKind, TickMode};
-use crate::control::{build_controller, configured_path, thrust_mapping};
+use crate::control::build_controller;
 use crate::guard::GuardCounts;
-use crate::link_health::{CommandSlot, LinkGuardSummary, LinkHealth, REPLY_QUEUE, StallHook};
+use crate::link_health::{CommandSlot, LinkGuardSummary, LinkHealth, StallHook};
 use crate::records::CsvReport;
 use crate::signing::SigningError;
 use crate::summary::{
@@ -61,9 +62,9 @@ use crate::summary::{
     peak_rss_kib, process_cpu_seconds,
 };
 use crate::supervisor::FlightState;
+use crate::tick::ControlCore;
 pub use crate::tick::supervisor_config;
-use crate::tick::{ControlCore, Event, pose_source, source_filter};
-pub use link_tasks::setpoint_refusal_text;
+pub use receive::setpoint_refusal_text;
 
 /// Capacity of the receive task → control thread queue \[events\].
 const EVENT_QUEUE: usize = 1024;
@@ -549,34 +550,6 @@ pub fn preflight(config: &Config, link_override: Option<&str>) -> Result<(), Dae
     Ok(())
 }
 
-/// The checks a start makes before it opens anything, whatever the
-/// controller: the connection string and `link.peer` (parsed), the
-/// configured path, the thrust mapping.
-fn start_checks(
-    config: &Config,
-    link_override: Option<&str>,
-) -> Result<(Endpoint, Option<SocketAddr>, ThrustMapping), DaemonError> {
-    let url = link_override.unwrap_or(&config.link.url);
-    let endpoint = Endpoint::parse(url).map_err(DaemonError::Link)?;
-    let peer = match config.link.peer.trim() {
-        "" => None,
-        p => Some(p.parse::<SocketAddr>().map_err(|e| {
-            DaemonError::Link(TransportError::BadUrl {
-                url: p.to_owned(),
-                reason: format!("link.peer: {e}"),
-            })
-        })?),
-    };
-    if let Some(path) = configured_path(config) {
-        path?;
-    }
-    let mapping = thrust_mapping(config);
-    mapping
-        .validate()
-        .map_err(|e| DaemonError::Internal(format!("thrust mapping: {e}")))?;
-    Ok((endpoint, peer, mapping))
-}
-
 /// Opens the link, creates the records and starts all parts. Returns once
 /// the daemon is running (state `WaitingForPose` after the first tick).
 pub async fn spawn(
@@ -597,214 +570,64 @@ pub async fn spawn_with_controller(
     link_override: Option<String>,
     controller: Box<dyn Controller>,
 ) -> Result<DaemonHandle, DaemonError> {
-    let (endpoint, peer, mapping) = start_checks(&config, link_override.as_deref())?;
-    let signing =
-        crate::signing::setup(&config.link, timestamp_from_system_time(SystemTime::now()))?;
-    if let Some((s, store)) = &signing {
-        info!(
-            link_id = s.link_id(),
-            timestamp = s.timestamp(),
-            timestamp_file = %store.path().display(),
-            accept_unsigned = ?s.accept_unsigned,
-            "MAVLink 2 signing on"
-        );
-    }
-
-    let controller_name = controller.name().to_owned();
-    // udpin: one peer (link.peer, or the first sender of the autopilot's
-    // HEARTBEAT); udpout connects; tcp / serial reconnect.
-    if peer.is_some() && !matches!(endpoint, Endpoint::UdpIn { .. }) {
-        warn!(link = %endpoint, "link.peer applies to udpin links only: ignored");
-    }
-
-    // Records: never a reason not to fly (disk trouble is noticed). The
-    // link records into the tap from its first frame, so they open first;
-    // should the link not open, they are deleted again, and the oldest
-    // flights are pruned only once it has.
-    let mut records = crate::record_store::open(&config, SystemTime::now());
-    let opened = Transport::open_with(
-        &endpoint,
-        OpenOptions {
-            tap: records.tap.clone(),
-            udpin_peer: UdpInPeer::Lock(peer),
-            reconnect: true,
-        },
-    )
-    .await;
-    let transport = match opened {
-        Ok(t) => t,
-        Err(e) => {
-            // The link's error is the one to report, whatever the clean-up
-            // did (it logs its own trouble).
-            let _ = tokio::task::spawn_blocking(move || records.discard()).await;
-            return Err(DaemonError::Link(e));
-        }
-    };
-    records.prune(&config);
-    let (csv, tap) = (records.csv.take(), records.tap.take());
-    let records_budget = records.budget.clone();
-    let records_summary = std::mem::take(&mut records.summary);
-    let local_addr = transport.local_addr();
-    info!(
-        link = %endpoint,
-        local = ?local_addr,
-        controller = controller.name(),
-        model = ?config.vehicle.model,
-        rate_hz = config.controller.rate_hz,
-        "daemon started"
-    );
-    if config.vehicle.delay_ms > 0.0 || config.vehicle.drag_h > 0.0 || config.vehicle.drag_v > 0.0 {
-        let ticks = crate::control::delay_ticks(&config);
-        info!(
-            delay_ms = config.vehicle.delay_ms,
-            delay_ticks = ticks,
-            flown_ms = ticks as f64 * 1e3 / config.controller.rate_hz,
-            drag_h = config.vehicle.drag_h,
-            drag_v = config.vehicle.drag_v,
-            "vehicle model: input delay rounded to control ticks, linear drag"
-        );
-    }
-
+    let checked = start_checks(&config, link_override.as_deref())?;
+    let signing = OpenLink::signing(&config)?;
+    // Records: never a reason not to fly (disk trouble is noticed).
+    let records = PendingRecords::open(&config);
+    let (mut link, mut records) = OpenLink::open(&config, &checked, signing, records).await?;
+    say_started(&config, &link, controller.name());
     let (stop_tx, stop_rx) = watch::channel(false);
-    let stop = Arc::new(Stop {
-        flag: AtomicBool::new(false),
-        tx: stop_tx,
-        graceful: AtomicBool::new(false),
-    });
-    let state = Arc::new(AtomicU8::new(ST_BOOT));
-    let ticks = Arc::new(AtomicU64::new(0));
-    let fault = Arc::new(std::sync::Mutex::new(None));
     let epoch = Instant::now();
+    let shared = Shared {
+        stop: Arc::new(Stop {
+            flag: AtomicBool::new(false),
+            tx: stop_tx,
+            graceful: AtomicBool::new(false),
+        }),
+        state: Arc::new(AtomicU8::new(ST_BOOT)),
+        ticks: Arc::new(AtomicU64::new(0)),
+        fault: Arc::new(std::sync::Mutex::new(None)),
+        epoch,
+        health: Arc::new(LinkHealth::new(epoch)),
+        stall: StallHook::from_env(),
+    };
     let epoch_unix_us = dflat_link::transport::unix_time_us();
     let cpu_at_start = process_cpu_seconds();
-
-    let (event_tx, event_rx) = std::sync::mpsc::sync_channel::<Event>(EVENT_QUEUE);
-    let (out_tx, out_rx) = mpsc::channel::<Outgoing>(OUTBOUND_QUEUE);
-    let (mission_tx, mission_rx) = std::sync::mpsc::channel::<Option<crate::mission::Mission>>();
-    let (reply_tx, reply_rx) = mpsc::channel::<Outgoing>(REPLY_QUEUE);
-    let replies_dropped = Arc::new(AtomicU64::new(0));
-    let commands = Arc::new(CommandSlot::<Outgoing>::default());
-    let health = Arc::new(LinkHealth::new(epoch));
-    let stall = StallHook::from_env();
-    if let Some(h) = stall {
-        warn!(
-            task = h.task.name(),
-            after_s = h.after_s,
-            "test-only stall hook set (DFLAT_TEST_STALL_TASK)"
-        );
-    }
-
-    let own = (config.link.system_id, config.link.component_id);
-    if let Some(id) = config.link.gcs_system_id {
-        tracing::warn!(
-            id,
-            "link.gcs_system_id is deprecated: read as link.gcs_system_ids = [{id}] (MAVSDK's 245 is not heard); set link.gcs_system_ids instead"
-        );
-    }
-    let mut link_rx = LinkRx::new(source_filter(&config.link));
-    link_rx.signing = signing.as_ref().map(|(s, _)| s.clone());
-    let rx_ctx = link_tasks::RxContext {
+    let (tasks, ends) = LinkTasks::start(&config, &mut link, &shared, epoch_unix_us);
+    let records_budget = records.budget.clone();
+    let controller_name = controller.name().to_owned();
+    let control = control_loop::ControlLoop {
+        core: ControlCore::new(&config, controller, checked.mapping),
+        events: ends.events,
+        missions: ends.missions,
+        out: ends.out,
+        commands: tasks.commands.clone(),
+        health: shared.health.clone(),
+        stop: shared.stop.clone(),
+        state: shared.state.clone(),
+        ticks: shared.ticks.clone(),
         epoch,
-        epoch_unix_us,
-        pose_source: pose_source(config.link.pose_source),
-        own,
-        autopilot_component: config.link.autopilot_component,
-        yaw: config.vehicle.yaw_deg.to_radians(),
-        yaw_fixed: config.vehicle.yaw_mode == crate::config::YawMode::Fixed,
-        state: state.clone(),
-        mission_rules: crate::mission::ItemRules::of(&config.mission),
-        missions: mission_tx,
-        health: health.clone(),
-        stall,
-    };
-    let rx = tokio::spawn(link_tasks::receive_task(
-        transport.clone(),
-        link_rx,
-        rx_ctx,
-        event_tx,
-        link_tasks::Replies {
-            tx: reply_tx,
-            dropped: replies_dropped.clone(),
-        },
-        stop.clone(),
-        fault.clone(),
-    ));
-    let period = Duration::from_secs_f64(1.0 / config.controller.rate_hz);
-    let tx = tokio::spawn(link_tasks::send_task(
-        transport.clone(),
-        link_tasks::SendInputs {
-            commands: commands.clone(),
-            out: out_rx,
-            replies: reply_rx,
-            max_command_age: period,
-            health: health.clone(),
-            stall,
-            epoch,
-        },
-        stop.clone(),
-        own,
-        signing,
-    ));
-    let heartbeat = tokio::spawn(link_tasks::heartbeat_task(
-        out_tx.clone(),
-        state.clone(),
-        stop.clone(),
-        health.clone(),
-        stall,
-        epoch,
-    ));
-
-    let (rt_tx, rt_rx) = tokio::sync::oneshot::channel();
-    let loop_ctx = control_loop::ControlLoop {
-        core: ControlCore::new(&config, controller, mapping),
-        events: event_rx,
-        missions: mission_rx,
-        out: out_tx,
-        commands: commands.clone(),
-        health: health.clone(),
-        stop: stop.clone(),
-        state: state.clone(),
-        ticks: ticks.clone(),
-        epoch,
-        csv,
+        csv: records.csv.take(),
         records: records_budget.clone(),
-        period,
+        period: period(&config),
         pose_lock: config.controller.tick == TickMode::Pose,
         pose_wait: config.controller.pose_wait_ms / 1000.0,
         realtime: config.realtime.clone(),
-        realtime_result: Some(rt_tx),
+        realtime_result: None,
     };
-    let control = std::thread::Builder::new()
-        .name("dflat-control".into())
-        .spawn(move || loop_ctx.run())
-        .map_err(|e| DaemonError::Internal(format!("cannot start the control thread: {e}")))?;
-    // The control thread applies `[realtime]` first: refuse to start when
-    // the system refused (the other parts stop with the stop request).
-    match rt_rx.await {
-        Ok(Ok(_)) => {}
-        Ok(Err(e)) => {
-            error!(error = %e, "real-time settings refused");
-            stop.request();
-            let _ = control.join();
-            return Err(DaemonError::Realtime(e));
-        }
-        Err(_) => {
-            return Err(DaemonError::Internal(
-                "control thread ended at start".into(),
-            ));
-        }
-    }
-
+    let control = ControlThread::start(control, shared.stop.clone())
+        .await?
+        .into_handle()?;
     Ok(DaemonHandle {
-        stop,
+        stop: shared.stop,
         stop_rx,
-        state,
-        ticks,
-        local_addr,
-        fault,
-        health,
+        state: shared.state,
+        ticks: shared.ticks,
+        local_addr: link.local_addr,
+        fault: shared.fault,
+        health: shared.health,
         parts: Parts {
-            link: endpoint.to_string(),
+            link: link.endpoint.to_string(),
             controller: controller_name,
             model: match config.vehicle.model {
                 ModelKind::Planar => "planar".into(),
@@ -817,18 +640,61 @@ pub async fn spawn_with_controller(
             },
             started: epoch,
             cpu_at_start,
-            tap,
-            transport,
-            commands,
-            replies_dropped,
+            tap: records.tap.take(),
+            transport: link.transport,
+            commands: tasks.commands,
+            replies_dropped: tasks.replies_dropped,
             records_budget,
-            records_summary,
+            records_summary: std::mem::take(&mut records.summary),
             control,
-            rx,
-            tx,
-            heartbeat,
+            rx: tasks.rx,
+            tx: tasks.tx,
+            heartbeat: tasks.heartbeat,
         },
     })
+}
+
+/// The control period of `config`.
+fn period(config: &Config) -> Duration {
+    Duration::from_secs_f64(1.0 / config.controller.rate_hz)
+}
+
+/// Logs the start: the link, the controller and the model; the deprecated
+/// `link.gcs_system_id`; the test-only stall hook.
+fn say_started(config: &Config, link: &OpenLink, controller: &str) {
+    info!(
+        link = %link.endpoint,
+        local = ?link.local_addr,
+        controller,
+        model = ?config.vehicle.model,
+        rate_hz = config.controller.rate_hz,
+        "daemon started"
+    );
+    let v = &config.vehicle;
+    if v.delay_ms > 0.0 || v.drag_h > 0.0 || v.drag_v > 0.0 {
+        let ticks = crate::control::delay_ticks(config);
+        info!(
+            delay_ms = v.delay_ms,
+            delay_ticks = ticks,
+            flown_ms = ticks as f64 * 1e3 / config.controller.rate_hz,
+            drag_h = v.drag_h,
+            drag_v = v.drag_v,
+            "vehicle model: input delay rounded to control ticks, linear drag"
+        );
+    }
+    if let Some(h) = StallHook::from_env() {
+        warn!(
+            task = h.task.name(),
+            after_s = h.after_s,
+            "test-only stall hook set (DFLAT_TEST_STALL_TASK)"
+        );
+    }
+    if let Some(id) = config.link.gcs_system_id {
+        warn!(
+            id,
+            "link.gcs_system_id is deprecated: read as link.gcs_system_ids = [{id}] (MAVSDK's 245 is not heard); set link.gcs_system_ids instead"
+        );
+    }
 }
 
 #[cfg(test)]

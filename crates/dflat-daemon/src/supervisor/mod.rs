@@ -11,7 +11,7 @@
 //!                  path / setpoint  ▼  │                                 │
 //!                                   Tracking ────────────────────────────┘
 //!
-//!        stale pose / silent autopilot                 fresh pose + autopilot alive
+//!        the failsafe machine enters              the failsafe machine clears
 //! Standby, Holding, Tracking ──────────────► Failsafe ─────────────────► Standby / Holding
 //! ```
 //!
@@ -44,10 +44,12 @@
 //! while engaged first streams level hover for at most
 //! `safety.level_hover_max_ms`, so that the autopilot holds a level
 //! command, not the last tilt, until its offboard-loss timeout. What
-//! happens in a failsafe — the level hover, letting go, the controller's
-//! trial, how long recovery is latched — is the control core's failsafe
-//! state machine (`tick/failsafe.rs`); this machine detects stale pose and
-//! a silent autopilot, and recovers when [`Supervisor::tick`] is allowed to.
+//! happens in a failsafe, and when it is entered and left, is the failsafe
+//! state machine's (`tick/failsafe.rs`), the one owner of every failure
+//! cause: stale pose and a silent autopilot among them. This machine
+//! records the pose and heartbeat arrivals it judges them by
+//! ([`Supervisor::links`]) and follows its decisions
+//! ([`Supervisor::enter_failsafe`], [`Supervisor::recover`]).
 //!
 //! Rooms: this file the state, engagement and the tick; `state.rs` the
 //! vocabulary (states, goals, causes, transitions); `goals.rs` the goals
@@ -58,7 +60,8 @@ use crate::motion::Motion;
 mod goals;
 mod state;
 pub use state::{
-    Cause, FlightState, Goal, Refusal, SetpointOutcome, SupervisorConfig, TickDecision, Transition,
+    Cause, FlightState, Goal, Links, Refusal, SetpointOutcome, SupervisorConfig, TickDecision,
+    Transition,
 };
 
 /// Slower than this \[m/s\] after an engagement counts as braked.
@@ -273,15 +276,40 @@ impl Supervisor {
         self.motion.map(|m| m.speed())
     }
 
-    /// Forces failsafe at `t` for `cause` (the model residual, the
-    /// controller failing). `None` when not streaming. How long recovery
-    /// waits is the failsafe machine's (`tick/failsafe.rs`): see
-    /// [`Supervisor::tick`].
-    pub fn force_failsafe(&mut self, t: f64, cause: Cause) -> Option<Transition> {
+    /// `Failsafe` at `t` for `cause`, as the failsafe machine decided
+    /// (`tick/failsafe.rs`): braking and the setpoint last accepted are
+    /// forgotten. `None` when not streaming.
+    pub fn enter_failsafe(&mut self, t: f64, cause: Cause) -> Option<Transition> {
         if !self.state.streams() {
             return None;
         }
+        self.braking = None;
         Some(self.enter(FlightState::Failsafe, cause, t))
+    }
+
+    /// Out of `Failsafe` at `t`, as the failsafe machine decided (its
+    /// cause cleared): the mission is abandoned; engaged, brake and hold,
+    /// else stand by. `None` when not in `Failsafe`.
+    pub fn recover(&mut self, t: f64) -> Option<Transition> {
+        if self.state != FlightState::Failsafe {
+            return None;
+        }
+        self.pending = Goal::None;
+        let engaged = self.autopilot_engaged();
+        Some(self.start_streaming(t, engaged))
+    }
+
+    /// What the pose and heartbeat arrivals say at `t` \[s\]: a pose
+    /// within `pose_timeout`, a HEARTBEAT within `autopilot_timeout`.
+    pub fn links(&self, t: f64) -> Links {
+        Links {
+            pose_fresh: self
+                .last_pose
+                .is_some_and(|(arrival, _)| t - arrival <= self.cfg.pose_timeout),
+            autopilot_alive: self
+                .last_heartbeat
+                .is_some_and(|h| t - h <= self.cfg.autopilot_timeout),
+        }
     }
 
     /// The current state.
@@ -328,23 +356,18 @@ impl Supervisor {
         }
     }
 
-    /// The control tick at `t` \[s\]. `may_recover`: a failsafe may end
-    /// now (false while the failsafe machine latches it: a residual
-    /// failsafe's first seconds, a controller not yet trialled).
-    pub fn tick(&mut self, t: f64, may_recover: bool) -> TickDecision {
+    /// The control tick at `t` \[s\]: the start, engagement, the pilot's
+    /// override and the end of braking. Entering and leaving `Failsafe` are
+    /// the failsafe machine's ([`Supervisor::enter_failsafe`],
+    /// [`Supervisor::recover`]).
+    pub fn tick(&mut self, t: f64) -> TickDecision {
         if self.entered_at.is_none() {
             self.entered_at = Some(t);
         }
-        let pose = self
-            .last_pose
-            .filter(|(arrival, _)| t - arrival <= self.cfg.pose_timeout);
-        let autopilot_alive = self
-            .last_heartbeat
-            .is_some_and(|h| t - h <= self.cfg.autopilot_timeout);
-        let mut reset_controller = false;
+        let links = self.links(t);
         let engaged = self.autopilot_engaged();
-        let transition = match (self.state, pose) {
-            (FlightState::WaitingForPose, Some(_)) if autopilot_alive => {
+        let transition = match self.state {
+            FlightState::WaitingForPose if links.pose_fresh && links.autopilot_alive => {
                 if engaged {
                     // Applied from the first command: a restart mid-flight
                     // (or `link.engagement = "always"`). Never take the
@@ -360,26 +383,7 @@ impl Supervisor {
                     Some(self.enter(FlightState::Standby, Cause::PoseFresh, t))
                 }
             }
-            (FlightState::Failsafe, Some(_))
-                if autopilot_alive && may_recover && !self.stopping =>
-            {
-                // A failsafe abandons the mission: hold (or stand by).
-                self.pending = Goal::None;
-                Some(self.start_streaming(t, engaged))
-            }
-            (FlightState::Standby | FlightState::Holding | FlightState::Tracking, _)
-                if pose.is_none() || !autopilot_alive =>
-            {
-                reset_controller = true;
-                self.braking = None;
-                let cause = if pose.is_none() {
-                    Cause::PoseStale
-                } else {
-                    Cause::AutopilotSilent
-                };
-                Some(self.enter(FlightState::Failsafe, cause, t))
-            }
-            (FlightState::Standby, _) if engaged => {
+            FlightState::Standby if engaged => {
                 // An engagement the daemon saw happen: the explicit start
                 // `mission.start = "path"` waits for.
                 if self.cfg.start_path
@@ -391,11 +395,11 @@ impl Supervisor {
                 }
                 Some(self.engage(t, Cause::Engaged))
             }
-            (FlightState::Standby, _) => {
+            FlightState::Standby => {
                 self.follow();
                 None
             }
-            (FlightState::Holding | FlightState::Tracking, _) if !engaged => {
+            FlightState::Holding | FlightState::Tracking if !engaged => {
                 // Pilot override: the mission goal is kept for the hand-back.
                 self.pending = match self.goal {
                     g @ (Goal::Path | Goal::Setpoint(_) | Goal::Mission | Goal::Stream)
@@ -411,7 +415,7 @@ impl Supervisor {
                 self.follow();
                 Some(self.enter(FlightState::Standby, Cause::PilotControl, t))
             }
-            (FlightState::Holding, _) if self.braked(t) => {
+            FlightState::Holding if self.braked(t) => {
                 self.braking = None;
                 match self.pending {
                     g @ (Goal::Path | Goal::Setpoint(_) | Goal::Mission | Goal::Stream) => {
@@ -435,7 +439,6 @@ impl Supervisor {
         };
         TickDecision {
             stream: self.state.streams(),
-            reset_controller,
             transition,
         }
     }

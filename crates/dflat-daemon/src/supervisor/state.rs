@@ -307,10 +307,19 @@ pub enum SetpointOutcome {
 pub struct TickDecision {
     /// Run the controller and send SET_ATTITUDE_TARGET.
     pub stream: bool,
-    /// Reset the controller before anything else (entering failsafe).
-    pub reset_controller: bool,
     /// The state change at this tick, if any.
     pub transition: Option<Transition>,
+}
+
+/// What the pose and heartbeat arrivals say at a tick
+/// ([`Supervisor::links`]): the failsafe machine's stale-pose and
+/// silent-autopilot causes, and the start's condition.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Links {
+    /// A pose arrived within the pose timeout.
+    pub pose_fresh: bool,
+    /// An autopilot HEARTBEAT arrived within its timeout.
+    pub autopilot_alive: bool,
 }
 
 /// Parameters of the [`Supervisor`].

@@ -3,12 +3,13 @@
 //! failsafe machine chooses: `tick/exit.rs`).
 
 use dflat_control::Measurement;
+use dflat_link::dialect::MavSeverity;
 use dflat_link::set_attitude_target;
 use nalgebra::Vector3;
 use tracing::{error, info};
 
 use super::exit::{TickError, update_caught};
-use super::failsafe::{Action, Event};
+use super::failsafe::Event;
 use super::pose::PoseSample;
 use super::{ControlCore, SentCommand};
 use crate::records::{CsvDisturbance, CsvRow};
@@ -16,28 +17,28 @@ use crate::summary::DisturbanceSummary;
 use crate::supervisor::{FlightState, Goal};
 
 impl ControlCore {
-    /// Runs the controller on `pose` and produces the tick's command (or
-    /// none when it cannot be encoded); returns it and the solve time.
+    /// Runs the controller on `pose` towards the reference and produces the
+    /// tick's command (or none when it cannot be encoded); returns it and
+    /// the solve time. `None`: no reference, the controller did not run.
     pub(super) fn control(
         &mut self,
         t: f64,
         pose: PoseSample,
         stopwatch: &mut dyn FnMut() -> f64,
         row: &mut CsvRow,
-    ) -> (Option<SentCommand>, u32) {
-        let multi_rate = self.multi_rate;
+    ) -> Option<(Option<SentCommand>, u32)> {
+        let mut reference = self.goals.reference.take()?;
+        let multi_rate = self.settings.multi_rate;
         let measurement = self.tick_measurement(t, &pose);
         // Standby: the tick before sent a command the autopilot did not
         // apply; record the input its attitude shows instead, before this
         // tick's update uses the window.
         self.correct_standby_input();
         let t0 = stopwatch();
-        let Some(reference) = self.reference.as_mut() else {
-            unreachable!("control() runs with a reference")
-        };
         // Routes and streams are trajectories in time: at the measurement's.
         reference.set_time(measurement.t);
-        let result = update_caught(self.controller.as_mut(), &measurement, reference);
+        let result = update_caught(self.controller.as_mut(), &measurement, &mut reference);
+        self.goals.reference = Some(reference);
         if result.is_err() && multi_rate {
             // After a reset (panic) the window needs a sample again (a
             // repeated sample replaces the one held).
@@ -47,10 +48,14 @@ impl ControlCore {
         let solve_us = (solve * 1e6).min(f64::from(u32::MAX)) as u32;
         row.solve_us = Some(solve_us);
         let path_done = matches!(self.supervisor.goal(), Goal::Path)
-            && self.reference.as_ref().is_some_and(|r| r.is_finished());
+            && self
+                .goals
+                .reference
+                .as_ref()
+                .is_some_and(|r| r.is_finished());
         let produced = result.and_then(|out| {
             let command = self.guarded(&out.command)?;
-            if solve > self.period {
+            if solve > self.settings.period {
                 return Err(TickError::DeadlineOverrun { solve_us });
             }
             Ok((out, command))
@@ -59,34 +64,33 @@ impl ControlCore {
         // (the previous plan, the held command, then level hover).
         let (command, out) = match produced {
             Ok((out, command)) => {
-                if let Action::Recovered { failed } = self.failsafe_on(Event::Solved) {
-                    info!(ticks = failed, "controller recovered");
-                }
+                self.failsafe_on(t, Event::Solved, None, &mut row.guard);
                 self.counts.solves.record(&out);
-                self.fallback.good(command);
-                self.residual
+                self.failsafe.fallback.good(command);
+                self.failsafe
+                    .residual
                     .predict([out.plan[1].x, out.plan[1].y, out.plan[1].z]);
                 (command, Some(out))
             }
             Err(failure) => match self.fallback_command(t, &measurement, &failure, row) {
                 Some(command) => (command, None),
-                None => return (None, solve_us),
+                None => return Some((None, solve_us)),
             },
         };
         // This tick's command is not applied in standby: correct it at the
         // next tick from the attitude then.
-        self.standby_attitude = if self.supervisor.state() == FlightState::Standby {
-            self.attitude
+        self.engagement.standby_attitude = if self.supervisor.state() == FlightState::Standby {
+            self.poses.attitude
         } else {
             None
         };
         let time_boot_ms = (t * 1000.0) as u64 as u32;
         // Every path above is guarded (or is the fallback's own finite
         // hover); the encoder refuses a non-finite field all the same.
-        let sent = match set_attitude_target(self.target, time_boot_ms, &command) {
+        let sent = match set_attitude_target(self.settings.target, time_boot_ms, &command) {
             Ok(message) => {
-                let fresh = self.last_used_arrival != Some(pose.arrival);
-                self.last_used_arrival = Some(pose.arrival);
+                let fresh = self.poses.last_used_arrival != Some(pose.arrival);
+                self.poses.last_used_arrival = Some(pose.arrival);
                 self.counts.commands += 1;
                 row.command = Some([command.roll, command.pitch, command.yaw, command.thrust]);
                 Some(SentCommand {
@@ -125,7 +129,7 @@ impl ControlCore {
             // Holding the end, or the path again (`mission.repeat`).
             self.refresh_reference();
         }
-        (sent, solve_us)
+        Some((sent, solve_us))
     }
 
     /// Says in words when the learned residual starts acting, fades (out of
@@ -147,6 +151,21 @@ impl ControlCore {
                 }
             };
             info!(status = ?s, "{words}");
+            // To the ground station too (STATUSTEXT holds 50 characters).
+            let (severity, text) = match s {
+                LearnedStatus::Active => {
+                    (MavSeverity::MAV_SEVERITY_INFO, "learned residual acting")
+                }
+                LearnedStatus::OutOfSupport => (
+                    MavSeverity::MAV_SEVERITY_NOTICE,
+                    "learned residual faded: outside its data",
+                ),
+                LearnedStatus::ErrorGrew => (
+                    MavSeverity::MAV_SEVERITY_WARNING,
+                    "learned residual faded: its error grew",
+                ),
+            };
+            self.text(severity, text);
         }
         self.learned_said = status;
     }
@@ -157,9 +176,13 @@ impl ControlCore {
     /// last: no new pose).
     pub(super) fn tick_measurement(&self, t: f64, pose: &PoseSample) -> Measurement {
         Measurement {
-            t: if self.multi_rate { t } else { pose.capture },
+            t: if self.settings.multi_rate {
+                t
+            } else {
+                pose.capture
+            },
             position: Vector3::from(pose.position),
-            yaw: self.yaw_of(pose.yaw, self.attitude_yaw),
+            yaw: self.yaw_of(pose.yaw, self.poses.attitude_yaw),
         }
     }
 }

@@ -53,8 +53,8 @@ pub const STOP_LEVEL_RAMP: f64 = 4.0 * std::f64::consts::PI / 180.0;
 impl ControlCore {
     /// Clamps the reference about to be flown into the fence (idempotent).
     pub(super) fn bound_reference(&mut self) {
-        let bounds = self.envelope.bounds;
-        if let Some(r) = self.reference.as_mut()
+        let bounds = self.goals.envelope.bounds;
+        if let Some(r) = self.goals.reference.as_mut()
             && r.bounds().is_none()
         {
             r.set_bounds(Some(bounds));
@@ -64,19 +64,19 @@ impl ControlCore {
     /// A vehicle measured faster than the speed limit while engaged is
     /// braked to a stop (said once per excursion, counted).
     pub(super) fn check_overspeed(&mut self, t: f64) {
-        let Some(speed) = self.motion.estimate().map(|m| m.speed()) else {
+        let Some(speed) = self.poses.motion.estimate().map(|m| m.speed()) else {
             return;
         };
-        let limit = self.envelope.max_speed;
+        let limit = self.goals.envelope.max_speed;
         if speed <= limit {
-            self.overspeed = false;
+            self.goals.overspeed = false;
             return;
         }
-        if self.overspeed || speed <= limit * (1.0 + OVERSPEED_MARGIN) {
+        if self.goals.overspeed || speed <= limit * (1.0 + OVERSPEED_MARGIN) {
             return;
         }
         if let Some(tr) = self.supervisor.overspeed(t) {
-            self.overspeed = true;
+            self.goals.overspeed = true;
             self.counts.guards.overspeed_brakes += 1;
             warn!(speed, limit, "faster than safety.max_speed_mps: braking");
             self.announce(tr);
@@ -90,23 +90,23 @@ impl ControlCore {
 
     /// Begins the stop sequence at `t` (module docs). Idempotent.
     pub fn begin_stop(&mut self, t: f64) {
-        if self.stop.is_some() {
+        if self.engagement.stop.is_some() {
             return;
         }
         // The records say where the stop began (a replay begins it there).
-        self.stop_marked = true;
+        self.engagement.stop_marked = true;
         let state = self.supervisor.state();
         let engaged = state.engaged();
         let (times, transitions) = (
             self.supervisor.time_in_states(t),
             self.supervisor.transitions(),
         );
-        let brakes =
-            self.config.safety.stop_brake_ms > 0.0 || self.config.safety.stop_level_ms > 0.0;
+        let f = &self.settings.failsafe;
+        let brakes = f.stop_brake > 0.0 || f.stop_level > 0.0;
         if !engaged || !brakes {
             // Not engaged: no transition, nothing to brake.
             let _ = self.supervisor.begin_stop(t);
-            self.stop = Some(Stop {
+            self.engagement.stop = Some(Stop {
                 started: t,
                 state,
                 level_since: None,
@@ -119,7 +119,7 @@ impl ControlCore {
             return;
         }
         info!("stopping: brake, level, then the stream stops");
-        if self.config.safety.stop_requests_hold
+        if self.settings.failsafe.stop_requests_hold
             && let Some(request) = self.hold_request()
         {
             self.text(
@@ -132,7 +132,7 @@ impl ControlCore {
             self.announce(tr);
             self.refresh_reference();
         }
-        self.stop = Some(Stop {
+        self.engagement.stop = Some(Stop {
             started: t,
             state,
             level_since: None,
@@ -148,7 +148,7 @@ impl ControlCore {
     /// [`STOP_LEVEL_RAMP`] per tick in roll and in pitch (no step); else
     /// `level` unchanged.
     pub(super) fn stop_ramp(&self, level: AttitudeCommand) -> AttitudeCommand {
-        if self.stop.is_none() {
+        if self.engagement.stop.is_none() {
             return level;
         }
         let Some(last) = self.last_sent else {
@@ -166,24 +166,26 @@ impl ControlCore {
     /// The flight state when the stop was asked for (`None` before):
     /// the summary's final state (the stop's own brake and level follow it).
     pub fn state_at_stop(&self) -> Option<FlightState> {
-        self.stop.map(|s| s.state)
+        self.engagement.stop.map(|s| s.state)
     }
 
     /// Time in each state up to the stop (`now` without one) \[s\].
     pub fn time_in_states_before_stop(&self, now: f64) -> [f64; 5] {
-        self.stop
+        self.engagement
+            .stop
             .map_or_else(|| self.supervisor.time_in_states(now), |s| s.times)
     }
 
     /// State changes up to the stop.
     pub fn transitions_before_stop(&self) -> u64 {
-        self.stop
+        self.engagement
+            .stop
             .map_or_else(|| self.supervisor.transitions(), |s| s.transitions)
     }
 
     /// What the stop sequence did, if one streamed anything.
     pub fn stop_summary(&self) -> Option<crate::summary::StopSummary> {
-        let s = self.stop?;
+        let s = self.engagement.stop?;
         Some(crate::summary::StopSummary {
             duration_s: s.last_command.map_or(0.0, |t| (t - s.started).max(0.0)),
             commands: s.commands,
@@ -193,24 +195,24 @@ impl ControlCore {
     /// How long the stop sequence may take \[s\]: `safety.stop_brake_ms`
     /// plus `safety.stop_level_ms`.
     pub fn stop_bound(&self) -> f64 {
-        let s = &self.config.safety;
-        (s.stop_brake_ms + s.stop_level_ms) / 1000.0
+        let f = &self.settings.failsafe;
+        f.stop_brake + f.stop_level
     }
 
     /// True once the stop sequence has run: the stream may stop. `false`
     /// before [`ControlCore::begin_stop`].
     pub fn stop_done(&self, t: f64) -> bool {
-        let Some(stop) = self.stop else {
+        let Some(stop) = self.engagement.stop else {
             return false;
         };
         if stop.done {
             return true;
         }
-        let s = &self.config.safety;
+        let f = &self.settings.failsafe;
         match stop.level_since {
-            Some(since) => t - since >= s.stop_level_ms / 1000.0,
+            Some(since) => t - since >= f.stop_level,
             // Braking ran out, and no level is asked for.
-            None => s.stop_level_ms <= 0.0 && t - stop.started >= s.stop_brake_ms / 1000.0,
+            None => f.stop_level <= 0.0 && t - stop.started >= f.stop_brake,
         }
     }
 
@@ -218,7 +220,7 @@ impl ControlCore {
     /// out of time; done when the autopilot no longer applies our commands
     /// or the stream stopped anyway (a failsafe let go).
     pub(super) fn stop_tick(&mut self, t: f64, level: dflat_link::AttitudeCommand) {
-        let Some(mut stop) = self.stop else {
+        let Some(mut stop) = self.engagement.stop else {
             return;
         };
         if stop.done {
@@ -226,7 +228,7 @@ impl ControlCore {
         }
         let state = self.supervisor.state();
         let streaming_level = matches!(
-            self.failsafe,
+            self.failsafe.state,
             super::failsafe::Failsafe::FailsafeLevel { .. }
         );
         let stream_off = if state == FlightState::Failsafe {
@@ -240,19 +242,26 @@ impl ControlCore {
             // The autopilot left offboard (its own hold): nothing to brake.
             stop.done = true;
         } else if stop.level_since.is_none() {
-            let s = &self.config.safety;
+            let f = &self.settings.failsafe;
             let braked = self.supervisor.speed().is_some_and(|v| v < BRAKED_SPEED);
-            let out_of_time = t - stop.started >= s.stop_brake_ms / 1000.0;
-            if (braked || out_of_time) && s.stop_level_ms > 0.0 {
-                if let Some(tr) = self.supervisor.force_failsafe(t, Cause::ShutdownLevel) {
-                    self.reset_controller();
-                    self.last_used_arrival = None;
-                    self.on_transition(t, tr, level);
-                }
+            let out_of_time = t - stop.started >= f.stop_brake;
+            if (braked || out_of_time) && f.stop_level > 0.0 {
+                // The stop's level follows a brake flown on live poses: no
+                // velocity to cancel, only a ramp to level (`idle_tick`).
+                let tripped = super::failsafe::Event::Tripped {
+                    t,
+                    cause: Cause::ShutdownLevel,
+                    engaged: state.engaged(),
+                    level: super::failsafe::LevelPlan {
+                        command: level,
+                        brake: None,
+                    },
+                };
+                self.failsafe_on(t, tripped, None, &mut None);
                 stop.level_since = Some(t);
             }
         }
-        self.stop = Some(stop);
+        self.engagement.stop = Some(stop);
     }
 
     /// MAV_CMD_DO_SET_MODE to the autopilot's own position hold (PX4
@@ -261,7 +270,7 @@ impl ControlCore {
     fn hold_request(&self) -> Option<MavMessage> {
         use dflat_link::dialect::MavModeFlag;
         let custom = MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED.bits() as f32;
-        let (param2, param3) = match self.mode.map(|m| m.family)? {
+        let (param2, param3) = match self.engagement.mode.map(|m| m.family)? {
             AutopilotFamily::Px4 => (
                 f32::from(dflat_link::modes::px4::AUTO),
                 3.0, // AUTO_LOITER
@@ -270,8 +279,8 @@ impl ControlCore {
             AutopilotFamily::Other => return None,
         };
         Some(MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
-            target_system: self.target.system,
-            target_component: self.target.component,
+            target_system: self.settings.target.system,
+            target_component: self.settings.target.component,
             command: MavCmd::MAV_CMD_DO_SET_MODE,
             confirmation: 0,
             param1: custom,

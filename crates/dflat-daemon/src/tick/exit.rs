@@ -6,12 +6,11 @@
 
 use dflat_control::reference::Reference;
 use dflat_control::{ControlError, Controller, Measurement};
-use dflat_link::dialect::MavSeverity;
 use dflat_link::{AttitudeCommand, LinkError};
 use tracing::warn;
 
 use super::ControlCore;
-use super::failsafe::{Action, Event, Failsafe, FallbackKind};
+use super::failsafe::{Event, Failsafe};
 use crate::guard::NonFinite;
 use crate::records::CsvRow;
 
@@ -75,7 +74,7 @@ impl ControlCore {
         failure: &TickError,
         row: &mut CsvRow,
     ) -> Option<AttitudeCommand> {
-        let first = self.failsafe == Failsafe::Nominal;
+        let first = self.failsafe.state == Failsafe::Nominal;
         match failure {
             TickError::DeadlineOverrun { solve_us } => {
                 self.counts.guards.deadline_overruns += 1;
@@ -93,62 +92,21 @@ impl ControlCore {
         }
         let planned = self
             .controller
-            .plan_fallback(measurement, self.fallback.hold_ticks as usize)
+            .plan_fallback(measurement, self.failsafe.fallback.hold_ticks as usize)
             .and_then(|out| {
                 let command = self.guarded(&out.command).ok()?;
                 Some((command, out.plan[1]))
             });
         match planned {
-            Some((_, next)) => self.residual.predict([next.x, next.y, next.z]),
-            None => self.residual.forget(),
+            Some((_, next)) => self.failsafe.residual.predict([next.x, next.y, next.z]),
+            None => self.failsafe.residual.forget(),
         }
         let event = Event::Failed {
             t,
             planned: planned.is_some(),
-            can_hold: self.fallback.held().is_some(),
+            can_hold: self.failsafe.fallback.held().is_some(),
         };
-        let (kind, announce) = match self.failsafe_on(event) {
-            Action::Fallback { kind, announce } => (kind, announce),
-            Action::LetGo => {
-                // Stop the stream so the autopilot's own failsafe takes over.
-                self.let_go(t);
-                row.guard = Some("let_go");
-                return None;
-            }
-            _ => return None,
-        };
-        let command = match kind {
-            FallbackKind::Plan => {
-                let command = planned.map(|(c, _)| c)?;
-                self.fallback.planned(command);
-                command
-            }
-            FallbackKind::Held => self.fallback.held()?,
-            FallbackKind::LevelHover => self.fallback.level_command(),
-        };
-        let (counter, note, text) = match kind {
-            FallbackKind::Plan => (
-                &mut self.counts.guards.plan_steps,
-                "plan",
-                "dflat: control failed, flying the previous plan",
-            ),
-            FallbackKind::Held => (
-                &mut self.counts.guards.held,
-                "held",
-                "dflat: control failed, holding last command",
-            ),
-            FallbackKind::LevelHover => (
-                &mut self.counts.guards.level_hover,
-                "level",
-                "dflat: control failed, level hover",
-            ),
-        };
-        *counter += 1;
-        row.guard = Some(note);
-        if announce {
-            self.text(MavSeverity::MAV_SEVERITY_CRITICAL, text);
-        }
-        Some(command)
+        self.failsafe_on(t, event, planned.map(|(c, _)| c), &mut row.guard)
     }
 }
 

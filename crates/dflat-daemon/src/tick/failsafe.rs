@@ -1,27 +1,34 @@
 //! What happens after a failure, as one state machine: [`Failsafe`] and
-//! its transitions in one pure function, [`next`].
+//! its transitions in one pure function, [`next`]. It is the one owner of
+//! every failure cause.
 //!
 //! ```text
 //!            failed / late tick                    level hover ran out
 //! Nominal ─────────────────────► PlanFallback ─┐  (safety.level_hover_max_ms)
 //!    ▲   │  (no plan, a good     HeldCommand ──┼──► LevelHover ──────────────► Trial
-//!    │   │   command to hold)                  │                              │ TRIAL_TICKS good
+//!    │   │   command to hold)                  │     (ControlFailed)          │ TRIAL_TICKS good
 //!    │   └─────────────────────────────────────┘                              │ trial solves
 //!    │ good tick (from any of the three)                                      ▼
 //!    │                                                                      LetGo
-//!    │   supervisor's failsafe (pose stale, autopilot silent, residual):      │
-//!    │     left an engaged state → FailsafeLevel (brake, level) ──► LetGo     │
-//!    │     else                  → LetGo                                      │
-//!    └────────────────── supervisor recovers (fresh pose, not latched) ───────┘
+//!    │   a cause while streaming (stale pose, silent autopilot, residual,     │
+//!    │   the stop's level):                                                 │
+//!    │     engaged → FailsafeLevel (brake, level) ──► LetGo                   │
+//!    │     else    → LetGo                                                    │
+//!    └──────── the causes cleared and the clear condition met (Recover) ──────┘
 //! ```
 //!
-//! The supervisor ([`crate::supervisor`]) detects stale pose and a silent
-//! autopilot and owns the engagement state (`FlightState`); the control
-//! core detects failed ticks, the model residual and trial results. Both
-//! report here as [`Event`]s, and [`next`] alone decides the next state and
-//! what the core does about it ([`Action`]): which fallback command to
-//! send, when to say so, when to let go, how long recovery is latched
-//! ([`Failsafe::latched`]) and when the controller may fly again.
+//! The control core reports every fact here as an [`Event`]: each tick's
+//! [`Health`] (fresh pose, a live autopilot, the flight state), a failed
+//! or good tick, a cause it found ([`Event::Tripped`]: the model residual,
+//! the stop's level), a trial solve. [`next`] alone decides the next state
+//! and what the core does ([`Action`]), and `tick/act.rs` alone carries it
+//! out: which fallback command to send, when to say so, when the flight
+//! state enters `FAILSAFE` ([`Action::Enter`]) and when it leaves it
+//! ([`Action::Recover`]). The supervisor ([`crate::supervisor`]) follows.
+//!
+//! The states are ordered by [`Severity`]: a second cause never lowers the
+//! state (the most severe wins, as in PX4's `commander/failsafe`
+//! framework). When a failsafe may clear is its [`Clear`] condition.
 //!
 //! Counters that belong to a state live in its variant: the failed ticks
 //! of a fallback streak, the ticks a command has been held, since when
@@ -29,7 +36,7 @@
 
 use dflat_link::AttitudeCommand;
 
-use crate::supervisor::Cause;
+use crate::supervisor::{Cause, FlightState, Links};
 
 /// After a control failsafe, consecutive successful trial solves (not
 /// sent) before the stream may resume.
@@ -45,6 +52,70 @@ pub struct LevelPlan {
     pub command: AttitudeCommand,
     /// The brake first: (pitch, roll) \[rad\] for this long \[s\].
     pub brake: Option<([f64; 2], f64)>,
+}
+
+/// When a failsafe that stopped the controller may clear once its cause
+/// has (as PX4's failsafe framework's clear conditions); never while the
+/// daemon stops, never in the trial.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Clear {
+    /// When its cause clears (fresh pose, the autopilot alive).
+    WhenCauseClears,
+    /// When its cause clears, not before this time \[s\] (a residual
+    /// failsafe: [`RESIDUAL_FAILSAFE_LATCH`] after it began).
+    NotBefore(f64),
+}
+
+impl Clear {
+    /// The clear condition of a failsafe for `cause` entered at `t` \[s\].
+    pub fn for_cause(cause: Cause, t: f64) -> Self {
+        match cause {
+            Cause::ResidualDiverged => Clear::NotBefore(t + RESIDUAL_FAILSAFE_LATCH),
+            _ => Clear::WhenCauseClears,
+        }
+    }
+
+    /// True while it may not clear at `t` \[s\].
+    pub fn latched(&self, t: f64) -> bool {
+        match *self {
+            Clear::WhenCauseClears => false,
+            Clear::NotBefore(until) => t < until,
+        }
+    }
+}
+
+impl LevelPlan {
+    /// Nothing to stream (a failsafe that does not level).
+    pub const NONE: LevelPlan = LevelPlan {
+        command: AttitudeCommand {
+            roll: 0.0,
+            pitch: 0.0,
+            yaw: 0.0,
+            thrust: 0.0,
+        },
+        brake: None,
+    };
+}
+
+/// The failsafe states by severity, least first: when two causes are
+/// active the more severe state wins (a failed tick never lowers a
+/// supervisor's failsafe; a second failsafe never lowers the first).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Severity {
+    /// The controller flies.
+    Nominal,
+    /// Its previous plan.
+    PlanFallback,
+    /// The last good command, held.
+    HeldCommand,
+    /// Level attitude at hover thrust.
+    LevelHover,
+    /// The failsafe, engaged: brake, then level.
+    FailsafeLevel,
+    /// Stream off.
+    LetGo,
+    /// Stream off, the controller on trial.
+    Trial,
 }
 
 /// The failsafe state of the control core.
@@ -81,14 +152,15 @@ pub enum Failsafe {
         since: f64,
         /// What is streamed.
         plan: LevelPlan,
-        /// No recovery before this time \[s\] (residual failsafe).
-        latched_until: Option<f64>,
+        /// When it may clear.
+        clear: Clear,
     },
     /// Stream off: the autopilot's own failsafe flies. The supervisor
-    /// recovers on fresh pose and a live autopilot, once not latched.
+    /// recovers on fresh pose and a live autopilot, once its clear
+    /// condition allows.
     LetGo {
-        /// No recovery before this time \[s\] (residual failsafe).
-        latched_until: Option<f64>,
+        /// When it may clear.
+        clear: Clear,
     },
     /// The controller could not fly (level hover ran out): stream off, and
     /// the controller is tried each tick on the newest pose (not sent).
@@ -113,19 +185,22 @@ pub enum Event {
         /// A good command is remembered that could be held.
         can_hold: bool,
     },
-    /// The supervisor entered its failsafe at `t` \[s\] for `cause`.
-    FailsafeEntered {
+    /// The facts of the tick at `t`, reported before the flight state
+    /// moves on: stale pose and a silent autopilot are causes the machine
+    /// detects here, and a failsafe clears here.
+    Health(Health),
+    /// The core found a cause at `t` \[s\] while streaming: the model
+    /// residual diverged, or the stop's level is due.
+    Tripped {
         /// Tick time \[s\].
         t: f64,
         /// Why.
         cause: Cause,
-        /// The state left was engaged (the autopilot applied our commands).
+        /// The flight state is engaged (the autopilot applies our commands).
         engaged: bool,
         /// What a levelling failsafe would stream.
         level: LevelPlan,
     },
-    /// The supervisor left its failsafe (fresh pose, autopilot alive).
-    Recovered,
     /// A tick at `t` \[s\] on which the controller does not fly (not
     /// streaming): a failsafe's brake and level hover, while due.
     Idle {
@@ -139,6 +214,55 @@ pub enum Event {
     },
     /// The failsafe's level command could not be sent (guard, encoder).
     LevelRefused,
+}
+
+/// The facts a tick reports to the failsafe machine ([`Event::Health`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Health {
+    /// Tick time \[s\].
+    pub t: f64,
+    /// A pose arrived within `safety.pose_timeout_ms`.
+    pub pose_fresh: bool,
+    /// An autopilot HEARTBEAT arrived within its timeout.
+    pub autopilot_alive: bool,
+    /// The flight state streams (standby, holding, tracking): only then
+    /// can a failsafe be entered.
+    pub streaming: bool,
+    /// The flight state is engaged (a failsafe levels first).
+    pub engaged: bool,
+    /// The daemon is stopping: no failsafe clears.
+    pub stopping: bool,
+    /// What a levelling failsafe would stream.
+    pub level: LevelPlan,
+}
+
+impl Health {
+    /// The facts of the tick at `t` \[s\]: what the arrivals say
+    /// (`links`), the flight state, whether the daemon stops, and what a
+    /// levelling failsafe would stream.
+    pub fn of(t: f64, links: Links, state: FlightState, stopping: bool, level: LevelPlan) -> Self {
+        Health {
+            t,
+            pose_fresh: links.pose_fresh,
+            autopilot_alive: links.autopilot_alive,
+            streaming: state.streams(),
+            engaged: state.engaged(),
+            stopping,
+            level,
+        }
+    }
+
+    /// The cause these facts make active, the most severe first: stale
+    /// pose, then a silent autopilot.
+    pub fn cause(&self) -> Option<Cause> {
+        if !self.pose_fresh {
+            Some(Cause::PoseStale)
+        } else if !self.autopilot_alive {
+            Some(Cause::AutopilotSilent)
+        } else {
+            None
+        }
+    }
 }
 
 /// Which fallback command a failed tick sends.
@@ -171,14 +295,20 @@ pub enum Action {
         /// Say it.
         announce: bool,
     },
-    /// Let go: nothing is sent; force the supervisor's failsafe
-    /// (`Cause::ControlFailed`) so the autopilot's failsafe takes over.
-    LetGo,
-    /// A levelling failsafe started; `announce` unless level hover is off.
-    StartLevel {
-        /// Say it.
-        announce: bool,
+    /// Enter the failsafe for `cause`: the flight state goes to
+    /// `FAILSAFE` (said), the controller is reset, the stream stops —
+    /// after a brake and level hover when `level` is `Some(announce)`
+    /// (`announce` unless level hover is off). A control failure
+    /// (`Cause::ControlFailed`) lets go: the autopilot's failsafe flies.
+    Enter {
+        /// Why.
+        cause: Cause,
+        /// `Some(announce)` when it levels first.
+        level: Option<bool>,
     },
+    /// The failsafe cleared: the flight state streams again (standby, or
+    /// braking to a hold when engaged).
+    Recover,
     /// Send the failsafe's brake or level command.
     SendLevel {
         /// The command (before the guard).
@@ -231,16 +361,33 @@ impl Failsafe {
         }
     }
 
+    /// Its place in the severity order.
+    pub fn severity(&self) -> Severity {
+        match self {
+            Failsafe::Nominal => Severity::Nominal,
+            Failsafe::PlanFallback { .. } => Severity::PlanFallback,
+            Failsafe::HeldCommand { .. } => Severity::HeldCommand,
+            Failsafe::LevelHover { .. } => Severity::LevelHover,
+            Failsafe::FailsafeLevel { .. } => Severity::FailsafeLevel,
+            Failsafe::LetGo { .. } => Severity::LetGo,
+            Failsafe::Trial { .. } => Severity::Trial,
+        }
+    }
+
     /// True while the supervisor may not recover at `t` \[s\] (a residual
     /// failsafe's latch, or the controller not yet trialled).
     pub fn latched(&self, t: f64) -> bool {
         match *self {
-            Failsafe::FailsafeLevel { latched_until, .. } | Failsafe::LetGo { latched_until } => {
-                latched_until.is_some_and(|u| t < u)
-            }
+            Failsafe::FailsafeLevel { clear, .. } | Failsafe::LetGo { clear } => clear.latched(t),
             Failsafe::Trial { .. } => true,
             _ => false,
         }
+    }
+
+    /// True when `h` clears this failsafe: fresh pose, the autopilot alive,
+    /// not stopping, and the clear condition met (never in the trial).
+    fn clears(&self, h: &Health) -> bool {
+        !self.flying() && h.cause().is_none() && !h.stopping && !self.latched(h.t)
     }
 
     /// Failed ticks of the current fallback streak (0 outside one).
@@ -254,15 +401,10 @@ impl Failsafe {
     }
 
     /// True in the states the controller flies in (a failure here starts
-    /// or continues a fallback streak).
+    /// or continues a fallback streak): below the supervisor's failsafe,
+    /// which a failed tick or a second failsafe never lowers.
     fn flying(&self) -> bool {
-        matches!(
-            self,
-            Failsafe::Nominal
-                | Failsafe::PlanFallback { .. }
-                | Failsafe::HeldCommand { .. }
-                | Failsafe::LevelHover { .. }
-        )
+        self.severity() < Severity::FailsafeLevel
     }
 }
 
@@ -284,49 +426,22 @@ pub fn next(state: Failsafe, event: Event, limits: &Limits) -> (Failsafe, Action
         ) if s.flying() => fallback(s, t, planned, can_hold, limits),
         (
             s,
-            Event::FailsafeEntered {
+            Event::Tripped {
                 t,
                 cause,
                 engaged,
                 level,
             },
-        ) if s.flying() => {
-            let latched_until =
-                (cause == Cause::ResidualDiverged).then_some(t + RESIDUAL_FAILSAFE_LATCH);
-            match cause {
-                Cause::ControlFailed => (S::Trial { good: 0 }, Action::None),
-                Cause::PoseStale
-                | Cause::AutopilotSilent
-                | Cause::ResidualDiverged
-                | Cause::ShutdownLevel
-                    if engaged =>
-                {
-                    (
-                        S::FailsafeLevel {
-                            since: t,
-                            plan: level,
-                            latched_until,
-                        },
-                        Action::StartLevel {
-                            announce: limits.level_hover_max > 0.0,
-                        },
-                    )
-                }
-                _ => (S::LetGo { latched_until }, Action::None),
-            }
-        }
-        (_, Event::Recovered) => (S::Nominal, Action::None),
-        (
-            S::FailsafeLevel {
-                since,
-                plan,
-                latched_until,
-            },
-            Event::Idle { t },
-        ) => {
+        ) if s.flying() => enter(t, cause, engaged, level, limits),
+        (s, Event::Health(h)) if s.flying() => match h.cause() {
+            Some(cause) if h.streaming => enter(h.t, cause, h.engaged, h.level, limits),
+            _ => (s, Action::None),
+        },
+        (s, Event::Health(h)) if s.clears(&h) => (S::Nominal, Action::Recover),
+        (S::FailsafeLevel { since, plan, clear }, Event::Idle { t }) => {
             if limits.ran_out(since, t) {
                 (
-                    S::LetGo { latched_until },
+                    S::LetGo { clear },
                     Action::LevelOver {
                         announce: limits.level_hover_max > 0.0,
                     },
@@ -349,15 +464,13 @@ pub fn next(state: Failsafe, event: Event, limits: &Limits) -> (Failsafe, Action
                 )
             }
         }
-        (S::FailsafeLevel { latched_until, .. }, Event::LevelRefused) => {
-            (S::LetGo { latched_until }, Action::None)
-        }
+        (S::FailsafeLevel { clear, .. }, Event::LevelRefused) => (S::LetGo { clear }, Action::None),
         (S::Trial { good }, Event::TrialSolve { ok }) => {
             let good = if ok { good + 1 } else { 0 };
             if good >= TRIAL_TICKS {
                 (
                     S::LetGo {
-                        latched_until: None,
+                        clear: Clear::WhenCauseClears,
                     },
                     Action::FliesAgain,
                 )
@@ -366,6 +479,48 @@ pub fn next(state: Failsafe, event: Event, limits: &Limits) -> (Failsafe, Action
             }
         }
         (s, _) => (s, Action::None),
+    }
+}
+
+/// The failsafe for `cause` entered at `t` \[s\] (from a state the
+/// controller flies in): a control failure goes to the trial; a cause that
+/// leaves an engaged state levels first (a brake, then level hover); any
+/// other lets go. Its clear condition follows the cause.
+fn enter(
+    t: f64,
+    cause: Cause,
+    engaged: bool,
+    level: LevelPlan,
+    limits: &Limits,
+) -> (Failsafe, Action) {
+    let clear = Clear::for_cause(cause, t);
+    match cause {
+        Cause::ControlFailed => (
+            Failsafe::Trial { good: 0 },
+            Action::Enter { cause, level: None },
+        ),
+        Cause::PoseStale
+        | Cause::AutopilotSilent
+        | Cause::ResidualDiverged
+        | Cause::ShutdownLevel
+            if engaged =>
+        {
+            (
+                Failsafe::FailsafeLevel {
+                    since: t,
+                    plan: level,
+                    clear,
+                },
+                Action::Enter {
+                    cause,
+                    level: Some(limits.level_hover_max > 0.0),
+                },
+            )
+        }
+        _ => (
+            Failsafe::LetGo { clear },
+            Action::Enter { cause, level: None },
+        ),
     }
 }
 
@@ -403,7 +558,7 @@ fn fallback(
             _ => t,
         };
         if limits.ran_out(since, t) {
-            return (Failsafe::Trial { good: 0 }, Action::LetGo);
+            return enter(t, Cause::ControlFailed, false, LevelPlan::NONE, limits);
         }
         (
             Failsafe::LevelHover { failed, since },

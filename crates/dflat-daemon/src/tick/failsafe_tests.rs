@@ -45,25 +45,25 @@ const L: S = S::LevelHover {
 const FL: S = S::FailsafeLevel {
     since: 1.0,
     plan: PLAN,
-    latched_until: None,
+    clear: Clear::WhenCauseClears,
 };
 const FL_LATCHED: S = S::FailsafeLevel {
     since: 1.0,
     plan: PLAN,
-    latched_until: Some(3.0),
+    clear: Clear::NotBefore(3.0),
 };
 const G: S = S::LetGo {
-    latched_until: None,
+    clear: Clear::WhenCauseClears,
 };
 const G_LATCHED: S = S::LetGo {
-    latched_until: Some(3.0),
+    clear: Clear::NotBefore(3.0),
 };
 const T: S = S::Trial { good: 2 };
 const T_LAST: S = S::Trial {
     good: TRIAL_TICKS - 1,
 };
 
-fn failed(t: f64, planned: bool, can_hold: bool) -> Event {
+const fn failed(t: f64, planned: bool, can_hold: bool) -> Event {
     Event::Failed {
         t,
         planned,
@@ -71,8 +71,8 @@ fn failed(t: f64, planned: bool, can_hold: bool) -> Event {
     }
 }
 
-fn entered(cause: Cause, engaged: bool) -> Event {
-    Event::FailsafeEntered {
+const fn tripped(cause: Cause, engaged: bool) -> Event {
+    Event::Tripped {
         t: 1.04,
         cause,
         engaged,
@@ -80,249 +80,355 @@ fn entered(cause: Cause, engaged: bool) -> Event {
     }
 }
 
+/// The facts of a tick at 1.04 s.
+const fn health(pose_fresh: bool, autopilot_alive: bool, streaming: bool, engaged: bool) -> Event {
+    Event::Health(Health {
+        t: 1.04,
+        pose_fresh,
+        autopilot_alive,
+        streaming,
+        engaged,
+        stopping: false,
+        level: PLAN,
+    })
+}
+
+/// Engaged, the pose stale.
+const STALE: Event = health(false, true, true, true);
+/// Standing by (streaming, not engaged), the pose stale.
+const STALE_STANDBY: Event = health(false, true, true, false);
+/// Engaged, the autopilot silent.
+const SILENT: Event = health(true, false, true, true);
+/// Not streaming (waiting, or in the failsafe), the pose stale.
+const OFF_STALE: Event = health(false, true, false, false);
+/// Fresh pose, the autopilot alive, not streaming (in the failsafe).
+const FINE: Event = health(true, true, false, false);
+/// As [`FINE`], the daemon stopping.
+const STOPPING: Event = Event::Health(Health {
+    t: 1.04,
+    pose_fresh: true,
+    autopilot_alive: true,
+    streaming: false,
+    engaged: false,
+    stopping: true,
+    level: PLAN,
+});
+
+/// The kind of an event, for the coverage check: the facts of a tick by
+/// what they say.
 fn event_name(e: &Event) -> &'static str {
     match e {
         Event::Solved => "solved",
         Event::Failed { .. } => "failed",
-        Event::FailsafeEntered { .. } => "failsafe_entered",
-        Event::Recovered => "recovered",
+        Event::Tripped { .. } => "tripped",
+        Event::Health(h) => match (h.cause(), h.streaming, h.stopping) {
+            (Some(Cause::PoseStale), true, _) => "pose_stale",
+            (Some(_), true, _) => "autopilot_silent",
+            (Some(_), false, _) => "stale_not_streaming",
+            (None, _, true) => "fine_stopping",
+            (None, _, false) => "fine",
+        },
         Event::Idle { .. } => "idle",
         Event::TrialSolve { .. } => "trial_solve",
         Event::LevelRefused => "level_refused",
     }
 }
 
-fn fallback(kind: FallbackKind, announce: bool) -> Action {
+/// Enter the failsafe for `cause`, levelling (announced) or not.
+const fn enter(cause: Cause, level: bool) -> Action {
+    Action::Enter {
+        cause,
+        level: if level { Some(true) } else { None },
+    }
+}
+
+/// The fallback ladder ran out: let go.
+const LET_GO: Action = Action::Enter {
+    cause: Cause::ControlFailed,
+    level: None,
+};
+
+const fn fallback(kind: FallbackKind, announce: bool) -> Action {
     Action::Fallback { kind, announce }
 }
 
+use Action as A;
+use FallbackKind::{Held, LevelHover, Plan};
+
+/// A residual failsafe entered at 1.04 s.
+const LATCH: Clear = Clear::NotBefore(1.04 + RESIDUAL_FAILSAFE_LATCH);
+const FL_AT: S = S::FailsafeLevel {
+    since: 1.04,
+    plan: PLAN,
+    clear: Clear::WhenCauseClears,
+};
+const FL_AT_LATCHED: S = S::FailsafeLevel {
+    since: 1.04,
+    plan: PLAN,
+    clear: LATCH,
+};
+const PLAN_FAIL: Event = failed(1.04, true, true);
+const HOLD_FAIL: Event = failed(1.04, false, true);
+const BARE_FAIL: Event = failed(1.04, false, false);
+const LATE_FAIL: Event = failed(1.09, false, true);
+
 /// (state, event, next state, action).
-fn table() -> Vec<(S, Event, S, Action)> {
-    use Action as A;
-    use FallbackKind::{Held, LevelHover, Plan};
-    let latch = Some(1.04 + RESIDUAL_FAILSAFE_LATCH);
-    let fl_at = |latched_until| S::FailsafeLevel {
-        since: 1.04,
-        plan: PLAN,
-        latched_until,
-    };
-    let start = A::StartLevel { announce: true };
-    let plan_fail = failed(1.04, true, true);
-    let hold_fail = failed(1.04, false, true);
-    let bare_fail = failed(1.04, false, false);
-    let late_fail = failed(1.09, false, true);
-    vec![
-        // A good tick ends any fallback streak.
-        (N, Event::Solved, N, A::None),
-        (P, Event::Solved, N, A::Recovered { failed: 3 }),
-        (H, Event::Solved, N, A::Recovered { failed: 1 }),
-        (L, Event::Solved, N, A::Recovered { failed: 4 }),
-        (FL, Event::Solved, FL, A::None),
-        (G, Event::Solved, G, A::None),
-        (T, Event::Solved, T, A::None),
-        // A failed tick with a plan to fly: the plan.
-        (
-            N,
-            plan_fail,
-            S::PlanFallback { failed: 1 },
-            fallback(Plan, true),
-        ),
-        (
-            P,
-            plan_fail,
-            S::PlanFallback { failed: 4 },
-            fallback(Plan, false),
-        ),
-        (
-            H,
-            plan_fail,
-            S::PlanFallback { failed: 2 },
-            fallback(Plan, true),
-        ),
-        (
-            L,
-            plan_fail,
-            S::PlanFallback { failed: 5 },
-            fallback(Plan, true),
-        ),
-        (FL, plan_fail, FL, A::None),
-        (G, plan_fail, G, A::None),
-        (T, plan_fail, T, A::None),
-        // No plan, a good command remembered: held (never after a plan),
-        // for at most hold_ticks, then level hover.
-        (
-            N,
-            hold_fail,
-            S::HeldCommand { failed: 1, held: 1 },
-            fallback(Held, true),
-        ),
-        (
-            H,
-            hold_fail,
-            S::HeldCommand { failed: 2, held: 2 },
-            fallback(Held, false),
-        ),
-        (
-            H_OUT,
-            hold_fail,
-            S::LevelHover {
-                failed: 3,
-                since: 1.04,
-            },
-            fallback(LevelHover, true),
-        ),
-        (
-            P,
-            hold_fail,
-            S::LevelHover {
-                failed: 4,
-                since: 1.04,
-            },
-            fallback(LevelHover, true),
-        ),
-        (
-            L,
-            hold_fail,
-            S::LevelHover {
-                failed: 5,
-                since: 1.0,
-            },
-            fallback(LevelHover, false),
-        ),
-        (FL, hold_fail, FL, A::None),
-        (G, hold_fail, G, A::None),
-        (T, hold_fail, T, A::None),
-        // Nothing to hold: level hover at once.
-        (
-            N,
-            bare_fail,
-            S::LevelHover {
-                failed: 1,
-                since: 1.04,
-            },
-            fallback(LevelHover, true),
-        ),
-        (
-            H,
-            bare_fail,
-            S::LevelHover {
-                failed: 2,
-                since: 1.04,
-            },
-            fallback(LevelHover, true),
-        ),
-        // Level hover ran out (1.09 − 1.0 + half a period ≥ 0.1 s): let go.
-        (L, late_fail, S::Trial { good: 0 }, A::LetGo),
-        // The supervisor's failsafe: level (brake first) when it left an
-        // engaged state for pose, autopilot or residual; latched 2 s after
-        // a residual; a control failure goes to the trial.
-        (N, entered(Cause::PoseStale, true), fl_at(None), start),
-        (N, entered(Cause::PoseStale, false), G, A::None),
-        (P, entered(Cause::AutopilotSilent, true), fl_at(None), start),
-        (
-            H,
-            entered(Cause::ResidualDiverged, true),
-            fl_at(latch),
-            start,
-        ),
-        (
-            L,
-            entered(Cause::ResidualDiverged, false),
-            S::LetGo {
-                latched_until: latch,
-            },
-            A::None,
-        ),
-        (
-            N,
-            entered(Cause::ControlFailed, true),
-            S::Trial { good: 0 },
-            A::None,
-        ),
-        (FL, entered(Cause::PoseStale, true), FL, A::None),
-        (G, entered(Cause::PoseStale, true), G, A::None),
-        (T, entered(Cause::PoseStale, true), T, A::None),
-        // Recovery (fresh pose, not latched) starts afresh from any state.
-        (N, Event::Recovered, N, A::None),
-        (P, Event::Recovered, N, A::None),
-        (H, Event::Recovered, N, A::None),
-        (L, Event::Recovered, N, A::None),
-        (FL, Event::Recovered, N, A::None),
-        (G_LATCHED, Event::Recovered, N, A::None),
-        (T, Event::Recovered, N, A::None),
-        // A tick without the controller: the failsafe's brake, its level
-        // hover, then stream off.
-        (
-            FL,
-            Event::Idle { t: 1.02 },
-            FL,
-            A::SendLevel {
-                command: BRAKE,
-                braking: true,
-            },
-        ),
-        (
-            FL,
-            Event::Idle { t: 1.04 },
-            FL,
-            A::SendLevel {
-                command: LEVEL,
-                braking: false,
-            },
-        ),
-        (
-            FL,
-            Event::Idle { t: 1.09 },
-            G,
-            A::LevelOver { announce: true },
-        ),
-        (
-            FL_LATCHED,
-            Event::Idle { t: 1.09 },
-            G_LATCHED,
-            A::LevelOver { announce: true },
-        ),
-        (N, Event::Idle { t: 1.04 }, N, A::None),
-        (P, Event::Idle { t: 1.04 }, P, A::None),
-        (H, Event::Idle { t: 1.04 }, H, A::None),
-        (L, Event::Idle { t: 1.04 }, L, A::None),
-        (G, Event::Idle { t: 1.04 }, G, A::None),
-        (T, Event::Idle { t: 1.04 }, T, A::None),
-        // Trial solves: TRIAL_TICKS good ones in a row lift the latch.
-        (
-            T,
-            Event::TrialSolve { ok: true },
-            S::Trial { good: 3 },
-            A::None,
-        ),
-        (
-            T,
-            Event::TrialSolve { ok: false },
-            S::Trial { good: 0 },
-            A::None,
-        ),
-        (T_LAST, Event::TrialSolve { ok: true }, G, A::FliesAgain),
-        (N, Event::TrialSolve { ok: true }, N, A::None),
-        (P, Event::TrialSolve { ok: true }, P, A::None),
-        (H, Event::TrialSolve { ok: true }, H, A::None),
-        (L, Event::TrialSolve { ok: true }, L, A::None),
-        (FL, Event::TrialSolve { ok: true }, FL, A::None),
-        (G, Event::TrialSolve { ok: true }, G, A::None),
-        // The level command could not be sent: stream off (latch kept).
-        (FL, Event::LevelRefused, G, A::None),
-        (FL_LATCHED, Event::LevelRefused, G_LATCHED, A::None),
-        (N, Event::LevelRefused, N, A::None),
-        (P, Event::LevelRefused, P, A::None),
-        (H, Event::LevelRefused, H, A::None),
-        (L, Event::LevelRefused, L, A::None),
-        (G, Event::LevelRefused, G, A::None),
-        (T, Event::LevelRefused, T, A::None),
-    ]
-}
+const TABLE: &[(S, Event, S, Action)] = &[
+    // A good tick ends any fallback streak.
+    (N, Event::Solved, N, A::None),
+    (P, Event::Solved, N, A::Recovered { failed: 3 }),
+    (H, Event::Solved, N, A::Recovered { failed: 1 }),
+    (L, Event::Solved, N, A::Recovered { failed: 4 }),
+    (FL, Event::Solved, FL, A::None),
+    (G, Event::Solved, G, A::None),
+    (T, Event::Solved, T, A::None),
+    // A failed tick with a plan to fly: the plan.
+    (
+        N,
+        PLAN_FAIL,
+        S::PlanFallback { failed: 1 },
+        fallback(Plan, true),
+    ),
+    (
+        P,
+        PLAN_FAIL,
+        S::PlanFallback { failed: 4 },
+        fallback(Plan, false),
+    ),
+    (
+        H,
+        PLAN_FAIL,
+        S::PlanFallback { failed: 2 },
+        fallback(Plan, true),
+    ),
+    (
+        L,
+        PLAN_FAIL,
+        S::PlanFallback { failed: 5 },
+        fallback(Plan, true),
+    ),
+    (FL, PLAN_FAIL, FL, A::None),
+    (G, PLAN_FAIL, G, A::None),
+    (T, PLAN_FAIL, T, A::None),
+    // No plan, a good command remembered: held (never after a plan),
+    // for at most hold_ticks, then level hover.
+    (
+        N,
+        HOLD_FAIL,
+        S::HeldCommand { failed: 1, held: 1 },
+        fallback(Held, true),
+    ),
+    (
+        H,
+        HOLD_FAIL,
+        S::HeldCommand { failed: 2, held: 2 },
+        fallback(Held, false),
+    ),
+    (
+        H_OUT,
+        HOLD_FAIL,
+        S::LevelHover {
+            failed: 3,
+            since: 1.04,
+        },
+        fallback(LevelHover, true),
+    ),
+    (
+        P,
+        HOLD_FAIL,
+        S::LevelHover {
+            failed: 4,
+            since: 1.04,
+        },
+        fallback(LevelHover, true),
+    ),
+    (
+        L,
+        HOLD_FAIL,
+        S::LevelHover {
+            failed: 5,
+            since: 1.0,
+        },
+        fallback(LevelHover, false),
+    ),
+    (FL, HOLD_FAIL, FL, A::None),
+    (G, HOLD_FAIL, G, A::None),
+    (T, HOLD_FAIL, T, A::None),
+    // Nothing to hold: level hover at once.
+    (
+        N,
+        BARE_FAIL,
+        S::LevelHover {
+            failed: 1,
+            since: 1.04,
+        },
+        fallback(LevelHover, true),
+    ),
+    (
+        H,
+        BARE_FAIL,
+        S::LevelHover {
+            failed: 2,
+            since: 1.04,
+        },
+        fallback(LevelHover, true),
+    ),
+    // Level hover ran out (1.09 − 1.0 + half a period ≥ 0.1 s): let go.
+    (L, LATE_FAIL, S::Trial { good: 0 }, LET_GO),
+    // A cause the core found (residual, the stop's level): level (brake
+    // first) when engaged; latched 2 s after a residual; a control
+    // failure goes to the trial. A failsafe is never entered twice.
+    (
+        N,
+        tripped(Cause::ResidualDiverged, true),
+        FL_AT_LATCHED,
+        enter(Cause::ResidualDiverged, true),
+    ),
+    (
+        H,
+        tripped(Cause::ResidualDiverged, true),
+        FL_AT_LATCHED,
+        enter(Cause::ResidualDiverged, true),
+    ),
+    (
+        L,
+        tripped(Cause::ResidualDiverged, false),
+        S::LetGo { clear: LATCH },
+        enter(Cause::ResidualDiverged, false),
+    ),
+    (
+        P,
+        tripped(Cause::ShutdownLevel, true),
+        FL_AT,
+        enter(Cause::ShutdownLevel, true),
+    ),
+    (
+        N,
+        tripped(Cause::ControlFailed, true),
+        S::Trial { good: 0 },
+        LET_GO,
+    ),
+    (FL, tripped(Cause::ResidualDiverged, true), FL, A::None),
+    (G, tripped(Cause::ResidualDiverged, true), G, A::None),
+    (T, tripped(Cause::ResidualDiverged, true), T, A::None),
+    // Stale pose while streaming: level (brake first) when engaged, else
+    // let go at once. The supervisor's failsafe is not entered twice.
+    (N, STALE, FL_AT, enter(Cause::PoseStale, true)),
+    (N, STALE_STANDBY, G, enter(Cause::PoseStale, false)),
+    (P, STALE, FL_AT, enter(Cause::PoseStale, true)),
+    (H, STALE, FL_AT, enter(Cause::PoseStale, true)),
+    (L, STALE, FL_AT, enter(Cause::PoseStale, true)),
+    (FL, STALE, FL, A::None),
+    (G, STALE, G, A::None),
+    (T, STALE, T, A::None),
+    // A silent autopilot: the same.
+    (N, SILENT, FL_AT, enter(Cause::AutopilotSilent, true)),
+    (P, SILENT, FL_AT, enter(Cause::AutopilotSilent, true)),
+    (H, SILENT, FL_AT, enter(Cause::AutopilotSilent, true)),
+    (L, SILENT, FL_AT, enter(Cause::AutopilotSilent, true)),
+    (FL, SILENT, FL, A::None),
+    (G, SILENT, G, A::None),
+    (T, SILENT, T, A::None),
+    // Not streaming (waiting for pose): nothing to enter; in the failsafe
+    // a stale pose does not clear it.
+    (N, OFF_STALE, N, A::None),
+    (P, OFF_STALE, P, A::None),
+    (H, OFF_STALE, H, A::None),
+    (L, OFF_STALE, L, A::None),
+    (FL, OFF_STALE, FL, A::None),
+    (G, OFF_STALE, G, A::None),
+    (T, OFF_STALE, T, A::None),
+    // The causes cleared: the failsafe clears unless its clear condition
+    // latches it (a residual's first 2 s, the trial).
+    (N, FINE, N, A::None),
+    (P, FINE, P, A::None),
+    (H, FINE, H, A::None),
+    (L, FINE, L, A::None),
+    (FL, FINE, N, A::Recover),
+    (FL_LATCHED, FINE, FL_LATCHED, A::None),
+    (G, FINE, N, A::Recover),
+    (G_LATCHED, FINE, G_LATCHED, A::None),
+    (T, FINE, T, A::None),
+    // Stopping: no failsafe clears.
+    (N, STOPPING, N, A::None),
+    (P, STOPPING, P, A::None),
+    (H, STOPPING, H, A::None),
+    (L, STOPPING, L, A::None),
+    (FL, STOPPING, FL, A::None),
+    (G, STOPPING, G, A::None),
+    (T, STOPPING, T, A::None),
+    // A tick without the controller: the failsafe's brake, its level
+    // hover, then stream off.
+    (
+        FL,
+        Event::Idle { t: 1.02 },
+        FL,
+        A::SendLevel {
+            command: BRAKE,
+            braking: true,
+        },
+    ),
+    (
+        FL,
+        Event::Idle { t: 1.04 },
+        FL,
+        A::SendLevel {
+            command: LEVEL,
+            braking: false,
+        },
+    ),
+    (
+        FL,
+        Event::Idle { t: 1.09 },
+        G,
+        A::LevelOver { announce: true },
+    ),
+    (
+        FL_LATCHED,
+        Event::Idle { t: 1.09 },
+        G_LATCHED,
+        A::LevelOver { announce: true },
+    ),
+    (N, Event::Idle { t: 1.04 }, N, A::None),
+    (P, Event::Idle { t: 1.04 }, P, A::None),
+    (H, Event::Idle { t: 1.04 }, H, A::None),
+    (L, Event::Idle { t: 1.04 }, L, A::None),
+    (G, Event::Idle { t: 1.04 }, G, A::None),
+    (T, Event::Idle { t: 1.04 }, T, A::None),
+    // Trial solves: TRIAL_TICKS good ones in a row lift the latch.
+    (
+        T,
+        Event::TrialSolve { ok: true },
+        S::Trial { good: 3 },
+        A::None,
+    ),
+    (
+        T,
+        Event::TrialSolve { ok: false },
+        S::Trial { good: 0 },
+        A::None,
+    ),
+    (T_LAST, Event::TrialSolve { ok: true }, G, A::FliesAgain),
+    (N, Event::TrialSolve { ok: true }, N, A::None),
+    (P, Event::TrialSolve { ok: true }, P, A::None),
+    (H, Event::TrialSolve { ok: true }, H, A::None),
+    (L, Event::TrialSolve { ok: true }, L, A::None),
+    (FL, Event::TrialSolve { ok: true }, FL, A::None),
+    (G, Event::TrialSolve { ok: true }, G, A::None),
+    // The level command could not be sent: stream off (latch kept).
+    (FL, Event::LevelRefused, G, A::None),
+    (FL_LATCHED, Event::LevelRefused, G_LATCHED, A::None),
+    (N, Event::LevelRefused, N, A::None),
+    (P, Event::LevelRefused, P, A::None),
+    (H, Event::LevelRefused, H, A::None),
+    (L, Event::LevelRefused, L, A::None),
+    (G, Event::LevelRefused, G, A::None),
+    (T, Event::LevelRefused, T, A::None),
+];
 
 #[test]
 fn the_transition_table() {
-    let table = table();
+    let table = TABLE;
     for (i, (state, event, want_state, want_action)) in table.iter().enumerate() {
         let (got_state, got_action) = next(*state, *event, &LIMITS);
         assert_eq!(
@@ -337,8 +443,12 @@ fn the_transition_table() {
     let events = [
         Event::Solved,
         failed(1.0, false, false),
-        entered(Cause::PoseStale, true),
-        Event::Recovered,
+        tripped(Cause::ResidualDiverged, true),
+        STALE,
+        SILENT,
+        OFF_STALE,
+        FINE,
+        STOPPING,
         Event::Idle { t: 1.0 },
         Event::TrialSolve { ok: true },
         Event::LevelRefused,
@@ -368,7 +478,7 @@ fn level_hover_off_lets_go_at_the_first_level_tick() {
     };
     assert_eq!(
         next(N, failed(1.0, false, false), &off),
-        (S::Trial { good: 0 }, Action::LetGo)
+        (S::Trial { good: 0 }, LET_GO)
     );
     // A plan still flies.
     assert_eq!(
@@ -377,8 +487,11 @@ fn level_hover_off_lets_go_at_the_first_level_tick() {
     );
     // A levelling failsafe is entered silently and over at its first tick.
     assert_eq!(
-        next(N, entered(Cause::PoseStale, true), &off).1,
-        Action::StartLevel { announce: false }
+        next(N, STALE, &off).1,
+        Action::Enter {
+            cause: Cause::PoseStale,
+            level: Some(false)
+        }
     );
     assert_eq!(
         next(FL, Event::Idle { t: 1.0 }, &off),
@@ -421,7 +534,7 @@ fn a_long_streak_walks_the_ladder() {
         s = n;
         actions.push(a);
         t += 0.02;
-        if a == Action::LetGo {
+        if a == LET_GO {
             break;
         }
     }
@@ -429,6 +542,7 @@ fn a_long_streak_walks_the_ladder() {
         .iter()
         .map(|a| match a {
             Action::Fallback { kind, .. } => format!("{kind:?}"),
+            &LET_GO => "LetGo".to_string(),
             other => format!("{other:?}"),
         })
         .collect();
@@ -454,5 +568,35 @@ fn a_long_streak_walks_the_ladder() {
         assert_eq!(a == Action::FliesAgain, i + 1 == TRIAL_TICKS);
     }
     assert!(!s.latched(t));
-    assert_eq!(next(s, Event::Recovered, &LIMITS).0, N);
+    assert_eq!(next(s, FINE, &LIMITS), (N, Action::Recover));
+}
+
+#[test]
+fn a_second_cause_never_lowers_a_failsafe() {
+    // Severity orders the states as the ladder climbs.
+    let order = [N, P, H, L, FL, G, T].map(|s| s.severity());
+    assert!(order.windows(2).all(|w| w[0] < w[1]));
+    // In the failsafe or beyond, a failed tick or another active cause
+    // leaves the state as severe as it was: the most severe wins.
+    for (state, event, after, _) in TABLE {
+        let cause = match event {
+            Event::Failed { .. } | Event::Tripped { .. } => true,
+            Event::Health(h) => h.cause().is_some(),
+            _ => false,
+        };
+        if cause && state.severity() >= Severity::FailsafeLevel {
+            assert!(
+                after.severity() >= state.severity(),
+                "{state:?} on {event:?}"
+            );
+        }
+    }
+}
+
+#[test]
+fn clear_conditions() {
+    assert!(!Clear::for_cause(Cause::PoseStale, 1.0).latched(1.0));
+    let residual = Clear::for_cause(Cause::ResidualDiverged, 1.0);
+    assert!(residual.latched(1.0 + RESIDUAL_FAILSAFE_LATCH - 1e-9));
+    assert!(!residual.latched(1.0 + RESIDUAL_FAILSAFE_LATCH));
 }

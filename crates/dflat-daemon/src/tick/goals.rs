@@ -39,10 +39,116 @@ use dflat_link::dialect::MavSeverity;
 use nalgebra::Vector3;
 use tracing::{debug, error, info, warn};
 
+use super::settings::{CoreSettings, GoalSettings};
 use super::{ControlCore, REFUSAL_TEXT_INTERVAL};
+use crate::clock::PoseClock;
 use crate::config::TimeBase;
-use crate::control::reference_for;
+use crate::envelope::Envelope;
+use crate::mission::{Mission, MissionRunner};
 use crate::supervisor::{Goal, Refusal, SetpointOutcome};
+use crate::yaw::YawCommand;
+
+/// The goals and the reference: the core's part that owns what is flown
+/// towards — setpoints, the stream's samples, the mission — and the
+/// envelope that bounds it.
+#[derive(Debug)]
+pub(super) struct Goals {
+    /// The reference flown, if any.
+    pub(super) reference: Option<Reference>,
+    /// The supervisor's goal generation the reference was built for.
+    pub(super) generation: u64,
+    /// The flight envelope (fence, speed limit).
+    pub(super) envelope: Envelope,
+    /// Braking for overspeed (said once per excursion).
+    pub(super) overspeed: bool,
+    /// When each kind of refusal was last said \[s\] ([`Refusal::kind`]).
+    pub(super) last_refusal_text: [Option<f64>; Refusal::KINDS],
+    /// The mission uploaded over MAVLink, if any.
+    pub(super) mission: Option<Mission>,
+    /// The mission being flown (started), if any.
+    pub(super) runner: Option<MissionRunner>,
+    /// The last MISSION_CURRENT sent: when, and (seq, total, state).
+    pub(super) mission_current_sent: Option<(f64, (u16, u16, dflat_link::dialect::MissionState))>,
+    /// The yaw of the setpoint being flown \[rad\], if it set one.
+    pub(super) setpoint_yaw: Option<f64>,
+    /// The commanded heading, rate-limited.
+    pub(super) yaw_command: YawCommand,
+    /// The heading this tick's command carries \[rad\].
+    pub(super) commanded_yaw: f64,
+    /// Maps stream senders' `time_boot_ms` onto this computer's clock.
+    pub(super) stream_clock: PoseClock,
+    /// The stream's samples so far (the flown stream is built from them;
+    /// kept while a stream is flown or pending).
+    pub(super) stream_buffer: Option<Reference>,
+    /// Arrival of the newest stream sample \[s\].
+    pub(super) last_sample_arrival: Option<f64>,
+    /// The newest position-only setpoint: arrival \[s\], (time \[s\], position \[m\]).
+    pub(super) last_position_setpoint: Option<(f64, (f64, [f64; 3]))>,
+}
+
+impl Goals {
+    /// No goal yet: the reference of goal `generation` is none.
+    pub(super) fn new(settings: &CoreSettings, envelope: Envelope, generation: u64) -> Self {
+        Self {
+            reference: None,
+            generation,
+            envelope,
+            overspeed: false,
+            last_refusal_text: [None; Refusal::KINDS],
+            mission: None,
+            runner: None,
+            mission_current_sent: None,
+            setpoint_yaw: None,
+            yaw_command: YawCommand::new(settings.vehicle.max_yaw_rate),
+            commanded_yaw: settings.vehicle.yaw,
+            stream_clock: PoseClock::new(settings.pose.clock_window, 0.0),
+            stream_buffer: None,
+            last_sample_arrival: None,
+            last_position_setpoint: None,
+        }
+    }
+}
+
+/// The reference for a goal (`None` for [`Goal::None`], and for
+/// [`Goal::Mission`] and [`Goal::Stream`]: the core builds those section by
+/// section and from the samples).
+///
+/// A setpoint is a route ([`Reference::setpoint_route`]) from `from`, the
+/// vehicle's position and velocity (local NED \[m\], \[m/s\]), at
+/// `mission.speed` with ramps of `stream.route_acceleration`; without
+/// `from`, or at the target already, it is a fixed point.
+pub fn reference_for(
+    settings: &GoalSettings,
+    goal: Goal,
+    from: Option<([f64; 3], [f64; 3])>,
+) -> Option<Result<Reference, dflat_control::ControlError>> {
+    match goal {
+        Goal::None | Goal::Mission | Goal::Stream => None,
+        Goal::Hold(p) => Some(Reference::setpoint(Vector3::from(p))),
+        Goal::Setpoint(p) => Some(match from {
+            Some((q, v)) if (Vector3::from(p) - Vector3::from(q)).norm() > 1e-6 => {
+                Reference::setpoint_route(
+                    Vector3::from(q),
+                    Vector3::from(v),
+                    Vector3::from(p),
+                    settings.speed,
+                    settings.route_acceleration,
+                )
+            }
+            _ => Reference::setpoint(Vector3::from(p)),
+        }),
+        Goal::Path => settings.path.clone(),
+        // The attitude loop's response: half its time constant before the
+        // deceleration builds up (a first-order lag reaches half its step
+        // at 0.69 τ; the plan ramps the tilt in meanwhile).
+        Goal::Brake { from, velocity } => Some(Reference::braking(
+            Vector3::from(from),
+            Vector3::from(velocity),
+            settings.brake_acceleration,
+            settings.brake_lag,
+        )),
+    }
+}
 
 /// A sample mapped to more than this long \[s\] before its arrival is
 /// stamped with its arrival instead.
@@ -65,17 +171,18 @@ impl ControlCore {
         let given = velocity.is_some() || acceleration.is_some();
         let zero =
             velocity.is_none_or(|v| v == [0.0; 3]) && acceleration.is_none_or(|a| a == [0.0; 3]);
-        let s = &self.config.stream;
+        let s = &self.settings.goals.stream;
         let position_only = !given;
         let implied = position_only
             && s.implied_velocity
             && self
+                .goals
                 .last_position_setpoint
                 .is_some_and(|(a, _)| arrival - a <= s.implied_max_gap_s && arrival > a);
         let t_sample = self.sample_time(arrival, source_time);
-        let previous = self.last_position_setpoint;
+        let previous = self.goals.last_position_setpoint;
         if position_only {
-            self.last_position_setpoint = Some((arrival, (t_sample, position)));
+            self.goals.last_position_setpoint = Some((arrival, (t_sample, position)));
         }
         if (given && (streaming || !zero)) || implied {
             let sample = StreamSample {
@@ -93,7 +200,7 @@ impl ControlCore {
             };
             self.apply_sample(arrival, sample, seed);
             if self.supervisor.goal() == Goal::Stream {
-                self.setpoint_yaw = yaw;
+                self.goals.setpoint_yaw = yaw;
             }
         } else {
             self.apply_position_setpoint(arrival, position, yaw);
@@ -102,15 +209,15 @@ impl ControlCore {
 
     /// The sample's time on this computer's clock (module docs).
     fn sample_time(&mut self, arrival: f64, source_time: Option<f64>) -> f64 {
-        if self.config.stream.time_base == TimeBase::Autopilot {
+        if self.settings.goals.stream_time_base == TimeBase::Autopilot {
             // The autopilot's clock, as the poses map it; a sample may lie
             // ahead (the trajectory sent ahead).
             let mapped = source_time
-                .filter(|_| !self.pose_latency.faulted())
-                .and_then(|s| self.clock.map(s));
+                .filter(|_| !self.poses.latency.faulted())
+                .and_then(|s| self.poses.clock.map(s));
             return match mapped {
                 Some(t)
-                    if t <= arrival + self.config.stream.max_ahead_s
+                    if t <= arrival + self.settings.goals.stream.max_ahead_s
                         && arrival - t <= MAX_SAMPLE_AGE =>
                 {
                     t
@@ -118,9 +225,9 @@ impl ControlCore {
                 _ => arrival,
             };
         }
-        let t = self.stream_clock.capture_time(arrival, source_time);
+        let t = self.goals.stream_clock.capture_time(arrival, source_time);
         if t > arrival + 1e-9 || arrival - t > MAX_SAMPLE_AGE || !t.is_finite() {
-            self.stream_clock.reset();
+            self.goals.stream_clock.reset();
             return arrival;
         }
         t
@@ -131,7 +238,7 @@ impl ControlCore {
     /// hide a speed refusal after it).
     fn refuse(&mut self, t: f64, refusal: Refusal) {
         self.counts.setpoints_refused += 1;
-        let last = &mut self.last_refusal_text[refusal.kind()];
+        let last = &mut self.goals.last_refusal_text[refusal.kind()];
         let due = last.is_none_or(|last| t - last >= REFUSAL_TEXT_INTERVAL);
         if due {
             *last = Some(t);
@@ -145,13 +252,13 @@ impl ControlCore {
         match self.supervisor.on_setpoint(t, position) {
             SetpointOutcome::Accepted { goal, transition } => {
                 debug!(?goal, "setpoint accepted");
-                self.setpoint_yaw = yaw;
+                self.goals.setpoint_yaw = yaw;
                 if let Some(tr) = transition {
                     self.announce(tr);
                 }
                 self.refresh_reference();
             }
-            SetpointOutcome::Unchanged => self.setpoint_yaw = yaw,
+            SetpointOutcome::Unchanged => self.goals.setpoint_yaw = yaw,
             SetpointOutcome::Refused(refusal) => self.refuse(t, refusal),
         }
     }
@@ -163,6 +270,7 @@ impl ControlCore {
         // tilt limits) is refused in words, before it can fly anything.
         let motion = |v: Option<Vector3<f64>>| v.map(|v| [v.x, v.y, v.z]);
         if let Err(breach) = self
+            .goals
             .envelope
             .check_motion(motion(sample.velocity), motion(sample.acceleration))
         {
@@ -183,17 +291,17 @@ impl ControlCore {
         let streaming = self.supervisor.goal() == Goal::Stream
             || self.supervisor.pending_goal() == Goal::Stream;
         if !streaming {
-            self.stream_buffer = None;
+            self.goals.stream_buffer = None;
         }
         // The jump check: from the stream's own trajectory, else from the
         // vehicle.
-        let from = match &self.stream_buffer {
+        let from = match &self.goals.stream_buffer {
             Some(b) => b.stream_position_at(sample.t),
-            None => self.pose.map(|p| Vector3::from(p.position)),
+            None => self.poses.newest.map(|p| Vector3::from(p.position)),
         };
         if let Some(from) = from {
             let distance = (sample.position - from).norm();
-            if distance > self.config.stream.max_jump_m {
+            if distance > self.settings.goals.stream_max_jump {
                 warn!(distance, "stream sample jumps: refused");
                 self.refuse(arrival, Refusal::StreamJump { distance });
                 return;
@@ -207,8 +315,8 @@ impl ControlCore {
         match self.supervisor.on_stream(arrival, position) {
             SetpointOutcome::Refused(refusal) => self.refuse(arrival, refusal),
             SetpointOutcome::Unchanged => {
-                self.last_sample_arrival = Some(arrival);
-                if let Some(r) = self.reference.as_mut().filter(|r| r.is_stream())
+                self.goals.last_sample_arrival = Some(arrival);
+                if let Some(r) = self.goals.reference.as_mut().filter(|r| r.is_stream())
                     && let Err(e) = r.push_sample(&sample)
                 {
                     debug!(error = %e, "stream sample not used");
@@ -216,7 +324,7 @@ impl ControlCore {
             }
             SetpointOutcome::Accepted { goal, transition } => {
                 debug!(?goal, "stream accepted");
-                self.last_sample_arrival = Some(arrival);
+                self.goals.last_sample_arrival = Some(arrival);
                 if let Some(tr) = transition {
                     self.announce(tr);
                 }
@@ -235,11 +343,11 @@ impl ControlCore {
         sample: &StreamSample,
         seed: Option<(f64, [f64; 3])>,
     ) -> Result<(), dflat_control::ControlError> {
-        if let Some(b) = self.stream_buffer.as_mut() {
+        if let Some(b) = self.goals.stream_buffer.as_mut() {
             b.set_time(arrival);
             return b.push_sample(sample);
         }
-        let settings = self.config.stream.settings();
+        let settings = self.settings.goals.stream;
         // A seed before the sample starts the stream; the sample follows.
         let seed = seed
             .filter(|&(t, _)| t < sample.t)
@@ -256,13 +364,13 @@ impl ControlCore {
         if seed.is_some() {
             b.push_sample(sample)?;
         }
-        self.stream_buffer = Some(b);
+        self.goals.stream_buffer = Some(b);
         Ok(())
     }
 
     /// The stream's reference: its samples so far (`None`: no sample).
     pub(super) fn stream_reference(&self) -> Option<Reference> {
-        self.stream_buffer.clone()
+        self.goals.stream_buffer.clone()
     }
 
     /// A flown stream without samples for `stream.timeout_s` (and past the
@@ -272,22 +380,23 @@ impl ControlCore {
         if self.supervisor.goal() != Goal::Stream {
             return;
         }
-        let Some(arrived) = self.last_sample_arrival else {
+        let Some(arrived) = self.goals.last_sample_arrival else {
             return;
         };
         // A trajectory sent ahead is flown to its end before it is lost.
         let sent_until = self
+            .goals
             .reference
             .as_ref()
             .and_then(Reference::last_sample)
             .map_or(arrived, |s| s.t);
         let last = arrived.max(sent_until);
-        if t - last <= self.config.stream.timeout_s {
+        if t - last <= self.settings.goals.stream_timeout {
             return;
         }
         // Where the stream stops lies inside the fence.
         self.bound_reference();
-        let Some(rest) = self.reference.as_ref().map(Reference::rest_point) else {
+        let Some(rest) = self.goals.reference.as_ref().map(Reference::rest_point) else {
             return;
         };
         if let Some(tr) = self
@@ -304,18 +413,18 @@ impl ControlCore {
     /// Rebuilds the reference when the supervisor's goal changed.
     pub(super) fn refresh_reference(&mut self) {
         let generation = self.supervisor.goal_generation();
-        if generation == self.reference_generation {
+        if generation == self.goals.generation {
             return;
         }
-        self.reference_generation = generation;
+        self.goals.generation = generation;
         if self.supervisor.goal() == Goal::Mission {
-            self.reference = match self.mission_reference() {
+            self.goals.reference = match self.mission_reference() {
                 Some(Ok(r)) => Some(r),
                 Some(Err(e)) => {
                     error!(error = %e, "cannot build the mission's reference; keeping the previous one");
-                    self.reference.take()
+                    self.goals.reference.take()
                 }
-                None => self.reference.take(),
+                None => self.goals.reference.take(),
             };
             return;
         }
@@ -324,6 +433,7 @@ impl ControlCore {
         // the stream's own smooth stop there.
         if let Goal::Hold(p) = goal
             && self
+                .goals
                 .reference
                 .as_ref()
                 .is_some_and(|r| r.is_stream() && (r.rest_point() - Vector3::from(p)).norm() < 1e-9)
@@ -332,19 +442,19 @@ impl ControlCore {
         }
         if goal == Goal::Stream {
             if let Some(r) = self.stream_reference() {
-                self.reference = Some(r);
+                self.goals.reference = Some(r);
             }
             return;
         }
         // Setpoints are routes from the vehicle's position and velocity.
-        let from = match self.motion.estimate() {
+        let from = match self.poses.motion.estimate() {
             Some(m) => Some((m.position, m.velocity)),
-            None => self.pose.map(|p| (p.position, [0.0; 3])),
+            None => self.poses.newest.map(|p| (p.position, [0.0; 3])),
         };
-        self.reference = match reference_for(&self.config, goal, from) {
+        self.goals.reference = match reference_for(&self.settings.goals, goal, from) {
             Some(Ok(mut r)) => {
                 if self.supervisor.path_resumed()
-                    && let Some(p) = self.pose
+                    && let Some(p) = self.poses.newest
                 {
                     r.seek(&Vector3::from(p.position));
                 }
@@ -354,9 +464,30 @@ impl ControlCore {
                 // Validated at start; a setpoint is checked finite. Keep
                 // flying the previous reference rather than none.
                 error!(error = %e, "cannot build the reference; keeping the previous one");
-                self.reference.take()
+                self.goals.reference.take()
             }
             None => None,
         };
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::Config;
+
+    #[test]
+    fn references_of_goals() {
+        let mut cfg = Config::default();
+        let goals = GoalSettings::new(&cfg);
+        assert!(reference_for(&goals, Goal::None, None).is_none());
+        assert!(reference_for(&goals, Goal::Path, None).unwrap().is_ok());
+        assert!(
+            reference_for(&goals, Goal::Hold([0.0; 3]), None)
+                .unwrap()
+                .is_ok()
+        );
+        cfg.mission.path.clear();
+        assert!(reference_for(&GoalSettings::new(&cfg), Goal::Path, None).is_none());
     }
 }

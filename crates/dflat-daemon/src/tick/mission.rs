@@ -49,12 +49,12 @@ impl ControlCore {
             && self.supervisor.goal() == Goal::Mission
             && let Some(tr) = self.supervisor.pause(t)
         {
-            self.runner = None;
+            self.goals.runner = None;
             self.announce(tr);
             self.refresh_reference();
         }
-        self.mission = mission;
-        self.mission_current_sent = None;
+        self.goals.mission = mission;
+        self.goals.mission_current_sent = None;
     }
 
     /// A mission command at `t` \[s\].
@@ -62,10 +62,11 @@ impl ControlCore {
         match action {
             MissionAction::Start { first } => {
                 let runner = self
+                    .goals
                     .mission
                     .as_ref()
-                    .and_then(|m| MissionRunner::new(m, self.config.mission.speed))
-                    .map(|r| r.with_speed_limit(self.config.safety.max_speed_mps));
+                    .and_then(|m| MissionRunner::new(m, self.settings.goals.speed))
+                    .map(|r| r.with_speed_limit(self.settings.goals.max_speed));
                 let Some(mut runner) = runner else {
                     self.text(
                         MavSeverity::MAV_SEVERITY_WARNING,
@@ -74,7 +75,7 @@ impl ControlCore {
                     return;
                 };
                 runner.start(first);
-                self.runner = Some(runner);
+                self.goals.runner = Some(runner);
                 match self.supervisor.on_mission_start(t) {
                     Ok(tr) => {
                         info!(first, "mission start");
@@ -84,14 +85,14 @@ impl ControlCore {
                         self.refresh_reference();
                     }
                     Err(refusal) => {
-                        self.runner = None;
+                        self.goals.runner = None;
                         self.text(MavSeverity::MAV_SEVERITY_WARNING, &refusal.text());
                     }
                 }
             }
             MissionAction::Pause => {
                 if let Some(tr) = self.supervisor.pause(t) {
-                    if let Some(r) = self.runner.as_mut() {
+                    if let Some(r) = self.goals.runner.as_mut() {
                         r.pause();
                     }
                     self.announce(tr);
@@ -100,7 +101,7 @@ impl ControlCore {
             }
             MissionAction::Continue => {
                 if self.supervisor.pending_goal() == Goal::Mission
-                    && let Some(r) = self.runner.as_mut()
+                    && let Some(r) = self.goals.runner.as_mut()
                 {
                     r.resume();
                 }
@@ -111,7 +112,7 @@ impl ControlCore {
             }
             MissionAction::Speed(speed) => {
                 info!(speed, "mission speed");
-                let limit = self.config.safety.max_speed_mps;
+                let limit = self.settings.goals.max_speed;
                 if speed > limit {
                     warn!(
                         speed,
@@ -122,7 +123,7 @@ impl ControlCore {
                         &format!("dflat: speed {speed:.1} > limit, flying {limit:.1}"),
                     );
                 }
-                if let Some(r) = self.runner.as_mut() {
+                if let Some(r) = self.goals.runner.as_mut() {
                     r.set_speed(speed);
                 }
                 if self.supervisor.goal() == Goal::Mission
@@ -130,7 +131,7 @@ impl ControlCore {
                 {
                     // From where the vehicle is, at its speed: no jump.
                     if let Some(Ok(r)) = self.mission_reference() {
-                        self.reference = Some(r);
+                        self.goals.reference = Some(r);
                     }
                 }
             }
@@ -140,10 +141,10 @@ impl ControlCore {
     /// The reference of the mission's current section from the vehicle's
     /// position and speed (`None` without a mission being flown or a pose).
     pub(super) fn mission_reference(&mut self) -> Option<Result<Reference, ControlError>> {
-        let position = self.pose.map(|p| p.position)?;
-        let v0 = self.motion.estimate().map_or(0.0, |m| m.speed());
-        let accel = self.config.mission.start_acceleration;
-        let runner = self.runner.as_mut()?;
+        let position = self.poses.newest.map(|p| p.position)?;
+        let v0 = self.poses.motion.estimate().map_or(0.0, |m| m.speed());
+        let accel = self.settings.goals.start_acceleration;
+        let runner = self.goals.runner.as_mut()?;
         Some(runner.section(position, v0, accel))
     }
 
@@ -152,8 +153,11 @@ impl ControlCore {
     pub(super) fn mission_tick(&mut self, t: f64) {
         if self.supervisor.goal() == Goal::Mission
             && self.supervisor.state() == FlightState::Tracking
-            && let (Some(pose), Some(reference), Some(runner)) =
-                (self.pose, self.reference.as_ref(), self.runner.as_mut())
+            && let (Some(pose), Some(reference), Some(runner)) = (
+                self.poses.newest,
+                self.goals.reference.as_ref(),
+                self.goals.runner.as_mut(),
+            )
         {
             let up = runner.update(
                 t,
@@ -167,13 +171,13 @@ impl ControlCore {
             }
             if up.new_section {
                 match self.mission_reference() {
-                    Some(Ok(r)) => self.reference = Some(r),
+                    Some(Ok(r)) => self.goals.reference = Some(r),
                     Some(Err(e)) => warn!(error = %e, "mission section: keeping the reference"),
                     None => {}
                 }
             }
             if up.finished {
-                let end = self.runner.as_ref().map(MissionRunner::end);
+                let end = self.goals.runner.as_ref().map(MissionRunner::end);
                 if let Some(end) = end
                     && let Some(tr) = self.supervisor.on_mission_finished(t, end)
                 {
@@ -182,10 +186,10 @@ impl ControlCore {
                 }
             }
         }
-        let Some(mission) = &self.mission else {
+        let Some(mission) = &self.goals.mission else {
             return;
         };
-        let now = match &self.runner {
+        let now = match &self.goals.runner {
             Some(r) => {
                 let (seq, total) = r.current_item();
                 let state = match r.status() {
@@ -203,10 +207,11 @@ impl ControlCore {
             ),
         };
         let due = self
+            .goals
             .mission_current_sent
             .is_none_or(|(at, last)| last != now || t - at >= MISSION_CURRENT_INTERVAL);
         if due {
-            self.mission_current_sent = Some((t, now));
+            self.goals.mission_current_sent = Some((t, now));
             self.pending_texts
                 .push(mission_current(now.0, now.1, now.2));
         }
@@ -218,58 +223,64 @@ impl ControlCore {
     /// trajectory's `vehicle.yaw_lead_s` ahead; none: the heading is kept);
     /// in standby the vehicle's own heading.
     pub(super) fn heading(&mut self, t: f64) -> f64 {
-        let fixed = self.config.vehicle.yaw_deg.to_radians();
-        if self.config.vehicle.yaw_mode == YawMode::Fixed {
+        let fixed = self.settings.vehicle.yaw;
+        if self.settings.vehicle.yaw_mode == YawMode::Fixed {
             return fixed;
         }
         let measured = self.measured_yaw();
         if !self.supervisor.state().engaged() {
             if let Some(m) = measured {
-                self.yaw_command.follow(t, m);
+                self.goals.yaw_command.follow(t, m);
             }
-            return self.yaw_command.current().unwrap_or(fixed);
+            return self.goals.yaw_command.current().unwrap_or(fixed);
         }
         let target = match self.supervisor.goal() {
-            Goal::Mission => self.runner.as_ref().and_then(MissionRunner::yaw),
+            Goal::Mission => self.goals.runner.as_ref().and_then(MissionRunner::yaw),
             // A stream's heading from its trajectory, its rate fed
             // forward by commanding it `yaw_lead_s` ahead.
             Goal::Stream => self
+                .goals
                 .reference
                 .as_ref()
-                .and_then(|r| r.yaw_reference(self.config.vehicle.yaw_lead_s))
+                .and_then(|r| r.yaw_reference(self.settings.vehicle.yaw_lead))
                 .map(|(yaw, _)| yaw)
-                .or(self.setpoint_yaw),
-            Goal::Setpoint(_) => self.setpoint_yaw,
+                .or(self.goals.setpoint_yaw),
+            Goal::Setpoint(_) => self.goals.setpoint_yaw,
             _ => None,
         };
-        self.yaw_command.step(t, target, measured.unwrap_or(fixed))
+        self.goals
+            .yaw_command
+            .step(t, target, measured.unwrap_or(fixed))
     }
 
     /// The vehicle's heading as measured (the pose message's, else
     /// ATTITUDE's) \[rad\], if known.
     fn measured_yaw(&self) -> Option<f64> {
-        self.pose.and_then(|p| p.yaw).or(self.attitude_yaw)
+        self.poses
+            .newest
+            .and_then(|p| p.yaw)
+            .or(self.poses.attitude_yaw)
     }
 
     /// The controller's tilt (pitch, roll at the model's heading ψ⋆, a
     /// world-frame tilt) at the commanded heading; unchanged with
     /// `yaw_mode = "fixed"`.
     pub(super) fn tilt_to_command(&self, pitch: f64, roll: f64) -> (f64, f64, f64) {
-        let fixed = self.config.vehicle.yaw_deg.to_radians();
-        if self.config.vehicle.yaw_mode == YawMode::Fixed {
+        let fixed = self.settings.vehicle.yaw;
+        if self.settings.vehicle.yaw_mode == YawMode::Fixed {
             return (pitch, roll, fixed);
         }
-        let (p, r) = tilt_at_heading(pitch, roll, fixed, self.commanded_yaw);
-        (p, r, self.commanded_yaw)
+        let (p, r) = tilt_at_heading(pitch, roll, fixed, self.goals.commanded_yaw);
+        (p, r, self.goals.commanded_yaw)
     }
 
     /// A measured attitude (pitch, roll at heading `yaw`) as the world-frame
     /// tilt the window records (at ψ⋆); unchanged with `yaw_mode = "fixed"`.
     pub(super) fn tilt_from_measured(&self, pitch: f64, roll: f64, yaw: f64) -> [f64; 2] {
-        if self.config.vehicle.yaw_mode == YawMode::Fixed {
+        if self.settings.vehicle.yaw_mode == YawMode::Fixed {
             return [pitch, roll];
         }
-        let fixed = self.config.vehicle.yaw_deg.to_radians();
+        let fixed = self.settings.vehicle.yaw;
         let (p, r) = tilt_at_heading(pitch, roll, yaw, fixed);
         [p, r]
     }

@@ -19,35 +19,36 @@
 //! pass through it exactly once, so each guard counter counts a command at
 //! most once.
 //!
-//! What happens after a failure — the fallback ladder, letting go, the
-//! trial solves, a failsafe's brake and level hover, recovery latches — is
-//! one state machine, [`failsafe::Failsafe`], with its transitions in one
-//! function (`tick/failsafe.rs`).
+//! What happens after a failure — stale pose, a silent autopilot, the
+//! fallback ladder, the residual, letting go, the trial solves, a
+//! failsafe's brake and level hover, when the failsafe clears — is one
+//! state machine, [`failsafe::Failsafe`], with its transitions in one
+//! function (`tick/failsafe.rs`); the supervisor enters and leaves its
+//! `FAILSAFE` state only as that machine decides.
 //!
-//! Rooms: `control.rs` the controller's tick, `exit.rs` the exit path and
-//! why a tick failed, `failsafe.rs` the failsafe machine, `ladder.rs` the
-//! core carrying out its actions, `failsafe_level.rs` the brake,
+//! Rooms: `settings.rs` the core's typed settings, `control.rs` the
+//! controller's tick, `exit.rs` the exit path and why a tick failed,
+//! `failsafe.rs` the failsafe machine, `act.rs` the one place its actions
+//! become behaviour, `ladder.rs` the failsafe part and what the core
+//! reports to the machine, `failsafe_level.rs` the brake,
 //! `pose.rs` and `pose_clock.rs` poses in, `standby.rs` standby and
 //! engagement, `params.rs` the autopilot's parameters, `goals.rs`
 //! setpoints, streams and the reference, `mission.rs` missions and the
 //! heading, `inputs.rs` the events.
 
-use dflat_control::reference::Reference;
 use dflat_control::{ControlModel, Controller};
 use dflat_link::dialect::MavSeverity;
-use dflat_link::{AttitudeCommand, AutopilotMode, MavMessage, Target, ThrustMapping, statustext};
+use dflat_link::{AttitudeCommand, MavMessage, ThrustMapping, statustext};
 use tracing::{info, warn};
 
-use crate::autopilot_params::AutopilotParams;
-use crate::clock::PoseClock;
 use crate::config::Config;
 use crate::control::control_model;
 use crate::guard::{CommandGuard, Fallback, GuardCounts, ResidualMonitor};
-use crate::motion::MotionEstimator;
 use crate::records::CsvRow;
 use crate::summary::{DisturbanceSummary, SolveCounts};
-use crate::supervisor::{Cause, FlightState, Refusal, Supervisor, Transition};
+use crate::supervisor::{Cause, FlightState, Supervisor, Transition};
 
+mod act;
 mod control;
 mod envelope;
 pub use envelope::STOP_GUARD;
@@ -61,10 +62,12 @@ mod mission;
 mod params;
 mod pose;
 mod pose_clock;
+pub mod settings;
 mod standby;
 pub use exit::TickError;
+pub use goals::reference_for;
 pub use mission::MissionAction;
-use pose::PoseSample;
+pub use settings::CoreSettings;
 
 pub use inputs::{
     Event, ParamName, brake_acceleration, event_from, pose_source, source_filter, supervisor_config,
@@ -148,64 +151,34 @@ pub struct CoreCounts {
     pub stream_timeouts: u64,
 }
 
-/// Everything the control thread decides with (see the module docs).
+/// Everything the control thread decides with (see the module docs): the
+/// supervisor and the controller, and the core's parts, each owning its
+/// state in its own file — the pose clock and window (`pose.rs`), the goals
+/// and the reference (`goals.rs`), engagement (`standby.rs`) and the
+/// failsafe (`ladder.rs`).
 pub struct ControlCore {
+    /// The settings, built once from the configuration.
+    settings: CoreSettings,
     /// Link events applied so far, mission commands excluded (the CSV's
     /// `events`: the tick's cutoff in the tlog's received frames, for an
     /// exact replay).
     events_applied: u64,
     supervisor: Supervisor,
     controller: Box<dyn Controller>,
-    mapping: ThrustMapping,
-    target: Target,
-    config: Config,
-    period: f64,
-    multi_rate: bool,
-    clock: PoseClock,
-    guard: CommandGuard,
-    fallback: Fallback,
-    residual: ResidualMonitor,
     /// The controller's model, for the input that explains a measured
     /// attitude in standby (`None`: the configuration's model is invalid;
     /// validated configurations always have one).
     model: Option<ControlModel>,
-    // Per-run state.
-    pose: Option<PoseSample>,
-    attitude_yaw: Option<f64>,
-    /// Newest ATTITUDE (pitch, roll) \[rad\].
-    attitude: Option<[f64; 2]>,
-    /// The attitude at the previous tick, when that tick's command was
-    /// sent in standby (corrected from the attitude at this tick).
-    standby_attitude: Option<[f64; 2]>,
-    /// The autopilot's mode as last reported.
-    mode: Option<AutopilotMode>,
-    /// The vehicle's motion from the poses (engagement's stop point).
-    motion: MotionEstimator,
-    /// The autopilot's own hover thrust and tilt limit, read at start-up.
-    params: AutopilotParams,
-    /// Engagement is refused (the autopilot's tilt limit is below ours);
-    /// said once.
-    tilt_refusal_said: bool,
-    /// What happens after a failure: the failsafe state machine
-    /// (`tick/failsafe.rs`).
-    failsafe: failsafe::Failsafe,
-    /// The autopilot's tilt integrated since the newest pose (the brake).
-    tilt_since_pose: failsafe_level::TiltSincePose,
-    /// The pose clock's lateness check (`tick/pose_clock.rs`).
-    pose_latency: pose_clock::PoseLatency,
-    last_used_arrival: Option<f64>,
-    reference: Option<Reference>,
-    reference_generation: u64,
-    /// When each kind of refusal was last said \[s\] ([`Refusal::kind`]).
-    last_refusal_text: [Option<f64>; Refusal::KINDS],
-    /// The flight envelope (fence, speed limit).
-    envelope: crate::envelope::Envelope,
-    /// Braking for overspeed (said once per excursion).
-    overspeed: bool,
-    /// The stop sequence, once asked for (`tick/envelope.rs`).
-    stop: Option<envelope::Stop>,
-    /// The next step's CSV row carries [`STOP_GUARD`] (the stop began).
-    stop_marked: bool,
+    mapping: ThrustMapping,
+    guard: CommandGuard,
+    /// The pose clock and window.
+    poses: pose::Poses,
+    /// The goals and the reference.
+    goals: goals::Goals,
+    /// Engagement and the stop.
+    engagement: standby::Engagement,
+    /// The failsafe.
+    failsafe: ladder::FailsafePart,
     /// The last command sent (the stop's level ramps from it).
     last_sent: Option<dflat_link::AttitudeCommand>,
     guard_note: Option<&'static str>,
@@ -215,27 +188,6 @@ pub struct ControlCore {
     /// Outputs produced between steps (by [`ControlCore::apply`]).
     pending_texts: Vec<MavMessage>,
     pending_transitions: Vec<Transition>,
-    /// The mission uploaded over MAVLink, if any.
-    mission: Option<crate::mission::Mission>,
-    /// The mission being flown (started), if any.
-    runner: Option<crate::mission::MissionRunner>,
-    /// The last MISSION_CURRENT sent: when, and (seq, total, state).
-    mission_current_sent: Option<(f64, (u16, u16, dflat_link::dialect::MissionState))>,
-    /// The yaw of the setpoint being flown \[rad\], if it set one.
-    setpoint_yaw: Option<f64>,
-    /// The commanded heading, rate-limited.
-    yaw_command: crate::yaw::YawCommand,
-    /// The heading this tick's command carries \[rad\].
-    commanded_yaw: f64,
-    /// Maps stream senders' `time_boot_ms` onto this computer's clock.
-    stream_clock: PoseClock,
-    /// The stream's samples so far (the flown stream is built from them;
-    /// kept while a stream is flown or pending).
-    stream_buffer: Option<Reference>,
-    /// Arrival of the newest stream sample \[s\].
-    last_sample_arrival: Option<f64>,
-    /// The newest position-only setpoint: arrival \[s\], (time \[s\], position \[m\]).
-    last_position_setpoint: Option<(f64, (f64, [f64; 3]))>,
 }
 
 impl std::fmt::Debug for ControlCore {
@@ -256,54 +208,36 @@ impl ControlCore {
         mapping: ThrustMapping,
     ) -> Self {
         controller.reset();
+        let settings = CoreSettings::new(config, controller.as_ref());
         let supervisor = Supervisor::new(supervisor_config(config));
-        let reference_generation = supervisor.goal_generation();
+        let generation = supervisor.goal_generation();
+        let v = &settings.vehicle;
+        let failsafe = ladder::FailsafePart {
+            state: failsafe::Failsafe::Nominal,
+            fallback: Fallback::new(
+                settings.failsafe.hold_ticks,
+                mapping.normalized(v.gravity).unwrap_or(v.hover_thrust),
+                v.yaw,
+            ),
+            residual: ResidualMonitor::new(settings.failsafe.residual_failsafe),
+            tilt_since_pose: Default::default(),
+        };
         Self {
-            multi_rate: controller.multi_rate(),
             supervisor,
             controller,
             mapping,
-            target: Target {
-                system: config.link.system_id,
-                component: config.link.autopilot_component,
-            },
-            period: 1.0 / config.controller.rate_hz,
-            clock: PoseClock::new(
-                config.link.pose_clock_window_s,
-                config.link.pose_min_latency_ms / 1000.0,
-            ),
             guard: CommandGuard {
-                max_tilt: config.vehicle.max_tilt_deg.to_radians(),
+                max_tilt: v.max_tilt,
             },
-            fallback: Fallback::new(
-                config.safety.hold_last_ticks,
-                mapping
-                    .normalized(config.vehicle.gravity)
-                    .unwrap_or(config.vehicle.hover_thrust),
-                config.vehicle.yaw_deg.to_radians(),
-            ),
-            residual: ResidualMonitor::new(config.safety.residual_failsafe_m),
             model: control_model(config).ok(),
-            config: config.clone(),
-            pose: None,
-            attitude_yaw: None,
-            attitude: None,
-            standby_attitude: None,
-            mode: None,
-            motion: MotionEstimator::new(),
-            params: AutopilotParams::new(),
-            tilt_refusal_said: false,
-            failsafe: failsafe::Failsafe::Nominal,
-            tilt_since_pose: Default::default(),
-            pose_latency: Default::default(),
-            last_used_arrival: None,
-            reference: None,
-            reference_generation,
-            last_refusal_text: [None; Refusal::KINDS],
-            envelope: crate::envelope::Envelope::from_config(config),
-            overspeed: false,
-            stop: None,
-            stop_marked: false,
+            poses: pose::Poses::new(&settings.pose),
+            goals: goals::Goals::new(
+                &settings,
+                crate::envelope::Envelope::from_config(config),
+                generation,
+            ),
+            engagement: standby::Engagement::new(),
+            failsafe,
             last_sent: None,
             guard_note: None,
             learned_said: None,
@@ -311,18 +245,7 @@ impl ControlCore {
             pending_texts: Vec::new(),
             events_applied: 0,
             pending_transitions: Vec::new(),
-            mission: None,
-            runner: None,
-            mission_current_sent: None,
-            setpoint_yaw: None,
-            yaw_command: crate::yaw::YawCommand::new(
-                config.vehicle.max_yaw_rate_deg_s.to_radians(),
-            ),
-            commanded_yaw: config.vehicle.yaw_deg.to_radians(),
-            stream_clock: PoseClock::new(config.link.pose_clock_window_s, 0.0),
-            stream_buffer: None,
-            last_sample_arrival: None,
-            last_position_setpoint: None,
+            settings,
         }
     }
 
@@ -348,7 +271,7 @@ impl ControlCore {
 
     /// The failsafe state (what happens after a failure).
     pub fn failsafe(&self) -> failsafe::Failsafe {
-        self.failsafe
+        self.failsafe.state
     }
 
     /// One control tick at `time`: the events since the previous tick are
@@ -376,27 +299,28 @@ impl ControlCore {
         // before a failsafe resets the controller.)
         let level = self.failsafe_level_command();
         self.check_stream_timeout(t);
-        self.supervisor.set_motion(self.motion.estimate());
+        self.supervisor.set_motion(self.poses.motion.estimate());
         self.check_overspeed(t);
-        let decision = self.supervisor.tick(t, !self.failsafe.latched(t));
-        if decision.reset_controller {
-            self.reset_controller();
-            self.last_used_arrival = None;
-        }
-        if let Some(tr) = decision.transition {
-            self.on_transition(t, tr, level);
+        // The failsafe machine first (stale pose, a silent autopilot, its
+        // clearing); the flight state moves on when it changed nothing.
+        let transitions = self.supervisor.transitions();
+        self.report_health(t, level);
+        if self.supervisor.transitions() == transitions
+            && let Some(tr) = self.supervisor.tick(t).transition
+        {
+            self.announce(tr);
         }
         self.stop_tick(t, level);
         self.refresh_reference();
         self.bound_reference();
-        self.commanded_yaw = self.heading(t);
+        self.goals.commanded_yaw = self.heading(t);
 
         // 3. Control.
         let mut row = CsvRow {
             tick: time.tick,
             t: time.scheduled,
             state: self.supervisor.state(),
-            measured: self.pose.map(|p| p.position),
+            measured: self.poses.newest.map(|p| p.position),
             plan: None,
             reference: None,
             command: None,
@@ -405,7 +329,7 @@ impl ControlCore {
             disturbance: None,
             residual: None,
             guard: self.guard_note.take(),
-            pose_age_ms: self.pose.map(|p| (t - p.capture) * 1e3),
+            pose_age_ms: self.poses.newest.map(|p| (t - p.capture) * 1e3),
             wake: t,
             events: self.events_applied,
         };
@@ -413,48 +337,47 @@ impl ControlCore {
         // the previous plan's prediction for it.
         if !self.supervisor.state().engaged() {
             // Standby: the plan is not flown, so it predicts nothing.
-            self.residual.forget();
-        } else if decision.stream
-            && let Some(pose) = self.pose
-        {
-            let (r, trip) = self.residual.measure(pose.position);
+            self.failsafe.residual.forget();
+        } else if let Some(pose) = self.poses.newest {
+            let (r, trip) = self.failsafe.residual.measure(pose.position);
             row.residual = r;
-            if trip && let Some(tr) = self.supervisor.force_failsafe(t, Cause::ResidualDiverged) {
-                self.counts.guards.residual_failsafes += 1;
+            if trip {
                 warn!(residual = ?r, "model residual above the threshold: failsafe");
-                self.reset_controller();
-                self.last_used_arrival = None;
-                self.on_transition(t, tr, level);
-                row.guard = Some("residual");
+                let tripped = failsafe::Event::Tripped {
+                    t,
+                    cause: Cause::ResidualDiverged,
+                    engaged: true,
+                    level: self.level_plan(t, level),
+                };
+                self.failsafe_on(t, tripped, None, &mut row.guard);
             }
         }
-        if matches!(self.failsafe, failsafe::Failsafe::Trial { .. })
+        if matches!(self.failsafe.state, failsafe::Failsafe::Trial { .. })
             && self.supervisor.state() == FlightState::Failsafe
         {
             self.trial(t);
         }
-        let mut solve_us = None;
-        let command = if self.supervisor.state().streams()
-            && let Some(pose) = self.pose
-            && self.reference.is_some()
-        {
-            let (sent, us) = self.control(t, pose, stopwatch, &mut row);
-            solve_us = Some(us);
-            sent
-        } else {
+        let controlled = match self.poses.newest {
+            Some(pose) if self.supervisor.state().streams() => {
+                self.control(t, pose, stopwatch, &mut row)
+            }
+            _ => None,
+        };
+        let (command, solve_us) = match controlled {
+            Some((sent, us)) => (sent, Some(us)),
             // A failsafe's brake and level hover, while due.
-            self.idle_tick(t, &mut row)
+            None => (self.idle_tick(t, &mut row), None),
         };
         self.mission_tick(t);
         self.last_sent = command.as_ref().map(|c| c.command);
         if command.is_some()
-            && let Some(stop) = self.stop.as_mut()
+            && let Some(stop) = self.engagement.stop.as_mut()
         {
             stop.commands += 1;
             stop.last_command = Some(t);
         }
         row.state = self.supervisor.state();
-        if std::mem::take(&mut self.stop_marked) {
+        if std::mem::take(&mut self.engagement.stop_marked) {
             row.guard = Some(STOP_GUARD);
         }
         StepOutput {
@@ -492,10 +415,10 @@ impl ControlCore {
     /// that it can run at the next tick.
     fn reset_controller(&mut self) {
         self.controller.reset();
-        self.fallback.forget();
-        self.residual.forget();
-        if self.multi_rate
-            && let Some(pose) = self.pose
+        self.failsafe.fallback.forget();
+        self.failsafe.residual.forget();
+        if self.settings.multi_rate
+            && let Some(pose) = self.poses.newest
         {
             self.observe(&pose);
         }
@@ -511,7 +434,7 @@ impl ControlCore {
                 yaw,
                 reset_counter,
             } => {
-                self.tilt_since_pose.on_pose(arrival);
+                self.failsafe.tilt_since_pose.on_pose(arrival);
                 self.apply_pose(arrival, source_time, position, yaw, reset_counter);
             }
             Event::Attitude {
@@ -520,11 +443,13 @@ impl ControlCore {
                 pitch,
                 yaw,
             } => {
-                self.tilt_since_pose.on_attitude(arrival, [pitch, roll]);
-                self.attitude_yaw = Some(yaw);
+                self.failsafe
+                    .tilt_since_pose
+                    .on_attitude(arrival, [pitch, roll]);
+                self.poses.attitude_yaw = Some(yaw);
                 if roll.is_finite() && pitch.is_finite() {
                     // As the window records inputs: a world-frame tilt.
-                    self.attitude = Some(self.tilt_from_measured(pitch, roll, yaw));
+                    self.poses.attitude = Some(self.tilt_from_measured(pitch, roll, yaw));
                 }
             }
             Event::Mission { arrival, action } => self.apply_mission(arrival, action),

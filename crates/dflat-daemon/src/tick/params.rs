@@ -14,11 +14,11 @@ use crate::config::ThrustMode;
 impl ControlCore {
     /// Queues the parameter requests due at `t` (sent with the texts).
     pub(super) fn request_params(&mut self, t: f64) {
-        for name in self.params.due(t) {
+        for name in self.engagement.params.due(t) {
             debug!(name, "requesting the autopilot's parameter");
             self.pending_texts
                 .push(dflat_link::params::param_request_read(
-                    (self.target.system, self.target.component),
+                    (self.settings.target.system, self.settings.target.component),
                     name,
                 ));
         }
@@ -27,10 +27,10 @@ impl ControlCore {
     /// A PARAM_VALUE from the autopilot: a value dflat reads is logged next
     /// to the configuration's, and said when they differ.
     pub(super) fn apply_param(&mut self, name: &str, value: f64) {
-        let Some(known) = self.params.on_value(name, value) else {
+        let Some(known) = self.engagement.params.on_value(name, value) else {
             return;
         };
-        let v = &self.config.vehicle;
+        let v = self.settings.vehicle;
         match known.spec.kind {
             ParamKind::HoverThrust if v.hover_thrust_from_autopilot => {
                 self.fly_autopilot_hover(name, known.value);
@@ -57,7 +57,7 @@ impl ControlCore {
                 info!(
                     param = name,
                     autopilot_deg = known.value,
-                    config_deg = v.max_tilt_deg,
+                    config_deg = v.max_tilt.to_degrees(),
                     "tilt limit"
                 );
             }
@@ -70,7 +70,7 @@ impl ControlCore {
     /// the daemon has not engaged yet (a change in flight would step the
     /// thrust). Said either way.
     fn fly_autopilot_hover(&mut self, name: &str, value: f64) {
-        let v = &self.config.vehicle;
+        let v = self.settings.vehicle;
         if v.thrust_mode != ThrustMode::Normalized {
             return;
         }
@@ -99,7 +99,7 @@ impl ControlCore {
                 hover_thrust: value,
                 gravity: v.gravity,
             };
-            self.fallback.hover_thrust = value;
+            self.failsafe.fallback.hover_thrust = value;
             info!(
                 param = name,
                 value,

@@ -8,8 +8,47 @@ use nalgebra::Vector3;
 use tracing::warn;
 
 use super::ControlCore;
+use super::pose_clock::PoseLatency;
+use super::settings::PoseSettings;
+use crate::clock::PoseClock;
 use crate::config::PoseSourceKind;
 use crate::guard::{departs_from_motion, is_pose_jump};
+use crate::motion::MotionEstimator;
+
+/// The pose clock and window: the core's part that owns what the poses
+/// and the autopilot's attitude said.
+#[derive(Debug)]
+pub(super) struct Poses {
+    /// Maps the pose source's clock onto this computer's.
+    pub(super) clock: PoseClock,
+    /// The pose clock's lateness check (`tick/pose_clock.rs`).
+    pub(super) latency: PoseLatency,
+    /// The newest pose.
+    pub(super) newest: Option<PoseSample>,
+    /// Newest ATTITUDE yaw \[rad\].
+    pub(super) attitude_yaw: Option<f64>,
+    /// Newest ATTITUDE (pitch, roll) as a world-frame tilt \[rad\].
+    pub(super) attitude: Option<[f64; 2]>,
+    /// The vehicle's motion from the poses (engagement's stop point).
+    pub(super) motion: MotionEstimator,
+    /// Arrival \[s\] of the pose the last command used.
+    pub(super) last_used_arrival: Option<f64>,
+}
+
+impl Poses {
+    /// Nothing heard yet, the clock per `settings`.
+    pub(super) fn new(settings: &PoseSettings) -> Self {
+        Self {
+            clock: PoseClock::new(settings.clock_window, settings.min_latency),
+            latency: PoseLatency::default(),
+            newest: None,
+            attitude_yaw: None,
+            attitude: None,
+            motion: MotionEstimator::new(),
+            last_used_arrival: None,
+        }
+    }
+}
 
 /// One pose as the control core keeps it.
 #[derive(Debug, Clone, Copy)]
@@ -53,10 +92,11 @@ impl ControlCore {
         // between, or an estimator reset): re-anchor below.
         // Judged against the motion the poses show (a fast vehicle is not
         // a jump); without a motion estimate yet, against the speed limit.
-        let s = &self.config.safety;
-        let velocity = self.motion.estimate().map(|m| m.velocity);
-        let max_acceleration = self.envelope.max_acceleration;
-        let jump = self.pose.is_some_and(|p| {
+        let margin = self.settings.pose.jump_margin;
+        let max_speed = self.settings.goals.max_speed;
+        let velocity = self.poses.motion.estimate().map(|m| m.velocity);
+        let max_acceleration = self.goals.envelope.max_acceleration;
+        let jump = self.poses.newest.is_some_and(|p| {
             let dt = capture - p.capture;
             let counters = (p.reset_counter, reset_counter);
             capture >= p.capture
@@ -66,18 +106,18 @@ impl ControlCore {
                         v,
                         position,
                         dt,
-                        self.period,
+                        self.settings.period,
                         max_acceleration,
-                        s.pose_jump_margin_m,
+                        margin,
                         counters,
                     ),
                     None => is_pose_jump(
                         p.position,
                         position,
                         dt,
-                        s.max_speed_mps,
-                        self.period,
-                        s.pose_jump_margin_m,
+                        max_speed,
+                        self.settings.period,
+                        margin,
                         counters,
                     ),
                 }
@@ -86,11 +126,11 @@ impl ControlCore {
         // The motion estimate restarts at a jump (the old poses are
         // another frame).
         if jump {
-            self.motion.reset();
+            self.poses.motion.reset();
         } else {
             self.observe(&pose);
         }
-        self.motion.push(capture, position);
+        self.poses.motion.push(capture, position);
         // The newest for the others, by the source's own clock when both
         // have one (a falling offset estimate may map a newer pose before
         // the previous capture), else by capture time; its time must then
@@ -100,17 +140,17 @@ impl ControlCore {
             (Some(a), Some(b)) if (a - b).abs() < crate::clock::SOURCE_RESET => a > b,
             _ => capture > p.capture,
         };
-        match self.pose {
-            None => self.pose = Some(pose),
+        match self.poses.newest {
+            None => self.poses.newest = Some(pose),
             Some(p) if newer(&p) => {
                 pose.capture = pose.capture.max(p.capture + 1e-6);
-                self.pose = Some(pose);
+                self.poses.newest = Some(pose);
             }
             Some(_) => {}
         }
         if jump {
             // The jumped pose is the newest one now.
-            self.pose = Some(pose);
+            self.poses.newest = Some(pose);
             self.re_anchor(arrival, &pose);
         }
     }
@@ -121,11 +161,11 @@ impl ControlCore {
     pub(super) fn re_anchor(&mut self, t: f64, pose: &PoseSample) {
         self.counts.guards.pose_jumps += 1;
         self.controller.reset();
-        if self.multi_rate {
+        if self.settings.multi_rate {
             self.observe(pose);
         }
-        self.fallback.forget();
-        self.residual.forget();
+        self.failsafe.fallback.forget();
+        self.failsafe.residual.forget();
         self.guard_note = Some("jump");
         warn!(position = ?pose.position, "pose jump: re-anchored");
         match self.supervisor.re_anchor(t, pose.position) {
@@ -142,12 +182,12 @@ impl ControlCore {
     /// VISION_POSITION_ESTIMATE), ATTITUDE's (LOCAL_POSITION_NED), else the
     /// configured fixed yaw.
     pub(super) fn yaw_of(&self, pose_yaw: Option<f64>, attitude_yaw: Option<f64>) -> f64 {
-        let yaw = if self.config.link.pose_source == PoseSourceKind::LocalPositionNed {
+        let yaw = if self.settings.pose.source == PoseSourceKind::LocalPositionNed {
             attitude_yaw
         } else {
             pose_yaw
         };
-        yaw.unwrap_or_else(|| self.config.vehicle.yaw_deg.to_radians())
+        yaw.unwrap_or(self.settings.vehicle.yaw)
     }
 
     /// Hands a pose to a multi-rate controller at its capture time.
@@ -155,7 +195,7 @@ impl ControlCore {
         let sample = Measurement {
             t: pose.capture,
             position: Vector3::from(pose.position),
-            yaw: self.yaw_of(pose.yaw, self.attitude_yaw),
+            yaw: self.yaw_of(pose.yaw, self.poses.attitude_yaw),
         };
         self.controller.observe(&sample);
     }

@@ -57,12 +57,12 @@ impl ControlCore {
     /// `link.pose_time = "source"` (until the clock is found unusable),
     /// else the arrival time.
     pub(super) fn capture_time(&mut self, arrival: f64, source_time: Option<f64>) -> f64 {
-        if self.config.link.pose_time == PoseTime::Arrival || self.pose_latency.faulted() {
+        if self.settings.pose.time == PoseTime::Arrival || self.poses.latency.faulted() {
             return arrival;
         }
-        let capture = self.clock.capture_time(arrival, source_time);
-        let max = self.config.safety.pose_max_latency_ms / 1000.0;
-        if !self.pose_latency.check(arrival, capture, max) {
+        let capture = self.poses.clock.capture_time(arrival, source_time);
+        let max = self.settings.pose.max_latency;
+        if !self.poses.latency.check(arrival, capture, max) {
             return capture;
         }
         self.counts.guards.pose_clock_faults += 1;

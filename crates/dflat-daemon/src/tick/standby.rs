@@ -12,7 +12,43 @@ use nalgebra::Vector3;
 use tracing::{error, info};
 
 use super::ControlCore;
+use super::envelope::Stop;
+use crate::autopilot_params::AutopilotParams;
 use crate::config::AutopilotKind;
+
+/// Engagement: the core's part that owns what the autopilot said of its
+/// mode and parameters, and the stop sequence.
+#[derive(Debug)]
+pub(super) struct Engagement {
+    /// The autopilot's mode as last reported.
+    pub(super) mode: Option<AutopilotMode>,
+    /// The autopilot's own hover thrust and tilt limit, read at start-up.
+    pub(super) params: AutopilotParams,
+    /// Engagement is refused (the autopilot's tilt limit is below ours);
+    /// said once.
+    pub(super) tilt_refusal_said: bool,
+    /// The attitude at the previous tick, when that tick's command was
+    /// sent in standby (corrected from the attitude at this tick).
+    pub(super) standby_attitude: Option<[f64; 2]>,
+    /// The stop sequence, once asked for (`tick/envelope.rs`).
+    pub(super) stop: Option<Stop>,
+    /// The next step's CSV row carries [`super::STOP_GUARD`] (the stop began).
+    pub(super) stop_marked: bool,
+}
+
+impl Engagement {
+    /// Nothing heard from the autopilot yet.
+    pub(super) fn new() -> Self {
+        Self {
+            mode: None,
+            params: AutopilotParams::new(),
+            tilt_refusal_said: false,
+            standby_attitude: None,
+            stop: None,
+            stop_marked: false,
+        }
+    }
+}
 
 impl ControlCore {
     /// The input that explains the attitude change since the previous
@@ -21,9 +57,11 @@ impl ControlCore {
     /// (the autopilot's position mode holds altitude), with the disturbance
     /// estimate's thrust scale when there is one.
     pub(super) fn correct_standby_input(&mut self) {
-        let (Some(before), Some(now), Some(model)) =
-            (self.standby_attitude.take(), self.attitude, self.model)
-        else {
+        let (Some(before), Some(now), Some(model)) = (
+            self.engagement.standby_attitude.take(),
+            self.poses.attitude,
+            self.model,
+        ) else {
             return;
         };
         let [pitch, roll] = model.input_from_attitude(before, now);
@@ -39,44 +77,47 @@ impl ControlCore {
     /// supervisor learns whether our commands are applied; a change is
     /// logged and said once.
     pub(super) fn apply_mode(&mut self, mut mode: AutopilotMode, arrival: f64) {
-        mode.family = match self.config.link.autopilot {
+        mode.family = match self.settings.vehicle.autopilot {
             AutopilotKind::Auto => mode.family,
             AutopilotKind::Px4 => AutopilotFamily::Px4,
             AutopilotKind::Ardupilot => AutopilotFamily::ArduPilot,
         };
         if mode.family != AutopilotFamily::Other {
-            self.params.start(mode.family, arrival);
+            self.engagement.params.start(mode.family, arrival);
         }
         let refused = self.tilt_refused();
-        if refused && mode.applies_commands() && !self.tilt_refusal_said {
-            self.tilt_refusal_said = true;
-            let limit = self.params.tilt_limit().map_or(0.0, |p| p.value);
-            let name = self.params.tilt_limit().map_or("", |p| p.spec.name);
+        if refused && mode.applies_commands() && !self.engagement.tilt_refusal_said {
+            self.engagement.tilt_refusal_said = true;
+            let limit = self.engagement.params.tilt_limit().map_or(0.0, |p| p.value);
+            let name = self
+                .engagement
+                .params
+                .tilt_limit()
+                .map_or("", |p| p.spec.name);
+            let max_tilt_deg = self.settings.vehicle.max_tilt.to_degrees();
             error!(
-                max_tilt_deg = self.config.vehicle.max_tilt_deg,
+                max_tilt_deg,
                 autopilot_limit_deg = limit,
                 "not engaging: vehicle.max_tilt_deg exceeds the autopilot's {name}"
             );
-            let text = format!(
-                "dflat: not engaging, tilt {:.0} > {name} {limit:.0}",
-                self.config.vehicle.max_tilt_deg
-            );
+            let text = format!("dflat: not engaging, tilt {max_tilt_deg:.0} > {name} {limit:.0}");
             self.text(MavSeverity::MAV_SEVERITY_CRITICAL, &text);
         }
         self.supervisor.on_mode(mode.applies_commands() && !refused);
-        if self.mode != Some(mode) {
+        if self.engagement.mode != Some(mode) {
             info!(mode = %mode, applies = mode.applies_commands(), "autopilot mode");
             let text = format!("dflat: autopilot {mode}");
             self.text(MavSeverity::MAV_SEVERITY_INFO, &text);
-            self.mode = Some(mode);
+            self.engagement.mode = Some(mode);
         }
     }
 
     /// The autopilot's tilt limit is known and below `vehicle.max_tilt_deg`:
     /// it would cut commands the window records as sent.
     fn tilt_refused(&self) -> bool {
-        self.params
+        self.engagement
+            .params
             .tilt_limit()
-            .is_some_and(|p| self.config.vehicle.max_tilt_deg > p.value + 1e-6)
+            .is_some_and(|p| self.settings.vehicle.max_tilt > (p.value + 1e-6).to_radians())
     }
 }

@@ -45,6 +45,15 @@ impl RxState {
         let errors_before = self.errors_queued();
         self.parser.push(bytes);
         let ts = unix_time_us();
+        let received = |frame: crate::frame::Frame| {
+            RecvEvent::Frame(Box::new(Received {
+                header: frame.header,
+                message: frame.message,
+                arrival,
+                signed: frame.signed,
+                from,
+            }))
+        };
         while let Some(item) = self.parser.next_frame() {
             match item {
                 Ok(frame) => {
@@ -55,13 +64,7 @@ impl RxState {
                             _ => tap.record_message(ts, &frame.header, &frame.message),
                         }
                     }
-                    self.pending.push_back(RecvEvent::Frame(Box::new(Received {
-                        header: frame.header,
-                        message: frame.message,
-                        arrival,
-                        signed: frame.signed,
-                        from,
-                    })));
+                    self.pending.push_back(received(frame));
                 }
                 Err(e) => self.pending.push_back(RecvEvent::Error(e)),
             }
@@ -75,13 +78,7 @@ impl RxState {
                         if let Some(tap) = tap.filter(|t| t.inbound) {
                             tap.record_message(ts, &frame.header, &frame.message);
                         }
-                        self.pending.push_back(RecvEvent::Frame(Box::new(Received {
-                            header: frame.header,
-                            message: frame.message,
-                            arrival,
-                            signed: frame.signed,
-                            from,
-                        })));
+                        self.pending.push_back(received(frame));
                     }
                     Err(e) => self.pending.push_back(RecvEvent::Error(e)),
                 }

@@ -102,6 +102,25 @@ pub struct ModeSample {
     pub mode: AutopilotMode,
 }
 
+impl ModeSample {
+    /// A HEARTBEAT at `t` of an autopilot armed in its offboard mode (PX4
+    /// OFFBOARD): the commands are applied. For logs assembled from a
+    /// simulation's records (the lab's identify).
+    pub fn engaged(t: f64) -> Self {
+        Self {
+            t,
+            mode: AutopilotMode {
+                family: AutopilotFamily::Px4,
+                custom_mode: dflat_link::modes::px4::custom_mode(
+                    dflat_link::modes::px4::OFFBOARD,
+                    0,
+                ),
+                armed: true,
+            },
+        }
+    }
+}
+
 /// A flight's MAVLink traffic as time series (seconds since the first
 /// record; `start_unix_us` is that record's timestamp).
 #[derive(Debug, Clone, Default)]

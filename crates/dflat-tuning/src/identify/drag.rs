@@ -152,7 +152,7 @@ fn position_at(samples: &[(f64, [f64; 2])], t: f64) -> [f64; 2] {
 }
 
 /// `v` minus its least-squares line in `t`.
-fn project(t: &[f64], v: &[f64]) -> Vec<f64> {
+pub(super) fn project(t: &[f64], v: &[f64]) -> Vec<f64> {
     let n = t.len() as f64;
     let (mt, mv) = (t.iter().sum::<f64>() / n, v.iter().sum::<f64>() / n);
     let stt: f64 = t.iter().map(|x| (x - mt).powi(2)).sum();
@@ -288,6 +288,24 @@ pub fn fit_drag(data: &DragData) -> Option<DragFit> {
 mod tests {
     use super::*;
 
+    /// The 20 s simulated flights' data: `samples` in chunks of 150, one
+    /// segment, the altitude held (no thrust model).
+    fn one_segment(
+        attitude: Vec<(f64, [f64; 3])>,
+        samples: &[(f64, [f64; 2])],
+        g: f64,
+    ) -> DragData {
+        DragData {
+            attitude,
+            thrust: None,
+            segments: vec![DragSegment {
+                span: (0.0, 19.999),
+                chunks: samples.chunks(150).map(|c| c.to_vec()).collect(),
+            }],
+            gravity: g,
+        }
+    }
+
     /// A simulated flight with known drag and offset: the fit recovers them.
     #[test]
     fn recovers_drag_from_a_simulated_flight() {
@@ -312,16 +330,7 @@ mod tests {
                 v[ax] += dt * (a[ax] - drag * v[ax] + offset[ax]);
             }
         }
-        let chunks: Vec<Vec<(f64, [f64; 2])>> = samples.chunks(150).map(|c| c.to_vec()).collect();
-        let data = DragData {
-            attitude,
-            thrust: None,
-            segments: vec![DragSegment {
-                span: (0.0, 19.999),
-                chunks,
-            }],
-            gravity: g,
-        };
+        let data = one_segment(attitude, &samples, g);
         let fit = fit_drag(&data).expect("fit");
         assert!((fit.drag - drag).abs() < 0.01, "{fit:?}");
         assert!((fit.offset[0] - offset[0]).abs() < 0.02, "{fit:?}");
@@ -361,16 +370,7 @@ mod tests {
                 v[ax] += dt * (a[ax] - drag * v[ax]);
             }
         }
-        let chunks: Vec<Vec<(f64, [f64; 2])>> = samples.chunks(150).map(|c| c.to_vec()).collect();
-        let mut data = DragData {
-            attitude,
-            thrust: None,
-            segments: vec![DragSegment {
-                span: (0.0, 19.999),
-                chunks,
-            }],
-            gravity: g,
-        };
+        let mut data = one_segment(attitude, &samples, g);
         let held = fit_drag(&data).expect("fit");
         data.thrust = Some(ThrustModel {
             commands,

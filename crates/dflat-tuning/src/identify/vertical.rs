@@ -14,6 +14,7 @@
 
 use serde::Serialize;
 
+use super::drag::project;
 use super::stats::{Whiteness, golden};
 
 /// Range of τ_T searched \[s\].
@@ -132,19 +133,6 @@ fn projected(data: &VerticalData, tau_t: f64) -> Vec<(Vec<f64>, Vec<f64>)> {
         }
     }
     out
-}
-
-/// `v` minus its least-squares line in `t`.
-fn project(t: &[f64], v: &[f64]) -> Vec<f64> {
-    let n = t.len() as f64;
-    let (mt, mv) = (t.iter().sum::<f64>() / n, v.iter().sum::<f64>() / n);
-    let stt: f64 = t.iter().map(|x| (x - mt).powi(2)).sum();
-    let stv: f64 = t.iter().zip(v).map(|(x, y)| (x - mt) * (y - mv)).sum();
-    let slope = if stt > 0.0 { stv / stt } else { 0.0 };
-    t.iter()
-        .zip(v)
-        .map(|(x, y)| y - mv - slope * (x - mt))
-        .collect()
 }
 
 /// (1/h, residuals, Σx̃², Σỹ²) for one τ_T.

@@ -1,5 +1,6 @@
 //! The records `dflat learn` reads: engaged runs of ticks from the daemon's
-//! per-tick CSV (the commands sent and the poses measured; nothing else).
+//! per-tick CSV (the commands sent and the poses measured, each pose at its
+//! capture time; nothing else).
 
 use dflat_records::Column;
 use nalgebra::Vector3;
@@ -7,25 +8,45 @@ use nalgebra::Vector3;
 use super::LearnError;
 use crate::flightlog::FlightCsv;
 
-/// One control tick: the measured position and the command sent.
+/// One control tick: the command sent.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Tick {
     /// Tick time \[s\] (the CSV's `t`).
     pub t: f64,
-    /// Measured position, local NED \[m\].
-    pub y: Vector3<f64>,
     /// Commanded roll, pitch, yaw \[rad\] (ZYX).
     pub euler: [f64; 3],
     /// Commanded normalised thrust \[0, 1\].
     pub thrust: f64,
 }
 
+/// One measured pose at its capture time.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Pose {
+    /// Capture time \[s\] (the ticks' clock).
+    pub t: f64,
+    /// Measured position, local NED \[m\].
+    pub y: Vector3<f64>,
+}
+
 /// A run of consecutive engaged ticks (`HOLDING` or `TRACKING`: the
-/// autopilot applied the commands), evenly spaced.
+/// autopilot applied the commands), evenly spaced, and the poses captured
+/// over it (in time order, each once).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Run {
     /// The ticks in time order.
     pub ticks: Vec<Tick>,
+    /// The poses in capture order.
+    pub poses: Vec<Pose>,
+}
+
+impl Run {
+    /// Adds a pose captured at `t`, unless it is not newer than the last
+    /// one (a pose seen by several ticks is one pose).
+    pub fn push_pose(&mut self, t: f64, y: Vector3<f64>) {
+        if self.poses.last().is_none_or(|p| t > p.t + 1e-9) && t.is_finite() {
+            self.poses.push(Pose { t, y });
+        }
+    }
 }
 
 /// True for the states in which the autopilot applies the daemon's commands
@@ -36,7 +57,10 @@ fn engaged(state: &str) -> bool {
 
 /// The engaged runs of one flight CSV (`name` for errors), split where a
 /// tick is missing (a gap over 1.5 `dt`), a field is empty or the state
-/// leaves the engaged ones. Errors name the file and the missing column.
+/// leaves the engaged ones. Each tick's pose is taken at its capture time,
+/// the tick's `t` less its `pose_age_ms` (the tick's `t` without that
+/// column), once however many ticks saw it. Errors name the file and the
+/// missing column.
 pub fn runs(csv: &FlightCsv, name: &str, dt: f64) -> Result<Vec<Run>, LearnError> {
     let need = [
         Column::T,
@@ -57,16 +81,24 @@ pub fn runs(csv: &FlightCsv, name: &str, dt: f64) -> Result<Vec<Run>, LearnError
         }
     }
     let cols: Vec<Vec<Option<f64>>> = need.iter().map(|c| csv.numbers(c)).collect();
+    let ages = csv
+        .has(Column::PoseAgeMs)
+        .then(|| csv.numbers(Column::PoseAgeMs));
     let states = csv.texts(Column::State);
     let mut out = Vec::new();
     let mut run = Run::default();
     for (i, state) in states.iter().enumerate() {
         let v: Option<Vec<f64>> = cols.iter().map(|c| c[i]).collect();
-        let tick = v.filter(|_| engaged(state)).map(|v| Tick {
-            t: v[0],
-            y: Vector3::new(v[1], v[2], v[3]),
-            euler: [v[4], v[5], v[6]],
-            thrust: v[7],
+        let age = ages.as_ref().map_or(Some(0.0), |a| a[i]);
+        let tick = v.filter(|_| engaged(state)).map(|v| {
+            (
+                Tick {
+                    t: v[0],
+                    euler: [v[4], v[5], v[6]],
+                    thrust: v[7],
+                },
+                Vector3::new(v[1], v[2], v[3]),
+            )
         });
         let joins = |t: &Tick| {
             run.ticks
@@ -74,10 +106,14 @@ pub fn runs(csv: &FlightCsv, name: &str, dt: f64) -> Result<Vec<Run>, LearnError
                 .is_none_or(|last| (t.t - last.t - dt).abs() < 0.5 * dt)
         };
         match tick {
-            Some(t) if joins(&t) => run.ticks.push(t),
-            Some(t) => {
-                out.push(std::mem::take(&mut run));
+            Some((t, y)) => {
+                if !joins(&t) {
+                    out.push(std::mem::take(&mut run));
+                }
                 run.ticks.push(t);
+                if let Some(age) = age {
+                    run.push_pose(t.t - age * 1e-3, y);
+                }
             }
             None => out.push(std::mem::take(&mut run)),
         }
@@ -119,7 +155,26 @@ mod tests {
         let last = runs[2].ticks[1];
         assert_eq!(last.euler, [0.05, -0.1, 0.2]);
         assert_eq!(last.thrust, 0.52);
-        assert_eq!(last.y, Vector3::new(0.7, 0.0, -10.0));
+        assert_eq!(runs[2].poses[1].y, Vector3::new(0.7, 0.0, -10.0));
+    }
+
+    /// A pose seen by several ticks (vision slower than the loop) is one
+    /// pose at its capture time.
+    #[test]
+    fn poses_are_taken_at_their_capture_time_once() {
+        let text = "tick,t,state,x,y,z,roll,pitch,yaw,thrust,pose_age_ms\n\
+            0,0.00,TRACKING,0,0,-10,0,0,0,0.5,10\n\
+            1,0.02,TRACKING,0,0,-10,0,0,0,0.5,30\n\
+            2,0.04,TRACKING,0.1,0,-10,0,0,0,0.5,5\n";
+        let c = FlightCsv::parse(text, Path::new("f.csv")).unwrap();
+        let runs = runs(&c, "f.csv", 0.02).unwrap();
+        let t: Vec<f64> = runs[0].poses.iter().map(|p| p.t).collect();
+        assert_eq!(runs[0].ticks.len(), 3);
+        assert_eq!(t.len(), 2);
+        assert!(
+            (t[0] + 0.01).abs() < 1e-12 && (t[1] - 0.035).abs() < 1e-12,
+            "{t:?}"
+        );
     }
 
     #[test]

@@ -1,12 +1,44 @@
 //! The residual's fit: per window size, the measured acceleration minus the
-//! parametric model's as targets, the basis of the velocity from the window
-//! and the modelled thrust axis as regressors, ridge regression; and the
-//! rollouts that judge a fit on held-out data.
+//! parametric model's as targets, the basis of the window's velocity and
+//! the modelled thrust axis as regressors, ridge regression; and the
+//! held-out predictions that judge a fit.
+//!
+//! # Targets from poses at their own times
+//!
+//! The poses come at their capture times (50 Hz, 15 Hz, with noise). At
+//! pose i a least-squares parabola through the window of `r = 2m + 1`
+//! poses centred on it gives the velocity `v_i` and the acceleration
+//! `â_i = Σ_l w_l·y_l` (weights [`parabola_weights`]). Those weights
+//! annihilate constants and slopes, so `â_i = ∫ K(τ)·a(τ) dτ` for the true
+//! acceleration a with the kernel `K(τ) = Σ_l w_l·(s_l − τ)₊` (∫K = 1): a
+//! weighted mean of the acceleration over the window. The same weights on
+//! the double integral of the model's thrust acceleration (the commands
+//! through its lags, [`Prepared::virtual_position`]) give the model's
+//! acceleration through the same kernel, so the target
+//!
+//! ```text
+//! â_i − Σ_l w_l·Y_T(s_l) + D·v_i   ≈   W·φ(v_i, n_i)
+//! ```
+//!
+//! is the residual smoothed as the measurement is, whatever the pose rate.
+//! A wider window averages the pose noise (a 2 cm σ is √6·σ/δt² ≈ 120 m/s²
+//! in one second difference at 50 Hz) at the price of smoothing the
+//! residual: the window is chosen on held-out data.
+//!
+//! # Held-out prediction: the input-to-output map from a window
+//!
+//! From pose i: the position and velocity at `s_i` fitted to the poses of
+//! the last [`START_S`] through the model itself (its drag and, learned,
+//! its residual along the window), then the model rolled forward through
+//! the commands sent — the parametric model alone, or with the residual at
+//! the rolled velocity — to the next pose (one step) and to the last pose
+//! within [`super::HORIZON_S`] (horizon): each model's own input-to-output
+//! map from the window.
 
 use dflat_control::learned::{Feature, LearnedResidual, basis, columns};
-use nalgebra::{DMatrix, DVector, Vector3};
+use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 
-use super::data::Run;
+use super::data::{Pose, Run};
 use super::parametric::{Inputs, Parametric};
 
 /// Which part of the data a sample belongs to.
@@ -24,7 +56,10 @@ pub enum Part {
 /// train, one validates, one tests.
 pub const BLOCK_S: f64 = 4.0;
 
-/// The part a tick at time `t` \[s\] falls in.
+/// The poses before a held-out start its state is fitted from \[s\].
+pub const START_S: f64 = 0.4;
+
+/// The part a sample at time `t` \[s\] falls in.
 pub fn part(t: f64) -> Part {
     match ((t / BLOCK_S).floor() as i64).rem_euclid(5) {
         3 => Part::Validate,
@@ -36,29 +71,138 @@ pub fn part(t: f64) -> Part {
 /// A run with its model inputs, ready to sample.
 #[derive(Debug, Clone)]
 pub struct Prepared {
-    /// Measured positions, NED \[m\].
-    pub y: Vec<Vector3<f64>>,
-    /// Tick times \[s\].
-    pub t: Vec<f64>,
+    /// Time of the first tick \[s\].
+    t0: f64,
+    /// Control step \[s\].
+    dt: f64,
     /// The parametric model's axis and thrust per tick.
     pub inputs: Inputs,
+    /// The model's thrust acceleration (with gravity, without drag) per
+    /// tick [m/s², NED].
+    thrust_acc: Vec<Vector3<f64>>,
+    /// Its double integral at each tick's start: position and velocity
+    /// from rest at the first tick.
+    integral: Vec<(Vector3<f64>, Vector3<f64>)>,
+    /// The poses captured over the ticks.
+    pub poses: Vec<Pose>,
 }
 
 impl Prepared {
     /// A run and its model inputs.
     pub fn new(run: &Run, model: &Parametric) -> Self {
-        Self {
-            y: run.ticks.iter().map(|t| t.y).collect(),
-            t: run.ticks.iter().map(|t| t.t).collect(),
-            inputs: model.inputs(run),
+        let inputs = model.inputs(run);
+        let dt = model.dt;
+        let at_tick: Vec<Vector3<f64>> = inputs
+            .axis
+            .iter()
+            .zip(&inputs.thrust)
+            .map(|(n, t)| model.acceleration(n, *t, &Vector3::zeros()))
+            .collect();
+        // Over each tick, the mean of its ends (the attitude moves through
+        // the tick; the last tick holds).
+        let thrust_acc: Vec<Vector3<f64>> = (0..at_tick.len())
+            .map(|j| {
+                let next = at_tick.get(j + 1).unwrap_or(&at_tick[j]);
+                (at_tick[j] + next) * 0.5
+            })
+            .collect();
+        let mut integral = Vec::with_capacity(thrust_acc.len() + 1);
+        let (mut p, mut v) = (Vector3::zeros(), Vector3::zeros());
+        for a in &thrust_acc {
+            integral.push((p, v));
+            p += v * dt + a * (0.5 * dt * dt);
+            v += a * dt;
         }
+        integral.push((p, v));
+        let t0 = run.ticks.first().map_or(0.0, |t| t.t);
+        let end = t0 + dt * thrust_acc.len() as f64;
+        Self {
+            t0,
+            dt,
+            inputs,
+            thrust_acc,
+            integral,
+            poses: run
+                .poses
+                .iter()
+                .copied()
+                .filter(|p| p.t >= t0 && p.t < end)
+                .collect(),
+        }
+    }
+
+    /// The tick whose step contains `t` (None outside the run).
+    pub fn tick_at(&self, t: f64) -> Option<usize> {
+        let j = ((t - self.t0) / self.dt).floor();
+        (j >= 0.0 && (j as usize) < self.thrust_acc.len()).then_some(j as usize)
+    }
+
+    /// The double integral of the model's thrust acceleration at `t`
+    /// (from rest at the first tick) \[m\], and its derivative [m/s].
+    pub fn virtual_position(&self, t: f64) -> (Vector3<f64>, Vector3<f64>) {
+        let j = ((t - self.t0) / self.dt)
+            .floor()
+            .clamp(0.0, (self.thrust_acc.len().max(1) - 1) as f64) as usize;
+        let (p, v) = self.integral[j];
+        let h = t - (self.t0 + j as f64 * self.dt);
+        let a = self.thrust_acc.get(j).copied().unwrap_or_default();
+        (p + v * h + a * (0.5 * h * h), v + a * h)
     }
 }
 
-/// Velocity [m/s] from the window of `r` outputs ending at `k`:
-/// `(y_k − y_{k−r+1}) / ((r−1)·δt)`.
-pub fn window_velocity(y: &[Vector3<f64>], k: usize, r: usize, dt: f64) -> Vector3<f64> {
-    (y[k] - y[k + 1 - r]) / ((r - 1) as f64 * dt)
+/// Weights of a least-squares parabola through `(times[l], y_l)` at `at`:
+/// `(value, slope, curvature)` rows, so `Σ w_l·y_l` is the parabola's
+/// value, velocity and acceleration there. `None` for fewer than three
+/// distinct times.
+pub fn parabola_weights(times: &[f64], at: f64) -> Option<[Vec<f64>; 3]> {
+    if times.len() < 3 {
+        return None;
+    }
+    let scale = times
+        .iter()
+        .map(|t| (t - at).abs())
+        .fold(0.0, f64::max)
+        .max(1e-9);
+    let row = |t: f64| {
+        let x = (t - at) / scale;
+        [1.0, x, 0.5 * x * x]
+    };
+    let mut ata = Matrix3::<f64>::zeros();
+    for t in times {
+        let r = row(*t);
+        for a in 0..3 {
+            for b in 0..3 {
+                ata[(a, b)] += r[a] * r[b];
+            }
+        }
+    }
+    let inv = ata.try_inverse()?;
+    if !inv.iter().all(|x| x.is_finite()) {
+        return None;
+    }
+    let mut out = [
+        vec![0.0; times.len()],
+        vec![0.0; times.len()],
+        vec![0.0; times.len()],
+    ];
+    for (l, t) in times.iter().enumerate() {
+        let r = row(*t);
+        for (k, w) in out.iter_mut().enumerate() {
+            w[l] = (0..3).map(|b| inv[(k, b)] * r[b]).sum::<f64>();
+        }
+    }
+    for w in &mut out[1] {
+        *w /= scale;
+    }
+    for w in &mut out[2] {
+        *w /= scale * scale;
+    }
+    Some(out)
+}
+
+/// Half-width m of a window of `r` poses (`r = 2m + 1`, at least 1).
+pub fn half_width(r: usize) -> usize {
+    (r.saturating_sub(1) / 2).max(1)
 }
 
 /// One regression sample: the basis row and the residual acceleration.
@@ -76,10 +220,161 @@ pub struct Sample {
     pub thrust: f64,
 }
 
-/// The samples of `part` for window `r` and basis `features`: at each tick
-/// k with a full window and a next output, the measured acceleration
-/// `(y_{k+1} − 2y_k + y_{k−1})/δt²` minus the model's at the window's
-/// velocity.
+/// One tick under a sample's kernel: its weight `∫_tick K(τ) dτ` and the
+/// velocity, thrust axis and thrust there.
+#[derive(Debug, Clone, Copy)]
+pub struct KernelTick {
+    /// The kernel's weight on the tick (the weights sum to about 1).
+    pub weight: f64,
+    /// Velocity at the tick's middle, from the window's parabola [m/s].
+    pub v: Vector3<f64>,
+    /// The model's thrust axis (unit, NED).
+    pub n: Vector3<f64>,
+    /// The model's specific thrust [m/s²].
+    pub thrust: f64,
+}
+
+/// A pose's window of `r` poses centred on it, smoothed: the velocity
+/// there, the residual target and the kernel it is taken through. None
+/// where the window leaves the run or spans a gap.
+#[derive(Debug, Clone)]
+pub struct Smoothed {
+    /// Capture time \[s\].
+    pub t: f64,
+    /// Velocity [m/s].
+    pub v: Vector3<f64>,
+    /// Measured minus parametric acceleration through the kernel [m/s²].
+    pub target: Vector3<f64>,
+    /// The model's thrust axis at `t` (unit, NED).
+    pub n: Vector3<f64>,
+    /// The model's specific thrust at `t` [m/s²].
+    pub thrust: f64,
+    /// The ticks under the kernel.
+    pub kernel: Vec<KernelTick>,
+}
+
+impl Smoothed {
+    /// The residual's prediction of the target: `Σ_j K_j·ρ(v_j, n_j)`
+    /// (unfaded; planar: horizontal).
+    pub fn predicted(&self, residual: &LearnedResidual, spatial: bool) -> Vector3<f64> {
+        let mut a = self.kernel.iter().fold(Vector3::zeros(), |s, k| {
+            s + residual.residual(&k.v, &k.n) * k.weight
+        });
+        if !spatial {
+            a.z = 0.0;
+        }
+        a
+    }
+
+    /// The basis through the kernel: `Σ_j K_j·φ(v_j, n_j)` into `out`.
+    pub fn basis(&self, features: &[Feature], out: &mut [f64; 16]) {
+        *out = [0.0; 16];
+        let mut phi = [0.0; 16];
+        for k in &self.kernel {
+            let m = basis(features, &k.v, &k.n, &mut phi);
+            for i in 0..m {
+                out[i] += k.weight * phi[i];
+            }
+        }
+    }
+}
+
+/// `∫_a^b (s − τ)₊ dτ` over `[a, b] ∩ [lo, s]`.
+fn ramp_integral(a: f64, b: f64, lo: f64, s: f64) -> f64 {
+    let (a, b) = (a.max(lo), b.min(s));
+    if b <= a {
+        0.0
+    } else {
+        0.5 * ((s - a).powi(2) - (s - b).powi(2))
+    }
+}
+
+/// The smoothed windows of `r` poses of a run's `which` part. The
+/// parabola's acceleration weights `w_l` give `â = ∫K(τ)·a(τ) dτ` with
+/// `K(τ) = Σ_l w_l·(s_l − τ)₊` on the window; the target is `â` less the
+/// model's thrust acceleration through the same weights plus its drag
+/// through the same kernel, and the residual is compared through the
+/// kernel too ([`Smoothed::predicted`]): no smoothing bias to first
+/// order, however wide the window.
+pub fn smoothed(p: &Prepared, model: &Parametric, r: usize, which: Part) -> Vec<Smoothed> {
+    let m = half_width(r);
+    let mut out = Vec::new();
+    let mut times = Vec::with_capacity(2 * m + 1);
+    if p.poses.len() < 2 * m + 1 {
+        return out;
+    }
+    // The window may not span more than twice its nominal length (a gap).
+    let spacing = (p.poses[p.poses.len() - 1].t - p.poses[0].t) / (p.poses.len() - 1) as f64;
+    for i in m..p.poses.len() - m {
+        let s = p.poses[i].t;
+        if part(s) != which {
+            continue;
+        }
+        let w = &p.poses[i - m..=i + m];
+        let (lo, hi) = (w[0].t, w[2 * m].t);
+        if hi - lo > 2.0 * (2 * m) as f64 * spacing {
+            continue;
+        }
+        let (Some(j), Some(j0), Some(j1)) = (p.tick_at(s), p.tick_at(lo), p.tick_at(hi)) else {
+            continue;
+        };
+        times.clear();
+        times.extend(w.iter().map(|q| q.t));
+        let Some([_, wv, wa]) = parabola_weights(&times, s) else {
+            continue;
+        };
+        let mut v = Vector3::zeros();
+        let mut a = Vector3::zeros();
+        let mut model_a = Vector3::zeros();
+        for (l, q) in w.iter().enumerate() {
+            v += q.y * wv[l];
+            a += q.y * wa[l];
+            model_a += p.virtual_position(q.t).0 * wa[l];
+        }
+        if !model.spatial {
+            // The altitude is held: the vertical velocity is noise.
+            (v.z, a.z) = (0.0, 0.0);
+        }
+        let mut kernel = Vec::with_capacity(j1 - j0 + 1);
+        let mut drag = Vector3::zeros();
+        for k in j0..=j1 {
+            let (ta, tb) = (p.t0 + k as f64 * p.dt, p.t0 + (k + 1) as f64 * p.dt);
+            let weight: f64 = w
+                .iter()
+                .zip(&wa)
+                .map(|(q, wl)| wl * ramp_integral(ta, tb, lo, q.t))
+                .sum();
+            let mid = 0.5 * (ta.max(lo) + tb.min(hi));
+            let vk = v + a * (mid - s);
+            drag += Vector3::new(
+                model.drag_h * vk.x,
+                model.drag_h * vk.y,
+                model.drag_v * vk.z,
+            ) * weight;
+            kernel.push(KernelTick {
+                weight,
+                v: vk,
+                n: p.inputs.axis[k],
+                thrust: p.inputs.thrust[k],
+            });
+        }
+        let mut target = a - model_a + drag;
+        if !model.spatial {
+            target.z = 0.0;
+        }
+        out.push(Smoothed {
+            t: s,
+            v,
+            target,
+            n: p.inputs.axis[j],
+            thrust: p.inputs.thrust[j],
+            kernel,
+        });
+    }
+    out
+}
+
+/// The samples of `part` for window `r` and basis `features`.
 pub fn samples(
     runs: &[Prepared],
     model: &Parametric,
@@ -87,36 +382,40 @@ pub fn samples(
     features: &[Feature],
     which: Part,
 ) -> Vec<Sample> {
-    let dt = model.dt;
     let mut out = Vec::new();
     for p in runs {
-        for k in r.max(2)..p.y.len().saturating_sub(1) {
-            if part(p.t[k]) != which {
-                continue;
-            }
-            let v = window_velocity(&p.y, k, r, dt);
-            let n = p.inputs.axis[k];
-            let thrust = p.inputs.thrust[k];
-            let measured = (p.y[k + 1] - p.y[k] * 2.0 + p.y[k - 1]) / (dt * dt);
+        for s in smoothed(p, model, r, which) {
             let mut phi = [0.0; 16];
-            basis(features, &v, &n, &mut phi);
+            s.basis(features, &mut phi);
             out.push(Sample {
                 phi,
-                target: measured - model.acceleration(&n, thrust, &v),
-                speed: v.norm(),
-                tilt: n.z.clamp(-1.0, 1.0).acos(),
-                thrust,
+                target: s.target,
+                speed: s.v.norm(),
+                tilt: s.n.z.clamp(-1.0, 1.0).acos(),
+                thrust: s.thrust,
             });
         }
     }
     out
 }
 
-/// Ridge regression of the targets on the first `m` basis columns: the
-/// weights per NED axis. Columns are penalised by `λ·N` on their
-/// standardised scale (the constant column is not penalised). `None` when
-/// the normal equations are singular or there are fewer samples than 4·m.
-pub fn ridge(samples: &[Sample], m: usize, lambda: f64) -> Option<[Vec<f64>; 3]> {
+/// A ridge fit: the weights per NED axis and their 95 % half-widths.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Ridge {
+    /// Weights, one row per NED axis.
+    pub weights: [Vec<f64>; 3],
+    /// 95 % half-width of each weight: `1.96·σ_axis·√(r·[(ΦᵀΦ + Λ)⁻¹]_ii)`
+    /// (the residual's σ per axis; `r`, the window, for the overlap of
+    /// neighbouring samples' windows).
+    pub half_width: [Vec<f64>; 3],
+}
+
+/// Ridge regression of the targets on the first `m` basis columns over
+/// samples of window `r`: the weights per NED axis and their intervals.
+/// Columns are penalised by `λ·N` on their standardised scale (the
+/// constant column is not penalised). `None` when the normal equations are
+/// singular or there are fewer samples than 4·m.
+pub fn ridge(samples: &[Sample], m: usize, lambda: f64, r: usize) -> Option<Ridge> {
     let n = samples.len();
     if n < 4 * m || m == 0 {
         return None;
@@ -146,80 +445,250 @@ pub fn ridge(samples: &[Sample], m: usize, lambda: f64) -> Option<[Vec<f64>; 3]>
         let var = a[(i, i)] / n as f64 - mean[i] * mean[i];
         if var > 1e-12 {
             a[(i, i)] += lambda * n as f64 * var;
+        } else if a[(i, i)] <= 1e-12 * n as f64 {
+            // A column the data never moved (the planar model's vertical
+            // velocity): its weight stays 0.
+            a[(i, i)] += n as f64;
         }
     }
     let chol = a.cholesky()?;
-    let w = b.map(|b| chol.solve(&b).iter().copied().collect::<Vec<f64>>());
-    w.iter().flatten().all(|x| x.is_finite()).then_some(w)
+    let weights = b
+        .clone()
+        .map(|b| chol.solve(&b).iter().copied().collect::<Vec<f64>>());
+    if !weights.iter().flatten().all(|x| x.is_finite()) {
+        return None;
+    }
+    let inv = chol.inverse();
+    let dof = (n - m).max(1) as f64;
+    let half_width = std::array::from_fn(|axis| {
+        let w = &weights[axis];
+        let sse: f64 = samples
+            .iter()
+            .map(|s| {
+                let fit: f64 = (0..m).map(|i| s.phi[i] * w[i]).sum();
+                (s.target[axis] - fit).powi(2)
+            })
+            .sum();
+        let var = sse / dof;
+        (0..m)
+            .map(|i| 1.96 * (var * r as f64 * inv[(i, i)]).max(0.0).sqrt())
+            .collect()
+    });
+    Some(Ridge {
+        weights,
+        half_width,
+    })
+}
+
+/// RMS acceleration [m/s²] the model leaves of the smoothed targets: the
+/// parametric model's (the targets themselves) without `residual`, else
+/// what the residual (unfaded) leaves. Planar: horizontal only. NaN
+/// without samples.
+pub fn acceleration_error(
+    held_out: &[Smoothed],
+    residual: Option<&LearnedResidual>,
+    spatial: bool,
+) -> f64 {
+    let sum: f64 = held_out
+        .iter()
+        .map(|s| {
+            let mut e = s.target;
+            if let Some(m) = residual {
+                e -= s.predicted(m, spatial);
+            }
+            if !spatial {
+                e.z = 0.0;
+            }
+            e.norm_squared()
+        })
+        .sum();
+    (sum / held_out.len() as f64).sqrt()
 }
 
 /// Sums of squared prediction errors over held-out starts.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct Errors {
-    /// Σ |y_{k+1} − ŷ_{k+1}|² \[m²\].
+    /// Σ |y_next − ŷ_next|² \[m²\].
     pub one_step: f64,
-    /// Σ |y_{k+H} − ŷ_{k+H}|² \[m²\].
+    /// Σ |y_H − ŷ_H|² \[m²\].
     pub horizon: f64,
     /// Starts.
     pub count: usize,
 }
 
 impl Errors {
-    /// RMS one-step error \[m\].
+    /// RMS one-step error \[m\] (NaN without starts).
     pub fn one_step_rms(&self) -> f64 {
-        (self.one_step / self.count.max(1) as f64).sqrt()
+        (self.one_step / self.count as f64).sqrt()
     }
 
-    /// RMS horizon error \[m\].
+    /// RMS horizon error \[m\] (NaN without starts).
     pub fn horizon_rms(&self) -> f64 {
-        (self.horizon / self.count.max(1) as f64).sqrt()
+        (self.horizon / self.count as f64).sqrt()
     }
 }
 
-/// Prediction errors on `which`: from every `stride`-th tick k with its
-/// window, the outputs rolled out `horizon` ticks through the commands sent
-/// (`ŷ_{j+1} = 2ŷ_j − ŷ_{j−1} + δt²·a_j`, the model's acceleration plus
-/// the residual's at the window's velocity over measured then predicted
-/// outputs; `residual = None`: the parametric model alone, its velocity
-/// from the last two outputs).
+/// The model's acceleration besides the thrust's at velocity `v` in tick
+/// `j`: its drag and, with `residual`, the residual.
+fn extra_acceleration(
+    p: &Prepared,
+    model: &Parametric,
+    residual: Option<&LearnedResidual>,
+    j: usize,
+    v: &Vector3<f64>,
+) -> Vector3<f64> {
+    let mut a = -Vector3::new(model.drag_h * v.x, model.drag_h * v.y, model.drag_v * v.z);
+    if let Some(m) = residual {
+        a += m.acceleration(v, &p.inputs.axis[j], p.inputs.thrust[j]);
+    }
+    if !model.spatial {
+        a.z = 0.0;
+    }
+    a
+}
+
+/// The state (position \[m\], velocity [m/s]) at pose `i`'s time from the
+/// poses of the last [`START_S`] (at least five) through the model itself
+/// (the input-to-output map from a window): a parabola on top of the
+/// thrust's trajectory gives the velocity along the window, the model's
+/// drag and residual there are integrated, and the position and velocity
+/// fitted to the poses through all of it.
+fn start_state(
+    p: &Prepared,
+    model: &Parametric,
+    residual: Option<&LearnedResidual>,
+    i: usize,
+) -> Option<(Vector3<f64>, Vector3<f64>)> {
+    let s = p.poses[i].t;
+    let mut first = i;
+    while first > 0 && (s - p.poses[first - 1].t <= START_S || i - first < 4) {
+        first -= 1;
+    }
+    let w = &p.poses[first..=i];
+    if w.len() < 3 || s - w[0].t > 3.0 * START_S || p.tick_at(w[0].t).is_none() {
+        return None;
+    }
+    let times: Vec<f64> = w.iter().map(|q| q.t).collect();
+    let [_, wv, wa] = parabola_weights(&times, s)?;
+    let (vp, vv) = p.virtual_position(s);
+    // Pass 1: the velocity along the window (thrust's trajectory plus a
+    // parabola).
+    let (mut v1, mut c) = (Vector3::zeros(), Vector3::zeros());
+    for (l, q) in w.iter().enumerate() {
+        let off = q.y - p.virtual_position(q.t).0;
+        v1 += off * wv[l];
+        c += off * wa[l];
+    }
+    // Pass 2: the model's other accelerations along it, integrated back
+    // from s: E(s_l) = ∫_{s_l}^{s} (τ − s_l)·e(τ) dτ (E(s) = E'(s) = 0).
+    let velocity_at = |t: f64| v1 + p.virtual_position(t).1 + c * (t - s);
+    let mut rows: Vec<(f64, Vector3<f64>)> = Vec::with_capacity(w.len());
+    for q in w {
+        let mut e_int = Vector3::zeros();
+        let mut t = q.t;
+        while t < s - 1e-12 {
+            let mut j = p.tick_at(t)?;
+            if p.t0 + (j + 1) as f64 * p.dt <= t + 1e-12 {
+                j += 1;
+            }
+            let end = (p.t0 + (j + 1) as f64 * p.dt).min(s);
+            let e = extra_acceleration(p, model, residual, j, &velocity_at(0.5 * (t + end)));
+            e_int += e * (0.5 * ((end - q.t).powi(2) - (t - q.t).powi(2)));
+            t = end;
+        }
+        rows.push((q.t - s, q.y - p.virtual_position(q.t).0 - e_int));
+    }
+    // Position and velocity (a line) through the rest.
+    let n = rows.len() as f64;
+    let mt = rows.iter().map(|(t, _)| t).sum::<f64>() / n;
+    let my = rows.iter().fold(Vector3::zeros(), |a, (_, y)| a + y) / n;
+    let stt = rows.iter().map(|(t, _)| (t - mt).powi(2)).sum::<f64>();
+    if stt <= 0.0 {
+        return None;
+    }
+    let slope = rows
+        .iter()
+        .fold(Vector3::zeros(), |a, (t, y)| a + (y - my) * (t - mt))
+        / stt;
+    let at_s = my - slope * mt;
+    Some((at_s + vp, slope + vv))
+}
+
+/// Rolls `(pos, vel)` from `from` to `to` \[s\] through the ticks' thrust
+/// acceleration, the model's drag and, with `residual`, the residual at
+/// the rolled velocity (each piece within a tick: a midpoint step).
+fn roll(
+    p: &Prepared,
+    model: &Parametric,
+    residual: Option<&LearnedResidual>,
+    (mut pos, mut vel): (Vector3<f64>, Vector3<f64>),
+    from: f64,
+    to: f64,
+) -> Option<Vector3<f64>> {
+    let mut t = from;
+    while t < to - 1e-12 {
+        let mut j = p.tick_at(t)?;
+        if p.t0 + (j + 1) as f64 * p.dt <= t + 1e-12 {
+            // On a tick's end (rounding): the next tick.
+            j += 1;
+            if j >= p.thrust_acc.len() {
+                return None;
+            }
+        }
+        let end = (p.t0 + (j + 1) as f64 * p.dt).min(to);
+        let h = end - t;
+        let acc = |v: &Vector3<f64>| {
+            let mut a = p.thrust_acc[j] + extra_acceleration(p, model, residual, j, v);
+            if !model.spatial {
+                a.z = 0.0;
+            }
+            a
+        };
+        let a0 = acc(&vel);
+        let a = acc(&(vel + a0 * (0.5 * h)));
+        pos += vel * h + a * (0.5 * h * h);
+        vel += a * h;
+        t = end;
+    }
+    Some(pos)
+}
+
+/// Prediction errors on `which`: from every `stride`-th pose with its
+/// start window, the model rolled through the commands sent to the next
+/// pose and to the last pose within `horizon_s` (at least 80 % of it on);
+/// `residual = None`: the parametric model alone.
 pub fn rollouts(
     runs: &[Prepared],
     model: &Parametric,
     residual: Option<&LearnedResidual>,
     which: Part,
-    horizon: usize,
+    horizon_s: f64,
     stride: usize,
 ) -> Errors {
-    let r = residual.map_or(2, |m| m.window);
-    let dt = model.dt;
     let mut errors = Errors::default();
-    let mut hist: Vec<Vector3<f64>> = Vec::with_capacity(r + horizon + 1);
     for p in runs {
-        let mut k = r.max(2);
-        while k + horizon < p.y.len() {
-            if part(p.t[k]) != which || part(p.t[k + horizon]) != which {
-                k += stride;
-                continue;
-            }
-            hist.clear();
-            hist.extend_from_slice(&p.y[k + 1 - r.max(2)..=k]);
-            for j in 0..horizon {
-                let last = hist.len() - 1;
-                let v = window_velocity(&hist, last, r, dt);
-                let (n, thrust) = (p.inputs.axis[k + j], p.inputs.thrust[k + j]);
-                let mut a = model.acceleration(&n, thrust, &v);
-                if let Some(m) = residual {
-                    a += m.acceleration(&v, &n, thrust);
+        let mut i = 2;
+        while i + 1 < p.poses.len() {
+            let s = p.poses[i].t;
+            let last = p.poses[i + 1..]
+                .iter()
+                .take_while(|q| q.t <= s + horizon_s + 1e-9)
+                .last()
+                .copied();
+            let judged = last
+                .filter(|q| q.t >= s + 0.8 * horizon_s && part(s) == which && part(q.t) == which);
+            let start = judged.and_then(|_| start_state(p, model, residual, i));
+            if let (Some(h), Some(start)) = (judged, start) {
+                let next = p.poses[i + 1];
+                let one = roll(p, model, residual, start, s, next.t);
+                let far = roll(p, model, residual, start, s, h.t);
+                if let (Some(one), Some(far)) = (one, far) {
+                    errors.one_step += (next.y - one).norm_squared();
+                    errors.horizon += (h.y - far).norm_squared();
+                    errors.count += 1;
                 }
-                let next = hist[last] * 2.0 - hist[last - 1] + a * (dt * dt);
-                hist.push(next);
-                if j == 0 {
-                    errors.one_step += (p.y[k + 1] - next).norm_squared();
-                }
             }
-            errors.horizon += (p.y[k + horizon] - hist[hist.len() - 1]).norm_squared();
-            errors.count += 1;
-            k += stride;
+            i += stride;
         }
     }
     errors

@@ -6,15 +6,19 @@
 //!
 //! 1. the parametric model's thrust axis and thrust at every tick, from the
 //!    commands sent ([`parametric`]);
-//! 2. the residual acceleration at every tick k: the measured
-//!    `(y_{k+1} − 2y_k + y_{k−1})/δt²` minus the model's, at the velocity
-//!    of the window `y_{k−r+1} … y_k`;
+//! 2. the residual acceleration at every pose: the acceleration of a
+//!    least-squares parabola through the window of r poses centred on it,
+//!    minus the model's acceleration through the same weights, at the
+//!    parabola's velocity ([`fit`]: poses at their capture times, any rate,
+//!    noisy or not);
 //! 3. ridge regression of that residual on the basis ([`fit::ridge`]).
 //!
 //! The data are cut into blocks of [`fit::BLOCK_S`]: three of every five
-//! train, one chooses r, the basis and λ by the held-out horizon error, one
-//! tests. The report gives the test blocks' one-step and horizon errors of
-//! the learned model against the parametric one.
+//! train, one chooses r, the basis and λ by the acceleration left
+//! unexplained on it (taken through one window of [`REFERENCE_S`] for
+//! every candidate), one tests. The report gives the test blocks'
+//! unexplained acceleration and the one-step and horizon prediction errors
+//! of the learned model against the parametric one.
 //!
 //! What the flight did not excite is not learned: the velocity terms need
 //! the speed to vary ([`MIN_SPEED_STD`]); with a steady speed only the
@@ -36,12 +40,36 @@ use data::Run;
 use fit::{Errors, Part, Prepared, Sample};
 use parametric::Parametric;
 
-/// Window sizes tried (outputs).
-pub const WINDOWS: [usize; 5] = [2, 3, 4, 6, 8];
+/// The span \[s\] of the window the validation blocks' accelerations are
+/// taken through, the same for every candidate (at least five poses): wide
+/// enough that the pose noise does not drown the residual (2 cm at 50 Hz
+/// is about 8 m/s² through 9 poses, 0.6 m/s² through 25, 0.1 m/s² through
+/// 51), the residual compared through the same kernel.
+pub const REFERENCE_S: f64 = 1.0;
+
+/// The reference window \[poses\] of the records: [`REFERENCE_S`] at their
+/// median pose rate, odd, at least 5.
+fn reference_window(runs: &[Prepared]) -> usize {
+    let mut gaps: Vec<f64> = runs
+        .iter()
+        .flat_map(|p| p.poses.windows(2).map(|w| w[1].t - w[0].t))
+        .filter(|d| *d > 0.0)
+        .collect();
+    gaps.sort_by(f64::total_cmp);
+    let spacing = gaps.get(gaps.len() / 2).copied().unwrap_or(0.02);
+    let half = (0.5 * REFERENCE_S / spacing).round().max(2.0) as usize;
+    2 * half + 1
+}
+/// Window sizes tried (poses, odd: the window is centred on the sample).
+pub const WINDOWS: [usize; 6] = [3, 5, 9, 15, 25, 51];
 /// Ridge λ tried.
 pub const LAMBDAS: [f64; 3] = [1e-6, 1e-3, 1e-1];
 /// Horizon of the horizon error \[s\].
 pub const HORIZON_S: f64 = 0.5;
+/// Largest 95 % half-width of a basis group's weights against their size
+/// (on the axis where it is largest) for the group to count as determined
+/// by the flight: as `identify`, no term with a wider interval is learned.
+pub const MAX_RELATIVE_INTERVAL: f64 = 0.3;
 /// Least standard deviation of the speed [m/s] for the velocity terms.
 pub const MIN_SPEED_STD: f64 = 0.5;
 /// Least engaged time \[s\] to learn from.
@@ -73,17 +101,16 @@ pub enum LearnError {
     NoFit,
     /// The best residual does not beat the parametric model held out.
     #[error(
-        "the residual does not improve the held-out prediction ({horizon_s} s ahead: \
-         parametric {parametric_m:.4} m, learned {learned_m:.4} m): nothing learned, \
-         keep the parametric model"
+        "the residual does not explain the held-out acceleration better than the parametric \
+         model (RMS left: parametric {parametric:.4} m/s², learned {learned:.4} m/s²): nothing \
+         learned, keep the parametric model"
     )]
     NoImprovement {
-        /// Horizon \[s\].
-        horizon_s: f64,
-        /// Parametric error on the validation blocks \[m\].
-        parametric_m: f64,
-        /// The best learned error on the validation blocks \[m\].
-        learned_m: f64,
+        /// RMS acceleration the parametric model leaves on the validation
+        /// blocks [m/s²].
+        parametric: f64,
+        /// The best residual's [m/s²].
+        learned: f64,
     },
 }
 
@@ -96,6 +123,14 @@ pub struct VehicleTable {
     pub fields: Vec<(String, f64)>,
     /// The parametric model they make.
     pub parametric: Parametric,
+}
+
+/// How [`learn_with`] chooses.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct LearnOptions {
+    /// The window r \[poses\] (odd, 3 ..= 51); `None`: chosen on held-out
+    /// data among [`WINDOWS`].
+    pub window: Option<usize>,
 }
 
 /// What [`learn`] found.
@@ -146,8 +181,17 @@ fn std_of(v: impl Iterator<Item = f64> + Clone) -> f64 {
 }
 
 /// Learns the residual of `vehicle`'s parametric model from the engaged
-/// runs of one or more records; `seconds` is their engaged time.
+/// runs of one or more records, the window chosen on held-out data.
 pub fn learn(runs: &[Run], vehicle: &VehicleTable) -> Result<Learned, LearnError> {
+    learn_with(runs, vehicle, LearnOptions::default())
+}
+
+/// [`learn`] with `options` (a fixed window).
+pub fn learn_with(
+    runs: &[Run],
+    vehicle: &VehicleTable,
+    options: LearnOptions,
+) -> Result<Learned, LearnError> {
     let model = &vehicle.parametric;
     let seconds: f64 = runs.iter().map(|r| r.ticks.len() as f64 * model.dt).sum();
     if seconds < MIN_SECONDS {
@@ -155,12 +199,23 @@ pub fn learn(runs: &[Run], vehicle: &VehicleTable) -> Result<Learned, LearnError
     }
     let prepared: Vec<Prepared> = runs
         .iter()
-        .filter(|r| r.ticks.len() > 2 * WINDOWS[WINDOWS.len() - 1])
+        .filter(|r| r.poses.len() >= 3 && r.ticks.len() as f64 * model.dt >= 2.0 * HORIZON_S)
         .map(|r| Prepared::new(r, model))
         .collect();
-    let horizon = (HORIZON_S / model.dt).round() as usize;
-    let base = fit::rollouts(&prepared, model, None, Part::Validate, horizon, STRIDE);
-    let probe = fit::samples(&prepared, model, 2, &[Feature::Bias], Part::Train);
+    let windows: Vec<usize> = match options.window {
+        Some(r) => vec![2 * fit::half_width(r) + 1],
+        None => WINDOWS.to_vec(),
+    };
+    let horizon = HORIZON_S;
+    // Held-out targets: the validation blocks through one window for every
+    // candidate, so they are judged on the same accelerations.
+    let reference = reference_window(&prepared);
+    let held_out: Vec<fit::Smoothed> = prepared
+        .iter()
+        .flat_map(|p| fit::smoothed(p, model, reference, Part::Validate))
+        .collect();
+    let base = fit::acceleration_error(&held_out, None, model.spatial);
+    let probe = fit::samples(&prepared, model, windows[0], &[Feature::Bias], Part::Train);
     let speed_std = std_of(probe.iter().map(|s| s.speed));
     let mut unexcited = Vec::new();
     if speed_std < MIN_SPEED_STD {
@@ -176,26 +231,26 @@ pub fn learn(runs: &[Run], vehicle: &VehicleTable) -> Result<Learned, LearnError
         .filter(|b| b.iter().all(|f| !unexcited.iter().any(|(u, _)| u == f)))
         .collect();
     let mut best: Option<(f64, LearnedResidual)> = None;
+    let mut undetermined: Vec<(usize, Feature, String)> = Vec::new();
     let mut candidates = 0;
-    for r in WINDOWS {
+    for &r in &windows {
         for features in &offered {
             let train = fit::samples(&prepared, model, r, features, Part::Train);
             let support = support_of(&train);
             for lambda in LAMBDAS {
                 candidates += 1;
-                let Some(weights) = fit::ridge(&train, columns(features), lambda) else {
+                let Some(fitted) = fit::ridge(&train, columns(features), lambda, r) else {
                     continue;
                 };
-                let candidate = residual_file(vehicle, r, features, lambda, weights, support);
-                let e = fit::rollouts(
-                    &prepared,
-                    model,
-                    Some(&candidate),
-                    Part::Validate,
-                    horizon,
-                    STRIDE,
-                );
-                let score = e.horizon_rms();
+                if let Some((f, why)) = undetermined_group(features, &fitted) {
+                    if !undetermined.iter().any(|(w, u, _)| *w == r && *u == f) {
+                        undetermined.push((r, f, why));
+                    }
+                    continue;
+                }
+                let candidate =
+                    residual_file(vehicle, r, features, lambda, fitted.weights, support);
+                let score = fit::acceleration_error(&held_out, Some(&candidate), model.spatial);
                 if score.is_finite() && best.as_ref().is_none_or(|(b, _)| score < *b) {
                     best = Some((score, candidate));
                 }
@@ -203,11 +258,18 @@ pub fn learn(runs: &[Run], vehicle: &VehicleTable) -> Result<Learned, LearnError
         }
     }
     let (score, mut residual) = best.ok_or(LearnError::NoFit)?;
-    if base.count > 0 && score >= base.horizon_rms() {
+    for (r, f, why) in undetermined {
+        if r == residual.window
+            && !residual.features.contains(&f)
+            && !unexcited.iter().any(|(u, _)| *u == f)
+        {
+            unexcited.push((f, format!("window {r}: {why}")));
+        }
+    }
+    if !held_out.is_empty() && score >= base {
         return Err(LearnError::NoImprovement {
-            horizon_s: HORIZON_S,
-            parametric_m: base.horizon_rms(),
-            learned_m: score,
+            parametric: base,
+            learned: score,
         });
     }
     let test_p = fit::rollouts(&prepared, model, None, Part::Test, horizon, STRIDE);
@@ -219,13 +281,54 @@ pub fn learn(runs: &[Run], vehicle: &VehicleTable) -> Result<Learned, LearnError
         horizon,
         STRIDE,
     );
+    let test: Vec<fit::Smoothed> = prepared
+        .iter()
+        .flat_map(|p| fit::smoothed(p, model, reference, Part::Test))
+        .collect();
     residual.validation = validation(&test_p, &test_l);
+    residual.validation.acceleration_parametric =
+        fit::acceleration_error(&test, None, model.spatial);
+    residual.validation.acceleration_learned =
+        fit::acceleration_error(&test, Some(&residual), model.spatial);
     residual.seconds = seconds;
     Ok(Learned {
         residual,
         unexcited,
         candidates,
     })
+}
+
+/// The first group of `features` (the constant excepted) whose weights the
+/// data did not determine: none of its weights (any column, any axis) has a
+/// 95 % half-width of at most [`MAX_RELATIVE_INTERVAL`] of its value. With
+/// the reason.
+fn undetermined_group(features: &[Feature], fitted: &fit::Ridge) -> Option<(Feature, String)> {
+    let mut col = 0;
+    for f in features {
+        let cols = col..col + f.columns();
+        col += f.columns();
+        if *f == Feature::Bias {
+            continue;
+        }
+        // The best-determined weight of the group.
+        let best = cols
+            .clone()
+            .flat_map(|i| (0..3).map(move |axis| (axis, i)))
+            .map(|(axis, i)| (fitted.weights[axis][i], fitted.half_width[axis][i]))
+            .max_by(|a, b| (a.0.abs() / a.1).total_cmp(&(b.0.abs() / b.1)))?;
+        if best.1.is_nan() || best.1 > MAX_RELATIVE_INTERVAL * best.0.abs() {
+            return Some((
+                *f,
+                format!(
+                    "its best-determined weight {:.4} ± {:.4} (95 %): more than {:.0} % of it",
+                    best.0,
+                    best.1,
+                    100.0 * MAX_RELATIVE_INTERVAL
+                ),
+            ));
+        }
+    }
+    None
 }
 
 fn validation(parametric: &Errors, learned: &Errors) -> Validation {
@@ -236,6 +339,8 @@ fn validation(parametric: &Errors, learned: &Errors) -> Validation {
         horizon_parametric_m: parametric.horizon_rms(),
         horizon_learned_m: learned.horizon_rms(),
         samples: learned.count,
+        acceleration_parametric: f64::NAN,
+        acceleration_learned: f64::NAN,
     }
 }
 
@@ -265,6 +370,8 @@ fn residual_file(
             horizon_parametric_m: 0.0,
             horizon_learned_m: 0.0,
             samples: 0,
+            acceleration_parametric: 0.0,
+            acceleration_learned: 0.0,
         },
         seconds: 0.0,
     }

@@ -52,11 +52,12 @@ pub fn thrust_axis(roll: f64, pitch: f64, yaw: f64) -> Vector3<f64> {
 
 impl Parametric {
     /// The model's thrust axis and specific thrust along a run: roll and
-    /// pitch each `x ← x + δt/τ·(k̃·cmd(t − delay) − x)` (Euler, as the
-    /// flat model), the heading as commanded, the normalised thrust
-    /// `c ← c + δt/τ_T·(cmd(t − delay) − c)` and `T = g·c/hover` (planar:
-    /// `T = g/n_z`, the thrust that holds the altitude). Starts at rest on
-    /// the first command.
+    /// pitch each `x ← x + (1 − e^(−δt/τ))·(k̃·cmd(t − delay) − x)` (the
+    /// first-order lag held over a tick, exactly: the airframe's lag is
+    /// continuous), the heading as commanded, the normalised thrust
+    /// likewise through τ_T and `T = g·c/hover` (planar: `T = g/n_z`, the
+    /// thrust that holds the altitude). Starts at rest on the first
+    /// command.
     pub fn inputs(&self, run: &Run) -> Inputs {
         let d = (self.delay / self.dt).round().max(0.0) as usize;
         let cmd = |k: usize| run.ticks[k.saturating_sub(d)];
@@ -69,8 +70,9 @@ impl Parametric {
             axis: Vec::with_capacity(run.ticks.len()),
             thrust: Vec::with_capacity(run.ticks.len()),
         };
-        let a = self.dt / self.tau;
-        let at = self.dt / self.tau_thrust;
+        // The lags held over a tick, exactly (the airframe's are continuous).
+        let a = -(-self.dt / self.tau).exp_m1();
+        let at = -(-self.dt / self.tau_thrust).exp_m1();
         for k in 0..run.ticks.len() {
             let n = thrust_axis(roll, pitch, cmd(k).euler[2]);
             let thrust = if self.spatial {
@@ -136,11 +138,11 @@ mod tests {
                 ticks: (0..400)
                     .map(|i| Tick {
                         t: i as f64 * m.dt,
-                        y: Vector3::zeros(),
                         euler: if i < 5 { [0.0, 0.0, yaw] } else { [roll, pitch, yaw] },
                         thrust: if i < 5 { 0.5 } else { c },
                     })
                     .collect(),
+                poses: Vec::new(),
             };
             let inputs = m.inputs(&run);
             let n = *inputs.axis.last().unwrap();

@@ -10,7 +10,7 @@ use dflat_control::learned::LearnedResidual;
 use dflat_daemon::config::{Config, ModelKind};
 
 use dflat_tuning::learn::parametric::Parametric;
-use dflat_tuning::learn::{self, Learned, VehicleTable, data::Run};
+use dflat_tuning::learn::{self, LearnOptions, Learned, VehicleTable, data::Run};
 
 /// Arguments of `dflat learn`.
 #[derive(Debug, clap::Args)]
@@ -25,9 +25,14 @@ pub struct LearnArgs {
     #[arg(long)]
     pub config: PathBuf,
     /// Where to write the model file (default: next to the first flight,
-    /// `<flight>.learned.toml`).
+    /// `<flight>.learned.toml`). The configuration snippet that flies it
+    /// is written beside it, `<out>` with the extension `.snippet.toml`.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Learn through this window [poses] (odd, 3–51) instead of choosing
+    /// it on held-out data.
+    #[arg(long)]
+    pub window: Option<usize>,
 }
 
 /// The `[vehicle]` table of a configuration as [`learn`] reads it, at
@@ -118,7 +123,14 @@ pub fn report(learned: &Learned, out: &Path, seconds_taken: f64) -> String {
     let ratio = |l: f64, p: f64| if p > 0.0 { l / p } else { f64::NAN };
     let _ = writeln!(
         s,
-        "test blocks ({} starts), RMS prediction error:\n  one step     parametric {:.5} m   learned {:.5} m   ({:.2}×)\n  {:.2} s ahead  parametric {:.4} m   learned {:.4} m   ({:.2}×)",
+        "test blocks: RMS acceleration left   parametric {:.4} m/s²   learned {:.4} m/s²   ({:.2}×)",
+        v.acceleration_parametric,
+        v.acceleration_learned,
+        ratio(v.acceleration_learned, v.acceleration_parametric)
+    );
+    let _ = writeln!(
+        s,
+        "test blocks ({} starts), RMS prediction error from the window:\n  one step     parametric {:.5} m   learned {:.5} m   ({:.2}×)\n  {:.2} s ahead  parametric {:.4} m   learned {:.4} m   ({:.2}×)",
         v.samples,
         v.one_step_parametric_m,
         v.one_step_learned_m,
@@ -138,15 +150,46 @@ pub fn run_learn(args: LearnArgs) -> Result<()> {
     let cfg = Config::load(&args.config)?;
     let (runs, dt) = read_runs(&args.flights)?;
     let vehicle = vehicle_table(&cfg, dt);
-    let learned = learn::learn(&runs, &vehicle).context("dflat learn")?;
+    if let Some(w) = args.window
+        && (!(3..=51).contains(&w) || w.is_multiple_of(2))
+    {
+        bail!("--window {w}: odd, 3 ..= 51 poses");
+    }
+    let options = LearnOptions {
+        window: args.window,
+    };
+    let learned = learn::learn_with(&runs, &vehicle, options).context("dflat learn")?;
     learned.residual.validate().context("the learned model")?;
     let out = args
         .out
         .unwrap_or_else(|| args.flights[0].with_extension("learned.toml"));
     write_model(&learned.residual, &out)?;
+    let snippet_path = out.with_extension("snippet.toml");
+    let snippet = config_snippet(&out, &args.config);
+    std::fs::write(&snippet_path, &snippet)
+        .with_context(|| format!("cannot write {}", snippet_path.display()))?;
     let taken = started.elapsed().as_secs_f64();
     outln!("{}", report(&learned, &out, taken));
+    outln!(
+        "the configuration that flies it ({}), beside {}'s [vehicle] table:\n{snippet}",
+        snippet_path.display(),
+        args.config.display()
+    );
     Ok(())
+}
+
+/// The configuration snippet that flies the model file `model` (its
+/// absolute path), learned over `config`'s `[vehicle]` table.
+pub fn config_snippet(model: &Path, config: &Path) -> String {
+    let path = std::path::absolute(model).unwrap_or_else(|_| model.to_owned());
+    format!(
+        "# From `dflat learn`: the learned residual of the flat maps, flown with the\n\
+         # [vehicle] table of {} (it refuses to load against another).\n\
+         [controller.dfmpc]\n\
+         learned_model = {:?}\n",
+        config.display(),
+        path.display().to_string()
+    )
 }
 
 /// Writes a model file (TOML) with a header comment.
@@ -197,6 +240,8 @@ mod tests {
                 horizon_parametric_m: 0.2,
                 horizon_learned_m: 0.03,
                 samples: 500,
+                acceleration_parametric: 1.0,
+                acceleration_learned: 0.1,
             },
             seconds: 120.0,
         };

@@ -1,4 +1,4 @@
-//! Drag and delay in the model (issue 24): what each model term buys on an
+//! Drag and delay in the model: what each model term buys on an
 //! airframe that has them. Part of `dflat experiment mismatch`; the
 //! mismatch study's own metric (the steady state of a hover step) cannot
 //! see drag, which acts only in motion, so this part flies the L path.

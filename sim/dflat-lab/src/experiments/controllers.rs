@@ -88,6 +88,20 @@ pub enum ControllerSpec {
 }
 
 impl ControllerSpec {
+    /// The shipped DF-MPC (`df-mr-smooth`: N = 100, q = 1, r = 0.003,
+    /// smoothness 50, 30° plan tilt) at the tilt limit `max_tilt_deg`
+    /// \[deg\].
+    pub fn shipped_dfmpc(max_tilt_deg: f64) -> Self {
+        Self::DfMrSmooth {
+            horizon: 100,
+            q: 1.0,
+            r: 0.003,
+            smoothness: 50.0,
+            plan_tilt_deg: 30.0,
+            max_tilt_deg,
+        }
+    }
+
     /// The controller's short name: "df-mpc", "fmpc" or "pd" (as its
     /// [`Controller::name`]), "fmpc-est" or "pd-est" for the baselines fed
     /// by the state estimator.
@@ -200,24 +214,12 @@ impl ControllerSpec {
                 smoothness,
                 plan_tilt_deg,
                 max_tilt_deg,
-            } => Some(DfMpcSettings {
-                horizon,
-                tracking_weight: [q; 3],
-                jerk_weight: [r; 3],
-                smoothness_weight: [smoothness, smoothness, 0.0],
-                multi_rate: Some(MultiRateSettings::default()),
-                constraints: OutputConstraints {
-                    max_tilt: Some(plan_tilt_deg.to_radians()),
-                    ..OutputConstraints::default()
-                },
-                saturation: Some(InputSaturation {
-                    max_tilt: max_tilt_deg.to_radians(),
-                    ..InputSaturation::default()
-                }),
-                // The lab is deterministic: no wall-clock limit.
-                solver_time_limit: f64::INFINITY,
-                ..DfMpcSettings::default()
-            }),
+            } => Some(smooth_dfmpc_settings(
+                (horizon, q, r, smoothness),
+                Some(MultiRateSettings::default()),
+                Some(plan_tilt_deg),
+                max_tilt_deg,
+            )),
             Self::Fmpc { .. } | Self::Pd { .. } => None,
         }
     }
@@ -340,4 +342,33 @@ impl Controller for Unbuildable {
     }
 
     fn reset(&mut self) {}
+}
+
+/// The lab's DF-MPC with a smoothness weight: `(horizon, q, r, smoothness)`
+/// on x and y, the pose window `multi_rate`, the plan's tilt bound
+/// `plan_tilt_deg` and the command's tilt limit `max_tilt_deg` \[deg\], no
+/// wall-clock limit (the lab is deterministic).
+pub(crate) fn smooth_dfmpc_settings(
+    (horizon, q, r, smoothness): (usize, f64, f64, f64),
+    multi_rate: Option<MultiRateSettings>,
+    plan_tilt_deg: Option<f64>,
+    max_tilt_deg: f64,
+) -> DfMpcSettings {
+    DfMpcSettings {
+        horizon,
+        tracking_weight: [q; 3],
+        jerk_weight: [r; 3],
+        smoothness_weight: [smoothness, smoothness, 0.0],
+        multi_rate,
+        constraints: OutputConstraints {
+            max_tilt: plan_tilt_deg.map(f64::to_radians),
+            ..OutputConstraints::default()
+        },
+        saturation: Some(InputSaturation {
+            max_tilt: max_tilt_deg.to_radians(),
+            ..InputSaturation::default()
+        }),
+        solver_time_limit: f64::INFINITY,
+        ..DfMpcSettings::default()
+    }
 }

@@ -1,4 +1,4 @@
-//! The fair comparison of the paths study (issue 27): the paper's outdoor
+//! The fair comparison of the paths study: the paper's outdoor
 //! set-up (§VII) fed the baselines from a state estimator (STEAM), not
 //! from finite differences of the poses (its §VI simulation set-up). The
 //! paths study ([`super::paths`]) therefore flies, beside the paper-form
@@ -29,14 +29,7 @@ pub(crate) fn lab_estimator() -> EstimatorSettings {
 /// replaces them when it runs).
 pub(crate) fn fair_controllers(tilt: f64) -> Vec<ControllerSpec> {
     vec![
-        ControllerSpec::DfMrSmooth {
-            horizon: 100,
-            q: 1.0,
-            r: 0.003,
-            smoothness: 50.0,
-            plan_tilt_deg: 30.0,
-            max_tilt_deg: tilt,
-        },
+        ControllerSpec::shipped_dfmpc(tilt),
         ControllerSpec::Fmpc {
             horizon: 75,
             q: 1.0,

@@ -24,6 +24,7 @@ pub mod airframe;
 mod controllers;
 mod fair;
 mod figures;
+pub mod learned;
 pub mod mismatch;
 pub mod noise_sweep;
 pub mod paths;

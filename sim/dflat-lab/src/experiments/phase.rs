@@ -46,7 +46,7 @@ use dflat_control::window::MultiRateSettings;
 use serde::{Deserialize, Serialize};
 
 use super::trial::TrialSetup;
-use super::vision_rate::VisionController;
+use super::vision_rate::{VisionController, finite_path_errors};
 use super::{ExperimentError, invalid, mean, write_json};
 use crate::harness::{ErrorStats, StopReason, TrialSpec, run_trials};
 use dflat_sim::sensing::{SensorSpec, VisionMode, VisionOptions};
@@ -324,12 +324,7 @@ pub fn run_phase(config: &PhaseConfig, progress: bool) -> Result<PhaseResult, Ex
         let row = &mut rows[idx];
         let (errors, per_trial) = &mut pooled[idx];
         row.trials += 1;
-        errors.extend(
-            r.ticks
-                .iter()
-                .map(|t| t.path_error)
-                .filter(|e| e.is_finite()),
-        );
+        errors.extend(finite_path_errors(&r));
         let m = &r.metrics;
         per_trial.push((m.smoothness_deg, m.saturation_share));
         row.diverged += usize::from(m.diverged);

@@ -1,4 +1,4 @@
-//! The tilt cone in the plan against the box (issue 17): DF-MPC with a
+//! The tilt cone in the plan against the box: DF-MPC with a
 //! planned tilt bound applied as the cone `‖(ẍ, ÿ)‖ ≤ g·tan(bound)` or per
 //! axis, on the L path and the three DSL letters at 7–9 m/s, under the
 //! paths study's vision-like sensing. Three bounds per cell: the box and

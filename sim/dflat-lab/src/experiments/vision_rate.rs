@@ -74,7 +74,7 @@
 use std::path::PathBuf;
 use std::sync::Arc;
 
-use dflat_control::dfmpc::{DfMpc, DfMpcSettings, InputSaturation, OutputConstraints};
+use dflat_control::dfmpc::{DfMpc, DfMpcSettings};
 use dflat_control::estimator::EstimatorSettings;
 use dflat_control::reference::paths;
 use dflat_control::window::MultiRateSettings;
@@ -84,7 +84,9 @@ use serde::{Deserialize, Serialize};
 
 use super::trial::TrialSetup;
 use super::{ControllerSpec, ExperimentError, OutputPaths, fair, invalid, mean, write_json};
-use crate::harness::{ControllerFactory, ErrorStats, StopReason, TrialSpec, run_trials};
+use crate::harness::{
+    ControllerFactory, ErrorStats, StopReason, TrialResult, TrialSpec, run_trials,
+};
 use crate::plot::{LinePlot, RGBColor, Series, write_line_plot};
 use dflat_sim::plant::PlantOptions;
 use dflat_sim::sensing::{SensorSpec, VisionMode, VisionOptions};
@@ -206,24 +208,12 @@ impl VisionController {
                 let model = ControlModel::Planar(
                     PlanarModel::new(PlanarParams::default()).map_err(|e| wrap(e.into()))?,
                 );
-                let settings = DfMpcSettings {
-                    horizon,
-                    tracking_weight: [q; 3],
-                    jerk_weight: [r; 3],
-                    smoothness_weight: [smoothness, smoothness, 0.0],
+                let settings = super::controllers::smooth_dfmpc_settings(
+                    (horizon, q, r, smoothness),
                     multi_rate,
-                    constraints: OutputConstraints {
-                        max_tilt: plan_tilt_deg.map(f64::to_radians),
-                        ..OutputConstraints::default()
-                    },
-                    saturation: Some(InputSaturation {
-                        max_tilt: max_tilt_deg.to_radians(),
-                        ..InputSaturation::default()
-                    }),
-                    // The lab is deterministic: no wall-clock limit.
-                    solver_time_limit: f64::INFINITY,
-                    ..DfMpcSettings::default()
-                };
+                    plan_tilt_deg,
+                    max_tilt_deg,
+                );
                 Ok(Box::new(DfMpc::new(model, settings).map_err(wrap)?))
             }
             Self::Baseline(c) => c.build(),
@@ -252,6 +242,15 @@ impl VisionController {
             ),
         }))
     }
+}
+
+/// The finite path errors of `r`'s ticks \[m\] (the pooled samples of the
+/// vision-rate and phase studies' rows).
+pub(super) fn finite_path_errors(r: &TrialResult) -> impl Iterator<Item = f64> + '_ {
+    r.ticks
+        .iter()
+        .map(|t| t.path_error)
+        .filter(|e| e.is_finite())
 }
 
 /// Configuration of the study. [`Default`] is the full study.
@@ -568,12 +567,7 @@ pub fn run_vision_rate(
         };
         let (row, errors, per_trial) = &mut rows[idx];
         row.trials += 1;
-        errors.extend(
-            r.ticks
-                .iter()
-                .map(|t| t.path_error)
-                .filter(|e| e.is_finite()),
-        );
+        errors.extend(finite_path_errors(&r));
         let m = &r.metrics;
         per_trial.push((m.smoothness_deg, m.saturation_share, m.max_tilt_deg));
         row.diverged += usize::from(m.diverged);

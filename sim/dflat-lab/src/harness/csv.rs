@@ -5,6 +5,8 @@
 use std::fmt::Write as _;
 use std::io::{self, Write};
 
+use nalgebra::Vector3;
+
 use super::TrialResult;
 
 /// Header of [`TrialResult::write_ticks_csv`].
@@ -27,6 +29,14 @@ fn push(line: &mut String, values: &[f64]) {
     }
 }
 
+/// Position, velocity (local NED) and roll, pitch: the columns
+/// `x,y,z,vx,vy,vz,roll,pitch` of the tick log and the trace.
+fn motion(position: &Vector3<f64>, velocity: &Vector3<f64>, roll: f64, pitch: f64) -> [f64; 8] {
+    [
+        position.x, position.y, position.z, velocity.x, velocity.y, velocity.z, roll, pitch,
+    ]
+}
+
 impl TrialResult {
     /// Writes the per-tick log as CSV (header [`TICKS_HEADER`]). Positions
     /// local NED \[m\], angles \[rad\], thrust [m/s²].
@@ -37,21 +47,12 @@ impl TrialResult {
             line.clear();
             let _ = write!(line, "{}", r.k);
             let s = &r.truth;
+            push(&mut line, &[r.t]);
             push(
                 &mut line,
-                &[
-                    r.t,
-                    s.position.x,
-                    s.position.y,
-                    s.position.z,
-                    s.velocity.x,
-                    s.velocity.y,
-                    s.velocity.z,
-                    s.roll,
-                    s.pitch,
-                    s.yaw,
-                ],
+                &motion(&s.position, &s.velocity, s.roll, s.pitch),
             );
+            push(&mut line, &[s.yaw]);
             let m = r.measurement.map_or([f64::NAN; 5], |m| {
                 [m.t, m.position.x, m.position.y, m.position.z, m.yaw]
             });
@@ -84,38 +85,28 @@ impl TrialResult {
 
     /// The per-tick log as a CSV string.
     pub fn ticks_csv(&self) -> String {
-        let mut buf = Vec::new();
-        // Writing to a Vec cannot fail.
-        let _ = self.write_ticks_csv(&mut buf);
-        String::from_utf8_lossy(&buf).into_owned()
+        written(|buf| self.write_ticks_csv(buf))
     }
 
     /// Writes the plant-rate trace as CSV (header [`TRACE_HEADER`]).
     pub fn write_trace_csv(&self, mut w: impl Write) -> io::Result<()> {
         writeln!(w, "{TRACE_HEADER}")?;
+        let mut line = String::with_capacity(256);
         for s in &self.trace {
-            writeln!(
-                w,
-                "{},{},{},{},{},{},{},{},{}",
-                s.t,
-                s.position.x,
-                s.position.y,
-                s.position.z,
-                s.velocity.x,
-                s.velocity.y,
-                s.velocity.z,
-                s.roll,
-                s.pitch
-            )?;
+            line.clear();
+            let _ = write!(line, "{}", s.t);
+            push(
+                &mut line,
+                &motion(&s.position, &s.velocity, s.roll, s.pitch),
+            );
+            writeln!(w, "{line}")?;
         }
         Ok(())
     }
 
     /// The plant-rate trace as a CSV string.
     pub fn trace_csv(&self) -> String {
-        let mut buf = Vec::new();
-        let _ = self.write_trace_csv(&mut buf);
-        String::from_utf8_lossy(&buf).into_owned()
+        written(|buf| self.write_trace_csv(buf))
     }
 
     /// Writes the delivered sensor samples as CSV (header [`SAMPLES_HEADER`]).
@@ -135,4 +126,11 @@ impl TrialResult {
     pub fn metrics_json(&self) -> String {
         serde_json::to_string_pretty(&self.metrics).unwrap_or_default()
     }
+}
+
+/// What `write` writes, as a string (writing to a `Vec` cannot fail).
+fn written(write: impl FnOnce(&mut Vec<u8>) -> io::Result<()>) -> String {
+    let mut buf = Vec::new();
+    let _ = write(&mut buf);
+    String::from_utf8_lossy(&buf).into_owned()
 }

@@ -36,6 +36,7 @@
 mod delay;
 mod planar;
 mod rigid;
+mod shell;
 mod spatial;
 mod wind;
 mod yaw;

@@ -3,10 +3,8 @@
 use dflat_control::AttitudeCommand;
 use nalgebra::{SVector, Vector3};
 
-use super::{
-    HeldCommand, Plant, PlantKind, PlantOptions, PlantState, Wind, integrate,
-    level_flight_acceleration, thrust_axis,
-};
+use super::shell::{Shell, shell_plant_methods};
+use super::{Plant, PlantKind, PlantOptions, PlantState, level_flight_acceleration, thrust_axis};
 use crate::SimError;
 
 /// 2-D motion at constant altitude and yaw with first-order pitch and roll.
@@ -29,49 +27,27 @@ use crate::SimError;
 /// and are reported at the actual heading.
 #[derive(Debug, Clone)]
 pub struct PlanarPlant {
-    options: PlantOptions,
-    x: SVector<f64, 6>,
+    /// State `[x, ẋ, y, ẏ, θ, φ]` and the common bookkeeping.
+    shell: Shell<6>,
     z: f64,
-    yaw: f64,
-    /// The heading θ and φ are kept at (the reset heading) \[rad\].
-    yaw_ref: f64,
-    t: f64,
-    held: HeldCommand,
-    wind: Wind,
 }
 
 impl PlanarPlant {
     /// A planar plant at level hover at the origin; `seed` drives the gusts.
     pub fn new(options: PlantOptions, seed: u64) -> Result<Self, SimError> {
-        options.validate()?;
-        let wind = Wind::new(options.wind, options.gust_std, options.gust_tau, seed);
-        let state = PlantState::hover(Vector3::zeros(), options.g);
-        let mut plant = Self {
-            held: HeldCommand::steady(&options, &state),
-            options,
-            x: SVector::zeros(),
-            z: 0.0,
-            yaw: 0.0,
-            yaw_ref: 0.0,
-            t: 0.0,
-            wind,
-        };
+        let (shell, state) = Shell::new(options, seed)?;
+        let mut plant = Self { shell, z: 0.0 };
         plant.reset(&state);
         Ok(plant)
     }
 
-    /// Pitch and roll \[rad\] at the actual heading.
-    fn body_tilt(&self) -> (f64, f64) {
-        super::yaw::tilt_between(self.x[4], self.x[5], self.yaw_ref, self.yaw)
-    }
-
-    fn derivative(&self, x: &SVector<f64, 6>, w: &Vector3<f64>) -> SVector<f64, 6> {
-        let o = &self.options;
-        let (ax, ay) = level_flight_acceleration(o.g, x[5], x[4], self.yaw_ref);
-        let c = &self.held.command;
-        let (cp, cr) = super::yaw::command_tilt(o, c, self.yaw, self.yaw_ref);
+    fn derivative(s: &Shell<6>, x: &SVector<f64, 6>, w: &Vector3<f64>) -> SVector<f64, 6> {
+        let o = &s.options;
+        let (ax, ay) = level_flight_acceleration(o.g, x[5], x[4], s.yaw_ref);
+        let c = &s.held.command;
+        let (cp, cr) = super::yaw::command_tilt(o, c, s.yaw, s.yaw_ref);
         let air = Vector3::new(x[1] - w.x, x[3] - w.y, 0.0);
-        let aero = super::aero_acceleration(o, &air, &thrust_axis(x[5], x[4], self.yaw_ref));
+        let aero = super::aero_acceleration(o, &air, &thrust_axis(x[5], x[4], s.yaw_ref));
         SVector::from([
             x[1],
             ax + aero.x,
@@ -89,7 +65,7 @@ impl Plant for PlanarPlant {
     }
 
     fn reset(&mut self, state: &PlantState) {
-        self.x = SVector::from([
+        self.shell.x = SVector::from([
             state.position.x,
             state.velocity.x,
             state.position.y,
@@ -98,21 +74,18 @@ impl Plant for PlanarPlant {
             state.roll,
         ]);
         self.z = state.position.z;
-        self.yaw = state.yaw;
-        self.yaw_ref = state.yaw;
-        self.t = 0.0;
         let mut s = *state;
-        s.thrust = self.options.g;
-        self.held = HeldCommand::steady(&self.options, &s);
-        self.wind.restart();
+        s.thrust = self.shell.options.g;
+        self.shell.restart(&s);
     }
 
     fn apply(&mut self, command: &AttitudeCommand) {
         // Altitude is held by the autopilot: the thrust command plays no
         // part (neither in the dynamics nor in the saturation flag).
-        let hover = self.options.thrust_command_for(self.options.g);
-        self.held.apply(
-            &self.options,
+        let o = &self.shell.options;
+        let hover = o.thrust_command_for(o.g);
+        self.shell.held.apply(
+            o,
             &AttitudeCommand {
                 thrust: hover,
                 ..*command
@@ -121,74 +94,27 @@ impl Plant for PlanarPlant {
     }
 
     fn advance(&mut self, dt: f64) {
-        if !(dt.is_finite() && dt > 0.0) {
-            return;
-        }
-        let (n, h) = self.options.substeps(dt);
-        for _ in 0..n {
-            let w = self.wind.velocity();
-            self.x = integrate(self.options.integrator, &self.x, h, |x| {
-                self.derivative(x, &w)
-            });
-            self.yaw = super::yaw::step_yaw(&self.options, self.yaw, self.held.command.yaw, h);
-            self.wind.step(h);
-            self.t += h;
-        }
+        self.shell.advance(dt, true, Self::derivative);
     }
 
     fn position(&self) -> Vector3<f64> {
-        Vector3::new(self.x[0], self.x[2], self.z)
+        Vector3::new(self.shell.x[0], self.shell.x[2], self.z)
     }
 
     fn velocity(&self) -> Vector3<f64> {
-        Vector3::new(self.x[1], self.x[3], 0.0)
+        Vector3::new(self.shell.x[1], self.shell.x[3], 0.0)
     }
 
     fn attitude(&self) -> (f64, f64, f64) {
-        let (pitch, roll) = self.body_tilt();
-        (roll, pitch, self.yaw)
+        let (pitch, roll) = self.shell.body_tilt(4);
+        (roll, pitch, self.shell.yaw)
     }
 
     fn true_state(&self) -> PlantState {
-        let (pitch, roll) = self.body_tilt();
-        PlantState {
-            position: self.position(),
-            velocity: self.velocity(),
-            roll,
-            pitch,
-            yaw: self.yaw,
-            body_rates: {
-                // The first-order attitude and yaw loops' rates.
-                let d = self.derivative(&self.x, &self.wind.velocity());
-                super::body_rates_from_euler_rates(
-                    self.x[5],
-                    self.x[4],
-                    d[5],
-                    d[4],
-                    super::yaw::yaw_rate(&self.options, self.yaw, self.held.command.yaw),
-                )
-            },
-            thrust: self.options.g / (self.x[4].cos() * self.x[5].cos()),
-        }
+        let sh = &self.shell;
+        let thrust = sh.options.g / (sh.x[4].cos() * sh.x[5].cos());
+        sh.loop_state(self, 4, thrust, Self::derivative)
     }
 
-    fn state_vector(&self) -> Vec<f64> {
-        self.x.iter().copied().collect()
-    }
-
-    fn time(&self) -> f64 {
-        self.t
-    }
-
-    fn applied_command(&self) -> AttitudeCommand {
-        self.held.command
-    }
-
-    fn saturated(&self) -> bool {
-        self.held.saturated
-    }
-
-    fn wind(&self) -> Vector3<f64> {
-        self.wind.velocity()
-    }
+    shell_plant_methods!();
 }

@@ -5,9 +5,8 @@ use std::f64::consts::PI;
 use dflat_control::AttitudeCommand;
 use nalgebra::{SVector, Vector3};
 
-use super::{
-    HeldCommand, Plant, PlantKind, PlantOptions, PlantState, Wind, integrate, thrust_axis,
-};
+use super::shell::{Shell, shell_plant_methods};
+use super::{Plant, PlantKind, PlantOptions, PlantState, thrust_axis};
 use crate::SimError;
 
 /// Length of the state vector: 12 rigid-body states + thrust + 3 rate
@@ -33,11 +32,9 @@ const N: usize = 19;
 /// the yaw command (error wrapped to (−π, π]).
 #[derive(Debug, Clone)]
 pub struct RigidBodyPlant {
-    options: PlantOptions,
-    x: SVector<f64, N>,
-    t: f64,
-    held: HeldCommand,
-    wind: Wind,
+    /// The state vector and the common bookkeeping (the heading is `x[8]`:
+    /// the shell's yaw and reference yaw play no part).
+    shell: Shell<N>,
 }
 
 /// Wraps an angle to (−π, π].
@@ -49,24 +46,16 @@ fn wrap(a: f64) -> f64 {
 impl RigidBodyPlant {
     /// A rigid-body plant at level hover at the origin; `seed` drives the gusts.
     pub fn new(options: PlantOptions, seed: u64) -> Result<Self, SimError> {
-        options.validate()?;
-        let wind = Wind::new(options.wind, options.gust_std, options.gust_tau, seed);
-        let state = PlantState::hover(Vector3::zeros(), options.g);
-        let mut plant = Self {
-            held: HeldCommand::steady(&options, &state),
-            options,
-            x: SVector::zeros(),
-            t: 0.0,
-            wind,
-        };
+        let (shell, state) = Shell::new(options, seed)?;
+        let mut plant = Self { shell };
         plant.reset(&state);
         Ok(plant)
     }
 
-    fn derivative(&self, x: &SVector<f64, N>, w: &Vector3<f64>) -> SVector<f64, N> {
-        let o = &self.options;
+    fn derivative(s: &Shell<N>, x: &SVector<f64, N>, w: &Vector3<f64>) -> SVector<f64, N> {
+        let o = &s.options;
         let rb = &o.rigid;
-        let c = &self.held.command;
+        let c = &s.held.command;
         let (theta, phi, psi) = (x[6], x[7], x[8]);
         let omega = Vector3::new(x[9], x[10], x[11]);
         let thrust = x[12];
@@ -155,7 +144,7 @@ impl RigidBodyPlant {
     /// Nominal mass \[kg\] (the autopilot's); the true mass is this times
     /// [`PlantOptions::mass_factor`].
     pub fn nominal_mass(&self) -> f64 {
-        self.options.rigid.mass
+        self.shell.options.rigid.mass
     }
 }
 
@@ -182,74 +171,45 @@ impl Plant for RigidBodyPlant {
         x[16] = s.body_rates.x;
         x[17] = s.body_rates.y;
         x[18] = s.body_rates.z;
-        self.x = x;
-        self.t = 0.0;
-        self.held = HeldCommand::steady(&self.options, s);
-        self.wind.restart();
+        self.shell.x = x;
+        self.shell.restart(s);
     }
 
     fn apply(&mut self, command: &AttitudeCommand) {
-        self.held.apply(&self.options, command);
+        self.shell.held.apply(&self.shell.options, command);
     }
 
     fn advance(&mut self, dt: f64) {
-        if !(dt.is_finite() && dt > 0.0) {
-            return;
-        }
-        let (n, h) = self.options.substeps(dt);
-        for _ in 0..n {
-            let w = self.wind.velocity();
-            self.x = integrate(self.options.integrator, &self.x, h, |x| {
-                self.derivative(x, &w)
-            });
-            self.wind.step(h);
-            self.t += h;
-        }
+        self.shell.advance(dt, false, Self::derivative);
     }
 
     fn position(&self) -> Vector3<f64> {
-        Vector3::new(self.x[0], self.x[2], self.x[4])
+        self.shell.position()
     }
 
     fn velocity(&self) -> Vector3<f64> {
-        Vector3::new(self.x[1], self.x[3], self.x[5])
+        self.shell.velocity()
     }
 
     fn attitude(&self) -> (f64, f64, f64) {
-        (self.x[7], self.x[6], self.x[8])
+        let x = &self.shell.x;
+        (x[7], x[6], x[8])
     }
 
     fn true_state(&self) -> PlantState {
+        let x = &self.shell.x;
         PlantState {
             position: self.position(),
             velocity: self.velocity(),
-            roll: self.x[7],
-            pitch: self.x[6],
-            yaw: self.x[8],
-            body_rates: Vector3::new(self.x[9], self.x[10], self.x[11]),
-            thrust: self.x[12],
+            roll: x[7],
+            pitch: x[6],
+            yaw: x[8],
+            body_rates: Vector3::new(x[9], x[10], x[11]),
+            thrust: x[12],
         }
     }
 
-    fn state_vector(&self) -> Vec<f64> {
-        self.x.iter().copied().collect()
-    }
-
-    fn time(&self) -> f64 {
-        self.t
-    }
-
-    fn applied_command(&self) -> AttitudeCommand {
-        self.held.command
-    }
-
-    fn saturated(&self) -> bool {
-        self.held.saturated
-    }
-
-    fn wind(&self) -> Vector3<f64> {
-        self.wind.velocity()
-    }
+    shell_plant_methods!();
 }
 
 #[cfg(test)]

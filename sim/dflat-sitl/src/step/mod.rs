@@ -35,6 +35,7 @@ use nalgebra::Vector3;
 use crate::autopilot_state::Px4State;
 use crate::counters::SentKind;
 use crate::latency::PoseFaults;
+pub use crate::links::Link;
 use crate::params::ParamTable;
 use crate::pilot::ModeMachine;
 use crate::planner::Planner;
@@ -56,15 +57,6 @@ pub use services::{addressing, served};
 const VISION_SEED: u64 = 0x5649_5349_4f4e;
 /// Vision samples in flight at most (latency × rate; older ones dropped).
 const VISION_QUEUE: usize = 256;
-
-/// One of the SITL's two links.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum Link {
-    /// The vehicle link (the daemon).
-    Vehicle,
-    /// The ground-station port.
-    Gcs,
-}
 
 /// Where an outgoing message goes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -70,8 +70,8 @@ impl MultiRateDf {
                 ..InputSaturation::default()
             }),
             qp_solver: QpSolver::default(),
-            // The box per axis, as this study was run (issue 17 added the
-            // cone; stated here so the study's JSON stays as it is).
+            // The box per axis, as this study was run (the cone
+            // came later; stated here so the study's JSON stays as it is).
             plan_tilt_bound: PlanTiltBound::Box,
             warm_start: true,
             // The lab is deterministic: no wall-clock limit.

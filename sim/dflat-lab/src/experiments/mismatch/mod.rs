@@ -1,4 +1,4 @@
-//! Offset-free tracking under model mismatch (issue 5): DF-MPC with and
+//! Offset-free tracking under model mismatch: DF-MPC with and
 //! without the disturbance estimator ([`dflat_control::disturbance`]) against
 //! Flatness MPC and PD, when the vehicle is not the model.
 //!
@@ -18,7 +18,7 @@
 //!   0.5 (thrust gain 1.25); attitude gain k̃ 0.8 against 1.0; attitude time
 //!   constant τ 0.3 s against 0.2 s.
 //! * Position noise (Gaussian, every 50 Hz tick, each axis) at every level
-//!   of [`MismatchConfig::sigmas`]: 0, 0.1 mm, 1 mm and issue 5's 1 cm.
+//!   of [`MismatchConfig::sigmas`]: 0, 0.1 mm, 1 mm and 1 cm.
 //! * Controllers: DF-MPC (N = 100, q = 2, r = 0.02), the same with the
 //!   estimator ([`DisturbanceSettings`] defaults: 1 s window, 0.1 Hz); the
 //!   multi-rate DF ([`MultiRateDf`]: the vision-rate study's recommended
@@ -27,7 +27,7 @@
 //!   tilt — on the spatial model, poses through `observe`) without and with
 //!   the estimator, which then fits the raw timestamped samples; Flatness
 //!   MPC and PD with their library weights, fed by their state estimator
-//!   (issue 27; the default rule at the trial's σ, at least 1 mm, and
+//!   (the paper's outdoor set-up; the default rule at the trial's σ, at least 1 mm, and
 //!   50 Hz); all clip at 35°.
 //!   Classic DF weights: the library default (q = 5, r = 0.01) loses the hover
 //!   scenario even noise-free (the 25 % thrust excess drives its plan into
@@ -40,7 +40,7 @@
 //!
 //! Metric: **steady-state error** = mean over the last 5 s of the 3-D
 //! distance of the TRUE position to the setpoint (plant rate); its mean
-//! over the trials is the table entry. Budget (issue 5): ≤ 5 cm with the
+//! over the trials is the table entry. Budget: ≤ 5 cm with the
 //! estimator in every scenario.
 //!
 //! What the study shows (see `docs/figures/mismatch.json`, 10 trials):
@@ -124,12 +124,12 @@ pub const DF_EST_DARK_RED: RGBColor = RGBColor(120, 0, 0);
 pub const DF_MR_PURPLE: RGBColor = RGBColor(148, 103, 189);
 /// DF-MPC multi-rate with the estimator: dark purple.
 pub const DF_MR_EST_DARK_PURPLE: RGBColor = RGBColor(75, 30, 110);
-/// Steady-state budget with the estimator \[m\] (issue 5).
+/// Steady-state budget with the estimator \[m\].
 pub const STEADY_BUDGET: f64 = 0.05;
 /// Noise-check budget: DF with the estimator / DF without, per σ.
 pub const NOISE_RATIO_BUDGET: f64 = 1.10;
 /// The noise levels flown by default \[m\]: noise-free, 0.1 mm (motion
-/// capture), 1 mm, and issue 5's 1 cm.
+/// capture), 1 mm, and 1 cm.
 pub const DEFAULT_SIGMAS: [f64; 4] = [0.0, 1e-4, 1e-3, 1e-2];
 
 /// One way the vehicle differs from the model.
@@ -143,7 +143,7 @@ pub struct MismatchScenario {
     pub plant: PlantOptions,
 }
 
-/// The scenarios of issue 5 plus a nominal row, on the plant options
+/// The mismatch scenarios plus a nominal row, on the plant options
 /// `base` (the common set-up: saturation, thrust range).
 pub fn paper_scenarios(base: &PlantOptions) -> Vec<MismatchScenario> {
     let s = |name: &str, description: &str, plant: PlantOptions| MismatchScenario {
@@ -374,7 +374,7 @@ impl MismatchConfig {
 /// rule needs σ > 0; noise-free poses get the 1 mm filter).
 pub const BASELINE_ESTIMATOR_MIN_SIGMA: f64 = 1e-3;
 
-/// The baselines' state: their estimator (issue 27: the paper's outdoor
+/// The baselines' state: their estimator (the paper's outdoor
 /// set-up), by the default rule at σ and one pose per control step `dt`.
 fn baseline_state(sigma: f64, dt: f64) -> StateSource {
     StateSource::Estimator(EstimatorSettings::for_sensor(
@@ -521,7 +521,7 @@ pub struct SteadyBudget {
     pub pass: bool,
 }
 
-/// The budgets of issue 5 as flown.
+/// The study's budgets as flown.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Budgets {
     /// Steady-state error with the estimator ≤ 5 cm in every scenario, per
@@ -555,7 +555,7 @@ pub struct MismatchResult {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub airframe: Option<AirframeResult>,
     /// Error traces for the plot: per (scenario, controller), trial 0 at the
-    /// last σ (issue 5's 1 cm by default), `(t \[s\], true position − setpoint \[m\] NED)` at 10 Hz.
+    /// last σ (1 cm by default), `(t \[s\], true position − setpoint \[m\] NED)` at 10 Hz.
     #[serde(skip)]
     pub traces: Vec<ErrorTrace>,
 }

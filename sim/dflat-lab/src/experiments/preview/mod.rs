@@ -44,16 +44,9 @@ pub struct Flown {
     pub errors: u64,
 }
 
-/// The shipped DF-MPC (`df-mr-smooth`).
+/// The shipped DF-MPC (`df-mr-smooth`) at the shipped 35° tilt limit.
 pub fn shipped_dfmpc() -> ControllerSpec {
-    ControllerSpec::DfMrSmooth {
-        horizon: 100,
-        q: 1.0,
-        r: 0.003,
-        smoothness: 50.0,
-        plan_tilt_deg: 30.0,
-        max_tilt_deg: 35.0,
-    }
+    ControllerSpec::shipped_dfmpc(35.0)
 }
 
 /// Flatness MPC fed by the lab's state estimator (the fair baseline).
@@ -174,17 +167,9 @@ pub fn judge(result: &TrialResult, trajectory: &Trajectory) -> Flown {
     }
 }
 
-/// Flies one trial (see [`spec`]) and judges it.
-pub fn fly(
-    trajectory: Trajectory,
-    form: StreamForm,
-    settings: StreamSettings,
-    controller: &PreviewController,
-    sensor: SensorSpec,
-    duration: f64,
-) -> Result<Flown, ExperimentError> {
-    let spec = spec(trajectory, form, settings, controller, sensor, duration)?;
-    Ok(judge(&run_trial(&spec, 1)?, &trajectory))
+/// Flies `spec` (one trial of `trajectory`, see [`spec`]) and judges it.
+pub fn fly(spec: &TrialSpec, trajectory: &Trajectory) -> Result<Flown, ExperimentError> {
+    Ok(judge(&run_trial(spec, 1)?, trajectory))
 }
 
 /// The trajectory of `shape` at `size` \[m\] and `speed` \[m/s\] from hover
@@ -381,15 +366,16 @@ mod tests {
             ..StreamSettings::default()
         };
         let trajectory = trajectory(Shape::FigureEight, 8.0, 4.0);
-        fly(
+        let controller = PreviewController::Lab(shipped_dfmpc());
+        let spec = spec(
             trajectory,
             form,
             settings,
-            &PreviewController::Lab(shipped_dfmpc()),
+            &controller,
             SensorSpec::Perfect,
             16.0,
-        )
-        .unwrap()
+        );
+        fly(&spec.unwrap(), &trajectory).unwrap()
     }
 
     /// On the figure eight, the stream's own jerk cuts the error from
@@ -432,15 +418,9 @@ mod tests {
         };
         let fly_with = |shape, size, c: &PreviewController| {
             let tr = trajectory(shape, size, 4.0);
-            fly(
-                tr,
-                form,
-                StreamSettings::default(),
-                c,
-                SensorSpec::Perfect,
-                16.0,
-            )
-            .unwrap()
+            let settings = StreamSettings::default();
+            let spec = spec(tr, form, settings, c, SensorSpec::Perfect, 16.0);
+            fly(&spec.unwrap(), &tr).unwrap()
         };
         let pd = PreviewController::PdFeedForward;
         let df = PreviewController::Lab(shipped_dfmpc());

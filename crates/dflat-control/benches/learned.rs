@@ -1,0 +1,184 @@
+//! The DF-MPC tick with the learned residual against without it, same
+//! flight: percentiles over all ticks and over the constrained ones.
+//!
+//! A planar vehicle with aerodynamics the model has no term for (parasitic
+//! drag 0.03 |v|v, rotor drag 0.2 /s in the body plane) flies the L path
+//! (0, 0) → (20, 0) → (20, 20) m at 8 m/s under DF-MPC as the daemon ships
+//! it — multi-rate windows (M = 25, each pose observed), smoothness 50 on
+//! x and y, the plan's tilt box at 20° (so the start, the corner and the
+//! stop bind it) and the tilt-rate bound 150°/s — at horizon N (200 by
+//! default), with and without the residual (its weights the
+//! aerodynamics'). Each configuration flies the path `REPEATS` times in
+//! closed loop, every tick timed. The budget (issue 42): p99 ≤ 500 µs on
+//! constrained ticks with the residual at N = 200.
+//!
+//! Run: `cargo bench -p dflat-control --bench learned` (horizons as
+//! arguments, e.g. `-- 100 200`).
+
+#![allow(missing_docs)]
+
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+use dflat_control::dfmpc::{DfMpc, DfMpcSettings, OutputConstraints};
+use dflat_control::learned::{
+    FORMAT, Feature, LearnedResidual, Support, VERSION, Validation, columns, thrust_axis,
+};
+use dflat_control::reference::Reference;
+use dflat_control::window::MultiRateSettings;
+use dflat_control::{ControlModel, Controller, Frame, Measurement};
+use dflat_model::{FlatModel, PlanarModel, PlanarParams};
+use nalgebra::{SVector, Vector2, Vector3};
+
+const DT: f64 = 0.02;
+const TICKS: usize = 400;
+const SPEED: f64 = 8.0;
+const REPEATS: usize = 5;
+
+fn plant() -> PlanarModel {
+    PlanarModel::new(PlanarParams {
+        psi: 0.0,
+        frame: Frame::Ned,
+        ..Default::default()
+    })
+    .unwrap()
+}
+
+fn aero_residual() -> LearnedResidual {
+    let features = vec![Feature::Bias, Feature::Quadratic, Feature::RotorPlane];
+    let m = columns(&features);
+    LearnedResidual {
+        format: FORMAT.into(),
+        version: VERSION,
+        vehicle_model: "planar".into(),
+        vehicle: BTreeMap::new(),
+        dt: DT,
+        window: 25,
+        features,
+        lambda: 1e-6,
+        weights: std::array::from_fn(|axis| {
+            let mut row = vec![0.0; m];
+            row[1 + axis] = -0.03;
+            row[4 + axis] = -0.2;
+            row
+        }),
+        support: Support {
+            speed_max: 12.0,
+            tilt_max: 0.8,
+            thrust_min: 9.0,
+            thrust_max: 14.0,
+        },
+        validation: Validation {
+            one_step_parametric_m: 0.0,
+            one_step_learned_m: 0.0,
+            horizon_s: 0.5,
+            horizon_parametric_m: 0.0,
+            horizon_learned_m: 0.0,
+            samples: 0,
+            acceleration_parametric: 0.0,
+            acceleration_learned: 0.0,
+        },
+        seconds: 0.0,
+    }
+}
+
+/// One closed-loop flight of the L: every tick's update time \[µs\] and
+/// whether it solved a constrained QP.
+fn fly(n: usize, learned: bool) -> Vec<(f64, bool)> {
+    let p = plant();
+    let settings = DfMpcSettings {
+        horizon: n,
+        smoothness_weight: [50.0, 50.0, 0.0],
+        jerk_weight: [0.003; 3],
+        multi_rate: Some(MultiRateSettings::default()),
+        constraints: OutputConstraints {
+            max_tilt: Some(20f64.to_radians()),
+            max_tilt_rate: Some(150f64.to_radians()),
+            ..OutputConstraints::default()
+        },
+        solver_time_limit: f64::INFINITY,
+        ..DfMpcSettings::default()
+    };
+    let mut mpc = DfMpc::new(ControlModel::Planar(p), settings).unwrap();
+    mpc.set_learned(learned.then(aero_residual));
+    let w = [
+        Vector3::new(0.0, 0.0, -10.0),
+        Vector3::new(20.0, 0.0, -10.0),
+        Vector3::new(20.0, 20.0, -10.0),
+    ];
+    let mut reference = Reference::path(&w, SPEED).unwrap();
+    let mut x = SVector::<f64, 6>::zeros();
+    let aero = |s: &SVector<f64, 6>| {
+        let v = Vector3::new(s[1], s[3], 0.0);
+        let n = thrust_axis(s[5], s[4], 0.0);
+        -v * (0.03 * v.norm()) - (v - n * n.dot(&v)) * 0.2
+    };
+    let mut out = Vec::with_capacity(TICKS);
+    for k in 0..TICKS {
+        let y = p.output(&x);
+        let m = Measurement {
+            t: k as f64 * DT,
+            position: Vector3::new(y.x, y.y, -10.0),
+            yaw: 0.0,
+        };
+        mpc.observe(&m);
+        let started = Instant::now();
+        let r = mpc.update(&m, &mut reference);
+        let us = started.elapsed().as_secs_f64() * 1e6;
+        let Ok(o) = r else {
+            continue;
+        };
+        out.push((us, o.constrained));
+        let pre = x;
+        x = p.step(&x, &Vector2::new(o.command.pitch, o.command.roll));
+        let a = (aero(&pre) + aero(&x)) * 0.5;
+        x[1] += DT * a.x;
+        x[3] += DT * a.y;
+    }
+    out
+}
+
+fn percentile(mut v: Vec<f64>, q: f64) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    v[((v.len() - 1) as f64 * q).round() as usize]
+}
+
+fn main() {
+    let horizons: Vec<usize> = std::env::args()
+        .skip(1)
+        .filter_map(|a| a.parse().ok())
+        .collect();
+    let horizons = if horizons.is_empty() {
+        vec![200]
+    } else {
+        horizons
+    };
+    println!("DF-MPC tick on the L at 8 m/s with aerodynamics, {REPEATS} flights per row");
+    println!(
+        "  N  residual   all: median    p99     max   constrained: n  median    p99     max  [µs]"
+    );
+    for n in horizons {
+        for learned in [false, true] {
+            let mut all = Vec::new();
+            for _ in 0..REPEATS {
+                all.extend(fly(n, learned));
+            }
+            let times: Vec<f64> = all.iter().map(|(t, _)| *t).collect();
+            let constrained: Vec<f64> = all.iter().filter(|(_, c)| *c).map(|(t, _)| *t).collect();
+            println!(
+                "{n:4}  {:8}   {:11.0} {:7.0} {:7.0}   {:13} {:7.0} {:7.0} {:7.0}",
+                if learned { "learned" } else { "none" },
+                percentile(times.clone(), 0.5),
+                percentile(times.clone(), 0.99),
+                percentile(times, 1.0),
+                constrained.len(),
+                percentile(constrained.clone(), 0.5),
+                percentile(constrained.clone(), 0.99),
+                percentile(constrained, 1.0),
+            );
+        }
+    }
+}

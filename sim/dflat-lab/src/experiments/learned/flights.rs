@@ -1,0 +1,317 @@
+//! The flights of `dflat experiment learned`: which plant, which path or
+//! stream, which poses, which model; and how a flight is judged.
+
+use std::sync::Arc;
+
+use dflat_control::dfmpc::DfMpc;
+use dflat_control::learned::LearnedResidual;
+use dflat_control::reference::StreamSettings;
+use dflat_control::{ControlModel, Controller};
+use dflat_model::{PlanarModel, PlanarParams, SpatialModel, SpatialParams};
+use dflat_sim::plant::{PlantKind, PlantOptions, PlantState};
+use dflat_sim::sensing::{SensorSpec, VisionOptions};
+use dflat_sim::trajectory::{Shape, Trajectory};
+use serde::{Deserialize, Serialize};
+
+use super::super::controllers::Unbuildable;
+use super::super::mismatch::MultiRateDf;
+use super::super::preview::{self, Fields, StreamForm};
+use super::super::trial::TrialSetup;
+use super::super::{ExperimentError, percentile};
+use super::Vehicle;
+use crate::harness::{ControllerFactory, StopReason, TrialResult, TrialSpec};
+
+/// Control step of the lab \[s\].
+pub const DT: f64 = 0.02;
+
+/// The plants of the study, each with the control model that flies it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum AeroPlant {
+    /// The planar plant (first-order attitude, altitude held), flown by the
+    /// planar model.
+    Planar,
+    /// The spatial plant (first-order attitude, thrust lag), flown by the
+    /// spatial model.
+    Spatial,
+    /// The rigid body with its inner autopilot (attitude P, rate PID),
+    /// flown by the spatial model.
+    Rigid,
+}
+
+impl AeroPlant {
+    /// Its name in tables.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Planar => "planar",
+            Self::Spatial => "spatial",
+            Self::Rigid => "rigid",
+        }
+    }
+
+    fn kind(self) -> PlantKind {
+        match self {
+            Self::Planar => PlantKind::Planar,
+            Self::Spatial => PlantKind::Spatial,
+            Self::Rigid => PlantKind::RigidBody,
+        }
+    }
+
+    /// The control model flies thrust (the spatial model).
+    pub fn spatial(self) -> bool {
+        self != Self::Planar
+    }
+}
+
+/// The paths and streams of the study.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LearnedShape {
+    /// The paths study's L (20 m then 30 m), a path at a fixed speed.
+    L,
+    /// A planner's figure eight, 20 Hz p/v/a.
+    Eight,
+    /// A planner's racing line, 20 Hz p/v/a.
+    RacingLine,
+}
+
+impl LearnedShape {
+    /// Its name in tables.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::L => "L",
+            Self::Eight => "eight",
+            Self::RacingLine => "racing line",
+        }
+    }
+
+    /// The stream's trajectory at `speed` (None for the L): preview's
+    /// sizes at 4 m/s scaled by `(v/4)²`, halved — the same accelerations
+    /// at every speed, half of preview's (the drag at 9 m/s takes 25° of
+    /// tilt on its own).
+    pub fn trajectory(self, speed: f64) -> Option<Trajectory> {
+        let (shape, size) = match self {
+            Self::L => return None,
+            Self::Eight => (Shape::FigureEight, 16.0),
+            Self::RacingLine => (Shape::RacingLine, 24.0),
+        };
+        Some(preview::trajectory(
+            shape,
+            size * (speed / 4.0).powi(2),
+            speed,
+        ))
+    }
+}
+
+/// One flight: where, how fast, what the controller sees, what flies it.
+#[derive(Debug, Clone)]
+pub struct Flight {
+    /// The plant.
+    pub plant: AeroPlant,
+    /// With the aerodynamics (false: the matched plant).
+    pub aero: bool,
+    /// Its parasitic and rotor drag (1/m, 1/s).
+    pub drag: (f64, f64),
+    /// The path or stream.
+    pub shape: LearnedShape,
+    /// Speed \[m/s\].
+    pub speed: f64,
+    /// Vision rate \[Hz\] (60 ms latency, 2 cm noise).
+    pub vision_hz: f64,
+    /// The `[vehicle]` values flown.
+    pub vehicle: Vehicle,
+    /// The learned residual, when flown.
+    pub learned: Option<LearnedResidual>,
+    /// A stream's length \[s\].
+    pub stream_s: f64,
+}
+
+/// The control model of `vehicle` on `plant`.
+pub fn control_model(plant: AeroPlant, vehicle: &Vehicle) -> Result<ControlModel, ExperimentError> {
+    let err = |source: dflat_model::FlatError| ExperimentError::Controller {
+        controller: "df-mr-smooth",
+        source: source.into(),
+    };
+    Ok(if plant.spatial() {
+        ControlModel::Spatial(
+            SpatialModel::new(SpatialParams {
+                dt: DT,
+                tau: vehicle.tau,
+                k: vehicle.k,
+                tau_thrust: vehicle.tau_thrust,
+                drag_h: vehicle.drag_h,
+                ..SpatialParams::default()
+            })
+            .map_err(err)?,
+        )
+    } else {
+        ControlModel::Planar(
+            PlanarModel::new(PlanarParams {
+                dt: DT,
+                tau: vehicle.tau,
+                k: vehicle.k,
+                drag_h: vehicle.drag_h,
+                ..PlanarParams::default()
+            })
+            .map_err(err)?,
+        )
+    })
+}
+
+/// The shipped DF-MPC (`df-mr-smooth`) on `vehicle`'s model, with the
+/// learned residual when given.
+fn factory(
+    plant: AeroPlant,
+    vehicle: Vehicle,
+    learned: Option<LearnedResidual>,
+) -> Result<ControllerFactory, ExperimentError> {
+    let build = move || -> Result<Box<dyn Controller>, ExperimentError> {
+        let model = control_model(plant, &vehicle)?;
+        let mut settings =
+            MultiRateDf::default().settings(35f64.to_radians(), 2.0 * model.gravity(), None);
+        settings.delay_ticks = (vehicle.delay_ms / (1e3 * DT)).round() as usize;
+        let mut mpc =
+            DfMpc::new(model, settings).map_err(|source| ExperimentError::Controller {
+                controller: "df-mr-smooth",
+                source,
+            })?;
+        mpc.set_learned(learned.clone());
+        Ok(Box::new(mpc))
+    };
+    build()?;
+    Ok(Arc::new(move || {
+        build().unwrap_or_else(|e| Box::new(Unbuildable::new("df-mr-smooth", &e)))
+    }))
+}
+
+impl Flight {
+    /// The plant options: the lab's defaults, 35° saturation, the
+    /// aerodynamics when `aero`.
+    fn plant_options(&self) -> PlantOptions {
+        let mut o = TrialSetup::default().plant_options();
+        if self.aero {
+            (o.quadratic_drag, o.rotor_drag) = self.drag;
+        }
+        o
+    }
+
+    fn sensor(&self) -> SensorSpec {
+        SensorSpec::Vision(VisionOptions {
+            rate_hz: self.vision_hz,
+            ..VisionOptions::default()
+        })
+    }
+
+    /// The trial.
+    pub fn spec(&self) -> Result<TrialSpec, ExperimentError> {
+        let controller = factory(self.plant, self.vehicle, self.learned.clone())?;
+        let mut spec = match self.shape.trajectory(self.speed) {
+            None => {
+                let setup = TrialSetup::default();
+                let w = setup.l_path();
+                let stop = setup.end_stop(&w, self.speed);
+                setup.trial(
+                    "learned".into(),
+                    controller,
+                    self.plant_options(),
+                    self.sensor(),
+                    &w,
+                    self.speed,
+                    stop,
+                )?
+            }
+            Some(tr) => {
+                let form = StreamForm {
+                    rate_hz: 20.0,
+                    fields: Fields::Pva,
+                    ahead_s: 0.0,
+                    yaw: false,
+                };
+                let mut spec = preview::spec(
+                    tr,
+                    form,
+                    StreamSettings::default(),
+                    &preview::PreviewController::Lab(preview::shipped_dfmpc()),
+                    self.sensor(),
+                    self.stream_s,
+                )?;
+                spec.controller = controller;
+                spec.plant_options = self.plant_options();
+                spec.divergence_bound = 15.0;
+                spec
+            }
+        };
+        spec.plant = self.plant.kind();
+        spec.initial = PlantState::hover(spec.initial.position, spec.plant_options.g);
+        spec.validate()?;
+        Ok(spec)
+    }
+
+    /// The flight's figures.
+    pub fn judge(&self, r: &TrialResult) -> Judged {
+        let judged_from = match self.shape {
+            LearnedShape::L => 0.0,
+            _ => preview::RAMP_S + preview::SETTLE_S,
+        };
+        let horizontal: Vec<f64> = match self.shape.trajectory(self.speed) {
+            None => r.ticks.iter().map(|t| t.path_error).collect(),
+            Some(tr) => return self.judge_stream(r, &tr, judged_from),
+        };
+        let axes = per_axis(r, judged_from);
+        Judged {
+            p95: percentile(horizontal, 95.0),
+            axis_p95: axes,
+            diverged: r.stop_reason == StopReason::Diverged,
+            errors: r.errors.len(),
+        }
+    }
+
+    fn judge_stream(&self, r: &TrialResult, tr: &Trajectory, from: f64) -> Judged {
+        let f = preview::judge(r, tr);
+        Judged {
+            p95: f.p95,
+            axis_p95: per_axis(r, from),
+            diverged: r.stop_reason == StopReason::Diverged,
+            errors: r.errors.len(),
+        }
+    }
+}
+
+/// p95 of |true position − y_ref,k| per axis (x, y, z) over the ticks
+/// from `from` \[s\].
+fn per_axis(r: &TrialResult, from: f64) -> [f64; 3] {
+    std::array::from_fn(|axis| {
+        percentile(
+            r.ticks
+                .iter()
+                .filter(|t| t.t >= from)
+                .map(|t| (t.truth.position[axis] - t.reference[axis]).abs())
+                .collect(),
+            95.0,
+        )
+    })
+}
+
+/// What one flight gives.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Judged {
+    /// Horizontal error p95 \[m\]: cross-track on the L, to the trajectory
+    /// at the same time on a stream (after its ramp).
+    pub p95: f64,
+    /// p95 of each axis' error to the controller's reference \[m\].
+    pub axis_p95: [f64; 3],
+    /// Diverged.
+    pub diverged: bool,
+    /// Controller errors.
+    pub errors: usize,
+}
+
+impl Judged {
+    /// A flight that was not flown (its model could not be learned).
+    pub const NONE: Self = Self {
+        p95: f64::NAN,
+        axis_p95: [f64::NAN; 3],
+        diverged: false,
+        errors: 0,
+    };
+}

@@ -1,0 +1,278 @@
+//! End to end, learned maps: the SITL's aerodynamic plant (parasitic drag
+//! 0.03 |v|v and rotor drag 0.2 /s in the body plane, which no parametric
+//! term of the daemon's model has) flown three times from a planner's
+//! stream — stock, identified (`dflat identify` on the stock flight's
+//! .tlog), learned (`dflat learn` on the first two flights' CSVs over the
+//! identified `[vehicle]` table) — against the same airframe without the
+//! aerodynamics (the matched plant) flown in the same run.
+//!
+//! Judged from the daemon's own records: each flight's CSV, the measured
+//! position against the reference at the same tick, from the stream's
+//! ramp plus 2 s to its end (p95 horizontal, and p95 per axis).
+//!
+//! Asserted: learned better than identified; after
+//! identify or learn no axis worse than before; the learned model's
+//! held-out input-to-output prediction at most half the parametric
+//! model's; the learned model's status said in the daemon's log. Printed,
+//! not met: issue 42's learned ≤ 1.1× matched (measured 2026-11-28 on a
+//! quiet machine: matched 0.0017 m, learned 0.017 m, identified 0.167 m,
+//! stock 1.43 m — the 38 s of one racing line in the first two flights do
+//! not determine the rotor-drag term apart from the linear one, `dflat
+//! learn` says so and leaves it out, and the braking ends, tilted along
+//! the motion, are where the missing term shows; under a load of 6 on two
+//! cores the same run gave matched 0.089 m, learned 0.118 m, identified
+//! 0.174 m: the flights are real time; docs/results.md).
+
+#[path = "support/mod.rs"]
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Duration;
+
+use common::*;
+use dflat_tuning::flightlog::FlightLog;
+use dflat_tuning::identify;
+
+/// The stream: a racing line (accelerate along the sides, brake and turn
+/// at the ends) at 7 m/s, 20 Hz p/v/a, as the lab's `experiment learned`.
+const SPEED: f64 = 7.0;
+const SIZE: f64 = 24.0 * (SPEED / 4.0) * (SPEED / 4.0);
+const RAMP_S: f64 = 3.0;
+const STREAM_S: f64 = 16.0;
+
+/// One flight's config: `vehicle` (a `[vehicle]` table or empty),
+/// `extra` daemon lines, the aerodynamics on or off.
+fn config(vehicle: &str, extra: &str, aero: bool) -> String {
+    let drag = if aero {
+        "quadratic_drag = 0.03\nrotor_drag = 0.2\n"
+    } else {
+        ""
+    };
+    format!(
+        r#"
+{vehicle}
+{extra}
+[logging]
+dir = "@DIR@"
+tlog = true
+csv = true
+[mission]
+start = "hold"
+[sitl]
+start = [0.0, 0.0, -10.0]
+{drag}
+[sitl.planner]
+shape = "racing_line"
+size = {SIZE}
+speed = {SPEED}
+ramp_s = {RAMP_S}
+rate_hz = 20.0
+fields = "pva"
+start_after_s = 1.0
+duration_s = {STREAM_S}
+"#
+    )
+}
+
+/// What one flight gives, from its CSV.
+#[derive(Debug, Clone, Copy)]
+struct Judged {
+    /// Horizontal error to the reference, p95 \[m\].
+    p95: f64,
+    /// p95 of |x − ref_x|, |y − ref_y| \[m\].
+    axes: [f64; 2],
+    /// The daemon's STATUSTEXTs that speak of the learned residual.
+    said: usize,
+}
+
+/// The daemon's CSV in `dir`.
+fn csv_in(dir: &Path) -> PathBuf {
+    let mut csvs: Vec<PathBuf> = std::fs::read_dir(dir)
+        .expect("read dir")
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| {
+            p.extension().is_some_and(|x| x == "csv")
+                && p.file_name()
+                    .is_some_and(|n| n.to_string_lossy().starts_with("flight"))
+        })
+        .collect();
+    csvs.sort();
+    csvs.pop().expect("no flight CSV")
+}
+
+fn tlog_in(dir: &Path) -> PathBuf {
+    csv_in(dir).with_extension("tlog")
+}
+
+/// Flies `config` (real daemon, in-process SITL) and judges it from the
+/// daemon's CSV: TRACKING ticks from the first one + ramp + 2 s to the
+/// stream's end.
+fn fly(name: &str, config: &str) -> Judged {
+    let flight = fly_in_process(name, config, Duration::from_secs_f64(STREAM_S + 2.5));
+    assert!(flight.clean_exit, "{name}: the daemon did not exit cleanly");
+    let said = flight
+        .frames
+        .iter()
+        .filter(|f| match &f.message {
+            dflat_link::MavMessage::STATUSTEXT(d) => {
+                String::from_utf8_lossy(&d.text.to_vec()).contains("learned residual")
+            }
+            _ => false,
+        })
+        .count();
+    let rows = read_flight_csv(&scratch_dir(name));
+    let num = |r: &std::collections::HashMap<String, String>, k: &str| {
+        r.get(k).and_then(|v| v.parse::<f64>().ok())
+    };
+    let tracking: Vec<_> = rows
+        .iter()
+        .filter(|r| r.get("state").is_some_and(|s| s.starts_with("TRACKING")))
+        .collect();
+    let t0 = tracking
+        .first()
+        .and_then(|r| num(r, "t"))
+        .unwrap_or_else(|| panic!("{name}: never tracked"));
+    let mut e = Vec::new();
+    let mut ex = Vec::new();
+    let mut ey = Vec::new();
+    for r in tracking {
+        let (Some(t), Some(x), Some(y), Some(rx), Some(ry)) = (
+            num(r, "t"),
+            num(r, "x"),
+            num(r, "y"),
+            num(r, "ref_x"),
+            num(r, "ref_y"),
+        ) else {
+            continue;
+        };
+        if t < t0 + RAMP_S + 2.0 || t > t0 + STREAM_S {
+            continue;
+        }
+        e.push(((x - rx).powi(2) + (y - ry).powi(2)).sqrt());
+        ex.push((x - rx).abs());
+        ey.push((y - ry).abs());
+    }
+    assert!(e.len() > 300, "{name}: {} ticks judged", e.len());
+    Judged {
+        p95: quantile(&e, 0.95),
+        axes: [quantile(&ex, 0.95), quantile(&ey, 0.95)],
+        said,
+    }
+}
+
+/// The identified `[vehicle]` snippet of a flight's .tlog.
+fn identified(name: &str) -> String {
+    let log = FlightLog::read_tlog(&tlog_in(&scratch_dir(name))).expect("tlog");
+    let found = identify::identify(&log).expect("identify");
+    let snippet = found.vehicle_snippet(name, None);
+    eprintln!("{}\n{snippet}", found.report(name, None));
+    snippet
+}
+
+/// `dflat learn` on `flights` over `config`'s `[vehicle]`: the model file
+/// and the config snippet it wrote, and its report.
+fn learn(flights: &[PathBuf], config: &Path, out: &Path) -> (PathBuf, String, String) {
+    let output = Command::new(bin())
+        .arg("learn")
+        .args(flights)
+        .arg("--config")
+        .arg(config)
+        .arg("--out")
+        .arg(out)
+        .output()
+        .expect("run dflat learn");
+    let report = String::from_utf8_lossy(&output.stdout).into_owned();
+    assert!(
+        output.status.success(),
+        "dflat learn failed:\n{report}\n{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let snippet_path = out.with_extension("snippet.toml");
+    let snippet = std::fs::read_to_string(&snippet_path).expect("the config snippet");
+    (out.to_path_buf(), snippet, report)
+}
+
+/// The matched plant, then stock, identified and learned on the
+/// aerodynamic plant (≈ 90 s: four 20 s flights one after the other).
+#[test]
+fn learned_maps_fly_the_aerodynamic_plant_as_the_matched_one() {
+    let matched = fly("learned-matched", &config("", "", false));
+    let stock = fly("learned-stock", &config("", "", true));
+    let snippet = identified("learned-stock");
+    let identified_flight = fly("learned-identified", &config(&snippet, "", true));
+    // Learn over the identified table from both flights' records.
+    let dir = scratch("learned-model");
+    let table = write_config(&dir, "identified.toml", &snippet);
+    let flights = [
+        csv_in(&scratch_dir("learned-stock")),
+        csv_in(&scratch_dir("learned-identified")),
+    ];
+    let (model, learned_snippet, report) = learn(&flights, &table, &dir.join("model.toml"));
+    eprintln!("{report}\n{learned_snippet}");
+    assert!(
+        learned_snippet.contains("learned_model") && learned_snippet.contains("model.toml"),
+        "{learned_snippet}"
+    );
+    let residual = dflat_daemon::learned::read(&model).expect("the model file");
+    let v = residual.validation;
+    let learned = fly("learned-learned", &config(&snippet, &learned_snippet, true));
+    let log = std::fs::read_to_string(scratch_dir("learned-learned").join("daemon.stderr"))
+        .unwrap_or_default();
+    println!(
+        "racing line {SPEED} m/s, p95 (x, y): matched {:.4} ({:.4}, {:.4}) m; aerodynamic plant: stock \
+         {:.4} ({:.4}, {:.4}), identified {:.4} ({:.4}, {:.4}), learned {:.4} ({:.4}, {:.4}) m; \
+         learned / matched {:.2}×; held-out 0.5 s prediction {:.4} → {:.4} m ({:.2}×), acceleration \
+         left {:.3} → {:.3} m/s²",
+        matched.p95,
+        matched.axes[0],
+        matched.axes[1],
+        stock.p95,
+        stock.axes[0],
+        stock.axes[1],
+        identified_flight.p95,
+        identified_flight.axes[0],
+        identified_flight.axes[1],
+        learned.p95,
+        learned.axes[0],
+        learned.axes[1],
+        learned.p95 / matched.p95,
+        v.horizon_parametric_m,
+        v.horizon_learned_m,
+        v.horizon_learned_m / v.horizon_parametric_m,
+        v.acceleration_parametric,
+        v.acceleration_learned,
+    );
+    assert!(
+        log.contains("learned residual: acting") && learned.said > 0,
+        "the daemon did not say the residual acts ({} STATUSTEXTs):\n{log}",
+        learned.said
+    );
+    assert_eq!(identified_flight.said, 0, "no residual, nothing said");
+    assert!(
+        learned.p95 < identified_flight.p95,
+        "learned {:.4} m not better than identified {:.4} m",
+        learned.p95,
+        identified_flight.p95
+    );
+    for axis in 0..2 {
+        assert!(
+            identified_flight.axes[axis] <= stock.axes[axis],
+            "axis {axis}: identified {:?} worse than stock {:?}",
+            identified_flight.axes,
+            stock.axes
+        );
+        assert!(
+            learned.axes[axis] <= identified_flight.axes[axis],
+            "axis {axis}: learned {:?} worse than identified {:?}",
+            learned.axes,
+            identified_flight.axes
+        );
+    }
+    assert!(
+        v.horizon_learned_m <= 0.5 * v.horizon_parametric_m,
+        "held-out prediction {:.4} m vs the parametric model's {:.4} m",
+        v.horizon_learned_m,
+        v.horizon_parametric_m
+    );
+}
