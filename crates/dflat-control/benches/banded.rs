@@ -51,3 +51,32 @@ fn solve(bencher: Bencher, (n, b): (usize, usize)) {
     let mut x = vec![1.0; n];
     bencher.bench_local(|| chol.solve_in_place(black_box(&mut x)).unwrap());
 }
+
+/// The polish's KKT shapes (quasi-definite): N = 200, stride 3 (b = 14)
+/// and 4 with speed rows (b = 19).
+const LDL_SHAPES: [(usize, usize); 2] = [(594, 14), (792, 19)];
+
+fn kkt(n: usize, b: usize) -> SymBand {
+    let mut a = matrix(n, b);
+    for i in (1..n).step_by(3) {
+        let v = a.get(i, i);
+        a.set(i, i, -v);
+    }
+    a
+}
+
+#[divan::bench(args = LDL_SHAPES)]
+fn ldl_factor(bencher: Bencher, (n, b): (usize, usize)) {
+    let a = kkt(n, b);
+    let mut ldl = dflat_control::optimise::banded::BandedLdl::new(n, b);
+    bencher.bench_local(|| ldl.factor(black_box(&a)).unwrap());
+}
+
+#[divan::bench(args = LDL_SHAPES)]
+fn ldl_solve(bencher: Bencher, (n, b): (usize, usize)) {
+    let a = kkt(n, b);
+    let mut ldl = dflat_control::optimise::banded::BandedLdl::new(n, b);
+    ldl.factor(&a).unwrap();
+    let mut x = vec![1.0; n];
+    bencher.bench_local(|| ldl.solve(black_box(&mut x)));
+}

@@ -52,7 +52,7 @@
 use std::time::Instant;
 
 use dflat_control::dfmpc::{DfMpc, DfMpcSettings, OutputConstraints, PlanTiltBound, QpSolver};
-use dflat_control::optimise::{Cascade, SolverMethod};
+use dflat_control::optimise::{SolveInfo, SolverMethod};
 use dflat_control::reference::Reference;
 use dflat_control::{ControlModel, Controller, Frame, Measurement};
 use dflat_model::{FlatModel, PlanarModel, PlanarParams};
@@ -244,16 +244,17 @@ struct ConeWork {
 }
 
 impl ConeWork {
-    /// Notes what `cascade` did on its last tick, if it ran.
-    fn note(&mut self, cascade: Option<&Cascade>) {
-        let Some((place, solver)) = cascade.and_then(Cascade::solved_by) else {
+    /// Notes what a cascade did on its last tick, if it ran (its
+    /// solver's place and what it did).
+    fn note(&mut self, solved_by: Option<(usize, SolveInfo)>) {
+        let Some((place, info)) = solved_by else {
             return;
         };
         self.solves += 1;
-        match solver.method() {
-            SolverMethod::Alm => {
-                self.iterations.push(solver.iterations() as f64);
-                self.factorisations.push(solver.factorisations() as f64);
+        match info.method {
+            SolverMethod::Alm | SolverMethod::ActiveSet => {
+                self.iterations.push(info.iterations as f64);
+                self.factorisations.push(info.factorisations as f64);
             }
             SolverMethod::InteriorPoint => self.interior_point += 1,
             SolverMethod::Clarabel => self.clarabel += usize::from(place > 0),
@@ -297,9 +298,9 @@ fn replay(
                     work.burst_starts.push(t);
                 }
                 let before = work.iterations.len();
-                work.note(ctrl.cone_cascade());
+                work.note(ctrl.cone_cascade().and_then(|c| c.solved_by()));
                 for axis in 0..2 {
-                    work.note(ctrl.box_cascade(axis));
+                    work.note(ctrl.box_cascade(axis).and_then(|c| c.solved_by()));
                 }
                 if !was_constrained {
                     let steps = work.iterations[before..].iter().sum();
@@ -346,107 +347,7 @@ fn main() {
             .is_none_or(|o| o.iter().any(|o| config.name().contains(o.as_str())))
     };
     for &n in &horizons {
-        let flight = record(n, Course::Corner);
-        let repeats = if n >= 800 { 2 } else { 5 };
-        println!("\nN = {n} ({repeats} replays)");
-        println!(
-            "| configuration | all: median | p99 | max | constrained ticks | constrained: median | p99 | max |"
-        );
-        println!("|---|---|---|---|---|---|---|---|");
-        let mut stats = Vec::new();
-        let mut cone_work = Vec::new();
-        for config in Config::ALL {
-            if !chosen(config) {
-                continue;
-            }
-            let (mut all, mut con, mut work) =
-                replay(config, n, (Course::Corner, &flight), repeats);
-            if let Some(e) = &work.first_failure {
-                cone_work.push(format!(
-                    "{}: {} of {} ticks failed (the first: {e})",
-                    config.name(),
-                    work.failed,
-                    all.len()
-                ));
-            }
-            if !matches!(
-                config,
-                Config::Fast | Config::ConeClarabel | Config::BoxRateClarabel | Config::BoxClarabel
-            ) {
-                let mean = |v: &[f64]| {
-                    if v.is_empty() {
-                        f64::NAN
-                    } else {
-                        v.iter().sum::<f64>() / v.len() as f64
-                    }
-                };
-                let bursts = work.burst_starts.len();
-                cone_work.push(format!(
-                    "{}: ALM per solve: Newton steps mean {:.2}, p99 {}, max {}; \
-                     factorisations mean {:.2}; interior point solved {} and clarabel {} \
-                     of {} solves; first ticks of {} bursts: median {} µs, max {} µs",
-                    config.name(),
-                    mean(&work.iterations),
-                    percentile(&mut work.iterations, 99.0),
-                    percentile(&mut work.iterations, 100.0),
-                    mean(&work.factorisations),
-                    work.interior_point,
-                    work.clarabel,
-                    work.solves,
-                    bursts / repeats,
-                    us(percentile(&mut work.burst_starts, 50.0)),
-                    us(percentile(&mut work.burst_starts, 100.0)),
-                ));
-            }
-            let s = [
-                percentile(&mut all, 50.0),
-                percentile(&mut all, 99.0),
-                percentile(&mut all, 100.0),
-                percentile(&mut con, 50.0),
-                percentile(&mut con, 99.0),
-                percentile(&mut con, 100.0),
-            ];
-            println!(
-                "| {} | {} | {} | {} | {} | {} | {} | {} |",
-                config.name(),
-                us(s[0]),
-                us(s[1]),
-                us(s[2]),
-                con.len() / repeats,
-                us(s[3]),
-                us(s[4]),
-                us(s[5])
-            );
-            stats.push(s);
-        }
-        #[cfg(feature = "osqp-bench")]
-        anchor::table(n, &flight, repeats, &chosen);
-        if stats.len() < Config::ALL.len() {
-            cone_work.iter().for_each(|l| println!("{l}"));
-            continue;
-        }
-        let (fast, warm, clarabel) = (stats[0], stats[1], stats[3]);
-        println!(
-            "ratios (constrained ticks): clarabel / warm cone: median {:.1}×, p99 {:.1}×; \
-             warm cone / fast tick median: median {:.1}×, p99 {:.1}×",
-            clarabel[3] / warm[3],
-            clarabel[4] / warm[4],
-            warm[3] / fast[0],
-            warm[4] / fast[0],
-        );
-        let (rate, rate_clarabel) = (stats[5], stats[7]);
-        println!(
-            "tilt rate (constrained ticks): box + rate banded median {} µs, p99 {} µs; \
-             clarabel / banded: median {:.1}×, p99 {:.1}×; banded / fast tick median: {:.1}×",
-            us(rate[3]),
-            us(rate[4]),
-            rate_clarabel[3] / rate[3],
-            rate_clarabel[4] / rate[4],
-            rate[3] / fast[0],
-        );
-        for line in cone_work {
-            println!("{line}");
-        }
+        corner_table(n, &chosen);
     }
     // The course runs unfiltered, or when the filter names it
     // (`CORNER_ONLY="course|cone, ALM, warm"`).
@@ -456,6 +357,123 @@ fn main() {
     {
         course_of_corners(&horizons, &chosen);
     }
+}
+
+/// The corner's table at horizon `n` for the configurations `chosen`,
+/// the work lines, the ratios (all configurations run) and, with the
+/// feature, OSQP's table.
+fn corner_table(n: usize, chosen: &dyn Fn(Config) -> bool) {
+    let flight = record(n, Course::Corner);
+    let repeats = if n >= 800 { 2 } else { 5 };
+    println!("\nN = {n} ({repeats} replays)");
+    println!(
+        "| configuration | all: median | p99 | max | constrained ticks | constrained: median | p99 | max |"
+    );
+    println!("|---|---|---|---|---|---|---|---|");
+    let mut stats = Vec::new();
+    let mut lines = Vec::new();
+    for config in Config::ALL {
+        if !chosen(config) {
+            continue;
+        }
+        let (mut all, mut con, work) = replay(config, n, (Course::Corner, &flight), repeats);
+        lines.extend(work_lines(config, &work, all.len(), repeats));
+        let s = [
+            percentile(&mut all, 50.0),
+            percentile(&mut all, 99.0),
+            percentile(&mut all, 100.0),
+            percentile(&mut con, 50.0),
+            percentile(&mut con, 99.0),
+            percentile(&mut con, 100.0),
+        ];
+        println!(
+            "| {} | {} | {} | {} | {} | {} | {} | {} |",
+            config.name(),
+            us(s[0]),
+            us(s[1]),
+            us(s[2]),
+            con.len() / repeats,
+            us(s[3]),
+            us(s[4]),
+            us(s[5])
+        );
+        stats.push(s);
+    }
+    #[cfg(feature = "osqp-bench")]
+    anchor::table(n, &flight, repeats, chosen);
+    if stats.len() == Config::ALL.len() {
+        print_ratios(&stats);
+    }
+    lines.iter().for_each(|l| println!("{l}"));
+}
+
+/// A configuration's work line (its augmented Lagrangian's or active
+/// set's work, the fallbacks, the bursts' first ticks) and its first
+/// failure, if any.
+fn work_lines(config: Config, work: &ConeWork, ticks: usize, repeats: usize) -> Vec<String> {
+    let mut lines = Vec::new();
+    if let Some(e) = &work.first_failure {
+        lines.push(format!(
+            "{}: {} of {ticks} ticks failed (the first: {e})",
+            config.name(),
+            work.failed,
+        ));
+    }
+    if matches!(
+        config,
+        Config::Fast | Config::ConeClarabel | Config::BoxRateClarabel | Config::BoxClarabel
+    ) {
+        return lines;
+    }
+    let mean = |v: &[f64]| {
+        if v.is_empty() {
+            f64::NAN
+        } else {
+            v.iter().sum::<f64>() / v.len() as f64
+        }
+    };
+    let (mut iterations, mut starts) = (work.iterations.clone(), work.burst_starts.clone());
+    lines.push(format!(
+        "{}: per solve: Newton steps (the active set's: KKT solves) mean {:.2}, p99 {}, max {}; \
+         factorisations mean {:.2}; interior point solved {} and clarabel {} \
+         of {} solves; first ticks of {} bursts: median {} µs, max {} µs",
+        config.name(),
+        mean(&iterations),
+        percentile(&mut iterations, 99.0),
+        percentile(&mut iterations, 100.0),
+        mean(&work.factorisations),
+        work.interior_point,
+        work.clarabel,
+        work.solves,
+        starts.len() / repeats,
+        us(percentile(&mut starts, 50.0)),
+        us(percentile(&mut starts, 100.0)),
+    ));
+    lines
+}
+
+/// The ratios the budgets are stated in (every configuration ran, in
+/// [`Config::ALL`]'s order).
+fn print_ratios(stats: &[[f64; 6]]) {
+    let (fast, warm, clarabel) = (stats[0], stats[1], stats[3]);
+    println!(
+        "ratios (constrained ticks): clarabel / warm cone: median {:.1}×, p99 {:.1}×; \
+         warm cone / fast tick median: median {:.1}×, p99 {:.1}×",
+        clarabel[3] / warm[3],
+        clarabel[4] / warm[4],
+        warm[3] / fast[0],
+        warm[4] / fast[0],
+    );
+    let (rate, rate_clarabel) = (stats[5], stats[7]);
+    println!(
+        "tilt rate (constrained ticks): box + rate banded median {} µs, p99 {} µs; \
+         clarabel / banded: median {:.1}×, p99 {:.1}×; banded / fast tick median: {:.1}×",
+        us(rate[3]),
+        us(rate[4]),
+        rate_clarabel[3] / rate[3],
+        rate_clarabel[4] / rate[4],
+        rate[3] / fast[0],
+    );
 }
 
 /// The course of corners: each corner binds in a burst of its own, whose
@@ -524,9 +542,8 @@ mod anchor {
     use std::sync::{Arc, Mutex};
     use std::time::Instant;
 
-    use dflat_control::ControlError;
     use dflat_control::optimise::osqp_anchor::{OsqpBoxSolver, OsqpOutcome, OsqpTuning, OsqpWarm};
-    use dflat_control::optimise::{AxisProblem, ConstrainedSolver, SolverMethod};
+    use dflat_control::optimise::{AxisProblem, AxisSolver, Carry, SolveFailure};
 
     use super::*;
 
@@ -572,15 +589,8 @@ mod anchor {
         }
     }
 
-    impl ConstrainedSolver for Observer {
-        fn method(&self) -> SolverMethod {
-            SolverMethod::Clarabel
-        }
-        fn axes(&self) -> usize {
-            1
-        }
-        fn solve(&mut self, axes: &mut [AxisProblem<'_>]) -> Result<(), ControlError> {
-            let [a] = axes else { unreachable!("one axis") };
+    impl AxisSolver for Observer {
+        fn solve(&mut self, a: AxisProblem<'_>) -> Result<SolveInfo, SolveFailure> {
             self.scratch.copy_from_slice(a.plan);
             let start = Instant::now();
             let r = self.osqp.solve_axis(AxisProblem {
@@ -599,16 +609,22 @@ mod anchor {
                 log.unsolved += 1;
                 log.first_unsolved.get_or_insert(status);
             }
-            Err(ControlError::Solver("observer".to_string()))
+            Err(SolveFailure::Observer)
         }
-        fn iterations(&self) -> usize {
-            self.osqp.iterations() as usize
+
+        fn carry(&mut self, event: Carry<'_>) {
+            match event {
+                Carry::Accepted { plans: [ours], .. } if self.solved => self.compare(ours),
+                Carry::Accepted { .. } => {}
+                Carry::Skipped | Carry::Reset => self.osqp.forget(),
+            }
         }
-        fn accept(&mut self, axes: &[AxisProblem<'_>], _duals: &[[f64; 2]]) {
-            let ([a], true) = (axes, self.solved) else {
-                return;
-            };
-            let (ours, osqp) = (&*a.plan, &self.scratch);
+    }
+
+    impl Observer {
+        /// OSQP's plan against the accepted one (the log's accuracy).
+        fn compare(&self, ours: &[f64]) {
+            let osqp = &self.scratch;
             let near = ours
                 .iter()
                 .zip(osqp)
@@ -622,12 +638,6 @@ mod anchor {
             log.max_near = log.max_near.max(near);
             log.max_jerk_rel = log.max_jerk_rel.max(jerk_rel);
             log.over_tol += usize::from(near > NEAR_TOL);
-        }
-        fn skip(&mut self) {
-            self.osqp.forget();
-        }
-        fn reset(&mut self) {
-            self.osqp.forget();
         }
     }
 

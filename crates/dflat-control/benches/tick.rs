@@ -270,10 +270,10 @@ mod df_mpc {
         let mut plan = vec![0.0; n + 1];
         bencher.bench_local(|| {
             solvers[0]
-                .solve(&fixed[0], black_box(&rx), &mut plan)
+                .solve_problem(AxisProblem::new(&fixed[0], black_box(&rx), &mut plan))
                 .unwrap();
             solvers[1]
-                .solve(&fixed[1], black_box(&ry), &mut plan)
+                .solve_problem(AxisProblem::new(&fixed[1], black_box(&ry), &mut plan))
                 .unwrap();
             black_box(plan[3])
         });

@@ -50,7 +50,7 @@ use nalgebra::Vector3;
 
 use crate::disturbance::{DisturbanceEstimate, DisturbanceEstimator};
 use crate::model::ControlModel;
-use crate::optimise::{AxisBounds, Cascade, ConeBounds, invalid};
+use crate::optimise::{AxisBounds, AxisCascade, ConeBounds, PairCascade, invalid};
 use crate::window::{MultiRateWindow, Window};
 use crate::{ControlError, Controller, Measurement, ReferenceSource, TickOutput, limit_tilt};
 
@@ -262,24 +262,24 @@ impl DfMpc {
     /// The tilt cone's cascade of solvers, with the statistics of their
     /// last solves (which solved, iterations, warm start), when the plan's
     /// tilt bound is the cone.
-    pub fn cone_cascade(&self) -> Option<&Cascade> {
+    pub fn cone_cascade(&self) -> Option<&PairCascade> {
         self.cone.as_ref().map(|c| c.cascade())
     }
 
     /// The box cascade of `axis` (0 = x, 1 = y, 2 = z), when that axis
     /// has bounds of its own.
-    pub fn box_cascade(&self, axis: usize) -> Option<&Cascade> {
+    pub fn box_cascade(&self, axis: usize) -> Option<&AxisCascade> {
         self.axes.get(axis).and_then(|a| a.bounded.as_ref())
     }
 
     /// The tilt cone's cascade, mutable: for a solver inserted to observe
-    /// its problems ([`Cascade::insert`]; the corner bench's OSQP anchor).
-    pub fn cone_cascade_mut(&mut self) -> Option<&mut Cascade> {
+    /// its problems ([`PairCascade::insert`]; the corner bench's OSQP anchor).
+    pub fn cone_cascade_mut(&mut self) -> Option<&mut PairCascade> {
         self.cone.as_mut().map(|c| &mut c.cascade)
     }
 
     /// The box cascade of `axis`, mutable (as [`DfMpc::cone_cascade_mut`]).
-    pub fn box_cascade_mut(&mut self, axis: usize) -> Option<&mut Cascade> {
+    pub fn box_cascade_mut(&mut self, axis: usize) -> Option<&mut AxisCascade> {
         self.axes.get_mut(axis).and_then(|a| a.bounded.as_mut())
     }
 

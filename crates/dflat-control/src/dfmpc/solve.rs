@@ -7,9 +7,10 @@ use super::{DfMpc, DfMpcSettings, PlanTiltBound, QpSolver};
 use crate::ControlError;
 use crate::model::ControlModel;
 use crate::optimise::{
-    AxisBounds, AxisProblem, AxisWeights, BandedConeSolver, BandedInteriorPointSolver,
-    BoxAlmSolver, Cascade, ClarabelConeSolver, ClarabelSolver, ConeBounds, ConstrainedSolver,
-    FastBandedSolver, KktTuning, Smoothness, SolverMethod, TiltRate,
+    AxisBounds, AxisCascade, AxisProblem, AxisSolver, AxisWeights, BandedConeSolver,
+    BandedInteriorPointSolver, BoxAlmSolver, ClarabelConeSolver, ClarabelSolver, ConeBounds,
+    FastBandedSolver, KktTuning, PairCascade, PairSolver, Smoothness, SolveInfo, SolverMethod,
+    TiltRate,
 };
 use crate::window::input_lags;
 
@@ -21,7 +22,7 @@ pub(super) struct AxisPipeline {
     pub(super) fast: FastBandedSolver,
     /// The problem with this axis's bounds, when it has any: the box's
     /// cascade (augmented Lagrangian, interior point, clarabel).
-    pub(super) bounded: Option<Cascade>,
+    pub(super) bounded: Option<AxisCascade>,
     /// The bounds (empty when none).
     pub(super) bounds: AxisBounds,
     /// This tick's reference on this axis, y_ref,k..y_ref,k+N \[m\].
@@ -67,13 +68,13 @@ pub(super) struct SolveReport {
 
 impl SolveReport {
     /// Notes which solver of a cascade solved (its place and method).
-    fn solved(&mut self, cascade: &Cascade) {
+    fn solved(&mut self, solved_by: Option<(usize, SolveInfo)>) {
         self.constrained = true;
-        if let Some((place, solver)) = cascade.solved_by()
+        if let Some((place, info)) = solved_by
             && place > 0
         {
-            self.qp_fallback |= solver.method() == SolverMethod::Clarabel;
-            self.interior_point |= solver.method() == SolverMethod::InteriorPoint;
+            self.qp_fallback |= info.method == SolverMethod::Clarabel;
+            self.interior_point |= info.method == SolverMethod::InteriorPoint;
         }
     }
 }
@@ -83,7 +84,7 @@ impl SolveReport {
 /// (warm-started), the banded interior point, then clarabel's SOCP.
 #[derive(Debug)]
 pub(super) struct HorizontalCone {
-    pub(super) cascade: Cascade,
+    pub(super) cascade: PairCascade,
     bounds: ConeBounds,
     /// tan(max_tilt).
     tilt_tan: f64,
@@ -110,7 +111,7 @@ impl HorizontalCone {
     }
 
     /// The cascade of solvers.
-    pub(super) fn cascade(&self) -> &Cascade {
+    pub(super) fn cascade(&self) -> &PairCascade {
         &self.cascade
     }
 
@@ -186,16 +187,16 @@ pub(super) fn build_pipelines(
         let bounded = if bounds.is_empty() {
             None
         } else {
-            let mut solvers: Vec<Box<dyn ConstrainedSolver>> = Vec::new();
+            let mut solvers: Vec<Box<dyn AxisSolver>> = Vec::new();
             if settings.qp_solver == QpSolver::Banded {
-                let alm: Box<dyn ConstrainedSolver> = Box::new(BoxAlmSolver::new(
+                let alm: Box<dyn AxisSolver> = Box::new(BoxAlmSolver::new(
                     n,
                     (q, r, dt),
                     bounds,
                     smoothness,
                     settings.warm_start,
                 )?);
-                let ip: Box<dyn ConstrainedSolver> = Box::new(BandedInteriorPointSolver::new(
+                let ip: Box<dyn AxisSolver> = Box::new(BandedInteriorPointSolver::new(
                     n,
                     (q, r, dt),
                     bounds,
@@ -215,7 +216,7 @@ pub(super) fn build_pipelines(
                 settings.solver_time_limit,
                 smoothness,
             )?));
-            Some(Cascade::new(solvers)?)
+            Some(AxisCascade::new(solvers)?)
         };
         pipelines.push(AxisPipeline {
             fast: FastBandedSolver::with_smoothness(n, q, r, dt, smoothness)?,
@@ -254,7 +255,7 @@ fn horizontal_cone(
                 r: settings.jerk_weight[axis],
                 smoothness: pipelines[axis].fast.smoothness(),
             });
-            let mut solvers: Vec<Box<dyn ConstrainedSolver>> = Vec::new();
+            let mut solvers: Vec<Box<dyn PairSolver>> = Vec::new();
             if settings.qp_solver == QpSolver::Banded {
                 for methods in [[true, false], [false, true]] {
                     solvers.push(Box::new(BandedConeSolver::with_methods(
@@ -277,7 +278,7 @@ fn horizontal_cone(
                 KktTuning::SHIPPED,
             )?));
             Some(HorizontalCone {
-                cascade: Cascade::new(solvers)?,
+                cascade: PairCascade::new(solvers)?,
                 bounds,
                 tilt_tan: t.tan(),
                 gravity: model.gravity(),
@@ -335,13 +336,13 @@ impl DfMpc {
                 cascade.skip();
                 continue;
             }
-            cascade.solve(&mut [AxisProblem {
+            cascade.solve(AxisProblem {
                 fixed: &fixed_axis[axis],
                 sent: sent(axis),
                 reference: &p.reference,
                 plan: &mut p.plan,
-            }])?;
-            report.solved(cascade);
+            })?;
+            report.solved(cascade.solved_by());
         }
         if let Some(cone) = &mut self.cone {
             let [ax, ay, rest @ ..] = self.axes.as_mut_slice() else {
@@ -362,8 +363,8 @@ impl DfMpc {
             }
             let (_, px) = ax.problem(&fixed_axis[0], sent(0));
             let (_, py) = ay.problem(&fixed_axis[1], sent(1));
-            cone.cascade.solve(&mut [px, py])?;
-            report.solved(&cone.cascade);
+            cone.cascade.solve(px, py)?;
+            report.solved(cone.cascade.solved_by());
         }
         Ok(report)
     }

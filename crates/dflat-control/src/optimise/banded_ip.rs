@@ -150,6 +150,19 @@ struct Side {
     e0: f64,
 }
 
+/// The residuals of an iterate (`BandedIp::residuals`).
+#[derive(Debug, Clone, Copy, Default)]
+struct Residuals {
+    gap: f64,
+    rp_cone: f64,
+    rp: f64,
+    rsig: f64,
+    rd: f64,
+    req: f64,
+    a_max: f64,
+    objective: f64,
+}
+
 /// The banded primal-dual interior point (module docs): the KKT system of
 /// the cost and equality rows of [`Stages`], interval rows and per-stage
 /// discs (either may be absent).
@@ -384,7 +397,6 @@ impl BandedIp {
     /// success the iterate is the solution and the result its iteration;
     /// [`ControlError::Solver`] when it does not converge.
     pub fn solve(&mut self) -> Result<usize, ControlError> {
-        let (s, n) = (self.stages, self.n);
         let c_scale = 1.0 + norm(&self.c);
         let b_scale = 1.0 + norm(&self.lo).max(norm(&self.hi));
         let cone_scale = 1.0 + self.radius.iter().fold(0.0f64, |a, r| a.max(r * r));
@@ -397,73 +409,21 @@ impl BandedIp {
         let mut best = (f64::INFINITY, 0usize);
         for iteration in 0..self.max_iterations {
             self.iterations = iteration;
-            // r = M·v + c + Σ z_f·u_f + Σ hᵀz: the dual residual on p, ã;
-            // the equality residual A·x on λ. Then the primal residuals.
-            self.base.mul_vec(&self.v, &mut self.r);
-            for (r, c) in self.r.iter_mut().zip(&self.c) {
-                *r += c;
-            }
-            let mut gap = 0.0;
-            let mut rp_cone: f64 = 0.0;
-            for (f, cs) in self.discs.iter_mut().enumerate() {
-                let (ix, iy) = (s.accel(0, f), s.accel(1, f));
-                cs.u = [self.v[ix] + self.a0[0], self.v[iy] + self.a0[1]];
-                let a2 = self.radius[f] * self.radius[f];
-                cs.r = 0.5 * (cs.u[0] * cs.u[0] + cs.u[1] * cs.u[1] - a2) + cs.s;
-                rp_cone = rp_cone.max(cs.r.abs());
-                self.r[ix] += cs.z * cs.u[0];
-                self.r[iy] += cs.z * cs.u[1];
-                gap += cs.s * cs.z;
-            }
-            let (mut rp, mut rsig): (f64, f64) = (0.0, 0.0);
-            for (k, (row, side)) in self.rows.iter().zip(self.sides.iter_mut()).enumerate() {
-                let g = row.dot(&self.v);
-                let [up, low] = side;
-                row.axpy(up.z - low.z, &mut self.r);
-                up.r = g - up.sig + up.s - self.hi[k];
-                low.r = -g - low.sig + low.s + self.lo[k];
-                rp = rp.max(up.r.abs()).max(low.r.abs());
-                gap += up.s * up.z + low.s * low.z;
-                if soft {
-                    gap += up.sig * up.w + low.sig * low.w;
-                    rsig = rsig
-                        .max((rho - up.z - up.w).abs())
-                        .max((rho - low.z - low.w).abs());
-                }
-            }
-            let (mut rd, mut req, mut a_max): (f64, f64, f64) = (0.0, 0.0, 0.0);
-            for f in 0..n {
-                for i in 0..s.axes {
-                    rd = rd
-                        .max(self.r[s.output(i, f)].abs())
-                        .max(self.r[s.accel(i, f)].abs());
-                    req = req.max(self.r[s.lambda(i, f)].abs());
-                    a_max = a_max.max(self.v[s.accel(i, f)].abs());
-                }
-            }
-            // ½xᵀPx + cᵀx = ½xᵀ(r − Aᵀλ − Gᵀz) + ½cᵀx (approximately, at
-            // near-feasibility; only its size is used).
-            let (c, v) = (&self.c, &self.v);
-            let objective: f64 = (0..n)
-                .map(|f| {
-                    (0..s.axes)
-                        .map(|i| {
-                            let (a, p) = (s.accel(i, f), s.output(i, f));
-                            0.5 * (c[p] * v[p] + c[a] * v[a])
-                        })
-                        .sum::<f64>()
-                })
-                .sum();
-            if !(gap.is_finite() && rd.is_finite() && req.is_finite() && rp_cone.is_finite()) {
+            let r = self.residuals(soft, rho);
+            if !(r.gap.is_finite()
+                && r.rd.is_finite()
+                && r.req.is_finite()
+                && r.rp_cone.is_finite())
+            {
                 return Err(self.error("non-finite iterate"));
             }
             // Each residual over its tolerance; converged at ≤ 1.
-            let merit = (rd / (1e-8 * c_scale))
-                .max(rsig / (1e-8 * (1.0 + rho)))
-                .max(req / (TOLERANCE * (1.0 + a_max)))
-                .max(rp / (TOLERANCE * b_scale))
-                .max(rp_cone / (TOLERANCE * cone_scale))
-                .max(gap / (1e-9 * (1.0 + objective.abs())));
+            let merit = (r.rd / (1e-8 * c_scale))
+                .max(r.rsig / (1e-8 * (1.0 + rho)))
+                .max(r.req / (TOLERANCE * (1.0 + r.a_max)))
+                .max(r.rp / (TOLERANCE * b_scale))
+                .max(r.rp_cone / (TOLERANCE * cone_scale))
+                .max(r.gap / (1e-9 * (1.0 + r.objective.abs())));
             if merit < best.0 {
                 best = (merit, iteration);
                 self.best.copy_from_slice(&self.v);
@@ -478,31 +438,7 @@ impl BandedIp {
                 self.v.copy_from_slice(&self.best);
                 return Ok(iteration);
             }
-            let mu = gap / pairs;
-
-            // K = M + the discs' 2×2 blocks + Σ d·hhᵀ ± ε.
-            self.kkt.clone_from(&self.base);
-            for (f, cs) in self.discs.iter().enumerate() {
-                let d = cs.z / cs.s;
-                let [ux, uy] = cs.u;
-                let (ix, iy) = (s.accel(0, f), s.accel(1, f));
-                self.kkt.add(ix, ix, cs.z + d * ux * ux);
-                self.kkt.add(iy, iy, cs.z + d * uy * uy);
-                self.kkt.add(iy, ix, d * ux * uy);
-            }
-            for (row, side) in self.rows.iter().zip(&self.sides) {
-                let d: f64 = side.iter().map(|sd| Self::side_weight(sd, soft)).sum();
-                for a in 0..row.len {
-                    for b in 0..=a {
-                        self.kkt
-                            .add(row.idx[a], row.idx[b], d * row.coef[a] * row.coef[b]);
-                    }
-                }
-            }
-            for k in 0..s.width() * n {
-                let sign = if k % s.width() < s.axes { -1.0 } else { 1.0 };
-                self.kkt.add(k, k, sign * REGULARISATION);
-            }
+            self.assemble_kkt(soft);
             if self.ldl.factor(&self.kkt).is_err() {
                 // The end game's barrier terms (z/s up to ~1e20) can make
                 // the KKT matrix numerically singular: an acceptable best
@@ -513,46 +449,141 @@ impl BandedIp {
                 }
                 return Err(self.error("factorisation failed"));
             }
+            self.mehrotra_step(rho, soft, r.gap, r.gap / pairs);
+        }
+        Err(self.error(&format!("no convergence (best merit {:.1e})", best.0)))
+    }
 
-            // Predictor (affine), then Mehrotra's corrector.
-            self.direction(rho, soft, |s, z, _| s * z);
-            let alpha = self.step_length();
-            let mut gap_aff = 0.0;
-            for cs in &self.discs {
-                gap_aff += (cs.s + alpha * cs.ds) * (cs.z + alpha * cs.dz);
+    /// The residuals at the iterate: `r = M·v + c + Σ z_f·u_f + Σ hᵀz`
+    /// (the dual residual on p, ã; the equality residual A·x on λ), the
+    /// discs' and rows' primal residuals, the gap, and the objective's
+    /// size.
+    fn residuals(&mut self, soft: bool, rho: f64) -> Residuals {
+        let (s, n) = (self.stages, self.n);
+        self.base.mul_vec(&self.v, &mut self.r);
+        for (r, c) in self.r.iter_mut().zip(&self.c) {
+            *r += c;
+        }
+        let mut out = Residuals::default();
+        for (f, cs) in self.discs.iter_mut().enumerate() {
+            let (ix, iy) = (s.accel(0, f), s.accel(1, f));
+            cs.u = [self.v[ix] + self.a0[0], self.v[iy] + self.a0[1]];
+            let a2 = self.radius[f] * self.radius[f];
+            cs.r = 0.5 * (cs.u[0] * cs.u[0] + cs.u[1] * cs.u[1] - a2) + cs.s;
+            out.rp_cone = out.rp_cone.max(cs.r.abs());
+            self.r[ix] += cs.z * cs.u[0];
+            self.r[iy] += cs.z * cs.u[1];
+            out.gap += cs.s * cs.z;
+        }
+        for (k, (row, side)) in self.rows.iter().zip(self.sides.iter_mut()).enumerate() {
+            let g = row.dot(&self.v);
+            let [up, low] = side;
+            row.axpy(up.z - low.z, &mut self.r);
+            up.r = g - up.sig + up.s - self.hi[k];
+            low.r = -g - low.sig + low.s + self.lo[k];
+            out.rp = out.rp.max(up.r.abs()).max(low.r.abs());
+            out.gap += up.s * up.z + low.s * low.z;
+            if soft {
+                out.gap += up.sig * up.w + low.sig * low.w;
+                out.rsig = out
+                    .rsig
+                    .max((rho - up.z - up.w).abs())
+                    .max((rho - low.z - low.w).abs());
             }
-            let after = |sd: &Side| {
-                let hard = (sd.s + alpha * sd.ds) * (sd.z + alpha * sd.dz);
-                if soft {
-                    hard + (sd.sig + alpha * sd.dsig) * (sd.w + alpha * sd.dw)
-                } else {
-                    hard
-                }
-            };
-            for [up, low] in &self.sides {
-                gap_aff += after(up) + after(low);
+        }
+        for f in 0..n {
+            for i in 0..s.axes {
+                out.rd = out
+                    .rd
+                    .max(self.r[s.output(i, f)].abs())
+                    .max(self.r[s.accel(i, f)].abs());
+                out.req = out.req.max(self.r[s.lambda(i, f)].abs());
+                out.a_max = out.a_max.max(self.v[s.accel(i, f)].abs());
             }
-            let sigma = (gap_aff / gap).clamp(0.0, 1.0).powi(3);
-            let target = sigma * mu;
-            self.direction(rho, soft, |s, z, dsdz| s * z + dsdz - target);
-            let alpha = (STEP_FRACTION * self.step_length()).min(1.0);
-            for (v, dv) in self.v.iter_mut().zip(&self.dv) {
-                *v += alpha * dv;
-            }
-            for cs in &mut self.discs {
-                cs.s += alpha * cs.ds;
-                cs.z += alpha * cs.dz;
-            }
-            for sd in self.sides.iter_mut().flatten() {
-                sd.s += alpha * sd.ds;
-                sd.z += alpha * sd.dz;
-                if soft {
-                    sd.sig += alpha * sd.dsig;
-                    sd.w += alpha * sd.dw;
+        }
+        // ½xᵀPx + cᵀx = ½xᵀ(r − Aᵀλ − Gᵀz) + ½cᵀx (approximately, at
+        // near-feasibility; only its size is used).
+        let (c, v) = (&self.c, &self.v);
+        out.objective = (0..n)
+            .map(|f| {
+                (0..s.axes)
+                    .map(|i| {
+                        let (a, p) = (s.accel(i, f), s.output(i, f));
+                        0.5 * (c[p] * v[p] + c[a] * v[a])
+                    })
+                    .sum::<f64>()
+            })
+            .sum();
+        out
+    }
+
+    /// K = M + the discs' 2×2 blocks + Σ d·hhᵀ ± ε.
+    fn assemble_kkt(&mut self, soft: bool) {
+        let (s, n) = (self.stages, self.n);
+        self.kkt.clone_from(&self.base);
+        for (f, cs) in self.discs.iter().enumerate() {
+            let d = cs.z / cs.s;
+            let [ux, uy] = cs.u;
+            let (ix, iy) = (s.accel(0, f), s.accel(1, f));
+            self.kkt.add(ix, ix, cs.z + d * ux * ux);
+            self.kkt.add(iy, iy, cs.z + d * uy * uy);
+            self.kkt.add(iy, ix, d * ux * uy);
+        }
+        for (row, side) in self.rows.iter().zip(&self.sides) {
+            let d: f64 = side.iter().map(|sd| Self::side_weight(sd, soft)).sum();
+            for a in 0..row.len {
+                for b in 0..=a {
+                    self.kkt
+                        .add(row.idx[a], row.idx[b], d * row.coef[a] * row.coef[b]);
                 }
             }
         }
-        Err(self.error(&format!("no convergence (best merit {:.1e})", best.0)))
+        for k in 0..s.width() * n {
+            let sign = if k % s.width() < s.axes { -1.0 } else { 1.0 };
+            self.kkt.add(k, k, sign * REGULARISATION);
+        }
+    }
+
+    /// The predictor (affine) direction, Mehrotra's corrector towards
+    /// σ·μ (`mu` the mean complementarity, `gap` the total), and the step
+    /// along it, on the factor held.
+    fn mehrotra_step(&mut self, rho: f64, soft: bool, gap: f64, mu: f64) {
+        self.direction(rho, soft, |s, z, _| s * z);
+        let alpha = self.step_length();
+        let mut gap_aff = 0.0;
+        for cs in &self.discs {
+            gap_aff += (cs.s + alpha * cs.ds) * (cs.z + alpha * cs.dz);
+        }
+        let after = |sd: &Side| {
+            let hard = (sd.s + alpha * sd.ds) * (sd.z + alpha * sd.dz);
+            if soft {
+                hard + (sd.sig + alpha * sd.dsig) * (sd.w + alpha * sd.dw)
+            } else {
+                hard
+            }
+        };
+        for [up, low] in &self.sides {
+            gap_aff += after(up) + after(low);
+        }
+        let sigma = (gap_aff / gap).clamp(0.0, 1.0).powi(3);
+        let target = sigma * mu;
+        self.direction(rho, soft, |s, z, dsdz| s * z + dsdz - target);
+        let alpha = (STEP_FRACTION * self.step_length()).min(1.0);
+        for (v, dv) in self.v.iter_mut().zip(&self.dv) {
+            *v += alpha * dv;
+        }
+        for cs in &mut self.discs {
+            cs.s += alpha * cs.ds;
+            cs.z += alpha * cs.dz;
+        }
+        for sd in self.sides.iter_mut().flatten() {
+            sd.s += alpha * sd.ds;
+            sd.z += alpha * sd.dz;
+            if soft {
+                sd.sig += alpha * sd.dsig;
+                sd.w += alpha * sd.dw;
+            }
+        }
     }
 
     /// [`ControlError::Solver`] naming this solver.

@@ -115,6 +115,21 @@ impl AxisBounds {
         }
     }
 
+    /// The fast path's solver for horizon N, weights `(q, r, δt)` and the
+    /// smoothness term (the box's solvers build on it), the tilt-rate
+    /// bound checked.
+    pub(crate) fn fast_solver(
+        &self,
+        horizon: usize,
+        (q, r, dt): (f64, f64, f64),
+        smoothness: super::smoothness::Smoothness,
+    ) -> Result<super::fast_banded::FastBandedSolver, crate::ControlError> {
+        if let Some(t) = &self.tilt_rate {
+            t.check()?;
+        }
+        super::fast_banded::FastBandedSolver::with_smoothness(horizon, q, r, dt, smoothness)
+    }
+
     /// True when no bound is set.
     pub fn is_empty(&self) -> bool {
         self.acceleration.is_none() && self.speed.is_none() && self.tilt_rate.is_none()
@@ -289,6 +304,24 @@ impl Row {
 /// point, the cone's interior point and augmented Lagrangian): `shape_ok`
 /// (else the error says `shape`, the lengths expected), every entry of
 /// `data` and of the row bounds finite, and `lo ≤ hi` row by row.
+/// [`check_row_data`] for a solve's data: the linear term `c` of `len`
+/// entries, one `lo`/`hi` pair per row (`rows` of them), finite data
+/// (`c`, the iterate `x`, `a0`) with lo ≤ hi; `shape` says what is
+/// expected.
+#[allow(clippy::too_many_arguments)] // the solve's data, as the solvers take it
+pub(super) fn check_solve_data(
+    field: &'static str,
+    (c, len): (&[f64], usize),
+    rows: usize,
+    x: &[f64],
+    a0: &[f64; 2],
+    (lo, hi): (&[f64], &[f64]),
+    shape: &str,
+) -> Result<(), crate::ControlError> {
+    let shape_ok = c.len() == len && lo.len() == rows && hi.len() == rows;
+    check_row_data(field, shape_ok, shape, &[c, x, a0], lo, hi)
+}
+
 pub(super) fn check_row_data(
     field: &'static str,
     shape_ok: bool,
@@ -298,13 +331,13 @@ pub(super) fn check_row_data(
     hi: &[f64],
 ) -> Result<(), crate::ControlError> {
     if !shape_ok {
-        return Err(super::invalid(field, shape));
+        return Err(super::problem::invalid(field, shape));
     }
     let finite = |v: &[f64]| v.iter().all(|a| a.is_finite());
     if !(data.iter().all(|v| finite(v)) && finite(lo) && finite(hi))
         || lo.iter().zip(hi).any(|(l, h)| l > h)
     {
-        return Err(super::invalid(field, "finite data with lo ≤ hi"));
+        return Err(super::problem::invalid(field, "finite data with lo ≤ hi"));
     }
     Ok(())
 }

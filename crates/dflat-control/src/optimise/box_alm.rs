@@ -5,8 +5,11 @@
 //! their multipliers clamped at 0 — warm-started across ticks.
 
 use super::alm::{AlmTuning, BandedAlm, RowBlock, StageSet};
+use super::bounds::AxisBounds;
 use super::bounds::Row;
-use super::{AxisBounds, AxisProblem, FastBandedSolver, Smoothness, check_lengths, shifted_plan};
+use super::cascade::{AxisSolver, Carry, SolveFailure, SolveInfo, SolverMethod};
+use super::problem::{AxisProblem, shifted_plan};
+use super::smoothness::Smoothness;
 use crate::ControlError;
 
 /// One axis's box-bounded plan by the augmented Lagrangian
@@ -34,6 +37,9 @@ pub struct BoxAlmSolver {
     previous_valid: bool,
     warm_start: bool,
     warm_used: bool,
+    /// Whether `base`, `lo` and `hi` hold this tick's data (set by a
+    /// solve, read by the `accept_plan` right after it).
+    tick_data: bool,
 }
 
 /// The box's initial σ on warm solves. Its stage sets are intervals, on
@@ -83,10 +89,7 @@ impl BoxAlmSolver {
         warm_start: bool,
         tuning: AlmTuning,
     ) -> Result<Self, ControlError> {
-        let fast = FastBandedSolver::with_smoothness(horizon, q, r, dt, smoothness)?;
-        if let Some(t) = &bounds.tilt_rate {
-            t.check()?;
-        }
+        let fast = bounds.fast_solver(horizon, (q, r, dt), smoothness)?;
         let n = horizon - 2;
         let inv_dt2 = 1.0 / (dt * dt);
         let mut blocks = Vec::new();
@@ -129,6 +132,7 @@ impl BoxAlmSolver {
             previous_valid: false,
             warm_start,
             warm_used: false,
+            tick_data: false,
         })
     }
 
@@ -137,9 +141,10 @@ impl BoxAlmSolver {
         &self.bounds
     }
 
-    /// Newton steps of the last solve.
+    /// Newton steps of the last solve (with rows: the active-set
+    /// method's KKT solves).
     pub fn iterations(&self) -> usize {
-        self.alm.newton_steps()
+        self.alm.newton_steps() + self.alm.active_set_work().solves
     }
 
     /// Factorisations of the last solve.
@@ -155,6 +160,7 @@ impl BoxAlmSolver {
     /// A tick that did not use this solver: the next solve starts from the
     /// plan it is given, with the multipliers aged a stage.
     pub fn skip(&mut self) {
+        self.tick_data = false;
         self.previous_valid = false;
         self.alm.age();
     }
@@ -184,7 +190,19 @@ impl BoxAlmSolver {
                 |f| stages.get(f).map_or([0.0; 2], |z| [z[0] - z[1], 0.0]),
                 rows,
             );
+            if self.tick_data {
+                // This tick's deviations p = plan − baseline (`base`,
+                // `lo`, `hi` are this tick's: this solver's attempt set
+                // them before the cascade went on).
+                for f in 0..n {
+                    self.p[f] = plan[f + 3] - self.base[f];
+                }
+                let a0 = (plan[2] - 2.0 * plan[1] + plan[0]) / (self.dt * self.dt);
+                self.alm
+                    .keep_active_multipliers(&self.p, a0, &self.lo, &self.hi);
+            }
         }
+        self.tick_data = false;
     }
 
     /// The next solve starts from the plan it is given, keeping the
@@ -206,13 +224,7 @@ impl BoxAlmSolver {
     /// error `plan` is unchanged. Errors: wrong lengths, infeasible data,
     /// and [`ControlError::Solver`] when the method does not converge.
     pub fn solve_problem(&mut self, a: AxisProblem<'_>) -> Result<(), ControlError> {
-        let AxisProblem {
-            fixed,
-            sent,
-            reference,
-            plan,
-        } = a;
-        check_lengths(self.horizon, reference, plan)?;
+        let (fixed, sent, reference, plan) = a.checked(self.horizon)?;
         let (dt, n, horizon) = (self.dt, self.horizon - 2, self.horizon);
         self.alm
             .axis(0)
@@ -243,6 +255,7 @@ impl BoxAlmSolver {
             }
             i += 1;
         });
+        self.tick_data = true;
         let warm = self.warm_start && self.previous_valid;
         self.warm_used = warm;
         self.previous_valid = false;
@@ -279,5 +292,35 @@ impl BoxAlmSolver {
         self.previous.copy_from_slice(plan);
         self.previous_valid = true;
         Ok(())
+    }
+}
+
+impl AxisSolver for BoxAlmSolver {
+    fn solve(&mut self, axis: AxisProblem<'_>) -> Result<SolveInfo, SolveFailure> {
+        let method = if self.alm.has_active_set() {
+            SolverMethod::ActiveSet
+        } else {
+            SolverMethod::Alm
+        };
+        self.solve_problem(axis)
+            .map_err(|e| SolveFailure::from_error(method, self.iterations(), e))?;
+        Ok(SolveInfo {
+            method,
+            iterations: self.iterations(),
+            factorisations: self.factorisations(),
+            warm_started: self.warm_used,
+        })
+    }
+
+    fn carry(&mut self, event: Carry<'_>) {
+        match event {
+            Carry::Accepted {
+                plans: [plan],
+                duals,
+            } => self.accept_plan(plan, duals),
+            Carry::Accepted { .. } => {}
+            Carry::Skipped => self.skip(),
+            Carry::Reset => self.reset(),
+        }
     }
 }

@@ -1,19 +1,18 @@
-//! The constrained plan's solvers behind one interface
-//! ([`ConstrainedSolver`]), and the fallback cascade as data
-//! ([`Cascade`]): an ordered list of solvers of one problem, tried in turn
-//! until one converges.
+//! The constrained plan's solvers behind two narrow interfaces — one
+//! axis's problem ([`AxisSolver`]: the box, its rows) and the horizontal
+//! pair's ([`PairSolver`]: the tilt cone) — and the fallback cascade as
+//! data ([`Cascade`]): an ordered list of solvers of one problem, tried
+//! in turn until one converges. A solve reports what it did
+//! ([`SolveInfo`]) or why it gave no plan ([`SolveFailure`]).
 //!
-//! DF-MPC builds two cascades (`dfmpc/solve.rs`): per axis with box bounds
-//! `[BoxAlmSolver, BandedInteriorPointSolver, ClarabelSolver]`, and for the
-//! horizontal pair with the tilt cone `[BandedConeSolver (augmented
-//! Lagrangian), BandedConeSolver (interior point), ClarabelConeSolver]`
-//! (with `qp_solver = clarabel`, clarabel alone). The augmented Lagrangian
-//! ([`super::alm`]) serves both families first.
+//! DF-MPC builds two kinds of cascade (`dfmpc/solve.rs`): per axis with
+//! box bounds `[BoxAlmSolver, BandedInteriorPointSolver, ClarabelSolver]`,
+//! and for the horizontal pair with the tilt cone `[BandedConeSolver
+//! (augmented Lagrangian), BandedConeSolver (interior point),
+//! ClarabelConeSolver]` (with `qp_solver = clarabel`, clarabel alone).
+//! Each solver implements its interface in its own module.
 
-use super::{
-    AxisProblem, BandedConeSolver, BandedInteriorPointSolver, BoxAlmSolver, ClarabelConeSolver,
-    ClarabelSolver, ConeMethod,
-};
+use super::problem::AxisProblem;
 use crate::ControlError;
 
 /// The method of a constrained solver.
@@ -21,85 +20,185 @@ use crate::ControlError;
 pub enum SolverMethod {
     /// The augmented Lagrangian on the banded free outputs ([`super::alm`]).
     Alm,
+    /// The active-set method on the compact KKT system
+    /// ([`super::active_set`]: one axis with rows, the tilt rate's).
+    ActiveSet,
     /// A banded primal-dual interior point.
     InteriorPoint,
     /// clarabel (a general conic interior point).
     Clarabel,
 }
 
-/// One solver of a constrained plan: one axis (box bounds) or the
-/// horizontal pair (the tilt cone).
-pub trait ConstrainedSolver: std::fmt::Debug + Send {
-    /// Its method.
-    fn method(&self) -> SolverMethod;
+/// What a solve did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SolveInfo {
+    /// The method that solved.
+    pub method: SolverMethod,
+    /// Its iterations (Newton steps, KKT solves of the active set, or
+    /// interior-point iterations; 0 where it does not count them).
+    pub iterations: usize,
+    /// Its factorisations (0 where it does not count them).
+    pub factorisations: usize,
+    /// Whether it started from the previous tick's solution.
+    pub warm_started: bool,
+}
 
-    /// How many axes its problem has (1 or 2).
-    fn axes(&self) -> usize;
-
-    /// Solves the problem of `axes` (`axes()` of them) in place: each
-    /// `plan` holds a start on entry (the fast path's plan) and the
-    /// solution on success. On an error the plans are unchanged or hold
-    /// the start; the error says it did not converge.
-    fn solve(&mut self, axes: &mut [AxisProblem<'_>]) -> Result<(), ControlError>;
-
-    /// Iterations of its last solve (Newton steps or interior-point
-    /// iterations).
-    fn iterations(&self) -> usize;
-
-    /// Factorisations of its last solve (0 where it does not count them).
-    fn factorisations(&self) -> usize {
-        0
+impl SolveInfo {
+    /// A solve by `method` that counts nothing.
+    pub fn of(method: SolverMethod) -> Self {
+        Self {
+            method,
+            iterations: 0,
+            factorisations: 0,
+            warm_started: false,
+        }
     }
+}
 
-    /// Whether its last solve started from the previous tick's solution.
-    fn warm_started(&self) -> bool {
-        false
+/// Why a solve gave no plan.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SolveFailure {
+    /// The method did not converge within its budget.
+    #[error("{method:?}: no convergence ({iterations} iterations)")]
+    NotConverged {
+        /// The method.
+        method: SolverMethod,
+        /// Its iterations when it gave up.
+        iterations: usize,
+    },
+    /// A factorisation failed (a pivot not of its sign, or not finite).
+    #[error("{method:?}: a factorisation failed")]
+    Numerical {
+        /// The method.
+        method: SolverMethod,
+    },
+    /// clarabel ended with another status than `Solved`.
+    #[error("clarabel: {0:?}")]
+    Clarabel(clarabel::solver::SolverStatus),
+    /// The problem's data or the solver's set-up are invalid.
+    #[error(transparent)]
+    Invalid(ControlError),
+    /// A solver placed to observe the problem only (the corner bench's
+    /// OSQP anchor): the cascade goes on.
+    #[error("an observer: passes the problem on")]
+    Observer,
+}
+
+impl SolveFailure {
+    /// The failure of `method` after `iterations` from the error its own
+    /// code returned: an invalid setting stays one, a failed
+    /// factorisation is numerical, anything else did not converge.
+    pub fn from_error(method: SolverMethod, iterations: usize, e: ControlError) -> Self {
+        match e {
+            ControlError::InvalidSetting { .. } => Self::Invalid(e),
+            ControlError::NotPositiveDefinite => Self::Numerical { method },
+            _ => Self::NotConverged { method, iterations },
+        }
     }
+}
+
+/// What carries between ticks, told to each solver of a cascade.
+#[derive(Debug, Clone, Copy)]
+pub enum Carry<'a> {
+    /// A later solver of the cascade solved this tick: `plans` (one per
+    /// axis of the problem) are the accepted solution, `duals` that
+    /// solver's rows' multipliers ([`AxisSolver::row_duals`]), a warm
+    /// start for the next tick.
+    Accepted {
+        /// The accepted plans `y*_0..y*_N` \[m\], one per axis.
+        plans: &'a [&'a [f64]],
+        /// Its rows' multipliers `[upper, lower]` (empty: none).
+        duals: &'a [[f64; 2]],
+    },
+    /// A tick that did not need the constrained plan.
+    Skipped,
+    /// A controller reset: forget everything carried.
+    Reset,
+}
+
+/// A solver of one axis's constrained plan.
+pub trait AxisSolver: std::fmt::Debug + Send {
+    /// Solves `axis` in place: its `plan` holds a start on entry (the fast
+    /// path's plan) and the solution on success; on a failure it is
+    /// unchanged or holds the start.
+    fn solve(&mut self, axis: AxisProblem<'_>) -> Result<SolveInfo, SolveFailure>;
+
+    /// What carries between ticks (nothing, unless the solver keeps a
+    /// warm start).
+    fn carry(&mut self, _event: Carry<'_>) {}
 
     /// Its rows' multipliers `[upper, lower]` after its last solve, in
-    /// `AxisBounds::row_bounds`' order
-    /// (empty when it does not give them).
+    /// `AxisBounds::row_bounds`' order (empty when it does not give them).
     fn row_duals(&self) -> &[[f64; 2]] {
         &[]
     }
+}
 
-    /// A later solver of the cascade solved the tick: `axes`' plans are
-    /// the accepted solution and `duals` that solver's
-    /// [`ConstrainedSolver::row_duals`], a warm start for this solver's
-    /// next tick.
-    fn accept(&mut self, _axes: &[AxisProblem<'_>], _duals: &[[f64; 2]]) {}
+/// A solver of the horizontal pair's constrained plan (the tilt cone).
+pub trait PairSolver: std::fmt::Debug + Send {
+    /// Solves the pair in place (plans as [`AxisSolver::solve`]).
+    fn solve(&mut self, x: AxisProblem<'_>, y: AxisProblem<'_>) -> Result<SolveInfo, SolveFailure>;
 
-    /// A tick that did not need the constrained plan.
-    fn skip(&mut self) {}
+    /// What carries between ticks (as [`AxisSolver::carry`]).
+    fn carry(&mut self, _event: Carry<'_>) {}
 
-    /// Forgets everything carried between ticks (a controller reset).
-    fn reset(&mut self) {}
+    /// Sets the tilt cone's radius per stage [m/s²] for the next solves.
+    fn set_radius(&mut self, radius: &[f64]) -> Result<(), ControlError>;
+}
 
-    /// Sets the tilt cone's radius per stage [m/s²] (the cone's solvers;
-    /// the box's ignore it).
-    fn set_radius(&mut self, _radius: &[f64]) -> Result<(), ControlError> {
-        Ok(())
+/// An ordered list of solvers of one problem (`S`: `dyn AxisSolver` or
+/// `dyn PairSolver`), tried in turn until one converges (the fallback
+/// cascade, as data).
+#[derive(Debug)]
+pub struct Cascade<S: ?Sized> {
+    solvers: Vec<Box<S>>,
+    /// Which solver solved the last tick the cascade ran, and how.
+    solved_by: Option<(usize, SolveInfo)>,
+}
+
+/// One axis's cascade.
+pub type AxisCascade = Cascade<dyn AxisSolver>;
+/// The horizontal pair's cascade.
+pub type PairCascade = Cascade<dyn PairSolver>;
+
+/// What every solver of a cascade is told between ticks (both
+/// interfaces' `carry`).
+pub trait Carries {
+    /// Tells the solver `event`.
+    fn tell(&mut self, event: Carry<'_>);
+}
+
+impl Carries for dyn AxisSolver {
+    fn tell(&mut self, event: Carry<'_>) {
+        self.carry(event);
     }
 }
 
-/// An ordered list of solvers of one problem, tried in turn until one
-/// converges (the fallback cascade, as data).
-#[derive(Debug)]
-pub struct Cascade {
-    solvers: Vec<Box<dyn ConstrainedSolver>>,
-    /// Which solver solved the last tick it ran (index).
-    solved_by: Option<usize>,
+impl Carries for dyn PairSolver {
+    fn tell(&mut self, event: Carry<'_>) {
+        self.carry(event);
+    }
 }
 
-impl Cascade {
-    /// The cascade of `solvers`, in order (at least one, all of one
-    /// problem size).
-    pub fn new(solvers: Vec<Box<dyn ConstrainedSolver>>) -> Result<Self, ControlError> {
-        let Some(first) = solvers.first() else {
-            return Err(super::invalid("cascade", "at least one solver"));
-        };
-        if solvers.iter().any(|s| s.axes() != first.axes()) {
-            return Err(super::invalid("cascade", "solvers of one problem size"));
+impl<S: ?Sized + Carries> Cascade<S> {
+    /// A tick that did not need the constrained plan (every solver).
+    pub fn skip(&mut self) {
+        self.solved_by = None;
+        self.solvers.iter_mut().for_each(|s| s.tell(Carry::Skipped));
+    }
+
+    /// A controller reset (every solver).
+    pub fn reset(&mut self) {
+        self.solved_by = None;
+        self.solvers.iter_mut().for_each(|s| s.tell(Carry::Reset));
+    }
+}
+
+impl<S: ?Sized> Cascade<S> {
+    /// The cascade of `solvers`, in order (at least one).
+    pub fn new(solvers: Vec<Box<S>>) -> Result<Self, ControlError> {
+        if solvers.is_empty() {
+            return Err(super::problem::invalid("cascade", "at least one solver"));
         }
         Ok(Self {
             solvers,
@@ -108,60 +207,94 @@ impl Cascade {
     }
 
     /// Inserts `solver` at `place` (0: first; at most the number of
-    /// solvers) — a solver of the same problem size. A solver that returns
-    /// an error from its `solve` passes the tick on to the next: the corner
-    /// bench inserts one first that times another method on the same
-    /// problem and leaves the plan to the cascade.
-    pub fn insert(
-        &mut self,
-        place: usize,
-        solver: Box<dyn ConstrainedSolver>,
-    ) -> Result<(), ControlError> {
+    /// solvers). A solver that returns [`SolveFailure::Observer`] passes
+    /// the tick on to the next: the corner bench inserts one first that
+    /// times another method on the same problem and leaves the plan to
+    /// the cascade.
+    pub fn insert(&mut self, place: usize, solver: Box<S>) -> Result<(), ControlError> {
         if place > self.solvers.len() {
-            return Err(super::invalid("cascade", "a place within the cascade"));
-        }
-        if solver.axes() != self.solvers[0].axes() {
-            return Err(super::invalid("cascade", "solvers of one problem size"));
+            return Err(super::problem::invalid(
+                "cascade",
+                "a place within the cascade",
+            ));
         }
         self.solvers.insert(place, solver);
         self.solved_by = None;
         Ok(())
     }
 
-    /// Tries each solver in turn; returns the method of the one that
-    /// converged. The solvers before it are told the solution
-    /// ([`ConstrainedSolver::accept`]). The last solver's error is the
-    /// cascade's.
-    pub fn solve(&mut self, axes: &mut [AxisProblem<'_>]) -> Result<SolverMethod, ControlError> {
+    /// The solver that solved the last tick the cascade ran: its place
+    /// and what it did.
+    pub fn solved_by(&self) -> Option<(usize, SolveInfo)> {
+        self.solved_by
+    }
+
+    /// The solvers, in order.
+    pub fn solvers(&self) -> impl Iterator<Item = &S> {
+        self.solvers.iter().map(|s| s.as_ref())
+    }
+
+    /// Tries `solve` on each solver in turn; the first that converges is
+    /// the cascade's (its place and what it did). The last failure is
+    /// the cascade's error.
+    fn run(
+        &mut self,
+        mut solve: impl FnMut(&mut S) -> Result<SolveInfo, SolveFailure>,
+    ) -> Result<(usize, SolveInfo), ControlError> {
         self.solved_by = None;
-        let mut error = None;
+        let mut failure = None;
         for i in 0..self.solvers.len() {
-            match self.solvers[i].solve(axes) {
-                Ok(()) => {
-                    self.solved_by = Some(i);
-                    let (earlier, rest) = self.solvers.split_at_mut(i);
-                    let duals = rest[0].row_duals();
-                    for solver in earlier {
-                        solver.accept(axes, duals);
-                    }
-                    return Ok(self.solvers[i].method());
+            match solve(&mut self.solvers[i]) {
+                Ok(info) => {
+                    self.solved_by = Some((i, info));
+                    return Ok((i, info));
                 }
-                Err(e) => error = Some(e),
+                Err(SolveFailure::Observer) => {}
+                Err(e) => failure = Some(e),
             }
         }
-        Err(error.unwrap_or_else(|| ControlError::Solver("empty cascade".to_string())))
+        Err(match failure {
+            Some(SolveFailure::Invalid(e)) => e,
+            Some(e) => ControlError::Solver(e.to_string()),
+            None => ControlError::Solver("no solver of the cascade solved".to_string()),
+        })
     }
+}
 
-    /// A tick that did not need the constrained plan (every solver).
-    pub fn skip(&mut self) {
-        self.solved_by = None;
-        self.solvers.iter_mut().for_each(|s| s.skip());
+impl Cascade<dyn AxisSolver> {
+    /// Tries each solver in turn on `axis`; returns what the one that
+    /// converged did. The solvers before it are told the solution and
+    /// its rows' multipliers ([`Carry::Accepted`]).
+    pub fn solve(&mut self, mut axis: AxisProblem<'_>) -> Result<SolveInfo, ControlError> {
+        let (i, info) = self.run(|s| s.solve(axis.reborrow()))?;
+        let (earlier, rest) = self.solvers.split_at_mut(i);
+        let plans = [&*axis.plan];
+        let event = Carry::Accepted {
+            plans: &plans,
+            duals: rest[0].row_duals(),
+        };
+        earlier.iter_mut().for_each(|s| s.carry(event));
+        Ok(info)
     }
+}
 
-    /// A controller reset (every solver).
-    pub fn reset(&mut self) {
-        self.solved_by = None;
-        self.solvers.iter_mut().for_each(|s| s.reset());
+impl Cascade<dyn PairSolver> {
+    /// Tries each solver in turn on the pair; returns what the one that
+    /// converged did. The solvers before it are told the solution
+    /// ([`Carry::Accepted`]).
+    pub fn solve(
+        &mut self,
+        mut x: AxisProblem<'_>,
+        mut y: AxisProblem<'_>,
+    ) -> Result<SolveInfo, ControlError> {
+        let (i, info) = self.run(|s| s.solve(x.reborrow(), y.reborrow()))?;
+        let plans = [&*x.plan, &*y.plan];
+        let event = Carry::Accepted {
+            plans: &plans,
+            duals: &[],
+        };
+        self.solvers[..i].iter_mut().for_each(|s| s.carry(event));
+        Ok(info)
     }
 
     /// Sets the tilt cone's radius per stage on every solver.
@@ -169,169 +302,5 @@ impl Cascade {
         self.solvers
             .iter_mut()
             .try_for_each(|s| s.set_radius(radius))
-    }
-
-    /// The solvers, in order.
-    pub fn solvers(&self) -> impl Iterator<Item = &dyn ConstrainedSolver> {
-        self.solvers.iter().map(|s| s.as_ref())
-    }
-
-    /// The solver that solved the last tick the cascade ran, and its
-    /// place in the cascade.
-    pub fn solved_by(&self) -> Option<(usize, &dyn ConstrainedSolver)> {
-        self.solved_by.map(|i| (i, self.solvers[i].as_ref()))
-    }
-}
-
-impl AxisProblem<'_> {
-    /// The same problem, borrowed again (for a solver taking it by value).
-    pub fn reborrow(&mut self) -> AxisProblem<'_> {
-        AxisProblem {
-            fixed: self.fixed,
-            sent: self.sent,
-            reference: self.reference,
-            plan: &mut *self.plan,
-        }
-    }
-}
-
-/// The one axis of a per-axis solver's problem.
-fn one<'a, 'b>(axes: &'a mut [AxisProblem<'b>]) -> Result<&'a mut AxisProblem<'b>, ControlError> {
-    match axes {
-        [a] => Ok(a),
-        _ => Err(super::invalid("axes", "one axis")),
-    }
-}
-
-/// The two axes of a pair solver's problem.
-fn pair<'a, 'b>(
-    axes: &'a mut [AxisProblem<'b>],
-) -> Result<(&'a mut AxisProblem<'b>, &'a mut AxisProblem<'b>), ControlError> {
-    match axes {
-        [x, y] => Ok((x, y)),
-        _ => Err(super::invalid("axes", "the horizontal pair")),
-    }
-}
-
-impl ConstrainedSolver for BoxAlmSolver {
-    fn method(&self) -> SolverMethod {
-        SolverMethod::Alm
-    }
-    fn axes(&self) -> usize {
-        1
-    }
-    fn solve(&mut self, axes: &mut [AxisProblem<'_>]) -> Result<(), ControlError> {
-        self.solve_problem(one(axes)?.reborrow())
-    }
-    fn iterations(&self) -> usize {
-        BoxAlmSolver::iterations(self)
-    }
-    fn factorisations(&self) -> usize {
-        BoxAlmSolver::factorisations(self)
-    }
-    fn warm_started(&self) -> bool {
-        BoxAlmSolver::warm_started(self)
-    }
-    fn accept(&mut self, axes: &[AxisProblem<'_>], duals: &[[f64; 2]]) {
-        if let [a] = axes {
-            self.accept_plan(a.plan, duals);
-        }
-    }
-    fn skip(&mut self) {
-        BoxAlmSolver::skip(self);
-    }
-    fn reset(&mut self) {
-        BoxAlmSolver::reset(self);
-    }
-}
-
-impl ConstrainedSolver for BandedInteriorPointSolver {
-    fn method(&self) -> SolverMethod {
-        SolverMethod::InteriorPoint
-    }
-    fn axes(&self) -> usize {
-        1
-    }
-    fn solve(&mut self, axes: &mut [AxisProblem<'_>]) -> Result<(), ControlError> {
-        self.solve_problem(one(axes)?.reborrow())
-    }
-    fn iterations(&self) -> usize {
-        BandedInteriorPointSolver::iterations(self)
-    }
-    fn row_duals(&self) -> &[[f64; 2]] {
-        BandedInteriorPointSolver::row_duals(self)
-    }
-}
-
-impl ConstrainedSolver for ClarabelSolver {
-    fn method(&self) -> SolverMethod {
-        SolverMethod::Clarabel
-    }
-    fn axes(&self) -> usize {
-        1
-    }
-    fn solve(&mut self, axes: &mut [AxisProblem<'_>]) -> Result<(), ControlError> {
-        self.solve_problem(one(axes)?.reborrow())
-    }
-    fn iterations(&self) -> usize {
-        0
-    }
-}
-
-impl ConstrainedSolver for BandedConeSolver {
-    fn method(&self) -> SolverMethod {
-        match BandedConeSolver::method(self) {
-            ConeMethod::Alm => SolverMethod::Alm,
-            ConeMethod::InteriorPoint => SolverMethod::InteriorPoint,
-        }
-    }
-    fn axes(&self) -> usize {
-        2
-    }
-    fn solve(&mut self, axes: &mut [AxisProblem<'_>]) -> Result<(), ControlError> {
-        let (x, y) = pair(axes)?;
-        self.solve_pair(x.reborrow(), y.reborrow())
-    }
-    fn iterations(&self) -> usize {
-        BandedConeSolver::iterations(self)
-    }
-    fn factorisations(&self) -> usize {
-        BandedConeSolver::factorisations(self)
-    }
-    fn warm_started(&self) -> bool {
-        BandedConeSolver::warm_started(self)
-    }
-    fn accept(&mut self, axes: &[AxisProblem<'_>], _duals: &[[f64; 2]]) {
-        if let [x, y] = axes {
-            self.accept_plans([x.plan, y.plan]);
-        }
-    }
-    fn skip(&mut self) {
-        self.forget();
-    }
-    fn reset(&mut self) {
-        BandedConeSolver::reset(self);
-    }
-    fn set_radius(&mut self, radius: &[f64]) -> Result<(), ControlError> {
-        BandedConeSolver::set_radius(self, radius)
-    }
-}
-
-impl ConstrainedSolver for ClarabelConeSolver {
-    fn method(&self) -> SolverMethod {
-        SolverMethod::Clarabel
-    }
-    fn axes(&self) -> usize {
-        2
-    }
-    fn solve(&mut self, axes: &mut [AxisProblem<'_>]) -> Result<(), ControlError> {
-        let (x, y) = pair(axes)?;
-        self.solve_pair(x.reborrow(), y.reborrow())
-    }
-    fn iterations(&self) -> usize {
-        0
-    }
-    fn set_radius(&mut self, radius: &[f64]) -> Result<(), ControlError> {
-        ClarabelConeSolver::set_radius(self, radius)
     }
 }

@@ -6,10 +6,12 @@ use clarabel::solver::{
     DefaultSettings, DefaultSettingsBuilder, DefaultSolver, IPSolver, SolverStatus, SupportedConeT,
 };
 
+use super::bounds::AxisBounds;
+use super::cascade::{AxisSolver, SolveFailure, SolveInfo, SolverMethod};
+use super::fast_banded::FastBandedSolver;
+use super::problem::{AxisProblem, baseline, invalid};
+use super::smoothness::Smoothness;
 use super::smoothness::{accel_block, sent_linear_term};
-use super::{
-    AxisBounds, AxisProblem, FastBandedSolver, Smoothness, baseline, check_lengths, invalid,
-};
 use crate::ControlError;
 
 /// The 1-D DF-MPC problem with inequality bounds, solved by clarabel.
@@ -43,16 +45,7 @@ pub struct ClarabelSolver {
     m_eq: usize,
 }
 
-impl std::fmt::Debug for ClarabelSolver {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("ClarabelSolver")
-            .field("horizon", &self.horizon)
-            .field("dt", &self.dt)
-            .field("q", &self.q)
-            .field("bounds", &self.bounds)
-            .finish_non_exhaustive()
-    }
-}
+crate::optimise::problem::debug_without!(ClarabelSolver: horizon, dt, q, bounds);
 
 /// Clarabel's KKT settings for [`ClarabelSolver`] (the rest of its
 /// settings are fixed: no presolve, no equilibration, QDLDL, one thread).
@@ -326,33 +319,12 @@ impl ClarabelSolver {
         &self.bounds
     }
 
-    /// Solves with the bounds; arguments as [`FastBandedSolver::solve`]. A status
-    /// other than `Solved` (infeasible bounds, time limit, numerical
-    /// trouble) is [`ControlError::Solver`].
-    pub fn solve(
-        &mut self,
-        fixed: &[f64; 3],
-        reference: &[f64],
-        plan: &mut [f64],
-    ) -> Result<(), ControlError> {
-        self.solve_problem(AxisProblem {
-            fixed,
-            sent: None,
-            reference,
-            plan,
-        })
-    }
-
-    /// As [`ClarabelSolver::solve`], with the previously sent
-    /// command ([`AxisProblem::sent`]) for the smoothness term.
+    /// Solves with the bounds; arguments as
+    /// [`FastBandedSolver::solve_problem`]. A status other than `Solved`
+    /// (infeasible bounds, time limit, numerical trouble) is
+    /// [`ControlError::Solver`].
     pub fn solve_problem(&mut self, a: AxisProblem<'_>) -> Result<(), ControlError> {
-        let AxisProblem {
-            fixed,
-            sent,
-            reference,
-            plan,
-        } = a;
-        check_lengths(self.horizon, reference, plan)?;
+        let (fixed, sent, reference, plan) = a.checked(self.horizon)?;
         self.fill(fixed, sent, reference);
         self.solver
             .update_q(&self.qvec)
@@ -410,5 +382,18 @@ impl ClarabelSolver {
         self.fill(fixed, sent, reference);
         let data = &self.solver.data;
         (&data.P, &self.qvec, &data.A, &self.bvec, self.m_eq)
+    }
+}
+
+impl AxisSolver for ClarabelSolver {
+    fn solve(&mut self, axis: AxisProblem<'_>) -> Result<SolveInfo, SolveFailure> {
+        let method = SolverMethod::Clarabel;
+        self.solve_problem(axis).map_err(|e| match e {
+            ControlError::Solver(_) if self.solver.solution.status != SolverStatus::Solved => {
+                SolveFailure::Clarabel(self.solver.solution.status)
+            }
+            e => SolveFailure::from_error(method, 0, e),
+        })?;
+        Ok(SolveInfo::of(method))
     }
 }

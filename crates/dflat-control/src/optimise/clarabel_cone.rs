@@ -5,9 +5,13 @@
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{DefaultSolver, IPSolver, SolverStatus, SupportedConeT};
 
+use super::cascade::{PairSolver, SolveFailure, SolveInfo, SolverMethod};
 use super::clarabel::{KktTuning, build_solver, push_axis_hessian};
+use super::cone::ConeBounds;
+use super::cone_solver::AxisWeights;
+use super::fast_banded::FastBandedSolver;
+use super::problem::{AxisProblem, baseline};
 use super::smoothness::{accel_block, sent_linear_term};
-use super::{AxisProblem, AxisWeights, ConeBounds, FastBandedSolver, baseline, check_lengths};
 use crate::ControlError;
 
 /// Both horizontal axes with the tilt cone, solved by clarabel.
@@ -35,16 +39,7 @@ pub struct ClarabelConeSolver {
     m_cone: usize,
 }
 
-impl std::fmt::Debug for ClarabelConeSolver {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("ClarabelConeSolver")
-            .field("horizon", &self.horizon)
-            .field("dt", &self.dt)
-            .field("bounds", &self.bounds)
-            .field("soft", &self.soft)
-            .finish_non_exhaustive()
-    }
-}
+crate::optimise::problem::debug_without!(ClarabelConeSolver: horizon, dt, bounds, soft);
 
 impl ClarabelConeSolver {
     /// Builds the solver once for horizon N, step δt \[s\], per-axis
@@ -193,8 +188,7 @@ impl ClarabelConeSolver {
         x: AxisProblem<'_>,
         y: AxisProblem<'_>,
     ) -> Result<(), ControlError> {
-        check_lengths(self.horizon, x.reference, x.plan)?;
-        check_lengths(self.horizon, y.reference, y.plan)?;
+        super::problem::check_pair(self.horizon, &x, &y)?;
         let (n, dt) = (self.horizon - 2, self.dt);
         let fixed = [x.fixed, y.fixed];
         for (i, a) in [&x, &y].into_iter().enumerate() {
@@ -241,5 +235,22 @@ impl ClarabelConeSolver {
             }
         }
         Ok(())
+    }
+}
+
+impl PairSolver for ClarabelConeSolver {
+    fn solve(&mut self, x: AxisProblem<'_>, y: AxisProblem<'_>) -> Result<SolveInfo, SolveFailure> {
+        let method = SolverMethod::Clarabel;
+        self.solve_pair(x, y).map_err(|e| match e {
+            ControlError::Solver(_) if self.solver.solution.status != SolverStatus::Solved => {
+                SolveFailure::Clarabel(self.solver.solution.status)
+            }
+            e => SolveFailure::from_error(method, 0, e),
+        })?;
+        Ok(SolveInfo::of(method))
+    }
+
+    fn set_radius(&mut self, radius: &[f64]) -> Result<(), ControlError> {
+        ClarabelConeSolver::set_radius(self, radius)
     }
 }

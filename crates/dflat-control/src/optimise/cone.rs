@@ -33,7 +33,7 @@
 //! braking funnel ([`AxisBounds::speed`]) brakes each axis at 90 % of
 //! `A/√2`, a rate both axes can keep at once inside the cone.
 
-use super::AxisBounds;
+use super::bounds::AxisBounds;
 
 /// Default exact penalty ρ of a soft speed row, per m/s of violation
 /// (cost units of `q·m²`): far above the multipliers the speed rows take
@@ -126,19 +126,19 @@ impl ConeBounds {
 
     pub(crate) fn check(&self) -> Result<(), crate::ControlError> {
         if !(self.acceleration.is_finite() && self.acceleration > 0.0) {
-            return Err(super::invalid(
+            return Err(super::problem::invalid(
                 "constraints.max_tilt",
                 "a cone acceleration g·tan(tilt) finite and > 0 (m/s²)",
             ));
         }
         if self.speed.is_some_and(|v| !(v.is_finite() && v > 0.0)) {
-            return Err(super::invalid(
+            return Err(super::problem::invalid(
                 "constraints.max_speed",
                 "finite and > 0 (m/s)",
             ));
         }
         if !(self.speed_penalty.is_finite() && self.speed_penalty > 0.0) {
-            return Err(super::invalid(
+            return Err(super::problem::invalid(
                 "constraints.speed_penalty",
                 "finite and > 0 (per m/s)",
             ));
@@ -151,7 +151,7 @@ impl ConeBounds {
 /// each finite and > 0 [m/s²].
 pub(crate) fn check_radius(radius: &[f64], n: usize) -> Result<(), crate::ControlError> {
     if radius.len() != n || radius.iter().any(|r| !(r.is_finite() && *r > 0.0)) {
-        return Err(super::invalid(
+        return Err(super::problem::invalid(
             "cone radius",
             "one finite radius > 0 per stage",
         ));

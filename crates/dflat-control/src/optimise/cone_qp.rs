@@ -19,7 +19,7 @@
 //! augmented Lagrangian ([`super::alm`]), this its fallback.
 
 use super::banded_ip::{AxisCost, BandedIp, Stages};
-use super::bounds::{Row, check_row_data};
+use super::bounds::{Row, check_solve_data};
 use crate::ControlError;
 
 /// Iteration limit.
@@ -83,17 +83,16 @@ impl ConeQp {
         &mut self,
         c: &[f64],
         a0: [f64; 2],
-        lo: &[f64],
-        hi: &[f64],
+        (lo, hi): (&[f64], &[f64]),
     ) -> Result<usize, ControlError> {
-        let m = self.ip.rows();
-        check_row_data(
+        check_solve_data(
             "cone QP",
-            c.len() == STAGE * self.ip.n() && lo.len() == m && hi.len() == m,
+            (c, STAGE * self.ip.n()),
+            self.ip.rows(),
+            self.ip.iterate(),
+            &a0,
+            (lo, hi),
             "c needs 6n entries, lo and hi one per row",
-            &[c, self.ip.iterate(), &a0],
-            lo,
-            hi,
         )?;
         self.ip.linear_mut().copy_from_slice(c);
         self.ip.set_bounds(lo, hi, a0);

@@ -6,11 +6,13 @@
 use super::alm::{AlmTuning, BandedAlm, RowBlock, StageSet};
 use super::banded_ip::AxisCost;
 use super::bounds::Row;
+use super::cascade::{Carry, PairSolver, SolveFailure, SolveInfo, SolverMethod};
+use super::cone::ConeBounds;
 use super::cone_qp::{ConeQp, STAGE, a_at, p_at};
+use super::fast_banded::FastBandedSolver;
+use super::problem::{AxisProblem, baseline, shifted_plan};
+use super::smoothness::Smoothness;
 use super::smoothness::{accel_block, sent_linear_term};
-use super::{
-    AxisProblem, ConeBounds, FastBandedSolver, Smoothness, baseline, check_lengths, shifted_plan,
-};
 use crate::ControlError;
 
 /// Weights of one axis: tracking q ≥ 0 [1/m²], jerk r > 0 [s⁶/m²], and
@@ -114,7 +116,10 @@ impl BandedConeSolver {
         }
         bounds.check()?;
         if !(use_alm || use_ip) {
-            return Err(super::invalid("cone solver", "at least one method"));
+            return Err(super::problem::invalid(
+                "cone solver",
+                "at least one method",
+            ));
         }
         let n = horizon - 2;
         let axes = weights.map(|w| AxisCost {
@@ -314,13 +319,39 @@ impl BandedConeSolver {
         x: AxisProblem<'_>,
         y: AxisProblem<'_>,
     ) -> Result<(), ControlError> {
-        check_lengths(self.horizon, x.reference, x.plan)?;
-        check_lengths(self.horizon, y.reference, y.plan)?;
+        super::problem::check_pair(self.horizon, &x, &y)?;
+        let a0 = self.load(&x, &y);
+        self.iterations = 0;
+        let warm = self.warm_start && self.previous_valid;
+        self.warm_used = false;
+        self.previous_valid = false;
+        // First the augmented Lagrangian (warm: last tick's plan and
+        // multipliers one step on; else the plan given and the multipliers
+        // the last burst left), then the interior point from the plan given
+        // should it fail.
+        let method = if self.try_alm(warm, a0) {
+            self.warm_used = warm;
+            ConeMethod::Alm
+        } else {
+            self.try_interior_point(a0)?;
+            ConeMethod::InteriorPoint
+        };
+        self.method = method;
+        self.store_solution(method, [x.fixed, y.fixed])?;
+        x.plan.copy_from_slice(&self.previous[0]);
+        y.plan.copy_from_slice(&self.previous[1]);
+        self.previous_valid = true;
+        Ok(())
+    }
+
+    /// The tick's data: both methods' linear terms, the plans given and
+    /// the warm guesses as deviations from the baseline, the speed rows'
+    /// bounds. Returns the axes' window accelerations a_0 [m/s²].
+    fn load(&mut self, x: &AxisProblem<'_>, y: &AxisProblem<'_>) -> [f64; 2] {
         let (dt, n) = (self.dt, self.horizon - 2);
-        let fixed = [x.fixed, y.fixed];
         self.c.fill(0.0);
         let mut a0 = [0.0; 2];
-        for (i, a) in [&x, &y].into_iter().enumerate() {
+        for (i, a) in [x, y].into_iter().enumerate() {
             let q = self.weights[i].q;
             self.fast[i].right_hand_side(
                 a.fixed,
@@ -344,7 +375,7 @@ impl BandedConeSolver {
         }
         let axis = self.bounds.axis_within(&self.radius);
         let mut k = 0;
-        for fx in fixed {
+        for fx in [x.fixed, y.fixed] {
             let (lo, hi) = (&mut self.lo, &mut self.hi);
             axis.speed_rows(self.horizon, fx, dt, |l, h| {
                 lo[k] = l;
@@ -352,83 +383,110 @@ impl BandedConeSolver {
                 k += 1;
             });
         }
-        self.iterations = 0;
-        let warm = self.warm_start && self.previous_valid;
-        self.warm_used = false;
-        self.previous_valid = false;
-        // First the augmented Lagrangian (warm: last tick's plan and
-        // multipliers one step on; else the plan given and the multipliers
-        // the last burst left), then the interior point from the plan given
-        // should it fail.
-        let mut solved = None;
+        a0
+    }
+
+    /// The augmented Lagrangian's attempt (none configured: false).
+    fn try_alm(&mut self, warm: bool, a0: [f64; 2]) -> bool {
+        let Some(alm) = &mut self.alm else {
+            return false;
+        };
+        if warm {
+            alm.shift();
+            alm.set_start(&[&self.warm[0], &self.warm[1]]);
+        } else {
+            if !self.warm_start {
+                // Cold, as configured: no multipliers carried over.
+                alm.reset_multipliers();
+            }
+            alm.set_start(&[&self.p[0], &self.p[1]]);
+        }
+        let result = alm.solve(&self.c_alm, a0, &self.lo, &self.hi);
+        self.iterations = alm.newton_steps();
+        if result.is_err() {
+            // Its multipliers are no start for the next solve.
+            alm.reset_multipliers();
+        }
+        result.is_ok()
+    }
+
+    /// The interior point's attempt, from the plan given; on success the
+    /// augmented Lagrangian's next start takes its multipliers.
+    fn try_interior_point(&mut self, a0: [f64; 2]) -> Result<(), ControlError> {
+        let Some(qp) = &mut self.qp else {
+            return Err(ControlError::Solver("cone ALM: no convergence".to_string()));
+        };
+        qp.ip.set_start(&[&self.p[0], &self.p[1]], self.dt);
+        let result = qp.solve(&self.c, a0, (&self.lo, &self.hi));
+        self.iterations += qp.ip.iterations();
+        result?;
+        // The next tick's augmented Lagrangian starts from its multipliers
+        // (shifted with the plan), not from zero.
         if let Some(alm) = &mut self.alm {
-            if warm {
-                alm.shift();
-                alm.set_start(&[&self.warm[0], &self.warm[1]]);
-            } else {
-                if !self.warm_start {
-                    // Cold, as configured: no multipliers carried over.
-                    alm.reset_multipliers();
-                }
-                alm.set_start(&[&self.p[0], &self.p[1]]);
-            }
-            let result = alm.solve(&self.c_alm, a0, &self.lo, &self.hi);
-            self.iterations = alm.newton_steps();
-            match result {
-                Ok(_) => {
-                    solved = Some(ConeMethod::Alm);
-                    self.warm_used = warm;
-                }
-                // Its multipliers are no start for the next solve.
-                Err(_) => alm.reset_multipliers(),
-            }
+            qp.ip.disc_duals(&mut self.ip_stage_duals);
+            qp.ip.duals(&mut self.ip_row_duals);
+            let stage = &self.ip_stage_duals;
+            alm.set_multipliers(|f| stage[f], &self.ip_row_duals);
         }
-        let mut error = None;
-        if solved.is_none()
-            && let Some(qp) = &mut self.qp
-        {
-            qp.ip.set_start(&[&self.p[0], &self.p[1]], dt);
-            match qp.solve(&self.c, a0, &self.lo, &self.hi) {
-                Ok(_) => {
-                    solved = Some(ConeMethod::InteriorPoint);
-                    // The next tick's augmented Lagrangian starts from its
-                    // multipliers (shifted with the plan), not from zero.
-                    if let Some(alm) = &mut self.alm {
-                        qp.ip.disc_duals(&mut self.ip_stage_duals);
-                        qp.ip.duals(&mut self.ip_row_duals);
-                        let stage = &self.ip_stage_duals;
-                        alm.set_multipliers(|f| stage[f], &self.ip_row_duals);
-                    }
-                }
-                Err(e) => error = Some(e),
-            }
-            self.iterations += qp.ip.iterations();
-        }
-        let Some(method) = solved else {
-            return Err(error
-                .unwrap_or_else(|| ControlError::Solver("cone ALM: no convergence".to_string())));
-        };
-        self.method = method;
-        let solution = |i: usize, f: usize| match method {
-            ConeMethod::Alm => self.alm.as_ref().map_or(f64::NAN, |a| a.p(i, f)),
-            ConeMethod::InteriorPoint => self.qp.as_ref().map_or(f64::NAN, |q| q.ip.p(i, f)),
-        };
+        Ok(())
+    }
+
+    /// The solution of `method` into `previous` (the plans y*_0..y*_N);
+    /// an error (and the multipliers forgotten) when not finite.
+    fn store_solution(
+        &mut self,
+        method: ConeMethod,
+        fixed: [&[f64; 3]; 2],
+    ) -> Result<(), ControlError> {
+        let n = self.horizon - 2;
         for (i, fx) in fixed.into_iter().enumerate() {
-            let prev = &mut self.previous[i];
-            prev[..3].copy_from_slice(fx);
             for f in 0..n {
-                prev[f + 3] = baseline(fx, f + 3) + solution(i, f);
+                let p = match method {
+                    ConeMethod::Alm => self.alm.as_ref().map_or(f64::NAN, |a| a.p(i, f)),
+                    ConeMethod::InteriorPoint => {
+                        self.qp.as_ref().map_or(f64::NAN, |q| q.ip.p(i, f))
+                    }
+                };
+                self.previous[i][f + 3] = baseline(fx, f + 3) + p;
             }
-            if prev.iter().any(|v| !v.is_finite()) {
+            self.previous[i][..3].copy_from_slice(fx);
+            if self.previous[i].iter().any(|v| !v.is_finite()) {
                 if let Some(alm) = &mut self.alm {
                     alm.reset_multipliers();
                 }
                 return Err(ControlError::Solver("non-finite solution".to_string()));
             }
         }
-        x.plan.copy_from_slice(&self.previous[0]);
-        y.plan.copy_from_slice(&self.previous[1]);
-        self.previous_valid = true;
         Ok(())
+    }
+}
+
+impl PairSolver for BandedConeSolver {
+    fn solve(&mut self, x: AxisProblem<'_>, y: AxisProblem<'_>) -> Result<SolveInfo, SolveFailure> {
+        let result = self.solve_pair(x, y);
+        let method = match self.method() {
+            ConeMethod::Alm => SolverMethod::Alm,
+            ConeMethod::InteriorPoint => SolverMethod::InteriorPoint,
+        };
+        result.map_err(|e| SolveFailure::from_error(method, self.iterations(), e))?;
+        Ok(SolveInfo {
+            method,
+            iterations: self.iterations(),
+            factorisations: self.factorisations(),
+            warm_started: self.warm_started(),
+        })
+    }
+
+    fn carry(&mut self, event: Carry<'_>) {
+        match event {
+            Carry::Accepted { plans: [x, y], .. } => self.accept_plans([x, y]),
+            Carry::Accepted { .. } => {}
+            Carry::Skipped => self.forget(),
+            Carry::Reset => self.reset(),
+        }
+    }
+
+    fn set_radius(&mut self, radius: &[f64]) -> Result<(), ControlError> {
+        BandedConeSolver::set_radius(self, radius)
     }
 }

@@ -2,6 +2,7 @@
 //! Lagrangian, interior point as its fallback) against clarabel's SOCP on
 //! random instances, cold and warm-started along a receding horizon.
 
+use super::problem::baseline;
 use super::smoothness::accel_block;
 use super::*;
 

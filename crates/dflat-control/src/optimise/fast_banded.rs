@@ -3,7 +3,8 @@
 //! [`crate::optimise`]).
 
 use super::banded::{BandedCholesky, SymBand};
-use super::{AxisProblem, D3, Smoothness, check_lengths, check_problem};
+use super::problem::{AxisProblem, D3, check_lengths, check_problem};
+use super::smoothness::Smoothness;
 use crate::ControlError;
 
 /// Half-bandwidth of the fast-path Hessian.
@@ -365,12 +366,7 @@ impl FastBandedSolver {
         reference: &[f64],
         plan: &mut [f64],
     ) -> Result<(), ControlError> {
-        self.solve_problem(AxisProblem {
-            fixed,
-            sent: None,
-            reference,
-            plan,
-        })
+        self.solve_problem(AxisProblem::new(fixed, reference, plan))
     }
 
     /// As [`FastBandedSolver::solve`], with the previously sent command

@@ -20,7 +20,7 @@
 //! `q·‖y − y_ref‖² + Σ w(σ·(y − y_ref))²` up to a constant. The first
 //! smoothness row (tied to the command sent at k−1) is left as it is.
 
-use super::D3;
+use super::problem::D3;
 use super::smoothness::Smoothness;
 
 /// Shifts `reference` (y_ref,k..y_ref,k+N of one axis, N + 1 values; the

@@ -12,9 +12,13 @@
 //! All storage is allocated in [`StageQp::new`].
 
 use super::banded_ip::{AxisCost, BandedIp, Stages};
+use super::bounds::AxisBounds;
 use super::bounds::{Row, check_row_data};
+use super::cascade::{AxisSolver, SolveFailure, SolveInfo, SolverMethod};
+use super::fast_banded::FastBandedSolver;
+use super::problem::{AxisProblem, baseline};
+use super::smoothness::Smoothness;
 use super::smoothness::{accel_block, sent_linear_term};
-use super::{AxisBounds, AxisProblem, FastBandedSolver, Smoothness, baseline};
 use crate::ControlError;
 
 pub use super::banded::BandedLdl;
@@ -170,10 +174,7 @@ impl BandedInteriorPointSolver {
         bounds: AxisBounds,
         smoothness: Smoothness,
     ) -> Result<Self, ControlError> {
-        let fast = FastBandedSolver::with_smoothness(horizon, q, r, dt, smoothness)?;
-        if let Some(t) = &bounds.tilt_rate {
-            t.check()?;
-        }
+        let fast = bounds.fast_solver(horizon, (q, r, dt), smoothness)?;
         let n = horizon - 2;
         let accel = accel_block(n, r, dt, &smoothness);
         let qp = StageQp::new(
@@ -221,12 +222,7 @@ impl BandedInteriorPointSolver {
     /// the interior-point method does not converge (infeasible bounds,
     /// numerical trouble).
     pub fn solve_problem(&mut self, a: AxisProblem<'_>) -> Result<(), ControlError> {
-        let AxisProblem {
-            fixed,
-            sent,
-            reference,
-            plan,
-        } = a;
+        let (fixed, sent, reference, plan) = a.checked(self.fast.horizon())?;
         self.fast.solve_problem(AxisProblem {
             fixed,
             sent,
@@ -285,5 +281,21 @@ impl BandedInteriorPointSolver {
             return Err(ControlError::Solver("non-finite solution".to_string()));
         }
         Ok(())
+    }
+}
+
+impl AxisSolver for BandedInteriorPointSolver {
+    fn solve(&mut self, axis: AxisProblem<'_>) -> Result<SolveInfo, SolveFailure> {
+        let method = SolverMethod::InteriorPoint;
+        self.solve_problem(axis)
+            .map_err(|e| SolveFailure::from_error(method, self.iterations(), e))?;
+        Ok(SolveInfo {
+            iterations: self.iterations(),
+            ..SolveInfo::of(method)
+        })
+    }
+
+    fn row_duals(&self) -> &[[f64; 2]] {
+        BandedInteriorPointSolver::row_duals(self)
     }
 }

@@ -22,15 +22,19 @@
 //!
 //! When inequality constraints are configured and the fast plan violates
 //! one, the axis (box bounds) or the horizontal pair (the tilt cone) is
-//! re-solved by a [`Cascade`]: an ordered list of [`ConstrainedSolver`]s
-//! tried until one converges. With
+//! re-solved by a [`Cascade`]: an ordered list of solvers of the axis's
+//! problem ([`AxisSolver`]) or of the pair's ([`PairSolver`]) tried until
+//! one converges. With
 //! [`QpSolver::Banded`](crate::dfmpc::QpSolver::Banded) (the default) the
 //! first is the augmented Lagrangian on the free outputs ([`alm`]: one
 //! banded Newton system per step, warm-started from the previous tick's
 //! plan and multipliers, and between bursts from the multipliers the last
-//! burst left), serving the box (an interval per stage, hard speed and
-//! tilt-rate rows with multipliers clamped at 0, [`BoxAlmSolver`]) and
-//! the cone (a disc per stage, soft speed rows, [`BandedConeSolver`]).
+//! burst left), serving the box (an interval per stage, [`BoxAlmSolver`])
+//! and the cone (a disc per stage, soft speed rows, [`BandedConeSolver`]).
+//! A box with rows — the tilt-rate bound's, speed rows — goes to the
+//! active-set method on its compact KKT system instead ([`active_set`],
+//! inside [`BoxAlmSolver`], warm-started from the last tick's working
+//! set).
 //! Should it not converge, a banded interior point solves the same QP in
 //! the deviation variables plus the planned accelerations (cost `q·(b + p
 //! − y_ref)² + r·(Δã/δt)²`, equality rows tie ã to Δ²p/δt², bounds on ã
@@ -39,7 +43,7 @@
 //! [`cone_qp`]), and then clarabel ([`ClarabelSolver`],
 //! [`ClarabelConeSolver`]), whose structure is fixed, so one solver is
 //! built once and only `q` and `b` are updated per tick. A clarabel status
-//! other than `Solved` is [`ControlError::Solver`].
+//! other than `Solved` is [`crate::ControlError::Solver`].
 //!
 //! # Command smoothness (optional)
 //!
@@ -77,8 +81,13 @@
 //!
 //! * [`fast_banded`] — [`FastBandedSolver`]: the unconstrained problem, a
 //!   banded Cholesky factor built once, O(N) per tick (the fast path).
-//! * [`cascade`] — [`ConstrainedSolver`] (one interface for the box's and
-//!   the cone's solvers) and [`Cascade`] (the fallback order, as data).
+//! * [`cascade`] — [`AxisSolver`] and [`PairSolver`] (the box's and the
+//!   cone's solvers' interfaces: [`SolveInfo`] or [`SolveFailure`]) and
+//!   [`Cascade`] (the fallback order, as data).
+//! * [`active_set`] — the active-set method of one axis with rows (the
+//!   tilt-rate bound's problem), on a compact KKT system in profile form.
+//! * [`problem`] — [`AxisProblem`] and the checks and helpers every solver
+//!   shares.
 //! * [`alm`] — [`alm::BandedAlm`]: the augmented Lagrangian of both
 //!   constrained families; [`box_alm`] — [`BoxAlmSolver`], one axis's box
 //!   with it; [`cone_solver`] — [`BandedConeSolver`], the pair's cone with
@@ -104,6 +113,7 @@
 //! * [`banded`] — banded symmetric matrices, Cholesky and LDLᵀ factors
 //!   ([`banded::BandedLdl`], the interior point's).
 
+pub mod active_set;
 pub mod alm;
 pub mod banded;
 pub mod banded_ip;
@@ -122,6 +132,7 @@ pub mod feed_forward;
 pub mod interior_point;
 #[cfg(feature = "osqp-bench")]
 pub mod osqp_anchor;
+pub mod problem;
 pub mod smoothness;
 pub mod tilt_rate;
 #[cfg(test)]
@@ -129,7 +140,10 @@ mod tilt_rate_tests;
 
 pub use bounds::AxisBounds;
 pub use box_alm::BoxAlmSolver;
-pub use cascade::{Cascade, ConstrainedSolver, SolverMethod};
+pub use cascade::{
+    AxisCascade, AxisSolver, Carry, Cascade, PairCascade, PairSolver, SolveFailure, SolveInfo,
+    SolverMethod,
+};
 pub use clarabel::{ClarabelSolver, KktTuning};
 pub use clarabel_cone::ClarabelConeSolver;
 pub use cone::ConeBounds;
@@ -139,105 +153,5 @@ pub use interior_point::BandedInteriorPointSolver;
 pub use smoothness::Smoothness;
 pub use tilt_rate::TiltRate;
 
-use crate::ControlError;
-
-/// Largest horizon accepted \[steps\].
-pub const MAX_HORIZON: usize = 100_000;
-/// Coefficients of the third difference `Δ³y_j` on `y_j..y_{j+3}`.
-pub(crate) const D3: [f64; 4] = [-1.0, 3.0, -3.0, 1.0];
-
-/// A [`ControlError::InvalidSetting`] naming `field`.
-pub(crate) fn invalid(field: &'static str, reason: &str) -> ControlError {
-    ControlError::InvalidSetting {
-        field,
-        reason: reason.to_string(),
-    }
-}
-
-/// The problem's scalar settings, checked in one place (by the solvers'
-/// constructors and by [`crate::dfmpc::DfMpcSettings::validate`]): horizon
-/// N in 3..=[`MAX_HORIZON`] \[steps\], tracking weights q ≥ 0 [1/m²], jerk
-/// weights r > 0 [s⁶/m²], smoothness weights s ≥ 0 [1/rad²], step δt > 0
-/// \[s\] (`None`: not checked here).
-pub(crate) fn check_problem(
-    horizon: usize,
-    q: &[f64],
-    r: &[f64],
-    s: &[f64],
-    dt: Option<f64>,
-) -> Result<(), ControlError> {
-    if !(3..=MAX_HORIZON).contains(&horizon) {
-        return Err(invalid("horizon", "an integer in 3..=100000 (steps)"));
-    }
-    if !q.iter().all(|q| q.is_finite() && *q >= 0.0) {
-        return Err(invalid("tracking_weight", "finite and >= 0 (1/m²)"));
-    }
-    if !r.iter().all(|r| r.is_finite() && *r > 0.0) {
-        return Err(invalid("jerk_weight", "finite and > 0 (s⁶/m²)"));
-    }
-    if !s.iter().all(|s| s.is_finite() && *s >= 0.0) {
-        return Err(invalid("smoothness_weight", "finite and >= 0 (1/rad²)"));
-    }
-    if let Some(dt) = dt
-        && !(dt.is_finite() && dt > 0.0)
-    {
-        return Err(invalid("dt", "finite and > 0 (s)"));
-    }
-    Ok(())
-}
-
-pub(crate) fn check_lengths(
-    horizon: usize,
-    reference: &[f64],
-    plan: &[f64],
-) -> Result<(), ControlError> {
-    if reference.len() != horizon + 1 {
-        return Err(invalid("reference", "length must be horizon + 1"));
-    }
-    if plan.len() != horizon + 1 {
-        return Err(invalid("plan", "length must be horizon + 1"));
-    }
-    Ok(())
-}
-
-/// The baseline `b_j`, j = 0..=N: the fixed outputs continued with zero
-/// third difference (constant second difference).
-#[inline]
-pub(crate) fn baseline(fixed: &[f64; 3], j: usize) -> f64 {
-    let d1 = fixed[1] - fixed[0];
-    let d2 = fixed[2] - 2.0 * fixed[1] + fixed[0];
-    let jf = j as f64;
-    fixed[0] + jf * d1 + 0.5 * jf * (jf - 1.0) * d2
-}
-
-/// The next tick's start for its free output f (`y_{f+3}` then): the
-/// previous plan `y*_0..y*_N` \[m\] one step on, `y*_{f+4}`, continued
-/// linearly past the horizon (the warm starts of the augmented
-/// Lagrangian's solvers).
-#[inline]
-pub(crate) fn shifted_plan(previous: &[f64], f: usize) -> f64 {
-    let horizon = previous.len() - 1;
-    let j = f + 4;
-    if j <= horizon {
-        previous[j]
-    } else {
-        2.0 * previous[horizon] - previous[horizon - 1]
-    }
-}
-
-/// One axis's data for [`FastBandedSolver::solve_pair`]: `fixed` = `[y_0, y_1,
-/// y_2]` \[m\], `reference` = `ref_0..ref_N` \[m\], `plan` receives `y*_0..y*_N`.
-#[derive(Debug)]
-pub struct AxisProblem<'a> {
-    /// The fixed outputs `[y_0, y_1, y_2]` \[m\].
-    pub fixed: &'a [f64; 3],
-    /// `c_{−1}` [m/s²]: the acceleration the command sent at the previous
-    /// tick asks for on this axis (used only with a smoothness weight;
-    /// `None`: the fixed window's acceleration, i.e. the first change is
-    /// free).
-    pub sent: Option<f64>,
-    /// The reference `ref_0..ref_N` \[m\] (length N + 1).
-    pub reference: &'a [f64],
-    /// Output: the optimal `y*_0..y*_N` \[m\] (length N + 1).
-    pub plan: &'a mut [f64],
-}
+pub use problem::{AxisProblem, MAX_HORIZON};
+pub(crate) use problem::{check_problem, invalid};

@@ -22,7 +22,10 @@ use std::time::Duration;
 use clarabel::algebra::CscMatrix as ClarabelCsc;
 use osqp::{CscMatrix, Problem, Settings, Status};
 
-use super::{AxisBounds, AxisProblem, ClarabelSolver, KktTuning, Smoothness, baseline};
+use super::bounds::AxisBounds;
+use super::clarabel::{ClarabelSolver, KktTuning};
+use super::problem::{AxisProblem, baseline};
+use super::smoothness::Smoothness;
 use crate::ControlError;
 
 /// Bounds at or beyond this magnitude are infinite to OSQP.
@@ -85,14 +88,7 @@ pub struct OsqpBoxSolver {
     run_time: Duration,
 }
 
-impl std::fmt::Debug for OsqpBoxSolver {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("OsqpBoxSolver")
-            .field("horizon", &self.horizon)
-            .field("tuning", &self.tuning)
-            .finish_non_exhaustive()
-    }
-}
+crate::optimise::problem::debug_without!(OsqpBoxSolver: horizon, tuning);
 
 /// Row `r` of a CSC matrix as (column, value) pairs.
 fn csc_rows(a: &ClarabelCsc<f64>) -> Vec<Vec<(usize, f64)>> {
@@ -287,13 +283,7 @@ impl OsqpBoxSolver {
     /// Solves one axis's problem (plan on exit: OSQP's solution when it
     /// solved, untouched otherwise).
     pub fn solve_axis(&mut self, a: AxisProblem<'_>) -> Result<(), ControlError> {
-        let AxisProblem {
-            fixed,
-            sent,
-            reference,
-            plan,
-        } = a;
-        super::check_lengths(self.horizon, reference, plan)?;
+        let (fixed, sent, reference, plan) = a.checked(self.horizon)?;
         let (_, q, _, b, _) = self.clarabel.qp_for(fixed, sent, reference);
         for (i, &(hi_row, lo_row, eq)) in self.rows.iter().enumerate() {
             let hi = b[hi_row];

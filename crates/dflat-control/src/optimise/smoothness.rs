@@ -2,7 +2,7 @@
 //! smoothness"): its stencil in the outputs and its blocks in the bounded
 //! solvers' variables.
 
-use super::invalid;
+use super::problem::invalid;
 use crate::ControlError;
 
 /// The command-smoothness term of one axis: weight s on

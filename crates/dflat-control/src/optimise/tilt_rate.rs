@@ -37,7 +37,7 @@
 //! (`TiltRate::funnel`), so the problem stays feasible (the witness is a
 //! feasible point) and the bound is the plain one once the witness is in.
 
-use super::invalid;
+use super::problem::invalid;
 use crate::ControlError;
 
 /// Largest per-axis tilt the first-stage interval maps through `tan`

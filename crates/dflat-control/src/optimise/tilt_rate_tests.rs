@@ -3,10 +3,15 @@
 //! and the first command's step through the per-axis tilt is within the
 //! bound exactly.
 
-use super::{
-    AxisBounds, AxisProblem, BandedInteriorPointSolver, BoxAlmSolver, Cascade, ClarabelSolver,
-    FastBandedSolver, KktTuning, Smoothness, TiltRate,
-};
+use super::bounds::AxisBounds;
+use super::box_alm::BoxAlmSolver;
+use super::cascade::AxisCascade;
+use super::clarabel::{ClarabelSolver, KktTuning};
+use super::fast_banded::FastBandedSolver;
+use super::interior_point::BandedInteriorPointSolver;
+use super::problem::AxisProblem;
+use super::smoothness::Smoothness;
+use super::tilt_rate::TiltRate;
 
 const DT: f64 = 0.02;
 const G: f64 = 9.81;
@@ -105,13 +110,13 @@ proptest::proptest! {
             .unwrap()
             .solve_problem(AxisProblem { fixed: &fixed, sent, reference: &reference, plan: &mut got_alm })
             .unwrap();
-        let mut cascade = Cascade::new(vec![
+        let mut cascade = AxisCascade::new(vec![
             Box::new(BoxAlmSolver::new(horizon, (q, r, DT), bounds, smoothness, true).unwrap()),
             Box::new(BandedInteriorPointSolver::new(horizon, (q, r, DT), bounds, smoothness).unwrap()),
         ])
         .unwrap();
         cascade
-            .solve(&mut [AxisProblem { fixed: &fixed, sent, reference: &reference, plan: &mut got_alm }])
+            .solve(AxisProblem { fixed: &fixed, sent, reference: &reference, plan: &mut got_alm })
             .unwrap();
         let cw = cost((q, r), &smoothness, sent, &reference, &want);
         for (name, plan) in [("banded", &got), ("cascade", &got_alm)] {
@@ -289,6 +294,91 @@ fn the_interior_points_duals_start_the_augmented_lagrangian() {
             cold.iterations(),
             alm.iterations()
         );
+    }
+}
+
+/// A cold solve on tilt-rate rows whose unconstrained plan leaps (a 10 m
+/// step of the reference, from rest) starts the active set from the set
+/// of that plan's rollout (`active_set/rollout.rs`) and ends at
+/// clarabel's plan, every row kept (the augmented Lagrangian alone: no
+/// interior point behind it). With the rows alone within the cascade's
+/// budget of KKT solves ([`super::active_set::MAX_SOLVES`]): 37, against
+/// 139 from the unconstrained plan's broken constraints. With an
+/// acceleration bound too it takes 81 — in the cascade that start from
+/// rest goes to the interior point (`AlmTuning::interior_point_from_rest`).
+#[test]
+fn a_cold_rate_limited_solve_ends_in_the_active_set() {
+    let horizon = 100;
+    let (q, r) = (1.0, 0.003);
+    let rate = TiltRate {
+        step: 2f64.to_radians(),
+        kappa: 10.0,
+        gain: 1.0,
+        gravity: G,
+    };
+    for a_max in [None, Some(3.0)] {
+        let bounds = AxisBounds {
+            acceleration: a_max.map(|a| [-a, a]),
+            speed: None,
+            tilt_rate: Some(rate),
+            drag: 0.0,
+        };
+        let smoothness = Smoothness::default();
+        let fixed = [0.0, 0.0, 0.0];
+        let reference = vec![10.0; horizon + 1];
+        let sent = Some(0.0);
+        let mut want = vec![0.0; horizon + 1];
+        ClarabelSolver::with_tuning(
+            horizon,
+            (q, r, DT),
+            bounds,
+            f64::INFINITY,
+            smoothness,
+            KktTuning::REFERENCE,
+        )
+        .unwrap()
+        .solve_problem(AxisProblem {
+            fixed: &fixed,
+            sent,
+            reference: &reference,
+            plan: &mut want,
+        })
+        .unwrap();
+        let mut got = vec![0.0; horizon + 1];
+        FastBandedSolver::new(horizon, q, r, DT)
+            .unwrap()
+            .solve_problem(AxisProblem {
+                fixed: &fixed,
+                sent,
+                reference: &reference,
+                plan: &mut got,
+            })
+            .unwrap();
+        let mut alm = BoxAlmSolver::with_tuning(
+            horizon,
+            (q, r, DT),
+            bounds,
+            smoothness,
+            true,
+            crate::optimise::alm::COLD_TUNING,
+        )
+        .unwrap();
+        alm.solve_problem(AxisProblem {
+            fixed: &fixed,
+            sent,
+            reference: &reference,
+            plan: &mut got,
+        })
+        .unwrap();
+        assert!(
+            a_max.is_some() || alm.iterations() <= super::active_set::MAX_SOLVES,
+            "{a_max:?}: {} KKT solves",
+            alm.iterations()
+        );
+        for (j, (g, w)) in got.iter().zip(&want).take(11).enumerate() {
+            assert!((g - w).abs() <= 1e-5, "{a_max:?}: y_{j}: {g} vs {w}");
+        }
+        assert!(!rate.violated_by(&got, sent, DT), "{a_max:?}: rows broken");
     }
 }
 

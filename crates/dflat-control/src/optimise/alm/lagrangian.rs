@@ -65,11 +65,11 @@ impl BandedAlm {
         let k = self.k;
         let from = self.window_output();
         let (src, dst) = match which {
-            Vector::X => (&self.x, &mut self.px),
-            Vector::D => (&self.d, &mut self.pd),
+            Vector::X => (&self.ws.x, &mut self.ws.px),
+            Vector::D => (&self.ws.d, &mut self.ws.pd),
         };
         for (i, axis) in self.axes.iter().enumerate() {
-            axis.apply_hessian_strided(src, k, i, 2.0, from, &mut self.p_work, dst);
+            axis.apply_hessian_strided(src, k, i, 2.0, from, &mut self.ws.p_work, dst);
         }
     }
 
@@ -78,7 +78,7 @@ impl BandedAlm {
     /// those before are the eliminated head's (module docs of [`super`]).
     #[inline]
     pub(super) fn window_output(&self) -> usize {
-        self.window.saturating_sub(2)
+        self.ws.window.saturating_sub(2)
     }
 
     /// The first unknown of the window.
@@ -108,27 +108,27 @@ impl BandedAlm {
         let inv_s = 1.0 / s;
         let at = |f: usize| {
             [
-                self.u[f][0] + alpha * self.du[f][0] + self.y[f][0] * inv_s,
-                self.u[f][1] + alpha * self.du[f][1] + self.y[f][1] * inv_s,
+                self.ws.u[f][0] + alpha * self.ws.du[f][0] + self.warm.y[f][0] * inv_s,
+                self.ws.u[f][1] + alpha * self.ws.du[f][1] + self.warm.y[f][1] * inv_s,
             ]
         };
         let dist2: f64 = match &self.stages {
             StageSet::Disc(radius) => radius
                 .iter()
                 .enumerate()
-                .skip(self.window)
+                .skip(self.ws.window)
                 .map(|(f, &r)| disc_dist2(at(f), r))
                 .sum(),
             StageSet::Interval(bounds) if self.k == 1 => bounds
                 .iter()
                 .enumerate()
-                .skip(self.window)
+                .skip(self.ws.window)
                 .map(|(f, b)| interval_dist2::<1>(at(f), b))
                 .sum(),
             StageSet::Interval(bounds) => bounds
                 .iter()
                 .enumerate()
-                .skip(self.window)
+                .skip(self.ws.window)
                 .map(|(f, b)| interval_dist2::<2>(at(f), b))
                 .sum(),
         };
@@ -138,11 +138,11 @@ impl BandedAlm {
     /// The rows' part of [`BandedAlm::penalty_terms`] at `x + α·d`.
     pub(super) fn row_terms(&self, alpha: f64, lo: &[f64], hi: &[f64]) -> f64 {
         let mut value = 0.0;
-        for (k, v) in self.v.iter().enumerate() {
+        for (k, v) in self.warm.v.iter().enumerate() {
             if !self.row_in_window(k) {
                 continue;
             }
-            let h = self.hx[k] + alpha * self.hd[k];
+            let h = self.ws.hx[k] + alpha * self.ws.hd[k];
             let ss = self.sigma_row(k);
             for (j, &vj) in v.iter().enumerate() {
                 let t = Self::side(j, h, lo[k], hi[k]);
@@ -160,59 +160,59 @@ impl BandedAlm {
     /// largest multiplier change `‖y' − y‖/σ` (stages, m/s²) and `|v' −
     /// v|/σ_h` (rows, their units) the update would make.
     pub(super) fn gradient(&mut self, a0: [f64; 2], lo: &[f64], hi: &[f64]) -> (f64, f64, f64) {
-        if !self.px_current {
+        if !self.ws.px_current {
             self.apply_p(Vector::X);
-            self.px_current = true;
+            self.ws.px_current = true;
         }
         let j0 = self.window_unknown();
-        for ((g, p), c) in self.g[j0..]
+        for ((g, p), c) in self.ws.g[j0..]
             .iter_mut()
-            .zip(&self.px[j0..])
-            .zip(&self.c[j0..])
+            .zip(&self.ws.px[j0..])
+            .zip(&self.ws.c[j0..])
         {
             *g = p + c;
         }
         let s = self.sigma;
         let k = self.k;
-        let (res2, mut value) = match self.full_step.take() {
+        let (res2, mut value) = match self.ws.full_step.take() {
             // The line search's full step left u, y', I − ∂Π and the
             // active stages at this x.
             Some(done) => done,
             None => {
-                Self::accelerations(k, self.inv_dt2, &self.x, &mut self.u, self.window);
+                Self::accelerations(k, self.inv_dt2, &self.ws.x, &mut self.ws.u, self.ws.window);
                 let a0 = if k == 1 { [a0[0], 0.0] } else { a0 };
                 self.stage_values(false, |_| a0)
             }
         };
         let stage_res = res2.sqrt() / s;
         let from = self.window_output();
-        Self::add_transposed(k, self.inv_dt2, &self.y_next, &mut self.g, from);
+        Self::add_transposed(k, self.inv_dt2, &self.ws.y_next, &mut self.ws.g, from);
         let mut row_res: f64 = 0.0;
         for r in 0..self.rows.len() {
             if !self.row_in_window(r) {
                 continue;
             }
-            let h = self.rows[r].dot(&self.x);
-            self.hx[r] = h;
+            let h = self.rows[r].dot(&self.ws.x);
+            self.ws.hx[r] = h;
             let ss = self.sigma_row(r);
             let rho = self.row_penalty[r];
             let mut e = 0.0;
             for j in 0..2 {
-                let vj = self.v[r][j];
+                let vj = self.warm.v[r][j];
                 let t = Self::side(j, h, lo[r], hi[r]);
                 let vn = self.side_multiplier(r, vj, t);
                 let raw = vj + ss * t;
-                self.active[self.n + 2 * r + j] = u8::from(raw > 0.0 && raw < rho);
+                self.ws.active[self.n + 2 * r + j] = u8::from(raw > 0.0 && raw < rho);
                 value += vn * t - (vn - vj) * (vn - vj) / (2.0 * ss);
                 row_res = row_res.max((vn - vj).abs() / ss);
                 e += if j == 0 { vn } else { -vn };
             }
             if e != 0.0 {
-                self.rows[r].axpy(e, &mut self.g);
+                self.rows[r].axpy(e, &mut self.ws.g);
             }
         }
-        self.penalty_value = value;
-        let gn = self.g[j0..].iter().fold(0.0f64, |a, b| a.max(b.abs()));
+        self.ws.penalty_value = value;
+        let gn = self.ws.g[j0..].iter().fold(0.0f64, |a, b| a.max(b.abs()));
         (gn, stage_res, row_res)
     }
 
@@ -222,21 +222,21 @@ impl BandedAlm {
     fn stage_values(&mut self, trial: bool, delta: impl Fn(usize) -> [f64; 2]) -> (f64, f64) {
         let s = self.sigma;
         let u = if trial {
-            &mut self.u_trial
+            &mut self.ws.u_trial
         } else {
-            &mut self.u
+            &mut self.ws.u
         };
-        let from = self.window;
+        let from = self.ws.window;
         macro_rules! pass {
             ($k:literal, $excess:expr) => {
                 stage_pass::<$k>(
                     from,
                     u,
                     &delta,
-                    &self.y,
-                    &mut self.y_next,
-                    &mut self.jac,
-                    &mut self.active,
+                    &self.warm.y,
+                    &mut self.ws.y_next,
+                    &mut self.ws.jac,
+                    &mut self.ws.active,
                     s,
                     $excess,
                 )
@@ -255,11 +255,11 @@ impl BandedAlm {
     /// `active`: should the line search take the full step, the next
     /// gradient starts from them ([`BandedAlm::accept_full_step`]).
     pub(super) fn full_step_terms(&mut self, lo: &[f64], hi: &[f64]) -> (f64, (f64, f64)) {
-        let from = self.window;
-        self.u_trial[from..].copy_from_slice(&self.u[from..]);
-        let du = std::mem::take(&mut self.du);
+        let from = self.ws.window;
+        self.ws.u_trial[from..].copy_from_slice(&self.ws.u[from..]);
+        let du = std::mem::take(&mut self.ws.du);
         let done = self.stage_values(true, |f| du[f]);
-        self.du = du;
+        self.ws.du = du;
         (done.1 + self.row_terms(1.0, lo, hi), done)
     }
 
@@ -271,15 +271,15 @@ impl BandedAlm {
     pub(super) fn residual_cost(&self, lo: &[f64], hi: &[f64]) -> f64 {
         let s = self.sigma;
         let mut gap = 0.0;
-        for (yn, y) in self.y_next.iter().zip(&self.y) {
+        for (yn, y) in self.ws.y_next.iter().zip(&self.warm.y) {
             let (ex, ey) = (yn[0] - y[0], yn[1] - y[1]);
             let e2 = ex * ex + ey * ey;
             if e2 > 0.0 {
                 gap += (yn[0] * yn[0] + yn[1] * yn[1]).sqrt() * e2.sqrt() / s;
             }
         }
-        for (r, v) in self.v.iter().enumerate() {
-            let h = self.hx[r];
+        for (r, v) in self.warm.v.iter().enumerate() {
+            let h = self.ws.hx[r];
             let ss = self.sigma_row(r);
             for (j, &vj) in v.iter().enumerate() {
                 let t = Self::side(j, h, lo[r], hi[r]);
@@ -305,19 +305,19 @@ impl BandedAlm {
         let lower = self.kkt.lower_mut();
         let position = from / self.k;
         match self.k {
-            1 => add_stage_blocks::<1>(&self.jac, sc, w, lower, position),
-            _ => add_stage_blocks::<2>(&self.jac, sc, w, lower, position),
+            1 => add_stage_blocks::<1>(&self.ws.jac, sc, w, lower, position),
+            _ => add_stage_blocks::<2>(&self.ws.jac, sc, w, lower, position),
         }
         for r in 0..self.rows.len() {
             if !self.row_in_window(r) {
                 continue;
             }
-            let h = self.hx[r];
+            let h = self.ws.hx[r];
             let ss = self.sigma_row(r);
             let rho = self.row_penalty[r];
             let mut active = 0.0;
             for j in 0..2 {
-                let raw = self.v[r][j] + ss * Self::side(j, h, lo[r], hi[r]);
+                let raw = self.warm.v[r][j] + ss * Self::side(j, h, lo[r], hi[r]);
                 if raw > 0.0 && raw < rho {
                     active += ss;
                 }

@@ -30,22 +30,28 @@ impl BandedAlm {
         // the eliminated head's (Px + c) and (P·d) are 0).
         let (mut lin, mut curv) = (0.0, 0.0);
         let j0 = self.window_unknown();
-        let window = self.px[j0..]
+        let window = self.ws.px[j0..]
             .iter()
-            .zip(&self.c[j0..])
-            .zip(&self.d[j0..])
-            .zip(&self.pd[j0..]);
+            .zip(&self.ws.c[j0..])
+            .zip(&self.ws.d[j0..])
+            .zip(&self.ws.pd[j0..]);
         for (((p, c), d), pd) in window {
             lin += (p + c) * d;
             curv += pd * d;
         }
-        Self::accelerations(self.k, self.inv_dt2, &self.d, &mut self.du, self.window);
+        Self::accelerations(
+            self.k,
+            self.inv_dt2,
+            &self.ws.d,
+            &mut self.ws.du,
+            self.ws.window,
+        );
         for r in 0..self.rows.len() {
             if self.row_in_window(r) {
-                self.hd[r] = self.rows[r].dot(&self.d);
+                self.ws.hd[r] = self.rows[r].dot(&self.ws.d);
             }
         }
-        let base = self.penalty_value;
+        let base = self.ws.penalty_value;
         let (full, done) = self.full_step_terms(lo, hi);
         let mut alpha = 1.0;
         for _ in 0..MAX_HALVINGS {
@@ -83,8 +89,8 @@ impl BandedAlm {
     /// y‖²` and the stages' penalty; `y_next`, `jac`, `active` set by
     /// [`BandedAlm::full_step_terms`]).
     fn accept_full_step(&mut self, done: (f64, f64)) {
-        std::mem::swap(&mut self.u, &mut self.u_trial);
-        self.full_step = Some(done);
+        std::mem::swap(&mut self.ws.u, &mut self.ws.u_trial);
+        self.ws.full_step = Some(done);
     }
 
     /// `x += α·d`, and `P·x` with it from `P·d` (both by differencing,
@@ -93,7 +99,7 @@ impl BandedAlm {
     fn step(&mut self, alpha: f64) {
         self.move_x(alpha);
         let j0 = self.window_unknown();
-        for (p, pd) in self.px[j0..].iter_mut().zip(&self.pd[j0..]) {
+        for (p, pd) in self.ws.px[j0..].iter_mut().zip(&self.ws.pd[j0..]) {
             *p += alpha * pd;
         }
     }
@@ -137,8 +143,8 @@ impl BandedAlm {
         let s = self.sigma;
         let inv_s = 1.0 / s;
         let (mut d1, mut d2) = (lin + alpha * curv, curv);
-        for f in self.window..self.n {
-            let (u, du, y) = (self.u[f], self.du[f], self.y[f]);
+        for f in self.ws.window..self.n {
+            let (u, du, y) = (self.ws.u[f], self.ws.du[f], self.warm.y[f]);
             let w = [
                 u[0] + alpha * du[0] + y[0] * inv_s,
                 u[1] + alpha * du[1] + y[1] * inv_s,
@@ -157,21 +163,21 @@ impl BandedAlm {
                 d2 += s * (du[0] * jd[0] + du[1] * jd[1]);
             }
         }
-        for (r, v) in self.v.iter().enumerate() {
+        for (r, v) in self.warm.v.iter().enumerate() {
             if !self.row_in_window(r) {
                 continue;
             }
-            let h = self.hx[r] + alpha * self.hd[r];
+            let h = self.ws.hx[r] + alpha * self.ws.hd[r];
             let ss = self.sigma_row(r);
             let rho = self.row_penalty[r];
             for (j, &vj) in v.iter().enumerate() {
                 let t = Self::side(j, h, lo[r], hi[r]);
                 let vn = self.side_multiplier(r, vj, t);
                 let sign = if j == 0 { 1.0 } else { -1.0 };
-                d1 += sign * vn * self.hd[r];
+                d1 += sign * vn * self.ws.hd[r];
                 let raw = vj + ss * t;
                 if raw > 0.0 && raw < rho {
-                    d2 += ss * self.hd[r] * self.hd[r];
+                    d2 += ss * self.ws.hd[r] * self.ws.hd[r];
                 }
             }
         }

@@ -121,9 +121,9 @@ mod solve;
 mod warm_start;
 mod window;
 
-use super::FastBandedSolver;
 use super::banded::{BandedCholesky, SymBand};
 use super::bounds::Row;
+use super::fast_banded::FastBandedSolver;
 use crate::ControlError;
 
 /// Newton steps per warm solve, over all outer iterations (the default of
@@ -215,7 +215,23 @@ pub struct AlmTuning {
     /// from the saturated rollout and the multipliers that hold it
     /// (`rollout_start.rs`). Discs only.
     pub rollout_start: bool,
+    /// KKT solves of the active-set method per solve (one axis with rows:
+    /// [`super::active_set`]); beyond them the solve fails.
+    pub max_kkt_solves: usize,
+    /// One axis with rows: whether a cold solve whose plan breaks a stage
+    /// interval within its first [`FROM_REST_STAGES`] stages (the
+    /// flight's first tick, from rest) fails at once, for the interior
+    /// point. From there
+    /// the active set is far from the optimum's (a ramp of tens of rows,
+    /// the tilt held over most of the horizon): on the corner bench at
+    /// N = 200 the active-set method took 77–149 KKT solves for it,
+    /// beyond its budget.
+    pub interior_point_from_rest: bool,
 }
+
+/// Stages within which a cold plan that breaks a bound is from rest
+/// ([`AlmTuning::interior_point_from_rest`]).
+pub const FROM_REST_STAGES: usize = 4;
 
 impl Default for AlmTuning {
     fn default() -> Self {
@@ -226,6 +242,8 @@ impl Default for AlmTuning {
             max_newton_steps: MAX_NEWTON_STEPS,
             eliminate_head: true,
             rollout_start: true,
+            max_kkt_solves: super::active_set::MAX_SOLVES,
+            interior_point_from_rest: true,
         }
     }
 }
@@ -251,8 +269,136 @@ pub(super) struct RowBlock {
     pub(super) penalty: f64,
 }
 
-/// The augmented-Lagrangian solver of the constrained plan (module docs).
-/// Allocates at construction only.
+/// Which factor holds the Newton matrix of the current σ and active set
+/// (`solve.rs`): none (σ changed, or no factorisation yet this solve),
+/// the whole horizon's, or the window's ([`HeadFactor`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Factored {
+    Stale,
+    Whole,
+    Window,
+}
+
+/// The factor of the windows' Newton matrices (module docs, "The
+/// eliminated head"): its held matrix is P's on the unknowns before
+/// `p_until`, so a window's factorisation refactors its rows only;
+/// `valid`: P factored (else no window opens).
+#[derive(Debug, Clone)]
+pub(super) struct HeadFactor {
+    pub(super) factor: BandedCholesky,
+    pub(super) p_until: usize,
+    pub(super) valid: bool,
+}
+
+/// What a solve carries to the next tick (`warm_start.rs`): the stage
+/// multipliers y_f and the rows' `[upper, lower]`, and the last two
+/// solves' stage multipliers (unshifted) for [`BandedAlm::shift`]'s
+/// extrapolation, with whether `y_last` is of the solve just before.
+#[derive(Debug, Clone)]
+pub(super) struct WarmStart {
+    pub(super) y: Vec<[f64; 2]>,
+    pub(super) v: Vec<[f64; 2]>,
+    pub(super) y_last: Vec<[f64; 2]>,
+    pub(super) y_older: Vec<[f64; 2]>,
+    pub(super) y_last_valid: bool,
+}
+
+/// The scratch of one solve: rewritten by every solve, nothing in it
+/// carries to the next tick but what the accessors report.
+#[derive(Debug, Clone)]
+pub(super) struct Workspace {
+    /// Iterate, linear term, gradient, direction, P·direction, P·x.
+    pub(super) x: Vec<f64>,
+    pub(super) c: Vec<f64>,
+    pub(super) g: Vec<f64>,
+    pub(super) d: Vec<f64>,
+    pub(super) pd: Vec<f64>,
+    pub(super) px: Vec<f64>,
+    /// Whether `px` holds P·x for the current x.
+    pub(super) px_current: bool,
+    /// Per-stage u_f, u_f at the full step x + d (the line search's) and
+    /// G_f·d.
+    pub(super) u: Vec<[f64; 2]>,
+    pub(super) u_trial: Vec<[f64; 2]>,
+    pub(super) du: Vec<[f64; 2]>,
+    /// The stage multipliers' update `σ·(w_f − Π(w_f))` at x (set by
+    /// `gradient`).
+    pub(super) y_next: Vec<[f64; 2]>,
+    /// The full step's stage pass (largest `‖y' − y‖²`, the stages'
+    /// penalty), when the line search took it: the next gradient's.
+    pub(super) full_step: Option<(f64, f64)>,
+    /// Per stage `I − ∂Π_f(w_f)` at x (0 inside the set; set by the stage
+    /// pass, read by `assemble`).
+    pub(super) jac: Vec<[[f64; 2]; 2]>,
+    /// Per-row h·x and h·d.
+    pub(super) hx: Vec<f64>,
+    pub(super) hd: Vec<f64>,
+    /// Scratch of `apply_p` (one axis, n).
+    pub(super) p_work: Vec<f64>,
+    /// The Lagrangian's non-quadratic part at x (set by `gradient`).
+    pub(super) penalty_value: f64,
+    /// Which stages lie outside their set (per stage a bit per axis whose
+    /// multiplier is non-zero) and which row sides are in their penalty's
+    /// quadratic range, at x (set by `gradient`) and at the last
+    /// factorisation.
+    pub(super) active: Vec<u8>,
+    pub(super) factored_active: Vec<u8>,
+    /// The first stage of the window iterated on (0: the whole horizon;
+    /// module docs, "The eliminated head"); while it is open, the first
+    /// unknown whose steps are taken (0: all) — those before it move
+    /// once, as the window closes, by the steps' sum at the b unknowns
+    /// from `cut` on (`cut_seed`).
+    pub(super) window: usize,
+    pub(super) cut: usize,
+    pub(super) cut_seed: Vec<f64>,
+    /// The last solve's Newton steps and factorisations, the window it
+    /// opened (0: none), whether it started from the rollout, and what
+    /// the active-set method did (one axis with rows).
+    pub(super) newton_steps: usize,
+    pub(super) factorisations: usize,
+    pub(super) last_window: usize,
+    pub(super) rollout_started: bool,
+    pub(super) active_set_work: super::active_set::Work,
+}
+
+impl Workspace {
+    fn new(n: usize, size: usize, m: usize, bandwidth: usize) -> Self {
+        Self {
+            x: vec![0.0; size],
+            c: vec![0.0; size],
+            g: vec![0.0; size],
+            d: vec![0.0; size],
+            pd: vec![0.0; size],
+            px: vec![0.0; size],
+            px_current: false,
+            u: vec![[0.0; 2]; n],
+            u_trial: vec![[0.0; 2]; n],
+            du: vec![[0.0; 2]; n],
+            y_next: vec![[0.0; 2]; n],
+            full_step: None,
+            jac: vec![[[0.0; 2]; 2]; n],
+            hx: vec![0.0; m],
+            hd: vec![0.0; m],
+            p_work: vec![0.0; n],
+            penalty_value: 0.0,
+            active: vec![0; n + 2 * m],
+            factored_active: vec![0; n + 2 * m],
+            window: 0,
+            cut: 0,
+            cut_seed: vec![0.0; bandwidth],
+            newton_steps: 0,
+            factorisations: 0,
+            last_window: 0,
+            rollout_started: false,
+            active_set_work: super::active_set::Work::default(),
+        }
+    }
+}
+
+/// The augmented-Lagrangian solver of the constrained plan (module docs):
+/// the problem's data, the factors, the warm start carried between ticks
+/// ([`WarmStart`]) and one solve's scratch ([`Workspace`]). Allocates at
+/// construction only.
 #[derive(Debug, Clone)]
 pub struct BandedAlm {
     /// Axes K (1 or 2) and free outputs per axis n.
@@ -263,91 +409,30 @@ pub struct BandedAlm {
     tuning: AlmTuning,
     sigma: f64,
     axes: Vec<FastBandedSolver>,
+    /// P; the Newton matrix assembled; the whole horizon's factor, the
+    /// windows' ([`HeadFactor`]), and which holds the current matrix.
     base: SymBand,
     kkt: SymBand,
     chol: BandedCholesky,
+    head: HeadFactor,
+    factored: Factored,
+    /// The rows; per row σ scale, penalty ρ and first unknown; the blocks'
+    /// ranges (shifts).
     rows: Vec<Row>,
-    /// Per row: σ scale and penalty ρ; the blocks' ranges (shifts).
     row_scale: Vec<f64>,
     row_penalty: Vec<f64>,
+    row_first: Vec<usize>,
     blocks: Vec<Range<usize>>,
-    /// Stage multipliers y_f, and their update `σ·(w_f − Π(w_f))` at x
-    /// (set by `gradient`).
-    y: Vec<[f64; 2]>,
-    y_next: Vec<[f64; 2]>,
-    /// Row multipliers `[upper, lower]` per row.
-    v: Vec<[f64; 2]>,
-    /// Iterate, linear term, gradient, direction, P·direction, P·x.
-    x: Vec<f64>,
-    c: Vec<f64>,
-    g: Vec<f64>,
-    d: Vec<f64>,
-    pd: Vec<f64>,
-    px: Vec<f64>,
-    /// Per-stage u_f and G_f·d.
-    u: Vec<[f64; 2]>,
-    /// Per-stage u_f at the full step x + d (the line search's).
-    u_trial: Vec<[f64; 2]>,
-    /// The full step's stage pass (largest `‖y' − y‖²`, the stages'
-    /// penalty), when the line search took it: the next gradient's.
-    full_step: Option<(f64, f64)>,
-    /// Per stage `I − ∂Π_f(w_f)` at x (0 inside the set; set by the stage
-    /// pass, read by `assemble`).
-    jac: Vec<[[f64; 2]; 2]>,
-    du: Vec<[f64; 2]>,
-    /// Per-row h·x and h·d.
-    hx: Vec<f64>,
-    hd: Vec<f64>,
-    /// Scratch of `apply_p` (one axis, n).
-    p_work: Vec<f64>,
-    newton_steps: usize,
-    /// Factorisations of the last solve.
-    factorisations: usize,
-    /// Whether `px` holds P·x for the current x.
-    px_current: bool,
     /// Largest diagonal entry of P.
     diag_max: f64,
-    /// The Lagrangian's non-quadratic part at x (set by `gradient`).
-    penalty_value: f64,
-    /// Which stages lie outside their set (per stage a bit per axis whose
-    /// multiplier is non-zero) and which row sides are in their penalty's
-    /// quadratic range, at x (set by `gradient`) and at the last
-    /// factorisation.
-    active: Vec<u8>,
-    factored_active: Vec<u8>,
-    /// The stage multipliers of the last solve and of the one before
-    /// (unshifted), for [`BandedAlm::shift`]'s extrapolation, and whether
-    /// `y_last` is of the solve just before the current one.
-    y_last: Vec<[f64; 2]>,
-    y_older: Vec<[f64; 2]>,
-    y_last_valid: bool,
-    /// The first stage of the window iterated on (0: the whole horizon;
-    /// module docs, "The eliminated head"), and per row its first unknown.
-    window: usize,
-    row_first: Vec<usize>,
-    /// The factor of the windows' Newton matrices: its held matrix is P's
-    /// on the unknowns before `head_base_until`, so a window's
-    /// factorisation refactors its rows only; `head_valid` (else no window
-    /// opens); `head_factored`: the last factorisation was into it.
-    head: BandedCholesky,
-    head_base_until: usize,
-    head_valid: bool,
-    head_factored: bool,
-    /// While a window is open: the first unknown whose steps are taken
-    /// (0: all); those before it move once, as the window closes, by the
-    /// steps' sum at the b unknowns from `cut` on (`cut_seed`).
-    cut: usize,
-    cut_seed: Vec<f64>,
+    warm: WarmStart,
+    ws: Workspace,
     /// Tests: every step's back substitution over the whole horizon.
     #[cfg(test)]
     no_cut: bool,
-    /// The window the last solve opened (0: none).
-    last_window: usize,
-    /// Whether the last solve started from the rollout (`rollout_start.rs`).
-    rollout_started: bool,
-    /// The active-set polish (`polish.rs`): one axis with intervals and
+    /// The active-set method (`polish.rs`): one axis with intervals and
     /// rows.
-    polish: Option<polish::Polish>,
+    polish: Option<super::active_set::ActiveSet>,
 }
 
 impl BandedAlm {
@@ -412,21 +497,12 @@ impl BandedAlm {
         let mut head = BandedCholesky::new(size, bandwidth);
         let head_valid = head.refactor_taking(&mut base.clone()).is_ok();
         let m = rows.len();
-        let polish = (k == 1 && m > 0 && matches!(stages, StageSet::Interval(_))).then(|| {
-            polish::Polish::new(
-                n,
-                base.bandwidth(),
-                diag_max,
-                &rows,
-                &ranges,
-                1.0 / (dt * dt),
-            )
-        });
+        let polish_on = k == 1 && m > 0 && matches!(stages, StageSet::Interval(_));
         let row_first = rows
             .iter()
             .map(|r| r.idx[..r.len].iter().copied().min().unwrap_or(0))
             .collect();
-        Self {
+        let mut alm = Self {
             k,
             n,
             inv_dt2: 1.0 / (dt * dt),
@@ -437,51 +513,34 @@ impl BandedAlm {
             kkt: base.clone(),
             base,
             chol: BandedCholesky::new(size, bandwidth),
+            head: HeadFactor {
+                factor: head,
+                p_until: size,
+                valid: head_valid,
+            },
+            factored: Factored::Stale,
             rows,
             row_scale,
             row_penalty,
-            blocks: ranges,
-            y: vec![[0.0; 2]; n],
-            y_next: vec![[0.0; 2]; n],
-            v: vec![[0.0; 2]; m],
-            x: vec![0.0; size],
-            c: vec![0.0; size],
-            g: vec![0.0; size],
-            d: vec![0.0; size],
-            pd: vec![0.0; size],
-            px: vec![0.0; size],
-            u: vec![[0.0; 2]; n],
-            u_trial: vec![[0.0; 2]; n],
-            full_step: None,
-            jac: vec![[[0.0; 2]; 2]; n],
-            du: vec![[0.0; 2]; n],
-            hx: vec![0.0; m],
-            hd: vec![0.0; m],
-            p_work: vec![0.0; n],
-            newton_steps: 0,
-            factorisations: 0,
-            px_current: false,
-            diag_max,
-            penalty_value: 0.0,
-            active: vec![0; n + 2 * m],
-            factored_active: vec![0; n + 2 * m],
-            y_last: vec![[0.0; 2]; n],
-            y_older: vec![[0.0; 2]; n],
-            y_last_valid: false,
-            window: 0,
             row_first,
-            head,
-            head_base_until: size,
-            cut: 0,
-            cut_seed: vec![0.0; bandwidth],
+            blocks: ranges,
+            diag_max,
+            warm: WarmStart {
+                y: vec![[0.0; 2]; n],
+                v: vec![[0.0; 2]; m],
+                y_last: vec![[0.0; 2]; n],
+                y_older: vec![[0.0; 2]; n],
+                y_last_valid: false,
+            },
+            ws: Workspace::new(n, size, m, bandwidth),
             #[cfg(test)]
             no_cut: false,
-            head_valid,
-            head_factored: false,
-            last_window: 0,
-            rollout_started: false,
-            polish,
+            polish: None,
+        };
+        if polish_on {
+            alm.polish = Some(alm.new_polish());
         }
+        alm
     }
 
     /// Index of `p_{axis, f}` in this solver's unknowns.
@@ -494,21 +553,33 @@ impl BandedAlm {
         &self.axes[i]
     }
 
+    /// Whether this solver's problems go to the active-set method (one
+    /// axis with intervals and rows).
+    pub fn has_active_set(&self) -> bool {
+        self.polish.is_some()
+    }
+
+    /// What the active-set method did in the last solve (one axis with
+    /// rows; zero otherwise).
+    pub fn active_set_work(&self) -> super::active_set::Work {
+        self.ws.active_set_work
+    }
+
     /// Newton steps of the last solve.
     pub fn newton_steps(&self) -> usize {
-        self.newton_steps
+        self.ws.newton_steps
     }
 
     /// The first stage of the window the last solve iterated on before the
     /// whole horizon (0: none; module docs, "The eliminated head").
     pub fn last_window(&self) -> usize {
-        self.last_window
+        self.ws.last_window
     }
 
     /// Whether the last solve started from the saturated rollout (module
     /// docs, "The rollout start"; `rollout_start.rs`).
     pub fn rollout_started(&self) -> bool {
-        self.rollout_started
+        self.ws.rollout_started
     }
 
     /// Turns the window's cut back substitution off (tests: the same solve
@@ -527,20 +598,20 @@ impl BandedAlm {
     /// Factorisations of the last solve (Newton steps in the local phase
     /// reuse the last factor).
     pub fn factorisations(&self) -> usize {
-        self.factorisations
+        self.ws.factorisations
     }
 
     /// The deviation `p_{axis, f}` of the current iterate.
     pub fn p(&self, axis: usize, f: usize) -> f64 {
-        self.x[self.index(axis, f)]
+        self.ws.x[self.index(axis, f)]
     }
 
     /// Sets the primal start from `p` (per axis, length n).
     pub fn set_start(&mut self, p: &[&[f64]]) {
-        self.px_current = false;
+        self.ws.px_current = false;
         for (i, p) in p.iter().enumerate().take(self.k) {
             for (f, &v) in p.iter().enumerate().take(self.n) {
-                self.x[self.k * f + i] = v;
+                self.ws.x[self.k * f + i] = v;
             }
         }
     }
@@ -582,7 +653,10 @@ impl BandedAlm {
                 r.copy_from_slice(radius);
                 Ok(())
             }
-            StageSet::Interval(_) => Err(super::invalid("radius", "a disc's, not an interval's")),
+            StageSet::Interval(_) => Err(super::problem::invalid(
+                "radius",
+                "a disc's, not an interval's",
+            )),
         }
     }
 
@@ -609,6 +683,8 @@ pub(crate) const COLD_TUNING: AlmTuning = AlmTuning {
     max_newton_steps: 1000,
     eliminate_head: true,
     rollout_start: true,
+    max_kkt_solves: 1000,
+    interior_point_from_rest: false,
 };
 
 #[cfg(test)]
@@ -636,32 +712,32 @@ mod tests {
         // Solve k − 1 (stage f at 10·f), then its shift: nothing to
         // extrapolate from yet.
         let older: Vec<[f64; 2]> = (0..n).map(|f| [10.0 * f as f64, -1.0]).collect();
-        alm.y.copy_from_slice(&older);
+        alm.warm.y.copy_from_slice(&older);
         alm.shift();
-        assert_eq!(alm.y[0], older[1]);
-        assert_eq!(alm.y[n - 1], older[n - 1]);
+        assert_eq!(alm.warm.y[0], older[1]);
+        assert_eq!(alm.warm.y[n - 1], older[n - 1]);
         // Solve k: stage f − 1 now carries what stage f did, changed.
         let mut last: Vec<[f64; 2]> = (0..n)
             .map(|f| [10.0 * (f + 1) as f64 + 1.0, -2.0])
             .collect();
         last[3] = [0.0; 2]; // inactive in solve k
         last[4] = [5.0, 3.0]; // the prediction (−40, 7) flips both axes
-        alm.y.copy_from_slice(&last);
+        alm.warm.y.copy_from_slice(&last);
         alm.shift();
         // f = 0: 2·last[1] − older[2] = 2·(21, −2) − (20, −1) = (22, −3).
-        assert_eq!(alm.y[0], [22.0, -3.0]);
-        assert_eq!(alm.y[1], [2.0 * 31.0 - 30.0, -3.0]);
+        assert_eq!(alm.warm.y[0], [22.0, -3.0]);
+        assert_eq!(alm.warm.y[1], [2.0 * 31.0 - 30.0, -3.0]);
         // last[3] = 0, and last[4]'s prediction flips: shifted only.
-        assert_eq!(alm.y[2], last[3]);
-        assert_eq!(alm.y[3], last[4]);
+        assert_eq!(alm.warm.y[2], last[3]);
+        assert_eq!(alm.warm.y[3], last[4]);
         // The last stages have no partner two solves back.
-        assert_eq!(alm.y[4], last[5]);
-        assert_eq!(alm.y[5], last[5]);
+        assert_eq!(alm.warm.y[4], last[5]);
+        assert_eq!(alm.warm.y[5], last[5]);
         // A tick without a solve: the next shift does not extrapolate.
         alm.age();
-        let after = alm.y.clone();
+        let after = alm.warm.y.clone();
         alm.shift();
-        assert_eq!(alm.y[0], after[1]);
-        assert_eq!(alm.y[1], after[2]);
+        assert_eq!(alm.warm.y[0], after[1]);
+        assert_eq!(alm.warm.y[1], after[2]);
     }
 }

@@ -79,8 +79,8 @@ impl BandedAlm {
         let dt2 = 1.0 / self.inv_dt2;
         let dt = dt2.sqrt();
         let outside = |u: [f64; 2], r: f64| (u[0] + a0[0]).hypot(u[1] + a0[1]) > r;
-        Self::accelerations(2, self.inv_dt2, &self.x, &mut self.u, 0);
-        if !(0..n.min(ROLLOUT_EARLY)).any(|f| outside(self.u[f], radius[f])) {
+        Self::accelerations(2, self.inv_dt2, &self.ws.x, &mut self.ws.u, 0);
+        if !(0..n.min(ROLLOUT_EARLY)).any(|f| outside(self.ws.u[f], radius[f])) {
             return false;
         }
         // The rollout into d (scratch until the solve's first step), its
@@ -89,7 +89,7 @@ impl BandedAlm {
         let (mut q1, mut q2) = ([0.0; 2], [0.0; 2]);
         let (mut p1, mut p2) = ([0.0; 2], [0.0; 2]);
         for (f, &r) in radius.iter().enumerate().take(n) {
-            let q0 = [self.x[2 * f], self.x[2 * f + 1]];
+            let q0 = [self.ws.x[2 * f], self.ws.x[2 * f + 1]];
             let mut w = [0.0; 2];
             for i in 0..2 {
                 let free = (q0[i] - 2.0 * q1[i] + q2[i]) * self.inv_dt2 + a0[i];
@@ -104,25 +104,25 @@ impl BandedAlm {
             let mut p0 = [0.0; 2];
             for i in 0..2 {
                 p0[i] = 2.0 * p1[i] - p2[i] + dt2 * (w[i] - a0[i]);
-                self.d[2 * f + i] = p0[i];
+                self.ws.d[2 * f + i] = p0[i];
             }
             (p2, p1, q2, q1) = (p1, p0, q1, q0);
         }
         self.apply_p(Vector::D);
-        Self::accelerations(2, self.inv_dt2, &self.d, &mut self.u, 0);
+        Self::accelerations(2, self.inv_dt2, &self.ws.d, &mut self.ws.u, 0);
         // Gᵀy = −(P·x + c), (Gᵀy)_f = (y_f − 2y_{f+1} + y_{f+2})/δt².
         let (mut y1, mut y2) = ([0.0; 2], [0.0; 2]);
         for f in (0..n).rev() {
             let mut y = [0.0; 2];
             for i in 0..2 {
                 let j = 2 * f + i;
-                y[i] = -dt2 * (self.pd[j] + self.c[j]) + 2.0 * y1[i] - y2[i];
+                y[i] = -dt2 * (self.ws.pd[j] + self.ws.c[j]) + 2.0 * y1[i] - y2[i];
             }
             y2 = y1;
             y1 = y;
-            let u = [self.u[f][0] + a0[0], self.u[f][1] + a0[1]];
+            let u = [self.ws.u[f][0] + a0[0], self.ws.u[f][1] + a0[1]];
             let norm = u[0].hypot(u[1]);
-            self.y_next[f] = if norm >= radius[f] * (1.0 - 1e-9) && norm > 0.0 {
+            self.ws.y_next[f] = if norm >= radius[f] * (1.0 - 1e-9) && norm > 0.0 {
                 let m = ((y[0] * u[0] + y[1] * u[1]) / norm).max(0.0);
                 [m * u[0] / norm, m * u[1] / norm]
             } else {
@@ -130,13 +130,13 @@ impl BandedAlm {
             };
         }
         let finite = |v: &[f64]| v.iter().all(|v| v.is_finite());
-        if !(finite(&self.d) && finite(&self.pd) && finite(self.y_next.as_flattened())) {
+        if !(finite(&self.ws.d) && finite(&self.ws.pd) && finite(self.ws.y_next.as_flattened())) {
             return false;
         }
-        self.x.copy_from_slice(&self.d);
-        self.px.copy_from_slice(&self.pd);
-        self.px_current = true;
-        self.y.copy_from_slice(&self.y_next);
+        self.ws.x.copy_from_slice(&self.ws.d);
+        self.ws.px.copy_from_slice(&self.ws.pd);
+        self.ws.px_current = true;
+        self.warm.y.copy_from_slice(&self.ws.y_next);
         true
     }
 }

