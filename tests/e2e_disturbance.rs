@@ -24,6 +24,7 @@ fn config() -> String {
     let sitl = "[sitl]\nplant = \"spatial\"\nhover_thrust = 0.4\nmass_factor = 0.9\nstart = [0.0, 0.0, -10.0]";
     format!(
         r#"
+{realtime}
 [mission]
 start = "path"
 path = [[0.0, 0.0, -10.0], [10.0, 0.0, -10.0]]
@@ -37,7 +38,8 @@ tlog = false
 [controller.disturbance]
 enabled = true
 {SPATIAL_VEHICLE}{sitl}
-"#
+"#,
+        realtime = realtime_if_granted(),
     )
 }
 

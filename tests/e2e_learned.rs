@@ -51,6 +51,7 @@ fn config(vehicle: &str, extra: &str, aero: bool) -> String {
     };
     format!(
         r#"
+{realtime}
 {vehicle}
 {extra}
 [logging]
@@ -71,7 +72,8 @@ rate_hz = 20.0
 fields = "pva"
 start_after_s = 1.0
 duration_s = {STREAM_S}
-"#
+"#,
+        realtime = realtime_if_granted(),
     )
 }
 

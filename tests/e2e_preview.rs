@@ -73,8 +73,12 @@ impl Form {
         } else {
             "sender"
         };
+        // The daemon as deployed (SCHED_FIFO where granted); the anchor is
+        // the SITL's own loop, in the plant's step.
+        let realtime = if anchor { "" } else { realtime_if_granted() };
         format!(
             r#"
+{realtime}
 [vehicle]
 max_yaw_rate_deg_s = 90.0
 [stream]

@@ -396,6 +396,42 @@ pub fn fly_in_process(name: &str, config_text: &str, fly: Duration) -> Flight {
     fly_in_process_until(name, config_text, end, |_| false)
 }
 
+/// The `[realtime]` table of a flight judged to centimetres: the control
+/// thread at SCHED_FIFO 50 (its link threads at 49), as the daemon is
+/// deployed on a companion computer that does other work
+/// (docs/deployment.md), when this machine grants it (root or
+/// `CAP_SYS_NICE` with `RLIMIT_RTPRIO`); empty where it does not, and said
+/// once. Without it two busy loops on two cores delay the daemon's ticks by
+/// up to 50 ms (its own records' `jitter_us`), and a centimetre budget then
+/// judges the scheduler, not the controller.
+#[allow(dead_code)]
+pub fn realtime_if_granted() -> &'static str {
+    static GRANTED: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    let granted = *GRANTED.get_or_init(|| {
+        let probe = dflat_daemon::realtime::RealtimeConfig {
+            fifo_priority: 1,
+            ..Default::default()
+        };
+        let granted = std::thread::spawn(move || {
+            dflat_daemon::realtime::apply_to_current_thread(&probe).is_ok()
+        })
+        .join()
+        .unwrap_or(false);
+        if !granted {
+            eprintln!(
+                "realtime: SCHED_FIFO not granted here; the flight runs on the normal \
+                 scheduler (its figures then depend on this machine's load)"
+            );
+        }
+        granted
+    });
+    if granted {
+        "[realtime]\nfifo_priority = 50\n"
+    } else {
+        ""
+    }
+}
+
 /// When [`fly_in_process_until`] ends a flight: `fly` after the daemon's
 /// first attitude target, `cap` after the start, or `settle` after its
 /// condition first held, whichever comes first.

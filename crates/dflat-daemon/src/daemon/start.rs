@@ -428,7 +428,10 @@ mod tests {
         assert!(!flight_files(&dir).is_empty());
         drop(records);
         tokio::time::sleep(std::time::Duration::from_millis(50)).await;
-        assert!(!flight_files(&dir).is_empty(), "kept records are not deleted");
+        assert!(
+            !flight_files(&dir).is_empty(),
+            "kept records are not deleted"
+        );
         let _ = std::fs::remove_dir_all(&dir);
     }
 }
