@@ -59,7 +59,7 @@ const TILT_RATE_NEWTON_STEPS: usize = 20;
 
 impl BoxAlmSolver {
     /// Builds the solver for horizon N ≥ 3, weights `(q, r, δt)` as
-    /// [`FastBandedSolver::with_smoothness`], the bounds and the
+    /// [`FastBandedSolver::with_smoothness`](crate::optimise::FastBandedSolver::with_smoothness), the bounds and the
     /// smoothness term, and whether to warm-start.
     pub fn new(
         horizon: usize,
@@ -219,7 +219,7 @@ impl BoxAlmSolver {
         self.alm.reset_multipliers();
     }
 
-    /// Solves with the bounds; arguments as [`FastBandedSolver::solve_problem`],
+    /// Solves with the bounds; arguments as [`FastBandedSolver::solve_problem`](crate::optimise::FastBandedSolver::solve_problem),
     /// `plan` holding the start on entry (the fast path's plan). On an
     /// error `plan` is unchanged. Errors: wrong lengths, infeasible data,
     /// and [`ControlError::Solver`] when the method does not converge.

@@ -397,7 +397,7 @@ impl Workspace {
 
 /// The augmented-Lagrangian solver of the constrained plan (module docs):
 /// the problem's data, the factors, the warm start carried between ticks
-/// ([`WarmStart`]) and one solve's scratch ([`Workspace`]). Allocates at
+/// (`WarmStart`) and one solve's scratch (`Workspace`). Allocates at
 /// construction only.
 #[derive(Debug, Clone)]
 pub struct BandedAlm {
