@@ -68,16 +68,7 @@ fn aero_residual() -> LearnedResidual {
             thrust_min: 9.0,
             thrust_max: 14.0,
         },
-        validation: Validation {
-            one_step_parametric_m: 0.0,
-            one_step_learned_m: 0.0,
-            horizon_s: 0.5,
-            horizon_parametric_m: 0.0,
-            horizon_learned_m: 0.0,
-            samples: 0,
-            acceleration_parametric: 0.0,
-            acceleration_learned: 0.0,
-        },
+        validation: Validation::unmeasured(0.5),
         seconds: 0.0,
     }
 }

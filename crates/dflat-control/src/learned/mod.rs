@@ -168,6 +168,23 @@ pub struct Validation {
     pub acceleration_learned: f64,
 }
 
+impl Validation {
+    /// Nothing measured yet (every error and count zero) over a horizon of
+    /// `horizon_s` \[s\]: what a model carries before its held-out check.
+    pub fn unmeasured(horizon_s: f64) -> Self {
+        Self {
+            one_step_parametric_m: 0.0,
+            one_step_learned_m: 0.0,
+            horizon_s,
+            horizon_parametric_m: 0.0,
+            horizon_learned_m: 0.0,
+            samples: 0,
+            acceleration_parametric: 0.0,
+            acceleration_learned: 0.0,
+        }
+    }
+}
+
 /// A learned residual as stored in its file (TOML): versioned, with the
 /// `[vehicle]` table it was learned with and the support of its data.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -225,27 +225,35 @@ fn the_funnel_keeps_rate_and_acceleration_bounds_feasible() {
     );
 }
 
+/// Horizon and weights `(q, r)` of the rate-limited 10 m step from rest.
+const STEP_HORIZON: usize = 100;
+const STEP_WEIGHTS: (f64, f64) = (1.0, 0.003);
+
+/// The bounds of the rate-limited step: tilt-rate rows of 2° a step
+/// (κ 10), with an acceleration interval `±a_max` when given.
+fn step_bounds(a_max: Option<f64>) -> AxisBounds {
+    AxisBounds {
+        acceleration: a_max.map(|a| [-a, a]),
+        speed: None,
+        tilt_rate: Some(TiltRate {
+            step: 2f64.to_radians(),
+            kappa: 10.0,
+            gain: 1.0,
+            gravity: G,
+        }),
+        drag: 0.0,
+    }
+}
+
 /// The interior point's plan and row multipliers, handed to the
 /// augmented Lagrangian ([`BoxAlmSolver::accept_plan`], what the cascade
 /// does after a fallback), are a start it finishes from in a few Newton
 /// steps, at the same plan: one fallback does not make the next.
 #[test]
 fn the_interior_points_duals_start_the_augmented_lagrangian() {
-    let horizon = 100;
-    let (q, r) = (1.0, 0.003);
-    let rate = TiltRate {
-        step: 2f64.to_radians(),
-        kappa: 10.0,
-        gain: 1.0,
-        gravity: G,
-    };
+    let (horizon, (q, r)) = (STEP_HORIZON, STEP_WEIGHTS);
     for a_max in [None, Some(3.0)] {
-        let bounds = AxisBounds {
-            acceleration: a_max.map(|a| [-a, a]),
-            speed: None,
-            tilt_rate: Some(rate),
-            drag: 0.0,
-        };
+        let bounds = step_bounds(a_max);
         let smoothness = Smoothness::default();
         let fixed = [0.0, 0.0, 0.0];
         let reference = vec![10.0; horizon + 1];
@@ -308,21 +316,9 @@ fn the_interior_points_duals_start_the_augmented_lagrangian() {
 /// rest goes to the interior point (`AlmTuning::interior_point_from_rest`).
 #[test]
 fn a_cold_rate_limited_solve_ends_in_the_active_set() {
-    let horizon = 100;
-    let (q, r) = (1.0, 0.003);
-    let rate = TiltRate {
-        step: 2f64.to_radians(),
-        kappa: 10.0,
-        gain: 1.0,
-        gravity: G,
-    };
+    let (horizon, (q, r)) = (STEP_HORIZON, STEP_WEIGHTS);
     for a_max in [None, Some(3.0)] {
-        let bounds = AxisBounds {
-            acceleration: a_max.map(|a| [-a, a]),
-            speed: None,
-            tilt_rate: Some(rate),
-            drag: 0.0,
-        };
+        let bounds = step_bounds(a_max);
         let smoothness = Smoothness::default();
         let fixed = [0.0, 0.0, 0.0];
         let reference = vec![10.0; horizon + 1];
@@ -378,7 +374,10 @@ fn a_cold_rate_limited_solve_ends_in_the_active_set() {
         for (j, (g, w)) in got.iter().zip(&want).take(11).enumerate() {
             assert!((g - w).abs() <= 1e-5, "{a_max:?}: y_{j}: {g} vs {w}");
         }
-        assert!(!rate.violated_by(&got, sent, DT), "{a_max:?}: rows broken");
+        assert!(
+            !bounds.tilt_rate.unwrap().violated_by(&got, sent, DT),
+            "{a_max:?}: rows broken"
+        );
     }
 }
 

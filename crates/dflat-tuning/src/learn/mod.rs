@@ -363,16 +363,7 @@ fn residual_file(
         lambda,
         weights,
         support,
-        validation: Validation {
-            one_step_parametric_m: 0.0,
-            one_step_learned_m: 0.0,
-            horizon_s: HORIZON_S,
-            horizon_parametric_m: 0.0,
-            horizon_learned_m: 0.0,
-            samples: 0,
-            acceleration_parametric: 0.0,
-            acceleration_learned: 0.0,
-        },
+        validation: Validation::unmeasured(HORIZON_S),
         seconds: 0.0,
     }
 }
