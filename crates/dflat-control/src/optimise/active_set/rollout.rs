@@ -21,7 +21,9 @@ impl ActiveSet {
             self.refine(prob, p_times)?;
             return Ok(true);
         }
-        self.rollout_guess();
+        if !self.interior_guess(prob)? {
+            self.rollout_guess();
+        }
         Ok(false)
     }
 

@@ -243,7 +243,7 @@ impl Default for AlmTuning {
             eliminate_head: true,
             rollout_start: true,
             max_kkt_solves: super::active_set::MAX_SOLVES,
-            interior_point_from_rest: true,
+            interior_point_from_rest: false,
         }
     }
 }
