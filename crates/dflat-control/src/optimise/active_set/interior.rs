@@ -22,6 +22,7 @@
 //! multiplier z ≥ 0.
 
 use super::super::banded::{BandedCholesky, SymBand};
+use super::kkt::Con;
 use super::{ActiveSet, Problem, Side};
 use crate::ControlError;
 
@@ -44,20 +45,25 @@ const PRIMAL_TOLERANCE: f64 = 1e-8;
 /// A side is in the working set when its barrier term `(z/s)·w²aaᵀ`,
 /// relative to P's largest diagonal entry, exceeds this.
 const ACTIVE_RATIO: f64 = 1.0;
+/// Entries past the last output in the iterate's vectors: every
+/// constraint is read as five coefficients (zero past its own), so the
+/// loops have a fixed length.
+const PAD: usize = 4;
 
 /// Storage of the condensed interior point (allocated with the active
 /// set). Per constraint `id`, its sides at `2·id` (upper) and `2·id + 1`
-/// (lower).
+/// (lower); a side whose bound is infinite has `on` 0 and every term of
+/// it is multiplied by that (no branches in the loops).
 #[derive(Debug, Clone)]
 pub(super) struct Interior {
     /// The Newton matrix and its factor (half-bandwidth: P's and the
     /// constraints' reach).
     m: SymBand,
     chol: BandedCholesky,
-    /// Per side: whether it is finite, β, slack, multiplier, their
-    /// inverses, primal residual, complementarity right-hand side and
-    /// steps.
-    on: Vec<bool>,
+    /// Per side: 1 where its bound is finite (else 0), β, slack,
+    /// multiplier, their inverses (0 where off), primal residual,
+    /// complementarity right-hand side and steps.
+    on: Vec<f64>,
     beta: Vec<f64>,
     s: Vec<f64>,
     z: Vec<f64>,
@@ -67,26 +73,45 @@ pub(super) struct Interior {
     rc: Vec<f64>,
     ds: Vec<f64>,
     dz: Vec<f64>,
-    /// The iterate, its step, the dual residual and P·p.
+    /// The iterate, its step, the dual residual (n + [`PAD`]) and P·p (n).
     p: Vec<f64>,
     dp: Vec<f64>,
     rd: Vec<f64>,
     px: Vec<f64>,
+    /// The constraints by output (the transpose, for gathers): output f's
+    /// entries `col[col_start[f]..col_start[f + 1]]`, each the
+    /// constraint and its scaled coefficient `w·a_k` on p_f.
+    col_start: Vec<usize>,
+    col: Vec<(usize, f64)>,
+    /// Per constraint, the scalar a gather multiplies its column by.
+    t: Vec<f64>,
     /// Finite sides.
     sides: usize,
-    /// Iterations of the last guess.
-    iterations: usize,
 }
 
 impl Interior {
-    /// Storage for n outputs, `m` constraints and the Newton matrix's
+    /// Storage for n outputs, the constraints and the Newton matrix's
     /// half-bandwidth `band`.
-    pub(super) fn new(n: usize, m: usize, band: usize) -> Self {
+    pub(super) fn new(n: usize, cons: &[Con], band: usize) -> Self {
+        let m = cons.len();
         let per_side = || vec![0.0; 2 * m];
+        let mut cols = vec![Vec::new(); n];
+        for (id, c) in cons.iter().enumerate() {
+            for k in 0..c.len {
+                cols[c.first + k].push((id, c.w * c.coef[k]));
+            }
+        }
+        let mut col_start = Vec::with_capacity(n + 1);
+        let mut col = Vec::new();
+        for c in cols {
+            col_start.push(col.len());
+            col.extend(c);
+        }
+        col_start.push(col.len());
         Self {
             m: SymBand::zeros(n, band),
             chol: BandedCholesky::new(n, band),
-            on: vec![false; 2 * m],
+            on: per_side(),
             beta: per_side(),
             s: per_side(),
             z: per_side(),
@@ -96,18 +121,15 @@ impl Interior {
             rc: per_side(),
             ds: per_side(),
             dz: per_side(),
-            p: vec![0.0; n],
-            dp: vec![0.0; n],
-            rd: vec![0.0; n],
+            p: vec![0.0; n + PAD],
+            dp: vec![0.0; n + PAD],
+            rd: vec![0.0; n + PAD],
             px: vec![0.0; n],
+            col_start,
+            col,
+            t: vec![0.0; m],
             sides: 0,
-            iterations: 0,
         }
-    }
-
-    /// Iterations of the last guess.
-    pub(super) fn iterations(&self) -> usize {
-        self.iterations
     }
 
     /// The start from the gaps `s = β − ã·p` held in `s`: floored at
@@ -118,17 +140,11 @@ impl Interior {
             .s
             .iter()
             .zip(&self.on)
-            .filter(|(_, on)| **on)
-            .fold(0.0f64, |a, (g, _)| a.max(g.abs()));
+            .fold(0.0f64, |a, (g, on)| a.max(on * g.abs()));
         let theta = (START_FLOOR * largest).max(1e-12);
-        for k in 0..self.s.len() {
-            if self.on[k] {
-                self.s[k] = self.s[k].max(theta);
-                self.z[k] = theta * theta / self.s[k];
-            } else {
-                self.s[k] = 1.0;
-                self.z[k] = 0.0;
-            }
+        for ((s, z), on) in self.s.iter_mut().zip(&mut self.z).zip(&self.on) {
+            *s = if *on > 0.0 { s.max(theta) } else { 1.0 };
+            *z = on * theta * theta / *s;
         }
         theta * theta
     }
@@ -136,13 +152,45 @@ impl Interior {
     /// The largest step in (0, 1] that keeps every slack and multiplier
     /// positive, times `fraction`.
     fn step_to_boundary(&self, fraction: f64) -> f64 {
-        let mut worst = 1.0f64;
-        for k in 0..self.s.len() {
-            worst = worst
+        let mut worst = [1.0f64; 4];
+        let chunks = self.s.len() / 4 * 4;
+        for k0 in (0..chunks).step_by(4) {
+            for (j, w) in worst.iter_mut().enumerate() {
+                let k = k0 + j;
+                *w = w
+                    .max(-self.ds[k] * self.inv_s[k])
+                    .max(-self.dz[k] * self.inv_z[k]);
+            }
+        }
+        for k in chunks..self.s.len() {
+            worst[0] = worst[0]
                 .max(-self.ds[k] * self.inv_s[k])
                 .max(-self.dz[k] * self.inv_z[k]);
         }
+        let worst = worst.iter().fold(1.0f64, |a, w| a.max(*w));
         (fraction / worst).min(1.0)
+    }
+}
+
+/// `a·p` over a constraint's five coefficients (p padded).
+#[inline(always)]
+fn dot5(c: &Con, p: &[f64]) -> f64 {
+    let p = &p[c.first..c.first + 5];
+    c.coef[0] * p[0] + c.coef[1] * p[1] + c.coef[2] * p[2] + c.coef[3] * p[3] + c.coef[4] * p[4]
+}
+
+impl Interior {
+    /// `out_f += Σ_id w·a_{id,f}·t_id` for every output f: a gather by
+    /// output (scattering each constraint's five entries instead makes
+    /// overlapping vector stores, and their loads stall).
+    fn gather_add(&self, out: &mut [f64]) {
+        for (f, o) in out.iter_mut().enumerate().take(self.col_start.len() - 1) {
+            let mut acc = 0.0;
+            for &(id, wa) in &self.col[self.col_start[f]..self.col_start[f + 1]] {
+                acc += wa * self.t[id];
+            }
+            *o += acc;
+        }
     }
 }
 
@@ -152,22 +200,23 @@ impl ActiveSet {
     /// (nothing set) when it does not converge.
     pub(super) fn interior_guess(&mut self, prob: &Problem<'_>) -> Result<bool, ControlError> {
         let ip = &mut self.interior;
-        ip.p.copy_from_slice(&self.x);
-        ip.iterations = 0;
+        ip.p[..self.n].copy_from_slice(&self.x);
         ip.sides = 0;
         let mut beta_scale = 0.0f64;
         for (id, c) in self.cons.iter().enumerate() {
-            let v = c.w * c.dot(&ip.p);
-            for side in 0..2 {
+            let v = c.w * dot5(c, &ip.p);
+            // The upper side holds w·a·p ≤ w·hi, the lower −w·a·p ≤ −w·lo.
+            for (side, sign) in [(0, 1.0), (1, -1.0)] {
                 let k = 2 * id + side;
                 let b = self.bound[id][1 - side];
-                ip.on[k] = b.is_finite();
-                if ip.on[k] {
-                    ip.beta[k] = SIGN[side] * c.w * b;
+                if b.is_finite() {
+                    ip.on[k] = 1.0;
+                    ip.beta[k] = sign * c.w * b;
                     beta_scale = beta_scale.max(ip.beta[k].abs());
-                    ip.s[k] = ip.beta[k] - SIGN[side] * v;
+                    ip.s[k] = ip.beta[k] - sign * v;
                     ip.sides += 1;
                 } else {
+                    ip.on[k] = 0.0;
                     ip.beta[k] = 0.0;
                 }
             }
@@ -178,8 +227,7 @@ impl ActiveSet {
         let mu0 = ip.start();
         let primal_tol = PRIMAL_TOLERANCE * beta_scale.max(1.0);
         let mut converged = false;
-        for it in 0..MAX_ITERATIONS {
-            self.interior.iterations = it + 1;
+        for _ in 0..MAX_ITERATIONS {
             let (mu, primal) = self.interior_residuals(prob);
             if mu <= GAP_REDUCTION * mu0 && primal <= primal_tol {
                 converged = true;
@@ -195,8 +243,10 @@ impl ActiveSet {
         // The working set: the sides whose barrier outweighs P.
         let ip = &self.interior;
         for id in 0..self.cons.len() {
-            let ratio = |k: usize| if ip.on[k] { ip.z[k] * ip.inv_s[k] } else { 0.0 };
-            let (u, l) = (ratio(2 * id), ratio(2 * id + 1));
+            let (u, l) = (
+                ip.z[2 * id] * ip.inv_s[2 * id],
+                ip.z[2 * id + 1] * ip.inv_s[2 * id + 1],
+            );
             self.side[id] = if u.max(l) <= ACTIVE_RATIO {
                 Side::Free
             } else if u >= l {
@@ -215,35 +265,34 @@ impl ActiveSet {
     /// primal residuals `r = ã·p + s − β` and the inverses of s and z;
     /// returns the mean complementarity and the largest primal residual.
     fn interior_residuals(&mut self, prob: &Problem<'_>) -> (f64, f64) {
+        let n = self.n;
         let ip = &mut self.interior;
-        prob.p.mul_vec(&ip.p, &mut ip.px);
+        prob.p.mul_vec(&ip.p[..n], &mut ip.px);
         for ((rd, px), c) in ip.rd.iter_mut().zip(&ip.px).zip(prob.c) {
             *rd = px + c;
         }
-        let (mut gap, mut primal) = (0.0, 0.0f64);
+        let (mut gap, mut primal) = ([0.0; 2], [0.0f64; 2]);
         for (id, c) in self.cons.iter().enumerate() {
-            let (u, l) = (2 * id, 2 * id + 1);
-            let v = c.w * c.dot(&ip.p);
-            let zz = c.w * (ip.z[u] - ip.z[l]);
-            for k in 0..c.len {
-                ip.rd[c.first + k] += c.coef[k] * zz;
-            }
-            for (k, sign) in [(u, 1.0), (l, -1.0)] {
-                if ip.on[k] {
-                    let r = sign * v + ip.s[k] - ip.beta[k];
-                    ip.r[k] = r;
-                    primal = primal.max(r.abs());
-                    gap += ip.s[k] * ip.z[k];
-                    ip.inv_s[k] = 1.0 / ip.s[k];
-                    ip.inv_z[k] = 1.0 / ip.z[k];
-                } else {
-                    ip.r[k] = 0.0;
-                    ip.inv_s[k] = 0.0;
-                    ip.inv_z[k] = 0.0;
-                }
+            let v = c.w * dot5(c, &ip.p);
+            ip.t[id] = ip.z[2 * id] - ip.z[2 * id + 1];
+            for (side, sign) in [(0, 1.0), (1, -1.0)] {
+                let k = 2 * id + side;
+                let on = ip.on[k];
+                let r = on * (sign * v + ip.s[k] - ip.beta[k]);
+                ip.r[k] = r;
+                primal[side] = primal[side].max(r.abs());
+                gap[side] += ip.s[k] * ip.z[k];
+                ip.inv_s[k] = on / ip.s[k];
+                ip.inv_z[k] = on / (ip.z[k] + (1.0 - on));
             }
         }
-        (gap / ip.sides as f64, primal)
+        let mut rd = std::mem::take(&mut ip.rd);
+        ip.gather_add(&mut rd);
+        ip.rd = rd;
+        (
+            (gap[0] + gap[1]) / ip.sides as f64,
+            primal[0].max(primal[1]),
+        )
     }
 
     /// One predictor-corrector step from the residuals of
@@ -256,26 +305,22 @@ impl ActiveSet {
         // The predictor: rc = −s·z.
         {
             let ip = &mut self.interior;
-            for k in 0..ip.s.len() {
-                ip.rc[k] = -ip.s[k] * ip.z[k];
+            for ((rc, s), z) in ip.rc.iter_mut().zip(&ip.s).zip(&ip.z) {
+                *rc = -s * z;
             }
         }
         self.interior_direction()?;
         let ip = &mut self.interior;
         let alpha = ip.step_to_boundary(1.0);
-        let mut mu_aff = 0.0;
+        let mut mu_aff = [0.0; 4];
         for k in 0..ip.s.len() {
-            mu_aff += (ip.s[k] + alpha * ip.ds[k]) * (ip.z[k] + alpha * ip.dz[k]);
+            mu_aff[k % 4] += (ip.s[k] + alpha * ip.ds[k]) * (ip.z[k] + alpha * ip.dz[k]);
         }
-        mu_aff /= ip.sides as f64;
+        let mu_aff = mu_aff.iter().sum::<f64>() / ip.sides as f64;
         let sigma = (mu_aff / mu).clamp(0.0, 1.0).powi(3);
         // The corrector: rc = σμ − s·z − Δs_aff·Δz_aff.
         for k in 0..ip.s.len() {
-            ip.rc[k] = if ip.on[k] {
-                sigma * mu - ip.s[k] * ip.z[k] - ip.ds[k] * ip.dz[k]
-            } else {
-                0.0
-            };
+            ip.rc[k] = ip.on[k] * (sigma * mu - ip.s[k] * ip.z[k] - ip.ds[k] * ip.dz[k]);
         }
         self.interior_direction()?;
         let ip = &mut self.interior;
@@ -284,10 +329,8 @@ impl ActiveSet {
             *p += alpha * dp;
         }
         for k in 0..ip.s.len() {
-            if ip.on[k] {
-                ip.s[k] += alpha * ip.ds[k];
-                ip.z[k] += alpha * ip.dz[k];
-            }
+            ip.s[k] += alpha * ip.ds[k];
+            ip.z[k] += alpha * ip.dz[k];
         }
         Ok(true)
     }
@@ -325,35 +368,28 @@ impl ActiveSet {
     /// `dp = M⁻¹(−rd − Σ ã·(rc + z·r)/s)`, `ds = −r − ã·dp`,
     /// `dz = (rc + z·(r + ã·dp))/s`.
     fn interior_direction(&mut self) -> Result<(), ControlError> {
+        let n = self.n;
         let ip = &mut self.interior;
         for (d, r) in ip.dp.iter_mut().zip(&ip.rd) {
             *d = -r;
         }
-        for (id, c) in self.cons.iter().enumerate() {
+        for id in 0..self.cons.len() {
             let (u, l) = (2 * id, 2 * id + 1);
-            let t = (ip.rc[u] + ip.z[u] * ip.r[u]) * ip.inv_s[u]
-                - (ip.rc[l] + ip.z[l] * ip.r[l]) * ip.inv_s[l];
-            let t = c.w * t;
-            for k in 0..c.len {
-                ip.dp[c.first + k] -= c.coef[k] * t;
-            }
+            ip.t[id] = (ip.rc[l] + ip.z[l] * ip.r[l]) * ip.inv_s[l]
+                - (ip.rc[u] + ip.z[u] * ip.r[u]) * ip.inv_s[u];
         }
-        ip.chol.solve_in_place(&mut ip.dp)?;
+        let mut dp = std::mem::take(&mut ip.dp);
+        ip.gather_add(&mut dp);
+        ip.dp = dp;
+        ip.dp[n..].fill(0.0);
+        ip.chol.solve_in_place(&mut ip.dp[..n])?;
         for (id, c) in self.cons.iter().enumerate() {
-            let t = c.w * c.dot(&ip.dp);
+            let t = c.w * dot5(c, &ip.dp);
             for (k, a_dp) in [(2 * id, t), (2 * id + 1, -t)] {
-                if ip.on[k] {
-                    ip.ds[k] = -ip.r[k] - a_dp;
-                    ip.dz[k] = (ip.rc[k] + ip.z[k] * (ip.r[k] + a_dp)) * ip.inv_s[k];
-                } else {
-                    ip.ds[k] = 0.0;
-                    ip.dz[k] = 0.0;
-                }
+                ip.ds[k] = ip.on[k] * (-ip.r[k] - a_dp);
+                ip.dz[k] = (ip.rc[k] + ip.z[k] * (ip.r[k] + a_dp)) * ip.inv_s[k];
             }
         }
         Ok(())
     }
 }
-
-/// Upper and lower side's sign on `w·a`.
-const SIGN: [f64; 2] = [1.0, -1.0];

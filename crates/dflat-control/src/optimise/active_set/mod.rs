@@ -32,18 +32,23 @@
 //! breaks nothing is the optimum. From a warm start this ends in one to
 //! three KKT solves.
 //!
-//! **Cold starts** (`rollout.rs`). Without a guess (a burst's first
-//! tick), the unconstrained plan is rolled out output by output, each
-//! clamped into the constraints that end at it while keeping the plan's
-//! acceleration, and the constraints that clamp it are the first set:
-//! where the plan is rate-limited, a ramp of rows up to the stage
-//! interval it reaches, not every row the unconstrained plan breaks. On
-//! the corner bench at N = 200, the tilt rate alone's two bursts then
-//! start in the active set (first ticks 2445 → 719 µs, the interior
-//! point's solves 10 → 5 of 870). With the box, a start from rest still
-//! goes to the interior point ([`super::alm::AlmTuning`]'s
-//! `interior_point_from_rest`): the rollout's set took up to 400 KKT
-//! solves there.
+//! **Cold starts** (`interior.rs`). Without a guess (a burst's first
+//! tick), or when a warm start has not ended within [`WARM_SOLVES`] KKT
+//! solves, the working set is read off a condensed interior point: Mehrotra's
+//! predictor-corrector on the QP in the outputs alone, whose Newton
+//! matrix keeps P's band (half-bandwidth 4), run until the mean
+//! complementarity has fallen 1e-8; a constraint whose barrier term
+//! outweighs P is in the set. From there the methods below end in two or
+//! three KKT solves on the corner bench at N = 200, where the set of the
+//! unconstrained plan's rollout (`rollout.rs`: output by output, the value
+//! that keeps the plan's acceleration, clamped into the constraints that
+//! end at it) took up to 2179 from rest with the box, and warm starts
+//! shifted from the last tick took more than 400 on the ticks where the
+//! replayed state left the last plan. The rollout's set remains the start
+//! when the interior point does not converge. (Before, a start from rest
+//! with the box went to the stage interior point, ~2.2 ms; its switch,
+//! [`super::alm::AlmTuning`]'s `interior_point_from_rest`, is now off by
+//! default.)
 //!
 //! **The dual method** (`dual.rs`). Then every wrong-signed constraint
 //! is freed until none is left (a dual-feasible point), and the broken
@@ -211,7 +216,7 @@ impl ActiveSet {
             n,
             p_band: p.bandwidth(),
             kkt: Kkt::new(n, m, span, per_stage),
-            interior: interior::Interior::new(n, m, span),
+            interior: interior::Interior::new(n, &cons, span),
             cons,
             by_stage,
             stage_start,

@@ -1,13 +1,16 @@
-//! The working set of a cold solve (module docs of [`super`], "Cold
-//! starts"): the unconstrained plan rolled out stage by stage into the
-//! constraints, and the constraints that held it.
+//! A cold solve's start (module docs of [`super`], "Cold starts"): the
+//! unconstrained plan, then the interior point's working set
+//! (`interior.rs`), or, when that does not converge, the unconstrained
+//! plan rolled out stage by stage into the constraints, and the
+//! constraints that held it.
 
 use super::{ActiveSet, Problem, Side};
 use crate::ControlError;
 
 impl ActiveSet {
     /// A cold solve's start (no guess): the unconstrained plan, then the
-    /// working set of its rollout ([`ActiveSet::rollout_guess`]). Returns
+    /// interior point's working set ([`ActiveSet::interior_guess`]) or
+    /// else its rollout's ([`ActiveSet::rollout_guess`]). Returns
     /// true when the unconstrained plan is the optimum (solved).
     pub(super) fn cold_start(
         &mut self,
