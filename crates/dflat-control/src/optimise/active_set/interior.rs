@@ -32,8 +32,9 @@ const MAX_ITERATIONS: usize = 40;
 const STEP_FRACTION: f64 = 0.99;
 /// The start's slacks are floored at this fraction of the largest gap
 /// (and its multipliers centred on them): on the corner bench at N = 200
-/// 1e-2 took 23–34 iterations from rest, 0.3 took 10–21.
-const START_FLOOR: f64 = 0.3;
+/// 1e-2 took 23–34 iterations from rest, 0.3 took 10–21; 0.3–0.6 give
+/// the same times within the machine's noise.
+const START_FLOOR: f64 = 0.5;
 /// The iteration ends when the mean complementarity is below this
 /// fraction of the start's and the primal residuals below
 /// [`PRIMAL_TOLERANCE`] of their bounds' scale: on the corner bench at
@@ -50,29 +51,35 @@ const ACTIVE_RATIO: f64 = 1.0;
 /// loops have a fixed length.
 const PAD: usize = 4;
 
+/// Per constraint, a value for each of its two sides (upper, lower).
+type Pairs = Vec<[f64; 2]>;
+
+/// Upper and lower side's sign on `w·a`.
+const SIGN: [f64; 2] = [1.0, -1.0];
+
 /// Storage of the condensed interior point (allocated with the active
-/// set). Per constraint `id`, its sides at `2·id` (upper) and `2·id + 1`
-/// (lower); a side whose bound is infinite has `on` 0 and every term of
-/// it is multiplied by that (no branches in the loops).
+/// set).
 #[derive(Debug, Clone)]
 pub(super) struct Interior {
     /// The Newton matrix and its factor (half-bandwidth: P's and the
     /// constraints' reach).
     m: SymBand,
     chol: BandedCholesky,
-    /// Per side: 1 where its bound is finite (else 0), β, slack,
-    /// multiplier, their inverses (0 where off), primal residual,
-    /// complementarity right-hand side and steps.
-    on: Vec<f64>,
-    beta: Vec<f64>,
-    s: Vec<f64>,
-    z: Vec<f64>,
-    inv_s: Vec<f64>,
-    inv_z: Vec<f64>,
-    r: Vec<f64>,
-    rc: Vec<f64>,
-    ds: Vec<f64>,
-    dz: Vec<f64>,
+    /// Per constraint and side (upper, lower; each vector apart, so that a
+    /// pass reads only what it uses): 1 where the bound is finite, else 0
+    /// (a side off has every term multiplied by it: no branches); β (the
+    /// scaled bound), slack, multiplier, their inverses (0 where off),
+    /// primal residual, complementarity right-hand side, steps.
+    on: Pairs,
+    beta: Pairs,
+    s: Pairs,
+    z: Pairs,
+    inv_s: Pairs,
+    inv_z: Pairs,
+    r: Pairs,
+    rc: Pairs,
+    ds: Pairs,
+    dz: Pairs,
     /// The iterate, its step, the dual residual (n + [`PAD`]) and P·p (n).
     p: Vec<f64>,
     dp: Vec<f64>,
@@ -86,7 +93,7 @@ pub(super) struct Interior {
     /// Per constraint, the scalar a gather multiplies its column by.
     t: Vec<f64>,
     /// Finite sides.
-    sides: usize,
+    finite: usize,
 }
 
 impl Interior {
@@ -94,7 +101,6 @@ impl Interior {
     /// half-bandwidth `band`.
     pub(super) fn new(n: usize, cons: &[Con], band: usize) -> Self {
         let m = cons.len();
-        let per_side = || vec![0.0; 2 * m];
         let mut cols = vec![Vec::new(); n];
         for (id, c) in cons.iter().enumerate() {
             for k in 0..c.len {
@@ -111,16 +117,16 @@ impl Interior {
         Self {
             m: SymBand::zeros(n, band),
             chol: BandedCholesky::new(n, band),
-            on: per_side(),
-            beta: per_side(),
-            s: per_side(),
-            z: per_side(),
-            inv_s: per_side(),
-            inv_z: per_side(),
-            r: per_side(),
-            rc: per_side(),
-            ds: per_side(),
-            dz: per_side(),
+            on: vec![[0.0; 2]; m],
+            beta: vec![[0.0; 2]; m],
+            s: vec![[0.0; 2]; m],
+            z: vec![[0.0; 2]; m],
+            inv_s: vec![[0.0; 2]; m],
+            inv_z: vec![[0.0; 2]; m],
+            r: vec![[0.0; 2]; m],
+            rc: vec![[0.0; 2]; m],
+            ds: vec![[0.0; 2]; m],
+            dz: vec![[0.0; 2]; m],
             p: vec![0.0; n + PAD],
             dp: vec![0.0; n + PAD],
             rd: vec![0.0; n + PAD],
@@ -128,7 +134,7 @@ impl Interior {
             col_start,
             col,
             t: vec![0.0; m],
-            sides: 0,
+            finite: 0,
         }
     }
 
@@ -136,15 +142,15 @@ impl Interior {
     /// θ = [`START_FLOOR`] of the largest, multipliers `θ²/s` (centred);
     /// returns μ = θ².
     fn start(&mut self) -> f64 {
-        let largest = self
-            .s
-            .iter()
-            .zip(&self.on)
-            .fold(0.0f64, |a, (g, on)| a.max(on * g.abs()));
+        let largest = self.s.iter().zip(&self.on).fold(0.0f64, |a, (s, on)| {
+            a.max(on[0] * s[0].abs()).max(on[1] * s[1].abs())
+        });
         let theta = (START_FLOOR * largest).max(1e-12);
         for ((s, z), on) in self.s.iter_mut().zip(&mut self.z).zip(&self.on) {
-            *s = if *on > 0.0 { s.max(theta) } else { 1.0 };
-            *z = on * theta * theta / *s;
+            for j in 0..2 {
+                s[j] = if on[j] > 0.0 { s[j].max(theta) } else { 1.0 };
+                z[j] = on[j] * theta * theta / s[j];
+            }
         }
         theta * theta
     }
@@ -152,34 +158,21 @@ impl Interior {
     /// The largest step in (0, 1] that keeps every slack and multiplier
     /// positive, times `fraction`.
     fn step_to_boundary(&self, fraction: f64) -> f64 {
-        let mut worst = [1.0f64; 4];
-        let chunks = self.s.len() / 4 * 4;
-        for k0 in (0..chunks).step_by(4) {
-            for (j, w) in worst.iter_mut().enumerate() {
-                let k = k0 + j;
-                *w = w
-                    .max(-self.ds[k] * self.inv_s[k])
-                    .max(-self.dz[k] * self.inv_z[k]);
+        let mut worst = [1.0f64; 2];
+        for (((ds, dz), inv_s), inv_z) in self
+            .ds
+            .iter()
+            .zip(&self.dz)
+            .zip(&self.inv_s)
+            .zip(&self.inv_z)
+        {
+            for j in 0..2 {
+                worst[j] = fmax(fmax(worst[j], -ds[j] * inv_s[j]), -dz[j] * inv_z[j]);
             }
         }
-        for k in chunks..self.s.len() {
-            worst[0] = worst[0]
-                .max(-self.ds[k] * self.inv_s[k])
-                .max(-self.dz[k] * self.inv_z[k]);
-        }
-        let worst = worst.iter().fold(1.0f64, |a, w| a.max(*w));
-        (fraction / worst).min(1.0)
+        (fraction / worst[0].max(worst[1])).min(1.0)
     }
-}
 
-/// `a·p` over a constraint's five coefficients (p padded).
-#[inline(always)]
-fn dot5(c: &Con, p: &[f64]) -> f64 {
-    let p = &p[c.first..c.first + 5];
-    c.coef[0] * p[0] + c.coef[1] * p[1] + c.coef[2] * p[2] + c.coef[3] * p[3] + c.coef[4] * p[4]
-}
-
-impl Interior {
     /// `out_f += Σ_id w·a_{id,f}·t_id` for every output f: a gather by
     /// output (scattering each constraint's five entries instead makes
     /// overlapping vector stores, and their loads stall).
@@ -194,6 +187,20 @@ impl Interior {
     }
 }
 
+/// The larger of a and b, for finite values (one `maxsd`: `f64::max`'s
+/// NaN handling costs three instructions on a dependency chain).
+#[inline(always)]
+fn fmax(a: f64, b: f64) -> f64 {
+    if a > b { a } else { b }
+}
+
+/// `a·p` over a constraint's five coefficients (p padded).
+#[inline(always)]
+fn dot5(c: &Con, p: &[f64]) -> f64 {
+    let p = &p[c.first..c.first + 5];
+    c.coef[0] * p[0] + c.coef[1] * p[1] + c.coef[2] * p[2] + c.coef[3] * p[3] + c.coef[4] * p[4]
+}
+
 impl ActiveSet {
     /// Sets the working set of a cold solve from the condensed interior
     /// point started at the plan in `x` (module docs); returns false
@@ -201,27 +208,26 @@ impl ActiveSet {
     pub(super) fn interior_guess(&mut self, prob: &Problem<'_>) -> Result<bool, ControlError> {
         let ip = &mut self.interior;
         ip.p[..self.n].copy_from_slice(&self.x);
-        ip.sides = 0;
+        ip.finite = 0;
         let mut beta_scale = 0.0f64;
-        for (id, c) in self.cons.iter().enumerate() {
+        for (id, (c, bound)) in self.cons.iter().zip(&self.bound).enumerate() {
             let v = c.w * dot5(c, &ip.p);
             // The upper side holds w·a·p ≤ w·hi, the lower −w·a·p ≤ −w·lo.
-            for (side, sign) in [(0, 1.0), (1, -1.0)] {
-                let k = 2 * id + side;
-                let b = self.bound[id][1 - side];
+            for j in 0..2 {
+                let b = bound[1 - j];
                 if b.is_finite() {
-                    ip.on[k] = 1.0;
-                    ip.beta[k] = sign * c.w * b;
-                    beta_scale = beta_scale.max(ip.beta[k].abs());
-                    ip.s[k] = ip.beta[k] - sign * v;
-                    ip.sides += 1;
+                    ip.on[id][j] = 1.0;
+                    ip.beta[id][j] = SIGN[j] * c.w * b;
+                    beta_scale = beta_scale.max(ip.beta[id][j].abs());
+                    ip.s[id][j] = ip.beta[id][j] - SIGN[j] * v;
+                    ip.finite += 1;
                 } else {
-                    ip.on[k] = 0.0;
-                    ip.beta[k] = 0.0;
+                    ip.on[id][j] = 0.0;
+                    ip.beta[id][j] = 0.0;
                 }
             }
         }
-        if ip.sides == 0 {
+        if ip.finite == 0 {
             return Ok(false);
         }
         let mu0 = ip.start();
@@ -242,11 +248,8 @@ impl ActiveSet {
         }
         // The working set: the sides whose barrier outweighs P.
         let ip = &self.interior;
-        for id in 0..self.cons.len() {
-            let (u, l) = (
-                ip.z[2 * id] * ip.inv_s[2 * id],
-                ip.z[2 * id + 1] * ip.inv_s[2 * id + 1],
-            );
+        for (id, (z, inv_s)) in ip.z.iter().zip(&ip.inv_s).enumerate() {
+            let (u, l) = (z[0] * inv_s[0], z[1] * inv_s[1]);
             self.side[id] = if u.max(l) <= ACTIVE_RATIO {
                 Side::Free
             } else if u >= l {
@@ -272,25 +275,26 @@ impl ActiveSet {
             *rd = px + c;
         }
         let (mut gap, mut primal) = ([0.0; 2], [0.0f64; 2]);
-        for (id, c) in self.cons.iter().enumerate() {
+        let sides = ip.s.iter().zip(&ip.z).zip(&ip.on).zip(&ip.beta);
+        let out = ip.r.iter_mut().zip(&mut ip.inv_s).zip(&mut ip.inv_z);
+        for (((c, t), (((s, z), on), beta)), ((r, inv_s), inv_z)) in
+            self.cons.iter().zip(&mut ip.t).zip(sides).zip(out)
+        {
             let v = c.w * dot5(c, &ip.p);
-            ip.t[id] = ip.z[2 * id] - ip.z[2 * id + 1];
-            for (side, sign) in [(0, 1.0), (1, -1.0)] {
-                let k = 2 * id + side;
-                let on = ip.on[k];
-                let r = on * (sign * v + ip.s[k] - ip.beta[k]);
-                ip.r[k] = r;
-                primal[side] = primal[side].max(r.abs());
-                gap[side] += ip.s[k] * ip.z[k];
-                ip.inv_s[k] = on / ip.s[k];
-                ip.inv_z[k] = on / (ip.z[k] + (1.0 - on));
+            *t = z[0] - z[1];
+            for j in 0..2 {
+                r[j] = on[j] * (SIGN[j] * v + s[j] - beta[j]);
+                primal[j] = fmax(primal[j], r[j].abs());
+                gap[j] += s[j] * z[j];
+                inv_s[j] = on[j] / s[j];
+                inv_z[j] = on[j] / (z[j] + (1.0 - on[j]));
             }
         }
         let mut rd = std::mem::take(&mut ip.rd);
         ip.gather_add(&mut rd);
         ip.rd = rd;
         (
-            (gap[0] + gap[1]) / ip.sides as f64,
+            (gap[0] + gap[1]) / ip.finite as f64,
             primal[0].max(primal[1]),
         )
     }
@@ -306,21 +310,28 @@ impl ActiveSet {
         {
             let ip = &mut self.interior;
             for ((rc, s), z) in ip.rc.iter_mut().zip(&ip.s).zip(&ip.z) {
-                *rc = -s * z;
+                for j in 0..2 {
+                    rc[j] = -s[j] * z[j];
+                }
             }
         }
         self.interior_direction()?;
         let ip = &mut self.interior;
         let alpha = ip.step_to_boundary(1.0);
-        let mut mu_aff = [0.0; 4];
-        for k in 0..ip.s.len() {
-            mu_aff[k % 4] += (ip.s[k] + alpha * ip.ds[k]) * (ip.z[k] + alpha * ip.dz[k]);
+        let mut mu_aff = [0.0; 2];
+        for (((s, z), ds), dz) in ip.s.iter().zip(&ip.z).zip(&ip.ds).zip(&ip.dz) {
+            for j in 0..2 {
+                mu_aff[j] += (s[j] + alpha * ds[j]) * (z[j] + alpha * dz[j]);
+            }
         }
-        let mu_aff = mu_aff.iter().sum::<f64>() / ip.sides as f64;
+        let mu_aff = (mu_aff[0] + mu_aff[1]) / ip.finite as f64;
         let sigma = (mu_aff / mu).clamp(0.0, 1.0).powi(3);
         // The corrector: rc = σμ − s·z − Δs_aff·Δz_aff.
-        for k in 0..ip.s.len() {
-            ip.rc[k] = ip.on[k] * (sigma * mu - ip.s[k] * ip.z[k] - ip.ds[k] * ip.dz[k]);
+        let sides = ip.s.iter().zip(&ip.z).zip(&ip.ds).zip(&ip.dz);
+        for ((rc, on), (((s, z), ds), dz)) in ip.rc.iter_mut().zip(&ip.on).zip(sides) {
+            for j in 0..2 {
+                rc[j] = on[j] * (sigma * mu - s[j] * z[j] - ds[j] * dz[j]);
+            }
         }
         self.interior_direction()?;
         let ip = &mut self.interior;
@@ -328,9 +339,15 @@ impl ActiveSet {
         for (p, dp) in ip.p.iter_mut().zip(&ip.dp) {
             *p += alpha * dp;
         }
-        for k in 0..ip.s.len() {
-            ip.s[k] += alpha * ip.ds[k];
-            ip.z[k] += alpha * ip.dz[k];
+        for (s, ds) in ip.s.iter_mut().zip(&ip.ds) {
+            for j in 0..2 {
+                s[j] += alpha * ds[j];
+            }
+        }
+        for (z, dz) in ip.z.iter_mut().zip(&ip.dz) {
+            for j in 0..2 {
+                z[j] += alpha * dz[j];
+            }
         }
         Ok(true)
     }
@@ -349,9 +366,8 @@ impl ActiveSet {
                 dst[i * mw..i * mw + pw].copy_from_slice(&src[i * pw..(i + 1) * pw]);
             }
         }
-        for (id, c) in self.cons.iter().enumerate() {
-            let (u, l) = (2 * id, 2 * id + 1);
-            let d = (ip.z[u] * ip.inv_s[u] + ip.z[l] * ip.inv_s[l]) * c.w * c.w;
+        for ((c, z), inv_s) in self.cons.iter().zip(&ip.z).zip(&ip.inv_s) {
+            let d = (z[0] * inv_s[0] + z[1] * inv_s[1]) * c.w * c.w;
             for k1 in 0..c.len {
                 let row = (c.first + k1) * mw;
                 let a1 = d * c.coef[k1];
@@ -373,21 +389,29 @@ impl ActiveSet {
         for (d, r) in ip.dp.iter_mut().zip(&ip.rd) {
             *d = -r;
         }
-        for id in 0..self.cons.len() {
-            let (u, l) = (2 * id, 2 * id + 1);
-            ip.t[id] = (ip.rc[l] + ip.z[l] * ip.r[l]) * ip.inv_s[l]
-                - (ip.rc[u] + ip.z[u] * ip.r[u]) * ip.inv_s[u];
+        let sides = ip.rc.iter().zip(&ip.z).zip(&ip.r).zip(&ip.inv_s);
+        for (t, (((rc, z), r), inv_s)) in ip.t.iter_mut().zip(sides) {
+            *t = (rc[1] + z[1] * r[1]) * inv_s[1] - (rc[0] + z[0] * r[0]) * inv_s[0];
         }
         let mut dp = std::mem::take(&mut ip.dp);
         ip.gather_add(&mut dp);
         ip.dp = dp;
         ip.dp[n..].fill(0.0);
         ip.chol.solve_in_place(&mut ip.dp[..n])?;
-        for (id, c) in self.cons.iter().enumerate() {
+        let sides = ip
+            .on
+            .iter()
+            .zip(&ip.r)
+            .zip(&ip.rc)
+            .zip(&ip.z)
+            .zip(&ip.inv_s);
+        let out = ip.ds.iter_mut().zip(&mut ip.dz);
+        for ((c, ((((on, r), rc), z), inv_s)), (ds, dz)) in self.cons.iter().zip(sides).zip(out) {
             let t = c.w * dot5(c, &ip.dp);
-            for (k, a_dp) in [(2 * id, t), (2 * id + 1, -t)] {
-                ip.ds[k] = ip.on[k] * (-ip.r[k] - a_dp);
-                ip.dz[k] = (ip.rc[k] + ip.z[k] * (ip.r[k] + a_dp)) * ip.inv_s[k];
+            for j in 0..2 {
+                let a_dp = SIGN[j] * t;
+                ds[j] = on[j] * (-r[j] - a_dp);
+                dz[j] = (rc[j] + z[j] * (r[j] + a_dp)) * inv_s[j];
             }
         }
         Ok(())
