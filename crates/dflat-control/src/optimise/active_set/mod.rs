@@ -90,10 +90,11 @@ pub const MAX_SOLVES: usize = 40;
 /// KKT solves a warm start (a guessed working set) may take before the
 /// solve starts again cold, from the interior point's set
 /// (`interior.rs`). On the corner bench at N = 200 with box and tilt
-/// rate, 3060 of 3090 warm solves that end within 12 take at most 8 (9:
-/// 25, 12: 5); 45 do not, and of those the ones tried with 400 did not
-/// end in 400.
-const WARM_SOLVES: usize = 12;
+/// rate, 3060 of 3090 warm solves that end within 12 take at most 8; 45
+/// do not end within 12, and those tried with 400 did not end in 400. The
+/// p99 of its constrained ticks with 6 / 8 / 12 / 20 / 40: 779 / 733 /
+/// 834 / 1030 / 2719 µs.
+const WARM_SOLVES: usize = 8;
 
 /// Which side of its interval a constraint of the working set holds.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
