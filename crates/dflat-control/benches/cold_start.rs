@@ -55,9 +55,10 @@ fn settings(n: usize, bound: PlanTiltBound, rate: bool) -> DfMpcSettings {
     }
 }
 
-/// One cold solve's outcome: KKT solves and µs of the active set, and
-/// iterations and µs of the stage interior point.
-type Row = (usize, usize, usize, f64, usize, f64);
+/// One cold solve's outcome: tick, axis; the active set's condensed
+/// interior-point iterations, KKT solves and µs; the stage interior
+/// point's iterations and µs.
+type Row = (usize, usize, usize, usize, f64, usize, f64);
 
 /// Solves every problem it is handed (up to [`TICKS`]) cold with both
 /// solvers, then passes it on to the cascade.
@@ -110,10 +111,12 @@ impl AxisSolver for Cold {
         if self.tick < TICKS {
             let t_as = self.time(&a, false);
             let t_ip = self.time(&a, true);
+            let work = self.active_set.active_set_work();
             self.rows.lock().unwrap().push((
                 self.tick,
                 self.axis,
-                self.active_set.iterations(),
+                work.interior,
+                work.solves,
                 t_as,
                 self.interior_point.iterations(),
                 t_ip,
@@ -192,10 +195,10 @@ fn main() {
     }
     println!("cold solves of the corner's box + tilt-rate QPs, N = {n}; min of {REPS}, µs");
     println!(
-        "| tick | axis | active set: KKT solves | µs | stage interior point: iterations | µs |"
+        "| tick | axis | active set: its interior point's iterations | KKT solves | µs | stage interior point: iterations | µs |"
     );
-    println!("|---|---|---|---|---|---|");
-    for (tick, axis, kkt, t_as, its, t_ip) in rows.lock().unwrap().iter() {
-        println!("| {tick} | {axis} | {kkt} | {t_as:.0} | {its} | {t_ip:.0} |");
+    println!("|---|---|---|---|---|---|---|");
+    for (tick, axis, guess, kkt, t_as, its, t_ip) in rows.lock().unwrap().iter() {
+        println!("| {tick} | {axis} | {guess} | {kkt} | {t_as:.0} | {its} | {t_ip:.0} |");
     }
 }

@@ -141,6 +141,11 @@ impl BoxAlmSolver {
         &self.bounds
     }
 
+    /// What the active-set method did in the last solve (with rows).
+    pub fn active_set_work(&self) -> super::active_set::Work {
+        self.alm.active_set_work()
+    }
+
     /// Newton steps of the last solve (with rows: the active-set
     /// method's KKT solves).
     pub fn iterations(&self) -> usize {

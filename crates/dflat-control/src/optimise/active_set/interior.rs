@@ -234,6 +234,7 @@ impl ActiveSet {
         let primal_tol = PRIMAL_TOLERANCE * beta_scale.max(1.0);
         let mut converged = false;
         for _ in 0..MAX_ITERATIONS {
+            self.work.interior += 1;
             let (mu, primal) = self.interior_residuals(prob);
             if mu <= GAP_REDUCTION * mu0 && primal <= primal_tol {
                 converged = true;

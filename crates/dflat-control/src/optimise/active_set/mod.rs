@@ -135,6 +135,9 @@ pub struct Work {
     pub solves: usize,
     /// Of those, the dual method's.
     pub dual: usize,
+    /// Iterations of the condensed interior point that guessed a cold
+    /// start's working set (0: none ran).
+    pub interior: usize,
 }
 
 /// The active-set method's storage (module docs); built for one axis.
