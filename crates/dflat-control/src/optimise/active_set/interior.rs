@@ -92,6 +92,14 @@ pub(super) struct Interior {
     col: Vec<(usize, f64)>,
     /// Per constraint, the scalar a gather multiplies its column by.
     t: Vec<f64>,
+    /// The constraints as stencils, where they are: families of n, the
+    /// constraint f of each ending at output f (stage intervals, tilt-rate
+    /// and speed rows). Entry `(family·5 + d)·n + f` is `w·a` of that
+    /// constraint on output `f − 4 + d` (0 outside it); `Aᵀt` is then five
+    /// shifted vector multiply-adds per family into `pad` (n + 4, its
+    /// first four entries before output 0). Empty: gather by `col`.
+    stencil: Vec<f64>,
+    pad: Vec<f64>,
     /// Finite sides.
     finite: usize,
 }
@@ -114,6 +122,20 @@ impl Interior {
             col.extend(c);
         }
         col_start.push(col.len());
+        let aligned = n > 0
+            && m.is_multiple_of(n)
+            && cons.iter().enumerate().all(|(id, c)| c.last() == id % n);
+        let mut stencil = Vec::new();
+        if aligned {
+            stencil = vec![0.0; 5 * m];
+            for (id, c) in cons.iter().enumerate() {
+                let (family, f) = (id / n, id % n);
+                for k in 0..c.len {
+                    let d = k + 5 - c.len;
+                    stencil[(family * 5 + d) * n + f] = c.w * c.coef[k];
+                }
+            }
+        }
         Self {
             m: SymBand::zeros(n, band),
             chol: BandedCholesky::new(n, band),
@@ -134,6 +156,8 @@ impl Interior {
             col_start,
             col,
             t: vec![0.0; m],
+            stencil,
+            pad: vec![0.0; n + 4],
             finite: 0,
         }
     }
@@ -173,11 +197,28 @@ impl Interior {
         (fraction / worst[0].max(worst[1])).min(1.0)
     }
 
-    /// `out_f += Σ_id w·a_{id,f}·t_id` for every output f: a gather by
+    /// `out_f += Σ_id w·a_{id,f}·t_id` for every output f (`Aᵀt`): by
+    /// the stencils where the constraints are aligned, else a gather by
     /// output (scattering each constraint's five entries instead makes
     /// overlapping vector stores, and their loads stall).
-    fn gather_add(&self, out: &mut [f64]) {
-        for (f, o) in out.iter_mut().enumerate().take(self.col_start.len() - 1) {
+    fn gather_add(&mut self, out: &mut [f64]) {
+        let n = self.pad.len() - 4;
+        if !self.stencil.is_empty() {
+            self.pad.fill(0.0);
+            for (family, t) in self.t.chunks_exact(n).enumerate() {
+                for d in 0..5 {
+                    let cd = &self.stencil[(family * 5 + d) * n..(family * 5 + d + 1) * n];
+                    for ((o, c), t) in self.pad[d..d + n].iter_mut().zip(cd).zip(t) {
+                        *o += c * t;
+                    }
+                }
+            }
+            for (o, p) in out[..n].iter_mut().zip(&self.pad[4..]) {
+                *o += p;
+            }
+            return;
+        }
+        for (f, o) in out.iter_mut().enumerate().take(n) {
             let mut acc = 0.0;
             for &(id, wa) in &self.col[self.col_start[f]..self.col_start[f + 1]] {
                 acc += wa * self.t[id];
@@ -416,5 +457,70 @@ impl ActiveSet {
             }
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::super::bounds::Row;
+    use super::*;
+
+    /// The stage intervals and tilt-rate rows of n outputs at δt = 0.02,
+    /// as `ActiveSet::new` builds them.
+    fn constraints(n: usize) -> Vec<Con> {
+        let inv_dt2 = 2500.0;
+        let mut cons: Vec<Con> = (0..n).map(|f| Con::stage(f, inv_dt2, 3.0)).collect();
+        cons.extend((0..n).map(|f| {
+            Con::row(
+                &Row::tilt_rate(f, 7.5, |s| s).on_outputs(inv_dt2, |k| k),
+                3.0,
+            )
+        }));
+        cons
+    }
+
+    /// `Aᵀt` by the stencils is the gather by output, and both are the
+    /// definition `Σ_id w·a_id·t_id`.
+    #[test]
+    fn the_stencils_transpose_as_the_gather_does() {
+        let n = 23;
+        let cons = constraints(n);
+        let mut stencil = Interior::new(n, &cons, 4);
+        assert!(!stencil.stencil.is_empty(), "aligned families");
+        let mut gather = stencil.clone();
+        gather.stencil.clear();
+        let t: Vec<f64> = (0..cons.len())
+            .map(|i| ((i * 37 % 11) as f64 - 5.0) * 0.3)
+            .collect();
+        stencil.t.copy_from_slice(&t);
+        gather.t.copy_from_slice(&t);
+        let mut want = vec![0.5; n + PAD];
+        for (c, t) in cons.iter().zip(&t) {
+            for k in 0..c.len {
+                want[c.first + k] += c.w * c.coef[k] * t;
+            }
+        }
+        for ip in [&mut stencil, &mut gather] {
+            let mut out = vec![0.5; n + PAD];
+            ip.gather_add(&mut out);
+            for f in 0..n {
+                assert!(
+                    (out[f] - want[f]).abs() <= 1e-9 * want[f].abs().max(1.0),
+                    "output {f}: {} vs {}",
+                    out[f],
+                    want[f]
+                );
+            }
+        }
+    }
+
+    /// Constraints that are not families of n aligned on their last
+    /// output are gathered, not read as stencils.
+    #[test]
+    fn unaligned_constraints_are_gathered() {
+        let n = 10;
+        let mut cons = constraints(n);
+        cons.swap(3, 4);
+        assert!(Interior::new(n, &cons, 4).stencil.is_empty());
     }
 }
