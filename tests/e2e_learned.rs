@@ -6,22 +6,24 @@
 //! identified `[vehicle]` table) — against the same airframe without the
 //! aerodynamics (the matched plant) flown in the same run.
 //!
-//! Judged from the daemon's own records: each flight's CSV, the measured
-//! position against the reference at the same tick, from the stream's
-//! ramp plus 2 s to its end (p95 horizontal, and p95 per axis).
+//! Judged from the SITL's truth against the planner's trajectory at the
+//! same SITL time, from the stream's ramp plus 2 s to its end (p95
+//! horizontal, and p95 per axis): what an independent judge of the stream
+//! sees. The daemon's own CSV (the measured position against the
+//! reference at the tick) is printed beside it; without pose noise the two
+//! agree within half a millimetre.
 //!
-//! Asserted: learned better than identified; after
-//! identify or learn no axis worse than before; the learned model's
-//! held-out input-to-output prediction at most half the parametric
-//! model's; the learned model's status said in the daemon's log. Printed,
-//! not met: issue 42's learned ≤ 1.1× matched (measured 2026-11-28 on a
-//! quiet machine: matched 0.0017 m, learned 0.017 m, identified 0.167 m,
-//! stock 1.43 m — the 38 s of one racing line in the first two flights do
-//! not determine the rotor-drag term apart from the linear one, `dflat
-//! learn` says so and leaves it out, and the braking ends, tilted along
-//! the motion, are where the missing term shows; under a load of 6 on two
-//! cores the same run gave matched 0.089 m, learned 0.118 m, identified
-//! 0.174 m: the flights are real time; docs/results.md).
+//! Asserted: learned better than identified; after identify or learn no
+//! axis worse than before; the learned model's held-out input-to-output
+//! prediction at most half the parametric model's; the learned model's
+//! status said in the daemon's log. Printed, not met: the learned flight
+//! within 1.1× the matched one (2026-11-28, quiet machine: matched 0.0015
+//! m, learned 0.0123 m, identified 0.140 m, stock 1.43 m — the 38 s of one
+//! racing line in the first two flights do not determine the rotor-drag
+//! term apart from the linear one, `dflat learn` says so and leaves it
+//! out; docs/results.md). `E2E_VISION=1` flies the same on vision poses
+//! (50 Hz, 60 ms, 2 cm: the lab's sensing) and prints the figures without
+//! asserting them: there 38 s of records determine only a constant.
 
 #[path = "support/mod.rs"]
 mod common;
@@ -41,6 +43,13 @@ const SIZE: f64 = 24.0 * (SPEED / 4.0) * (SPEED / 4.0);
 const RAMP_S: f64 = 3.0;
 const STREAM_S: f64 = 16.0;
 
+/// Whether the flights fly on vision poses (`E2E_VISION=1`): 50 Hz,
+/// 60 ms latency (told to the daemon, `link.pose_min_latency_ms`), 2 cm
+/// noise — the lab's sensing. Measured, not asserted.
+fn vision() -> bool {
+    std::env::var_os("E2E_VISION").is_some_and(|v| v == "1")
+}
+
 /// One flight's config: `vehicle` (a `[vehicle]` table or empty),
 /// `extra` daemon lines, the aerodynamics on or off.
 fn config(vehicle: &str, extra: &str, aero: bool) -> String {
@@ -49,10 +58,19 @@ fn config(vehicle: &str, extra: &str, aero: bool) -> String {
     } else {
         ""
     };
+    let (link, sensing) = if vision() {
+        (
+            "[link]\npose_source = \"vision_position_estimate\"\npose_min_latency_ms = 60.0\n",
+            "vision_rate_hz = 50.0\nvision_latency_ms = 60.0\nvision_noise_sigma = 0.02\n",
+        )
+    } else {
+        ("", "")
+    };
     format!(
         r#"
 {realtime}
 {vehicle}
+{link}
 {extra}
 [logging]
 dir = "@DIR@"
@@ -63,6 +81,7 @@ start = "hold"
 [sitl]
 start = [0.0, 0.0, -10.0]
 {drag}
+{sensing}
 [sitl.planner]
 shape = "racing_line"
 size = {SIZE}
@@ -86,6 +105,10 @@ struct Judged {
     axes: [f64; 2],
     /// The daemon's STATUSTEXTs that speak of the learned residual.
     said: usize,
+    /// The same judged from the SITL's truth against the planner's
+    /// trajectory at the same SITL time: p95 horizontal, and per axis \[m\].
+    truth: f64,
+    truth_axes: [f64; 2],
 }
 
 /// The daemon's CSV in `dir`.
@@ -156,11 +179,43 @@ fn fly(name: &str, config: &str) -> Judged {
         ey.push((y - ry).abs());
     }
     assert!(e.len() > 300, "{name}: {} ticks judged", e.len());
+    let (truth, truth_axes) = judge_truth(name, &flight.report);
     Judged {
         p95: quantile(&e, 0.95),
         axes: [quantile(&ex, 0.95), quantile(&ey, 0.95)],
         said,
+        truth,
+        truth_axes,
     }
+}
+
+/// The SITL's true position against the planner's trajectory at the same
+/// SITL time, over the judged span: p95 horizontal and per axis \[m\].
+fn judge_truth(name: &str, report: &dflat_sitl::SitlReport) -> (f64, [f64; 2]) {
+    let t0 = report.planner_start.expect("the planner never streamed");
+    let trajectory = dflat_sim::trajectory::Trajectory {
+        shape: dflat_sim::trajectory::Shape::RacingLine,
+        size: SIZE,
+        speed: SPEED,
+        ramp_s: RAMP_S,
+        start: nalgebra::Vector3::new(0.0, 0.0, -10.0),
+    };
+    let (mut e, mut ex, mut ey) = (Vec::new(), Vec::new(), Vec::new());
+    for sample in &report.trace {
+        if sample.t < t0 + RAMP_S + 2.0 || sample.t > t0 + STREAM_S {
+            continue;
+        }
+        let want = trajectory.at(sample.t - t0).position;
+        let (dx, dy) = (sample.position[0] - want.x, sample.position[1] - want.y);
+        e.push(dx.hypot(dy));
+        ex.push(dx.abs());
+        ey.push(dy.abs());
+    }
+    assert!(e.len() > 300, "{name}: {} truth samples judged", e.len());
+    (
+        quantile(&e, 0.95),
+        [quantile(&ex, 0.95), quantile(&ey, 0.95)],
+    )
 }
 
 /// The identified `[vehicle]` snippet of a flight's .tlog.
@@ -222,7 +277,7 @@ fn learned_maps_fly_the_aerodynamic_plant_as_the_matched_one() {
     let log = std::fs::read_to_string(scratch_dir("learned-learned").join("daemon.stderr"))
         .unwrap_or_default();
     println!(
-        "racing line {SPEED} m/s, p95 (x, y): matched {:.4} ({:.4}, {:.4}) m; aerodynamic plant: stock \
+        "from the daemon's CSV (measured against the reference at the tick): racing line {SPEED} m/s, p95 (x, y): matched {:.4} ({:.4}, {:.4}) m; aerodynamic plant: stock \
          {:.4} ({:.4}, {:.4}), identified {:.4} ({:.4}, {:.4}), learned {:.4} ({:.4}, {:.4}) m; \
          learned / matched {:.2}×; held-out 0.5 s prediction {:.4} → {:.4} m ({:.2}×), acceleration \
          left {:.3} → {:.3} m/s²",
@@ -245,30 +300,50 @@ fn learned_maps_fly_the_aerodynamic_plant_as_the_matched_one() {
         v.acceleration_parametric,
         v.acceleration_learned,
     );
+    println!(
+        "judged, from the SITL's truth against the planner's trajectory at the same SITL time, p95 (x, y): matched {:.4} ({:.4}, {:.4}); stock {:.4} ({:.4}, {:.4}), identified {:.4} ({:.4}, {:.4}), learned {:.4} ({:.4}, {:.4}) m; learned / matched {:.2}×",
+        matched.truth,
+        matched.truth_axes[0],
+        matched.truth_axes[1],
+        stock.truth,
+        stock.truth_axes[0],
+        stock.truth_axes[1],
+        identified_flight.truth,
+        identified_flight.truth_axes[0],
+        identified_flight.truth_axes[1],
+        learned.truth,
+        learned.truth_axes[0],
+        learned.truth_axes[1],
+        learned.truth / matched.truth,
+    );
     assert!(
         log.contains("learned residual: acting") && learned.said > 0,
         "the daemon did not say the residual acts ({} STATUSTEXTs):\n{log}",
         learned.said
     );
     assert_eq!(identified_flight.said, 0, "no residual, nothing said");
+    if vision() {
+        println!("vision poses: measured, not asserted (docs/results.md)");
+        return;
+    }
     assert!(
-        learned.p95 < identified_flight.p95,
+        learned.truth < identified_flight.truth,
         "learned {:.4} m not better than identified {:.4} m",
-        learned.p95,
-        identified_flight.p95
+        learned.truth,
+        identified_flight.truth
     );
     for axis in 0..2 {
         assert!(
-            identified_flight.axes[axis] <= stock.axes[axis],
+            identified_flight.truth_axes[axis] <= stock.truth_axes[axis],
             "axis {axis}: identified {:?} worse than stock {:?}",
-            identified_flight.axes,
-            stock.axes
+            identified_flight.truth_axes,
+            stock.truth_axes
         );
         assert!(
-            learned.axes[axis] <= identified_flight.axes[axis],
+            learned.truth_axes[axis] <= identified_flight.truth_axes[axis],
             "axis {axis}: learned {:?} worse than identified {:?}",
-            learned.axes,
-            identified_flight.axes
+            learned.truth_axes,
+            identified_flight.truth_axes
         );
     }
     assert!(
