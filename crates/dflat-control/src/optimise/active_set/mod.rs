@@ -33,7 +33,7 @@
 //! three KKT solves.
 //!
 //! **Cold starts** (`interior.rs`). Without a guess (a burst's first
-//! tick), or when a warm start has not ended within [`WARM_SOLVES`] KKT
+//! tick), or when a warm start has not ended within `WARM_SOLVES` (8) KKT
 //! solves, the working set is read off a condensed interior point: Mehrotra's
 //! predictor-corrector on the QP in the outputs alone, whose Newton
 //! matrix keeps P's band (half-bandwidth 4), run until the mean
