@@ -277,6 +277,10 @@ impl ActiveSet {
         for _ in 0..MAX_ITERATIONS {
             self.work.interior += 1;
             let (mu, primal) = self.interior_residuals(prob);
+            if !(mu.is_finite() && primal.is_finite()) {
+                // Rounding took a slack or multiplier to 0: no guess.
+                return Ok(false);
+            }
             if mu <= GAP_REDUCTION * mu0 && primal <= primal_tol {
                 converged = true;
                 break;
