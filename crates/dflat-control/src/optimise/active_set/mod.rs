@@ -46,9 +46,7 @@
 //! shifted from the last tick took more than 400 on the ticks where the
 //! replayed state left the last plan. The rollout's set remains the start
 //! when the interior point does not converge. (Before, a start from rest
-//! with the box went to the stage interior point, ~2.2 ms; its switch,
-//! [`super::alm::AlmTuning`]'s `interior_point_from_rest`, is now off by
-//! default.)
+//! with the box went to the stage interior point by rule, ~2.2 ms.)
 //!
 //! **The dual method** (`dual.rs`). Then every wrong-signed constraint
 //! is freed until none is left (a dual-feasible point), and the broken

@@ -218,19 +218,7 @@ pub struct AlmTuning {
     /// KKT solves of the active-set method per solve (one axis with rows:
     /// [`super::active_set`]); beyond them the solve fails.
     pub max_kkt_solves: usize,
-    /// One axis with rows: whether a cold solve whose plan breaks a stage
-    /// interval within its first [`FROM_REST_STAGES`] stages (the
-    /// flight's first tick, from rest) fails at once, for the interior
-    /// point. Off by default: the active set's cold start reads its
-    /// working set off a condensed interior point and ends in 2–3 KKT
-    /// solves there (`active_set/interior.rs`); from the rollout's set it
-    /// took up to 2179, and the stage interior point ~2.2 ms at N = 200.
-    pub interior_point_from_rest: bool,
 }
-
-/// Stages within which a cold plan that breaks a bound is from rest
-/// ([`AlmTuning::interior_point_from_rest`]).
-pub const FROM_REST_STAGES: usize = 4;
 
 impl Default for AlmTuning {
     fn default() -> Self {
@@ -242,7 +230,6 @@ impl Default for AlmTuning {
             eliminate_head: true,
             rollout_start: true,
             max_kkt_solves: super::active_set::MAX_SOLVES,
-            interior_point_from_rest: false,
         }
     }
 }
@@ -683,7 +670,6 @@ pub(crate) const COLD_TUNING: AlmTuning = AlmTuning {
     eliminate_head: true,
     rollout_start: true,
     max_kkt_solves: 1000,
-    interior_point_from_rest: false,
 };
 
 #[cfg(test)]

@@ -9,20 +9,6 @@ use super::BandedAlm;
 use crate::ControlError;
 
 impl BandedAlm {
-    /// Whether the start (x) breaks a stage interval among the first
-    /// `stages` (one axis with intervals; a_0 the window's acceleration).
-    pub(super) fn breaks_early(&self, a0: f64, stages: usize) -> bool {
-        let super::StageSet::Interval(b) = &self.stages else {
-            return false;
-        };
-        let at = |k: usize| self.ws.x.get(k).copied().unwrap_or(0.0);
-        (0..stages.min(self.n)).any(|f| {
-            let u = (at(f) - 2.0 * at(f.wrapping_sub(1)) + at(f.wrapping_sub(2))) * self.inv_dt2;
-            let [l, h] = b[f][0];
-            u + a0 > h || u + a0 < l
-        })
-    }
-
     /// Storage of the polish for this solver's one axis and rows.
     pub(super) fn new_polish(&self) -> ActiveSet {
         ActiveSet::new(&self.base, &self.rows, &self.blocks, self.inv_dt2)

@@ -83,7 +83,7 @@ impl BandedAlm {
         let cold = self.begin(c);
         let tol = self.tolerances(cold, lo, hi);
         if self.polish.is_some() {
-            return self.solve_rows(cold, a0[0], (lo, hi), &tol);
+            return self.solve_rows(a0[0], (lo, hi), &tol);
         }
         // Whether σ climbs to the warm σ after each update (module docs):
         // a cold solve's, unless the rollout start gave it multipliers.
@@ -219,23 +219,14 @@ impl BandedAlm {
         }
     }
 
-    /// One axis with rows: the active-set method alone (module docs), or
-    /// from rest the interior point (an error, for the cascade's next).
+    /// One axis with rows: the active-set method alone (module docs; its
+    /// cold start reads its working set off a condensed interior point).
     fn solve_rows(
         &mut self,
-        cold: bool,
         a0: f64,
         (lo, hi): (&[f64], &[f64]),
         tol: &Tolerances,
     ) -> Result<usize, ControlError> {
-        if cold
-            && self.tuning.interior_point_from_rest
-            && self.breaks_early(a0, super::FROM_REST_STAGES)
-        {
-            return Err(ControlError::Solver(
-                "active set: a cold start from rest".into(),
-            ));
-        }
         if self.polish(a0, (lo, hi), (tol.stage, tol.row))? {
             Ok(0)
         } else {
