@@ -80,24 +80,23 @@ pub(super) struct Interior {
     rc: Pairs,
     ds: Pairs,
     dz: Pairs,
-    /// The iterate, its step, the dual residual (n + [`PAD`]) and P·p (n).
+    /// The iterate and its step (n + [`PAD`], the padding always 0), the
+    /// dual residual and P·p (n).
     p: Vec<f64>,
     dp: Vec<f64>,
     rd: Vec<f64>,
     px: Vec<f64>,
-    /// The constraints by output (the transpose, for gathers): output f's
-    /// entries `col[col_start[f]..col_start[f + 1]]`, each the
-    /// constraint and its scaled coefficient `w·a_k` on p_f.
-    col_start: Vec<usize>,
-    col: Vec<(usize, f64)>,
-    /// Per constraint, the scalar a gather multiplies its column by.
+    /// Per constraint, the scalar `Aᵀt` multiplies its row by.
     t: Vec<f64>,
-    /// The constraints as stencils, where they are: families of n, the
-    /// constraint f of each ending at output f (stage intervals, tilt-rate
-    /// and speed rows). Entry `(family·5 + d)·n + f` is `w·a` of that
-    /// constraint on output `f − 4 + d` (0 outside it); `Aᵀt` is then five
-    /// shifted vector multiply-adds per family into `pad` (n + 4, its
-    /// first four entries before output 0). Empty: gather by `col`.
+    /// The constraints as stencils: families of n, the constraint f of
+    /// each ending at output f (stage intervals, tilt-rate and speed rows,
+    /// as `ActiveSet::new` builds them). Entry `(family·5 + d)·n + f` is
+    /// `w·a` of that constraint on output `f − 4 + d` (0 outside it); `Aᵀt`
+    /// is then five shifted vector multiply-adds per family into `pad`
+    /// (n + 4, its first four entries before output 0; scattering each
+    /// constraint's five entries instead makes overlapping vector stores,
+    /// and their loads stall). Empty when the constraints are not so
+    /// aligned: there is then no guess.
     stencil: Vec<f64>,
     pad: Vec<f64>,
     /// Finite sides.
@@ -109,19 +108,6 @@ impl Interior {
     /// half-bandwidth `band`.
     pub(super) fn new(n: usize, cons: &[Con], band: usize) -> Self {
         let m = cons.len();
-        let mut cols = vec![Vec::new(); n];
-        for (id, c) in cons.iter().enumerate() {
-            for k in 0..c.len {
-                cols[c.first + k].push((id, c.w * c.coef[k]));
-            }
-        }
-        let mut col_start = Vec::with_capacity(n + 1);
-        let mut col = Vec::new();
-        for c in cols {
-            col_start.push(col.len());
-            col.extend(c);
-        }
-        col_start.push(col.len());
         let aligned = n > 0
             && m.is_multiple_of(n)
             && cons.iter().enumerate().all(|(id, c)| c.last() == id % n);
@@ -151,10 +137,8 @@ impl Interior {
             dz: vec![[0.0; 2]; m],
             p: vec![0.0; n + PAD],
             dp: vec![0.0; n + PAD],
-            rd: vec![0.0; n + PAD],
+            rd: vec![0.0; n],
             px: vec![0.0; n],
-            col_start,
-            col,
             t: vec![0.0; m],
             stencil,
             pad: vec![0.0; n + 4],
@@ -196,35 +180,23 @@ impl Interior {
         }
         (fraction / worst[0].max(worst[1])).min(1.0)
     }
+}
 
-    /// `out_f += Σ_id w·a_{id,f}·t_id` for every output f (`Aᵀt`): by
-    /// the stencils where the constraints are aligned, else a gather by
-    /// output (scattering each constraint's five entries instead makes
-    /// overlapping vector stores, and their loads stall).
-    fn gather_add(&mut self, out: &mut [f64]) {
-        let n = self.pad.len() - 4;
-        if !self.stencil.is_empty() {
-            self.pad.fill(0.0);
-            for (family, t) in self.t.chunks_exact(n).enumerate() {
-                for d in 0..5 {
-                    let cd = &self.stencil[(family * 5 + d) * n..(family * 5 + d + 1) * n];
-                    for ((o, c), t) in self.pad[d..d + n].iter_mut().zip(cd).zip(t) {
-                        *o += c * t;
-                    }
-                }
+/// `out_f += Σ_id w·a_{id,f}·t_id` for every output f < n (`Aᵀt`) by the
+/// stencils ([`Interior::stencil`]), `pad` (n + 4) the scratch.
+fn add_transpose(stencil: &[f64], t: &[f64], pad: &mut [f64], out: &mut [f64]) {
+    let n = pad.len() - 4;
+    pad.fill(0.0);
+    for (family, t) in t.chunks_exact(n).enumerate() {
+        for d in 0..5 {
+            let cd = &stencil[(family * 5 + d) * n..(family * 5 + d + 1) * n];
+            for ((o, c), t) in pad[d..d + n].iter_mut().zip(cd).zip(t) {
+                *o += c * t;
             }
-            for (o, p) in out[..n].iter_mut().zip(&self.pad[4..]) {
-                *o += p;
-            }
-            return;
         }
-        for (f, o) in out.iter_mut().enumerate().take(n) {
-            let mut acc = 0.0;
-            for &(id, wa) in &self.col[self.col_start[f]..self.col_start[f + 1]] {
-                acc += wa * self.t[id];
-            }
-            *o += acc;
-        }
+    }
+    for (o, p) in out[..n].iter_mut().zip(&pad[4..]) {
+        *o += p;
     }
 }
 
@@ -248,6 +220,9 @@ impl ActiveSet {
     /// (nothing set) when it does not converge.
     pub(super) fn interior_guess(&mut self, prob: &Problem<'_>) -> Result<bool, ControlError> {
         let ip = &mut self.interior;
+        if ip.stencil.is_empty() {
+            return Ok(false);
+        }
         ip.p[..self.n].copy_from_slice(&self.x);
         ip.finite = 0;
         let mut beta_scale = 0.0f64;
@@ -305,8 +280,7 @@ impl ActiveSet {
             };
             self.lam[id] = 0.0;
         }
-        self.changed_from = 0;
-        self.kkt.invalidate();
+        self.set_replaced();
         Ok(true)
     }
 
@@ -336,9 +310,7 @@ impl ActiveSet {
                 inv_z[j] = on[j] / (z[j] + (1.0 - on[j]));
             }
         }
-        let mut rd = std::mem::take(&mut ip.rd);
-        ip.gather_add(&mut rd);
-        ip.rd = rd;
+        add_transpose(&ip.stencil, &ip.t, &mut ip.pad, &mut ip.rd);
         (
             (gap[0] + gap[1]) / ip.finite as f64,
             primal[0].max(primal[1]),
@@ -439,10 +411,7 @@ impl ActiveSet {
         for (t, (((rc, z), r), inv_s)) in ip.t.iter_mut().zip(sides) {
             *t = (rc[1] + z[1] * r[1]) * inv_s[1] - (rc[0] + z[0] * r[0]) * inv_s[0];
         }
-        let mut dp = std::mem::take(&mut ip.dp);
-        ip.gather_add(&mut dp);
-        ip.dp = dp;
-        ip.dp[n..].fill(0.0);
+        add_transpose(&ip.stencil, &ip.t, &mut ip.pad, &mut ip.dp);
         ip.chol.solve_in_place(&mut ip.dp[..n])?;
         let sides = ip
             .on
@@ -483,45 +452,39 @@ mod tests {
         cons
     }
 
-    /// `Aᵀt` by the stencils is the gather by output, and both are the
-    /// definition `Σ_id w·a_id·t_id`.
+    /// `Aᵀt` by the stencils is the definition `Σ_id w·a_id·t_id`.
     #[test]
-    fn the_stencils_transpose_as_the_gather_does() {
+    fn the_stencils_give_the_transpose() {
         let n = 23;
         let cons = constraints(n);
-        let mut stencil = Interior::new(n, &cons, 4);
-        assert!(!stencil.stencil.is_empty(), "aligned families");
-        let mut gather = stencil.clone();
-        gather.stencil.clear();
+        let mut ip = Interior::new(n, &cons, 4);
+        assert!(!ip.stencil.is_empty(), "aligned families");
         let t: Vec<f64> = (0..cons.len())
             .map(|i| ((i * 37 % 11) as f64 - 5.0) * 0.3)
             .collect();
-        stencil.t.copy_from_slice(&t);
-        gather.t.copy_from_slice(&t);
         let mut want = vec![0.5; n + PAD];
         for (c, t) in cons.iter().zip(&t) {
             for k in 0..c.len {
                 want[c.first + k] += c.w * c.coef[k] * t;
             }
         }
-        for ip in [&mut stencil, &mut gather] {
-            let mut out = vec![0.5; n + PAD];
-            ip.gather_add(&mut out);
-            for f in 0..n {
-                assert!(
-                    (out[f] - want[f]).abs() <= 1e-9 * want[f].abs().max(1.0),
-                    "output {f}: {} vs {}",
-                    out[f],
-                    want[f]
-                );
-            }
+        let mut out = vec![0.5; n];
+        add_transpose(&ip.stencil, &t, &mut ip.pad, &mut out);
+        for f in 0..n {
+            assert!(
+                (out[f] - want[f]).abs() <= 1e-9 * want[f].abs().max(1.0),
+                "output {f}: {} vs {}",
+                out[f],
+                want[f]
+            );
         }
     }
 
     /// Constraints that are not families of n aligned on their last
-    /// output are gathered, not read as stencils.
+    /// output are not read as stencils (the interior point then gives no
+    /// guess: the rollout's set is the cold start).
     #[test]
-    fn unaligned_constraints_are_gathered() {
+    fn unaligned_constraints_are_not_stencils() {
         let n = 10;
         let mut cons = constraints(n);
         cons.swap(3, 4);

@@ -285,9 +285,7 @@ impl ActiveSet {
                 _ => Side::Free,
             };
         }
-        self.adding.fill(false);
-        self.changed_from = 0;
-        self.kkt.invalidate();
+        self.set_replaced();
         if self.set_members().next().is_some() {
             // Warm: the guess's set, within WARM_SOLVES; else cold.
             self.budget = budget.min(WARM_SOLVES);
@@ -297,9 +295,7 @@ impl ActiveSet {
                     self.budget = budget;
                     self.side.fill(Side::Free);
                     self.lam.fill(0.0);
-                    self.adding.fill(false);
-                    self.changed_from = 0;
-                    self.kkt.invalidate();
+                    self.set_replaced();
                 }
                 Err(e) => return Err(e),
             }
@@ -309,6 +305,15 @@ impl ActiveSet {
         }
         self.run(prob, &mut p_times)?;
         Ok(self.work)
+    }
+
+    /// Notes that the working set was replaced as a whole (a guess, a
+    /// restart): no constraint is being added, and the KKT factor is
+    /// rebuilt from the first stage.
+    fn set_replaced(&mut self) {
+        self.adding.fill(false);
+        self.changed_from = 0;
+        self.kkt.invalidate();
     }
 
     /// The methods from the current working set: block steps, then the
