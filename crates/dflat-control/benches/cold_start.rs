@@ -12,6 +12,9 @@
 
 #![allow(missing_docs)]
 
+#[path = "common/mod.rs"]
+mod common;
+
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
@@ -22,24 +25,15 @@ use dflat_control::optimise::{
     AxisSolver, BandedInteriorPointSolver, BoxAlmSolver, Carry, SolveFailure, SolveInfo,
 };
 use dflat_control::reference::Reference;
-use dflat_control::{ControlModel, Controller, Frame, Measurement};
-use dflat_model::{FlatModel, PlanarModel, PlanarParams};
-use nalgebra::{SVector, Vector2, Vector3};
+use dflat_control::{ControlModel, Controller};
+use nalgebra::Vector3;
 
-const DT: f64 = 0.02;
+use common::{DT, plant};
+
 /// Ticks of the replay whose problems are solved cold.
 const TICKS: usize = 12;
 /// Times each solve is repeated (the minimum is reported).
 const REPS: usize = 30;
-
-fn plant() -> PlanarModel {
-    PlanarModel::new(PlanarParams {
-        psi: 0.0,
-        frame: Frame::Ned,
-        ..Default::default()
-    })
-    .unwrap()
-}
 
 fn settings(n: usize, bound: PlanTiltBound, rate: bool) -> DfMpcSettings {
     DfMpcSettings {
@@ -145,20 +139,11 @@ fn main() {
         settings(n, PlanTiltBound::Cone, false),
     )
     .unwrap();
-    let mut reference = Reference::path(&corners, 8.0).unwrap();
-    let mut x = SVector::<f64, 6>::zeros();
-    let mut flight = Vec::new();
-    for k in 0..TICKS + 1 {
-        let y = p.output(&x);
-        let m = Measurement {
-            t: k as f64 * DT,
-            position: Vector3::new(y.x, y.y, -2.0),
-            yaw: 0.0,
-        };
-        let c = ctrl.update(&m, &mut reference).unwrap();
-        x = p.step(&x, &Vector2::new(c.command.pitch, c.command.roll));
-        flight.push(m);
-    }
+    let flight = common::record(
+        &mut ctrl,
+        &mut Reference::path(&corners, 8.0).unwrap(),
+        TICKS + 1,
+    );
     // Replayed with box + tilt rate, the timer first in each axis's cascade.
     let s = settings(n, PlanTiltBound::Box, true);
     let rows = Arc::new(Mutex::new(Vec::new()));

@@ -49,31 +49,25 @@
 
 #![allow(missing_docs)]
 
+#[path = "common/mod.rs"]
+mod common;
+
 use std::time::Instant;
 
 use dflat_control::dfmpc::{DfMpc, DfMpcSettings, OutputConstraints, PlanTiltBound, QpSolver};
 use dflat_control::optimise::{SolveInfo, SolverMethod};
 use dflat_control::reference::Reference;
-use dflat_control::{ControlModel, Controller, Frame, Measurement};
-use dflat_model::{FlatModel, PlanarModel, PlanarParams};
-use nalgebra::{SVector, Vector2, Vector3};
+use dflat_control::{ControlModel, Controller, Measurement};
+use nalgebra::Vector3;
 
-const DT: f64 = 0.02;
+use common::plant;
+
 const TICKS: usize = 400;
 const SPEED: f64 = 8.0;
 const TILT_DEG: f64 = 20.0;
 /// The tilt-rate bound of the tilt-rate configurations \[deg/s\] (the
 /// daemon's default).
 const RATE_DEG_S: f64 = 150.0;
-
-fn plant() -> PlanarModel {
-    PlanarModel::new(PlanarParams {
-        psi: 0.0,
-        frame: Frame::Ned,
-        ..Default::default()
-    })
-    .unwrap()
-}
 
 /// The flown course: the L of the corner, or the course of corners (five
 /// 60 m legs, [`COURSE_TICKS`]), whose corners the horizon meets one at a
@@ -197,23 +191,8 @@ impl Config {
 /// The measurements of one closed-loop flight of the course with the warm
 /// cone.
 fn record(n: usize, course: Course) -> Vec<Measurement> {
-    let plant = plant();
-    let mut ctrl = DfMpc::new(ControlModel::Planar(plant), Config::ConeWarm.settings(n)).unwrap();
-    let mut reference = course.reference();
-    let mut x = SVector::<f64, 6>::zeros();
-    let mut out = Vec::with_capacity(course.ticks());
-    for k in 0..course.ticks() {
-        let y = plant.output(&x);
-        let m = Measurement {
-            t: k as f64 * DT,
-            position: Vector3::new(y.x, y.y, -2.0),
-            yaw: 0.0,
-        };
-        let c = ctrl.update(&m, &mut reference).unwrap();
-        x = plant.step(&x, &Vector2::new(c.command.pitch, c.command.roll));
-        out.push(m);
-    }
-    out
+    let mut ctrl = DfMpc::new(ControlModel::Planar(plant()), Config::ConeWarm.settings(n)).unwrap();
+    common::record(&mut ctrl, &mut course.reference(), course.ticks())
 }
 
 /// What the cascades' first solver (the augmented Lagrangian) did on the
@@ -545,6 +524,7 @@ mod anchor {
     use dflat_control::optimise::osqp_anchor::{OsqpBoxSolver, OsqpOutcome, OsqpTuning, OsqpWarm};
     use dflat_control::optimise::{AxisProblem, AxisSolver, Carry, SolveFailure};
 
+    use super::common::DT;
     use super::*;
 
     /// eps_abs = eps_rel: the loosest power of ten at which OSQP's plan

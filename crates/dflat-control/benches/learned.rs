@@ -17,6 +17,9 @@
 
 #![allow(missing_docs)]
 
+#[path = "common/mod.rs"]
+mod common;
+
 use std::collections::BTreeMap;
 use std::time::Instant;
 
@@ -26,23 +29,15 @@ use dflat_control::learned::{
 };
 use dflat_control::reference::Reference;
 use dflat_control::window::MultiRateSettings;
-use dflat_control::{ControlModel, Controller, Frame, Measurement};
-use dflat_model::{FlatModel, PlanarModel, PlanarParams};
+use dflat_control::{ControlModel, Controller, Measurement};
+use dflat_model::FlatModel;
 use nalgebra::{SVector, Vector2, Vector3};
 
-const DT: f64 = 0.02;
 const TICKS: usize = 400;
 const SPEED: f64 = 8.0;
 const REPEATS: usize = 5;
 
-fn plant() -> PlanarModel {
-    PlanarModel::new(PlanarParams {
-        psi: 0.0,
-        frame: Frame::Ned,
-        ..Default::default()
-    })
-    .unwrap()
-}
+use common::{DT, plant};
 
 fn aero_residual() -> LearnedResidual {
     let features = vec![Feature::Bias, Feature::Quadratic, Feature::RotorPlane];
