@@ -42,6 +42,8 @@ const SPEED: f64 = 7.0;
 const SIZE: f64 = 24.0 * (SPEED / 4.0) * (SPEED / 4.0);
 const RAMP_S: f64 = 3.0;
 const STREAM_S: f64 = 16.0;
+/// Where the vehicle and the planner's trajectory start, NED \[m\].
+const START: [f64; 3] = [0.0, 0.0, -10.0];
 
 /// Whether the flights fly on vision poses (`E2E_VISION=1`): 50 Hz,
 /// 60 ms latency (told to the daemon, `link.pose_min_latency_ms`), 2 cm
@@ -79,7 +81,7 @@ csv = true
 [mission]
 start = "hold"
 [sitl]
-start = [0.0, 0.0, -10.0]
+start = {START:?}
 {drag}
 {sensing}
 [sitl.planner]
@@ -198,7 +200,7 @@ fn judge_truth(name: &str, report: &dflat_sitl::SitlReport) -> (f64, [f64; 2]) {
         size: SIZE,
         speed: SPEED,
         ramp_s: RAMP_S,
-        start: nalgebra::Vector3::new(0.0, 0.0, -10.0),
+        start: nalgebra::Vector3::from(START),
     };
     let (mut e, mut ex, mut ey) = (Vec::new(), Vec::new(), Vec::new());
     for sample in &report.trace {
