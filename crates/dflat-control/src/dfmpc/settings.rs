@@ -259,15 +259,6 @@ impl DfMpcSettings {
         if let Some(w) = c.max_tilt_rate {
             OutputConstraints::MAX_TILT_RATE_DEG_S.check_radians("constraints.max_tilt_rate", w)?;
         }
-        if c.max_tilt_rate.is_some()
-            && c.max_tilt.is_some()
-            && self.plan_tilt_bound == PlanTiltBound::Cone
-        {
-            return Err(invalid(
-                "constraints.max_tilt_rate",
-                "not available with plan_tilt_bound = cone yet (box only)",
-            ));
-        }
         if self.solver_time_limit.is_nan() || self.solver_time_limit <= 0.0 {
             return Err(invalid("solver_time_limit", "> 0 s (or infinity)"));
         }

@@ -170,12 +170,11 @@ pub(super) fn build_pipelines(
         } else {
             c.vertical_acceleration
         };
-        let tilt_rate = c.max_tilt_rate.filter(|_| axis < 2).map(|w| TiltRate {
-            step: w * dt,
-            kappa: lag / dt,
-            gain: model.attitude_gain(),
-            gravity: model.gravity(),
-        });
+        // With the cone the tilt-rate rows are the pair's (`horizontal_cone`).
+        let tilt_rate = c
+            .max_tilt_rate
+            .filter(|_| axis < 2 && !cone_mode)
+            .map(|w| tilt_rate(model, w, *lag));
         let bounds = AxisBounds {
             acceleration,
             speed: c.max_speed,
@@ -233,6 +232,18 @@ pub(super) fn build_pipelines(
     Ok((pipelines, cone))
 }
 
+/// The tilt-rate bound `max_tilt_rate` [rad/s] of a horizontal axis whose
+/// attitude lags by `lag` \[s\].
+fn tilt_rate(model: &ControlModel, max_tilt_rate: f64, lag: f64) -> TiltRate {
+    let dt = model.dt();
+    TiltRate {
+        step: max_tilt_rate * dt,
+        kappa: lag / dt,
+        gain: model.attitude_gain(),
+        gravity: model.gravity(),
+    }
+}
+
 /// With the cone (`plan_tilt_bound = Cone` and a tilt limit), the
 /// horizontal pair's cone QP on the weights of the axes' `pipelines`.
 fn horizontal_cone(
@@ -243,9 +254,13 @@ fn horizontal_cone(
     let c = &settings.constraints;
     let cone_mode = settings.plan_tilt_bound == PlanTiltBound::Cone && c.max_tilt.is_some();
     let (dt, n) = (model.dt(), settings.horizon);
+    let lags = input_lags(model);
     let cone = match c.max_tilt {
         Some(t) if cone_mode => {
-            let bounds = ConeBounds::new(model.gravity() * t.tan(), c.max_speed);
+            let mut bounds = ConeBounds::new(model.gravity() * t.tan(), c.max_speed);
+            if let Some(w) = c.max_tilt_rate {
+                bounds = bounds.with_tilt_rate([0, 1].map(|i| tilt_rate(model, w, lags[i])));
+            }
             let down = match model.frame() {
                 crate::Frame::Ned => 1.0,
                 crate::Frame::Zup => -1.0,
@@ -353,9 +368,11 @@ impl DfMpc {
                 // follows the vertical plan (solved above).
                 cone.follow_vertical_plan(&az.plan, dt)?;
             }
-            if !cone
+            let plans = [ax.plan.as_slice(), ay.plan.as_slice()];
+            if !(cone
                 .bounds
-                .violated_within(&ax.plan, &ay.plan, dt, &cone.radius)
+                .violated_within(plans[0], plans[1], dt, &cone.radius)
+                || cone.bounds.rate_violated_by(plans, [sent(0), sent(1)], dt))
             {
                 // Not solved: the next solve has no previous one to shift.
                 cone.cascade.skip();

@@ -188,8 +188,10 @@ pub struct BandedIp {
     sides: Vec<[Side; 2]>,
     lo: Vec<f64>,
     hi: Vec<f64>,
-    /// The exact penalty ρ of soft rows (`None`: hard).
-    soft: Option<f64>,
+    /// The exact penalty ρ per row (`f64::INFINITY`: a hard row), and
+    /// the largest finite one (0: none soft).
+    penalty: Vec<f64>,
+    rho_max: f64,
     /// Iterate, linear term, residual, step, right-hand side, best
     /// iterate.
     v: Vec<f64>,
@@ -204,8 +206,9 @@ pub struct BandedIp {
 
 impl BandedIp {
     /// The interior point `name` (its errors say it) for n ≥ 1 stages of
-    /// `costs.len()` axes at step δt: the bound `rows`, soft with the
-    /// exact penalty ρ when `penalty` is finite, and discs of radius
+    /// `costs.len()` axes at step δt: the bound `rows`, each soft with the
+    /// exact penalty ρ where its entry of `penalty` is finite (one per
+    /// row; `f64::INFINITY`: hard), and discs of radius
     /// `disc` on the first two axes' accelerations; at most
     /// `max_iterations` iterations.
     #[allow(clippy::too_many_arguments)]
@@ -215,7 +218,7 @@ impl BandedIp {
         dt: f64,
         costs: &[&AxisCost],
         rows: Vec<Row>,
-        penalty: Option<f64>,
+        penalty: Vec<f64>,
         disc: Option<f64>,
         max_iterations: usize,
     ) -> Self {
@@ -247,7 +250,13 @@ impl BandedIp {
             }
         }
         let m = rows.len();
+        assert_eq!(penalty.len(), m, "a penalty per row");
         let discs = if disc.is_some() { n } else { 0 };
+        let rho_max = penalty
+            .iter()
+            .copied()
+            .filter(|p| p.is_finite())
+            .fold(0.0, f64::max);
         Self {
             name,
             stages,
@@ -263,7 +272,8 @@ impl BandedIp {
             sides: vec![[Side::default(); 2]; m],
             lo: vec![0.0; m],
             hi: vec![0.0; m],
-            soft: penalty.filter(|p| p.is_finite()),
+            penalty,
+            rho_max,
             v: vec![0.0; size],
             c: vec![0.0; size],
             r: vec![0.0; size],
@@ -383,7 +393,8 @@ impl BandedIp {
                     z: 1.0,
                     ..Side::default()
                 };
-                if let Some(rho) = self.soft {
+                let rho = self.penalty[k];
+                if rho.is_finite() {
                     sd.w = (rho - 1.0).max(1.0);
                     sd.sig = (-room).max(0.0) + floor / sd.w;
                 }
@@ -400,16 +411,16 @@ impl BandedIp {
         let c_scale = 1.0 + norm(&self.c);
         let b_scale = 1.0 + norm(&self.lo).max(norm(&self.hi));
         let cone_scale = 1.0 + self.radius.iter().fold(0.0f64, |a, r| a.max(r * r));
-        let soft = self.soft.is_some();
-        let rho = self.soft.unwrap_or(0.0);
+        let rho = self.rho_max;
         self.cold_duals(b_scale);
-        let pairs = (self.discs.len() + self.rows.len() * if soft { 4 } else { 2 }).max(1) as f64;
+        let soft_rows = self.penalty.iter().filter(|p| p.is_finite()).count();
+        let pairs = (self.discs.len() + 2 * self.rows.len() + 2 * soft_rows).max(1) as f64;
 
         // (lowest merit, its iteration); the iterate is in `best`.
         let mut best = (f64::INFINITY, 0usize);
         for iteration in 0..self.max_iterations {
             self.iterations = iteration;
-            let r = self.residuals(soft, rho);
+            let r = self.residuals();
             if !(r.gap.is_finite()
                 && r.rd.is_finite()
                 && r.req.is_finite()
@@ -438,7 +449,7 @@ impl BandedIp {
                 self.v.copy_from_slice(&self.best);
                 return Ok(iteration);
             }
-            self.assemble_kkt(soft);
+            self.assemble_kkt();
             if self.ldl.factor(&self.kkt).is_err() {
                 // The end game's barrier terms (z/s up to ~1e20) can make
                 // the KKT matrix numerically singular: an acceptable best
@@ -449,7 +460,7 @@ impl BandedIp {
                 }
                 return Err(self.error("factorisation failed"));
             }
-            self.mehrotra_step(rho, soft, r.gap, r.gap / pairs);
+            self.mehrotra_step(r.gap, r.gap / pairs);
         }
         Err(self.error(&format!("no convergence (best merit {:.1e})", best.0)))
     }
@@ -458,7 +469,7 @@ impl BandedIp {
     /// (the dual residual on p, ã; the equality residual A·x on λ), the
     /// discs' and rows' primal residuals, the gap, and the objective's
     /// size.
-    fn residuals(&mut self, soft: bool, rho: f64) -> Residuals {
+    fn residuals(&mut self) -> Residuals {
         let (s, n) = (self.stages, self.n);
         self.base.mul_vec(&self.v, &mut self.r);
         for (r, c) in self.r.iter_mut().zip(&self.c) {
@@ -483,7 +494,8 @@ impl BandedIp {
             low.r = -g - low.sig + low.s + self.lo[k];
             out.rp = out.rp.max(up.r.abs()).max(low.r.abs());
             out.gap += up.s * up.z + low.s * low.z;
-            if soft {
+            let rho = self.penalty[k];
+            if rho.is_finite() {
                 out.gap += up.sig * up.w + low.sig * low.w;
                 out.rsig = out
                     .rsig
@@ -518,7 +530,7 @@ impl BandedIp {
     }
 
     /// K = M + the discs' 2×2 blocks + Σ d·hhᵀ ± ε.
-    fn assemble_kkt(&mut self, soft: bool) {
+    fn assemble_kkt(&mut self) {
         let (s, n) = (self.stages, self.n);
         self.kkt.clone_from(&self.base);
         for (f, cs) in self.discs.iter().enumerate() {
@@ -529,7 +541,8 @@ impl BandedIp {
             self.kkt.add(iy, iy, cs.z + d * uy * uy);
             self.kkt.add(iy, ix, d * ux * uy);
         }
-        for (row, side) in self.rows.iter().zip(&self.sides) {
+        for ((row, side), rho) in self.rows.iter().zip(&self.sides).zip(&self.penalty) {
+            let soft = rho.is_finite();
             let d: f64 = side.iter().map(|sd| Self::side_weight(sd, soft)).sum();
             for a in 0..row.len {
                 for b in 0..=a {
@@ -547,27 +560,24 @@ impl BandedIp {
     /// The predictor (affine) direction, Mehrotra's corrector towards
     /// σ·μ (`mu` the mean complementarity, `gap` the total), and the step
     /// along it, on the factor held.
-    fn mehrotra_step(&mut self, rho: f64, soft: bool, gap: f64, mu: f64) {
-        self.direction(rho, soft, |s, z, _| s * z);
+    fn mehrotra_step(&mut self, gap: f64, mu: f64) {
+        self.direction(|s, z, _| s * z);
         let alpha = self.step_length();
         let mut gap_aff = 0.0;
         for cs in &self.discs {
             gap_aff += (cs.s + alpha * cs.ds) * (cs.z + alpha * cs.dz);
         }
+        // A hard side's σ, w and their steps are 0.
         let after = |sd: &Side| {
-            let hard = (sd.s + alpha * sd.ds) * (sd.z + alpha * sd.dz);
-            if soft {
-                hard + (sd.sig + alpha * sd.dsig) * (sd.w + alpha * sd.dw)
-            } else {
-                hard
-            }
+            (sd.s + alpha * sd.ds) * (sd.z + alpha * sd.dz)
+                + (sd.sig + alpha * sd.dsig) * (sd.w + alpha * sd.dw)
         };
         for [up, low] in &self.sides {
             gap_aff += after(up) + after(low);
         }
         let sigma = (gap_aff / gap).clamp(0.0, 1.0).powi(3);
         let target = sigma * mu;
-        self.direction(rho, soft, |s, z, dsdz| s * z + dsdz - target);
+        self.direction(|s, z, dsdz| s * z + dsdz - target);
         let alpha = (STEP_FRACTION * self.step_length()).min(1.0);
         for (v, dv) in self.v.iter_mut().zip(&self.dv) {
             *v += alpha * dv;
@@ -579,10 +589,8 @@ impl BandedIp {
         for sd in self.sides.iter_mut().flatten() {
             sd.s += alpha * sd.ds;
             sd.z += alpha * sd.dz;
-            if soft {
-                sd.sig += alpha * sd.dsig;
-                sd.w += alpha * sd.dw;
-            }
+            sd.sig += alpha * sd.dsig;
+            sd.w += alpha * sd.dw;
         }
     }
 
@@ -604,7 +612,7 @@ impl BandedIp {
 
     /// The Newton step for complementarity targets `rc(s, z, Δs·Δz)` (the
     /// last argument is the predictor's product, unused by the predictor).
-    fn direction(&mut self, rho: f64, soft: bool, rc: impl Fn(f64, f64, f64) -> f64) {
+    fn direction(&mut self, rc: impl Fn(f64, f64, f64) -> f64) {
         let s = self.stages;
         for (o, r) in self.rhs.iter_mut().zip(&self.r) {
             *o = -r;
@@ -616,7 +624,8 @@ impl BandedIp {
             self.rhs[s.accel(1, f)] -= cs.u[1] * e;
         }
         // Sides: Δz = k0 + d·hΔx, rhs −= hᵀk0 (h = ±g).
-        for (row, side) in self.rows.iter().zip(self.sides.iter_mut()) {
+        for ((row, side), &rho) in self.rows.iter().zip(self.sides.iter_mut()).zip(&self.penalty) {
+            let soft = rho.is_finite();
             for sd in side.iter_mut() {
                 let rcs = rc(sd.s, sd.z, sd.ds * sd.dz);
                 sd.k0 = if soft {
@@ -639,7 +648,8 @@ impl BandedIp {
             cs.ds = -cs.r - du;
             cs.dz = -(rcs + cs.z * cs.ds) / cs.s;
         }
-        for (row, side) in self.rows.iter().zip(self.sides.iter_mut()) {
+        for ((row, side), rho) in self.rows.iter().zip(self.sides.iter_mut()).zip(&self.penalty) {
+            let soft = rho.is_finite();
             let gdx = row.dot(&self.dv);
             for (j, sd) in side.iter_mut().enumerate() {
                 let hdx = if j == 0 { gdx } else { -gdx };

@@ -7,6 +7,7 @@ use clarabel::solver::{DefaultSolver, IPSolver, SolverStatus, SupportedConeT};
 
 use super::cascade::{PairSolver, SolveFailure, SolveInfo, SolverMethod};
 use super::clarabel::{KktTuning, build_solver, push_axis_hessian};
+use super::bounds::Row;
 use super::cone::ConeBounds;
 use super::cone_solver::AxisWeights;
 use super::fast_banded::FastBandedSolver;
@@ -19,7 +20,7 @@ use crate::ControlError;
 /// Variables `[p_x, ã_x, p_y, ã_y, σ]` (n = N − 2 each; σ the elastic
 /// variables of the soft speed sides, 4n of them, when there is a speed
 /// bound and it is soft). Per axis the cost, the equality rows
-/// `Δ²p_f/δt² − ã_f = 0` and the speed rows as
+/// `Δ²p_f/δt² − ã_f = 0`, the speed rows and the tilt-rate rows (hard) as
 /// [`ClarabelSolver`](super::ClarabelSolver); per stage f the cone
 /// `(A, ã_{x,f} + a_{0,x}, ã_{y,f} + a_{0,y}) ∈ SOC₃`. The sparsity is fixed
 /// at construction; each solve updates `q` and `b` only.
@@ -28,14 +29,18 @@ pub struct ClarabelConeSolver {
     dt: f64,
     weights: [AxisWeights; 2],
     bounds: ConeBounds,
-    /// The cone's radius per stage [m/s²] (the bounds' A unless set).
+    /// The cone's radius per stage [m/s²] (the bounds' A unless set), and
+    /// the one enforced this solve (with a tilt-rate bound the funnel,
+    /// [`ConeBounds`]).
     radius: Vec<f64>,
+    stage_radius: Vec<f64>,
     soft: bool,
     solver: DefaultSolver<f64>,
     qvec: Vec<f64>,
     bvec: Vec<f64>,
-    /// First speed row, first cone row.
+    /// First speed row, first tilt-rate row, first cone row.
     m_speed: usize,
+    m_rate: usize,
     m_cone: usize,
 }
 
@@ -130,6 +135,21 @@ impl ClarabelConeSolver {
                 m += 1;
             }
         }
+        // The tilt-rate rows per axis, hard: ±(row·ã) ≤ ±bound.
+        let m_rate = m;
+        if let Some(rates) = &bounds.tilt_rate {
+            for (i, rate) in rates.iter().enumerate() {
+                for f in 0..n {
+                    let row = Row::tilt_rate(f, rate.kappa, |s| a_of(i, s));
+                    for sign in [1.0, -1.0] {
+                        for k in 0..row.len {
+                            push(m, row.idx[k], sign * row.coef[k]);
+                        }
+                        m += 1;
+                    }
+                }
+            }
+        }
         let m_cone = m;
         for f in 0..n {
             // s = b − A·x = (A, a_0x + ã_x, a_0y + ã_y).
@@ -155,12 +175,14 @@ impl ClarabelConeSolver {
             dt,
             weights,
             radius: vec![bounds.acceleration; n],
+            stage_radius: vec![bounds.acceleration; n],
             bounds,
             soft,
             solver,
             qvec,
             bvec,
             m_speed,
+            m_rate,
             m_cone,
         })
     }
@@ -191,6 +213,9 @@ impl ClarabelConeSolver {
         super::problem::check_pair(self.horizon, &x, &y)?;
         let (n, dt) = (self.horizon - 2, self.dt);
         let fixed = [x.fixed, y.fixed];
+        let sent = [x.sent, y.sent];
+        self.bounds
+            .funnel_radius(&self.radius, fixed, sent, dt, &mut self.stage_radius);
         for (i, a) in [&x, &y].into_iter().enumerate() {
             let q = self.weights[i].q;
             for f in 0..n {
@@ -201,20 +226,27 @@ impl ClarabelConeSolver {
                 sent_linear_term(&self.weights[i].smoothness, a.fixed, a.sent, dt);
             let a0 = (a.fixed[2] - 2.0 * a.fixed[1] + a.fixed[0]) / (dt * dt);
             for f in 0..n {
-                self.bvec[self.m_cone + 3 * f] = self.radius[f];
+                self.bvec[self.m_cone + 3 * f] = self.stage_radius[f];
                 self.bvec[self.m_cone + 3 * f + 1 + i] = a0;
             }
         }
-        let mut m = self.m_speed;
+        // The rows in `ConeBounds::rows`'s order: the speed rows (each a
+        // pair of sides from m_speed), then the tilt-rate rows (from m_rate).
         let bvec = &mut self.bvec;
-        let axis = self.bounds.axis_within(&self.radius);
-        for fx in fixed {
-            axis.speed_rows(self.horizon, fx, dt, |lo, hi| {
+        let speed_rows = if self.bounds.speed.is_some() { 2 * n } else { 0 };
+        let (m_speed, m_rate) = (self.m_speed, self.m_rate);
+        let mut k = 0;
+        self.bounds
+            .row_bounds(self.horizon, fixed, sent, &self.radius, dt, |lo, hi| {
+                let m = if k < speed_rows {
+                    m_speed + 2 * k
+                } else {
+                    m_rate + 2 * (k - speed_rows)
+                };
                 bvec[m] = hi;
                 bvec[m + 1] = -lo;
-                m += 2;
+                k += 1;
             });
-        }
         self.solver
             .update_q(&self.qvec)
             .and_then(|()| self.solver.update_b(&self.bvec))

@@ -32,8 +32,32 @@
 //! problem has the hard problem's solution whenever that one exists. The
 //! braking funnel ([`AxisBounds::speed`]) brakes each axis at 90 % of
 //! `A/√2`, a rate both axes can keep at once inside the cone.
+//!
+//! Optionally per axis the **tilt-rate** rows of [`TiltRate`] (hard, on
+//! the stage accelerations ã, after the speed rows: axis x's, then y's).
+//! With them the cone's radius of each stage widens to a **funnel**
+//! ([`ConeBounds::funnel_radius`]) as the box's acceleration rows do: a
+//! witness trajectory — each axis's command moved from the sent one at
+//! 90 % of the rate bound towards the sent command's projection onto the
+//! narrowest disc (with a speed bound: braking at the speed funnel's rate
+//! while faster than the bound, else 0), the accelerations its
+//! first-order response — keeps every tilt-rate row by construction;
+//! stage f's radius is at least the witness's `‖a_f‖`, and with a speed
+//! bound each speed row's bound at least the witness's speed, so that
+//! disc, speed and rate rows together stay feasible when the window's
+//! attitude or the sent command lies outside the cone (a radius that
+//! shrank, a command saturated elsewhere) or the window is faster than
+//! the speed bound (the braking the rate rows allow is slower than the
+//! plain funnel's).
 
-use super::bounds::AxisBounds;
+use super::bounds::{AxisBounds, TiltRate};
+
+/// Share of the rate bound the funnel's witness moves at (module docs):
+/// below 1, so that the plans that keep the funnel (disc and speed rows)
+/// and the rate rows have an interior — at 1 the witness's speed would be
+/// the only one the speed rows allow while it brakes, and the interior
+/// points stall on the set's empty interior (clarabel: `InsufficientProgress`).
+pub(crate) const FUNNEL_RATE: f64 = 0.9;
 
 /// Default exact penalty ρ of a soft speed row, per m/s of violation
 /// (cost units of `q·m²`): far above the multipliers the speed rows take
@@ -51,6 +75,9 @@ pub struct ConeBounds {
     pub speed: Option<f64>,
     /// Exact penalty ρ of the soft speed rows, per m/s of violation (> 0).
     pub speed_penalty: f64,
+    /// The tilt-rate bound per axis (x, y), hard (module docs). `None`:
+    /// none.
+    pub tilt_rate: Option<[TiltRate; 2]>,
 }
 
 impl ConeBounds {
@@ -61,7 +88,165 @@ impl ConeBounds {
             acceleration,
             speed,
             speed_penalty: DEFAULT_SPEED_PENALTY,
+            tilt_rate: None,
         }
+    }
+
+    /// These bounds with the tilt-rate bound per axis (x, y).
+    pub fn with_tilt_rate(self, tilt_rate: [TiltRate; 2]) -> Self {
+        Self {
+            tilt_rate: Some(tilt_rate),
+            ..self
+        }
+    }
+
+    /// Number of bound rows of `n` stages per axis: the speed rows (n per
+    /// axis with a speed bound), then the tilt-rate rows (n per axis).
+    pub(crate) fn rows(&self, n: usize) -> usize {
+        let per_axis = usize::from(self.speed.is_some()) + usize::from(self.tilt_rate.is_some());
+        2 * n * per_axis
+    }
+
+    /// The rows' bounds `(lo, hi)` in row order ([`ConeBounds::rows`]):
+    /// the speed rows per axis with the funnel of the narrowest of
+    /// `radius` ([`ConeBounds::axis_within`]), then the tilt-rate rows per
+    /// axis ([`TiltRate::rows`]; `sent` the accelerations the command sent
+    /// at k−1 asks for [m/s²]), on the deviations from the baseline.
+    pub(crate) fn row_bounds(
+        &self,
+        horizon: usize,
+        fixed: [&[f64; 3]; 2],
+        sent: [Option<f64>; 2],
+        radius: &[f64],
+        dt: f64,
+        mut out: impl FnMut(f64, f64),
+    ) {
+        match (self.speed, &self.tilt_rate) {
+            (Some(limit), Some(_)) => {
+                // The speed funnel of the rate-limited witness (module docs):
+                // row j = f + 2 bounds |v_j| by max(v, the witness's), v_j =
+                // v_{j−1} + a_{j−1}·δt from the window's v_1.
+                let mut v = 0.0;
+                self.witness(radius, fixed, sent, dt, FUNNEL_RATE, |axis, f, a| {
+                    let fx = fixed[axis];
+                    if f == 0 {
+                        v = (fx[2] - fx[1]) / dt;
+                    }
+                    v += a * dt;
+                    let (d1, d2) = (fx[1] - fx[0], fx[2] - 2.0 * fx[1] + fx[0]);
+                    let s_base = (d1 + (f + 2) as f64 * d2) / dt;
+                    let l = limit.max(v.abs());
+                    out(-l - s_base, l - s_base);
+                });
+            }
+            _ => {
+                let axis = self.axis_within(radius);
+                for fx in fixed {
+                    axis.speed_rows(horizon, fx, dt, &mut out);
+                }
+            }
+        }
+        if let Some(rates) = &self.tilt_rate {
+            for ((rate, fx), s) in rates.iter().zip(fixed).zip(sent) {
+                rate.rows(horizon, fx, s, dt, &mut out);
+            }
+        }
+    }
+
+    /// The radius per stage the solvers enforce: `radius` (the cone's,
+    /// one per stage f = 0..n−1 [m/s²]), widened with a tilt-rate bound to
+    /// the witness's `‖a_f‖` (module docs: the funnel); `radius` itself
+    /// without one. `fixed` and `sent` per axis as
+    /// [`ConeBounds::row_bounds`].
+    pub(crate) fn funnel_radius(
+        &self,
+        radius: &[f64],
+        fixed: [&[f64; 3]; 2],
+        sent: [Option<f64>; 2],
+        dt: f64,
+        out: &mut [f64],
+    ) {
+        out.copy_from_slice(radius);
+        // Axis x's witness into `out`, then the norm with axis y's.
+        self.witness(radius, fixed, sent, dt, FUNNEL_RATE, |axis, f, a| {
+            out[f] = if axis == 0 {
+                a
+            } else {
+                radius[f].max(out[f].hypot(a))
+            };
+        });
+    }
+
+    /// The witness at `shrink`·B per tick as deviations `p` per axis from
+    /// the baseline (n each; `Δ²p_f = ã_f·δt²`): strictly inside the rate
+    /// rows for `shrink` < 1, the interior point's start. No effect
+    /// without a tilt-rate bound.
+    pub(crate) fn witness_start(
+        &self,
+        radius: &[f64],
+        fixed: [&[f64; 3]; 2],
+        sent: [Option<f64>; 2],
+        dt: f64,
+        shrink: f64,
+        [px, py]: [&mut [f64]; 2],
+    ) {
+        let a0 = fixed.map(|f| (f[2] - 2.0 * f[1] + f[0]) / (dt * dt));
+        let dt2 = dt * dt;
+        self.witness(radius, fixed, sent, dt, shrink, |axis, f, a| {
+            let p = if axis == 0 { &mut *px } else { &mut *py };
+            let at = |k: usize| if f >= k { p[f - k] } else { 0.0 };
+            p[f] = 2.0 * at(1) - at(2) + (a - a0[axis]) * dt2;
+        });
+    }
+
+    /// The witness trajectory of the funnel (module docs) at `shrink`·B
+    /// per tick: `out(axis, f, a_f)` for axis x's stages f = 0..n−1, then
+    /// axis y's [m/s²]. Nothing without a tilt-rate bound. Each axis's
+    /// command moves towards, with a speed bound v, `∓b` while the
+    /// witness is faster than v and 0 otherwise (b = 0.9·A_min/√2, the
+    /// speed funnel's braking: a point inside every disc), without one
+    /// the sent command's projection onto the narrowest disc.
+    fn witness(
+        &self,
+        radius: &[f64],
+        fixed: [&[f64; 3]; 2],
+        sent: [Option<f64>; 2],
+        dt: f64,
+        shrink: f64,
+        mut out: impl FnMut(usize, usize, f64),
+    ) {
+        let Some(rates) = &self.tilt_rate else {
+            return;
+        };
+        let horizon = radius.len() + 2;
+        let a0 = fixed.map(|f| (f[2] - 2.0 * f[1] + f[0]) / (dt * dt));
+        let c = [0, 1].map(|i| sent[i].unwrap_or(a0[i]));
+        let narrowest = radius.iter().copied().fold(f64::INFINITY, f64::min);
+        let norm = c[0].hypot(c[1]);
+        let scale = if norm > narrowest { narrowest / norm } else { 1.0 };
+        let brake = 0.9 * narrowest / std::f64::consts::SQRT_2;
+        for axis in 0..2 {
+            let projected = c[axis] * scale;
+            let target = |v: f64| match self.speed {
+                Some(limit) if v > limit => -brake,
+                Some(limit) if v < -limit => brake,
+                Some(_) => 0.0,
+                None => projected,
+            };
+            let mut f = 0;
+            rates[axis].witness_toward(horizon, fixed[axis], sent[axis], dt, shrink, target, |a| {
+                out(axis, f, a);
+                f += 1;
+            });
+        }
+    }
+
+    /// True when a tilt-rate row of either axis is broken by the plans
+    /// ([`TiltRate::violated_by`]; `sent` as [`ConeBounds::row_bounds`]).
+    pub fn rate_violated_by(&self, plans: [&[f64]; 2], sent: [Option<f64>; 2], dt: f64) -> bool {
+        self.tilt_rate.is_some_and(|rates| {
+            (0..2).any(|i| rates[i].violated_by(plans[i], sent[i], dt))
+        })
     }
 
     /// The per-axis view used for the speed rows: the speed bound with the
@@ -142,6 +327,9 @@ impl ConeBounds {
                 "constraints.speed_penalty",
                 "finite and > 0 (per m/s)",
             ));
+        }
+        if let Some(rates) = &self.tilt_rate {
+            rates.iter().try_for_each(TiltRate::check)?;
         }
         Ok(())
     }

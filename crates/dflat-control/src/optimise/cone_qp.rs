@@ -12,7 +12,9 @@
 //! matrix has half-bandwidth 8 (12 with smoothness) over 6n rows.
 //!
 //! The cone is a disc per stage, the speed rows are soft interval rows
-//! (or hard, with an infinite penalty).
+//! (or hard, with an infinite penalty), the tilt-rate rows hard interval
+//! rows on three ã entries of one axis (distance 12: the band then is
+//! 12 wide).
 //!
 //! Always started cold: the warm path of
 //! [`BandedConeSolver`](super::BandedConeSolver) is the
@@ -47,19 +49,36 @@ pub struct ConeQp {
 
 impl ConeQp {
     /// A solver for n ≥ 1 free outputs per axis at step δt, cone radius
-    /// `limit` = A [m/s²], and speed rows with exact penalty ρ when
-    /// `speed_penalty` is given (soft: `Some`; `f64::INFINITY`: hard).
+    /// `limit` = A [m/s²], speed rows with exact penalty ρ when
+    /// `speed_penalty` is given (soft: `Some`; `f64::INFINITY`: hard), and
+    /// hard tilt-rate rows on ã per axis with `tilt_rate = Some([κ_x,
+    /// κ_y])` (`Row::tilt_rate`), in [`ConeBounds::rows`]'s order.
+    ///
+    /// [`ConeBounds::rows`]: super::cone::ConeBounds
     pub fn new(
         n: usize,
         dt: f64,
         axes: [&AxisCost; 2],
         limit: f64,
         speed_penalty: Option<f64>,
+        tilt_rate: Option<[f64; 2]>,
     ) -> Self {
-        let rows = if speed_penalty.is_some() {
-            Row::speed_pair(n, dt, p_at)
+        let mut rows = Vec::new();
+        let mut penalty = Vec::new();
+        if let Some(rho) = speed_penalty {
+            rows.extend(Row::speed_pair(n, dt, p_at));
+            penalty.resize(rows.len(), rho);
+        }
+        if let Some(kappa) = tilt_rate {
+            for (axis, k) in kappa.into_iter().enumerate() {
+                rows.extend((0..n).map(|f| Row::tilt_rate(f, k, |s| a_at(axis, s))));
+            }
+            penalty.resize(rows.len(), f64::INFINITY);
+        }
+        let max_iterations = if tilt_rate.is_some() {
+            super::interior_point::MAX_ITERATIONS_TILT_RATE
         } else {
-            Vec::new()
+            MAX_ITERATIONS
         };
         let ip = BandedIp::new(
             "cone QP",
@@ -67,9 +86,9 @@ impl ConeQp {
             dt,
             &axes,
             rows,
-            speed_penalty,
+            penalty,
             Some(limit),
-            MAX_ITERATIONS,
+            max_iterations,
         );
         Self { ip }
     }

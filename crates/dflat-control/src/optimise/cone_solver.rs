@@ -59,9 +59,15 @@ pub struct BandedConeSolver {
     lo: Vec<f64>,
     hi: Vec<f64>,
     /// The axes' fast paths (their right-hand sides), and the radius per
-    /// stage A_f [m/s²].
+    /// stage A_f [m/s²]: the cone's, and the one enforced this tick (with
+    /// a tilt-rate bound the funnel, [`ConeBounds`]).
     fast: [FastBandedSolver; 2],
     radius: Vec<f64>,
+    stage_radius: Vec<f64>,
+    /// This tick's window (fixed outputs per axis \[m\]) and the
+    /// accelerations the command sent at k−1 asks for [m/s²].
+    window: [[f64; 3]; 2],
+    sent: [Option<f64>; 2],
     /// Start deviations per axis (cold), then the warm guess.
     p: [Vec<f64>; 2],
     warm: [Vec<f64>; 2],
@@ -127,25 +133,36 @@ impl BandedConeSolver {
             accel: accel_block(n, w.r, dt, &w.smoothness),
         });
         let penalty = bounds.speed.map(|_| bounds.speed_penalty);
-        let qp = ConeQp::new(n, dt, [&axes[0], &axes[1]], bounds.acceleration, penalty);
+        let kappa = bounds.tilt_rate.map(|r| r.map(|r| r.kappa));
+        let qp = ConeQp::new(n, dt, [&axes[0], &axes[1]], bounds.acceleration, penalty, kappa);
         let fast = |w: &AxisWeights| {
             FastBandedSolver::with_smoothness(horizon, w.q, w.r, dt, w.smoothness)
         };
         let fast = [fast(&weights[0])?, fast(&weights[1])?];
-        // The speed rows per axis, axis 0's first (p_{axis, k} at 2k + axis).
-        let blocks = penalty
-            .map(|penalty| {
-                (0..2)
-                    .map(|axis| RowBlock {
-                        rows: (0..n)
-                            .map(|g| Row::speed(g, dt, |k| 2 * k + axis))
-                            .collect(),
-                        scale: 1.0 / (dt * dt),
-                        penalty,
+        // The speed rows per axis, axis 0's first (p_{axis, k} at 2k + axis),
+        // then the tilt-rate rows per axis (hard, in m/s²).
+        let mut blocks = Vec::new();
+        if let Some(penalty) = penalty {
+            blocks.extend((0..2).map(|axis| RowBlock {
+                rows: (0..n)
+                    .map(|g| Row::speed(g, dt, |k| 2 * k + axis))
+                    .collect(),
+                scale: 1.0 / (dt * dt),
+                penalty,
+            }));
+        }
+        if let Some(kappa) = kappa {
+            let inv_dt2 = 1.0 / (dt * dt);
+            blocks.extend((0..2).map(|axis| RowBlock {
+                rows: (0..n)
+                    .map(|f| {
+                        Row::tilt_rate(f, kappa[axis], |s| s).on_outputs(inv_dt2, |k| 2 * k + axis)
                     })
-                    .collect()
-            })
-            .unwrap_or_default();
+                    .collect(),
+                scale: 1.0,
+                penalty: f64::INFINITY,
+            }));
+        }
         let alm = use_alm.then(|| {
             BandedAlm::new(
                 fast.to_vec(),
@@ -155,7 +172,8 @@ impl BandedConeSolver {
                 AlmTuning::default(),
             )
         });
-        let m = qp.ip.rows();
+        let m = bounds.rows(n);
+        debug_assert_eq!(m, qp.ip.rows());
         Ok(Self {
             horizon,
             dt,
@@ -165,6 +183,9 @@ impl BandedConeSolver {
             alm,
             fast,
             radius: vec![bounds.acceleration; n],
+            stage_radius: vec![bounds.acceleration; n],
+            window: [[0.0; 3]; 2],
+            sent: [None; 2],
             c_alm: vec![0.0; 2 * n],
             ip_stage_duals: vec![[0.0; 2]; n],
             ip_row_duals: vec![[0.0; 2]; m],
@@ -320,7 +341,7 @@ impl BandedConeSolver {
         y: AxisProblem<'_>,
     ) -> Result<(), ControlError> {
         super::problem::check_pair(self.horizon, &x, &y)?;
-        let a0 = self.load(&x, &y);
+        let a0 = self.load(&x, &y)?;
         self.iterations = 0;
         let warm = self.warm_start && self.previous_valid;
         self.warm_used = false;
@@ -345,9 +366,10 @@ impl BandedConeSolver {
     }
 
     /// The tick's data: both methods' linear terms, the plans given and
-    /// the warm guesses as deviations from the baseline, the speed rows'
-    /// bounds. Returns the axes' window accelerations a_0 [m/s²].
-    fn load(&mut self, x: &AxisProblem<'_>, y: &AxisProblem<'_>) -> [f64; 2] {
+    /// the warm guesses as deviations from the baseline, the rows' bounds
+    /// and, with a tilt-rate bound, the funnel's radius on both methods.
+    /// Returns the axes' window accelerations a_0 [m/s²].
+    fn load(&mut self, x: &AxisProblem<'_>, y: &AxisProblem<'_>) -> Result<[f64; 2], ControlError> {
         let (dt, n) = (self.dt, self.horizon - 2);
         self.c.fill(0.0);
         let mut a0 = [0.0; 2];
@@ -373,17 +395,28 @@ impl BandedConeSolver {
             self.c[a_at(i, 0)] = sent_linear_term(&self.weights[i].smoothness, a.fixed, a.sent, dt);
             a0[i] = (a.fixed[2] - 2.0 * a.fixed[1] + a.fixed[0]) / (dt * dt);
         }
-        let axis = self.bounds.axis_within(&self.radius);
+        self.window = [*x.fixed, *y.fixed];
+        self.sent = [x.sent, y.sent];
+        let (fixed, sent) = ([x.fixed, y.fixed], self.sent);
+        let (lo, hi) = (&mut self.lo, &mut self.hi);
         let mut k = 0;
-        for fx in [x.fixed, y.fixed] {
-            let (lo, hi) = (&mut self.lo, &mut self.hi);
-            axis.speed_rows(self.horizon, fx, dt, |l, h| {
+        self.bounds
+            .row_bounds(self.horizon, fixed, sent, &self.radius, dt, |l, h| {
                 lo[k] = l;
                 hi[k] = h;
                 k += 1;
             });
+        if self.bounds.tilt_rate.is_some() {
+            self.bounds
+                .funnel_radius(&self.radius, fixed, sent, dt, &mut self.stage_radius);
+            if let Some(alm) = &mut self.alm {
+                alm.set_radius(&self.stage_radius)?;
+            }
+            if let Some(qp) = &mut self.qp {
+                qp.ip.set_radius(&self.stage_radius)?;
+            }
         }
-        a0
+        Ok(a0)
     }
 
     /// The augmented Lagrangian's attempt (none configured: false).
@@ -416,6 +449,15 @@ impl BandedConeSolver {
         let Some(qp) = &mut self.qp else {
             return Err(ControlError::Solver("cone ALM: no convergence".to_string()));
         };
+        if self.bounds.tilt_rate.is_some() {
+            // As the box's interior point: from the witness at half the
+            // rate, strictly inside the rate rows (the plan given breaks
+            // those narrow rows by many times their width).
+            let [px, py] = &mut self.p;
+            let fixed = [&self.window[0], &self.window[1]];
+            self.bounds
+                .witness_start(&self.radius, fixed, self.sent, self.dt, 0.5, [px, py]);
+        }
         qp.ip.set_start(&[&self.p[0], &self.p[1]], self.dt);
         let result = qp.solve(&self.c, a0, (&self.lo, &self.hi));
         self.iterations += qp.ip.iterations();

@@ -84,13 +84,15 @@ impl StageQp {
         } else {
             MAX_ITERATIONS
         };
+        // Every row hard.
+        let penalty = vec![f64::INFINITY; rows.len()];
         let ip = BandedIp::new(
             "stage QP",
             n,
             dt,
             &[&cost],
             rows,
-            None,
+            penalty,
             None,
             max_iterations,
         );

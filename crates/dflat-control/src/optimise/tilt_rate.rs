@@ -149,21 +149,43 @@ impl TiltRate {
         bound: Option<[f64; 2]>,
         dt: f64,
         shrink: f64,
-        mut out: impl FnMut(f64),
+        out: impl FnMut(f64),
     ) {
         let a0 = (fixed[2] - 2.0 * fixed[1] + fixed[0]) / (dt * dt);
         let c_prev = sent.unwrap_or(a0);
         let target = bound.map_or(c_prev, |[lo, hi]| c_prev.clamp(lo, hi));
+        self.witness_toward(horizon, fixed, sent, dt, shrink, |_| target, out);
+    }
+
+    /// As [`TiltRate::witness`], the command moved towards `target(v)`
+    /// [m/s²], v the witness's speed [m/s] before the stage (v_1 = (y_2 −
+    /// y_1)/δt, then `v_{j+1} = v_j + a_j·δt`): a target that brakes
+    /// while the speed is above a bound (the cone's speed funnel).
+    #[allow(clippy::too_many_arguments)] // the problem's data, as `funnel`
+    pub(crate) fn witness_toward(
+        &self,
+        horizon: usize,
+        fixed: &[f64; 3],
+        sent: Option<f64>,
+        dt: f64,
+        shrink: f64,
+        mut target: impl FnMut(f64) -> f64,
+        mut out: impl FnMut(f64),
+    ) {
+        let a0 = (fixed[2] - 2.0 * fixed[1] + fixed[0]) / (dt * dt);
+        let mut v = (fixed[2] - fixed[1]) / dt;
+        let c_prev = sent.unwrap_or(a0);
         let b = shrink * self.accel_step();
         let k = self.kappa;
-        let toward = |c: f64| c + (target - c).clamp(-b, b);
+        let toward = |c: f64, t: f64| c + (t - c).clamp(-b, b);
         let (l1, h1) = self.first_stage(a0, sent);
         let (mid, half) = (0.5 * (l1 + h1), 0.5 * shrink * (h1 - l1));
-        let mut a = (a0 + (toward(c_prev) - a0) / k).clamp(mid - half, mid + half);
+        let mut a = (a0 + (toward(c_prev, target(v)) - a0) / k).clamp(mid - half, mid + half);
         let mut c = a0 + k * (a - a0);
         out(a);
         for _ in 1..horizon - 2 {
-            c = toward(c);
+            v += a * dt;
+            c = toward(c, target(v));
             a += (c - a) / k;
             out(a);
         }

@@ -145,12 +145,14 @@ pub struct DfMpcConfig {
     /// makes the command jump (docs/controllers.md, "The tilt-rate bound").
     /// Default 150 (3° per tick at 50 Hz on each NED axis; pitch and roll
     /// measured ≤ 4.5° per tick after 10 and 20 m diagonal steps, inside the
-    /// 5°/tick budget). Box plan-tilt bound only: with
-    /// `plan_tilt_bound = "cone"` set it to 0.
+    /// 5°/tick budget). With either plan-tilt bound: with the cone the
+    /// rate rows join the pair's problem, the cone's radius widening into
+    /// a funnel where the rate cannot reach it in time.
     pub max_tilt_rate_deg_s: f64,
     /// Solver of the constrained QP: "banded" — O(N) per iteration: an
-    /// interior point for the box, an augmented Lagrangian (interior point
-    /// as its fallback) for the cone; clarabel as the fallback of both — or
+    /// augmented Lagrangian (an active-set method for the box's rows) with
+    /// a banded interior point as its fallback, for the box and the cone;
+    /// clarabel as the last fallback of both — or
     /// "clarabel" alone. Default "banded".
     pub qp_solver: QpSolver,
     /// How `controller.constraint_tilt_deg` bounds the plan: "box" (each
@@ -375,16 +377,6 @@ impl ControllerConfig {
             d.max_tilt_rate_deg_s,
             OutputConstraints::MAX_TILT_RATE_DEG_S,
         )?;
-        if d.max_tilt_rate_deg_s != 0.0
-            && d.plan_tilt_bound == PlanTiltBound::Cone
-            && self.constraint_tilt_deg > 0.0
-        {
-            return Err(v.err(
-                "controller.dfmpc.max_tilt_rate_deg_s",
-                &d.max_tilt_rate_deg_s.to_string(),
-                "0 with plan_tilt_bound = \"cone\" (the tilt-rate bound is in the box solvers only)",
-            ));
-        }
         let s = &self.disturbance;
         v.limit(
             "controller.disturbance.bandwidth_hz",

@@ -407,6 +407,12 @@ pub struct BandedAlm {
     rows: Vec<Row>,
     row_scale: Vec<f64>,
     row_penalty: Vec<f64>,
+    /// Per row, the factor its multiplier's change enters the row
+    /// residual with: 1, but for hard rows beside soft ones
+    /// ([`PRIMAL_TOLERANCE`]/(ρ_max·[`ROW_TOLERANCE`])), whose residual
+    /// tolerance is then the soft rows' (ρ_max times tighter than the
+    /// stages') scaled back to the hard rows' own.
+    row_res_weight: Vec<f64>,
     row_first: Vec<usize>,
     blocks: Vec<Range<usize>>,
     /// Largest diagonal entry of P.
@@ -478,6 +484,22 @@ impl BandedAlm {
             }
         }
         let diag_max = (0..size).fold(0.0f64, |a, i| a.max(base.get(i, i)));
+        let rho_max = row_penalty
+            .iter()
+            .copied()
+            .filter(|r: &f64| r.is_finite())
+            .fold(0.0f64, f64::max);
+        let mixed = rho_max > 0.0 && row_penalty.iter().any(|r| r.is_infinite());
+        let row_res_weight = row_penalty
+            .iter()
+            .map(|r| {
+                if mixed && r.is_infinite() {
+                    PRIMAL_TOLERANCE / (rho_max.max(1.0) * ROW_TOLERANCE)
+                } else {
+                    1.0
+                }
+            })
+            .collect();
         // P's factor, the head of every window's (P is positive definite
         // for valid weights; should it not factor, no window opens).
         let mut head = BandedCholesky::new(size, bandwidth);
@@ -508,6 +530,7 @@ impl BandedAlm {
             rows,
             row_scale,
             row_penalty,
+            row_res_weight,
             row_first,
             blocks: ranges,
             diag_max,
