@@ -1,7 +1,7 @@
 //! End to end: the daemon plans with the tilt cone
 //! (`controller.dfmpc.plan_tilt_bound = "cone"`) against the built-in SITL,
-//! in-process: the shipped SITL configuration with a 12° plan bound, so
-//! the cone binds from the start; the banded solver (augmented Lagrangian,
+//! in-process: the shipped SITL configuration with a 12° plan bound and
+//! its tilt-rate bound, so the cone binds from the start; the banded solver (augmented Lagrangian,
 //! warm) serves every constrained tick — no clarabel fallback, no control
 //! error — and the vehicle flies the path's first leg.
 
@@ -18,8 +18,9 @@ async fn the_daemon_flies_with_the_tilt_cone_in_the_plan() {
     let (mut cfg, mut plant) = demo_config(&DemoOptions::default()).unwrap();
     cfg.logging.dir = String::new();
     cfg.controller.dfmpc.plan_tilt_bound = PlanTiltBound::Cone;
-    // The tilt-rate bound is in the box solvers only.
-    cfg.controller.dfmpc.max_tilt_rate_deg_s = 0.0;
+    // The shipped tilt-rate bound (150 deg/s) stays on: its rows join the
+    // cone's problem.
+    assert!(cfg.controller.dfmpc.max_tilt_rate_deg_s > 0.0);
     cfg.controller.constraint_tilt_deg = 12.0;
     plant.sitl.engage = SitlEngage::Auto;
     plant.sitl.pilot.clear();

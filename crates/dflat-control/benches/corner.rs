@@ -13,10 +13,12 @@
 //! work (Newton steps, factorisations, fallbacks).
 //!
 //! The tilt-rate bound (`max_tilt_rate`, [`RATE_DEG_S`]) is timed with the
-//! box (the daemon's set-up: box + tilt rate), alone, and with clarabel
-//! solving the same box + tilt-rate QP; its banded rows run the box's
-//! cascade (the augmented Lagrangian with its active-set polish, then the
-//! interior point).
+//! box (the daemon's set-up: box + tilt rate), alone, with the cone, and
+//! with clarabel solving the same box + tilt-rate and cone + tilt-rate
+//! QPs; with the box its banded rows run the box's cascade (the
+//! augmented Lagrangian with its active-set polish, then the interior
+//! point), with the cone the cone's (the augmented Lagrangian, then the
+//! interior point, both with the rate rows).
 //!
 //! Each banded configuration runs DF-MPC's cascade (`optimise/cascade.rs`);
 //! the work line per configuration gives what its augmented Lagrangian did
@@ -120,10 +122,12 @@ enum Config {
     RateAlone,
     BoxRateClarabel,
     BoxClarabel,
+    ConeRate,
+    ConeRateClarabel,
 }
 
 impl Config {
-    const ALL: [Self; 9] = [
+    const ALL: [Self; 11] = [
         Self::Fast,
         Self::ConeWarm,
         Self::ConeCold,
@@ -133,6 +137,8 @@ impl Config {
         Self::RateAlone,
         Self::BoxRateClarabel,
         Self::BoxClarabel,
+        Self::ConeRate,
+        Self::ConeRateClarabel,
     ];
     fn name(self) -> &'static str {
         match self {
@@ -145,6 +151,8 @@ impl Config {
             Self::RateAlone => "tilt rate alone, ALM",
             Self::BoxRateClarabel => "box + tilt rate, clarabel",
             Self::BoxClarabel => "box, clarabel",
+            Self::ConeRate => "cone + tilt rate, ALM",
+            Self::ConeRateClarabel => "cone + tilt rate, clarabel",
         }
     }
     fn settings(self, n: usize) -> DfMpcSettings {
@@ -157,7 +165,10 @@ impl Config {
             horizon: n,
             constraints: match self {
                 Self::Fast => OutputConstraints::default(),
-                Self::BoxRate | Self::BoxRateClarabel => OutputConstraints {
+                Self::BoxRate
+                | Self::BoxRateClarabel
+                | Self::ConeRate
+                | Self::ConeRateClarabel => OutputConstraints {
                     max_tilt_rate: rate,
                     ..constraints
                 },
@@ -168,9 +179,10 @@ impl Config {
                 _ => constraints,
             },
             qp_solver: match self {
-                Self::ConeClarabel | Self::BoxRateClarabel | Self::BoxClarabel => {
-                    QpSolver::Clarabel
-                }
+                Self::ConeClarabel
+                | Self::BoxRateClarabel
+                | Self::BoxClarabel
+                | Self::ConeRateClarabel => QpSolver::Clarabel,
                 _ => QpSolver::Banded,
             },
             plan_tilt_bound: match self {

@@ -11,7 +11,9 @@
 //! `cargo test --release -p dflat-control --test df_tilt_rate -- --nocapture`
 //! prints the figures quoted in docs/controllers.md.
 
-use dflat_control::dfmpc::{DfMpc, DfMpcSettings, InputSaturation, OutputConstraints};
+use dflat_control::dfmpc::{
+    DfMpc, DfMpcSettings, InputSaturation, OutputConstraints, PlanTiltBound,
+};
 use dflat_control::reference::{Reference, paths};
 use dflat_control::{
     ControlModel, Controller, Measurement, ReferenceSource, TickOutput, TiltLimit,
@@ -43,7 +45,13 @@ fn planar() -> PlanarModel {
 /// The daemon's DF-MPC set-up (`config/default.toml`, classic window),
 /// with the tilt-rate bound `rate` \[deg/s\] or none.
 fn settings(rate: Option<f64>) -> DfMpcSettings {
+    settings_with(rate, PlanTiltBound::Box)
+}
+
+/// [`settings`] with the plan-tilt bound `bound` (box or cone).
+fn settings_with(rate: Option<f64>, bound: PlanTiltBound) -> DfMpcSettings {
     DfMpcSettings {
+        plan_tilt_bound: bound,
         horizon: 100,
         tracking_weight: [1.0; 3],
         jerk_weight: [0.003; 3],
@@ -141,17 +149,25 @@ fn fly(
 }
 
 fn step_flight(rate: Option<f64>, distance: f64) -> Flight {
-    let mut ctrl = DfMpc::new(ControlModel::Planar(planar()), settings(rate)).unwrap();
+    step_flight_with(rate, distance, PlanTiltBound::Box)
+}
+
+fn step_flight_with(rate: Option<f64>, distance: f64, bound: PlanTiltBound) -> Flight {
+    let mut ctrl = DfMpc::new(ControlModel::Planar(planar()), settings_with(rate, bound)).unwrap();
     let start = Vector3::new(0.0, 0.0, -2.0);
     // Diagonal, so both axes step at once.
     let goal = start + Vector3::new(distance, distance, 0.0) / 2f64.sqrt();
     let flight = fly(&mut ctrl, &mut Setpoint(goal), start, 400, |_| 0.0);
-    println!("{distance} m step, rate bound {rate:?} deg/s: {flight:?}");
+    println!("{distance} m step, {bound:?}, rate bound {rate:?} deg/s: {flight:?}");
     flight
 }
 
 fn l_flight(rate: Option<f64>) -> Flight {
-    let mut ctrl = DfMpc::new(ControlModel::Planar(planar()), settings(rate)).unwrap();
+    l_flight_with(rate, PlanTiltBound::Box)
+}
+
+fn l_flight_with(rate: Option<f64>, bound: PlanTiltBound) -> Flight {
+    let mut ctrl = DfMpc::new(ControlModel::Planar(planar()), settings_with(rate, bound)).unwrap();
     // The daemon's default path start: a 3 m/s² speed ramp from rest.
     let make = || paths::l(-2.0, 5.0).unwrap().with_ramp(0.0, 3.0).unwrap();
     let mut reference: Reference = make();
@@ -161,7 +177,7 @@ fn l_flight(rate: Option<f64>) -> Flight {
     let flight = fly(&mut ctrl, &mut reference, start, 700, |p| {
         geometry.distance_to_path(p)
     });
-    println!("L path 5 m/s, rate bound {rate:?} deg/s: {flight:?}");
+    println!("L path 5 m/s, {bound:?}, rate bound {rate:?} deg/s: {flight:?}");
     flight
 }
 
@@ -207,6 +223,45 @@ fn the_l_path_corner_keeps_the_tilt_rate_and_tracks_as_before() {
         assert!(
             w <= 1.1 * wo + 0.01,
             "L path {name} error {w} m with the bound, {wo} m without"
+        );
+    }
+}
+
+/// The same flights with the tilt cone as the plan's tilt bound (the rate
+/// rows in the pair's problem, `optimise/cone.rs`): the steps keep the
+/// command within the bound as the box does, and the L path's corner
+/// within the bound plus the slack, tracked within 10 % (plus 1 cm) of the
+/// cone's flight without the bound.
+#[test]
+fn the_cone_keeps_the_tilt_rate_as_the_box_does() {
+    let bound = RATE_DEG_S * DT;
+    for distance in [10.0, 20.0] {
+        let without = step_flight_with(None, distance, PlanTiltBound::Cone);
+        let with = step_flight_with(Some(RATE_DEG_S), distance, PlanTiltBound::Cone);
+        assert!(without.max_step > 3.0 * bound, "{distance} m: {}", without.max_step);
+        assert!(with.constrained > 0, "the bound never bound");
+        assert!(
+            with.max_step <= (COUPLED_FACTOR * bound).min(BUDGET_DEG),
+            "cone, {distance} m: {} deg/tick > {COUPLED_FACTOR} × {bound}",
+            with.max_step
+        );
+    }
+    let without = l_flight_with(None, PlanTiltBound::Cone);
+    let with = l_flight_with(Some(RATE_DEG_S), PlanTiltBound::Cone);
+    assert!(
+        with.max_step <= bound + SLACK_DEG && with.max_axis_step <= bound + SLACK_DEG,
+        "cone, L path: {} deg/tick (per axis {}) > {bound} + {SLACK_DEG}",
+        with.max_step,
+        with.max_axis_step
+    );
+    assert!(without.max_step > 1.5 * bound, "{}", without.max_step);
+    for (name, w, wo) in [
+        ("worst", with.worst, without.worst),
+        ("p95", with.p95, without.p95),
+    ] {
+        assert!(
+            w <= 1.1 * wo + 0.01,
+            "cone, L path {name} error {w} m with the bound, {wo} m without"
         );
     }
 }
