@@ -43,6 +43,11 @@
 //! `docs/performance.md`, "OSQP beside clarabel"). The row "box,
 //! clarabel" is clarabel alone on the box (no tilt rate).
 //!
+//! `CORNER_FLIGHT=own` replays, per configuration, the flight that
+//! configuration flies itself (its closed loop on the model plant)
+//! instead of the warm cone's: the rate-limited configurations then meet
+//! only states their own commands lead to.
+//!
 //! Run: `cargo bench -p dflat-control --bench corner` (a horizon list as
 //! argument, e.g. `-- 200`, limits the run); with OSQP: `eval "$(bash
 //! crates/dflat-control/benches/osqp-qdldl.sh)"` (offline, OSQP's cmake
@@ -203,7 +208,13 @@ impl Config {
 /// The measurements of one closed-loop flight of the course with the warm
 /// cone.
 fn record(n: usize, course: Course) -> Vec<Measurement> {
-    let mut ctrl = DfMpc::new(ControlModel::Planar(plant()), Config::ConeWarm.settings(n)).unwrap();
+    record_with(Config::ConeWarm, n, course)
+}
+
+/// The measurements of one closed-loop flight of the course under
+/// `config`.
+fn record_with(config: Config, n: usize, course: Course) -> Vec<Measurement> {
+    let mut ctrl = DfMpc::new(ControlModel::Planar(plant()), config.settings(n)).unwrap();
     common::record(&mut ctrl, &mut course.reference(), course.ticks())
 }
 
@@ -355,6 +366,13 @@ fn main() {
 /// feature, OSQP's table.
 fn corner_table(n: usize, chosen: &dyn Fn(Config) -> bool) {
     let flight = record(n, Course::Corner);
+    // `CORNER_FLIGHT=own`: each configuration replays the flight it flies
+    // itself (its closed loop on the model plant) instead of the warm
+    // cone's.
+    let own = std::env::var("CORNER_FLIGHT").is_ok_and(|v| v == "own");
+    if own {
+        println!("(each configuration replays its own flight: CORNER_FLIGHT=own)");
+    }
     let repeats = if n >= 800 { 2 } else { 5 };
     println!("\nN = {n} ({repeats} replays)");
     println!(
@@ -367,7 +385,14 @@ fn corner_table(n: usize, chosen: &dyn Fn(Config) -> bool) {
         if !chosen(config) {
             continue;
         }
-        let (mut all, mut con, work) = replay(config, n, (Course::Corner, &flight), repeats);
+        let own_flight;
+        let flight = if own {
+            own_flight = record_with(config, n, Course::Corner);
+            &own_flight
+        } else {
+            &flight
+        };
+        let (mut all, mut con, work) = replay(config, n, (Course::Corner, flight), repeats);
         lines.extend(work_lines(config, &work, all.len(), repeats));
         let s = [
             percentile(&mut all, 50.0),
