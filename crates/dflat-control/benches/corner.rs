@@ -43,6 +43,9 @@
 //! `docs/performance.md`, "OSQP beside clarabel"). The row "box,
 //! clarabel" is clarabel alone on the box (no tilt rate).
 //!
+//! `CORNER_SLOW=500` prints every tick slower than 500 µs (its index in
+//! the flight and its time): the ticks behind a p99.
+//!
 //! `CORNER_FLIGHT=own` replays, per configuration, the flight that
 //! configuration flies itself (its closed loop on the model plant)
 //! instead of the warm cone's: the rate-limited configurations then meet
@@ -282,6 +285,11 @@ fn replay(
             let start = Instant::now();
             let out = std::hint::black_box(ctrl.update(std::hint::black_box(m), &mut reference));
             let t = start.elapsed().as_secs_f64();
+            if let Some(slow) = slow_us()
+                && t * 1e6 > slow
+            {
+                eprintln!("slow tick {} of {}: {:.0} µs", all.len() % flight.len(), config.name(), t * 1e6);
+            }
             all.push(t);
             let out = match out {
                 Ok(out) => out,
@@ -313,6 +321,12 @@ fn replay(
         }
     }
     (all, constrained, work)
+}
+
+/// `CORNER_SLOW` [µs]: ticks slower than it are printed (their index and
+/// time), to find the ticks behind a p99.
+fn slow_us() -> Option<f64> {
+    std::env::var("CORNER_SLOW").ok().and_then(|v| v.parse().ok())
 }
 
 fn percentile(v: &mut [f64], p: f64) -> f64 {
