@@ -23,7 +23,9 @@
 //! term apart from the linear one, `dflat learn` says so and leaves it
 //! out; docs/results.md). `E2E_VISION=1` flies the same on vision poses
 //! (50 Hz, 60 ms, 2 cm: the lab's sensing) and prints the figures without
-//! asserting them: there 38 s of records determine only a constant.
+//! asserting them: there 38 s of records determine nothing on either axis
+//! (not even the constant), `dflat learn` refuses in words, and the
+//! identified flight stands.
 
 #[path = "support/mod.rs"]
 mod common;
@@ -230,8 +232,10 @@ fn identified(name: &str) -> String {
 }
 
 /// `dflat learn` on `flights` over `config`'s `[vehicle]`: the model file
-/// and the config snippet it wrote, and its report.
-fn learn(flights: &[PathBuf], config: &Path, out: &Path) -> (PathBuf, String, String) {
+/// and the config snippet it wrote, and its report. On vision poses a
+/// refusal (nothing the records determine) is `None`, its words printed;
+/// without noise it fails the test.
+fn learn(flights: &[PathBuf], config: &Path, out: &Path) -> Option<(PathBuf, String, String)> {
     let output = Command::new(bin())
         .arg("learn")
         .args(flights)
@@ -242,6 +246,13 @@ fn learn(flights: &[PathBuf], config: &Path, out: &Path) -> (PathBuf, String, St
         .output()
         .expect("run dflat learn");
     let report = String::from_utf8_lossy(&output.stdout).into_owned();
+    if vision() && !output.status.success() {
+        println!(
+            "dflat learn refused:\n{report}{}",
+            String::from_utf8_lossy(&output.stderr)
+        );
+        return None;
+    }
     assert!(
         output.status.success(),
         "dflat learn failed:\n{report}\n{}",
@@ -249,7 +260,7 @@ fn learn(flights: &[PathBuf], config: &Path, out: &Path) -> (PathBuf, String, St
     );
     let snippet_path = out.with_extension("snippet.toml");
     let snippet = std::fs::read_to_string(&snippet_path).expect("the config snippet");
-    (out.to_path_buf(), snippet, report)
+    Some((out.to_path_buf(), snippet, report))
 }
 
 /// The matched plant, then stock, identified and learned on the
@@ -267,7 +278,22 @@ fn learned_maps_fly_the_aerodynamic_plant_as_the_matched_one() {
         csv_in(&scratch_dir("learned-stock")),
         csv_in(&scratch_dir("learned-identified")),
     ];
-    let (model, learned_snippet, report) = learn(&flights, &table, &dir.join("model.toml"));
+    let Some((model, learned_snippet, report)) = learn(&flights, &table, &dir.join("model.toml"))
+    else {
+        // Vision poses only: nothing learned, so the learned flight would
+        // be the identified one.
+        println!(
+            "vision poses: nothing learned; judged p95 (x, y): matched {:.4} ({:.4}, {:.4}), stock {:.4}, identified {:.4} ({:.4}, {:.4}) m (the flight the daemon keeps)",
+            matched.truth,
+            matched.truth_axes[0],
+            matched.truth_axes[1],
+            stock.truth,
+            identified_flight.truth,
+            identified_flight.truth_axes[0],
+            identified_flight.truth_axes[1],
+        );
+        return;
+    };
     eprintln!("{report}\n{learned_snippet}");
     assert!(
         learned_snippet.contains("learned_model") && learned_snippet.contains("model.toml"),

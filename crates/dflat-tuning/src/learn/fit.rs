@@ -505,6 +505,27 @@ pub fn acceleration_error(
     (sum / held_out.len() as f64).sqrt()
 }
 
+/// [`acceleration_error`] per NED axis (x, y, z; z 0 planar) [m/s²].
+pub fn acceleration_error_per_axis(
+    held_out: &[Smoothed],
+    residual: Option<&LearnedResidual>,
+    spatial: bool,
+) -> [f64; 3] {
+    let mut sum = [0.0; 3];
+    for s in held_out {
+        let mut e = s.target;
+        if let Some(m) = residual {
+            e -= s.predicted(m, spatial);
+        }
+        for (axis, acc) in sum.iter_mut().enumerate() {
+            if spatial || axis < 2 {
+                *acc += e[axis] * e[axis];
+            }
+        }
+    }
+    sum.map(|v| (v / held_out.len() as f64).sqrt())
+}
+
 /// Sums of squared prediction errors over held-out starts.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct Errors {

@@ -24,6 +24,16 @@
 //! the speed to vary ([`MIN_SPEED_STD`]); with a steady speed only the
 //! constant is offered. A residual that does not beat the parametric model
 //! on held-out data is refused ([`LearnError::NoImprovement`]).
+//!
+//! **Axis by axis** ([`Learned::parametric_axes`]): an axis whose learned
+//! weights are all undetermined (no weight's 95 % interval within
+//! [`MAX_RELATIVE_INTERVAL`] of it: the constant included, which the
+//! basis check above exempts), or on which the residual does not lower
+//! the validation blocks' unexplained acceleration, keeps the parametric
+//! model: its weights are set to 0 and the report says why. Under pose
+//! noise a short record can determine a constant on one axis and not on
+//! the other; learned on both, it made the first axis worse in flight
+//! (`E2E_VISION=1` in `tests/e2e_learned.rs`, 2026-11-28).
 
 pub mod data;
 pub mod fit;
@@ -99,6 +109,14 @@ pub enum LearnError {
     /// No basis could be fitted.
     #[error("no fit: the normal equations are singular for every window and basis")]
     NoFit,
+    /// No axis keeps a learned term (module docs, "Axis by axis").
+    #[error(
+        "no axis keeps a learned term ({why}): nothing learned, keep the parametric model"
+    )]
+    EveryAxisParametric {
+        /// Each axis's reason.
+        why: String,
+    },
     /// The best residual does not beat the parametric model held out.
     #[error(
         "the residual does not explain the held-out acceleration better than the parametric \
@@ -140,6 +158,9 @@ pub struct Learned {
     pub residual: LearnedResidual,
     /// Basis groups the flight did not excite (with why), not offered.
     pub unexcited: Vec<(Feature, String)>,
+    /// NED axes (0 x, 1 y, 2 z) left to the parametric model (their
+    /// weights 0), with why (module docs, "Axis by axis").
+    pub parametric_axes: Vec<(usize, String)>,
     /// Candidates tried (window × basis × λ).
     pub candidates: usize,
 }
@@ -230,7 +251,7 @@ pub fn learn_with(
         .into_iter()
         .filter(|b| b.iter().all(|f| !unexcited.iter().any(|(u, _)| u == f)))
         .collect();
-    let mut best: Option<(f64, LearnedResidual)> = None;
+    let mut best: Option<(f64, LearnedResidual, [Vec<f64>; 3])> = None;
     let mut undetermined: Vec<(usize, Feature, String)> = Vec::new();
     let mut candidates = 0;
     for &r in &windows {
@@ -251,13 +272,13 @@ pub fn learn_with(
                 let candidate =
                     residual_file(vehicle, r, features, lambda, fitted.weights, support);
                 let score = fit::acceleration_error(&held_out, Some(&candidate), model.spatial);
-                if score.is_finite() && best.as_ref().is_none_or(|(b, _)| score < *b) {
-                    best = Some((score, candidate));
+                if score.is_finite() && best.as_ref().is_none_or(|(b, _, _)| score < *b) {
+                    best = Some((score, candidate, fitted.half_width));
                 }
             }
         }
     }
-    let (score, mut residual) = best.ok_or(LearnError::NoFit)?;
+    let (mut score, mut residual, half_width) = best.ok_or(LearnError::NoFit)?;
     for (r, f, why) in undetermined {
         if r == residual.window
             && !residual.features.contains(&f)
@@ -265,6 +286,19 @@ pub fn learn_with(
         {
             unexcited.push((f, format!("window {r}: {why}")));
         }
+    }
+    let parametric_axes = keep_parametric_axes(&mut residual, &half_width, &held_out, model.spatial);
+    if !parametric_axes.is_empty() {
+        score = fit::acceleration_error(&held_out, Some(&residual), model.spatial);
+    }
+    let axes = if model.spatial { 3 } else { 2 };
+    if parametric_axes.len() == axes {
+        let why = parametric_axes
+            .iter()
+            .map(|(a, w)| format!("{}: {w}", ["x", "y", "z"][*a]))
+            .collect::<Vec<_>>()
+            .join("; ");
+        return Err(LearnError::EveryAxisParametric { why });
     }
     if !held_out.is_empty() && score >= base {
         return Err(LearnError::NoImprovement {
@@ -294,8 +328,70 @@ pub fn learn_with(
     Ok(Learned {
         residual,
         unexcited,
+        parametric_axes,
         candidates,
     })
+}
+
+/// Sets to 0 the weights of each axis the residual should not act on
+/// (module docs, "Axis by axis"): all its weights undetermined by the
+/// fit (`half_width`, the 95 % half-widths), or its held-out unexplained
+/// acceleration not lowered. Returns those axes with why.
+fn keep_parametric_axes(
+    residual: &mut LearnedResidual,
+    half_width: &[Vec<f64>; 3],
+    held_out: &[fit::Smoothed],
+    spatial: bool,
+) -> Vec<(usize, String)> {
+    let axes = if spatial { 3 } else { 2 };
+    let mut kept = Vec::new();
+    for axis in 0..axes {
+        let w = &residual.weights[axis];
+        let determined = w
+            .iter()
+            .zip(&half_width[axis])
+            .any(|(w, h)| *w != 0.0 && h.is_finite() && *h <= MAX_RELATIVE_INTERVAL * w.abs());
+        if !determined {
+            let (w, h) = w
+                .iter()
+                .zip(&half_width[axis])
+                .map(|(w, h)| (*w, *h))
+                .max_by(|a, b| (a.0.abs() / a.1).total_cmp(&(b.0.abs() / b.1)))
+                .unwrap_or((0.0, f64::NAN));
+            kept.push((
+                axis,
+                format!(
+                    "no weight determined (the best {w:.4} ± {h:.4}, 95 %: more than {:.0} % of it)",
+                    100.0 * MAX_RELATIVE_INTERVAL
+                ),
+            ));
+        }
+    }
+    for (axis, _) in &kept {
+        residual.weights[*axis].iter_mut().for_each(|w| *w = 0.0);
+    }
+    if held_out.is_empty() {
+        return kept;
+    }
+    let base = fit::acceleration_error_per_axis(held_out, None, spatial);
+    let learned = fit::acceleration_error_per_axis(held_out, Some(residual), spatial);
+    for axis in 0..axes {
+        if kept.iter().any(|(a, _)| *a == axis) {
+            continue;
+        }
+        if learned[axis].is_nan() || learned[axis] >= base[axis] {
+            kept.push((
+                axis,
+                format!(
+                    "held-out unexplained acceleration not lowered ({:.4} → {:.4} m/s² RMS)",
+                    base[axis], learned[axis]
+                ),
+            ));
+            residual.weights[axis].iter_mut().for_each(|w| *w = 0.0);
+        }
+    }
+    kept.sort_by_key(|(a, _)| *a);
+    kept
 }
 
 /// The first group of `features` (the constant excepted) whose weights the

@@ -112,6 +112,10 @@ pub fn report(learned: &Learned, out: &Path, seconds_taken: f64) -> String {
     for (f, why) in &learned.unexcited {
         let _ = writeln!(s, "  {}: unexcited ({why}), not learned", f.name());
     }
+    for (axis, why) in &learned.parametric_axes {
+        let name = ["x", "y", "z"].get(*axis).copied().unwrap_or("?");
+        let _ = writeln!(s, "  axis {name}: the parametric model kept ({why}), weights 0");
+    }
     let _ = writeln!(
         s,
         "support: speed ≤ {:.2} m/s, tilt ≤ {:.1}°, thrust {:.2} … {:.2} m/s²",

@@ -246,10 +246,15 @@ pub struct SecondsRow {
     pub horizon_parametric_m: f64,
     /// With the residual \[m\].
     pub horizon_learned_m: f64,
-    /// Worst ratio of the learned p95 to the matched p95 over the cells.
+    /// Worst ratio of the learned p95 to the matched p95 over the cells
+    /// (nothing learned: the identified flights', which the daemon then
+    /// keeps).
     pub worst_ratio: f64,
     /// Mean of that ratio.
     pub mean_ratio: f64,
+    /// Why nothing was learned from these seconds (`dflat learn`'s
+    /// refusal); `None`: a model was learned and flown.
+    pub refused: Option<String>,
 }
 
 /// The study's results.
@@ -337,14 +342,20 @@ impl LearnedResult {
         if !self.seconds.is_empty() {
             t += "\nseconds of records → held-out 0.5 s error (parametric → learned), learned p95 / matched over the cells (worst, mean)\n";
             for s in &self.seconds {
-                t += &format!(
-                    "  {:5.0} s   {:.4} → {:.4} m   worst {:.2}×, mean {:.2}×\n",
-                    s.seconds,
-                    s.horizon_parametric_m,
-                    s.horizon_learned_m,
-                    s.worst_ratio,
-                    s.mean_ratio
-                );
+                t += &match &s.refused {
+                    None => format!(
+                        "  {:5.0} s   {:.4} → {:.4} m   worst {:.2}×, mean {:.2}×\n",
+                        s.seconds,
+                        s.horizon_parametric_m,
+                        s.horizon_learned_m,
+                        s.worst_ratio,
+                        s.mean_ratio
+                    ),
+                    Some(why) => format!(
+                        "  {:5.0} s   nothing learned, the identified flights kept (worst {:.2}×, mean {:.2}×): {why}\n",
+                        s.seconds, s.worst_ratio, s.mean_ratio
+                    ),
+                };
             }
         }
         t
@@ -445,10 +456,16 @@ fn learned(
 ) -> Result<(LearnedResidual, Vec<String>), String> {
     learn::learn_with(runs, &vehicle.table(spatial, g), LearnOptions { window })
         .map(|l| {
+            let axis = |a: &usize| ["x", "y", "z"].get(*a).copied().unwrap_or("?");
             let why = l
                 .unexcited
                 .iter()
                 .map(|(f, w)| format!("{} ({w})", f.name()))
+                .chain(
+                    l.parametric_axes
+                        .iter()
+                        .map(|(a, w)| format!("axis {}: parametric ({w})", axis(a))),
+                )
                 .collect();
             (l.residual, why)
         })
@@ -597,8 +614,24 @@ pub fn run_learned(
     if let Some(gr) = groups.first() {
         for &s in &config.seconds {
             let runs = group_records(0, Some(s));
-            let Ok((m, _)) = learned(&runs, &ids[0].0, gr.plant.spatial(), g, None) else {
-                continue;
+            let m = match learned(&runs, &ids[0].0, gr.plant.spatial(), g, None) {
+                Ok((m, _)) => m,
+                Err(why) => {
+                    // Nothing learned: the daemon keeps the identified model.
+                    // (The first group's rows are the first cells.len().)
+                    let ratios: Vec<f64> = (0..cells.len())
+                        .map(|c| rows[c].identified.p95 / rows[c].matched.p95)
+                        .collect();
+                    seconds.push(SecondsRow {
+                        seconds: s,
+                        horizon_parametric_m: f64::NAN,
+                        horizon_learned_m: f64::NAN,
+                        worst_ratio: ratios.iter().copied().fold(0.0, f64::max),
+                        mean_ratio: ratios.iter().sum::<f64>() / ratios.len().max(1) as f64,
+                        refused: Some(why),
+                    });
+                    continue;
+                }
             };
             let fl: Vec<Flight> = cells
                 .iter()
@@ -617,6 +650,7 @@ pub fn run_learned(
                 horizon_learned_m: m.validation.horizon_learned_m,
                 worst_ratio: ratios.iter().copied().fold(0.0, f64::max),
                 mean_ratio: ratios.iter().sum::<f64>() / ratios.len().max(1) as f64,
+                refused: None,
             });
         }
     }
