@@ -173,13 +173,12 @@ impl Config {
             horizon: n,
             constraints: match self {
                 Self::Fast => OutputConstraints::default(),
-                Self::BoxRate
-                | Self::BoxRateClarabel
-                | Self::ConeRate
-                | Self::ConeRateClarabel => OutputConstraints {
-                    max_tilt_rate: rate,
-                    ..constraints
-                },
+                Self::BoxRate | Self::BoxRateClarabel | Self::ConeRate | Self::ConeRateClarabel => {
+                    OutputConstraints {
+                        max_tilt_rate: rate,
+                        ..constraints
+                    }
+                }
                 Self::RateAlone => OutputConstraints {
                     max_tilt_rate: rate,
                     ..Default::default()
@@ -288,7 +287,12 @@ fn replay(
             if let Some(slow) = slow_us()
                 && t * 1e6 > slow
             {
-                eprintln!("slow tick {} of {}: {:.0} µs", all.len() % flight.len(), config.name(), t * 1e6);
+                eprintln!(
+                    "slow tick {} of {}: {:.0} µs",
+                    all.len() % flight.len(),
+                    config.name(),
+                    t * 1e6
+                );
             }
             all.push(t);
             let out = match out {
@@ -326,7 +330,9 @@ fn replay(
 /// `CORNER_SLOW` [µs]: ticks slower than it are printed (their index and
 /// time), to find the ticks behind a p99.
 fn slow_us() -> Option<f64> {
-    std::env::var("CORNER_SLOW").ok().and_then(|v| v.parse().ok())
+    std::env::var("CORNER_SLOW")
+        .ok()
+        .and_then(|v| v.parse().ok())
 }
 
 fn percentile(v: &mut [f64], p: f64) -> f64 {

@@ -43,12 +43,8 @@ fn planar() -> PlanarModel {
 }
 
 /// The daemon's DF-MPC set-up (`config/default.toml`, classic window),
-/// with the tilt-rate bound `rate` \[deg/s\] or none.
-fn settings(rate: Option<f64>) -> DfMpcSettings {
-    settings_with(rate, PlanTiltBound::Box)
-}
-
-/// [`settings`] with the plan-tilt bound `bound` (box or cone).
+/// with the tilt-rate bound `rate` \[deg/s\] or none and the plan-tilt
+/// bound `bound` (the daemon's: box; or the cone).
 fn settings_with(rate: Option<f64>, bound: PlanTiltBound) -> DfMpcSettings {
     DfMpcSettings {
         plan_tilt_bound: bound,
@@ -238,7 +234,11 @@ fn the_cone_keeps_the_tilt_rate_as_the_box_does() {
     for distance in [10.0, 20.0] {
         let without = step_flight_with(None, distance, PlanTiltBound::Cone);
         let with = step_flight_with(Some(RATE_DEG_S), distance, PlanTiltBound::Cone);
-        assert!(without.max_step > 3.0 * bound, "{distance} m: {}", without.max_step);
+        assert!(
+            without.max_step > 3.0 * bound,
+            "{distance} m: {}",
+            without.max_step
+        );
         assert!(with.constrained > 0, "the bound never bound");
         assert!(
             with.max_step <= (COUPLED_FACTOR * bound).min(BUDGET_DEG),

@@ -624,7 +624,12 @@ impl BandedIp {
             self.rhs[s.accel(1, f)] -= cs.u[1] * e;
         }
         // Sides: Δz = k0 + d·hΔx, rhs −= hᵀk0 (h = ±g).
-        for ((row, side), &rho) in self.rows.iter().zip(self.sides.iter_mut()).zip(&self.penalty) {
+        for ((row, side), &rho) in self
+            .rows
+            .iter()
+            .zip(self.sides.iter_mut())
+            .zip(&self.penalty)
+        {
             let soft = rho.is_finite();
             for sd in side.iter_mut() {
                 let rcs = rc(sd.s, sd.z, sd.ds * sd.dz);
@@ -648,7 +653,12 @@ impl BandedIp {
             cs.ds = -cs.r - du;
             cs.dz = -(rcs + cs.z * cs.ds) / cs.s;
         }
-        for ((row, side), rho) in self.rows.iter().zip(self.sides.iter_mut()).zip(&self.penalty) {
+        for ((row, side), rho) in self
+            .rows
+            .iter()
+            .zip(self.sides.iter_mut())
+            .zip(&self.penalty)
+        {
             let soft = rho.is_finite();
             let gdx = row.dot(&self.dv);
             for (j, sd) in side.iter_mut().enumerate() {

@@ -5,9 +5,9 @@
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{DefaultSolver, IPSolver, SolverStatus, SupportedConeT};
 
+use super::bounds::Row;
 use super::cascade::{PairSolver, SolveFailure, SolveInfo, SolverMethod};
 use super::clarabel::{KktTuning, build_solver, push_axis_hessian};
-use super::bounds::Row;
 use super::cone::ConeBounds;
 use super::cone_solver::AxisWeights;
 use super::fast_banded::FastBandedSolver;
@@ -233,7 +233,11 @@ impl ClarabelConeSolver {
         // The rows in `ConeBounds::rows`'s order: the speed rows (each a
         // pair of sides from m_speed), then the tilt-rate rows (from m_rate).
         let bvec = &mut self.bvec;
-        let speed_rows = if self.bounds.speed.is_some() { 2 * n } else { 0 };
+        let speed_rows = if self.bounds.speed.is_some() {
+            2 * n
+        } else {
+            0
+        };
         let (m_speed, m_rate) = (self.m_speed, self.m_rate);
         let mut k = 0;
         self.bounds

@@ -36,7 +36,7 @@
 //! Optionally per axis the **tilt-rate** rows of [`TiltRate`] (hard, on
 //! the stage accelerations ã, after the speed rows: axis x's, then y's).
 //! With them the cone's radius of each stage widens to a **funnel**
-//! ([`ConeBounds::funnel_radius`]) as the box's acceleration rows do: a
+//! (`ConeBounds::funnel_radius`) as the box's acceleration rows do: a
 //! witness trajectory — each axis's command moved from the sent one at
 //! 90 % of the rate bound towards the sent command's projection onto the
 //! narrowest disc (with a speed bound: braking at the speed funnel's rate
@@ -223,7 +223,11 @@ impl ConeBounds {
         let c = [0, 1].map(|i| sent[i].unwrap_or(a0[i]));
         let narrowest = radius.iter().copied().fold(f64::INFINITY, f64::min);
         let norm = c[0].hypot(c[1]);
-        let scale = if norm > narrowest { narrowest / norm } else { 1.0 };
+        let scale = if norm > narrowest {
+            narrowest / norm
+        } else {
+            1.0
+        };
         let brake = 0.9 * narrowest / std::f64::consts::SQRT_2;
         for axis in 0..2 {
             let projected = c[axis] * scale;
@@ -242,11 +246,11 @@ impl ConeBounds {
     }
 
     /// True when a tilt-rate row of either axis is broken by the plans
-    /// ([`TiltRate::violated_by`]; `sent` as [`ConeBounds::row_bounds`]).
+    /// ([`TiltRate::violated_by`]; `sent` per axis: the accelerations the
+    /// command sent at k−1 asks for [m/s²]).
     pub fn rate_violated_by(&self, plans: [&[f64]; 2], sent: [Option<f64>; 2], dt: f64) -> bool {
-        self.tilt_rate.is_some_and(|rates| {
-            (0..2).any(|i| rates[i].violated_by(plans[i], sent[i], dt))
-        })
+        self.tilt_rate
+            .is_some_and(|rates| (0..2).any(|i| rates[i].violated_by(plans[i], sent[i], dt)))
     }
 
     /// The per-axis view used for the speed rows: the speed bound with the

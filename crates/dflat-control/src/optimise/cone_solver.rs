@@ -134,7 +134,14 @@ impl BandedConeSolver {
         });
         let penalty = bounds.speed.map(|_| bounds.speed_penalty);
         let kappa = bounds.tilt_rate.map(|r| r.map(|r| r.kappa));
-        let qp = ConeQp::new(n, dt, [&axes[0], &axes[1]], bounds.acceleration, penalty, kappa);
+        let qp = ConeQp::new(
+            n,
+            dt,
+            [&axes[0], &axes[1]],
+            bounds.acceleration,
+            penalty,
+            kappa,
+        );
         let fast = |w: &AxisWeights| {
             FastBandedSolver::with_smoothness(horizon, w.q, w.r, dt, w.smoothness)
         };
@@ -143,24 +150,29 @@ impl BandedConeSolver {
         // then the tilt-rate rows per axis (hard, in m/s²).
         let mut blocks = Vec::new();
         if let Some(penalty) = penalty {
-            blocks.extend((0..2).map(|axis| RowBlock {
-                rows: (0..n)
-                    .map(|g| Row::speed(g, dt, |k| 2 * k + axis))
-                    .collect(),
-                scale: 1.0 / (dt * dt),
-                penalty,
+            blocks.extend((0..2).map(|axis| {
+                RowBlock {
+                    rows: (0..n)
+                        .map(|g| Row::speed(g, dt, |k| 2 * k + axis))
+                        .collect(),
+                    scale: 1.0 / (dt * dt),
+                    penalty,
+                }
             }));
         }
         if let Some(kappa) = kappa {
             let inv_dt2 = 1.0 / (dt * dt);
-            blocks.extend((0..2).map(|axis| RowBlock {
-                rows: (0..n)
-                    .map(|f| {
-                        Row::tilt_rate(f, kappa[axis], |s| s).on_outputs(inv_dt2, |k| 2 * k + axis)
-                    })
-                    .collect(),
-                scale: 1.0,
-                penalty: f64::INFINITY,
+            blocks.extend((0..2).map(|axis| {
+                RowBlock {
+                    rows: (0..n)
+                        .map(|f| {
+                            Row::tilt_rate(f, kappa[axis], |s| s)
+                                .on_outputs(inv_dt2, |k| 2 * k + axis)
+                        })
+                        .collect(),
+                    scale: 1.0,
+                    penalty: f64::INFINITY,
+                }
             }));
         }
         let alm = use_alm.then(|| {

@@ -2,10 +2,10 @@
 //! Lagrangian, interior point as its fallback) against clarabel's SOCP on
 //! random instances, cold and warm-started along a receding horizon.
 
+use super::cone::FUNNEL_RATE;
 use super::problem::baseline;
 use super::smoothness::accel_block;
 use super::*;
-use super::cone::FUNNEL_RATE;
 use crate::ControlError;
 
 const DT: f64 = 0.02;
@@ -60,8 +60,15 @@ fn objective(
         let speed: Vec<f64> = (2..horizon).map(|j| (plan[j + 1] - plan[j]) / DT).collect();
         let d1 = a.fixed[1] - a.fixed[0];
         let d2 = a.fixed[2] - 2.0 * a.fixed[1] + a.fixed[0];
-        let radius = if radius.is_empty() { vec![bounds.acceleration; n] } else { radius.to_vec() };
-        let (fixed, sent) = ([&axes[0].fixed, &axes[1].fixed], [axes[0].sent, axes[1].sent]);
+        let radius = if radius.is_empty() {
+            vec![bounds.acceleration; n]
+        } else {
+            radius.to_vec()
+        };
+        let (fixed, sent) = (
+            [&axes[0].fixed, &axes[1].fixed],
+            [axes[0].sent, axes[1].sent],
+        );
         let mut k = 0;
         // This axis's speed rows (the first 2n rows: x's, then y's).
         bounds.row_bounds(horizon, fixed, sent, &radius, DT, |lo, hi| {
@@ -902,7 +909,6 @@ proptest::proptest! {
         }
     }
 }
-
 
 proptest::proptest! {
     #![proptest_config(proptest::test_runner::Config::with_cases(256))]

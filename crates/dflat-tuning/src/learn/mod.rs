@@ -110,9 +110,7 @@ pub enum LearnError {
     #[error("no fit: the normal equations are singular for every window and basis")]
     NoFit,
     /// No axis keeps a learned term (module docs, "Axis by axis").
-    #[error(
-        "no axis keeps a learned term ({why}): nothing learned, keep the parametric model"
-    )]
+    #[error("no axis keeps a learned term ({why}): nothing learned, keep the parametric model")]
     EveryAxisParametric {
         /// Each axis's reason.
         why: String,
@@ -287,7 +285,8 @@ pub fn learn_with(
             unexcited.push((f, format!("window {r}: {why}")));
         }
     }
-    let parametric_axes = keep_parametric_axes(&mut residual, &half_width, &held_out, model.spatial);
+    let parametric_axes =
+        keep_parametric_axes(&mut residual, &half_width, &held_out, model.spatial);
     if !parametric_axes.is_empty() {
         score = fit::acceleration_error(&held_out, Some(&residual), model.spatial);
     }
@@ -345,16 +344,21 @@ fn keep_parametric_axes(
 ) -> Vec<(usize, String)> {
     let axes = if spatial { 3 } else { 2 };
     let mut kept = Vec::new();
-    for axis in 0..axes {
-        let w = &residual.weights[axis];
+    for (axis, (w, hw)) in residual
+        .weights
+        .iter()
+        .zip(half_width)
+        .enumerate()
+        .take(axes)
+    {
         let determined = w
             .iter()
-            .zip(&half_width[axis])
+            .zip(hw)
             .any(|(w, h)| *w != 0.0 && h.is_finite() && *h <= MAX_RELATIVE_INTERVAL * w.abs());
         if !determined {
             let (w, h) = w
                 .iter()
-                .zip(&half_width[axis])
+                .zip(hw)
                 .map(|(w, h)| (*w, *h))
                 .max_by(|a, b| (a.0.abs() / a.1).total_cmp(&(b.0.abs() / b.1)))
                 .unwrap_or((0.0, f64::NAN));

@@ -197,7 +197,13 @@ fn a_hover_does_not_learn_velocity_terms() {
 /// rule removed), or the x axis is dropped too.
 #[test]
 fn an_axis_the_records_do_not_determine_keeps_the_parametric_model() {
-    let runs = vec![flight_biased(60.0, (0.0, 0.0, 0.5), 1, 0.02, Vector3::new(0.4, 0.0, 0.0))];
+    let runs = vec![flight_biased(
+        60.0,
+        (0.0, 0.0, 0.5),
+        1,
+        0.02,
+        Vector3::new(0.4, 0.0, 0.0),
+    )];
     let l = learn(&runs, &vehicle()).unwrap();
     eprintln!(
         "basis {:?}, weights {:?}, parametric axes {:?}",
@@ -210,7 +216,12 @@ fn an_axis_the_records_do_not_determine_keeps_the_parametric_model() {
         assert!(l.residual.weights[*axis].iter().all(|w| *w == 0.0));
     }
     // The constant on x: the force, to 25 %.
-    let bias = l.residual.features.iter().position(|f| *f == Feature::Bias).unwrap();
+    let bias = l
+        .residual
+        .features
+        .iter()
+        .position(|f| *f == Feature::Bias)
+        .unwrap();
     let wx = l.residual.weights[0][bias];
     assert!((wx - 0.4).abs() < 0.1, "x constant {wx}");
 }

@@ -114,7 +114,10 @@ pub fn report(learned: &Learned, out: &Path, seconds_taken: f64) -> String {
     }
     for (axis, why) in &learned.parametric_axes {
         let name = ["x", "y", "z"].get(*axis).copied().unwrap_or("?");
-        let _ = writeln!(s, "  axis {name}: the parametric model kept ({why}), weights 0");
+        let _ = writeln!(
+            s,
+            "  axis {name}: the parametric model kept ({why}), weights 0"
+        );
     }
     let _ = writeln!(
         s,
