@@ -287,11 +287,18 @@ fn replay(
             if let Some(slow) = slow_us()
                 && t * 1e6 > slow
             {
+                // What each axis's box cascade did (its solver's place and
+                // method, Newton steps plus KKT solves).
+                let axes: Vec<String> = (0..2)
+                    .filter_map(|a| ctrl.box_cascade(a).and_then(|c| c.solved_by()))
+                    .map(|(place, i)| format!("{:?}@{place} {}", i.method, i.iterations))
+                    .collect();
                 eprintln!(
-                    "slow tick {} of {}: {:.0} µs",
+                    "slow tick {} of {}: {:.0} µs {}",
                     all.len() % flight.len(),
                     config.name(),
-                    t * 1e6
+                    t * 1e6,
+                    axes.join(", ")
                 );
             }
             all.push(t);
