@@ -464,7 +464,11 @@ fn work_lines(config: Config, work: &ConeWork, ticks: usize, repeats: usize) -> 
     }
     if matches!(
         config,
-        Config::Fast | Config::ConeClarabel | Config::BoxRateClarabel | Config::BoxClarabel
+        Config::Fast
+            | Config::ConeClarabel
+            | Config::BoxRateClarabel
+            | Config::BoxClarabel
+            | Config::ConeRateClarabel
     ) {
         return lines;
     }
@@ -516,6 +520,15 @@ fn print_ratios(stats: &[[f64; 6]]) {
         rate_clarabel[3] / rate[3],
         rate_clarabel[4] / rate[4],
         rate[3] / fast[0],
+    );
+    let (cone_rate, cone_rate_clarabel) = (stats[9], stats[10]);
+    println!(
+        "cone + tilt rate (constrained ticks): banded median {} µs, p99 {} µs; \
+         clarabel / banded: median {:.1}×, p99 {:.1}×",
+        us(cone_rate[3]),
+        us(cone_rate[4]),
+        cone_rate_clarabel[3] / cone_rate[3],
+        cone_rate_clarabel[4] / cone_rate[4],
     );
 }
 
