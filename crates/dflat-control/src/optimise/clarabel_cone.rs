@@ -71,8 +71,6 @@ impl ClarabelConeSolver {
         let soft = soft && speed;
         let n_sig = if soft { 4 * n } else { 0 };
         let nv = 4 * n + n_sig;
-        let p_of = |i: usize, f: usize| 2 * n * i + f;
-        let a_of = |i: usize, f: usize| 2 * n * i + n + f;
         // P, upper triangle, column by column: per axis [p, ã].
         let (mut colptr, mut prow, mut pval) = (vec![0usize], Vec::new(), Vec::new());
         for (i, w) in weights.iter().enumerate() {
@@ -90,73 +88,9 @@ impl ClarabelConeSolver {
         }
         let p_mat = CscMatrix::new(nv, nv, colptr, prow, pval);
 
-        let (mut tr, mut tc, mut tv) = (Vec::new(), Vec::new(), Vec::new());
-        let mut push = |r: usize, c: usize, v: f64| {
-            tr.push(r);
-            tc.push(c);
-            tv.push(v);
-        };
-        let inv_dt2 = 1.0 / (dt * dt);
-        let mut m = 0;
-        for i in 0..2 {
-            for f in 0..n {
-                push(m, p_of(i, f), inv_dt2);
-                if f >= 1 {
-                    push(m, p_of(i, f - 1), -2.0 * inv_dt2);
-                }
-                if f >= 2 {
-                    push(m, p_of(i, f - 2), inv_dt2);
-                }
-                push(m, a_of(i, f), -1.0);
-                m += 1;
-            }
-        }
-        let m_speed = m;
-        if speed {
-            let mut sig = 4 * n;
-            for i in 0..2 {
-                for g in 0..n {
-                    // ±(p_g − p_{g−1})/δt − σ ≤ b.
-                    for sign in [1.0, -1.0] {
-                        push(m, p_of(i, g), sign / dt);
-                        if g >= 1 {
-                            push(m, p_of(i, g - 1), -sign / dt);
-                        }
-                        if soft {
-                            push(m, sig, -1.0);
-                            sig += 1;
-                        }
-                        m += 1;
-                    }
-                }
-            }
-            for s in 0..n_sig {
-                push(m, 4 * n + s, -1.0);
-                m += 1;
-            }
-        }
-        // The tilt-rate rows per axis, hard: ±(row·ã) ≤ ±bound.
-        let m_rate = m;
-        if let Some(rates) = &bounds.tilt_rate {
-            for (i, rate) in rates.iter().enumerate() {
-                for f in 0..n {
-                    let row = Row::tilt_rate(f, rate.kappa, |s| a_of(i, s));
-                    for sign in [1.0, -1.0] {
-                        for k in 0..row.len {
-                            push(m, row.idx[k], sign * row.coef[k]);
-                        }
-                        m += 1;
-                    }
-                }
-            }
-        }
-        let m_cone = m;
-        for f in 0..n {
-            // s = b − A·x = (A, a_0x + ã_x, a_0y + ã_y).
-            push(m + 1, a_of(0, f), -1.0);
-            push(m + 2, a_of(1, f), -1.0);
-            m += 3;
-        }
+        let rows = constraint_rows(n, dt, &bounds, soft);
+        let (m, m_speed, m_rate, m_cone) = (rows.m, rows.m_speed, rows.m_rate, rows.m_cone);
+        let (tr, tc, tv) = (rows.r, rows.c, rows.v);
         let a_mat = CscMatrix::new_from_triplets(m, nv, tr, tc, tv);
         let mut cones = vec![SupportedConeT::ZeroConeT(2 * n)];
         if m_cone > m_speed {
@@ -288,5 +222,106 @@ impl PairSolver for ClarabelConeSolver {
 
     fn set_radius(&mut self, radius: &[f64]) -> Result<(), ControlError> {
         ClarabelConeSolver::set_radius(self, radius)
+    }
+}
+
+/// The constraint matrix's triplets of [`ClarabelConeSolver`] and where
+/// each family of rows starts.
+struct ConeRows {
+    r: Vec<usize>,
+    c: Vec<usize>,
+    v: Vec<f64>,
+    /// Rows in all; the first speed row, tilt-rate row and cone row.
+    m: usize,
+    m_speed: usize,
+    m_rate: usize,
+    m_cone: usize,
+}
+
+/// The rows of the two-axis problem over `[p_x, ã_x, p_y, ã_y, σ]` (n
+/// each, σ the soft speed sides' elastic variables when `soft`): the
+/// equality rows `Δ²p_f/δt² − ã_f = 0`, the speed rows (each side, with
+/// its σ when soft) and σ ≥ 0, the tilt-rate rows (hard, each side), and
+/// per stage the cone's three rows.
+fn constraint_rows(n: usize, dt: f64, bounds: &ConeBounds, soft: bool) -> ConeRows {
+    let speed = bounds.speed.is_some();
+    let n_sig = if soft { 4 * n } else { 0 };
+    let p_of = |i: usize, f: usize| 2 * n * i + f;
+    let a_of = |i: usize, f: usize| 2 * n * i + n + f;
+    let (mut tr, mut tc, mut tv) = (Vec::new(), Vec::new(), Vec::new());
+    let mut push = |r: usize, c: usize, v: f64| {
+        tr.push(r);
+        tc.push(c);
+        tv.push(v);
+    };
+    let inv_dt2 = 1.0 / (dt * dt);
+    let mut m = 0;
+    for i in 0..2 {
+        for f in 0..n {
+            push(m, p_of(i, f), inv_dt2);
+            if f >= 1 {
+                push(m, p_of(i, f - 1), -2.0 * inv_dt2);
+            }
+            if f >= 2 {
+                push(m, p_of(i, f - 2), inv_dt2);
+            }
+            push(m, a_of(i, f), -1.0);
+            m += 1;
+        }
+    }
+    let m_speed = m;
+    if speed {
+        let mut sig = 4 * n;
+        for i in 0..2 {
+            for g in 0..n {
+                // ±(p_g − p_{g−1})/δt − σ ≤ b.
+                for sign in [1.0, -1.0] {
+                    push(m, p_of(i, g), sign / dt);
+                    if g >= 1 {
+                        push(m, p_of(i, g - 1), -sign / dt);
+                    }
+                    if soft {
+                        push(m, sig, -1.0);
+                        sig += 1;
+                    }
+                    m += 1;
+                }
+            }
+        }
+        for s in 0..n_sig {
+            push(m, 4 * n + s, -1.0);
+            m += 1;
+        }
+    }
+    // The tilt-rate rows per axis, hard: ±(row·ã) ≤ ±bound.
+    let m_rate = m;
+    if let Some(rates) = &bounds.tilt_rate {
+        for (i, rate) in rates.iter().enumerate() {
+            for f in 0..n {
+                let row = Row::tilt_rate(f, rate.kappa, |s| a_of(i, s));
+                for sign in [1.0, -1.0] {
+                    for k in 0..row.len {
+                        push(m, row.idx[k], sign * row.coef[k]);
+                    }
+                    m += 1;
+                }
+            }
+        }
+    }
+    let m_cone = m;
+    for f in 0..n {
+        // s = b − A·x = (A, a_0x + ã_x, a_0y + ã_y).
+        push(m + 1, a_of(0, f), -1.0);
+        push(m + 2, a_of(1, f), -1.0);
+        m += 3;
+    }
+    ConeRows {
+        r: tr,
+        c: tc,
+        v: tv,
+        m,
+        m_speed,
+        m_rate,
+        m_cone,
     }
 }
