@@ -204,7 +204,12 @@ impl BandedAlm {
                 let raw = vj + ss * t;
                 self.ws.active[self.n + 2 * r + j] = u8::from(raw > 0.0 && raw < rho);
                 value += vn * t - (vn - vj) * (vn - vj) / (2.0 * ss);
-                row_res = row_res.max(self.row_res_weight[r] * (vn - vj).abs() / ss);
+                let weight = if self.row_hard[r] {
+                    self.hard_row_weight
+                } else {
+                    1.0
+                };
+                row_res = row_res.max(weight * (vn - vj).abs() / ss);
                 e += if j == 0 { vn } else { -vn };
             }
             if e != 0.0 {

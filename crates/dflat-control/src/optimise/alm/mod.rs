@@ -407,12 +407,16 @@ pub struct BandedAlm {
     rows: Vec<Row>,
     row_scale: Vec<f64>,
     row_penalty: Vec<f64>,
-    /// Per row, the factor its multiplier's change enters the row
-    /// residual with: 1, but for hard rows beside soft ones
-    /// ([`PRIMAL_TOLERANCE`]/(ρ_max·[`ROW_TOLERANCE`])), whose residual
-    /// tolerance is then the soft rows' (ρ_max times tighter than the
-    /// stages') scaled back to the hard rows' own.
-    row_res_weight: Vec<f64>,
+    /// Hard rows beside soft ones (the cone's tilt-rate rows beside its
+    /// speed rows): the factor a hard row's multiplier change enters the
+    /// row residual with, set per solve (`solve.rs`, `tolerances`), so
+    /// that the one row tolerance — the soft rows', ρ times tighter than
+    /// the stages' — holds each hard row to [`ROW_TOLERANCE`] of the hard
+    /// rows' own bounds' scale (a first-stage rate interval can sit within
+    /// 1e-3 m/s² of zero, while the speed rows' bounds reach 10 m/s); 1
+    /// otherwise. Per row: whether it is hard.
+    hard_row_weight: f64,
+    row_hard: Vec<bool>,
     row_first: Vec<usize>,
     blocks: Vec<Range<usize>>,
     /// Largest diagonal entry of P.
@@ -484,22 +488,7 @@ impl BandedAlm {
             }
         }
         let diag_max = (0..size).fold(0.0f64, |a, i| a.max(base.get(i, i)));
-        let rho_max = row_penalty
-            .iter()
-            .copied()
-            .filter(|r: &f64| r.is_finite())
-            .fold(0.0f64, f64::max);
-        let mixed = rho_max > 0.0 && row_penalty.iter().any(|r| r.is_infinite());
-        let row_res_weight = row_penalty
-            .iter()
-            .map(|r| {
-                if mixed && r.is_infinite() {
-                    PRIMAL_TOLERANCE / (rho_max.max(1.0) * ROW_TOLERANCE)
-                } else {
-                    1.0
-                }
-            })
-            .collect();
+        let row_hard = row_penalty.iter().map(|r| r.is_infinite()).collect();
         // P's factor, the head of every window's (P is positive definite
         // for valid weights; should it not factor, no window opens).
         let mut head = BandedCholesky::new(size, bandwidth);
@@ -530,7 +519,8 @@ impl BandedAlm {
             rows,
             row_scale,
             row_penalty,
-            row_res_weight,
+            hard_row_weight: 1.0,
+            row_hard,
             row_first,
             blocks: ranges,
             diag_max,
