@@ -276,6 +276,7 @@ fn replay(
 ) -> (Vec<f64>, Vec<f64>, ConeWork) {
     let (mut all, mut constrained) = (Vec::new(), Vec::new());
     let mut work = ConeWork::default();
+    let slow = slow_us();
     for _ in 0..repeats {
         let mut ctrl = DfMpc::new(ControlModel::Planar(plant()), config.settings(n)).unwrap();
         let mut reference = course.reference();
@@ -284,7 +285,7 @@ fn replay(
             let start = Instant::now();
             let out = std::hint::black_box(ctrl.update(std::hint::black_box(m), &mut reference));
             let t = start.elapsed().as_secs_f64();
-            if let Some(slow) = slow_us()
+            if let Some(slow) = slow
                 && t * 1e6 > slow
             {
                 // What each axis's box cascade did (its solver's place and

@@ -489,20 +489,11 @@ pub fn acceleration_error(
     residual: Option<&LearnedResidual>,
     spatial: bool,
 ) -> f64 {
-    let sum: f64 = held_out
+    acceleration_error_per_axis(held_out, residual, spatial)
         .iter()
-        .map(|s| {
-            let mut e = s.target;
-            if let Some(m) = residual {
-                e -= s.predicted(m, spatial);
-            }
-            if !spatial {
-                e.z = 0.0;
-            }
-            e.norm_squared()
-        })
-        .sum();
-    (sum / held_out.len() as f64).sqrt()
+        .map(|e| e * e)
+        .sum::<f64>()
+        .sqrt()
 }
 
 /// [`acceleration_error`] per NED axis (x, y, z; z 0 planar) [m/s²].

@@ -356,11 +356,7 @@ fn keep_parametric_axes(
             .zip(hw)
             .any(|(w, h)| *w != 0.0 && h.is_finite() && *h <= MAX_RELATIVE_INTERVAL * w.abs());
         if !determined {
-            let (w, h) = w
-                .iter()
-                .zip(hw)
-                .map(|(w, h)| (*w, *h))
-                .max_by(|a, b| (a.0.abs() / a.1).total_cmp(&(b.0.abs() / b.1)))
+            let (w, h) = best_determined(w.iter().copied().zip(hw.iter().copied()))
                 .unwrap_or((0.0, f64::NAN));
             kept.push((
                 axis,
@@ -411,11 +407,11 @@ fn undetermined_group(features: &[Feature], fitted: &fit::Ridge) -> Option<(Feat
             continue;
         }
         // The best-determined weight of the group.
-        let best = cols
-            .clone()
-            .flat_map(|i| (0..3).map(move |axis| (axis, i)))
-            .map(|(axis, i)| (fitted.weights[axis][i], fitted.half_width[axis][i]))
-            .max_by(|a, b| (a.0.abs() / a.1).total_cmp(&(b.0.abs() / b.1)))?;
+        let best = best_determined(
+            cols.clone()
+                .flat_map(|i| (0..3).map(move |axis| (axis, i)))
+                .map(|(axis, i)| (fitted.weights[axis][i], fitted.half_width[axis][i])),
+        )?;
         if best.1.is_nan() || best.1 > MAX_RELATIVE_INTERVAL * best.0.abs() {
             return Some((
                 *f,
@@ -429,6 +425,12 @@ fn undetermined_group(features: &[Feature], fitted: &fit::Ridge) -> Option<(Feat
         }
     }
     None
+}
+
+/// Of `(weight, 95 % half-width)` pairs, the best-determined: the
+/// largest `|weight| / half-width`.
+fn best_determined(pairs: impl Iterator<Item = (f64, f64)>) -> Option<(f64, f64)> {
+    pairs.max_by(|a, b| (a.0.abs() / a.1).total_cmp(&(b.0.abs() / b.1)))
 }
 
 fn validation(parametric: &Errors, learned: &Errors) -> Validation {

@@ -196,6 +196,11 @@ impl BandedAlm {
             self.ws.hx[r] = h;
             let ss = self.sigma_row(r);
             let rho = self.row_penalty[r];
+            let weight = if rho.is_infinite() {
+                self.hard_row_weight
+            } else {
+                1.0
+            };
             let mut e = 0.0;
             for j in 0..2 {
                 let vj = self.warm.v[r][j];
@@ -204,11 +209,6 @@ impl BandedAlm {
                 let raw = vj + ss * t;
                 self.ws.active[self.n + 2 * r + j] = u8::from(raw > 0.0 && raw < rho);
                 value += vn * t - (vn - vj) * (vn - vj) / (2.0 * ss);
-                let weight = if self.row_hard[r] {
-                    self.hard_row_weight
-                } else {
-                    1.0
-                };
                 row_res = row_res.max(weight * (vn - vj).abs() / ss);
                 e += if j == 0 { vn } else { -vn };
             }

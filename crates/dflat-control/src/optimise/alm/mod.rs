@@ -414,9 +414,8 @@ pub struct BandedAlm {
     /// the stages' — holds each hard row to [`ROW_TOLERANCE`] of the hard
     /// rows' own bounds' scale (a first-stage rate interval can sit within
     /// 1e-3 m/s² of zero, while the speed rows' bounds reach 10 m/s); 1
-    /// otherwise. Per row: whether it is hard.
+    /// otherwise.
     hard_row_weight: f64,
-    row_hard: Vec<bool>,
     row_first: Vec<usize>,
     blocks: Vec<Range<usize>>,
     /// Largest diagonal entry of P.
@@ -488,7 +487,6 @@ impl BandedAlm {
             }
         }
         let diag_max = (0..size).fold(0.0f64, |a, i| a.max(base.get(i, i)));
-        let row_hard = row_penalty.iter().map(|r| r.is_infinite()).collect();
         // P's factor, the head of every window's (P is positive definite
         // for valid weights; should it not factor, no window opens).
         let mut head = BandedCholesky::new(size, bandwidth);
@@ -520,7 +518,6 @@ impl BandedAlm {
             row_scale,
             row_penalty,
             hard_row_weight: 1.0,
-            row_hard,
             row_first,
             blocks: ranges,
             diag_max,

@@ -82,7 +82,7 @@ impl BandedAlm {
         self.check_data(c, a0, lo, hi)?;
         let cold = self.begin(c);
         let tol = self.tolerances(cold, lo, hi);
-        self.hard_row_weight = self.hard_row_weight(lo, hi, tol.row);
+        self.hard_row_weight = self.hard_row_residual_weight(lo, hi, tol.row);
         if self.polish.is_some() {
             return self.solve_rows(a0[0], (lo, hi), &tol);
         }
@@ -176,16 +176,16 @@ impl BandedAlm {
     }
 
     /// The factor of hard rows' residuals beside soft rows
-    /// ([`BandedAlm::hard_row_weight`]'s field): `row_tol` over
+    /// (the field `hard_row_weight`): `row_tol` over
     /// [`ROW_TOLERANCE`] of the hard rows' bounds' scale; 1 without soft
     /// rows (`row_tol` is then the hard rows' own).
-    fn hard_row_weight(&self, lo: &[f64], hi: &[f64], row_tol: f64) -> f64 {
+    fn hard_row_residual_weight(&self, lo: &[f64], hi: &[f64], row_tol: f64) -> f64 {
         if self.row_penalty.iter().all(|r| r.is_infinite()) {
             return 1.0;
         }
         let hard_scale = 1.0
             + (0..lo.len())
-                .filter(|&r| self.row_hard[r])
+                .filter(|&r| self.row_penalty[r].is_infinite())
                 .fold(0.0f64, |a, r| a.max(lo[r].abs()).max(hi[r].abs()));
         row_tol / (ROW_TOLERANCE * hard_scale)
     }
