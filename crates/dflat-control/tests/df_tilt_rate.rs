@@ -144,11 +144,7 @@ fn fly(
     flight
 }
 
-fn step_flight(rate: Option<f64>, distance: f64) -> Flight {
-    step_flight_with(rate, distance, PlanTiltBound::Box)
-}
-
-fn step_flight_with(rate: Option<f64>, distance: f64, bound: PlanTiltBound) -> Flight {
+fn step_flight(rate: Option<f64>, distance: f64, bound: PlanTiltBound) -> Flight {
     let mut ctrl = DfMpc::new(ControlModel::Planar(planar()), settings_with(rate, bound)).unwrap();
     let start = Vector3::new(0.0, 0.0, -2.0);
     // Diagonal, so both axes step at once.
@@ -158,11 +154,7 @@ fn step_flight_with(rate: Option<f64>, distance: f64, bound: PlanTiltBound) -> F
     flight
 }
 
-fn l_flight(rate: Option<f64>) -> Flight {
-    l_flight_with(rate, PlanTiltBound::Box)
-}
-
-fn l_flight_with(rate: Option<f64>, bound: PlanTiltBound) -> Flight {
+fn l_flight(rate: Option<f64>, bound: PlanTiltBound) -> Flight {
     let mut ctrl = DfMpc::new(ControlModel::Planar(planar()), settings_with(rate, bound)).unwrap();
     // The daemon's default path start: a 3 m/s² speed ramp from rest.
     let make = || paths::l(-2.0, 5.0).unwrap().with_ramp(0.0, 3.0).unwrap();
@@ -179,48 +171,12 @@ fn l_flight_with(rate: Option<f64>, bound: PlanTiltBound) -> Flight {
 
 #[test]
 fn setpoint_steps_from_hover_keep_the_command_within_the_tilt_rate() {
-    let bound = RATE_DEG_S * DT;
-    for distance in [10.0, 20.0] {
-        let without = step_flight(None, distance);
-        let with = step_flight(Some(RATE_DEG_S), distance);
-        // Without the bound the first command jumps far past it.
-        assert!(
-            without.max_step > 3.0 * bound,
-            "{distance} m without the bound: {} deg/tick",
-            without.max_step
-        );
-        assert!(with.constrained > 0, "the bound never bound");
-        assert!(
-            with.max_step <= (COUPLED_FACTOR * bound).min(BUDGET_DEG),
-            "{distance} m: {} deg/tick > {COUPLED_FACTOR} × {bound}",
-            with.max_step
-        );
-    }
+    assert_steps_keep_the_tilt_rate(PlanTiltBound::Box);
 }
 
 #[test]
 fn the_l_path_corner_keeps_the_tilt_rate_and_tracks_as_before() {
-    let bound = RATE_DEG_S * DT;
-    let without = l_flight(None);
-    let with = l_flight(Some(RATE_DEG_S));
-    assert!(
-        with.max_step <= bound + SLACK_DEG && with.max_axis_step <= bound + SLACK_DEG,
-        "L path: {} deg/tick (per axis {}) > {bound} + {SLACK_DEG}",
-        with.max_step,
-        with.max_axis_step
-    );
-    // Without the bound the corner steps by more.
-    assert!(without.max_step > 1.5 * bound, "{}", without.max_step);
-    // Tracking: within 10 % (plus 1 cm) of the figures without the bound.
-    for (name, w, wo) in [
-        ("worst", with.worst, without.worst),
-        ("p95", with.p95, without.p95),
-    ] {
-        assert!(
-            w <= 1.1 * wo + 0.01,
-            "L path {name} error {w} m with the bound, {wo} m without"
-        );
-    }
+    assert_the_l_path_keeps_the_tilt_rate(PlanTiltBound::Box);
 }
 
 /// The same flights with the tilt cone as the plan's tilt bound (the rate
@@ -230,38 +186,62 @@ fn the_l_path_corner_keeps_the_tilt_rate_and_tracks_as_before() {
 /// cone's flight without the bound.
 #[test]
 fn the_cone_keeps_the_tilt_rate_as_the_box_does() {
+    assert_steps_keep_the_tilt_rate(PlanTiltBound::Cone);
+    assert_the_l_path_keeps_the_tilt_rate(PlanTiltBound::Cone);
+}
+
+/// The diagonal 10 and 20 m steps from hover with the plan-tilt bound
+/// `tilt`: without the rate bound the first command jumps past three times
+/// it; with it the bound binds and the command steps by at most
+/// [`COUPLED_FACTOR`] times it (and the budget).
+fn assert_steps_keep_the_tilt_rate(tilt: PlanTiltBound) {
     let bound = RATE_DEG_S * DT;
     for distance in [10.0, 20.0] {
-        let without = step_flight_with(None, distance, PlanTiltBound::Cone);
-        let with = step_flight_with(Some(RATE_DEG_S), distance, PlanTiltBound::Cone);
+        let without = step_flight(None, distance, tilt);
+        let with = step_flight(Some(RATE_DEG_S), distance, tilt);
+        // Without the bound the first command jumps far past it.
         assert!(
             without.max_step > 3.0 * bound,
-            "{distance} m: {}",
+            "{tilt:?}, {distance} m without the bound: {} deg/tick",
             without.max_step
         );
-        assert!(with.constrained > 0, "the bound never bound");
+        assert!(with.constrained > 0, "{tilt:?}: the bound never bound");
         assert!(
             with.max_step <= (COUPLED_FACTOR * bound).min(BUDGET_DEG),
-            "cone, {distance} m: {} deg/tick > {COUPLED_FACTOR} × {bound}",
+            "{tilt:?}, {distance} m: {} deg/tick > {COUPLED_FACTOR} × {bound}",
             with.max_step
         );
     }
-    let without = l_flight_with(None, PlanTiltBound::Cone);
-    let with = l_flight_with(Some(RATE_DEG_S), PlanTiltBound::Cone);
+}
+
+/// The L path with the plan-tilt bound `tilt`: the command within the
+/// bound plus [`SLACK_DEG`] through the corner (pitch/roll and per-axis
+/// tilt), more without it, and tracked within 10 % (plus 1 cm) of the
+/// flight without it.
+fn assert_the_l_path_keeps_the_tilt_rate(tilt: PlanTiltBound) {
+    let bound = RATE_DEG_S * DT;
+    let without = l_flight(None, tilt);
+    let with = l_flight(Some(RATE_DEG_S), tilt);
     assert!(
         with.max_step <= bound + SLACK_DEG && with.max_axis_step <= bound + SLACK_DEG,
-        "cone, L path: {} deg/tick (per axis {}) > {bound} + {SLACK_DEG}",
+        "{tilt:?}, L path: {} deg/tick (per axis {}) > {bound} + {SLACK_DEG}",
         with.max_step,
         with.max_axis_step
     );
-    assert!(without.max_step > 1.5 * bound, "{}", without.max_step);
+    // Without the bound the corner steps by more.
+    assert!(
+        without.max_step > 1.5 * bound,
+        "{tilt:?}: {}",
+        without.max_step
+    );
+    // Tracking: within 10 % (plus 1 cm) of the figures without the bound.
     for (name, w, wo) in [
         ("worst", with.worst, without.worst),
         ("p95", with.p95, without.p95),
     ] {
         assert!(
             w <= 1.1 * wo + 0.01,
-            "cone, L path {name} error {w} m with the bound, {wo} m without"
+            "{tilt:?}, L path {name} error {w} m with the bound, {wo} m without"
         );
     }
 }

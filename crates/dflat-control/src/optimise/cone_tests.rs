@@ -2,30 +2,29 @@
 //! Lagrangian, interior point as its fallback) against clarabel's SOCP on
 //! random instances, cold and warm-started along a receding horizon.
 
-use super::cone::FUNNEL_RATE;
 use super::problem::baseline;
 use super::smoothness::accel_block;
 use super::*;
 use crate::ControlError;
 
-const DT: f64 = 0.02;
-const G: f64 = 9.81;
+pub(super) const DT: f64 = 0.02;
+pub(super) const G: f64 = 9.81;
 
 /// The x and y plans `y_0..y_N` \[m\].
-type Plans = [Vec<f64>; 2];
+pub(super) type Plans = [Vec<f64>; 2];
 
 /// One axis of an instance.
 #[derive(Debug, Clone)]
-struct Axis {
-    fixed: [f64; 3],
-    sent: Option<f64>,
-    reference: Vec<f64>,
+pub(super) struct Axis {
+    pub(super) fixed: [f64; 3],
+    pub(super) sent: Option<f64>,
+    pub(super) reference: Vec<f64>,
 }
 
 /// The soft problem's objective (`½xᵀPx + cᵀx` per axis as clarabel's,
 /// plus ρ times the speed violations, the funnel set by the narrowest of
 /// `radius` — empty: the bounds' A) of the plans.
-fn objective(
+pub(super) fn objective(
     horizon: usize,
     weights: &[AxisWeights; 2],
     bounds: &ConeBounds,
@@ -93,7 +92,7 @@ fn jerk(p: &[f64]) -> f64 {
 /// Clarabel's SOCP solution of an instance (its default KKT settings,
 /// solved to a duality gap of 1e-11: [`KktTuning::REFERENCE`]), or `None`
 /// when clarabel fails.
-fn clarabel_plans(
+pub(super) fn clarabel_plans(
     horizon: usize,
     weights: [AxisWeights; 2],
     bounds: ConeBounds,
@@ -114,24 +113,21 @@ fn clarabel_plans(
         clarabel.set_radius(r).unwrap();
     }
     let mut want = [vec![0.0; horizon + 1], vec![0.0; horizon + 1]];
-    let [wx, wy] = &mut want;
-    clarabel
-        .solve_pair(
-            AxisProblem {
-                fixed: &axes[0].fixed,
-                sent: axes[0].sent,
-                reference: &axes[0].reference,
-                plan: wx,
-            },
-            AxisProblem {
-                fixed: &axes[1].fixed,
-                sent: axes[1].sent,
-                reference: &axes[1].reference,
-                plan: wy,
-            },
-        )
-        .ok()?;
+    let [x, y] = problems(axes, &mut want);
+    clarabel.solve_pair(x, y).ok()?;
     Some(want)
+}
+
+/// The instance's two axis problems, their plans `plans`.
+fn problems<'a>(axes: &'a [Axis; 2], plans: &'a mut Plans) -> [AxisProblem<'a>; 2] {
+    let [px, py] = plans;
+    let problem = |a: &'a Axis, plan: &'a mut Vec<f64>| AxisProblem {
+        fixed: &a.fixed,
+        sent: a.sent,
+        reference: &a.reference,
+        plan,
+    };
+    [problem(&axes[0], px), problem(&axes[1], py)]
 }
 
 /// The banded cone solver's plans for an instance, its cold start the
@@ -141,38 +137,19 @@ fn banded_plans(
     weights: [AxisWeights; 2],
     axes: &[Axis; 2],
 ) -> Plans {
-    let horizon = solver.horizon();
-    let mut got = [vec![0.0; horizon + 1], vec![0.0; horizon + 1]];
-    for (i, plan) in got.iter_mut().enumerate() {
-        let w = weights[i];
-        let mut fast =
-            FastBandedSolver::with_smoothness(horizon, w.q, w.r, DT, w.smoothness).unwrap();
-        fast.solve_problem(AxisProblem {
-            fixed: &axes[i].fixed,
-            sent: axes[i].sent,
-            reference: &axes[i].reference,
-            plan,
-        })
-        .unwrap();
-    }
-    let [gx, gy] = &mut got;
-    solver
-        .solve_pair(
-            AxisProblem {
-                fixed: &axes[0].fixed,
-                sent: axes[0].sent,
-                reference: &axes[0].reference,
-                plan: gx,
-            },
-            AxisProblem {
-                fixed: &axes[1].fixed,
-                sent: axes[1].sent,
-                reference: &axes[1].reference,
-                plan: gy,
-            },
-        )
-        .unwrap();
-    got
+    try_banded_plans(solver, weights, axes).unwrap()
+}
+
+/// [`banded_plans`], the solver's error when it fails.
+pub(super) fn try_banded_plans(
+    solver: &mut BandedConeSolver,
+    weights: [AxisWeights; 2],
+    axes: &[Axis; 2],
+) -> Result<Plans, ControlError> {
+    let mut got = banded_start(solver.horizon(), weights, axes);
+    let [x, y] = problems(axes, &mut got);
+    solver.solve_pair(x, y)?;
+    Ok(got)
 }
 
 /// Solves an instance with the banded cone solver (cold) and with
@@ -706,39 +683,6 @@ proptest::proptest! {
     }
 }
 
-/// One method of [`BandedConeSolver`] on an instance (cold), `Err` when
-/// it fails.
-fn one_method(
-    horizon: usize,
-    weights: [AxisWeights; 2],
-    bounds: ConeBounds,
-    axes: &[Axis; 2],
-    methods: [bool; 2],
-) -> Result<Plans, ControlError> {
-    let mut solver =
-        BandedConeSolver::with_methods(horizon, DT, weights, bounds, false, methods).unwrap();
-    if let Some(alm) = solver.alm_mut() {
-        alm.set_max_newton_steps(1000);
-    }
-    let mut got = banded_start(horizon, weights, axes);
-    let [gx, gy] = &mut got;
-    solver.solve_pair(
-        AxisProblem {
-            fixed: &axes[0].fixed,
-            sent: axes[0].sent,
-            reference: &axes[0].reference,
-            plan: gx,
-        },
-        AxisProblem {
-            fixed: &axes[1].fixed,
-            sent: axes[1].sent,
-            reference: &axes[1].reference,
-            plan: gy,
-        },
-    )?;
-    Ok(got)
-}
-
 /// The fast path's plans of an instance (the cascade's cold start).
 fn banded_start(horizon: usize, weights: [AxisWeights; 2], axes: &[Axis; 2]) -> Plans {
     let mut got = [vec![0.0; horizon + 1], vec![0.0; horizon + 1]];
@@ -755,200 +699,4 @@ fn banded_start(horizon: usize, weights: [AxisWeights; 2], axes: &[Axis; 2]) -> 
             .unwrap();
     }
     got
-}
-
-/// The cost tolerance (relative) of the cone with tilt-rate rows: the
-/// cascade's ticks that go to the interior point end at its acceptable
-/// merit (residuals up to 100× its targets: a gap of 1e-7 relative), and
-/// a draw (`cc c95c1dc3…` in the regressions) came out 1.1e-7 above
-/// clarabel's; the augmented Lagrangian's own ticks keep 1e-7.
-const COST_TOLERANCE: f64 = 1e-6;
-/// The first outputs' tolerance \[m\] against the interior point (where
-/// clarabel fails): its acceptable merit; a draw's costs differed by
-/// 1.5e-6 relative (`cc` in the regressions), the augmented Lagrangian's
-/// the lower.
-const IP_PLAN_TOLERANCE: f64 = 1e-4;
-
-proptest::proptest! {
-    #![proptest_config(proptest::test_runner::Config::with_cases(96))]
-    /// The cone with tilt-rate rows on both axes: the augmented
-    /// Lagrangian alone and the interior point alone (each cold) give
-    /// clarabel's SOCP solution with the same rows (the reference
-    /// settings) on random instances — tilt bounds 8–35°, rate 0.5–5° per
-    /// tick, attitude lag κ 1–12 steps, with and without soft speed
-    /// bounds and the smoothness term, the sent command up to 6 m/s² off
-    /// the window's acceleration (outside the cone too: the funnel): cost
-    /// no higher than clarabel's ([`COST_TOLERANCE`]), the first ten
-    /// outputs to 1e-5 m; every plan keeps each axis's tilt-rate rows and the
-    /// funnel's radius, and the first command's step through the per-axis
-    /// tilt is within the bound.
-    #[test]
-    fn cone_with_tilt_rate_matches_clarabel_socp(
-        horizon in 20usize..=160,
-        q in proptest::array::uniform2(0.5f64..10.0),
-        r in proptest::array::uniform2(1e-3f64..0.1),
-        tilt_deg in 8.0f64..35.0,
-        step_deg in 0.5f64..5.0,
-        kappa in proptest::array::uniform2(1.0f64..12.0),
-        speed in proptest::option::of(2.0f64..8.0),
-        v0 in proptest::array::uniform2(-6.0f64..6.0),
-        a0_frac in proptest::array::uniform2(-0.8f64..0.8),
-        sent_delta in proptest::array::uniform2(-6.0f64..6.0),
-        target in proptest::array::uniform2(-20.0f64..20.0),
-        slope in proptest::array::uniform2(-3.0f64..3.0),
-        smooth in proptest::option::of(1.0f64..50.0),
-    ) {
-        let a = G * tilt_deg.to_radians().tan();
-        let rates: [TiltRate; 2] = std::array::from_fn(|i| TiltRate {
-            step: step_deg.to_radians(),
-            kappa: kappa[i],
-            gain: 1.0,
-            gravity: G,
-        });
-        let bounds = ConeBounds::new(a, speed).with_tilt_rate(rates);
-        let weights: [AxisWeights; 2] = std::array::from_fn(|i| AxisWeights {
-            q: q[i],
-            r: r[i],
-            smoothness: smooth.map_or(Smoothness::default(), |weight| Smoothness {
-                weight,
-                kappa: kappa[i],
-                gravity: G,
-            }),
-        });
-        let axes: [Axis; 2] = std::array::from_fn(|i| {
-            let acc = a0_frac[i] * a;
-            Axis {
-                fixed: [0.3, 0.3 + v0[i] * DT, 0.3 + 2.0 * v0[i] * DT + acc * DT * DT],
-                sent: Some(acc + sent_delta[i]),
-                reference: (0..=horizon)
-                    .map(|j| target[i] + slope[i] * DT * j as f64)
-                    .collect(),
-            }
-        });
-        // Clarabel at the reference settings; it fails (NumericalError) on
-        // most draws with soft speed rows. (The hard-bounded problem is no
-        // reference there: where the window is faster than the speed
-        // bound the soft optimum can leave a speed row, 4.7 cheaper in
-        // one draw than the hard problem's.)
-        let clarabel = clarabel_plans(horizon, weights, bounds, &axes, None);
-        let fixed = [&axes[0].fixed, &axes[1].fixed];
-        let sent = [axes[0].sent, axes[1].sent];
-        let mut funnel = vec![0.0; horizon - 2];
-        bounds.funnel_radius(&vec![a; horizon - 2], fixed, sent, DT, &mut funnel);
-        let obj = |p: &Plans| objective(horizon, &weights, &bounds, &axes, [&p[0], &p[1]], &[]);
-        // Where clarabel solves neither, the two methods against each other:
-        // the interior point's plan the reference of the augmented
-        // Lagrangian alone (when it converges within 1000 Newton steps).
-        let ip = one_method(horizon, weights, bounds, &axes, [false, true]);
-        proptest::prop_assert!(ip.is_ok(), "interior point: {:?}", ip.err());
-        let ip = ip.unwrap();
-        let (want, against, methods) = match clarabel {
-            Some(want) => (want, "clarabel", vec![("cascade", [true, true]), ("interior point", [false, true])]),
-            // (The interior point against itself: its rows and funnel checked.)
-            None => (ip, "the interior point", vec![("ALM", [true, false]), ("interior point", [false, true])]),
-        };
-        let ow = obj(&want);
-        let mut steps = Vec::new();
-        for (name, methods) in methods {
-            let got = one_method(horizon, weights, bounds, &axes, methods);
-            if against != "clarabel" && got.is_err() {
-                continue;
-            }
-            proptest::prop_assert!(got.is_ok(), "{name}: {:?}", got.err());
-            let got = got.unwrap();
-            let og = obj(&got);
-            // No costlier than the reference (lower is the reference's
-            // inaccuracy: the interior point's acceptable merit).
-            proptest::prop_assert!(
-                og <= ow + COST_TOLERANCE * (1.0 + ow.abs()),
-                "{name}: cost {og} vs {against}'s {ow}"
-            );
-            let plan_tol = if against == "clarabel" { 1e-5 } else { IP_PLAN_TOLERANCE };
-            for i in 0..2 {
-                for j in 0..=10 {
-                    proptest::prop_assert!(
-                        (got[i][j] - want[i][j]).abs() <= plan_tol,
-                        "{name} axis {i} y_{j}: {} vs {against}'s {}", got[i][j], want[i][j]
-                    );
-                }
-                proptest::prop_assert!(!rates[i].violated_by(&got[i], sent[i], DT), "{name} axis {i}: rate rows broken");
-                rates[i].command_steps(&got[i], sent[i], DT, &mut steps);
-                proptest::prop_assert!(steps[0].abs() <= rates[i].step + 1e-7, "{name} axis {i}: first step {}", steps[0]);
-            }
-            proptest::prop_assert!(
-                !ConeBounds::new(a, None).violated_within(&got[0], &got[1], DT, &funnel),
-                "{name}: outside the funnel"
-            );
-        }
-    }
-}
-
-proptest::proptest! {
-    #![proptest_config(proptest::test_runner::Config::with_cases(256))]
-    /// The funnel's witness (`ConeBounds::witness_start` at the funnel's
-    /// share of the rate) is a feasible point of the cone with tilt-rate
-    /// rows and speed rows, whatever the window: speeds up to twice the
-    /// bound, attitude and sent command outside the cone. It keeps every
-    /// speed row and tilt-rate row of `ConeBounds::row_bounds` and each
-    /// stage's funnel radius, so the problem the solvers get is feasible.
-    /// Broken when the witness brakes at the full rate (`FUNNEL_RATE` →
-    /// above 1) or the speed rows' index is shifted a stage.
-    #[test]
-    fn the_funnels_witness_keeps_every_row(
-        horizon in 10usize..=200,
-        tilt_deg in 8.0f64..35.0,
-        step_deg in 0.5f64..5.0,
-        kappa in proptest::array::uniform2(1.0f64..12.0),
-        speed in proptest::option::of(1.0f64..8.0),
-        v0 in proptest::array::uniform2(-12.0f64..12.0),
-        a0 in proptest::array::uniform2(-12.0f64..12.0),
-        sent in proptest::array::uniform2(-12.0f64..12.0),
-    ) {
-        let a = G * tilt_deg.to_radians().tan();
-        let rates: [TiltRate; 2] = std::array::from_fn(|i| TiltRate {
-            step: step_deg.to_radians(),
-            kappa: kappa[i],
-            gain: 1.0,
-            gravity: G,
-        });
-        let bounds = ConeBounds::new(a, speed).with_tilt_rate(rates);
-        let windows: [[f64; 3]; 2] =
-            std::array::from_fn(|i| [0.3, 0.3 + v0[i] * DT, 0.3 + 2.0 * v0[i] * DT + a0[i] * DT * DT]);
-        let fixed = [&windows[0], &windows[1]];
-        let sent = sent.map(Some);
-        let n = horizon - 2;
-        let radius = vec![a; n];
-        let mut funnel = vec![0.0; n];
-        bounds.funnel_radius(&radius, fixed, sent, DT, &mut funnel);
-        let (mut px, mut py) = (vec![0.0; n], vec![0.0; n]);
-        bounds.witness_start(&radius, fixed, sent, DT, FUNNEL_RATE, [&mut px, &mut py]);
-        // The plans y_0..y_N of the witness, and its rows' values.
-        let plans: [Vec<f64>; 2] = std::array::from_fn(|i| {
-            let p = if i == 0 { &px } else { &py };
-            (0..=horizon)
-                .map(|j| if j < 3 { windows[i][j] } else { baseline(&windows[i], j) + p[j - 3] })
-                .collect()
-        });
-        let (mut lo, mut hi) = (Vec::new(), Vec::new());
-        bounds.row_bounds(horizon, fixed, sent, &radius, DT, |l, h| {
-            lo.push(l);
-            hi.push(h);
-        });
-        proptest::prop_assert_eq!(lo.len(), bounds.rows(n));
-        let tol = |b: f64| 1e-9 * (1.0 + b.abs());
-        let speed_rows = if speed.is_some() { 2 * n } else { 0 };
-        for i in 0..2 {
-            let p = if i == 0 { &px } else { &py };
-            for g in 0..n.min(speed_rows) {
-                let v = (p[g] - if g > 0 { p[g - 1] } else { 0.0 }) / DT;
-                let k = i * n + g;
-                proptest::prop_assert!(v >= lo[k] - tol(lo[k]) && v <= hi[k] + tol(hi[k]), "axis {i} speed row {g}: {v} not in [{}, {}]", lo[k], hi[k]);
-            }
-            proptest::prop_assert!(!rates[i].violated_by(&plans[i], sent[i], DT), "axis {i}: rate rows broken");
-        }
-        proptest::prop_assert!(
-            !ConeBounds::new(a, None).violated_within(&plans[0], &plans[1], DT, &funnel),
-            "outside the funnel"
-        );
-    }
 }

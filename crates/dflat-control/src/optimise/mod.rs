@@ -124,6 +124,8 @@ pub mod clarabel;
 pub mod clarabel_cone;
 pub mod cone;
 pub mod cone_qp;
+#[cfg(test)]
+mod cone_rate_tests;
 pub mod cone_solver;
 #[cfg(test)]
 mod cone_tests;
