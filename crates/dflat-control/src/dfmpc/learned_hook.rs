@@ -40,17 +40,18 @@ pub(super) struct Score {
     recent: [Vector3<f64>; 3],
     /// How many of `recent` are filled (up to 3).
     filled: usize,
-    /// The parametric model's acceleration (no drag) at the previous tick
-    /// and at this one: the commands' through the attitude lag τ [m/s²].
-    previous: Vector3<f64>,
+    /// The parametric model's acceleration (no drag) the commands sent so
+    /// far ask for through the attitude lag τ [m/s²] (None before a
+    /// command and after one F could not make).
     now: Option<Vector3<f64>>,
     /// The newest pose samples (multi-rate mode), oldest first: time \[s\]
     /// and position \[m\].
     samples: [(f64, Vector3<f64>); RING],
     /// How many of `samples` are filled (up to [`RING`]).
     sampled: usize,
-    /// The parametric acceleration at the newest ticks (multi-rate mode),
-    /// oldest first: tick time \[s\] and acceleration [m/s²].
+    /// The parametric acceleration of the newest ticks' commands, oldest
+    /// first: the time it acts on the vehicle (the tick's, plus the input
+    /// delay) \[s\] and the acceleration [m/s²].
     ticks: [(f64, Vector3<f64>); RING],
     /// How many of `ticks` are filled.
     ticked: usize,
@@ -183,16 +184,27 @@ impl DfMpc {
         if fresh {
             s.recent = [s.recent[1], s.recent[2], measurement.position];
             s.filled = (s.filled + 1).min(3);
-            if s.filled == 3 && s.now.is_some() {
-                let dt = self.model.dt();
+            // The second difference centred on y_{k−1} is the Euler
+            // step's acceleration at k − 2: the one acting then (made
+            // by the command of tick k − 2 − d).
+            let dt = self.model.dt();
+            let at = measurement.t - 2.0 * dt;
+            let parametric = s.ticks[..s.ticked]
+                .iter()
+                .rev()
+                .find(|(acts, _)| (acts - at).abs() <= 0.5 * dt)
+                .map(|(_, a)| *a);
+            if s.filled == 3
+                && let Some(parametric) = parametric
+            {
                 let [y2, y1, y0] = s.recent;
                 let measured = (y0 - y1 * 2.0 + y2) / (dt * dt);
                 let v = (y0 - y2) / (2.0 * dt);
-                let mut unexplained = measured - (s.previous - self.model.drag().component_mul(&v));
+                let mut unexplained = measured - (parametric - self.model.drag().component_mul(&v));
                 if let ControlModel::Planar(_) = self.model {
                     unexplained.z = 0.0;
                 }
-                term.observe(&self.model, &unexplained, &v, &s.previous);
+                term.observe(&self.model, &unexplained, &v, &parametric);
             }
         } else {
             s.filled = 0;
@@ -221,18 +233,18 @@ impl DfMpc {
         let commanded = commanded_acceleration(&self.model, sent).ok();
         let s = &mut self.learned_score;
         match (s.now, commanded) {
-            (Some(now), Some(a)) => {
-                s.previous = now;
-                s.now = Some(now + (a - now) * step);
-            }
+            (Some(now), Some(a)) => s.now = Some(now + (a - now) * step),
             (None, Some(a)) => s.now = Some(a),
             (_, None) => s.now = None,
         }
+        // The command acts on the vehicle the input delay's ticks later:
+        // the lag's response to it is the acceleration then.
+        let acts = t + self.settings.delay_ticks as f64 * dt;
         if let Some(now) = s.now
-            && t.is_finite()
-            && (s.ticked == 0 || t > s.ticks[s.ticked - 1].0)
+            && acts.is_finite()
+            && (s.ticked == 0 || acts > s.ticks[s.ticked - 1].0)
         {
-            push(&mut s.ticks, &mut s.ticked, (t, now));
+            push(&mut s.ticks, &mut s.ticked, (acts, now));
         }
     }
 

@@ -92,7 +92,8 @@ pub struct DfMpc {
     /// The horizontal pair's tilt-cone QP, when the plan's tilt bound is
     /// the cone ([`PlanTiltBound::Cone`]).
     cone: Option<HorizontalCone>,
-    /// Reference y_ref,k..y_ref,k+N (model frame, m) of this tick, and of
+    /// Reference y_ref,k..y_ref,k+d+N (model frame, m; d the input
+    /// delay's ticks: the plan takes it from k + d) of this tick, and of
     /// the last good tick (swapped after each good tick).
     reference: Vec<Vector3<f64>>,
     good_reference: Vec<Vector3<f64>>,
@@ -190,8 +191,8 @@ impl DfMpc {
                 .transpose()?,
             axes: pipelines,
             cone,
-            reference: vec![Vector3::zeros(); n + 1],
-            good_reference: vec![Vector3::zeros(); n + 1],
+            reference: vec![Vector3::zeros(); n + 1 + settings.delay_ticks],
+            good_reference: vec![Vector3::zeros(); n + 1 + settings.delay_ticks],
             good_y0: Vector3::zeros(),
             last_t: f64::NEG_INFINITY,
             predicted: Vector3::zeros(),
@@ -310,14 +311,19 @@ impl DfMpc {
             .map_or(DisturbanceEstimate::NOMINAL, |e| e.estimate())
     }
 
-    /// Step 3: the reference over the horizon from y_k, split per axis.
+    /// Step 3: the reference from tick k (`y_k` the window's output
+    /// there), split per axis from the plan's start on: with an input
+    /// delay of d ticks the plan starts at k + d, and so does each axis's
+    /// reference (`y_ref,k+d..`; before, a time-indexed source — a stream,
+    /// a route — was tracked d ticks late).
     fn build_reference(
         &mut self,
-        y0: &Vector3<f64>,
+        y_k: &Vector3<f64>,
         reference: &mut dyn ReferenceSource,
     ) -> Result<(), ControlError> {
         let axes = self.axes.len();
-        reference.horizon(y0, self.model.dt(), &mut self.reference);
+        let lead = self.settings.delay_ticks;
+        reference.horizon(y_k, self.model.dt(), &mut self.reference);
         if !self
             .reference
             .iter()
@@ -328,7 +334,7 @@ impl DfMpc {
         let flyable = reference.flyable();
         let dt = self.model.dt();
         for (axis, pipeline) in self.axes.iter_mut().enumerate() {
-            for (dst, r) in pipeline.reference.iter_mut().zip(&self.reference) {
+            for (dst, r) in pipeline.reference.iter_mut().zip(&self.reference[lead..]) {
                 *dst = r[axis];
             }
             if flyable {
@@ -566,8 +572,9 @@ impl Controller for DfMpc {
         } else {
             None
         };
-        // 3. The reference over the horizon.
-        self.build_reference(&y0, reference)?;
+        // 3. The reference over the horizon (from tick k: the plan takes
+        // it from its start, k + d).
+        self.build_reference(&fixed[0], reference)?;
         // 4. Output trajectory optimisation.
         let solve = self.optimise(&planned, sent_acceleration)?;
         // 5. The output-to-input map F on y*_k..y*_{k+3}.
