@@ -92,9 +92,14 @@ pub struct LearnedArgs {
     /// Vision pose rates [Hz], comma-separated.
     #[arg(long, value_delimiter = ',', default_value = "50,15")]
     vision: Vec<f64>,
+    /// Length of each stream flight (figure eight, racing line) [s]: with
+    /// the L's, the records one plant and pose rate learn from (60 s: about
+    /// 13 minutes).
+    #[arg(long, default_value_t = 60.0)]
+    stream_s: f64,
     /// Seconds of records the learning is given in the seconds study,
     /// comma-separated.
-    #[arg(long, value_delimiter = ',', default_value = "20,40,80")]
+    #[arg(long, value_delimiter = ',', default_value = "20,40,80,160,320,600")]
     seconds: Vec<f64>,
     /// No seconds study.
     #[arg(long)]
@@ -426,6 +431,7 @@ pub fn run(command: ExperimentCommand) -> Result<()> {
                 speeds: a.speeds,
                 vision_rates: a.vision,
                 seconds: if a.no_seconds { Vec::new() } else { a.seconds },
+                stream_s: a.stream_s,
                 ..LearnedConfig::default()
             };
             let result = run_learned(&config, !a.no_progress).context("learned study")?;

@@ -115,6 +115,23 @@ pub enum LearnError {
         /// Each axis's reason.
         why: String,
     },
+    /// The records leave no held-out block to choose or judge a residual
+    /// on (runs too short for the validation and test blocks).
+    #[error(
+        "the records leave no {part} block to judge a residual on ({seconds:.1} s in runs of \
+         at most {longest:.1} s; of every five {block} s blocks of a run the fourth validates \
+         and the fifth tests): fly longer runs"
+    )]
+    NoHeldOut {
+        /// Which part is empty ("validation" or "test").
+        part: &'static str,
+        /// Engaged time \[s\].
+        seconds: f64,
+        /// The longest run \[s\].
+        longest: f64,
+        /// Block length \[s\].
+        block: f64,
+    },
     /// The best residual does not beat the parametric model held out.
     #[error(
         "the residual does not explain the held-out acceleration better than the parametric \
@@ -233,6 +250,19 @@ pub fn learn_with(
         .iter()
         .flat_map(|p| fit::smoothed(p, model, reference, Part::Validate))
         .collect();
+    let longest = runs
+        .iter()
+        .map(|r| r.ticks.len() as f64 * model.dt)
+        .fold(0.0, f64::max);
+    let no_held_out = |part| LearnError::NoHeldOut {
+        part,
+        seconds,
+        longest,
+        block: fit::BLOCK_S,
+    };
+    if held_out.is_empty() {
+        return Err(no_held_out("validation"));
+    }
     let base = fit::acceleration_error(&held_out, None, model.spatial);
     let probe = fit::samples(&prepared, model, windows[0], &[Feature::Bias], Part::Train);
     let speed_std = std_of(probe.iter().map(|s| s.speed));
@@ -299,7 +329,7 @@ pub fn learn_with(
             .join("; ");
         return Err(LearnError::EveryAxisParametric { why });
     }
-    if !held_out.is_empty() && score >= base {
+    if score >= base {
         return Err(LearnError::NoImprovement {
             parametric: base,
             learned: score,
@@ -318,6 +348,9 @@ pub fn learn_with(
         .iter()
         .flat_map(|p| fit::smoothed(p, model, reference, Part::Test))
         .collect();
+    if test_l.count == 0 || test.is_empty() {
+        return Err(no_held_out("test"));
+    }
     residual.validation = validation(&test_p, &test_l);
     residual.validation.acceleration_parametric =
         fit::acceleration_error(&test, None, model.spatial);

@@ -232,6 +232,26 @@ fn too_short_is_refused_in_words() {
     assert!(err.to_string().contains("fly longer"), "{err}");
 }
 
+/// Enough seconds in all, but in runs too short for a test block (the
+/// fifth 4 s block of a run, from 16 s): refused in words, not a model
+/// whose held-out errors are NaN (the lab's seconds study at 40 s wrote
+/// one, and flew it).
+#[test]
+fn runs_without_a_held_out_block_are_refused() {
+    let runs: Vec<Run> = (0..4)
+        .map(|i| flight(15.0, 0.03, 0.2, 4.0 + i as f64))
+        .collect();
+    let err = learn(&runs, &vehicle()).unwrap_err();
+    assert!(
+        matches!(err, LearnError::NoHeldOut { part: "test", .. }),
+        "{err}"
+    );
+    assert!(err.to_string().contains("fly longer runs"), "{err}");
+    // The same seconds in runs long enough are learned.
+    let long = flight(60.0, 0.03, 0.2, 5.0);
+    assert!(learn(&[long], &vehicle()).is_ok());
+}
+
 /// Ten minutes of flight learned: the time it takes, printed (no timing
 /// assertion). `cargo test -p dflat-tuning --lib --release
 /// learn::tests::ten_minutes -- --ignored --nocapture`
