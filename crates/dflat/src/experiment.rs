@@ -97,6 +97,12 @@ pub struct LearnedArgs {
     /// 13 minutes).
     #[arg(long, default_value_t = 60.0)]
     stream_s: f64,
+    /// The aerodynamic plants' parasitic drag, quadratic in speed [1/m].
+    #[arg(long, default_value_t = 0.03)]
+    quadratic_drag: f64,
+    /// The aerodynamic plants' rotor drag in the body plane [1/s].
+    #[arg(long, default_value_t = 0.2)]
+    rotor_drag: f64,
     /// Seconds of records the learning is given in the seconds study,
     /// comma-separated.
     #[arg(long, value_delimiter = ',', default_value = "20,40,80,160,320,600")]
@@ -432,6 +438,8 @@ pub fn run(command: ExperimentCommand) -> Result<()> {
                 vision_rates: a.vision,
                 seconds: if a.no_seconds { Vec::new() } else { a.seconds },
                 stream_s: a.stream_s,
+                quadratic_drag: a.quadratic_drag,
+                rotor_drag: a.rotor_drag,
                 ..LearnedConfig::default()
             };
             let result = run_learned(&config, !a.no_progress).context("learned study")?;
