@@ -440,7 +440,6 @@ pub fn run(command: ExperimentCommand) -> Result<()> {
                 stream_s: a.stream_s,
                 quadratic_drag: a.quadratic_drag,
                 rotor_drag: a.rotor_drag,
-                ..LearnedConfig::default()
             };
             let result = run_learned(&config, !a.no_progress).context("learned study")?;
             out!("{}", result.table());
