@@ -15,6 +15,12 @@ use super::smoothness::Smoothness;
 use super::smoothness::{accel_block, sent_linear_term};
 use crate::ControlError;
 
+/// Newton steps a warm start of the pair with tilt-rate rows is given
+/// before it goes on from the condensed interior point's start: on the
+/// corner bench at N = 200, 97 % of the warm solves that end by
+/// themselves end within 14.
+pub const WARM_STEPS_BEFORE_START: usize = 12;
+
 /// Weights of one axis: tracking q ≥ 0 [1/m²], jerk r > 0 [s⁶/m²], and
 /// the smoothness term.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -77,6 +83,8 @@ pub struct BandedConeSolver {
     warm_start: bool,
     previous_valid: bool,
     iterations: usize,
+    /// The condensed interior point's iterations in the last solve.
+    interior_iterations: usize,
     warm_used: bool,
     /// Which method gave the last solution.
     method: ConeMethod,
@@ -212,6 +220,7 @@ impl BandedConeSolver {
             warm_start,
             previous_valid: false,
             iterations: 0,
+            interior_iterations: 0,
             warm_used: false,
             method: if use_alm {
                 ConeMethod::Alm
@@ -355,6 +364,7 @@ impl BandedConeSolver {
         super::problem::check_pair(self.horizon, &x, &y)?;
         let a0 = self.load(&x, &y)?;
         self.iterations = 0;
+        self.interior_iterations = 0;
         let warm = self.warm_start && self.previous_valid;
         self.warm_used = false;
         self.previous_valid = false;
@@ -431,11 +441,17 @@ impl BandedConeSolver {
         Ok(a0)
     }
 
-    /// The augmented Lagrangian's attempt (none configured: false).
+    /// The augmented Lagrangian's attempt (none configured: false). With
+    /// the tilt-rate rows a cold solve starts from the condensed interior
+    /// point's solution and multipliers (`alm/interior_start.rs`), and a
+    /// warm one that has not ended within [`WARM_STEPS_BEFORE_START`]
+    /// Newton steps goes on from there (a chain of rate rows that moved
+    /// takes the warm multipliers 40 and more).
     fn try_alm(&mut self, warm: bool, a0: [f64; 2]) -> bool {
         let Some(alm) = &mut self.alm else {
             return false;
         };
+        let rate_rows = self.bounds.tilt_rate.is_some();
         if warm {
             alm.shift();
             alm.set_start(&[&self.warm[0], &self.warm[1]]);
@@ -446,13 +462,79 @@ impl BandedConeSolver {
             }
             alm.set_start(&[&self.p[0], &self.p[1]]);
         }
-        let result = alm.solve(&self.c_alm, a0, &self.lo, &self.hi);
+        let mut started = false;
+        if rate_rows && !warm {
+            started = self.interior_start(a0);
+        }
+        let Some(alm) = &mut self.alm else {
+            return false;
+        };
+        let budget = alm.max_newton_steps();
+        let short = rate_rows && !started;
+        if short {
+            alm.set_max_newton_steps(WARM_STEPS_BEFORE_START.min(budget));
+        }
+        let mut result = alm.solve(&self.c_alm, a0, &self.lo, &self.hi);
+        alm.set_max_newton_steps(budget);
         self.iterations = alm.newton_steps();
-        if result.is_err() {
+        if result.is_err()
+            && short
+            && self.interior_start(a0)
+            && let Some(alm) = &mut self.alm
+        {
+            result = alm.solve(&self.c_alm, a0, &self.lo, &self.hi);
+            self.iterations += alm.newton_steps();
+        }
+        if result.is_err()
+            && let Some(alm) = &mut self.alm
+        {
             // Its multipliers are no start for the next solve.
             alm.reset_multipliers();
         }
         result.is_ok()
+    }
+
+    /// The augmented Lagrangian's start from the condensed interior point,
+    /// itself started from the funnel's witness at half the rate (strictly
+    /// inside the rate rows); whether it converged (its iterations are
+    /// counted in [`BandedConeSolver::iterations`]).
+    fn interior_start(&mut self, a0: [f64; 2]) -> bool {
+        let Some(alm) = &mut self.alm else {
+            return false;
+        };
+        let [px, py] = &mut self.p;
+        let fixed = [&self.window[0], &self.window[1]];
+        self.bounds
+            .witness_start(&self.radius, fixed, self.sent, self.dt, 0.5, [px, py]);
+        alm.set_start(&[&self.p[0], &self.p[1]]);
+        let r = alm.interior_start(&self.c_alm, a0, &self.lo, &self.hi);
+        match r {
+            Ok(Some(iterations)) => {
+                self.interior_iterations += iterations;
+                true
+            }
+            _ => {
+                // Its iterate is unspecified: the witness is the start.
+                alm.set_start(&[&self.p[0], &self.p[1]]);
+                false
+            }
+        }
+    }
+
+    /// Loads a tick and runs the condensed interior point's start alone
+    /// (tests): whether it converged.
+    #[cfg(test)]
+    pub(crate) fn interior_start_only(&mut self, x: AxisProblem<'_>, y: AxisProblem<'_>) -> bool {
+        match self.load(&x, &y) {
+            Ok(a0) => self.interior_start(a0),
+            Err(_) => false,
+        }
+    }
+
+    /// The condensed interior point's iterations in the last solve (the
+    /// augmented Lagrangian's start with the tilt-rate rows; 0: none ran).
+    pub fn interior_iterations(&self) -> usize {
+        self.interior_iterations
     }
 
     /// The interior point's attempt, from the plan given; on success the

@@ -119,7 +119,7 @@ pub(super) fn clarabel_plans(
 }
 
 /// The instance's two axis problems, their plans `plans`.
-fn problems<'a>(axes: &'a [Axis; 2], plans: &'a mut Plans) -> [AxisProblem<'a>; 2] {
+pub(super) fn problems<'a>(axes: &'a [Axis; 2], plans: &'a mut Plans) -> [AxisProblem<'a>; 2] {
     let [px, py] = plans;
     let problem = |a: &'a Axis, plan: &'a mut Vec<f64>| AxisProblem {
         fixed: &a.fixed,
@@ -684,7 +684,7 @@ proptest::proptest! {
 }
 
 /// The fast path's plans of an instance (the cascade's cold start).
-fn banded_start(horizon: usize, weights: [AxisWeights; 2], axes: &[Axis; 2]) -> Plans {
+pub(super) fn banded_start(horizon: usize, weights: [AxisWeights; 2], axes: &[Axis; 2]) -> Plans {
     let mut got = [vec![0.0; horizon + 1], vec![0.0; horizon + 1]];
     for (i, plan) in got.iter_mut().enumerate() {
         let w = weights[i];

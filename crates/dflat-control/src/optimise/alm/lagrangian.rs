@@ -508,7 +508,7 @@ fn interval_dist2<const K: usize>(w: [f64; 2], b: &[[f64; 2]; 2]) -> f64 {
 /// entry written once, in order. `jac` is 0 at the stages inside their
 /// set.
 #[inline(always)]
-fn add_stage_blocks<const K: usize>(
+pub(super) fn add_stage_blocks<const K: usize>(
     jac: &[[[f64; 2]; 2]],
     sc: f64,
     w: usize,

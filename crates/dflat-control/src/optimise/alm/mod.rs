@@ -113,6 +113,7 @@
 
 use std::ops::Range;
 
+mod interior_start;
 mod lagrangian;
 mod line_search;
 mod polish;
@@ -428,6 +429,9 @@ pub struct BandedAlm {
     /// The active-set method (`polish.rs`): one axis with intervals and
     /// rows.
     polish: Option<super::active_set::ActiveSet>,
+    /// The condensed interior point's storage (`interior_start.rs`): the
+    /// pair's discs with rows.
+    interior: Option<interior_start::InteriorStart>,
 }
 
 impl BandedAlm {
@@ -493,6 +497,8 @@ impl BandedAlm {
         let head_valid = head.refactor_taking(&mut base.clone()).is_ok();
         let m = rows.len();
         let polish_on = k == 1 && m > 0 && matches!(stages, StageSet::Interval(_));
+        let interior = (k == 2 && m > 0 && matches!(stages, StageSet::Disc(_)))
+            .then(|| interior_start::InteriorStart::new(n, &rows, size, bandwidth));
         let row_first = rows
             .iter()
             .map(|r| r.idx[..r.len].iter().copied().min().unwrap_or(0))
@@ -532,6 +538,7 @@ impl BandedAlm {
             #[cfg(test)]
             no_cut: false,
             polish: None,
+            interior,
         };
         if polish_on {
             alm.polish = Some(alm.new_polish());
@@ -612,10 +619,17 @@ impl BandedAlm {
         }
     }
 
-    /// Sets the Newton-step budget (tests: make the method give up).
-    #[cfg(test)]
+    /// Sets the Newton-step budget of a warm solve (a cold one has twice
+    /// as many): tests make the method give up; the pair with tilt-rate
+    /// rows gives a warm start `WARM_STEPS_BEFORE_START` before its
+    /// interior-point start.
     pub(crate) fn set_max_newton_steps(&mut self, steps: usize) {
         self.tuning.max_newton_steps = steps;
+    }
+
+    /// The Newton-step budget of a warm solve.
+    pub(crate) fn max_newton_steps(&self) -> usize {
+        self.tuning.max_newton_steps
     }
 
     /// Turns the head's elimination on or off (tests: the same solve both
