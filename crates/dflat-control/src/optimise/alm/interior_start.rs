@@ -222,12 +222,12 @@ impl BandedAlm {
                 return Ok(None);
             }
             if mu <= GAP_REDUCTION * mu0 && primal <= primal_tol {
-                self.interior_hand_over(a0);
+                self.interior_hand_over();
                 return Ok(Some(iteration));
             }
             if !self.interior_step(mu, count)? {
                 if mu <= FALLEN_ENOUGH * mu0 {
-                    self.interior_hand_over(a0);
+                    self.interior_hand_over();
                     return Ok(Some(iteration));
                 }
                 return Ok(None);
@@ -444,12 +444,12 @@ impl BandedAlm {
     /// The multipliers of the converged iterate, in the augmented
     /// Lagrangian's terms: `y_f = w_f z_f u_f` per stage, `[w z_u, w z_l]`
     /// per row clamped to its penalty; σ its warm value.
-    fn interior_hand_over(&mut self, a0: [f64; 2]) {
+    fn interior_hand_over(&mut self) {
         let Some(ip) = self.interior.as_mut() else {
             return;
         };
-        // `u` holds u_f of the last residuals (the iterate's).
-        let _ = a0;
+        // `u` holds u_f of the last residuals (the iterate's: a failed
+        // step does not move it).
         for (f, (y, d)) in self.warm.y.iter_mut().zip(&ip.discs).enumerate() {
             let wz = ip.disc_w[f] * d.z;
             *y = [wz * ip.u[f][0], wz * ip.u[f][1]];

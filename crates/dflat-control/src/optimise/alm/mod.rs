@@ -92,6 +92,14 @@
 //! (the flight's first tick, from rest) starts near the constrained plan
 //! and its multipliers instead (`rollout_start.rs`).
 //!
+//! **The interior-point start** (`interior_start.rs`; the pair's discs
+//! with rows: the cone with the tilt rate). A cold solve, and a warm one
+//! that has not ended within a few Newton steps, start from a condensed
+//! interior point's solution and multipliers (its Newton matrix this
+//! solver's own, with the discs' barrier blocks): the first-order updates
+//! find a chain of rate rows' multipliers slowly, and from the optimum's
+//! the solve ends in a few steps ([`BandedAlm::interior_start`]).
+//!
 //! **The active-set polish** (`polish.rs`; one axis with rows: speed and
 //! tilt-rate rows). A warm solve first, and every multiplier update after,
 //! takes the active set the multipliers name (below 1e-6 of the largest:
