@@ -45,6 +45,56 @@ fn rate_bounds(
     (a, rates, ConeBounds::new(a, speed).with_tilt_rate(rates))
 }
 
+/// Per-axis weights: tracking q, jerk r, and the smoothness term of
+/// weight `smooth` (none: off) on attitude lag κ.
+fn instance_weights(
+    q: [f64; 2],
+    r: [f64; 2],
+    kappa: [f64; 2],
+    smooth: Option<f64>,
+) -> [AxisWeights; 2] {
+    std::array::from_fn(|i| AxisWeights {
+        q: q[i],
+        r: r[i],
+        smoothness: smooth.map_or(Smoothness::default(), |weight| Smoothness {
+            weight,
+            kappa: kappa[i],
+            gravity: G,
+        }),
+    })
+}
+
+/// A window of three outputs from 0.3 m at speed `v0` [m/s] and
+/// acceleration `acc` [m/s²].
+fn window(v0: f64, acc: f64) -> [f64; 3] {
+    [0.3, 0.3 + v0 * DT, 0.3 + 2.0 * v0 * DT + acc * DT * DT]
+}
+
+/// Both axes of an instance: the window at `v0` accelerating at the
+/// fraction `a0_frac` of the cone's radius `a`, the command sent last
+/// `sent_delta` [m/s²] off that acceleration, and a reference from
+/// `target` [m] moving at `slope` [m/s].
+fn instance_axes(
+    horizon: usize,
+    a: f64,
+    v0: [f64; 2],
+    a0_frac: [f64; 2],
+    sent_delta: [f64; 2],
+    target: [f64; 2],
+    slope: [f64; 2],
+) -> [Axis; 2] {
+    std::array::from_fn(|i| {
+        let acc = a0_frac[i] * a;
+        Axis {
+            fixed: window(v0[i], acc),
+            sent: Some(acc + sent_delta[i]),
+            reference: (0..=horizon)
+                .map(|j| target[i] + slope[i] * DT * j as f64)
+                .collect(),
+        }
+    })
+}
+
 /// The cost tolerance (relative) of the cone with tilt-rate rows: the
 /// cascade's ticks that go to the interior point end at its acceptable
 /// merit (residuals up to 100× its targets: a gap of 1e-7 relative), and
@@ -87,25 +137,8 @@ proptest::proptest! {
         smooth in proptest::option::of(1.0f64..50.0),
     ) {
         let (a, rates, bounds) = rate_bounds(tilt_deg, step_deg, kappa, speed);
-        let weights: [AxisWeights; 2] = std::array::from_fn(|i| AxisWeights {
-            q: q[i],
-            r: r[i],
-            smoothness: smooth.map_or(Smoothness::default(), |weight| Smoothness {
-                weight,
-                kappa: kappa[i],
-                gravity: G,
-            }),
-        });
-        let axes: [Axis; 2] = std::array::from_fn(|i| {
-            let acc = a0_frac[i] * a;
-            Axis {
-                fixed: [0.3, 0.3 + v0[i] * DT, 0.3 + 2.0 * v0[i] * DT + acc * DT * DT],
-                sent: Some(acc + sent_delta[i]),
-                reference: (0..=horizon)
-                    .map(|j| target[i] + slope[i] * DT * j as f64)
-                    .collect(),
-            }
-        });
+        let weights = instance_weights(q, r, kappa, smooth);
+        let axes = instance_axes(horizon, a, v0, a0_frac, sent_delta, target, slope);
         // Clarabel at the reference settings; it fails (NumericalError) on
         // most draws with soft speed rows. (The hard-bounded problem is no
         // reference there: where the window is faster than the speed
@@ -186,8 +219,7 @@ proptest::proptest! {
         sent in proptest::array::uniform2(-12.0f64..12.0),
     ) {
         let (a, rates, bounds) = rate_bounds(tilt_deg, step_deg, kappa, speed);
-        let windows: [[f64; 3]; 2] =
-            std::array::from_fn(|i| [0.3, 0.3 + v0[i] * DT, 0.3 + 2.0 * v0[i] * DT + a0[i] * DT * DT]);
+        let windows: [[f64; 3]; 2] = std::array::from_fn(|i| window(v0[i], a0[i]));
         let fixed = [&windows[0], &windows[1]];
         let sent = sent.map(Some);
         let n = horizon - 2;
@@ -255,23 +287,8 @@ proptest::proptest! {
         smooth in proptest::option::of(1.0f64..50.0),
     ) {
         let (a, _, bounds) = rate_bounds(tilt_deg, step_deg, kappa, None);
-        let weights: [AxisWeights; 2] = std::array::from_fn(|i| AxisWeights {
-            q: q[i],
-            r: r[i],
-            smoothness: smooth.map_or(Smoothness::default(), |weight| Smoothness {
-                weight,
-                kappa: kappa[i],
-                gravity: G,
-            }),
-        });
-        let axes: [Axis; 2] = std::array::from_fn(|i| {
-            let acc = a0_frac[i] * a;
-            Axis {
-                fixed: [0.3, 0.3 + v0[i] * DT, 0.3 + 2.0 * v0[i] * DT + acc * DT * DT],
-                sent: Some(acc + sent_delta[i]),
-                reference: vec![target[i]; horizon + 1],
-            }
-        });
+        let weights = instance_weights(q, r, kappa, smooth);
+        let axes = instance_axes(horizon, a, v0, a0_frac, sent_delta, target, [0.0; 2]);
         let mut solver =
             BandedConeSolver::with_methods(horizon, DT, weights, bounds, false, [true, false]).unwrap();
         let mut plans = super::cone_tests::banded_start(horizon, weights, &axes);

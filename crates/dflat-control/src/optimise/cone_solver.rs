@@ -507,8 +507,7 @@ impl BandedConeSolver {
         self.bounds
             .witness_start(&self.radius, fixed, self.sent, self.dt, 0.5, [px, py]);
         alm.set_start(&[&self.p[0], &self.p[1]]);
-        let r = alm.interior_start(&self.c_alm, a0, &self.lo, &self.hi);
-        match r {
+        match alm.interior_start(&self.c_alm, a0, &self.lo, &self.hi) {
             Ok(Some(iterations)) => {
                 self.interior_iterations += iterations;
                 true

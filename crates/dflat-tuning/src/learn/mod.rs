@@ -368,7 +368,8 @@ pub fn learn_with(
 /// Sets to 0 the weights of each axis the residual should not act on
 /// (module docs, "Axis by axis"): all its weights undetermined by the
 /// fit (`half_width`, the 95 % half-widths), or its held-out unexplained
-/// acceleration not lowered. Returns those axes with why.
+/// acceleration not lowered (`held_out` is not empty: `learn_with` refuses
+/// records without validation blocks). Returns those axes with why.
 fn keep_parametric_axes(
     residual: &mut LearnedResidual,
     half_width: &[Vec<f64>; 3],
@@ -402,9 +403,6 @@ fn keep_parametric_axes(
     }
     for (axis, _) in &kept {
         residual.weights[*axis].iter_mut().for_each(|w| *w = 0.0);
-    }
-    if held_out.is_empty() {
-        return kept;
     }
     let base = fit::acceleration_error_per_axis(held_out, None, spatial);
     let learned = fit::acceleration_error_per_axis(held_out, Some(residual), spatial);

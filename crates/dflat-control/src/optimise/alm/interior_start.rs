@@ -76,10 +76,10 @@ pub(super) struct InteriorStart {
     disc_w: Vec<f64>,
     u: Vec<[f64; 2]>,
     gdx: Vec<[f64; 2]>,
-    /// Per row: its sides `[upper, lower]`, its scale w_r and `h·x`.
+    /// Per row: its sides `[upper, lower]` and its scale w_r (fixed with
+    /// the rows and P).
     sides: Vec<[Ineq; 2]>,
     row_w: Vec<f64>,
-    hx: Vec<f64>,
     /// Dual residual, right-hand side / step, stage scratch.
     rd: Vec<f64>,
     dx: Vec<f64>,
@@ -93,9 +93,22 @@ pub(super) struct InteriorStart {
 
 impl InteriorStart {
     /// Storage for n stages, the rows and `size` unknowns, the Newton
-    /// matrix's half-bandwidth `band`.
-    pub(super) fn new(n: usize, rows: &[Row], size: usize, band: usize) -> Self {
+    /// matrix's half-bandwidth `band` and P's largest diagonal entry
+    /// `diag_max` (the rows' scales).
+    pub(super) fn new(n: usize, rows: &[Row], size: usize, band: usize, diag_max: f64) -> Self {
         let m = rows.len();
+        let root = diag_max.sqrt();
+        let row_w = rows
+            .iter()
+            .map(|row| {
+                let norm = row.coef[..row.len]
+                    .iter()
+                    .map(|c| c * c)
+                    .sum::<f64>()
+                    .sqrt();
+                root / norm.max(f64::MIN_POSITIVE)
+            })
+            .collect();
         let w = band + 1;
         let outer = rows
             .iter()
@@ -121,8 +134,7 @@ impl InteriorStart {
             u: vec![[0.0; 2]; n],
             gdx: vec![[0.0; 2]; n],
             sides: vec![[Ineq::default(); 2]; m],
-            row_w: vec![0.0; m],
-            hx: vec![0.0; m],
+            row_w,
             rd: vec![0.0; size],
             dx: vec![0.0; size],
             e: vec![[0.0; 2]; n],
@@ -164,44 +176,37 @@ impl BandedAlm {
             ));
         }
         self.ws.c.copy_from_slice(c);
-        let inv_dt2 = self.inv_dt2;
-        let x = &mut self.ws.x;
-        // Scales: P's largest diagonal entry against each gradient's norm
-        // (a disc's at the edge of its radius: ‖G_fᵀu‖ ≤ √6·A/δt²).
+        // The discs' scales: P's largest diagonal entry against the
+        // gradient's norm at the edge of the radius (‖G_fᵀu‖ ≤ √6·A/δt²);
+        // the rows' are fixed (`InteriorStart::new`).
         let root = self.diag_max.sqrt();
-        for (w, a) in ip.disc_w.iter_mut().zip(radius) {
-            *w = root / (6f64.sqrt() * inv_dt2 * a.max(1e-3));
-        }
-        for (w, row) in ip.row_w.iter_mut().zip(&self.rows) {
-            let norm = row.coef[..row.len]
-                .iter()
-                .map(|c| c * c)
-                .sum::<f64>()
-                .sqrt();
-            *w = root / norm.max(f64::MIN_POSITIVE);
-        }
-        // The start: the gaps, floored at θ of the largest; z = θ²/s.
-        Self::accelerations(2, inv_dt2, x, &mut ip.u, 0);
-        let mut largest = 0.0f64;
         let mut bound_scale = 0.0f64;
-        for (f, d) in ip.discs.iter_mut().enumerate() {
-            let u = [ip.u[f][0] + a0[0], ip.u[f][1] + a0[1]];
-            let c = 0.5 * (u[0] * u[0] + u[1] * u[1] - radius[f] * radius[f]);
-            d.s = -ip.disc_w[f] * c;
-            d.on = true;
-            largest = largest.max(d.s.abs());
-            bound_scale = bound_scale.max(ip.disc_w[f] * 0.5 * radius[f] * radius[f]);
+        for (w, a) in ip.disc_w.iter_mut().zip(radius) {
+            *w = root / (6f64.sqrt() * self.inv_dt2 * a.max(1e-3));
+            bound_scale = bound_scale.max(*w * 0.5 * a * a);
         }
-        for (r, row) in self.rows.iter().enumerate() {
-            let hx: f64 = (0..row.len).map(|k| row.coef[k] * x[row.idx[k]]).sum();
-            let b = [hi[r], -lo[r]];
-            for (j, side) in ip.sides[r].iter_mut().enumerate() {
-                side.on = b[j].is_finite();
+        // The start: the gaps (the residuals with s = 0), floored at θ of
+        // the largest; z = θ²/s.
+        for d in &mut ip.discs {
+            (d.on, d.s, d.z) = (true, 0.0, 0.0);
+        }
+        for (r, sides) in ip.sides.iter_mut().enumerate() {
+            for (side, b) in sides.iter_mut().zip([hi[r], -lo[r]]) {
+                (side.on, side.s, side.z) = (b.is_finite(), 0.0, 0.0);
                 if side.on {
-                    side.s = ip.row_w[r] * (b[j] - SIGN[j] * hx);
-                    largest = largest.max(side.s.abs());
-                    bound_scale = bound_scale.max(ip.row_w[r] * b[j].abs());
+                    bound_scale = bound_scale.max(ip.row_w[r] * b.abs());
                 }
+            }
+        }
+        self.interior_residuals(a0, lo, hi, 1);
+        let Some(ip) = self.interior.as_mut() else {
+            return Ok(None);
+        };
+        let mut largest = 0.0f64;
+        for q in ip.discs.iter_mut().chain(ip.sides.iter_mut().flatten()) {
+            if q.on {
+                q.s = -q.r;
+                largest = largest.max(q.s.abs());
             }
         }
         let theta = (START_FLOOR * largest).max(1e-12);
@@ -274,7 +279,6 @@ impl BandedAlm {
         Self::add_transposed(2, self.inv_dt2, &ip.e, &mut ip.rd, 0);
         for (r, row) in self.rows.iter().enumerate() {
             let hx: f64 = (0..row.len).map(|k| row.coef[k] * x[row.idx[k]]).sum();
-            ip.hx[r] = hx;
             let b = [hi[r], -lo[r]];
             let mut t = 0.0;
             for (j, side) in ip.sides[r].iter_mut().enumerate() {

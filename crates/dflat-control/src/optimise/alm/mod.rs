@@ -506,7 +506,7 @@ impl BandedAlm {
         let m = rows.len();
         let polish_on = k == 1 && m > 0 && matches!(stages, StageSet::Interval(_));
         let interior = (k == 2 && m > 0 && matches!(stages, StageSet::Disc(_)))
-            .then(|| interior_start::InteriorStart::new(n, &rows, size, bandwidth));
+            .then(|| interior_start::InteriorStart::new(n, &rows, size, bandwidth, diag_max));
         let row_first = rows
             .iter()
             .map(|r| r.idx[..r.len].iter().copied().min().unwrap_or(0))
