@@ -30,7 +30,12 @@
 //! [`MAX_RELATIVE_INTERVAL`] of it: the constant included, which the
 //! basis check above exempts), or on which the residual does not lower
 //! the validation blocks' unexplained acceleration, keeps the parametric
-//! model: its weights are set to 0 and the report says why. Under pose
+//! model: its weights are set to 0 and the report says why. Every
+//! candidate is scored on the validation blocks so, as it would fly: a
+//! window that determines both axes wins over one that scores lower on
+//! weights it cannot keep (a 38 s record chose r = 5 for its full-weight
+//! score, then lost y to its interval, and flew y worse than identify's,
+//! `tests/e2e_learned.rs`, 2026-11-29). Under pose
 //! noise a short record can determine a constant on one axis and not on
 //! the other; learned on both, it made the first axis worse in flight
 //! (`E2E_VISION=1` in `tests/e2e_learned.rs`, 2026-11-28).
@@ -279,7 +284,14 @@ pub fn learn_with(
         .into_iter()
         .filter(|b| b.iter().all(|f| !unexcited.iter().any(|(u, _)| u == f)))
         .collect();
-    let mut best: Option<(f64, LearnedResidual, [Vec<f64>; 3])> = None;
+    let axes = if model.spatial { 3 } else { 2 };
+    let base_axes = fit::acceleration_error_per_axis(&held_out, None, model.spatial);
+    // Each candidate is judged as it would fly: the axes it leaves to the
+    // parametric model (module docs, "Axis by axis") zeroed before its
+    // held-out score, so a window that determines every axis is not lost
+    // to one that scores lower on weights it cannot keep.
+    let mut best: Option<(f64, LearnedResidual, Vec<(usize, String)>)> = None;
+    let mut every_axis_parametric: Option<String> = None;
     let mut undetermined: Vec<(usize, Feature, String)> = Vec::new();
     let mut candidates = 0;
     for &r in &windows {
@@ -297,16 +309,39 @@ pub fn learn_with(
                     }
                     continue;
                 }
-                let candidate =
+                let mut candidate =
                     residual_file(vehicle, r, features, lambda, fitted.weights, support);
+                let kept = keep_parametric_axes(
+                    &mut candidate,
+                    &fitted.half_width,
+                    &held_out,
+                    &base_axes,
+                    model.spatial,
+                );
+                if kept.len() == axes {
+                    if every_axis_parametric.is_none() {
+                        every_axis_parametric = Some(
+                            kept.iter()
+                                .map(|(a, w)| format!("{}: {w}", ["x", "y", "z"][*a]))
+                                .collect::<Vec<_>>()
+                                .join("; "),
+                        );
+                    }
+                    continue;
+                }
                 let score = fit::acceleration_error(&held_out, Some(&candidate), model.spatial);
                 if score.is_finite() && best.as_ref().is_none_or(|(b, _, _)| score < *b) {
-                    best = Some((score, candidate, fitted.half_width));
+                    best = Some((score, candidate, kept));
                 }
             }
         }
     }
-    let (mut score, mut residual, half_width) = best.ok_or(LearnError::NoFit)?;
+    let Some((score, mut residual, parametric_axes)) = best else {
+        return Err(match every_axis_parametric {
+            Some(why) => LearnError::EveryAxisParametric { why },
+            None => LearnError::NoFit,
+        });
+    };
     for (r, f, why) in undetermined {
         if r == residual.window
             && !residual.features.contains(&f)
@@ -314,20 +349,6 @@ pub fn learn_with(
         {
             unexcited.push((f, format!("window {r}: {why}")));
         }
-    }
-    let parametric_axes =
-        keep_parametric_axes(&mut residual, &half_width, &held_out, model.spatial);
-    if !parametric_axes.is_empty() {
-        score = fit::acceleration_error(&held_out, Some(&residual), model.spatial);
-    }
-    let axes = if model.spatial { 3 } else { 2 };
-    if parametric_axes.len() == axes {
-        let why = parametric_axes
-            .iter()
-            .map(|(a, w)| format!("{}: {w}", ["x", "y", "z"][*a]))
-            .collect::<Vec<_>>()
-            .join("; ");
-        return Err(LearnError::EveryAxisParametric { why });
     }
     if score >= base {
         return Err(LearnError::NoImprovement {
@@ -369,11 +390,13 @@ pub fn learn_with(
 /// (module docs, "Axis by axis"): all its weights undetermined by the
 /// fit (`half_width`, the 95 % half-widths), or its held-out unexplained
 /// acceleration not lowered (`held_out` is not empty: `learn_with` refuses
-/// records without validation blocks). Returns those axes with why.
+/// records without validation blocks; `base` is its parametric error per
+/// axis). Returns those axes with why.
 fn keep_parametric_axes(
     residual: &mut LearnedResidual,
     half_width: &[Vec<f64>; 3],
     held_out: &[fit::Smoothed],
+    base: &[f64; 3],
     spatial: bool,
 ) -> Vec<(usize, String)> {
     let axes = if spatial { 3 } else { 2 };
@@ -404,7 +427,6 @@ fn keep_parametric_axes(
     for (axis, _) in &kept {
         residual.weights[*axis].iter_mut().for_each(|w| *w = 0.0);
     }
-    let base = fit::acceleration_error_per_axis(held_out, None, spatial);
     let learned = fit::acceleration_error_per_axis(held_out, Some(residual), spatial);
     for axis in 0..axes {
         if kept.iter().any(|(a, _)| *a == axis) {
