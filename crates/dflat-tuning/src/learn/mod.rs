@@ -291,7 +291,9 @@ pub fn learn_with(
     // held-out score, so a window that determines every axis is not lost
     // to one that scores lower on weights it cannot keep.
     let mut best: Option<(f64, LearnedResidual, Vec<(usize, String)>)> = None;
-    let mut every_axis_parametric: Option<String> = None;
+    // The refusal's words when every candidate keeps no axis: those of the
+    // one whose full weights scored best.
+    let mut every_axis_parametric: Option<(f64, String)> = None;
     let mut undetermined: Vec<(usize, Feature, String)> = Vec::new();
     let mut candidates = 0;
     for &r in &windows {
@@ -311,6 +313,8 @@ pub fn learn_with(
                 }
                 let mut candidate =
                     residual_file(vehicle, r, features, lambda, fitted.weights, support);
+                // The full weights' score names the closest refusal.
+                let full = fit::acceleration_error(&held_out, Some(&candidate), model.spatial);
                 let kept = keep_parametric_axes(
                     &mut candidate,
                     &fitted.half_width,
@@ -319,13 +323,16 @@ pub fn learn_with(
                     model.spatial,
                 );
                 if kept.len() == axes {
-                    if every_axis_parametric.is_none() {
-                        every_axis_parametric = Some(
-                            kept.iter()
-                                .map(|(a, w)| format!("{}: {w}", ["x", "y", "z"][*a]))
-                                .collect::<Vec<_>>()
-                                .join("; "),
-                        );
+                    if every_axis_parametric
+                        .as_ref()
+                        .is_none_or(|(b, _)| full < *b)
+                    {
+                        let why = kept
+                            .iter()
+                            .map(|(a, w)| format!("{}: {w}", ["x", "y", "z"][*a]))
+                            .collect::<Vec<_>>()
+                            .join("; ");
+                        every_axis_parametric = Some((full, why));
                     }
                     continue;
                 }
@@ -338,7 +345,7 @@ pub fn learn_with(
     }
     let Some((score, mut residual, parametric_axes)) = best else {
         return Err(match every_axis_parametric {
-            Some(why) => LearnError::EveryAxisParametric { why },
+            Some((_, why)) => LearnError::EveryAxisParametric { why },
             None => LearnError::NoFit,
         });
     };
