@@ -72,8 +72,10 @@ pub enum ExperimentCommand {
     /// planar, spatial and rigid plants with parasitic (0.03 |v|v) and
     /// rotor drag (0.2 /s), the L, a figure eight and a racing line at 5, 7
     /// and 9 m/s under 50 and 15 Hz vision poses; the matched plant, stock,
-    /// identify, learned (window 3) and learned (window from data); and the
-    /// seconds of records the learning needs. Tables on stdout, JSON.
+    /// identify, learned (window 3), learned (window from data) and the
+    /// plant's exact aerodynamics as the residual (what a perfect learn
+    /// flies); and the seconds of records the learning needs. Tables on
+    /// stdout, JSON.
     Learned(LearnedArgs),
 }
 

@@ -258,23 +258,48 @@ impl Flight {
             Some(tr) => return self.judge_stream(r, &tr, judged_from),
         };
         let axes = per_axis(r, judged_from);
+        let (constrained, tilt_p99_deg) = bound_use(r, judged_from);
         Judged {
             p95: percentile(horizontal, 95.0),
             axis_p95: axes,
             diverged: r.stop_reason == StopReason::Diverged,
             errors: r.errors.len(),
+            constrained,
+            tilt_p99_deg,
         }
     }
 
     fn judge_stream(&self, r: &TrialResult, tr: &Trajectory, from: f64) -> Judged {
         let f = preview::judge(r, tr);
+        let (constrained, tilt_p99_deg) = bound_use(r, from);
         Judged {
             p95: f.p95,
             axis_p95: per_axis(r, from),
             diverged: r.stop_reason == StopReason::Diverged,
             errors: r.errors.len(),
+            constrained,
+            tilt_p99_deg,
         }
     }
+}
+
+/// Over the ticks from `from` \[s\]: the share whose plan was constrained
+/// (its tilt bound or tilt-rate rows active), and the p99 of the commanded
+/// tilt `acos(cos φ·cos θ)` \[°\].
+fn bound_use(r: &TrialResult, from: f64) -> (f64, f64) {
+    let judged: Vec<_> = r.ticks.iter().filter(|t| t.t >= from).collect();
+    let constrained =
+        judged.iter().filter(|t| t.constrained).count() as f64 / judged.len().max(1) as f64;
+    let tilt = judged
+        .iter()
+        .map(|t| {
+            (t.command.roll.cos() * t.command.pitch.cos())
+                .clamp(-1.0, 1.0)
+                .acos()
+                .to_degrees()
+        })
+        .collect();
+    (constrained, percentile(tilt, 99.0))
 }
 
 /// p95 of |true position − y_ref,k| per axis (x, y, z) over the ticks
@@ -304,6 +329,12 @@ pub struct Judged {
     pub diverged: bool,
     /// Controller errors.
     pub errors: usize,
+    /// Share of the judged ticks whose plan was constrained (the plan's
+    /// tilt bound or tilt-rate rows active).
+    pub constrained: f64,
+    /// p99 of the commanded tilt over the judged ticks \[°\] (the plan's
+    /// bound: 30°).
+    pub tilt_p99_deg: f64,
 }
 
 impl Judged {
@@ -313,5 +344,7 @@ impl Judged {
         axis_p95: [f64::NAN; 3],
         diverged: false,
         errors: 0,
+        constrained: f64::NAN,
+        tilt_p99_deg: f64::NAN,
     };
 }

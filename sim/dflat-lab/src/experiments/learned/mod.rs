@@ -22,6 +22,12 @@
 //!    records over the identified `[vehicle]`, its window fixed at 3 poses;
 //! 5. **learned, r from data**: the same with the window chosen on
 //!    held-out data;
+//! 6. **exact**: the plant's own aerodynamics written as the residual
+//!    (`−c_q·|v|·v − d·(v − n·(n·v))`, everywhere in support) over the
+//!    identified `[vehicle]` without its linear drag: what a perfectly
+//!    learned residual flies in this controller, so a gap to matched is
+//!    split into what learning misses and what the residual's place in
+//!    the controller misses;
 //!
 //! and how many seconds of those records the learning needs: the
 //! residual learned from their first T seconds, flown on every cell of the
@@ -35,7 +41,7 @@ mod records;
 
 pub use flights::{AeroPlant, Flight, Judged, LearnedShape, control_model};
 
-use dflat_control::learned::LearnedResidual;
+use dflat_control::learned::{Feature, LearnedResidual, Support, Validation};
 use dflat_tuning::identify::{self, FlownVehicle};
 use dflat_tuning::learn::parametric::Parametric;
 use dflat_tuning::learn::{self, LearnOptions, VehicleTable, data::Run};
@@ -213,6 +219,8 @@ pub struct LearnedRow {
     pub learned: Judged,
     /// Learned, window chosen from data.
     pub learned_window: Judged,
+    /// The plant's exact aerodynamics as the residual ([`exact_residual`]).
+    pub exact: Judged,
 }
 
 /// What identify and learn gave one plant at one pose rate.
@@ -284,11 +292,11 @@ impl LearnedResult {
     /// seconds study.
     pub fn table(&self) -> String {
         let mut t = String::from(
-            "plant    vision  shape        speed   matched     stock  identify   learned  learned(r)  learned/matched  r/matched\n",
+            "plant    vision  shape        speed   matched     stock  identify   learned  learned(r)     exact  learned/matched  r/matched  exact/matched\n",
         );
         for r in &self.rows {
             t += &format!(
-                "{:8} {:4.0} Hz {:12} {:4.1}  {:8.4}  {:8.4}  {:8.4}  {:8.4}  {:10.4}  {:>15}  {:>9}\n",
+                "{:8} {:4.0} Hz {:12} {:4.1}  {:8.4}  {:8.4}  {:8.4}  {:8.4}  {:10.4}  {:8.4}  {:>15}  {:>9}  {:>13}\n",
                 r.plant,
                 r.vision_hz,
                 r.shape,
@@ -298,8 +306,10 @@ impl LearnedResult {
                 r.identified.p95,
                 r.learned.p95,
                 r.learned_window.p95,
+                r.exact.p95,
                 fmt_ratio(r.learned.p95, r.matched.p95),
                 fmt_ratio(r.learned_window.p95, r.matched.p95),
+                fmt_ratio(r.exact.p95, r.matched.p95),
             );
         }
         for g in &self.models {
@@ -473,6 +483,57 @@ fn learned(
         .map_err(|e| e.to_string())
 }
 
+/// The plant's own aerodynamics — parasitic drag `c_q·|v|·v` and rotor
+/// drag `d·(v − n·(n·v))`, `drag = (c_q, d)` — written as a learned
+/// residual over `vehicle` (whose linear drag should be 0: the residual is
+/// the whole of the aerodynamics), acting everywhere (its support covers
+/// any flight). Planar: no z.
+pub fn exact_residual(
+    vehicle: &Vehicle,
+    spatial: bool,
+    g: f64,
+    drag: (f64, f64),
+) -> LearnedResidual {
+    let table = vehicle.table(spatial, g);
+    let (cq, d) = drag;
+    let weights = std::array::from_fn(|axis| {
+        let mut w = vec![0.0; 6];
+        if spatial || axis < 2 {
+            w[axis] = -cq;
+            w[3 + axis] = -d;
+        }
+        w
+    });
+    LearnedResidual {
+        format: dflat_control::learned::FORMAT.into(),
+        version: dflat_control::learned::VERSION,
+        vehicle_model: table.model,
+        vehicle: table.fields.into_iter().collect(),
+        dt: flights::DT,
+        window: 3,
+        features: vec![Feature::Quadratic, Feature::RotorPlane],
+        lambda: 0.0,
+        weights,
+        support: Support {
+            speed_max: 1e3,
+            tilt_max: std::f64::consts::FRAC_PI_2,
+            thrust_min: 1e-3,
+            thrust_max: 1e3,
+        },
+        validation: Validation {
+            one_step_parametric_m: f64::NAN,
+            one_step_learned_m: f64::NAN,
+            horizon_s: learn::HORIZON_S,
+            horizon_parametric_m: f64::NAN,
+            horizon_learned_m: f64::NAN,
+            samples: 0,
+            acceleration_parametric: f64::NAN,
+            acceleration_learned: f64::NAN,
+        },
+        seconds: 0.0,
+    }
+}
+
 /// Flies the study.
 pub fn run_learned(
     config: &LearnedConfig,
@@ -574,10 +635,16 @@ pub fn run_learned(
             }
         })
         .collect();
-    // 5. Fly both residuals (a refused one is not flown).
+    // 5. Fly both residuals (a refused one is not flown), and the exact
+    // aerodynamics over the identified table without its linear drag.
     let mut third = Vec::new();
     let mut third_index = Vec::new();
     for (i, gr) in groups.iter().enumerate() {
+        let bare = Vehicle {
+            drag_h: 0.0,
+            ..ids[i].0
+        };
+        let exact = exact_residual(&bare, gr.plant.spatial(), g, drag);
         for c in &cells {
             for m in [&models[i].learned, &models[i].learned_window] {
                 third_index.push(m.is_some().then_some(third.len()));
@@ -585,6 +652,8 @@ pub fn run_learned(
                     third.push(flight(gr, c, true, ids[i].0, Some(m.clone())));
                 }
             }
+            third_index.push(Some(third.len()));
+            third.push(flight(gr, c, true, bare, Some(exact.clone())));
         }
     }
     let third_results = fly_all(&third, progress)?;
@@ -594,7 +663,7 @@ pub fn run_learned(
             let f = flight(gr, cell, true, Vehicle::STOCK, None);
             let judge = |r: &TrialResult| f.judge(r);
             let learned_of = |k: usize| {
-                third_index[(i * cells.len() + c) * 2 + k]
+                third_index[(i * cells.len() + c) * 3 + k]
                     .map_or(Judged::NONE, |j| judge(&third_results[j]))
             };
             rows.push(LearnedRow {
@@ -607,6 +676,7 @@ pub fn run_learned(
                 identified: judge(&second_results[i * cells.len() + c]),
                 learned: learned_of(0),
                 learned_window: learned_of(1),
+                exact: learned_of(2),
             });
         }
     }
