@@ -185,6 +185,9 @@ pub struct Learned {
     pub candidates: usize,
 }
 
+/// NED axes left to the parametric model, with why.
+type ParametricAxes = Vec<(usize, String)>;
+
 /// The bases tried, before the excitation check.
 fn bases() -> Vec<Vec<Feature>> {
     use Feature::*;
@@ -290,7 +293,7 @@ pub fn learn_with(
     // parametric model (module docs, "Axis by axis") zeroed before its
     // held-out score, so a window that determines every axis is not lost
     // to one that scores lower on weights it cannot keep.
-    let mut best: Option<(f64, LearnedResidual, Vec<(usize, String)>)> = None;
+    let mut best: Option<(f64, LearnedResidual, ParametricAxes)> = None;
     // The refusal's words when every candidate keeps no axis: those of the
     // one whose full weights scored best.
     let mut every_axis_parametric: Option<(f64, String)> = None;
