@@ -165,3 +165,75 @@ fn the_window_predicts_the_same_with_and_without_a_heading_change() {
         "a heading change left the fixed window: {diff}"
     );
 }
+
+/// The heading commanded on a stream turning at 0.5 rad/s (samples at
+/// 50 Hz with yaw, creeping along x at 0.1 m/s, engaged from tick 20), with
+/// `vehicle.delay_ms` = `delay_ms`: the commanded yaw per tick.
+fn stream_headings(delay_ms: f64) -> Vec<Option<f64>> {
+    let mut cfg = Config::default();
+    cfg.vehicle.yaw_mode = YawMode::Flown;
+    cfg.vehicle.delay_ms = delay_ms;
+    let controller = build_controller(&cfg).unwrap();
+    let mut core = ControlCore::new(&cfg, controller, thrust_mapping(&cfg));
+    (0..150)
+        .map(|k| {
+            let t = k as f64 * DT;
+            let mut events = vec![
+                Event::Heartbeat {
+                    arrival: t - 0.002,
+                    mode: mode(k >= 20),
+                },
+                Event::Pose {
+                    arrival: t - 0.001,
+                    source_time: None,
+                    position: [0.0, 0.0, -10.0],
+                    yaw: None,
+                    reset_counter: None,
+                },
+            ];
+            if k >= 10 {
+                events.push(Event::Setpoint {
+                    arrival: t - 0.0005,
+                    position: [0.1 * t, 0.0, -10.0],
+                    yaw: Some(0.5 * t),
+                    yaw_rate: Some(0.5),
+                    source_time: None,
+                    velocity: Some([0.1, 0.0, 0.0]),
+                    acceleration: None,
+                });
+            }
+            let time = TickTime {
+                tick: k,
+                t,
+                scheduled: t,
+                jitter_us: 0,
+            };
+            let mut clock = t;
+            let out = core.step(&time, events, &mut || {
+                clock += 1e-5;
+                clock
+            });
+            out.command.map(|c| c.command.yaw)
+        })
+        .collect()
+}
+
+/// With an input delay the controller plans from `delay_ms` ahead, and a
+/// stream's heading is commanded that much further ahead too: on a stream
+/// turning at 0.5 rad/s, 40 ms (two ticks) of delay lead the commanded
+/// heading by 0.02 rad once it follows the stream. Fails with the heading
+/// taken `yaw_lead_s` ahead alone (the two runs then agree).
+#[test]
+fn a_streams_heading_is_led_by_the_input_delay() {
+    let (plain, delayed) = (stream_headings(0.0), stream_headings(40.0));
+    let mut compared = 0;
+    for (k, (a, b)) in plain.iter().zip(&delayed).enumerate().skip(100) {
+        let (Some(a), Some(b)) = (a, b) else {
+            panic!("tick {k}: no command ({a:?}, {b:?})");
+        };
+        let lead = dflat_link::math::wrap_pi(b - a);
+        assert!((lead - 0.02).abs() < 1e-6, "tick {k}: lead {lead} rad");
+        compared += 1;
+    }
+    assert!(compared >= 40, "{compared} ticks compared");
+}

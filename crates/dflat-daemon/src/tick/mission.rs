@@ -220,7 +220,8 @@ impl ControlCore {
     /// The heading the tick commands \[rad\]: `vehicle.yaw_deg` with
     /// `yaw_mode = "fixed"`; else, streaming engaged, one rate-limited step
     /// towards the goal's yaw (a setpoint's, the mission's, a stream's
-    /// trajectory's `vehicle.yaw_lead_s` ahead; none: the heading is kept);
+    /// trajectory's `vehicle.yaw_lead_s` plus the input delay ahead; none:
+    /// the heading is kept);
     /// in standby the vehicle's own heading.
     pub(super) fn heading(&mut self, t: f64) -> f64 {
         let fixed = self.settings.vehicle.yaw;
@@ -237,7 +238,8 @@ impl ControlCore {
         let target = match self.supervisor.goal() {
             Goal::Mission => self.goals.runner.as_ref().and_then(MissionRunner::yaw),
             // A stream's heading from its trajectory, its rate fed
-            // forward by commanding it `yaw_lead_s` ahead.
+            // forward by commanding it `yaw_lead_s` ahead, and the input
+            // delay further (as the plan starts `delay_ms` ahead).
             Goal::Stream => self
                 .goals
                 .reference

@@ -58,8 +58,10 @@ pub struct VehicleSettings {
     pub yaw: f64,
     /// How the heading is commanded (`vehicle.yaw_mode`).
     pub yaw_mode: YawMode,
-    /// How far ahead a stream's heading is commanded \[s\]
-    /// (`vehicle.yaw_lead_s`).
+    /// How far ahead a stream's heading is commanded \[s\]:
+    /// `vehicle.yaw_lead_s` plus the input delay the controller plans over
+    /// (`vehicle.delay_ms`, in whole control ticks), so a heading sent now
+    /// is the stream's when it acts.
     pub yaw_lead: f64,
     /// Heading rate limit \[rad/s\] (`vehicle.max_yaw_rate_deg_s`).
     pub max_yaw_rate: f64,
@@ -148,7 +150,8 @@ impl CoreSettings {
                 max_tilt: vehicle.max_tilt_deg.to_radians(),
                 yaw: vehicle.yaw_deg.to_radians(),
                 yaw_mode: vehicle.yaw_mode,
-                yaw_lead: vehicle.yaw_lead_s,
+                yaw_lead: vehicle.yaw_lead_s
+                    + crate::control::delay_ticks(config) as f64 / config.controller.rate_hz,
                 max_yaw_rate: vehicle.max_yaw_rate_deg_s.to_radians(),
                 tau: vehicle.tau,
                 k: vehicle.k,
