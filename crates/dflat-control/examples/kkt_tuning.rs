@@ -81,6 +81,7 @@ fn problem(c: &Case) -> (Smoothness, AxisBounds) {
             speed: None,
             tilt_rate: None,
             drag: 0.0,
+            offset: None,
         },
     )
 }

@@ -191,6 +191,7 @@ fn smooth_clarabel_agrees_with_fast_path() {
         speed: None,
         tilt_rate: None,
         drag: 0.0,
+        offset: None,
     };
     let mut bounded =
         ClarabelSolver::with_smoothness(n, 1.0, 0.08, DT, bounds, f64::INFINITY, sm).unwrap();
@@ -203,6 +204,7 @@ fn smooth_clarabel_agrees_with_fast_path() {
         speed: None,
         tilt_rate: None,
         drag: 0.0,
+        offset: None,
     };
     assert!(!relaxed.violated_by(&b, DT));
 }

@@ -182,6 +182,7 @@ pub(super) fn build_pipelines(
             // The tilt bound holds the thrust's acceleration (the plan's
             // plus D·v); the vertical bound is on the plan's own.
             drag: if axis < 2 { model.drag()[axis] } else { 0.0 },
+            offset: None,
         };
         let bounded = if bounds.is_empty() {
             None
@@ -311,11 +312,14 @@ impl DfMpc {
     /// first (x and y together when they share weights), then the bounded
     /// QP for an axis whose fast plan violates a configured bound.
     /// `sent_acceleration`: what the command sent at k−1 asks for (with a
-    /// smoothness weight).
+    /// smoothness weight). `offsets`: per horizontal axis, the plan's
+    /// acceleration less the thrust's at the window ([`AxisBounds::offset`];
+    /// `None`: the drag's alone).
     pub(super) fn optimise(
         &mut self,
         fixed: &[Vector3<f64>; 3],
         sent_acceleration: Option<Vector3<f64>>,
+        offsets: Option<[f64; 2]>,
     ) -> Result<SolveReport, ControlError> {
         let mut fixed_axis = [[0.0; 3]; 3];
         for (axis, f) in fixed_axis.iter_mut().enumerate().take(self.axes.len()) {
@@ -347,6 +351,9 @@ impl DfMpc {
             let Some(cascade) = &mut p.bounded else {
                 continue;
             };
+            let offset = offsets.and_then(|o| o.get(axis).copied());
+            p.bounds.offset = offset;
+            cascade.set_offset(offset);
             if !p.bounds.violated(&p.plan, sent(axis), dt) {
                 cascade.skip();
                 continue;

@@ -29,19 +29,28 @@ pub struct AxisBounds {
     /// acceleration, the same for every stage of the tick (the speed the
     /// window has, not the plan's along the horizon).
     pub drag: f64,
+    /// This tick's offset of the plan's acceleration from the thrust's on
+    /// this axis [m/s²], `Δ²y/δt² − a_thrust` at the window's speed: what
+    /// the model adds to the thrust's (the drag `−D·v_1`, a learned
+    /// residual `ρ`). `None`: `−D·v_1` from [`AxisBounds::drag`]. Set per
+    /// tick by the controller when a learned residual is flown: a residual
+    /// that takes the drag back (`dflat learn` over an identified
+    /// `drag_h`) moves the bound with it.
+    pub offset: Option<f64>,
 }
 
 impl AxisBounds {
     /// The acceleration bound on the plan's `Δ²y/δt²` for a window whose
-    /// last outputs are `fixed` ([`AxisBounds::drag`]): `[lo, hi]` less
-    /// `D·v_1`.
+    /// last outputs are `fixed` ([`AxisBounds::drag`]): `[lo, hi]` plus the
+    /// offset ([`AxisBounds::offset`], else `−D·v_1`).
     pub(crate) fn acceleration_at(&self, fixed: &[f64; 3], dt: f64) -> Option<[f64; 2]> {
         let [lo, hi] = self.acceleration?;
-        if self.drag == 0.0 {
-            return Some([lo, hi]);
-        }
-        let shift = self.drag * (fixed[2] - fixed[1]) / dt;
-        Some([lo - shift, hi - shift])
+        let offset = match self.offset {
+            Some(o) if o.is_finite() => o,
+            _ if self.drag == 0.0 => return Some([lo, hi]),
+            _ => -self.drag * (fixed[2] - fixed[1]) / dt,
+        };
+        Some([lo + offset, hi + offset])
     }
 
     /// The speed funnel for a window moving faster than the speed bound:
@@ -340,4 +349,45 @@ pub(super) fn check_row_data(
         return Err(super::problem::invalid(field, "finite data with lo ≤ hi"));
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The acceleration bound on the plan follows the thrust's: `−D·v_1`
+    /// from the drag without an offset, the tick's offset when one is
+    /// set (whatever the drag), nothing shifted without either; a
+    /// non-finite offset falls back to the drag's.
+    #[test]
+    fn the_acceleration_bound_moves_with_the_models_offset() {
+        let dt = 0.02;
+        // Window speed v_1 = (y_2 − y_1)/δt = 5 m/s.
+        let fixed = [0.0, 0.1, 0.2];
+        let mut b = AxisBounds {
+            acceleration: Some([-4.0, 4.0]),
+            drag: 0.4,
+            ..AxisBounds::default()
+        };
+        let near = |a: Option<[f64; 2]>, want: [f64; 2]| {
+            let a = a.unwrap();
+            (a[0] - want[0]).abs() < 1e-12 && (a[1] - want[1]).abs() < 1e-12
+        };
+        assert!(near(b.acceleration_at(&fixed, dt), [-6.0, 2.0]));
+        b.offset = Some(1.5);
+        assert!(near(b.acceleration_at(&fixed, dt), [-2.5, 5.5]));
+        b.offset = Some(f64::NAN);
+        assert!(near(b.acceleration_at(&fixed, dt), [-6.0, 2.0]));
+        b.drag = 0.0;
+        b.offset = None;
+        assert!(near(b.acceleration_at(&fixed, dt), [-4.0, 4.0]));
+        // The fast plan's check reads the same bound: a plan at 5 m/s²
+        // keeps it with the offset 1.5, breaks it without.
+        let plan: Vec<f64> = (0..8)
+            .map(|j| 0.1 * j as f64 + 0.5 * 5.0 * (j as f64 * dt).powi(2))
+            .collect();
+        assert!(b.violated_by(&plan, dt));
+        b.offset = Some(1.5);
+        assert!(!b.violated_by(&plan, dt));
+    }
 }

@@ -301,6 +301,10 @@ impl BoxAlmSolver {
 }
 
 impl AxisSolver for BoxAlmSolver {
+    fn set_offset(&mut self, offset: Option<f64>) {
+        self.bounds.offset = offset;
+    }
+
     fn solve(&mut self, axis: AxisProblem<'_>) -> Result<SolveInfo, SolveFailure> {
         let method = if self.alm.has_active_set() {
             SolverMethod::ActiveSet

@@ -132,6 +132,11 @@ pub trait AxisSolver: std::fmt::Debug + Send {
     fn row_duals(&self) -> &[[f64; 2]] {
         &[]
     }
+
+    /// This tick's offset of the plan's acceleration from the thrust's
+    /// ([`super::AxisBounds::offset`]) for the next solves (a solver
+    /// without an acceleration bound ignores it).
+    fn set_offset(&mut self, _offset: Option<f64>) {}
 }
 
 /// A solver of the horizontal pair's constrained plan (the tilt cone).
@@ -191,6 +196,14 @@ impl<S: ?Sized + Carries> Cascade<S> {
     pub fn reset(&mut self) {
         self.solved_by = None;
         self.solvers.iter_mut().for_each(|s| s.tell(Carry::Reset));
+    }
+}
+
+impl Cascade<dyn AxisSolver> {
+    /// Sets this tick's [`super::AxisBounds::offset`] in every solver
+    /// ([`AxisSolver::set_offset`]).
+    pub fn set_offset(&mut self, offset: Option<f64>) {
+        self.solvers.iter_mut().for_each(|s| s.set_offset(offset));
     }
 }
 

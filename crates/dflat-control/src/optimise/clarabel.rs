@@ -386,6 +386,10 @@ impl ClarabelSolver {
 }
 
 impl AxisSolver for ClarabelSolver {
+    fn set_offset(&mut self, offset: Option<f64>) {
+        self.bounds.offset = offset;
+    }
+
     fn solve(&mut self, axis: AxisProblem<'_>) -> Result<SolveInfo, SolveFailure> {
         let method = SolverMethod::Clarabel;
         self.solve_problem(axis).map_err(|e| match e {

@@ -266,6 +266,7 @@ impl ConeBounds {
             speed: self.speed,
             tilt_rate: None,
             drag: 0.0,
+            offset: None,
         }
     }
 
@@ -295,6 +296,7 @@ impl ConeBounds {
             speed: self.speed,
             tilt_rate: None,
             drag: 0.0,
+            offset: None,
         };
         speed.violated_by(x, dt) || speed.violated_by(y, dt)
     }

@@ -287,6 +287,10 @@ impl BandedInteriorPointSolver {
 }
 
 impl AxisSolver for BandedInteriorPointSolver {
+    fn set_offset(&mut self, offset: Option<f64>) {
+        self.bounds.offset = offset;
+    }
+
     fn solve(&mut self, axis: AxisProblem<'_>) -> Result<SolveInfo, SolveFailure> {
         let method = SolverMethod::InteriorPoint;
         self.solve_problem(axis)

@@ -82,6 +82,7 @@ proptest::proptest! {
             speed: None,
             tilt_rate: Some(rate),
             drag: 0.0,
+            offset: None,
         };
         let smoothness = Smoothness { weight: smooth.unwrap_or(0.0), kappa, gravity: G };
         let sent = Some(a0 + sent_delta);
@@ -165,6 +166,7 @@ fn the_funnel_keeps_rate_and_acceleration_bounds_feasible() {
         speed: None,
         tilt_rate: Some(rate),
         drag: 0.0,
+        offset: None,
     };
     let sent = Some(a0);
     let mut banded =
@@ -201,6 +203,7 @@ fn the_funnel_keeps_rate_and_acceleration_bounds_feasible() {
         AxisBounds {
             tilt_rate: None,
             drag: 0.0,
+            offset: None,
             ..bounds
         },
         f64::INFINITY,
@@ -242,6 +245,7 @@ fn step_bounds(a_max: Option<f64>) -> AxisBounds {
             gravity: G,
         }),
         drag: 0.0,
+        offset: None,
     }
 }
 
@@ -411,6 +415,7 @@ proptest::proptest! {
             speed,
             tilt_rate: Some(rate),
             drag: 0.0,
+            offset: None,
         };
         let smoothness = Smoothness::default();
         let mut reference_solver = ClarabelSolver::with_tuning(
