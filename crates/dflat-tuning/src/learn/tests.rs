@@ -271,12 +271,12 @@ fn ten_minutes() {
 }
 
 /// A slow, short, noisy flight (30 s at about 2 m/s, 1 cm poses): the
-/// candidate with the lowest held-out error on its full weights (r = 51,
-/// all four groups, λ 0.1) cannot keep z (its interval), and flown
-/// without z it leaves 0.161 m/s²; one without the velocity group keeps
-/// every axis and leaves 0.148. Candidates are judged as they fly, so
-/// the second is chosen. Fails when the choice is made on full weights
-/// and the undetermined axis dropped afterwards (z left parametric).
+/// candidate with the lowest held-out error on its full weights cannot
+/// keep z (its interval) and, flown without z, leaves more of the
+/// held-out acceleration than one that keeps every axis. Candidates are
+/// judged as they fly, so the second is chosen. Fails when the choice is
+/// made on full weights and the undetermined axis dropped afterwards (z
+/// left parametric: seen on this flight).
 #[test]
 fn candidates_are_judged_with_the_axes_they_keep() {
     let runs = vec![flight_sensed(30.0, 0.03, 0.2, 2.0, 1, 0.01)];
