@@ -105,6 +105,10 @@ pub struct LearnedArgs {
     /// The aerodynamic plants' rotor drag in the body plane [1/s].
     #[arg(long, default_value_t = 0.2)]
     rotor_drag: f64,
+    /// DF-MPC's command-smoothness weight on x and y [1/rad²] for every
+    /// flight (the shipped df-mr-smooth's: 50).
+    #[arg(long, default_value_t = 50.0)]
+    smoothness: f64,
     /// Seconds of records the learning is given in the seconds study,
     /// comma-separated.
     #[arg(long, value_delimiter = ',', default_value = "20,40,80,160,320,600")]
@@ -442,6 +446,7 @@ pub fn run(command: ExperimentCommand) -> Result<()> {
                 stream_s: a.stream_s,
                 quadratic_drag: a.quadratic_drag,
                 rotor_drag: a.rotor_drag,
+                smoothness: a.smoothness,
             };
             let result = run_learned(&config, !a.no_progress).context("learned study")?;
             out!("{}", result.table());

@@ -124,7 +124,13 @@ pub struct Flight {
     pub learned: Option<LearnedResidual>,
     /// A stream's length \[s\].
     pub stream_s: f64,
+    /// DF-MPC's command-smoothness weight on x and y \[1/rad²\].
+    pub smoothness: f64,
 }
+
+/// The shipped `df-mr-smooth`'s command-smoothness weight on x and y
+/// \[1/rad²\].
+pub const SMOOTHNESS: f64 = 50.0;
 
 /// The control model of `vehicle` on `plant`.
 pub fn control_model(plant: AeroPlant, vehicle: &Vehicle) -> Result<ControlModel, ExperimentError> {
@@ -159,16 +165,20 @@ pub fn control_model(plant: AeroPlant, vehicle: &Vehicle) -> Result<ControlModel
 }
 
 /// The shipped DF-MPC (`df-mr-smooth`) on `vehicle`'s model, with the
-/// learned residual when given.
+/// learned residual when given and the command-smoothness weight
+/// `smoothness` on x and y.
 fn factory(
     plant: AeroPlant,
     vehicle: Vehicle,
     learned: Option<LearnedResidual>,
+    smoothness: f64,
 ) -> Result<ControllerFactory, ExperimentError> {
     let build = move || -> Result<Box<dyn Controller>, ExperimentError> {
         let model = control_model(plant, &vehicle)?;
-        let mut settings =
-            MultiRateDf::default().settings(35f64.to_radians(), 2.0 * model.gravity(), None);
+        let mut df = MultiRateDf::default();
+        df.smoothness[0] = smoothness;
+        df.smoothness[1] = smoothness;
+        let mut settings = df.settings(35f64.to_radians(), 2.0 * model.gravity(), None);
         settings.delay_ticks = (vehicle.delay_ms / (1e3 * DT)).round() as usize;
         let mut mpc =
             DfMpc::new(model, settings).map_err(|source| ExperimentError::Controller {
@@ -204,7 +214,12 @@ impl Flight {
 
     /// The trial.
     pub fn spec(&self) -> Result<TrialSpec, ExperimentError> {
-        let controller = factory(self.plant, self.vehicle, self.learned.clone())?;
+        let controller = factory(
+            self.plant,
+            self.vehicle,
+            self.learned.clone(),
+            self.smoothness,
+        )?;
         let mut spec = match self.shape.trajectory(self.speed) {
             None => {
                 let setup = TrialSetup::default();

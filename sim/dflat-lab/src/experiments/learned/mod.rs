@@ -39,7 +39,7 @@
 mod flights;
 mod records;
 
-pub use flights::{AeroPlant, Flight, Judged, LearnedShape, control_model};
+pub use flights::{AeroPlant, Flight, Judged, LearnedShape, SMOOTHNESS, control_model};
 
 use dflat_control::learned::{Feature, LearnedResidual, Support, Validation};
 use dflat_tuning::identify::{self, FlownVehicle};
@@ -137,6 +137,9 @@ pub struct LearnedConfig {
     pub rotor_drag: f64,
     /// A stream's length \[s\].
     pub stream_s: f64,
+    /// DF-MPC's command-smoothness weight on x and y \[1/rad²\] (the
+    /// shipped `df-mr-smooth`'s: 50).
+    pub smoothness: f64,
     /// Seconds of records the learning is given in the seconds study (an
     /// empty list: no study).
     pub seconds: Vec<f64>,
@@ -156,6 +159,7 @@ impl Default for LearnedConfig {
             quadratic_drag: 0.03,
             rotor_drag: 0.2,
             stream_s: 60.0,
+            smoothness: SMOOTHNESS,
             seconds: vec![20.0, 40.0, 80.0, 160.0, 320.0, 600.0],
         }
     }
@@ -186,6 +190,9 @@ impl LearnedConfig {
         }
         if !(5.0..=120.0).contains(&self.stream_s) {
             return Err(invalid("stream_s", "5 ..= 120 s"));
+        }
+        if !(0.0..=1e4).contains(&self.smoothness) {
+            return Err(invalid("smoothness", "0 ..= 1e4 1/rad²"));
         }
         if self
             .seconds
@@ -567,6 +574,7 @@ pub fn run_learned(
         vehicle,
         learned,
         stream_s: config.stream_s,
+        smoothness: config.smoothness,
     };
     // 1–2. Matched and stock.
     let mut first = Vec::new();

@@ -13,6 +13,7 @@ fn flight(shape: LearnedShape, speed: f64, drag: (f64, f64), vehicle: Vehicle) -
         vehicle,
         learned: None,
         stream_s: 20.0,
+        smoothness: SMOOTHNESS,
     }
 }
 
