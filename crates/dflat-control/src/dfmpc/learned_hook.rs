@@ -156,7 +156,7 @@ impl DfMpc {
     /// The bound holds the thrust's acceleration; a residual that takes
     /// the drag back moves it with it (without: the box bound was shifted
     /// by `D·v_1` alone, and a learned residual over an identified drag
-    /// flew the racing line at 9 m/s 1.58× matched instead of 0.93×).
+    /// flew the racing line at 9 m/s 1.58× matched instead of 1.01×).
     /// `None` without a residual (the drag's shift alone) or when not
     /// finite.
     pub(super) fn bound_offsets(
