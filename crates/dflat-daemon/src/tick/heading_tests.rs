@@ -34,17 +34,42 @@ fn truth(k: u64) -> ([f64; 2], [f64; 3]) {
     )
 }
 
+/// Steps the pure core of `cfg` through 150 ticks, tick k (time t) fed
+/// `events(k, t)`; returns `take` of every tick's output.
+fn fly<T>(
+    cfg: &Config,
+    mut events: impl FnMut(u64, f64) -> Vec<Event>,
+    take: impl Fn(StepOutput) -> T,
+) -> Vec<T> {
+    let controller = build_controller(cfg).unwrap();
+    let mut core = ControlCore::new(cfg, controller, thrust_mapping(cfg));
+    (0..150)
+        .map(|k| {
+            let t = k as f64 * DT;
+            let time = TickTime {
+                tick: k,
+                t,
+                scheduled: t,
+                jitter_us: 0,
+            };
+            let mut clock = t;
+            take(core.step(&time, events(k, t), &mut || {
+                clock += 1e-5;
+                clock
+            }))
+        })
+        .collect()
+}
+
 /// Flies 150 ticks (50 in standby, then engaged with a setpoint at tick
 /// 60 carrying `setpoint_yaw`); the measured heading is `heading(k)`.
 /// Returns every tick's (plan, command).
 fn run(yaw_mode: YawMode, heading: impl Fn(u64) -> f64, setpoint_yaw: Option<f64>) -> Vec<Tick> {
     let mut cfg = Config::default();
     cfg.vehicle.yaw_mode = yaw_mode;
-    let controller = build_controller(&cfg).unwrap();
-    let mut core = ControlCore::new(&cfg, controller, thrust_mapping(&cfg));
-    (0..150)
-        .map(|k| {
-            let t = k as f64 * DT;
+    fly(
+        &cfg,
+        |k, t| {
             let ([pitch, roll], position) = truth(k);
             let psi = heading(k);
             // The autopilot reports body angles at its heading.
@@ -79,20 +104,10 @@ fn run(yaw_mode: YawMode, heading: impl Fn(u64) -> f64, setpoint_yaw: Option<f64
                     acceleration: None,
                 });
             }
-            let time = TickTime {
-                tick: k,
-                t,
-                scheduled: t,
-                jitter_us: 0,
-            };
-            let mut clock = t;
-            let out = core.step(&time, events, &mut || {
-                clock += 1e-5;
-                clock
-            });
-            (out.row.plan, out.command.map(|c| c.command))
-        })
-        .collect()
+            events
+        },
+        |out| (out.row.plan, out.command.map(|c| c.command)),
+    )
 }
 
 fn largest_plan_difference(a: &[Tick], b: &[Tick]) -> f64 {
@@ -173,11 +188,9 @@ fn stream_headings(delay_ms: f64) -> Vec<Option<f64>> {
     let mut cfg = Config::default();
     cfg.vehicle.yaw_mode = YawMode::Flown;
     cfg.vehicle.delay_ms = delay_ms;
-    let controller = build_controller(&cfg).unwrap();
-    let mut core = ControlCore::new(&cfg, controller, thrust_mapping(&cfg));
-    (0..150)
-        .map(|k| {
-            let t = k as f64 * DT;
+    fly(
+        &cfg,
+        |k, t| {
             let mut events = vec![
                 Event::Heartbeat {
                     arrival: t - 0.002,
@@ -202,20 +215,10 @@ fn stream_headings(delay_ms: f64) -> Vec<Option<f64>> {
                     acceleration: None,
                 });
             }
-            let time = TickTime {
-                tick: k,
-                t,
-                scheduled: t,
-                jitter_us: 0,
-            };
-            let mut clock = t;
-            let out = core.step(&time, events, &mut || {
-                clock += 1e-5;
-                clock
-            });
-            out.command.map(|c| c.command.yaw)
-        })
-        .collect()
+            events
+        },
+        |out| out.command.map(|c| c.command.yaw),
+    )
 }
 
 /// With an input delay the controller plans from `delay_ms` ahead, and a
