@@ -489,11 +489,14 @@ pub fn acceleration_error(
     residual: Option<&LearnedResidual>,
     spatial: bool,
 ) -> f64 {
-    acceleration_error_per_axis(held_out, residual, spatial)
-        .iter()
-        .map(|e| e * e)
-        .sum::<f64>()
-        .sqrt()
+    combined(&acceleration_error_per_axis(held_out, residual, spatial))
+}
+
+/// The RMS error over the axes of [`acceleration_error_per_axis`]'s
+/// per-axis errors [m/s²]: `√Σ e_axis²` (what [`acceleration_error`]
+/// gives).
+pub fn combined(per_axis: &[f64; 3]) -> f64 {
+    per_axis.iter().map(|e| e * e).sum::<f64>().sqrt()
 }
 
 /// [`acceleration_error`] per NED axis (x, y, z; z 0 planar) [m/s²].

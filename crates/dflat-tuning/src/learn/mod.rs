@@ -316,12 +316,17 @@ pub fn learn_with(
                 }
                 let mut candidate =
                     residual_file(vehicle, r, features, lambda, fitted.weights, support);
+                // The residual acts on each axis through that axis's weights
+                // alone: one pass over the held-out blocks gives every
+                // axis's error, flown with its weights or at 0.
+                let full_axes =
+                    fit::acceleration_error_per_axis(&held_out, Some(&candidate), model.spatial);
                 // The full weights' score names the closest refusal.
-                let full = fit::acceleration_error(&held_out, Some(&candidate), model.spatial);
-                let kept = keep_parametric_axes(
+                let full = fit::combined(&full_axes);
+                let (kept, flown_axes) = keep_parametric_axes(
                     &mut candidate,
                     &fitted.half_width,
-                    &held_out,
+                    &full_axes,
                     &base_axes,
                     model.spatial,
                 );
@@ -339,7 +344,7 @@ pub fn learn_with(
                     }
                     continue;
                 }
-                let score = fit::acceleration_error(&held_out, Some(&candidate), model.spatial);
+                let score = fit::combined(&flown_axes);
                 if score.is_finite() && best.as_ref().is_none_or(|(b, _, _)| score < *b) {
                     best = Some((score, candidate, kept));
                 }
@@ -399,16 +404,18 @@ pub fn learn_with(
 /// Sets to 0 the weights of each axis the residual should not act on
 /// (module docs, "Axis by axis"): all its weights undetermined by the
 /// fit (`half_width`, the 95 % half-widths), or its held-out unexplained
-/// acceleration not lowered (`held_out` is not empty: `learn_with` refuses
-/// records without validation blocks; `base` is its parametric error per
-/// axis). Returns those axes with why.
+/// acceleration not lowered (`learned`: per axis with the residual's
+/// weights, `base`: without; `learn_with` refuses records without
+/// validation blocks). Returns those axes with why, and each axis's
+/// held-out error as flown (`base` where its weights are 0: an axis's
+/// residual is its own weights' alone).
 fn keep_parametric_axes(
     residual: &mut LearnedResidual,
     half_width: &[Vec<f64>; 3],
-    held_out: &[fit::Smoothed],
+    learned: &[f64; 3],
     base: &[f64; 3],
     spatial: bool,
-) -> Vec<(usize, String)> {
+) -> (ParametricAxes, [f64; 3]) {
     let axes = if spatial { 3 } else { 2 };
     let mut kept = Vec::new();
     for (axis, (w, hw)) in residual
@@ -434,10 +441,6 @@ fn keep_parametric_axes(
             ));
         }
     }
-    for (axis, _) in &kept {
-        residual.weights[*axis].iter_mut().for_each(|w| *w = 0.0);
-    }
-    let learned = fit::acceleration_error_per_axis(held_out, Some(residual), spatial);
     for axis in 0..axes {
         if kept.iter().any(|(a, _)| *a == axis) {
             continue;
@@ -450,11 +453,15 @@ fn keep_parametric_axes(
                     base[axis], learned[axis]
                 ),
             ));
-            residual.weights[axis].iter_mut().for_each(|w| *w = 0.0);
         }
     }
+    let mut flown = *learned;
+    for (axis, _) in &kept {
+        residual.weights[*axis].iter_mut().for_each(|w| *w = 0.0);
+        flown[*axis] = base[*axis];
+    }
     kept.sort_by_key(|(a, _)| *a);
-    kept
+    (kept, flown)
 }
 
 /// The first group of `features` (the constant excepted) whose weights the
