@@ -165,12 +165,25 @@ impl DfMpc {
         d: &DisturbanceEstimate,
     ) -> Option<[f64; 2]> {
         let l = self.learned.as_ref()?;
-        let dt = self.model.dt();
-        let [_, rho] = l.step_offsets(&self.model, planned, &d.acceleration);
-        let v1 = (planned[2] - planned[1]) / dt;
-        let drag = self.model.drag();
-        let o = [rho.x - drag.x * v1.x, rho.y - drag.y * v1.y];
+        let [_, o1] = self.step_model_offsets(l, planned, d);
+        let o = [o1.x, o1.y];
         o.iter().all(|x| x.is_finite()).then_some(o)
+    }
+
+    /// What the model adds to the thrust's acceleration in each of the two
+    /// steps over the outputs `y` (three or four, \[m\]; as
+    /// [`LearnedTerm::step_offsets`]): `o_j = ρ_j − D·v_j`, the residual
+    /// of step j and the drag at its backward speed `(y_{j+1} − y_j)/δt`.
+    fn step_model_offsets(
+        &self,
+        l: &LearnedTerm,
+        y: &[Vector3<f64>],
+        d: &DisturbanceEstimate,
+    ) -> [Vector3<f64>; 2] {
+        let dt = self.model.dt();
+        let drag = self.model.drag();
+        let rho = l.step_offsets(&self.model, y, &d.acceleration);
+        std::array::from_fn(|j| rho[j] - drag.component_mul(&((y[j + 1] - y[j]) / dt)))
     }
 
     /// Keeps what the model adds to the command F just made from `plan`
@@ -180,10 +193,7 @@ impl DfMpc {
             return;
         };
         let dt = self.model.dt();
-        let drag = self.model.drag();
-        let [r0, r1] = l.step_offsets(&self.model, plan, &d.acceleration);
-        let o0 = r0 - drag.component_mul(&((plan[1] - plan[0]) / dt));
-        let o1 = r1 - drag.component_mul(&((plan[2] - plan[1]) / dt));
+        let [o0, o1] = self.step_model_offsets(l, plan, d);
         let kappa = crate::window::input_lags(&self.model).map(|lag| lag / dt);
         let o = Vector3::from_fn(|i, _| o0[i] + kappa[i] * (o1[i] - o0[i]));
         self.learned_score.sent_offset = o.iter().all(|x| x.is_finite()).then_some(o);
