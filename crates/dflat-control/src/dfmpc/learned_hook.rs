@@ -131,20 +131,20 @@ impl DfMpc {
 
     /// What the model adds to the command sent last in the plan's terms
     /// of the smoothness term and the tilt-rate bound \[m/s²\]
-    /// (`velocity`: the plan's start velocity). With a learned residual: F
-    /// made that command from its plan's two steps with the drag `−D·v_j`
-    /// and the residual `ρ_j` in them, and those terms linearise a step's
-    /// command as `c_j = a_j + κ·(a_{j+1} − a_j)`: the sent command's
-    /// acceleration plus `o_0 + κ·(o_1 − o_0)`, `o_j = ρ_j − D·v_j`
+    /// (`velocity`: the plan's start velocity). F made that command from
+    /// its plan's two steps with the drag `−D·v_j` and, when flown, the
+    /// residual `ρ_j` in them, and those terms linearise a step's command
+    /// as `c_j = a_j + κ·(a_{j+1} − a_j)`: the sent command's acceleration
+    /// plus `o_0 + κ·(o_1 − o_0)`, `o_j = ρ_j − D·v_j`
     /// ([`DfMpc::keep_sent_offset`]). Without the κ term the anchor missed
     /// τ·ȯ, and the smoothness weight pulled every plan by it (the figure
     /// eight at 5 m/s with the aerodynamics' residual: 0.08 m against
-    /// 0.009 m with it). Without a residual (and before a plan): `−D·v` at
-    /// the plan's start, as the parametric model always had it.
+    /// 0.009 m with it; with a matched linear drag of 0.4 /s and no
+    /// residual, 0.099 m against 0.013 m). Before a plan: `−D·v` at the
+    /// plan's start.
     pub(super) fn sent_offset(&self, velocity: &Vector3<f64>) -> Vector3<f64> {
         self.learned_score
             .sent_offset
-            .filter(|_| self.learned.is_some())
             .unwrap_or_else(|| -self.model.drag().component_mul(velocity))
     }
 
@@ -164,8 +164,8 @@ impl DfMpc {
         planned: &[Vector3<f64>; 3],
         d: &DisturbanceEstimate,
     ) -> Option<[f64; 2]> {
-        let l = self.learned.as_ref()?;
-        let [_, o1] = self.step_model_offsets(l, planned, d);
+        self.learned.as_ref()?;
+        let [_, o1] = self.step_model_offsets(planned, d);
         let o = [o1.x, o1.y];
         o.iter().all(|x| x.is_finite()).then_some(o)
     }
@@ -173,27 +173,23 @@ impl DfMpc {
     /// What the model adds to the thrust's acceleration in each of the two
     /// steps over the outputs `y` (three or four, \[m\]; as
     /// [`LearnedTerm::step_offsets`]): `o_j = ρ_j − D·v_j`, the residual
-    /// of step j and the drag at its backward speed `(y_{j+1} − y_j)/δt`.
-    fn step_model_offsets(
-        &self,
-        l: &LearnedTerm,
-        y: &[Vector3<f64>],
-        d: &DisturbanceEstimate,
-    ) -> [Vector3<f64>; 2] {
+    /// of step j (0 without one) and the drag at its backward speed
+    /// `(y_{j+1} − y_j)/δt`.
+    fn step_model_offsets(&self, y: &[Vector3<f64>], d: &DisturbanceEstimate) -> [Vector3<f64>; 2] {
         let dt = self.model.dt();
         let drag = self.model.drag();
-        let rho = l.step_offsets(&self.model, y, &d.acceleration);
+        let rho = self.learned.as_ref().map_or([Vector3::zeros(); 2], |l| {
+            l.step_offsets(&self.model, y, &d.acceleration)
+        });
         std::array::from_fn(|j| rho[j] - drag.component_mul(&((y[j + 1] - y[j]) / dt)))
     }
 
     /// Keeps what the model adds to the command F just made from `plan`
-    /// when a residual is flown (see [`DfMpc::sent_offset`]).
+    /// (see [`DfMpc::sent_offset`]): the drag's and, when flown, the
+    /// residual's.
     pub(super) fn keep_sent_offset(&mut self, plan: &[Vector3<f64>; 4], d: &DisturbanceEstimate) {
-        let Some(l) = &self.learned else {
-            return;
-        };
         let dt = self.model.dt();
-        let [o0, o1] = self.step_model_offsets(l, plan, d);
+        let [o0, o1] = self.step_model_offsets(plan, d);
         let kappa = crate::window::input_lags(&self.model).map(|lag| lag / dt);
         let o = Vector3::from_fn(|i, _| o0[i] + kappa[i] * (o1[i] - o0[i]));
         self.learned_score.sent_offset = o.iter().all(|x| x.is_finite()).then_some(o);
