@@ -17,8 +17,8 @@
 //! axis worse than before; the learned model's held-out input-to-output
 //! prediction at most half the parametric model's; the learned model's
 //! status said in the daemon's log. Printed, not met: the learned flight
-//! within 1.1× the matched one (2026-11-28, quiet machine: matched 0.0015
-//! m, learned 0.0123 m, identified 0.140 m, stock 1.43 m — the 38 s of one
+//! within 1.1× the matched one (2026-11-29, load ~1: matched 0.0013
+//! m, learned 0.0122 m, identified 0.167 m, stock 1.43 m — the 38 s of one
 //! racing line in the first two flights do not determine the rotor-drag
 //! term apart from the linear one, `dflat learn` says so and leaves it
 //! out; docs/results.md). `E2E_VISION=1` flies the same on vision poses
