@@ -82,6 +82,7 @@ fn problem(c: &Case) -> (Smoothness, AxisBounds) {
             tilt_rate: None,
             drag: 0.0,
             offset: None,
+            offset_slope: 0.0,
         },
     )
 }

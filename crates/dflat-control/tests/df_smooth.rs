@@ -192,6 +192,7 @@ fn smooth_clarabel_agrees_with_fast_path() {
         tilt_rate: None,
         drag: 0.0,
         offset: None,
+        offset_slope: 0.0,
     };
     let mut bounded =
         ClarabelSolver::with_smoothness(n, 1.0, 0.08, DT, bounds, f64::INFINITY, sm).unwrap();
@@ -205,6 +206,7 @@ fn smooth_clarabel_agrees_with_fast_path() {
         tilt_rate: None,
         drag: 0.0,
         offset: None,
+        offset_slope: 0.0,
     };
     assert!(!relaxed.violated_by(&b, DT));
 }

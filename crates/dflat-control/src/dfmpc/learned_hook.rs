@@ -170,6 +170,31 @@ impl DfMpc {
         o.iter().all(|x| x.is_finite()).then_some(o)
     }
 
+    /// Per horizontal axis, how what the model adds to the thrust's
+    /// acceleration changes per stage at the plan's start `planned`
+    /// (`y_{k+d}..y_{k+d+2}` \[m\]): `o_1 − o_0` of the window's two
+    /// model steps, `o_j = ρ_j − D·v_j` (the drag's `−D·a·δt` without a
+    /// residual), for the tilt bound along the horizon
+    /// ([`crate::optimise::AxisBounds::offset_slope`]). The bound moved by
+    /// the start's offset at every stage let a braking plan count on the
+    /// drag of its start speed to its stop: on the lab's L at 9 m/s the
+    /// exact aerodynamics as the residual flew 1.06–1.13× the matched
+    /// plant, with the slope 0.95–0.97×. 0 without drag or residual, or
+    /// when not finite.
+    pub(super) fn bound_slopes(
+        &self,
+        planned: &[Vector3<f64>; 3],
+        d: &DisturbanceEstimate,
+    ) -> [f64; 2] {
+        let [o0, o1] = self.step_model_offsets(planned, d);
+        let s = [o1.x - o0.x, o1.y - o0.y];
+        if s.iter().all(|x| x.is_finite()) {
+            s
+        } else {
+            [0.0; 2]
+        }
+    }
+
     /// What the model adds to the thrust's acceleration in each of the two
     /// steps over the outputs `y` (three or four, \[m\]; as
     /// [`LearnedTerm::step_offsets`]): `o_j = ρ_j − D·v_j`, the residual

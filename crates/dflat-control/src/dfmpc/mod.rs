@@ -580,6 +580,7 @@ impl Controller for DfMpc {
             &planned,
             sent_acceleration,
             self.bound_offsets(&planned, &d),
+            self.bound_slopes(&planned, &d),
         )?;
         // 5. The output-to-input map F on y*_k..y*_{k+3}.
         let (plan4, u) = self.map_through_f(y0, &d)?;

@@ -183,6 +183,7 @@ pub(super) fn build_pipelines(
             // plus D·v); the vertical bound is on the plan's own.
             drag: if axis < 2 { model.drag()[axis] } else { 0.0 },
             offset: None,
+            offset_slope: 0.0,
         };
         let bounded = if bounds.is_empty() {
             None
@@ -314,12 +315,14 @@ impl DfMpc {
     /// `sent_acceleration`: what the command sent at k−1 asks for (with a
     /// smoothness weight). `offsets`: per horizontal axis, the plan's
     /// acceleration less the thrust's at the window ([`AxisBounds::offset`];
-    /// `None`: the drag's alone).
+    /// `None`: the drag's alone); `slopes`: its change per stage
+    /// ([`AxisBounds::offset_slope`]).
     pub(super) fn optimise(
         &mut self,
         fixed: &[Vector3<f64>; 3],
         sent_acceleration: Option<Vector3<f64>>,
         offsets: Option<[f64; 2]>,
+        slopes: [f64; 2],
     ) -> Result<SolveReport, ControlError> {
         let mut fixed_axis = [[0.0; 3]; 3];
         for (axis, f) in fixed_axis.iter_mut().enumerate().take(self.axes.len()) {
@@ -352,8 +355,10 @@ impl DfMpc {
                 continue;
             };
             let offset = offsets.and_then(|o| o.get(axis).copied());
+            let slope = slopes.get(axis).copied().unwrap_or(0.0);
             p.bounds.offset = offset;
-            cascade.set_offset(offset);
+            p.bounds.offset_slope = slope;
+            cascade.set_offset(offset, slope);
             if !p.bounds.violated(&p.plan, sent(axis), dt) {
                 cascade.skip();
                 continue;

@@ -119,6 +119,7 @@ fn constrained_plan_respects_bounds() {
         tilt_rate: None,
         drag: 0.0,
         offset: None,
+        offset_slope: 0.0,
     };
     let mut fast = FastBandedSolver::new(100, 1.0, 0.08, DT).unwrap();
     let mut cs = ClarabelSolver::new(100, 1.0, 0.08, DT, bounds, f64::INFINITY).unwrap();
@@ -135,6 +136,7 @@ fn constrained_plan_respects_bounds() {
             tilt_rate: None,
             drag: 0.0,
             offset: None,
+            offset_slope: 0.0,
         }
         .violated_by(&plan, DT)
     );
@@ -221,7 +223,7 @@ proptest::proptest! {
         let fixed = [y0, y0 + v0 * DT, y0 + 2.0 * v0 * DT + a0 * DT * DT];
         let reference: Vec<f64> =
             (0..=horizon).map(|j| target + slope * DT * j as f64).collect();
-        let bounds = AxisBounds { acceleration: Some([-a_max, a_max]), speed, tilt_rate: None, drag: 0.0, offset: None };
+        let bounds = AxisBounds { acceleration: Some([-a_max, a_max]), speed, tilt_rate: None, drag: 0.0, offset: None, offset_slope: 0.0 };
         let (smoothness, sent) = match smooth {
             Some((weight, kappa, delta)) => (
                 Smoothness { weight, kappa, gravity: 9.81 },
@@ -335,6 +337,7 @@ fn faster_than_the_speed_bound_brakes_in_a_funnel() {
         tilt_rate: None,
         drag: 0.0,
         offset: None,
+        offset_slope: 0.0,
     };
     let n = 300; // 6 s: long enough to get down to 1 m/s
     let mut cs = ClarabelSolver::new(n, 1.0, 0.08, DT, bounds, f64::INFINITY).unwrap();
@@ -367,6 +370,7 @@ fn solver_failure_is_an_error() {
         tilt_rate: None,
         drag: 0.0,
         offset: None,
+        offset_slope: 0.0,
     };
     let mut cs = ClarabelSolver::new(50, 1.0, 0.08, DT, bounds, 1e-12).unwrap();
     let mut plan = vec![0.0; 51];
@@ -505,6 +509,7 @@ fn banded_failure_falls_back_to_clarabel_and_says_so() {
         tilt_rate: None,
         drag: 0.0,
         offset: None,
+        offset_slope: 0.0,
     };
     let weights = DfMpcSettings::default();
     for (axis, p) in broken.axes.iter_mut().enumerate() {

@@ -26,8 +26,8 @@ pub struct AxisBounds {
     /// holds the thrust's acceleration, the plan's plus `D·v`, so the
     /// acceleration bound applies to `Δ²y/δt² + D·v_1`, v_1 the window's
     /// speed `(y_2 − y_1)/δt`: `[lo − D·v_1, hi − D·v_1]` on the plan's
-    /// acceleration, the same for every stage of the tick (the speed the
-    /// window has, not the plan's along the horizon).
+    /// first free acceleration, moved along the horizon by
+    /// [`AxisBounds::offset_slope`].
     pub drag: f64,
     /// This tick's offset of the plan's acceleration from the thrust's on
     /// this axis [m/s²], `Δ²y/δt² − a_thrust` at the window's speed: what
@@ -37,6 +37,15 @@ pub struct AxisBounds {
     /// that takes the drag back (`dflat learn` over an identified
     /// `drag_h`) moves the bound with it.
     pub offset: Option<f64>,
+    /// How the offset changes per stage along the horizon [m/s² per
+    /// stage], from the window's two model steps (`o_1 − o_0`: the drag's
+    /// `−D·a·δt`, and a learned residual's change). Where the offset
+    /// shrinks towards 0 (the vehicle slows), stage j's bound is moved by
+    /// `o_j = o_1 + slope·(j − 1)`, not past 0, instead of `o_1`: a
+    /// braking plan does not count on the drag of its start speed to its
+    /// stop. Where it would grow (speeding up), every stage keeps `o_1`.
+    /// 0: the start's offset for every stage.
+    pub offset_slope: f64,
 }
 
 impl AxisBounds {
@@ -51,6 +60,26 @@ impl AxisBounds {
             _ => -self.drag * (fixed[2] - fixed[1]) / dt,
         };
         Some([lo + offset, hi + offset])
+    }
+
+    /// Stage j's offset (j = 1 the first free acceleration) less stage
+    /// 1's \[m/s²\] ([`AxisBounds::offset_slope`]): the slope's while the
+    /// offset shrinks towards 0, never past it; 0 where it would grow, and
+    /// without a slope or an acceleration bound.
+    pub(crate) fn stage_shift(&self, fixed: &[f64; 3], dt: f64, j: usize) -> f64 {
+        if self.acceleration.is_none() || j <= 1 {
+            return 0.0;
+        }
+        let o1 = match self.offset {
+            Some(o) if o.is_finite() => o,
+            _ => -self.drag * (fixed[2] - fixed[1]) / dt,
+        };
+        if !(o1 * self.offset_slope < 0.0) {
+            return 0.0;
+        }
+        let oj = o1 + self.offset_slope * (j - 1) as f64;
+        let oj = if oj * o1 < 0.0 { 0.0 } else { oj };
+        if oj.is_finite() { oj - o1 } else { 0.0 }
     }
 
     /// The speed funnel for a window moving faster than the speed bound:
@@ -86,12 +115,18 @@ impl AxisBounds {
         let a_base = d2 / (dt * dt);
         if let Some([lo, hi]) = self.acceleration_at(fixed, dt) {
             match &self.tilt_rate {
-                Some(rate) => rate.funnel(horizon, fixed, sent, [lo, hi], dt, |l, h| {
-                    out(l - a_base, h - a_base)
-                }),
+                Some(rate) => {
+                    let mut j = 0;
+                    rate.funnel(horizon, fixed, sent, [lo, hi], dt, |a| {
+                        j += 1;
+                        let sh = self.stage_shift(fixed, dt, j);
+                        out((lo + sh).min(a) - a_base, (hi + sh).max(a) - a_base)
+                    })
+                }
                 None => {
-                    for _ in 1..=horizon - 2 {
-                        out(lo - a_base, hi - a_base);
+                    for j in 1..=horizon - 2 {
+                        let sh = self.stage_shift(fixed, dt, j);
+                        out(lo + sh - a_base, hi + sh - a_base);
                     }
                 }
             }
@@ -168,6 +203,8 @@ impl AxisBounds {
             let dt2 = dt * dt;
             for j in 1..n.saturating_sub(2) {
                 let a = (plan[j + 2] - 2.0 * plan[j + 1] + plan[j]) / dt2;
+                let sh = self.stage_shift(&fixed, dt, j);
+                let (lo, hi) = (lo + sh, hi + sh);
                 if a > hi + tol(hi) || a < lo - tol(lo) {
                     return true;
                 }
@@ -389,5 +426,59 @@ mod tests {
         assert!(b.violated_by(&plan, dt));
         b.offset = Some(1.5);
         assert!(!b.violated_by(&plan, dt));
+    }
+
+    /// Along the horizon the drag's offset shrinks with a braking plan's
+    /// speed, to 0 and not past it; where it would grow, every stage
+    /// keeps the start's; the solvers' rows and the fast plan's check read
+    /// the same stage bounds.
+    #[test]
+    fn a_braking_plans_bound_loses_the_drag_as_it_slows() {
+        let dt = 0.02;
+        // v_1 = 5 m/s, a = −2 m/s² (y_0..y_2): the drag 0.4 /s gives o_1 =
+        // −2 m/s², shrinking by D·|a|·δt = 0.016 m/s² a stage.
+        let fixed = [0.0, 0.1 + 2.0 * dt * dt, 0.2 + 2.0 * dt * dt];
+        let o1 = -0.4 * (fixed[2] - fixed[1]) / dt;
+        let b = AxisBounds {
+            acceleration: Some([-4.0, 4.0]),
+            drag: 0.4,
+            offset_slope: 0.016,
+            ..AxisBounds::default()
+        };
+        assert_eq!(b.stage_shift(&fixed, dt, 1), 0.0);
+        assert!((b.stage_shift(&fixed, dt, 11) - 0.16).abs() < 1e-12);
+        // 125 stages take the offset to 0; later stages stay there.
+        assert!((b.stage_shift(&fixed, dt, 200) + o1).abs() < 1e-12);
+        let growing = AxisBounds {
+            offset_slope: -0.016,
+            ..b
+        };
+        assert_eq!(growing.stage_shift(&fixed, dt, 50), 0.0);
+        let mut rows = Vec::new();
+        b.row_bounds(200, &fixed, None, dt, |l, h| rows.push((l, h)));
+        let a_base = (fixed[2] - 2.0 * fixed[1] + fixed[0]) / (dt * dt);
+        for (j, (l, h)) in rows.iter().enumerate().take(198) {
+            let [lo, hi] = b.acceleration_at(&fixed, dt).unwrap();
+            let sh = b.stage_shift(&fixed, dt, j + 1);
+            assert!(
+                (l - (lo + sh - a_base)).abs() < 1e-12 && (h - (hi + sh - a_base)).abs() < 1e-12
+            );
+        }
+        // A plan braking at the start's bound to the end breaks the later
+        // stages' (they lose the drag's help), and not without the slope.
+        let [lo, _] = b.acceleration_at(&fixed, dt).unwrap();
+        let mut plan = fixed.to_vec();
+        for _ in 0..40 {
+            let n = plan.len();
+            plan.push(2.0 * plan[n - 1] - plan[n - 2] + lo * dt * dt);
+        }
+        assert!(b.violated_by(&plan, dt));
+        assert!(
+            !AxisBounds {
+                offset_slope: 0.0,
+                ..b
+            }
+            .violated_by(&plan, dt)
+        );
     }
 }

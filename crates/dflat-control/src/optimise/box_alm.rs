@@ -301,8 +301,9 @@ impl BoxAlmSolver {
 }
 
 impl AxisSolver for BoxAlmSolver {
-    fn set_offset(&mut self, offset: Option<f64>) {
+    fn set_offset(&mut self, offset: Option<f64>, slope: f64) {
         self.bounds.offset = offset;
+        self.bounds.offset_slope = slope;
     }
 
     fn solve(&mut self, axis: AxisProblem<'_>) -> Result<SolveInfo, SolveFailure> {

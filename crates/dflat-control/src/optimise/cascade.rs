@@ -134,9 +134,10 @@ pub trait AxisSolver: std::fmt::Debug + Send {
     }
 
     /// This tick's offset of the plan's acceleration from the thrust's
-    /// ([`super::AxisBounds::offset`]) for the next solves (a solver
-    /// without an acceleration bound ignores it).
-    fn set_offset(&mut self, _offset: Option<f64>) {}
+    /// ([`super::AxisBounds::offset`]) and its change per stage
+    /// ([`super::AxisBounds::offset_slope`]) for the next solves (a solver
+    /// without an acceleration bound ignores them).
+    fn set_offset(&mut self, _offset: Option<f64>, _slope: f64) {}
 }
 
 /// A solver of the horizontal pair's constrained plan (the tilt cone).
@@ -200,10 +201,13 @@ impl<S: ?Sized + Carries> Cascade<S> {
 }
 
 impl Cascade<dyn AxisSolver> {
-    /// Sets this tick's [`super::AxisBounds::offset`] in every solver
+    /// Sets this tick's [`super::AxisBounds::offset`] and
+    /// [`super::AxisBounds::offset_slope`] in every solver
     /// ([`AxisSolver::set_offset`]).
-    pub fn set_offset(&mut self, offset: Option<f64>) {
-        self.solvers.iter_mut().for_each(|s| s.set_offset(offset));
+    pub fn set_offset(&mut self, offset: Option<f64>, slope: f64) {
+        self.solvers
+            .iter_mut()
+            .for_each(|s| s.set_offset(offset, slope));
     }
 }
 

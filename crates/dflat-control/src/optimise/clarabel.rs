@@ -386,8 +386,9 @@ impl ClarabelSolver {
 }
 
 impl AxisSolver for ClarabelSolver {
-    fn set_offset(&mut self, offset: Option<f64>) {
+    fn set_offset(&mut self, offset: Option<f64>, slope: f64) {
         self.bounds.offset = offset;
+        self.bounds.offset_slope = slope;
     }
 
     fn solve(&mut self, axis: AxisProblem<'_>) -> Result<SolveInfo, SolveFailure> {

@@ -267,6 +267,7 @@ impl ConeBounds {
             tilt_rate: None,
             drag: 0.0,
             offset: None,
+            offset_slope: 0.0,
         }
     }
 
@@ -297,6 +298,7 @@ impl ConeBounds {
             tilt_rate: None,
             drag: 0.0,
             offset: None,
+            offset_slope: 0.0,
         };
         speed.violated_by(x, dt) || speed.violated_by(y, dt)
     }

@@ -287,8 +287,9 @@ impl BandedInteriorPointSolver {
 }
 
 impl AxisSolver for BandedInteriorPointSolver {
-    fn set_offset(&mut self, offset: Option<f64>) {
+    fn set_offset(&mut self, offset: Option<f64>, slope: f64) {
         self.bounds.offset = offset;
+        self.bounds.offset_slope = slope;
     }
 
     fn solve(&mut self, axis: AxisProblem<'_>) -> Result<SolveInfo, SolveFailure> {

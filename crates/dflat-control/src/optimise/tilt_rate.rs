@@ -117,8 +117,9 @@ impl TiltRate {
         }
     }
 
-    /// The acceleration bounds `(lo, hi)` [m/s²] of stages a_1..a_{N−2}:
-    /// `[lo, hi]` widened to the witness trajectory (module docs).
+    /// The witness trajectory's accelerations a_1..a_{N−2} [m/s²] that
+    /// widen the stages' bounds (module docs): each stage's interval, `[lo,
+    /// hi]` as the caller moves it per stage, widened to include it.
     pub(crate) fn funnel(
         &self,
         horizon: usize,
@@ -126,11 +127,9 @@ impl TiltRate {
         sent: Option<f64>,
         [lo, hi]: [f64; 2],
         dt: f64,
-        mut out: impl FnMut(f64, f64),
+        out: impl FnMut(f64),
     ) {
-        self.witness(horizon, fixed, sent, Some([lo, hi]), dt, 1.0, |a| {
-            out(lo.min(a), hi.max(a))
-        });
+        self.witness(horizon, fixed, sent, Some([lo, hi]), dt, 1.0, out);
     }
 
     /// The witness trajectory's accelerations a_1..a_{N−2} [m/s²] into

@@ -83,6 +83,7 @@ proptest::proptest! {
             tilt_rate: Some(rate),
             drag: 0.0,
             offset: None,
+            offset_slope: 0.0,
         };
         let smoothness = Smoothness { weight: smooth.unwrap_or(0.0), kappa, gravity: G };
         let sent = Some(a0 + sent_delta);
@@ -167,6 +168,7 @@ fn the_funnel_keeps_rate_and_acceleration_bounds_feasible() {
         tilt_rate: Some(rate),
         drag: 0.0,
         offset: None,
+        offset_slope: 0.0,
     };
     let sent = Some(a0);
     let mut banded =
@@ -246,6 +248,7 @@ fn step_bounds(a_max: Option<f64>) -> AxisBounds {
         }),
         drag: 0.0,
         offset: None,
+        offset_slope: 0.0,
     }
 }
 
@@ -416,6 +419,7 @@ proptest::proptest! {
             tilt_rate: Some(rate),
             drag: 0.0,
             offset: None,
+            offset_slope: 0.0,
         };
         let smoothness = Smoothness::default();
         let mut reference_solver = ClarabelSolver::with_tuning(
