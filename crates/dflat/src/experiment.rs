@@ -94,6 +94,10 @@ pub struct LearnedArgs {
     /// Vision pose rates [Hz], comma-separated.
     #[arg(long, value_delimiter = ',', default_value = "50,15")]
     vision: Vec<f64>,
+    /// The vision poses' noise, standard deviation per axis [m] (0: exact
+    /// poses, still at the rate and 60 ms latency).
+    #[arg(long, default_value_t = 0.02)]
+    vision_sigma: f64,
     /// Length of each stream flight (figure eight, racing line) [s]: with
     /// the L's, the records one plant and pose rate learn from (60 s: about
     /// 13 minutes).
@@ -442,6 +446,7 @@ pub fn run(command: ExperimentCommand) -> Result<()> {
                     .collect::<Result<_>>()?,
                 speeds: a.speeds,
                 vision_rates: a.vision,
+                vision_sigma: a.vision_sigma,
                 seconds: if a.no_seconds { Vec::new() } else { a.seconds },
                 stream_s: a.stream_s,
                 quadratic_drag: a.quadratic_drag,

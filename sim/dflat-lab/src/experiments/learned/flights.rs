@@ -116,8 +116,10 @@ pub struct Flight {
     pub shape: LearnedShape,
     /// Speed \[m/s\].
     pub speed: f64,
-    /// Vision rate \[Hz\] (60 ms latency, 2 cm noise).
+    /// Vision rate \[Hz\] (60 ms latency).
     pub vision_hz: f64,
+    /// The poses' noise per axis \[m\] ([`VISION_SIGMA`] in the study).
+    pub vision_sigma: f64,
     /// The `[vehicle]` values flown.
     pub vehicle: Vehicle,
     /// The learned residual, when flown.
@@ -127,6 +129,9 @@ pub struct Flight {
     /// DF-MPC's command-smoothness weight on x and y \[1/rad²\].
     pub smoothness: f64,
 }
+
+/// The lab's vision noise per axis \[m\].
+pub const VISION_SIGMA: f64 = 0.02;
 
 /// The shipped `df-mr-smooth`'s command-smoothness weight on x and y
 /// \[1/rad²\].
@@ -208,6 +213,7 @@ impl Flight {
     fn sensor(&self) -> SensorSpec {
         SensorSpec::Vision(VisionOptions {
             rate_hz: self.vision_hz,
+            sigma: self.vision_sigma,
             ..VisionOptions::default()
         })
     }

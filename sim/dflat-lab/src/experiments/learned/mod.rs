@@ -39,7 +39,9 @@
 mod flights;
 mod records;
 
-pub use flights::{AeroPlant, Flight, Judged, LearnedShape, SMOOTHNESS, control_model};
+pub use flights::{
+    AeroPlant, Flight, Judged, LearnedShape, SMOOTHNESS, VISION_SIGMA, control_model,
+};
 
 use dflat_control::learned::{Feature, LearnedResidual, Support, Validation};
 use dflat_tuning::identify::{self, FlownVehicle};
@@ -131,6 +133,9 @@ pub struct LearnedConfig {
     pub speeds: Vec<f64>,
     /// Vision rates \[Hz\].
     pub vision_rates: Vec<f64>,
+    /// The poses' noise, standard deviation per axis \[m\] (the lab's
+    /// vision: 0.02).
+    pub vision_sigma: f64,
     /// Parasitic drag of the aerodynamic plants \[1/m\].
     pub quadratic_drag: f64,
     /// Rotor drag \[1/s\].
@@ -156,6 +161,7 @@ impl Default for LearnedConfig {
             ],
             speeds: vec![5.0, 7.0, 9.0],
             vision_rates: vec![50.0, 15.0],
+            vision_sigma: flights::VISION_SIGMA,
             quadratic_drag: 0.03,
             rotor_drag: 0.2,
             stream_s: 60.0,
@@ -187,6 +193,9 @@ impl LearnedConfig {
                 "quadratic_drag, rotor_drag",
                 "0 ..= 1 1/m, 0 ..= 2 1/s",
             ));
+        }
+        if !(0.0..=0.5).contains(&self.vision_sigma) {
+            return Err(invalid("vision_sigma", "0 ..= 0.5 m"));
         }
         if !(5.0..=120.0).contains(&self.stream_s) {
             return Err(invalid("stream_s", "5 ..= 120 s"));
@@ -571,6 +580,7 @@ pub fn run_learned(
         shape: cell.0,
         speed: cell.1,
         vision_hz: gr.vision_hz,
+        vision_sigma: config.vision_sigma,
         vehicle,
         learned,
         stream_s: config.stream_s,

@@ -10,6 +10,7 @@ fn flight(shape: LearnedShape, speed: f64, drag: (f64, f64), vehicle: Vehicle) -
         shape,
         speed,
         vision_hz: 50.0,
+        vision_sigma: VISION_SIGMA,
         vehicle,
         learned: None,
         stream_s: 20.0,
@@ -252,4 +253,37 @@ fn the_exact_aerodynamics_brake_into_the_l_as_the_matched_plant() {
     ));
     eprintln!("spatial L at 9 m/s: matched {matched:.4} m, exact residual {exact:.4} m");
     assert!(exact <= 1.03 * matched, "{exact} against {matched}");
+}
+
+/// A bad setting is refused with its field named, before anything flies.
+#[test]
+fn bad_settings_are_refused_by_name() {
+    for (config, field) in [
+        (
+            LearnedConfig {
+                vision_sigma: -0.01,
+                ..LearnedConfig::default()
+            },
+            "vision_sigma",
+        ),
+        (
+            LearnedConfig {
+                vision_sigma: f64::NAN,
+                ..LearnedConfig::default()
+            },
+            "vision_sigma",
+        ),
+        (
+            LearnedConfig {
+                stream_s: 1.0,
+                ..LearnedConfig::default()
+            },
+            "stream_s",
+        ),
+    ] {
+        match run_learned(&config, false) {
+            Err(ExperimentError::Invalid { field: f, .. }) => assert_eq!(f, field),
+            other => panic!("{field}: expected a refusal, got {other:?}"),
+        }
+    }
 }
