@@ -74,7 +74,9 @@ impl AxisBounds {
             Some(o) if o.is_finite() => o,
             _ => -self.drag * (fixed[2] - fixed[1]) / dt,
         };
-        if !(o1 * self.offset_slope < 0.0) {
+        // Only towards 0 (NaN: nowhere).
+        let shrinking = o1 * self.offset_slope < 0.0;
+        if !shrinking {
             return 0.0;
         }
         let oj = o1 + self.offset_slope * (j - 1) as f64;
