@@ -148,51 +148,44 @@ impl DfMpc {
             .unwrap_or_else(|| -self.model.drag().component_mul(velocity))
     }
 
-    /// With a learned residual flown: per horizontal axis, what the model
-    /// adds to the thrust's acceleration at the plan's start `planned`
-    /// (`y_{k+d}..y_{k+d+2}` \[m\]): `ρ − D·v_1`, the residual at the
-    /// newest output and the drag at the window's speed `v_1 = (y_2 −
-    /// y_1)/δt`, for the tilt bound ([`crate::optimise::AxisBounds::offset`]).
-    /// The bound holds the thrust's acceleration; a residual that takes
-    /// the drag back moves it with it (without: the box bound was shifted
-    /// by `D·v_1` alone, and a learned residual over an identified drag
-    /// flew the racing line at 9 m/s 1.58× matched instead of 1.01×).
-    /// `None` without a residual (the drag's shift alone) or when not
-    /// finite.
-    pub(super) fn bound_offsets(
+    /// The tilt bound's shift at the plan's start `planned`
+    /// (`y_{k+d}..y_{k+d+2}` \[m\]), per horizontal axis, from the
+    /// window's two model steps `o_j = ρ_j − D·v_j` (one evaluation of the
+    /// residual for both):
+    ///
+    /// * the offset ([`crate::optimise::AxisBounds::offset`]), with a
+    ///   learned residual flown: `o_1`, the residual at the newest output
+    ///   and the drag at the window's speed `v_1 = (y_2 − y_1)/δt`. The
+    ///   bound holds the thrust's acceleration; a residual that takes the
+    ///   drag back moves it with it (without: the box bound was shifted by
+    ///   `D·v_1` alone, and a learned residual over an identified drag
+    ///   flew the racing line at 9 m/s 1.58× matched instead of 1.01×).
+    ///   `None` without a residual (the drag's shift alone) or when not
+    ///   finite;
+    /// * its change per stage
+    ///   ([`crate::optimise::AxisBounds::offset_slope`]): `o_1 − o_0` (the
+    ///   drag's `−D·a·δt` without a residual). The bound moved by the
+    ///   start's offset at every stage let a braking plan count on the drag
+    ///   of its start speed to its stop: on the lab's L at 9 m/s the exact
+    ///   aerodynamics as the residual flew 1.06–1.13× the matched plant,
+    ///   with the slope 0.95–0.97×. 0 without drag or residual, or when not
+    ///   finite.
+    pub(super) fn bound_shifts(
         &self,
         planned: &[Vector3<f64>; 3],
         d: &DisturbanceEstimate,
-    ) -> Option<[f64; 2]> {
-        self.learned.as_ref()?;
-        let [_, o1] = self.step_model_offsets(planned, d);
-        let o = [o1.x, o1.y];
-        o.iter().all(|x| x.is_finite()).then_some(o)
-    }
-
-    /// Per horizontal axis, how what the model adds to the thrust's
-    /// acceleration changes per stage at the plan's start `planned`
-    /// (`y_{k+d}..y_{k+d+2}` \[m\]): `o_1 − o_0` of the window's two
-    /// model steps, `o_j = ρ_j − D·v_j` (the drag's `−D·a·δt` without a
-    /// residual), for the tilt bound along the horizon
-    /// ([`crate::optimise::AxisBounds::offset_slope`]). The bound moved by
-    /// the start's offset at every stage let a braking plan count on the
-    /// drag of its start speed to its stop: on the lab's L at 9 m/s the
-    /// exact aerodynamics as the residual flew 1.06–1.13× the matched
-    /// plant, with the slope 0.95–0.97×. 0 without drag or residual, or
-    /// when not finite.
-    pub(super) fn bound_slopes(
-        &self,
-        planned: &[Vector3<f64>; 3],
-        d: &DisturbanceEstimate,
-    ) -> [f64; 2] {
+    ) -> (Option<[f64; 2]>, [f64; 2]) {
         let [o0, o1] = self.step_model_offsets(planned, d);
-        let s = [o1.x - o0.x, o1.y - o0.y];
-        if s.iter().all(|x| x.is_finite()) {
-            s
+        let offset = [o1.x, o1.y];
+        let offset =
+            (self.learned.is_some() && offset.iter().all(|x| x.is_finite())).then_some(offset);
+        let slope = [o1.x - o0.x, o1.y - o0.y];
+        let slope = if slope.iter().all(|x| x.is_finite()) {
+            slope
         } else {
             [0.0; 2]
-        }
+        };
+        (offset, slope)
     }
 
     /// What the model adds to the thrust's acceleration in each of the two

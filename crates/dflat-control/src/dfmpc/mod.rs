@@ -576,12 +576,8 @@ impl Controller for DfMpc {
         // it from its start, k + d).
         self.build_reference(&fixed[0], reference)?;
         // 4. Output trajectory optimisation.
-        let solve = self.optimise(
-            &planned,
-            sent_acceleration,
-            self.bound_offsets(&planned, &d),
-            self.bound_slopes(&planned, &d),
-        )?;
+        let (offsets, slopes) = self.bound_shifts(&planned, &d);
+        let solve = self.optimise(&planned, sent_acceleration, offsets, slopes)?;
         // 5. The output-to-input map F on y*_k..y*_{k+3}.
         let (plan4, u) = self.map_through_f(y0, &d)?;
         // 6. Saturation; the sent input into the window.

@@ -54,34 +54,38 @@ impl AxisBounds {
     /// offset ([`AxisBounds::offset`], else `−D·v_1`).
     pub(crate) fn acceleration_at(&self, fixed: &[f64; 3], dt: f64) -> Option<[f64; 2]> {
         let [lo, hi] = self.acceleration?;
-        let offset = match self.offset {
-            Some(o) if o.is_finite() => o,
-            _ if self.drag == 0.0 => return Some([lo, hi]),
-            _ => -self.drag * (fixed[2] - fixed[1]) / dt,
-        };
+        let offset = self.start_offset(fixed, dt);
         Some([lo + offset, hi + offset])
     }
 
-    /// Stage j's offset (j = 1 the first free acceleration) less stage
-    /// 1's \[m/s²\] ([`AxisBounds::offset_slope`]): the slope's while the
-    /// offset shrinks towards 0, never past it; 0 where it would grow, and
-    /// without a slope or an acceleration bound.
-    pub(crate) fn stage_shift(&self, fixed: &[f64; 3], dt: f64, j: usize) -> f64 {
-        if self.acceleration.is_none() || j <= 1 {
-            return 0.0;
-        }
-        let o1 = match self.offset {
+    /// The offset at the plan's start \[m/s²\]: [`AxisBounds::offset`]
+    /// when finite, else the drag's `−D·v_1` (0 without drag).
+    fn start_offset(&self, fixed: &[f64; 3], dt: f64) -> f64 {
+        match self.offset {
             Some(o) if o.is_finite() => o,
+            _ if self.drag == 0.0 => 0.0,
             _ => -self.drag * (fixed[2] - fixed[1]) / dt,
-        };
-        // Only towards 0 (NaN: nowhere).
-        let shrinking = o1 * self.offset_slope < 0.0;
-        if !shrinking {
-            return 0.0;
         }
-        let oj = o1 + self.offset_slope * (j - 1) as f64;
-        let oj = if oj * o1 < 0.0 { 0.0 } else { oj };
-        if oj.is_finite() { oj - o1 } else { 0.0 }
+    }
+
+    /// For the window `fixed`: stage j's offset (j = 1 the first free
+    /// acceleration) less stage 1's \[m/s²\] as a function of j
+    /// ([`AxisBounds::offset_slope`]): the slope's while the offset shrinks
+    /// towards 0, never past it; 0 where it would grow, and without a
+    /// slope or an acceleration bound.
+    pub(crate) fn stage_shifts(&self, fixed: &[f64; 3], dt: f64) -> impl Fn(usize) -> f64 {
+        let o1 = self.start_offset(fixed, dt);
+        let slope = self.offset_slope;
+        // Only towards 0 (NaN: nowhere).
+        let shrinking = self.acceleration.is_some() && o1 * slope < 0.0;
+        move |j| {
+            if !shrinking || j <= 1 {
+                return 0.0;
+            }
+            let oj = o1 + slope * (j - 1) as f64;
+            let oj = if oj * o1 < 0.0 { 0.0 } else { oj };
+            if oj.is_finite() { oj - o1 } else { 0.0 }
+        }
     }
 
     /// The speed funnel for a window moving faster than the speed bound:
@@ -116,18 +120,19 @@ impl AxisBounds {
         let d2 = fixed[2] - 2.0 * fixed[1] + fixed[0];
         let a_base = d2 / (dt * dt);
         if let Some([lo, hi]) = self.acceleration_at(fixed, dt) {
+            let shift = self.stage_shifts(fixed, dt);
             match &self.tilt_rate {
                 Some(rate) => {
                     let mut j = 0;
                     rate.funnel(horizon, fixed, sent, [lo, hi], dt, |a| {
                         j += 1;
-                        let sh = self.stage_shift(fixed, dt, j);
+                        let sh = shift(j);
                         out((lo + sh).min(a) - a_base, (hi + sh).max(a) - a_base)
                     })
                 }
                 None => {
                     for j in 1..=horizon - 2 {
-                        let sh = self.stage_shift(fixed, dt, j);
+                        let sh = shift(j);
                         out(lo + sh - a_base, hi + sh - a_base);
                     }
                 }
@@ -203,9 +208,10 @@ impl AxisBounds {
         };
         if let Some([lo, hi]) = self.acceleration_at(&fixed, dt) {
             let dt2 = dt * dt;
+            let shift = self.stage_shifts(&fixed, dt);
             for j in 1..n.saturating_sub(2) {
                 let a = (plan[j + 2] - 2.0 * plan[j + 1] + plan[j]) / dt2;
-                let sh = self.stage_shift(&fixed, dt, j);
+                let sh = shift(j);
                 let (lo, hi) = (lo + sh, hi + sh);
                 if a > hi + tol(hi) || a < lo - tol(lo) {
                     return true;
@@ -447,21 +453,22 @@ mod tests {
             offset_slope: 0.016,
             ..AxisBounds::default()
         };
-        assert_eq!(b.stage_shift(&fixed, dt, 1), 0.0);
-        assert!((b.stage_shift(&fixed, dt, 11) - 0.16).abs() < 1e-12);
+        let shift = b.stage_shifts(&fixed, dt);
+        assert_eq!(shift(1), 0.0);
+        assert!((shift(11) - 0.16).abs() < 1e-12);
         // 125 stages take the offset to 0; later stages stay there.
-        assert!((b.stage_shift(&fixed, dt, 200) + o1).abs() < 1e-12);
+        assert!((shift(200) + o1).abs() < 1e-12);
         let growing = AxisBounds {
             offset_slope: -0.016,
             ..b
         };
-        assert_eq!(growing.stage_shift(&fixed, dt, 50), 0.0);
+        assert_eq!(growing.stage_shifts(&fixed, dt)(50), 0.0);
         let mut rows = Vec::new();
         b.row_bounds(200, &fixed, None, dt, |l, h| rows.push((l, h)));
         let a_base = (fixed[2] - 2.0 * fixed[1] + fixed[0]) / (dt * dt);
         for (j, (l, h)) in rows.iter().enumerate().take(198) {
             let [lo, hi] = b.acceleration_at(&fixed, dt).unwrap();
-            let sh = b.stage_shift(&fixed, dt, j + 1);
+            let sh = shift(j + 1);
             assert!(
                 (l - (lo + sh - a_base)).abs() < 1e-12 && (h - (hi + sh - a_base)).abs() < 1e-12
             );
