@@ -219,6 +219,25 @@ fn matched_delay_is_tracked_as_without_delay() {
     assert!(unmodelled.p95() > delayed.p95());
 }
 
+/// The timed circle from its start at rest, as [`fly_planar_smooth`]; the
+/// error is the distance to the reference point of the same tick after
+/// the first 5 s.
+fn fly_timed_circle(plant: (f64, usize), model: (f64, usize), smoothness: f64) -> Flight {
+    fly_planar_smooth(
+        &mut TimedCircle { k: 0 },
+        |k, p| {
+            if k < 250 {
+                0.0
+            } else {
+                (p - TimedCircle::at(k)).xy().norm()
+            }
+        },
+        plant,
+        model,
+        smoothness,
+    )
+}
+
 /// With an input delay of d ticks the plan starts at k + d, and so must
 /// its reference: a time-indexed one (a planner's stream, a route) was
 /// taken from tick k, and the vehicle flew it d ticks late — 3 ticks at
@@ -228,20 +247,7 @@ fn matched_delay_is_tracked_as_without_delay() {
 /// 5 s.
 #[test]
 fn matched_delay_flies_a_timed_reference_on_time() {
-    let fly = |delay: usize| {
-        fly_planar_on(
-            &mut TimedCircle { k: 0 },
-            |k, p| {
-                if k < 250 {
-                    0.0
-                } else {
-                    (p - TimedCircle::at(k)).xy().norm()
-                }
-            },
-            (0.3, delay),
-            (0.3, delay),
-        )
-    };
+    let fly = |delay: usize| fly_timed_circle((0.3, delay), (0.3, delay), 0.0);
     let (plain, delayed) = (fly(0), fly(3));
     println!(
         "timed circle at 4 m/s: error p95 {:.4} m with 3 ticks of delay, {:.4} m without; \
@@ -269,21 +275,7 @@ fn matched_delay_flies_a_timed_reference_on_time() {
 /// model, p95 0.0454 m against 0.0088 m without drag (now 0.0092 m).
 #[test]
 fn matched_drag_with_the_smoothness_term_flies_a_timed_reference_as_without_drag() {
-    let fly = |drag: f64| {
-        fly_planar_smooth(
-            &mut TimedCircle { k: 0 },
-            |k, p| {
-                if k < 250 {
-                    0.0
-                } else {
-                    (p - TimedCircle::at(k)).xy().norm()
-                }
-            },
-            (drag, 0),
-            (drag, 0),
-            50.0,
-        )
-    };
+    let fly = |drag: f64| fly_timed_circle((drag, 0), (drag, 0), 50.0);
     let (plain, drag) = (fly(0.0), fly(0.4));
     println!(
         "timed circle at 4 m/s, smoothness 50 /rad²: error p95 {:.4} m with drag 0.4 /s, \
