@@ -5,6 +5,7 @@
 //! same outputs to rounding, and its commands are the same thrust axis
 //! expressed at the other heading. Without the conversion the plans part.
 
+use super::tests::step_events;
 use super::*;
 use crate::config::YawMode;
 use crate::control::{build_controller, thrust_mapping};
@@ -44,20 +45,7 @@ fn fly<T>(
     let controller = build_controller(cfg).unwrap();
     let mut core = ControlCore::new(cfg, controller, thrust_mapping(cfg));
     (0..150)
-        .map(|k| {
-            let t = k as f64 * DT;
-            let time = TickTime {
-                tick: k,
-                t,
-                scheduled: t,
-                jitter_us: 0,
-            };
-            let mut clock = t;
-            take(core.step(&time, events(k, t), &mut || {
-                clock += 1e-5;
-                clock
-            }))
-        })
+        .map(|k| take(step_events(&mut core, k, events(k, k as f64 * DT))))
         .collect()
 }
 

@@ -119,8 +119,8 @@ fn step_at(
 }
 
 /// Tick `k` at `k·δt` (no jitter) with `events`; the stopwatch advances
-/// 0.1 ms per reading.
-fn step_events(
+/// 0.1 ms per reading (also the heading tests' driver).
+pub(super) fn step_events(
     core: &mut ControlCore,
     k: u64,
     events: impl IntoIterator<Item = Event>,
