@@ -206,11 +206,21 @@ impl DfMpc {
     /// (see [`DfMpc::sent_offset`]): the drag's and, when flown, the
     /// residual's.
     pub(super) fn keep_sent_offset(&mut self, plan: &[Vector3<f64>; 4], d: &DisturbanceEstimate) {
+        if !self.anchors_sent() {
+            return;
+        }
         let dt = self.model.dt();
         let [o0, o1] = self.step_model_offsets(plan, d);
         let kappa = crate::window::input_lags(&self.model).map(|lag| lag / dt);
         let o = Vector3::from_fn(|i, _| o0[i] + kappa[i] * (o1[i] - o0[i]));
         self.learned_score.sent_offset = o.iter().all(|x| x.is_finite()).then_some(o);
+    }
+
+    /// True when a term reads the command sent at the previous tick in
+    /// the plan's terms: the smoothness term or the tilt-rate bound's first
+    /// row ([`DfMpc::sent_offset`]).
+    pub(super) fn anchors_sent(&self) -> bool {
+        self.smooth || self.settings.constraints.max_tilt_rate.is_some()
     }
 
     /// Forgets what the sent command's offset was (its input replaced).

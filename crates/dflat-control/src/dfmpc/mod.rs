@@ -561,8 +561,7 @@ impl Controller for DfMpc {
         // the disturbance. Without the drag the tilt-rate bound's first
         // row pinned the plan's acceleration to the thrust's, D·v too
         // high, and a model with drag ran away (0.3 /s: 100 m).
-        let sent_acceleration = if self.smooth || self.settings.constraints.max_tilt_rate.is_some()
-        {
+        let sent_acceleration = if self.anchors_sent() {
             let velocity = (y0 - planned[1]) / -self.model.dt();
             Some(
                 commanded_acceleration(&self.model, &previous_input)?
