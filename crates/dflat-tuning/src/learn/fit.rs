@@ -410,35 +410,83 @@ pub struct Ridge {
     pub half_width: [Vec<f64>; 3],
 }
 
-/// Ridge regression of the targets on the first `m` basis columns over
-/// samples of window `r`: the weights per NED axis and their intervals.
+/// Ridge regression of the targets on the basis of `features` over samples
+/// of window `r`: the weights per NED axis and their intervals.
+///
+/// **Per axis.** An axis's residual is fitted on its own components of
+/// each feature group (and the constant), `ρ_x = w_0 + w_v·v_x +
+/// w_q·|v|·v_x + w_r·(v − n·(n·v))_x`, the other axes' columns held at 0 (their
+/// half-widths infinite: never determined). Drag acts against the
+/// velocity: parasitic, linear and rotor drag of an airframe symmetric
+/// about its thrust axis are all of that form in any frame (the rotor
+/// plane's coupling through the tilt is in its group's columns). A fit
+/// coupled across axes found forces the aerodynamics do not have (a
+/// lateral force from the forward speed, −0.0076·v_x on y from 38 s of a
+/// racing line along x) and flew the lab's study worse: 10 of its 54
+/// cells outside the budgets against 7 per axis (`dflat experiment
+/// learned`, docs/results.md).
+///
 /// Columns are penalised by `λ·N` on their standardised scale (the
 /// constant column is not penalised). `None` when the normal equations are
-/// singular or there are fewer samples than 4·m.
-pub fn ridge(samples: &[Sample], m: usize, lambda: f64, r: usize) -> Option<Ridge> {
-    let n = samples.len();
-    if n < 4 * m || m == 0 {
+/// singular or there are fewer samples than 4·m (m the columns of one
+/// axis's fit).
+pub fn ridge(samples: &[Sample], features: &[Feature], lambda: f64, r: usize) -> Option<Ridge> {
+    let m = columns(features);
+    // The columns of each axis's fit: the constant, and the axis's own
+    // component of each three-column group.
+    let of_axis: [Vec<usize>; 3] = std::array::from_fn(|axis| {
+        let mut col = 0;
+        let mut own = Vec::new();
+        for f in features {
+            own.push(if f.columns() == 1 { col } else { col + axis });
+            col += f.columns();
+        }
+        own
+    });
+    if samples.len() < 4 * of_axis[0].len() || m == 0 {
         return None;
     }
-    let mut a = DMatrix::<f64>::zeros(m, m);
-    let mut b = [
-        DVector::<f64>::zeros(m),
-        DVector::zeros(m),
-        DVector::zeros(m),
-    ];
-    let mut mean = vec![0.0; m];
-    for s in samples {
-        for i in 0..m {
-            mean[i] += s.phi[i] / n as f64;
-            for j in 0..=i {
-                a[(i, j)] += s.phi[i] * s.phi[j];
-            }
-            for (axis, b) in b.iter_mut().enumerate() {
-                b[i] += s.phi[i] * s.target[axis];
-            }
+    let mut weights: [Vec<f64>; 3] = std::array::from_fn(|_| vec![0.0; m]);
+    let mut half_width: [Vec<f64>; 3] = std::array::from_fn(|_| vec![f64::INFINITY; m]);
+    for (axis, cols) in of_axis.iter().enumerate() {
+        let (w, hw) = fit_axis(samples, cols, axis, lambda, r)?;
+        for (i, &c) in cols.iter().enumerate() {
+            weights[axis][c] = w[i];
+            half_width[axis][c] = hw[i];
         }
     }
-    for i in 0..m {
+    Some(Ridge {
+        weights,
+        half_width,
+    })
+}
+
+/// One axis's ridge fit on the basis columns `cols`: the weights and their
+/// 95 % half-widths, in the order of `cols`.
+fn fit_axis(
+    samples: &[Sample],
+    cols: &[usize],
+    axis: usize,
+    lambda: f64,
+    r: usize,
+) -> Option<(Vec<f64>, Vec<f64>)> {
+    let (n, k) = (samples.len(), cols.len());
+    if k == 0 {
+        return Some((Vec::new(), Vec::new()));
+    }
+    let mut a = DMatrix::<f64>::zeros(k, k);
+    let mut b = DVector::<f64>::zeros(k);
+    let mut mean = vec![0.0; k];
+    for s in samples {
+        for (i, &ci) in cols.iter().enumerate() {
+            mean[i] += s.phi[ci] / n as f64;
+            for (j, &cj) in cols.iter().enumerate().take(i + 1) {
+                a[(i, j)] += s.phi[ci] * s.phi[cj];
+            }
+            b[i] += s.phi[ci] * s.target[axis];
+        }
+    }
+    for i in 0..k {
         for j in 0..i {
             a[(j, i)] = a[(i, j)];
         }
@@ -452,32 +500,24 @@ pub fn ridge(samples: &[Sample], m: usize, lambda: f64, r: usize) -> Option<Ridg
         }
     }
     let chol = a.cholesky()?;
-    let weights = b
-        .clone()
-        .map(|b| chol.solve(&b).iter().copied().collect::<Vec<f64>>());
-    if !weights.iter().flatten().all(|x| x.is_finite()) {
+    let w = chol.solve(&b);
+    if !w.iter().all(|x| x.is_finite()) {
         return None;
     }
     let inv = chol.inverse();
-    let dof = (n - m).max(1) as f64;
-    let half_width = std::array::from_fn(|axis| {
-        let w = &weights[axis];
-        let sse: f64 = samples
-            .iter()
-            .map(|s| {
-                let fit: f64 = (0..m).map(|i| s.phi[i] * w[i]).sum();
-                (s.target[axis] - fit).powi(2)
-            })
-            .sum();
-        let var = sse / dof;
-        (0..m)
-            .map(|i| 1.96 * (var * r as f64 * inv[(i, i)]).max(0.0).sqrt())
-            .collect()
-    });
-    Some(Ridge {
-        weights,
-        half_width,
-    })
+    let dof = (n - k).max(1) as f64;
+    let sse: f64 = samples
+        .iter()
+        .map(|s| {
+            let fit: f64 = cols.iter().zip(w.iter()).map(|(&c, w)| s.phi[c] * w).sum();
+            (s.target[axis] - fit).powi(2)
+        })
+        .sum();
+    let var = sse / dof;
+    let hw = (0..k)
+        .map(|i| 1.96 * (var * r as f64 * inv[(i, i)]).max(0.0).sqrt())
+        .collect();
+    Some((w.iter().copied().collect(), hw))
 }
 
 /// RMS acceleration [m/s²] the model leaves of the smoothed targets: the

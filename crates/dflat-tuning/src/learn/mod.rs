@@ -46,9 +46,7 @@ pub mod parametric;
 
 use std::collections::BTreeMap;
 
-use dflat_control::learned::{
-    FORMAT, Feature, LearnedResidual, Support, VERSION, Validation, columns,
-};
+use dflat_control::learned::{FORMAT, Feature, LearnedResidual, Support, VERSION, Validation};
 use thiserror::Error;
 
 use data::Run;
@@ -305,7 +303,7 @@ pub fn learn_with(
             let support = support_of(&train);
             for lambda in LAMBDAS {
                 candidates += 1;
-                let Some(fitted) = fit::ridge(&train, columns(features), lambda, r) else {
+                let Some(fitted) = fit::ridge(&train, features, lambda, r) else {
                     continue;
                 };
                 if let Some((f, why)) = undetermined_group(features, &fitted) {

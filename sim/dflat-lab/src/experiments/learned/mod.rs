@@ -140,7 +140,8 @@ pub struct LearnedConfig {
     pub quadratic_drag: f64,
     /// Rotor drag \[1/s\].
     pub rotor_drag: f64,
-    /// A stream's length \[s\].
+    /// A stream's length \[s\], its ramp included (judged from the ramp's
+    /// end plus 2 s: [`flights::judged_from`]).
     pub stream_s: f64,
     /// DF-MPC's command-smoothness weight on x and y \[1/rad²\] (the
     /// shipped `df-mr-smooth`'s: 50).
@@ -199,6 +200,13 @@ impl LearnedConfig {
         }
         if !(5.0..=120.0).contains(&self.stream_s) {
             return Err(invalid("stream_s", "5 ..= 120 s"));
+        }
+        let fastest = self.speeds.iter().copied().fold(0.0, f64::max);
+        if self.stream_s < flights::judged_from(fastest) + 5.0 {
+            return Err(invalid(
+                "stream_s",
+                "at least 5 s beyond the fastest stream's ramp (3 s × speed / 4 m/s, 3 s at least) and 2 s of settling",
+            ));
         }
         if !(0.0..=1e4).contains(&self.smoothness) {
             return Err(invalid("smoothness", "0 ..= 1e4 1/rad²"));

@@ -141,12 +141,13 @@ pub fn spec(
     Ok(spec)
 }
 
-/// The figures of a flight of `trajectory` (from `RAMP_S + SETTLE_S` on).
+/// The figures of a flight of `trajectory` (from its ramp plus
+/// [`SETTLE_S`] on: [`RAMP_S`] + [`SETTLE_S`] for the study's own).
 pub fn judge(result: &TrialResult, trajectory: &Trajectory) -> Flown {
     let mut errors: Vec<f64> = result
         .trace
         .iter()
-        .filter(|s| s.t >= RAMP_S + SETTLE_S)
+        .filter(|s| s.t >= trajectory.ramp_s + SETTLE_S)
         .map(|s| (s.position - trajectory.at(s.t).position).xy().norm())
         .collect();
     errors.sort_by(f64::total_cmp);
