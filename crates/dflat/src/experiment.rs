@@ -98,9 +98,11 @@ pub struct LearnedArgs {
     /// poses, still at the rate and 60 ms latency).
     #[arg(long, default_value_t = 0.02)]
     vision_sigma: f64,
-    /// Length of each stream flight (figure eight, racing line) [s]: with
-    /// the L's, the records one plant and pose rate learn from (60 s: about
-    /// 13 minutes).
+    /// Length of each stream flight (figure eight, racing line) [s], its
+    /// speed ramp included (3 s up to 4 m/s, 3 s × speed/4 above; judged
+    /// from 2 s after it, so at least 5 s more than that at the fastest
+    /// speed): with the L's, the records one plant and pose rate learn
+    /// from (60 s: about 13 minutes).
     #[arg(long, default_value_t = 60.0)]
     stream_s: f64,
     /// The aerodynamic plants' parasitic drag, quadratic in speed [1/m].
