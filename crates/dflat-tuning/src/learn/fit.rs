@@ -413,46 +413,62 @@ pub struct Ridge {
 /// Ridge regression of the targets on the basis of `features` over samples
 /// of window `r`: the weights per NED axis and their intervals.
 ///
-/// **Per axis.** An axis's residual is fitted on its own components of
-/// each feature group (and the constant), `ρ_x = w_0 + w_v·v_x +
-/// w_q·|v|·v_x + w_r·(v − n·(n·v))_x`, the other axes' columns held at 0 (their
-/// half-widths infinite: never determined). Drag acts against the
-/// velocity: parasitic, linear and rotor drag of an airframe symmetric
-/// about its thrust axis are all of that form in any frame (the rotor
-/// plane's coupling through the tilt is in its group's columns). A fit
-/// coupled across axes found forces the aerodynamics do not have (a
-/// lateral force from the forward speed, −0.0076·v_x on y from 38 s of a
-/// racing line along x) and flew the lab's study worse: 10 of its 54
-/// cells outside the budgets against 7 per axis (`dflat experiment
-/// learned`, docs/results.md).
+/// **One weight per group, shared by the horizontal axes.** Each axis's
+/// residual is its own components of the groups, `ρ_x = w_v·v_x +
+/// w_q·|v|·v_x + w_r·(v − n·(n·v))_x` (a constant likewise, per axis, when
+/// the basis has one), and x and y share `w`: the rows of both axes are
+/// one regression. z (the spatial model) has its own weights. Drag acts
+/// against the velocity, and an airframe symmetric about its thrust axis
+/// drags the same way whichever way it flies horizontally (the rotor
+/// plane's coupling through the tilt is in its group's columns); in the
+/// world frame that is the one form a yawing vehicle keeps. What it buys
+/// (`dflat experiment learned`, `tests/e2e_learned.rs`, docs/results.md):
+///
+/// * a fit coupled across the axes found forces the aerodynamics do not
+///   have (from 38 s of a racing line along x, a lateral force of
+///   −0.0076·v_x);
+/// * a fit per axis left the lateral axis of that racing line, which saw
+///   speed only in the turns, to split its drag between `v_y` and the
+///   rotor plane's `(v − n·(n·v))_y` with the rotor drag's sign wrong;
+/// * shared, the lateral axis has the forward axis's well-determined
+///   weights: the lab's study had 10 (coupled), 7 (per axis) and 4
+///   (shared) of its 54 cells outside the budgets.
 ///
 /// Columns are penalised by `λ·N` on their standardised scale (the
 /// constant column is not penalised). `None` when the normal equations are
-/// singular or there are fewer samples than 4·m (m the columns of one
-/// axis's fit).
+/// singular or there are fewer samples than four per unknown.
 pub fn ridge(samples: &[Sample], features: &[Feature], lambda: f64, r: usize) -> Option<Ridge> {
     let m = columns(features);
-    // The columns of each axis's fit: the constant, and the axis's own
-    // component of each three-column group.
-    let of_axis: [Vec<usize>; 3] = std::array::from_fn(|axis| {
-        let mut col = 0;
-        let mut own = Vec::new();
-        for f in features {
-            own.push(if f.columns() == 1 { col } else { col + axis });
-            col += f.columns();
+    // Each fit: the axes whose rows it stacks, and its unknowns (per axis,
+    // the basis column an unknown multiplies in that axis's rows).
+    let mut horizontal = Vec::new();
+    let mut vertical = Vec::new();
+    let mut col = 0;
+    for f in features {
+        if f.columns() == 1 {
+            horizontal.push([Some(col), None, None]);
+            horizontal.push([None, Some(col), None]);
+            vertical.push([None, None, Some(col)]);
+        } else {
+            horizontal.push([Some(col), Some(col + 1), None]);
+            vertical.push([None, None, Some(col + 2)]);
         }
-        own
-    });
-    if samples.len() < 4 * of_axis[0].len() || m == 0 {
+        col += f.columns();
+    }
+    if samples.len() < 4 * horizontal.len() || m == 0 {
         return None;
     }
     let mut weights: [Vec<f64>; 3] = std::array::from_fn(|_| vec![0.0; m]);
     let mut half_width: [Vec<f64>; 3] = std::array::from_fn(|_| vec![f64::INFINITY; m]);
-    for (axis, cols) in of_axis.iter().enumerate() {
-        let (w, hw) = fit_axis(samples, cols, axis, lambda, r)?;
-        for (i, &c) in cols.iter().enumerate() {
-            weights[axis][c] = w[i];
-            half_width[axis][c] = hw[i];
+    for (axes, unknowns) in [(&[0, 1][..], horizontal), (&[2][..], vertical)] {
+        let (w, hw) = fit_rows(samples, axes, &unknowns, lambda, r)?;
+        for (u, cols) in unknowns.iter().enumerate() {
+            for (axis, c) in cols.iter().enumerate() {
+                if let Some(c) = c {
+                    weights[axis][*c] = w[u];
+                    half_width[axis][*c] = hw[u];
+                }
+            }
         }
     }
     Some(Ridge {
@@ -461,29 +477,40 @@ pub fn ridge(samples: &[Sample], features: &[Feature], lambda: f64, r: usize) ->
     })
 }
 
-/// One axis's ridge fit on the basis columns `cols`: the weights and their
-/// 95 % half-widths, in the order of `cols`.
-fn fit_axis(
+/// One ridge fit over the rows of `axes` (each sample gives one row per
+/// axis) on `unknowns` (per axis, the basis column an unknown multiplies
+/// there): the unknowns' values and their 95 % half-widths.
+fn fit_rows(
     samples: &[Sample],
-    cols: &[usize],
-    axis: usize,
+    axes: &[usize],
+    unknowns: &[[Option<usize>; 3]],
     lambda: f64,
     r: usize,
 ) -> Option<(Vec<f64>, Vec<f64>)> {
-    let (n, k) = (samples.len(), cols.len());
+    let k = unknowns.len();
+    let n = samples.len() * axes.len();
     if k == 0 {
         return Some((Vec::new(), Vec::new()));
     }
+    let row = |s: &Sample, axis: usize, out: &mut [f64]| {
+        for (u, cols) in unknowns.iter().enumerate() {
+            out[u] = cols[axis].map_or(0.0, |c| s.phi[c]);
+        }
+    };
     let mut a = DMatrix::<f64>::zeros(k, k);
     let mut b = DVector::<f64>::zeros(k);
     let mut mean = vec![0.0; k];
+    let mut x = vec![0.0; k];
     for s in samples {
-        for (i, &ci) in cols.iter().enumerate() {
-            mean[i] += s.phi[ci] / n as f64;
-            for (j, &cj) in cols.iter().enumerate().take(i + 1) {
-                a[(i, j)] += s.phi[ci] * s.phi[cj];
+        for &axis in axes {
+            row(s, axis, &mut x);
+            for i in 0..k {
+                mean[i] += x[i] / n as f64;
+                for j in 0..=i {
+                    a[(i, j)] += x[i] * x[j];
+                }
+                b[i] += x[i] * s.target[axis];
             }
-            b[i] += s.phi[ci] * s.target[axis];
         }
     }
     for i in 0..k {
@@ -506,13 +533,14 @@ fn fit_axis(
     }
     let inv = chol.inverse();
     let dof = (n - k).max(1) as f64;
-    let sse: f64 = samples
-        .iter()
-        .map(|s| {
-            let fit: f64 = cols.iter().zip(w.iter()).map(|(&c, w)| s.phi[c] * w).sum();
-            (s.target[axis] - fit).powi(2)
-        })
-        .sum();
+    let mut sse = 0.0;
+    for s in samples {
+        for &axis in axes {
+            row(s, axis, &mut x);
+            let fit: f64 = x.iter().zip(w.iter()).map(|(x, w)| x * w).sum();
+            sse += (s.target[axis] - fit).powi(2);
+        }
+    }
     let var = sse / dof;
     let hw = (0..k)
         .map(|i| 1.96 * (var * r as f64 * inv[(i, i)]).max(0.0).sqrt())

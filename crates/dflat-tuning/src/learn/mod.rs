@@ -11,7 +11,8 @@
 //!    minus the model's acceleration through the same weights, at the
 //!    parabola's velocity ([`fit`]: poses at their capture times, any rate,
 //!    noisy or not);
-//! 3. ridge regression of that residual on the basis ([`fit::ridge`]).
+//! 3. ridge regression of that residual on the basis ([`fit::ridge`]: one
+//!    weight per group, shared by x and y; z its own).
 //!
 //! The data are cut into blocks of [`fit::BLOCK_S`]: three of every five
 //! train, one chooses r, the basis and λ by the acceleration left
@@ -21,24 +22,36 @@
 //! of the learned model against the parametric one.
 //!
 //! What the flight did not excite is not learned: the velocity terms need
-//! the speed to vary ([`MIN_SPEED_STD`]); with a steady speed only the
-//! constant is offered. A residual that does not beat the parametric model
-//! on held-out data is refused ([`LearnError::NoImprovement`]).
+//! the speed to vary ([`MIN_SPEED_STD`]); with a steady speed nothing is
+//! offered ([`LearnError::NothingDetermined`]). A residual that does not
+//! beat the parametric model on held-out data is refused
+//! ([`LearnError::NoImprovement`]).
+//!
+//! **No constant.** The bases are the velocity terms alone
+//! ([`Feature::Velocity`], [`Feature::Quadratic`], [`Feature::RotorPlane`]);
+//! a constant acceleration ([`Feature::Bias`], which model files may still
+//! carry) is not learned. A constant is the day's wind or a trim, not the
+//! airframe's maps, and the disturbance estimator (`[controller.disturbance]`)
+//! estimates it in flight; learned from one flight it takes whatever the
+//! records' dynamics leave on average. From 38 s of one racing line in the
+//! SITL it learned a lateral −0.019 m/s² from a single turn, and the
+//! learned flight was 9.8× the matched one; without the constant 2.6×
+//! (`tests/e2e_learned.rs`, 2026-11-29).
 //!
 //! **Axis by axis** ([`Learned::parametric_axes`]): an axis whose learned
 //! weights are all undetermined (no weight's 95 % interval within
-//! [`MAX_RELATIVE_INTERVAL`] of it: the constant included, which the
-//! basis check above exempts), or on which the residual does not lower
+//! [`MAX_RELATIVE_INTERVAL`] of it; x and y share theirs), or on which the residual does not lower
 //! the validation blocks' unexplained acceleration, keeps the parametric
 //! model: its weights are set to 0 and the report says why. Every
 //! candidate is scored on the validation blocks so, as it would fly: a
 //! window that determines both axes wins over one that scores lower on
 //! weights it cannot keep (a 38 s record chose r = 5 for its full-weight
 //! score, then lost y to its interval, and flew y worse than identify's,
-//! `tests/e2e_learned.rs`, 2026-11-29). Under pose
-//! noise a short record can determine a constant on one axis and not on
-//! the other; learned on both, it made the first axis worse in flight
-//! (`E2E_VISION=1` in `tests/e2e_learned.rs`, 2026-11-28).
+//! `tests/e2e_learned.rs`, 2026-11-29; the shared horizontal weights end
+//! that case). Under pose noise a short record could determine a constant
+//! on one axis and not on the other; learned on both, it made the first
+//! axis worse in flight (`E2E_VISION=1` in `tests/e2e_learned.rs`,
+//! 2026-11-28).
 
 pub mod data;
 pub mod fit;
@@ -112,6 +125,15 @@ pub enum LearnError {
     /// No basis could be fitted.
     #[error("no fit: the normal equations are singular for every window and basis")]
     NoFit,
+    /// No term is determined by the records: none offered (the speed did
+    /// not vary) or each candidate's weights undetermined.
+    #[error(
+        "no term is determined by the records ({why}): nothing learned, keep the parametric model"
+    )]
+    NothingDetermined {
+        /// What was not excited or not determined.
+        why: String,
+    },
     /// No axis keeps a learned term (module docs, "Axis by axis").
     #[error("no axis keeps a learned term ({why}): nothing learned, keep the parametric model")]
     EveryAxisParametric {
@@ -190,12 +212,11 @@ type ParametricAxes = Vec<(usize, String)>;
 fn bases() -> Vec<Vec<Feature>> {
     use Feature::*;
     vec![
-        vec![Bias],
-        vec![Bias, Velocity],
-        vec![Bias, Quadratic],
-        vec![Bias, Velocity, Quadratic],
-        vec![Bias, Quadratic, RotorPlane],
-        vec![Bias, Velocity, Quadratic, RotorPlane],
+        vec![Velocity],
+        vec![Quadratic],
+        vec![Velocity, Quadratic],
+        vec![Quadratic, RotorPlane],
+        vec![Velocity, Quadratic, RotorPlane],
     ]
 }
 
@@ -270,7 +291,13 @@ pub fn learn_with(
         return Err(no_held_out("validation"));
     }
     let base = fit::acceleration_error(&held_out, None, model.spatial);
-    let probe = fit::samples(&prepared, model, windows[0], &[Feature::Bias], Part::Train);
+    let probe = fit::samples(
+        &prepared,
+        model,
+        windows[0],
+        &[Feature::Velocity],
+        Part::Train,
+    );
     let speed_std = std_of(probe.iter().map(|s| s.speed));
     let mut unexcited = Vec::new();
     if speed_std < MIN_SPEED_STD {
@@ -350,8 +377,27 @@ pub fn learn_with(
         }
     }
     let Some((score, mut residual, parametric_axes)) = best else {
+        let not_determined = || {
+            unexcited
+                .iter()
+                .map(|(f, why)| format!("{}: {why}", f.name()))
+                .chain(
+                    // Each group once (the first window it failed at).
+                    undetermined
+                        .iter()
+                        .enumerate()
+                        .filter(|(i, (_, f, _))| !undetermined[..*i].iter().any(|(_, g, _)| g == f))
+                        .map(|(_, (r, f, why))| format!("{} (window {r}): {why}", f.name())),
+                )
+                .collect::<Vec<_>>()
+        };
         return Err(match every_axis_parametric {
             Some((_, why)) => LearnError::EveryAxisParametric { why },
+            None if offered.is_empty() || !undetermined.is_empty() => {
+                LearnError::NothingDetermined {
+                    why: not_determined().join("; "),
+                }
+            }
             None => LearnError::NoFit,
         });
     };
