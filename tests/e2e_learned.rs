@@ -17,11 +17,11 @@
 //! axis worse than before; the learned model's held-out input-to-output
 //! prediction at most half the parametric model's; the learned model's
 //! status said in the daemon's log. Printed, not met: the learned flight
-//! within 1.1× the matched one (2026-11-29, load ~1: matched 0.0013
-//! m, learned 0.0143 m, identified 0.167 m, stock 1.43 m — 38 s of one
-//! racing line teach the lateral axis, which sees speed only in the
-//! turns, too little; with the plant's own aerodynamics as the model
-//! file's weights the same flight is 1.19× matched; docs/results.md). `E2E_VISION=1` flies the same on vision poses
+//! within 1.1× the matched one (2026-11-29, load ~1: matched 0.0014
+//! m, learned 0.0041 m, identified 0.167 m, stock 1.43 m — with the
+//! plant's own aerodynamics as the model file's weights the same flight
+//! is 1.19× matched: what is left is the split the 38 s of one racing line
+//! leave between the linear and the rotor-plane drag; docs/results.md). `E2E_VISION=1` flies the same on vision poses
 //! (50 Hz, 60 ms, 2 cm: the lab's sensing) and prints the figures without
 //! asserting them: there 38 s of records determine nothing on either axis
 //! (not even the constant), `dflat learn` refuses in words, and the

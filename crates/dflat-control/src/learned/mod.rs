@@ -61,7 +61,10 @@ pub const VEHICLE_TOLERANCE: f64 = 1e-6;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Feature {
-    /// 1 (one column): a constant acceleration (wind, bias).
+    /// 1 (one column): a constant acceleration (wind, bias). Model files
+    /// may carry it and fly it; `dflat learn` no longer fits it (a constant
+    /// is the day's wind or a trim, which the disturbance estimator
+    /// estimates in flight: `dflat_tuning::learn`'s module docs).
     Bias,
     /// `v` (three columns, NED [m/s]): linear drag beyond the model's.
     Velocity,
