@@ -576,6 +576,50 @@ pub fn polyline_distance(vertices: &[Vector3<f64>], p: &Vector3<f64>, horizontal
     }
 }
 
+/// The point of the polyline through `vertices` closest to `p` (local NED
+/// \[m\]): with `horizontal`, closest in north/east, at the path's own
+/// altitude there. A single vertex is a point; None without vertices.
+pub fn polyline_closest(
+    vertices: &[Vector3<f64>],
+    p: &Vector3<f64>,
+    horizontal: bool,
+) -> Option<Vector3<f64>> {
+    let flat = |v: &Vector3<f64>| {
+        if horizontal {
+            Vector3::new(v.x, v.y, 0.0)
+        } else {
+            *v
+        }
+    };
+    let q = flat(p);
+    match vertices {
+        [] => None,
+        [a] => Some(*a),
+        _ => vertices
+            .windows(2)
+            .map(|w| {
+                let (a, b) = (flat(&w[0]), flat(&w[1]));
+                let ab = b - a;
+                let len2 = ab.norm_squared();
+                let s = if len2 > 0.0 {
+                    ((q - a).dot(&ab) / len2).clamp(0.0, 1.0)
+                } else {
+                    0.0
+                };
+                let d = (q - (a + ab * s)).norm();
+                (d, w[0] + (w[1] - w[0]) * s)
+            })
+            .fold(
+                None,
+                |best: Option<(f64, Vector3<f64>)>, (d, c)| match best {
+                    Some((bd, _)) if !(d < bd) => best,
+                    _ => Some((d, c)),
+                },
+            )
+            .map(|(_, c)| c),
+    }
+}
+
 /// A [`PathDistance`] to the polyline through `vertices` (see
 /// [`polyline_distance`]).
 pub fn polyline_path_distance(vertices: Vec<Vector3<f64>>, horizontal: bool) -> PathDistance {

@@ -11,6 +11,7 @@ use dflat_model::{PlanarModel, PlanarParams, SpatialModel, SpatialParams};
 use dflat_sim::plant::{PlantKind, PlantOptions, PlantState};
 use dflat_sim::sensing::{SensorSpec, VisionOptions};
 use dflat_sim::trajectory::{Shape, Trajectory};
+use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use super::super::controllers::Unbuildable;
@@ -19,7 +20,7 @@ use super::super::preview::{self, Fields, StreamForm};
 use super::super::trial::TrialSetup;
 use super::super::{ExperimentError, percentile};
 use super::Vehicle;
-use crate::harness::{ControllerFactory, StopReason, TrialResult, TrialSpec};
+use crate::harness::{ControllerFactory, StopReason, TrialResult, TrialSpec, polyline_closest};
 
 /// Control step of the lab \[s\].
 pub const DT: f64 = 0.02;
@@ -299,7 +300,7 @@ impl Flight {
             None => r.ticks.iter().map(|t| t.path_error).collect(),
             Some(tr) => return self.judge_stream(r, &tr, judged_from),
         };
-        let axes = per_axis(r, judged_from);
+        let axes = cross_track_per_axis(r, &TrialSetup::default().l_path());
         let (constrained, tilt_p99_deg) = bound_use(r, judged_from);
         Judged {
             p95: percentile(horizontal, 95.0),
@@ -344,6 +345,30 @@ fn bound_use(r: &TrialResult, from: f64) -> (f64, f64) {
     (constrained, percentile(tilt, 99.0))
 }
 
+/// p95 of each axis (x, y, z) of the cross-track error: the true
+/// position less its closest point on the path through `waypoints`
+/// (horizontally closest, at the path's altitude there), over every tick.
+/// The L's judged error split by axis: the error to the controller's own
+/// reference (as on a stream) holds its progress along the path too, which
+/// differs from controller to controller and is not judged on the L (until
+/// 2026-11-29 the L's axes were read so: the learned flights' y on the
+/// second leg, along y, looked 1.5–2× the stock flights' for braking
+/// sooner into the corner).
+fn cross_track_per_axis(r: &TrialResult, waypoints: &[Vector3<f64>]) -> [f64; 3] {
+    std::array::from_fn(|axis| {
+        percentile(
+            r.ticks
+                .iter()
+                .filter_map(|t| {
+                    polyline_closest(waypoints, &t.truth.position, true)
+                        .map(|c| (t.truth.position[axis] - c[axis]).abs())
+                })
+                .collect(),
+            95.0,
+        )
+    })
+}
+
 /// p95 of |true position − y_ref,k| per axis (x, y, z) over the ticks
 /// from `from` \[s\].
 fn per_axis(r: &TrialResult, from: f64) -> [f64; 3] {
@@ -365,7 +390,9 @@ pub struct Judged {
     /// Horizontal error p95 \[m\]: cross-track on the L, to the trajectory
     /// at the same time on a stream (after its ramp).
     pub p95: f64,
-    /// p95 of each axis' error to the controller's reference \[m\].
+    /// p95 of each axis' error \[m\]: on the L the cross-track error's
+    /// (to the closest point of the path), on a stream the error to the
+    /// controller's reference.
     pub axis_p95: [f64; 3],
     /// Diverged.
     pub diverged: bool,
