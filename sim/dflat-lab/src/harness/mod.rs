@@ -609,10 +609,12 @@ pub fn polyline_closest(
                 let d = (q - (a + ab * s)).norm();
                 (d, w[0] + (w[1] - w[0]) * s)
             })
+            // The nearest segment's point (the first of equals; a NaN
+            // distance never replaces one).
             .fold(
                 None,
                 |best: Option<(f64, Vector3<f64>)>, (d, c)| match best {
-                    Some((bd, _)) if !(d < bd) => best,
+                    Some((bd, _)) if d.partial_cmp(&bd) != Some(std::cmp::Ordering::Less) => best,
                     _ => Some((d, c)),
                 },
             )
