@@ -299,7 +299,9 @@ fn bad_settings_are_refused_by_name() {
 
 /// The residual enters the Euler step as the model's drag does, at the
 /// step's velocity `(y_{j+1} − y_j)/δt` (`LearnedTerm::step_offsets`).
-/// Without pose noise, on the planar figure eight at 9 m/s: a linear drag
+/// Without pose noise, on the planar figure eight at 9 m/s (20 s: judged
+/// before its first crossing at full speed, where the aerodynamic plant
+/// runs out of tilt): a linear drag
 /// of 0.4 /s given as a residual flies as the same drag in the parametric
 /// model, and the exact aerodynamics as the residual as the plant without
 /// them. At the central difference (the continuous-time velocity at the
