@@ -178,15 +178,37 @@ fn judge(report: &SitlReport, trajectory: &Trajectory, limit_deg: f64) -> Judged
     }
 }
 
+/// A tick this late in the daemon's own records \[µs\] (a quarter of its
+/// 20 ms period) means the machine starved the flight: it is flown again.
+const STARVED_US: f64 = 5000.0;
+/// Flights at most, when the machine starves them.
+const ATTEMPTS: usize = 3;
+
 /// The daemon flies the stream: its figures and its largest command step
-/// over the stream \[deg/tick\] (from the commands it sent).
+/// over the stream \[deg/tick\] (from the commands it sent). A flight whose
+/// own records show a tick later than [`STARVED_US`] is flown again, up to
+/// [`ATTEMPTS`] flights; the last is judged whatever its timing. The
+/// budgets are the daemon's as deployed, on its real-time thread: beside
+/// two busy loops one flight of the eight sent ahead had ticks 11 ms late
+/// (p95 0.0317 m against its 0.03 m budget; 0.0256 m on time).
 fn daemon_flight(name: &str, form: &Form) -> (Judged, f64) {
     let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    let flight = fly_in_process(
-        name,
-        &form.config(false),
-        Duration::from_secs_f64(DURATION_S + 3.0),
-    );
+    let mut attempt = 1;
+    let flight = loop {
+        let flight = fly_in_process(
+            &format!("{name}-{attempt}"),
+            &form.config(false),
+            Duration::from_secs_f64(DURATION_S + 3.0),
+        );
+        let late = flight.latest_tick_us();
+        if late <= STARVED_US || attempt == ATTEMPTS {
+            break flight;
+        }
+        println!(
+            "{name}: a tick ran {late:.0} µs late in flight {attempt} (the machine starved it): flown again"
+        );
+        attempt += 1;
+    };
     let first = flight.attitude_targets().next().map(|(f, _)| f.at).unwrap();
     let stream_end = first + Duration::from_secs_f64(DURATION_S + 1.0);
     let step = largest_tilt_step_deg(

@@ -373,6 +373,18 @@ impl Flight {
         }
     }
 
+    /// How late the daemon's latest tick ran, from its own records (the
+    /// flight CSV's `jitter_us` over the ticks that commanded) \[µs\]; 0
+    /// without such ticks.
+    #[allow(dead_code)]
+    pub fn latest_tick_us(&self) -> f64 {
+        read_flight_csv(&self.dir)
+            .iter()
+            .filter(|r| field(r, "roll").is_some())
+            .filter_map(|r| field(r, "jitter_us"))
+            .fold(0.0, f64::max)
+    }
+
     /// The SET_ATTITUDE_TARGET frames.
     pub fn attitude_targets(
         &self,
