@@ -90,7 +90,7 @@ impl LearnedShape {
     /// sizes at 4 m/s scaled by `(v/4)²`, halved — the same accelerations
     /// at every speed, half of preview's (the drag at 9 m/s takes 25° of
     /// tilt on its own) — and its speed ramp likewise: preview's 3 s at
-    /// 4 m/s, stretched by `v/4` above ([`ramp_s`]), so the ramp asks for
+    /// 4 m/s, stretched by `v/4` above (`ramp_s`), so the ramp asks for
     /// the same acceleration at every speed and stays inside the tilt
     /// envelope with the aerodynamics. With 3 s at every speed the eight's
     /// ramp at 9 m/s asked 34° of the plant without them and more than the

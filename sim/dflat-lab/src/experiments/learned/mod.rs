@@ -141,7 +141,7 @@ pub struct LearnedConfig {
     /// Rotor drag \[1/s\].
     pub rotor_drag: f64,
     /// A stream's length \[s\], its ramp included (judged from the ramp's
-    /// end plus 2 s: [`flights::judged_from`]).
+    /// end plus 2 s: `judged_from`).
     pub stream_s: f64,
     /// DF-MPC's command-smoothness weight on x and y \[1/rad²\] (the
     /// shipped `df-mr-smooth`'s: 50).
