@@ -35,13 +35,15 @@
 //! estimates it in flight; learned from one flight it takes whatever the
 //! records' dynamics leave on average. From 38 s of one racing line in the
 //! SITL it learned a lateral −0.019 m/s² from a single turn, and the
-//! learned flight was 9.8× the matched one; without the constant 2.6×
-//! (`tests/e2e_learned.rs`, 2026-11-29).
+//! learned flight was 9.8× the matched one; without the constant
+//! 2.6–2.9× (`tests/e2e_learned.rs`, 2026-11-29, the weights shared by x
+//! and y in both).
 //!
 //! **Axis by axis** ([`Learned::parametric_axes`]): an axis whose learned
 //! weights are all undetermined (no weight's 95 % interval within
-//! [`MAX_RELATIVE_INTERVAL`] of it; x and y share theirs), or on which the residual does not lower
-//! the validation blocks' unexplained acceleration, keeps the parametric
+//! [`MAX_RELATIVE_INTERVAL`] of it; x and y share theirs), or on which
+//! the residual does not lower the validation blocks' unexplained
+//! acceleration, keeps the parametric
 //! model: its weights are set to 0 and the report says why. Every
 //! candidate is scored on the validation blocks so, as it would fly: a
 //! window that determines both axes wins over one that scores lower on
