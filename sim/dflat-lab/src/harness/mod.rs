@@ -548,30 +548,11 @@ pub fn run_trials(
 /// with `horizontal` only north/east count. A single vertex is a point;
 /// no vertices give NaN.
 pub fn polyline_distance(vertices: &[Vector3<f64>], p: &Vector3<f64>, horizontal: bool) -> f64 {
-    let flat = |v: &Vector3<f64>| {
-        if horizontal {
-            Vector3::new(v.x, v.y, 0.0)
-        } else {
-            *v
-        }
-    };
-    let p = flat(p);
     match vertices {
         [] => f64::NAN,
-        [a] => (p - flat(a)).norm(),
-        _ => vertices
-            .windows(2)
-            .map(|w| {
-                let (a, b) = (flat(&w[0]), flat(&w[1]));
-                let ab = b - a;
-                let len2 = ab.norm_squared();
-                let s = if len2 > 0.0 {
-                    ((p - a).dot(&ab) / len2).clamp(0.0, 1.0)
-                } else {
-                    0.0
-                };
-                (p - (a + ab * s)).norm()
-            })
+        [a] => (flatten(p, horizontal) - flatten(a, horizontal)).norm(),
+        _ => segment_projections(vertices, p, horizontal)
+            .map(|(d, _)| d)
             .fold(f64::INFINITY, f64::min),
     }
 }
@@ -584,31 +565,10 @@ pub fn polyline_closest(
     p: &Vector3<f64>,
     horizontal: bool,
 ) -> Option<Vector3<f64>> {
-    let flat = |v: &Vector3<f64>| {
-        if horizontal {
-            Vector3::new(v.x, v.y, 0.0)
-        } else {
-            *v
-        }
-    };
-    let q = flat(p);
     match vertices {
         [] => None,
         [a] => Some(*a),
-        _ => vertices
-            .windows(2)
-            .map(|w| {
-                let (a, b) = (flat(&w[0]), flat(&w[1]));
-                let ab = b - a;
-                let len2 = ab.norm_squared();
-                let s = if len2 > 0.0 {
-                    ((q - a).dot(&ab) / len2).clamp(0.0, 1.0)
-                } else {
-                    0.0
-                };
-                let d = (q - (a + ab * s)).norm();
-                (d, w[0] + (w[1] - w[0]) * s)
-            })
+        _ => segment_projections(vertices, p, horizontal)
             // The nearest segment's point (the first of equals; a NaN
             // distance never replaces one).
             .fold(
@@ -620,6 +580,37 @@ pub fn polyline_closest(
             )
             .map(|(_, c)| c),
     }
+}
+
+/// `v` with its vertical dropped when `horizontal`.
+fn flatten(v: &Vector3<f64>, horizontal: bool) -> Vector3<f64> {
+    if horizontal {
+        Vector3::new(v.x, v.y, 0.0)
+    } else {
+        *v
+    }
+}
+
+/// Per segment of the polyline through `vertices` (two or more): the
+/// distance from `p` to its closest point (north/east only with
+/// `horizontal`) and that point on the segment itself (its altitude kept).
+fn segment_projections<'a>(
+    vertices: &'a [Vector3<f64>],
+    p: &Vector3<f64>,
+    horizontal: bool,
+) -> impl Iterator<Item = (f64, Vector3<f64>)> + 'a {
+    let q = flatten(p, horizontal);
+    vertices.windows(2).map(move |w| {
+        let (a, b) = (flatten(&w[0], horizontal), flatten(&w[1], horizontal));
+        let ab = b - a;
+        let len2 = ab.norm_squared();
+        let s = if len2 > 0.0 {
+            ((q - a).dot(&ab) / len2).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        ((q - (a + ab * s)).norm(), w[0] + (w[1] - w[0]) * s)
+    })
 }
 
 /// A [`PathDistance`] to the polyline through `vertices` (see
