@@ -348,25 +348,21 @@ fn bound_use(r: &TrialResult, from: f64) -> (f64, f64) {
 /// p95 of each axis (x, y, z) of the cross-track error: the true
 /// position less its closest point on the path through `waypoints`
 /// (horizontally closest, at the path's altitude there), over every tick.
-/// The L's judged error split by axis: the error to the controller's own
-/// reference (as on a stream) holds its progress along the path too, which
-/// differs from controller to controller and is not judged on the L (until
-/// 2026-11-29 the L's axes were read so: the learned flights' y on the
-/// second leg, along y, looked 1.5–2× the stock flights' for braking
-/// sooner into the corner).
+/// The L's judged error split by axis; the error to the controller's own
+/// reference (as on a stream) would hold its progress along the path too,
+/// which differs from controller to controller and is not judged on the L
+/// (the L's axes were read so until 2026-11-29; both readings put the
+/// learned flights' y at 1.5–2.2× the stock flights' at 5 and 7 m/s, as
+/// the matched plant's).
 fn cross_track_per_axis(r: &TrialResult, waypoints: &[Vector3<f64>]) -> [f64; 3] {
-    std::array::from_fn(|axis| {
-        percentile(
-            r.ticks
-                .iter()
-                .filter_map(|t| {
-                    polyline_closest(waypoints, &t.truth.position, true)
-                        .map(|c| (t.truth.position[axis] - c[axis]).abs())
-                })
-                .collect(),
-            95.0,
-        )
-    })
+    let offsets: Vec<Vector3<f64>> = r
+        .ticks
+        .iter()
+        .filter_map(|t| {
+            polyline_closest(waypoints, &t.truth.position, true).map(|c| t.truth.position - c)
+        })
+        .collect();
+    std::array::from_fn(|axis| percentile(offsets.iter().map(|o| o[axis].abs()).collect(), 95.0))
 }
 
 /// p95 of |true position − y_ref,k| per axis (x, y, z) over the ticks
