@@ -478,8 +478,8 @@ pub fn ridge(samples: &[Sample], features: &[Feature], lambda: f64, r: usize) ->
 }
 
 /// One ridge fit over the rows of `axes` (each sample gives one row per
-/// axis) on `unknowns` (per axis, the basis column an unknown multiplies
-/// there): the unknowns' values and their 95 % half-widths.
+/// axis) on `unknowns` (one or more; per axis, the basis column an unknown
+/// multiplies there): the unknowns' values and their 95 % half-widths.
 fn fit_rows(
     samples: &[Sample],
     axes: &[usize],
@@ -489,9 +489,6 @@ fn fit_rows(
 ) -> Option<(Vec<f64>, Vec<f64>)> {
     let k = unknowns.len();
     let n = samples.len() * axes.len();
-    if k == 0 {
-        return Some((Vec::new(), Vec::new()));
-    }
     let row = |s: &Sample, axis: usize, out: &mut [f64]| {
         for (u, cols) in unknowns.iter().enumerate() {
             out[u] = cols[axis].map_or(0.0, |c| s.phi[c]);

@@ -247,9 +247,9 @@ fn a_steady_force_is_not_learned_as_a_constant() {
 /// altitude, with parasitic drag alone (rotor drag would reach z through
 /// the tilt: `(v − n·(n·v))_z`): the horizontal weights are determined and
 /// learned, the vertical ones (the vertical speed barely moves) are not,
-/// and z keeps the parametric model (weights 0, said). Fails when an undetermined axis's weights are
-/// learned anyway (the rule removed), or the horizontal axes are dropped
-/// too.
+/// and z keeps the parametric model (weights 0, said). Fails when an
+/// undetermined axis's weights are learned anyway (the rule removed), or
+/// the horizontal axes are dropped too.
 #[test]
 fn an_axis_the_records_do_not_determine_keeps_the_parametric_model() {
     let runs = vec![flight_with(
