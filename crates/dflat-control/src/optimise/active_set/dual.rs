@@ -166,13 +166,22 @@ impl ActiveSet {
             if self.dependent_member(0).is_some()
                 || (self.lam[add] == 0.0 && self.wrong(add, self.lam_next[add]))
             {
-                // Determined (or nearly) by the set (the factorisation may
-                // find the dependence at another member's slot): the
-                // set's factor without it, and the others' multipliers
-                // move for it.
+                // Determined (or nearly) by the set: the set's factor
+                // without it, and the others' multipliers move for it.
+                // Found at its own slot alone (the usual case: a chain's
+                // row at the horizon's start), the factor held is that
+                // one already: its row is decoupled, and no later row
+                // refers to it. Found elsewhere, or nearly dependent, the
+                // set without it is factored again.
+                let own_slot_alone = self.dependent_member(0) == Some(add)
+                    && self.dependent_member(add + 1).is_none();
                 self.set_side(add, Side::Free);
-                self.kkt_solve(prob)?;
-                if self.dependent_member(0).is_some() || !self.pure_dual_step(add, side) {
+                if !own_slot_alone {
+                    self.kkt_solve(prob)?;
+                }
+                if self.dependent_member(0).is_some_and(|id| id != add)
+                    || !self.pure_dual_step(add, side)
+                {
                     return Err(ControlError::Solver(
                         "active set: a dependent constraint cannot be met".into(),
                     ));

@@ -34,7 +34,9 @@
 //!
 //! **Cold starts** (`interior.rs`). Without a guess (a burst's first
 //! tick), or when a warm start has not ended within `WARM_SOLVES` (8) KKT
-//! solves, the working set is read off a condensed interior point: Mehrotra's
+//! solves or its KKT point misprices or breaks more than `WARM_DISTANCE`
+//! (40) constraints at once, the working set is read off a condensed
+//! interior point: Mehrotra's
 //! predictor-corrector on the QP in the outputs alone, whose Newton
 //! matrix keeps P's band (half-bandwidth 4), run until the mean
 //! complementarity has fallen 1e-8; a constraint whose barrier term
@@ -93,6 +95,14 @@ pub const MAX_SOLVES: usize = 40;
 /// p99 of its constrained ticks with 6 / 8 / 12 / 20 / 40: 779 / 733 /
 /// 834 / 1030 / 2719 µs.
 const WARM_SOLVES: usize = 8;
+/// A warm start whose KKT point, in a block step or while it is made dual
+/// feasible, misprices (wrong-signed multipliers) or breaks more
+/// constraints than this at once starts again cold at once: its set is
+/// far from the optimum's. On the corner bench at N = 200 with box and
+/// tilt rate, the warm solves that end within `WARM_SOLVES` show at most
+/// 28; 25 of the 75 that do not show more than 40 within their first four
+/// KKT solves (the constrained ticks' p99 ~525 → ~490 µs).
+const WARM_DISTANCE: usize = 40;
 
 /// Which side of its interval a constraint of the working set holds.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -143,7 +153,6 @@ pub struct Work {
 #[derive(Debug, Clone)]
 pub(super) struct ActiveSet {
     n: usize,
-    p_band: usize,
     /// Constraints: the n stages, then the rows; per stage the ids whose
     /// last output is p_f (the stage first), flattened; per constraint its
     /// family (0: stages, 1 + block: rows) for the chains.
@@ -174,6 +183,8 @@ pub(super) struct ActiveSet {
     work: Work,
     /// The KKT solves' budget of the current solve.
     budget: usize,
+    /// Whether the current run is a warm start's.
+    warm: bool,
     /// The condensed interior point of a cold solve's guess.
     interior: interior::Interior,
 }
@@ -218,7 +229,6 @@ impl ActiveSet {
         let slots = n + m;
         Self {
             n,
-            p_band: p.bandwidth(),
             kkt: Kkt::new(n, m, span, per_stage),
             interior: interior::Interior::new(n, &cons, span),
             cons,
@@ -239,6 +249,7 @@ impl ActiveSet {
             changed_from: 0,
             work: Work::default(),
             budget: MAX_SOLVES,
+            warm: false,
         }
     }
 
@@ -289,7 +300,10 @@ impl ActiveSet {
         if self.set_members().next().is_some() {
             // Warm: the guess's set, within WARM_SOLVES; else cold.
             self.budget = budget.min(WARM_SOLVES);
-            match self.run(prob, &mut p_times) {
+            self.warm = true;
+            let warm = self.run(prob, &mut p_times);
+            self.warm = false;
+            match warm {
                 Ok(()) => return Ok(self.work),
                 Err(_) if budget > self.work.solves => {
                     self.budget = budget;
@@ -342,9 +356,10 @@ impl ActiveSet {
         self.take_solution(false);
         let tol = self.lam_noise();
         let dependent = self.free_dependent();
-        let freed = self.free_chain_ends(tol);
+        let (freed, wrong) = self.free_chain_ends(tol);
         let bound = self.bind_broken(prob);
-        if dependent || freed || bound || self.free_wrong_signed(tol) {
+        self.check_distance(wrong + bound)?;
+        if dependent || freed || bound > 0 || self.free_wrong_signed(tol) > 0 {
             return Ok(false);
         }
         self.refine(prob, p_times)?;
@@ -359,7 +374,9 @@ impl ActiveSet {
             self.take_solution(false);
             let tol = self.lam_noise();
             let dependent = self.free_dependent();
-            if !(self.free_wrong_signed(tol) || dependent) {
+            let wrong = self.free_wrong_signed(tol);
+            self.check_distance(wrong)?;
+            if !(wrong > 0 || dependent) {
                 return Ok(());
             }
         }
@@ -421,14 +438,16 @@ impl ActiveSet {
     }
 
     /// Frees the wrong-signed constraints at the ends of their chains
-    /// (module docs); returns whether any.
-    fn free_chain_ends(&mut self, tol: f64) -> bool {
+    /// (module docs); returns whether any, and how many members are
+    /// wrong-signed.
+    fn free_chain_ends(&mut self, tol: f64) -> (bool, usize) {
         let m = self.cons.len();
-        let mut any = false;
+        let (mut any, mut wrong) = (false, 0);
         for id in 0..m {
             if !self.wrong_beyond(id, tol) {
                 continue;
             }
+            wrong += 1;
             let fam = self.family[id];
             let first_row = fam > 0 && (id == 0 || self.family[id - 1] != fam);
             let end = first_row
@@ -446,20 +465,32 @@ impl ActiveSet {
                 self.release(id);
             }
         }
-        any
+        (any, wrong)
     }
 
     /// Frees every constraint whose multiplier is wrong-signed beyond
-    /// `tol`; returns whether any.
-    fn free_wrong_signed(&mut self, tol: f64) -> bool {
-        let mut any = false;
+    /// `tol`; returns how many.
+    fn free_wrong_signed(&mut self, tol: f64) -> usize {
+        let mut freed = 0;
         for id in 0..self.cons.len() {
             if self.wrong_beyond(id, tol) {
                 self.release(id);
-                any = true;
+                freed += 1;
             }
         }
-        any
+        freed
+    }
+
+    /// Ends a warm start whose KKT point misprices or breaks more than
+    /// [`WARM_DISTANCE`] constraints (`far`): its set is far from the
+    /// optimum's, and the cold start's is nearer.
+    fn check_distance(&self, far: usize) -> Result<(), ControlError> {
+        if self.warm && far > WARM_DISTANCE {
+            return Err(ControlError::Solver(
+                "active set: the warm start's set is far from the optimum's".into(),
+            ));
+        }
+        Ok(())
     }
 
     /// How far constraint `id` (outside the set) is broken at x beyond its
@@ -506,16 +537,16 @@ impl ActiveSet {
     }
 
     /// Binds every constraint outside the set broken at x (keeping gaps,
-    /// [`ActiveSet::keep_gap`]); returns whether any.
-    fn bind_broken(&mut self, prob: &Problem<'_>) -> bool {
-        let mut any = false;
+    /// [`ActiveSet::keep_gap`]); returns how many.
+    fn bind_broken(&mut self, prob: &Problem<'_>) -> usize {
+        let mut bound = 0;
         self.for_each_broken(prob, |set, id, side| {
             set.lam[id] = 0.0;
             set.set_side(id, side);
             set.keep_gap(prob, id, side);
-            any = true;
+            bound += 1;
         });
-        any
+        bound
     }
 
     /// Calls `f(self, id, side)` for each constraint outside the set that

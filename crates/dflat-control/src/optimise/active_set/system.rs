@@ -22,11 +22,9 @@ impl ActiveSet {
         self.work.solves += 1;
         let (by_stage, stage_start) = (&self.by_stage, &self.stage_start);
         let side = &self.side;
-        let p = prob.p;
         self.kkt.build_from(
             self.changed_from,
-            self.p_band,
-            |f, g| p.get(f, g),
+            prob.p,
             &self.cons,
             |f| &by_stage[stage_start[f]..stage_start[f + 1]],
             |id| side[id] != Side::Free,

@@ -54,6 +54,12 @@ impl SymBand {
         self.b
     }
 
+    /// Row i's lower band: entry d is `A[i][i − d]`, d = 0..=b (entries
+    /// before column 0 are 0).
+    pub(crate) fn lower_row(&self, i: usize) -> &[f64] {
+        &self.lower[i * (self.b + 1)..(i + 1) * (self.b + 1)]
+    }
+
     fn index(&self, i: usize, j: usize) -> usize {
         let (r, c) = if i >= j { (i, j) } else { (j, i) };
         assert!(
