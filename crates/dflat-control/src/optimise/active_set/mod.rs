@@ -35,7 +35,8 @@
 //! **Cold starts** (`interior.rs`). Without a guess (a burst's first
 //! tick), or when a warm start has not ended within `WARM_SOLVES` (8) KKT
 //! solves or its KKT point misprices or breaks more than `WARM_DISTANCE`
-//! (40) constraints at once, the working set is read off a condensed
+//! (40) constraints at once (and on the next solve after such a warm
+//! start), the working set is read off a condensed
 //! interior point: Mehrotra's
 //! predictor-corrector on the QP in the outputs alone, whose Newton
 //! matrix keeps P's band (half-bandwidth 4), run until the mean
@@ -93,7 +94,10 @@ pub const MAX_SOLVES: usize = 40;
 /// rate, 3060 of 3090 warm solves that end within 12 take at most 8; 45
 /// do not end within 12, and those tried with 400 did not end in 400. The
 /// p99 of its constrained ticks with 6 / 8 / 12 / 20 / 40: 779 / 733 /
-/// 834 / 1030 / 2719 µs.
+/// 834 / 1030 / 2719 µs. The guesses fail in streaks (ticks 194–199 of
+/// the corner replay): after one fails, the axis's next solve starts
+/// cold (p99 of 8 interleaved runs each, median: 481 → 466 µs; the
+/// median 108 → 110 µs).
 const WARM_SOLVES: usize = 8;
 /// A warm start whose KKT point, in a block step or while it is made dual
 /// feasible, misprices (wrong-signed multipliers) or breaks more
@@ -185,6 +189,9 @@ pub(super) struct ActiveSet {
     budget: usize,
     /// Whether the current run is a warm start's.
     warm: bool,
+    /// Whether the last solve's warm start did not end (this one's guess
+    /// is then not tried).
+    warm_failed: bool,
     /// The condensed interior point of a cold solve's guess.
     interior: interior::Interior,
 }
@@ -250,6 +257,7 @@ impl ActiveSet {
             work: Work::default(),
             budget: MAX_SOLVES,
             warm: false,
+            warm_failed: false,
         }
     }
 
@@ -297,7 +305,10 @@ impl ActiveSet {
             };
         }
         self.set_replaced();
-        if self.set_members().next().is_some() {
+        // After a warm start that did not end, this one starts cold: the
+        // guesses fail in streaks (`WARM_SOLVES`).
+        let skip = std::mem::take(&mut self.warm_failed);
+        if self.set_members().next().is_some() && !skip {
             // Warm: the guess's set, within WARM_SOLVES; else cold.
             self.budget = budget.min(WARM_SOLVES);
             self.warm = true;
@@ -306,6 +317,7 @@ impl ActiveSet {
             match warm {
                 Ok(()) => return Ok(self.work),
                 Err(_) if budget > self.work.solves => {
+                    self.warm_failed = true;
                     self.budget = budget;
                     self.side.fill(Side::Free);
                     self.lam.fill(0.0);
@@ -313,6 +325,11 @@ impl ActiveSet {
                 }
                 Err(e) => return Err(e),
             }
+        }
+        if skip {
+            self.side.fill(Side::Free);
+            self.lam.fill(0.0);
+            self.set_replaced();
         }
         if self.cold_start(prob, &mut p_times)? {
             return Ok(self.work);
