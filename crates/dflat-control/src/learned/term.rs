@@ -243,9 +243,9 @@ impl LearnedTerm {
     /// step before). At the second difference's centre instead (the
     /// central difference `(y_{j+2} − y_j)/(2δt)`, the continuous-time
     /// velocity `dflat learn` fits the residual at) the exact aerodynamics
-    /// flew the lab's figure eight at 9 m/s (its first 20 s) 2.5× the
+    /// flew the lab's figure eight at 9 m/s (its first 20 s) 10× the
     /// matched plant without pose noise, and a linear drag given as a
-    /// residual 2.5× the same drag in the parametric model (`learned::tests::
+    /// residual 9× the same drag in the parametric model (`learned::tests::
     /// the_residual_is_taken_at_the_euler_steps_velocity` in `dflat-lab`).
     /// Weighted (support, running error); for
     /// [`ControlModel::next_output_stepped`] and

@@ -99,18 +99,31 @@ impl LearnedShape {
     /// catching up when the judging began, so the study measured a
     /// saturation the matched plant never met instead of the model
     /// (`the_streams_ramp_inside_the_tilt_envelope`).
+    ///
+    /// `speed` is the stream's top speed, as the L's legs and the racing
+    /// line's sides fly it: the eight's phase rate is `speed/√2`
+    /// ([`EIGHT_TOP_OVER_PHASE`]), so it crosses its centre at `speed`
+    /// and turns through its lobes at `speed/√2`. (With its phase rate at
+    /// `speed` the eight "at 9 m/s" crossed at 12.7 m/s, where the drag
+    /// alone needs 37° of the plants' 35°: the study measured the tilt
+    /// envelope there, not the model;
+    /// `every_stream_tops_out_at_its_speed`.)
     pub fn trajectory(self, speed: f64) -> Option<Trajectory> {
-        let (shape, size) = match self {
+        let (shape, size, top_over_phase) = match self {
             Self::L => return None,
-            Self::Eight => (Shape::FigureEight, 16.0),
-            Self::RacingLine => (Shape::RacingLine, 24.0),
+            Self::Eight => (Shape::FigureEight, 16.0, EIGHT_TOP_OVER_PHASE),
+            Self::RacingLine => (Shape::RacingLine, 24.0, 1.0),
         };
         Some(Trajectory {
             ramp_s: ramp_s(speed),
-            ..preview::trajectory(shape, size * (speed / 4.0).powi(2), speed)
+            ..preview::trajectory(shape, size * (speed / 4.0).powi(2), speed / top_over_phase)
         })
     }
 }
+
+/// The Gerono eight's top speed (through its crossing) over its
+/// `Trajectory::speed` (its size times its phase rate): √2.
+pub const EIGHT_TOP_OVER_PHASE: f64 = std::f64::consts::SQRT_2;
 
 /// The streams' speed ramp at `speed` [m/s]: preview's
 /// [`preview::RAMP_S`] up to 4 m/s, `RAMP_S·v/4` above \[s\]

@@ -7,7 +7,8 @@
 //! (`df-mr-smooth`: multi-rate windows, smoothness, 30° plan tilt, 35°
 //! command) on the planar model (planar plant) or the spatial model, on the
 //! L (a path at a fixed speed) and two planner streams (figure eight,
-//! racing line; 20 Hz p/v/a, 60 s each) at 5, 7 and 9 m/s, under vision
+//! racing line; 20 Hz p/v/a, 60 s each) at 5, 7 and 9 m/s (each stream's
+//! top speed, as the L's legs: `LearnedShape::trajectory`), under vision
 //! poses at 50 and 15 Hz (60 ms latency, 2 cm noise). Per plant and pose
 //! rate, in the order a user would (the records learn is given: the stock
 //! and identified flights, about 13 minutes):
