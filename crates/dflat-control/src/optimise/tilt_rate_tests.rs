@@ -387,6 +387,81 @@ fn a_cold_rate_limited_solve_ends_in_the_active_set() {
     }
 }
 
+/// A warm start whose working set is far from the optimum's goes cold at
+/// once (`WARM_DISTANCE` in `active_set/mod.rs`), and the axis's next
+/// solve starts cold too: the rate-limited step to +10 m solved, then the
+/// step to −10 m from rest warm-started from it (every row of its ramp on
+/// the wrong side). Both end at clarabel's plan, every row kept; the
+/// mirrored solve within `WARM_SOLVES` KKT solves in all (a warm start
+/// run to its 8 solves, then the cold start's, takes more), the one after
+/// it from the condensed interior point's set although its guess is good.
+#[test]
+fn a_warm_start_far_from_the_optimum_goes_cold_at_once() {
+    let (horizon, (q, r)) = (STEP_HORIZON, STEP_WEIGHTS);
+    let bounds = step_bounds(None);
+    let smoothness = Smoothness::default();
+    let fixed = [0.0, 0.0, 0.0];
+    let sent = Some(0.0);
+    let mut alm = BoxAlmSolver::with_tuning(
+        horizon,
+        (q, r, DT),
+        bounds,
+        smoothness,
+        true,
+        crate::optimise::alm::COLD_TUNING,
+    )
+    .unwrap();
+    for (solve, target) in [10.0, -10.0, -10.0].into_iter().enumerate() {
+        let reference = vec![target; horizon + 1];
+        let mut want = vec![0.0; horizon + 1];
+        ClarabelSolver::with_tuning(
+            horizon,
+            (q, r, DT),
+            bounds,
+            f64::INFINITY,
+            smoothness,
+            KktTuning::REFERENCE,
+        )
+        .unwrap()
+        .solve_problem(AxisProblem {
+            fixed: &fixed,
+            sent,
+            reference: &reference,
+            plan: &mut want,
+        })
+        .unwrap();
+        let mut got = vec![0.0; horizon + 1];
+        FastBandedSolver::new(horizon, q, r, DT)
+            .unwrap()
+            .solve_problem(AxisProblem {
+                fixed: &fixed,
+                sent,
+                reference: &reference,
+                plan: &mut got,
+            })
+            .unwrap();
+        alm.solve_problem(AxisProblem {
+            fixed: &fixed,
+            sent,
+            reference: &reference,
+            plan: &mut got,
+        })
+        .unwrap();
+        let work = alm.active_set_work();
+        for (j, (g, w)) in got.iter().zip(&want).take(11).enumerate() {
+            assert!((g - w).abs() <= 1e-5, "solve {solve}: y_{j}: {g} vs {w}");
+        }
+        assert!(
+            !bounds.tilt_rate.unwrap().violated_by(&got, sent, DT),
+            "solve {solve}: rows broken"
+        );
+        assert!(work.interior > 0, "solve {solve}: not cold: {work:?}");
+        if solve == 1 {
+            assert!(work.solves <= 8, "the mirrored solve: {work:?}");
+        }
+    }
+}
+
 proptest::proptest! {
     #![proptest_config(proptest::test_runner::Config::with_cases(100))]
     /// The augmented Lagrangian alone ([`BoxAlmSolver`], no interior point
