@@ -102,7 +102,7 @@ impl LearnedShape {
     ///
     /// `speed` is the stream's top speed, as the L's legs and the racing
     /// line's sides fly it: the eight's phase rate is `speed/√2`
-    /// ([`EIGHT_TOP_OVER_PHASE`]), so it crosses its centre at `speed`
+    /// (`EIGHT_TOP_OVER_PHASE`), so it crosses its centre at `speed`
     /// and turns through its lobes at `speed/√2`. (With its phase rate at
     /// `speed` the eight "at 9 m/s" crossed at 12.7 m/s, where the drag
     /// alone needs 37° of the plants' 35°: the study measured the tilt
