@@ -50,6 +50,10 @@
 //! replayed state left the last plan. The rollout's set remains the start
 //! when the interior point does not converge. (Before, a start from rest
 //! with the box went to the stage interior point by rule, ~2.2 ms.)
+//! Should the methods not end from the interior point's set within
+//! `COLD_SOLVES` (16) KKT solves, the interior point is carried on from
+//! where it stopped to a gap of 1e-13 and names the set again: near a
+//! degenerate vertex the sides at 1e-8 name an ill-conditioned set.
 //!
 //! **The dual method** (`dual.rs`). Then every wrong-signed constraint
 //! is freed until none is left (a dual-feasible point), and the broken
@@ -107,6 +111,16 @@ const WARM_SOLVES: usize = 8;
 /// 28; 25 of the 75 that do not show more than 40 within their first four
 /// KKT solves (the constrained ticks' p99 ~525 → ~490 µs).
 const WARM_DISTANCE: usize = 40;
+/// KKT solves a cold solve may take from the condensed interior point's
+/// set before the interior point is carried on to a smaller gap and names
+/// the set again (`interior.rs`, `TIGHT_GAP_REDUCTION`). From its set the
+/// method ends in 1–4 KKT solves on the corner bench's cold solves and in
+/// 1–14 in the learned bench's closed-loop flights (where 8 sent the
+/// 10–14 to the interior point's extra iterations, which cost more:
+/// p99 ~515 → ~560 µs); the one that did not end (its tick 7, at a
+/// degenerate vertex) ran out of all 40 and fell to the stage interior
+/// point (2.6–4.4 ms): now ~0.7–1 ms.
+const COLD_SOLVES: usize = 16;
 
 /// Which side of its interval a constraint of the working set holds.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -192,6 +206,9 @@ pub(super) struct ActiveSet {
     /// Whether the last solve's warm start did not end (this one's guess
     /// is then not tried).
     warm_failed: bool,
+    /// Whether the cold solve's working set is the condensed interior
+    /// point's.
+    from_interior: bool,
     /// The condensed interior point of a cold solve's guess.
     interior: interior::Interior,
 }
@@ -258,6 +275,7 @@ impl ActiveSet {
             budget: MAX_SOLVES,
             warm: false,
             warm_failed: false,
+            from_interior: false,
         }
     }
 
@@ -333,6 +351,22 @@ impl ActiveSet {
         }
         if self.cold_start(prob, &mut p_times)? {
             return Ok(self.work);
+        }
+        if self.from_interior {
+            // From the interior point's set, within COLD_SOLVES; else
+            // again from its iterate carried on to a smaller gap.
+            self.budget = budget.min(self.work.solves + COLD_SOLVES);
+            match self.run(prob, &mut p_times) {
+                Ok(()) => return Ok(self.work),
+                Err(_) if budget > self.work.solves => {
+                    self.budget = budget;
+                    self.lam.fill(0.0);
+                    if !self.interior_tighten(prob)? {
+                        self.set_replaced();
+                    }
+                }
+                Err(e) => return Err(e),
+            }
         }
         self.run(prob, &mut p_times)?;
         Ok(self.work)

@@ -24,7 +24,8 @@ impl ActiveSet {
             self.refine(prob, p_times)?;
             return Ok(true);
         }
-        if !self.interior_guess(prob)? {
+        self.from_interior = self.interior_guess(prob)?;
+        if !self.from_interior {
             self.rollout_guess();
         }
         Ok(false)
