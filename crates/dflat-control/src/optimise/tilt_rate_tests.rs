@@ -322,68 +322,16 @@ fn the_interior_points_duals_start_the_augmented_lagrangian() {
 /// 139.)
 #[test]
 fn a_cold_rate_limited_solve_ends_in_the_active_set() {
-    let (horizon, (q, r)) = (STEP_HORIZON, STEP_WEIGHTS);
     for a_max in [None, Some(3.0)] {
         let bounds = step_bounds(a_max);
-        let smoothness = Smoothness::default();
-        let fixed = [0.0, 0.0, 0.0];
-        let reference = vec![10.0; horizon + 1];
-        let sent = Some(0.0);
-        let mut want = vec![0.0; horizon + 1];
-        ClarabelSolver::with_tuning(
-            horizon,
-            (q, r, DT),
-            bounds,
-            f64::INFINITY,
-            smoothness,
-            KktTuning::REFERENCE,
-        )
-        .unwrap()
-        .solve_problem(AxisProblem {
-            fixed: &fixed,
-            sent,
-            reference: &reference,
-            plan: &mut want,
-        })
-        .unwrap();
-        let mut got = vec![0.0; horizon + 1];
-        FastBandedSolver::new(horizon, q, r, DT)
-            .unwrap()
-            .solve_problem(AxisProblem {
-                fixed: &fixed,
-                sent,
-                reference: &reference,
-                plan: &mut got,
-            })
-            .unwrap();
-        let mut alm = BoxAlmSolver::with_tuning(
-            horizon,
-            (q, r, DT),
-            bounds,
-            smoothness,
-            true,
-            crate::optimise::alm::COLD_TUNING,
-        )
-        .unwrap();
-        alm.solve_problem(AxisProblem {
-            fixed: &fixed,
-            sent,
-            reference: &reference,
-            plan: &mut got,
-        })
-        .unwrap();
+        let mut alm = step_alm(bounds);
+        let (got, want) = solve_step(&mut alm, bounds, 10.0);
         assert!(
             alm.iterations() <= 6,
             "{a_max:?}: {} KKT solves",
             alm.iterations()
         );
-        for (j, (g, w)) in got.iter().zip(&want).take(11).enumerate() {
-            assert!((g - w).abs() <= 1e-5, "{a_max:?}: y_{j}: {g} vs {w}");
-        }
-        assert!(
-            !bounds.tilt_rate.unwrap().violated_by(&got, sent, DT),
-            "{a_max:?}: rows broken"
-        );
+        check_step(&format!("{a_max:?}"), bounds, &got, &want);
     }
 }
 
@@ -397,69 +345,89 @@ fn a_cold_rate_limited_solve_ends_in_the_active_set() {
 /// it from the condensed interior point's set although its guess is good.
 #[test]
 fn a_warm_start_far_from_the_optimum_goes_cold_at_once() {
-    let (horizon, (q, r)) = (STEP_HORIZON, STEP_WEIGHTS);
     let bounds = step_bounds(None);
-    let smoothness = Smoothness::default();
-    let fixed = [0.0, 0.0, 0.0];
-    let sent = Some(0.0);
-    let mut alm = BoxAlmSolver::with_tuning(
+    let mut alm = step_alm(bounds);
+    for (solve, target) in [10.0, -10.0, -10.0].into_iter().enumerate() {
+        let (got, want) = solve_step(&mut alm, bounds, target);
+        let work = alm.active_set_work();
+        check_step(&format!("solve {solve}"), bounds, &got, &want);
+        assert!(work.interior > 0, "solve {solve}: not cold: {work:?}");
+        if solve == 1 {
+            assert!(work.solves <= 8, "the mirrored solve: {work:?}");
+        }
+    }
+}
+
+/// The augmented Lagrangian alone ([`BoxAlmSolver`] at its cold tuning)
+/// of the rate-limited step.
+fn step_alm(bounds: AxisBounds) -> BoxAlmSolver {
+    let (horizon, (q, r)) = (STEP_HORIZON, STEP_WEIGHTS);
+    BoxAlmSolver::with_tuning(
         horizon,
         (q, r, DT),
         bounds,
-        smoothness,
+        Smoothness::default(),
         true,
         crate::optimise::alm::COLD_TUNING,
     )
+    .unwrap()
+}
+
+/// The rate-limited step from rest (nothing sent but 0) to `target` \[m\]
+/// under `bounds`, solved by `alm` from the fast path's unconstrained
+/// plan: its plan and clarabel's at its reference tuning.
+fn solve_step(alm: &mut BoxAlmSolver, bounds: AxisBounds, target: f64) -> (Vec<f64>, Vec<f64>) {
+    let (horizon, (q, r)) = (STEP_HORIZON, STEP_WEIGHTS);
+    let fixed = [0.0, 0.0, 0.0];
+    let reference = vec![target; horizon + 1];
+    let sent = Some(0.0);
+    let mut want = vec![0.0; horizon + 1];
+    ClarabelSolver::with_tuning(
+        horizon,
+        (q, r, DT),
+        bounds,
+        f64::INFINITY,
+        Smoothness::default(),
+        KktTuning::REFERENCE,
+    )
+    .unwrap()
+    .solve_problem(AxisProblem {
+        fixed: &fixed,
+        sent,
+        reference: &reference,
+        plan: &mut want,
+    })
     .unwrap();
-    for (solve, target) in [10.0, -10.0, -10.0].into_iter().enumerate() {
-        let reference = vec![target; horizon + 1];
-        let mut want = vec![0.0; horizon + 1];
-        ClarabelSolver::with_tuning(
-            horizon,
-            (q, r, DT),
-            bounds,
-            f64::INFINITY,
-            smoothness,
-            KktTuning::REFERENCE,
-        )
+    let mut got = vec![0.0; horizon + 1];
+    FastBandedSolver::new(horizon, q, r, DT)
         .unwrap()
         .solve_problem(AxisProblem {
-            fixed: &fixed,
-            sent,
-            reference: &reference,
-            plan: &mut want,
-        })
-        .unwrap();
-        let mut got = vec![0.0; horizon + 1];
-        FastBandedSolver::new(horizon, q, r, DT)
-            .unwrap()
-            .solve_problem(AxisProblem {
-                fixed: &fixed,
-                sent,
-                reference: &reference,
-                plan: &mut got,
-            })
-            .unwrap();
-        alm.solve_problem(AxisProblem {
             fixed: &fixed,
             sent,
             reference: &reference,
             plan: &mut got,
         })
         .unwrap();
-        let work = alm.active_set_work();
-        for (j, (g, w)) in got.iter().zip(&want).take(11).enumerate() {
-            assert!((g - w).abs() <= 1e-5, "solve {solve}: y_{j}: {g} vs {w}");
-        }
-        assert!(
-            !bounds.tilt_rate.unwrap().violated_by(&got, sent, DT),
-            "solve {solve}: rows broken"
-        );
-        assert!(work.interior > 0, "solve {solve}: not cold: {work:?}");
-        if solve == 1 {
-            assert!(work.solves <= 8, "the mirrored solve: {work:?}");
-        }
+    alm.solve_problem(AxisProblem {
+        fixed: &fixed,
+        sent,
+        reference: &reference,
+        plan: &mut got,
+    })
+    .unwrap();
+    (got, want)
+}
+
+/// A step's plan `got` at clarabel's `want` over the first ten outputs
+/// (1e-5 m) and every tilt-rate row of `bounds` kept.
+fn check_step(label: &str, bounds: AxisBounds, got: &[f64], want: &[f64]) {
+    for (j, (g, w)) in got.iter().zip(want).take(11).enumerate() {
+        assert!((g - w).abs() <= 1e-5, "{label}: y_{j}: {g} vs {w}");
     }
+    assert!(
+        !bounds.tilt_rate.unwrap().violated_by(got, Some(0.0), DT),
+        "{label}: rows broken"
+    );
 }
 
 proptest::proptest! {

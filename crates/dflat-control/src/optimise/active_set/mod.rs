@@ -314,19 +314,22 @@ impl ActiveSet {
         self.work = Work::default();
         self.budget = budget;
         self.set_bounds(prob);
-        for id in 0..self.cons.len() {
-            // A side whose bound is infinite cannot hold.
-            self.side[id] = match guess(id) {
-                Side::Upper if self.bound[id][1].is_finite() => Side::Upper,
-                Side::Lower if self.bound[id][0].is_finite() => Side::Lower,
-                _ => Side::Free,
-            };
-        }
-        self.set_replaced();
         // After a warm start that did not end, this one starts cold: the
         // guesses fail in streaks (`WARM_SOLVES`).
-        let skip = std::mem::take(&mut self.warm_failed);
-        if self.set_members().next().is_some() && !skip {
+        if std::mem::take(&mut self.warm_failed) {
+            self.forget_set();
+        } else {
+            for id in 0..self.cons.len() {
+                // A side whose bound is infinite cannot hold.
+                self.side[id] = match guess(id) {
+                    Side::Upper if self.bound[id][1].is_finite() => Side::Upper,
+                    Side::Lower if self.bound[id][0].is_finite() => Side::Lower,
+                    _ => Side::Free,
+                };
+            }
+            self.set_replaced();
+        }
+        if self.set_members().next().is_some() {
             // Warm: the guess's set, within WARM_SOLVES; else cold.
             self.budget = budget.min(WARM_SOLVES);
             self.warm = true;
@@ -337,17 +340,10 @@ impl ActiveSet {
                 Err(_) if budget > self.work.solves => {
                     self.warm_failed = true;
                     self.budget = budget;
-                    self.side.fill(Side::Free);
-                    self.lam.fill(0.0);
-                    self.set_replaced();
+                    self.forget_set();
                 }
                 Err(e) => return Err(e),
             }
-        }
-        if skip {
-            self.side.fill(Side::Free);
-            self.lam.fill(0.0);
-            self.set_replaced();
         }
         if self.cold_start(prob, &mut p_times)? {
             return Ok(self.work);
@@ -370,6 +366,13 @@ impl ActiveSet {
         }
         self.run(prob, &mut p_times)?;
         Ok(self.work)
+    }
+
+    /// Empties the working set (multipliers 0) for a cold start.
+    fn forget_set(&mut self) {
+        self.side.fill(Side::Free);
+        self.lam.fill(0.0);
+        self.set_replaced();
     }
 
     /// Notes that the working set was replaced as a whole (a guess, a
