@@ -96,6 +96,8 @@ mod tests {
                 horizon_parametric_m: 0.1,
                 horizon_learned_m: 0.01,
                 samples: 10,
+                start_parametric_s: 0.4,
+                start_learned_s: 1.2,
                 acceleration_parametric: 1.0,
                 acceleration_learned: 0.1,
             },
@@ -124,5 +126,40 @@ mod tests {
         std::fs::remove_dir_all(&dir).unwrap();
         cfg.controller.dfmpc.learned_model.clear();
         assert!(configured(&cfg).unwrap().is_none());
+    }
+
+    /// A version-2 file (before the held-out predictions' start windows
+    /// were written) still loads, its windows the 0.4 s it was judged
+    /// with; a version this build does not know is refused in words.
+    #[test]
+    fn a_version_2_file_loads_and_a_newer_one_is_refused() {
+        let dir = std::env::temp_dir().join(format!("dflat-learned-v2-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("m.learned.toml");
+        let cfg = Config::default();
+        let text = toml::to_string(&model_for(&cfg)).unwrap();
+        let v2: String = text
+            .lines()
+            .filter(|l| !l.starts_with("start_"))
+            .map(|l| {
+                if l.starts_with("version") {
+                    "version = 2\n".to_owned()
+                } else {
+                    format!("{l}\n")
+                }
+            })
+            .collect();
+        assert!(v2.contains("version = 2") && !v2.contains("start_learned_s"));
+        std::fs::write(&path, &v2).unwrap();
+        let model = read(&path).unwrap();
+        assert_eq!(model.validation.start_parametric_s, 0.4);
+        assert_eq!(model.validation.start_learned_s, 0.4);
+        std::fs::write(&path, v2.replace("version = 2", "version = 99")).unwrap();
+        let err = read(&path).unwrap_err();
+        assert!(
+            err.contains("version = 99") && err.contains("learn it again"),
+            "{err}"
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -42,9 +42,20 @@ use thiserror::Error;
 
 /// The `format` every learned-residual file carries.
 pub const FORMAT: &str = "dflat-learned-residual";
-/// The file version this build reads and writes (2: the window counts
-/// poses centred on the sample, the held-out acceleration reported).
-pub const VERSION: u32 = 2;
+/// The file version this build writes (2: the window counts poses
+/// centred on the sample, the held-out acceleration reported; 3: the
+/// held-out predictions' start windows, [`Validation::start_parametric_s`]
+/// and [`Validation::start_learned_s`]).
+pub const VERSION: u32 = 3;
+/// The oldest file version this build reads: a version-2 file's held-out
+/// predictions started from 0.4 s of poses ([`LEGACY_START_S`]).
+pub const MIN_VERSION: u32 = 2;
+/// The start window of a version-2 file's held-out predictions \[s\].
+pub const LEGACY_START_S: f64 = 0.4;
+
+fn legacy_start_s() -> f64 {
+    LEGACY_START_S
+}
 /// Relative reach beyond each edge of the support where the residual still
 /// acts in full (0.1: a speed 10 % above the fastest flown, a thrust 10 %
 /// below the least): a smooth basis extrapolates that far, and a flight
@@ -164,6 +175,14 @@ pub struct Validation {
     pub horizon_learned_m: f64,
     /// Held-out samples.
     pub samples: usize,
+    /// The span of poses the parametric model's held-out predictions
+    /// start from \[s\] (chosen on the validation blocks: the
+    /// input-to-output map's window from data).
+    #[serde(default = "legacy_start_s")]
+    pub start_parametric_s: f64,
+    /// The same for the model with the residual \[s\].
+    #[serde(default = "legacy_start_s")]
+    pub start_learned_s: f64,
     /// RMS acceleration the parametric model leaves on the test blocks
     /// [m/s²].
     pub acceleration_parametric: f64,
@@ -182,6 +201,8 @@ impl Validation {
             horizon_parametric_m: 0.0,
             horizon_learned_m: 0.0,
             samples: 0,
+            start_parametric_s: 0.0,
+            start_learned_s: 0.0,
             acceleration_parametric: 0.0,
             acceleration_learned: 0.0,
         }
@@ -230,7 +251,9 @@ pub enum LearnedError {
         found: String,
     },
     /// A version this build does not read.
-    #[error("version = {found}: this build reads version {VERSION}; learn it again")]
+    #[error(
+        "version = {found}: this build reads versions {MIN_VERSION} ..= {VERSION}; learn it again"
+    )]
     Version {
         /// The version found.
         found: u32,
@@ -285,7 +308,7 @@ impl LearnedResidual {
                 found: self.format.clone(),
             });
         }
-        if self.version != VERSION {
+        if !(MIN_VERSION..=VERSION).contains(&self.version) {
             return Err(LearnedError::Version {
                 found: self.version,
             });

@@ -75,6 +75,8 @@ pub(crate) fn aero_residual(cq: f64, d: f64, speed_max: f64) -> LearnedResidual 
             horizon_parametric_m: 0.1,
             horizon_learned_m: 0.01,
             samples: 100,
+            start_parametric_s: 0.4,
+            start_learned_s: 1.2,
             acceleration_parametric: 1.0,
             acceleration_learned: 0.1,
         },

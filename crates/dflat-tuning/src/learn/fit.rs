@@ -28,7 +28,8 @@
 //! # Held-out prediction: the input-to-output map from a window
 //!
 //! From pose i: the position and velocity at `s_i` fitted to the poses of
-//! the last [`START_S`] through the model itself (its drag and, learned,
+//! the last `start_s` (one of [`START_WINDOWS_S`], each model its own,
+//! chosen on the validation blocks) through the model itself (its drag and, learned,
 //! its residual along the window), then the model rolled forward through
 //! the commands sent — the parametric model alone, or with the residual at
 //! the rolled velocity — to the next pose (one step) and to the last pose
@@ -56,8 +57,12 @@ pub enum Part {
 /// train, one validates, one tests.
 pub const BLOCK_S: f64 = 4.0;
 
-/// The poses before a held-out start its state is fitted from \[s\].
-pub const START_S: f64 = 0.4;
+/// The spans \[s\] of poses before a held-out start that its state may be
+/// fitted from; each model is judged from its own, chosen on the
+/// validation blocks ([`super::best_start`]). A model that explains the
+/// flight affords a long window, which averages the pose noise; one that
+/// leaves acceleration unexplained bends its start over a long one.
+pub const START_WINDOWS_S: [f64; 6] = [0.2, 0.4, 0.8, 1.2, 1.6, 2.4];
 
 /// The part a sample at time `t` \[s\] falls in.
 pub fn part(t: f64) -> Part {
@@ -628,7 +633,7 @@ fn extra_acceleration(
 }
 
 /// The state (position \[m\], velocity [m/s]) at pose `i`'s time from the
-/// poses of the last [`START_S`] (at least five) through the model itself
+/// poses of the last `start_s` \[s\] (at least five) through the model itself
 /// (the input-to-output map from a window): a parabola on top of the
 /// thrust's trajectory gives the velocity along the window, the model's
 /// drag and residual there are integrated, and the position and velocity
@@ -638,14 +643,15 @@ fn start_state(
     model: &Parametric,
     residual: Option<&LearnedResidual>,
     i: usize,
+    start_s: f64,
 ) -> Option<(Vector3<f64>, Vector3<f64>)> {
     let s = p.poses[i].t;
     let mut first = i;
-    while first > 0 && (s - p.poses[first - 1].t <= START_S || i - first < 4) {
+    while first > 0 && (s - p.poses[first - 1].t <= start_s || i - first < 4) {
         first -= 1;
     }
     let w = &p.poses[first..=i];
-    if w.len() < 3 || s - w[0].t > 3.0 * START_S || p.tick_at(w[0].t).is_none() {
+    if w.len() < 3 || s - w[0].t > 3.0 * start_s || p.tick_at(w[0].t).is_none() {
         return None;
     }
     let times: Vec<f64> = w.iter().map(|q| q.t).collect();
@@ -660,22 +666,41 @@ fn start_state(
         c += off * wa[l];
     }
     // Pass 2: the model's other accelerations along it, integrated back
-    // from s: E(s_l) = ∫_{s_l}^{s} (τ − s_l)·e(τ) dτ (E(s) = E'(s) = 0).
+    // from s: E(s_l) = ∫_{s_l}^{s} (τ − s_l)·e(τ) dτ (E(s) = E'(s) = 0),
+    // e held per segment between the poses' times and the ticks' ends
+    // (at its midpoint), in one backward pass: with τ' = τ − s,
+    // E(s_l) = Σ_{segments after s_l} ∫ τ'·e − s'_l·∫ e.
     let velocity_at = |t: f64| v1 + p.virtual_position(t).1 + c * (t - s);
-    let mut rows: Vec<(f64, Vector3<f64>)> = Vec::with_capacity(w.len());
-    for q in w {
-        let mut e_int = Vector3::zeros();
-        let mut t = q.t;
-        while t < s - 1e-12 {
-            let mut j = p.tick_at(t)?;
-            if p.t0 + (j + 1) as f64 * p.dt <= t + 1e-12 {
-                j += 1;
-            }
-            let end = (p.t0 + (j + 1) as f64 * p.dt).min(s);
-            let e = extra_acceleration(p, model, residual, j, &velocity_at(0.5 * (t + end)));
-            e_int += e * (0.5 * ((end - q.t).powi(2) - (t - q.t).powi(2)));
-            t = end;
+    let mut cuts: Vec<f64> = times.clone();
+    let mut j = p.tick_at(w[0].t)?;
+    loop {
+        let end = p.t0 + (j + 1) as f64 * p.dt;
+        if end >= s - 1e-12 {
+            break;
         }
+        cuts.push(end);
+        j += 1;
+    }
+    cuts.sort_by(f64::total_cmp);
+    cuts.dedup_by(|a, b| (*a - *b).abs() <= 1e-12);
+    // Suffix sums of ∫ τ'·e and ∫ e over the segments from cut k on.
+    let mut first_moment = vec![Vector3::zeros(); cuts.len()];
+    let mut integral = vec![Vector3::zeros(); cuts.len()];
+    for k in (0..cuts.len().saturating_sub(1)).rev() {
+        let (a, b) = (cuts[k], cuts[k + 1]);
+        let mid = 0.5 * (a + b);
+        let e = extra_acceleration(p, model, residual, p.tick_at(mid)?, &velocity_at(mid));
+        let (a, b) = (a - s, b - s);
+        first_moment[k] = first_moment[k + 1] + e * (0.5 * (b * b - a * a));
+        integral[k] = integral[k + 1] + e * (b - a);
+    }
+    let mut rows: Vec<(f64, Vector3<f64>)> = Vec::with_capacity(w.len());
+    let mut k = 0;
+    for q in w {
+        while k + 1 < cuts.len() && cuts[k] < q.t - 1e-12 {
+            k += 1;
+        }
+        let e_int = first_moment[k] - integral[k] * (q.t - s);
         rows.push((q.t - s, q.y - p.virtual_position(q.t).0 - e_int));
     }
     // Position and velocity (a line) through the rest.
@@ -734,7 +759,7 @@ fn roll(
 }
 
 /// Prediction errors on `which`: from every `stride`-th pose with its
-/// start window, the model rolled through the commands sent to the next
+/// start window (`start_s` \[s\] of poses), the model rolled through the commands sent to the next
 /// pose and to the last pose within `horizon_s` (at least 80 % of it on);
 /// `residual = None`: the parametric model alone.
 pub fn rollouts(
@@ -744,6 +769,7 @@ pub fn rollouts(
     which: Part,
     horizon_s: f64,
     stride: usize,
+    start_s: f64,
 ) -> Errors {
     let mut errors = Errors::default();
     for p in runs {
@@ -757,7 +783,7 @@ pub fn rollouts(
                 .copied();
             let judged = last
                 .filter(|q| q.t >= s + 0.8 * horizon_s && part(s) == which && part(q.t) == which);
-            let start = judged.and_then(|_| start_state(p, model, residual, i));
+            let start = judged.and_then(|_| start_state(p, model, residual, i, start_s));
             if let (Some(h), Some(start)) = (judged, start) {
                 let next = p.poses[i + 1];
                 let one = roll(p, model, residual, start, s, next.t);

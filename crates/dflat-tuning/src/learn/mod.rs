@@ -417,7 +417,12 @@ pub fn learn_with(
             learned: score,
         });
     }
-    let test_p = fit::rollouts(&prepared, model, None, Part::Test, horizon, STRIDE);
+    // Each model's input-to-output map from its own window of poses,
+    // chosen on the validation blocks, judged on the test blocks.
+    let start_p = best_start(&prepared, model, None).ok_or_else(|| no_held_out("validation"))?;
+    let start_l =
+        best_start(&prepared, model, Some(&residual)).ok_or_else(|| no_held_out("validation"))?;
+    let test_p = fit::rollouts(&prepared, model, None, Part::Test, horizon, STRIDE, start_p);
     let test_l = fit::rollouts(
         &prepared,
         model,
@@ -425,6 +430,7 @@ pub fn learn_with(
         Part::Test,
         horizon,
         STRIDE,
+        start_l,
     );
     let test: Vec<fit::Smoothed> = prepared
         .iter()
@@ -434,6 +440,8 @@ pub fn learn_with(
         return Err(no_held_out("test"));
     }
     residual.validation = validation(&test_p, &test_l);
+    residual.validation.start_parametric_s = start_p;
+    residual.validation.start_learned_s = start_l;
     residual.validation.acceleration_parametric =
         fit::acceleration_error(&test, None, model.spatial);
     residual.validation.acceleration_learned =
@@ -549,6 +557,34 @@ fn best_determined(pairs: impl Iterator<Item = (f64, f64)>) -> Option<(f64, f64)
     pairs.max_by(|a, b| (a.0.abs() / a.1).total_cmp(&(b.0.abs() / b.1)))
 }
 
+/// The start window (of [`fit::START_WINDOWS_S`]) with the least
+/// held-out horizon error on the validation blocks for the parametric
+/// model with `residual` (`None`: alone); `None` when no window gives a
+/// validation rollout.
+fn best_start(
+    prepared: &[Prepared],
+    model: &Parametric,
+    residual: Option<&LearnedResidual>,
+) -> Option<f64> {
+    fit::START_WINDOWS_S
+        .iter()
+        .map(|&s| {
+            let e = fit::rollouts(
+                prepared,
+                model,
+                residual,
+                Part::Validate,
+                HORIZON_S,
+                STRIDE,
+                s,
+            );
+            (s, e.horizon_rms())
+        })
+        .filter(|(_, e)| e.is_finite())
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|(s, _)| s)
+}
+
 fn validation(parametric: &Errors, learned: &Errors) -> Validation {
     Validation {
         one_step_parametric_m: parametric.one_step_rms(),
@@ -557,6 +593,8 @@ fn validation(parametric: &Errors, learned: &Errors) -> Validation {
         horizon_parametric_m: parametric.horizon_rms(),
         horizon_learned_m: learned.horizon_rms(),
         samples: learned.count,
+        start_parametric_s: fit::START_WINDOWS_S[1],
+        start_learned_s: fit::START_WINDOWS_S[1],
         acceleration_parametric: f64::NAN,
         acceleration_learned: f64::NAN,
     }

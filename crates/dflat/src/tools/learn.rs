@@ -137,8 +137,10 @@ pub fn report(learned: &Learned, out: &Path, seconds_taken: f64) -> String {
     );
     let _ = writeln!(
         s,
-        "test blocks ({} starts), RMS prediction error from the window:\n  one step     parametric {:.5} m   learned {:.5} m   ({:.2}×)\n  {:.2} s ahead  parametric {:.4} m   learned {:.4} m   ({:.2}×)",
+        "test blocks ({} starts), RMS prediction error from each model's window of poses (chosen on the validation blocks: parametric {:.1} s, learned {:.1} s):\n  one step     parametric {:.5} m   learned {:.5} m   ({:.2}×)\n  {:.2} s ahead  parametric {:.4} m   learned {:.4} m   ({:.2}×)",
         v.samples,
+        v.start_parametric_s,
+        v.start_learned_s,
         v.one_step_parametric_m,
         v.one_step_learned_m,
         ratio(v.one_step_learned_m, v.one_step_parametric_m),
@@ -247,6 +249,8 @@ mod tests {
                 horizon_parametric_m: 0.2,
                 horizon_learned_m: 0.03,
                 samples: 500,
+                start_parametric_s: 0.4,
+                start_learned_s: 1.2,
                 acceleration_parametric: 1.0,
                 acceleration_learned: 0.1,
             },

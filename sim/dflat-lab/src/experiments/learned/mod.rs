@@ -356,13 +356,15 @@ impl LearnedResult {
                     let v = &m.validation;
                     let names: Vec<&str> = m.features.iter().map(|f| f.name()).collect();
                     t += &format!(
-                        "  learned ({label}): r = {}, [{}], {:.0} s; held-out 0.5 s error {:.4} → {:.4} m ({:.2}×), one step {:.5} → {:.5} m\n",
+                        "  learned ({label}): r = {}, [{}], {:.0} s; held-out 0.5 s error {:.4} → {:.4} m ({:.2}×; from {:.1} s → {:.1} s of poses), one step {:.5} → {:.5} m\n",
                         m.window,
                         names.join(", "),
                         m.seconds,
                         v.horizon_parametric_m,
                         v.horizon_learned_m,
                         v.horizon_learned_m / v.horizon_parametric_m,
+                        v.start_parametric_s,
+                        v.start_learned_s,
                         v.one_step_parametric_m,
                         v.one_step_learned_m,
                     );
@@ -552,6 +554,8 @@ pub fn exact_residual(
             horizon_parametric_m: f64::NAN,
             horizon_learned_m: f64::NAN,
             samples: 0,
+            start_parametric_s: f64::NAN,
+            start_learned_s: f64::NAN,
             acceleration_parametric: f64::NAN,
             acceleration_learned: f64::NAN,
         },
