@@ -52,7 +52,7 @@
 //! `tests/e2e_learned.rs`, 2026-11-29; the shared horizontal weights end
 //! that case). Under pose noise a short record could determine a constant
 //! on one axis and not on the other; learned on both, it made the first
-//! axis worse in flight (`E2E_VISION=1` in `tests/e2e_learned.rs`,
+//! axis worse in flight (vision poses in `tests/e2e_learned.rs`,
 //! 2026-11-28).
 
 pub mod data;
