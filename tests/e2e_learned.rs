@@ -56,7 +56,7 @@ const START: [f64; 3] = [0.0, 0.0, -10.0];
 /// the daemon, `link.pose_min_latency_ms`), 2 cm noise — the lab's
 /// sensing; unless `E2E_EXACT=1` (exact poses, module docs).
 fn vision() -> bool {
-    !std::env::var_os("E2E_EXACT").is_some_and(|v| v == "1")
+    std::env::var_os("E2E_EXACT").is_none_or(|v| v != "1")
 }
 
 /// One flight's config: `vehicle` (a `[vehicle]` table or empty),
