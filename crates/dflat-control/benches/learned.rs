@@ -13,7 +13,9 @@
 //! constrained ticks with the residual at N = 200.
 //!
 //! Run: `cargo bench -p dflat-control --bench learned` (horizons as
-//! arguments, e.g. `-- 100 200`).
+//! arguments, e.g. `-- 100 200`). `LEARNED_SLOW=450` prints the ticks
+//! slower than 450 µs (flight, tick, time, constrained): the ticks behind
+//! a p99.
 
 #![allow(missing_docs)]
 
@@ -68,9 +70,10 @@ fn aero_residual() -> LearnedResidual {
     }
 }
 
-/// One closed-loop flight of the L: every tick's update time \[µs\] and
-/// whether it solved a constrained QP.
-fn fly(n: usize, learned: bool) -> Vec<(f64, bool)> {
+/// One closed-loop flight of the L: every tick's update time \[µs\],
+/// whether it solved a constrained QP, and the axes' solves (method,
+/// iterations, warm-started; `LEARNED_SLOW` prints them).
+fn fly(n: usize, learned: bool) -> Vec<(f64, bool, String)> {
     let p = plant();
     let settings = DfMpcSettings {
         horizon: n,
@@ -114,7 +117,11 @@ fn fly(n: usize, learned: bool) -> Vec<(f64, bool)> {
         let Ok(o) = r else {
             continue;
         };
-        out.push((us, o.constrained));
+        let solves: Vec<String> = (0..2)
+            .filter_map(|axis| mpc.box_cascade(axis).and_then(|c| c.solved_by()))
+            .map(|(s, i)| format!("#{s} {:?} {} {}", i.method, i.iterations, if i.warm_started { "warm" } else { "cold" }))
+            .collect();
+        out.push((us, o.constrained, solves.join(", ")));
         let pre = x;
         x = p.step(&x, &Vector2::new(o.command.pitch, o.command.roll));
         let a = (aero(&pre) + aero(&x)) * 0.5;
@@ -122,6 +129,11 @@ fn fly(n: usize, learned: bool) -> Vec<(f64, bool)> {
         x[3] += DT * a.y;
     }
     out
+}
+
+/// `LEARNED_SLOW` [µs]: ticks slower than it are printed.
+fn slow_us() -> Option<f64> {
+    std::env::var("LEARNED_SLOW").ok().and_then(|v| v.parse().ok())
 }
 
 fn percentile(mut v: Vec<f64>, q: f64) -> f64 {
@@ -149,8 +161,14 @@ fn main() {
     for n in horizons {
         for learned in [false, true] {
             let mut all = Vec::new();
-            for _ in 0..REPEATS {
-                all.extend(fly(n, learned));
+            for flight in 0..REPEATS {
+                let ticks = fly(n, learned);
+                if let Some(slow) = slow_us() {
+                    for (k, (t, c, w)) in ticks.iter().enumerate().filter(|(_, (t, _, _))| *t > slow) {
+                        println!("slow: N {n}, residual {learned}, flight {flight}, tick {k}: {t:.0} µs, constrained {c}; {w}");
+                    }
+                }
+                all.extend(ticks.into_iter().map(|(t, c, _)| (t, c)));
             }
             let times: Vec<f64> = all.iter().map(|(t, _)| *t).collect();
             let constrained: Vec<f64> = all.iter().filter(|(_, c)| *c).map(|(t, _)| *t).collect();
