@@ -119,7 +119,14 @@ fn fly(n: usize, learned: bool) -> Vec<(f64, bool, String)> {
         };
         let solves: Vec<String> = (0..2)
             .filter_map(|axis| mpc.box_cascade(axis).and_then(|c| c.solved_by()))
-            .map(|(s, i)| format!("#{s} {:?} {} {}", i.method, i.iterations, if i.warm_started { "warm" } else { "cold" }))
+            .map(|(s, i)| {
+                format!(
+                    "#{s} {:?} {} {}",
+                    i.method,
+                    i.iterations,
+                    if i.warm_started { "warm" } else { "cold" }
+                )
+            })
             .collect();
         out.push((us, o.constrained, solves.join(", ")));
         let pre = x;
@@ -133,7 +140,9 @@ fn fly(n: usize, learned: bool) -> Vec<(f64, bool, String)> {
 
 /// `LEARNED_SLOW` [µs]: ticks slower than it are printed.
 fn slow_us() -> Option<f64> {
-    std::env::var("LEARNED_SLOW").ok().and_then(|v| v.parse().ok())
+    std::env::var("LEARNED_SLOW")
+        .ok()
+        .and_then(|v| v.parse().ok())
 }
 
 fn percentile(mut v: Vec<f64>, q: f64) -> f64 {
@@ -164,8 +173,12 @@ fn main() {
             for flight in 0..REPEATS {
                 let ticks = fly(n, learned);
                 if let Some(slow) = slow_us() {
-                    for (k, (t, c, w)) in ticks.iter().enumerate().filter(|(_, (t, _, _))| *t > slow) {
-                        println!("slow: N {n}, residual {learned}, flight {flight}, tick {k}: {t:.0} µs, constrained {c}; {w}");
+                    for (k, (t, c, w)) in
+                        ticks.iter().enumerate().filter(|(_, (t, _, _))| *t > slow)
+                    {
+                        println!(
+                            "slow: N {n}, residual {learned}, flight {flight}, tick {k}: {t:.0} µs, constrained {c}; {w}"
+                        );
                     }
                 }
                 all.extend(ticks.into_iter().map(|(t, c, _)| (t, c)));
