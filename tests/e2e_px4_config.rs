@@ -23,7 +23,12 @@ use dflat_sitl::SitlSettings;
 /// within it, the worst within twice it.
 const ALTITUDE_BAND: f64 = 0.1;
 /// Flight time after engagement \[s\]; the last [`CHECK_S`] are checked.
-const FLY_S: f64 = 12.0;
+/// The altitude sags about 1 m while the estimator learns the hover
+/// thrust and recovers over some 8 s on a quiet machine (mean error 0.01 m
+/// at 10–12 s); beside two busy loops the recovery lagged 2–4 s (0.09–0.17
+/// m at 10–12 s, one full-suite failure at 12 s), so the flight is 16 s
+/// (p95 0.002–0.043 m over the last 3 s in five loaded runs).
+const FLY_S: f64 = 16.0;
 const CHECK_S: f64 = 3.0;
 
 fn px4_toml() -> (String, &'static Path) {
