@@ -59,7 +59,7 @@ pub const BLOCK_S: f64 = 4.0;
 
 /// The spans \[s\] of poses before a held-out start that its state may be
 /// fitted from; each model is judged from its own, chosen on the
-/// validation blocks ([`super::best_start`]). A model that explains the
+/// validation blocks (`learn`'s `best_start`). A model that explains the
 /// flight affords a long window, which averages the pose noise; one that
 /// leaves acceleration unexplained bends its start over a long one.
 pub const START_WINDOWS_S: [f64; 6] = [0.2, 0.4, 0.8, 1.2, 1.6, 2.4];
