@@ -109,3 +109,36 @@ fn settings_are_validated() {
         "disturbance.max_step"
     );
 }
+
+/// Multi-rate mode: ticks whose times jitter within half a step of the
+/// grid (late poses' deadline ticks under load) keep the fit window, so a
+/// constant offset is still learned; under the old rule (a restart beyond
+/// a quarter step) a tick every fifth 6 ms late kept the window from ever
+/// filling. A missed tick (two steps) still restarts it.
+#[test]
+fn jittered_ticks_keep_the_window() {
+    let d = 0.5;
+    let est = |jitter: f64| {
+        let mut e = DisturbanceEstimator::new(planar(), DisturbanceSettings::default()).unwrap();
+        let dt = 0.02;
+        // Level attitude, zero inputs: the plant's only acceleration is d on x.
+        for k in 0..2000 {
+            let late = if k % 5 == 2 { jitter } else { 0.0 };
+            let t = k as f64 * dt + late;
+            e.observe(t, &Vector3::new(0.5 * d * t * t, 0.0, 0.0));
+            e.begin_tick();
+            e.record_input(t, &Vector3::zeros(), false);
+        }
+        e
+    };
+    let e = est(0.006);
+    assert_eq!(e.status(), EstimatorStatus::Tracking);
+    let got = e.estimate().acceleration.x;
+    assert!((got - d).abs() < 0.02 * d, "d̂ {got} against {d}");
+    // A missed tick restarts the window: not tracking right after it.
+    let mut e = est(0.0);
+    e.observe(40.04, &Vector3::new(0.5 * d * 40.04f64.powi(2), 0.0, 0.0));
+    e.begin_tick();
+    e.record_input(40.04, &Vector3::zeros(), false);
+    assert_ne!(e.status(), EstimatorStatus::Tracking);
+}
