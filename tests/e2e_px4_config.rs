@@ -26,7 +26,7 @@ const ALTITUDE_BAND: f64 = 0.1;
 /// The altitude sags about 1 m while the estimator learns the hover
 /// thrust and recovers within some 10 s. Under load the daemon ticks on
 /// its deadline for late poses; until 2026-11-29 the estimator restarted
-/// its fit window on each such tick, and beside four busy loops the sag
+/// its fit window on each such tick, and beside eight busy loops (load average ~10) the sag
 /// was still 0.2–1.2 m 13–16 s into a 16 s hover (the full suite failed
 /// this test twice); with the window kept, 0.001 m there and 0.011–0.016 m
 /// over the last 3 s of 12 s (`DisturbanceEstimator::record_input`).

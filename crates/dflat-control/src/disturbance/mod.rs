@@ -517,7 +517,7 @@ impl DisturbanceEstimator {
     /// does one less than half a step after it. A tick within half a step
     /// of its time (a late pose's deadline tick, jitter) keeps the window:
     /// restarting there (the rule was ±¼ step until 2026-11-29) starved the
-    /// fit under load — 150–270 deadline ticks in a 16 s hover beside four
+    /// fit under load — 150–270 deadline ticks in a 16 s hover beside eight
     /// busy loops left the hover sag 0.2–1.2 m after 13 s, against 0.001 m
     /// with the window kept (`tests/e2e_px4_config.rs`).
     pub fn record_input(&mut self, t: f64, u: &Vector3<f64>, saturated: bool) {
