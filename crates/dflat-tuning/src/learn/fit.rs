@@ -671,7 +671,7 @@ fn start_state(
     // (at its midpoint), in one backward pass: with τ' = τ − s,
     // E(s_l) = Σ_{segments after s_l} ∫ τ'·e − s'_l·∫ e.
     let velocity_at = |t: f64| v1 + p.virtual_position(t).1 + c * (t - s);
-    let mut cuts: Vec<f64> = times.clone();
+    let mut cuts = times;
     let mut j = p.tick_at(w[0].t)?;
     loop {
         let end = p.t0 + (j + 1) as f64 * p.dt;

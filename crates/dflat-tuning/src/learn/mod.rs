@@ -439,9 +439,7 @@ pub fn learn_with(
     if test_l.count == 0 || test.is_empty() {
         return Err(no_held_out("test"));
     }
-    residual.validation = validation(&test_p, &test_l);
-    residual.validation.start_parametric_s = start_p;
-    residual.validation.start_learned_s = start_l;
+    residual.validation = validation((&test_p, start_p), (&test_l, start_l));
     residual.validation.acceleration_parametric =
         fit::acceleration_error(&test, None, model.spatial);
     residual.validation.acceleration_learned =
@@ -585,7 +583,12 @@ fn best_start(
         .map(|(s, _)| s)
 }
 
-fn validation(parametric: &Errors, learned: &Errors) -> Validation {
+/// The test blocks' errors of the parametric model and with the residual,
+/// each with the start window it was judged from \[s\].
+fn validation(
+    (parametric, start_parametric_s): (&Errors, f64),
+    (learned, start_learned_s): (&Errors, f64),
+) -> Validation {
     Validation {
         one_step_parametric_m: parametric.one_step_rms(),
         one_step_learned_m: learned.one_step_rms(),
@@ -593,8 +596,8 @@ fn validation(parametric: &Errors, learned: &Errors) -> Validation {
         horizon_parametric_m: parametric.horizon_rms(),
         horizon_learned_m: learned.horizon_rms(),
         samples: learned.count,
-        start_parametric_s: fit::START_WINDOWS_S[1],
-        start_learned_s: fit::START_WINDOWS_S[1],
+        start_parametric_s,
+        start_learned_s,
         acceleration_parametric: f64::NAN,
         acceleration_learned: f64::NAN,
     }
