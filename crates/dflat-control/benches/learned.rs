@@ -21,22 +21,18 @@
 
 #[path = "common/mod.rs"]
 mod common;
+#[path = "common/l_with_drag.rs"]
+mod l_with_drag;
 
 use std::collections::BTreeMap;
-use std::time::Instant;
 
-use dflat_control::dfmpc::{DfMpc, DfMpcSettings, OutputConstraints};
+use dflat_control::ControlModel;
+use dflat_control::dfmpc::DfMpc;
 use dflat_control::learned::{
-    FORMAT, Feature, LearnedResidual, Support, VERSION, Validation, columns, thrust_axis,
+    FORMAT, Feature, LearnedResidual, Support, VERSION, Validation, columns,
 };
-use dflat_control::reference::Reference;
-use dflat_control::window::MultiRateSettings;
-use dflat_control::{ControlModel, Controller, Measurement};
-use dflat_model::FlatModel;
-use nalgebra::{SVector, Vector2, Vector3};
 
 const TICKS: usize = 400;
-const SPEED: f64 = 8.0;
 const REPEATS: usize = 5;
 
 use common::{DT, plant};
@@ -70,52 +66,17 @@ fn aero_residual() -> LearnedResidual {
     }
 }
 
-/// One closed-loop flight of the L: every tick's update time \[µs\],
-/// whether it solved a constrained QP, and the axes' solves (method,
-/// iterations, warm-started; `LEARNED_SLOW` prints them).
+/// One closed-loop flight of the L ([`l_with_drag::fly`]): every tick's
+/// update time \[µs\], whether it solved a constrained QP, and the axes'
+/// solves (method, iterations, warm-started; `LEARNED_SLOW` prints them).
 fn fly(n: usize, learned: bool) -> Vec<(f64, bool, String)> {
     let p = plant();
-    let settings = DfMpcSettings {
-        horizon: n,
-        smoothness_weight: [50.0, 50.0, 0.0],
-        jerk_weight: [0.003; 3],
-        multi_rate: Some(MultiRateSettings::default()),
-        constraints: OutputConstraints {
-            max_tilt: Some(20f64.to_radians()),
-            max_tilt_rate: Some(150f64.to_radians()),
-            ..OutputConstraints::default()
-        },
-        solver_time_limit: f64::INFINITY,
-        ..DfMpcSettings::default()
-    };
-    let mut mpc = DfMpc::new(ControlModel::Planar(p), settings).unwrap();
+    let mut mpc = DfMpc::new(ControlModel::Planar(p), l_with_drag::settings(n)).unwrap();
     mpc.set_learned(learned.then(aero_residual));
-    let w = [
-        Vector3::new(0.0, 0.0, -10.0),
-        Vector3::new(20.0, 0.0, -10.0),
-        Vector3::new(20.0, 20.0, -10.0),
-    ];
-    let mut reference = Reference::path(&w, SPEED).unwrap();
-    let mut x = SVector::<f64, 6>::zeros();
-    let aero = |s: &SVector<f64, 6>| {
-        let v = Vector3::new(s[1], s[3], 0.0);
-        let n = thrust_axis(s[5], s[4], 0.0);
-        -v * (0.03 * v.norm()) - (v - n * n.dot(&v)) * 0.2
-    };
     let mut out = Vec::with_capacity(TICKS);
-    for k in 0..TICKS {
-        let y = p.output(&x);
-        let m = Measurement {
-            t: k as f64 * DT,
-            position: Vector3::new(y.x, y.y, -10.0),
-            yaw: 0.0,
-        };
-        mpc.observe(&m);
-        let started = Instant::now();
-        let r = mpc.update(&m, &mut reference);
-        let us = started.elapsed().as_secs_f64() * 1e6;
+    l_with_drag::fly(&p, &mut mpc, TICKS, |_, mpc, r, us| {
         let Ok(o) = r else {
-            continue;
+            return;
         };
         let solves: Vec<String> = (0..2)
             .filter_map(|axis| mpc.box_cascade(axis).and_then(|c| c.solved_by()))
@@ -129,12 +90,7 @@ fn fly(n: usize, learned: bool) -> Vec<(f64, bool, String)> {
             })
             .collect();
         out.push((us, o.constrained, solves.join(", ")));
-        let pre = x;
-        x = p.step(&x, &Vector2::new(o.command.pitch, o.command.roll));
-        let a = (aero(&pre) + aero(&x)) * 0.5;
-        x[1] += DT * a.x;
-        x[3] += DT * a.y;
-    }
+    });
     out
 }
 

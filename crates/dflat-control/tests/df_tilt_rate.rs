@@ -22,6 +22,8 @@ use dflat_model::{FlatModel, PlanarModel};
 use nalgebra::{SVector, Vector2, Vector3};
 
 mod common;
+#[path = "../benches/common/l_with_drag.rs"]
+mod l_with_drag;
 use common::{DT, G, Setpoint, planar_ned};
 
 /// The daemon's default bound \[deg/s\] (`controller.dfmpc.max_tilt_rate_deg_s`).
@@ -248,7 +250,8 @@ fn assert_the_l_path_keeps_the_tilt_rate(tilt: PlanTiltBound) {
 
 /// The daemon's box and tilt-rate bound on the L at 8 m/s from rest,
 /// closed loop, with aerodynamics the model has no term for (0.03 |v|v
-/// and 0.2 /s in the rotor plane, as `benches/learned.rs` flies it): every
+/// and 0.2 /s in the rotor plane, as `benches/learned.rs` flies it:
+/// `benches/common/l_with_drag.rs`): every
 /// constrained tick's box QP is solved by the active set, none by the
 /// stage interior point. Its seventh tick meets a degenerate vertex (the
 /// command's ramp up and down from the horizon's start meeting the 20°
@@ -260,44 +263,11 @@ fn assert_the_l_path_keeps_the_tilt_rate(tilt: PlanTiltBound) {
 #[test]
 fn the_l_from_rest_with_drag_stays_in_the_active_set() {
     use dflat_control::optimise::SolverMethod;
-    use dflat_control::window::MultiRateSettings;
     let p = planar_ned(0.0);
-    let settings = DfMpcSettings {
-        horizon: 200,
-        smoothness_weight: [50.0, 50.0, 0.0],
-        jerk_weight: [0.003; 3],
-        multi_rate: Some(MultiRateSettings::default()),
-        constraints: OutputConstraints {
-            max_tilt: Some(20f64.to_radians()),
-            max_tilt_rate: Some(RATE_DEG_S.to_radians()),
-            ..OutputConstraints::default()
-        },
-        solver_time_limit: f64::INFINITY,
-        ..DfMpcSettings::default()
-    };
-    let mut mpc = DfMpc::new(ControlModel::Planar(p), settings).unwrap();
-    let w = [
-        Vector3::new(0.0, 0.0, -10.0),
-        Vector3::new(20.0, 0.0, -10.0),
-        Vector3::new(20.0, 20.0, -10.0),
-    ];
-    let mut reference = Reference::path(&w, 8.0).unwrap();
-    let aero = |s: &SVector<f64, 6>| {
-        let v = Vector3::new(s[1], s[3], 0.0);
-        let n = dflat_control::learned::thrust_axis(s[5], s[4], 0.0);
-        -v * (0.03 * v.norm()) - (v - n * n.dot(&v)) * 0.2
-    };
-    let mut x = SVector::<f64, 6>::zeros();
+    let mut mpc = DfMpc::new(ControlModel::Planar(p), l_with_drag::settings(200)).unwrap();
     let mut constrained = 0;
-    for k in 0..30 {
-        let y = p.output(&x);
-        let m = Measurement {
-            t: k as f64 * DT,
-            position: Vector3::new(y.x, y.y, -10.0),
-            yaw: 0.0,
-        };
-        mpc.observe(&m);
-        let o = mpc.update(&m, &mut reference).unwrap();
+    l_with_drag::fly(&p, &mut mpc, 30, |k, mpc, r, _| {
+        let o = r.as_ref().unwrap();
         if o.constrained {
             constrained += 1;
             for axis in 0..2 {
@@ -310,11 +280,6 @@ fn the_l_from_rest_with_drag_stays_in_the_active_set() {
                 }
             }
         }
-        let pre = x;
-        x = p.step(&x, &Vector2::new(o.command.pitch, o.command.roll));
-        let a = (aero(&pre) + aero(&x)) * 0.5;
-        x[1] += DT * a.x;
-        x[3] += DT * a.y;
-    }
+    });
     assert!(constrained >= 20, "{constrained} constrained ticks");
 }
