@@ -341,7 +341,7 @@ fn a_cold_rate_limited_solve_ends_in_the_active_set() {
 /// step to −10 m from rest warm-started from it (every row of its ramp on
 /// the wrong side). Both end at clarabel's plan, every row kept; the
 /// mirrored solve within `WARM_SOLVES` KKT solves in all (a warm start
-/// run to its 8 solves, then the cold start's, takes more), the one after
+/// run to its `WARM_SOLVES`, then the cold start's, takes more), the one after
 /// it from the condensed interior point's set although its guess is good.
 #[test]
 fn a_warm_start_far_from_the_optimum_goes_cold_at_once() {

@@ -33,7 +33,7 @@
 //! three KKT solves.
 //!
 //! **Cold starts** (`interior.rs`). Without a guess (a burst's first
-//! tick), or when a warm start has not ended within `WARM_SOLVES` (8) KKT
+//! tick), or when a warm start has not ended within `WARM_SOLVES` (14) KKT
 //! solves or its KKT point misprices or breaks more than `WARM_DISTANCE`
 //! (40) constraints at once (and on the next solve after such a warm
 //! start), the working set is read off a condensed
@@ -94,15 +94,22 @@ const BLOCK_STEPS: usize = 2;
 pub const MAX_SOLVES: usize = 40;
 /// KKT solves a warm start (a guessed working set) may take before the
 /// solve starts again cold, from the interior point's set
-/// (`interior.rs`). On the corner bench at N = 200 with box and tilt
-/// rate, 3060 of 3090 warm solves that end within 12 take at most 8; 45
-/// do not end within 12, and those tried with 400 did not end in 400. The
-/// p99 of its constrained ticks with 6 / 8 / 12 / 20 / 40: 779 / 733 /
-/// 834 / 1030 / 2719 µs. The guesses fail in streaks (ticks 194–199 of
+/// (`interior.rs`). A cold solve costs the interior point's 10–19
+/// iterations (~20 µs each at N = 200) and 1–4 KKT solves (~20 µs each),
+/// so a warm start that ends within ~14 is still the cheaper one. With
+/// box and tilt rate at N = 200, constrained p99 µs in three interleaved
+/// runs each (docs/performance.md, "Longer warm starts"): 8 → 14, the
+/// corner bench 460–468 → 446–448, the learned bench's L with drag
+/// 508–517 → 427–433 with the residual and 496–544 → 378–383 without;
+/// 16 gave 447–452 and 450–474; 40 leaves the cold start no budget
+/// (`MAX_SOLVES`) and sends 15 solves of the corner to the stage interior
+/// point (p99 626). (On 2026-11-28, with dearer KKT solves and no
+/// `WARM_DISTANCE`, 8 was best: 6 / 8 / 12 / 20 / 40 gave 779 / 733 /
+/// 834 / 1030 / 2719 µs.) The guesses fail in streaks (ticks 194–199 of
 /// the corner replay): after one fails, the axis's next solve starts
 /// cold (p99 of 8 interleaved runs each, median: 481 → 466 µs; the
 /// median 108 → 110 µs).
-const WARM_SOLVES: usize = 8;
+const WARM_SOLVES: usize = 14;
 /// A warm start whose KKT point, in a block step or while it is made dual
 /// feasible, misprices (wrong-signed multipliers) or breaks more
 /// constraints than this at once starts again cold at once: its set is
