@@ -26,6 +26,11 @@ pub struct Pose {
     pub t: f64,
     /// Measured position, local NED \[m\].
     pub y: Vector3<f64>,
+    /// The true position at `t`, local NED \[m\], where a simulator knows
+    /// it (the lab's records); `None` in a flight's record. Used only to
+    /// judge the held-out prediction without the poses' noise
+    /// ([`super::Learned::horizon_truth_m`]); nothing is fitted to it.
+    pub truth: Option<Vector3<f64>>,
 }
 
 /// A run of consecutive engaged ticks (`HOLDING` or `TRACKING`: the
@@ -43,8 +48,14 @@ impl Run {
     /// Adds a pose captured at `t`, unless it is not newer than the last
     /// one (a pose seen by several ticks is one pose).
     pub fn push_pose(&mut self, t: f64, y: Vector3<f64>) {
+        self.push_pose_with_truth(t, y, None);
+    }
+
+    /// As [`Run::push_pose`], with the true position at `t` (a
+    /// simulator's records: [`Pose::truth`]).
+    pub fn push_pose_with_truth(&mut self, t: f64, y: Vector3<f64>, truth: Option<Vector3<f64>>) {
         if self.poses.last().is_none_or(|p| t > p.t + 1e-9) && t.is_finite() {
-            self.poses.push(Pose { t, y });
+            self.poses.push(Pose { t, y, truth });
         }
     }
 }

@@ -599,6 +599,11 @@ pub struct Errors {
     pub horizon: f64,
     /// Starts.
     pub count: usize,
+    /// Σ |y*_H − ŷ_H|² against the true positions y* where the poses
+    /// carry them ([`Pose::truth`]) \[m²\], and over how many starts.
+    pub horizon_truth: f64,
+    /// Starts whose horizon pose carries its true position.
+    pub truth_count: usize,
 }
 
 impl Errors {
@@ -610,6 +615,12 @@ impl Errors {
     /// RMS horizon error \[m\] (NaN without starts).
     pub fn horizon_rms(&self) -> f64 {
         (self.horizon / self.count as f64).sqrt()
+    }
+
+    /// RMS horizon error against the true positions \[m\] (NaN without
+    /// starts that carry them).
+    pub fn horizon_truth_rms(&self) -> f64 {
+        (self.horizon_truth / self.truth_count as f64).sqrt()
     }
 }
 
@@ -792,6 +803,10 @@ pub fn rollouts(
                     errors.one_step += (next.y - one).norm_squared();
                     errors.horizon += (h.y - far).norm_squared();
                     errors.count += 1;
+                    if let Some(truth) = h.truth {
+                        errors.horizon_truth += (truth - far).norm_squared();
+                        errors.truth_count += 1;
+                    }
                 }
             }
             i += stride;

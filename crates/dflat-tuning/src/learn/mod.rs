@@ -205,6 +205,11 @@ pub struct Learned {
     pub parametric_axes: Vec<(usize, String)>,
     /// Candidates tried (window × basis × λ).
     pub candidates: usize,
+    /// The test blocks' held-out horizon error against the true positions
+    /// \[m\], parametric and with the residual (each from its own start
+    /// window), when the records carry them (a simulator's: the lab);
+    /// `None` for a flight's records. Not written to the model file.
+    pub horizon_truth_m: Option<[f64; 2]>,
 }
 
 /// NED axes left to the parametric model, with why.
@@ -445,11 +450,14 @@ pub fn learn_with(
     residual.validation.acceleration_learned =
         fit::acceleration_error(&test, Some(&residual), model.spatial);
     residual.seconds = seconds;
+    let horizon_truth_m = (test_p.truth_count > 0 && test_l.truth_count > 0)
+        .then(|| [test_p.horizon_truth_rms(), test_l.horizon_truth_rms()]);
     Ok(Learned {
         residual,
         unexcited,
         parametric_axes,
         candidates,
+        horizon_truth_m,
     })
 }
 

@@ -264,6 +264,13 @@ pub struct GroupModels {
     pub learned: Option<LearnedResidual>,
     /// The residual with the window chosen from data.
     pub learned_window: Option<LearnedResidual>,
+    /// The held-out 0.5 s prediction error against the plant's true
+    /// positions \[m\], parametric and with the residual (window 3; each
+    /// model from its own start window, as in its `validation`, which is
+    /// judged against the noisy poses).
+    pub learned_truth_m: Option<[f64; 2]>,
+    /// The same for the residual with the window chosen from data.
+    pub learned_window_truth_m: Option<[f64; 2]>,
     /// Why a residual was not learned.
     pub refusals: Vec<String>,
     /// The basis groups the records did not determine, and why.
@@ -348,9 +355,13 @@ impl LearnedResult {
                     g.identify_changes.join("; ")
                 }
             );
-            for (label, m) in [
-                ("window 3", &g.learned),
-                ("window from data", &g.learned_window),
+            for (label, m, truth) in [
+                ("window 3", &g.learned, g.learned_truth_m),
+                (
+                    "window from data",
+                    &g.learned_window,
+                    g.learned_window_truth_m,
+                ),
             ] {
                 if let Some(m) = m {
                     let v = &m.validation;
@@ -368,6 +379,12 @@ impl LearnedResult {
                         v.one_step_parametric_m,
                         v.one_step_learned_m,
                     );
+                    if let Some([p, l]) = truth {
+                        t += &format!(
+                            "    against the true positions (no pose noise at the horizon): {p:.4} → {l:.4} m ({:.2}×)\n",
+                            l / p
+                        );
+                    }
                 }
             }
             for why in &g.refusals {
@@ -491,7 +508,7 @@ fn learned(
     spatial: bool,
     g: f64,
     window: Option<usize>,
-) -> Result<(LearnedResidual, Vec<String>), String> {
+) -> Result<(LearnedResidual, Vec<String>, Option<[f64; 2]>), String> {
     learn::learn_with(runs, &vehicle.table(spatial, g), LearnOptions { window })
         .map(|l| {
             let axis = |a: &usize| ["x", "y", "z"].get(*a).copied().unwrap_or("?");
@@ -505,7 +522,7 @@ fn learned(
                         .map(|(a, w)| format!("axis {}: parametric ({w})", axis(a))),
                 )
                 .collect();
-            (l.residual, why)
+            (l.residual, why, l.horizon_truth_m)
         })
         .map_err(|e| e.to_string())
 }
@@ -649,10 +666,14 @@ pub fn run_learned(
                 .collect();
             let mut unexcited: Vec<String> = Vec::new();
             for (label, r) in [("window 3", &fixed), ("window from data", &chosen)] {
-                if let Ok((_, why)) = r {
+                if let Ok((_, why, _)) = r {
                     unexcited.extend(why.iter().map(|w| format!("{label}: {w}")));
                 }
             }
+            let truth = |r: &Result<(LearnedResidual, Vec<String>, Option<[f64; 2]>), String>| {
+                r.as_ref().ok().and_then(|m| m.2)
+            };
+            let (learned_truth_m, learned_window_truth_m) = (truth(&fixed), truth(&chosen));
             let (fixed, chosen) = (fixed.map(|m| m.0), chosen.map(|m| m.0));
             GroupModels {
                 plant: gr.plant.name(),
@@ -661,6 +682,8 @@ pub fn run_learned(
                 identify_changes: ids[i].1.clone(),
                 learned: fixed.ok(),
                 learned_window: chosen.ok(),
+                learned_truth_m,
+                learned_window_truth_m,
                 refusals,
                 unexcited,
             }
@@ -717,7 +740,7 @@ pub fn run_learned(
         for &s in &config.seconds {
             let runs = group_records(0, Some(s));
             let m = match learned(&runs, &ids[0].0, gr.plant.spatial(), g, None) {
-                Ok((m, _)) => m,
+                Ok((m, _, _)) => m,
                 Err(why) => {
                     // Nothing learned: the daemon keeps the identified model.
                     // (The first group's rows are the first cells.len().)
