@@ -500,6 +500,11 @@ fn identified(
     (v, said)
 }
 
+/// A learned residual, the basis groups and axes it left (in words), and
+/// its held-out error against the true positions (parametric, learned)
+/// \[m\].
+type LearnedModel = (LearnedResidual, Vec<String>, Option<[f64; 2]>);
+
 /// Learns over `vehicle` from `runs` (window fixed or chosen); the model or
 /// why not.
 fn learned(
@@ -508,7 +513,7 @@ fn learned(
     spatial: bool,
     g: f64,
     window: Option<usize>,
-) -> Result<(LearnedResidual, Vec<String>, Option<[f64; 2]>), String> {
+) -> Result<LearnedModel, String> {
     learn::learn_with(runs, &vehicle.table(spatial, g), LearnOptions { window })
         .map(|l| {
             let axis = |a: &usize| ["x", "y", "z"].get(*a).copied().unwrap_or("?");
@@ -670,9 +675,7 @@ pub fn run_learned(
                     unexcited.extend(why.iter().map(|w| format!("{label}: {w}")));
                 }
             }
-            let truth = |r: &Result<(LearnedResidual, Vec<String>, Option<[f64; 2]>), String>| {
-                r.as_ref().ok().and_then(|m| m.2)
-            };
+            let truth = |r: &Result<LearnedModel, String>| r.as_ref().ok().and_then(|m| m.2);
             let (learned_truth_m, learned_window_truth_m) = (truth(&fixed), truth(&chosen));
             let (fixed, chosen) = (fixed.map(|m| m.0), chosen.map(|m| m.0));
             GroupModels {
