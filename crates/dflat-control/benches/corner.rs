@@ -32,7 +32,8 @@
 //! first ticks of the bursts (each a cold solve: the unconstrained plan
 //! and, the last burst's having aged out, no multipliers), their Newton
 //! steps, and the other constrained ticks, for the warm cone, the cone
-//! with warm starts off and the box.
+//! with warm starts off, the box, and with the tilt-rate bound the box
+//! (the shipped default), the rate alone and the cone.
 //! `CORNER_ONLY` runs the course only when one of its parts is `course`.
 //!
 //! With the feature `osqp-bench` (off by default: the `osqp` crate builds
@@ -541,7 +542,14 @@ fn print_ratios(stats: &[[f64; 6]]) {
 /// constrained ticks (median / p99 / max µs).
 fn course_of_corners(horizons: &[usize], chosen: &dyn Fn(Config) -> bool) {
     const REPEATS: usize = 3;
-    let configs = [Config::ConeWarm, Config::ConeCold, Config::BoxBanded];
+    let configs = [
+        Config::ConeWarm,
+        Config::ConeCold,
+        Config::BoxBanded,
+        Config::BoxRate,
+        Config::RateAlone,
+        Config::ConeRate,
+    ];
     if !configs.iter().any(|&c| chosen(c)) {
         return;
     }

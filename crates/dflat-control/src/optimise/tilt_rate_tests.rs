@@ -358,6 +358,35 @@ fn a_warm_start_far_from_the_optimum_goes_cold_at_once() {
     }
 }
 
+/// A burst's first tick whose unconstrained plan breaks a few constraints
+/// (a small step of the reference, from rest: at most `COLD_FEW`) is
+/// solved by the active set from the rollout of that plan, without the
+/// condensed interior point, and ends at clarabel's plan, every row kept;
+/// a 10 m step (most of the horizon broken) still goes to the interior
+/// point ([`a_cold_rate_limited_solve_ends_in_the_active_set`]).
+#[test]
+fn a_burst_that_breaks_a_few_constraints_starts_without_the_interior_point() {
+    for a_max in [None, Some(3.0)] {
+        for target in [0.3, 0.6] {
+            let bounds = step_bounds(a_max);
+            let mut alm = step_alm(bounds);
+            let (got, want) = solve_step(&mut alm, bounds, target);
+            let work = alm.active_set_work();
+            eprintln!("{a_max:?}, {target} m: {work:?}");
+            assert!(
+                work.solves > 1,
+                "{a_max:?}, {target} m: nothing broken: {work:?}"
+            );
+            assert_eq!(work.interior, 0, "{a_max:?}, {target} m: {work:?}");
+            check_step(&format!("{a_max:?}, {target} m"), bounds, &got, &want);
+        }
+    }
+    let bounds = step_bounds(None);
+    let mut alm = step_alm(bounds);
+    solve_step(&mut alm, bounds, 10.0);
+    assert!(alm.active_set_work().interior > 0);
+}
+
 /// The augmented Lagrangian alone ([`BoxAlmSolver`] at its cold tuning)
 /// of the rate-limited step.
 fn step_alm(bounds: AxisBounds) -> BoxAlmSolver {

@@ -8,21 +8,44 @@ use super::{ActiveSet, Problem, Side};
 use crate::ControlError;
 
 impl ActiveSet {
-    /// A cold solve's start (no guess): the unconstrained plan, then the
-    /// interior point's working set ([`ActiveSet::interior_guess`]) or
-    /// else its rollout's ([`ActiveSet::rollout_guess`]). Returns
-    /// true when the unconstrained plan is the optimum (solved).
+    /// A cold solve's start (no guess): the unconstrained plan; when it
+    /// breaks at most [`super::COLD_FEW`] constraints and no warm start
+    /// ran this solve (`first`), the methods from the set it breaks,
+    /// within `WARM_SOLVES` KKT solves; else, or when that does not end,
+    /// the interior point's working set ([`ActiveSet::interior_guess`])
+    /// or else its rollout's ([`ActiveSet::rollout_guess`]). Returns true
+    /// when solved.
     pub(super) fn cold_start(
         &mut self,
         prob: &Problem<'_>,
         p_times: &mut impl FnMut(&[f64], &mut [f64]),
+        first: bool,
     ) -> Result<bool, ControlError> {
         self.kkt_solve(prob)?;
         self.take_solution(false);
         let m = self.cons.len();
-        if !(0..m).any(|id| self.broken(prob, id).0 > 0.0) {
+        let broken = (0..m).filter(|&id| self.broken(prob, id).0 > 0.0).count();
+        if broken == 0 {
             self.refine(prob, p_times)?;
             return Ok(true);
+        }
+        if first && broken <= super::COLD_FEW {
+            self.unconstrained.copy_from_slice(&self.x);
+            let budget = self.budget;
+            self.budget = budget.min(self.work.solves + super::WARM_SOLVES);
+            self.warm = true;
+            self.rollout_guess();
+            let few = self.run(prob, p_times);
+            self.warm = false;
+            self.budget = budget;
+            match few {
+                Ok(()) => return Ok(true),
+                Err(_) if budget > self.work.solves => {
+                    self.forget_set();
+                    self.x.copy_from_slice(&self.unconstrained);
+                }
+                Err(e) => return Err(e),
+            }
         }
         self.from_interior = self.interior_guess(prob)?;
         if !self.from_interior {
