@@ -187,28 +187,45 @@ const ATTEMPTS: usize = 3;
 /// The daemon flies the stream: its figures and its largest command step
 /// over the stream \[deg/tick\] (from the commands it sent). A flight whose
 /// own records show a tick later than [`STARVED_US`] is flown again, up to
-/// [`ATTEMPTS`] flights; the last is judged whatever its timing. The
-/// budgets are the daemon's as deployed, on its real-time thread: beside
-/// two busy loops one flight of the eight sent ahead had ticks 11 ms late
-/// (p95 0.0317 m against its 0.03 m budget; 0.0256 m on time).
+/// [`ATTEMPTS`] flights; when every one was starved, the least late is
+/// judged (the suite beside two busy loops once starved all three of the
+/// delayed eight, 11, 10 and an unreported ms, and the last flown, judged
+/// then, read p95 0.035 m against 0.023–0.024 m on time). The budgets are
+/// the daemon's as deployed, on its real-time thread: beside two busy
+/// loops one flight of the eight sent ahead had ticks 11 ms late (p95
+/// 0.0317 m against its 0.03 m budget; 0.0256 m on time).
 fn daemon_flight(name: &str, form: &Form) -> (Judged, f64) {
     let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    let mut attempt = 1;
-    let flight = loop {
+    let mut least_late: Option<(f64, Flight)> = None;
+    for attempt in 1..=ATTEMPTS {
         let flight = fly_in_process(
             &format!("{name}-{attempt}"),
             &form.config(false),
             Duration::from_secs_f64(DURATION_S + 3.0),
         );
         let late = flight.latest_tick_us();
-        if late <= STARVED_US || attempt == ATTEMPTS {
-            break flight;
+        let on_time = late <= STARVED_US;
+        if !on_time {
+            println!(
+                "{name}: a tick ran {late:.0} µs late in flight {attempt} (the machine starved it){}",
+                if attempt < ATTEMPTS {
+                    ": flown again"
+                } else {
+                    ""
+                }
+            );
         }
-        println!(
-            "{name}: a tick ran {late:.0} µs late in flight {attempt} (the machine starved it): flown again"
-        );
-        attempt += 1;
-    };
+        if least_late.as_ref().is_none_or(|(l, _)| late < *l) {
+            least_late = Some((late, flight));
+        }
+        if on_time {
+            break;
+        }
+    }
+    let (late, flight) = least_late.expect("at least one flight");
+    if late > STARVED_US {
+        println!("{name}: every flight was starved; the least late ({late:.0} µs) is judged");
+    }
     let first = flight.attitude_targets().next().map(|(f, _)| f.at).unwrap();
     let stream_end = first + Duration::from_secs_f64(DURATION_S + 1.0);
     let step = largest_tilt_step_deg(
