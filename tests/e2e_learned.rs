@@ -141,56 +141,16 @@ fn tlog_in(dir: &Path) -> PathBuf {
     csv_in(dir).with_extension("tlog")
 }
 
-/// A tick this late in the daemon's own records \[µs\] (a quarter of its
-/// 20 ms period) means the machine starved the flight: it is flown again.
-const STARVED_US: f64 = 5000.0;
-/// Flights at most, when the machine starves them.
-const ATTEMPTS: usize = 3;
-
 /// Flies `config` (real daemon, in-process SITL) and judges it from the
 /// daemon's CSV: TRACKING ticks from the first one + ramp + 2 s to the
-/// stream's end. A flight whose own records show a tick later than
-/// [`STARVED_US`] is flown again, up to [`ATTEMPTS`] flights; when every
-/// one was starved the least late is judged. The judged flight's records
-/// are left in `name`'s scratch directory (identify and learn read them).
-/// (The loaded suite once flew the learned flight at 1.34× matched, 0.0725
-/// against 0.0543 m, where it flies 1.00–1.02× on time, beside two busy
-/// loops too.)
+/// stream's end. A flight the machine starved is flown again, and when
+/// every one was, the least late is judged ([`fly_unstarved`]); the judged
+/// flight's records are in `name`'s scratch directory (identify and learn
+/// read them). (The loaded suite once flew the learned flight at 1.34×
+/// matched, 0.0725 against 0.0543 m, where it flies 1.00–1.02× on time,
+/// beside two busy loops too.)
 fn fly(name: &str, config: &str) -> Judged {
-    let mut least_late: Option<(f64, usize, Flight)> = None;
-    for attempt in 1..=ATTEMPTS {
-        let flight = fly_in_process(
-            &format!("{name}-{attempt}"),
-            config,
-            Duration::from_secs_f64(STREAM_S + 2.5),
-        );
-        let late = flight.latest_tick_us();
-        let on_time = late <= STARVED_US;
-        if !on_time {
-            println!(
-                "{name}: a tick ran {late:.0} µs late in flight {attempt} (the machine starved it){}",
-                if attempt < ATTEMPTS {
-                    ": flown again"
-                } else {
-                    ""
-                }
-            );
-        }
-        if least_late.as_ref().is_none_or(|(l, _, _)| late < *l) {
-            least_late = Some((late, attempt, flight));
-        }
-        if on_time {
-            break;
-        }
-    }
-    let (late, attempt, flight) = least_late.expect("at least one flight");
-    if late > STARVED_US {
-        println!("{name}: every flight was starved; the least late ({late:.0} µs) is judged");
-    }
-    let dir = scratch_dir(name);
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::rename(scratch_dir(&format!("{name}-{attempt}")), &dir)
-        .expect("the judged flight's records");
+    let flight = fly_unstarved(name, config, Duration::from_secs_f64(STREAM_S + 2.5));
     assert!(flight.clean_exit, "{name}: the daemon did not exit cleanly");
     let said = flight
         .frames

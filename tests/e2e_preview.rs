@@ -178,54 +178,23 @@ fn judge(report: &SitlReport, trajectory: &Trajectory, limit_deg: f64) -> Judged
     }
 }
 
-/// A tick this late in the daemon's own records \[µs\] (a quarter of its
-/// 20 ms period) means the machine starved the flight: it is flown again.
-const STARVED_US: f64 = 5000.0;
-/// Flights at most, when the machine starves them.
-const ATTEMPTS: usize = 3;
-
 /// The daemon flies the stream: its figures and its largest command step
-/// over the stream \[deg/tick\] (from the commands it sent). A flight whose
-/// own records show a tick later than [`STARVED_US`] is flown again, up to
-/// [`ATTEMPTS`] flights; when every one was starved, the least late is
-/// judged (the suite beside two busy loops once starved all three of the
-/// delayed eight, 11, 10 and an unreported ms, and the last flown, judged
-/// then, read p95 0.035 m against 0.023–0.024 m on time). The budgets are
-/// the daemon's as deployed, on its real-time thread: beside two busy
-/// loops one flight of the eight sent ahead had ticks 11 ms late (p95
-/// 0.0317 m against its 0.03 m budget; 0.0256 m on time).
+/// over the stream \[deg/tick\] (from the commands it sent). A flight the
+/// machine starved is flown again, and when every one was, the least late
+/// is judged ([`fly_unstarved`]: the suite beside two busy loops once
+/// starved all three of the delayed eight, 11, 10 and an unreported ms,
+/// and the last flown, judged then, read p95 0.035 m against 0.023–0.024 m
+/// on time). The budgets are the daemon's as deployed, on its real-time
+/// thread: beside two busy loops one flight of the eight sent ahead had
+/// ticks 11 ms late (p95 0.0317 m against its 0.03 m budget; 0.0256 m on
+/// time).
 fn daemon_flight(name: &str, form: &Form) -> (Judged, f64) {
     let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    let mut least_late: Option<(f64, Flight)> = None;
-    for attempt in 1..=ATTEMPTS {
-        let flight = fly_in_process(
-            &format!("{name}-{attempt}"),
-            &form.config(false),
-            Duration::from_secs_f64(DURATION_S + 3.0),
-        );
-        let late = flight.latest_tick_us();
-        let on_time = late <= STARVED_US;
-        if !on_time {
-            println!(
-                "{name}: a tick ran {late:.0} µs late in flight {attempt} (the machine starved it){}",
-                if attempt < ATTEMPTS {
-                    ": flown again"
-                } else {
-                    ""
-                }
-            );
-        }
-        if least_late.as_ref().is_none_or(|(l, _)| late < *l) {
-            least_late = Some((late, flight));
-        }
-        if on_time {
-            break;
-        }
-    }
-    let (late, flight) = least_late.expect("at least one flight");
-    if late > STARVED_US {
-        println!("{name}: every flight was starved; the least late ({late:.0} µs) is judged");
-    }
+    let flight = fly_unstarved(
+        name,
+        &form.config(false),
+        Duration::from_secs_f64(DURATION_S + 3.0),
+    );
     let first = flight.attitude_targets().next().map(|(f, _)| f.at).unwrap();
     let stream_end = first + Duration::from_secs_f64(DURATION_S + 1.0);
     let step = largest_tilt_step_deg(

@@ -408,6 +408,54 @@ pub fn fly_in_process(name: &str, config_text: &str, fly: Duration) -> Flight {
     fly_in_process_until(name, config_text, end, |_| false)
 }
 
+/// A tick this late in the daemon's own records \[µs\] (a quarter of its
+/// 20 ms period) means the machine starved the flight
+/// ([`fly_unstarved`]).
+pub const STARVED_US: f64 = 5000.0;
+/// Flights at most [`fly_unstarved`] flies when the machine starves them.
+pub const STARVED_ATTEMPTS: usize = 3;
+
+/// [`fly_in_process`], flown again while the daemon's own records show a
+/// tick later than [`STARVED_US`] (the machine starved it: said), up to
+/// [`STARVED_ATTEMPTS`] flights; when every one was starved, the least
+/// late is returned (said). The flights run as `{name}-{attempt}`; the
+/// returned one's directory becomes `name`'s ([`scratch_dir`]), where its
+/// records are read.
+pub fn fly_unstarved(name: &str, config_text: &str, fly: Duration) -> Flight {
+    let mut least_late: Option<(f64, usize, Flight)> = None;
+    for attempt in 1..=STARVED_ATTEMPTS {
+        let flight = fly_in_process(&format!("{name}-{attempt}"), config_text, fly);
+        let late = flight.latest_tick_us();
+        let on_time = late <= STARVED_US;
+        if !on_time {
+            println!(
+                "{name}: a tick ran {late:.0} µs late in flight {attempt} (the machine starved it){}",
+                if attempt < STARVED_ATTEMPTS {
+                    ": flown again"
+                } else {
+                    ""
+                }
+            );
+        }
+        if least_late.as_ref().is_none_or(|(l, _, _)| late < *l) {
+            least_late = Some((late, attempt, flight));
+        }
+        if on_time {
+            break;
+        }
+    }
+    let (late, attempt, mut flight) = least_late.expect("at least one flight");
+    if late > STARVED_US {
+        println!("{name}: every flight was starved; the least late ({late:.0} µs) is judged");
+    }
+    let dir = scratch_dir(name);
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::rename(scratch_dir(&format!("{name}-{attempt}")), &dir)
+        .expect("the judged flight's records");
+    flight.dir = dir;
+    flight
+}
+
 /// The `[realtime]` table of a flight judged to centimetres: the control
 /// thread at SCHED_FIFO 50 (its link threads at 49), as the daemon is
 /// deployed on a companion computer that does other work
