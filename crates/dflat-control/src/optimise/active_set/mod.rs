@@ -354,9 +354,10 @@ impl ActiveSet {
             }
             self.set_replaced();
         }
+        let guessed = self.set_members().next().is_some();
         // A burst's first tick: no guess (not a start made cold above).
-        let first = !forced_cold && self.set_members().next().is_none();
-        if self.set_members().next().is_some() {
+        let first = !forced_cold && !guessed;
+        if guessed {
             // Warm: the guess's set, within WARM_SOLVES; else cold.
             self.budget = budget.min(WARM_SOLVES);
             self.warm = true;
