@@ -273,15 +273,44 @@ impl ControlModel {
         }
     }
 
-    /// The model's linear drag \[1/s\] per axis, `[D_h, D_h, D_v]` (planar:
-    /// `D_v = 0`): the step subtracts `D·v` from the acceleration.
+    /// The model's drag as a linear drag \[1/s\] per axis at level
+    /// attitude, `[D_h + d_r, D_h + d_r, D_v]` (planar: `[D_h, D_h, 0]`):
+    /// the step subtracts `D·v` from the acceleration. The rotor drag d_r
+    /// (spatial) is `−d_r·(v − n·(n·v))`, which with the thrust axis n
+    /// vertical is `−d_r·v` horizontally and nothing vertically; the tilt
+    /// bound, the sent command's anchor, the disturbance estimator's basis
+    /// and the residual's features take it so. The maps and
+    /// [`Self::drag_acceleration`] take it exactly.
     pub fn drag(&self) -> Vector3<f64> {
         match self {
             ControlModel::Planar(m) => Vector3::new(m.params().drag_h, m.params().drag_h, 0.0),
             ControlModel::Spatial(m) => {
                 let p = m.params();
-                Vector3::new(p.drag_h, p.drag_h, p.drag_v)
+                Vector3::new(p.drag_h + p.drag_rotor, p.drag_h + p.drag_rotor, p.drag_v)
             }
+        }
+    }
+
+    /// The drag's acceleration \[m/s²\] (model frame) at velocity `v`
+    /// \[m/s\] when the thrust and gravity give `thrust_acc` \[m/s²\]:
+    /// `−D·v`, and for the spatial model with rotor drag
+    /// `−D·v − d_r·(v − n·(n·v))`, n the thrust axis (the direction of
+    /// `thrust_acc` less gravity; vertical when that is 0).
+    pub fn drag_acceleration(&self, v: &Vector3<f64>, thrust_acc: &Vector3<f64>) -> Vector3<f64> {
+        match self {
+            ControlModel::Spatial(m) if m.params().drag_rotor != 0.0 => {
+                let p = m.params();
+                let gravity = Vector3::from(p.frame.acceleration([0.0; 3], p.g));
+                let t = thrust_acc - gravity;
+                let n = if t.norm() > 0.0 {
+                    t.normalize()
+                } else {
+                    Vector3::z()
+                };
+                let linear = Vector3::new(p.drag_h * v.x, p.drag_h * v.y, p.drag_v * v.z);
+                -linear - p.drag_rotor * (v - n * n.dot(v))
+            }
+            _ => -self.drag().component_mul(v),
         }
     }
 

@@ -297,11 +297,23 @@ fn matched_drag_with_the_smoothness_term_flies_a_timed_reference_as_without_drag
 /// setpoint change is flown exactly (plan[3] reached to rounding).
 #[test]
 fn spatial_matched_drag_is_exact() {
+    spatial_matched_is_exact(0.0);
+}
+
+/// The same with rotor drag 0.3 /s besides (the thrust axis's part of it
+/// lifts the vehicle as it tilts into the climb's motion).
+#[test]
+fn spatial_matched_rotor_drag_is_exact() {
+    spatial_matched_is_exact(0.3);
+}
+
+fn spatial_matched_is_exact(drag_rotor: f64) {
     let model = SpatialModel::new(SpatialParams {
         psi: -0.7,
         frame: Frame::Ned,
         drag_h: 0.35,
         drag_v: 0.2,
+        drag_rotor,
         ..Default::default()
     })
     .unwrap();
@@ -344,7 +356,10 @@ fn spatial_matched_drag_is_exact() {
         .filter_map(|(k, p)| Some((measured.get(k + 5)? - p.as_ref()?).norm()))
         .fold(0.0, f64::max);
     let end = (measured.last().unwrap() - target).norm();
-    println!("spatial, drag 0.35/0.2, delay 2: plan miss {miss:.2e} m, final error {end:.2e} m");
+    println!(
+        "spatial, drag 0.35/0.2, rotor drag {drag_rotor}, delay 2: plan miss {miss:.2e} m, \
+         final error {end:.2e} m"
+    );
     assert!(miss < 1e-8, "{miss}");
     assert!(end < 0.01, "{end}");
 }
@@ -355,13 +370,39 @@ fn spatial_matched_drag_is_exact() {
 /// (150°/s) and the smoothness term. Returns the cross-track p95 \[m\]
 /// and the farthest north the vehicle went \[m\] (the corner is at 12).
 fn fly_spatial_bounded(drag: f64) -> (f64, f64) {
+    let (cross, north, _) = fly_spatial_rotor(drag, (0.0, 0.0), 4.0);
+    (cross, north)
+}
+
+/// [`fly_spatial_bounded`] with rotor drag `rotor = (plant, model)` [1/s]
+/// and the path at `speed` [m/s]: cross-track p95 \[m\], the farthest north
+/// \[m\] and the altitude error p95 \[m\].
+fn fly_spatial_rotor(drag: f64, rotor: (f64, f64), speed: f64) -> (f64, f64, f64) {
+    let w = [[0.0, 0.0], [12.0, 0.0], [12.0, 12.0]].map(|[x, y]| Vector3::new(x, y, Z));
+    let mut reference = Reference::path(&w, speed).unwrap();
+    fly_spatial_on(&mut reference, |_, p| cross_track(p), drag, rotor)
+}
+
+/// [`fly_spatial_rotor`] on any reference, `error(k, y_k)` the error per
+/// tick: its p95 \[m\], the farthest north \[m\] and the altitude error
+/// p95 \[m\].
+fn fly_spatial_on(
+    reference: &mut dyn ReferenceSource,
+    error: impl Fn(usize, &Vector3<f64>) -> f64,
+    drag: f64,
+    rotor: (f64, f64),
+) -> (f64, f64, f64) {
     use dflat_control::dfmpc::{InputSaturation, OutputConstraints};
-    let model = SpatialModel::new(SpatialParams {
-        frame: Frame::Ned,
-        drag_h: drag,
-        ..Default::default()
-    })
-    .unwrap();
+    let spatial = |drag_rotor| {
+        SpatialModel::new(SpatialParams {
+            frame: Frame::Ned,
+            drag_h: drag,
+            drag_rotor,
+            ..Default::default()
+        })
+        .unwrap()
+    };
+    let (plant, model) = (spatial(rotor.0), spatial(rotor.1));
     let settings = DfMpcSettings {
         tracking_weight: [1.0; 3],
         jerk_weight: [0.003; 3],
@@ -378,31 +419,126 @@ fn fly_spatial_bounded(drag: f64) -> (f64, f64) {
         ..DfMpcSettings::default()
     };
     let mut ctrl = DfMpc::new(ControlModel::Spatial(model), settings).unwrap();
-    let mut reference = l_path();
     let mut x = SVector::<f64, 9>::zeros();
     x[4] = Z;
     x[8] = 9.81;
     let mut cross = Vec::new();
+    let mut altitude = Vec::new();
     let mut north: f64 = 0.0;
     for k in 0..400 {
-        let y = model.output(&x);
-        cross.push(cross_track(&y));
+        let y = plant.output(&x);
+        cross.push(error(k, &y));
+        altitude.push((y.z - Z).abs());
         north = north.max(y.x);
         let m = Measurement {
             t: k as f64 * DT,
             position: y,
             yaw: 0.0,
         };
-        let out = ctrl.update(&m, &mut reference).unwrap();
+        let out = ctrl.update(&m, reference).unwrap();
         assert!(out.command.is_finite());
         let u = Vector3::new(out.command.pitch, out.command.roll, out.command.thrust);
-        x = model.step(&x, &u);
+        x = plant.step(&x, &u);
     }
-    let flight = Flight {
-        plan_miss: 0.0,
-        cross_track: cross,
+    let p95 = |e: Vec<f64>| {
+        Flight {
+            plan_miss: 0.0,
+            cross_track: e,
+        }
+        .p95()
     };
-    (flight.p95(), north)
+    (p95(cross), north, p95(altitude))
+}
+
+/// A circle of radius 30 m flown at 8 m/s, indexed by time, from rest:
+/// the speed ramps up over the first 4 s (judged from 5 s).
+struct FastCircle {
+    k: usize,
+}
+
+impl FastCircle {
+    const RAMP_S: f64 = 4.0;
+
+    fn at(k: usize) -> Vector3<f64> {
+        let t = k as f64 * DT;
+        let s = if t < Self::RAMP_S {
+            8.0 * t * t / (2.0 * Self::RAMP_S)
+        } else {
+            8.0 * (t - Self::RAMP_S / 2.0)
+        };
+        let phase = s / 30.0;
+        Vector3::new(30.0 * phase.sin(), 30.0 * (1.0 - phase.cos()), Z)
+    }
+}
+
+impl ReferenceSource for FastCircle {
+    fn horizon(&mut self, _measured: &Vector3<f64>, _dt: f64, out: &mut [Vector3<f64>]) {
+        for (j, o) in out.iter_mut().enumerate() {
+            *o = Self::at(self.k + j);
+        }
+        self.k += 1;
+    }
+    fn closest(&mut self, _measured: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
+        (Self::at(self.k), Vector3::zeros())
+    }
+    fn flyable(&self) -> bool {
+        true
+    }
+}
+
+/// Rotor drag 0.3 /s on a timed circle at 8 m/s under the daemon's plan
+/// bounds and the smoothness term: with the term in the model the flight
+/// tracks its stream as with the same drag linear in the model and the
+/// plant. The sent command's anchor and the tilt bound's shift take the
+/// rotor drag's part along the thrust axis, `d_r·n·(n·v)`.
+#[test]
+fn matched_rotor_drag_flies_a_fast_stream_as_linear_drag() {
+    let error = |k: usize, p: &Vector3<f64>| {
+        if k < 250 {
+            0.0
+        } else {
+            (p - FastCircle::at(k)).norm()
+        }
+    };
+    let (linear, _, _) = fly_spatial_on(&mut FastCircle { k: 0 }, error, 0.3, (0.0, 0.0));
+    let (rotor, _, rotor_z) = fly_spatial_on(&mut FastCircle { k: 0 }, error, 0.0, (0.3, 0.3));
+    println!(
+        "timed circle 8 m/s: error p95 linear drag 0.3 {linear:.4} m, rotor drag 0.3 {rotor:.4} m \
+         (altitude {rotor_z:.4} m)"
+    );
+    assert!(
+        rotor <= 1.2 * linear + 0.005,
+        "{rotor:.4} m vs {linear:.4} m"
+    );
+}
+
+/// Rotor drag 0.3 /s on the L at 7 m/s under the daemon's plan bounds:
+/// with the term in the model the flight tracks as the linear drag's
+/// (the sent command's anchor takes the rotor drag's part along the
+/// thrust axis: at the level attitude's drag alone the smoothness term
+/// and the tilt-rate row pulled the plan by it), and holds the altitude
+/// the rotor drag's lift takes from a model without it (the same drag as
+/// linear drag, its horizontal part at level attitude).
+#[test]
+fn matched_rotor_drag_tracks_and_holds_the_altitude() {
+    let (linear, _, linear_z) = fly_spatial_rotor(0.3, (0.0, 0.0), 7.0);
+    let (rotor, north, rotor_z) = fly_spatial_rotor(0.0, (0.3, 0.3), 7.0);
+    let (_, _, missing_z) = fly_spatial_rotor(0.3, (0.3, 0.0), 7.0);
+    println!(
+        "L path 7 m/s: linear drag 0.3 matched: cross-track p95 {linear:.3} m, altitude {linear_z:.4} m; \
+         rotor drag 0.3 matched: {rotor:.3} m (north {north:.2} m), altitude {rotor_z:.4} m; \
+         rotor drag flown as linear drag: altitude {missing_z:.4} m"
+    );
+    assert!(north < 12.5, "overshot the corner to {north:.2} m");
+    assert!(
+        rotor <= 1.2 * linear + 0.01,
+        "{rotor:.3} m vs {linear:.3} m"
+    );
+    assert!(rotor_z < 0.01, "{rotor_z}");
+    assert!(
+        missing_z > 5.0 * rotor_z.max(1e-3),
+        "{missing_z} vs {rotor_z}"
+    );
 }
 
 /// The tilt-rate bound and the smoothness term compare the plan's

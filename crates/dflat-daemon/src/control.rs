@@ -42,6 +42,7 @@ pub fn control_model(cfg: &Config) -> Result<ControlModel, ControlError> {
             frame: Frame::Ned,
             drag_h: v.drag_h,
             drag_v: v.drag_v,
+            drag_rotor: v.drag_rotor,
         })?),
     })
 }

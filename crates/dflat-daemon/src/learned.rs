@@ -28,6 +28,7 @@ pub fn vehicle_fields(v: &VehicleConfig) -> (&'static str, Vec<(&'static str, f6
             ("hover_thrust", v.hover_thrust),
             ("drag_h", v.drag_h),
             ("drag_v", v.drag_v),
+            ("drag_rotor", v.drag_rotor),
             ("delay_ms", v.delay_ms),
         ],
     )

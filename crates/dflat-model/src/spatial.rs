@@ -11,7 +11,9 @@
 //!
 //! ```text
 //! p_{k+1} = p_k + δt·v_k
-//! v_{k+1} = v_k + δt·(a_k − D·v_k),   D = diag(drag_h, drag_h, drag_v) [1/s]
+//! v_{k+1} = v_k + δt·(a_k − D·v_k − d_r·(v_k − n_k·(n_k·v_k))),
+//!                           D = diag(drag_h, drag_h, drag_v) [1/s],
+//!                           d_r = drag_rotor [1/s], n_k = R_k·e3
 //!                           a_k = g·e3 − T_k·R_k·e3   (NED)
 //!                           a_k = T_k·R_k·e3 − g·e3   (z-up)
 //! θ_{k+1} = θ_k + δt·(k̃·θ_cmd − θ_k)/τ           (φ likewise)
@@ -40,6 +42,20 @@
 //!   of the attitude and thrust loops with u_k, the acceleration a_{k+1}
 //!   from them, and `y_{k+3} = 2·y_{k+2} − y_{k+1} + δt²·(a_{k+1} − D·v_{k+1})`,
 //!   `v_{k+1} = (y_{k+2} − y_{k+1})/δt`.
+//!
+//! ## Rotor drag
+//!
+//! `d_r` is the rotor drag in the body plane, `−d_r·R·diag(1, 1, 0)·Rᵀ·v`
+//! (the blades' induced drag, across the thrust axis; Faessler, Franchi
+//! and Scaramuzza, RA-L 2018, show it keeps the flatness). It splits into
+//! an isotropic linear drag `−d_r·v` and a part along the thrust axis,
+//! `+d_r·n·(n·v)`, that acts as a thrust change. So the maps stay closed
+//! form: with `c = Δ²y/δt² + (D + d_r)·v` (and the offset), the thrust
+//! axis is c's direction (as without rotor drag) and the thrust is
+//! `T = T' − s·d_r·(n·v)`, T' what c alone would need and s the frame's
+//! sign of the thrust in the acceleration (NED −1, z-up +1). Tilted into
+//! its motion, a vehicle needs that much less thrust: the rotor drag lifts
+//! it by `d_r·v·sinθ·cosθ`.
 //!
 //! [`SpatialModel::input_from_outputs_offset`] and
 //! [`SpatialModel::next_output_offset`] are F and F⁻¹ with a constant
@@ -99,6 +115,10 @@ pub struct SpatialParams {
     /// Linear vertical drag \[1/s\] in the world frame (z; ≥ 0,
     /// drag·δt < 1). 0 is no drag.
     pub drag_v: f64,
+    /// Rotor drag \[1/s\] in the body plane: the step loses
+    /// `drag_rotor·(v − n·(n·v))`, n = R·e3 the thrust axis (≥ 0,
+    /// (drag_h + drag_rotor)·δt < 1). 0 is none.
+    pub drag_rotor: f64,
 }
 
 impl Default for SpatialParams {
@@ -114,6 +134,7 @@ impl Default for SpatialParams {
             frame: Frame::Ned,
             drag_h: 0.0,
             drag_v: 0.0,
+            drag_rotor: 0.0,
         }
     }
 }
@@ -136,6 +157,9 @@ impl SpatialModel {
         check_finite_param("psi", p.psi)?;
         check_drag("drag_h", p.drag_h, p.dt)?;
         check_drag("drag_v", p.drag_v, p.dt)?;
+        check_drag("drag_rotor", p.drag_rotor, p.dt)?;
+        // The isotropic part of the rotor drag adds to the linear drag.
+        check_drag("drag_rotor", p.drag_rotor + p.drag_h.max(p.drag_v), p.dt)?;
         Ok(Self { p })
     }
 
@@ -171,13 +195,33 @@ impl SpatialModel {
         Ok((thrust, theta, phi))
     }
 
-    /// The drag acceleration \[m/s²\] at velocity `v` \[m/s\]: `D·v`.
+    /// The linear drag's deceleration \[m/s²\] at velocity `v` \[m/s\]:
+    /// `D·v`.
     fn drag(&self, v: &Vector3<f64>) -> Vector3<f64> {
         Vector3::new(
             self.p.drag_h * v.x,
             self.p.drag_h * v.y,
             self.p.drag_v * v.z,
         )
+    }
+
+    /// The drag's acceleration \[m/s²\] (model frame) at velocity `v`
+    /// \[m/s\] and pitch θ, roll φ \[rad\] (yaw ψ⋆): the linear drag's
+    /// and the rotor drag's, `−D·v − d_r·(v − n·(n·v))`, n = R·e3.
+    pub fn drag_acceleration(&self, theta: f64, phi: f64, v: &Vector3<f64>) -> Vector3<f64> {
+        let mut a = -self.drag(v);
+        if self.p.drag_rotor != 0.0 {
+            let n = Vector3::from(thrust_axis(theta, phi, self.p.psi));
+            a -= self.p.drag_rotor * (v - n * n.dot(v));
+        }
+        a
+    }
+
+    /// The sign s of the thrust in the acceleration, `a = g_vec + s·T·n`
+    /// (NED −1, z-up +1).
+    fn thrust_sign(&self) -> f64 {
+        let a = self.p.frame.acceleration([0.0, 0.0, 1.0], 0.0);
+        a[2].signum()
     }
 
     /// Thrust and attitude (T, θ, φ) at the first of three outputs, from the
@@ -191,8 +235,22 @@ impl SpatialModel {
         d: &Vector3<f64>,
     ) -> Result<(f64, f64, f64), FlatError> {
         let dt = self.p.dt;
-        let a = (y2 - 2.0 * y1 + y0) / (dt * dt) + self.drag(&((y1 - y0) / dt)) - d;
-        self.attitude_thrust(&a)
+        let v = (y1 - y0) / dt;
+        let dr = self.p.drag_rotor;
+        let a = (y2 - 2.0 * y1 + y0) / (dt * dt) + self.drag(&v) + dr * v - d;
+        let (thrust, theta, phi) = self.attitude_thrust(&a)?;
+        if dr == 0.0 {
+            return Ok((thrust, theta, phi));
+        }
+        // The rotor drag's part along the thrust axis, d_r·n·(n·v), is a
+        // thrust change (module docs, Rotor drag).
+        let n = Vector3::from(thrust_axis(theta, phi, self.p.psi));
+        let thrust = thrust - self.thrust_sign() * dr * n.dot(&v);
+        if thrust > 0.0 {
+            Ok((thrust, theta, phi))
+        } else {
+            Err(FlatError::FreeFall)
+        }
     }
 
     /// F with a constant acceleration offset `d` \[m/s²\] in the step: the
@@ -269,10 +327,11 @@ impl SpatialModel {
             self.attitude_step(p0, u.y),
             self.thrust_step(f0, u.z),
         );
+        let (theta1, phi1) = (self.attitude_step(t0, u.x), self.attitude_step(p0, u.y));
         let dt = self.p.dt;
         let v1 = (y[2] - y[1]) / dt;
         finite_result(
-            2.0 * y[2] - y[1] + dt * dt * (acc - self.drag(&v1) + d[1]),
+            2.0 * y[2] - y[1] + dt * dt * (acc + self.drag_acceleration(theta1, phi1, &v1) + d[1]),
             "next output",
         )
     }
@@ -313,7 +372,7 @@ impl FlatModel for SpatialModel {
     fn step(&self, x: &SpatialState, u: &SpatialInput) -> SpatialState {
         let dt = self.p.dt;
         let v = Vector3::new(x[1], x[3], x[5]);
-        let a = self.acceleration(x[6], x[7], x[8]) - self.drag(&v);
+        let a = self.acceleration(x[6], x[7], x[8]) + self.drag_acceleration(x[6], x[7], &v);
         SpatialState::from([
             x[0] + dt * x[1],
             x[1] + dt * a.x,
@@ -393,6 +452,43 @@ mod tests {
             .unwrap();
             let x = SpatialState::from([1.0, 0.0, 2.0, 0.0, -3.0, 0.0, 0.0, 0.0, 9.81]);
             assert_eq!(m.step(&x, &SpatialInput::new(0.0, 0.0, 9.81)), x);
+        }
+    }
+
+    /// Level flight at constant velocity against rotor drag alone: along
+    /// the thrust axis, `0 = g·n_z − T + d_r·(n·v) − d_r·(n·v)`, so the
+    /// thrust is `g·n_z` — less than hover, where without the rotor
+    /// drag's lift a tilted vehicle needs `g/n_z`. Λ finds it from the
+    /// outputs, in both frames and on any heading.
+    #[test]
+    fn rotor_drag_lifts_a_vehicle_tilted_into_its_motion() {
+        for (frame, psi, v) in [
+            (Frame::Ned, 0.0, Vector3::new(9.0, 0.0, 0.0)),
+            (Frame::Ned, 0.7, Vector3::new(-3.0, 6.0, 0.0)),
+            (Frame::Zup, -1.2, Vector3::new(4.0, -5.0, 0.0)),
+        ] {
+            let m = SpatialModel::new(SpatialParams {
+                frame,
+                psi,
+                drag_rotor: 0.3,
+                ..Default::default()
+            })
+            .unwrap();
+            let y: Vec<SpatialOutput> = (0..3).map(|k| v * (0.02 * k as f64)).collect();
+            let x = m.state_from_outputs(&y).unwrap();
+            let n = Vector3::from(thrust_axis(x[6], x[7], psi));
+            let tilt = n.z.abs().acos();
+            assert!(tilt > 0.05, "tilted into the motion: {tilt}");
+            assert!(
+                (x[8] - 9.81 * n.z.abs()).abs() < 1e-9,
+                "{frame:?}: T = {}",
+                x[8]
+            );
+            // One step of the model from that state keeps the velocity.
+            let u = SpatialInput::new(x[6] / m.params().k, x[7] / m.params().k, x[8]);
+            let next = m.step(&x, &u);
+            assert!((next[1] - v.x).abs() < 1e-12 && (next[3] - v.y).abs() < 1e-12);
+            assert!(next[5].abs() < 1e-12, "{frame:?}: vz {}", next[5]);
         }
     }
 

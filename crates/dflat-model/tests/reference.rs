@@ -145,6 +145,8 @@ fn spatial_model(p: &SpatialJsonParams) -> SpatialModel {
         frame: frame(&p.frame),
         drag_h: p.drag_h,
         drag_v: p.drag_v,
+        // The reference derives no rotor drag.
+        drag_rotor: 0.0,
     })
     .expect("reference parameters are valid")
 }

@@ -192,14 +192,27 @@ impl DfMpc {
     /// steps over the outputs `y` (three or four, \[m\]; as
     /// [`LearnedTerm::step_offsets`]): `o_j = ρ_j − D·v_j`, the residual
     /// of step j (0 without one) and the drag at its backward speed
-    /// `(y_{j+1} − y_j)/δt`.
+    /// `(y_{j+1} − y_j)/δt` — with rotor drag, the model's drag at the
+    /// step's thrust axis ([`ControlModel::drag_acceleration`]), from the
+    /// step's second difference (step 1 of three outputs: step 0's). At the
+    /// level attitude's drag alone the anchor missed the rotor drag's part
+    /// along the thrust axis, `d_r·n·(n·v)`.
     fn step_model_offsets(&self, y: &[Vector3<f64>], d: &DisturbanceEstimate) -> [Vector3<f64>; 2] {
         let dt = self.model.dt();
         let drag = self.model.drag();
         let rho = self.learned.as_ref().map_or([Vector3::zeros(); 2], |l| {
             l.step_offsets(&self.model, y, &d.acceleration)
         });
-        std::array::from_fn(|j| rho[j] - drag.component_mul(&((y[j + 1] - y[j]) / dt)))
+        let mut thrust = Vector3::zeros();
+        std::array::from_fn(|j| {
+            let v = (y[j + 1] - y[j]) / dt;
+            if let Some(y2) = y.get(j + 2) {
+                thrust = (y2 - y[j + 1] * 2.0 + y[j]) / (dt * dt) + drag.component_mul(&v)
+                    - rho[j]
+                    - d.acceleration;
+            }
+            rho[j] + self.model.drag_acceleration(&v, &thrust)
+        })
     }
 
     /// Keeps what the model adds to the command F just made from `plan`
@@ -259,7 +272,8 @@ impl DfMpc {
                 let [y2, y1, y0] = s.recent;
                 let measured = (y0 - y1 * 2.0 + y2) / (dt * dt);
                 let v = (y0 - y2) / (2.0 * dt);
-                let mut unexplained = measured - (parametric - self.model.drag().component_mul(&v));
+                let mut unexplained =
+                    measured - (parametric + self.model.drag_acceleration(&v, &parametric));
                 if let ControlModel::Planar(_) = self.model {
                     unexplained.z = 0.0;
                 }
@@ -349,7 +363,7 @@ impl DfMpc {
         let now = aa + (ab - aa) * ((t1 - ta) / (tb - ta));
         let measured = ((y2 - y1) / (t2 - t1) - (y1 - y0) / (t1 - t0)) * (2.0 / (t2 - t0));
         let v = (y2 - y0) / (t2 - t0);
-        let mut unexplained = measured - (now - self.model.drag().component_mul(&v));
+        let mut unexplained = measured - (now + self.model.drag_acceleration(&v, &now));
         if let ControlModel::Planar(_) = self.model {
             unexplained.z = 0.0;
         }

@@ -68,6 +68,10 @@ pub const FADE_MARGIN: f64 = 0.3;
 /// was learned with that still counts as the same table.
 pub const VEHICLE_TOLERANCE: f64 = 1e-6;
 
+/// `[vehicle]` fields added after model files were first written, with the
+/// value every earlier file was learned at: `drag_rotor` (none).
+pub const FIELDS_ADDED_LATER: &[(&str, f64)] = &[("drag_rotor", 0.0)];
+
 /// A group of basis functions; each adds its columns to `φ` in this order.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -356,8 +360,23 @@ impl LearnedResidual {
     /// Refuses a `[vehicle]` table other than the one the residual was
     /// learned with: `model` is `vehicle.model`, `vehicle` its numeric fields
     /// (name, value). Every field of the file must be present and equal
-    /// within [`VEHICLE_TOLERANCE`] (relative).
+    /// within [`VEHICLE_TOLERANCE`] (relative); a field of
+    /// [`FIELDS_ADDED_LATER`] the file does not hold was learned at its
+    /// value there (a file written before the field existed).
     pub fn check_vehicle(&self, model: &str, vehicle: &[(&str, f64)]) -> Result<(), LearnedError> {
+        for (field, before) in FIELDS_ADDED_LATER {
+            let configured = vehicle.iter().find(|(k, _)| k == field).map(|(_, v)| *v);
+            if let Some(c) = configured
+                && !self.vehicle.contains_key(*field)
+                && c != *before
+            {
+                return Err(LearnedError::Vehicle {
+                    field: (*field).into(),
+                    learned: format!("{before} (not in the file: written before the field)"),
+                    configured: c.to_string(),
+                });
+            }
+        }
         if model != self.vehicle_model {
             return Err(LearnedError::Vehicle {
                 field: "model".into(),

@@ -171,6 +171,21 @@ fn another_vehicle_table_is_refused() {
         err.to_string().contains("hover_thrust") && err.to_string().contains("nothing"),
         "{err}"
     );
+    // A file from before `drag_rotor` existed was learned without it: it
+    // loads at 0 and is refused against a rotor drag.
+    assert!(!m.vehicle.contains_key("drag_rotor"));
+    let table = [("tau", 0.2), ("hover_thrust", 0.5), ("drag_rotor", 0.0)];
+    m.check_vehicle("spatial", &table).unwrap();
+    let err = m
+        .check_vehicle(
+            "spatial",
+            &[("tau", 0.2), ("hover_thrust", 0.5), ("drag_rotor", 0.2)],
+        )
+        .unwrap_err();
+    assert!(
+        err.to_string().contains("drag_rotor") && err.to_string().contains("0.2"),
+        "{err}"
+    );
 }
 
 /// Bad files are refused naming the field.

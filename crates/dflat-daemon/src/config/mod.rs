@@ -337,6 +337,12 @@ pub struct VehicleConfig {
     pub drag_h: f64,
     /// Linear vertical drag \[1/s\] (spatial model; 0–2, default 0).
     pub drag_v: f64,
+    /// Rotor drag \[1/s\] in the body plane (spatial model; 0–2, default
+    /// 0): the velocity's part across the thrust axis loses
+    /// `drag_rotor·(v − n·(n·v))` of acceleration, which lifts a vehicle
+    /// tilted into its motion (docs/controllers.md, *Rotor drag*).
+    /// `dflat identify` estimates it from the vertical motion.
+    pub drag_rotor: f64,
     /// Pure input delay \[ms\] between a command leaving the daemon and the
     /// autopilot acting on it (0–500, default 0), rounded to control ticks
     /// (said at start). DF-MPC predicts across the commands in flight.
@@ -373,6 +379,7 @@ impl Default for VehicleConfig {
             yaw_lead_s: 0.1,
             drag_h: 0.0,
             drag_v: 0.0,
+            drag_rotor: 0.0,
             delay_ms: 0.0,
         }
     }

@@ -36,6 +36,31 @@ fn spatial_needs_normalized_thrust() {
     assert!(parse("[vehicle]\nmodel = \"spatial\"\nthrust_mode = \"normalized\"\n").is_ok());
 }
 
+/// The rotor drag is the spatial model's (its lift acts on the thrust the
+/// planar model does not fly): refused on the planar model, out of range
+/// refused, and flown by the spatial model's maps.
+#[test]
+fn rotor_drag_needs_the_spatial_model() {
+    let e = parse("[vehicle]\ndrag_rotor = 0.2\n")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("vehicle.drag_rotor") && e.contains("spatial"),
+        "{e}"
+    );
+    let spatial = "[vehicle]\nmodel = \"spatial\"\nthrust_mode = \"normalized\"\n";
+    let e = parse(&format!("{spatial}drag_rotor = 2.5\n"))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("vehicle.drag_rotor"), "{e}");
+    let cfg = parse(&format!("{spatial}drag_rotor = 0.2\n")).unwrap();
+    assert_eq!(cfg.vehicle.drag_rotor, 0.2);
+    match crate::control::control_model(&cfg).unwrap() {
+        dflat_control::ControlModel::Spatial(m) => assert_eq!(m.params().drag_rotor, 0.2),
+        other => panic!("{other:?}"),
+    }
+}
+
 #[test]
 fn path_mission_needs_two_distinct_waypoints() {
     let e = parse("[mission]\nstart = \"path\"\npath = [[0.0, 0.0, -5.0]]\n")

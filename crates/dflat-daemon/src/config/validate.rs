@@ -256,7 +256,16 @@ impl VehicleConfig {
         v.range("vehicle.yaw_lead_s", ve.yaw_lead_s, 0.0, 1.0)?;
         v.range("vehicle.drag_h", ve.drag_h, 0.0, 2.0)?;
         v.range("vehicle.drag_v", ve.drag_v, 0.0, 2.0)?;
+        v.range("vehicle.drag_rotor", ve.drag_rotor, 0.0, 2.0)?;
         v.range("vehicle.delay_ms", ve.delay_ms, 0.0, 500.0)?;
+        if ve.model == ModelKind::Planar && ve.drag_rotor != 0.0 {
+            return Err(v.err(
+                "vehicle.drag_rotor",
+                &ve.drag_rotor.to_string(),
+                "0 with model = \"planar\" (the rotor drag's lift needs the spatial model, \
+                 which flies the thrust; fold it into drag_h)",
+            ));
+        }
         if ve.model == ModelKind::Spatial && ve.thrust_mode == ThrustMode::Fixed {
             return Err(v.err(
                 "vehicle.thrust_mode",

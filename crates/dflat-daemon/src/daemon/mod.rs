@@ -671,7 +671,7 @@ fn say_started(config: &Config, link: &OpenLink, controller: &str) {
         "daemon started"
     );
     let v = &config.vehicle;
-    if v.delay_ms > 0.0 || v.drag_h > 0.0 || v.drag_v > 0.0 {
+    if v.delay_ms > 0.0 || v.drag_h > 0.0 || v.drag_v > 0.0 || v.drag_rotor > 0.0 {
         let ticks = crate::control::delay_ticks(config);
         info!(
             delay_ms = v.delay_ms,
@@ -679,7 +679,8 @@ fn say_started(config: &Config, link: &OpenLink, controller: &str) {
             flown_ms = ticks as f64 * 1e3 / config.controller.rate_hz,
             drag_h = v.drag_h,
             drag_v = v.drag_v,
-            "vehicle model: input delay rounded to control ticks, linear drag"
+            drag_rotor = v.drag_rotor,
+            "vehicle model: input delay rounded to control ticks, linear and rotor drag"
         );
     }
     if let Some(h) = StallHook::from_env() {

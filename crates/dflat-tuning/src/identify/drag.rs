@@ -74,6 +74,9 @@ impl ThrustModel {
     }
 }
 
+/// A horizontal series: (time \[s\], [north, east]).
+pub type HorizontalSeries = Vec<(f64, [f64; 2])>;
+
 /// Everything the drag fit reads.
 #[derive(Debug, Clone, Default)]
 pub struct DragData {
@@ -82,6 +85,11 @@ pub struct DragData {
     /// The thrust, when the vertical fit found it; else the altitude is
     /// taken as held.
     pub thrust: Option<ThrustModel>,
+    /// The rotor drag d_r \[1/s\] and the horizontal velocity across the
+    /// rotor plane `(v − n·(n·v))_h` (time \[s\], [north, east] [m/s]), when
+    /// the vertical fit determined d_r: the rows then fit D beside it
+    /// (`v̇_h = a_att − D·v_h − d_r·q_h + c`).
+    pub rotor: Option<(f64, HorizontalSeries)>,
     /// Segments with position samples.
     pub segments: Vec<DragSegment>,
     /// Gravity \[m/s²\].
@@ -123,7 +131,7 @@ fn tilt_acceleration(euler: [f64; 3], g: f64, thrust: Option<f64>) -> [f64; 2] {
 }
 
 /// Attitude at `t`: linear between samples (yaw across ±π: the nearer).
-fn attitude_at(att: &[(f64, [f64; 3])], t: f64) -> [f64; 3] {
+pub(super) fn attitude_at(att: &[(f64, [f64; 3])], t: f64) -> [f64; 3] {
     let i = att.partition_point(|(s, _)| *s <= t);
     match (i.checked_sub(1).map(|j| att[j]), att.get(i)) {
         (Some((t0, a)), Some(&(t1, b))) if t1 > t0 => {
@@ -188,12 +196,22 @@ fn rows(data: &DragData) -> Vec<Row> {
             .map(|m| (m, (-GRID / m.tau_thrust.max(1e-4)).exp()));
         let mut cf = lag.map(|(m, _)| m.commanded(a));
         let specific = |m: &ThrustModel, cf: f64| g * cf / m.hover_thrust;
+        let rotor = |t: f64, acc: [f64; 2]| match &data.rotor {
+            Some((d, q)) => {
+                let q = position_at(q, t);
+                [acc[0] - d * q[0], acc[1] - d * q[1]]
+            }
+            None => acc,
+        };
         let (mut v, mut acc_prev) = (
             [0.0; 2],
-            tilt_acceleration(
-                attitude_at(&data.attitude, a),
-                g,
-                lag.zip(cf).map(|((m, _), c)| specific(m, c)),
+            rotor(
+                a,
+                tilt_acceleration(
+                    attitude_at(&data.attitude, a),
+                    g,
+                    lag.zip(cf).map(|((m, _), c)| specific(m, c)),
+                ),
             ),
         );
         let mut p_prev = position_at(&samples, a);
@@ -203,10 +221,13 @@ fn rows(data: &DragData) -> Vec<Row> {
                 let u = m.commanded(t - GRID / 2.0);
                 *c = u + (*c - u) * e;
             }
-            let acc = tilt_acceleration(
-                attitude_at(&data.attitude, t),
-                g,
-                lag.zip(cf).map(|((m, _), c)| specific(m, c)),
+            let acc = rotor(
+                t,
+                tilt_acceleration(
+                    attitude_at(&data.attitude, t),
+                    g,
+                    lag.zip(cf).map(|((m, _), c)| specific(m, c)),
+                ),
             );
             let p = position_at(&samples, t);
             for ax in 0..2 {
@@ -298,6 +319,7 @@ mod tests {
         DragData {
             attitude,
             thrust: None,
+            rotor: None,
             segments: vec![DragSegment {
                 span: (0.0, 19.999),
                 chunks: samples.chunks(150).map(|c| c.to_vec()).collect(),

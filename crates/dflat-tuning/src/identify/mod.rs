@@ -7,8 +7,12 @@
 //! * for the spatial model, from the commanded thrust, the measured tilt
 //!   and the altitude: the hover thrust and the thrust time constant τ_T
 //!   ([`vertical`]);
+//! * the rotor drag d_r (spatial model), from the altitude the thrust does
+//!   not explain against the velocity across the rotor plane, jointly with
+//!   the hover thrust ([`vertical`]);
 //! * the horizontal linear drag D, from the acceleration that the measured
-//!   tilt does not explain against the velocity ([`drag`]).
+//!   tilt (and, when determined, the rotor drag) does not explain against
+//!   the velocity ([`drag`]).
 //!
 //! Each value is recommended only when the flight excited it
 //! ([`excitation`]): its regressor moved and its interval is small against
@@ -56,6 +60,9 @@ const VERTICAL_CHUNK_S: f64 = 3.0;
 const DRAG_CHUNK_S: f64 = 4.0;
 /// Gravity assumed \[m/s²\].
 pub const GRAVITY: f64 = 9.81;
+/// Half-width of the window the velocity across the rotor plane is
+/// fitted on \[s\] (a straight line through the poses of ±0.1 s).
+const ROTOR_VELOCITY_HALF_S: f64 = 0.1;
 
 /// Why a log cannot be identified.
 #[derive(Debug, Clone, PartialEq, Error)]
@@ -182,6 +189,10 @@ pub struct Identification {
     /// the engaged time \[m/s²\] (the regressor of τ_T; 0 without the
     /// vertical fit): [`excitation::vertical_accel_std`].
     pub vertical_excitation: f64,
+    /// Standard deviation of the velocity across the rotor plane's
+    /// vertical part `(v − n·(n·v))_z` over the engaged poses \[m/s\] (the
+    /// regressor of the rotor drag; 0 without the vertical fit).
+    pub rotor_excitation: f64,
 }
 
 impl Identification {
@@ -316,8 +327,27 @@ pub fn identify(log: &FlightLog) -> Result<Identification, IdentifyError> {
     ) else {
         return Err(IdentifyError::NoAttitude);
     };
-    let vertical = vertical_fit(log, &segments, &engaged_cmds, delay.value);
-    let drag = drag_fit(log, &segments, &vertical, delay.value);
+    let rotor = rotor_velocity(log, &segments);
+    let vertical = vertical_fit(log, &segments, &engaged_cmds, delay.value, &rotor);
+    let rotor_excitation = match &vertical {
+        VerticalResult::Fitted(_) => std_dev(rotor.iter().map(|(_, q)| q[2])),
+        VerticalResult::Skipped(_) => 0.0,
+    };
+    // The horizontal fit counts the rotor drag in only when identify
+    // recommends it: else drag_h carries all of it.
+    let rotor_drag = match &vertical {
+        VerticalResult::Fitted(v) => v
+            .drag_rotor
+            .filter(|e| report::rotor_excitation_check(*e, rotor_excitation).is_excited()),
+        VerticalResult::Skipped(_) => None,
+    };
+    let drag = drag_fit(
+        log,
+        &segments,
+        &vertical,
+        delay.value,
+        rotor_drag.map(|e| (e.value, &rotor[..])),
+    );
     let vertical_excitation = match &vertical {
         VerticalResult::Fitted(v) => excitation::vertical_accel_std(
             &engaged_cmds
@@ -344,7 +374,55 @@ pub fn identify(log: &FlightLog) -> Result<Identification, IdentifyError> {
         vertical,
         drag,
         vertical_excitation,
+        rotor_excitation,
     })
+}
+
+/// (time \[s\], `v − n·(n·v)` NED \[m/s\]) per engaged pose.
+type RotorSeries = [(f64, [f64; 3])];
+
+/// The velocity across the rotor plane, `q = v − n·(n·v)` (NED \[m/s\]),
+/// at each engaged pose: v the slope of a straight line through the poses
+/// within [`ROTOR_VELOCITY_HALF_S`], n = R·e3 the measured attitude's thrust
+/// axis at the pose's time.
+fn rotor_velocity(log: &FlightLog, segments: &[(f64, f64)]) -> Vec<(f64, [f64; 3])> {
+    let poses: Vec<(f64, [f64; 3])> = log
+        .positions()
+        .iter()
+        .map(|p| (log.pose_time(p), p.position))
+        .filter(|(t, _)| inside(segments, *t).is_some())
+        .collect();
+    let attitude: Vec<(f64, [f64; 3])> = log.attitude.iter().map(|a| (a.t, a.euler)).collect();
+    let h = ROTOR_VELOCITY_HALF_S;
+    let mut out = Vec::with_capacity(poses.len());
+    let (mut lo, mut hi) = (0, 0);
+    for (i, &(t, _)) in poses.iter().enumerate() {
+        while poses[lo].0 < t - h {
+            lo += 1;
+        }
+        hi = hi.max(i);
+        while hi + 1 < poses.len() && poses[hi + 1].0 <= t + h {
+            hi += 1;
+        }
+        let w = &poses[lo..=hi];
+        if w.len() < 3 || inside(segments, w[0].0) != inside(segments, w[w.len() - 1].0) {
+            continue;
+        }
+        let mt = w.iter().map(|(s, _)| s).sum::<f64>() / w.len() as f64;
+        let stt: f64 = w.iter().map(|(s, _)| (s - mt).powi(2)).sum();
+        if stt <= 0.0 {
+            continue;
+        }
+        let v = nalgebra::Vector3::from_fn(|ax, _| {
+            let mp = w.iter().map(|(_, p)| p[ax]).sum::<f64>() / w.len() as f64;
+            w.iter().map(|(s, p)| (s - mt) * (p[ax] - mp)).sum::<f64>() / stt
+        });
+        let [roll, pitch, yaw] = drag::attitude_at(&attitude, t);
+        let n = crate::learn::parametric::thrust_axis(roll, pitch, yaw);
+        let q = v - n * n.dot(&v);
+        out.push((t, [q.x, q.y, q.z]));
+    }
+    out
 }
 
 fn drag_fit(
@@ -352,6 +430,7 @@ fn drag_fit(
     segments: &[(f64, f64)],
     vertical: &VerticalResult,
     delay: f64,
+    rotor: Option<(f64, &RotorSeries)>,
 ) -> DragResult {
     let positions = log.positions();
     let chunks = chunked(
@@ -374,6 +453,7 @@ fn drag_fit(
             }),
             VerticalResult::Skipped(_) => None,
         },
+        rotor: rotor.map(|(d, q)| (d, q.iter().map(|(t, q)| (*t, [q[0], q[1]])).collect())),
         segments: segments
             .iter()
             .zip(chunks)
@@ -394,6 +474,7 @@ fn vertical_fit(
     segments: &[(f64, f64)],
     engaged_cmds: &[&crate::flightlog::CommandSample],
     delay: f64,
+    rotor: &RotorSeries,
 ) -> VerticalResult {
     let thrust_std = std_dev(engaged_cmds.iter().map(|c| c.thrust));
     if thrust_std < 1e-4 {
@@ -420,6 +501,7 @@ fn vertical_fit(
             .zip(chunks)
             .map(|(&span, chunks)| VerticalSegment { span, chunks })
             .collect(),
+        rotor: rotor.iter().map(|(t, q)| (*t, q[2])).collect(),
         delay,
         gravity: GRAVITY,
     };

@@ -26,6 +26,8 @@ pub struct FlownVehicle {
     pub delay_ms: f64,
     /// `vehicle.drag_h` \[1/s\].
     pub drag_h: f64,
+    /// `vehicle.drag_rotor` \[1/s\].
+    pub drag_rotor: f64,
 }
 
 impl FlownVehicle {
@@ -39,6 +41,7 @@ impl FlownVehicle {
             "hover_thrust" => self.hover_thrust,
             "delay_ms" => self.delay_ms,
             "drag_h" => self.drag_h,
+            "drag_rotor" => self.drag_rotor,
             _ => f64::NAN,
         }
     }
@@ -78,9 +81,30 @@ pub struct Parameter {
 fn floor_of(field: &str) -> f64 {
     match field {
         "delay_ms" => 5.0,
-        "drag_h" => 0.02,
+        "drag_h" | "drag_rotor" => 0.02,
         _ => 0.0,
     }
+}
+
+/// Least standard deviation of the velocity across the rotor plane's
+/// vertical part \[m/s\] for the rotor drag to be recommended: a vehicle
+/// tilted into its motion (0.3 m/s: 3 m/s at 6° of tilt).
+pub const MIN_ROTOR_VELOCITY_STD: f64 = 0.3;
+
+/// The excitation check of the rotor drag `e` with the standard deviation
+/// `spread` \[m/s\] of its regressor ([`super::Identification::rotor_excitation`]).
+pub(super) fn rotor_excitation_check(e: Estimate, spread: f64) -> Excitation {
+    excitation::check(
+        e.value,
+        e.ci,
+        floor_of("drag_rotor"),
+        Some(Regressor {
+            what: "velocity across the rotor plane, vertical part, std",
+            value: spread,
+            needed: MIN_ROTOR_VELOCITY_STD,
+            unit: "m/s",
+        }),
+    )
 }
 
 /// Relative difference below which a value is kept.
@@ -136,6 +160,15 @@ impl Identification {
         ];
         if let Some(d) = self.drag_estimate() {
             out.push(param("drag_h", d, None));
+        }
+        if let VerticalResult::Fitted(v) = &self.vertical
+            && let Some(e) = v.drag_rotor
+        {
+            out.push(Parameter {
+                field: "drag_rotor",
+                estimate: e,
+                excitation: rotor_excitation_check(e, self.rotor_excitation),
+            });
         }
         if let Some((hover, tau_t)) = self.vertical_estimates() {
             out.push(param("hover_thrust", hover, None));
@@ -336,6 +369,14 @@ impl Identification {
                     fmt_ci(&p.estimate, 1.0, 3)
                 );
             }
+            if p.field == "drag_rotor" && p.excitation.is_excited() {
+                let _ = writeln!(
+                    s,
+                    "# Rotor drag {} /s (altitude the thrust does not explain, against\n\
+                     # the velocity across the rotor plane).",
+                    fmt_ci(&p.estimate, 1.0, 3)
+                );
+            }
             write_field(&mut s, p, flown);
         }
         if !params.iter().any(|p| p.field == "drag_h") {
@@ -358,7 +399,7 @@ fn write_field(s: &mut String, p: &Parameter, flown: Option<&FlownVehicle>) {
     let digits = if p.field == "delay_ms" { 1 } else { 3 };
     let configured = |v: f64| match p.field {
         "delay_ms" => v.max(0.0),
-        "drag_h" => v.clamp(0.0, 2.0),
+        "drag_h" | "drag_rotor" => v.clamp(0.0, 2.0),
         _ => v,
     };
     match (&p.excitation, flown) {
@@ -407,6 +448,7 @@ mod tests {
                 hover_thrust_ci: 0.004,
                 tau_thrust: 0.456,
                 tau_thrust_ci,
+                drag_rotor: None,
                 samples: 1500,
                 variance_explained: 0.9,
                 rms: 0.02,
@@ -418,6 +460,7 @@ mod tests {
             }),
             drag: DragResult::Skipped("test".into()),
             vertical_excitation,
+            rotor_excitation: 0.0,
         }
     }
 
@@ -430,6 +473,7 @@ mod tests {
             spatial: true,
             delay_ms: 0.0,
             drag_h: 0.0,
+            drag_rotor: 0.0,
         }
     }
 

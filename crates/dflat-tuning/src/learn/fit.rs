@@ -351,11 +351,7 @@ pub fn smoothed(p: &Prepared, model: &Parametric, r: usize, which: Part) -> Vec<
                 .sum();
             let mid = 0.5 * (ta.max(lo) + tb.min(hi));
             let vk = v + a * (mid - s);
-            drag += Vector3::new(
-                model.drag_h * vk.x,
-                model.drag_h * vk.y,
-                model.drag_v * vk.z,
-            ) * weight;
+            drag += model.drag(&p.inputs.axis[k], &vk) * weight;
             kernel.push(KernelTick {
                 weight,
                 v: vk,
@@ -633,7 +629,7 @@ fn extra_acceleration(
     j: usize,
     v: &Vector3<f64>,
 ) -> Vector3<f64> {
-    let mut a = -Vector3::new(model.drag_h * v.x, model.drag_h * v.y, model.drag_v * v.z);
+    let mut a = -model.drag(&p.inputs.axis[j], v);
     if let Some(m) = residual {
         a += m.acceleration(v, &p.inputs.axis[j], p.inputs.thrust[j]);
     }

@@ -29,6 +29,9 @@ pub struct Parametric {
     pub drag_h: f64,
     /// Vertical linear drag \[1/s\].
     pub drag_v: f64,
+    /// Rotor drag \[1/s\] in the body plane (spatial model): the step
+    /// loses `drag_rotor·(v − n·(n·v))`.
+    pub drag_rotor: f64,
     /// Control step δt \[s\].
     pub dt: f64,
 }
@@ -91,16 +94,27 @@ impl Parametric {
     }
 
     /// The model's acceleration [m/s², NED] at thrust axis `n`, specific
-    /// thrust `thrust` and velocity `v` (NED [m/s]): `g·e3 − T·n − D·v`
-    /// (planar: the vertical component 0).
+    /// thrust `thrust` and velocity `v` (NED [m/s]): `g·e3 − T·n` less
+    /// [`Parametric::drag`] (planar: the vertical component 0).
     pub fn acceleration(&self, n: &Vector3<f64>, thrust: f64, v: &Vector3<f64>) -> Vector3<f64> {
-        let mut a = Vector3::new(0.0, 0.0, self.g)
-            - n * thrust
-            - Vector3::new(self.drag_h * v.x, self.drag_h * v.y, self.drag_v * v.z);
+        let mut a = Vector3::new(0.0, 0.0, self.g) - n * thrust - self.drag(n, v);
         if !self.spatial {
             a.z = 0.0;
         }
         a
+    }
+}
+
+impl Parametric {
+    /// The deceleration of the model's drag [m/s², NED] at velocity `v`
+    /// (NED [m/s]) and thrust axis `n` (unit): `D·v` and, spatial, the
+    /// rotor drag `d_r·(v − n·(n·v))`.
+    pub fn drag(&self, n: &Vector3<f64>, v: &Vector3<f64>) -> Vector3<f64> {
+        let mut d = Vector3::new(self.drag_h * v.x, self.drag_h * v.y, self.drag_v * v.z);
+        if self.spatial && self.drag_rotor != 0.0 {
+            d += self.drag_rotor * (v - n * n.dot(v));
+        }
+        d
     }
 }
 
@@ -121,6 +135,7 @@ mod tests {
             hover_thrust: 0.5,
             drag_h: 0.0,
             drag_v: 0.0,
+            drag_rotor: 0.0,
             dt: 0.02,
         }
     }

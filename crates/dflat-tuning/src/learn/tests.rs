@@ -14,6 +14,7 @@ fn vehicle() -> VehicleTable {
         hover_thrust: 0.5,
         drag_h: 0.0,
         drag_v: 0.0,
+        drag_rotor: 0.0,
         dt: 0.02,
     };
     VehicleTable {

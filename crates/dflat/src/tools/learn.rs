@@ -54,6 +54,11 @@ pub fn vehicle_table(cfg: &Config, dt: f64) -> VehicleTable {
             hover_thrust: v.hover_thrust,
             drag_h: v.drag_h,
             drag_v: v.drag_v,
+            drag_rotor: if v.model == ModelKind::Spatial {
+                v.drag_rotor
+            } else {
+                0.0
+            },
             dt,
         },
     }

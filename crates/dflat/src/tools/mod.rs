@@ -114,6 +114,7 @@ pub fn flown_vehicle(config: &Path) -> Result<FlownVehicle> {
         spatial: v.model == dflat_daemon::config::ModelKind::Spatial,
         delay_ms: v.delay_ms,
         drag_h: v.drag_h,
+        drag_rotor: v.drag_rotor,
     })
 }
 

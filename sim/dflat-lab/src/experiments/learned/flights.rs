@@ -186,6 +186,7 @@ pub fn control_model(plant: AeroPlant, vehicle: &Vehicle) -> Result<ControlModel
                 k: vehicle.k,
                 tau_thrust: vehicle.tau_thrust,
                 drag_h: vehicle.drag_h,
+                drag_rotor: vehicle.drag_rotor,
                 ..SpatialParams::default()
             })
             .map_err(err)?,

@@ -69,6 +69,9 @@ pub struct Vehicle {
     pub drag_h: f64,
     /// Thrust time constant \[s\].
     pub tau_thrust: f64,
+    /// Rotor drag \[1/s\] (spatial plants).
+    #[serde(default)]
+    pub drag_rotor: f64,
 }
 
 impl Vehicle {
@@ -79,6 +82,7 @@ impl Vehicle {
         delay_ms: 0.0,
         drag_h: 0.0,
         tau_thrust: 0.04,
+        drag_rotor: 0.0,
     };
     /// Normalised thrust at hover in the lab's records.
     pub const HOVER_THRUST: f64 = 0.5;
@@ -92,6 +96,7 @@ impl Vehicle {
             spatial,
             delay_ms: self.delay_ms,
             drag_h: self.drag_h,
+            drag_rotor: self.drag_rotor,
         }
     }
 
@@ -105,6 +110,7 @@ impl Vehicle {
                 ("delay_ms".into(), self.delay_ms),
                 ("drag_h".into(), self.drag_h),
                 ("tau_thrust".into(), self.tau_thrust),
+                ("drag_rotor".into(), self.drag_rotor),
             ],
             parametric: Parametric {
                 spatial,
@@ -116,6 +122,7 @@ impl Vehicle {
                 hover_thrust: Self::HOVER_THRUST,
                 drag_h: self.drag_h,
                 drag_v: 0.0,
+                drag_rotor: if spatial { self.drag_rotor } else { 0.0 },
                 dt: flights::DT,
             },
         }
@@ -481,6 +488,7 @@ fn identified(
             "k" => &mut v.k,
             "delay_ms" => &mut v.delay_ms,
             "drag_h" => &mut v.drag_h,
+            "drag_rotor" if spatial => &mut v.drag_rotor,
             "tau_thrust" if spatial => &mut v.tau_thrust,
             // The lab's plants hover at HOVER_THRUST: reported, not applied.
             _ => {
@@ -490,7 +498,7 @@ fn identified(
         };
         *value = match c.field {
             "delay_ms" => (c.identified / (1e3 * flights::DT)).round().max(0.0) * 1e3 * flights::DT,
-            "drag_h" => c.identified.clamp(0.0, 2.0),
+            "drag_h" | "drag_rotor" => c.identified.clamp(0.0, 2.0),
             _ => c.identified,
         };
         if *value != c.flown {
@@ -699,6 +707,7 @@ pub fn run_learned(
     for (i, gr) in groups.iter().enumerate() {
         let bare = Vehicle {
             drag_h: 0.0,
+            drag_rotor: 0.0,
             ..ids[i].0
         };
         let exact = exact_residual(&bare, gr.plant.spatial(), g, drag);
