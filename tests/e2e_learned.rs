@@ -1,6 +1,8 @@
 //! End to end, learned maps: the SITL's aerodynamic plant (parasitic drag
 //! 0.03 |v|v and rotor drag 0.2 /s in the body plane, which no parametric
-//! term of the daemon's model has) flown three times from a planner's
+//! term of the daemon's planar model has: `vehicle.drag_rotor` is the
+//! spatial model's, and the planar model leaves the altitude, where its
+//! lift acts, to the autopilot) flown three times from a planner's
 //! stream — stock, identified (`dflat identify` on the stock flight's
 //! .tlog), learned (`dflat learn` on the first two flights' CSVs over the
 //! identified `[vehicle]` table) — against the same airframe without the
