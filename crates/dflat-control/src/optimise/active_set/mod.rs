@@ -40,7 +40,7 @@
 //! the tilt rate's bursts' first ticks from ~390 to ~210 µs (median).
 //!
 //! **Cold starts** (`interior.rs`). Without a guess (a burst's first
-//! tick that breaks more, or whose start above did not end), or when a warm start has not ended within `WARM_SOLVES` (14) KKT
+//! tick that breaks more, or whose start above did not end), or when a warm start has not ended within `warm_solves` (8 at N = 50, 10 at N = 100, 14 from N = 200) KKT
 //! solves or its KKT point misprices or breaks more than `WARM_DISTANCE`
 //! (40) constraints at once (and on the next solve after such a warm
 //! start), the working set is read off a condensed
@@ -115,8 +115,23 @@ pub const MAX_SOLVES: usize = 40;
 /// 834 / 1030 / 2719 µs.) The guesses fail in streaks (ticks 194–199 of
 /// the corner replay): after one fails, the axis's next solve starts
 /// cold (p99 of 8 interleaved runs each, median: 481 → 466 µs; the
-/// median 108 → 110 µs).
+/// median 108 → 110 µs). A burst's first tick from its rollout's set
+/// (`rollout.rs`) has this budget at every horizon; a guess has
+/// [`warm_solves`]'s, fewer at shorter horizons.
 const WARM_SOLVES: usize = 14;
+
+/// KKT solves a guess may take before the solve starts again cold, for
+/// n free outputs: `6 + (n + 12)/25` within 8 ..= [`WARM_SOLVES`] — 8 at
+/// N = 50, 10 at N = 100 (the shipped horizon), 14 from N = 200. Measured
+/// on the corner bench with box and tilt rate, constrained p99 µs,
+/// interleaved runs (docs/performance.md, "The warm start's budget by
+/// horizon"): N = 100, 8 / 10 / 12 / 14 gave 430–435 / 411–424 / 450 /
+/// 472–479 (the course of corners' other ticks 464–479 with 10 against
+/// 622–639 with 14); N = 50, 8 against 14: 237 against 287–341; N = 200,
+/// 10 against 14: 522–596 against 455–542; N = 400, 14 and 22 the same.
+fn warm_solves(n: usize) -> usize {
+    (6 + (n + 12) / 25).clamp(8, WARM_SOLVES)
+}
 /// A warm start whose KKT point, in a block step or while it is made dual
 /// feasible, misprices (wrong-signed multipliers) or breaks more
 /// constraints than this at once starts again cold at once: its set is
@@ -358,8 +373,8 @@ impl ActiveSet {
         // A burst's first tick: no guess (not a start made cold above).
         let first = !forced_cold && !guessed;
         if guessed {
-            // Warm: the guess's set, within WARM_SOLVES; else cold.
-            self.budget = budget.min(WARM_SOLVES);
+            // Warm: the guess's set, within warm_solves(n); else cold.
+            self.budget = budget.min(warm_solves(self.n));
             self.warm = true;
             let warm = self.run(prob, &mut p_times);
             self.warm = false;
