@@ -57,6 +57,7 @@
 
 pub mod data;
 pub mod fit;
+mod horizon;
 pub mod parametric;
 
 use std::collections::BTreeMap;
