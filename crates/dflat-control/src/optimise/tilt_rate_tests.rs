@@ -387,6 +387,81 @@ fn a_burst_that_breaks_a_few_constraints_starts_without_the_interior_point() {
     assert!(alm.active_set_work().interior > 0);
 }
 
+/// A corner entering the horizon's end: the reference still for most of
+/// the horizon, then leaving at `speed` [m/s] over its last `ticks`; the
+/// vehicle at rest. The unconstrained plan breaks the acceleration box
+/// over the last stages, a block about twice the optimum's.
+fn solve_corner(
+    a_max: f64,
+    speed: f64,
+    ticks: usize,
+) -> (Vec<f64>, Vec<f64>, super::active_set::Work, AxisBounds) {
+    let (horizon, (q, r)) = (STEP_HORIZON, STEP_WEIGHTS);
+    let mut bounds = step_bounds(Some(a_max));
+    if let Some(rate) = &mut bounds.tilt_rate {
+        rate.step = 3f64.to_radians();
+    }
+    let fixed = [0.0, 0.0, 0.0];
+    let start = horizon + 1 - ticks;
+    let reference: Vec<f64> = (0..=horizon)
+        .map(|j| speed * DT * j.saturating_sub(start) as f64)
+        .collect();
+    let sent = Some(0.0);
+    let mut want = vec![0.0; horizon + 1];
+    ClarabelSolver::with_tuning(
+        horizon,
+        (q, r, DT),
+        bounds,
+        f64::INFINITY,
+        Smoothness::default(),
+        KktTuning::REFERENCE,
+    )
+    .unwrap()
+    .solve_problem(AxisProblem {
+        fixed: &fixed,
+        sent,
+        reference: &reference,
+        plan: &mut want,
+    })
+    .unwrap();
+    let mut got = vec![0.0; horizon + 1];
+    FastBandedSolver::new(horizon, q, r, DT)
+        .unwrap()
+        .solve_problem(AxisProblem {
+            fixed: &fixed,
+            sent,
+            reference: &reference,
+            plan: &mut got,
+        })
+        .unwrap();
+    let mut alm = step_alm(bounds);
+    alm.solve_problem(AxisProblem {
+        fixed: &fixed,
+        sent,
+        reference: &reference,
+        plan: &mut got,
+    })
+    .unwrap();
+    (got, want, alm.active_set_work(), bounds)
+}
+
+/// A corner entering the horizon's end breaks a block of the acceleration
+/// box there, about twice the optimum's: the active set starts from the
+/// block's second half (`rollout.rs`, `trim_end_block`) and ends in 6
+/// and 8 KKT solves, without the interior point, at clarabel's plan (13
+/// and 12 from the whole block, freed one stage per solve).
+#[test]
+fn a_corner_entering_the_horizons_end_starts_from_its_blocks_second_half() {
+    for (a_max, speed, ticks) in [(2.0, 4.0, 20), (3.0, 4.0, 30)] {
+        let label = format!("±{a_max} m/s², {speed} m/s over the last {ticks} ticks");
+        let (got, want, work, bounds) = solve_corner(a_max, speed, ticks);
+        eprintln!("{label}: {work:?}");
+        assert_eq!(work.interior, 0, "{label}: {work:?}");
+        assert!(work.solves <= 8, "{label}: {work:?}");
+        check_step(&label, bounds, &got, &want);
+    }
+}
+
 /// The augmented Lagrangian alone ([`BoxAlmSolver`] at its cold tuning)
 /// of the rate-limited step.
 fn step_alm(bounds: AxisBounds) -> BoxAlmSolver {

@@ -35,6 +35,7 @@ impl ActiveSet {
             self.budget = budget.min(self.work.solves + super::WARM_SOLVES);
             self.warm = true;
             self.rollout_guess();
+            self.trim_end_block();
             let few = self.run(prob, p_times);
             self.warm = false;
             self.budget = budget;
@@ -52,6 +53,32 @@ impl ActiveSet {
             self.rollout_guess();
         }
         Ok(false)
+    }
+
+    /// Frees the first half of the block of stage intervals in the set
+    /// that reaches the horizon's last stage. Where a burst begins because
+    /// a corner enters the horizon's end, the rollout's block there spans
+    /// the unconstrained plan's violation, about twice the optimum's (9
+    /// stages where the optimum holds 4 on the corner bench's course at
+    /// N = 200: the optimum turns earlier, under the bound), and the
+    /// methods freed it one stage per KKT solve from its start. From its
+    /// second half they end in 6 KKT solves instead of 14 there (4 instead
+    /// of 22 at N = 100); docs/performance.md, "The block at the horizon's
+    /// end".
+    fn trim_end_block(&mut self) {
+        let n = self.n;
+        if n == 0 || self.side[n - 1] == Side::Free {
+            return;
+        }
+        let side = self.side[n - 1];
+        let mut first = n - 1;
+        while first > 0 && self.side[first - 1] == side {
+            first -= 1;
+        }
+        for id in first..first + (n - first) / 2 {
+            self.lam[id] = 0.0;
+            self.set_side(id, Side::Free);
+        }
     }
 
     /// Sets the working set of a cold solve from the unconstrained plan
