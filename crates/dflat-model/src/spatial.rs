@@ -159,7 +159,13 @@ impl SpatialModel {
         check_drag("drag_v", p.drag_v, p.dt)?;
         check_drag("drag_rotor", p.drag_rotor, p.dt)?;
         // The isotropic part of the rotor drag adds to the linear drag.
-        check_drag("drag_rotor", p.drag_rotor + p.drag_h.max(p.drag_v), p.dt)?;
+        if (p.drag_rotor + p.drag_h.max(p.drag_v)) * p.dt >= 1.0 {
+            return Err(FlatError::InvalidParameter {
+                name: "drag_rotor",
+                value: p.drag_rotor,
+                allowed: "max(drag_h, drag_v) + drag_rotor < 1/dt",
+            });
+        }
         Ok(Self { p })
     }
 
@@ -440,6 +446,36 @@ mod tests {
                 other => panic!("{name}: {other:?}"),
             }
         }
+    }
+
+    /// The rotor drag's isotropic part adds to the linear drag: their sum
+    /// must keep one Euler step from reversing the velocity.
+    #[test]
+    fn rotor_drag_and_linear_drag_together_are_bounded() {
+        let p = SpatialParams {
+            dt: 0.1,
+            drag_h: 6.0,
+            drag_rotor: 5.0,
+            ..Default::default()
+        };
+        match SpatialModel::new(p) {
+            Err(FlatError::InvalidParameter { name, allowed, .. }) => {
+                assert_eq!(name, "drag_rotor");
+                assert!(allowed.contains("drag_h"), "{allowed}");
+            }
+            other => panic!("{other:?}"),
+        }
+        SpatialModel::new(SpatialParams {
+            drag_rotor: 4.0,
+            ..p
+        })
+        .unwrap_err();
+        SpatialModel::new(SpatialParams {
+            drag_h: 4.0,
+            drag_rotor: 5.0,
+            ..p
+        })
+        .unwrap();
     }
 
     #[test]

@@ -282,6 +282,14 @@ impl Identification {
                     },
                     v.samples
                 );
+                if let Some(rotor) = v.drag_rotor {
+                    let _ = writeln!(
+                        s,
+                        "  rotor drag {} /s (against the velocity across the rotor plane, std {:.2} m/s)",
+                        fmt_ci(&rotor, 1.0, 3),
+                        self.rotor_excitation
+                    );
+                }
             }
             VerticalResult::Skipped(why) => {
                 let _ = writeln!(s, "  not identified: {why}");
