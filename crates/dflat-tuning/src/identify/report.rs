@@ -496,6 +496,44 @@ mod tests {
             .unwrap()
     }
 
+    /// The rotor drag changes only when its regressor moved and its
+    /// interval is tight: a slow flight (spread 0.1 m/s) keeps the value
+    /// flown, in words, whatever the interval; a fast one changes it.
+    #[test]
+    fn the_rotor_drag_changes_only_when_the_flight_excited_it() {
+        let with_rotor = |spread: f64, ci: f64| {
+            let mut found = level_flight(0.01, 0.5);
+            if let VerticalResult::Fitted(v) = &mut found.vertical {
+                v.drag_rotor = Some(Estimate { value: 0.25, ci });
+            }
+            found.rotor_excitation = spread;
+            found
+        };
+        let rotor = |found: &Identification| {
+            found
+                .compare(&flown())
+                .into_iter()
+                .find(|c| c.field == "drag_rotor")
+                .unwrap()
+        };
+        for found in [with_rotor(0.1, 0.01), with_rotor(0.5, 0.1)] {
+            let c = rotor(&found);
+            assert!(!c.change && !c.excitation.is_excited(), "{c:?}");
+            let snippet = found.vehicle_snippet("slow.tlog", Some(&flown()));
+            assert!(snippet.contains("\ndrag_rotor = 0.000\n"), "{snippet}");
+            assert!(snippet.contains("drag_rotor: unexcited"), "{snippet}");
+        }
+        let fast = with_rotor(0.5, 0.01);
+        let c = rotor(&fast);
+        assert!(c.change && c.excitation.is_excited(), "{c:?}");
+        let snippet = fast.vehicle_snippet("fast.tlog", Some(&flown()));
+        assert!(snippet.contains("\ndrag_rotor = 0.250\n"), "{snippet}");
+        assert!(
+            fast.report("fast.tlog", None)
+                .contains("rotor drag 0.250 ± 0.010 /s")
+        );
+    }
+
     /// A level flight must not change `tau_thrust`: neither with its 30 %
     /// interval, nor with a tight one when the vertical was never excited;
     /// the snippet keeps the value flown and says why.
