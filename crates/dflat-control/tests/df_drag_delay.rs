@@ -70,11 +70,38 @@ fn fly_planar(plant_drag: f64, plant_delay: usize, model_drag: f64, model_delay:
     )
 }
 
-/// A circle of radius 6 m flown at 4 m/s, indexed by time (a planner's
-/// stream is): `out[j]` the point at tick k + j, k the calls so far.
-struct TimedCircle {
+/// A reference indexed by time (a planner's stream is): `out[j]` the
+/// point `at(k + j)` of tick k + j, k the calls so far.
+struct Timed {
     k: usize,
+    at: fn(usize) -> Vector3<f64>,
 }
+
+impl Timed {
+    /// From its first tick.
+    fn new(at: fn(usize) -> Vector3<f64>) -> Self {
+        Self { k: 0, at }
+    }
+}
+
+impl ReferenceSource for Timed {
+    fn horizon(&mut self, _measured: &Vector3<f64>, _dt: f64, out: &mut [Vector3<f64>]) {
+        for (j, o) in out.iter_mut().enumerate() {
+            *o = (self.at)(self.k + j);
+        }
+        self.k += 1;
+    }
+    fn closest(&mut self, _measured: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
+        ((self.at)(self.k), Vector3::zeros())
+    }
+    /// A trajectory (as a stream): the plan's jerk is weighed against its.
+    fn flyable(&self) -> bool {
+        true
+    }
+}
+
+/// A circle of radius 6 m flown at 4 m/s ([`Timed`]).
+struct TimedCircle;
 
 impl TimedCircle {
     const RADIUS: f64 = 6.0;
@@ -87,22 +114,6 @@ impl TimedCircle {
             Self::RADIUS * (1.0 - phase.cos()),
             Z,
         )
-    }
-}
-
-impl ReferenceSource for TimedCircle {
-    fn horizon(&mut self, _measured: &Vector3<f64>, _dt: f64, out: &mut [Vector3<f64>]) {
-        for (j, o) in out.iter_mut().enumerate() {
-            *o = Self::at(self.k + j);
-        }
-        self.k += 1;
-    }
-    fn closest(&mut self, _measured: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
-        (Self::at(self.k), Vector3::zeros())
-    }
-    /// A trajectory (as a stream): the plan's jerk is weighed against its.
-    fn flyable(&self) -> bool {
-        true
     }
 }
 
@@ -224,7 +235,7 @@ fn matched_delay_is_tracked_as_without_delay() {
 /// the first 5 s.
 fn fly_timed_circle(plant: (f64, usize), model: (f64, usize), smoothness: f64) -> Flight {
     fly_planar_smooth(
-        &mut TimedCircle { k: 0 },
+        &mut Timed::new(TimedCircle::at),
         |k, p| {
             if k < 250 {
                 0.0
@@ -450,11 +461,9 @@ fn fly_spatial_on(
     (p95(cross), north, p95(altitude))
 }
 
-/// A circle of radius 30 m flown at 8 m/s, indexed by time, from rest:
-/// the speed ramps up over the first 4 s (judged from 5 s).
-struct FastCircle {
-    k: usize,
-}
+/// A circle of radius 30 m flown at 8 m/s ([`Timed`]), from rest: the
+/// speed ramps up over the first 4 s (judged from 5 s).
+struct FastCircle;
 
 impl FastCircle {
     const RAMP_S: f64 = 4.0;
@@ -468,21 +477,6 @@ impl FastCircle {
         };
         let phase = s / 30.0;
         Vector3::new(30.0 * phase.sin(), 30.0 * (1.0 - phase.cos()), Z)
-    }
-}
-
-impl ReferenceSource for FastCircle {
-    fn horizon(&mut self, _measured: &Vector3<f64>, _dt: f64, out: &mut [Vector3<f64>]) {
-        for (j, o) in out.iter_mut().enumerate() {
-            *o = Self::at(self.k + j);
-        }
-        self.k += 1;
-    }
-    fn closest(&mut self, _measured: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
-        (Self::at(self.k), Vector3::zeros())
-    }
-    fn flyable(&self) -> bool {
-        true
     }
 }
 
@@ -500,8 +494,9 @@ fn matched_rotor_drag_flies_a_fast_stream_as_linear_drag() {
             (p - FastCircle::at(k)).norm()
         }
     };
-    let (linear, _, _) = fly_spatial_on(&mut FastCircle { k: 0 }, error, 0.3, (0.0, 0.0));
-    let (rotor, _, rotor_z) = fly_spatial_on(&mut FastCircle { k: 0 }, error, 0.0, (0.3, 0.3));
+    let (linear, _, _) = fly_spatial_on(&mut Timed::new(FastCircle::at), error, 0.3, (0.0, 0.0));
+    let (rotor, _, rotor_z) =
+        fly_spatial_on(&mut Timed::new(FastCircle::at), error, 0.0, (0.3, 0.3));
     println!(
         "timed circle 8 m/s: error p95 linear drag 0.3 {linear:.4} m, rotor drag 0.3 {rotor:.4} m \
          (altitude {rotor_z:.4} m)"
