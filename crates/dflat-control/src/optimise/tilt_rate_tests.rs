@@ -396,52 +396,16 @@ fn solve_corner(
     speed: f64,
     ticks: usize,
 ) -> (Vec<f64>, Vec<f64>, super::active_set::Work, AxisBounds) {
-    let (horizon, (q, r)) = (STEP_HORIZON, STEP_WEIGHTS);
     let mut bounds = step_bounds(Some(a_max));
     if let Some(rate) = &mut bounds.tilt_rate {
         rate.step = 3f64.to_radians();
     }
-    let fixed = [0.0, 0.0, 0.0];
-    let start = horizon + 1 - ticks;
-    let reference: Vec<f64> = (0..=horizon)
+    let start = STEP_HORIZON + 1 - ticks;
+    let reference: Vec<f64> = (0..=STEP_HORIZON)
         .map(|j| speed * DT * j.saturating_sub(start) as f64)
         .collect();
-    let sent = Some(0.0);
-    let mut want = vec![0.0; horizon + 1];
-    ClarabelSolver::with_tuning(
-        horizon,
-        (q, r, DT),
-        bounds,
-        f64::INFINITY,
-        Smoothness::default(),
-        KktTuning::REFERENCE,
-    )
-    .unwrap()
-    .solve_problem(AxisProblem {
-        fixed: &fixed,
-        sent,
-        reference: &reference,
-        plan: &mut want,
-    })
-    .unwrap();
-    let mut got = vec![0.0; horizon + 1];
-    FastBandedSolver::new(horizon, q, r, DT)
-        .unwrap()
-        .solve_problem(AxisProblem {
-            fixed: &fixed,
-            sent,
-            reference: &reference,
-            plan: &mut got,
-        })
-        .unwrap();
     let mut alm = step_alm(bounds);
-    alm.solve_problem(AxisProblem {
-        fixed: &fixed,
-        sent,
-        reference: &reference,
-        plan: &mut got,
-    })
-    .unwrap();
+    let (got, want) = solve_from_rest(&mut alm, bounds, &reference);
     (got, want, alm.active_set_work(), bounds)
 }
 
@@ -481,9 +445,20 @@ fn step_alm(bounds: AxisBounds) -> BoxAlmSolver {
 /// under `bounds`, solved by `alm` from the fast path's unconstrained
 /// plan: its plan and clarabel's at its reference tuning.
 fn solve_step(alm: &mut BoxAlmSolver, bounds: AxisBounds, target: f64) -> (Vec<f64>, Vec<f64>) {
+    solve_from_rest(alm, bounds, &vec![target; STEP_HORIZON + 1])
+}
+
+/// The vehicle at rest (nothing sent but 0) planning along `reference`
+/// (STEP_HORIZON + 1 outputs \[m\]) under `bounds`, solved by `alm` from
+/// the fast path's unconstrained plan: its plan and clarabel's at its
+/// reference tuning.
+fn solve_from_rest(
+    alm: &mut BoxAlmSolver,
+    bounds: AxisBounds,
+    reference: &[f64],
+) -> (Vec<f64>, Vec<f64>) {
     let (horizon, (q, r)) = (STEP_HORIZON, STEP_WEIGHTS);
     let fixed = [0.0, 0.0, 0.0];
-    let reference = vec![target; horizon + 1];
     let sent = Some(0.0);
     let mut want = vec![0.0; horizon + 1];
     ClarabelSolver::with_tuning(
@@ -498,7 +473,7 @@ fn solve_step(alm: &mut BoxAlmSolver, bounds: AxisBounds, target: f64) -> (Vec<f
     .solve_problem(AxisProblem {
         fixed: &fixed,
         sent,
-        reference: &reference,
+        reference,
         plan: &mut want,
     })
     .unwrap();
@@ -508,14 +483,14 @@ fn solve_step(alm: &mut BoxAlmSolver, bounds: AxisBounds, target: f64) -> (Vec<f
         .solve_problem(AxisProblem {
             fixed: &fixed,
             sent,
-            reference: &reference,
+            reference,
             plan: &mut got,
         })
         .unwrap();
     alm.solve_problem(AxisProblem {
         fixed: &fixed,
         sent,
-        reference: &reference,
+        reference,
         plan: &mut got,
     })
     .unwrap();
