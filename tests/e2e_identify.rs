@@ -178,25 +178,35 @@ fn without_drag_and_delay(plant: &str) -> String {
 
 /// Cross-track p95 \[m\] of the L path at 5 m/s with `vehicle` on `plant`.
 fn fly_l_path_on(name: &str, vehicle: &str, plant: &str) -> f64 {
+    let errors: Vec<f64> = fly_l_path_positions(name, vehicle, plant, 5.0)
+        .iter()
+        .map(|p| path_distance(&L_PATH, *p))
+        .collect();
+    quantile(&errors, 0.95)
+}
+
+/// The SITL's true positions while engaged on the L path at `speed`
+/// [m/s] with `vehicle` on `plant` (more than 200 of them).
+fn fly_l_path_positions(name: &str, vehicle: &str, plant: &str, speed: f64) -> Vec<[f64; 3]> {
     let config = format!(
         "[logging]\ndir = \"@DIR@\"\ntlog = true\n{vehicle}\n[mission]\nstart = \"path\"\n\
-         path = [[0.0, 0.0, -10.0], [15.0, 0.0, -10.0], [15.0, 15.0, -10.0]]\nspeed = 5.0\n\
+         path = [[0.0, 0.0, -10.0], [15.0, 0.0, -10.0], [15.0, 15.0, -10.0]]\nspeed = {speed:.1}\n\
          [sitl]\n{plant}"
     );
     let flight = fly_in_process(name, &config, Duration::from_secs(10));
-    let errors: Vec<f64> = flight
+    let offboard: Vec<[f64; 3]> = flight
         .report
         .trace
         .iter()
         .filter(|s| s.mode == SitlMode::Offboard)
-        .map(|s| path_distance(&L_PATH, s.position))
+        .map(|s| s.position)
         .collect();
     assert!(
-        errors.len() > 200,
+        offboard.len() > 200,
         "{name}: {} offboard samples",
-        errors.len()
+        offboard.len()
     );
-    quantile(&errors, 0.95)
+    offboard
 }
 
 /// Drag and delay identified as their own terms (drag within 10 %, delay
@@ -330,24 +340,7 @@ start = [0.0, 0.0, -10.0]
 /// Altitude error p95 and cross-track p95 \[m\] of the L path at `speed`
 /// with `vehicle` on `plant` (judged from the SITL's truth, engaged).
 fn fly_l_path_altitude(name: &str, vehicle: &str, plant: &str, speed: f64) -> (f64, f64) {
-    let config = format!(
-        "[logging]\ndir = \"@DIR@\"\ntlog = true\n{vehicle}\n[mission]\nstart = \"path\"\n\
-         path = [[0.0, 0.0, -10.0], [15.0, 0.0, -10.0], [15.0, 15.0, -10.0]]\nspeed = {speed:.1}\n\
-         [sitl]\n{plant}"
-    );
-    let flight = fly_in_process(name, &config, Duration::from_secs(10));
-    let offboard: Vec<[f64; 3]> = flight
-        .report
-        .trace
-        .iter()
-        .filter(|s| s.mode == SitlMode::Offboard)
-        .map(|s| s.position)
-        .collect();
-    assert!(
-        offboard.len() > 200,
-        "{name}: {} offboard samples",
-        offboard.len()
-    );
+    let offboard = fly_l_path_positions(name, vehicle, plant, speed);
     let z: Vec<f64> = offboard.iter().map(|p| (p[2] + 10.0).abs()).collect();
     let cross: Vec<f64> = offboard
         .iter()
