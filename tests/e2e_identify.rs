@@ -47,6 +47,24 @@ fn tlog_in(dir: &Path) -> PathBuf {
         .expect("no .tlog written")
 }
 
+/// The identification manoeuvre flown on the `[sitl]` body `plant` with
+/// 5 mm of position noise, the daemon on the spatial model's defaults,
+/// then `dflat identify` on its .tlog: what it found and its `[vehicle]`
+/// snippet (both printed).
+fn identify_manoeuvre(name: &str, plant: &str) -> (Identification, String) {
+    let config = format!(
+        "{DAEMON}{}\n[sitl]\n{plant}noise_sigma = 0.005\n",
+        manoeuvre_mission([0.0, 0.0, -10.0])
+    );
+    fly_in_process(name, &config, Duration::from_secs(17));
+    let log = FlightLog::read_tlog(&tlog_in(&scratch_dir(name))).expect("tlog");
+    let found = identify::identify(&log).expect("identify");
+    eprintln!("{name}:\n{}", found.report(name, None));
+    let snippet = found.vehicle_snippet(name, None);
+    eprintln!("{snippet}");
+    (found, snippet)
+}
+
 fn identify_flight(
     name: &str,
     extra_daemon: &str,
@@ -218,14 +236,7 @@ fn fly_l_path_positions(name: &str, vehicle: &str, plant: &str, speed: f64) -> V
 fn identifies_drag_and_delay_and_flies_as_well_as_a_matched_plant() {
     let spatial = SPATIAL;
     let name = "identify-drag";
-    let config = format!(
-        "{DAEMON}{}\n[sitl]\n{DRAG_PLANT}noise_sigma = 0.005\n",
-        manoeuvre_mission([0.0, 0.0, -10.0])
-    );
-    fly_in_process(name, &config, Duration::from_secs(17));
-    let log = FlightLog::read_tlog(&tlog_in(&scratch_dir(name))).expect("tlog");
-    let found = identify::identify(&log).expect("identify");
-    eprintln!("{name}:\n{}", found.report(name, None));
+    let (found, snippet) = identify_manoeuvre(name, DRAG_PLANT);
     let Some(drag) = found.drag_estimate() else {
         panic!("drag not identified: {:?}", found.drag)
     };
@@ -239,8 +250,6 @@ fn identifies_drag_and_delay_and_flies_as_well_as_a_matched_plant() {
     assert!((delay_ms - 40.0).abs() <= 20.0, "delay {delay_ms:.1} ms");
     assert_within("identify-drag", "τ", found.tau.value, 0.08, 0.15);
 
-    let snippet = found.vehicle_snippet("identify-drag", None);
-    eprintln!("{snippet}");
     let tuned = spatial_snippet(&snippet);
     // The same airframe (τ 0.08, k̃ 0.8, hover 0.42) without drag and
     // delay, flown with its exact model: what the identified terms should
@@ -289,16 +298,7 @@ start = [0.0, 0.0, -10.0]
 fn identifies_drag_on_a_rigid_body_and_flies_better_than_the_defaults() {
     let spatial = SPATIAL;
     let name = "identify-rigid";
-    let config = format!(
-        "{DAEMON}{}\n[sitl]\n{RIGID_PLANT}noise_sigma = 0.005\n",
-        manoeuvre_mission([0.0, 0.0, -10.0])
-    );
-    fly_in_process(name, &config, Duration::from_secs(17));
-    let log = FlightLog::read_tlog(&tlog_in(&scratch_dir(name))).expect("tlog");
-    let found = identify::identify(&log).expect("identify");
-    eprintln!("{name}:\n{}", found.report(name, None));
-    let snippet = found.vehicle_snippet(name, None);
-    eprintln!("{snippet}");
+    let (found, snippet) = identify_manoeuvre(name, RIGID_PLANT);
     let tuned = spatial_snippet(&snippet);
     let clean_plant = without_drag_and_delay(RIGID_PLANT);
     let clean = fly_l_path_on("rigid-clean", spatial, &clean_plant);
@@ -361,16 +361,7 @@ fn fly_l_path_altitude(name: &str, vehicle: &str, plant: &str, speed: f64) -> (f
 #[test]
 fn identifies_rotor_drag_and_holds_the_altitude() {
     let name = "identify-rotor";
-    let config = format!(
-        "{DAEMON}{}\n[sitl]\n{ROTOR_PLANT}noise_sigma = 0.005\n",
-        manoeuvre_mission([0.0, 0.0, -10.0])
-    );
-    fly_in_process(name, &config, Duration::from_secs(17));
-    let log = FlightLog::read_tlog(&tlog_in(&scratch_dir(name))).expect("tlog");
-    let found = identify::identify(&log).expect("identify");
-    eprintln!("{name}:\n{}", found.report(name, None));
-    let snippet = found.vehicle_snippet(name, None);
-    eprintln!("{snippet}");
+    let (found, snippet) = identify_manoeuvre(name, ROTOR_PLANT);
     let rotor = match &found.vertical {
         VerticalResult::Fitted(v) => v.drag_rotor.expect("rotor drag fitted"),
         VerticalResult::Skipped(why) => panic!("no vertical fit: {why}"),
