@@ -488,12 +488,17 @@ mod tests {
         }
     }
 
-    fn tau_thrust(found: &Identification) -> Change {
+    /// The comparison's row of `field` against [`flown`].
+    fn change_of(found: &Identification, field: &str) -> Change {
         found
             .compare(&flown())
             .into_iter()
-            .find(|c| c.field == "tau_thrust")
+            .find(|c| c.field == field)
             .unwrap()
+    }
+
+    fn tau_thrust(found: &Identification) -> Change {
+        change_of(found, "tau_thrust")
     }
 
     /// The rotor drag changes only when its regressor moved and its
@@ -509,13 +514,7 @@ mod tests {
             found.rotor_excitation = spread;
             found
         };
-        let rotor = |found: &Identification| {
-            found
-                .compare(&flown())
-                .into_iter()
-                .find(|c| c.field == "drag_rotor")
-                .unwrap()
-        };
+        let rotor = |found: &Identification| change_of(found, "drag_rotor");
         for found in [with_rotor(0.1, 0.01), with_rotor(0.5, 0.1)] {
             let c = rotor(&found);
             assert!(!c.change && !c.excitation.is_excited(), "{c:?}");
