@@ -300,15 +300,16 @@ impl ControlModel {
         match self {
             ControlModel::Spatial(m) if m.params().drag_rotor != 0.0 => {
                 let p = m.params();
-                let gravity = Vector3::from(p.frame.acceleration([0.0; 3], p.g));
-                let t = thrust_acc - gravity;
+                let t = Vector3::from(
+                    p.frame
+                        .thrust_vector([thrust_acc.x, thrust_acc.y, thrust_acc.z], p.g),
+                );
                 let n = if t.norm() > 0.0 {
                     t.normalize()
                 } else {
                     Vector3::z()
                 };
-                let linear = Vector3::new(p.drag_h * v.x, p.drag_h * v.y, p.drag_v * v.z);
-                -linear - p.drag_rotor * (v - n * n.dot(v))
+                m.drag_acceleration_at_axis(&n, v)
             }
             _ => -self.drag().component_mul(v),
         }

@@ -215,19 +215,16 @@ impl SpatialModel {
     /// \[m/s\] and pitch θ, roll φ \[rad\] (yaw ψ⋆): the linear drag's
     /// and the rotor drag's, `−D·v − d_r·(v − n·(n·v))`, n = R·e3.
     pub fn drag_acceleration(&self, theta: f64, phi: f64, v: &Vector3<f64>) -> Vector3<f64> {
-        let mut a = -self.drag(v);
-        if self.p.drag_rotor != 0.0 {
-            let n = Vector3::from(thrust_axis(theta, phi, self.p.psi));
-            a -= self.p.drag_rotor * (v - n * n.dot(v));
+        if self.p.drag_rotor == 0.0 {
+            return -self.drag(v);
         }
-        a
+        self.drag_acceleration_at_axis(&Vector3::from(thrust_axis(theta, phi, self.p.psi)), v)
     }
 
-    /// The sign s of the thrust in the acceleration, `a = g_vec + s·T·n`
-    /// (NED −1, z-up +1).
-    fn thrust_sign(&self) -> f64 {
-        let a = self.p.frame.acceleration([0.0, 0.0, 1.0], 0.0);
-        a[2].signum()
+    /// [`Self::drag_acceleration`] at the unit thrust axis `n` (model
+    /// frame; its sign does not matter): `−D·v − d_r·(v − n·(n·v))`.
+    pub fn drag_acceleration_at_axis(&self, n: &Vector3<f64>, v: &Vector3<f64>) -> Vector3<f64> {
+        -self.drag(v) - self.p.drag_rotor * (v - n * n.dot(v))
     }
 
     /// Thrust and attitude (T, θ, φ) at the first of three outputs, from the
@@ -251,7 +248,9 @@ impl SpatialModel {
         // The rotor drag's part along the thrust axis, d_r·n·(n·v), is a
         // thrust change (module docs, Rotor drag).
         let n = Vector3::from(thrust_axis(theta, phi, self.p.psi));
-        let thrust = thrust - self.thrust_sign() * dr * n.dot(&v);
+        // s, the thrust's sign in `a = g_vec + s·T·n`, is the frame's
+        // horizontal sign (NED −1, z-up +1).
+        let thrust = thrust - self.p.frame.horizontal_sign() * dr * n.dot(&v);
         if thrust > 0.0 {
             Ok((thrust, theta, phi))
         } else {
