@@ -76,8 +76,7 @@ impl ActiveSet {
             first -= 1;
         }
         for id in first..first + (n - first) / 2 {
-            self.lam[id] = 0.0;
-            self.set_side(id, Side::Free);
+            self.release(id);
         }
     }
 
