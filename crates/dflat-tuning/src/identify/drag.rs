@@ -146,8 +146,9 @@ pub(super) fn attitude_at(att: &[(f64, [f64; 3])], t: f64) -> [f64; 3] {
     }
 }
 
-/// Position at `t` from a segment's samples (linear; held at the ends).
-fn position_at(samples: &[(f64, [f64; 2])], t: f64) -> [f64; 2] {
+/// A series' value at `t` (a segment's positions, the velocity across the
+/// rotor plane): linear between samples, held at the ends.
+fn sample_at(samples: &[(f64, [f64; 2])], t: f64) -> [f64; 2] {
     let i = samples.partition_point(|(s, _)| *s <= t);
     match (i.checked_sub(1).map(|j| samples[j]), samples.get(i)) {
         (Some((t0, a)), Some(&(t1, b))) if t1 > t0 => {
@@ -198,7 +199,7 @@ fn rows(data: &DragData) -> Vec<Row> {
         let specific = |m: &ThrustModel, cf: f64| g * cf / m.hover_thrust;
         let rotor = |t: f64, acc: [f64; 2]| match &data.rotor {
             Some((d, q)) => {
-                let q = position_at(q, t);
+                let q = sample_at(q, t);
                 [acc[0] - d * q[0], acc[1] - d * q[1]]
             }
             None => acc,
@@ -214,7 +215,7 @@ fn rows(data: &DragData) -> Vec<Row> {
                 ),
             ),
         );
-        let mut p_prev = position_at(&samples, a);
+        let mut p_prev = sample_at(&samples, a);
         for k in 1..n {
             let t = a + k as f64 * GRID;
             if let (Some((m, e)), Some(c)) = (lag, cf.as_mut()) {
@@ -229,7 +230,7 @@ fn rows(data: &DragData) -> Vec<Row> {
                     lag.zip(cf).map(|((m, _), c)| specific(m, c)),
                 ),
             );
-            let p = position_at(&samples, t);
+            let p = sample_at(&samples, t);
             for ax in 0..2 {
                 let v_next = v[ax] + 0.5 * (acc[ax] + acc_prev[ax]) * GRID;
                 i2[k][ax] = i2[k - 1][ax] + 0.5 * (v[ax] + v_next) * GRID;
