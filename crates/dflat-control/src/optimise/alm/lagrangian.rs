@@ -143,6 +143,10 @@ impl BandedAlm {
                 continue;
             }
             let h = self.ws.hx[k] + alpha * self.ws.hd[k];
+            if *v == [0.0; 2] && lo[k] <= h && h <= hi[k] {
+                // Inside, no multiplier: no term (`gradient`).
+                continue;
+            }
             let ss = self.sigma_row(k);
             for (j, &vj) in v.iter().enumerate() {
                 let t = Self::side(j, h, lo[k], hi[k]);
@@ -194,6 +198,13 @@ impl BandedAlm {
             }
             let h = self.rows[r].dot(&self.ws.x);
             self.ws.hx[r] = h;
+            if self.warm.v[r] == [0.0; 2] && lo[r] <= h && h <= hi[r] {
+                // Inside its interval with no multiplier: both sides'
+                // updates are 0, and so are its terms (bit for bit).
+                self.ws.active[self.n + 2 * r] = 0;
+                self.ws.active[self.n + 2 * r + 1] = 0;
+                continue;
+            }
             let ss = self.sigma_row(r);
             let rho = self.row_penalty[r];
             let weight = if rho.is_infinite() {
