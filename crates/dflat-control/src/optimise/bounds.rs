@@ -343,13 +343,90 @@ impl Row {
 
     /// `g·v`.
     pub(super) fn dot(&self, v: &[f64]) -> f64 {
-        (0..self.len).map(|k| self.coef[k] * v[self.idx[k]]).sum()
+        let mut s = 0.0;
+        for k in 0..self.len {
+            s += self.coef[k] * v[self.idx[k]];
+        }
+        s
     }
 
     /// `out += a·g`.
     pub(super) fn axpy(&self, a: f64, out: &mut [f64]) {
         for k in 0..self.len {
             out[self.idx[k]] += a * self.coef[k];
+        }
+    }
+}
+
+/// A run of consecutive rows that are one row shifted by `stride`
+/// unknowns per row (a block's rows past its truncated first ones): their
+/// products with a vector in one pass, the first row's indices and
+/// coefficients held ([`RowRun::products`]).
+#[derive(Debug, Clone, Copy)]
+pub(super) struct RowRun {
+    /// The rows `start..end`.
+    pub(super) start: usize,
+    pub(super) end: usize,
+    row: Row,
+    stride: usize,
+}
+
+impl RowRun {
+    /// The maximal runs of `rows`, in order (a row shifted from none of
+    /// its neighbours is a run of one).
+    pub(super) fn runs(rows: &[Row]) -> Vec<Self> {
+        let mut runs: Vec<Self> = Vec::new();
+        for (r, row) in rows.iter().enumerate() {
+            if let Some(run) = runs.last_mut()
+                && run.end == r
+                && run.extends(row)
+            {
+                run.end += 1;
+                continue;
+            }
+            runs.push(Self {
+                start: r,
+                end: r + 1,
+                row: *row,
+                stride: 0,
+            });
+        }
+        runs
+    }
+
+    /// Whether `next` (the row after the run's last) extends the run: the
+    /// same coefficients, every index moved by one stride (> 0).
+    fn extends(&mut self, next: &Row) -> bool {
+        let (first, len) = (&self.row, self.row.len);
+        if next.len != len || len == 0 || next.coef[..len] != first.coef[..len] {
+            return false;
+        }
+        let count = self.end - self.start;
+        let Some(step) = next.idx[0].checked_sub(first.idx[0]) else {
+            return false;
+        };
+        let stride = if count == 1 { step } else { self.stride };
+        if stride == 0 || step != stride * count {
+            return false;
+        }
+        let shifted = (0..len).all(|k| next.idx[k] == first.idx[k] + stride * count);
+        if shifted {
+            self.stride = stride;
+        }
+        shifted
+    }
+
+    /// `out[r] = h_r·v` for the run's rows r from `from` on, as
+    /// [`Row::dot`] computes it (the same sum in the same order).
+    pub(super) fn products(&self, v: &[f64], from: usize, out: &mut [f64]) {
+        let (len, idx, coef) = (self.row.len, &self.row.idx, &self.row.coef);
+        for r in from.max(self.start)..self.end {
+            let shift = self.stride * (r - self.start);
+            let mut s = 0.0;
+            for k in 0..len {
+                s += coef[k] * v[idx[k] + shift];
+            }
+            out[r] = s;
         }
     }
 }
@@ -489,5 +566,55 @@ mod tests {
             }
             .violated_by(&plan, dt)
         );
+    }
+
+    /// The cone's rows (speed and tilt-rate rows of both axes on the
+    /// interleaved unknowns, their first rows truncated at the horizon's
+    /// start) fall into one run per block past the truncated rows, and a
+    /// run's products are each row's own [`Row::dot`], bit for bit; a row
+    /// that is no shift of its neighbour starts a run.
+    #[test]
+    fn row_runs_give_each_rows_product() {
+        let (n, dt) = (40, 0.02);
+        let inv_dt2 = 1.0 / (dt * dt);
+        let mut rows = Vec::new();
+        for axis in 0..2 {
+            rows.extend((0..n).map(|g| Row::speed(g, dt, |k| 2 * k + axis)));
+        }
+        for axis in 0..2 {
+            rows.extend((0..n).map(|f| {
+                Row::tilt_rate(f, 3.5, |s| s).on_outputs(inv_dt2, |k| 2 * k + axis)
+            }));
+        }
+        // A row breaking the tilt-rate run of axis 1 at f = 20.
+        let broken = 3 * n + 20;
+        rows[broken].coef[0] *= 1.5;
+        let runs = RowRun::runs(&rows);
+        // Contiguous, in order, covering every row.
+        assert_eq!(runs[0].start, 0);
+        assert_eq!(runs.last().unwrap().end, rows.len());
+        assert!(runs.windows(2).all(|w| w[0].end == w[1].start));
+        // Few runs: each block's truncated first rows (one speed row, four
+        // tilt-rate rows), then one run; the broken row splits its block's
+        // in two around itself.
+        let spans: Vec<_> = runs.iter().map(|r| (r.start, r.end)).collect();
+        assert_eq!(runs.len(), 2 * 2 + 2 * 5 + 2, "{spans:?}");
+        assert!(runs.iter().any(|r| r.start == broken && r.end == broken + 1));
+        assert!(runs.iter().any(|r| r.end - r.start == n - 1));
+        assert!(runs.iter().any(|r| r.end - r.start == n - 4));
+        let v: Vec<f64> = (0..2 * n).map(|i| ((i * 7919) % 97) as f64 * 0.013 - 0.6).collect();
+        let mut out = vec![f64::NAN; rows.len()];
+        for run in &runs {
+            run.products(&v, run.start, &mut out);
+        }
+        for (r, row) in rows.iter().enumerate() {
+            assert_eq!(out[r].to_bits(), row.dot(&v).to_bits(), "row {r}");
+        }
+        // From a later row on, the earlier ones are left alone.
+        let mut part = vec![f64::NAN; rows.len()];
+        let run = runs.iter().find(|r| r.end - r.start >= 10).unwrap();
+        run.products(&v, run.start + 5, &mut part);
+        assert!(part[run.start..run.start + 5].iter().all(|p| p.is_nan()));
+        assert_eq!(part[run.start + 5].to_bits(), rows[run.start + 5].dot(&v).to_bits());
     }
 }

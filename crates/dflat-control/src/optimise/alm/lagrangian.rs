@@ -95,6 +95,23 @@ impl BandedAlm {
         self.row_first[r] >= self.window_unknown()
     }
 
+    /// `h_r·v` for the rows in the window (`row_in_window`), v the
+    /// iterate (into `hx`) or the direction (into `hd`).
+    pub(super) fn row_products(&mut self, v: Vector) {
+        let j0 = self.window_unknown();
+        let (src, out) = match v {
+            Vector::X => (&self.ws.x, &mut self.ws.hx),
+            _ => (&self.ws.d, &mut self.ws.hd),
+        };
+        for run in &self.row_runs {
+            let mut from = run.start;
+            while from < run.end && self.row_first[from] < j0 {
+                from += 1;
+            }
+            run.products(src, from, out);
+        }
+    }
+
     /// The side `t` of row k at h (upper side j = 0: h − hi, lower: lo − h).
     #[inline]
     pub(super) fn side(j: usize, h: f64, lo: f64, hi: f64) -> f64 {
@@ -192,12 +209,12 @@ impl BandedAlm {
         let from = self.window_output();
         Self::add_transposed(k, self.inv_dt2, &self.ws.y_next, &mut self.ws.g, from);
         let mut row_res: f64 = 0.0;
+        self.row_products(Vector::X);
         for r in 0..self.rows.len() {
             if !self.row_in_window(r) {
                 continue;
             }
-            let h = self.rows[r].dot(&self.ws.x);
-            self.ws.hx[r] = h;
+            let h = self.ws.hx[r];
             if self.warm.v[r] == [0.0; 2] && lo[r] <= h && h <= hi[r] {
                 // Inside its interval with no multiplier: both sides'
                 // updates are 0, and so are its terms (bit for bit).

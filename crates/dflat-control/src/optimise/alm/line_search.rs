@@ -46,11 +46,7 @@ impl BandedAlm {
             &mut self.ws.du,
             self.ws.window,
         );
-        for r in 0..self.rows.len() {
-            if self.row_in_window(r) {
-                self.ws.hd[r] = self.rows[r].dot(&self.ws.d);
-            }
-        }
+        self.row_products(super::lagrangian::Vector::D);
         let base = self.ws.penalty_value;
         let (full, done) = self.full_step_terms(lo, hi);
         let mut alpha = 1.0;

@@ -131,7 +131,7 @@ mod warm_start;
 mod window;
 
 use super::banded::{BandedCholesky, SymBand};
-use super::bounds::Row;
+use super::bounds::{Row, RowRun};
 use super::fast_banded::FastBandedSolver;
 use crate::ControlError;
 
@@ -426,6 +426,9 @@ pub struct BandedAlm {
     /// otherwise.
     hard_row_weight: f64,
     row_first: Vec<usize>,
+    /// The rows as runs of one row shifted ([`RowRun`]): their products
+    /// with a vector in one pass per run.
+    row_runs: Vec<RowRun>,
     blocks: Vec<Range<usize>>,
     /// Largest diagonal entry of P.
     diag_max: f64,
@@ -511,6 +514,7 @@ impl BandedAlm {
             .iter()
             .map(|r| r.idx[..r.len].iter().copied().min().unwrap_or(0))
             .collect();
+        let row_runs = RowRun::runs(&rows);
         let mut alm = Self {
             k,
             n,
@@ -533,6 +537,7 @@ impl BandedAlm {
             row_penalty,
             hard_row_weight: 1.0,
             row_first,
+            row_runs,
             blocks: ranges,
             diag_max,
             warm: WarmStart {
