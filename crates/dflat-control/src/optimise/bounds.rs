@@ -420,13 +420,14 @@ impl RowRun {
     /// [`Row::dot`] computes it (the same sum in the same order).
     pub(super) fn products(&self, v: &[f64], from: usize, out: &mut [f64]) {
         let (len, idx, coef) = (self.row.len, &self.row.idx, &self.row.coef);
-        for r in from.max(self.start)..self.end {
-            let shift = self.stride * (r - self.start);
+        let first = from.max(self.start);
+        for (r, o) in out[first..self.end].iter_mut().enumerate() {
+            let shift = self.stride * (first - self.start + r);
             let mut s = 0.0;
             for k in 0..len {
                 s += coef[k] * v[idx[k] + shift];
             }
-            out[r] = s;
+            *o = s;
         }
     }
 }
@@ -582,9 +583,9 @@ mod tests {
             rows.extend((0..n).map(|g| Row::speed(g, dt, |k| 2 * k + axis)));
         }
         for axis in 0..2 {
-            rows.extend((0..n).map(|f| {
-                Row::tilt_rate(f, 3.5, |s| s).on_outputs(inv_dt2, |k| 2 * k + axis)
-            }));
+            rows.extend(
+                (0..n).map(|f| Row::tilt_rate(f, 3.5, |s| s).on_outputs(inv_dt2, |k| 2 * k + axis)),
+            );
         }
         // A row breaking the tilt-rate run of axis 1 at f = 20.
         let broken = 3 * n + 20;
@@ -599,10 +600,15 @@ mod tests {
         // in two around itself.
         let spans: Vec<_> = runs.iter().map(|r| (r.start, r.end)).collect();
         assert_eq!(runs.len(), 2 * 2 + 2 * 5 + 2, "{spans:?}");
-        assert!(runs.iter().any(|r| r.start == broken && r.end == broken + 1));
+        assert!(
+            runs.iter()
+                .any(|r| r.start == broken && r.end == broken + 1)
+        );
         assert!(runs.iter().any(|r| r.end - r.start == n - 1));
         assert!(runs.iter().any(|r| r.end - r.start == n - 4));
-        let v: Vec<f64> = (0..2 * n).map(|i| ((i * 7919) % 97) as f64 * 0.013 - 0.6).collect();
+        let v: Vec<f64> = (0..2 * n)
+            .map(|i| ((i * 7919) % 97) as f64 * 0.013 - 0.6)
+            .collect();
         let mut out = vec![f64::NAN; rows.len()];
         for run in &runs {
             run.products(&v, run.start, &mut out);
@@ -615,6 +621,9 @@ mod tests {
         let run = runs.iter().find(|r| r.end - r.start >= 10).unwrap();
         run.products(&v, run.start + 5, &mut part);
         assert!(part[run.start..run.start + 5].iter().all(|p| p.is_nan()));
-        assert_eq!(part[run.start + 5].to_bits(), rows[run.start + 5].dot(&v).to_bits());
+        assert_eq!(
+            part[run.start + 5].to_bits(),
+            rows[run.start + 5].dot(&v).to_bits()
+        );
     }
 }
