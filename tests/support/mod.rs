@@ -1,6 +1,7 @@
 //! Shared helpers of the end-to-end tests: spawn the real `dflat` binary
 //! (SITL and daemon) on loopback, read the SITL's truth, fake a ground
-//! station.
+//! station (`gcs.rs`), judge a flight (`judge.rs`) and inject faults into
+//! a controller (`faulty.rs`).
 //!
 //! Ports: the SITL binds port 0 and prints the address it got
 //! (`sitl listening on udpin:127.0.0.1:PORT`); the daemon is then started
@@ -9,7 +10,14 @@
 
 #![allow(dead_code)] // each test binary uses a subset
 
+mod faulty;
 pub mod gcs;
+mod judge;
+
+#[allow(unused_imports)] // each test binary uses a subset
+pub use faulty::{Fault, Faulty};
+#[allow(unused_imports)]
+pub use judge::*;
 
 use std::io::{BufRead, BufReader};
 use std::net::{SocketAddr, UdpSocket};
@@ -286,63 +294,6 @@ pub fn position_setpoint(p: [f64; 3]) -> MavMessage {
 pub fn send(socket: &UdpSocket, to: SocketAddr, sys: u8, comp: u8, seq: u8, msg: &MavMessage) {
     let frame = dflat_link::serialize_v2(&dflat_link::header(sys, comp, seq), msg).expect("encode");
     socket.send_to(frame.as_bytes(), to).expect("send");
-}
-
-/// Distance from `p` to the polyline through `w` (3-D) \[m\].
-pub fn path_distance(w: &[[f64; 3]], p: [f64; 3]) -> f64 {
-    w.windows(2)
-        .map(|seg| {
-            let (a, b) = (seg[0], seg[1]);
-            let ab = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
-            let ap = [p[0] - a[0], p[1] - a[1], p[2] - a[2]];
-            let len2 = ab.iter().map(|x| x * x).sum::<f64>();
-            let s = if len2 > 0.0 {
-                (ap.iter().zip(&ab).map(|(x, y)| x * y).sum::<f64>() / len2).clamp(0.0, 1.0)
-            } else {
-                0.0
-            };
-            dist(p, [a[0] + s * ab[0], a[1] + s * ab[1], a[2] + s * ab[2]])
-        })
-        .fold(f64::INFINITY, f64::min)
-}
-
-/// The true distances to `path` (NED \[m\]) of the `trace`'s samples
-/// while commanded, from the first commanded one until the vehicle is
-/// within `arrival` \[m\] of the path's end; and whether it got there.
-pub fn path_errors(
-    trace: &[dflat_sitl::TruthSample],
-    path: &[[f64; 3]],
-    arrival: f64,
-) -> (Vec<f64>, bool) {
-    let end_point = *path.last().expect("a path");
-    let first = trace
-        .iter()
-        .position(|s| s.command.is_some())
-        .unwrap_or(trace.len());
-    let end = trace[first..]
-        .iter()
-        .position(|s| dist(s.position, end_point) < arrival)
-        .map(|i| first + i);
-    let errors = trace[first..end.unwrap_or(trace.len())]
-        .iter()
-        .map(|s| path_distance(path, s.position))
-        .collect();
-    (errors, end.is_some())
-}
-
-/// Euclidean distance \[m\].
-pub fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
-    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
-}
-
-/// The `q`-quantile of `v` (sorted copy, nearest rank).
-pub fn quantile(v: &[f64], q: f64) -> f64 {
-    let mut s = v.to_vec();
-    s.sort_by(f64::total_cmp);
-    if s.is_empty() {
-        return f64::NAN;
-    }
-    s[((q * (s.len() - 1) as f64).round() as usize).min(s.len() - 1)]
 }
 
 /// What [`fly_in_process`] saw.
@@ -708,121 +659,6 @@ pub fn wait_streaming(tap: &Receiver<TapFrame>, hold: Duration) -> bool {
     since.is_some()
 }
 
-/// The largest step from one attitude target to the next of roll or
-/// pitch \[deg\].
-pub fn largest_tilt_step_deg<'a>(
-    targets: impl Iterator<Item = &'a dflat_link::dialect::SET_ATTITUDE_TARGET_DATA>,
-) -> f64 {
-    let tilts: Vec<[f64; 3]> = targets
-        .map(|d| dflat_link::euler_from_quaternion(d.q.map(f64::from)))
-        .collect();
-    tilts
-        .windows(2)
-        .map(|w| (w[1][0] - w[0][0]).abs().max((w[1][1] - w[0][1]).abs()))
-        .fold(0.0, f64::max)
-        .to_degrees()
-}
-
-/// The daemon's per-flight CSV in `dir` (the newest `*.csv`) as rows of
-/// column name → field.
-pub fn read_flight_csv(dir: &Path) -> Vec<std::collections::HashMap<String, String>> {
-    let mut csvs: Vec<PathBuf> = std::fs::read_dir(dir)
-        .expect("read dir")
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| {
-            p.extension().is_some_and(|x| x == "csv")
-                && !p
-                    .file_name()
-                    .is_some_and(|n| n.to_string_lossy().starts_with("truth"))
-        })
-        .collect();
-    csvs.sort();
-    let path = csvs.pop().expect("no flight CSV");
-    let text = std::fs::read_to_string(&path).expect("read CSV");
-    let mut lines = text.lines();
-    let header: Vec<String> = lines
-        .next()
-        .expect("header")
-        .split(',')
-        .map(str::to_owned)
-        .collect();
-    lines
-        .map(|l| {
-            header
-                .iter()
-                .cloned()
-                .zip(l.split(',').map(str::to_owned))
-                .collect()
-        })
-        .collect()
-}
-
-/// A numeric CSV field (`None` when empty).
-pub fn field(row: &std::collections::HashMap<String, String>, name: &str) -> Option<f64> {
-    row.get(name)
-        .filter(|v| !v.is_empty())
-        .map(|v| v.parse().unwrap_or(f64::NAN))
-}
-
-/// The capture time of the newest pose a CSV row's tick had, on the
-/// daemon's clock: the tick's `t_wake` less the pose's age \[s\].
-pub fn pose_capture(row: &std::collections::HashMap<String, String>) -> Option<f64> {
-    Some(field(row, "t_wake")? - field(row, "pose_age_ms")? / 1e3)
-}
-
-/// Checks every command in the CSV rows: finite, tilt ≤ `max_tilt_deg`,
-/// thrust in [0, 1]. Returns the number of commands and the largest tilt \[deg\].
-pub fn check_csv_commands(
-    rows: &[std::collections::HashMap<String, String>],
-    max_tilt_deg: f64,
-) -> (usize, f64) {
-    let mut n = 0;
-    let mut worst: f64 = 0.0;
-    for r in rows {
-        let (Some(roll), Some(pitch), Some(yaw), Some(thrust)) = (
-            field(r, "roll"),
-            field(r, "pitch"),
-            field(r, "yaw"),
-            field(r, "thrust"),
-        ) else {
-            continue;
-        };
-        n += 1;
-        assert!(
-            [roll, pitch, yaw, thrust].iter().all(|v| v.is_finite()),
-            "non-finite command at tick {:?}",
-            r.get("tick")
-        );
-        let tilt = (roll.cos() * pitch.cos())
-            .clamp(-1.0, 1.0)
-            .acos()
-            .to_degrees();
-        worst = worst.max(tilt);
-        assert!(
-            tilt <= max_tilt_deg + 1e-3,
-            "tilt {tilt:.2}° at tick {:?}",
-            r.get("tick")
-        );
-        assert!((0.0..=1.0).contains(&thrust), "thrust {thrust}");
-    }
-    (n, worst)
-}
-
-/// Tilt of a SET_ATTITUDE_TARGET quaternion [w, x, y, z] \[deg\], or NaN if
-/// it is not finite.
-pub fn quaternion_tilt_deg(q: [f32; 4]) -> f64 {
-    let [w, x, y, z] = q.map(f64::from);
-    let n = (w * w + x * x + y * y + z * z).sqrt();
-    if !n.is_finite() || n == 0.0 {
-        return f64::NAN;
-    }
-    let (x, y) = (x / n, y / n);
-    (1.0 - 2.0 * (x * x + y * y))
-        .clamp(-1.0, 1.0)
-        .acos()
-        .to_degrees()
-}
-
 /// The daemon's local address from its log line `daemon started ... local=Some(ADDR)`.
 pub fn daemon_local_addr(daemon: &Proc, limit: Duration) -> Option<SocketAddr> {
     let until = Instant::now() + limit;
@@ -857,73 +693,6 @@ pub fn sitl_flight(
     cfg.logging.dir = String::new();
     plant.sitl.engage = engage;
     (cfg, plant)
-}
-
-/// A fault a [`Faulty`] controller injects into one update.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Fault {
-    /// The update fails (a solver error).
-    Fail,
-    /// The update takes this long first (a deadline overrun).
-    Slow(Duration),
-}
-
-/// The daemon's own controller with faults injected: before update k
-/// (counted from the first), `fault(k)` says what goes wrong, if anything.
-/// Everything else is delegated.
-pub struct Faulty {
-    /// The real controller.
-    pub inner: Box<dyn dflat_control::Controller>,
-    /// Updates so far.
-    pub tick: usize,
-    /// The fault of update k.
-    pub fault: Box<dyn FnMut(usize) -> Option<Fault> + Send>,
-}
-
-impl dflat_control::Controller for Faulty {
-    fn name(&self) -> &'static str {
-        "faulty df-mpc"
-    }
-    fn multi_rate(&self) -> bool {
-        self.inner.multi_rate()
-    }
-    fn observe(&mut self, sample: &dflat_control::Measurement) {
-        self.inner.observe(sample);
-    }
-    fn update(
-        &mut self,
-        measurement: &dflat_control::Measurement,
-        reference: &mut dyn dflat_control::ReferenceSource,
-    ) -> Result<dflat_control::TickOutput, dflat_control::ControlError> {
-        let k = self.tick;
-        self.tick += 1;
-        match (self.fault)(k) {
-            Some(Fault::Fail) => {
-                return Err(dflat_control::ControlError::Solver(format!(
-                    "injected failure at update {k}"
-                )));
-            }
-            Some(Fault::Slow(d)) => std::thread::sleep(d),
-            None => {}
-        }
-        self.inner.update(measurement, reference)
-    }
-    fn plan_fallback(
-        &mut self,
-        measurement: &dflat_control::Measurement,
-        max_steps: usize,
-    ) -> Option<dflat_control::TickOutput> {
-        self.inner.plan_fallback(measurement, max_steps)
-    }
-    fn correct_last_input(&mut self, applied: &nalgebra::Vector3<f64>) {
-        self.inner.correct_last_input(applied);
-    }
-    fn reset(&mut self) {
-        self.inner.reset();
-    }
-    fn disturbance(&self) -> Option<dflat_control::disturbance::DisturbanceReport> {
-        self.inner.disturbance()
-    }
 }
 
 /// Every command the daemon's ticks produced (`summary.commands`) reached
