@@ -150,8 +150,16 @@ const DUAL_TOLERANCE: f64 = 1e-8;
 /// L) relative to the objective's scale `|c|·|x|`.
 const DECREMENT_TOLERANCE: f64 = 1e-13;
 /// Decrement (relative, as [`DECREMENT_TOLERANCE`]) below which a full
-/// step counts as the local phase, where the next step reuses the factor.
+/// step counts as the local phase, where the next step reuses the factor
+/// (discs with rows: the cone with the tilt rate).
 const REUSE_DECREMENT: f64 = 1e-7;
+/// [`REUSE_DECREMENT`] for discs without rows (the plain cone): on the
+/// corner bench at N = 200 its constrained median went 77.6–79.2 →
+/// 70.2–72.9 µs (factorisations per solve 3.28 → 3.07, Newton steps 6.13
+/// → 6.20; p99 unchanged), where the cone with the tilt rate went 163.2–
+/// 163.5 → 165.0–168.6 µs (six alternated runs each;
+/// docs/performance.md, "The cone with the tilt rate: the rows' passes").
+const REUSE_DECREMENT_DISCS: f64 = 1e-6;
 /// Multiple of the inexact inner tolerance (`loose`, below) under which
 /// the last decrement lets the next step reuse the factor: the step then
 /// only has to bring an already small decrement below `loose`.

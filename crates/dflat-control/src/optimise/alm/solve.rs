@@ -9,8 +9,8 @@
 use super::super::bounds::check_solve_data;
 use super::{
     BandedAlm, DECREMENT_TOLERANCE, DUAL_TOLERANCE, Factored, GAP_TOLERANCE, INEXACT, LOCAL_STOP,
-    LOOSE_REUSE, MAX_OUTER, PRIMAL_TOLERANCE, REUSE_DECREMENT, ROW_TOLERANCE, SIGMA_GROWTH,
-    STALL_TOLERANCE, StageSet,
+    LOOSE_REUSE, MAX_OUTER, PRIMAL_TOLERANCE, REUSE_DECREMENT, REUSE_DECREMENT_DISCS,
+    ROW_TOLERANCE, SIGMA_GROWTH, STALL_TOLERANCE, StageSet,
 };
 use crate::ControlError;
 
@@ -367,7 +367,12 @@ impl BandedAlm {
         let exact_reuse = matches!(self.stages, StageSet::Interval(_));
         let same_set =
             self.factored != Factored::Stale && self.ws.active == self.ws.factored_active;
-        let small = (REUSE_DECREMENT * tol.c_scale * tol.x_scale).max(LOOSE_REUSE * loose);
+        let reuse_decrement = if self.rows.is_empty() {
+            REUSE_DECREMENT_DISCS
+        } else {
+            REUSE_DECREMENT
+        };
+        let small = (reuse_decrement * tol.c_scale * tol.x_scale).max(LOOSE_REUSE * loose);
         let reuse = same_set
             && memory.reuse_allowed
             && (exact_reuse || memory.last_full && memory.last_decrement <= small);
