@@ -343,9 +343,16 @@ impl Row {
 
     /// `g·v`.
     pub(super) fn dot(&self, v: &[f64]) -> f64 {
+        self.dot_shifted(v, 0)
+    }
+
+    /// The row moved `shift` unknowns on, times v: `Σ g_k·v[idx_k +
+    /// shift]`, summed in order (a [`RowRun`]'s rows past its first).
+    #[inline(always)]
+    fn dot_shifted(&self, v: &[f64], shift: usize) -> f64 {
         let mut s = 0.0;
         for k in 0..self.len {
-            s += self.coef[k] * v[self.idx[k]];
+            s += self.coef[k] * v[self.idx[k] + shift];
         }
         s
     }
@@ -416,18 +423,14 @@ impl RowRun {
         shifted
     }
 
-    /// `out[r] = h_r·v` for the run's rows r from `from` on, as
-    /// [`Row::dot`] computes it (the same sum in the same order).
+    /// `out[r] = h_r·v` for the run's rows r from `from` on: the first
+    /// row shifted ([`Row::dot`]'s own sum).
     pub(super) fn products(&self, v: &[f64], from: usize, out: &mut [f64]) {
-        let (len, idx, coef) = (self.row.len, &self.row.idx, &self.row.coef);
         let first = from.max(self.start);
         for (r, o) in out[first..self.end].iter_mut().enumerate() {
-            let shift = self.stride * (first - self.start + r);
-            let mut s = 0.0;
-            for k in 0..len {
-                s += coef[k] * v[idx[k] + shift];
-            }
-            *o = s;
+            *o = self
+                .row
+                .dot_shifted(v, self.stride * (first - self.start + r));
         }
     }
 }

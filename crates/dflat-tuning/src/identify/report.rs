@@ -501,6 +501,19 @@ mod tests {
         change_of(found, "tau_thrust")
     }
 
+    /// `field` not changed and said unexcited: the snippet keeps the
+    /// value flown (`kept`, its line as written) and says why.
+    fn assert_kept_unexcited(found: &Identification, field: &str, kept: &str) {
+        let c = change_of(found, field);
+        assert!(!c.change && !c.excitation.is_excited(), "{c:?}");
+        let snippet = found.vehicle_snippet("flight.tlog", Some(&flown()));
+        assert!(snippet.contains(&format!("\n{kept}\n")), "{snippet}");
+        assert!(
+            snippet.contains(&format!("{field}: unexcited")),
+            "{snippet}"
+        );
+    }
+
     /// The rotor drag changes only when its regressor moved and its
     /// interval is tight: a slow flight (spread 0.1 m/s) keeps the value
     /// flown, in words, whatever the interval; a fast one changes it.
@@ -514,16 +527,11 @@ mod tests {
             found.rotor_excitation = spread;
             found
         };
-        let rotor = |found: &Identification| change_of(found, "drag_rotor");
         for found in [with_rotor(0.1, 0.01), with_rotor(0.5, 0.1)] {
-            let c = rotor(&found);
-            assert!(!c.change && !c.excitation.is_excited(), "{c:?}");
-            let snippet = found.vehicle_snippet("slow.tlog", Some(&flown()));
-            assert!(snippet.contains("\ndrag_rotor = 0.000\n"), "{snippet}");
-            assert!(snippet.contains("drag_rotor: unexcited"), "{snippet}");
+            assert_kept_unexcited(&found, "drag_rotor", "drag_rotor = 0.000");
         }
         let fast = with_rotor(0.5, 0.01);
-        let c = rotor(&fast);
+        let c = change_of(&fast, "drag_rotor");
         assert!(c.change && c.excitation.is_excited(), "{c:?}");
         let snippet = fast.vehicle_snippet("fast.tlog", Some(&flown()));
         assert!(snippet.contains("\ndrag_rotor = 0.250\n"), "{snippet}");
@@ -539,11 +547,7 @@ mod tests {
     #[test]
     fn a_level_flight_does_not_change_tau_thrust() {
         for found in [level_flight(0.136, 0.05), level_flight(0.01, 0.05)] {
-            let c = tau_thrust(&found);
-            assert!(!c.change && !c.excitation.is_excited(), "{c:?}");
-            let snippet = found.vehicle_snippet("level.tlog", Some(&flown()));
-            assert!(snippet.contains("\ntau_thrust = 0.040\n"), "{snippet}");
-            assert!(snippet.contains("tau_thrust: unexcited"), "{snippet}");
+            assert_kept_unexcited(&found, "tau_thrust", "tau_thrust = 0.040");
             let report = found.report("level.tlog", Some(&flown()));
             assert!(report.contains("keep: unexcited"), "{report}");
             // The parameters it did excite still change.

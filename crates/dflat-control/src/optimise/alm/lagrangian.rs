@@ -112,6 +112,15 @@ impl BandedAlm {
         }
     }
 
+    /// Whether a row with multipliers `v` at `h` is inside its interval
+    /// `[lo, hi]` with no multiplier: both sides' updates are then 0, and
+    /// so are its terms in L and its gradient (bit for bit), which the
+    /// row passes skip.
+    #[inline]
+    pub(super) fn row_idle(v: [f64; 2], h: f64, lo: f64, hi: f64) -> bool {
+        v == [0.0; 2] && lo <= h && h <= hi
+    }
+
     /// The side `t` of row k at h (upper side j = 0: h − hi, lower: lo − h).
     #[inline]
     pub(super) fn side(j: usize, h: f64, lo: f64, hi: f64) -> f64 {
@@ -160,8 +169,7 @@ impl BandedAlm {
                 continue;
             }
             let h = self.ws.hx[k] + alpha * self.ws.hd[k];
-            if *v == [0.0; 2] && lo[k] <= h && h <= hi[k] {
-                // Inside, no multiplier: no term (`gradient`).
+            if Self::row_idle(*v, h, lo[k], hi[k]) {
                 continue;
             }
             let ss = self.sigma_row(k);
@@ -215,9 +223,7 @@ impl BandedAlm {
                 continue;
             }
             let h = self.ws.hx[r];
-            if self.warm.v[r] == [0.0; 2] && lo[r] <= h && h <= hi[r] {
-                // Inside its interval with no multiplier: both sides'
-                // updates are 0, and so are its terms (bit for bit).
+            if Self::row_idle(self.warm.v[r], h, lo[r], hi[r]) {
                 self.ws.active[self.n + 2 * r] = 0;
                 self.ws.active[self.n + 2 * r + 1] = 0;
                 continue;
