@@ -11,7 +11,9 @@
 //!   command moves by at most 5° per tick for 1 s (no kick from a stale
 //!   window). Judged on the daemon's own records: the hand-back is the
 //!   CSV's tick where STANDBY becomes engaged again, and the second after
-//!   it is counted in the CSV's tick times, not on the test's clock.
+//!   it is counted in the CSV's tick times, not on the test's clock. A
+//!   flight the machine starved (a tick over 5 ms late in the daemon's
+//!   records) is flown again, as `support::fly_unstarved` does.
 //! * A dead stream: the SITL refuses OFFBOARD.
 //! * The ArduPilot flavour (LOITER → GUIDED_NOGPS, mode numbers as
 //!   ArduPilot reports them) end to end.
@@ -191,11 +193,36 @@ async fn engaging_while_the_pilot_flies_brakes_where_it_was_engaged() {
     assert_eq!(summary.final_state, FlightState::Holding);
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn override_and_hand_back_on_the_l_path_without_a_kick() {
+/// One override flight (the test below): what the daemon and the SITL
+/// said, whether the path completed, the daemon's CSV and the commands
+/// the SITL received.
+struct OverrideFlight {
+    summary: dflat_daemon::summary::FlightSummary,
+    diverged: bool,
+    arrived: bool,
+    csv: dflat_tuning::flightlog::FlightCsv,
+    cmds: Vec<(Instant, f64, f64)>,
+}
+
+impl OverrideFlight {
+    /// The latest engaged or standby tick in the daemon's records \[µs\]
+    /// (`jitter_us` of the rows that carry a command).
+    fn latest_tick_us(&self) -> f64 {
+        let (roll, jitter) = (self.csv.numbers("roll"), self.csv.numbers("jitter_us"));
+        roll.iter()
+            .zip(&jitter)
+            .filter_map(|(r, j)| r.and(*j))
+            .fold(0.0, f64::max)
+    }
+}
+
+/// Flies the L path with a 3 s pilot override 4 s in and the hand-back
+/// (the test below), as flight `attempt`.
+async fn fly_override(attempt: usize) -> OverrideFlight {
     let (mut cfg, plant) = setup("override", MissionStart::Path, SitlAutopilot::Px4);
     // The daemon's records: the hand-back is judged from them.
-    let records = std::env::temp_dir().join(format!("dflat-override-{}", std::process::id()));
+    let records =
+        std::env::temp_dir().join(format!("dflat-override-{}-{attempt}", std::process::id()));
     cfg.logging.dir = records.to_string_lossy().into_owned();
     cfg.logging.tlog = false;
     let (sitl, taps) = tap_sitl(&plant);
@@ -219,7 +246,58 @@ async fn override_and_hand_back_on_the_l_path_without_a_kick() {
     daemon.shutdown();
     let summary = daemon.join().await.unwrap();
     let report = sitl.stop().unwrap();
-    assert!(!report.diverged);
+    let csv_path = summary.csv.as_ref().expect("the flight's CSV").path.clone();
+    let csv = dflat_tuning::flightlog::FlightCsv::read(&csv_path).unwrap();
+    let _ = std::fs::remove_dir_all(&records);
+    OverrideFlight {
+        summary,
+        diverged: report.diverged,
+        arrived,
+        csv,
+        cmds: commands(&taps),
+    }
+}
+
+/// The override flight, flown again while the daemon's own records show
+/// a tick later than [`support::STARVED_US`] (the machine starved it:
+/// its pose failsafe then holds, as designed, and the path does not
+/// complete in time), up to [`support::STARVED_ATTEMPTS`] flights; when
+/// every one was starved, the least late is judged (said).
+async fn fly_override_unstarved() -> OverrideFlight {
+    let mut least_late: Option<(f64, OverrideFlight)> = None;
+    for attempt in 1..=support::STARVED_ATTEMPTS {
+        let flight = fly_override(attempt).await;
+        let late = flight.latest_tick_us();
+        let on_time = late <= support::STARVED_US;
+        if !on_time {
+            println!(
+                "override: a tick ran {late:.0} µs late in flight {attempt} (the machine starved it)"
+            );
+        }
+        if least_late.as_ref().is_none_or(|(l, _)| late < *l) {
+            least_late = Some((late, flight));
+        }
+        if on_time {
+            break;
+        }
+    }
+    let (late, flight) = least_late.expect("at least one flight");
+    if late > support::STARVED_US {
+        println!("override: every flight was starved; the least late ({late:.0} µs) is judged");
+    }
+    flight
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn override_and_hand_back_on_the_l_path_without_a_kick() {
+    let OverrideFlight {
+        summary,
+        diverged,
+        arrived,
+        csv,
+        cmds,
+    } = fly_override_unstarved().await;
+    assert!(!diverged);
     assert!(arrived, "path not completed: {summary}");
     assert_eq!(summary.engagements, 2, "{summary}");
     assert_eq!(summary.disengagements, 1, "{summary}");
@@ -228,9 +306,6 @@ async fn override_and_hand_back_on_the_l_path_without_a_kick() {
     // becomes engaged (TRACKING or HOLDING); its second by the CSV's tick
     // times, from the last standby command (the step into the engagement
     // counts too).
-    let csv_path = summary.csv.as_ref().expect("the flight's CSV").path.clone();
-    let csv = dflat_tuning::flightlog::FlightCsv::read(&csv_path).unwrap();
-    let _ = std::fs::remove_dir_all(&records);
     let state = csv.index("state").expect("state column");
     let engaged = |i: usize| matches!(csv.rows[i][state].as_str(), "TRACKING" | "HOLDING");
     let handback = (1..csv.rows.len())
@@ -259,7 +334,6 @@ async fn override_and_hand_back_on_the_l_path_without_a_kick() {
             d.to_degrees()
         })
         .collect();
-    let cmds = commands(&taps);
     let worst = steps.iter().copied().fold(0.0, f64::max);
     let normal: Vec<f64> = cmds
         .windows(2)
