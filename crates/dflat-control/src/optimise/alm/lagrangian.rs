@@ -127,41 +127,8 @@ impl BandedAlm {
         if j == 0 { h - hi } else { lo - h }
     }
 
-    /// The Lagrangian's non-quadratic part at `x + α·d` (`u`, `du`, `hx`,
-    /// `hd` current), without its constant `−Σ‖y_f‖²/(2σ)`.
-    pub(super) fn penalty_terms(&self, alpha: f64, lo: &[f64], hi: &[f64]) -> f64 {
-        let s = self.sigma;
-        let inv_s = 1.0 / s;
-        let at = |f: usize| {
-            [
-                self.ws.u[f][0] + alpha * self.ws.du[f][0] + self.warm.y[f][0] * inv_s,
-                self.ws.u[f][1] + alpha * self.ws.du[f][1] + self.warm.y[f][1] * inv_s,
-            ]
-        };
-        let dist2: f64 = match &self.stages {
-            StageSet::Disc(radius) => radius
-                .iter()
-                .enumerate()
-                .skip(self.ws.window)
-                .map(|(f, &r)| disc_dist2(at(f), r))
-                .sum(),
-            StageSet::Interval(bounds) if self.k == 1 => bounds
-                .iter()
-                .enumerate()
-                .skip(self.ws.window)
-                .map(|(f, b)| interval_dist2::<1>(at(f), b))
-                .sum(),
-            StageSet::Interval(bounds) => bounds
-                .iter()
-                .enumerate()
-                .skip(self.ws.window)
-                .map(|(f, b)| interval_dist2::<2>(at(f), b))
-                .sum(),
-        };
-        0.5 * s * dist2 + self.row_terms(alpha, lo, hi)
-    }
-
-    /// The rows' part of [`BandedAlm::penalty_terms`] at `x + α·d`.
+    /// The rows' part of the Lagrangian's non-quadratic part at `x + α·d`
+    /// (`hx`, `hd` current).
     pub(super) fn row_terms(&self, alpha: f64, lo: &[f64], hi: &[f64]) -> f64 {
         let mut value = 0.0;
         for (k, v) in self.warm.v.iter().enumerate() {
@@ -289,7 +256,7 @@ impl BandedAlm {
     }
 
     /// The Lagrangian's non-quadratic part at the full step `x + d` (`u`,
-    /// `du`, `hx`, `hd` current), as [`BandedAlm::penalty_terms`] at α = 1,
+    /// `du`, `hx`, `hd` current; without its constant `−Σ‖y_f‖²/(2σ)`),
     /// by the gradient's stage pass into `u_trial`, `y_next`, `jac` and
     /// `active`: should the line search take the full step, the next
     /// gradient starts from them ([`BandedAlm::accept_full_step`]).
@@ -506,32 +473,6 @@ pub(super) fn interval_excess<const K: usize>(
         }
     }
     any.then_some((e, j))
-}
-
-/// `½·dist²(w, D)·2` for the disc of radius r: `(‖w‖ − r)²` outside, 0
-/// inside (the line search's value only).
-#[inline(always)]
-fn disc_dist2(w: [f64; 2], r: f64) -> f64 {
-    let n2 = w[0] * w[0] + w[1] * w[1];
-    if n2 <= r * r {
-        return 0.0;
-    }
-    let d = n2.sqrt() - r;
-    d * d
-}
-
-/// `dist²(w, D)` for the first `K` axes' intervals (the line search's
-/// value only: written apart from [`interval_excess`], whose Jacobian cost
-/// the box 3 % more instructions here).
-#[inline(always)]
-fn interval_dist2<const K: usize>(w: [f64; 2], b: &[[f64; 2]; 2]) -> f64 {
-    let mut v = 0.0;
-    for i in 0..K {
-        let [lo, hi] = b[i];
-        let out = w[i] - w[i].clamp(lo, hi);
-        v += out * out;
-    }
-    v
 }
 
 /// `lower += σ·k2·Σ_f G_fᵀ J_f G_f` (`sc` = σ/δt⁴, `w` the band's row

@@ -1,16 +1,18 @@
 //! The augmented Lagrangian's line search (module docs of [`super`]):
-//! Armijo backtracking on L along the Newton direction, the full step
-//! evaluated by the gradient's own stage pass so that the next gradient
-//! can take it.
+//! the full Newton step where it passes Armijo's test, else L's minimiser
+//! along the direction; the full step evaluated by the gradient's own
+//! stage pass so that the next gradient can take it.
 
 use super::lagrangian::Vector;
 use super::lagrangian::{disc_excess, interval_excess};
-use super::{ARMIJO, BandedAlm, MAX_HALVINGS, StageSet};
+use super::{ARMIJO, BandedAlm, StageSet};
 use crate::ControlError;
 
 impl BandedAlm {
-    /// Armijo backtracking on L along d from x (u, hx, g current); moves x.
-    /// Returns whether the full step was taken.
+    /// The full step along d from x (u, hx, g current) where it passes
+    /// Armijo's test, else L's minimiser along d on (0, 1)
+    /// ([`BandedAlm::exact_step`]); moves x. Returns whether the full step
+    /// was taken.
     pub(super) fn line_search(
         &mut self,
         decrement: f64,
@@ -49,35 +51,16 @@ impl BandedAlm {
         self.row_products(super::lagrangian::Vector::D);
         let base = self.ws.penalty_value;
         let (full, done) = self.full_step_terms(lo, hi);
-        let mut alpha = 1.0;
-        for _ in 0..MAX_HALVINGS {
-            let penalty = if alpha == 1.0 {
-                full
-            } else {
-                self.penalty_terms(alpha, lo, hi)
-            };
-            let value = alpha * lin + 0.5 * alpha * alpha * curv + penalty;
-            if value <= base + ARMIJO * alpha * slope {
-                self.step(alpha);
-                if alpha == 1.0 {
-                    self.accept_full_step(done);
-                }
-                return Ok(alpha == 1.0);
-            }
-            if alpha == 1.0 && matches!(self.stages, StageSet::Interval(_)) {
-                // Intervals: L along d is piecewise quadratic; its
-                // minimiser on (0, 1) in place of the halvings.
-                alpha = self.exact_step(lin, curv, slope, lo, hi);
-                self.step(alpha);
-                return Ok(false);
-            }
-            alpha *= 0.5;
+        if lin + 0.5 * curv + full <= base + ARMIJO * slope {
+            self.step(1.0);
+            self.accept_full_step(done);
+            return Ok(true);
         }
-        // No decrease measurable: the merit is flat to rounding here, where
-        // the full Newton step is the best guess.
-        self.step(1.0);
-        self.accept_full_step(done);
-        Ok(true)
+        // L along d is convex (piecewise quadratic for intervals): its
+        // minimiser on (0, 1) where the full step fails Armijo.
+        let alpha = self.exact_step(lin, curv, slope, lo, hi);
+        self.step(alpha);
+        Ok(false)
     }
 
     /// After the full step: its accelerations (`u_trial`) become u, and
@@ -107,9 +90,10 @@ const EXACT_ITERATIONS: usize = 12;
 impl BandedAlm {
     /// The minimiser on (0, 1) of L along d (convex, its derivative
     /// `lin + α·curv + Σ y'_f(α)·du_f + Σ (v'_up(α) − v'_lo(α))·hd_r`
-    /// increasing and piecewise linear for intervals), by Newton's method
-    /// on the derivative kept inside the bracket `[0, 1]` (bisection where
-    /// it leaves it), to 1e-3 of the slope at 0.
+    /// increasing: piecewise linear for intervals, smooth between the
+    /// kinks for discs), by Newton's method on the derivative kept inside
+    /// the bracket `[0, 1]` (bisection where it leaves it), to 1e-3 of
+    /// the slope at 0.
     fn exact_step(&self, lin: f64, curv: f64, slope: f64, lo: &[f64], hi: &[f64]) -> f64 {
         let (mut a_lo, mut a_hi) = (0.0, 1.0);
         let mut alpha = 1.0;
