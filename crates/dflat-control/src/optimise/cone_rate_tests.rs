@@ -298,3 +298,111 @@ proptest::proptest! {
         proptest::prop_assert!(stationarity <= 1e-9, "stationarity {stationarity:.2e}");
     }
 }
+
+proptest::proptest! {
+    #![proptest_config(proptest::test_runner::Config::with_cases(64))]
+    /// The condensed interior point restarted from where an augmented
+    /// Lagrangian that did not end stopped (its iterate and multipliers
+    /// after 1–8 Newton steps from the unconstrained plan,
+    /// `BandedAlm::interior_restart`) converges on the instances of
+    /// `the_interior_start_hands_over_stationary_multipliers` and hands
+    /// over an iterate and multipliers that satisfy the KKT stationarity
+    /// to the same 1e-9 of its largest term's scale.
+    #[test]
+    fn the_interior_restart_hands_over_stationary_multipliers(
+        horizon in 40usize..=160,
+        q in proptest::array::uniform2(0.5f64..10.0),
+        r in proptest::array::uniform2(1e-3f64..0.1),
+        tilt_deg in 8.0f64..35.0,
+        step_deg in 0.5f64..5.0,
+        kappa in proptest::array::uniform2(1.0f64..12.0),
+        v0 in proptest::array::uniform2(-6.0f64..6.0),
+        a0_frac in proptest::array::uniform2(-0.8f64..0.8),
+        sent_delta in proptest::array::uniform2(-6.0f64..6.0),
+        target in proptest::array::uniform2(-20.0f64..20.0),
+        smooth in proptest::option::of(1.0f64..50.0),
+        steps in 1usize..=8,
+    ) {
+        let (a, _, bounds) = rate_bounds(tilt_deg, step_deg, kappa, None);
+        let weights = instance_weights(q, r, kappa, smooth);
+        let axes = instance_axes(horizon, a, v0, a0_frac, sent_delta, target, [0.0; 2]);
+        let mut solver =
+            BandedConeSolver::with_methods(horizon, DT, weights, bounds, false, [true, false]).unwrap();
+        let mut plans = super::cone_tests::banded_start(horizon, weights, &axes);
+        let [x, y] = super::cone_tests::problems(&axes, &mut plans);
+        proptest::prop_assert!(solver.interior_restart_after(x, y, steps), "no convergence");
+        let stationarity = solver.alm_mut().unwrap().stationarity();
+        proptest::prop_assert!(stationarity <= 1e-9, "stationarity {stationarity:.2e}");
+    }
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::test_runner::Config::with_cases(48))]
+    /// Warm-started ticks of the cone with tilt-rate rows, every warm
+    /// attempt cut after one Newton step so that the interior point is
+    /// restarted from where it stopped (`BandedConeSolver::interior_restart`),
+    /// give clarabel's SOCP solution tick after tick while a reference
+    /// moves (cost no higher than clarabel's, [`COST_TOLERANCE`]; the first
+    /// ten outputs to 1e-5 m), keep each axis's tilt-rate rows, and do
+    /// restart on some tick.
+    #[test]
+    fn restarted_warm_ticks_match_clarabel_socp(
+        horizon in 30usize..=100,
+        q in proptest::array::uniform2(0.5f64..10.0),
+        r in proptest::array::uniform2(1e-3f64..0.1),
+        tilt_deg in 8.0f64..30.0,
+        step_deg in 0.5f64..5.0,
+        kappa in proptest::array::uniform2(1.0f64..12.0),
+        v0 in proptest::array::uniform2(-6.0f64..6.0),
+        a0_frac in proptest::array::uniform2(-0.8f64..0.8),
+        sent_delta in proptest::array::uniform2(-3.0f64..3.0),
+        target in proptest::array::uniform2(-20.0f64..20.0),
+        slope in proptest::array::uniform2(-4.0f64..4.0),
+        smooth in proptest::option::of(1.0f64..50.0),
+    ) {
+        let (a, rates, bounds) = rate_bounds(tilt_deg, step_deg, kappa, None);
+        let weights = instance_weights(q, r, kappa, smooth);
+        let mut solver = BandedConeSolver::new(horizon, DT, weights, bounds, true).unwrap();
+        solver.set_warm_steps_before_start(1);
+        let mut axes = instance_axes(horizon, a, v0, a0_frac, sent_delta, target, slope);
+        let sent = [axes[0].sent, axes[1].sent];
+        let mut restarts = 0;
+        for tick in 0..10 {
+            for (i, axis) in axes.iter_mut().enumerate() {
+                axis.reference = (0..=horizon)
+                    .map(|j| target[i] + slope[i] * DT * (j + tick) as f64)
+                    .collect();
+            }
+            let Some(want) = clarabel_plans(horizon, weights, bounds, &axes, None) else {
+                // Clarabel failed: the sequence ends here.
+                break;
+            };
+            let got = try_banded_plans(&mut solver, weights, &axes);
+            proptest::prop_assert!(got.is_ok(), "tick {tick}: {:?}", got.err());
+            let got = got.unwrap();
+            restarts += usize::from(solver.interior_restarted());
+            let obj = |p: &Plans| objective(horizon, &weights, &bounds, &axes, [&p[0], &p[1]], &[]);
+            let (og, ow) = (obj(&got), obj(&want));
+            proptest::prop_assert!(
+                og <= ow + COST_TOLERANCE * (1.0 + ow.abs()),
+                "tick {tick}: cost {og} vs clarabel {ow} (restarted {})",
+                solver.interior_restarted()
+            );
+            for i in 0..2 {
+                for j in 0..=10 {
+                    proptest::prop_assert!(
+                        (got[i][j] - want[i][j]).abs() <= 1e-5,
+                        "tick {tick} axis {i} y_{j}: {} vs {}", got[i][j], want[i][j]
+                    );
+                }
+                proptest::prop_assert!(
+                    !rates[i].violated_by(&got[i], sent[i], DT),
+                    "tick {tick} axis {i}: rate rows broken"
+                );
+            }
+        }
+        // (A sequence whose ticks all end within one Newton step, or whose
+        // first tick clarabel fails, restarts nowhere: at most a few.)
+        proptest::prop_assume!(restarts > 0);
+    }
+}

@@ -85,6 +85,12 @@ pub struct BandedConeSolver {
     iterations: usize,
     /// The condensed interior point's iterations in the last solve.
     interior_iterations: usize,
+    /// Whether the last solve's interior point was restarted from where
+    /// its warm attempt stopped ([`BandedConeSolver::interior_restart`]).
+    restarted: bool,
+    /// Newton steps a warm solve with tilt-rate rows gets before the
+    /// interior point ([`WARM_STEPS_BEFORE_START`]; tests lower it).
+    warm_steps_before_start: usize,
     warm_used: bool,
     /// Which method gave the last solution.
     method: ConeMethod,
@@ -221,6 +227,8 @@ impl BandedConeSolver {
             previous_valid: false,
             iterations: 0,
             interior_iterations: 0,
+            restarted: false,
+            warm_steps_before_start: WARM_STEPS_BEFORE_START,
             warm_used: false,
             method: if use_alm {
                 ConeMethod::Alm
@@ -365,6 +373,7 @@ impl BandedConeSolver {
         let a0 = self.load(&x, &y)?;
         self.iterations = 0;
         self.interior_iterations = 0;
+        self.restarted = false;
         let warm = self.warm_start && self.previous_valid;
         self.warm_used = false;
         self.previous_valid = false;
@@ -446,7 +455,8 @@ impl BandedConeSolver {
     /// point's solution and multipliers (`alm/interior_start.rs`), and a
     /// warm one that has not ended within [`WARM_STEPS_BEFORE_START`]
     /// Newton steps goes on from there (a chain of rate rows that moved
-    /// takes the warm multipliers 40 and more).
+    /// takes the warm multipliers 40 and more): the interior point
+    /// restarted from where the warm solve stopped, else started cold.
     fn try_alm(&mut self, warm: bool, a0: [f64; 2]) -> bool {
         let Some(alm) = &mut self.alm else {
             return false;
@@ -472,14 +482,14 @@ impl BandedConeSolver {
         let budget = alm.max_newton_steps();
         let short = rate_rows && !started;
         if short {
-            alm.set_max_newton_steps(WARM_STEPS_BEFORE_START.min(budget));
+            alm.set_max_newton_steps(self.warm_steps_before_start.min(budget));
         }
         let mut result = alm.solve(&self.c_alm, a0, &self.lo, &self.hi);
         alm.set_max_newton_steps(budget);
         self.iterations = alm.newton_steps();
         if result.is_err()
             && short
-            && self.interior_start(a0)
+            && (self.interior_restart(a0) || self.interior_start(a0))
             && let Some(alm) = &mut self.alm
         {
             result = alm.solve(&self.c_alm, a0, &self.lo, &self.hi);
@@ -518,6 +528,63 @@ impl BandedConeSolver {
                 false
             }
         }
+    }
+
+    /// The condensed interior point restarted from the iterate and the
+    /// multipliers a warm solve that did not end left
+    /// ([`BandedAlm::interior_restart`]); whether it converged (its
+    /// iterations are counted in [`BandedConeSolver::iterations`]; when it
+    /// does not, the cold start follows).
+    fn interior_restart(&mut self, a0: [f64; 2]) -> bool {
+        let Some(alm) = &mut self.alm else {
+            return false;
+        };
+        match alm.interior_restart(&self.c_alm, a0, &self.lo, &self.hi) {
+            Ok(Some(iterations)) => {
+                self.interior_iterations += iterations;
+                self.restarted = true;
+                true
+            }
+            _ => false,
+        }
+    }
+
+    /// Whether the last solve's condensed interior point was restarted
+    /// from where its warm attempt stopped (else, if it ran, it started
+    /// cold from the funnel's witness).
+    pub fn interior_restarted(&self) -> bool {
+        self.restarted
+    }
+
+    /// Sets the Newton steps a warm solve with tilt-rate rows gets before
+    /// the interior point (tests: every warm tick restarted).
+    #[cfg(test)]
+    pub(crate) fn set_warm_steps_before_start(&mut self, steps: usize) {
+        self.warm_steps_before_start = steps;
+    }
+
+    /// Loads a tick, runs the augmented Lagrangian from the plan given and
+    /// zero multipliers for at most `steps` Newton steps, and restarts the
+    /// condensed interior point from where it stopped (tests): whether the
+    /// restart converged.
+    #[cfg(test)]
+    pub(crate) fn interior_restart_after(
+        &mut self,
+        x: AxisProblem<'_>,
+        y: AxisProblem<'_>,
+        steps: usize,
+    ) -> bool {
+        let Ok(a0) = self.load(&x, &y) else {
+            return false;
+        };
+        let Some(alm) = &mut self.alm else {
+            return false;
+        };
+        alm.reset_multipliers();
+        alm.set_start(&[&self.p[0], &self.p[1]]);
+        alm.set_max_newton_steps(steps);
+        let _ = alm.solve(&self.c_alm, a0, &self.lo, &self.hi);
+        self.interior_restart(a0)
     }
 
     /// Loads a tick and runs the condensed interior point's start alone

@@ -99,7 +99,9 @@
 //! interior point's solution and multipliers (its Newton matrix this
 //! solver's own, with the discs' barrier blocks): the first-order updates
 //! find a chain of rate rows' multipliers slowly, and from the optimum's
-//! the solve ends in a few steps ([`BandedAlm::interior_start`]).
+//! the solve ends in a few steps ([`BandedAlm::interior_start`]). After
+//! a warm solve that did not end, the interior point is restarted from
+//! its iterate and multipliers ([`BandedAlm::interior_restart`]).
 //!
 //! **The active-set polish** (`polish.rs`; one axis with rows: speed and
 //! tilt-rate rows). A warm solve first, and every multiplier update after,
