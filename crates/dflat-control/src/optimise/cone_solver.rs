@@ -20,6 +20,17 @@ use crate::ControlError;
 /// corner bench at N = 200, 97 % of the warm solves that end by
 /// themselves end within 14.
 pub const WARM_STEPS_BEFORE_START: usize = 12;
+/// Newton steps the first inner solve of that warm start (its multipliers
+/// as shifted) gets before the interior point's restart: a tick whose
+/// first inner solve has not ended by then is a chain of rate rows that
+/// moved, which the warm start walks a row or two per Newton step. On the
+/// corner bench (constrained p99 µs, one run per value; no limit: 235,
+/// 553, 1503, 2514 at N = 50, 100, 200, 400): 5 gave 205, 452, 1370,
+/// 1946; 6 203, 438, 1376, 2085; 8 202, 486, 1375, 2329; 10 219, 520,
+/// 1551, 2295; 4 took the median at N = 50 and 100 from 44 and 86 to 100
+/// and 202 µs (docs/performance.md, "The warm start's first inner
+/// solve").
+pub const WARM_FIRST_INNER_STEPS: usize = 6;
 
 /// Weights of one axis: tracking q ≥ 0 [1/m²], jerk r > 0 [s⁶/m²], and
 /// the smoothness term.
@@ -483,9 +494,11 @@ impl BandedConeSolver {
         let short = rate_rows && !started;
         if short {
             alm.set_max_newton_steps(self.warm_steps_before_start.min(budget));
+            alm.set_first_inner_steps(WARM_FIRST_INNER_STEPS);
         }
         let mut result = alm.solve(&self.c_alm, a0, &self.lo, &self.hi);
         alm.set_max_newton_steps(budget);
+        alm.set_first_inner_steps(usize::MAX);
         self.iterations = alm.newton_steps();
         if result.is_err()
             && short

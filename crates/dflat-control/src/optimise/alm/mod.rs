@@ -418,6 +418,9 @@ pub struct BandedAlm {
     inv_dt2: f64,
     stages: StageSet,
     tuning: AlmTuning,
+    /// Newton steps a warm solve's first inner solve may take
+    /// ([`BandedAlm::set_first_inner_steps`]).
+    first_inner_steps: usize,
     sigma: f64,
     axes: Vec<FastBandedSolver>,
     /// P; the Newton matrix assembled; the whole horizon's factor, the
@@ -532,6 +535,7 @@ impl BandedAlm {
             .collect();
         let row_runs = RowRun::runs(&rows);
         let mut alm = Self {
+            first_inner_steps: usize::MAX,
             k,
             n,
             inv_dt2: 1.0 / (dt * dt),
@@ -654,6 +658,15 @@ impl BandedAlm {
     /// interior-point start.
     pub(crate) fn set_max_newton_steps(&mut self, steps: usize) {
         self.tuning.max_newton_steps = steps;
+    }
+
+    /// Sets the Newton steps a warm solve's first inner solve (the
+    /// multipliers as shifted) may take before the solve gives up
+    /// (`usize::MAX`: no such limit, the default): the pair with tilt-rate
+    /// rows gives up there on a warm start far from its optimum
+    /// (`WARM_FIRST_INNER_STEPS`) for the interior point's restart.
+    pub(crate) fn set_first_inner_steps(&mut self, steps: usize) {
+        self.first_inner_steps = steps;
     }
 
     /// The Newton-step budget of a warm solve.

@@ -106,8 +106,15 @@ impl BandedAlm {
             exact_full: false,
         };
         let mut previous_res = f64::INFINITY;
-        for _outer in 0..MAX_OUTER {
-            let end = self.inner_solve(a0, (lo, hi), &tol, &mut memory, first_gradient.take())?;
+        for outer in 0..MAX_OUTER {
+            // A warm start far from its optimum gives up early when told
+            // to (`first_inner_steps`: the caller has a better start).
+            let mut inner_tol = tol;
+            if outer == 0 && !cold {
+                inner_tol.max_steps = tol.max_steps.min(self.first_inner_steps);
+            }
+            let end =
+                self.inner_solve(a0, (lo, hi), &inner_tol, &mut memory, first_gradient.take())?;
             match self.outer_update(end, (lo, hi), &tol, climb, previous_res)? {
                 Outer::Done(steps) => return Ok(steps),
                 Outer::Continue(res) => previous_res = res,
