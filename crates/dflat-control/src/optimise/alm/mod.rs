@@ -47,7 +47,8 @@
 //! costs ‖y_f‖ per m/s²: with many active stages the residual test alone
 //! left the cost 1e-7 above the optimum). σ grows tenfold only while the
 //! residual is above its tolerance and did not fall tenfold (or, cold,
-//! while σ is below the warm σ). With intervals the matrix depends only on
+//! while σ is below the warm σ); with discs and rows, the residuals'
+//! cost over its tolerance counts as a residual there. With intervals the matrix depends only on
 //! σ and the active set (stages outside their set, per axis; row sides in
 //! their quadratic range): the factor is reused whenever they are the ones
 //! factored. With discs it also depends on where each active stage lies,

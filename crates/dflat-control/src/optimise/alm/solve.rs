@@ -448,8 +448,12 @@ impl BandedAlm {
         // ended it was the model's with the active set it started from (a
         // warm start whose rows all let go at once stopped there 0.6 %
         // above the optimum's cost).
-        let gap_small =
-            end.converged && (residuals_small || stalled) && self.residual_cost(lo, hi) <= tol.gap;
+        let mut gap_ratio = 0.0;
+        let gap_small = end.converged && (residuals_small || stalled) && {
+            let cost = self.residual_cost(lo, hi);
+            gap_ratio = cost / tol.gap;
+            cost <= tol.gap
+        };
         self.update_multipliers(lo, hi);
         if gap_small && self.ws.window > 0 {
             // The window converged: on to the whole horizon, whose first
@@ -464,7 +468,16 @@ impl BandedAlm {
             }
             return Ok(Outer::Done(self.ws.newton_steps));
         }
-        let res = (stage_res / tol.stage).max(row_res / tol.row);
+        let mut res = (stage_res / tol.stage).max(row_res / tol.row);
+        if !self.rows.is_empty() && matches!(self.stages, StageSet::Disc(_)) {
+            // Discs with rows (the cone with the tilt rate): residuals
+            // within their tolerances whose cost is not (a chain of rate
+            // rows with large multipliers, its residual falling a few
+            // percent per update) count as a residual too, so that σ
+            // grows there (corner bench, N = 200: p99 1370 → 1108 µs,
+            // Newton steps per solve at most 35 → 22).
+            res = res.max(gap_ratio);
+        }
         // σ grows tenfold when the residual stalls, and on a cold solve
         // after every update until it reaches the warm σ: the soft first
         // subproblem found the active set, and at σ = 1e2 an update gains
