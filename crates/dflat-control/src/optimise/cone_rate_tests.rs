@@ -385,7 +385,9 @@ proptest::proptest! {
             let (og, ow) = (obj(&got), obj(&want));
             proptest::prop_assert!(
                 og <= ow + COST_TOLERANCE * (1.0 + ow.abs()),
-                "tick {tick}: cost {og} vs clarabel {ow} (restarted {})",
+                "tick {tick}: cost {og} vs clarabel {ow} ({:?}, {} iterations, restarted {})",
+                solver.method(),
+                solver.iterations(),
                 solver.interior_restarted()
             );
             for i in 0..2 {

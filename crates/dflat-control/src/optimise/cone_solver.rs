@@ -31,6 +31,15 @@ pub const WARM_STEPS_BEFORE_START: usize = 12;
 /// and 202 µs (docs/performance.md, "The warm start's first inner
 /// solve").
 pub const WARM_FIRST_INNER_STEPS: usize = 6;
+/// Share of the horizon before which a cold solve's start (the plan given)
+/// breaks no disc or row for the cone with the tilt rate to try the
+/// augmented Lagrangian first, with the warm start's budget and then the
+/// interior point's restart, instead of the interior point's cold start
+/// (the eliminated head's share, `alm/mod.rs`). On the course of corners
+/// at N = 200 a burst's first tick went from ~650 to ~105 µs at the
+/// median (docs/performance.md, "A burst's first tick of the cone with
+/// the tilt rate").
+pub const LATE_ARC_SHARE: f64 = 0.25;
 
 /// Weights of one axis: tracking q ≥ 0 [1/m²], jerk r > 0 [s⁶/m²], and
 /// the smoothness term.
@@ -484,7 +493,7 @@ impl BandedConeSolver {
             alm.set_start(&[&self.p[0], &self.p[1]]);
         }
         let mut started = false;
-        if rate_rows && !warm {
+        if rate_rows && !warm && !self.breaks_late(a0) {
             started = self.interior_start(a0);
         }
         let Some(alm) = &mut self.alm else {
@@ -515,6 +524,17 @@ impl BandedConeSolver {
             alm.reset_multipliers();
         }
         result.is_ok()
+    }
+
+    /// Whether the start held breaks no disc or row before
+    /// [`LATE_ARC_SHARE`] of the horizon (a burst's first tick mid-flight,
+    /// its arc entering late): its cold solve then tries the augmented
+    /// Lagrangian before the interior point.
+    fn breaks_late(&self, a0: [f64; 2]) -> bool {
+        self.alm.as_ref().is_some_and(|alm| {
+            let first = alm.first_broken_stage(a0, &self.lo, &self.hi);
+            first as f64 >= LATE_ARC_SHARE * (self.horizon - 2) as f64
+        })
     }
 
     /// The augmented Lagrangian's start from the condensed interior point,

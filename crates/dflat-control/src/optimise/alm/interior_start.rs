@@ -542,6 +542,7 @@ impl BandedAlm {
             });
         }
         self.warm.y_last_valid = false;
+        self.handed_over = true;
         self.sigma = self.tuning.sigma;
         self.ws.px_current = false;
     }

@@ -8,9 +8,9 @@
 
 use super::super::bounds::check_solve_data;
 use super::{
-    BandedAlm, DECREMENT_TOLERANCE, DUAL_TOLERANCE, Factored, GAP_TOLERANCE, INEXACT, LOCAL_STOP,
-    LOOSE_REUSE, MAX_OUTER, PRIMAL_TOLERANCE, REUSE_DECREMENT, REUSE_DECREMENT_DISCS,
-    ROW_TOLERANCE, SIGMA_GROWTH, STALL_TOLERANCE, StageSet,
+    BandedAlm, DECREMENT_TOLERANCE, DUAL_TOLERANCE, Factored, GAP_TOLERANCE,
+    GAP_TOLERANCE_AFTER_INTERIOR, INEXACT, LOCAL_STOP, LOOSE_REUSE, MAX_OUTER, PRIMAL_TOLERANCE,
+    REUSE_DECREMENT, REUSE_DECREMENT_DISCS, ROW_TOLERANCE, SIGMA_GROWTH, STALL_TOLERANCE, StageSet,
 };
 use crate::ControlError;
 
@@ -81,7 +81,10 @@ impl BandedAlm {
     ) -> Result<usize, ControlError> {
         self.check_data(c, a0, lo, hi)?;
         let cold = self.begin(c);
-        let tol = self.tolerances(cold, lo, hi);
+        let mut tol = self.tolerances(cold, lo, hi);
+        if std::mem::take(&mut self.handed_over) {
+            tol.gap *= GAP_TOLERANCE_AFTER_INTERIOR / GAP_TOLERANCE;
+        }
         self.hard_row_weight = self.hard_row_residual_weight(lo, hi, tol.row);
         if self.polish.is_some() {
             return self.solve_rows(a0[0], (lo, hi), &tol);

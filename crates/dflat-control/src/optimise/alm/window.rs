@@ -72,6 +72,41 @@ impl BandedAlm {
         (gn, done.1, done.2)
     }
 
+    /// The first stage at which the held iterate ([`BandedAlm::set_start`])
+    /// leaves its disc, or breaks a row that starts there, for fixed
+    /// relative accelerations `a0` [m/s²] and row bounds `lo ≤ h·x ≤ hi`
+    /// (n: nowhere; intervals: 0, not asked). A cold solve of the pair
+    /// whose plan breaks nothing before late in the horizon (a burst's
+    /// first tick, its arc entering at the end) needs no interior-point
+    /// start.
+    pub fn first_broken_stage(&self, a0: [f64; 2], lo: &[f64], hi: &[f64]) -> usize {
+        let super::StageSet::Disc(radius) = &self.stages else {
+            return 0;
+        };
+        let (k, x) = (self.k, &self.ws.x);
+        let at = |f: isize, i: usize| if f < 0 { 0.0 } else { x[k * f as usize + i] };
+        let mut first = self.n;
+        for (f, &r) in radius.iter().enumerate() {
+            let g = f as isize;
+            let u = [0, 1]
+                .map(|i| (at(g, i) - 2.0 * at(g - 1, i) + at(g - 2, i)) * self.inv_dt2 + a0[i]);
+            if u[0].hypot(u[1]) > r {
+                first = f;
+                break;
+            }
+        }
+        for (r, row) in self.rows.iter().enumerate() {
+            let stage = self.row_first[r] / k;
+            if stage < first {
+                let h = row.dot(x);
+                if h > hi[r] || h < lo[r] {
+                    first = stage;
+                }
+            }
+        }
+        first
+    }
+
     /// Back to the whole horizon: P·x and the stages' accelerations
     /// evaluated afresh on it by the next gradient.
     pub(super) fn close_window(&mut self) {
