@@ -472,11 +472,14 @@ impl BandedConeSolver {
 
     /// The augmented Lagrangian's attempt (none configured: false). With
     /// the tilt-rate rows a cold solve starts from the condensed interior
-    /// point's solution and multipliers (`alm/interior_start.rs`), and a
-    /// warm one that has not ended within [`WARM_STEPS_BEFORE_START`]
-    /// Newton steps goes on from there (a chain of rate rows that moved
-    /// takes the warm multipliers 40 and more): the interior point
-    /// restarted from where the warm solve stopped, else started cold.
+    /// point's solution and multipliers (`alm/interior_start.rs`) unless
+    /// its start breaks nothing before [`LATE_ARC_SHARE`] of the horizon;
+    /// a warm one (or that cold one) that has not ended within
+    /// [`WARM_STEPS_BEFORE_START`] Newton steps, or whose first inner
+    /// solve has not within [`WARM_FIRST_INNER_STEPS`], goes on from the
+    /// interior point (a chain of rate rows that moved takes the warm
+    /// multipliers 40 and more): restarted from where it stopped, else
+    /// started cold.
     fn try_alm(&mut self, warm: bool, a0: [f64; 2]) -> bool {
         let Some(alm) = &mut self.alm else {
             return false;
