@@ -271,45 +271,12 @@ proptest::proptest! {
     /// ends from in a few Newton steps (1–4 from the stage interior
     /// point's, 27–684 from zero). Fails with the discs' multipliers
     /// dropped in the hand-over (5.6e-6) and with the rows' halved
-    /// (2.5e-7).
+    /// (2.5e-7). The same holds for the interior point restarted from
+    /// where an augmented Lagrangian that did not end stopped (its iterate
+    /// and multipliers after 1–8 Newton steps from the unconstrained plan,
+    /// `BandedAlm::interior_restart`).
     #[test]
     fn the_interior_start_hands_over_stationary_multipliers(
-        horizon in 40usize..=160,
-        q in proptest::array::uniform2(0.5f64..10.0),
-        r in proptest::array::uniform2(1e-3f64..0.1),
-        tilt_deg in 8.0f64..35.0,
-        step_deg in 0.5f64..5.0,
-        kappa in proptest::array::uniform2(1.0f64..12.0),
-        v0 in proptest::array::uniform2(-6.0f64..6.0),
-        a0_frac in proptest::array::uniform2(-0.8f64..0.8),
-        sent_delta in proptest::array::uniform2(-6.0f64..6.0),
-        target in proptest::array::uniform2(-20.0f64..20.0),
-        smooth in proptest::option::of(1.0f64..50.0),
-    ) {
-        let (a, _, bounds) = rate_bounds(tilt_deg, step_deg, kappa, None);
-        let weights = instance_weights(q, r, kappa, smooth);
-        let axes = instance_axes(horizon, a, v0, a0_frac, sent_delta, target, [0.0; 2]);
-        let mut solver =
-            BandedConeSolver::with_methods(horizon, DT, weights, bounds, false, [true, false]).unwrap();
-        let mut plans = super::cone_tests::banded_start(horizon, weights, &axes);
-        let [x, y] = super::cone_tests::problems(&axes, &mut plans);
-        proptest::prop_assert!(solver.interior_start_only(x, y), "no convergence");
-        let stationarity = solver.alm_mut().unwrap().stationarity();
-        proptest::prop_assert!(stationarity <= 1e-9, "stationarity {stationarity:.2e}");
-    }
-}
-
-proptest::proptest! {
-    #![proptest_config(proptest::test_runner::Config::with_cases(64))]
-    /// The condensed interior point restarted from where an augmented
-    /// Lagrangian that did not end stopped (its iterate and multipliers
-    /// after 1–8 Newton steps from the unconstrained plan,
-    /// `BandedAlm::interior_restart`) converges on the instances of
-    /// `the_interior_start_hands_over_stationary_multipliers` and hands
-    /// over an iterate and multipliers that satisfy the KKT stationarity
-    /// to the same 1e-9 of its largest term's scale.
-    #[test]
-    fn the_interior_restart_hands_over_stationary_multipliers(
         horizon in 40usize..=160,
         q in proptest::array::uniform2(0.5f64..10.0),
         r in proptest::array::uniform2(1e-3f64..0.1),
@@ -326,13 +293,23 @@ proptest::proptest! {
         let (a, _, bounds) = rate_bounds(tilt_deg, step_deg, kappa, None);
         let weights = instance_weights(q, r, kappa, smooth);
         let axes = instance_axes(horizon, a, v0, a0_frac, sent_delta, target, [0.0; 2]);
-        let mut solver =
-            BandedConeSolver::with_methods(horizon, DT, weights, bounds, false, [true, false]).unwrap();
-        let mut plans = super::cone_tests::banded_start(horizon, weights, &axes);
-        let [x, y] = super::cone_tests::problems(&axes, &mut plans);
-        proptest::prop_assert!(solver.interior_restart_after(x, y, steps), "no convergence");
-        let stationarity = solver.alm_mut().unwrap().stationarity();
-        proptest::prop_assert!(stationarity <= 1e-9, "stationarity {stationarity:.2e}");
+        for restart in [false, true] {
+            let mut solver =
+                BandedConeSolver::with_methods(horizon, DT, weights, bounds, false, [true, false]).unwrap();
+            let mut plans = super::cone_tests::banded_start(horizon, weights, &axes);
+            let [x, y] = super::cone_tests::problems(&axes, &mut plans);
+            let converged = if restart {
+                solver.interior_restart_after(x, y, steps)
+            } else {
+                solver.interior_start_only(x, y)
+            };
+            proptest::prop_assert!(converged, "no convergence (restart {restart})");
+            let stationarity = solver.alm_mut().unwrap().stationarity();
+            proptest::prop_assert!(
+                stationarity <= 1e-9,
+                "stationarity {stationarity:.2e} (restart {restart})"
+            );
+        }
     }
 }
 
