@@ -264,28 +264,15 @@ async fn fly_override(attempt: usize) -> OverrideFlight {
 /// complete in time), up to [`support::STARVED_ATTEMPTS`] flights; when
 /// every one was starved, the least late is judged (said).
 async fn fly_override_unstarved() -> OverrideFlight {
-    let mut least_late: Option<(f64, OverrideFlight)> = None;
+    let mut flights = support::LeastLate::new("override");
     for attempt in 1..=support::STARVED_ATTEMPTS {
         let flight = fly_override(attempt).await;
         let late = flight.latest_tick_us();
-        let on_time = late <= support::STARVED_US;
-        if !on_time {
-            println!(
-                "override: a tick ran {late:.0} µs late in flight {attempt} (the machine starved it)"
-            );
-        }
-        if least_late.as_ref().is_none_or(|(l, _)| late < *l) {
-            least_late = Some((late, flight));
-        }
-        if on_time {
+        if flights.offer(attempt, late, flight) {
             break;
         }
     }
-    let (late, flight) = least_late.expect("at least one flight");
-    if late > support::STARVED_US {
-        println!("override: every flight was starved; the least late ({late:.0} µs) is judged");
-    }
-    flight
+    flights.judged().1
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -373,14 +373,50 @@ pub const STARVED_ATTEMPTS: usize = 3;
 /// returned one's directory becomes `name`'s ([`scratch_dir`]), where its
 /// records are read.
 pub fn fly_unstarved(name: &str, config_text: &str, fly: Duration) -> Flight {
-    let mut least_late: Option<(f64, usize, Flight)> = None;
+    let mut flights = LeastLate::new(name);
     for attempt in 1..=STARVED_ATTEMPTS {
         let flight = fly_in_process(&format!("{name}-{attempt}"), config_text, fly);
         let late = flight.latest_tick_us();
+        if flights.offer(attempt, late, flight) {
+            break;
+        }
+    }
+    let (attempt, mut flight) = flights.judged();
+    let dir = scratch_dir(name);
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::rename(scratch_dir(&format!("{name}-{attempt}")), &dir)
+        .expect("the judged flight's records");
+    flight.dir = dir;
+    flight
+}
+
+/// The choice among flights the machine may have starved
+/// ([`fly_unstarved`]): each flight is offered with how late its latest
+/// tick ran in the daemon's own records \[µs\]; one on time
+/// ([`STARVED_US`]) ends the flying, else the least late is judged, each
+/// starved flight and that choice said under `name`.
+pub struct LeastLate<T> {
+    name: String,
+    least: Option<(f64, usize, T)>,
+}
+
+impl<T> LeastLate<T> {
+    /// No flight offered yet.
+    pub fn new(name: &str) -> Self {
+        Self {
+            name: name.to_string(),
+            least: None,
+        }
+    }
+
+    /// Offers flight `attempt` (from 1), whose latest tick ran `late` µs
+    /// late; returns whether it was on time (then fly no more).
+    pub fn offer(&mut self, attempt: usize, late: f64, flight: T) -> bool {
         let on_time = late <= STARVED_US;
         if !on_time {
             println!(
-                "{name}: a tick ran {late:.0} µs late in flight {attempt} (the machine starved it){}",
+                "{}: a tick ran {late:.0} µs late in flight {attempt} (the machine starved it){}",
+                self.name,
                 if attempt < STARVED_ATTEMPTS {
                     ": flown again"
                 } else {
@@ -388,23 +424,24 @@ pub fn fly_unstarved(name: &str, config_text: &str, fly: Duration) -> Flight {
                 }
             );
         }
-        if least_late.as_ref().is_none_or(|(l, _, _)| late < *l) {
-            least_late = Some((late, attempt, flight));
+        if self.least.as_ref().is_none_or(|(l, _, _)| late < *l) {
+            self.least = Some((late, attempt, flight));
         }
-        if on_time {
-            break;
+        on_time
+    }
+
+    /// The flight to judge and its attempt: the one on time, else the
+    /// least late (said). Panics when none was offered.
+    pub fn judged(self) -> (usize, T) {
+        let (late, attempt, flight) = self.least.expect("at least one flight");
+        if late > STARVED_US {
+            println!(
+                "{}: every flight was starved; the least late ({late:.0} µs) is judged",
+                self.name
+            );
         }
+        (attempt, flight)
     }
-    let (late, attempt, mut flight) = least_late.expect("at least one flight");
-    if late > STARVED_US {
-        println!("{name}: every flight was starved; the least late ({late:.0} µs) is judged");
-    }
-    let dir = scratch_dir(name);
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::rename(scratch_dir(&format!("{name}-{attempt}")), &dir)
-        .expect("the judged flight's records");
-    flight.dir = dir;
-    flight
 }
 
 /// The `[realtime]` table of a flight judged to centimetres: the control
