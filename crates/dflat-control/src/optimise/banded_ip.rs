@@ -86,6 +86,8 @@ const STEP_FRACTION: f64 = 0.99;
 const GAP_FLOOR: f64 = 0.1;
 /// Relative tolerance of the equality and primal residuals.
 const TOLERANCE: f64 = 1e-10;
+/// Tolerance of the gap, relative to `1 + |objective|`.
+const GAP_TOLERANCE: f64 = 1e-9;
 /// Static regularisation of the KKT matrix.
 const REGULARISATION: f64 = 1e-12;
 
@@ -440,12 +442,13 @@ impl BandedIp {
                 return Err(self.error("non-finite iterate"));
             }
             // Each residual over its tolerance; converged at ≤ 1.
+            let gap_target = GAP_TOLERANCE * (1.0 + r.objective.abs());
             let merit = (r.rd / (1e-8 * c_scale))
                 .max(r.rsig / (1e-8 * (1.0 + rho)))
                 .max(r.req / (TOLERANCE * (1.0 + r.a_max)))
                 .max(r.rp / (TOLERANCE * b_scale))
                 .max(r.rp_cone / (TOLERANCE * cone_scale))
-                .max(r.gap / (1e-9 * (1.0 + r.objective.abs())));
+                .max(r.gap / gap_target);
             if merit < best.0 {
                 best = (merit, iteration);
                 self.best.copy_from_slice(&self.v);
@@ -471,7 +474,6 @@ impl BandedIp {
                 }
                 return Err(self.error("factorisation failed"));
             }
-            let gap_target = 1e-9 * (1.0 + r.objective.abs());
             self.mehrotra_step(r.gap, r.gap / pairs, GAP_FLOOR * gap_target / pairs);
         }
         Err(self.error(&format!("no convergence (best merit {:.1e})", best.0)))

@@ -533,8 +533,8 @@ impl BandedConeSolver {
     /// [`LATE_ARC_SHARE`] of the horizon (a burst's first tick mid-flight,
     /// its arc entering late): its cold solve then tries the augmented
     /// Lagrangian before the interior point.
-    fn breaks_late(&self, a0: [f64; 2]) -> bool {
-        self.alm.as_ref().is_some_and(|alm| {
+    fn breaks_late(&mut self, a0: [f64; 2]) -> bool {
+        self.alm.as_mut().is_some_and(|alm| {
             let first = alm.first_broken_stage(a0, &self.lo, &self.hi);
             first as f64 >= LATE_ARC_SHARE * (self.horizon - 2) as f64
         })

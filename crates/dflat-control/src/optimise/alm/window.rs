@@ -78,27 +78,22 @@ impl BandedAlm {
     /// (n: nowhere; intervals: 0, not asked). A cold solve of the pair
     /// whose plan breaks nothing before late in the horizon (a burst's
     /// first tick, its arc entering at the end) needs no interior-point
-    /// start.
-    pub fn first_broken_stage(&self, a0: [f64; 2], lo: &[f64], hi: &[f64]) -> usize {
+    /// start. Leaves `u` the iterate's accelerations (a solve's first
+    /// gradient evaluates them afresh).
+    pub fn first_broken_stage(&mut self, a0: [f64; 2], lo: &[f64], hi: &[f64]) -> usize {
         let super::StageSet::Disc(radius) = &self.stages else {
             return 0;
         };
-        let (k, x) = (self.k, &self.ws.x);
-        let at = |f: isize, i: usize| if f < 0 { 0.0 } else { x[k * f as usize + i] };
-        let mut first = self.n;
-        for (f, &r) in radius.iter().enumerate() {
-            let g = f as isize;
-            let u = [0, 1]
-                .map(|i| (at(g, i) - 2.0 * at(g - 1, i) + at(g - 2, i)) * self.inv_dt2 + a0[i]);
-            if u[0].hypot(u[1]) > r {
-                first = f;
-                break;
-            }
-        }
+        Self::accelerations(self.k, self.inv_dt2, &self.ws.x, &mut self.ws.u, 0);
+        let mut first = radius
+            .iter()
+            .zip(&self.ws.u)
+            .position(|(&r, u)| (u[0] + a0[0]).hypot(u[1] + a0[1]) > r)
+            .unwrap_or(self.n);
         for (r, row) in self.rows.iter().enumerate() {
-            let stage = self.row_first[r] / k;
+            let stage = self.row_first[r] / self.k;
             if stage < first {
-                let h = row.dot(x);
+                let h = row.dot(&self.ws.x);
                 if h > hi[r] || h < lo[r] {
                     first = stage;
                 }
