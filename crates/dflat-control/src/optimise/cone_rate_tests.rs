@@ -385,3 +385,53 @@ proptest::proptest! {
         proptest::prop_assume!(restarts > 0);
     }
 }
+
+/// Warm ticks of the cone with the tilt-rate rows whose window stays where
+/// it was while the reference moves on at 8 m/s (20° cone, 1° per tick,
+/// N = 60): each tick the chain of rate rows moves, the warm attempt's
+/// first line search stops short of [`super::alm`]'s `BLOCKED_STEP` and
+/// the interior point restarts after that one Newton step, not after the
+/// first inner solve's [`super::cone_solver::WARM_FIRST_INNER_STEPS`]; every tick still ends
+/// at clarabel's SOCP solution (cost, first ten outputs to 1e-5 m).
+#[test]
+fn a_blocked_warm_step_restarts_the_interior_point_at_once() {
+    let horizon = 60;
+    let kappa = [5.0, 5.0];
+    let (a, _, bounds) = rate_bounds(20.0, 1.0, kappa, None);
+    let weights = instance_weights([5.0, 5.0], [0.01, 0.01], kappa, Some(20.0));
+    let mut solver = BandedConeSolver::new(horizon, DT, weights, bounds, true).unwrap();
+    let (target, slope) = ([10.0, 5.0], [8.0, 0.0]);
+    let mut axes = instance_axes(horizon, a, [0.0; 2], [0.0; 2], [0.0; 2], target, slope);
+    for tick in 0..10 {
+        for (i, axis) in axes.iter_mut().enumerate() {
+            axis.reference = (0..=horizon)
+                .map(|j| target[i] + slope[i] * DT * (j + tick) as f64)
+                .collect();
+        }
+        let want = clarabel_plans(horizon, weights, bounds, &axes, None).unwrap();
+        let got = try_banded_plans(&mut solver, weights, &axes).unwrap();
+        let obj = |p: &Plans| objective(horizon, &weights, &bounds, &axes, [&p[0], &p[1]], &[]);
+        let (og, ow) = (obj(&got), obj(&want));
+        assert!(
+            og <= ow + COST_TOLERANCE * (1.0 + ow.abs()),
+            "tick {tick}: {og} vs {ow}"
+        );
+        for i in 0..2 {
+            for j in 0..=10 {
+                assert!(
+                    (got[i][j] - want[i][j]).abs() <= 1e-5,
+                    "tick {tick} axis {i} y_{j}: {} vs {}",
+                    got[i][j],
+                    want[i][j]
+                );
+            }
+        }
+        if tick > 0 {
+            let after = solver.restarted_after();
+            assert!(
+                (1..super::cone_solver::WARM_FIRST_INNER_STEPS).contains(&after),
+                "tick {tick}: restarted after {after} Newton steps"
+            );
+        }
+    }
+}

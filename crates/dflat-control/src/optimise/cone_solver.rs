@@ -108,6 +108,9 @@ pub struct BandedConeSolver {
     /// Whether the last solve's interior point was restarted from where
     /// its warm attempt stopped ([`BandedConeSolver::interior_restart`]).
     restarted: bool,
+    /// The Newton steps of the last solve's warm attempt, when the
+    /// interior point's restart followed it.
+    attempt_steps: usize,
     /// Newton steps a warm solve with tilt-rate rows gets before the
     /// interior point ([`WARM_STEPS_BEFORE_START`]; tests lower it).
     warm_steps_before_start: usize,
@@ -247,6 +250,7 @@ impl BandedConeSolver {
             previous_valid: false,
             iterations: 0,
             interior_iterations: 0,
+            attempt_steps: 0,
             restarted: false,
             warm_steps_before_start: WARM_STEPS_BEFORE_START,
             warm_used: false,
@@ -394,6 +398,7 @@ impl BandedConeSolver {
         self.iterations = 0;
         self.interior_iterations = 0;
         self.restarted = false;
+        self.attempt_steps = 0;
         let warm = self.warm_start && self.previous_valid;
         self.warm_used = false;
         self.previous_valid = false;
@@ -512,6 +517,7 @@ impl BandedConeSolver {
         alm.set_max_newton_steps(budget);
         alm.set_first_inner_steps(usize::MAX);
         self.iterations = alm.newton_steps();
+        self.attempt_steps = self.iterations;
         if result.is_err()
             && short
             && (self.interior_restart(a0) || self.interior_start(a0))
@@ -590,6 +596,19 @@ impl BandedConeSolver {
     /// cold from the funnel's witness).
     pub fn interior_restarted(&self) -> bool {
         self.restarted
+    }
+
+    /// The Newton steps of the warm attempt the last solve's interior
+    /// point was restarted after (0 when it was not): at most
+    /// [`WARM_STEPS_BEFORE_START`]; its first inner solve gives up after
+    /// [`WARM_FIRST_INNER_STEPS`], or sooner at a blocked line search
+    /// (`alm/mod.rs`, `BLOCKED_STEP`).
+    pub fn restarted_after(&self) -> usize {
+        if self.restarted {
+            self.attempt_steps
+        } else {
+            0
+        }
     }
 
     /// Sets the Newton steps a warm solve with tilt-rate rows gets before

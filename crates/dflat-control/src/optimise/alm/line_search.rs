@@ -53,12 +53,14 @@ impl BandedAlm {
         let (full, done) = self.full_step_terms(lo, hi);
         if lin + 0.5 * curv + full <= base + ARMIJO * slope {
             self.step(1.0);
+            self.ws.last_alpha = 1.0;
             self.accept_full_step(done);
             return Ok(true);
         }
         // L along d is convex (piecewise quadratic for intervals): its
         // minimiser on (0, 1) where the full step fails Armijo.
         let alpha = self.exact_step(lin, curv, slope, lo, hi);
+        self.ws.last_alpha = alpha;
         self.step(alpha);
         Ok(false)
     }

@@ -205,6 +205,17 @@ const GAP_TOLERANCE: f64 = 3e-10;
 /// it there costs the other solves nothing (at every solve: the cone with
 /// the tilt rate's median at N = 200 +4 %, one pair of runs).
 const GAP_TOLERANCE_AFTER_INTERIOR: f64 = 3e-11;
+/// Shortest line-search step (a fraction of the Newton step) a warm
+/// solve's first inner solve takes before it gives up, when its caller
+/// has a better start ([`BandedAlm::set_first_inner_steps`]): a step
+/// stopped short of it is a chain of rate rows that moved, whose next
+/// rows activate one or two a step (the corner bench's restarted ticks
+/// took steps of 0.00–0.01 from the first). The cone with the tilt rate's
+/// constrained p99 on the corner bench, three alternated runs of each
+/// binary: N = 200 1048–1063 → 980–1007 µs; 0.02, 0.1 and 0.2 gave
+/// 981–997, 980–993 and 979–993; giving up at the second such step in a
+/// row 1017–1044 (docs/performance.md, "A blocked warm step").
+const BLOCKED_STEP: f64 = 0.05;
 /// Multiple of the stage residual's tolerance that ends a solve at the
 /// largest σ (where the residual can stall at rounding), with the
 /// residuals' cost within its tolerance.
@@ -377,6 +388,8 @@ pub(super) struct Workspace {
     /// opened (0: none), whether it started from the rollout, and what
     /// the active-set method did (one axis with rows).
     pub(super) newton_steps: usize,
+    /// The last line search's step (1: full).
+    pub(super) last_alpha: f64,
     pub(super) factorisations: usize,
     pub(super) last_window: usize,
     pub(super) rollout_started: bool,
@@ -409,6 +422,7 @@ impl Workspace {
             cut: 0,
             cut_seed: vec![0.0; bandwidth],
             newton_steps: 0,
+            last_alpha: 1.0,
             factorisations: 0,
             last_window: 0,
             rollout_started: false,
@@ -680,7 +694,9 @@ impl BandedAlm {
     /// multipliers as shifted) may take before the solve gives up
     /// (`usize::MAX`: no such limit, the default): the pair with tilt-rate
     /// rows gives up there on a warm start far from its optimum
-    /// (`WARM_FIRST_INNER_STEPS`) for the interior point's restart.
+    /// (`WARM_FIRST_INNER_STEPS`) for the interior point's restart. With
+    /// such a limit the first inner solve also gives up at its first line
+    /// search that stops short of [`BLOCKED_STEP`].
     pub(crate) fn set_first_inner_steps(&mut self, steps: usize) {
         self.first_inner_steps = steps;
     }

@@ -8,7 +8,7 @@
 
 use super::super::bounds::check_solve_data;
 use super::{
-    BandedAlm, DECREMENT_TOLERANCE, DUAL_TOLERANCE, Factored, GAP_TOLERANCE,
+    BLOCKED_STEP, BandedAlm, DECREMENT_TOLERANCE, DUAL_TOLERANCE, Factored, GAP_TOLERANCE,
     GAP_TOLERANCE_AFTER_INTERIOR, INEXACT, LOCAL_STOP, LOOSE_REUSE, MAX_OUTER, PRIMAL_TOLERANCE,
     REUSE_DECREMENT, REUSE_DECREMENT_DISCS, ROW_TOLERANCE, SIGMA_GROWTH, STALL_TOLERANCE, StageSet,
 };
@@ -33,6 +33,10 @@ struct Tolerances {
     row_scale_max: f64,
     /// Newton steps allowed.
     max_steps: usize,
+    /// Whether the inner solve gives up at a blocked step
+    /// ([`BLOCKED_STEP`]: a warm start's first, when the caller has a
+    /// better start).
+    give_up_blocked: bool,
 }
 
 /// The inner loop's memory across Newton steps and outer iterations.
@@ -115,6 +119,7 @@ impl BandedAlm {
             let mut inner_tol = tol;
             if outer == 0 && !cold {
                 inner_tol.max_steps = tol.max_steps.min(self.first_inner_steps);
+                inner_tol.give_up_blocked = self.first_inner_steps < usize::MAX;
             }
             let end =
                 self.inner_solve(a0, (lo, hi), &inner_tol, &mut memory, first_gradient.take())?;
@@ -242,6 +247,7 @@ impl BandedAlm {
             } else {
                 self.tuning.max_newton_steps
             },
+            give_up_blocked: false,
         }
     }
 
@@ -344,6 +350,12 @@ impl BandedAlm {
                 });
             }
             memory.last_full = self.line_search(decrement, lo, hi)?;
+            if tol.give_up_blocked && self.ws.last_alpha < BLOCKED_STEP {
+                return Err(ControlError::Solver(format!(
+                    "ALM: the warm start's step is blocked (α = {:.1e})",
+                    self.ws.last_alpha
+                )));
+            }
             memory.exact_full = memory.last_full && !reuse;
             if memory.exact_full && decrement <= LOCAL_STOP * tol.c_scale * tol.x_scale {
                 // A full step from a small decrement: the next one is of
