@@ -319,6 +319,40 @@ fn successive_windows_solve_as_the_whole_horizon_does() {
     );
 }
 
+/// A cold solve on the window that fails (the augmented Lagrangian alone,
+/// its Newton steps cut to three) leaves no window behind: the next solve
+/// of the same solver, from rest (no window: the plan binds at once), takes
+/// a fresh solver's Newton steps to its plan. With the window's cut left
+/// to it, that solve's steps skipped the head and its first substitution
+/// panicked (found by a random draw of
+/// `restarted_warm_ticks_match_clarabel_socp`, whose warm solve after an
+/// interior-point restart followed a cold one that failed on its window).
+#[test]
+fn a_failed_solve_on_the_window_leaves_none_to_the_next() {
+    let horizon = 200;
+    let w = tracking_weights();
+    let bounds = ConeBounds::new(G * 20f64.to_radians().tan(), None);
+    let alm_only = || {
+        BandedConeSolver::with_methods(horizon, DT, [w, w], bounds, false, [true, false]).unwrap()
+    };
+    let mut solver = alm_only();
+    let budget = solver.alm_mut().unwrap().max_newton_steps();
+    solver.alm_mut().unwrap().set_max_newton_steps(3);
+    assert!(try_banded_plans(&mut solver, [w, w], &late_corner(horizon, 20)).is_err());
+    assert!(
+        solver.eliminated_head() > horizon / 2,
+        "it failed on its window"
+    );
+    solver.alm_mut().unwrap().set_max_newton_steps(budget);
+    let axes = from_rest(horizon, [8.0, -6.0]);
+    let got = banded_plans(&mut solver, [w, w], &axes);
+    assert_eq!(solver.eliminated_head(), 0);
+    let mut fresh = alm_only();
+    let want = banded_plans(&mut fresh, [w, w], &axes);
+    assert_eq!(solver.iterations(), fresh.iterations());
+    assert_plans_within(&got, &want, 1e-12, "a fresh solver's");
+}
+
 /// The flight's first tick, from rest, with the reference already moving
 /// at 8 m/s 3 m to the side (the corner bench's): the plan binds at once,
 /// so the augmented Lagrangian starts from the saturated rollout and the
@@ -589,7 +623,8 @@ proptest::proptest! {
     /// outputs shifted by a position error of up to 2 cm, the reference one
     /// step on), solved by one warm-started [`BandedConeSolver`] and, each
     /// tick, by clarabel's SOCP from scratch: cost no higher than
-    /// clarabel's (1e-7 relative), first jerk per axis to 1e-3 relative,
+    /// clarabel's (1e-7 relative; where clarabel's plan leaves the cone,
+    /// on the cone it keeps), first jerk per axis to 1e-3 relative,
     /// first ten outputs to 1e-5 m, the cone holds; after the first tick
     /// the solver starts warm, and the augmented Lagrangian (not its
     /// interior-point fallback) solves at least half of the ticks, so the
@@ -647,9 +682,24 @@ proptest::proptest! {
             let obj =
                 |p: &[Vec<f64>; 2]| objective(horizon, &weights, &bounds, &axes, [&p[0], &p[1]], &[]);
             let (og, ow) = (obj(&got), obj(&want));
+            let tol = 1e-7 * (1.0 + ow.abs());
+            let peak = ConeBounds::peak_acceleration(&want[0], &want[1], DT);
+            // Clarabel's plan can leave the cone by its feasibility
+            // tolerance (1e-8), which with many active stages is worth
+            // more than the cost's (`cc 86ad73cd…`: 3.8e-9 of the radius,
+            // 7e-7 of cost; tol_feas 1e-9 leaves it so, 1e-10 fails other
+            // ticks): such a tick is judged on the cone clarabel's plan
+            // keeps, where ours must cost no more than clarabel's.
+            let kept = if og > ow + tol && peak > a {
+                let wider = ConeBounds::new(peak, speed);
+                let mut fair = BandedConeSolver::new(horizon, DT, weights, wider, false).unwrap();
+                obj(&banded_plans(&mut fair, weights, &axes))
+            } else {
+                og
+            };
             proptest::prop_assert!(
-                og <= ow + 1e-7 * (1.0 + ow.abs()),
-                "tick {tick}: cost {og} vs clarabel {ow} ({:?}, {} iterations); peak {} vs clarabel {} (A {a})",
+                kept <= ow + tol,
+                "tick {tick}: cost {og} ({kept} on clarabel's cone) vs clarabel {ow} ({:?}, {} iterations); peak {} vs clarabel {} (A {a})",
                 solver.method(),
                 solver.iterations(),
                 ConeBounds::peak_acceleration(&got[0], &got[1], DT),

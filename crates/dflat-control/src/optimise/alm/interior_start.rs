@@ -74,6 +74,17 @@ const PRIMAL_TOLERANCE: f64 = 1e-6;
 /// handed over all the same.
 const FALLEN_ENOUGH: f64 = 1e-6;
 
+/// Relative shift of the Newton matrix's diagonal when it does not factor
+/// as assembled: in the end game the barrier terms of a chain of active
+/// rate rows and discs grow to ~1e12 of P's, and rounding can take a
+/// pivot below zero. Two draws of
+/// `the_interior_start_hands_over_stationary_multipliers` (`cc b76fa06f…`:
+/// 33.7° cone, 0.5° a tick, from 5.5 m/s; `cc 6a4b410d…`: 34.2°) failed
+/// so (the first at a gap of 9.4e-6 of its start) and were no start;
+/// with 1e-15, 1e-14 or 1e-13 both converge and hand over multipliers
+/// stationary to 1e-9, with 1e-12 the second only to 3.4e-9.
+const REGULARISATION: f64 = 1e-14;
+
 /// Slack, multiplier, primal residual, complementarity right-hand side
 /// and steps of one scaled inequality `g̃ + s = 0` (a disc, or a row's
 /// side `w·(±h·x − b) + s = 0`).
@@ -381,7 +392,7 @@ impl BandedAlm {
     /// One predictor-corrector step from the residuals; false when the
     /// Newton matrix does not factor.
     fn interior_step(&mut self, mu: f64, count: usize) -> Result<bool, ControlError> {
-        if !self.interior_factor() {
+        if !self.interior_factor(0.0) && !self.interior_factor(REGULARISATION) {
             return Ok(false);
         }
         // Predictor (affine): rc = s·z.
@@ -419,8 +430,9 @@ impl BandedAlm {
         Ok(true)
     }
 
-    /// Assembles and factors `P + Σ G_fᵀ J_f G_f + Σ (z/s)·w²·hhᵀ`.
-    fn interior_factor(&mut self) -> bool {
+    /// Assembles and factors `P + Σ G_fᵀ J_f G_f + Σ (z/s)·w²·hhᵀ`, its
+    /// diagonal times `1 + regularise`.
+    fn interior_factor(&mut self, regularise: f64) -> bool {
         let Some(ip) = self.interior.as_mut() else {
             return false;
         };
@@ -448,6 +460,11 @@ impl BandedAlm {
                 * ip.row_w[r];
             for &(k, prod) in outer {
                 lower[k] += weight * prod;
+            }
+        }
+        if regularise > 0.0 {
+            for d in lower.iter_mut().step_by(w) {
+                *d *= 1.0 + regularise;
             }
         }
         self.factored = super::Factored::Stale;

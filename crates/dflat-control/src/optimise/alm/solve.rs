@@ -83,6 +83,26 @@ impl BandedAlm {
         lo: &[f64],
         hi: &[f64],
     ) -> Result<usize, ControlError> {
+        let result = self.solve_from_start(c, a0, lo, hi);
+        if result.is_err() && self.ws.window > 0 {
+            // A window left open would leave its cut to the next solve
+            // (whose steps would then skip the head, and whose first
+            // substitution panics), and the head unmoved by its steps:
+            // closed, the iterate is whole for a restart from it.
+            self.close_window();
+        }
+        result
+    }
+
+    /// [`BandedAlm::solve`] itself, which may leave a window open on an
+    /// error.
+    fn solve_from_start(
+        &mut self,
+        c: &[f64],
+        a0: [f64; 2],
+        lo: &[f64],
+        hi: &[f64],
+    ) -> Result<usize, ControlError> {
         self.check_data(c, a0, lo, hi)?;
         let cold = self.begin(c);
         let mut tol = self.tolerances(cold, lo, hi);
@@ -172,6 +192,7 @@ impl BandedAlm {
         self.ws.c.copy_from_slice(c);
         self.ws.px_current = false;
         self.ws.window = 0;
+        self.ws.cut = 0;
         self.ws.last_window = 0;
         self.ws.rollout_started = false;
         self.ws.newton_steps = 0;
