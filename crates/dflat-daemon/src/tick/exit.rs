@@ -129,3 +129,51 @@ pub(super) fn update_caught(
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use dflat_control::{ReferenceSource, TickOutput};
+    use nalgebra::Vector3;
+
+    use super::*;
+
+    /// A controller whose update panics (a bug), counting its resets.
+    struct Panicking {
+        resets: usize,
+    }
+
+    impl Controller for Panicking {
+        fn name(&self) -> &'static str {
+            "panicking"
+        }
+        fn update(
+            &mut self,
+            _: &Measurement,
+            _: &mut dyn ReferenceSource,
+        ) -> Result<TickOutput, ControlError> {
+            panic!("a controller bug")
+        }
+        fn reset(&mut self) {
+            self.resets += 1;
+        }
+    }
+
+    /// A panic in the controller's update fails the tick (the fallback
+    /// flies it) and resets the controller, instead of taking the control
+    /// loop down; the next tick calls it again.
+    #[test]
+    fn a_panicking_controller_fails_its_tick_and_is_reset() {
+        let mut controller = Panicking { resets: 0 };
+        let measurement = Measurement {
+            t: 0.0,
+            position: Vector3::new(0.0, 0.0, -2.0),
+            yaw: 0.0,
+        };
+        let mut reference = Reference::setpoint(Vector3::new(1.0, 0.0, -2.0)).unwrap();
+        for tick in 1..=2 {
+            let got = update_caught(&mut controller, &measurement, &mut reference);
+            assert!(matches!(got, Err(TickError::Panicked)), "{got:?}");
+            assert_eq!(controller.resets, tick);
+        }
+    }
+}
