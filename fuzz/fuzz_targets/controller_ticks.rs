@@ -12,7 +12,9 @@
 //! the measured z through); a failed tick is an `Err`, never a NaN command.
 #![no_main]
 
-use dflat_control::dfmpc::{DfMpc, DfMpcSettings, InputSaturation, OutputConstraints};
+use dflat_control::dfmpc::{
+    DfMpc, DfMpcSettings, InputSaturation, OutputConstraints, PlanTiltBound,
+};
 use dflat_control::disturbance::DisturbanceSettings;
 use dflat_control::fmpc::{FlatnessMpc, FmpcSettings};
 use dflat_control::pd::{Pd, PdSettings};
@@ -140,6 +142,11 @@ fn build(input: &Input) -> Option<(Box<dyn Controller>, bool, bool)> {
         )
     };
     let horizon = 10 + usize::from(input.horizon % 60);
+    // DF-MPC's plan bound and tilt rate (bits 5 and 6 of `kind`; `kind % 3`
+    // picks the controller): the tilt cone in the plan, and the tilt-rate
+    // bound of the shipped configs (150°/s), with either plan bound.
+    let plan_cone = input.kind & 0x20 != 0;
+    let tilt_rate = input.kind & 0x40 != 0;
     let is_df = input.kind % 3 == 0;
     let controller: Box<dyn Controller> = match input.kind % 3 {
         0 => Box::new(
@@ -152,6 +159,12 @@ fn build(input: &Input) -> Option<(Box<dyn Controller>, bool, bool)> {
                         max_tilt: input.tilt_bound.then(|| 20f64.to_radians()),
                         max_speed: input.speed_bound.then_some(3.0),
                         vertical_acceleration: None,
+                        max_tilt_rate: tilt_rate.then(|| 150f64.to_radians()),
+                    },
+                    plan_tilt_bound: if plan_cone {
+                        PlanTiltBound::Cone
+                    } else {
+                        PlanTiltBound::Box
                     },
                     multi_rate: input.multi_rate.then(|| MultiRateSettings {
                         fit_span: 10,

@@ -223,7 +223,7 @@ impl Harness {
                     "setpoint {p:?} outside the fence"
                 );
             }
-            (_, Goal::Path | Goal::Stream) => {}
+            (_, Goal::Path | Goal::Mission | Goal::Stream) => {}
             (_, Goal::Brake { from, velocity }) => assert!(
                 from.iter().chain(&velocity).all(|v| v.is_finite()),
                 "brake {from:?} {velocity:?}"
@@ -232,7 +232,7 @@ impl Harness {
         if s.state() == FlightState::Tracking {
             assert!(matches!(
                 s.goal(),
-                Goal::Setpoint(_) | Goal::Path | Goal::Stream
+                Goal::Setpoint(_) | Goal::Path | Goal::Mission | Goal::Stream
             ));
         }
         let t = s.time_in_states(self.now);

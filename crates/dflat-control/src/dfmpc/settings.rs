@@ -87,7 +87,8 @@ pub struct OutputConstraints {
     /// against the command sent at the previous tick
     /// ([`TiltRate`](crate::optimise::TiltRate): exact in the per-axis
     /// tilt for the first command, linearised about hover after it).
-    /// Box tilt bound only ([`PlanTiltBound::Box`]). Default none.
+    /// With either plan tilt bound: per axis with the box, as rows of
+    /// the pair's QP with the cone ([`PlanTiltBound`]). Default none.
     pub max_tilt_rate: Option<f64>,
 }
 
