@@ -12,13 +12,13 @@ impl BandedAlm {
     /// The full step along d from x (u, hx, g current) where it passes
     /// Armijo's test, else L's minimiser along d on (0, 1)
     /// ([`BandedAlm::exact_step`]); moves x. Returns whether the full step
-    /// was taken.
+    /// was taken (Armijo's), and the step taken (1: full).
     pub(super) fn line_search(
         &mut self,
         decrement: f64,
         lo: &[f64],
         hi: &[f64],
-    ) -> Result<bool, ControlError> {
+    ) -> Result<(bool, f64), ControlError> {
         self.apply_p(Vector::D);
         // gᵀd = −(Newton decrement).
         let slope = -decrement;
@@ -53,16 +53,14 @@ impl BandedAlm {
         let (full, done) = self.full_step_terms(lo, hi);
         if lin + 0.5 * curv + full <= base + ARMIJO * slope {
             self.step(1.0);
-            self.ws.last_alpha = 1.0;
             self.accept_full_step(done);
-            return Ok(true);
+            return Ok((true, 1.0));
         }
         // L along d is convex (piecewise quadratic for intervals): its
         // minimiser on (0, 1) where the full step fails Armijo.
         let alpha = self.exact_step(lin, curv, slope, lo, hi);
-        self.ws.last_alpha = alpha;
         self.step(alpha);
-        Ok(false)
+        Ok((false, alpha))
     }
 
     /// After the full step: its accelerations (`u_trial`) become u, and

@@ -388,8 +388,6 @@ pub(super) struct Workspace {
     /// opened (0: none), whether it started from the rollout, and what
     /// the active-set method did (one axis with rows).
     pub(super) newton_steps: usize,
-    /// The last line search's step (1: full).
-    pub(super) last_alpha: f64,
     pub(super) factorisations: usize,
     pub(super) last_window: usize,
     pub(super) rollout_started: bool,
@@ -422,7 +420,6 @@ impl Workspace {
             cut: 0,
             cut_seed: vec![0.0; bandwidth],
             newton_steps: 0,
-            last_alpha: 1.0,
             factorisations: 0,
             last_window: 0,
             rollout_started: false,

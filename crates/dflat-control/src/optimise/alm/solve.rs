@@ -370,11 +370,11 @@ impl BandedAlm {
                     converged: decrement <= tol.decrement,
                 });
             }
-            memory.last_full = self.line_search(decrement, lo, hi)?;
-            if tol.give_up_blocked && self.ws.last_alpha < BLOCKED_STEP {
+            let (full, alpha) = self.line_search(decrement, lo, hi)?;
+            memory.last_full = full;
+            if tol.give_up_blocked && alpha < BLOCKED_STEP {
                 return Err(ControlError::Solver(format!(
-                    "ALM: the warm start's step is blocked (α = {:.1e})",
-                    self.ws.last_alpha
+                    "ALM: the warm start's step is blocked (α = {alpha:.1e})"
                 )));
             }
             memory.exact_full = memory.last_full && !reuse;
