@@ -12,7 +12,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use clap::{Args, Subcommand};
-use dflat_control::dfmpc::QpSolver;
+use dflat_control::dfmpc::{PlanTiltBound, QpSolver};
 use dflat_lab::experiments::OutputPaths;
 use dflat_lab::experiments::learned::{
     AeroPlant, LearnedConfig, LearnedShape, run_learned, write_learned,
@@ -115,6 +115,10 @@ pub struct LearnedArgs {
     /// flight (the shipped df-mr-smooth's: 50).
     #[arg(long, default_value_t = 50.0)]
     smoothness: f64,
+    /// The plan's tilt bound of every flight: `box` (per axis, the shipped
+    /// configs') or `cone` (on the combined tilt).
+    #[arg(long, default_value = "box", value_parser = parse_plan_tilt_bound)]
+    plan_tilt_bound: PlanTiltBound,
     /// Seconds of records the learning is given in the seconds study,
     /// comma-separated.
     #[arg(long, value_delimiter = ',', default_value = "20,40,80,160,320,600")]
@@ -128,6 +132,15 @@ pub struct LearnedArgs {
     /// No progress bar.
     #[arg(long)]
     no_progress: bool,
+}
+
+/// `box` or `cone` (`--plan-tilt-bound`).
+fn parse_plan_tilt_bound(s: &str) -> Result<PlanTiltBound, String> {
+    match s.trim() {
+        "box" => Ok(PlanTiltBound::Box),
+        "cone" => Ok(PlanTiltBound::Cone),
+        other => Err(format!("unknown plan tilt bound `{other}` (box, cone)")),
+    }
 }
 
 fn parse_plant(s: &str) -> Result<AeroPlant> {
@@ -454,6 +467,7 @@ pub fn run(command: ExperimentCommand) -> Result<()> {
                 quadratic_drag: a.quadratic_drag,
                 rotor_drag: a.rotor_drag,
                 smoothness: a.smoothness,
+                plan_tilt_bound: a.plan_tilt_bound,
             };
             let result = run_learned(&config, !a.no_progress).context("learned study")?;
             out!("{}", result.table());

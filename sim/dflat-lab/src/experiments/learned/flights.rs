@@ -3,7 +3,7 @@
 
 use std::sync::Arc;
 
-use dflat_control::dfmpc::DfMpc;
+use dflat_control::dfmpc::{DfMpc, PlanTiltBound};
 use dflat_control::learned::LearnedResidual;
 use dflat_control::reference::StreamSettings;
 use dflat_control::{ControlModel, Controller};
@@ -163,6 +163,9 @@ pub struct Flight {
     pub stream_s: f64,
     /// DF-MPC's command-smoothness weight on x and y \[1/rad²\].
     pub smoothness: f64,
+    /// The plan's tilt bound: a box per axis (the shipped configs') or
+    /// the cone on the combined tilt.
+    pub plan_tilt_bound: PlanTiltBound,
 }
 
 /// The lab's vision noise per axis \[m\].
@@ -213,6 +216,7 @@ fn factory(
     vehicle: Vehicle,
     learned: Option<LearnedResidual>,
     smoothness: f64,
+    plan_tilt_bound: PlanTiltBound,
 ) -> Result<ControllerFactory, ExperimentError> {
     let build = move || -> Result<Box<dyn Controller>, ExperimentError> {
         let model = control_model(plant, &vehicle)?;
@@ -221,6 +225,7 @@ fn factory(
         df.smoothness[1] = smoothness;
         let mut settings = df.settings(35f64.to_radians(), 2.0 * model.gravity(), None);
         settings.delay_ticks = (vehicle.delay_ms / (1e3 * DT)).round() as usize;
+        settings.plan_tilt_bound = plan_tilt_bound;
         let mut mpc =
             DfMpc::new(model, settings).map_err(|source| ExperimentError::Controller {
                 controller: "df-mr-smooth",
@@ -261,6 +266,7 @@ impl Flight {
             self.vehicle,
             self.learned.clone(),
             self.smoothness,
+            self.plan_tilt_bound,
         )?;
         let mut spec = match self.shape.trajectory(self.speed) {
             None => {

@@ -45,6 +45,7 @@ pub use flights::{
     AeroPlant, Flight, Judged, LearnedShape, SMOOTHNESS, VISION_SIGMA, control_model,
 };
 
+use dflat_control::dfmpc::PlanTiltBound;
 use dflat_control::learned::{Feature, LearnedResidual, Support, Validation};
 use dflat_tuning::identify::{self, FlownVehicle};
 use dflat_tuning::learn::parametric::Parametric;
@@ -155,6 +156,9 @@ pub struct LearnedConfig {
     /// DF-MPC's command-smoothness weight on x and y \[1/rad²\] (the
     /// shipped `df-mr-smooth`'s: 50).
     pub smoothness: f64,
+    /// The plan's tilt bound of every flight (the shipped configs': a box
+    /// per axis).
+    pub plan_tilt_bound: PlanTiltBound,
     /// Seconds of records the learning is given in the seconds study (an
     /// empty list: no study).
     pub seconds: Vec<f64>,
@@ -176,6 +180,7 @@ impl Default for LearnedConfig {
             rotor_drag: 0.2,
             stream_s: 60.0,
             smoothness: SMOOTHNESS,
+            plan_tilt_bound: PlanTiltBound::Box,
             seconds: vec![20.0, 40.0, 80.0, 160.0, 320.0, 600.0],
         }
     }
@@ -523,6 +528,7 @@ pub fn run_learned(
         learned,
         stream_s: config.stream_s,
         smoothness: config.smoothness,
+        plan_tilt_bound: config.plan_tilt_bound,
     };
     // 1–2. Matched and stock.
     let mut first = Vec::new();

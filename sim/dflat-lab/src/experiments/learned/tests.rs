@@ -15,6 +15,7 @@ fn flight(shape: LearnedShape, speed: f64, drag: (f64, f64), vehicle: Vehicle) -
         learned: None,
         stream_s: 20.0,
         smoothness: SMOOTHNESS,
+        plan_tilt_bound: PlanTiltBound::Box,
     }
 }
 
