@@ -215,6 +215,46 @@ impl DfMpc {
         })
     }
 
+    /// What the model adds to the thrust's acceleration along the last
+    /// plan one tick on (x, y; [`DfMpc::step_model_offsets`] of its step
+    /// at each stage f of this tick's plan, outputs f + 1..f + 3: the
+    /// drag at the plan's speed and the residual there), less its value at
+    /// the first stage, into `out` (one per stage; the last stages repeat
+    /// the last the plan reaches). False, `out` untouched, when the last
+    /// plan is not the last tick's.
+    pub(super) fn offsets_along_last_plan(
+        &self,
+        d: &DisturbanceEstimate,
+        out: &mut [[f64; 2]],
+    ) -> bool {
+        if !matches!(
+            self.plan,
+            super::PlanState::Fresh { flown: 0 } | super::PlanState::Kept { flown: 0 }
+        ) {
+            return false;
+        }
+        let len = self.axes.first().map_or(0, |a| a.good_plan.len());
+        let output = |j: usize| {
+            let mut y = self.good_y0;
+            for (axis, p) in self.axes.iter().enumerate() {
+                y[axis] = p.good_plan[j.min(len - 1)];
+            }
+            y
+        };
+        let mut first = [0.0; 2];
+        for (f, o) in out.iter_mut().enumerate() {
+            // This plan's outputs f + 1..f + 3 are the last plan's f + 2..f + 4.
+            let j = (f + 2).min(len.saturating_sub(3));
+            let [step, _] = self.step_model_offsets(&[output(j), output(j + 1), output(j + 2)], d);
+            let v = [step.x, step.y];
+            if f == 0 {
+                first = v;
+            }
+            *o = [v[0] - first[0], v[1] - first[1]];
+        }
+        out.iter().flatten().all(|v| v.is_finite())
+    }
+
     /// Keeps what the model adds to the command F just made from `plan`
     /// (see [`DfMpc::sent_offset`]): the drag's and, when flown, the
     /// residual's.

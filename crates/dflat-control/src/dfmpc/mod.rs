@@ -260,6 +260,15 @@ impl DfMpc {
         self.cone.as_ref().map(|c| c.radius())
     }
 
+    /// The tilt cone's centre per stage [m/s²] as of the last tick (x, y;
+    /// stage f as [`DfMpc::cone_radius`]): what the model adds to the
+    /// thrust's acceleration (the drag `−D·v`, a learned residual), so
+    /// that the cone bounds the planned acceleration less it, the thrust's
+    /// tilt. Zero without drag or residual.
+    pub fn cone_centre(&self) -> Option<&[[f64; 2]]> {
+        self.cone.as_ref().map(|c| c.centre())
+    }
+
     /// The tilt cone's cascade of solvers, with the statistics of their
     /// last solves (which solved, iterations, warm start), when the plan's
     /// tilt bound is the cone.
@@ -576,6 +585,13 @@ impl Controller for DfMpc {
         self.build_reference(&fixed[0], reference)?;
         // 4. Output trajectory optimisation.
         let (offsets, slopes) = self.bound_shifts(&planned, &d);
+        if let Some(mut along) = self.cone.as_mut().map(|c| std::mem::take(&mut c.along)) {
+            // The cone's centre along the last plan (`solve.rs`, `cone_centre`).
+            let valid = self.offsets_along_last_plan(&d, &mut along);
+            if let Some(c) = self.cone.as_mut() {
+                (c.along, c.along_valid) = (along, valid);
+            }
+        }
         let solve = self.optimise(&planned, sent_acceleration, offsets, slopes)?;
         // 5. The output-to-input map F on y*_k..y*_{k+3}.
         let (plan4, u) = self.map_through_f(y0, &d)?;

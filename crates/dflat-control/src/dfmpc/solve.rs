@@ -97,6 +97,17 @@ pub(super) struct HorizontalCone {
     /// from the vertical plan, the thrust's vertical part floored at
     /// [`MIN_VERTICAL_SHARE`]·g.
     radius: Vec<f64>,
+    /// The cone's centre per stage [m/s²]: per horizontal axis what the
+    /// model adds to the thrust's acceleration (the drag `−D·v`, a learned
+    /// residual; [`cone_centre`]), so that the cone bounds the planned
+    /// acceleration less it, the thrust's tilt, as the box's rows do
+    /// ([`AxisBounds::offset`]).
+    centre: Vec<[f64; 2]>,
+    /// What the model adds to the thrust's acceleration along the last
+    /// plan, less its first stage's (`DfMpc::offsets_along_last_plan`),
+    /// and whether it is this tick's.
+    pub(super) along: Vec<[f64; 2]>,
+    pub(super) along_valid: bool,
 }
 
 /// Floor of the thrust's vertical part, as a share of g, in the spatial
@@ -133,6 +144,11 @@ impl HorizontalCone {
             *r = self.tilt_tan * (self.gravity - self.down * az).max(floor);
         }
         self.cascade.set_radius(&self.radius)
+    }
+
+    /// The cone's centre per stage [m/s²] as of the last tick.
+    pub(super) fn centre(&self) -> &[[f64; 2]] {
+        &self.centre
     }
 
     /// A controller reset: nothing carried to the next solve.
@@ -301,6 +317,9 @@ fn horizontal_cone(
                 gravity: model.gravity(),
                 down,
                 radius: vec![bounds.acceleration; n - 2],
+                centre: vec![[0.0; 2]; n - 2],
+                along: vec![[0.0; 2]; n - 2],
+                along_valid: false,
             })
         }
         _ => None,
@@ -351,14 +370,14 @@ impl DfMpc {
         let mut report = SolveReport::default();
         let dt = self.model.dt();
         for (axis, p) in self.axes.iter_mut().enumerate() {
+            p.bounds.offset = offsets.and_then(|o| o.get(axis).copied());
+            p.bounds.offset_slope = slopes.get(axis).copied().unwrap_or(0.0);
+        }
+        for (axis, p) in self.axes.iter_mut().enumerate() {
             let Some(cascade) = &mut p.bounded else {
                 continue;
             };
-            let offset = offsets.and_then(|o| o.get(axis).copied());
-            let slope = slopes.get(axis).copied().unwrap_or(0.0);
-            p.bounds.offset = offset;
-            p.bounds.offset_slope = slope;
-            cascade.set_offset(offset, slope);
+            cascade.set_offset(p.bounds.offset, p.bounds.offset_slope);
             if !p.bounds.violated(&p.plan, sent(axis), dt) {
                 cascade.skip();
                 continue;
@@ -380,10 +399,21 @@ impl DfMpc {
                 // follows the vertical plan (solved above).
                 cone.follow_vertical_plan(&az.plan, dt)?;
             }
+            // The thrust's tilt: the cone about the model's offsets, along
+            // the last plan when it is the last tick's.
+            let along = cone.along_valid.then_some(cone.along.as_slice());
+            cone_centre(
+                &mut cone.centre,
+                [&*ax, &*ay],
+                [&fixed_axis[0], &fixed_axis[1]],
+                along,
+                dt,
+            );
+            cone.cascade.set_centre(&cone.centre)?;
             let plans = [ax.plan.as_slice(), ay.plan.as_slice()];
             if !(cone
                 .bounds
-                .violated_within(plans[0], plans[1], dt, &cone.radius)
+                .violated_within(plans[0], plans[1], dt, (&cone.radius, &cone.centre))
                 || cone.bounds.rate_violated_by(plans, [sent(0), sent(1)], dt))
             {
                 // Not solved: the next solve has no previous one to shift.
@@ -396,5 +426,46 @@ impl DfMpc {
             report.solved(cone.cascade.solved_by());
         }
         Ok(report)
+    }
+}
+
+/// The tilt cone's centre per stage f (acceleration row j = f + 1) [m/s²]
+/// into `centre`: per horizontal axis `o_j`, what the model adds to the
+/// thrust's acceleration (`ρ − D·v`), so that the cone bounds the thrust's
+/// tilt (the plan's acceleration less o_j).
+///
+/// * At j = 1 it is the window's offset ([`AxisBounds::stage_offsets`]:
+///   the learned hook's when a residual is flown, else `−D·v_1` at the
+///   window's speed).
+/// * Along the horizon, with `along` (the last plan's offsets one tick on
+///   less its first stage's, `DfMpc::offsets_along_last_plan`): `o_1 +
+///   along_f` — the model's offsets linearised along the last plan, as the
+///   learned maps are, so that a braking plan counts on the drag of the
+///   speed it will have and a turn on the drag it will meet.
+/// * Without: the box's offsets ([`AxisBounds::stage_offsets`]: the
+///   start's, moved towards 0 by its change per stage while it shrinks).
+///
+/// On the lab's L at 5 and 7 m/s (`dflat experiment learned
+/// --plan-tilt-bound cone`) the box's rule alone flew the learned maps
+/// 1.09–1.26× the matched plant, along the last plan 0.95–1.15×: a
+/// braking plan counted on the cruise drag to its stop, a turn not on the
+/// drag it meets (docs/results.md, "The tilt cone about the model's
+/// offsets").
+fn cone_centre(
+    centre: &mut [[f64; 2]],
+    axes: [&AxisPipeline; 2],
+    fixed: [&[f64; 3]; 2],
+    along: Option<&[[f64; 2]]>,
+    dt: f64,
+) {
+    for (i, (p, f)) in axes.into_iter().zip(fixed).enumerate() {
+        let offsets = p.bounds.stage_offsets(f, dt);
+        let o1 = offsets(1);
+        for (k, o) in centre.iter_mut().enumerate() {
+            o[i] = match along {
+                Some(a) => o1 + a[k][i],
+                None => offsets(k + 1),
+            };
+        }
     }
 }

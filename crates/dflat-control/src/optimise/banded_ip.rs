@@ -196,6 +196,9 @@ pub struct BandedIp {
     radius: Vec<f64>,
     discs: Vec<Disc>,
     a0: [f64; 2],
+    /// The discs' centre per stage o_f [m/s²] (zeros unless set): the
+    /// disc bounds `u_f − o_f`.
+    centre: Vec<[f64; 2]>,
     rows: Vec<Row>,
     /// `[upper, lower]` per row; upper `g·x ≤ hi`, lower `−g·x ≤ −lo`.
     sides: Vec<[Side; 2]>,
@@ -281,6 +284,7 @@ impl BandedIp {
             radius: vec![disc.unwrap_or(0.0); discs],
             discs: vec![Disc::default(); discs],
             a0: [0.0; 2],
+            centre: vec![[0.0; 2]; discs],
             rows,
             sides: vec![[Side::default(); 2]; m],
             lo: vec![0.0; m],
@@ -338,15 +342,16 @@ impl BandedIp {
     }
 
     /// The discs' multipliers of the last iterate as stage multipliers
-    /// on the accelerations, `z_f·u_f` per stage (`u_f = ã_f + a_0`
-    /// [m/s²], the gradient of `c_f`): the augmented Lagrangian's `y_f`
-    /// at the same optimum. No effect without discs.
+    /// on the accelerations, `z_f·(u_f − o_f)` per stage (`u_f = ã_f +
+    /// a_0` [m/s²], o_f the centre; the gradient of `c_f`): the augmented
+    /// Lagrangian's `y_f` at the same optimum. No effect without discs.
     pub fn disc_duals(&self, out: &mut [[f64; 2]]) {
         let s = self.stages;
         for (f, (o, d)) in out.iter_mut().zip(&self.discs).enumerate() {
+            let c = self.centre[f];
             let u = [
-                self.v[s.accel(0, f)] + self.a0[0],
-                self.v[s.accel(1, f)] + self.a0[1],
+                self.v[s.accel(0, f)] + self.a0[0] - c[0],
+                self.v[s.accel(1, f)] + self.a0[1] - c[1],
             ];
             *o = [d.z * u[0], d.z * u[1]];
         }
@@ -373,6 +378,14 @@ impl BandedIp {
     pub fn set_radius(&mut self, radius: &[f64]) -> Result<(), ControlError> {
         super::cone::check_radius(radius, self.radius.len())?;
         self.radius.copy_from_slice(radius);
+        Ok(())
+    }
+
+    /// Sets the discs' centre per stage o_f [m/s²] (n entries, finite):
+    /// the discs then bound `‖u_f − o_f‖ ≤ A_f`.
+    pub fn set_centre(&mut self, centre: &[[f64; 2]]) -> Result<(), ControlError> {
+        super::cone::check_centre(centre, self.centre.len())?;
+        self.centre.copy_from_slice(centre);
         Ok(())
     }
 
@@ -492,7 +505,12 @@ impl BandedIp {
         let mut out = Residuals::default();
         for (f, cs) in self.discs.iter_mut().enumerate() {
             let (ix, iy) = (s.accel(0, f), s.accel(1, f));
-            cs.u = [self.v[ix] + self.a0[0], self.v[iy] + self.a0[1]];
+            // Relative to the centre: c_f's gradient on ã_f.
+            let o = self.centre[f];
+            cs.u = [
+                self.v[ix] + self.a0[0] - o[0],
+                self.v[iy] + self.a0[1] - o[1],
+            ];
             let a2 = self.radius[f] * self.radius[f];
             cs.r = 0.5 * (cs.u[0] * cs.u[0] + cs.u[1] * cs.u[1] - a2) + cs.s;
             out.rp_cone = out.rp_cone.max(cs.r.abs());

@@ -75,16 +75,36 @@ impl AxisBounds {
     /// slope or an acceleration bound.
     pub(crate) fn stage_shifts(&self, fixed: &[f64; 3], dt: f64) -> impl Fn(usize) -> f64 {
         let o1 = self.start_offset(fixed, dt);
+        let along = self.stage_offsets(fixed, dt);
+        let bounded = self.acceleration.is_some();
+        move |j| {
+            let shift = along(j) - o1;
+            if bounded && shift.is_finite() {
+                shift
+            } else {
+                0.0
+            }
+        }
+    }
+
+    /// For the window `fixed`: stage j's offset o_j [m/s²] (j = 1 the
+    /// first free acceleration; [`AxisBounds::offset`], else `−D·v_1`),
+    /// moved along the horizon by [`AxisBounds::offset_slope`] while it
+    /// shrinks towards 0, never past it; the start's where it would grow.
+    /// The tilt cone's centre ([`super::BandedConeSolver::set_centre`]) is
+    /// the pair's.
+    pub(crate) fn stage_offsets(&self, fixed: &[f64; 3], dt: f64) -> impl Fn(usize) -> f64 {
+        let o1 = self.start_offset(fixed, dt);
         let slope = self.offset_slope;
         // Only towards 0 (NaN: nowhere).
-        let shrinking = self.acceleration.is_some() && o1 * slope < 0.0;
+        let shrinking = o1 * slope < 0.0;
         move |j| {
             if !shrinking || j <= 1 {
-                return 0.0;
+                return o1;
             }
             let oj = o1 + slope * (j - 1) as f64;
             let oj = if oj * o1 < 0.0 { 0.0 } else { oj };
-            if oj.is_finite() { oj - o1 } else { 0.0 }
+            if oj.is_finite() { oj } else { o1 }
         }
     }
 

@@ -150,6 +150,10 @@ pub trait PairSolver: std::fmt::Debug + Send {
 
     /// Sets the tilt cone's radius per stage [m/s²] for the next solves.
     fn set_radius(&mut self, radius: &[f64]) -> Result<(), ControlError>;
+
+    /// Sets the tilt cone's centre per stage [m/s²] for the next solves
+    /// (the disc bounds the plan's acceleration less it: the thrust's).
+    fn set_centre(&mut self, centre: &[[f64; 2]]) -> Result<(), ControlError>;
 }
 
 /// An ordered list of solvers of one problem (`S`: `dyn AxisSolver` or
@@ -319,5 +323,14 @@ impl Cascade<dyn PairSolver> {
         self.solvers
             .iter_mut()
             .try_for_each(|s| s.set_radius(radius))
+    }
+
+    /// Sets the tilt cone's centre per stage on every solver (each checks
+    /// it before it changes anything; all of one horizon, the first
+    /// refuses what any would).
+    pub fn set_centre(&mut self, centre: &[[f64; 2]]) -> Result<(), ControlError> {
+        self.solvers
+            .iter_mut()
+            .try_for_each(|s| s.set_centre(centre))
     }
 }

@@ -34,6 +34,8 @@ pub struct ClarabelConeSolver {
     /// [`ConeBounds`]).
     radius: Vec<f64>,
     stage_radius: Vec<f64>,
+    /// The cone's centre per stage o_f [m/s²] (zeros unless set).
+    centre: Vec<[f64; 2]>,
     soft: bool,
     solver: DefaultSolver<f64>,
     qvec: Vec<f64>,
@@ -110,6 +112,7 @@ impl ClarabelConeSolver {
             weights,
             radius: vec![bounds.acceleration; n],
             stage_radius: vec![bounds.acceleration; n],
+            centre: vec![[0.0; 2]; n],
             bounds,
             soft,
             solver,
@@ -135,6 +138,15 @@ impl ClarabelConeSolver {
         Ok(())
     }
 
+    /// Sets the cone's centre per stage o_f [m/s²] (N − 2 entries,
+    /// finite) for the next solves: the cone bounds `‖a_f − o_f‖ ≤ A_f`
+    /// (as [`super::BandedConeSolver::set_centre`]).
+    pub fn set_centre(&mut self, centre: &[[f64; 2]]) -> Result<(), ControlError> {
+        super::cone::check_centre(centre, self.centre.len())?;
+        self.centre.copy_from_slice(centre);
+        Ok(())
+    }
+
     /// Solves both axes (arguments as
     /// [`BandedConeSolver::solve_pair`](super::BandedConeSolver::solve_pair);
     /// the plans' contents on entry are not used). A status other than
@@ -148,8 +160,13 @@ impl ClarabelConeSolver {
         let (n, dt) = (self.horizon - 2, self.dt);
         let fixed = [x.fixed, y.fixed];
         let sent = [x.sent, y.sent];
-        self.bounds
-            .funnel_radius(&self.radius, fixed, sent, dt, &mut self.stage_radius);
+        self.bounds.funnel_radius(
+            (&self.radius, &self.centre),
+            fixed,
+            sent,
+            dt,
+            &mut self.stage_radius,
+        );
         for (i, a) in [&x, &y].into_iter().enumerate() {
             let q = self.weights[i].q;
             for f in 0..n {
@@ -161,7 +178,7 @@ impl ClarabelConeSolver {
             let a0 = (a.fixed[2] - 2.0 * a.fixed[1] + a.fixed[0]) / (dt * dt);
             for f in 0..n {
                 self.bvec[self.m_cone + 3 * f] = self.stage_radius[f];
-                self.bvec[self.m_cone + 3 * f + 1 + i] = a0;
+                self.bvec[self.m_cone + 3 * f + 1 + i] = a0 - self.centre[f][i];
             }
         }
         // The rows in `ConeBounds::rows`'s order: the speed rows (each a
@@ -174,8 +191,14 @@ impl ClarabelConeSolver {
         };
         let (m_speed, m_rate) = (self.m_speed, self.m_rate);
         let mut k = 0;
-        self.bounds
-            .row_bounds(self.horizon, fixed, sent, &self.radius, dt, |lo, hi| {
+        self.bounds.row_bounds(
+            self.horizon,
+            fixed,
+            sent,
+            &self.radius,
+            &self.centre,
+            dt,
+            |lo, hi| {
                 let m = if k < speed_rows {
                     m_speed + 2 * k
                 } else {
@@ -184,7 +207,8 @@ impl ClarabelConeSolver {
                 bvec[m] = hi;
                 bvec[m + 1] = -lo;
                 k += 1;
-            });
+            },
+        );
         self.solver
             .update_q(&self.qvec)
             .and_then(|()| self.solver.update_b(&self.bvec))
@@ -222,6 +246,10 @@ impl PairSolver for ClarabelConeSolver {
 
     fn set_radius(&mut self, radius: &[f64]) -> Result<(), ControlError> {
         ClarabelConeSolver::set_radius(self, radius)
+    }
+
+    fn set_centre(&mut self, centre: &[[f64; 2]]) -> Result<(), ControlError> {
+        ClarabelConeSolver::set_centre(self, centre)
     }
 }
 

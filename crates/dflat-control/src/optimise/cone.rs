@@ -112,12 +112,15 @@ impl ConeBounds {
     /// `radius` ([`ConeBounds::axis_within`]), then the tilt-rate rows per
     /// axis ([`TiltRate::rows`]; `sent` the accelerations the command sent
     /// at k−1 asks for [m/s²]), on the deviations from the baseline.
+    /// `centre`: the discs' centres ([`centre_at`]).
+    #[allow(clippy::too_many_arguments)]
     pub(crate) fn row_bounds(
         &self,
         horizon: usize,
         fixed: [&[f64; 3]; 2],
         sent: [Option<f64>; 2],
         radius: &[f64],
+        centre: &[[f64; 2]],
         dt: f64,
         mut out: impl FnMut(f64, f64),
     ) {
@@ -127,17 +130,24 @@ impl ConeBounds {
                 // row j = f + 2 bounds |v_j| by max(v, the witness's), v_j =
                 // v_{j−1} + a_{j−1}·δt from the window's v_1.
                 let mut v = 0.0;
-                self.witness(radius, fixed, sent, dt, FUNNEL_RATE, |axis, f, a| {
-                    let fx = fixed[axis];
-                    if f == 0 {
-                        v = (fx[2] - fx[1]) / dt;
-                    }
-                    v += a * dt;
-                    let (d1, d2) = (fx[1] - fx[0], fx[2] - 2.0 * fx[1] + fx[0]);
-                    let s_base = (d1 + (f + 2) as f64 * d2) / dt;
-                    let l = limit.max(v.abs());
-                    out(-l - s_base, l - s_base);
-                });
+                self.witness(
+                    (radius, centre),
+                    fixed,
+                    sent,
+                    dt,
+                    FUNNEL_RATE,
+                    |axis, f, a| {
+                        let fx = fixed[axis];
+                        if f == 0 {
+                            v = (fx[2] - fx[1]) / dt;
+                        }
+                        v += a * dt;
+                        let (d1, d2) = (fx[1] - fx[0], fx[2] - 2.0 * fx[1] + fx[0]);
+                        let s_base = (d1 + (f + 2) as f64 * d2) / dt;
+                        let l = limit.max(v.abs());
+                        out(-l - s_base, l - s_base);
+                    },
+                );
             }
             _ => {
                 let axis = self.axis_within(radius);
@@ -155,12 +165,12 @@ impl ConeBounds {
 
     /// The radius per stage the solvers enforce: `radius` (the cone's,
     /// one per stage f = 0..n−1 [m/s²]), widened with a tilt-rate bound to
-    /// the witness's `‖a_f‖` (module docs: the funnel); `radius` itself
-    /// without one. `fixed` and `sent` per axis as
-    /// [`ConeBounds::row_bounds`].
+    /// the witness's `‖a_f − o_f‖` (module docs: the funnel; o_f the
+    /// disc's centre, [`centre_at`]); `radius` itself without one. `fixed`
+    /// and `sent` per axis as [`ConeBounds::row_bounds`].
     pub(crate) fn funnel_radius(
         &self,
-        radius: &[f64],
+        (radius, centre): (&[f64], &[[f64; 2]]),
         fixed: [&[f64; 3]; 2],
         sent: [Option<f64>; 2],
         dt: f64,
@@ -168,13 +178,21 @@ impl ConeBounds {
     ) {
         out.copy_from_slice(radius);
         // Axis x's witness into `out`, then the norm with axis y's.
-        self.witness(radius, fixed, sent, dt, FUNNEL_RATE, |axis, f, a| {
-            out[f] = if axis == 0 {
-                a
-            } else {
-                radius[f].max(out[f].hypot(a))
-            };
-        });
+        self.witness(
+            (radius, centre),
+            fixed,
+            sent,
+            dt,
+            FUNNEL_RATE,
+            |axis, f, a| {
+                let o = centre_at(centre, f);
+                out[f] = if axis == 0 {
+                    a - o[0]
+                } else {
+                    radius[f].max(out[f].hypot(a - o[1]))
+                };
+            },
+        );
     }
 
     /// The witness at `shrink`·B per tick as deviations `p` per axis from
@@ -183,7 +201,7 @@ impl ConeBounds {
     /// without a tilt-rate bound.
     pub(crate) fn witness_start(
         &self,
-        radius: &[f64],
+        disc: (&[f64], &[[f64; 2]]),
         fixed: [&[f64; 3]; 2],
         sent: [Option<f64>; 2],
         dt: f64,
@@ -192,7 +210,7 @@ impl ConeBounds {
     ) {
         let a0 = fixed.map(|f| (f[2] - 2.0 * f[1] + f[0]) / (dt * dt));
         let dt2 = dt * dt;
-        self.witness(radius, fixed, sent, dt, shrink, |axis, f, a| {
+        self.witness(disc, fixed, sent, dt, shrink, |axis, f, a| {
             let p = if axis == 0 { &mut *px } else { &mut *py };
             let at = |k: usize| if f >= k { p[f - k] } else { 0.0 };
             p[f] = 2.0 * at(1) - at(2) + (a - a0[axis]) * dt2;
@@ -205,10 +223,11 @@ impl ConeBounds {
     /// command moves towards, with a speed bound v, `∓b` while the
     /// witness is faster than v and 0 otherwise (b = 0.9·A_min/√2, the
     /// speed funnel's braking: a point inside every disc), without one
-    /// the sent command's projection onto the narrowest disc.
+    /// the sent command's projection onto the narrowest disc — each
+    /// relative to the first stage's centre o_0 ([`centre_at`]).
     fn witness(
         &self,
-        radius: &[f64],
+        (radius, centre): (&[f64], &[[f64; 2]]),
         fixed: [&[f64; 3]; 2],
         sent: [Option<f64>; 2],
         dt: f64,
@@ -220,7 +239,8 @@ impl ConeBounds {
         };
         let horizon = radius.len() + 2;
         let a0 = fixed.map(|f| (f[2] - 2.0 * f[1] + f[0]) / (dt * dt));
-        let c = [0, 1].map(|i| sent[i].unwrap_or(a0[i]));
+        let o = centre_at(centre, 0);
+        let c = [0, 1].map(|i| sent[i].unwrap_or(a0[i]) - o[i]);
         let narrowest = radius.iter().copied().fold(f64::INFINITY, f64::min);
         let norm = c[0].hypot(c[1]);
         let scale = if norm > narrowest {
@@ -231,11 +251,14 @@ impl ConeBounds {
         let brake = 0.9 * narrowest / std::f64::consts::SQRT_2;
         for axis in 0..2 {
             let projected = c[axis] * scale;
-            let target = |v: f64| match self.speed {
-                Some(limit) if v > limit => -brake,
-                Some(limit) if v < -limit => brake,
-                Some(_) => 0.0,
-                None => projected,
+            let target = |v: f64| {
+                o[axis]
+                    + match self.speed {
+                        Some(limit) if v > limit => -brake,
+                        Some(limit) if v < -limit => brake,
+                        Some(_) => 0.0,
+                        None => projected,
+                    }
             };
             let mut f = 0;
             rates[axis].witness_toward(horizon, fixed[axis], sent[axis], dt, shrink, target, |a| {
@@ -275,19 +298,27 @@ impl ConeBounds {
     /// the cone by more than a relative 1e-6 or break a speed bound (as
     /// [`AxisBounds::violated_by`]).
     pub fn violated_by(&self, x: &[f64], y: &[f64], dt: f64) -> bool {
-        self.violated_within(x, y, dt, &[])
+        self.violated_within(x, y, dt, (&[], &[]))
     }
 
     /// As [`ConeBounds::violated_by`] with the cone's radius per stage
     /// (`radius[j − 1]` bounds the acceleration row j = 1..N−2; the
-    /// constant A where `radius` is shorter).
-    pub fn violated_within(&self, x: &[f64], y: &[f64], dt: f64, radius: &[f64]) -> bool {
+    /// constant A where `radius` is shorter) and its centre per stage
+    /// ([`centre_at`]: the disc bounds `a − o`).
+    pub fn violated_within(
+        &self,
+        x: &[f64],
+        y: &[f64],
+        dt: f64,
+        (radius, centre): (&[f64], &[[f64; 2]]),
+    ) -> bool {
         let dt2 = dt * dt;
         let n = x.len().min(y.len());
         for j in 1..n.saturating_sub(2) {
             let r = radius.get(j - 1).copied().unwrap_or(self.acceleration);
-            let ax = (x[j + 2] - 2.0 * x[j + 1] + x[j]) / dt2;
-            let ay = (y[j + 2] - 2.0 * y[j + 1] + y[j]) / dt2;
+            let o = centre_at(centre, j - 1);
+            let ax = (x[j + 2] - 2.0 * x[j + 1] + x[j]) / dt2 - o[0];
+            let ay = (y[j + 2] - 2.0 * y[j + 1] + y[j]) / dt2 - o[1];
             if ax.hypot(ay) > r * (1.0 + 1e-6) + 1e-9 {
                 return true;
             }
@@ -350,6 +381,25 @@ pub(crate) fn check_radius(radius: &[f64], n: usize) -> Result<(), crate::Contro
         return Err(super::problem::invalid(
             "cone radius",
             "one finite radius > 0 per stage",
+        ));
+    }
+    Ok(())
+}
+
+/// Stage f's disc centre o_f [m/s²] of `centre` (per stage f = 0..n−1:
+/// the plan's acceleration less the thrust's, the drag and a learned
+/// residual); 0 where `centre` is shorter (empty: every disc about 0).
+pub fn centre_at(centre: &[[f64; 2]], f: usize) -> [f64; 2] {
+    centre.get(f).copied().unwrap_or([0.0; 2])
+}
+
+/// Checks a cone's centre per stage for a solver of `n` stages: n
+/// entries, each finite [m/s²].
+pub(crate) fn check_centre(centre: &[[f64; 2]], n: usize) -> Result<(), crate::ControlError> {
+    if centre.len() != n || centre.iter().flatten().any(|c| !c.is_finite()) {
+        return Err(super::problem::invalid(
+            "cone centre",
+            "one finite centre per stage",
         ));
     }
     Ok(())

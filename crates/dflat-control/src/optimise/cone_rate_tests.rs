@@ -11,7 +11,7 @@ use crate::ControlError;
 
 /// One method of [`BandedConeSolver`] on an instance (cold), `Err` when
 /// it fails.
-fn one_method(
+pub(super) fn one_method(
     horizon: usize,
     weights: [AxisWeights; 2],
     bounds: ConeBounds,
@@ -29,7 +29,7 @@ fn one_method(
 /// The cone of `tilt_deg` (its radius A [m/s²]), the tilt-rate bound of
 /// `step_deg` per tick and attitude lag κ per axis (gain 1), and an
 /// optional speed bound [m/s]: A, the rate bounds and the cone's bounds.
-fn rate_bounds(
+pub(super) fn rate_bounds(
     tilt_deg: f64,
     step_deg: f64,
     kappa: [f64; 2],
@@ -47,7 +47,7 @@ fn rate_bounds(
 
 /// Per-axis weights: tracking q, jerk r, and the smoothness term of
 /// weight `smooth` (none: off) on attitude lag κ.
-fn instance_weights(
+pub(super) fn instance_weights(
     q: [f64; 2],
     r: [f64; 2],
     kappa: [f64; 2],
@@ -66,7 +66,7 @@ fn instance_weights(
 
 /// A window of three outputs from 0.3 m at speed `v0` [m/s] and
 /// acceleration `acc` [m/s²].
-fn window(v0: f64, acc: f64) -> [f64; 3] {
+pub(super) fn window(v0: f64, acc: f64) -> [f64; 3] {
     [0.3, 0.3 + v0 * DT, 0.3 + 2.0 * v0 * DT + acc * DT * DT]
 }
 
@@ -74,7 +74,7 @@ fn window(v0: f64, acc: f64) -> [f64; 3] {
 /// fraction `a0_frac` of the cone's radius `a`, the command sent last
 /// `sent_delta` [m/s²] off that acceleration, and a reference from
 /// `target` [m] moving at `slope` [m/s].
-fn instance_axes(
+pub(super) fn instance_axes(
     horizon: usize,
     a: f64,
     v0: [f64; 2],
@@ -100,7 +100,7 @@ fn instance_axes(
 /// merit (residuals up to 100× its targets: a gap of 1e-7 relative), and
 /// a draw (`cc c95c1dc3…` in the regressions) came out 1.1e-7 above
 /// clarabel's; the augmented Lagrangian's own ticks keep 1e-7.
-const COST_TOLERANCE: f64 = 1e-6;
+pub(super) const COST_TOLERANCE: f64 = 1e-6;
 /// The first outputs' tolerance \[m\] against the interior point (where
 /// clarabel fails): its acceptable merit; a draw's costs differed by
 /// 1.5e-6 relative (`cc` in the regressions), the augmented Lagrangian's
@@ -148,7 +148,7 @@ proptest::proptest! {
         let fixed = [&axes[0].fixed, &axes[1].fixed];
         let sent = [axes[0].sent, axes[1].sent];
         let mut funnel = vec![0.0; horizon - 2];
-        bounds.funnel_radius(&vec![a; horizon - 2], fixed, sent, DT, &mut funnel);
+        bounds.funnel_radius((&vec![a; horizon - 2], &[]), fixed, sent, DT, &mut funnel);
         let obj = |p: &Plans| objective(horizon, &weights, &bounds, &axes, [&p[0], &p[1]], &[]);
         // Where clarabel solves neither, the two methods against each other:
         // the interior point's plan the reference of the augmented
@@ -190,7 +190,7 @@ proptest::proptest! {
                 proptest::prop_assert!(steps[0].abs() <= rates[i].step + 1e-7, "{name} axis {i}: first step {}", steps[0]);
             }
             proptest::prop_assert!(
-                !ConeBounds::new(a, None).violated_within(&got[0], &got[1], DT, &funnel),
+                !ConeBounds::new(a, None).violated_within(&got[0], &got[1], DT, (&funnel, &[])),
                 "{name}: outside the funnel"
             );
         }
@@ -225,9 +225,9 @@ proptest::proptest! {
         let n = horizon - 2;
         let radius = vec![a; n];
         let mut funnel = vec![0.0; n];
-        bounds.funnel_radius(&radius, fixed, sent, DT, &mut funnel);
+        bounds.funnel_radius((&radius, &[]), fixed, sent, DT, &mut funnel);
         let (mut px, mut py) = (vec![0.0; n], vec![0.0; n]);
-        bounds.witness_start(&radius, fixed, sent, DT, FUNNEL_RATE, [&mut px, &mut py]);
+        bounds.witness_start((&radius, &[]), fixed, sent, DT, FUNNEL_RATE, [&mut px, &mut py]);
         // The plans y_0..y_N of the witness, and its rows' values.
         let plans: [Vec<f64>; 2] = std::array::from_fn(|i| {
             let p = if i == 0 { &px } else { &py };
@@ -236,7 +236,7 @@ proptest::proptest! {
                 .collect()
         });
         let (mut lo, mut hi) = (Vec::new(), Vec::new());
-        bounds.row_bounds(horizon, fixed, sent, &radius, DT, |l, h| {
+        bounds.row_bounds(horizon, fixed, sent, &radius, &[], DT, |l, h| {
             lo.push(l);
             hi.push(h);
         });
@@ -253,7 +253,7 @@ proptest::proptest! {
             proptest::prop_assert!(!rates[i].violated_by(&plans[i], sent[i], DT), "axis {i}: rate rows broken");
         }
         proptest::prop_assert!(
-            !ConeBounds::new(a, None).violated_within(&plans[0], &plans[1], DT, &funnel),
+            !ConeBounds::new(a, None).violated_within(&plans[0], &plans[1], DT, (&funnel, &[])),
             "outside the funnel"
         );
     }

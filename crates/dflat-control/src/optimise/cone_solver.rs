@@ -90,6 +90,9 @@ pub struct BandedConeSolver {
     fast: [FastBandedSolver; 2],
     radius: Vec<f64>,
     stage_radius: Vec<f64>,
+    /// The discs' centre per stage o_f [m/s²] (zeros unless set,
+    /// [`BandedConeSolver::set_centre`]).
+    centre: Vec<[f64; 2]>,
     /// This tick's window (fixed outputs per axis \[m\]) and the
     /// accelerations the command sent at k−1 asks for [m/s²].
     window: [[f64; 3]; 2],
@@ -236,6 +239,7 @@ impl BandedConeSolver {
             window: [[0.0; 3]; 2],
             sent: [None; 2],
             c_alm: vec![0.0; 2 * n],
+            centre: vec![[0.0; 2]; n],
             ip_stage_duals: vec![[0.0; 2]; n],
             ip_row_duals: vec![[0.0; 2]; m],
             base: vec![0.0; n],
@@ -327,6 +331,24 @@ impl BandedConeSolver {
             qp.ip.set_radius(radius)?;
         }
         self.radius.copy_from_slice(radius);
+        Ok(())
+    }
+
+    /// Sets the discs' centre per stage o_f [m/s²] (N − 2 entries,
+    /// finite; stage f as [`BandedConeSolver::set_radius`]) for the next
+    /// solves: the cone then bounds `‖a_f − o_f‖ ≤ A_f`, the thrust's
+    /// acceleration where the model adds o_f to it (the drag `−D·v`, a
+    /// learned residual). Zeros unless set. An error (nothing changed)
+    /// for a wrong length or a value that is not finite.
+    pub fn set_centre(&mut self, centre: &[[f64; 2]]) -> Result<(), ControlError> {
+        super::cone::check_centre(centre, self.horizon - 2)?;
+        if let Some(alm) = &mut self.alm {
+            alm.set_centre(centre)?;
+        }
+        if let Some(qp) = &mut self.qp {
+            qp.ip.set_centre(centre)?;
+        }
+        self.centre.copy_from_slice(centre);
         Ok(())
     }
 
@@ -456,15 +478,27 @@ impl BandedConeSolver {
         let (fixed, sent) = ([x.fixed, y.fixed], self.sent);
         let (lo, hi) = (&mut self.lo, &mut self.hi);
         let mut k = 0;
-        self.bounds
-            .row_bounds(self.horizon, fixed, sent, &self.radius, dt, |l, h| {
+        self.bounds.row_bounds(
+            self.horizon,
+            fixed,
+            sent,
+            &self.radius,
+            &self.centre,
+            dt,
+            |l, h| {
                 lo[k] = l;
                 hi[k] = h;
                 k += 1;
-            });
+            },
+        );
         if self.bounds.tilt_rate.is_some() {
-            self.bounds
-                .funnel_radius(&self.radius, fixed, sent, dt, &mut self.stage_radius);
+            self.bounds.funnel_radius(
+                (&self.radius, &self.centre),
+                fixed,
+                sent,
+                dt,
+                &mut self.stage_radius,
+            );
             if let Some(alm) = &mut self.alm {
                 alm.set_radius(&self.stage_radius)?;
             }
@@ -556,8 +590,14 @@ impl BandedConeSolver {
         };
         let [px, py] = &mut self.p;
         let fixed = [&self.window[0], &self.window[1]];
-        self.bounds
-            .witness_start(&self.radius, fixed, self.sent, self.dt, 0.5, [px, py]);
+        self.bounds.witness_start(
+            (&self.radius, &self.centre),
+            fixed,
+            self.sent,
+            self.dt,
+            0.5,
+            [px, py],
+        );
         alm.set_start(&[&self.p[0], &self.p[1]]);
         match alm.interior_start(&self.c_alm, a0, &self.lo, &self.hi) {
             Ok(Some(iterations)) => {
@@ -670,8 +710,14 @@ impl BandedConeSolver {
             // those narrow rows by many times their width).
             let [px, py] = &mut self.p;
             let fixed = [&self.window[0], &self.window[1]];
-            self.bounds
-                .witness_start(&self.radius, fixed, self.sent, self.dt, 0.5, [px, py]);
+            self.bounds.witness_start(
+                (&self.radius, &self.centre),
+                fixed,
+                self.sent,
+                self.dt,
+                0.5,
+                [px, py],
+            );
         }
         qp.ip.set_start(&[&self.p[0], &self.p[1]], self.dt);
         let result = qp.solve(&self.c, a0, (&self.lo, &self.hi));
@@ -745,5 +791,9 @@ impl PairSolver for BandedConeSolver {
 
     fn set_radius(&mut self, radius: &[f64]) -> Result<(), ControlError> {
         BandedConeSolver::set_radius(self, radius)
+    }
+
+    fn set_centre(&mut self, centre: &[[f64; 2]]) -> Result<(), ControlError> {
+        BandedConeSolver::set_centre(self, centre)
     }
 }

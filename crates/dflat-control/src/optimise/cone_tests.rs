@@ -32,6 +32,19 @@ pub(super) fn objective(
     plans: [&[f64]; 2],
     radius: &[f64],
 ) -> f64 {
+    objective_centred(horizon, weights, bounds, axes, plans, (radius, &[]))
+}
+
+/// [`objective`] with the discs' centres per stage (the speed rows'
+/// funnel of the tilt-rate witness follows them; empty: 0).
+pub(super) fn objective_centred(
+    horizon: usize,
+    weights: &[AxisWeights; 2],
+    bounds: &ConeBounds,
+    axes: &[Axis; 2],
+    plans: [&[f64]; 2],
+    (radius, centre): (&[f64], &[[f64; 2]]),
+) -> f64 {
     let n = horizon - 2;
     let mut obj = 0.0;
     for i in 0..2 {
@@ -70,7 +83,7 @@ pub(super) fn objective(
         );
         let mut k = 0;
         // This axis's speed rows (the first 2n rows: x's, then y's).
-        bounds.row_bounds(horizon, fixed, sent, &radius, DT, |lo, hi| {
+        bounds.row_bounds(horizon, fixed, sent, &radius, centre, DT, |lo, hi| {
             if bounds.speed.is_some() && k / n == i && k < 2 * n {
                 // Rows are on the deviation: add the baseline's speed back.
                 let j = k % n + 2;
@@ -99,6 +112,18 @@ pub(super) fn clarabel_plans(
     axes: &[Axis; 2],
     radius: Option<&[f64]>,
 ) -> Option<Plans> {
+    clarabel_plans_centred(horizon, weights, bounds, axes, radius, None)
+}
+
+/// [`clarabel_plans`] with the discs' centres per stage when given.
+pub(super) fn clarabel_plans_centred(
+    horizon: usize,
+    weights: [AxisWeights; 2],
+    bounds: ConeBounds,
+    axes: &[Axis; 2],
+    radius: Option<&[f64]>,
+    centre: Option<&[[f64; 2]]>,
+) -> Option<Plans> {
     let mut clarabel = ClarabelConeSolver::new(
         horizon,
         DT,
@@ -111,6 +136,9 @@ pub(super) fn clarabel_plans(
     .unwrap();
     if let Some(r) = radius {
         clarabel.set_radius(r).unwrap();
+    }
+    if let Some(o) = centre {
+        clarabel.set_centre(o).unwrap();
     }
     let mut want = [vec![0.0; horizon + 1], vec![0.0; horizon + 1]];
     let [x, y] = problems(axes, &mut want);
@@ -603,7 +631,7 @@ proptest::proptest! {
             }
         }
         let cone = ConeBounds::new(a, None);
-        proptest::prop_assert!(!cone.violated_within(&got[0], &got[1], DT, within));
+        proptest::prop_assert!(!cone.violated_within(&got[0], &got[1], DT, (within, &[])));
         if let Some(r) = &radius {
             // The radius binds where it is smallest: no stage uses more.
             let dt2 = DT * DT;

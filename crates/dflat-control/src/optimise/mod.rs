@@ -123,6 +123,8 @@ pub mod cascade;
 pub mod clarabel;
 pub mod clarabel_cone;
 pub mod cone;
+#[cfg(test)]
+mod cone_centre_tests;
 pub mod cone_qp;
 #[cfg(test)]
 mod cone_rate_tests;

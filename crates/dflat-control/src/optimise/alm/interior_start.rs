@@ -346,9 +346,11 @@ impl BandedAlm {
         Self::accelerations(2, self.inv_dt2, x, &mut ip.u, 0);
         let (mut gap, mut primal) = (0.0, 0.0f64);
         for (f, d) in ip.discs.iter_mut().enumerate() {
+            // Relative to the disc's centre: c_f and its gradient
+            // G_fᵀ(u_f − o_f).
             let u = &mut ip.u[f];
-            u[0] += a0[0];
-            u[1] += a0[1];
+            u[0] += a0[0] - self.centre[f][0];
+            u[1] += a0[1] - self.centre[f][1];
             let c = 0.5 * (u[0] * u[0] + u[1] * u[1] - radius[f] * radius[f]);
             d.r = ip.disc_w[f] * c + d.s;
             primal = primal.max(d.r.abs());

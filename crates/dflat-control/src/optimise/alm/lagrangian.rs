@@ -249,7 +249,10 @@ impl BandedAlm {
             };
         }
         match (&self.stages, self.k) {
-            (StageSet::Disc(radius), _) => pass!(2, |f, w| disc_excess(w, radius[f])),
+            (StageSet::Disc(radius), _) => {
+                let centre = &self.centre;
+                pass!(2, |f, w| disc_excess(centred(w, centre[f]), radius[f]))
+            }
             (StageSet::Interval(bounds), 1) => pass!(1, |f, w| interval_excess::<1>(w, &bounds[f])),
             (StageSet::Interval(bounds), _) => pass!(2, |f, w| interval_excess::<2>(w, &bounds[f])),
         }
@@ -432,6 +435,12 @@ fn stage_pass<const K: usize>(
         *ynf = yn;
     }
     (res2, value)
+}
+
+/// `w − o`: `w` relative to the disc's centre `o`.
+#[inline(always)]
+pub(super) fn centred(w: [f64; 2], o: [f64; 2]) -> [f64; 2] {
+    [w[0] - o[0], w[1] - o[1]]
 }
 
 /// `w − Π(w)` and `I − ∂Π(w)` for the disc of radius `r` when `w` lies

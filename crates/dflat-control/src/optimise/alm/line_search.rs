@@ -4,7 +4,7 @@
 //! stage pass so that the next gradient can take it.
 
 use super::lagrangian::Vector;
-use super::lagrangian::{disc_excess, interval_excess};
+use super::lagrangian::{centred, disc_excess, interval_excess};
 use super::{ARMIJO, BandedAlm, StageSet};
 use crate::ControlError;
 
@@ -130,7 +130,7 @@ impl BandedAlm {
                 u[1] + alpha * du[1] + y[1] * inv_s,
             ];
             let ex = match &self.stages {
-                StageSet::Disc(r) => disc_excess(w, r[f]),
+                StageSet::Disc(r) => disc_excess(centred(w, self.centre[f]), r[f]),
                 StageSet::Interval(b) if self.k == 1 => interval_excess::<1>(w, &b[f]),
                 StageSet::Interval(b) => interval_excess::<2>(w, &b[f]),
             };

@@ -439,6 +439,9 @@ pub struct BandedAlm {
     n: usize,
     inv_dt2: f64,
     stages: StageSet,
+    /// The disc's centre per stage `o_f` [m/s²] (zeros unless set,
+    /// [`BandedAlm::set_centre`]): the disc bounds `u_f − o_f`.
+    centre: Vec<[f64; 2]>,
     tuning: AlmTuning,
     /// Newton steps a warm solve's first inner solve may take
     /// ([`BandedAlm::set_first_inner_steps`]).
@@ -567,6 +570,7 @@ impl BandedAlm {
             n,
             inv_dt2: 1.0 / (dt * dt),
             stages,
+            centre: vec![[0.0; 2]; n],
             tuning,
             sigma: tuning.sigma,
             axes,
@@ -736,6 +740,30 @@ impl BandedAlm {
             }
             StageSet::Interval(_) => Err(super::problem::invalid(
                 "radius",
+                "a disc's, not an interval's",
+            )),
+        }
+    }
+
+    /// The disc's centre per stage `o_f` [m/s²] (zeros unless set).
+    pub fn centre(&self) -> &[[f64; 2]] {
+        &self.centre
+    }
+
+    /// Sets the disc's centre per stage `o_f` [m/s²] (n entries, finite):
+    /// the disc then bounds `‖u_f − o_f‖ ≤ A_f` — the thrust's
+    /// acceleration where the model adds `o_f` to it (the drag, a learned
+    /// residual). An error for intervals, and for a wrong length or a
+    /// value that is not finite (nothing changed then).
+    pub fn set_centre(&mut self, centre: &[[f64; 2]]) -> Result<(), ControlError> {
+        super::cone::check_centre(centre, self.n)?;
+        match &self.stages {
+            StageSet::Disc(_) => {
+                self.centre.copy_from_slice(centre);
+                Ok(())
+            }
+            StageSet::Interval(_) => Err(super::problem::invalid(
+                "centre",
                 "a disc's, not an interval's",
             )),
         }

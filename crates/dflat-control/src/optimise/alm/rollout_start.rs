@@ -73,14 +73,17 @@ impl BandedAlm {
 
     fn rollout_pass(&mut self, a0: [f64; 2], radius: &[f64]) -> bool {
         let n = self.n;
-        if n == 0 || a0[0].hypot(a0[1]) > ROLLOUT_A0_SHARE * radius[0] {
+        let o = &self.centre;
+        if n == 0 || (a0[0] - o[0][0]).hypot(a0[1] - o[0][1]) > ROLLOUT_A0_SHARE * radius[0] {
             return false;
         }
         let dt2 = 1.0 / self.inv_dt2;
         let dt = dt2.sqrt();
-        let outside = |u: [f64; 2], r: f64| (u[0] + a0[0]).hypot(u[1] + a0[1]) > r;
+        // Accelerations relative to the disc's centre.
+        let outside =
+            |u: [f64; 2], o: [f64; 2], r: f64| (u[0] + a0[0] - o[0]).hypot(u[1] + a0[1] - o[1]) > r;
         Self::accelerations(2, self.inv_dt2, &self.ws.x, &mut self.ws.u, 0);
-        if !(0..n.min(ROLLOUT_EARLY)).any(|f| outside(self.ws.u[f], radius[f])) {
+        if !(0..n.min(ROLLOUT_EARLY)).any(|f| outside(self.ws.u[f], self.centre[f], radius[f])) {
             return false;
         }
         // The rollout into d (scratch until the solve's first step), its
@@ -97,9 +100,13 @@ impl BandedAlm {
                 let velocity = ((q1[i] - q2[i]) - (p1[i] - p2[i])) / dt;
                 w[i] = free + ROLLOUT_KP * position + ROLLOUT_KD * velocity;
             }
-            let norm = w[0].hypot(w[1]);
+            let o = self.centre[f];
+            let norm = (w[0] - o[0]).hypot(w[1] - o[1]);
             if norm > r {
-                w = [w[0] * r / norm, w[1] * r / norm];
+                w = [
+                    o[0] + (w[0] - o[0]) * r / norm,
+                    o[1] + (w[1] - o[1]) * r / norm,
+                ];
             }
             let mut p0 = [0.0; 2];
             for i in 0..2 {
@@ -120,7 +127,11 @@ impl BandedAlm {
             }
             y2 = y1;
             y1 = y;
-            let u = [self.ws.u[f][0] + a0[0], self.ws.u[f][1] + a0[1]];
+            let o = self.centre[f];
+            let u = [
+                self.ws.u[f][0] + a0[0] - o[0],
+                self.ws.u[f][1] + a0[1] - o[1],
+            ];
             let norm = u[0].hypot(u[1]);
             self.ws.y_next[f] = if norm >= radius[f] * (1.0 - 1e-9) && norm > 0.0 {
                 let m = ((y[0] * u[0] + y[1] * u[1]) / norm).max(0.0);

@@ -88,7 +88,8 @@ impl BandedAlm {
         let mut first = radius
             .iter()
             .zip(&self.ws.u)
-            .position(|(&r, u)| (u[0] + a0[0]).hypot(u[1] + a0[1]) > r)
+            .zip(&self.centre)
+            .position(|((&r, u), o)| (u[0] + a0[0] - o[0]).hypot(u[1] + a0[1] - o[1]) > r)
             .unwrap_or(self.n);
         for (r, row) in self.rows.iter().enumerate() {
             let stage = self.row_first[r] / self.k;
