@@ -585,9 +585,11 @@ impl Controller for DfMpc {
         self.build_reference(&fixed[0], reference)?;
         // 4. Output trajectory optimisation.
         let (offsets, slopes) = self.bound_shifts(&planned, &d);
+        // The cone's centre along the last plan (`solve.rs`, `cone_centre`):
+        // without drag or a residual every offset is 0.
+        let offsets_move = self.learned.is_some() || self.model.drag() != Vector3::zeros();
         if let Some(mut along) = self.cone.as_mut().map(|c| std::mem::take(&mut c.along)) {
-            // The cone's centre along the last plan (`solve.rs`, `cone_centre`).
-            let valid = self.offsets_along_last_plan(&d, &mut along);
+            let valid = offsets_move && self.offsets_along_last_plan(&d, &mut along);
             if let Some(c) = self.cone.as_mut() {
                 (c.along, c.along_valid) = (along, valid);
             }
