@@ -564,6 +564,29 @@ fn banded_failure_falls_back_to_clarabel_and_says_so() {
     );
 }
 
+/// The corner flights' settings: N = 100, a 20° tilt cone in the plan,
+/// `qp_solver`, no time limit.
+pub(super) fn corner_cone(qp_solver: QpSolver) -> DfMpcSettings {
+    DfMpcSettings {
+        horizon: 100,
+        constraints: OutputConstraints {
+            max_tilt: Some(20f64.to_radians()),
+            ..Default::default()
+        },
+        plan_tilt_bound: PlanTiltBound::Cone,
+        qp_solver,
+        solver_time_limit: f64::INFINITY,
+        ..Default::default()
+    }
+}
+
+/// The corner flights' path: the L (0, 0) → (20, 0) → (20, 20) m at
+/// 8 m/s, 2 m up.
+pub(super) fn corner_path() -> crate::reference::Reference {
+    let w = [[0.0, 0.0], [20.0, 0.0], [20.0, 20.0]].map(|[x, y]| Vector3::new(x, y, -2.0));
+    crate::reference::Reference::path(&w, 8.0).unwrap()
+}
+
 /// The warm-started cone through the DF-MPC, in closed loop: an L path at
 /// 8 m/s under a 20° cone (start, corner and stop bind it), the banded
 /// solver's commands against clarabel's SOCP fed the same measurements
@@ -578,25 +601,11 @@ fn warm_cone_flies_the_corner_as_clarabel_does() {
         ..Default::default()
     })
     .unwrap();
-    let settings = |qp_solver| DfMpcSettings {
-        horizon: 100,
-        constraints: OutputConstraints {
-            max_tilt: Some(20f64.to_radians()),
-            ..Default::default()
-        },
-        plan_tilt_bound: PlanTiltBound::Cone,
-        qp_solver,
-        solver_time_limit: f64::INFINITY,
-        ..Default::default()
-    };
-    let path = || {
-        let w = [[0.0, 0.0], [20.0, 0.0], [20.0, 20.0]].map(|[x, y]| Vector3::new(x, y, -2.0));
-        crate::reference::Reference::path(&w, 8.0).unwrap()
-    };
-    let mut banded = DfMpc::new(ControlModel::Planar(plant), settings(QpSolver::Banded)).unwrap();
+    let mut banded =
+        DfMpc::new(ControlModel::Planar(plant), corner_cone(QpSolver::Banded)).unwrap();
     let mut clarabel =
-        DfMpc::new(ControlModel::Planar(plant), settings(QpSolver::Clarabel)).unwrap();
-    let (mut rb, mut rc) = (path(), path());
+        DfMpc::new(ControlModel::Planar(plant), corner_cone(QpSolver::Clarabel)).unwrap();
+    let (mut rb, mut rc) = (corner_path(), corner_path());
     let mut x = nalgebra::SVector::<f64, 6>::zeros();
     let (mut constrained, mut warm) = (0, 0);
     for k in 0..200 {
