@@ -243,16 +243,30 @@ impl DfMpc {
             }
             y
         };
-        let mut first = [0.0; 2];
-        for (f, o) in out.iter_mut().enumerate() {
-            // This plan's outputs f + 1..f + 3 are the last plan's f + 2..f + 4.
-            let j = (f + 2).min(len.saturating_sub(3));
-            let [step, _] = self.step_model_offsets(&[output(j), output(j + 1), output(j + 2)], d);
-            let v = [step.x, step.y];
-            if f == 0 {
-                first = v;
+        // This plan's stage f (outputs f + 1..f + 3) is the last plan's
+        // step over its outputs f + 2..f + 4: two stages per evaluation of
+        // four outputs (its steps 0 and 1), the last stages clamped to the
+        // last step the plan reaches.
+        let last_step = len.saturating_sub(3);
+        let mut f = 0;
+        while f < out.len() {
+            let j = f + 2;
+            let (steps, taken) = if j + 1 <= last_step && f + 1 < out.len() {
+                let y = [output(j), output(j + 1), output(j + 2), output(j + 3)];
+                (self.step_model_offsets(&y, d), 2)
+            } else {
+                let j = j.min(last_step);
+                let y = [output(j), output(j + 1), output(j + 2)];
+                (self.step_model_offsets(&y, d), 1)
+            };
+            for (o, step) in out[f..f + taken].iter_mut().zip(steps) {
+                *o = [step.x, step.y];
             }
-            *o = [v[0] - first[0], v[1] - first[1]];
+            f += taken;
+        }
+        let first = out.first().copied().unwrap_or_default();
+        for o in out.iter_mut() {
+            *o = [o[0] - first[0], o[1] - first[1]];
         }
         out.iter().flatten().all(|v| v.is_finite())
     }
