@@ -251,7 +251,7 @@ impl DfMpc {
         let mut f = 0;
         while f < out.len() {
             let j = f + 2;
-            let (steps, taken) = if j + 1 <= last_step && f + 1 < out.len() {
+            let (steps, taken) = if j < last_step && f + 1 < out.len() {
                 let y = [output(j), output(j + 1), output(j + 2), output(j + 3)];
                 (self.step_model_offsets(&y, d), 2)
             } else {
