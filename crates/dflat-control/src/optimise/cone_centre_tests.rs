@@ -8,12 +8,11 @@
 
 use super::cone::FUNNEL_RATE;
 use super::cone_rate_tests::{
-    COST_TOLERANCE, instance_axes, instance_weights, rate_bounds, window,
+    COST_TOLERANCE, instance_axes, instance_weights, plans_of, rate_bounds, window,
 };
 use super::cone_tests::{
     Axis, DT, G, Plans, banded_start, clarabel_plans_centred, objective_centred, try_banded_plans,
 };
-use super::problem::baseline;
 use super::*;
 use crate::ControlError;
 
@@ -145,12 +144,7 @@ proptest::proptest! {
         // The witness: a feasible point about the centres.
         let (mut px, mut py) = (vec![0.0; n], vec![0.0; n]);
         bounds.witness_start((&radius, &centre), fixed, sent, DT, FUNNEL_RATE, [&mut px, &mut py]);
-        let witness: Plans = std::array::from_fn(|i| {
-            let p = if i == 0 { &px } else { &py };
-            (0..=horizon)
-                .map(|j| if j < 3 { axes[i].fixed[j] } else { baseline(&axes[i].fixed, j) + p[j - 3] })
-                .collect()
-        });
+        let witness = plans_of(fixed, [&px, &py], horizon);
         proptest::prop_assert!(thrust_within(a, &witness, &centre, &funnel), "witness: outside the funnel");
         for i in 0..2 {
             proptest::prop_assert!(!rates[i].violated_by(&witness[i], sent[i], DT), "witness axis {i}: rate rows");

@@ -95,6 +95,22 @@ pub(super) fn instance_axes(
     })
 }
 
+/// The plans `y_0..y_N` \[m\] of deviations `p` per axis from the
+/// baseline of the windows `fixed` (the witness's).
+pub(super) fn plans_of(fixed: [&[f64; 3]; 2], p: [&[f64]; 2], horizon: usize) -> Plans {
+    std::array::from_fn(|i| {
+        (0..=horizon)
+            .map(|j| {
+                if j < 3 {
+                    fixed[i][j]
+                } else {
+                    baseline(fixed[i], j) + p[i][j - 3]
+                }
+            })
+            .collect()
+    })
+}
+
 /// The cost tolerance (relative) of the cone with tilt-rate rows: the
 /// cascade's ticks that go to the interior point end at its acceptable
 /// merit (residuals up to 100× its targets: a gap of 1e-7 relative), and
@@ -229,12 +245,7 @@ proptest::proptest! {
         let (mut px, mut py) = (vec![0.0; n], vec![0.0; n]);
         bounds.witness_start((&radius, &[]), fixed, sent, DT, FUNNEL_RATE, [&mut px, &mut py]);
         // The plans y_0..y_N of the witness, and its rows' values.
-        let plans: [Vec<f64>; 2] = std::array::from_fn(|i| {
-            let p = if i == 0 { &px } else { &py };
-            (0..=horizon)
-                .map(|j| if j < 3 { windows[i][j] } else { baseline(&windows[i], j) + p[j - 3] })
-                .collect()
-        });
+        let plans = plans_of([&windows[0], &windows[1]], [&px, &py], horizon);
         let (mut lo, mut hi) = (Vec::new(), Vec::new());
         bounds.row_bounds(horizon, fixed, sent, &radius, &[], DT, |l, h| {
             lo.push(l);
