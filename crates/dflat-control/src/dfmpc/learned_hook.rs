@@ -220,10 +220,10 @@ impl DfMpc {
     /// at each stage f of this tick's plan, outputs f + 1..f + 3: the
     /// drag at the plan's speed and the residual there), less its value at
     /// the first stage, into `out` (one per stage; the last stages repeat
-    /// the last the plan reaches). False when the last plan is not the
-    /// last tick's (`out` untouched; the plan state `Fresh`/`Kept` with no
-    /// step flown: after a failed update with none flown it is older, its
-    /// stages one off) or an offset is not finite.
+    /// the last the plan reaches). The caller checks that the last plan
+    /// is the last tick's (`update`: after a failed update it is older,
+    /// its stages one off). False when a step of it was flown since by
+    /// the plan fallback (`out` untouched) or an offset is not finite.
     pub(super) fn offsets_along_last_plan(
         &self,
         d: &DisturbanceEstimate,

@@ -283,3 +283,57 @@ fn the_cone_bounds_the_thrusts_tilt_with_drag() {
     assert!(constrained > 50, "{constrained}");
     assert!(outside > 0, "the drag never moved the bound");
 }
+
+/// The cone's centre comes along the last plan only when that plan is the
+/// last tick's: after a failed update (a NaN pose, nothing flown) the
+/// kept plan is a tick older, its stages one off, and the next tick takes
+/// the box's rule; the tick after that is back on the plan it made. With
+/// the drag off no centre moves and no plan is read.
+#[test]
+fn the_cone_centre_follows_only_the_last_ticks_plan() {
+    for drag in [0.4, 0.0] {
+        let plant = dflat_model::PlanarModel::new(dflat_model::PlanarParams {
+            psi: 0.0,
+            frame: crate::Frame::Ned,
+            drag_h: drag,
+            ..Default::default()
+        })
+        .unwrap();
+        let mut mpc =
+            DfMpc::new(ControlModel::Planar(plant), corner_cone(QpSolver::Banded)).unwrap();
+        assert_eq!(mpc.cone_centre_along_last_plan(), Some(false));
+        let mut reference = corner_path();
+        let mut x = nalgebra::SVector::<f64, 6>::zeros();
+        let mut along = Vec::new();
+        for k in 0..60 {
+            let y = plant.output(&x);
+            let nan = k == 30;
+            let m = Measurement {
+                t: k as f64 * DT,
+                position: Vector3::new(if nan { f64::NAN } else { y.x }, y.y, -2.0),
+                yaw: 0.0,
+            };
+            let Ok(out) = mpc.update(&m, &mut reference) else {
+                assert!(nan, "tick {k} failed");
+                along.push(None);
+                continue;
+            };
+            assert!(!nan, "a NaN pose was flown");
+            along.push(mpc.cone_centre_along_last_plan());
+            x = plant.step(
+                &x,
+                &nalgebra::Vector2::new(out.command.pitch, out.command.roll),
+            );
+        }
+        let moving = drag > 0.0;
+        assert_eq!(along[0], Some(false), "no plan before the first tick");
+        for (k, a) in along.iter().enumerate().skip(1) {
+            let expected = match k {
+                30 => None,
+                31 => Some(false),
+                _ => Some(moving),
+            };
+            assert_eq!(*a, expected, "drag {drag}, tick {k}");
+        }
+    }
+}

@@ -269,6 +269,14 @@ impl DfMpc {
         self.cone.as_ref().map(|c| c.centre())
     }
 
+    /// Whether the last tick's cone centre came along the last plan
+    /// (true: the model's offsets one tick on along the plan the tick
+    /// before made) or by the box's rule (false: no drag or residual, no
+    /// plan of the tick before, or it failed); `None` without the cone.
+    pub fn cone_centre_along_last_plan(&self) -> Option<bool> {
+        self.cone.as_ref().map(|c| c.along_valid)
+    }
+
     /// The tilt cone's cascade of solvers, with the statistics of their
     /// last solves (which solved, iterations, warm start), when the plan's
     /// tilt bound is the cone.
@@ -533,6 +541,10 @@ impl Controller for DfMpc {
             RecordState::Recorded => RecordState::Pending,
             RecordState::Pending | RecordState::PendingAfterGap => RecordState::PendingAfterGap,
         };
+        // The last plan is the last tick's only when that tick's update
+        // made it and flew none of it since (a failed update leaves it
+        // `Kept`: a tick older, its stages one off).
+        let last_ticks_plan = self.plan == PlanState::Fresh { flown: 0 };
         if let PlanState::Fresh { flown } = self.plan {
             self.plan = PlanState::Kept { flown };
         }
@@ -589,7 +601,8 @@ impl Controller for DfMpc {
         // without drag or a residual every offset is 0.
         let offsets_move = self.learned.is_some() || self.model.drag() != Vector3::zeros();
         if let Some(mut along) = self.cone.as_mut().map(|c| std::mem::take(&mut c.along)) {
-            let valid = offsets_move && self.offsets_along_last_plan(&d, &mut along);
+            let valid =
+                offsets_move && last_ticks_plan && self.offsets_along_last_plan(&d, &mut along);
             if let Some(c) = self.cone.as_mut() {
                 (c.along, c.along_valid) = (along, valid);
             }
