@@ -35,6 +35,12 @@
 //! with warm starts off, the box, and with the tilt-rate bound the box
 //! (the shipped default), the rate alone and the cone.
 //! `CORNER_ONLY` runs the course only when one of its parts is `course`.
+//! A third flight, the L started from rest as the daemon starts a path
+//! (its speed ramped up, `Reference::with_ramp`, at the daemon's default
+//! `mission.start_acceleration`), gives the same table as the course:
+//! what the tick from rest is in the daemon's own start, where the
+//! corner's first tick meets a reference already at 8 m/s. `CORNER_ONLY`
+//! runs it when one of its parts is `ramp`.
 //!
 //! With the feature `osqp-bench` (off by default: the `osqp` crate builds
 //! OSQP's C through cmake), a table per horizon gives OSQP on the same box
@@ -80,14 +86,25 @@ const TILT_DEG: f64 = 20.0;
 /// daemon's default).
 const RATE_DEG_S: f64 = 150.0;
 
-/// The flown course: the L of the corner, or the course of corners (five
-/// 60 m legs, [`COURSE_TICKS`]), whose corners the horizon meets one at a
-/// time, so that each binds in a burst of its own.
+/// The flown course: the L of the corner (from rest with the reference
+/// already at speed, or ramped up as the daemon starts a path), or the
+/// course of corners (five 60 m legs, [`COURSE_TICKS`]), whose corners
+/// the horizon meets one at a time, so that each binds in a burst of its
+/// own.
 #[derive(Clone, Copy, PartialEq)]
 enum Course {
     Corner,
     Corners,
+    /// The L of the corner started as the daemon starts a path from rest:
+    /// its speed ramped up with a peak acceleration of
+    /// [`START_ACCELERATION`] (`Reference::with_ramp`).
+    RampedCorner,
 }
+
+/// The daemon's default start ramp's peak acceleration \[m/s²\]
+/// (`mission.start_acceleration`), below this bench's 20° bound
+/// (g·tan 20° = 3.57 m/s²).
+const START_ACCELERATION: f64 = 3.0;
 
 /// Ticks of the course of corners (40 s: 300 m at 8 m/s and the stop).
 const COURSE_TICKS: usize = 2000;
@@ -95,7 +112,7 @@ const COURSE_TICKS: usize = 2000;
 impl Course {
     fn reference(self) -> Reference {
         let corners: &[[f64; 2]] = match self {
-            Self::Corner => &[[0.0, 0.0], [20.0, 0.0], [20.0, 20.0]],
+            Self::Corner | Self::RampedCorner => &[[0.0, 0.0], [20.0, 0.0], [20.0, 20.0]],
             Self::Corners => &[
                 [0.0, 0.0],
                 [60.0, 0.0],
@@ -109,12 +126,16 @@ impl Course {
             .iter()
             .map(|[x, y]| Vector3::new(*x, *y, -2.0))
             .collect();
-        Reference::path(&w, SPEED).unwrap()
+        let path = Reference::path(&w, SPEED).unwrap();
+        match self {
+            Self::RampedCorner => path.with_ramp(0.0, START_ACCELERATION).unwrap(),
+            _ => path,
+        }
     }
 
     fn ticks(self) -> usize {
         match self {
-            Self::Corner => TICKS,
+            Self::Corner | Self::RampedCorner => TICKS,
             Self::Corners => COURSE_TICKS,
         }
     }
@@ -238,6 +259,8 @@ struct ConeWork {
     solves: usize,
     /// Times of the first constrained tick after an unconstrained one \[s\].
     burst_starts: Vec<f64>,
+    /// The tick (of the flight) each burst began at.
+    burst_ticks: Vec<usize>,
     /// Times of the other constrained ticks \[s\].
     burst_rest: Vec<f64>,
     /// Newton steps of the first ticks' augmented Lagrangians (all axes).
@@ -319,6 +342,7 @@ fn replay(
                     work.burst_rest.push(t);
                 } else {
                     work.burst_starts.push(t);
+                    work.burst_ticks.push((all.len() - 1) % flight.len());
                 }
                 let before = work.iterations.len();
                 work.note(ctrl.cone_cascade().and_then(|c| c.solved_by()));
@@ -386,7 +410,11 @@ fn main() {
         .as_ref()
         .is_none_or(|o| o.iter().any(|o| o == "course"))
     {
-        course_of_corners(&horizons, &chosen);
+        course_of_corners(&horizons, &chosen, Course::Corners);
+    }
+    // So does the L started as the daemon starts a path (`ramp`).
+    if only.as_ref().is_none_or(|o| o.iter().any(|o| o == "ramp")) {
+        course_of_corners(&horizons, &chosen, Course::RampedCorner);
     }
 }
 
@@ -534,13 +562,16 @@ fn print_ratios(stats: &[[f64; 6]]) {
     );
 }
 
-/// The course of corners: each corner binds in a burst of its own, whose
-/// first tick starts from the plan given (the multipliers aged over the
-/// unconstrained ticks before it) — the cold solves of a flight, which the
-/// corner's single burst shows only once. Reported per horizon and
-/// configuration: the bursts per flight, their first ticks and the other
-/// constrained ticks (median / p99 / max µs).
-fn course_of_corners(horizons: &[usize], chosen: &dyn Fn(Config) -> bool) {
+/// The course of corners (`course`: [`Course::Corners`]): each corner
+/// binds in a burst of its own, whose first tick starts from the plan
+/// given (the multipliers aged over the unconstrained ticks before it) —
+/// the cold solves of a flight, which the corner's single burst shows
+/// only once. With [`Course::RampedCorner`], the same table for the L
+/// started from rest as the daemon starts a path, whose first tick does
+/// not see the whole horizon saturated as the corner's does. Reported
+/// per horizon and configuration: the bursts per flight, their first
+/// ticks and the other constrained ticks (median / p99 / max µs).
+fn course_of_corners(horizons: &[usize], chosen: &dyn Fn(Config) -> bool, course: Course) {
     const REPEATS: usize = 3;
     let configs = [
         Config::ConeWarm,
@@ -553,24 +584,35 @@ fn course_of_corners(horizons: &[usize], chosen: &dyn Fn(Config) -> bool) {
     if !configs.iter().any(|&c| chosen(c)) {
         return;
     }
+    match course {
+        Course::RampedCorner => println!(
+            "\nthe L from rest as the daemon starts a path: speed ramped up at \
+             {START_ACCELERATION} m/s² peak, {SPEED} m/s, {TILT_DEG}° cone, {TICKS} ticks, \
+             {REPEATS} replays; constrained ticks, µs"
+        ),
+        _ => println!(
+            "\ncourse of corners: five 60 m legs at {SPEED} m/s, {TILT_DEG}° cone, \
+             {COURSE_TICKS} ticks, {REPEATS} replays; constrained ticks, µs"
+        ),
+    }
     println!(
-        "\ncourse of corners: five 60 m legs at {SPEED} m/s, {TILT_DEG}° cone, \
-         {COURSE_TICKS} ticks, {REPEATS} replays; constrained ticks, µs"
-    );
-    println!(
-        "| N | configuration | bursts per flight | first ticks: median | p99 | max | \
+        "| N | configuration | bursts per flight | the first begins at tick | first ticks: median | p99 | max | \
          their Newton steps: median | max | other constrained ticks: median | p99 | max |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
     for &n in horizons {
-        let flight = record(n, Course::Corners);
+        let flight = record(n, course);
         for config in configs.into_iter().filter(|&c| chosen(c)) {
-            let (_, _, mut work) = replay(config, n, (Course::Corners, &flight), REPEATS);
+            let (_, _, mut work) = replay(config, n, (course, &flight), REPEATS);
             let bursts = work.burst_starts.len() / REPEATS;
             let (first, rest) = (&mut work.burst_starts, &mut work.burst_rest);
             let steps = &mut work.burst_steps;
+            let first_at = work
+                .burst_ticks
+                .first()
+                .map_or("–".to_string(), |k| k.to_string());
             println!(
-                "| {n} | {} | {bursts} | {} | {} | {} | {} | {} | {} | {} | {} |",
+                "| {n} | {} | {bursts} | {first_at} | {} | {} | {} | {} | {} | {} | {} | {} |",
                 config.name(),
                 us(percentile(first, 50.0)),
                 us(percentile(first, 99.0)),
