@@ -267,7 +267,7 @@ impl BoxAlmSolver {
         for f in 0..n {
             let b = self.base[f];
             self.p[f] = if warm {
-                shifted_plan(&self.previous, f) - b
+                shifted_plan(&self.previous, f, self.bounds.tilt_rate.is_some()) - b
             } else {
                 plan[f + 3] - b
             };

@@ -451,6 +451,7 @@ impl BandedConeSolver {
         let (dt, n) = (self.dt, self.horizon - 2);
         self.c.fill(0.0);
         let mut a0 = [0.0; 2];
+        let rate_rows = self.bounds.tilt_rate.is_some();
         for (i, a) in [x, y].into_iter().enumerate() {
             let q = self.weights[i].q;
             self.fast[i].right_hand_side(
@@ -465,7 +466,7 @@ impl BandedConeSolver {
                 self.c[p_at(i, f)] = 2.0 * q * (b - a.reference[f + 3]);
                 self.p[i][f] = a.plan[f + 3] - b;
                 // The warm guess: the previous plan one step on.
-                self.warm[i][f] = shifted_plan(&self.previous[i], f) - b;
+                self.warm[i][f] = shifted_plan(&self.previous[i], f, rate_rows) - b;
                 // ½xᵀ(2H)x − 2·rhsᵀx: the fast path's objective, doubled
                 // (p_{i, f} at 2f + i).
                 self.c_alm[2 * f + i] = -2.0 * self.rhs[f];

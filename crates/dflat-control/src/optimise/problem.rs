@@ -75,17 +75,27 @@ pub(crate) fn baseline(fixed: &[f64; 3], j: usize) -> f64 {
 }
 
 /// The next tick's start for its free output f (`y_{f+3}` then): the
-/// previous plan `y*_0..y*_N` \[m\] one step on, `y*_{f+4}`, continued
-/// linearly past the horizon (the warm starts of the augmented
-/// Lagrangian's solvers).
+/// previous plan `y*_0..y*_N` \[m\] one step on, `y*_{f+4}` (the warm
+/// starts of the augmented Lagrangian's solvers). Past the horizon it
+/// goes on at its last velocity, or with `hold_acceleration` at its last
+/// acceleration. With tilt-rate rows the start holds the acceleration: at
+/// its last velocity the plan's acceleration would drop to 0 in one step
+/// and break the last tilt-rate row by up to its whole acceleration, and
+/// the warm solve's first Newton step would spend itself there
+/// (docs/performance.md, "The warm start's last output").
 #[inline]
-pub(crate) fn shifted_plan(previous: &[f64], f: usize) -> f64 {
+pub(crate) fn shifted_plan(previous: &[f64], f: usize, hold_acceleration: bool) -> f64 {
     let horizon = previous.len() - 1;
     let j = f + 4;
     if j <= horizon {
         previous[j]
     } else {
-        2.0 * previous[horizon] - previous[horizon - 1]
+        let (a, b) = (previous[horizon], previous[horizon - 1]);
+        if hold_acceleration {
+            3.0 * (a - b) + previous[horizon - 2]
+        } else {
+            2.0 * a - b
+        }
     }
 }
 
@@ -163,5 +173,39 @@ impl AxisProblem<'_> {
             reference: self.reference,
             plan: &mut *self.plan,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::shifted_plan;
+
+    /// The warm start past the horizon: at the last velocity, or at the
+    /// last acceleration (a plan at constant acceleration goes on exactly,
+    /// and its last change of acceleration, what a tilt-rate row bounds,
+    /// stays 0).
+    #[test]
+    fn the_shifted_plan_goes_on_at_its_last_velocity_or_acceleration() {
+        let n = 10;
+        let (y0, v, a) = (1.5, -0.3, 0.7);
+        let at = |j: f64| y0 + v * j + 0.5 * a * j * j;
+        let previous: Vec<f64> = (0..=n).map(|j| at(j as f64)).collect();
+        // Inside the horizon: the plan one step on, either way.
+        for f in 0..n - 3 {
+            for hold in [false, true] {
+                assert_eq!(shifted_plan(&previous, f, hold), previous[f + 4]);
+            }
+        }
+        let f = n - 3; // output N + 1
+        let held = shifted_plan(&previous, f, true);
+        assert!((held - at((n + 1) as f64)).abs() < 1e-12, "{held}");
+        let linear = shifted_plan(&previous, f, false);
+        let last_velocity = previous[n] - previous[n - 1];
+        assert!((linear - (previous[n] + last_velocity)).abs() < 1e-12);
+        // The second difference at the end: held, the plan's; at the last
+        // velocity, 0 (a drop of the whole acceleration in one step).
+        let second = |next: f64| next - 2.0 * previous[n] + previous[n - 1];
+        assert!((second(held) - a).abs() < 1e-12);
+        assert!(second(linear).abs() < 1e-12);
     }
 }
