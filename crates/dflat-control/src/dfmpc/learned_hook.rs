@@ -221,20 +221,14 @@ impl DfMpc {
     /// drag at the plan's speed and the residual there), less its value at
     /// the first stage, into `out` (one per stage; the last stages repeat
     /// the last the plan reaches). The caller checks that the last plan
-    /// is the last tick's (`update`: after a failed update it is older,
-    /// its stages one off). False when a step of it was flown since by
-    /// the plan fallback (`out` untouched) or an offset is not finite.
+    /// is the last tick's (`update`: only when it began from a fresh plan
+    /// with no step flown; after a failed update it is older, its stages
+    /// one off). False when an offset is not finite.
     pub(super) fn offsets_along_last_plan(
         &self,
         d: &DisturbanceEstimate,
         out: &mut [[f64; 2]],
     ) -> bool {
-        if !matches!(
-            self.plan,
-            super::PlanState::Fresh { flown: 0 } | super::PlanState::Kept { flown: 0 }
-        ) {
-            return false;
-        }
         let len = self.axes.first().map_or(0, |a| a.good_plan.len());
         let output = |j: usize| {
             let mut y = self.good_y0;

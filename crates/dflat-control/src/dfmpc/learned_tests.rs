@@ -2,7 +2,7 @@
 //! with aerodynamics it has no term for (parasitic drag 0.03 |v|v, rotor
 //! drag 0.2 /s), along a 20 m circle.
 
-use super::tests::{corner_cone, corner_path};
+use super::tests::{corner_cone, corner_path, corner_plant};
 use super::*;
 use crate::learned::tests::aero_residual;
 use crate::learned::{LearnedResidual, LearnedStatus, thrust_axis};
@@ -225,13 +225,7 @@ fn a_delayed_vehicle_keeps_its_matched_residual() {
 #[test]
 fn the_cone_bounds_the_thrusts_tilt_with_drag() {
     let drag = 0.4;
-    let plant = dflat_model::PlanarModel::new(dflat_model::PlanarParams {
-        psi: 0.0,
-        frame: crate::Frame::Ned,
-        drag_h: drag,
-        ..Default::default()
-    })
-    .unwrap();
+    let plant = corner_plant(drag);
     let mut banded =
         DfMpc::new(ControlModel::Planar(plant), corner_cone(QpSolver::Banded)).unwrap();
     let mut clarabel =
@@ -292,13 +286,7 @@ fn the_cone_bounds_the_thrusts_tilt_with_drag() {
 #[test]
 fn the_cone_centre_follows_only_the_last_ticks_plan() {
     for drag in [0.4, 0.0] {
-        let plant = dflat_model::PlanarModel::new(dflat_model::PlanarParams {
-            psi: 0.0,
-            frame: crate::Frame::Ned,
-            drag_h: drag,
-            ..Default::default()
-        })
-        .unwrap();
+        let plant = corner_plant(drag);
         let mut mpc =
             DfMpc::new(ControlModel::Planar(plant), corner_cone(QpSolver::Banded)).unwrap();
         assert_eq!(mpc.cone_centre_along_last_plan(), Some(false));

@@ -580,6 +580,18 @@ pub(super) fn corner_cone(qp_solver: QpSolver) -> DfMpcSettings {
     }
 }
 
+/// The corner flights' plant: the planar model (ψ = 0, NED) with a
+/// horizontal drag of `drag_h` \[1/s\].
+pub(super) fn corner_plant(drag_h: f64) -> dflat_model::PlanarModel {
+    dflat_model::PlanarModel::new(dflat_model::PlanarParams {
+        psi: 0.0,
+        frame: crate::Frame::Ned,
+        drag_h,
+        ..Default::default()
+    })
+    .unwrap()
+}
+
 /// The corner flights' path: the L (0, 0) → (20, 0) → (20, 20) m at
 /// 8 m/s, 2 m up.
 pub(super) fn corner_path() -> crate::reference::Reference {
@@ -595,12 +607,7 @@ pub(super) fn corner_path() -> crate::reference::Reference {
 #[test]
 fn warm_cone_flies_the_corner_as_clarabel_does() {
     use dflat_model::FlatModel;
-    let plant = dflat_model::PlanarModel::new(dflat_model::PlanarParams {
-        psi: 0.0,
-        frame: crate::Frame::Ned,
-        ..Default::default()
-    })
-    .unwrap();
+    let plant = corner_plant(0.0);
     let mut banded =
         DfMpc::new(ControlModel::Planar(plant), corner_cone(QpSolver::Banded)).unwrap();
     let mut clarabel =
