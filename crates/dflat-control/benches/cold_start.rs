@@ -7,7 +7,7 @@
 //! 20° tilt and 150°/s tilt rate). Each solve is timed `REPS` times (min).
 //!
 //! Run: `cargo bench -p dflat-control --bench cold_start` (N = 200; a
-//! horizon as argument, e.g. `-- 100`). `docs/performance.md`, "The cold
+//! horizon as argument, e.g. `-- 100`). `docs/performance-log.md`, "The cold
 //! start from a condensed interior point".
 
 #![allow(missing_docs)]

@@ -28,7 +28,7 @@ pub const WARM_STEPS_BEFORE_START: usize = 12;
 /// 553, 1503, 2514 at N = 50, 100, 200, 400): 5 gave 205, 452, 1370,
 /// 1946; 6 203, 438, 1376, 2085; 8 202, 486, 1375, 2329; 10 219, 520,
 /// 1551, 2295; 4 took the median at N = 50 and 100 from 44 and 86 to 100
-/// and 202 µs (docs/performance.md, "The warm start's first inner
+/// and 202 µs (docs/performance-log.md, "The warm start's first inner
 /// solve").
 pub const WARM_FIRST_INNER_STEPS: usize = 6;
 /// Share of the horizon before which a cold solve's start (the plan given)
@@ -37,7 +37,7 @@ pub const WARM_FIRST_INNER_STEPS: usize = 6;
 /// interior point's restart, instead of the interior point's cold start
 /// (the eliminated head's share, `alm/mod.rs`). On the course of corners
 /// at N = 200 a burst's first tick went from ~650 to ~105 µs at the
-/// median (docs/performance.md, "A burst's first tick of the cone with
+/// median (docs/performance-log.md, "A burst's first tick of the cone with
 /// the tilt rate").
 pub const LATE_ARC_SHARE: f64 = 0.25;
 

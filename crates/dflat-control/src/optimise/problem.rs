@@ -82,7 +82,7 @@ pub(crate) fn baseline(fixed: &[f64; 3], j: usize) -> f64 {
 /// its last velocity the plan's acceleration would drop to 0 in one step
 /// and break the last tilt-rate row by up to its whole acceleration, and
 /// the warm solve's first Newton step would spend itself there
-/// (docs/performance.md, "The warm start's last output").
+/// (docs/performance-log.md, "The warm start's last output").
 #[inline]
 pub(crate) fn shifted_plan(previous: &[f64], f: usize, hold_acceleration: bool) -> f64 {
     let horizon = previous.len() - 1;

@@ -105,7 +105,7 @@ pub const MAX_SOLVES: usize = 40;
 /// iterations (~20 µs each at N = 200) and 1–4 KKT solves (~20 µs each),
 /// so a warm start that ends within ~14 is still the cheaper one. With
 /// box and tilt rate at N = 200, constrained p99 µs in three interleaved
-/// runs each (docs/performance.md, "Longer warm starts"): 8 → 14, the
+/// runs each (docs/performance-log.md, "Longer warm starts"): 8 → 14, the
 /// corner bench 460–468 → 446–448, the learned bench's L with drag
 /// 508–517 → 427–433 with the residual and 496–544 → 378–383 without;
 /// 16 gave 447–452 and 450–474; 40 leaves the cold start no budget
@@ -124,7 +124,7 @@ const WARM_SOLVES: usize = 14;
 /// n free outputs: `6 + (n + 12)/25` within 8 ..= [`WARM_SOLVES`] — 8 at
 /// N = 50, 10 at N = 100 (the shipped horizon), 14 from N = 200. Measured
 /// on the corner bench with box and tilt rate, constrained p99 µs,
-/// interleaved runs (docs/performance.md, "The warm start's budget by
+/// interleaved runs (docs/performance-log.md, "The warm start's budget by
 /// horizon"): N = 100, 8 / 10 / 12 / 14 gave 430–435 / 411–424 / 450 /
 /// 472–479 (the course of corners' other ticks 464–479 with 10 against
 /// 622–639 with 14); N = 50, 8 against 14: 237 against 287–341; N = 200,

@@ -63,7 +63,7 @@ impl ActiveSet {
     /// N = 200: the optimum turns earlier, under the bound), and the
     /// methods freed it one stage per KKT solve from its start. From its
     /// second half they end in 6 KKT solves instead of 14 there (4 instead
-    /// of 22 at N = 100); docs/performance.md, "The block at the horizon's
+    /// of 22 at N = 100); docs/performance-log.md, "The block at the horizon's
     /// end".
     fn trim_end_block(&mut self) {
         let n = self.n;

@@ -60,7 +60,7 @@ const START_FLOOR: f64 = 0.5;
 /// that the iterate and the multipliers held keep most of what they know
 /// (on the corner bench at N = 200, 0.1 and 0.2 took the restarts from
 /// 839 µs to 513–523 µs on the mean; 0.05 and 0.03 to 543–548; 0.001 to
-/// 780: docs/performance.md, "The interior point restarted from where the
+/// 780: docs/performance-log.md, "The interior point restarted from where the
 /// warm solve stopped").
 const RESTART_FLOOR: f64 = 0.1;
 /// Ends when the mean complementarity is below this fraction of the

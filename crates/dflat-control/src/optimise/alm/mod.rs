@@ -122,7 +122,7 @@
 //! step halvings: on the corner bench at N = 200 the cone with the tilt
 //! rate went from 7.84 to 7.61 Newton steps per solve (p99 27 → 22) and
 //! its first tick from rest from ~1.58 to ~1.40 ms
-//! (docs/performance.md, "The exact line search for the discs").
+//! (docs/performance-log.md, "The exact line search for the discs").
 //!
 //! Warm start ([`BandedAlm::shift`]): the multipliers one stage on,
 //! extrapolated linearly from the last two solves, σ from its initial
@@ -167,7 +167,7 @@ const REUSE_DECREMENT: f64 = 1e-7;
 /// 70.2–72.9 µs (factorisations per solve 3.28 → 3.07, Newton steps 6.13
 /// → 6.20; p99 unchanged), where the cone with the tilt rate went 163.2–
 /// 163.5 → 165.0–168.6 µs (six alternated runs each;
-/// docs/performance.md, "The cone with the tilt rate: the rows' passes").
+/// docs/performance-log.md, "The cone with the tilt rate: the rows' passes").
 const REUSE_DECREMENT_DISCS: f64 = 1e-6;
 /// Multiple of the inexact inner tolerance (`loose`, below) under which
 /// the last decrement lets the next step reuse the factor: the step then
@@ -214,7 +214,7 @@ const GAP_TOLERANCE_AFTER_INTERIOR: f64 = 3e-11;
 /// constrained p99 on the corner bench, three alternated runs of each
 /// binary: N = 200 1048–1063 → 980–1007 µs; 0.02, 0.1 and 0.2 gave
 /// 981–997, 980–993 and 979–993; giving up at the second such step in a
-/// row 1017–1044 (docs/performance.md, "A blocked warm step").
+/// row 1017–1044 (docs/performance-log.md, "A blocked warm step").
 const BLOCKED_STEP: f64 = 0.05;
 /// Multiple of the stage residual's tolerance that ends a solve at the
 /// largest σ (where the residual can stall at rounding), with the
