@@ -255,8 +255,10 @@ struct ConeWork {
     interior_point: usize,
     /// Solves clarabel finished (after the banded solvers).
     clarabel: usize,
-    /// Cascade solves in all.
+    /// Cascade solves in all, and those a relaxation's optimum gave (the
+    /// cone with the tilt rate solved without its rows first).
     solves: usize,
+    relaxed: usize,
     /// Times of the first constrained tick after an unconstrained one \[s\].
     burst_starts: Vec<f64>,
     /// The tick (of the flight) each burst began at.
@@ -279,6 +281,7 @@ impl ConeWork {
             return;
         };
         self.solves += 1;
+        self.relaxed += usize::from(info.relaxed);
         match info.method {
             SolverMethod::Alm | SolverMethod::ActiveSet => {
                 self.iterations.push(info.iterations as f64);
@@ -510,10 +513,18 @@ fn work_lines(config: Config, work: &ConeWork, ticks: usize, repeats: usize) -> 
         }
     };
     let (mut iterations, mut starts) = (work.iterations.clone(), work.burst_starts.clone());
+    let relaxed = if work.relaxed > 0 {
+        format!(
+            " (the relaxation without the tilt-rate rows held on {})",
+            work.relaxed
+        )
+    } else {
+        String::new()
+    };
     lines.push(format!(
         "{}: per solve: Newton steps (the active set's: KKT solves) mean {:.2}, p99 {}, max {}; \
          factorisations mean {:.2}; interior point solved {} and clarabel {} \
-         of {} solves; first ticks of {} bursts: median {} µs, max {} µs",
+         of {} solves{relaxed}; first ticks of {} bursts: median {} µs, max {} µs",
         config.name(),
         mean(&iterations),
         percentile(&mut iterations, 99.0),

@@ -319,6 +319,7 @@ impl AxisSolver for BoxAlmSolver {
             iterations: self.iterations(),
             factorisations: self.factorisations(),
             warm_started: self.warm_used,
+            relaxed: false,
         })
     }
 

@@ -41,6 +41,10 @@ pub struct SolveInfo {
     pub factorisations: usize,
     /// Whether it started from the previous tick's solution.
     pub warm_started: bool,
+    /// Whether its solution was a relaxation's optimum that kept the
+    /// dropped constraints (the cone with the tilt rate: the pair solved
+    /// without its tilt-rate rows first, `cone_solver/relaxation.rs`).
+    pub relaxed: bool,
 }
 
 impl SolveInfo {
@@ -51,6 +55,7 @@ impl SolveInfo {
             iterations: 0,
             factorisations: 0,
             warm_started: false,
+            relaxed: false,
         }
     }
 }

@@ -324,15 +324,72 @@ proptest::proptest! {
     }
 }
 
+/// A receding-horizon sequence of ten warm ticks whose reference moves
+/// on at `slope` from `target`: each tick against clarabel's SOCP (cost
+/// no higher than clarabel's, [`COST_TOLERANCE`]; the first ten outputs
+/// to 1e-5 m) and each axis's tilt-rate rows kept. `noted` sees the
+/// solver after each tick. A tick clarabel fails ends the sequence.
+#[allow(clippy::too_many_arguments)]
+fn warm_ticks_match_clarabel(
+    solver: &mut BandedConeSolver,
+    horizon: usize,
+    weights: [AxisWeights; 2],
+    bounds: ConeBounds,
+    rates: &[TiltRate; 2],
+    axes: &mut [Axis; 2],
+    (target, slope): ([f64; 2], [f64; 2]),
+    mut noted: impl FnMut(&BandedConeSolver),
+) -> Result<(), proptest::test_runner::TestCaseError> {
+    let sent = [axes[0].sent, axes[1].sent];
+    for tick in 0..10 {
+        for (i, axis) in axes.iter_mut().enumerate() {
+            axis.reference = (0..=horizon)
+                .map(|j| target[i] + slope[i] * DT * (j + tick) as f64)
+                .collect();
+        }
+        let Some(want) = clarabel_plans(horizon, weights, bounds, axes, None) else {
+            return Ok(());
+        };
+        let got = try_banded_plans(solver, weights, axes);
+        proptest::prop_assert!(got.is_ok(), "tick {tick}: {:?}", got.err());
+        let got = got.unwrap();
+        noted(solver);
+        let obj = |p: &Plans| objective(horizon, &weights, &bounds, axes, [&p[0], &p[1]], &[]);
+        let (og, ow) = (obj(&got), obj(&want));
+        proptest::prop_assert!(
+            og <= ow + COST_TOLERANCE * (1.0 + ow.abs()),
+            "tick {tick}: cost {og} vs clarabel {ow} ({:?}, {} iterations, restarted {}, relaxation {})",
+            solver.method(),
+            solver.iterations(),
+            solver.interior_restarted(),
+            solver.relaxation_held()
+        );
+        for i in 0..2 {
+            for j in 0..=10 {
+                proptest::prop_assert!(
+                    (got[i][j] - want[i][j]).abs() <= 1e-5,
+                    "tick {tick} axis {i} y_{j}: {} vs {}",
+                    got[i][j],
+                    want[i][j]
+                );
+            }
+            proptest::prop_assert!(
+                !rates[i].violated_by(&got[i], sent[i], DT),
+                "tick {tick} axis {i}: rate rows broken"
+            );
+        }
+    }
+    Ok(())
+}
+
 proptest::proptest! {
     #![proptest_config(proptest::test_runner::Config::with_cases(48))]
     /// Warm-started ticks of the cone with tilt-rate rows, every warm
     /// attempt cut after one Newton step so that the interior point is
     /// restarted from where it stopped (`BandedConeSolver::interior_restart`),
     /// give clarabel's SOCP solution tick after tick while a reference
-    /// moves (cost no higher than clarabel's, [`COST_TOLERANCE`]; the first
-    /// ten outputs to 1e-5 m), keep each axis's tilt-rate rows, and do
-    /// restart on some tick.
+    /// moves ([`warm_ticks_match_clarabel`]), and do restart on some tick
+    /// (the relaxation off, so that every warm tick goes that way).
     #[test]
     fn restarted_warm_ticks_match_clarabel_socp(
         horizon in 30usize..=100,
@@ -352,48 +409,57 @@ proptest::proptest! {
         let weights = instance_weights(q, r, kappa, smooth);
         let mut solver = BandedConeSolver::new(horizon, DT, weights, bounds, true).unwrap();
         solver.set_warm_steps_before_start(1);
+        solver.set_relaxation(false);
         let mut axes = instance_axes(horizon, a, v0, a0_frac, sent_delta, target, slope);
-        let sent = [axes[0].sent, axes[1].sent];
         let mut restarts = 0;
-        for tick in 0..10 {
-            for (i, axis) in axes.iter_mut().enumerate() {
-                axis.reference = (0..=horizon)
-                    .map(|j| target[i] + slope[i] * DT * (j + tick) as f64)
-                    .collect();
-            }
-            let Some(want) = clarabel_plans(horizon, weights, bounds, &axes, None) else {
-                // Clarabel failed: the sequence ends here.
-                break;
-            };
-            let got = try_banded_plans(&mut solver, weights, &axes);
-            proptest::prop_assert!(got.is_ok(), "tick {tick}: {:?}", got.err());
-            let got = got.unwrap();
-            restarts += usize::from(solver.interior_restarted());
-            let obj = |p: &Plans| objective(horizon, &weights, &bounds, &axes, [&p[0], &p[1]], &[]);
-            let (og, ow) = (obj(&got), obj(&want));
-            proptest::prop_assert!(
-                og <= ow + COST_TOLERANCE * (1.0 + ow.abs()),
-                "tick {tick}: cost {og} vs clarabel {ow} ({:?}, {} iterations, restarted {})",
-                solver.method(),
-                solver.iterations(),
-                solver.interior_restarted()
-            );
-            for i in 0..2 {
-                for j in 0..=10 {
-                    proptest::prop_assert!(
-                        (got[i][j] - want[i][j]).abs() <= 1e-5,
-                        "tick {tick} axis {i} y_{j}: {} vs {}", got[i][j], want[i][j]
-                    );
-                }
-                proptest::prop_assert!(
-                    !rates[i].violated_by(&got[i], sent[i], DT),
-                    "tick {tick} axis {i}: rate rows broken"
-                );
-            }
-        }
+        warm_ticks_match_clarabel(
+            &mut solver, horizon, weights, bounds, &rates, &mut axes, (target, slope),
+            |s| restarts += usize::from(s.interior_restarted()),
+        )?;
         // (A sequence whose ticks all end within one Newton step, or whose
         // first tick clarabel fails, restarts nowhere: at most a few.)
         proptest::prop_assume!(restarts > 0);
+    }
+}
+
+proptest::proptest! {
+    // A draw whose rows bind on its first tick keeps them bound and never
+    // tries the relaxation: rejected.
+    #![proptest_config(proptest::test_runner::Config {
+        max_global_rejects: 20_000,
+        ..proptest::test_runner::Config::with_cases(48)
+    })]
+    /// Warm ticks of the cone with tilt-rate rows, the pair without its
+    /// rows solved first (`cone_solver/relaxation.rs`), give clarabel's
+    /// SOCP solution tick after tick ([`warm_ticks_match_clarabel`]) —
+    /// the relaxation's optimum taken only where it keeps every row —
+    /// and the relaxation holds on some tick (a reference slow enough
+    /// that no row binds there; the speed bound drawn too, its rows soft
+    /// in both).
+    #[test]
+    fn relaxed_warm_ticks_match_clarabel_socp(
+        horizon in 30usize..=100,
+        q in proptest::array::uniform2(0.5f64..10.0),
+        r in proptest::array::uniform2(1e-3f64..0.1),
+        tilt_deg in 8.0f64..30.0,
+        step_deg in 2.0f64..5.0,
+        kappa in proptest::array::uniform2(1.0f64..12.0),
+        target in proptest::array::uniform2(-1.5f64..1.5),
+        slope in proptest::array::uniform2(-2.0f64..2.0),
+        speed in proptest::option::of(3.0f64..8.0),
+        smooth in proptest::option::of(1.0f64..50.0),
+    ) {
+        let (a, rates, bounds) = rate_bounds(tilt_deg, step_deg, kappa, speed);
+        let weights = instance_weights(q, r, kappa, smooth);
+        let mut solver = BandedConeSolver::new(horizon, DT, weights, bounds, true).unwrap();
+        // The window moving with the reference, its step `target` away.
+        let mut axes = instance_axes(horizon, a, slope, [0.0; 2], [0.0; 2], target, slope);
+        let mut held = 0;
+        warm_ticks_match_clarabel(
+            &mut solver, horizon, weights, bounds, &rates, &mut axes, (target, slope),
+            |s| held += usize::from(s.relaxation_held()),
+        )?;
+        proptest::prop_assume!(held > 0);
     }
 }
 
@@ -445,4 +511,57 @@ fn a_blocked_warm_step_restarts_the_interior_point_at_once() {
             );
         }
     }
+}
+
+/// The relaxation (`cone_solver/relaxation.rs`) changes no plan: a
+/// sequence of warm ticks whose plan rides the cone (a vehicle already
+/// accelerating on its edge towards a reference 20 m ahead; 15° cone,
+/// 3° per tick), solved with the relaxation and without, gives the same
+/// plans tick by tick (to 1e-6 m), and the relaxation's optimum holds on
+/// ticks where a disc binds.
+#[test]
+fn the_relaxation_changes_no_plan() {
+    let horizon = 60;
+    let kappa = [5.0, 5.0];
+    let (a, _, bounds) = rate_bounds(15.0, 3.0, kappa, None);
+    let weights = instance_weights([5.0, 5.0], [0.01, 0.01], kappa, Some(20.0));
+    let (target, slope) = ([20.0, 0.0], [3.0, 0.0]);
+    let mut solvers = [true, false].map(|on| {
+        let mut s = BandedConeSolver::new(horizon, DT, weights, bounds, true).unwrap();
+        s.set_relaxation(on);
+        s
+    });
+    // Accelerating along x on the cone's edge already, the command sent
+    // as much: the plan stays on the cone, no change of tilt to bound.
+    let mut axes = instance_axes(horizon, a, slope, [1.0, 0.0], [0.0; 2], target, slope);
+    let mut held_on_the_cone = 0;
+    for tick in 0..12 {
+        for (i, axis) in axes.iter_mut().enumerate() {
+            axis.reference = (0..=horizon)
+                .map(|j| target[i] + slope[i] * DT * (j + tick) as f64)
+                .collect();
+        }
+        let [with, without] = &mut solvers;
+        let got = try_banded_plans(with, weights, &axes).unwrap();
+        let want = try_banded_plans(without, weights, &axes).unwrap();
+        for i in 0..2 {
+            for j in 0..=horizon {
+                assert!(
+                    (got[i][j] - want[i][j]).abs() <= 1e-6,
+                    "tick {tick} axis {i} y_{j}: {} vs {}",
+                    got[i][j],
+                    want[i][j]
+                );
+            }
+        }
+        let on_the_cone = (2..horizon).any(|j| {
+            let acc = |i: usize| (got[i][j + 1] - 2.0 * got[i][j] + got[i][j - 1]) / (DT * DT);
+            acc(0).hypot(acc(1)) >= a * (1.0 - 1e-6)
+        });
+        held_on_the_cone += usize::from(with.relaxation_held() && on_the_cone);
+    }
+    assert!(
+        held_on_the_cone > 0,
+        "the relaxation never held where a disc binds"
+    );
 }

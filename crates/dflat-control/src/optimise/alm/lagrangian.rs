@@ -3,7 +3,7 @@
 //! gradient and its residuals, the line search's merit and the generalised
 //! Hessian.
 
-use super::{BandedAlm, StageSet};
+use super::{BandedAlm, ROW_TOLERANCE, StageSet};
 
 impl BandedAlm {
     /// The stage bounds' scale [m/s²] for the residual's tolerance.
@@ -270,6 +270,23 @@ impl BandedAlm {
         let done = self.stage_values(true, |f| du[f]);
         self.ws.du = du;
         (done.1 + self.row_terms(1.0, lo, hi), done)
+    }
+
+    /// Whether the iterate held keeps every hard row `lo ≤ h·x ≤ hi` to
+    /// the solve's tolerance of hard rows ([`ROW_TOLERANCE`] of their
+    /// bounds' scale); soft rows are not judged (their violation is
+    /// priced).
+    pub(crate) fn hard_rows_hold(&self, lo: &[f64], hi: &[f64]) -> bool {
+        let hard = |r: &usize| self.row_penalty[*r].is_infinite();
+        let scale = 1.0
+            + (0..self.rows.len())
+                .filter(hard)
+                .fold(0.0f64, |a, r| a.max(lo[r].abs()).max(hi[r].abs()));
+        let tol = ROW_TOLERANCE * scale;
+        (0..self.rows.len()).filter(hard).all(|r| {
+            let h = self.rows[r].dot(&self.ws.x);
+            h <= hi[r] + tol && h >= lo[r] - tol
+        })
     }
 
     /// What the constraints' residuals can cost at x (`y_next`, `hx`

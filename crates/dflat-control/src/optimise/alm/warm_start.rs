@@ -13,6 +13,18 @@ impl BandedAlm {
         self.sigma = self.tuning.sigma;
     }
 
+    /// The stage multiplier y_f held (after a solve: its solution's),
+    /// signed per axis, cost per m/s².
+    pub(crate) fn stage_multiplier(&self, f: usize) -> [f64; 2] {
+        self.warm.y[f]
+    }
+
+    /// The rows' multipliers `[upper, lower]` held (after a solve: its
+    /// solution's), in row order.
+    pub(crate) fn row_multipliers(&self) -> &[[f64; 2]] {
+        &self.warm.v
+    }
+
     /// Sets the multipliers from another method's: the stage multipliers
     /// per stage (`stage(f)`, signed per axis, cost per m/s²) and the rows'
     /// `[upper, lower]` in row order; σ from its initial value.

@@ -1,7 +1,9 @@
 //! [`BandedConeSolver`]: both horizontal axes with the tilt cone
 //! ([`super::cone`]), solved by the augmented Lagrangian of
 //! [`super::alm`] (warm-started across ticks), with the banded
-//! interior point of [`super::cone_qp`] as its fallback.
+//! interior point of [`super::cone_qp`] as its fallback. With the
+//! tilt-rate rows, a warm tick first solves the pair without them and
+//! keeps that optimum where it keeps every row (`relaxation.rs`).
 
 use super::alm::{AlmTuning, BandedAlm, RowBlock, StageSet};
 use super::banded_ip::AxisCost;
@@ -14,6 +16,8 @@ use super::problem::{AxisProblem, baseline, shifted_plan};
 use super::smoothness::Smoothness;
 use super::smoothness::{accel_block, sent_linear_term};
 use crate::ControlError;
+
+mod relaxation;
 
 /// Newton steps a warm start of the pair with tilt-rate rows is given
 /// before it goes on from the condensed interior point's start: on the
@@ -73,6 +77,21 @@ pub struct BandedConeSolver {
     /// solver runs ([`BandedConeSolver::with_methods`]).
     qp: Option<ConeQp>,
     alm: Option<BandedAlm>,
+    /// With tilt-rate rows, the augmented Lagrangian of the pair without
+    /// them (`relaxation.rs`), its plan and the rows' multipliers it
+    /// hands over, the speed rows' count (the first of `lo`, `hi`),
+    /// whether it is on, whether the last solution bound a tilt-rate row,
+    /// and the last solve's relaxation: its Newton steps and
+    /// factorisations (0 when it did not run), whether it held.
+    relaxed: Option<BandedAlm>,
+    relaxed_plan: [Vec<f64>; 2],
+    relaxed_rows: Vec<[f64; 2]>,
+    speed_rows: usize,
+    relaxation_on: bool,
+    rows_bound: bool,
+    relaxation_steps: usize,
+    relaxation_factorisations: usize,
+    relaxation_held: bool,
     /// ALM linear term (2n, interleaved) and scratch.
     c_alm: Vec<f64>,
     /// The interior point's disc and row multipliers after it solved: the
@@ -200,6 +219,9 @@ impl BandedConeSolver {
                 }
             }));
         }
+        // The relaxation's rows: the speed rows alone.
+        let speed_blocks = blocks.clone();
+        let speed_rows = speed_blocks.iter().map(|b| b.rows.len()).sum();
         if let Some(kappa) = kappa {
             let inv_dt2 = 1.0 / (dt * dt);
             blocks.extend((0..2).map(|axis| {
@@ -224,6 +246,15 @@ impl BandedConeSolver {
                 AlmTuning::default(),
             )
         });
+        let relaxed = (use_alm && kappa.is_some()).then(|| {
+            BandedAlm::new(
+                fast.to_vec(),
+                dt,
+                StageSet::Disc(vec![bounds.acceleration; n]),
+                speed_blocks,
+                AlmTuning::default(),
+            )
+        });
         let m = bounds.rows(n);
         debug_assert_eq!(m, qp.ip.rows());
         Ok(Self {
@@ -233,6 +264,15 @@ impl BandedConeSolver {
             bounds,
             qp: use_ip.then_some(qp),
             alm,
+            relaxed,
+            relaxed_plan: [vec![0.0; n], vec![0.0; n]],
+            relaxed_rows: vec![[0.0; 2]; m],
+            speed_rows,
+            relaxation_on: true,
+            rows_bound: true,
+            relaxation_steps: 0,
+            relaxation_factorisations: 0,
+            relaxation_held: false,
             fast,
             radius: vec![bounds.acceleration; n],
             stage_radius: vec![bounds.acceleration; n],
@@ -286,7 +326,12 @@ impl BandedConeSolver {
     /// one per Newton step: the local phase reuses the factor; 0 without
     /// it).
     pub fn factorisations(&self) -> usize {
-        self.alm.as_ref().map_or(0, BandedAlm::factorisations)
+        let alm = if self.relaxation_held {
+            0
+        } else {
+            self.alm.as_ref().map_or(0, BandedAlm::factorisations)
+        };
+        alm + self.relaxation_factorisations
     }
 
     /// The first stage of the window the augmented Lagrangian's last solve
@@ -324,7 +369,7 @@ impl BandedConeSolver {
     /// vertical acceleration.
     pub fn set_radius(&mut self, radius: &[f64]) -> Result<(), ControlError> {
         super::cone::check_radius(radius, self.horizon - 2)?;
-        if let Some(alm) = &mut self.alm {
+        for alm in self.alm.iter_mut().chain(&mut self.relaxed) {
             alm.set_radius(radius)?;
         }
         if let Some(qp) = &mut self.qp {
@@ -342,7 +387,7 @@ impl BandedConeSolver {
     /// for a wrong length or a value that is not finite.
     pub fn set_centre(&mut self, centre: &[[f64; 2]]) -> Result<(), ControlError> {
         super::cone::check_centre(centre, self.horizon - 2)?;
-        if let Some(alm) = &mut self.alm {
+        for alm in self.alm.iter_mut().chain(&mut self.relaxed) {
             alm.set_centre(centre)?;
         }
         if let Some(qp) = &mut self.qp {
@@ -369,7 +414,7 @@ impl BandedConeSolver {
     /// this one left ([`BandedAlm::age`]).
     pub fn forget(&mut self) {
         self.previous_valid = false;
-        if let Some(alm) = &mut self.alm {
+        for alm in self.alm.iter_mut().chain(&mut self.relaxed) {
             alm.age();
         }
     }
@@ -396,7 +441,8 @@ impl BandedConeSolver {
     /// Forgets everything carried between ticks (a controller reset).
     pub fn reset(&mut self) {
         self.previous_valid = false;
-        if let Some(alm) = &mut self.alm {
+        self.rows_bound = true;
+        for alm in self.alm.iter_mut().chain(&mut self.relaxed) {
             alm.reset_multipliers();
         }
     }
@@ -500,7 +546,7 @@ impl BandedConeSolver {
                 dt,
                 &mut self.stage_radius,
             );
-            if let Some(alm) = &mut self.alm {
+            for alm in self.alm.iter_mut().chain(&mut self.relaxed) {
                 alm.set_radius(&self.stage_radius)?;
             }
             if let Some(qp) = &mut self.qp {
@@ -519,8 +565,23 @@ impl BandedConeSolver {
     /// solve has not within [`WARM_FIRST_INNER_STEPS`], goes on from the
     /// interior point (a chain of rate rows that moved takes the warm
     /// multipliers 40 and more): restarted from where it stopped, else
-    /// started cold.
+    /// started cold. A warm tick whose last solution bound no tilt-rate
+    /// row first tries the pair without them (`relaxation.rs`).
     fn try_alm(&mut self, warm: bool, a0: [f64; 2]) -> bool {
+        self.relaxation_steps = 0;
+        self.relaxation_factorisations = 0;
+        self.relaxation_held = false;
+        if warm && self.relaxation_on && !self.rows_bound && self.relaxed.is_some() {
+            if self.try_relaxation(a0) {
+                self.relaxation_held = true;
+                self.iterations = self.relaxation_steps;
+                self.attempt_steps = 0;
+                return true;
+            }
+        } else if warm && let Some(relaxed) = &mut self.relaxed {
+            // Not run this tick: its multipliers a stage on, as time is.
+            relaxed.age();
+        }
         let Some(alm) = &mut self.alm else {
             return false;
         };
@@ -551,8 +612,8 @@ impl BandedConeSolver {
         let mut result = alm.solve(&self.c_alm, a0, &self.lo, &self.hi);
         alm.set_max_newton_steps(budget);
         alm.set_first_inner_steps(usize::MAX);
-        self.iterations = alm.newton_steps();
-        self.attempt_steps = self.iterations;
+        self.attempt_steps = alm.newton_steps();
+        self.iterations = self.attempt_steps + self.relaxation_steps;
         if result.is_err()
             && short
             && (self.interior_restart(a0) || self.interior_start(a0))
@@ -567,6 +628,15 @@ impl BandedConeSolver {
             // Its multipliers are no start for the next solve.
             alm.reset_multipliers();
         }
+        // Whether a tilt-rate row bound (their multipliers follow the
+        // speed rows'): the next tick then skips the relaxation.
+        let speed = self.speed_rows;
+        self.rows_bound = match (&result, &self.alm) {
+            (Ok(_), Some(alm)) => alm.row_multipliers()[speed..]
+                .iter()
+                .any(|v| *v != [0.0; 2]),
+            _ => true,
+        };
         result.is_ok()
     }
 
@@ -778,6 +848,7 @@ impl PairSolver for BandedConeSolver {
             iterations: self.iterations(),
             factorisations: self.factorisations(),
             warm_started: self.warm_started(),
+            relaxed: self.relaxation_held(),
         })
     }
 
