@@ -17,6 +17,7 @@ use super::smoothness::Smoothness;
 use super::smoothness::{accel_block, sent_linear_term};
 use crate::ControlError;
 
+mod interior;
 mod relaxation;
 
 /// Newton steps a warm start of the pair with tilt-rate rows is given
@@ -205,39 +206,9 @@ impl BandedConeSolver {
             FastBandedSolver::with_smoothness(horizon, w.q, w.r, dt, w.smoothness)
         };
         let fast = [fast(&weights[0])?, fast(&weights[1])?];
-        // The speed rows per axis, axis 0's first (p_{axis, k} at 2k + axis),
-        // then the tilt-rate rows per axis (hard, in m/s²).
-        let mut blocks = Vec::new();
-        if let Some(penalty) = penalty {
-            blocks.extend((0..2).map(|axis| {
-                RowBlock {
-                    rows: (0..n)
-                        .map(|g| Row::speed(g, dt, |k| 2 * k + axis))
-                        .collect(),
-                    scale: 1.0 / (dt * dt),
-                    penalty,
-                }
-            }));
-        }
-        // The relaxation's rows: the speed rows alone.
-        let speed_blocks = blocks.clone();
+        let (speed_blocks, rate_blocks) = row_blocks(n, dt, penalty, kappa);
         let speed_rows = speed_blocks.iter().map(|b| b.rows.len()).sum();
-        if let Some(kappa) = kappa {
-            let inv_dt2 = 1.0 / (dt * dt);
-            blocks.extend((0..2).map(|axis| {
-                RowBlock {
-                    rows: (0..n)
-                        .map(|f| {
-                            Row::tilt_rate(f, kappa[axis], |s| s)
-                                .on_outputs(inv_dt2, |k| 2 * k + axis)
-                        })
-                        .collect(),
-                    scale: 1.0,
-                    penalty: f64::INFINITY,
-                }
-            }));
-        }
-        let alm = use_alm.then(|| {
+        let alm_of = |blocks: Vec<RowBlock>| {
             BandedAlm::new(
                 fast.to_vec(),
                 dt,
@@ -245,16 +216,10 @@ impl BandedConeSolver {
                 blocks,
                 AlmTuning::default(),
             )
-        });
-        let relaxed = (use_alm && kappa.is_some()).then(|| {
-            BandedAlm::new(
-                fast.to_vec(),
-                dt,
-                StageSet::Disc(vec![bounds.acceleration; n]),
-                speed_blocks,
-                AlmTuning::default(),
-            )
-        });
+        };
+        // The relaxation's rows: the speed rows alone.
+        let relaxed = (use_alm && kappa.is_some()).then(|| alm_of(speed_blocks.clone()));
+        let alm = use_alm.then(|| alm_of([speed_blocks, rate_blocks].concat()));
         let m = bounds.rows(n);
         debug_assert_eq!(m, qp.ip.rows());
         Ok(Self {
@@ -640,171 +605,6 @@ impl BandedConeSolver {
         result.is_ok()
     }
 
-    /// Whether the start held breaks no disc or row before
-    /// [`LATE_ARC_SHARE`] of the horizon (a burst's first tick mid-flight,
-    /// its arc entering late): its cold solve then tries the augmented
-    /// Lagrangian before the interior point.
-    fn breaks_late(&mut self, a0: [f64; 2]) -> bool {
-        self.alm.as_mut().is_some_and(|alm| {
-            let first = alm.first_broken_stage(a0, &self.lo, &self.hi);
-            first as f64 >= LATE_ARC_SHARE * (self.horizon - 2) as f64
-        })
-    }
-
-    /// The augmented Lagrangian's start from the condensed interior point,
-    /// itself started from the funnel's witness at half the rate (strictly
-    /// inside the rate rows); whether it converged (its iterations are
-    /// counted in [`BandedConeSolver::iterations`]).
-    fn interior_start(&mut self, a0: [f64; 2]) -> bool {
-        let Some(alm) = &mut self.alm else {
-            return false;
-        };
-        let [px, py] = &mut self.p;
-        let fixed = [&self.window[0], &self.window[1]];
-        self.bounds.witness_start(
-            (&self.radius, &self.centre),
-            fixed,
-            self.sent,
-            self.dt,
-            0.5,
-            [px, py],
-        );
-        alm.set_start(&[&self.p[0], &self.p[1]]);
-        match alm.interior_start(&self.c_alm, a0, &self.lo, &self.hi) {
-            Ok(Some(iterations)) => {
-                self.interior_iterations += iterations;
-                true
-            }
-            _ => {
-                // Its iterate is unspecified: the witness is the start.
-                alm.set_start(&[&self.p[0], &self.p[1]]);
-                false
-            }
-        }
-    }
-
-    /// The condensed interior point restarted from the iterate and the
-    /// multipliers a warm solve that did not end left
-    /// ([`BandedAlm::interior_restart`]); whether it converged (its
-    /// iterations are counted in [`BandedConeSolver::iterations`]; when it
-    /// does not, the cold start follows).
-    fn interior_restart(&mut self, a0: [f64; 2]) -> bool {
-        let Some(alm) = &mut self.alm else {
-            return false;
-        };
-        match alm.interior_restart(&self.c_alm, a0, &self.lo, &self.hi) {
-            Ok(Some(iterations)) => {
-                self.interior_iterations += iterations;
-                self.restarted = true;
-                true
-            }
-            _ => false,
-        }
-    }
-
-    /// Whether the last solve's condensed interior point was restarted
-    /// from where its warm attempt stopped (else, if it ran, it started
-    /// cold from the funnel's witness).
-    pub fn interior_restarted(&self) -> bool {
-        self.restarted
-    }
-
-    /// The Newton steps of the warm attempt the last solve's interior
-    /// point was restarted after (0 when it was not): at most
-    /// [`WARM_STEPS_BEFORE_START`]; its first inner solve gives up after
-    /// [`WARM_FIRST_INNER_STEPS`], or sooner at a blocked line search
-    /// (`alm/mod.rs`, `BLOCKED_STEP`).
-    pub fn restarted_after(&self) -> usize {
-        if self.restarted {
-            self.attempt_steps
-        } else {
-            0
-        }
-    }
-
-    /// Sets the Newton steps a warm solve with tilt-rate rows gets before
-    /// the interior point (tests: every warm tick restarted).
-    #[cfg(test)]
-    pub(crate) fn set_warm_steps_before_start(&mut self, steps: usize) {
-        self.warm_steps_before_start = steps;
-    }
-
-    /// Loads a tick, runs the augmented Lagrangian from the plan given and
-    /// zero multipliers for at most `steps` Newton steps, and restarts the
-    /// condensed interior point from where it stopped (tests): whether the
-    /// restart converged.
-    #[cfg(test)]
-    pub(crate) fn interior_restart_after(
-        &mut self,
-        x: AxisProblem<'_>,
-        y: AxisProblem<'_>,
-        steps: usize,
-    ) -> bool {
-        let Ok(a0) = self.load(&x, &y) else {
-            return false;
-        };
-        let Some(alm) = &mut self.alm else {
-            return false;
-        };
-        alm.reset_multipliers();
-        alm.set_start(&[&self.p[0], &self.p[1]]);
-        alm.set_max_newton_steps(steps);
-        let _ = alm.solve(&self.c_alm, a0, &self.lo, &self.hi);
-        self.interior_restart(a0)
-    }
-
-    /// Loads a tick and runs the condensed interior point's start alone
-    /// (tests): whether it converged.
-    #[cfg(test)]
-    pub(crate) fn interior_start_only(&mut self, x: AxisProblem<'_>, y: AxisProblem<'_>) -> bool {
-        match self.load(&x, &y) {
-            Ok(a0) => self.interior_start(a0),
-            Err(_) => false,
-        }
-    }
-
-    /// The condensed interior point's iterations in the last solve (the
-    /// augmented Lagrangian's start with the tilt-rate rows; 0: none ran).
-    pub fn interior_iterations(&self) -> usize {
-        self.interior_iterations
-    }
-
-    /// The interior point's attempt, from the plan given; on success the
-    /// augmented Lagrangian's next start takes its multipliers.
-    fn try_interior_point(&mut self, a0: [f64; 2]) -> Result<(), ControlError> {
-        let Some(qp) = &mut self.qp else {
-            return Err(ControlError::Solver("cone ALM: no convergence".to_string()));
-        };
-        if self.bounds.tilt_rate.is_some() {
-            // As the box's interior point: from the witness at half the
-            // rate, strictly inside the rate rows (the plan given breaks
-            // those narrow rows by many times their width).
-            let [px, py] = &mut self.p;
-            let fixed = [&self.window[0], &self.window[1]];
-            self.bounds.witness_start(
-                (&self.radius, &self.centre),
-                fixed,
-                self.sent,
-                self.dt,
-                0.5,
-                [px, py],
-            );
-        }
-        qp.ip.set_start(&[&self.p[0], &self.p[1]], self.dt);
-        let result = qp.solve(&self.c, a0, (&self.lo, &self.hi));
-        self.iterations += qp.ip.iterations();
-        result?;
-        // The next tick's augmented Lagrangian starts from its multipliers
-        // (shifted with the plan), not from zero.
-        if let Some(alm) = &mut self.alm {
-            qp.ip.disc_duals(&mut self.ip_stage_duals);
-            qp.ip.duals(&mut self.ip_row_duals);
-            let stage = &self.ip_stage_duals;
-            alm.set_multipliers(|f| stage[f], &self.ip_row_duals);
-        }
-        Ok(())
-    }
-
     /// The solution of `method` into `previous` (the plans y*_0..y*_N);
     /// an error (and the multipliers forgotten) when not finite.
     fn store_solution(
@@ -833,6 +633,44 @@ impl BandedConeSolver {
         }
         Ok(())
     }
+}
+
+/// The pair's rows for the augmented Lagrangian: the speed rows per
+/// axis, axis 0's first (p_{axis, k} at 2k + axis; soft, penalty ρ), and
+/// the tilt-rate rows per axis (hard, in m/s²), each none when its bound
+/// is off.
+fn row_blocks(
+    n: usize,
+    dt: f64,
+    penalty: Option<f64>,
+    kappa: Option<[f64; 2]>,
+) -> (Vec<RowBlock>, Vec<RowBlock>) {
+    let speed = penalty.map_or_else(Vec::new, |penalty| {
+        (0..2)
+            .map(|axis| RowBlock {
+                rows: (0..n)
+                    .map(|g| Row::speed(g, dt, |k| 2 * k + axis))
+                    .collect(),
+                scale: 1.0 / (dt * dt),
+                penalty,
+            })
+            .collect()
+    });
+    let inv_dt2 = 1.0 / (dt * dt);
+    let rate = kappa.map_or_else(Vec::new, |kappa| {
+        (0..2)
+            .map(|axis| RowBlock {
+                rows: (0..n)
+                    .map(|f| {
+                        Row::tilt_rate(f, kappa[axis], |s| s).on_outputs(inv_dt2, |k| 2 * k + axis)
+                    })
+                    .collect(),
+                scale: 1.0,
+                penalty: f64::INFINITY,
+            })
+            .collect()
+    });
+    (speed, rate)
 }
 
 impl PairSolver for BandedConeSolver {
