@@ -25,19 +25,13 @@ impl BandedConeSolver {
     /// inside the rate rows); whether it converged (its iterations are
     /// counted in [`BandedConeSolver::iterations`]).
     pub(super) fn interior_start(&mut self, a0: [f64; 2]) -> bool {
+        if self.alm.is_none() {
+            return false;
+        }
+        self.start_from_witness();
         let Some(alm) = &mut self.alm else {
             return false;
         };
-        let [px, py] = &mut self.p;
-        let fixed = [&self.window[0], &self.window[1]];
-        self.bounds.witness_start(
-            (&self.radius, &self.centre),
-            fixed,
-            self.sent,
-            self.dt,
-            0.5,
-            [px, py],
-        );
         alm.set_start(&[&self.p[0], &self.p[1]]);
         match alm.interior_start(&self.c_alm, a0, &self.lo, &self.hi) {
             Ok(Some(iterations)) => {
@@ -141,24 +135,18 @@ impl BandedConeSolver {
     /// The interior point's attempt, from the plan given; on success the
     /// augmented Lagrangian's next start takes its multipliers.
     pub(super) fn try_interior_point(&mut self, a0: [f64; 2]) -> Result<(), ControlError> {
+        if self.qp.is_none() {
+            return Err(ControlError::Solver("cone ALM: no convergence".to_string()));
+        }
+        if self.bounds.tilt_rate.is_some() {
+            // As the box's interior point: from the witness, strictly
+            // inside the rate rows (the plan given breaks those narrow
+            // rows by many times their width).
+            self.start_from_witness();
+        }
         let Some(qp) = &mut self.qp else {
             return Err(ControlError::Solver("cone ALM: no convergence".to_string()));
         };
-        if self.bounds.tilt_rate.is_some() {
-            // As the box's interior point: from the witness at half the
-            // rate, strictly inside the rate rows (the plan given breaks
-            // those narrow rows by many times their width).
-            let [px, py] = &mut self.p;
-            let fixed = [&self.window[0], &self.window[1]];
-            self.bounds.witness_start(
-                (&self.radius, &self.centre),
-                fixed,
-                self.sent,
-                self.dt,
-                0.5,
-                [px, py],
-            );
-        }
         qp.ip.set_start(&[&self.p[0], &self.p[1]], self.dt);
         let result = qp.solve(&self.c, a0, (&self.lo, &self.hi));
         self.iterations += qp.ip.iterations();
@@ -172,5 +160,20 @@ impl BandedConeSolver {
             alm.set_multipliers(|f| stage[f], &self.ip_row_duals);
         }
         Ok(())
+    }
+
+    /// The start `p` (both axes' deviations) from the funnel's witness
+    /// at half the rate: strictly inside the rate rows and the discs.
+    fn start_from_witness(&mut self) {
+        let [px, py] = &mut self.p;
+        let fixed = [&self.window[0], &self.window[1]];
+        self.bounds.witness_start(
+            (&self.radius, &self.centre),
+            fixed,
+            self.sent,
+            self.dt,
+            0.5,
+            [px, py],
+        );
     }
 }
