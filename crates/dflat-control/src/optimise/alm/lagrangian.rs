@@ -277,16 +277,21 @@ impl BandedAlm {
     /// bounds' scale); soft rows are not judged (their violation is
     /// priced).
     pub(crate) fn hard_rows_hold(&self, lo: &[f64], hi: &[f64]) -> bool {
-        let hard = |r: &usize| self.row_penalty[*r].is_infinite();
-        let scale = 1.0
-            + (0..self.rows.len())
-                .filter(hard)
-                .fold(0.0f64, |a, r| a.max(lo[r].abs()).max(hi[r].abs()));
-        let tol = ROW_TOLERANCE * scale;
-        (0..self.rows.len()).filter(hard).all(|r| {
-            let h = self.rows[r].dot(&self.ws.x);
-            h <= hi[r] + tol && h >= lo[r] - tol
-        })
+        let tol = ROW_TOLERANCE * self.hard_row_scale(lo, hi);
+        (0..self.rows.len())
+            .filter(|&r| self.row_penalty[r].is_infinite())
+            .all(|r| {
+                let h = self.rows[r].dot(&self.ws.x);
+                h <= hi[r] + tol && h >= lo[r] - tol
+            })
+    }
+
+    /// The hard rows' bounds' scale, `1 + max |lo_r|, |hi_r|` over the
+    /// rows without a penalty, in their units.
+    pub(super) fn hard_row_scale(&self, lo: &[f64], hi: &[f64]) -> f64 {
+        1.0 + (0..lo.len())
+            .filter(|&r| self.row_penalty[r].is_infinite())
+            .fold(0.0f64, |a, r| a.max(lo[r].abs()).max(hi[r].abs()))
     }
 
     /// What the constraints' residuals can cost at x (`y_next`, `hx`

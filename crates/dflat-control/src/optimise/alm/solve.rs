@@ -219,11 +219,7 @@ impl BandedAlm {
         if self.row_penalty.iter().all(|r| r.is_infinite()) {
             return 1.0;
         }
-        let hard_scale = 1.0
-            + (0..lo.len())
-                .filter(|&r| self.row_penalty[r].is_infinite())
-                .fold(0.0f64, |a, r| a.max(lo[r].abs()).max(hi[r].abs()));
-        row_tol / (ROW_TOLERANCE * hard_scale)
+        row_tol / (ROW_TOLERANCE * self.hard_row_scale(lo, hi))
     }
 
     /// The solve's scales and tolerances (module docs of [`super`]).
