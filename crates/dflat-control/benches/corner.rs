@@ -259,6 +259,10 @@ struct ConeWork {
     /// cone with the tilt rate solved without its rows first).
     solves: usize,
     relaxed: usize,
+    /// Per solve whose interior point restarted from its warm attempt:
+    /// the attempt's Newton steps, the interior point's iterations, the
+    /// Newton steps after it.
+    restarts: Vec<[f64; 3]>,
     /// Times of the first constrained tick after an unconstrained one \[s\].
     burst_starts: Vec<f64>,
     /// The tick (of the flight) each burst began at.
@@ -282,6 +286,13 @@ impl ConeWork {
         };
         self.solves += 1;
         self.relaxed += usize::from(info.relaxed);
+        if let Some(r) = info.restart {
+            self.restarts.push([
+                r.attempt_steps as f64,
+                r.interior_iterations as f64,
+                r.steps_after as f64,
+            ]);
+        }
         match info.method {
             SolverMethod::Alm | SolverMethod::ActiveSet => {
                 self.iterations.push(info.iterations as f64);
@@ -483,6 +494,26 @@ fn corner_table(n: usize, chosen: &dyn Fn(Config) -> bool) {
     lines.iter().for_each(|l| println!("{l}"));
 }
 
+/// The restarts' counts for the work line (none: empty): how many,
+/// and the median (max) of the warm attempt's Newton steps, the interior
+/// point's iterations and the Newton steps after it.
+fn restart_counts(work: &ConeWork) -> String {
+    if work.restarts.is_empty() {
+        return String::new();
+    }
+    let column = |i: usize| {
+        let mut v: Vec<f64> = work.restarts.iter().map(|r| r[i]).collect();
+        (percentile(&mut v, 50.0), percentile(&mut v, 100.0))
+    };
+    let [(a, a_max), (ip, ip_max), (after, after_max)] = [0, 1, 2].map(column);
+    format!(
+        "; the interior point restarted from the warm attempt on {}: the attempt's Newton \
+         steps median {a} (max {a_max}), the interior point's iterations {ip} ({ip_max}), \
+         Newton steps after it {after} ({after_max})",
+        work.restarts.len()
+    )
+}
+
 /// A configuration's work line (its augmented Lagrangian's or active
 /// set's work, the fallbacks, the bursts' first ticks) and its first
 /// failure, if any.
@@ -521,10 +552,11 @@ fn work_lines(config: Config, work: &ConeWork, ticks: usize, repeats: usize) -> 
     } else {
         String::new()
     };
+    let restarts = restart_counts(work);
     lines.push(format!(
         "{}: per solve: Newton steps (the active set's: KKT solves) mean {:.2}, p99 {}, max {}; \
          factorisations mean {:.2}; interior point solved {} and clarabel {} \
-         of {} solves{relaxed}; first ticks of {} bursts: median {} µs, max {} µs",
+         of {} solves{relaxed}{restarts}; first ticks of {} bursts: median {} µs, max {} µs",
         config.name(),
         mean(&iterations),
         percentile(&mut iterations, 99.0),

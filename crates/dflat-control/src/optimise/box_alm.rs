@@ -320,6 +320,7 @@ impl AxisSolver for BoxAlmSolver {
             factorisations: self.factorisations(),
             warm_started: self.warm_used,
             relaxed: false,
+            restart: None,
         })
     }
 

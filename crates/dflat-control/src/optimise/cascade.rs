@@ -45,6 +45,24 @@ pub struct SolveInfo {
     /// dropped constraints (the cone with the tilt rate: the pair solved
     /// without its tilt-rate rows first, `cone_solver/relaxation.rs`).
     pub relaxed: bool,
+    /// Where a warm attempt that did not end was followed by the
+    /// condensed interior point restarted from it, and the augmented
+    /// Lagrangian after it (the cone with the tilt rate): their counts.
+    pub restart: Option<Restart>,
+}
+
+/// The counts of a solve whose warm attempt gave up, whose condensed
+/// interior point restarted from where it stopped, and whose augmented
+/// Lagrangian then ended from the interior point's solution
+/// (`cone_solver/interior.rs`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Restart {
+    /// Newton steps of the warm attempt given up.
+    pub attempt_steps: usize,
+    /// The interior point's iterations.
+    pub interior_iterations: usize,
+    /// Newton steps of the augmented Lagrangian after it.
+    pub steps_after: usize,
 }
 
 impl SolveInfo {
@@ -56,6 +74,7 @@ impl SolveInfo {
             factorisations: 0,
             warm_started: false,
             relaxed: false,
+            restart: None,
         }
     }
 }

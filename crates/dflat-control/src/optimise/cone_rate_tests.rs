@@ -411,11 +411,25 @@ proptest::proptest! {
         solver.set_warm_steps_before_start(1);
         solver.set_relaxation(false);
         let mut axes = instance_axes(horizon, a, v0, a0_frac, sent_delta, target, slope);
-        let mut restarts = 0;
+        let (mut restarts, mut counted) = (0, true);
         warm_ticks_match_clarabel(
             &mut solver, horizon, weights, bounds, &rates, &mut axes, (target, slope),
-            |s| restarts += usize::from(s.interior_restarted()),
+            |s| {
+                restarts += usize::from(s.interior_restarted());
+                // The solve's counts (`SolveInfo::restart`) are the
+                // solver's own: the attempt's steps and the steps after
+                // it make up its Newton steps.
+                let counts = s.restart_counts();
+                let ended = s.method() == super::cone_solver::ConeMethod::Alm;
+                counted &= counts.is_some() == (s.interior_restarted() && ended)
+                    && counts.is_none_or(|r| {
+                        r.attempt_steps == s.restarted_after()
+                            && r.interior_iterations == s.interior_iterations()
+                            && r.attempt_steps + r.steps_after == s.iterations()
+                    });
+            },
         )?;
+        proptest::prop_assert!(counted, "the restart's counts are not the solver's");
         // (A sequence whose ticks all end within one Newton step, or whose
         // first tick clarabel fails, restarts nowhere: at most a few.)
         proptest::prop_assume!(restarts > 0);

@@ -145,8 +145,8 @@ mod tilt_rate_tests;
 pub use bounds::AxisBounds;
 pub use box_alm::BoxAlmSolver;
 pub use cascade::{
-    AxisCascade, AxisSolver, Carry, Cascade, PairCascade, PairSolver, SolveFailure, SolveInfo,
-    SolverMethod,
+    AxisCascade, AxisSolver, Carry, Cascade, PairCascade, PairSolver, Restart, SolveFailure,
+    SolveInfo, SolverMethod,
 };
 pub use clarabel::{ClarabelSolver, KktTuning};
 pub use clarabel_cone::ClarabelConeSolver;

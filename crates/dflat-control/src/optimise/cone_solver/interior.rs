@@ -5,6 +5,7 @@
 
 use super::{BandedConeSolver, LATE_ARC_SHARE};
 use crate::ControlError;
+use crate::optimise::cascade::Restart;
 #[cfg(test)]
 use crate::optimise::problem::AxisProblem;
 
@@ -83,6 +84,20 @@ impl BandedConeSolver {
         } else {
             0
         }
+    }
+
+    /// The last solve's counts where its interior point was restarted
+    /// from its warm attempt ([`BandedConeSolver::interior_restarted`])
+    /// and the augmented Lagrangian ended after it: the attempt's Newton
+    /// steps, the interior point's iterations and the Newton steps after
+    /// it (`None` otherwise, also where the stage interior point solved).
+    pub fn restart_counts(&self) -> Option<Restart> {
+        let ended = self.method == super::ConeMethod::Alm;
+        (self.restarted && ended).then_some(Restart {
+            attempt_steps: self.attempt_steps,
+            interior_iterations: self.interior_iterations,
+            steps_after: self.steps_after,
+        })
     }
 
     /// Sets the Newton steps a warm solve with tilt-rate rows gets before

@@ -134,6 +134,9 @@ pub struct BandedConeSolver {
     /// The Newton steps of the last solve's warm attempt, when the
     /// interior point's restart followed it.
     attempt_steps: usize,
+    /// The Newton steps of the augmented Lagrangian after the interior
+    /// point's start or restart (0 when none ran).
+    steps_after: usize,
     /// Newton steps a warm solve with tilt-rate rows gets before the
     /// interior point ([`WARM_STEPS_BEFORE_START`]; tests lower it).
     warm_steps_before_start: usize,
@@ -260,6 +263,7 @@ impl BandedConeSolver {
             iterations: 0,
             interior_iterations: 0,
             attempt_steps: 0,
+            steps_after: 0,
             restarted: false,
             warm_steps_before_start: WARM_STEPS_BEFORE_START,
             warm_used: false,
@@ -432,6 +436,7 @@ impl BandedConeSolver {
         self.interior_iterations = 0;
         self.restarted = false;
         self.attempt_steps = 0;
+        self.steps_after = 0;
         let warm = self.warm_start && self.previous_valid;
         self.warm_used = false;
         self.previous_valid = false;
@@ -585,7 +590,8 @@ impl BandedConeSolver {
             && let Some(alm) = &mut self.alm
         {
             result = alm.solve(&self.c_alm, a0, &self.lo, &self.hi);
-            self.iterations += alm.newton_steps();
+            self.steps_after = alm.newton_steps();
+            self.iterations += self.steps_after;
         }
         if result.is_err()
             && let Some(alm) = &mut self.alm
@@ -687,6 +693,7 @@ impl PairSolver for BandedConeSolver {
             factorisations: self.factorisations(),
             warm_started: self.warm_started(),
             relaxed: self.relaxation_held(),
+            restart: self.restart_counts(),
         })
     }
 
