@@ -126,6 +126,10 @@ pub struct LearnedArgs {
     /// No seconds study.
     #[arg(long)]
     no_seconds: bool,
+    /// The noise seed of every flight (the plants' and the poses' noise,
+    /// and so the records learned from): the study's tables fly 1.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
     /// JSON results file.
     #[arg(long, default_value = "docs/figures/learned.json")]
     json: PathBuf,
@@ -468,6 +472,7 @@ pub fn run(command: ExperimentCommand) -> Result<()> {
                 rotor_drag: a.rotor_drag,
                 smoothness: a.smoothness,
                 plan_tilt_bound: a.plan_tilt_bound,
+                seed: a.seed,
             };
             let result = run_learned(&config, !a.no_progress).context("learned study")?;
             out!("{}", result.table());

@@ -162,6 +162,9 @@ pub struct LearnedConfig {
     /// Seconds of records the learning is given in the seconds study (an
     /// empty list: no study).
     pub seconds: Vec<f64>,
+    /// The noise seed of every flight (the plant's and the poses' noise;
+    /// the records learned from follow): 1 in the study's tables.
+    pub seed: u64,
 }
 
 impl Default for LearnedConfig {
@@ -182,6 +185,7 @@ impl Default for LearnedConfig {
             smoothness: SMOOTHNESS,
             plan_tilt_bound: PlanTiltBound::Box,
             seconds: vec![20.0, 40.0, 80.0, 160.0, 320.0, 600.0],
+            seed: 1,
         }
     }
 }
@@ -331,11 +335,16 @@ struct Group {
     vision_hz: f64,
 }
 
-/// Flies `flights`, in parallel: the results in order.
-fn fly_all(flights: &[Flight], progress: bool) -> Result<Vec<TrialResult>, ExperimentError> {
+/// Flies `flights` with the noise of `seed`, in parallel: the results in
+/// order.
+fn fly_all(
+    flights: &[Flight],
+    seed: u64,
+    progress: bool,
+) -> Result<Vec<TrialResult>, ExperimentError> {
     let specs = flights
         .iter()
-        .map(|f| Ok((f.spec()?, 1)))
+        .map(|f| Ok((f.spec()?, seed)))
         .collect::<Result<Vec<_>, ExperimentError>>()?;
     run_trials(&specs, progress)
         .into_iter()
@@ -538,7 +547,7 @@ pub fn run_learned(
             first.push(flight(gr, c, true, Vehicle::STOCK, None));
         }
     }
-    let first_results = fly_all(&first, progress)?;
+    let first_results = fly_all(&first, config.seed, progress)?;
     let per_group = 2 * cells.len();
     // 3. Identify on each group's stock flights; fly it.
     let ids: Vec<(Vehicle, Vec<String>)> = groups
@@ -557,7 +566,7 @@ pub fn run_learned(
             second.push(flight(gr, c, true, ids[i].0, None));
         }
     }
-    let second_results = fly_all(&second, progress)?;
+    let second_results = fly_all(&second, config.seed, progress)?;
     // 4. Learn on each group's stock and identified records.
     let group_records = |i: usize, seconds: Option<f64>| {
         let mut rs: Vec<&TrialResult> = (0..cells.len())
@@ -623,7 +632,7 @@ pub fn run_learned(
             third.push(flight(gr, c, true, bare, Some(exact.clone())));
         }
     }
-    let third_results = fly_all(&third, progress)?;
+    let third_results = fly_all(&third, config.seed, progress)?;
     let mut rows = Vec::new();
     for (i, gr) in groups.iter().enumerate() {
         for (c, cell) in cells.iter().enumerate() {
@@ -675,7 +684,7 @@ pub fn run_learned(
                 .iter()
                 .map(|c| flight(gr, c, true, ids[0].0, Some(m.clone())))
                 .collect();
-            let res = fly_all(&fl, progress)?;
+            let res = fly_all(&fl, config.seed, progress)?;
             let ratios: Vec<f64> = res
                 .iter()
                 .zip(&fl)
