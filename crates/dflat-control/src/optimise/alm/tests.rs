@@ -51,3 +51,49 @@ fn shift_extrapolates_the_multipliers_of_consecutive_solves() {
     assert_eq!(alm.warm.y[0], after[1]);
     assert_eq!(alm.warm.y[1], after[2]);
 }
+
+/// The warm start shifts the row multipliers a stage on within each row
+/// block, but each block's first row (the one on the window and the sent
+/// command) keeps its own, and the last row keeps its own too.
+#[test]
+fn shift_keeps_each_blocks_first_row_multiplier() {
+    let n = 6;
+    let dt = 0.02;
+    let axis = || FastBandedSolver::new(n + 2, 1.0, 1e-4, dt).unwrap();
+    let blocks = (0..2)
+        .map(|a| RowBlock {
+            rows: (0..n)
+                .map(|f| {
+                    super::super::bounds::Row::tilt_rate(f, 5.0, |s| s)
+                        .on_outputs(1.0 / (dt * dt), |k| 2 * k + a)
+                })
+                .collect(),
+            scale: 1.0,
+            penalty: f64::INFINITY,
+        })
+        .collect();
+    let mut alm = BandedAlm::new(
+        vec![axis(), axis()],
+        dt,
+        StageSet::Disc(vec![3.0; n]),
+        blocks,
+        AlmTuning::default(),
+    );
+    let v: Vec<[f64; 2]> = (0..2 * n)
+        .map(|r| [100.0 + r as f64, 200.0 + r as f64])
+        .collect();
+    alm.warm.v.copy_from_slice(&v);
+    alm.shift();
+    for block in [0..n, n..2 * n] {
+        let (start, end) = (block.start, block.end);
+        assert_eq!(alm.warm.v[start], v[start], "first row of {start}..{end}");
+        for r in start + 1..end - 1 {
+            assert_eq!(alm.warm.v[r], v[r + 1], "row {r}");
+        }
+        assert_eq!(
+            alm.warm.v[end - 1],
+            v[end - 1],
+            "last row of {start}..{end}"
+        );
+    }
+}
