@@ -131,6 +131,10 @@ impl Vehicle {
     }
 }
 
+/// The noise seed the study's tables fly ([`LearnedConfig::seed`]'s
+/// default; `docs/figures/learned.json`).
+pub const TABLE_SEED: u64 = 1;
+
 /// `dflat experiment learned`'s settings.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
@@ -163,7 +167,8 @@ pub struct LearnedConfig {
     /// empty list: no study).
     pub seconds: Vec<f64>,
     /// The noise seed of every flight (the plant's and the poses' noise;
-    /// the records learned from follow): 1 in the study's tables.
+    /// the records learned from follow): [`TABLE_SEED`] in the study's
+    /// tables.
     pub seed: u64,
 }
 
@@ -185,7 +190,7 @@ impl Default for LearnedConfig {
             smoothness: SMOOTHNESS,
             plan_tilt_bound: PlanTiltBound::Box,
             seconds: vec![20.0, 40.0, 80.0, 160.0, 320.0, 600.0],
-            seed: 1,
+            seed: TABLE_SEED,
         }
     }
 }
