@@ -14,7 +14,14 @@ impl LearnedResult {
     /// The tables: cells (p95 \[m\] and learned / matched), the models, the
     /// seconds study.
     pub fn table(&self) -> String {
-        let mut t = String::from(
+        let mut t = String::new();
+        if self.config.exact_scale != 1.0 {
+            t.push_str(&format!(
+                "exact: the plants' aerodynamics × {} in the residual (--exact-scale)\n",
+                self.config.exact_scale
+            ));
+        }
+        t.push_str(
             "plant    vision  shape        speed   matched     stock  identify   learned  learned(r)     exact  learned/matched  r/matched  exact/matched\n",
         );
         for r in &self.rows {
