@@ -28,7 +28,9 @@
 //!    identified `[vehicle]` without its linear drag: what a perfectly
 //!    learned residual flies in this controller, so a gap to matched is
 //!    split into what learning misses and what the residual's place in
-//!    the controller misses;
+//!    the controller misses (`--exact-scale` gives the controller a share
+//!    of it instead, [`LearnedConfig::exact_scale`]: the flights'
+//!    sensitivity to a drag the model under- or over-predicts);
 //!
 //! and how many seconds of those records the learning needs: the
 //! residual learned from their first T seconds, flown on every cell of the
