@@ -24,12 +24,9 @@ fi
 cargo build --release -q
 for s in $scales; do
     for k in $seeds; do
-        f="$out/exact_${s}_s$k.json"
-        if [ ! -s "$f" ]; then
-            echo "scale $s, seed $k ..." >&2
-            target/release/dflat experiment learned --no-seconds --no-progress \
-                --seed "$k" --exact-scale "$s" --json "$f" > /dev/null
-        fi
+        echo "scale $s, seed $k ..." >&2
+        target/release/dflat experiment learned --no-seconds --no-progress \
+            --seed "$k" --exact-scale "$s" --json "$out/exact_${s}_s$k.json" > /dev/null
     done
 done
 python3 - "$out" "$scales" "$seeds" <<'EOF'
