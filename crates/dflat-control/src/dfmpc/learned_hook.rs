@@ -300,7 +300,7 @@ impl DfMpc {
             return;
         };
         let fresh = self.multi.is_none()
-            && measurement.t > self.last_t
+            && measurement.t > self.window.pose_time()
             && self.record == super::RecordState::Pending;
         let s = &mut self.learned_score;
         if fresh {

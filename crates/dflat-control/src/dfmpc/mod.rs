@@ -67,10 +67,13 @@ pub const MAX_FALLBACK_STEPS: usize = 50;
 /// One [`Controller::update`] per control step δt: window → F⁻¹ prediction
 /// of y_{k+1}, y_{k+2} → reference over the horizon → per-axis optimisation
 /// → F on y*_k..y*_{k+3} → saturation → the sent input into the window.
-/// A measurement whose time `t` is not newer than the last one used (a
-/// tick without a new pose) is not entered as new: y_k is then the model's
-/// own prediction, F⁻¹ over the window with the input already sent (dead
-/// reckoning; the shell's pose timeout bounds how long).
+/// The measurement is placed in the window by its time `t`
+/// ([`Window::place`]): one not newer than the last one used (a tick
+/// without a new pose) is not entered as new, and y_k is the model's own
+/// prediction, F⁻¹ over the window with the inputs already sent (dead
+/// reckoning; the shell's pose timeout bounds how long); a pose a tick late
+/// takes its own tick's slot; ticks the shell skipped are filled with
+/// predictions under the input it held.
 /// With [`DfMpcSettings::multi_rate`] the window is a [`MultiRateWindow`]:
 /// samples come through [`Controller::observe`], `update` takes the tick
 /// time. Commands use the model's fixed yaw ψ⋆ (the measured yaw is only
@@ -99,12 +102,6 @@ pub struct DfMpc {
     good_reference: Vec<Vector3<f64>>,
     /// y_k of the last good tick (the z of planar plans) \[m\].
     good_y0: Vector3<f64>,
-    /// Time of the newest measurement used (classic mode) \[s\]; a tick whose
-    /// measurement is not newer is predicted instead (see [`DfMpc`]).
-    last_t: f64,
-    /// The previous tick's F⁻¹ prediction of this tick's output, y_{k+1}
-    /// then (classic mode) \[m\].
-    predicted: Vector3<f64>,
     /// True when some axis has a smoothness weight.
     smooth: bool,
     /// What plan there is to fly.
@@ -194,8 +191,6 @@ impl DfMpc {
             reference: vec![Vector3::zeros(); n + 1 + settings.delay_ticks],
             good_reference: vec![Vector3::zeros(); n + 1 + settings.delay_ticks],
             good_y0: Vector3::zeros(),
-            last_t: f64::NEG_INFINITY,
-            predicted: Vector3::zeros(),
             smooth: settings
                 .smoothness_weight
                 .iter()
@@ -419,22 +414,20 @@ struct FixedOutputs {
 impl DfMpc {
     /// The fixed outputs `[y_k, y_{k+1}, y_{k+2}]` and the input sent at
     /// k−1: from the multi-rate window (moved to `measurement.t`, committed
-    /// by [`DfMpc::commit`]), or from a copy of the classic window with y_k
-    /// pushed — the measurement, or the model's own prediction on a tick
-    /// without a new pose (F⁻¹ over the window with u_{k−3}, computed at the
-    /// previous tick as its y_{k+1}; u_{k−3} has left the window since) —
-    /// then F⁻¹ for y_{k+1}, y_{k+2}. The copy is returned for `commit`;
-    /// after a gap it starts from the start-up padding.
+    /// by [`DfMpc::commit`]), or from a copy of the classic window with the
+    /// measurement placed by its time ([`Window::place`]: y_k is the
+    /// measurement, or the model's own prediction on a tick without a new
+    /// pose; a late pose takes its own tick's slot, skipped ticks are
+    /// filled) — then F⁻¹ for y_{k+1}, y_{k+2}. The copy is returned for
+    /// `commit`; after a gap it starts from the start-up padding.
     fn fixed_outputs(
         &mut self,
         measurement: &Measurement,
         d: &DisturbanceEstimate,
     ) -> Result<FixedOutputs, ControlError> {
         let mut window = self.window;
-        let mut last_t = self.last_t;
         if self.record == RecordState::PendingAfterGap {
             window.reset();
-            last_t = f64::NEG_INFINITY;
         }
         if let Some(multi) = &mut self.multi {
             let (model, learned) = (&self.model, self.learned.as_ref());
@@ -447,12 +440,12 @@ impl DfMpc {
                 previous_input: e.previous_input,
             });
         }
-        let y_k = if !window.is_empty() && measurement.t <= last_t {
-            self.predicted
-        } else {
-            measurement.position
-        };
-        window.push_measurement(y_k);
+        window.place(
+            measurement.t,
+            measurement.position,
+            self.model.dt(),
+            &|y, u| self.f_inv(y, u, d),
+        )?;
         let [ym2, ym1, y0] = *window.outputs();
         let [u2, u1] = *window.inputs();
         let y1 = self.f_inv(&[ym2, ym1, y0], &u2, d)?;
@@ -493,13 +486,6 @@ impl DfMpc {
         } else {
             window.push_input(*sent);
             self.window = window;
-            let last_t = if self.record == RecordState::PendingAfterGap {
-                f64::NEG_INFINITY
-            } else {
-                self.last_t
-            };
-            self.last_t = last_t.max(t);
-            self.predicted = fixed[1];
         }
         self.record = RecordState::Recorded;
     }
@@ -739,7 +725,6 @@ impl Controller for DfMpc {
     fn reset(&mut self) {
         self.window.reset();
         self.delay.fill(self.model.hover_input());
-        self.last_t = f64::NEG_INFINITY;
         if let Some(multi) = &mut self.multi {
             multi.reset();
         }

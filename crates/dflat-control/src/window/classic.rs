@@ -1,0 +1,493 @@
+//! The classic window (module docs of [`crate::window`], "Classic"): the
+//! paper's r = 3 outputs and r − 1 = 2 inputs, each pose placed in its slot
+//! by its time ([`Window::place`]).
+
+use dflat_model::FlatError;
+use nalgebra::Vector3;
+
+use crate::ControlError;
+
+/// Measured outputs the window hands F⁻¹: r = 3.
+pub const OUTPUTS: usize = 3;
+/// Sent inputs the window hands F⁻¹: r − 1 = 2.
+pub const INPUTS: usize = 2;
+/// Slots (ticks) kept: the r = 3 of the window plus the ones a late pose
+/// may land in and the later slots be predicted again from (a pose up to
+/// `SLOTS − 2` = 6 ticks late is placed).
+pub const SLOTS: usize = 8;
+/// Skipped ticks [`Window::place`] fills at most (1 s at 50 Hz); a longer
+/// gap restarts the window from its padding.
+pub const MAX_FILL: usize = 50;
+/// A pose at least this many control steps after the newest slot counts
+/// the ticks in between as skipped (their number rounded); a nearer one is
+/// the next slot. 1.75 rather than 1.5, so that a stream a little faster
+/// than the loop (one tick in five or six finds two poses) is not read as
+/// skipped ticks.
+pub const FILL_FROM: f64 = 1.75;
+
+/// Type of the one-step prediction F⁻¹ the window is given:
+/// `y_{j+3} = F⁻¹(y_j, y_{j+1}, y_{j+2}; u_j)`.
+type NextOutput<'a> =
+    &'a dyn Fn(&[Vector3<f64>; 3], &Vector3<f64>) -> Result<Vector3<f64>, FlatError>;
+
+/// What [`Window::place`] did with this tick's measurement.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Placement {
+    /// The first measurement since construction or [`Window::reset`] (or a
+    /// restart: a gap of more than [`MAX_FILL`] ticks, or a new pose that
+    /// lands before the slots kept): the padding; y_k is the measurement.
+    Start,
+    /// y_k is the measurement: one step after the newest slot, or after
+    /// `filled` skipped ticks filled with the model's predictions under the
+    /// input the autopilot held.
+    Next {
+        /// Skipped ticks filled.
+        filled: usize,
+    },
+    /// The pose landed on the slot `back` ticks before this one (1: the
+    /// previous tick's), which held a prediction: it replaced it, the
+    /// slots after it were predicted again from it, and y_k is predicted.
+    Late {
+        /// Ticks before this one.
+        back: usize,
+    },
+    /// No new pose (none half a step newer than the newest placed): y_k is
+    /// the model's prediction, F⁻¹ with the inputs sent.
+    Predicted,
+}
+
+/// What the window's placement has done since construction (never reset).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct WindowStats {
+    /// Ticks whose y_k is a prediction ([`Placement::Predicted`] and
+    /// [`Placement::Late`]).
+    pub predicted: u64,
+    /// Skipped ticks filled with predictions.
+    pub filled: u64,
+    /// Poses placed in an earlier tick's slot ([`Placement::Late`]).
+    pub late: u64,
+    /// Restarts from the padding after the first start (see
+    /// [`Placement::Start`]).
+    pub restarts: u64,
+}
+
+/// The last r measured outputs and r − 1 sent inputs, with start-up
+/// padding, and the [`SLOTS`] − r older slots that time placement needs.
+///
+/// Between ticks (after the input of tick k − 1 is pushed) slot `i` of the
+/// outputs and of the inputs belong to the same tick; [`Window::place`]
+/// then pushes y_k, and the controller's [`Window::push_input`] pushes u_k.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Window {
+    /// Outputs of the last [`SLOTS`] ticks, oldest first, positions \[m\] in
+    /// the model frame.
+    outputs: [Vector3<f64>; SLOTS],
+    /// Inputs `[θ_cmd, φ_cmd, T_cmd]` (rad, rad, m/s²) of the last
+    /// [`SLOTS`] ticks, oldest first.
+    inputs: [Vector3<f64>; SLOTS],
+    /// Whether each output slot holds a measurement (or the padding), not a
+    /// prediction.
+    measured: [bool; SLOTS],
+    /// Input used for padding.
+    hover: Vector3<f64>,
+    /// Outputs pushed since construction or reset (saturating).
+    measurements: usize,
+    /// Time of the newest output slot \[s\] (the poses' clock).
+    newest_t: f64,
+    /// Time of the newest pose placed \[s\] (−∞ before one).
+    pose_t: f64,
+    /// What placement has done.
+    stats: WindowStats,
+}
+
+impl Window {
+    /// An empty window padded with `hover` as the past inputs
+    /// (`[0, 0, g]`: level attitude, hover specific thrust).
+    pub fn new(hover: Vector3<f64>) -> Self {
+        Self {
+            outputs: [Vector3::zeros(); SLOTS],
+            inputs: [hover; SLOTS],
+            measured: [true; SLOTS],
+            hover,
+            measurements: 0,
+            newest_t: f64::NEG_INFINITY,
+            pose_t: f64::NEG_INFINITY,
+            stats: WindowStats::default(),
+        }
+    }
+
+    /// Pushes the newest measured output `y^m_k` \[m\] as the next slot,
+    /// without a time (the raw ring operation; the controller uses
+    /// [`Window::place`]). The first one after construction or
+    /// [`Window::reset`] fills every output slot.
+    pub fn push_measurement(&mut self, y: Vector3<f64>) {
+        self.push_output(y, true);
+    }
+
+    /// Pushes an output slot, measured or predicted.
+    fn push_output(&mut self, y: Vector3<f64>, measured: bool) {
+        if self.measurements == 0 {
+            self.outputs = [y; SLOTS];
+            self.measured = [true; SLOTS];
+        } else {
+            self.outputs.rotate_left(1);
+            self.outputs[SLOTS - 1] = y;
+            self.measured.rotate_left(1);
+            self.measured[SLOTS - 1] = measured;
+        }
+        self.measurements = self.measurements.saturating_add(1);
+    }
+
+    /// Pushes the input `u_k` actually sent at the newest tick.
+    pub fn push_input(&mut self, u: Vector3<f64>) {
+        self.inputs.rotate_left(1);
+        self.inputs[SLOTS - 1] = u;
+    }
+
+    /// Replaces the newest input (the one pushed last) with `u`: the input
+    /// actually applied when it differs from the one sent (standby).
+    pub fn replace_last_input(&mut self, u: Vector3<f64>) {
+        self.inputs[SLOTS - 1] = u;
+    }
+
+    /// Forgets all history: the next measurement starts the padding again
+    /// (the [`WindowStats`] are kept).
+    pub fn reset(&mut self) {
+        *self = Self {
+            stats: self.stats,
+            ..Self::new(self.hover)
+        };
+    }
+
+    /// Enters tick k's measurement (position `y` \[m\], model frame, taken
+    /// at `t` \[s\], the poses' clock) by its time, and pushes y_k: the
+    /// measurement, or the model's prediction through `next_output` (F⁻¹,
+    /// `y_{j+3} = F⁻¹(y_j, y_{j+1}, y_{j+2}; u_j)`). Call it between ticks
+    /// (after the last tick's input was pushed); then [`Window::outputs`]
+    /// ends at y_k and [`Window::inputs`] at u_{k−1}.
+    ///
+    /// With `x = (t − t_newest)/δt` (t_newest the newest slot's time; δt
+    /// `dt` \[s\]):
+    /// * `x ≥` [`FILL_FROM`]: `round(x) − 1` ticks were skipped (the
+    ///   autopilot held the last input): each gets F⁻¹'s prediction under
+    ///   that input, then y_k is the measurement ([`Placement::Next`]);
+    /// * `½ ≤ x <` [`FILL_FROM`]: y_k is the measurement;
+    /// * otherwise the pose belongs to slot `round(x)` from the newest: if
+    ///   it is at least half a step newer than the newest pose placed and
+    ///   that slot holds a prediction, it replaces it and the slots after
+    ///   it are predicted again ([`Placement::Late`]); either way y_k is
+    ///   predicted. A new pose older than the slots kept restarts the
+    ///   window ([`Placement::Start`]).
+    ///
+    /// A non-finite `t` is no new pose. Errors: F⁻¹'s, or a non-finite `t`
+    /// or `y` for the first measurement
+    /// ([`ControlError::NonFiniteMeasurement`]). On error the window may be
+    /// part-changed: the controller places on a copy.
+    pub fn place(
+        &mut self,
+        t: f64,
+        y: Vector3<f64>,
+        dt: f64,
+        next_output: NextOutput<'_>,
+    ) -> Result<Placement, ControlError> {
+        if self.measurements == 0 {
+            return self.start(t, y, false);
+        }
+        let new_pose = t.is_finite() && t >= self.pose_t + 0.5 * dt;
+        let x = (t - self.newest_t) / dt;
+        if new_pose && x >= 0.5 {
+            let filled = if x >= FILL_FROM {
+                x.round() as usize - 1
+            } else {
+                0
+            };
+            if filled > MAX_FILL {
+                return self.start(t, y, true);
+            }
+            for _ in 0..filled {
+                let held = self.inputs[SLOTS - 1];
+                let p = self.predict_next(next_output)?;
+                self.push_output(p, false);
+                self.push_input(held);
+            }
+            self.push_output(y, true);
+            self.newest_t = t;
+            self.pose_t = t;
+            self.stats.filled += filled as u64;
+            return Ok(Placement::Next { filled });
+        }
+        let mut placement = Placement::Predicted;
+        if new_pose {
+            // Slot `idx` (newest = SLOTS − 1); re-predicting the slots
+            // after it needs three before each.
+            let back = (-x.round()) as usize + 1;
+            let Some(idx) = SLOTS.checked_sub(back).filter(|i| *i >= 2) else {
+                return self.start(t, y, true);
+            };
+            if !self.measured[idx] {
+                self.outputs[idx] = y;
+                self.measured[idx] = true;
+                for i in idx + 1..SLOTS {
+                    if !self.measured[i] {
+                        let before: [Vector3<f64>; 3] = [
+                            self.outputs[i - 3],
+                            self.outputs[i - 2],
+                            self.outputs[i - 1],
+                        ];
+                        self.outputs[i] = next_output(&before, &self.inputs[i - 3])?;
+                    }
+                }
+                self.newest_t = t + (SLOTS - 1 - idx) as f64 * dt;
+                self.pose_t = t;
+                self.stats.late += 1;
+                placement = Placement::Late { back };
+            }
+        }
+        let p = self.predict_next(next_output)?;
+        self.push_output(p, false);
+        self.newest_t += dt;
+        self.stats.predicted += 1;
+        Ok(placement)
+    }
+
+    /// The padding from measurement `y` at `t`; `restart` counts it.
+    fn start(&mut self, t: f64, y: Vector3<f64>, restart: bool) -> Result<Placement, ControlError> {
+        if !(t.is_finite() && y.iter().all(|v| v.is_finite())) {
+            return Err(ControlError::NonFiniteMeasurement);
+        }
+        self.reset();
+        self.push_output(y, true);
+        self.newest_t = t;
+        self.pose_t = t;
+        if restart {
+            self.stats.restarts += 1;
+        }
+        Ok(Placement::Start)
+    }
+
+    /// F⁻¹ over the newest three slots with the input of the oldest of
+    /// them: the output of the slot after the newest.
+    fn predict_next(&self, next_output: NextOutput<'_>) -> Result<Vector3<f64>, FlatError> {
+        let before: [Vector3<f64>; 3] = [
+            self.outputs[SLOTS - 3],
+            self.outputs[SLOTS - 2],
+            self.outputs[SLOTS - 1],
+        ];
+        next_output(&before, &self.inputs[SLOTS - 3])
+    }
+
+    /// Measured outputs `[y^m_{k−2}, y^m_{k−1}, y^m_k]`, oldest first (some
+    /// may be predictions: see [`Window::place`]).
+    pub fn outputs(&self) -> &[Vector3<f64>; OUTPUTS] {
+        self.outputs.last_chunk().expect("SLOTS ≥ OUTPUTS")
+    }
+
+    /// Sent inputs `[u_{k−2}, u_{k−1}]`, oldest first.
+    pub fn inputs(&self) -> &[Vector3<f64>; INPUTS] {
+        self.inputs.last_chunk().expect("SLOTS ≥ INPUTS")
+    }
+
+    /// Newest output `y_k`.
+    pub fn latest(&self) -> &Vector3<f64> {
+        &self.outputs[SLOTS - 1]
+    }
+
+    /// Number of outputs pushed since construction or reset (saturates).
+    pub fn measurements(&self) -> usize {
+        self.measurements
+    }
+
+    /// True until the first measurement.
+    pub fn is_empty(&self) -> bool {
+        self.measurements == 0
+    }
+
+    /// True once r outputs fill the output slots (no padding left).
+    pub fn is_full(&self) -> bool {
+        self.measurements >= OUTPUTS
+    }
+
+    /// Time of the newest pose placed \[s\] (−∞ before one).
+    pub fn pose_time(&self) -> f64 {
+        self.pose_t
+    }
+
+    /// What placement has done since construction.
+    pub fn stats(&self) -> WindowStats {
+        self.stats
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn v(x: f64) -> Vector3<f64> {
+        Vector3::new(x, 0.0, 0.0)
+    }
+
+    #[test]
+    fn pads_then_shifts() {
+        let hover = Vector3::new(0.0, 0.0, 9.81);
+        let mut w = Window::new(hover);
+        assert!(w.is_empty());
+        w.push_measurement(v(1.0));
+        assert_eq!(w.outputs(), &[v(1.0), v(1.0), v(1.0)]);
+        assert_eq!(w.inputs(), &[hover, hover]);
+        w.push_input(v(0.1));
+        w.push_measurement(v(2.0));
+        assert_eq!(w.outputs(), &[v(1.0), v(1.0), v(2.0)]);
+        assert_eq!(w.inputs(), &[hover, v(0.1)]);
+        assert!(!w.is_full());
+        w.push_input(v(0.2));
+        w.push_measurement(v(3.0));
+        w.push_input(v(0.3));
+        assert!(w.is_full());
+        assert_eq!(w.outputs(), &[v(1.0), v(2.0), v(3.0)]);
+        assert_eq!(w.inputs(), &[v(0.2), v(0.3)]);
+        assert_eq!(w.latest(), &v(3.0));
+        w.reset();
+        assert!(w.is_empty());
+        w.push_measurement(v(5.0));
+        assert_eq!(w.outputs(), &[v(5.0); 3]);
+        assert_eq!(w.inputs(), &[hover, hover]);
+    }
+
+    const DT: f64 = 0.02;
+
+    /// A double integrator on x: `y_{j+3} = 2y_{j+2} − y_{j+1} + u_j·δt²`
+    /// (u's x the acceleration).
+    fn integrator(y: &[Vector3<f64>; 3], u: &Vector3<f64>) -> Result<Vector3<f64>, FlatError> {
+        Ok(y[2] * 2.0 - y[1] + u * DT * DT)
+    }
+
+    /// A window that has seen ticks 0..=k of a vehicle at 4 m/s along x
+    /// (poses on time, zero input): the committed state after tick k.
+    fn cruising(k: usize) -> Window {
+        let mut w = Window::new(Vector3::zeros());
+        for j in 0..=k {
+            let t = j as f64 * DT;
+            w.place(t, v(4.0 * t), DT, &integrator).unwrap();
+            w.push_input(Vector3::zeros());
+        }
+        w
+    }
+
+    /// Differences of the window's outputs over one step [m/s].
+    fn speeds(w: &Window) -> [f64; 2] {
+        let [a, b, c] = *w.outputs();
+        [(b.x - a.x) / DT, (c.x - b.x) / DT]
+    }
+
+    #[test]
+    fn poses_on_time_are_the_papers_window() {
+        let mut w = cruising(5);
+        let p = w
+            .place(6.0 * DT, v(4.0 * 6.0 * DT), DT, &integrator)
+            .unwrap();
+        assert_eq!(p, Placement::Next { filled: 0 });
+        assert_eq!(w.latest(), &v(0.48));
+        assert!(w.stats() == WindowStats::default());
+    }
+
+    #[test]
+    fn a_tick_without_a_new_pose_is_predicted() {
+        let mut w = cruising(5);
+        // The tick-5 pose again, with its own time.
+        let p = w.place(5.0 * DT, v(0.4), DT, &integrator).unwrap();
+        assert_eq!(p, Placement::Predicted);
+        for s in speeds(&w) {
+            assert!((s - 4.0).abs() < 1e-9, "{s}");
+        }
+    }
+
+    #[test]
+    fn skipped_ticks_are_filled_under_the_held_input() {
+        let mut w = cruising(5);
+        w.replace_last_input(v(1.0)); // tick 5 sent 1 m/s², held over 6, 7
+        // Ticks 6 and 7 skipped: the pose of tick 8 (the true path under
+        // the held input: the input acts from slot j + 3 on).
+        let p = w.place(8.0 * DT, v(0.6404), DT, &integrator).unwrap();
+        assert_eq!(p, Placement::Next { filled: 2 });
+        assert_eq!(w.inputs(), &[v(1.0), v(1.0)]);
+        assert_eq!(w.stats().filled, 2);
+        // The fills sit at the vehicle's speed, not at a third of it.
+        let [a, b, _] = *w.outputs();
+        assert!(((b.x - a.x) / DT - 4.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_late_pose_replaces_its_prediction_and_the_window_stays_one_step_apart() {
+        let mut w = cruising(5);
+        // Tick 6 finds no new pose: predicted at 0.48 m.
+        w.place(5.0 * DT, v(0.4), DT, &integrator).unwrap();
+        w.push_input(Vector3::zeros());
+        // Tick 7 gets the pose of tick 6 (late), 1 cm off the prediction:
+        // it takes tick 6's slot, and tick 7 is predicted from it.
+        let p = w.place(6.0 * DT, v(0.49), DT, &integrator).unwrap();
+        assert_eq!(p, Placement::Late { back: 1 });
+        let [a, b, c] = *w.outputs();
+        assert_eq!((a, b), (v(0.4), v(0.49)));
+        assert!((c.x - 0.58).abs() < 1e-12, "{c}");
+        // Tick 8 gets its own pose on time: the next slot.
+        w.push_input(Vector3::zeros());
+        let p = w.place(8.0 * DT, v(0.64), DT, &integrator).unwrap();
+        assert_eq!(p, Placement::Next { filled: 0 });
+        assert_eq!(w.stats().late, 1);
+    }
+
+    #[test]
+    fn a_stream_one_tick_late_for_good_is_placed_every_tick() {
+        let mut w = cruising(5);
+        w.place(5.0 * DT, v(0.4), DT, &integrator).unwrap();
+        w.push_input(Vector3::zeros());
+        for k in 7..20 {
+            let t = (k - 1) as f64 * DT;
+            let p = w.place(t, v(4.0 * t), DT, &integrator).unwrap();
+            assert_eq!(p, Placement::Late { back: 1 }, "tick {k}");
+            w.push_input(Vector3::zeros());
+            for s in speeds(&w) {
+                assert!((s - 4.0).abs() < 1e-9, "tick {k}: {s}");
+            }
+        }
+    }
+
+    #[test]
+    fn repeated_and_older_poses_change_nothing_but_the_prediction() {
+        let mut w = cruising(5);
+        for t in [5.0 * DT, 4.0 * DT, 5.3 * DT, f64::NAN, f64::NEG_INFINITY] {
+            let p = w.place(t, v(99.0), DT, &integrator).unwrap();
+            assert_eq!(p, Placement::Predicted, "t {t}");
+            w.push_input(Vector3::zeros());
+            assert!(w.outputs().iter().all(|y| y.x < 1.0));
+        }
+    }
+
+    #[test]
+    fn a_long_gap_or_a_pose_behind_the_slots_restarts_the_padding() {
+        let mut w = cruising(5);
+        let t = 5.0 * DT + (MAX_FILL + 2) as f64 * DT;
+        assert_eq!(
+            w.place(t, v(7.0), DT, &integrator).unwrap(),
+            Placement::Start
+        );
+        assert_eq!(w.outputs(), &[v(7.0); 3]);
+        let mut w = cruising(5);
+        for _ in 0..8 {
+            w.place(5.0 * DT, v(0.4), DT, &integrator).unwrap();
+            w.push_input(Vector3::zeros());
+        }
+        // Eight predicted ticks; a new pose seven slots back.
+        assert_eq!(
+            w.place(6.0 * DT, v(0.48), DT, &integrator).unwrap(),
+            Placement::Start
+        );
+        assert_eq!(w.stats().restarts, 1);
+        let mut w = Window::new(Vector3::zeros());
+        assert!(matches!(
+            w.place(f64::NAN, v(0.0), DT, &integrator),
+            Err(ControlError::NonFiniteMeasurement)
+        ));
+        assert!(w.is_empty());
+    }
+}
