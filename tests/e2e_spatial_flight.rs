@@ -6,7 +6,10 @@
 //! away when such a tick entered the repeated pose into the window as new.
 //! Flown with the shipped defaults (multi-rate windows) and, as
 //! `..._classic_window`, with the paper's one-pose-per-tick window, where
-//! the controller predicts y_k for a tick without a new pose.
+//! the controller places each pose by its time (a tick without a new pose
+//! predicted, a late pose in its own tick's slot). On a starved machine
+//! the classic window once lost up to 0.67 m here beside three busy loops
+//! (`scripts/classic-window-under-load.sh`); both now hold 5–8 mm there.
 
 #[path = "support/mod.rs"]
 mod common;
@@ -23,8 +26,9 @@ fn config() -> String {
     )
 }
 
-/// Largest altitude error allowed while flying \[m\].
-const ALTITUDE_BOUND: f64 = 0.5;
+/// Largest altitude error allowed while flying \[m\] (both windows hold
+/// 5–8 mm, also beside six busy loops on two cores).
+const ALTITUDE_BOUND: f64 = 0.05;
 
 #[test]
 fn spatial_model_streams_at_50_hz_and_holds_altitude() {

@@ -73,6 +73,9 @@ fn cross_track(p: &Vector3<f64>) -> f64 {
 enum Tick {
     /// The pose taken at this tick.
     OnTime,
+    /// A pose taken this many hundredths of a step before the tick (a
+    /// starved sender's capture times), with its own time.
+    Early(u8),
     /// No new pose: the last one again, with its own time.
     NoPose,
     /// The pose of the previous tick (late by one).
@@ -145,6 +148,14 @@ fn fly(ticks: &dyn Fn(usize) -> Tick) -> Flown {
                     last = Measurement {
                         t,
                         position: sim.pos,
+                        yaw: 0.0,
+                    }
+                }
+                Tick::Early(percent) => {
+                    let f = f64::from(percent) / 100.0;
+                    last = Measurement {
+                        t: t - f * DT,
+                        position: sim.pos + (previous - sim.pos) * f,
                         yaw: 0.0,
                     }
                 }
@@ -261,19 +272,27 @@ fn a_stream_a_tick_late_for_good_flies_as_the_stream_on_time() {
     judge(&clean, &late, "every pose a tick late from tick 50");
 }
 
+/// Every pose taken up to 45 % of a step before its tick, at random.
+#[test]
+fn poses_taken_off_the_tick_are_moved_onto_it() {
+    let clean = fly(&|_| Tick::OnTime);
+    let early = fly(&|k| Tick::Early(((k * 37 + 11) % 46) as u8));
+    judge(&clean, &early, "capture times up to 0.45 δt early");
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(24))]
 
-    /// Any mix of late poses, ticks without a pose and skipped ticks, each
-    /// on up to a fifth of the ticks.
+    /// Any mix of late poses, ticks without a pose, skipped ticks and poses
+    /// taken early, each on up to a fifth of the ticks.
     #[test]
     fn any_mix_of_late_missing_and_skipped_holds_altitude(
-        events in prop::collection::vec((0u8..4, 0.0f64..1.0), TICKS),
+        events in prop::collection::vec((0u8..4, 0.0f64..1.0, 0u8..46), TICKS),
         rate in 0.02f64..0.2,
     ) {
         let clean = fly(&|_| Tick::OnTime);
         let perturbed = fly(&|k| {
-            let (kind, draw) = events[k];
+            let (kind, draw, percent) = events[k];
             if draw >= rate {
                 return Tick::OnTime;
             }
@@ -281,7 +300,7 @@ proptest! {
                 0 => Tick::NoPose,
                 1 => Tick::Late,
                 2 => Tick::Skipped,
-                _ => Tick::OnTime,
+                _ => Tick::Early(percent),
             }
         });
         judge(&clean, &perturbed, "a random mix");

@@ -18,13 +18,6 @@ pub const SLOTS: usize = 8;
 /// Skipped ticks [`Window::place`] fills at most (1 s at 50 Hz); a longer
 /// gap restarts the window from its padding.
 pub const MAX_FILL: usize = 50;
-/// A pose at least this many control steps after the newest slot counts
-/// the ticks in between as skipped (their number rounded); a nearer one is
-/// the next slot. 1.75 rather than 1.5, so that a stream a little faster
-/// than the loop (one tick in five or six finds two poses) is not read as
-/// skipped ticks.
-pub const FILL_FROM: f64 = 1.75;
-
 /// Type of the one-step prediction F⁻¹ the window is given:
 /// `y_{j+3} = F⁻¹(y_j, y_{j+1}, y_{j+2}; u_j)`.
 type NextOutput<'a> =
@@ -92,8 +85,11 @@ pub struct Window {
     hover: Vector3<f64>,
     /// Outputs pushed since construction or reset (saturating).
     measurements: usize,
-    /// Time of the newest output slot \[s\] (the poses' clock).
-    newest_t: f64,
+    /// Time of the first pose since the start \[s\] (the poses' clock): the
+    /// slots lie one step apart from it.
+    origin_t: f64,
+    /// The newest output slot's index on that grid.
+    newest: i64,
     /// Time of the newest pose placed \[s\] (−∞ before one).
     pose_t: f64,
     /// What placement has done.
@@ -110,7 +106,8 @@ impl Window {
             measured: [true; SLOTS],
             hover,
             measurements: 0,
-            newest_t: f64::NEG_INFINITY,
+            origin_t: f64::NEG_INFINITY,
+            newest: 0,
             pose_t: f64::NEG_INFINITY,
             stats: WindowStats::default(),
         }
@@ -166,19 +163,22 @@ impl Window {
     /// (after the last tick's input was pushed); then [`Window::outputs`]
     /// ends at y_k and [`Window::inputs`] at u_{k−1}.
     ///
-    /// With `x = (t − t_newest)/δt` (t_newest the newest slot's time; δt
-    /// `dt` \[s\]):
-    /// * `x ≥` [`FILL_FROM`]: `round(x) − 1` ticks were skipped (the
-    ///   autopilot held the last input): each gets F⁻¹'s prediction under
-    ///   that input, then y_k is the measurement ([`Placement::Next`]);
-    /// * `½ ≤ x <` [`FILL_FROM`]: y_k is the measurement;
-    /// * otherwise the pose belongs to slot `round(x)` from the newest: if
-    ///   it is at least half a step newer than the newest pose placed and
-    ///   that slot holds a prediction, it replaces it and the slots after
-    ///   it are predicted again ([`Placement::Late`]); either way y_k is
-    ///   predicted. A new pose older than the slots kept restarts the
-    ///   window ([`Placement::Start`]).
+    /// The slots lie on a grid one step δt (`dt` \[s\]) apart from the first
+    /// pose's time. A new pose (half a step newer than the newest placed)
+    /// goes to the grid slot nearest its time, `n = round((t − t_newest)/δt)`
+    /// slots from the newest, moved to the slot's time along the window's
+    /// velocity there (`y − v̂·(t − t_slot)`: off by `a·δt²/8` at most, where
+    /// snapping it would be off by `v·δt/2`):
+    /// * `n ≥ 1`: `n − 1` ticks were skipped (the autopilot held the last
+    ///   input): each gets F⁻¹'s prediction under that input, then y_k is
+    ///   the measurement ([`Placement::Next`]);
+    /// * `n ≤ 0`: if that slot holds a prediction, the pose replaces it and
+    ///   the slots after it are predicted again ([`Placement::Late`]); y_k
+    ///   is predicted. A new pose older than the slots kept, or a gap of
+    ///   more than [`MAX_FILL`] ticks, restarts the window
+    ///   ([`Placement::Start`]).
     ///
+    /// Otherwise (no new pose) y_k is predicted ([`Placement::Predicted`]).
     /// A non-finite `t` is no new pose. Errors: F⁻¹'s, or a non-finite `t`
     /// or `y` for the first measurement
     /// ([`ControlError::NonFiniteMeasurement`]). On error the window may be
@@ -194,13 +194,21 @@ impl Window {
             return self.start(t, y, false);
         }
         let new_pose = t.is_finite() && t >= self.pose_t + 0.5 * dt;
-        let x = (t - self.newest_t) / dt;
-        if new_pose && x >= 0.5 {
-            let filled = if x >= FILL_FROM {
-                x.round() as usize - 1
+        let origin_t = self.origin_t;
+        let slot_time = |i: i64| origin_t + i as f64 * dt;
+        let n = ((t - slot_time(self.newest)) / dt).round();
+        // Moves a pose at `t` to the time of slot `i` along velocity `v`
+        // (not at all when it is on the slot).
+        let onto = |i: i64, v: Vector3<f64>| {
+            let off = t - slot_time(i);
+            if off.abs() <= 1e-9 * dt {
+                y
             } else {
-                0
-            };
+                y - v * off
+            }
+        };
+        if new_pose && n >= 1.0 {
+            let filled = n as usize - 1;
             if filled > MAX_FILL {
                 return self.start(t, y, true);
             }
@@ -210,8 +218,10 @@ impl Window {
                 self.push_output(p, false);
                 self.push_input(held);
             }
-            self.push_output(y, true);
-            self.newest_t = t;
+            let p = self.predict_next(next_output)?;
+            let v = (p - self.outputs[SLOTS - 1]) / dt;
+            self.newest += filled as i64 + 1;
+            self.push_output(onto(self.newest, v), true);
             self.pose_t = t;
             self.stats.filled += filled as u64;
             return Ok(Placement::Next { filled });
@@ -220,12 +230,13 @@ impl Window {
         if new_pose {
             // Slot `idx` (newest = SLOTS − 1); re-predicting the slots
             // after it needs three before each.
-            let back = (-x.round()) as usize + 1;
+            let back = (-n) as usize + 1;
             let Some(idx) = SLOTS.checked_sub(back).filter(|i| *i >= 2) else {
                 return self.start(t, y, true);
             };
             if !self.measured[idx] {
-                self.outputs[idx] = y;
+                let v = (self.outputs[idx] - self.outputs[idx - 1]) / dt;
+                self.outputs[idx] = onto(self.newest + n as i64, v);
                 self.measured[idx] = true;
                 for i in idx + 1..SLOTS {
                     if !self.measured[i] {
@@ -237,7 +248,6 @@ impl Window {
                         self.outputs[i] = next_output(&before, &self.inputs[i - 3])?;
                     }
                 }
-                self.newest_t = t + (SLOTS - 1 - idx) as f64 * dt;
                 self.pose_t = t;
                 self.stats.late += 1;
                 placement = Placement::Late { back };
@@ -245,7 +255,7 @@ impl Window {
         }
         let p = self.predict_next(next_output)?;
         self.push_output(p, false);
-        self.newest_t += dt;
+        self.newest += 1;
         self.stats.predicted += 1;
         Ok(placement)
     }
@@ -257,7 +267,8 @@ impl Window {
         }
         self.reset();
         self.push_output(y, true);
-        self.newest_t = t;
+        self.origin_t = t;
+        self.newest = 0;
         self.pose_t = t;
         if restart {
             self.stats.restarts += 1;
@@ -448,6 +459,33 @@ mod tests {
             w.push_input(Vector3::zeros());
             for s in speeds(&w) {
                 assert!((s - 4.0).abs() < 1e-9, "tick {k}: {s}");
+            }
+        }
+    }
+
+    #[test]
+    fn poses_off_their_slot_times_are_moved_onto_them() {
+        // Capture times up to ±0.45 δt off the grid (a starved sender) and
+        // a 60 Hz stream: the window stays on the 4 m/s line at its slots.
+        for (name, times) in [
+            (
+                "jittered",
+                (6..40)
+                    .map(|k| (k as f64 + 0.45 * ((k * 7 % 5) as f64 / 2.0 - 1.0)) * DT)
+                    .collect::<Vec<_>>(),
+            ),
+            (
+                "60 Hz",
+                (0..40).map(|k| 0.12 + k as f64 / 60.0 + 0.001).collect(),
+            ),
+        ] {
+            let mut w = cruising(5);
+            for (tick, t) in times.into_iter().enumerate() {
+                w.place(t, v(4.0 * t), DT, &integrator).unwrap();
+                w.push_input(Vector3::zeros());
+                for s in speeds(&w) {
+                    assert!((s - 4.0).abs() < 1e-9, "{name}, tick {tick}: {s}");
+                }
             }
         }
     }

@@ -21,13 +21,16 @@
 //! reads as a stop or a doubled speed (at 4 m/s, 200 m/s² for one tick).
 //! On a real link poses and ticks are not one to one: a tick finds no new
 //! pose, a pose arrives a tick late, a starved machine skips ticks while
-//! the autopilot holds the last command. [`Window::place`] therefore puts
-//! each pose in its slot *by its time*: a tick without a new pose gets the
-//! model's prediction (F⁻¹ with the inputs sent); a pose that lands on a
-//! slot already predicted replaces it and the later slots are predicted
-//! again from it; skipped ticks are filled with predictions under the held
-//! input. The window keeps [`SLOTS`] slots for this. With one pose per
-//! tick, on time, it is the paper's window exactly.
+//! the autopilot holds the last command, a sender's capture times wander.
+//! [`Window::place`] therefore puts each pose in its slot *by its time*:
+//! the slots lie on a grid one step apart from the first pose's time, and
+//! a pose goes to the nearest slot, moved onto the slot's time along the
+//! window's velocity (off by at most `a·δt²/8`). A tick without a new pose
+//! gets the model's prediction (F⁻¹ with the inputs sent); a pose that
+//! lands on a slot already predicted replaces it and the later slots are
+//! predicted again from it; skipped ticks are filled with predictions
+//! under the held input. The window keeps [`SLOTS`] slots for this. With
+//! one pose per tick, on time, it is the paper's window exactly.
 //!
 //! # Multi-rate: [`MultiRateWindow`]
 //!
@@ -112,7 +115,7 @@
 
 mod classic;
 mod multi_rate;
-pub use classic::{FILL_FROM, INPUTS, MAX_FILL, OUTPUTS, Placement, SLOTS, Window, WindowStats};
+pub use classic::{INPUTS, MAX_FILL, OUTPUTS, Placement, SLOTS, Window, WindowStats};
 pub(crate) use multi_rate::input_lags;
 pub use multi_rate::{
     MAX_WINDOW, MultiRateEstimate, MultiRateSettings, MultiRateStats, MultiRateWindow, PoseSample,
