@@ -51,7 +51,7 @@ use nalgebra::Vector3;
 use crate::disturbance::{DisturbanceEstimate, DisturbanceEstimator};
 use crate::model::ControlModel;
 use crate::optimise::{AxisBounds, AxisCascade, ConeBounds, PairCascade, invalid};
-use crate::window::{MultiRateWindow, Window};
+use crate::window::{INPUTS, MultiRateWindow, Placement, SLOTS, Window};
 use crate::{ControlError, Controller, Measurement, ReferenceSource, TickOutput, limit_tilt};
 
 /// Most ticks [`Controller::plan_fallback`] flies the last good plan (and
@@ -409,6 +409,9 @@ struct FixedOutputs {
     fixed: [Vector3<f64>; 3],
     /// The input sent at k−1.
     previous_input: Vector3<f64>,
+    /// Skipped ticks the classic window filled before y_k (0 in
+    /// multi-rate).
+    filled: usize,
 }
 
 impl DfMpc {
@@ -438,14 +441,19 @@ impl DfMpc {
                 window,
                 fixed: e.fixed,
                 previous_input: e.previous_input,
+                filled: 0,
             });
         }
-        window.place(
+        let placement = window.place(
             measurement.t,
             measurement.position,
             self.model.dt(),
             &|y, u| self.f_inv(y, u, d),
         )?;
+        let filled = match placement {
+            Placement::Next { filled } => filled,
+            _ => 0,
+        };
         let [ym2, ym1, y0] = *window.outputs();
         let [u2, u1] = *window.inputs();
         let y1 = self.f_inv(&[ym2, ym1, y0], &u2, d)?;
@@ -454,6 +462,7 @@ impl DfMpc {
             window,
             fixed: [y0, y1, y2],
             previous_input: u1,
+            filled,
         })
     }
 
@@ -465,6 +474,7 @@ impl DfMpc {
         mut window: Window,
         t: f64,
         fixed: &[Vector3<f64>; 3],
+        filled: usize,
         sent: &Vector3<f64>,
         saturated: bool,
     ) {
@@ -477,6 +487,15 @@ impl DfMpc {
                 // got through `observe`, never the window's estimate of y_k.
                 e.record_input(t, sent, saturated);
             } else {
+                // Skipped ticks the window filled, under the input held:
+                // the estimator's own window stays a tick apart too (left
+                // out, a skipped tick biased its horizontal estimate by
+                // 0.1 m/s²: `classic_window_timing.rs`).
+                let slots = window.slot_outputs();
+                let held = window.inputs()[INPUTS - 1];
+                for back in (1..=filled).rev() {
+                    e.record(&slots[SLOTS - 1 - back], &held, false);
+                }
                 // A tick without a new pose: the predicted y_k stands in.
                 e.record(&fixed[0], sent, saturated);
             }
@@ -557,6 +576,7 @@ impl Controller for DfMpc {
             window,
             fixed,
             previous_input,
+            filled,
         } = self.fixed_outputs(measurement, &d)?;
         // 2b. Across the inputs sent and not yet in effect (input delay):
         // the plan starts at k + d.
@@ -598,7 +618,7 @@ impl Controller for DfMpc {
         let (plan4, u) = self.map_through_f(y0, &d)?;
         // 6. Saturation; the sent input into the window.
         let (sent, saturated) = self.saturate(u);
-        self.commit(window, measurement.t, &fixed, &sent, saturated);
+        self.commit(window, measurement.t, &fixed, filled, &sent, saturated);
         self.keep_plan(y0);
         self.keep_sent_offset(&plan4, &d);
         self.learned_after_tick(measurement.t, &plan4, &sent, &d);
@@ -656,7 +676,12 @@ impl Controller for DfMpc {
                 }
             }
         }
-        let FixedOutputs { window, fixed, .. } = self.fixed_outputs(&m, &d).ok()?;
+        let FixedOutputs {
+            window,
+            fixed,
+            filled,
+            ..
+        } = self.fixed_outputs(&m, &d).ok()?;
         // Step s of the plan is in effect at (good tick + d + s): sending
         // it now keeps the delay's bookkeeping.
         let plan4: [Vector3<f64>; 4] = std::array::from_fn(|j| {
@@ -671,7 +696,7 @@ impl Controller for DfMpc {
             return None;
         }
         let (sent, saturated) = self.saturate(u);
-        self.commit(window, m.t, &fixed, &sent, saturated);
+        self.commit(window, m.t, &fixed, filled, &sent, saturated);
         self.keep_sent_offset(&plan4, &d);
         self.plan = match previous {
             PlanState::Fresh { .. } => PlanState::Fresh { flown: step },

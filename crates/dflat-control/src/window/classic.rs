@@ -293,6 +293,12 @@ impl Window {
         self.outputs.last_chunk().expect("SLOTS ≥ OUTPUTS")
     }
 
+    /// Every output slot kept, oldest first \[m\] (the last [`OUTPUTS`] are
+    /// [`Window::outputs`]).
+    pub fn slot_outputs(&self) -> &[Vector3<f64>; SLOTS] {
+        &self.outputs
+    }
+
     /// Sent inputs `[u_{k−2}, u_{k−1}]`, oldest first.
     pub fn inputs(&self) -> &[Vector3<f64>; INPUTS] {
         self.inputs.last_chunk().expect("SLOTS ≥ INPUTS")
