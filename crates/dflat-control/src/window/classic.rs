@@ -197,16 +197,9 @@ impl Window {
         let origin_t = self.origin_t;
         let slot_time = |i: i64| origin_t + i as f64 * dt;
         let n = ((t - slot_time(self.newest)) / dt).round();
-        // Moves a pose at `t` to the time of slot `i` along velocity `v`
-        // (not at all when it is on the slot).
-        let onto = |i: i64, v: Vector3<f64>| {
-            let off = t - slot_time(i);
-            if off.abs() <= 1e-9 * dt {
-                y
-            } else {
-                y - v * off
-            }
-        };
+        // How far the pose is from slot `i`'s time \[s\]: none when on it
+        // (then no velocity is needed).
+        let off = |i: i64| Some(t - slot_time(i)).filter(|o| o.abs() > 1e-9 * dt);
         if new_pose && n >= 1.0 {
             let filled = n as usize - 1;
             if filled > MAX_FILL {
@@ -218,10 +211,16 @@ impl Window {
                 self.push_output(p, false);
                 self.push_input(held);
             }
-            let p = self.predict_next(next_output)?;
-            let v = (p - self.outputs[SLOTS - 1]) / dt;
-            self.newest += filled as i64 + 1;
-            self.push_output(onto(self.newest, v), true);
+            let slot = self.newest + filled as i64 + 1;
+            let onto = match off(slot) {
+                // Moved onto the slot's time along the velocity there.
+                Some(o) => {
+                    y - (self.predict_next(next_output)? - self.outputs[SLOTS - 1]) * (o / dt)
+                }
+                None => y,
+            };
+            self.newest = slot;
+            self.push_output(onto, true);
             self.pose_t = t;
             self.stats.filled += filled as u64;
             return Ok(Placement::Next { filled });
@@ -235,8 +234,12 @@ impl Window {
                 return self.start(t, y, true);
             };
             if !self.measured[idx] {
-                let v = (self.outputs[idx] - self.outputs[idx - 1]) / dt;
-                self.outputs[idx] = onto(self.newest + n as i64, v);
+                if let Some(o) = off(self.newest + n as i64) {
+                    let v = (self.outputs[idx] - self.outputs[idx - 1]) / dt;
+                    self.outputs[idx] = y - v * o;
+                } else {
+                    self.outputs[idx] = y;
+                }
                 self.measured[idx] = true;
                 for i in idx + 1..SLOTS {
                     if !self.measured[i] {
