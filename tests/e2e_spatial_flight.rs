@@ -63,4 +63,17 @@ fn check(name: &str, config: &str) {
         altitude_error < ALTITUDE_BOUND,
         "altitude error {altitude_error:.2} m"
     );
+    // The classic window says in the summary what it did with poses off
+    // their ticks; the multi-rate window has no such line.
+    let summary = flight.summary().expect("the daemon's summary");
+    let window = &summary["pose_window"];
+    eprintln!("{name}: pose window {window}");
+    if config.contains("multi_rate = false") {
+        let count = |k: &str| window[k].as_u64().expect("a count");
+        assert_eq!(count("restarts"), 0, "{window}");
+        let ticks = summary["ticks"].as_u64().expect("ticks");
+        assert!(count("predicted") + count("filled") <= ticks, "{window}");
+    } else {
+        assert!(window.is_null(), "{window}");
+    }
 }

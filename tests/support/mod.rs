@@ -296,6 +296,10 @@ pub fn send(socket: &UdpSocket, to: SocketAddr, sys: u8, comp: u8, seq: u8, msg:
     socket.send_to(frame.as_bytes(), to).expect("send");
 }
 
+/// The daemon's summary file in a [`fly_in_process`] flight's directory
+/// (`--summary-json`).
+pub const SUMMARY_JSON: &str = "summary.json";
+
 /// What [`fly_in_process`] saw.
 pub struct Flight {
     /// Every frame the daemon sent, in arrival order.
@@ -309,6 +313,13 @@ pub struct Flight {
 }
 
 impl Flight {
+    /// The daemon's shutdown summary (`--summary-json`), parsed; `None`
+    /// when it did not write one (no clean exit).
+    pub fn summary(&self) -> Option<serde_json::Value> {
+        let text = std::fs::read_to_string(self.dir.join(SUMMARY_JSON)).ok()?;
+        serde_json::from_str(&text).ok()
+    }
+
     /// How long the daemon streamed, on its own clock: from its first
     /// command to its last in its records (the flight CSV's tick wake
     /// times) \[s\]; 0 without two.
@@ -508,7 +519,13 @@ pub fn fly_in_process_until(
         ..TapOptions::default()
     };
     let (sim, tap) = tapped_sitl(&config, options);
-    let mut daemon = spawn_daemon(&dir, &config, sim.local_addr());
+    let summary = dir.join(SUMMARY_JSON).display().to_string();
+    let mut daemon = spawn_daemon_with(
+        &dir,
+        &config,
+        sim.local_addr(),
+        &["--summary-json", summary.as_str()],
+    );
     let start = Instant::now();
     let mut frames = Vec::new();
     let mut first_target: Option<Instant> = None;

@@ -167,6 +167,13 @@ pub trait Controller: Send {
     fn multi_rate(&self) -> bool {
         false
     }
+    /// What the classic DF-MPC window's time placement did
+    /// ([`window::Window::place`]: ticks predicted, skipped ticks filled,
+    /// late poses placed, restarts); `None` for other controllers and
+    /// windows. Default `None`.
+    fn window_stats(&self) -> Option<window::WindowStats> {
+        None
+    }
     /// A raw pose sample at its measurement time `sample.t` \[s\] (multi-rate
     /// mode; see the trait docs). Bad or stale samples are dropped. Default:
     /// ignored.

@@ -360,6 +360,10 @@ pub struct FlightSummary {
     /// What the controller's successful ticks reported (constrained
     /// solves, solver fallbacks, input saturation).
     pub solves: SolveCounts,
+    /// What the classic DF-MPC window (`controller.dfmpc.multi_rate =
+    /// false`) did with poses off their ticks: ticks predicted, skipped
+    /// ticks filled, late poses placed, restarts; `None` otherwise.
+    pub pose_window: Option<dflat_control::window::WindowStats>,
     /// The link's guards: foreign senders, reconnects, the command slot,
     /// replies, link-task stalls.
     pub link_guard: crate::link_health::LinkGuardSummary,
@@ -550,6 +554,13 @@ impl FlightSummary {
             "  solves        {} constrained ({} by clarabel after the banded solver, {} by the cone's interior point), {} saturated by the controller",
             s.constrained, s.qp_fallbacks, s.cone_interior_point, s.saturated
         )?;
+        if let Some(w) = &self.pose_window {
+            writeln!(
+                f,
+                "  pose window   classic: {} ticks predicted (no new pose), {} skipped ticks filled, {} late poses placed, {} restarts",
+                w.predicted, w.filled, w.late, w.restarts
+            )?;
+        }
         let lg = &self.link_guard;
         writeln!(
             f,

@@ -637,6 +637,10 @@ impl Controller for DfMpc {
         self.multi.is_some()
     }
 
+    fn window_stats(&self) -> Option<crate::window::WindowStats> {
+        self.multi.is_none().then(|| self.window.stats())
+    }
+
     /// Flies the last good plan: step s = 1, 2, … of it through F (with
     /// the current disturbance estimate) and saturation. A non-finite
     /// measurement is not used (classic mode: y_k is the model's

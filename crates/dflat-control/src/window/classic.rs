@@ -50,7 +50,7 @@ pub enum Placement {
 }
 
 /// What the window's placement has done since construction (never reset).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct WindowStats {
     /// Ticks whose y_k is a prediction ([`Placement::Predicted`] and
     /// [`Placement::Late`]).

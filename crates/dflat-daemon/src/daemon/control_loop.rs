@@ -365,6 +365,7 @@ impl ControlLoop {
             disturbance: counts.disturbance,
             guards: counts.guards,
             solves: counts.solves,
+            pose_window: self.core.window_stats(),
         }
     }
 }

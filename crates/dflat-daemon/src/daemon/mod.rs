@@ -210,6 +210,7 @@ struct ControlReport {
     disturbance: Option<DisturbanceSummary>,
     guards: GuardCounts,
     solves: SolveCounts,
+    pose_window: Option<dflat_control::window::WindowStats>,
 }
 
 /// What the receive task counted.
@@ -407,6 +408,7 @@ impl DaemonHandle {
             disturbance: control.disturbance,
             guards: control.guards,
             solves: control.solves,
+            pose_window: control.pose_window,
             link_guard,
             records: crate::record_store::finish_summary(records_summary, &records_budget),
         };

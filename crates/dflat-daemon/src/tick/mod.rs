@@ -264,6 +264,12 @@ impl ControlCore {
         self.controller.name()
     }
 
+    /// What the classic DF-MPC window's time placement did (`None` for
+    /// other controllers and windows).
+    pub fn window_stats(&self) -> Option<dflat_control::window::WindowStats> {
+        self.controller.window_stats()
+    }
+
     /// The counters so far.
     pub fn counts(&self) -> &CoreCounts {
         &self.counts
