@@ -38,6 +38,8 @@ pub(super) fn next_output(
 pub(super) struct Score {
     /// The newest measured outputs, oldest first \[m\].
     recent: [Vector3<f64>; 3],
+    /// Their times \[s\] (the poses' clock), oldest first.
+    recent_t: [f64; 3],
     /// How many of `recent` are filled (up to 3).
     filled: usize,
     /// The parametric model's acceleration (no drag) the commands sent so
@@ -305,23 +307,42 @@ impl DfMpc {
         let s = &mut self.learned_score;
         if fresh {
             s.recent = [s.recent[1], s.recent[2], measurement.position];
+            s.recent_t = [s.recent_t[1], s.recent_t[2], measurement.t];
             s.filled = (s.filled + 1).min(3);
             // The second difference centred on y_{k−1} is the Euler
             // step's acceleration at k − 2: the one acting then (made
-            // by the command of tick k − 2 − d).
+            // by the command of tick k − 2 − d). Poses off the step (a
+            // starved sender's capture times) take the second difference
+            // over their own times, its acceleration a step before the
+            // middle one's.
             let dt = self.model.dt();
-            let at = measurement.t - 2.0 * dt;
+            let [t2, t1, t0] = s.recent_t;
+            let uniform =
+                ((t0 - t1) - dt).abs() <= 1e-9 * dt && ((t1 - t2) - dt).abs() <= 1e-9 * dt;
+            let at = if uniform {
+                measurement.t - 2.0 * dt
+            } else {
+                t1 - dt
+            };
             let parametric = s.ticks[..s.ticked]
                 .iter()
                 .rev()
                 .find(|(acts, _)| (acts - at).abs() <= 0.5 * dt)
                 .map(|(_, a)| *a);
             if s.filled == 3
+                && t0 > t1
+                && t1 > t2
                 && let Some(parametric) = parametric
             {
                 let [y2, y1, y0] = s.recent;
-                let measured = (y0 - y1 * 2.0 + y2) / (dt * dt);
-                let v = (y0 - y2) / (2.0 * dt);
+                let (measured, v) = if uniform {
+                    ((y0 - y1 * 2.0 + y2) / (dt * dt), (y0 - y2) / (2.0 * dt))
+                } else {
+                    (
+                        ((y0 - y1) / (t0 - t1) - (y1 - y2) / (t1 - t2)) * (2.0 / (t0 - t2)),
+                        (y0 - y2) / (t0 - t2),
+                    )
+                };
                 let mut unexplained =
                     measured - (parametric + self.model.drag_acceleration(&v, &parametric));
                 if let ControlModel::Planar(_) = self.model {

@@ -170,24 +170,30 @@ fn a_learned_residual_helps_inside_its_support_and_is_inert_outside() {
     assert_eq!(slow_status, Some(LearnedStatus::OutOfSupport));
 }
 
-/// With capture times up to 0.45 δt early at random (a starved sender) the
-/// classic window's scoring, which takes three fresh poses as a step
-/// apart, sees their spacing as acceleration (its running error 0.41 m/s²
-/// against 0.03 on time), but the parametric model's score sees the same:
-/// the matched residual stays active and helps as on time.
+/// With capture times up to 0.45 δt early at random (a starved sender)
+/// the classic window's scoring takes the second difference over the
+/// poses' own times: the matched residual's running error stays where it
+/// is on time (0.031 m/s²; as if a step apart, it was 0.41), the residual
+/// stays active and helps, and another airframe's still fades.
 #[test]
-fn a_starved_senders_capture_times_leave_the_matched_residual_active() {
+fn a_starved_senders_capture_times_are_scored_at_their_times() {
     let early = |k: usize| ((k * 37 + 11) % 46) as f64 / 100.0;
     let (stock, _, _) = fly_timed(None, 9.0, 1.0, false, 0, &early);
     let (matched, status, running) =
         fly_timed(Some(residual(0.03, 0.2, 12.0)), 9.0, 1.0, false, 0, &early);
     let running = running.unwrap();
+    let (other, other_status, _) =
+        fly_timed(Some(residual(0.09, 0.6, 12.0)), 9.0, 1.0, false, 0, &early);
     eprintln!(
         "circle 9 m/s p95, capture times early: stock {stock:.4} m, learned {matched:.4} m \
-         ({status:?}), its running error {running:.3} m/s²"
+         ({status:?}), its running error {running:.3} m/s²; another airframe's {other:.4} m \
+         ({other_status:?})"
     );
     assert!(matched < 0.7 * stock, "{matched} vs {stock}");
     assert_eq!(status, Some(LearnedStatus::Active));
+    assert!(running < 0.1, "running error {running} m/s²");
+    assert!(other <= 1.05 * stock, "{other} vs {stock}");
+    assert_eq!(other_status, Some(LearnedStatus::ErrorGrew));
 }
 
 /// A residual learned on another airframe (three times the drag), flown
