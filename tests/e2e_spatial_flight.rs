@@ -77,3 +77,59 @@ fn check(name: &str, config: &str) {
         assert!(window.is_null(), "{window}");
     }
 }
+
+/// The classic window through the SITL's pose faults while flying the L
+/// at 4 m/s: a pose dropped, three in a row, and poses 10 ms and 30 ms
+/// late, each 0.3 s apart from 0.8 s on. Each tick without its pose is
+/// predicted (the summary counts them), and the altitude holds as on
+/// time.
+#[test]
+fn the_classic_window_flies_through_dropped_and_late_poses() {
+    let config = format!("{}[controller.dfmpc]\nmulti_rate = false\n", config());
+    let mut next = 0;
+    let end = FlightEnd {
+        fly: Duration::from_secs(6),
+        cap: Duration::from_secs(20),
+        settle: Duration::ZERO,
+    };
+    let flight = fly_in_process_with(
+        "spatial-flight-classic-faults",
+        &config,
+        end,
+        |_| false,
+        |sim, since| {
+            let faults: [&dyn Fn(&dflat_sitl::SitlHandle); 6] = [
+                &|s| s.drop_next_poses(1),
+                &|s| s.delay_next_pose(Duration::from_millis(10)),
+                &|s| s.drop_next_poses(3),
+                &|s| s.delay_next_pose(Duration::from_millis(30)),
+                &|s| s.drop_next_poses(2),
+                &|s| s.delay_next_pose(Duration::from_millis(10)),
+            ];
+            if next < faults.len() && since >= Duration::from_millis(800 + 300 * next as u64) {
+                faults[next](sim);
+                next += 1;
+            }
+        },
+    );
+    assert_eq!(next, 6, "the faults were not all injected");
+    let altitude_error = flight
+        .report
+        .trace
+        .iter()
+        .map(|s| (s.position[2] + 10.0).abs())
+        .fold(0.0, f64::max);
+    let summary = flight.summary().expect("the daemon's summary");
+    let window = &summary["pose_window"];
+    eprintln!(
+        "classic through faults: max altitude error {altitude_error:.3} m, pose window {window}"
+    );
+    assert!(
+        altitude_error < ALTITUDE_BOUND,
+        "altitude error {altitude_error:.3} m"
+    );
+    // Six poses dropped: six ticks at least found no new pose.
+    let predicted = window["predicted"].as_u64().expect("a count");
+    assert!(predicted >= 6, "{window}");
+    assert_eq!(window["restarts"].as_u64(), Some(0), "{window}");
+}

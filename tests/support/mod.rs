@@ -511,6 +511,19 @@ pub fn fly_in_process_until(
     end: FlightEnd,
     done: impl Fn([f64; 3]) -> bool,
 ) -> Flight {
+    fly_in_process_with(name, config_text, end, done, |_, _| {})
+}
+
+/// As [`fly_in_process_until`], handing the SITL to `during` with the time
+/// since the daemon's first command (zero before it) at every frame the
+/// daemon sends: a test's faults (dropped or late poses) go in there.
+pub fn fly_in_process_with(
+    name: &str,
+    config_text: &str,
+    end: FlightEnd,
+    done: impl Fn([f64; 3]) -> bool,
+    mut during: impl FnMut(&sitl::SitlHandle, Duration),
+) -> Flight {
     let dir = scratch(name);
     let text = config_text.replace("@DIR@", &dir.display().to_string());
     let (config, _) = write_daemon_config(&dir, &format!("{name}.toml"), &text);
@@ -539,6 +552,7 @@ pub fn fly_in_process_until(
                 first_target.get_or_insert(f.at);
             }
             frames.push(f);
+            during(&sim, first_target.map_or(Duration::ZERO, |t| t.elapsed()));
         }
         if done_at.is_none() && done(sim.truth().position) {
             done_at = Some(Instant::now());
