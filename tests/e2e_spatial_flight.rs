@@ -26,6 +26,17 @@ fn config() -> String {
     )
 }
 
+/// The largest distance of the SITL's true altitude from the L's 10 m
+/// while flying \[m\].
+fn largest_altitude_error(flight: &Flight) -> f64 {
+    flight
+        .report
+        .trace
+        .iter()
+        .map(|s| (s.position[2] + 10.0).abs())
+        .fold(0.0, f64::max)
+}
+
 /// Largest altitude error allowed while flying \[m\] (both windows hold
 /// 5–8 mm, also beside six busy loops on two cores).
 const ALTITUDE_BOUND: f64 = 0.05;
@@ -46,12 +57,7 @@ fn check(name: &str, config: &str) {
     let n = flight.attitude_targets().count();
     let streamed_s = flight.streamed_s();
     let expected = streamed_s * 50.0;
-    let altitude_error = flight
-        .report
-        .trace
-        .iter()
-        .map(|s| (s.position[2] + 10.0).abs())
-        .fold(0.0, f64::max);
+    let altitude_error = largest_altitude_error(&flight);
     eprintln!(
         "{name}: {n} attitude targets in {streamed_s:.2} s of the daemon's stream, max altitude error {altitude_error:.3} m"
     );
@@ -86,6 +92,14 @@ fn check(name: &str, config: &str) {
 #[test]
 fn the_classic_window_flies_through_dropped_and_late_poses() {
     let config = format!("{}[controller.dfmpc]\nmulti_rate = false\n", config());
+    let faults: [&dyn Fn(&dflat_sitl::SitlHandle); 6] = [
+        &|s| s.drop_next_poses(1),
+        &|s| s.delay_next_pose(Duration::from_millis(10)),
+        &|s| s.drop_next_poses(3),
+        &|s| s.delay_next_pose(Duration::from_millis(30)),
+        &|s| s.drop_next_poses(2),
+        &|s| s.delay_next_pose(Duration::from_millis(10)),
+    ];
     let mut next = 0;
     let end = FlightEnd {
         fly: Duration::from_secs(6),
@@ -98,27 +112,14 @@ fn the_classic_window_flies_through_dropped_and_late_poses() {
         end,
         |_| false,
         |sim, since| {
-            let faults: [&dyn Fn(&dflat_sitl::SitlHandle); 6] = [
-                &|s| s.drop_next_poses(1),
-                &|s| s.delay_next_pose(Duration::from_millis(10)),
-                &|s| s.drop_next_poses(3),
-                &|s| s.delay_next_pose(Duration::from_millis(30)),
-                &|s| s.drop_next_poses(2),
-                &|s| s.delay_next_pose(Duration::from_millis(10)),
-            ];
             if next < faults.len() && since >= Duration::from_millis(800 + 300 * next as u64) {
                 faults[next](sim);
                 next += 1;
             }
         },
     );
-    assert_eq!(next, 6, "the faults were not all injected");
-    let altitude_error = flight
-        .report
-        .trace
-        .iter()
-        .map(|s| (s.position[2] + 10.0).abs())
-        .fold(0.0, f64::max);
+    assert_eq!(next, faults.len(), "the faults were not all injected");
+    let altitude_error = largest_altitude_error(&flight);
     let summary = flight.summary().expect("the daemon's summary");
     let window = &summary["pose_window"];
     eprintln!(

@@ -243,12 +243,7 @@ impl Window {
                 self.measured[idx] = true;
                 for i in idx + 1..SLOTS {
                     if !self.measured[i] {
-                        let before: [Vector3<f64>; 3] = [
-                            self.outputs[i - 3],
-                            self.outputs[i - 2],
-                            self.outputs[i - 1],
-                        ];
-                        self.outputs[i] = next_output(&before, &self.inputs[i - 3])?;
+                        self.outputs[i] = self.predict_at(i, next_output)?;
                     }
                 }
                 self.pose_t = t;
@@ -282,12 +277,14 @@ impl Window {
     /// F⁻¹ over the newest three slots with the input of the oldest of
     /// them: the output of the slot after the newest.
     fn predict_next(&self, next_output: NextOutput<'_>) -> Result<Vector3<f64>, FlatError> {
-        let before: [Vector3<f64>; 3] = [
-            self.outputs[SLOTS - 3],
-            self.outputs[SLOTS - 2],
-            self.outputs[SLOTS - 1],
-        ];
-        next_output(&before, &self.inputs[SLOTS - 3])
+        self.predict_at(SLOTS, next_output)
+    }
+
+    /// F⁻¹ over the three slots before slot `i` (3 ..= [`SLOTS`]; `SLOTS`
+    /// is the slot after the newest) with the input of the oldest of them.
+    fn predict_at(&self, i: usize, next_output: NextOutput<'_>) -> Result<Vector3<f64>, FlatError> {
+        let before: &[Vector3<f64>; 3] = self.outputs[i - 3..i].try_into().expect("three slots");
+        next_output(before, &self.inputs[i - 3])
     }
 
     /// Measured outputs `[y^m_{k−2}, y^m_{k−1}, y^m_k]`, oldest first (some
