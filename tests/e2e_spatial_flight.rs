@@ -92,6 +92,92 @@ fn check(name: &str, config: &str) {
 #[test]
 fn the_classic_window_flies_through_dropped_and_late_poses() {
     let config = format!("{}[controller.dfmpc]\nmulti_rate = false\n", config());
+    let flight = fly_through_pose_faults("spatial-flight-classic-faults", &config);
+    let altitude_error = largest_altitude_error(&flight);
+    let summary = flight.summary().expect("the daemon's summary");
+    let window = &summary["pose_window"];
+    eprintln!(
+        "classic through faults: max altitude error {altitude_error:.3} m, pose window {window}"
+    );
+    assert!(
+        altitude_error < ALTITUDE_BOUND,
+        "altitude error {altitude_error:.3} m"
+    );
+    // Six poses dropped: six ticks at least found no new pose.
+    let predicted = window["predicted"].as_u64().expect("a count");
+    assert!(predicted >= 6, "{window}");
+    assert_eq!(window["restarts"].as_u64(), Some(0), "{window}");
+}
+
+/// The baselines on finite differences (`state_source =
+/// "finite-difference"`, the paper's §VI state) through the same pose
+/// faults, against their own flight without them: each pose differenced
+/// at its capture time, a tick without one carried forward. Differenced a
+/// tick apart, Flatness MPC's first tick without a pose asked for negative
+/// thrust (a control error) and PD's command stepped.
+#[test]
+fn the_finite_difference_baselines_fly_through_dropped_and_late_poses() {
+    for kind in ["fmpc", "pd"] {
+        let config = format!(
+            "{}[controller]\nkind = \"{kind}\"\n[controller.estimator]\nstate_source = \"finite-difference\"\n",
+            config()
+        );
+        let judged = |flight: &Flight| {
+            let summary = flight.summary().expect("the daemon's summary");
+            let errors = summary["control_errors"].as_u64().expect("a count");
+            // The commands from just before the first fault to just after
+            // the last (the start's own step is not the faults').
+            let first = flight.attitude_targets().next().map(|(f, _)| f.at).unwrap();
+            let window = first + FAULTS_FROM - Duration::from_millis(100)
+                ..first + FAULTS_UNTIL + Duration::from_millis(200);
+            let step = largest_tilt_step_deg(
+                flight
+                    .attitude_targets()
+                    .filter(|(f, _)| window.contains(&f.at))
+                    .map(|(_, d)| d),
+            );
+            (largest_altitude_error(flight), errors, step)
+        };
+        let clean = judged(&fly_in_process(
+            &format!("spatial-flight-{kind}"),
+            &config,
+            Duration::from_secs(6),
+        ));
+        let faults = judged(&fly_through_pose_faults(
+            &format!("spatial-flight-{kind}-faults"),
+            &config,
+        ));
+        eprintln!(
+            "{kind} on finite differences (max altitude error [m], control errors, \
+             largest tilt step [deg/tick]): {clean:.3?} without faults, {faults:.3?} through them"
+        );
+        assert_eq!(faults.1, 0, "{kind}: control errors");
+        assert!(
+            faults.0 <= 2.0 * clean.0 + 0.02,
+            "{kind}: altitude error {:.3} m against {:.3} m without faults",
+            faults.0,
+            clean.0
+        );
+        assert!(
+            faults.2 <= clean.2 + 2.0,
+            "{kind}: tilt step {:.2}°/tick against {:.2}°/tick without faults",
+            faults.2,
+            clean.2
+        );
+    }
+}
+
+/// The first pose fault, after the daemon's first command.
+const FAULTS_FROM: Duration = Duration::from_millis(800);
+/// From one pose fault to the next.
+const FAULT_SPACING: Duration = Duration::from_millis(300);
+/// The last pose fault (the sixth).
+const FAULTS_UNTIL: Duration = Duration::from_millis(800 + 5 * 300);
+
+/// Flies the L at 4 m/s through the SITL's pose faults: a pose dropped,
+/// three in a row, two, and poses 10 ms and 30 ms late, each
+/// [`FAULT_SPACING`] apart from [`FAULTS_FROM`] on.
+fn fly_through_pose_faults(name: &str, config: &str) -> Flight {
     let faults: [&dyn Fn(&dflat_sitl::SitlHandle); 6] = [
         &|s| s.drop_next_poses(1),
         &|s| s.delay_next_pose(Duration::from_millis(10)),
@@ -107,30 +193,17 @@ fn the_classic_window_flies_through_dropped_and_late_poses() {
         settle: Duration::ZERO,
     };
     let flight = fly_in_process_with(
-        "spatial-flight-classic-faults",
-        &config,
+        name,
+        config,
         end,
         |_| false,
         |sim, since| {
-            if next < faults.len() && since >= Duration::from_millis(800 + 300 * next as u64) {
+            if next < faults.len() && since >= FAULTS_FROM + FAULT_SPACING * next as u32 {
                 faults[next](sim);
                 next += 1;
             }
         },
     );
     assert_eq!(next, faults.len(), "the faults were not all injected");
-    let altitude_error = largest_altitude_error(&flight);
-    let summary = flight.summary().expect("the daemon's summary");
-    let window = &summary["pose_window"];
-    eprintln!(
-        "classic through faults: max altitude error {altitude_error:.3} m, pose window {window}"
-    );
-    assert!(
-        altitude_error < ALTITUDE_BOUND,
-        "altitude error {altitude_error:.3} m"
-    );
-    // Six poses dropped: six ticks at least found no new pose.
-    let predicted = window["predicted"].as_u64().expect("a count");
-    assert!(predicted >= 6, "{window}");
-    assert_eq!(window["restarts"].as_u64(), Some(0), "{window}");
+    flight
 }

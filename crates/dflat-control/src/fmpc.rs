@@ -34,6 +34,7 @@ use dflat_model::attitude::{pitch_roll_from_ratios, thrust_pitch_roll};
 use dflat_model::{FlatError, Frame};
 use nalgebra::{DMatrix, Vector3};
 
+use crate::estimator::differences::PoseDifferences;
 use crate::estimator::{BaselineEstimator, StateSource};
 use crate::{
     AttitudeCommand, ControlError, ControlModel, Controller, Limit, Measurement, ReferenceSource,
@@ -137,9 +138,9 @@ pub struct FlatnessMpc {
     /// Reference over the horizon, j = 0..=N (pre-allocated).
     refs: Vec<Vector3<f64>>,
     /// Measurements y_{k−2}, y_{k−1}, y_k (NED \[m\]).
-    hist: [Vector3<f64>; 3],
-    /// Whether `hist` holds a measurement yet.
-    started: bool,
+    /// The finite-difference state's poses at their capture times
+    /// ([`StateSource::FiniteDifference`]).
+    differences: PoseDifferences,
     /// The state estimator ([`StateSource::Estimator`]), else None.
     estimator: Option<BaselineEstimator>,
 }
@@ -271,8 +272,7 @@ impl FlatnessMpc {
             axes,
             gains,
             refs: vec![Vector3::zeros(); n + 1],
-            hist: [Vector3::zeros(); 3],
-            started: false,
+            differences: PoseDifferences::new(dt),
             estimator: BaselineEstimator::from_source(settings.state, &model)?,
         })
     }
@@ -391,14 +391,18 @@ impl Controller for FlatnessMpc {
         reference: &mut dyn ReferenceSource,
     ) -> Result<TickOutput, ControlError> {
         let estimate = BaselineEstimator::checked_state(self.estimator.as_ref(), measurement)?;
-        let y = match &estimate {
-            Some(s) => Vector3::new(s[0][0], s[1][0], s[2][0]),
-            None => measurement.position,
+        let mut differences = self.differences.clone();
+        let differenced = match &estimate {
+            Some(_) => None,
+            None => {
+                differences.tick(measurement.t, &measurement.position);
+                differences.state()
+            }
         };
-        let hist = if self.started {
-            [self.hist[1], self.hist[2], y]
-        } else {
-            [y; 3]
+        let y = match (&estimate, &differenced) {
+            (Some(s), _) => Vector3::new(s[0][0], s[1][0], s[2][0]),
+            (None, Some(d)) => d.position,
+            (None, None) => measurement.position,
         };
         reference.horizon(&y, self.dt, &mut self.refs);
         if !self.refs.iter().all(|r| r.iter().all(|c| c.is_finite())) {
@@ -409,10 +413,10 @@ impl Controller for FlatnessMpc {
         let mut z = [[0.0; 3]; 3]; // per axis: flat state
         let mut v = [[0.0; 3]; 3]; // per axis: jerks v_0, v_1, v_2
         for axis in 0..self.axes {
-            let (y2, y1, y0) = (hist[0][axis], hist[1][axis], hist[2][axis]);
-            let za = match &estimate {
-                Some(s) => [s[axis][0], s[axis][1], s[axis][2]],
-                None => [y0, (y0 - y1) / dt, (y0 - 2.0 * y1 + y2) / (dt * dt)],
+            let za = match (&estimate, &differenced) {
+                (Some(s), _) => [s[axis][0], s[axis][1], s[axis][2]],
+                (None, Some(d)) => [d.position[axis], d.velocity[axis], d.acceleration[axis]],
+                (None, None) => [y[axis], 0.0, 0.0],
             };
             let gains = &self.gains[axis];
             let mut acc = [0.0; 3];
@@ -440,8 +444,7 @@ impl Controller for FlatnessMpc {
             return Err(ControlError::Flat(FlatError::NonFinite("FMPC command")));
         }
 
-        self.hist = hist;
-        self.started = true;
+        self.differences = differences;
         if let Some(e) = &mut self.estimator {
             e.sent(&self.model, measurement.t, &command);
         }
@@ -457,8 +460,7 @@ impl Controller for FlatnessMpc {
     }
 
     fn reset(&mut self) {
-        self.hist = [Vector3::zeros(); 3];
-        self.started = false;
+        self.differences.reset();
         if let Some(e) = &mut self.estimator {
             e.estimator.reset();
         }

@@ -18,6 +18,7 @@ use dflat_model::attitude::thrust_pitch_roll;
 use dflat_model::{FlatError, Frame};
 use nalgebra::{Vector2, Vector3};
 
+use crate::estimator::differences::PoseDifferences;
 use crate::estimator::{BaselineEstimator, StateSource};
 use crate::fmpc::limit_pair;
 use crate::{
@@ -173,14 +174,11 @@ pub struct Pd {
     dt: f64,
     /// Low-pass coefficient α ∈ (0, 1] of the velocity filter (1 = off).
     alpha: f64,
-    /// Previous measured position (NED \[m\]).
-    prev: Vector3<f64>,
+    /// The finite-difference velocity's poses at their capture times
+    /// ([`StateSource::FiniteDifference`]).
+    differences: PoseDifferences,
     /// Velocity estimate (NED [m/s]).
     velocity: Vector3<f64>,
-    /// Whether `prev` holds a measurement yet.
-    started: bool,
-    /// Time \[s\] of the newest measurement used.
-    last_t: f64,
     /// The state estimator ([`StateSource::Estimator`]), else None.
     estimator: Option<BaselineEstimator>,
 }
@@ -222,10 +220,8 @@ impl Pd {
             settings,
             dt,
             alpha,
-            prev: Vector3::zeros(),
+            differences: PoseDifferences::new(dt),
             velocity: Vector3::zeros(),
-            started: false,
-            last_t: f64::NEG_INFINITY,
             estimator: BaselineEstimator::from_source(settings.state, &model)?,
         })
     }
@@ -324,27 +320,37 @@ impl Controller for Pd {
         reference: &mut dyn ReferenceSource,
     ) -> Result<TickOutput, ControlError> {
         let estimate = BaselineEstimator::checked_state(self.estimator.as_ref(), measurement)?;
-        // No pose since the previous tick: extrapolate with the velocity
-        // estimate instead of reading a repeated position as a stop.
-        let stale = estimate.is_none() && self.started && measurement.t <= self.last_t;
-        let y = if let Some(s) = &estimate {
-            Vector3::new(s[0][0], s[1][0], s[2][0])
-        } else if stale {
-            self.prev + self.velocity * self.dt
-        } else {
-            measurement.position
+        // The finite difference takes each pose at its capture time: a
+        // tick without a new pose is carried forward with the velocity
+        // estimate, not read as a stop, and a late pose or one after
+        // skipped ticks is differenced over its own spacing.
+        let mut differences = self.differences.clone();
+        let (y, velocity) = match &estimate {
+            Some(s) => (
+                Vector3::new(s[0][0], s[1][0], s[2][0]),
+                Vector3::new(s[0][1], s[1][1], s[2][1]),
+            ),
+            None => {
+                let first = !differences.started();
+                let new = differences.tick(measurement.t, &measurement.position);
+                let velocity = match differences.first_difference() {
+                    Some(raw) if new && !first => {
+                        self.velocity + (raw - self.velocity) * self.alpha
+                    }
+                    _ if first => Vector3::zeros(),
+                    _ => self.velocity,
+                };
+                let (_, newest) = differences.newest().unwrap_or((0.0, measurement.position));
+                let tau = differences.extrapolation().unwrap_or(0.0);
+                let y = if tau > 0.0 {
+                    newest + velocity * tau
+                } else {
+                    newest
+                };
+                (y, velocity)
+            }
         };
         let [p_ref, v_ref, a_ff] = self.reference_at(&y, reference)?;
-        let velocity = if let Some(s) = &estimate {
-            Vector3::new(s[0][1], s[1][1], s[2][1])
-        } else if stale {
-            self.velocity
-        } else if self.started {
-            let raw = (y - self.prev) / self.dt;
-            self.velocity + (raw - self.velocity) * self.alpha
-        } else {
-            Vector3::zeros()
-        };
 
         let s = &self.settings;
         let mut a = Vector3::from_fn(|i, _| {
@@ -384,12 +390,8 @@ impl Controller for Pd {
             return Err(ControlError::Flat(FlatError::NonFinite("PD command")));
         }
 
-        self.prev = y;
+        self.differences = differences;
         self.velocity = velocity;
-        self.started = true;
-        if !stale {
-            self.last_t = measurement.t;
-        }
         if let Some(e) = &mut self.estimator {
             e.sent(&self.model, measurement.t, &command);
         }
@@ -405,10 +407,8 @@ impl Controller for Pd {
     }
 
     fn reset(&mut self) {
-        self.prev = Vector3::zeros();
+        self.differences.reset();
         self.velocity = Vector3::zeros();
-        self.started = false;
-        self.last_t = f64::NEG_INFINITY;
         if let Some(e) = &mut self.estimator {
             e.estimator.reset();
         }

@@ -14,9 +14,10 @@
 //! leave the 3-sample window after three ticks; a pose stream that is
 //! *persistently* slower than the loop needs the multi-rate window
 //! (`DfMpcSettings::multi_rate`), not repeated predictions. (Flatness MPC, the paper's
-//! baseline, takes the pose as given: its finite-difference flat state has
-//! no better substitute — both a model prediction and a held state make it
-//! worse than the repeated pose.)
+//! baseline, carries its finite-difference state forward along the
+//! quadratic through its three newest poses, never entering a prediction
+//! into its differences: `baseline_pose_timing.rs` flies it through
+//! missing, late and skipped poses.)
 
 use dflat_control::dfmpc::{DfMpc, DfMpcSettings};
 use dflat_control::pd::{Pd, PdSettings};

@@ -38,6 +38,7 @@
 //! Pure and allocation-free once built: the input history is a ring of
 //! [`INPUT_CAPACITY`] entries.
 
+pub mod differences;
 #[cfg(test)]
 mod tests;
 

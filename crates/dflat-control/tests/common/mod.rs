@@ -146,3 +146,4 @@ impl SpatialSim {
         self.thrust += p.dt * (thrust_cmd - self.thrust) / p.tau_thrust;
     }
 }
+pub mod timing;
