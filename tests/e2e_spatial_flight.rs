@@ -69,18 +69,22 @@ fn check(name: &str, config: &str) {
         altitude_error < ALTITUDE_BOUND,
         "altitude error {altitude_error:.2} m"
     );
-    // The classic window says in the summary what it did with poses off
-    // their ticks; the multi-rate window has no such line.
+    // Each window says in the summary what it did with the poses.
     let summary = flight.summary().expect("the daemon's summary");
     let window = &summary["pose_window"];
     eprintln!("{name}: pose window {window}");
+    let count = |k: &str| window[k].as_u64().expect("a count");
+    let ticks = summary["ticks"].as_u64().expect("ticks");
     if config.contains("multi_rate = false") {
-        let count = |k: &str| window[k].as_u64().expect("a count");
+        assert_eq!(window["window"], "classic", "{window}");
         assert_eq!(count("restarts"), 0, "{window}");
-        let ticks = summary["ticks"].as_u64().expect("ticks");
         assert!(count("predicted") + count("filled") <= ticks, "{window}");
     } else {
-        assert!(window.is_null(), "{window}");
+        // Every 50 Hz pose taken, a tick with no pose in its window rare.
+        assert_eq!(window["window"], "multi-rate", "{window}");
+        assert_eq!(count("rejected"), 0, "{window}");
+        assert!(count("accepted") as f64 >= 0.9 * ticks as f64, "{window}");
+        assert!(count("blind_ticks") * 20 <= ticks, "{window}");
     }
 }
 

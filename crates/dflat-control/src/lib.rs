@@ -167,11 +167,13 @@ pub trait Controller: Send {
     fn multi_rate(&self) -> bool {
         false
     }
-    /// What the classic DF-MPC window's time placement did
-    /// ([`window::Window::place`]: ticks predicted, skipped ticks filled,
-    /// late poses placed, restarts); `None` for other controllers and
-    /// windows. Default `None`.
-    fn window_stats(&self) -> Option<window::WindowStats> {
+    /// What DF-MPC's window did with the poses since it was built: the
+    /// classic window's time placement ([`window::Window::place`]: ticks
+    /// predicted, skipped ticks filled, late poses placed, restarts) or the
+    /// multi-rate window's counts ([`window::MultiRateStats`]: poses taken
+    /// and refused, ticks with no pose in the window); `None` for other
+    /// controllers. Default `None`.
+    fn window_stats(&self) -> Option<window::PoseWindowStats> {
         None
     }
     /// A raw pose sample at its measurement time `sample.t` \[s\] (multi-rate

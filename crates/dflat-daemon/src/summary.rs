@@ -7,6 +7,7 @@ use serde::Serialize;
 
 use crate::records::CsvReport;
 use crate::supervisor::FlightState;
+use dflat_control::window::PoseWindowStats;
 use dflat_link::transport::TlogReport;
 
 /// Resolution boundary of [`Histogram`]: 1 µs bins below, 100 µs above \[µs\].
@@ -360,10 +361,12 @@ pub struct FlightSummary {
     /// What the controller's successful ticks reported (constrained
     /// solves, solver fallbacks, input saturation).
     pub solves: SolveCounts,
-    /// What the classic DF-MPC window (`controller.dfmpc.multi_rate =
-    /// false`) did with poses off their ticks: ticks predicted, skipped
-    /// ticks filled, late poses placed, restarts; `None` otherwise.
-    pub pose_window: Option<dflat_control::window::WindowStats>,
+    /// What DF-MPC's window did with the poses, tagged by window: the
+    /// classic one (`controller.dfmpc.multi_rate = false`) the ticks
+    /// predicted, skipped ticks filled, late poses placed and restarts; the
+    /// multi-rate one the poses taken and refused and the ticks with no pose
+    /// in the window (`blind_ticks`); `None` for the baselines.
+    pub pose_window: Option<PoseWindowStats>,
     /// The link's guards: foreign senders, reconnects, the command slot,
     /// replies, link-task stalls.
     pub link_guard: crate::link_health::LinkGuardSummary,
@@ -554,12 +557,18 @@ impl FlightSummary {
             "  solves        {} constrained ({} by clarabel after the banded solver, {} by the cone's interior point), {} saturated by the controller",
             s.constrained, s.qp_fallbacks, s.cone_interior_point, s.saturated
         )?;
-        if let Some(w) = &self.pose_window {
-            writeln!(
+        match &self.pose_window {
+            Some(PoseWindowStats::Classic(w)) => writeln!(
                 f,
                 "  pose window   classic: {} ticks predicted (no new pose), {} skipped ticks filled, {} late poses placed, {} restarts",
                 w.predicted, w.filled, w.late, w.restarts
-            )?;
+            )?,
+            Some(PoseWindowStats::MultiRate(w)) => writeln!(
+                f,
+                "  pose window   multi-rate: {} poses taken, {} refused (not finite or older than the window), {} ticks with no pose in the window",
+                w.accepted, w.rejected, w.blind_ticks
+            )?,
+            None => {}
         }
         let lg = &self.link_guard;
         writeln!(

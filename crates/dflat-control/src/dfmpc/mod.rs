@@ -637,8 +637,12 @@ impl Controller for DfMpc {
         self.multi.is_some()
     }
 
-    fn window_stats(&self) -> Option<crate::window::WindowStats> {
-        self.multi.is_none().then(|| self.window.stats())
+    fn window_stats(&self) -> Option<crate::window::PoseWindowStats> {
+        use crate::window::PoseWindowStats;
+        Some(match &self.multi {
+            Some(multi) => PoseWindowStats::MultiRate(multi.stats()),
+            None => PoseWindowStats::Classic(self.window.stats()),
+        })
     }
 
     /// Flies the last good plan: step s = 1, 2, … of it through F (with

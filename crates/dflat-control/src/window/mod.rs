@@ -116,6 +116,17 @@
 mod classic;
 mod multi_rate;
 pub use classic::{INPUTS, MAX_FILL, OUTPUTS, Placement, SLOTS, Window, WindowStats};
+
+/// What a DF-MPC window did with the poses, by window (the daemon's summary
+/// `pose_window`, tagged `"window": "classic"` or `"multi-rate"`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(tag = "window", rename_all = "kebab-case")]
+pub enum PoseWindowStats {
+    /// The paper's window, one pose per tick ([`Window::place`]).
+    Classic(WindowStats),
+    /// The multi-rate window ([`MultiRateWindow`]).
+    MultiRate(MultiRateStats),
+}
 pub(crate) use multi_rate::input_lags;
 pub use multi_rate::{
     MAX_WINDOW, MultiRateEstimate, MultiRateSettings, MultiRateStats, MultiRateWindow, PoseSample,

@@ -86,14 +86,17 @@ pub struct PoseSample {
     pub position: Vector3<f64>,
 }
 
-/// Counters of a [`MultiRateWindow`] since construction or reset.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+/// Counters of a [`MultiRateWindow`] since construction (a reset keeps
+/// them: the daemon's summary counts the whole flight).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 pub struct MultiRateStats {
     /// Samples accepted by [`MultiRateWindow::observe`].
     pub accepted: u64,
     /// Samples rejected: non-finite, or older than the window.
     pub rejected: u64,
-    /// Samples fitted at the last tick (padding included).
+    /// Samples fitted at the last tick (padding included; a gauge, not a
+    /// count: left out of the serialised form).
+    #[serde(skip)]
     pub fitted: usize,
     /// Ticks that had no sample in the window (pure prediction).
     pub blind_ticks: u64,
@@ -236,7 +239,7 @@ impl MultiRateWindow {
         &self.settings
     }
 
-    /// Counters since construction or reset.
+    /// Counters since construction.
     pub fn stats(&self) -> MultiRateStats {
         self.stats
     }
@@ -278,14 +281,14 @@ impl MultiRateWindow {
         self.last_tick
     }
 
-    /// Forgets everything: samples, estimate, inputs, counters.
+    /// Forgets the samples, estimate and inputs (the counters stay).
     pub fn reset(&mut self) {
         self.samples.clear();
         self.inputs.fill(self.hover);
         self.arrival.cov = [diag(self.unknown); 3];
         self.last_tick = None;
         self.pending_tick = None;
-        self.stats = MultiRateStats::default();
+        self.stats.fitted = 0;
     }
 
     /// Adds one pose sample taken at time `t` \[s\] (the clock of the tick

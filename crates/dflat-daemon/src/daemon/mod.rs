@@ -210,7 +210,7 @@ struct ControlReport {
     disturbance: Option<DisturbanceSummary>,
     guards: GuardCounts,
     solves: SolveCounts,
-    pose_window: Option<dflat_control::window::WindowStats>,
+    pose_window: Option<dflat_control::window::PoseWindowStats>,
 }
 
 /// What the receive task counted.

@@ -264,9 +264,8 @@ impl ControlCore {
         self.controller.name()
     }
 
-    /// What the classic DF-MPC window's time placement did (`None` for
-    /// other controllers and windows).
-    pub fn window_stats(&self) -> Option<dflat_control::window::WindowStats> {
+    /// What DF-MPC's window did with the poses (`None` for the baselines).
+    pub fn window_stats(&self) -> Option<dflat_control::window::PoseWindowStats> {
         self.controller.window_stats()
     }
 
