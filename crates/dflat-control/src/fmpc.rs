@@ -379,6 +379,11 @@ impl Controller for FlatnessMpc {
         BaselineEstimator::observe(self.estimator.as_mut(), sample);
     }
 
+    fn skipped(&mut self, ticks: u32) {
+        // The estimator takes the tick time from the update.
+        self.differences.skip(ticks);
+    }
+
     fn correct_last_input(&mut self, applied: &Vector3<f64>) {
         if let Some(e) = &mut self.estimator {
             e.correct(&self.model, applied);

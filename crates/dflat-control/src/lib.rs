@@ -182,6 +182,16 @@ pub trait Controller: Send {
     fn observe(&mut self, sample: &Measurement) {
         let _ = sample;
     }
+    /// The shell skipped `ticks` control ticks since the last
+    /// [`Controller::update`] (its loop stalled; the autopilot held the
+    /// last command). A controller that takes the tick's time from its
+    /// poses (finite differences, the classic window) counts them into the
+    /// next update, so a tick after them without a new pose is at its own
+    /// time, not a step after the last. Multi-rate controllers take the
+    /// tick time from the update itself. Default: ignored.
+    fn skipped(&mut self, ticks: u32) {
+        let _ = ticks;
+    }
     /// One control tick at control step δt: takes the newest measurement
     /// (at or before the tick; in multi-rate mode the tick time) and the
     /// reference, returns the command and records it as sent. On error

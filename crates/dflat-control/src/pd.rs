@@ -308,6 +308,11 @@ impl Controller for Pd {
         BaselineEstimator::observe(self.estimator.as_mut(), sample);
     }
 
+    fn skipped(&mut self, ticks: u32) {
+        // The estimator takes the tick time from the update.
+        self.differences.skip(ticks);
+    }
+
     fn correct_last_input(&mut self, applied: &Vector3<f64>) {
         if let Some(e) = &mut self.estimator {
             e.correct(&self.model, applied);
@@ -342,7 +347,7 @@ impl Controller for Pd {
                 };
                 let (_, newest) = differences.newest().unwrap_or((0.0, measurement.position));
                 let tau = differences.extrapolation().unwrap_or(0.0);
-                let y = if tau > 0.0 {
+                let y = if tau != 0.0 {
                     newest + velocity * tau
                 } else {
                     newest

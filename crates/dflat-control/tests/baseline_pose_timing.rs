@@ -102,6 +102,22 @@ fn skipped_ticks_are_differenced_over_their_gap() {
     );
 }
 
+/// Skipped ticks and then no new pose: only the shell's clock says how
+/// much time passed (`Controller::skipped`). Taken as a step, the state
+/// was two steps behind the line for a tick: PD's tilt stepped 0.026 rad
+/// there and back against 0.0003 rad on time.
+#[test]
+fn skipped_ticks_then_no_pose_are_counted_from_the_shells_clock() {
+    judge_both(
+        &|k| match k % 23 {
+            5 | 6 => Tick::Skipped,
+            7 => Tick::NoPose,
+            _ => Tick::OnTime,
+        },
+        "two ticks skipped, then no pose, in 23",
+    );
+}
+
 #[test]
 fn a_stream_a_tick_late_for_good_is_carried_to_the_tick() {
     judge_both(

@@ -104,6 +104,27 @@ fn skipped_ticks_are_filled_under_the_held_command() {
     judge(&clean, &three, "three ticks skipped in 40");
 }
 
+/// Skipped ticks and then no new pose: the shell's clock says how many
+/// (`Controller::skipped`), and the window fills them before predicting
+/// the tick's slot. No catch-up allowance: the tick is where it is (taken
+/// as the tick after the last, its slot two steps stale, the tilt stepped
+/// 0.053 rad against 0.002 rad on time).
+#[test]
+fn skipped_ticks_then_no_pose_are_filled_from_the_shells_clock() {
+    let clean = fly(&|_| Tick::OnTime);
+    let perturbed = fly(&|k| match k % 23 {
+        5 | 6 => Tick::Skipped,
+        7 => Tick::NoPose,
+        _ => Tick::OnTime,
+    });
+    timing::judge(
+        &clean,
+        &perturbed,
+        0.0,
+        "two ticks skipped, then no pose, in 23",
+    );
+}
+
 /// With the disturbance estimator (offset-free altitude on a plant 8 %
 /// heavier than the model), skipped ticks reach its window as the filled
 /// slots, a tick apart: it ends where the flight without skipped ticks

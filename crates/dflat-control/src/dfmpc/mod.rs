@@ -108,6 +108,9 @@ pub struct DfMpc {
     plan: PlanState,
     /// Whether the sent inputs are all recorded.
     record: RecordState,
+    /// Ticks the shell skipped since the last recorded tick
+    /// ([`Controller::skipped`]; classic window only).
+    skipped: u32,
     /// The inputs sent and not yet in effect (input delay).
     delay: DelayLine,
     /// The learned residual, when flown ([`DfMpc::set_learned`]).
@@ -198,6 +201,7 @@ impl DfMpc {
                 .any(|s| *s > 0.0),
             plan: PlanState::Empty,
             record: RecordState::Recorded,
+            skipped: 0,
             delay: DelayLine::new(settings.delay_ticks, model.hover_input()),
             learned: None,
             learned_score: learned_hook::Score::default(),
@@ -432,6 +436,9 @@ impl DfMpc {
         if self.record == RecordState::PendingAfterGap {
             window.reset();
         }
+        // Ticks the shell skipped, known from its clock: filled before
+        // y_k, so a tick after them without a new pose is at its own slot.
+        let skipped = window.fill_skipped(self.skipped as usize, &|y, u| self.f_inv(y, u, d))?;
         if let Some(multi) = &mut self.multi {
             let (model, learned) = (&self.model, self.learned.as_ref());
             let e = multi.estimate(measurement.t, |y, u| {
@@ -450,10 +457,11 @@ impl DfMpc {
             self.model.dt(),
             &|y, u| self.f_inv(y, u, d),
         )?;
-        let filled = match placement {
-            Placement::Next { filled } => filled,
-            _ => 0,
-        };
+        let filled = skipped
+            + match placement {
+                Placement::Next { filled } => filled,
+                _ => 0,
+            };
         let [ym2, ym1, y0] = *window.outputs();
         let [u2, u1] = *window.inputs();
         let y1 = self.f_inv(&[ym2, ym1, y0], &u2, d)?;
@@ -507,6 +515,7 @@ impl DfMpc {
             self.window = window;
         }
         self.record = RecordState::Recorded;
+        self.skipped = 0;
     }
 }
 
@@ -549,7 +558,7 @@ impl Controller for DfMpc {
         // The last plan is the last tick's only when that tick's update
         // made it and flew none of it since (a failed update leaves it
         // `Kept`: a tick older, its stages one off).
-        let last_ticks_plan = self.plan == PlanState::Fresh { flown: 0 };
+        let last_ticks_plan = self.plan == PlanState::Fresh { flown: 0 } && self.skipped == 0;
         if let PlanState::Fresh { flown } = self.plan {
             self.plan = PlanState::Kept { flown };
         }
@@ -635,6 +644,13 @@ impl Controller for DfMpc {
 
     fn multi_rate(&self) -> bool {
         self.multi.is_some()
+    }
+
+    fn skipped(&mut self, ticks: u32) {
+        // The multi-rate window takes the tick time from the update.
+        if self.multi.is_none() {
+            self.skipped = self.skipped.saturating_add(ticks);
+        }
     }
 
     fn window_stats(&self) -> Option<crate::window::PoseWindowStats> {
@@ -757,6 +773,7 @@ impl Controller for DfMpc {
 
     fn reset(&mut self) {
         self.window.reset();
+        self.skipped = 0;
         self.delay.fill(self.model.hover_input());
         if let Some(multi) = &mut self.multi {
             multi.reset();

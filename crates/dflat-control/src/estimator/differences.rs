@@ -17,6 +17,14 @@
 //! own time along that quadratic. With one pose per tick on time it is the
 //! paper's formula bit for bit.
 //!
+//! The ticks lie on a grid a step apart from the first pose's time, as the
+//! classic window's slots do: a pose taken off it (capture jitter) is
+//! carried onto it, up to half a step either way, and one more than half a
+//! step past the next tick moves the tick on by whole steps (ticks the
+//! shell skipped without saying). Taking each later pose's time as the
+//! tick's instead let one pose stamped late move every tick after it: the
+//! state was extrapolated by the largest capture delay seen, for good.
+//!
 //! [`StateSource::FiniteDifference`]: super::StateSource::FiniteDifference
 
 use nalgebra::Vector3;
@@ -44,7 +52,7 @@ pub struct DifferencedState {
     /// The second difference: acceleration [m/s²].
     pub acceleration: Vector3<f64>,
     /// How far the tick is past the newest pose \[s\] (0 with a pose on
-    /// time).
+    /// time; down to −δt/2 for a pose taken after the tick's grid time).
     pub extrapolated: f64,
 }
 
@@ -61,6 +69,9 @@ pub struct PoseDifferences {
     /// The current tick's time on the poses' clock \[s\]; None before the
     /// first pose.
     tick: Option<f64>,
+    /// Ticks the shell skipped since the last tick ([`Self::skip`]), taken
+    /// by the next one.
+    skipped: u32,
 }
 
 impl PoseDifferences {
@@ -72,6 +83,7 @@ impl PoseDifferences {
             poses: [(0.0, Vector3::zeros()); 3],
             held: 0,
             tick: None,
+            skipped: 0,
         }
     }
 
@@ -91,10 +103,13 @@ impl PoseDifferences {
     /// the newest held (an older or repeated one, or one in the same step,
     /// changes nothing but the tick's time).
     ///
-    /// The tick's time is a step after the last tick's, or the new pose's
-    /// time when that is later (ticks the shell skipped): each call is one
-    /// tick.
+    /// The tick's time is a step after the last tick's (plus the ticks
+    /// the shell said it skipped, [`Self::skip`]), or, for a new pose more
+    /// than half a step past that, the grid time nearest the pose's (ticks
+    /// skipped unsaid): each call is one tick, on a grid a step apart from
+    /// the first pose's time.
     pub fn tick(&mut self, t: f64, position: &Vector3<f64>) -> bool {
+        let skipped = std::mem::take(&mut self.skipped);
         let Some(tick) = self.tick else {
             // The first pose pads the history a step apart (the paper's
             // window padded with the first measurement).
@@ -108,26 +123,42 @@ impl PoseDifferences {
             self.tick = Some(t);
             return true;
         };
-        let next = tick + self.dt;
+        let next = tick + (1.0 + f64::from(skipped)) * self.dt;
         let newest = self.poses[0].0;
         let new = t >= newest + NEWER * self.dt;
         if new {
             self.poses = [(t, *position), self.poses[0], self.poses[1]];
             self.held = (self.held + 1).min(3);
         }
-        self.tick = Some(if new && t > next { t } else { next });
+        let unsaid = if new {
+            ((t - next) / self.dt).round().max(0.0)
+        } else {
+            0.0
+        };
+        self.tick = Some(next + unsaid * self.dt);
         new
     }
 
+    /// The shell skipped `ticks` ticks (no call, the last command held):
+    /// the next [`Self::tick`] is that many steps later than a step after
+    /// the last, with or without a new pose. Nothing before the first
+    /// pose.
+    pub fn skip(&mut self, ticks: u32) {
+        if self.tick.is_some() {
+            self.skipped = self.skipped.saturating_add(ticks);
+        }
+    }
+
     /// How far the tick is past the newest pose \[s\]: 0 for a pose on
-    /// time (within 1e-9 of a step), at most [`MAX_EXTRAPOLATION`] steps;
-    /// None before the first pose.
+    /// time (within 1e-9 of a step), at most [`MAX_EXTRAPOLATION`] steps,
+    /// down to −δt/2 for a pose taken after the tick's grid time; None
+    /// before the first pose.
     pub fn extrapolation(&self) -> Option<f64> {
         let tau = self.tick? - self.poses[0].0;
         Some(if tau.abs() <= ON_GRID * self.dt {
             0.0
         } else {
-            tau.clamp(0.0, MAX_EXTRAPOLATION * self.dt)
+            tau.clamp(-0.5 * self.dt, MAX_EXTRAPOLATION * self.dt)
         })
     }
 
@@ -173,7 +204,7 @@ impl PoseDifferences {
             (d1 + a * (0.5 * (h1 - dt)), a)
         };
         let mut position = y0;
-        if tau > 0.0 {
+        if tau != 0.0 {
             // Along the quadratic: its slope at t0 is d1 + a·h1/2.
             position += (d1 + acceleration * (0.5 * h1)) * tau + acceleration * (0.5 * tau * tau);
             velocity += acceleration * tau;
@@ -284,6 +315,61 @@ mod tests {
         }
     }
 
+    /// Skipped ticks the shell says: a tick after them without a new pose
+    /// is at its own time, not a step after the last; one with a late
+    /// pose too.
+    #[test]
+    fn skipped_ticks_said_move_the_tick_without_a_pose() {
+        let mut d = PoseDifferences::new(DT);
+        for k in 0..4 {
+            d.tick(k as f64 * DT, &quadratic(k as f64 * DT));
+        }
+        // Ticks 4 and 5 skipped, tick 6 finds the pose of tick 3 again.
+        d.skip(2);
+        assert!(!d.tick(3.0 * DT, &quadratic(3.0 * DT)));
+        let s = d.state().unwrap();
+        assert!((s.extrapolated - 3.0 * DT).abs() < 1e-12);
+        let (y, v) = paper_state(6.0 * DT);
+        assert_close(&s.position, &y, 1e-9, "position");
+        assert_close(&s.velocity, &v, 1e-7, "velocity");
+        // Taken once: tick 7 is a step later, with tick 5's pose (late).
+        assert!(d.tick(5.0 * DT, &quadratic(5.0 * DT)));
+        let s = d.state().unwrap();
+        assert!((s.extrapolated - 2.0 * DT).abs() < 1e-12);
+        let (y, v) = paper_state(7.0 * DT);
+        assert_close(&s.position, &y, 1e-9, "position after the late pose");
+        assert_close(&s.velocity, &v, 1e-7, "velocity after the late pose");
+        // Said before the first pose: nothing.
+        let mut fresh = PoseDifferences::new(DT);
+        fresh.skip(3);
+        assert!(fresh.tick(0.0, &quadratic(0.0)));
+        assert!(fresh.tick(DT, &quadratic(DT)));
+        assert_eq!(fresh.state().unwrap().extrapolated, 0.0);
+    }
+
+    /// One pose stamped late (capture jitter) is carried back onto its
+    /// tick; the poses on time after it are the paper's differences again
+    /// (the tick did not move to the late stamp).
+    #[test]
+    fn a_pose_stamped_late_does_not_move_the_ticks_after_it() {
+        let mut d = PoseDifferences::new(DT);
+        for k in 0..3 {
+            d.tick(k as f64 * DT, &quadratic(k as f64 * DT));
+        }
+        let late = 3.4 * DT;
+        assert!(d.tick(late, &quadratic(late)));
+        let s = d.state().unwrap();
+        assert!((s.extrapolated + 0.4 * DT).abs() < 1e-12);
+        let (y, v) = paper_state(3.0 * DT);
+        assert_close(&s.position, &y, 1e-9, "position moved back");
+        assert_close(&s.velocity, &v, 1e-7, "velocity moved back");
+        for k in 4..7 {
+            let t = k as f64 * DT;
+            assert!(d.tick(t, &quadratic(t)));
+            assert_eq!(d.state().unwrap().extrapolated, 0.0, "tick {k}");
+        }
+    }
+
     /// Repeated, older and same-step poses change nothing but the tick.
     #[test]
     fn older_and_repeated_poses_are_not_new() {
@@ -320,7 +406,8 @@ mod tests {
         /// Any capture times and any ticks between them (each pose from
         /// half a step before to two steps after the tick it arrives at,
         /// up to two ticks without a pose after it): on a quadratic motion
-        /// the state is the paper's at the tick's time.
+        /// the state is the paper's at the tick's time, the ticks a step
+        /// apart from the first pose's.
         #[test]
         fn quadratic_motion_is_read_exactly_at_any_capture_times(
             arrivals in prop::collection::vec((-0.45f64..2.0, 0usize..3), 3..30),
@@ -330,18 +417,26 @@ mod tests {
                 let t = k as f64 * DT;
                 d.tick(t, &quadratic(t));
             }
-            let mut tick = 2.0 * DT;
+            let (mut tick, mut newest) = (2.0 * DT, 2.0 * DT);
             for (offset, idle) in arrivals {
                 let t = tick + DT + offset * DT;
-                prop_assert!(d.tick(t, &quadratic(t)));
-                tick = (tick + DT).max(t);
+                // New when half a step newer than the newest held (a pose
+                // stamped late, then one stamped early, can be closer).
+                let new = t >= newest + 0.5 * DT;
+                prop_assert_eq!(d.tick(t, &quadratic(t)), new);
+                // On the grid: a new pose more than half a step late moves
+                // the tick on by whole steps.
+                tick += DT * (1.0 + if new { offset.round().max(0.0) } else { 0.0 });
+                if new {
+                    newest = t;
+                }
                 for i in 0..=idle {
                     if i > 0 {
                         prop_assert!(!d.tick(t, &quadratic(t)));
                         tick += DT;
                     }
                     let s = d.state().unwrap();
-                    prop_assert!((s.extrapolated - (tick - t)).abs() < 1e-9);
+                    prop_assert!((s.extrapolated - (tick - newest)).abs() < 1e-9);
                     let (y, v) = paper_state(tick);
                     prop_assert!((s.position - y).norm() < 1e-9, "{:?} {:?}", s.position, y);
                     prop_assert!((s.velocity - v).norm() < 1e-6, "{:?} {:?}", s.velocity, v);

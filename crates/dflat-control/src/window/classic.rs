@@ -205,13 +205,8 @@ impl Window {
             if filled > MAX_FILL {
                 return self.start(t, y, true);
             }
-            for _ in 0..filled {
-                let held = self.inputs[SLOTS - 1];
-                let p = self.predict_next(next_output)?;
-                self.push_output(p, false);
-                self.push_input(held);
-            }
-            let slot = self.newest + filled as i64 + 1;
+            self.fill(filled, next_output)?;
+            let slot = self.newest + 1;
             let onto = match off(slot) {
                 // Moved onto the slot's time along the velocity there.
                 Some(o) => {
@@ -222,7 +217,6 @@ impl Window {
             self.newest = slot;
             self.push_output(onto, true);
             self.pose_t = t;
-            self.stats.filled += filled as u64;
             return Ok(Placement::Next { filled });
         }
         let mut placement = Placement::Predicted;
@@ -256,6 +250,46 @@ impl Window {
         self.newest += 1;
         self.stats.predicted += 1;
         Ok(placement)
+    }
+
+    /// The shell skipped `ticks` ticks (its loop stalled; the autopilot
+    /// held the last input), known from its clock rather than a pose's
+    /// time: each gets F⁻¹'s prediction under the held input, as skipped
+    /// ticks found by [`Window::place`] do, and the next `place` is the
+    /// tick after them (so a tick after them without a new pose is
+    /// predicted at its own slot). Returns the slots filled. More than
+    /// [`MAX_FILL`] restarts the window (the next `place` starts it from
+    /// its pose); nothing before the first measurement. On error the
+    /// window may be part-changed: the controller fills a copy.
+    pub fn fill_skipped(
+        &mut self,
+        ticks: usize,
+        next_output: NextOutput<'_>,
+    ) -> Result<usize, ControlError> {
+        if self.measurements == 0 || ticks == 0 {
+            return Ok(0);
+        }
+        if ticks > MAX_FILL {
+            self.reset();
+            self.stats.restarts += 1;
+            return Ok(0);
+        }
+        self.fill(ticks, next_output)?;
+        Ok(ticks)
+    }
+
+    /// `n` skipped ticks after the newest slot: F⁻¹'s predictions under the
+    /// input held, the newest slot moved on by `n`.
+    fn fill(&mut self, n: usize, next_output: NextOutput<'_>) -> Result<(), FlatError> {
+        for _ in 0..n {
+            let held = self.inputs[SLOTS - 1];
+            let p = self.predict_next(next_output)?;
+            self.push_output(p, false);
+            self.push_input(held);
+        }
+        self.newest += n as i64;
+        self.stats.filled += n as u64;
+        Ok(())
     }
 
     /// The padding from measurement `y` at `t`; `restart` counts it.

@@ -67,7 +67,8 @@ pub enum Tick {
     NoPose,
     /// The pose of the previous tick (late by one).
     Late,
-    /// The shell skipped this tick: no update, the last command held.
+    /// The shell skipped this tick: no update, the last command held (it
+    /// tells the controller, [`dflat_control::Controller::skipped`]).
     Skipped,
 }
 
@@ -135,7 +136,10 @@ pub fn fly(ctrl: &mut dyn Controller, heavier: f64, ticks: &dyn Fn(usize) -> Tic
         let t = k as f64 * DT;
         let tick = if k < 3 { Tick::OnTime } else { ticks(k) };
         let judged = k >= SETTLE;
-        if tick != Tick::Skipped {
+        if tick == Tick::Skipped {
+            // The shell knows it skipped the tick (its clock).
+            ctrl.skipped(1);
+        } else {
             match tick {
                 Tick::OnTime => {
                     last = Measurement {

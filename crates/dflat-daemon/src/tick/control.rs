@@ -11,7 +11,7 @@ use tracing::{error, info};
 use super::exit::{TickError, update_caught};
 use super::failsafe::Event;
 use super::pose::PoseSample;
-use super::{ControlCore, SentCommand};
+use super::{ControlCore, SentCommand, TickTime};
 use crate::records::{CsvDisturbance, CsvRow};
 use crate::summary::DisturbanceSummary;
 use crate::supervisor::{FlightState, Goal};
@@ -22,12 +22,23 @@ impl ControlCore {
     /// the solve time. `None`: no reference, the controller did not run.
     pub(super) fn control(
         &mut self,
-        t: f64,
+        time: &TickTime,
         pose: PoseSample,
         stopwatch: &mut dyn FnMut() -> f64,
         row: &mut CsvRow,
     ) -> Option<(Option<SentCommand>, u32)> {
+        let t = time.t;
         let mut reference = self.goals.reference.take()?;
+        // Ticks since its last update without one (the loop stalled, or
+        // did not fly it): a controller that takes its clock from the
+        // poses counts them (`Controller::skipped`).
+        if let Some(last) = self.last_update_tick.replace(time.tick) {
+            let skipped = time.tick.saturating_sub(last).saturating_sub(1);
+            if skipped > 0 {
+                self.controller
+                    .skipped(u32::try_from(skipped).unwrap_or(u32::MAX));
+            }
+        }
         let multi_rate = self.settings.multi_rate;
         let measurement = self.tick_measurement(t, &pose);
         // Standby: the tick before sent a command the autopilot did not

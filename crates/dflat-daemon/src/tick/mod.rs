@@ -184,6 +184,9 @@ pub struct ControlCore {
     guard_note: Option<&'static str>,
     /// The learned residual's state last said (`tick/control.rs`).
     learned_said: Option<dflat_control::learned::LearnedStatus>,
+    /// The tick of the controller's last update (`tick/control.rs`): the
+    /// ticks after it without one are told to it as skipped.
+    last_update_tick: Option<u64>,
     counts: CoreCounts,
     /// Outputs produced between steps (by [`ControlCore::apply`]).
     pending_texts: Vec<MavMessage>,
@@ -241,6 +244,7 @@ impl ControlCore {
             last_sent: None,
             guard_note: None,
             learned_said: None,
+            last_update_tick: None,
             counts: CoreCounts::default(),
             pending_texts: Vec::new(),
             events_applied: 0,
@@ -364,7 +368,7 @@ impl ControlCore {
         }
         let controlled = match self.poses.newest {
             Some(pose) if self.supervisor.state().streams() => {
-                self.control(t, pose, stopwatch, &mut row)
+                self.control(time, pose, stopwatch, &mut row)
             }
             _ => None,
         };
@@ -420,6 +424,7 @@ impl ControlCore {
     /// that it can run at the next tick.
     fn reset_controller(&mut self) {
         self.controller.reset();
+        self.last_update_tick = None;
         self.failsafe.fallback.forget();
         self.failsafe.residual.forget();
         if self.settings.multi_rate

@@ -32,11 +32,13 @@ enum Script {
     Fail,
 }
 
-/// A controller that replays a script and counts its calls.
+/// A controller that replays a script and counts its calls and the ticks
+/// it is told were skipped.
 struct Scripted {
     script: Vec<Script>,
     tick: usize,
     updates: Arc<AtomicUsize>,
+    skipped: Arc<AtomicUsize>,
 }
 
 impl Controller for Scripted {
@@ -73,21 +75,34 @@ impl Controller for Scripted {
         })
     }
 
+    fn skipped(&mut self, ticks: u32) {
+        self.skipped.fetch_add(ticks as usize, Ordering::Relaxed);
+    }
+
     fn reset(&mut self) {}
 }
 
 fn core(script: Vec<Script>) -> (ControlCore, Arc<AtomicUsize>) {
+    let (core, updates, _) = core_counting_skipped(script);
+    (core, updates)
+}
+
+/// [`core`], with the count of ticks the controller was told were skipped.
+fn core_counting_skipped(script: Vec<Script>) -> (ControlCore, Arc<AtomicUsize>, Arc<AtomicUsize>) {
     let cfg = Config::default();
     let updates = Arc::new(AtomicUsize::new(0));
+    let skipped = Arc::new(AtomicUsize::new(0));
     let controller = Scripted {
         script,
         tick: 0,
         updates: updates.clone(),
+        skipped: skipped.clone(),
     };
     let mapping = thrust_mapping(&cfg);
     (
         ControlCore::new(&cfg, Box::new(controller), mapping),
         updates,
+        skipped,
     )
 }
 
@@ -169,6 +184,20 @@ fn a_good_tick_sends_the_guarded_command_and_records_it() {
     assert_eq!(updates.load(Ordering::Relaxed), 5);
     assert_eq!(core.counts().commands, 5);
     assert!(matches!(sent.message, MavMessage::SET_ATTITUDE_TARGET(_)));
+}
+
+/// The loop stalls over ticks 3–4 and 7–9 (the schedule's tick numbers
+/// jump): the controller is told, before its next update, how many ticks
+/// passed without one.
+#[test]
+fn ticks_the_loop_skipped_are_told_to_the_controller() {
+    let (mut core, updates, skipped) = core_counting_skipped(vec![Script::Command(0.0, 0.0)]);
+    for k in [0, 1, 2, 5, 6, 10, 11] {
+        let out = step_at(&mut core, k, None, vec![]);
+        assert!(out.command.is_some(), "tick {k}");
+    }
+    assert_eq!(updates.load(Ordering::Relaxed), 7);
+    assert_eq!(skipped.load(Ordering::Relaxed), 2 + 3);
 }
 
 #[test]
@@ -544,6 +573,7 @@ fn without_level_hover_pose_loss_goes_silent_at_once() {
         script: vec![Script::Command(tilt, 0.0)],
         tick: 0,
         updates: Arc::new(AtomicUsize::new(0)),
+        skipped: Arc::new(AtomicUsize::new(0)),
     };
     let mapping = thrust_mapping(&cfg);
     let mut core = ControlCore::new(&cfg, Box::new(controller), mapping);
@@ -580,6 +610,7 @@ fn flies_the_autopilots_hover_thrust_only_when_asked_and_before_engaging() {
             script: vec![Script::Command(0.0, 0.0)],
             tick: 0,
             updates: Arc::new(AtomicUsize::new(0)),
+            skipped: Arc::new(AtomicUsize::new(0)),
         };
         let mapping = thrust_mapping(&cfg);
         let mut core = ControlCore::new(&cfg, Box::new(controller), mapping);
@@ -657,6 +688,7 @@ fn the_stop_asks_for_a_hold_ramps_to_level_and_ends() {
         script: vec![Script::Command(tilt, 0.0)],
         tick: 0,
         updates: Arc::new(AtomicUsize::new(0)),
+        skipped: Arc::new(AtomicUsize::new(0)),
     };
     let mut core = ControlCore::new(&cfg, Box::new(controller), thrust_mapping(&cfg));
     let out = fly(&mut core, 50);
