@@ -384,6 +384,14 @@ impl Controller for FlatnessMpc {
         self.differences.skip(ticks);
     }
 
+    fn tick_time(&self, measurement: &Measurement) -> f64 {
+        if self.estimator.is_some() {
+            measurement.t
+        } else {
+            self.differences.tick_time(measurement.t)
+        }
+    }
+
     fn correct_last_input(&mut self, applied: &Vector3<f64>) {
         if let Some(e) = &mut self.estimator {
             e.correct(&self.model, applied);

@@ -192,6 +192,17 @@ pub trait Controller: Send {
     fn skipped(&mut self, ticks: u32) {
         let _ = ticks;
     }
+    /// The time \[s\] (the poses' clock) that [`Controller::update`] with
+    /// `measurement` will take its tick to be, without updating: the shell
+    /// sets a trajectory reference (a route, a stream) to it, so the plan
+    /// and the state are at one time. Multi-rate: `measurement.t`, the
+    /// tick time; a controller that takes its clock from the poses: the
+    /// tick a step after its last (plus the ticks skipped), or the grid
+    /// time of a new pose — on a tick without a new pose, a step after
+    /// the pose's time, not the pose's. Default: `measurement.t`.
+    fn tick_time(&self, measurement: &Measurement) -> f64 {
+        measurement.t
+    }
     /// One control tick at control step δt: takes the newest measurement
     /// (at or before the tick; in multi-rate mode the tick time) and the
     /// reference, returns the command and records it as sent. On error

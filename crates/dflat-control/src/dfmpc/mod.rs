@@ -653,6 +653,18 @@ impl Controller for DfMpc {
         }
     }
 
+    fn tick_time(&self, measurement: &Measurement) -> f64 {
+        // `update` restarts the window when a tick since the last one sent
+        // something unrecorded (`RecordState`).
+        if self.multi.is_some() || self.record != RecordState::Recorded {
+            // The tick time itself, or a window that starts again.
+            measurement.t
+        } else {
+            self.window
+                .tick_time(measurement.t, self.model.dt(), self.skipped as usize)
+        }
+    }
+
     fn window_stats(&self) -> Option<crate::window::PoseWindowStats> {
         use crate::window::PoseWindowStats;
         Some(match &self.multi {

@@ -109,8 +109,9 @@ impl PoseDifferences {
     /// skipped unsaid): each call is one tick, on a grid a step apart from
     /// the first pose's time.
     pub fn tick(&mut self, t: f64, position: &Vector3<f64>) -> bool {
-        let skipped = std::mem::take(&mut self.skipped);
-        let Some(tick) = self.tick else {
+        let next = self.tick_time(t);
+        self.skipped = 0;
+        if self.tick.is_none() {
             // The first pose pads the history a step apart (the paper's
             // window padded with the first measurement).
             let dt = self.dt;
@@ -122,21 +123,35 @@ impl PoseDifferences {
             self.held = 1;
             self.tick = Some(t);
             return true;
-        };
-        let next = tick + (1.0 + f64::from(skipped)) * self.dt;
-        let newest = self.poses[0].0;
-        let new = t >= newest + NEWER * self.dt;
+        }
+        let new = self.is_new(t);
         if new {
             self.poses = [(t, *position), self.poses[0], self.poses[1]];
             self.held = (self.held + 1).min(3);
         }
-        let unsaid = if new {
-            ((t - next) / self.dt).round().max(0.0)
-        } else {
-            0.0
-        };
-        self.tick = Some(next + unsaid * self.dt);
+        self.tick = Some(next);
         new
+    }
+
+    /// Whether a pose taken at `t` \[s\] is new: at least half a step newer
+    /// than the newest held.
+    fn is_new(&self, t: f64) -> bool {
+        t >= self.poses[0].0 + NEWER * self.dt
+    }
+
+    /// The time \[s\] the next [`Self::tick`] with the newest pose taken at
+    /// `t` will take the tick to be, without taking it: `t` for the first
+    /// pose.
+    pub fn tick_time(&self, t: f64) -> f64 {
+        let Some(tick) = self.tick else {
+            return t;
+        };
+        let next = tick + (1.0 + f64::from(self.skipped)) * self.dt;
+        if self.is_new(t) {
+            next + ((t - next) / self.dt).round().max(0.0) * self.dt
+        } else {
+            next
+        }
     }
 
     /// The shell skipped `ticks` ticks (no call, the last command held):
@@ -423,6 +438,7 @@ mod tests {
                 // New when half a step newer than the newest held (a pose
                 // stamped late, then one stamped early, can be closer).
                 let new = t >= newest + 0.5 * DT;
+                let ahead = d.tick_time(t);
                 prop_assert_eq!(d.tick(t, &quadratic(t)), new);
                 // On the grid: a new pose more than half a step late moves
                 // the tick on by whole steps.
@@ -430,6 +446,8 @@ mod tests {
                 if new {
                     newest = t;
                 }
+                // The tick's time, told before the tick.
+                prop_assert!((ahead - tick).abs() < 1e-9, "{} {}", ahead, tick);
                 for i in 0..=idle {
                     if i > 0 {
                         prop_assert!(!d.tick(t, &quadratic(t)));

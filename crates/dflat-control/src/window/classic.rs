@@ -252,6 +252,35 @@ impl Window {
         Ok(placement)
     }
 
+    /// The time \[s\] of the slot that [`Window::place`] of a pose taken at
+    /// `t` \[s\], after `skipped` ticks the shell said
+    /// ([`Window::fill_skipped`]), makes the tick's, without placing it:
+    /// the grid slot of a new pose, or the slot after the newest; `t`
+    /// where the place starts the window (the first measurement, a
+    /// restart). The controller's tick time, for the reference.
+    pub fn tick_time(&self, t: f64, dt: f64, skipped: usize) -> f64 {
+        if self.measurements == 0 || skipped > MAX_FILL {
+            return t;
+        }
+        let newest = self.newest + skipped as i64;
+        let slot_time = |i: i64| self.origin_t + i as f64 * dt;
+        if t.is_finite() && t >= self.pose_t + 0.5 * dt {
+            let n = ((t - slot_time(newest)) / dt).round();
+            if n >= 1.0 {
+                return if n as usize - 1 > MAX_FILL {
+                    t
+                } else {
+                    slot_time(newest + n as i64)
+                };
+            }
+            let back = (-n) as usize + 1;
+            if SLOTS.checked_sub(back).filter(|i| *i >= 2).is_none() {
+                return t;
+            }
+        }
+        slot_time(newest + 1)
+    }
+
     /// The shell skipped `ticks` ticks (its loop stalled; the autopilot
     /// held the last input), known from its clock rather than a pose's
     /// time: each gets F⁻¹'s prediction under the held input, as skipped
@@ -428,6 +457,32 @@ mod tests {
     fn speeds(w: &Window) -> [f64; 2] {
         let [a, b, c] = *w.outputs();
         [(b.x - a.x) / DT, (c.x - b.x) / DT]
+    }
+
+    proptest::proptest! {
+        /// The tick time told before a place is the time of the slot the
+        /// place makes the tick's (or of the pose it starts from), through
+        /// any mix of poses on time, late, early, missing, after skipped
+        /// ticks said and unsaid, and gaps that restart the window.
+        #[test]
+        fn the_tick_time_told_is_the_slot_placed(
+            ticks in proptest::collection::vec((0usize..3, -3.4f64..3.4, proptest::bool::ANY), 1..60),
+            gap in proptest::option::of(40usize..70),
+        ) {
+            let mut w = cruising(3);
+            let mut tick = 3.0;
+            for (i, (skipped, offset, pose)) in ticks.into_iter().enumerate() {
+                let skipped = if Some(i) == gap.map(|_| 5) { gap.unwrap() } else { skipped };
+                tick += 1.0 + skipped as f64;
+                let t = if pose { (tick + offset) * DT } else { w.pose_time() };
+                let told = w.tick_time(t, DT, skipped);
+                w.fill_skipped(skipped, &integrator).unwrap();
+                w.place(t, v(4.0 * t), DT, &integrator).unwrap();
+                let placed = w.origin_t + w.newest as f64 * DT;
+                proptest::prop_assert!((told - placed).abs() < 1e-12, "{} {}", told, placed);
+                w.push_input(Vector3::zeros());
+            }
+        }
     }
 
     #[test]

@@ -46,8 +46,11 @@ impl ControlCore {
         // tick's update uses the window.
         self.correct_standby_input();
         let t0 = stopwatch();
-        // Routes and streams are trajectories in time: at the measurement's.
-        reference.set_time(measurement.t);
+        // Routes and streams are trajectories in time: at the tick's, as the
+        // controller takes it (multi-rate: the tick time; from the poses:
+        // the pose's, or a step after the last tick on a tick without a
+        // new pose, where its state is).
+        reference.set_time(self.controller.tick_time(&measurement));
         let result = update_caught(self.controller.as_mut(), &measurement, &mut reference);
         self.goals.reference = Some(reference);
         if result.is_err() && multi_rate {

@@ -500,4 +500,6 @@ impl ControlCore {
 #[cfg(test)]
 mod heading_tests;
 #[cfg(test)]
+mod stream_time_tests;
+#[cfg(test)]
 mod tests;
