@@ -171,8 +171,16 @@ pub fn fly(ctrl: &mut dyn Controller, heavier: f64, ticks: &dyn Fn(usize) -> Tic
                 observed = last.t;
             }
             reference.t = t;
+            // A multi-rate controller is handed the tick time (its samples
+            // came through `observe`), as the daemon does; the others the
+            // newest pose at its capture time.
+            let measurement = if ctrl.multi_rate() {
+                Measurement { t, ..last }
+            } else {
+                last
+            };
             let out = ctrl
-                .update(&last, &mut reference)
+                .update(&measurement, &mut reference)
                 .unwrap_or_else(|e| panic!("tick {k} ({tick:?}): {e}"));
             let c = out.command;
             assert!(c.is_finite(), "tick {k}: {c:?}");
