@@ -39,6 +39,10 @@ impl ControlCore {
             Action::None => None,
             Action::Recovered { failed } => {
                 info!(ticks = failed, "controller recovered");
+                self.text(
+                    MavSeverity::MAV_SEVERITY_INFO,
+                    &format!("dflat: controller recovered ({failed} failed ticks)"),
+                );
                 None
             }
             Action::Fallback { kind, announce } => self.fallback_of(kind, announce, planned, note),

@@ -8,7 +8,8 @@
 //!    ▲   │  (no plan, a good     HeldCommand ──┼──► LevelHover ──────────────► Trial
 //!    │   │   command to hold)                  │     (ControlFailed)          │ TRIAL_TICKS good
 //!    │   └─────────────────────────────────────┘                              │ trial solves
-//!    │ good tick (from any of the three)                                      ▼
+//!    │ RECOVERY_S of good ticks in a row (Recovering; a failure               │
+//!    │ there continues the streak, said if its fallback changes)              ▼
 //!    │                                                                      LetGo
 //!    │   a cause while streaming (stale pose, silent autopilot, residual,     │
 //!    │   the stop's level):                                                 │
@@ -43,6 +44,13 @@ use crate::supervisor::{Cause, FlightState, Links};
 pub const TRIAL_TICKS: u32 = 5;
 /// How long a residual failsafe lasts before pose may re-engage \[s\].
 pub const RESIDUAL_FAILSAFE_LATCH: f64 = 2.0;
+/// How long the controller must solve every tick after a fallback streak
+/// before the streak is over \[s\] ([`Failsafe::Recovering`]): a failure
+/// before then continues it, said again only when its fallback changes
+/// kind. Ending a streak at the first good tick, a controller failing
+/// three ticks in five announced a new streak twice in every five ticks:
+/// 20 STATUSTEXTs a second.
+pub const RECOVERY_S: f64 = 1.0;
 
 /// What a failsafe that levels streams: the level command, and the brake
 /// before it (see `tick/failsafe_level.rs`).
@@ -104,6 +112,9 @@ impl LevelPlan {
 pub enum Severity {
     /// The controller flies.
     Nominal,
+    /// The controller flies again after a fallback streak, not long
+    /// enough to end it.
+    Recovering,
     /// Its previous plan.
     PlanFallback,
     /// The last good command, held.
@@ -123,6 +134,19 @@ pub enum Severity {
 pub enum Failsafe {
     /// The controller's own commands are sent (or nothing has failed).
     Nominal,
+    /// The controller's own commands are sent again after a fallback
+    /// streak, for less than [`RECOVERY_S`] so far: a failure now
+    /// continues the streak (its failed ticks counted on; its fallback
+    /// chosen as from [`Failsafe::Nominal`], so the same commands are
+    /// sent; said only when its kind differs from `from`'s).
+    Recovering {
+        /// Failed ticks in the streak.
+        failed: u64,
+        /// The streak's last fallback.
+        from: FallbackKind,
+        /// Good ticks in a row since.
+        good: u32,
+    },
     /// Failed or late ticks: the controller's previous plan, one step
     /// further per tick (DF-MPC).
     PlanFallback {
@@ -352,6 +376,7 @@ impl Failsafe {
     pub fn name(&self) -> &'static str {
         match self {
             Failsafe::Nominal => "nominal",
+            Failsafe::Recovering { .. } => "recovering",
             Failsafe::PlanFallback { .. } => "plan_fallback",
             Failsafe::HeldCommand { .. } => "held_command",
             Failsafe::LevelHover { .. } => "level_hover",
@@ -365,6 +390,7 @@ impl Failsafe {
     pub fn severity(&self) -> Severity {
         match self {
             Failsafe::Nominal => Severity::Nominal,
+            Failsafe::Recovering { .. } => Severity::Recovering,
             Failsafe::PlanFallback { .. } => Severity::PlanFallback,
             Failsafe::HeldCommand { .. } => Severity::HeldCommand,
             Failsafe::LevelHover { .. } => Severity::LevelHover,
@@ -394,6 +420,7 @@ impl Failsafe {
     fn failed(&self) -> u64 {
         match *self {
             Failsafe::PlanFallback { failed }
+            | Failsafe::Recovering { failed, .. }
             | Failsafe::HeldCommand { failed, .. }
             | Failsafe::LevelHover { failed, .. } => failed,
             _ => 0,
@@ -415,7 +442,7 @@ pub fn next(state: Failsafe, event: Event, limits: &Limits) -> (Failsafe, Action
     use Failsafe as S;
     match (state, event) {
         (S::Nominal, Event::Solved) => (S::Nominal, Action::None),
-        (s, Event::Solved) if s.flying() => (S::Nominal, Action::Recovered { failed: s.failed() }),
+        (s, Event::Solved) if s.flying() => recovering(s, limits),
         (
             s,
             Event::Failed {
@@ -524,6 +551,24 @@ fn enter(
     }
 }
 
+/// A good tick in a fallback streak `s` (or in its recovery): the streak
+/// ends once the good ticks in a row span [`RECOVERY_S`].
+fn recovering(s: Failsafe, limits: &Limits) -> (Failsafe, Action) {
+    let (from, good) = match s {
+        Failsafe::Recovering { from, good, .. } => (from, good + 1),
+        Failsafe::PlanFallback { .. } => (FallbackKind::Plan, 1),
+        Failsafe::HeldCommand { .. } => (FallbackKind::Held, 1),
+        _ => (FallbackKind::LevelHover, 1),
+    };
+    let failed = s.failed();
+    let needed = (RECOVERY_S / limits.period).round().max(1.0);
+    if f64::from(good) >= needed {
+        (Failsafe::Nominal, Action::Recovered { failed })
+    } else {
+        (Failsafe::Recovering { failed, from, good }, Action::None)
+    }
+}
+
 /// A failed tick at `t` in a flying state `s`: the plan when offered,
 /// else the held command (only from `Nominal` or while holding, for at
 /// most `hold_ticks`: once a streak has flown the plan it never falls back
@@ -538,7 +583,7 @@ fn fallback(
 ) -> (Failsafe, Action) {
     let failed = s.failed() + 1;
     let held_so_far = match s {
-        Failsafe::Nominal => Some(0),
+        Failsafe::Nominal | Failsafe::Recovering { .. } => Some(0),
         Failsafe::HeldCommand { held, .. } => Some(held),
         _ => None,
     };
@@ -565,7 +610,10 @@ fn fallback(
             FallbackKind::LevelHover,
         )
     };
-    let announce = std::mem::discriminant(&next) != std::mem::discriminant(&s);
+    let announce = match s {
+        Failsafe::Recovering { from, .. } => from != kind,
+        _ => std::mem::discriminant(&next) != std::mem::discriminant(&s),
+    };
     (next, Action::Fallback { kind, announce })
 }
 

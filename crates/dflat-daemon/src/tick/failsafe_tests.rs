@@ -58,6 +58,18 @@ const G: S = S::LetGo {
 const G_LATCHED: S = S::LetGo {
     clear: Clear::NotBefore(3.0),
 };
+/// Two good ticks after a streak of three failed ticks that held.
+const R: S = S::Recovering {
+    failed: 3,
+    from: FallbackKind::Held,
+    good: 2,
+};
+/// One good tick short of [`RECOVERY_S`] (50 ticks at 0.02 s).
+const R_LAST: S = S::Recovering {
+    failed: 3,
+    from: FallbackKind::Held,
+    good: 49,
+};
 const T: S = S::Trial { good: 2 };
 const T_LAST: S = S::Trial {
     good: TRIAL_TICKS - 1,
@@ -174,11 +186,87 @@ const LATE_FAIL: Event = failed(1.09, false, true);
 
 /// (state, event, next state, action).
 const TABLE: &[(S, Event, S, Action)] = &[
-    // A good tick ends any fallback streak.
+    // A good tick starts a fallback streak's recovery; RECOVERY_S of
+    // good ticks in a row end it.
     (N, Event::Solved, N, A::None),
-    (P, Event::Solved, N, A::Recovered { failed: 3 }),
-    (H, Event::Solved, N, A::Recovered { failed: 1 }),
-    (L, Event::Solved, N, A::Recovered { failed: 4 }),
+    (
+        P,
+        Event::Solved,
+        S::Recovering {
+            failed: 3,
+            from: Plan,
+            good: 1,
+        },
+        A::None,
+    ),
+    (
+        H,
+        Event::Solved,
+        S::Recovering {
+            failed: 1,
+            from: Held,
+            good: 1,
+        },
+        A::None,
+    ),
+    (
+        L,
+        Event::Solved,
+        S::Recovering {
+            failed: 4,
+            from: LevelHover,
+            good: 1,
+        },
+        A::None,
+    ),
+    (
+        R,
+        Event::Solved,
+        S::Recovering {
+            failed: 3,
+            from: Held,
+            good: 3,
+        },
+        A::None,
+    ),
+    (R_LAST, Event::Solved, N, A::Recovered { failed: 3 }),
+    // A failure in the recovery continues the streak: its fallback as
+    // from nominal, said only when its kind changes.
+    (
+        R,
+        PLAN_FAIL,
+        S::PlanFallback { failed: 4 },
+        fallback(Plan, true),
+    ),
+    (
+        R,
+        HOLD_FAIL,
+        S::HeldCommand { failed: 4, held: 1 },
+        fallback(Held, false),
+    ),
+    (
+        R,
+        BARE_FAIL,
+        S::LevelHover {
+            failed: 4,
+            since: 1.04,
+        },
+        fallback(LevelHover, true),
+    ),
+    (
+        R,
+        tripped(Cause::ResidualDiverged, true),
+        FL_AT_LATCHED,
+        enter(Cause::ResidualDiverged, true),
+    ),
+    (R, STALE, FL_AT, enter(Cause::PoseStale, true)),
+    (R, SILENT, FL_AT, enter(Cause::AutopilotSilent, true)),
+    (R, OFF_STALE, R, A::None),
+    (R, FINE, R, A::None),
+    (R, STOPPING, R, A::None),
+    (R, Event::Idle { t: 1.04 }, R, A::None),
+    (R, Event::TrialSolve { ok: true }, R, A::None),
+    (R, Event::LevelRefused, R, A::None),
     (FL, Event::Solved, FL, A::None),
     (G, Event::Solved, G, A::None),
     (T, Event::Solved, T, A::None),
@@ -439,7 +527,7 @@ fn the_transition_table() {
         );
     }
     // Every state meets every event at least once.
-    let states = [N, P, H, L, FL, G, T];
+    let states = [N, R, P, H, L, FL, G, T];
     let events = [
         Event::Solved,
         failed(1.0, false, false),
