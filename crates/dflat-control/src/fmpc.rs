@@ -385,11 +385,7 @@ impl Controller for FlatnessMpc {
     }
 
     fn tick_time(&self, measurement: &Measurement) -> f64 {
-        if self.estimator.is_some() {
-            measurement.t
-        } else {
-            self.differences.tick_time(measurement.t)
-        }
+        BaselineEstimator::tick_time(self.estimator.as_ref(), &self.differences, measurement)
     }
 
     fn correct_last_input(&mut self, applied: &Vector3<f64>) {

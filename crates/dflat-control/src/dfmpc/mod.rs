@@ -436,9 +436,6 @@ impl DfMpc {
         if self.record == RecordState::PendingAfterGap {
             window.reset();
         }
-        // Ticks the shell skipped, known from its clock: filled before
-        // y_k, so a tick after them without a new pose is at its own slot.
-        let skipped = window.fill_skipped(self.skipped as usize, &|y, u| self.f_inv(y, u, d))?;
         if let Some(multi) = &mut self.multi {
             let (model, learned) = (&self.model, self.learned.as_ref());
             let e = multi.estimate(measurement.t, |y, u| {
@@ -451,6 +448,9 @@ impl DfMpc {
                 filled: 0,
             });
         }
+        // Ticks the shell skipped, known from its clock: filled before
+        // y_k, so a tick after them without a new pose is at its own slot.
+        let skipped = window.fill_skipped(self.skipped as usize, &|y, u| self.f_inv(y, u, d))?;
         let placement = window.place(
             measurement.t,
             measurement.position,

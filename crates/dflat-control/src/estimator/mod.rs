@@ -556,6 +556,22 @@ impl BaselineEstimator {
         }
     }
 
+    /// The time a baseline's update will take its tick to be
+    /// ([`crate::Controller::tick_time`]): with an estimator (multi-rate)
+    /// the tick time it is handed, else the next tick of its finite
+    /// `differences`.
+    pub(crate) fn tick_time(
+        estimator: Option<&Self>,
+        differences: &differences::PoseDifferences,
+        measurement: &crate::Measurement,
+    ) -> f64 {
+        if estimator.is_some() {
+            measurement.t
+        } else {
+            differences.tick_time(measurement.t)
+        }
+    }
+
     /// The state per axis at the time of `measurement` from `estimator`
     /// (None without one); `NonFiniteMeasurement` for a measurement that is
     /// not finite, `NoMeasurement` for an estimator without a sample.

@@ -64,6 +64,30 @@ pub struct WindowStats {
     pub restarts: u64,
 }
 
+/// Where [`Window::place`] puts a pose ([`Window::slot_for`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum SlotFor {
+    /// The padding from the pose (the first, or a restart).
+    Start {
+        /// A restart (counted).
+        restart: bool,
+    },
+    /// The slot after the newest, `filled` skipped ticks after it.
+    Next {
+        /// Skipped ticks filled before it.
+        filled: usize,
+    },
+    /// An earlier slot: `idx` in the slots, `back` ticks before the tick's.
+    Late {
+        /// Index in the slots.
+        idx: usize,
+        /// Ticks before the tick's slot.
+        back: usize,
+    },
+    /// No new pose: the tick's slot is predicted.
+    Predicted,
+}
+
 /// The last r measured outputs and r − 1 sent inputs, with start-up
 /// padding, and the [`SLOTS`] − r older slots that time placement needs.
 ///
@@ -190,45 +214,31 @@ impl Window {
         dt: f64,
         next_output: NextOutput<'_>,
     ) -> Result<Placement, ControlError> {
-        if self.measurements == 0 {
-            return self.start(t, y, false);
-        }
-        let new_pose = t.is_finite() && t >= self.pose_t + 0.5 * dt;
         let origin_t = self.origin_t;
         let slot_time = |i: i64| origin_t + i as f64 * dt;
-        let n = ((t - slot_time(self.newest)) / dt).round();
         // How far the pose is from slot `i`'s time \[s\]: none when on it
         // (then no velocity is needed).
         let off = |i: i64| Some(t - slot_time(i)).filter(|o| o.abs() > 1e-9 * dt);
-        if new_pose && n >= 1.0 {
-            let filled = n as usize - 1;
-            if filled > MAX_FILL {
-                return self.start(t, y, true);
-            }
-            self.fill(filled, next_output)?;
-            let slot = self.newest + 1;
-            let onto = match off(slot) {
-                // Moved onto the slot's time along the velocity there.
-                Some(o) => {
-                    y - (self.predict_next(next_output)? - self.outputs[SLOTS - 1]) * (o / dt)
-                }
-                None => y,
-            };
-            self.newest = slot;
-            self.push_output(onto, true);
-            self.pose_t = t;
-            return Ok(Placement::Next { filled });
-        }
         let mut placement = Placement::Predicted;
-        if new_pose {
-            // Slot `idx` (newest = SLOTS − 1); re-predicting the slots
-            // after it needs three before each.
-            let back = (-n) as usize + 1;
-            let Some(idx) = SLOTS.checked_sub(back).filter(|i| *i >= 2) else {
-                return self.start(t, y, true);
-            };
-            if !self.measured[idx] {
-                if let Some(o) = off(self.newest + n as i64) {
+        match self.slot_for(t, dt, self.newest) {
+            SlotFor::Start { restart } => return self.start(t, y, restart),
+            SlotFor::Next { filled } => {
+                self.fill(filled, next_output)?;
+                let slot = self.newest + 1;
+                let onto = match off(slot) {
+                    // Moved onto the slot's time along the velocity there.
+                    Some(o) => {
+                        y - (self.predict_next(next_output)? - self.outputs[SLOTS - 1]) * (o / dt)
+                    }
+                    None => y,
+                };
+                self.newest = slot;
+                self.push_output(onto, true);
+                self.pose_t = t;
+                return Ok(Placement::Next { filled });
+            }
+            SlotFor::Late { idx, back } if !self.measured[idx] => {
+                if let Some(o) = off(self.newest + 1 - back as i64) {
                     let v = (self.outputs[idx] - self.outputs[idx - 1]) / dt;
                     self.outputs[idx] = y - v * o;
                 } else {
@@ -244,6 +254,7 @@ impl Window {
                 self.stats.late += 1;
                 placement = Placement::Late { back };
             }
+            SlotFor::Late { .. } | SlotFor::Predicted => {}
         }
         let p = self.predict_next(next_output)?;
         self.push_output(p, false);
@@ -259,26 +270,44 @@ impl Window {
     /// where the place starts the window (the first measurement, a
     /// restart). The controller's tick time, for the reference.
     pub fn tick_time(&self, t: f64, dt: f64, skipped: usize) -> f64 {
-        if self.measurements == 0 || skipped > MAX_FILL {
+        if skipped > MAX_FILL {
             return t;
         }
         let newest = self.newest + skipped as i64;
         let slot_time = |i: i64| self.origin_t + i as f64 * dt;
-        if t.is_finite() && t >= self.pose_t + 0.5 * dt {
-            let n = ((t - slot_time(newest)) / dt).round();
-            if n >= 1.0 {
-                return if n as usize - 1 > MAX_FILL {
-                    t
-                } else {
-                    slot_time(newest + n as i64)
-                };
-            }
-            let back = (-n) as usize + 1;
-            if SLOTS.checked_sub(back).filter(|i| *i >= 2).is_none() {
-                return t;
-            }
+        match self.slot_for(t, dt, newest) {
+            SlotFor::Start { .. } => t,
+            SlotFor::Next { filled } => slot_time(newest + filled as i64 + 1),
+            SlotFor::Late { .. } | SlotFor::Predicted => slot_time(newest + 1),
         }
-        slot_time(newest + 1)
+    }
+
+    /// Where [`Window::place`] puts a pose taken at `t` \[s\] with the
+    /// newest slot `newest`: the rules of its docs, decided once for the
+    /// place itself and for [`Window::tick_time`].
+    fn slot_for(&self, t: f64, dt: f64, newest: i64) -> SlotFor {
+        if self.measurements == 0 {
+            return SlotFor::Start { restart: false };
+        }
+        if !(t.is_finite() && t >= self.pose_t + 0.5 * dt) {
+            return SlotFor::Predicted;
+        }
+        let n = ((t - (self.origin_t + newest as f64 * dt)) / dt).round();
+        if n >= 1.0 {
+            let filled = n as usize - 1;
+            return if filled > MAX_FILL {
+                SlotFor::Start { restart: true }
+            } else {
+                SlotFor::Next { filled }
+            };
+        }
+        // Slot `idx` (newest = SLOTS − 1); re-predicting the slots after
+        // it needs three before each.
+        let back = (-n) as usize + 1;
+        match SLOTS.checked_sub(back).filter(|i| *i >= 2) {
+            Some(idx) => SlotFor::Late { idx, back },
+            None => SlotFor::Start { restart: true },
+        }
     }
 
     /// The shell skipped `ticks` ticks (its loop stalled; the autopilot

@@ -29,16 +29,7 @@ impl ControlCore {
     ) -> Option<(Option<SentCommand>, u32)> {
         let t = time.t;
         let mut reference = self.goals.reference.take()?;
-        // Ticks since its last update without one (the loop stalled, or
-        // did not fly it): a controller that takes its clock from the
-        // poses counts them (`Controller::skipped`).
-        if let Some(last) = self.last_update_tick.replace(time.tick) {
-            let skipped = time.tick.saturating_sub(last).saturating_sub(1);
-            if skipped > 0 {
-                self.controller
-                    .skipped(u32::try_from(skipped).unwrap_or(u32::MAX));
-            }
-        }
+        self.tell_skipped(time.tick);
         let multi_rate = self.settings.multi_rate;
         let measurement = self.tick_measurement(t, &pose);
         // Standby: the tick before sent a command the autopilot did not
@@ -182,6 +173,20 @@ impl ControlCore {
             self.text(severity, text);
         }
         self.learned_said = status;
+    }
+
+    /// Tells the controller the ticks since its last update without one
+    /// (the loop stalled, or did not fly it), before the update of `tick`:
+    /// a controller that takes its clock from the poses counts them
+    /// (`Controller::skipped`).
+    fn tell_skipped(&mut self, tick: u64) {
+        if let Some(last) = self.last_update_tick.replace(tick) {
+            let skipped = tick.saturating_sub(last).saturating_sub(1);
+            if skipped > 0 {
+                self.controller
+                    .skipped(u32::try_from(skipped).unwrap_or(u32::MAX));
+            }
+        }
     }
 
     /// The measurement a tick at `t` hands the controller: multi-rate, the
