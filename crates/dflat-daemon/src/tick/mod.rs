@@ -500,6 +500,8 @@ impl ControlCore {
 #[cfg(test)]
 mod heading_tests;
 #[cfg(test)]
+mod recovery_tests;
+#[cfg(test)]
 mod stream_time_tests;
 #[cfg(test)]
 mod tests;
