@@ -29,8 +29,11 @@
 //! gets the model's prediction (F⁻¹ with the inputs sent); a pose that
 //! lands on a slot already predicted replaces it and the later slots are
 //! predicted again from it; skipped ticks are filled with predictions
-//! under the held input. The window keeps [`SLOTS`] slots for this. With
-//! one pose per tick, on time, it is the paper's window exactly.
+//! under the held input. The pose after a run of predicted slots corrects
+//! them, as one acceleration error from the last measured slot on would
+//! have put them off (a slot left 1 mm off reads as a 2.5 m/s² jolt at
+//! 50 Hz). The window keeps [`SLOTS`] slots for this. With one pose per
+//! tick, on time, it is the paper's window exactly.
 //!
 //! # Multi-rate: [`MultiRateWindow`]
 //!
