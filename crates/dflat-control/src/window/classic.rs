@@ -573,9 +573,8 @@ mod tests {
                 });
             }
             let mut w = cruising(5);
-            for n in 6..=8 {
-                let t = n as f64 * DT;
-                w.place(t, v(truth[n]), DT, &integrator).unwrap();
+            for (n, y) in truth.iter().enumerate().take(9).skip(6) {
+                w.place(n as f64 * DT, v(*y), DT, &integrator).unwrap();
                 w.push_input(v(sent));
             }
             if skipped {
