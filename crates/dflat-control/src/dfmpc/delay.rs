@@ -61,6 +61,27 @@ impl DelayLine {
         (self.len > 0).then(|| self.get(self.len - 1))
     }
 
+    /// The inputs sent and not yet in effect, oldest first: the first
+    /// `len` of the array (`len` = d).
+    pub fn in_flight(&self) -> ([Vector3<f64>; MAX_DELAY_TICKS], usize) {
+        let mut out = [Vector3::zeros(); MAX_DELAY_TICKS];
+        for (i, u) in out.iter_mut().enumerate().take(self.len) {
+            *u = self.get(i);
+        }
+        (out, self.len)
+    }
+
+    /// `n` ticks on which nothing was sent (the shell skipped them; the
+    /// autopilot holds the newest input it has): each moves the line on
+    /// with the newest input sent again.
+    pub fn skip(&mut self, n: usize) {
+        for _ in 0..n.min(self.len) {
+            if let Some(u) = self.newest() {
+                self.push(u);
+            }
+        }
+    }
+
     /// Sends `u`: returns the input that takes effect now (`u` itself for
     /// d = 0, else the one sent d ticks ago).
     pub fn push(&mut self, u: Vector3<f64>) -> Vector3<f64> {
@@ -96,6 +117,24 @@ mod tests {
 
     fn v(x: f64) -> Vector3<f64> {
         Vector3::new(x, 0.0, 0.0)
+    }
+
+    #[test]
+    fn skipped_ticks_move_the_line_on_under_the_newest_input() {
+        let mut line = DelayLine::new(3, v(0.0));
+        for i in 1..=3 {
+            line.push(v(i as f64));
+        }
+        let (pending, len) = line.in_flight();
+        assert_eq!(&pending[..len], &[v(1.0), v(2.0), v(3.0)]);
+        // Two ticks skipped: 1 and 2 took effect, 3 is held.
+        line.skip(2);
+        assert_eq!(line.push(v(4.0)), v(3.0));
+        let (pending, len) = line.in_flight();
+        assert_eq!(&pending[..len], &[v(3.0), v(3.0), v(4.0)]);
+        // More skipped ticks than the delay: only the newest is left.
+        line.skip(10);
+        assert_eq!(&line.in_flight().0[..3], &[v(4.0); 3]);
     }
 
     #[test]

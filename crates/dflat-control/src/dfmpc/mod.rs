@@ -416,6 +416,10 @@ struct FixedOutputs {
     /// Skipped ticks the classic window filled before y_k (0 in
     /// multi-rate).
     filled: usize,
+    /// Ticks since the last committed one that nothing was sent on (the
+    /// classic window's filled ticks; the multi-rate window's, from the
+    /// tick times): the input delay's line moves on over them.
+    gap: usize,
 }
 
 impl DfMpc {
@@ -436,7 +440,16 @@ impl DfMpc {
         if self.record == RecordState::PendingAfterGap {
             window.reset();
         }
+        // With an input delay, the ticks nothing was sent on had the
+        // inputs in flight in effect, then the newest held.
+        let (in_flight, delayed) = self.delay.in_flight();
         if let Some(multi) = &mut self.multi {
+            let dt = self.model.dt();
+            let gap = multi.last_tick().map_or(0, |last| {
+                (((measurement.t - last) / dt).round() - 1.0).clamp(0.0, MAX_DELAY_TICKS as f64)
+                    as usize
+            });
+            multi.set_pending_inputs(&in_flight[..delayed]);
             let (model, learned) = (&self.model, self.learned.as_ref());
             let e = multi.estimate(measurement.t, |y, u| {
                 learned_hook::next_output(model, learned, y, u, d)
@@ -446,8 +459,10 @@ impl DfMpc {
                 fixed: e.fixed,
                 previous_input: e.previous_input,
                 filled: 0,
+                gap,
             });
         }
+        window.set_pending_inputs(&in_flight[..delayed]);
         // Ticks the shell skipped, known from its clock: filled before
         // y_k, so a tick after them without a new pose is at its own slot.
         let skipped = window.fill_skipped(self.skipped as usize, &|y, u| self.f_inv(y, u, d))?;
@@ -471,6 +486,7 @@ impl DfMpc {
             fixed: [y0, y1, y2],
             previous_input: u1,
             filled,
+            gap: filled,
         })
     }
 
@@ -482,11 +498,13 @@ impl DfMpc {
         mut window: Window,
         t: f64,
         fixed: &[Vector3<f64>; 3],
-        filled: usize,
+        (filled, gap): (usize, usize),
         sent: &Vector3<f64>,
         saturated: bool,
     ) {
-        // The input in effect at this tick (the one sent d ticks ago).
+        // The input in effect at this tick (the one sent d ticks ago; over
+        // the ticks nothing was sent on, the newest held).
+        self.delay.skip(gap);
         let applied = self.delay.push(*sent);
         let sent = &applied;
         if let Some(e) = &mut self.estimator {
@@ -586,11 +604,14 @@ impl Controller for DfMpc {
             fixed,
             previous_input,
             filled,
+            gap,
         } = self.fixed_outputs(measurement, &d)?;
         // 2b. Across the inputs sent and not yet in effect (input delay):
         // the plan starts at k + d.
-        let planned = self.delay.predict(fixed, |y, u| self.f_inv(y, u, &d))?;
-        let previous_input = self.delay.newest().unwrap_or(previous_input);
+        let mut line = self.delay;
+        line.skip(gap);
+        let planned = line.predict(fixed, |y, u| self.f_inv(y, u, &d))?;
+        let previous_input = line.newest().unwrap_or(previous_input);
         let y0 = planned[0];
         // The sent command's acceleration in the plan's terms (Δ²y/δt²):
         // the thrust's, less the drag at the plan's start velocity, plus
@@ -627,7 +648,14 @@ impl Controller for DfMpc {
         let (plan4, u) = self.map_through_f(y0, &d)?;
         // 6. Saturation; the sent input into the window.
         let (sent, saturated) = self.saturate(u);
-        self.commit(window, measurement.t, &fixed, filled, &sent, saturated);
+        self.commit(
+            window,
+            measurement.t,
+            &fixed,
+            (filled, gap),
+            &sent,
+            saturated,
+        );
         self.keep_plan(y0);
         self.keep_sent_offset(&plan4, &d);
         self.learned_after_tick(measurement.t, &plan4, &sent, &d);
@@ -716,6 +744,7 @@ impl Controller for DfMpc {
             window,
             fixed,
             filled,
+            gap,
             ..
         } = self.fixed_outputs(&m, &d).ok()?;
         // Step s of the plan is in effect at (good tick + d + s): sending
@@ -732,7 +761,7 @@ impl Controller for DfMpc {
             return None;
         }
         let (sent, saturated) = self.saturate(u);
-        self.commit(window, m.t, &fixed, filled, &sent, saturated);
+        self.commit(window, m.t, &fixed, (filled, gap), &sent, saturated);
         self.keep_sent_offset(&plan4, &d);
         self.plan = match previous {
             PlanState::Fresh { .. } => PlanState::Fresh { flown: step },

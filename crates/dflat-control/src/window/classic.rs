@@ -18,6 +18,10 @@ pub const SLOTS: usize = 8;
 /// Skipped ticks [`Window::place`] fills at most (1 s at 50 Hz); a longer
 /// gap restarts the window from its padding.
 pub const MAX_FILL: usize = 50;
+/// Inputs in effect after the last committed tick the window can be told
+/// ([`Window::set_pending_inputs`]): 0.5 s at 50 Hz, as the controller's
+/// longest input delay.
+pub const PENDING_INPUTS: usize = 25;
 /// Type of the one-step prediction F⁻¹ the window is given:
 /// `y_{j+3} = F⁻¹(y_j, y_{j+1}, y_{j+2}; u_j)`.
 type NextOutput<'a> =
@@ -118,6 +122,14 @@ pub struct Window {
     pose_t: f64,
     /// What placement has done.
     stats: WindowStats,
+    /// The inputs in effect at the ticks after the last committed one,
+    /// oldest first, the last repeated beyond them (an input delay's
+    /// pending inputs); none: the last input, held.
+    pending: [Vector3<f64>; PENDING_INPUTS],
+    /// How many of `pending` hold.
+    pending_len: usize,
+    /// Slots filled since the last [`Window::push_input`].
+    filled_since_input: usize,
 }
 
 impl Window {
@@ -134,6 +146,9 @@ impl Window {
             newest: 0,
             pose_t: f64::NEG_INFINITY,
             stats: WindowStats::default(),
+            pending: [hover; PENDING_INPUTS],
+            pending_len: 0,
+            filled_since_input: 0,
         }
     }
 
@@ -159,8 +174,29 @@ impl Window {
         self.measurements = self.measurements.saturating_add(1);
     }
 
-    /// Pushes the input `u_k` actually sent at the newest tick.
+    /// Pushes the input `u_k` in effect at the newest tick (the one sent,
+    /// or with an input delay the one sent d ticks before); forgets the
+    /// pending inputs told ([`Window::set_pending_inputs`]).
     pub fn push_input(&mut self, u: Vector3<f64>) {
+        self.push_slot_input(u);
+        self.pending_len = 0;
+        self.filled_since_input = 0;
+    }
+
+    /// Tells the window the inputs in effect at the ticks after the newest
+    /// committed one, oldest first, when they are not the last input held:
+    /// with an input delay of d ticks, the d inputs sent and not yet in
+    /// effect (beyond them the newest repeats, as the autopilot holds it).
+    /// Skipped ticks are filled under them; at most [`PENDING_INPUTS`]
+    /// are kept. The next [`Window::push_input`] forgets them.
+    pub fn set_pending_inputs(&mut self, inputs: &[Vector3<f64>]) {
+        let n = inputs.len().min(PENDING_INPUTS);
+        self.pending[..n].copy_from_slice(&inputs[..n]);
+        self.pending_len = n;
+    }
+
+    /// The input slot ring's push.
+    fn push_slot_input(&mut self, u: Vector3<f64>) {
         self.inputs.rotate_left(1);
         self.inputs[SLOTS - 1] = u;
     }
@@ -374,13 +410,18 @@ impl Window {
     }
 
     /// `n` skipped ticks after the newest slot: F⁻¹'s predictions under the
-    /// input held, the newest slot moved on by `n`.
+    /// input held (or the pending inputs told), the newest slot moved on
+    /// by `n`.
     fn fill(&mut self, n: usize, next_output: NextOutput<'_>) -> Result<(), FlatError> {
         for _ in 0..n {
-            let held = self.inputs[SLOTS - 1];
+            self.filled_since_input += 1;
+            let held = match self.pending_len {
+                0 => self.inputs[SLOTS - 1],
+                len => self.pending[self.filled_since_input.min(len) - 1],
+            };
             let p = self.predict_next(next_output)?;
             self.push_output(p, false);
-            self.push_input(held);
+            self.push_slot_input(held);
         }
         self.newest += n as i64;
         self.stats.filled += n as u64;

@@ -118,7 +118,9 @@
 
 mod classic;
 mod multi_rate;
-pub use classic::{INPUTS, MAX_FILL, OUTPUTS, Placement, SLOTS, Window, WindowStats};
+pub use classic::{
+    INPUTS, MAX_FILL, OUTPUTS, PENDING_INPUTS, Placement, SLOTS, Window, WindowStats,
+};
 
 /// What a DF-MPC window did with the poses, by window (the daemon's summary
 /// `pose_window`, tagged `"window": "classic"` or `"multi-rate"`).

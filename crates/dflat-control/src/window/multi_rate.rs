@@ -6,6 +6,7 @@ use dflat_model::FlatError;
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
+use super::classic::PENDING_INPUTS;
 use crate::model::ControlModel;
 use crate::{ControlError, Limit};
 
@@ -178,6 +179,10 @@ pub struct MultiRateWindow {
     last_tick: Option<f64>,
     /// Time of the tick estimated last (committed by `commit`).
     pending_tick: Option<f64>,
+    /// The inputs in effect at the ticks after the last committed one,
+    /// oldest first, the last repeated beyond them (an input delay's
+    /// pending inputs); empty: the last input, held.
+    pending_inputs: Vec<Vector3<f64>>,
     stats: MultiRateStats,
 }
 
@@ -230,6 +235,7 @@ impl MultiRateWindow {
             chain: vec![Vector3::zeros(); m + 3],
             last_tick: None,
             pending_tick: None,
+            pending_inputs: Vec::with_capacity(PENDING_INPUTS),
             stats: MultiRateStats::default(),
         })
     }
@@ -377,9 +383,19 @@ impl MultiRateWindow {
             }
             Some(last) => {
                 let n = ((t - last) / dt).round().clamp(1.0, m as f64) as usize;
+                // Tick `last + i` (i = j + n − m ≥ 1, a tick skipped) had
+                // the pending input i told, or the last one held.
                 let held = self.inputs[m];
+                let pending = &self.pending_inputs;
                 for (j, u) in self.next_inputs.iter_mut().enumerate() {
-                    *u = self.inputs.get(j + n).copied().unwrap_or(held);
+                    *u = self.inputs.get(j + n).copied().unwrap_or_else(|| {
+                        let i = j + n - m;
+                        pending
+                            .get(i - 1)
+                            .or(pending.last())
+                            .copied()
+                            .unwrap_or(held)
+                    });
                 }
                 self.next_trajectory[..3].copy_from_slice(&self.trajectory[n..n + 3]);
                 self.advance_arrival(n, start - n as f64 * dt, &next_output)?;
@@ -617,13 +633,29 @@ impl MultiRateWindow {
         }
     }
 
-    /// Records the input `u` sent at the tick last estimated and makes that
-    /// estimate the window's: forgets the samples now in the arrival cost.
-    /// Without a pending estimate it does nothing.
+    /// Tells the window the inputs in effect at the ticks after the last
+    /// committed one, oldest first, when they are not the last input held:
+    /// with an input delay of d ticks, the d inputs sent and not yet in
+    /// effect (beyond them the newest repeats, as the autopilot holds it).
+    /// A tick the shell skipped is estimated under them; at most
+    /// [`PENDING_INPUTS`] are kept. The next [`MultiRateWindow::commit`]
+    /// forgets them.
+    pub fn set_pending_inputs(&mut self, inputs: &[Vector3<f64>]) {
+        self.pending_inputs.clear();
+        self.pending_inputs
+            .extend_from_slice(&inputs[..inputs.len().min(PENDING_INPUTS)]);
+    }
+
+    /// Records the input `u` in effect at the tick last estimated (the one
+    /// sent, or with an input delay the one sent d ticks before) and makes
+    /// that estimate the window's: forgets the samples now in the arrival
+    /// cost and the pending inputs told. Without a pending estimate it does
+    /// nothing.
     pub fn commit(&mut self, u: &Vector3<f64>) {
         let Some(t) = self.pending_tick.take() else {
             return;
         };
+        self.pending_inputs.clear();
         std::mem::swap(&mut self.trajectory, &mut self.next_trajectory);
         let m = self.settings.fit_span;
         self.inputs[..m].copy_from_slice(&self.next_inputs);

@@ -1,0 +1,102 @@
+//! An autopilot that applies each command d ticks after it is sent, and a
+//! shell that skips ticks now and then (the autopilot holds the newest
+//! command it has): over the skipped ticks the inputs in flight take
+//! effect one a tick and the newest is held after them. On the
+//! controller's own model, with every pose exact, the plan's start — the
+//! window's outputs carried across the inputs in flight, y_{k+d} — is
+//! then the vehicle's position d ticks later, to rounding, whether ticks
+//! were skipped or not.
+
+use dflat_control::dfmpc::{DfMpc, DfMpcSettings, OutputConstraints};
+use dflat_control::window::MultiRateSettings;
+use dflat_control::{ControlModel, Controller, Measurement};
+use dflat_model::{SpatialModel, SpatialParams};
+use nalgebra::Vector3;
+
+mod common;
+use common::SpatialSim;
+use common::timing::{Line, Z};
+
+/// Ticks flown (4 s).
+const TICKS: usize = 200;
+
+/// The largest distance \[m\] between the plan's start at tick k and the
+/// position at k + `delay`, over the ticks flown; `skip(k)` says which
+/// ticks the shell skips.
+fn plan_start_error(multi_rate: bool, delay: usize, skip: &dyn Fn(usize) -> bool) -> f64 {
+    let params = SpatialParams::default();
+    let model = SpatialModel::new(params).unwrap();
+    let settings = DfMpcSettings {
+        delay_ticks: delay,
+        multi_rate: multi_rate.then(MultiRateSettings::default),
+        constraints: OutputConstraints {
+            max_tilt: Some(30f64.to_radians()),
+            max_tilt_rate: Some(150f64.to_radians()),
+            ..OutputConstraints::default()
+        },
+        ..DfMpcSettings::default()
+    };
+    let mut ctrl = DfMpc::new(ControlModel::Spatial(model), settings).unwrap();
+    let mut sim = SpatialSim::at_rest(params, Vector3::new(0.0, 0.0, Z));
+    let mut reference = Line { t: 0.0 };
+    let dt = params.dt;
+    let hover = (0.0, 0.0, params.g);
+    let mut sent: Vec<(usize, (f64, f64, f64))> = Vec::new();
+    let mut applied = hover;
+    let mut positions = Vec::new();
+    let mut starts = Vec::new();
+    for k in 0..TICKS {
+        let t = k as f64 * dt;
+        positions.push(sim.pos);
+        let measurement = Measurement {
+            t,
+            position: sim.pos,
+            yaw: 0.0,
+        };
+        ctrl.observe(&measurement);
+        if k > 10 && skip(k) {
+            ctrl.skipped(1);
+        } else {
+            reference.t = t;
+            let out = ctrl.update(&measurement, &mut reference).unwrap();
+            starts.push((k, out.plan[0]));
+            let c = out.command;
+            sent.push((k, (c.pitch, c.roll, c.thrust)));
+        }
+        while let Some(&(at, c)) = sent.first() {
+            if at + delay > k {
+                break;
+            }
+            applied = c;
+            sent.remove(0);
+        }
+        sim.step(applied.0, applied.1, applied.2);
+    }
+    starts
+        .iter()
+        .filter(|(k, _)| k + delay < TICKS && *k > 10)
+        .map(|(k, y)| (y - positions[k + delay]).norm())
+        .fold(0.0, f64::max)
+}
+
+#[test]
+fn the_plan_starts_where_the_vehicle_will_be_after_skipped_ticks() {
+    let two_in_seven = |k: usize| k % 7 == 3 || k % 7 == 4;
+    for multi_rate in [false, true] {
+        for delay in [0, 1, 2, 5] {
+            let every = plan_start_error(multi_rate, delay, &|_| false);
+            let skipped = plan_start_error(multi_rate, delay, &two_in_seven);
+            println!(
+                "multi-rate {multi_rate}, delay {delay}: {every:.2e} m, skipped {skipped:.2e} m"
+            );
+            assert!(
+                every < 1e-6,
+                "multi-rate {multi_rate}, delay {delay}: {every} m"
+            );
+            assert!(
+                skipped < 1e-6,
+                "multi-rate {multi_rate}, delay {delay}, two ticks in seven skipped: {skipped} m"
+            );
+        }
+    }
+}
