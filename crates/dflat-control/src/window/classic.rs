@@ -48,8 +48,8 @@ pub enum Placement {
         /// Ticks before this one.
         back: usize,
     },
-    /// No new pose (none half a step newer than the newest placed): y_k is
-    /// the model's prediction, F⁻¹ with the inputs sent.
+    /// No new pose (none in a later grid slot than the newest placed): y_k
+    /// is the model's prediction, F⁻¹ with the inputs sent.
     Predicted,
 }
 
@@ -224,8 +224,8 @@ impl Window {
     /// ends at y_k and [`Window::inputs`] at u_{k−1}.
     ///
     /// The slots lie on a grid one step δt (`dt` \[s\]) apart from the first
-    /// pose's time. A new pose (half a step newer than the newest placed)
-    /// goes to the grid slot nearest its time, `n = round((t − t_newest)/δt)`
+    /// pose's time. A new pose (its grid slot, the one nearest its time,
+    /// later than the newest placed pose's) goes to that slot, `n = round((t − t_newest)/δt)`
     /// slots from the newest, moved to the slot's time along the window's
     /// velocity there (`y − v̂·(t − t_slot)`: off by `a·δt²/8` at most, where
     /// snapping it would be off by `v·δt/2`):
@@ -331,7 +331,11 @@ impl Window {
         if self.measurements == 0 {
             return SlotFor::Start { restart: false };
         }
-        if !(t.is_finite() && t >= self.pose_t + 0.5 * dt) {
+        // New: in a later grid slot than the newest pose placed. (Half a
+        // step newer, as before, dropped the next pose after one stamped
+        // late: a pose at k + 0.4 δt, then one at k + 0.8 δt.)
+        let slot_of = |x: f64| ((x - self.origin_t) / dt).round();
+        if !(t.is_finite() && slot_of(t) > slot_of(self.pose_t)) {
             return SlotFor::Predicted;
         }
         let n = ((t - (self.origin_t + newest as f64 * dt)) / dt).round();
@@ -733,6 +737,31 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn the_pose_after_one_stamped_late_is_new() {
+        // Tick 6's pose stamped 0.4 δt late (its slot, 6), tick 7's 0.2 δt
+        // early: 0.4 δt apart, but in slot 7. It is placed there, not
+        // dropped for a prediction.
+        let mut w = cruising(5);
+        w.place(6.4 * DT, v(4.0 * 6.4 * DT), DT, &integrator)
+            .unwrap();
+        w.push_input(Vector3::zeros());
+        let p = w
+            .place(6.8 * DT, v(4.0 * 6.8 * DT), DT, &integrator)
+            .unwrap();
+        assert_eq!(p, Placement::Next { filled: 0 });
+        assert_eq!(w.stats().predicted, 0);
+        for s in speeds(&w) {
+            assert!((s - 4.0).abs() < 1e-9, "{s}");
+        }
+        // A second pose in the newest pose's slot is not new.
+        w.push_input(Vector3::zeros());
+        let p = w
+            .place(7.2 * DT, v(4.0 * 7.2 * DT), DT, &integrator)
+            .unwrap();
+        assert_eq!(p, Placement::Predicted);
     }
 
     #[test]
