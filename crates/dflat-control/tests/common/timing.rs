@@ -108,6 +108,18 @@ pub struct Flown {
 /// with `heavier` × its gravity (a hover-thrust error the model does not
 /// know).
 pub fn fly(ctrl: &mut dyn Controller, heavier: f64, ticks: &dyn Fn(usize) -> Tick) -> Flown {
+    fly_delayed(ctrl, heavier, 0, ticks)
+}
+
+/// [`fly`] through an autopilot that applies each command `delay` ticks
+/// after it is sent (and holds the newest it has: over skipped ticks, the
+/// last sent).
+pub fn fly_delayed(
+    ctrl: &mut dyn Controller,
+    heavier: f64,
+    delay: usize,
+    ticks: &dyn Fn(usize) -> Tick,
+) -> Flown {
     let plant = SpatialParams {
         tau: 1.2 * SpatialParams::default().tau,
         tau_thrust: 1.2 * SpatialParams::default().tau_thrust,
@@ -118,6 +130,10 @@ pub fn fly(ctrl: &mut dyn Controller, heavier: f64, ticks: &dyn Fn(usize) -> Tic
     let mut reference = Line { t: 0.0 };
     let hover = SpatialParams::default().g;
     let mut command = (0.0, 0.0, hover);
+    // Commands sent, with their tick: the plant applies the newest sent at
+    // least `delay` ticks ago.
+    let mut in_flight: Vec<(usize, (f64, f64, f64))> = Vec::new();
+    let mut applied = command;
     let mut sent: Option<(f64, f64, f64)> = None;
     let mut last = Measurement {
         t: 0.0,
@@ -193,7 +209,17 @@ pub fn fly(ctrl: &mut dyn Controller, heavier: f64, ticks: &dyn Fn(usize) -> Tic
             sent = Some(command);
         }
         previous = sim.pos;
-        sim.step(command.0, command.1, command.2);
+        if tick != Tick::Skipped {
+            in_flight.push((k, command));
+        }
+        while let Some(&(sent_at, c)) = in_flight.first() {
+            if sent_at + delay > k {
+                break;
+            }
+            applied = c;
+            in_flight.remove(0);
+        }
+        sim.step(applied.0, applied.1, applied.2);
         if judged {
             flown.altitude = flown.altitude.max((sim.pos.z - Z).abs());
             flown.cross = flown.cross.max(cross_track(&sim.pos));
