@@ -162,6 +162,41 @@ fn skipped_ticks_reach_the_disturbance_estimator_a_tick_apart() {
     );
 }
 
+/// A stall longer than the window's slots (ten ticks skipped in a row,
+/// 200 ms, within the window's fill limit) with the disturbance
+/// estimator on: the filled slots that are still in the window reach it;
+/// the update does not fail (it indexed the slots by the ticks filled,
+/// and ten is more than the eight kept).
+#[test]
+fn a_stall_longer_than_the_slots_reaches_the_disturbance_estimator() {
+    let with_estimator = || DfMpcSettings {
+        disturbance: Some(DisturbanceSettings::default()),
+        ..settings()
+    };
+    let (clean, clean_estimate) = fly_with(with_estimator(), 1.08, &|_| Tick::OnTime);
+    let (stalled, estimate) = fly_with(with_estimator(), 1.08, &|k| {
+        if (250..260).contains(&k) {
+            Tick::Skipped
+        } else {
+            Tick::OnTime
+        }
+    });
+    let (a, b) = (clean_estimate.unwrap(), estimate.unwrap());
+    println!("estimates: clean {a:?}, stalled {b:?}");
+    assert!(
+        (a.thrust_scale - b.thrust_scale).abs() < 0.005,
+        "thrust scale {} against {} (a reset of the estimate puts it at 1)",
+        b.thrust_scale,
+        a.thrust_scale
+    );
+    assert!(
+        stalled.altitude <= 2.0 * clean.altitude + 0.02,
+        "altitude error {:.4} m against {:.4} m",
+        stalled.altitude,
+        clean.altitude
+    );
+}
+
 /// A pose stream one tick late for good (its phase slipped behind the
 /// loop's): each pose replaces its tick's prediction.
 #[test]

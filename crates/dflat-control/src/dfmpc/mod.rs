@@ -51,7 +51,7 @@ use nalgebra::Vector3;
 use crate::disturbance::{DisturbanceEstimate, DisturbanceEstimator};
 use crate::model::ControlModel;
 use crate::optimise::{AxisBounds, AxisCascade, ConeBounds, PairCascade, invalid};
-use crate::window::{INPUTS, MultiRateWindow, Placement, SLOTS, Window};
+use crate::window::{MultiRateWindow, Placement, SLOTS, Window};
 use crate::{ControlError, Controller, Measurement, ReferenceSource, TickOutput, limit_tilt};
 
 /// Most ticks [`Controller::plan_fallback`] flies the last good plan (and
@@ -517,10 +517,16 @@ impl DfMpc {
                 // the estimator's own window stays a tick apart too (left
                 // out, a skipped tick biased its horizontal estimate by
                 // 0.1 m/s²: `classic_window_timing.rs`).
-                let slots = window.slot_outputs();
-                let held = window.inputs()[INPUTS - 1];
-                for back in (1..=filled).rev() {
-                    e.record(&slots[SLOTS - 1 - back], &held, false);
+                // Output slot i was in effect under input slot i + 1 (y_k
+                // is placed, u_k not yet pushed). Filled slots beyond those
+                // the window keeps (a longer stall) are gone: the
+                // estimator's window starts again from the kept ones.
+                let (slots, inputs) = (window.slot_outputs(), window.slot_inputs());
+                if filled > SLOTS - 1 {
+                    e.after_gap();
+                }
+                for back in (1..=filled.min(SLOTS - 1)).rev() {
+                    e.record(&slots[SLOTS - 1 - back], &inputs[SLOTS - back], false);
                 }
                 // A tick without a new pose: the predicted y_k stands in.
                 e.record(&fixed[0], sent, saturated);

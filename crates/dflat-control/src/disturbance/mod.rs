@@ -387,6 +387,14 @@ impl DisturbanceEstimator {
         self.restart_window();
     }
 
+    /// Ticks went unrecorded (a stall longer than the classic window's
+    /// slots): the window of consecutive ticks starts again and the pose
+    /// jump check has no tick before the next one, the estimate kept.
+    pub fn after_gap(&mut self) {
+        self.restart_window();
+        self.last = None;
+    }
+
     fn restart_window(&mut self) {
         self.head = 0;
         self.len = 0;

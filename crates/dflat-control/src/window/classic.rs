@@ -473,6 +473,14 @@ impl Window {
         &self.outputs
     }
 
+    /// Every input slot kept, oldest first (`[θ_cmd, φ_cmd, T_cmd]`; the
+    /// last [`INPUTS`] are [`Window::inputs`]): the input in effect at
+    /// each slot's tick, the output slots' one tick behind after a
+    /// [`Window::place`].
+    pub fn slot_inputs(&self) -> &[Vector3<f64>; SLOTS] {
+        &self.inputs
+    }
+
     /// Sent inputs `[u_{k−2}, u_{k−1}]`, oldest first.
     pub fn inputs(&self) -> &[Vector3<f64>; INPUTS] {
         self.inputs.last_chunk().expect("SLOTS ≥ INPUTS")
