@@ -15,17 +15,14 @@ use nalgebra::Vector3;
 
 mod common;
 use common::SpatialSim;
-use common::timing::{self, Line, Tick, Z};
+use common::timing::{self, DelayedAutopilot, Line, Tick, Z};
 
 /// Ticks flown (4 s).
 const TICKS: usize = 200;
 
-/// The largest distance \[m\] between the plan's start at tick k and the
-/// position at k + `delay`, over the ticks flown; `skip(k)` says which
-/// ticks the shell skips.
-fn plan_start_error(multi_rate: bool, delay: usize, skip: &dyn Fn(usize) -> bool) -> f64 {
-    let params = SpatialParams::default();
-    let model = SpatialModel::new(params).unwrap();
+/// DF-MPC with the daemon's plan bounds (30° tilt, 150°/s tilt rate),
+/// `delay` ticks of input delay, on the classic or the multi-rate window.
+fn controller(multi_rate: bool, delay: usize) -> DfMpc {
     let settings = DfMpcSettings {
         delay_ticks: delay,
         multi_rate: multi_rate.then(MultiRateSettings::default),
@@ -36,13 +33,20 @@ fn plan_start_error(multi_rate: bool, delay: usize, skip: &dyn Fn(usize) -> bool
         },
         ..DfMpcSettings::default()
     };
-    let mut ctrl = DfMpc::new(ControlModel::Spatial(model), settings).unwrap();
+    let model = SpatialModel::new(SpatialParams::default()).unwrap();
+    DfMpc::new(ControlModel::Spatial(model), settings).unwrap()
+}
+
+/// The largest distance \[m\] between the plan's start at tick k and the
+/// position at k + `delay`, over the ticks flown; `skip(k)` says which
+/// ticks the shell skips.
+fn plan_start_error(multi_rate: bool, delay: usize, skip: &dyn Fn(usize) -> bool) -> f64 {
+    let params = SpatialParams::default();
+    let mut ctrl = controller(multi_rate, delay);
     let mut sim = SpatialSim::at_rest(params, Vector3::new(0.0, 0.0, Z));
     let mut reference = Line { t: 0.0 };
     let dt = params.dt;
-    let hover = (0.0, 0.0, params.g);
-    let mut sent: Vec<(usize, (f64, f64, f64))> = Vec::new();
-    let mut applied = hover;
+    let mut autopilot = DelayedAutopilot::new(delay, (0.0, 0.0, params.g));
     let mut positions = Vec::new();
     let mut starts = Vec::new();
     for k in 0..TICKS {
@@ -61,16 +65,10 @@ fn plan_start_error(multi_rate: bool, delay: usize, skip: &dyn Fn(usize) -> bool
             let out = ctrl.update(&measurement, &mut reference).unwrap();
             starts.push((k, out.plan[0]));
             let c = out.command;
-            sent.push((k, (c.pitch, c.roll, c.thrust)));
+            autopilot.send(k, (c.pitch, c.roll, c.thrust));
         }
-        while let Some(&(at, c)) = sent.first() {
-            if at + delay > k {
-                break;
-            }
-            applied = c;
-            sent.remove(0);
-        }
-        sim.step(applied.0, applied.1, applied.2);
+        let (theta, phi, thrust) = autopilot.applied_at(k);
+        sim.step(theta, phi, thrust);
     }
     starts
         .iter()
@@ -119,19 +117,7 @@ fn skipped_ticks_through_a_delayed_autopilot_hold_the_altitude() {
     };
     for (multi_rate, within) in [(false, 2.0), (true, 4.0)] {
         let fly = |ticks: &dyn Fn(usize) -> Tick| {
-            let settings = DfMpcSettings {
-                delay_ticks: 2,
-                multi_rate: multi_rate.then(MultiRateSettings::default),
-                constraints: OutputConstraints {
-                    max_tilt: Some(30f64.to_radians()),
-                    max_tilt_rate: Some(150f64.to_radians()),
-                    ..OutputConstraints::default()
-                },
-                ..DfMpcSettings::default()
-            };
-            let model = SpatialModel::new(SpatialParams::default()).unwrap();
-            let mut ctrl = DfMpc::new(ControlModel::Spatial(model), settings).unwrap();
-            timing::fly_delayed(&mut ctrl, 1.0, 2, ticks)
+            timing::fly_delayed(&mut controller(multi_rate, 2), 1.0, 2, ticks)
         };
         let every = fly(&|_| Tick::OnTime);
         let skipped = fly(&two_in_seven);

@@ -55,6 +55,45 @@ fn cross_track(p: &Vector3<f64>) -> f64 {
     (p.y * DIRECTION[0] - p.x * DIRECTION[1]).abs()
 }
 
+/// An autopilot that applies each command `delay` ticks after it is sent
+/// and holds the newest it has (over skipped ticks, the last sent).
+pub struct DelayedAutopilot {
+    delay: usize,
+    /// Commands sent and not yet applied, with their tick, oldest first.
+    in_flight: std::collections::VecDeque<(usize, (f64, f64, f64))>,
+    /// The command applied now (pitch, roll \[rad\], thrust [m/s²]).
+    applied: (f64, f64, f64),
+}
+
+impl DelayedAutopilot {
+    /// `delay` ticks late, applying `initial` until a command takes effect.
+    pub fn new(delay: usize, initial: (f64, f64, f64)) -> Self {
+        Self {
+            delay,
+            in_flight: std::collections::VecDeque::new(),
+            applied: initial,
+        }
+    }
+
+    /// The command (pitch, roll, thrust) sent at tick `k`.
+    pub fn send(&mut self, k: usize, command: (f64, f64, f64)) {
+        self.in_flight.push_back((k, command));
+    }
+
+    /// The command applied at tick `k`: the newest sent at least `delay`
+    /// ticks before.
+    pub fn applied_at(&mut self, k: usize) -> (f64, f64, f64) {
+        while let Some(&(sent_at, c)) = self.in_flight.front() {
+            if sent_at + self.delay > k {
+                break;
+            }
+            self.applied = c;
+            self.in_flight.pop_front();
+        }
+        self.applied
+    }
+}
+
 /// What one tick of the loop sees.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Tick {
@@ -130,10 +169,7 @@ pub fn fly_delayed(
     let mut reference = Line { t: 0.0 };
     let hover = SpatialParams::default().g;
     let mut command = (0.0, 0.0, hover);
-    // Commands sent, with their tick: the plant applies the newest sent at
-    // least `delay` ticks ago.
-    let mut in_flight: Vec<(usize, (f64, f64, f64))> = Vec::new();
-    let mut applied = command;
+    let mut autopilot = DelayedAutopilot::new(delay, command);
     let mut sent: Option<(f64, f64, f64)> = None;
     let mut last = Measurement {
         t: 0.0,
@@ -210,16 +246,10 @@ pub fn fly_delayed(
         }
         previous = sim.pos;
         if tick != Tick::Skipped {
-            in_flight.push((k, command));
+            autopilot.send(k, command);
         }
-        while let Some(&(sent_at, c)) = in_flight.first() {
-            if sent_at + delay > k {
-                break;
-            }
-            applied = c;
-            in_flight.remove(0);
-        }
-        sim.step(applied.0, applied.1, applied.2);
+        let (theta, phi, thrust) = autopilot.applied_at(k);
+        sim.step(theta, phi, thrust);
         if judged {
             flown.altitude = flown.altitude.max((sim.pos.z - Z).abs());
             flown.cross = flown.cross.max(cross_track(&sim.pos));
