@@ -217,7 +217,8 @@ pub trait Controller: Send {
     fn reset(&mut self);
     /// The command for a tick whose [`Controller::update`] failed, or whose
     /// result came too late to send: the last good plan shifted one step
-    /// per such consecutive tick (step s = 1, 2, … ≤ `max_steps`), mapped
+    /// per tick since it (step s = 1, 2, … ≤ `max_steps`; a skipped tick
+    /// counts), mapped
     /// to an input and saturated as `update` does, and recorded with
     /// `measurement` as this tick's (so the window stays consistent and
     /// the controller resumes cleanly). After a late `update` the plan is

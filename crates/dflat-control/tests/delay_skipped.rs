@@ -130,3 +130,84 @@ fn skipped_ticks_through_a_delayed_autopilot_hold_the_altitude() {
         );
     }
 }
+
+/// The plan `plan_fallback` flies after a good tick: the first output
+/// of what it returns on each of `fallbacks` ticks after it (`None`
+/// where it returns nothing). `skip`: ticks skipped between the good tick
+/// and the first fallback.
+fn fallback_plans(
+    multi_rate: bool,
+    delay: usize,
+    skip: usize,
+    fallbacks: usize,
+) -> Vec<Option<Vector3<f64>>> {
+    let params = SpatialParams::default();
+    let mut ctrl = controller(multi_rate, delay);
+    let mut sim = SpatialSim::at_rest(params, Vector3::new(0.0, 0.0, Z));
+    let mut reference = Line { t: 0.0 };
+    let dt = params.dt;
+    let mut autopilot = DelayedAutopilot::new(delay, (0.0, 0.0, params.g));
+    // Forty good ticks, then the skipped ticks and the fallbacks.
+    let good = 40;
+    let mut plans = Vec::new();
+    for k in 0..good + skip + fallbacks {
+        let t = k as f64 * dt;
+        let measurement = Measurement {
+            t,
+            position: sim.pos,
+            yaw: 0.0,
+        };
+        ctrl.observe(&measurement);
+        if k < good {
+            reference.t = t;
+            let out = ctrl.update(&measurement, &mut reference).unwrap();
+            let c = out.command;
+            autopilot.send(k, (c.pitch, c.roll, c.thrust));
+        } else if k < good + skip {
+            ctrl.skipped(1);
+        } else {
+            let out = ctrl.plan_fallback(&measurement, 10);
+            if let Some(out) = &out {
+                let c = out.command;
+                autopilot.send(k, (c.pitch, c.roll, c.thrust));
+            }
+            plans.push(out.map(|o| o.plan[0]));
+        }
+        let (theta, phi, thrust) = autopilot.applied_at(k);
+        sim.step(theta, phi, thrust);
+    }
+    plans
+}
+
+/// `plan_fallback` after skipped ticks flies the step of the good plan
+/// that is due at its tick, not the next one after the last sent: with
+/// two ticks skipped after the good tick, the first fallback's plan is
+/// the third fallback's of a flight with none skipped, and the budget of
+/// 10 steps ends two fallbacks sooner. (It flew the good plan's step 1
+/// there, two ticks late, and counted only the fallbacks.)
+#[test]
+fn the_fallback_after_skipped_ticks_flies_the_step_due() {
+    for multi_rate in [false, true] {
+        for delay in [0, 2] {
+            let every = fallback_plans(multi_rate, delay, 0, 12);
+            let skipped = fallback_plans(multi_rate, delay, 2, 12);
+            let at = |plans: &[Option<Vector3<f64>>], i: usize| {
+                plans[i].unwrap_or_else(|| {
+                    panic!("multi-rate {multi_rate}, delay {delay}: no fallback at {i}")
+                })
+            };
+            for i in 0..8 {
+                let (a, b) = (at(&every, i + 2), at(&skipped, i));
+                assert!(
+                    (a - b).norm() < 1e-9,
+                    "multi-rate {multi_rate}, delay {delay}, fallback {i}: {b:?} against {a:?}"
+                );
+            }
+            assert!(every[9].is_some() && every[10].is_none());
+            assert!(
+                skipped[7].is_some() && skipped[8].is_none(),
+                "multi-rate {multi_rate}, delay {delay}: the budget counts the skipped ticks"
+            );
+        }
+    }
+}

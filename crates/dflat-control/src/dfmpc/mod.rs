@@ -708,7 +708,9 @@ impl Controller for DfMpc {
     }
 
     /// Flies the last good plan: step s = 1, 2, … of it through F (with
-    /// the current disturbance estimate) and saturation. A non-finite
+    /// the current disturbance estimate) and saturation, s counting the
+    /// ticks since the good one, skipped ticks ([`Controller::skipped`],
+    /// or found by the tick times) included. A non-finite
     /// measurement is not used (classic mode: y_k is the model's
     /// prediction, as on a tick without a new pose). In multi-rate mode a
     /// tick time not after the last committed tick (a late update's tick)
@@ -723,8 +725,11 @@ impl Controller for DfMpc {
         let previous = self.plan;
         // Used up or unmappable unless this step is flown.
         self.plan = PlanState::Empty;
-        let step = previous.flown()? + 1;
-        if step > max_steps.min(MAX_FALLBACK_STEPS) || step + 3 > self.settings.horizon {
+        let next = previous.flown()? + 1;
+        let last_step = max_steps
+            .min(MAX_FALLBACK_STEPS)
+            .min(self.settings.horizon.saturating_sub(3));
+        if next > last_step {
             return None;
         }
         let d = self.disturbance_estimate();
@@ -754,7 +759,12 @@ impl Controller for DfMpc {
             ..
         } = self.fixed_outputs(&m, &d).ok()?;
         // Step s of the plan is in effect at (good tick + d + s): sending
-        // it now keeps the delay's bookkeeping.
+        // it now keeps the delay's bookkeeping. Ticks skipped since the
+        // last one sent (`gap`) count: the plan is that much older.
+        let step = next + gap;
+        if step > last_step {
+            return None;
+        }
         let plan4: [Vector3<f64>; 4] = std::array::from_fn(|j| {
             let mut p = self.good_y0;
             for (axis, pipeline) in self.axes.iter().enumerate() {
