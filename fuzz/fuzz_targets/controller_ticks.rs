@@ -1,8 +1,11 @@
 //! Structured input → a controller (DF-MPC in every configuration the
 //! daemon can build, Flatness MPC, PD; planar or spatial model) driven
 //! through a sequence of ticks with arbitrary, non-finite, huge and
-//! jumping poses and setpoints, stale and out-of-order times, failed ticks
-//! answered by `plan_fallback`, resets and multi-rate samples.
+//! jumping poses and setpoints, stale and out-of-order times, poses stamped
+//! off the tick, ticks the shell skipped (`Controller::skipped`), an input
+//! delay (DF-MPC's `delay_ticks`), failed ticks answered by
+//! `plan_fallback`, standby corrections (`correct_last_input`), resets and
+//! multi-rate samples.
 //!
 //! Checks, besides "no panic": every command a controller returns (from
 //! `update` or `plan_fallback`) is finite with |pitch|, |roll| within the
@@ -54,12 +57,21 @@ impl Coord {
 
 #[derive(Debug, Arbitrary)]
 enum Op {
-    /// One tick with a pose (and, multi-rate, its sample) `steps` ticks on.
+    /// One tick with a pose (and, multi-rate, its sample) `steps` ticks on,
+    /// the pose stamped `offset_ms` from the tick.
     Tick {
         position: [Coord; 3],
         yaw: Coord,
         steps: i8,
+        offset_ms: i8,
     },
+    /// The shell skipped `ticks` ticks (its loop stalled).
+    Skip {
+        ticks: u8,
+    },
+    /// The autopilot flew its own position mode: this input explains what
+    /// the vehicle did (standby).
+    Standby([Coord; 3]),
     /// A pose sample between ticks (multi-rate).
     Sample {
         position: [Coord; 3],
@@ -84,6 +96,7 @@ struct Input {
     speed_bound: bool,
     disturbance: bool,
     horizon: u8,
+    delay: u8,
     ops: Vec<Op>,
 }
 
@@ -171,6 +184,7 @@ fn build(input: &Input) -> Option<(Box<dyn Controller>, bool, bool)> {
                         ..MultiRateSettings::default()
                     }),
                     disturbance: input.disturbance.then(DisturbanceSettings::default),
+                    delay_ticks: usize::from(input.delay % 6),
                     saturation: Some(InputSaturation {
                         tilt_limit,
                         ..InputSaturation::default()
@@ -249,13 +263,14 @@ fuzz_target!(|input: Input| {
                 position: p,
                 yaw,
                 steps,
+                offset_ms,
             } => {
                 t += f64::from(*steps) * DT;
                 for (axis, c) in p.iter().enumerate() {
                     position[axis] = c.apply(position[axis]);
                 }
                 let m = Measurement {
-                    t,
+                    t: t + f64::from(*offset_ms) * 1e-3,
                     position,
                     yaw: yaw.apply(0.4),
                 };
@@ -304,6 +319,17 @@ fuzz_target!(|input: Input| {
                 if !reference.target.iter().all(|v| v.is_finite()) {
                     reference.target = Vector3::new(3.0, -2.0, -5.0);
                 }
+            }
+            Op::Skip { ticks } => {
+                t += f64::from(*ticks) * DT;
+                controller.skipped(u32::from(*ticks));
+            }
+            Op::Standby(u) => {
+                let mut applied = Vector3::new(0.0, 0.0, 9.81);
+                for (axis, c) in u.iter().enumerate() {
+                    applied[axis] = c.apply(applied[axis]);
+                }
+                controller.correct_last_input(&applied);
             }
             Op::Reset => controller.reset(),
         }
