@@ -25,10 +25,20 @@ pub struct ReviewArgs {
 
 /// `dflat review`.
 pub fn run(args: ReviewArgs) -> Result<()> {
-    let csv_path = match args.flight.extension().and_then(|e| e.to_str()) {
-        Some("tlog") => args.flight.with_extension("csv"),
-        _ => args.flight.clone(),
+    let given_tlog = args.flight.extension().and_then(|e| e.to_str()) == Some("tlog");
+    let csv_path = if given_tlog {
+        args.flight.with_extension("csv")
+    } else {
+        args.flight.clone()
     };
+    if given_tlog && !csv_path.exists() {
+        anyhow::bail!(
+            "{}: review reads the flight's .csv, and {} is not there \
+             (the daemon writes both with logging.csv and logging.tlog)",
+            args.flight.display(),
+            csv_path.display()
+        );
+    }
     let csv = super::read_csv(&csv_path)?;
     let log = load_tlog_beside(&csv_path)?;
     let header = header_for(&csv_path, log.as_ref(), args.config.as_deref())?;
@@ -56,5 +66,34 @@ pub fn load_tlog_beside(csv: &Path) -> Result<Option<FlightLog>> {
             }
             _ => Err(e),
         },
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A `.tlog` named with no flight CSV beside it: the error says that
+    /// review reads the CSV and which one it looked for, not only that a
+    /// file the user never named is missing.
+    #[test]
+    fn a_tlog_without_its_csv_is_refused_naming_both() {
+        let dir = std::env::temp_dir().join(format!("dflat-review-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let tlog = dir.join("flight.tlog");
+        std::fs::write(&tlog, b"").unwrap();
+        let err = run(ReviewArgs {
+            flight: tlog.clone(),
+            out: None,
+            config: None,
+        })
+        .unwrap_err()
+        .to_string();
+        assert!(
+            err.contains("flight.tlog") && err.contains("flight.csv") && err.contains("reads"),
+            "{err}"
+        );
+        assert!(!dir.join("flight.html").exists());
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }
