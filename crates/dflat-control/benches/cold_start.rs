@@ -121,6 +121,17 @@ impl AxisSolver for Cold {
     }
 
     fn carry(&mut self, _event: Carry<'_>) {}
+
+    fn row_duals(&self) -> &[[f64; 2]] {
+        &[]
+    }
+
+    /// Both timed solvers take the tick's offsets (none on the corner
+    /// replay, which flies without drag).
+    fn set_offset(&mut self, offset: Option<f64>, slope: f64) {
+        self.active_set.set_offset(offset, slope);
+        self.interior_point.set_offset(offset, slope);
+    }
 }
 
 fn main() {

@@ -90,6 +90,14 @@ impl AxisSolver for Observer {
             Carry::Skipped | Carry::Reset => self.osqp.forget(),
         }
     }
+
+    fn row_duals(&self) -> &[[f64; 2]] {
+        &[]
+    }
+
+    fn set_offset(&mut self, offset: Option<f64>, slope: f64) {
+        self.osqp.set_offset(offset, slope);
+    }
 }
 
 impl Observer {

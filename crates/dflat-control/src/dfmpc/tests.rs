@@ -679,6 +679,10 @@ impl crate::optimise::AxisSolver for Observer {
             self.accepted += 1;
         }
     }
+    fn row_duals(&self) -> &[[f64; 2]] {
+        &[]
+    }
+    fn set_offset(&mut self, _offset: Option<f64>, _slope: f64) {}
 }
 
 /// `Cascade::insert` checks its place; a solver

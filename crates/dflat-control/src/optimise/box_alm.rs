@@ -335,4 +335,10 @@ impl AxisSolver for BoxAlmSolver {
             Carry::Reset => self.reset(),
         }
     }
+
+    /// None: the cascade's first solver, no solver before it to tell
+    /// (its multipliers stay with its own warm start).
+    fn row_duals(&self) -> &[[f64; 2]] {
+        &[]
+    }
 }

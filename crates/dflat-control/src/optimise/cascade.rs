@@ -147,21 +147,19 @@ pub trait AxisSolver: std::fmt::Debug + Send {
     /// unchanged or holds the start.
     fn solve(&mut self, axis: AxisProblem<'_>) -> Result<SolveInfo, SolveFailure>;
 
-    /// What carries between ticks (nothing, unless the solver keeps a
-    /// warm start).
-    fn carry(&mut self, _event: Carry<'_>) {}
+    /// What carries between ticks (a solver that keeps no warm start
+    /// ignores it).
+    fn carry(&mut self, event: Carry<'_>);
 
     /// Its rows' multipliers `[upper, lower]` after its last solve, in
     /// `AxisBounds::row_bounds`' order (empty when it does not give them).
-    fn row_duals(&self) -> &[[f64; 2]] {
-        &[]
-    }
+    fn row_duals(&self) -> &[[f64; 2]];
 
     /// This tick's offset of the plan's acceleration from the thrust's
     /// ([`super::AxisBounds::offset`]) and its change per stage
     /// ([`super::AxisBounds::offset_slope`]) for the next solves (a solver
     /// without an acceleration bound ignores them).
-    fn set_offset(&mut self, _offset: Option<f64>, _slope: f64) {}
+    fn set_offset(&mut self, offset: Option<f64>, slope: f64);
 }
 
 /// A solver of the horizontal pair's constrained plan (the tilt cone).
@@ -170,7 +168,7 @@ pub trait PairSolver: std::fmt::Debug + Send {
     fn solve(&mut self, x: AxisProblem<'_>, y: AxisProblem<'_>) -> Result<SolveInfo, SolveFailure>;
 
     /// What carries between ticks (as [`AxisSolver::carry`]).
-    fn carry(&mut self, _event: Carry<'_>) {}
+    fn carry(&mut self, event: Carry<'_>);
 
     /// Sets the tilt cone's radius per stage [m/s²] for the next solves.
     fn set_radius(&mut self, radius: &[f64]) -> Result<(), ControlError>;

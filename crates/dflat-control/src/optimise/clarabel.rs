@@ -7,7 +7,7 @@ use clarabel::solver::{
 };
 
 use super::bounds::AxisBounds;
-use super::cascade::{AxisSolver, SolveFailure, SolveInfo, SolverMethod};
+use super::cascade::{AxisSolver, Carry, SolveFailure, SolveInfo, SolverMethod};
 use super::fast_banded::FastBandedSolver;
 use super::problem::{AxisProblem, baseline, invalid};
 use super::smoothness::Smoothness;
@@ -400,5 +400,14 @@ impl AxisSolver for ClarabelSolver {
             e => SolveFailure::from_error(method, 0, e),
         })?;
         Ok(SolveInfo::of(method))
+    }
+
+    /// Nothing carries: clarabel solves each QP from its own start.
+    fn carry(&mut self, _event: Carry<'_>) {}
+
+    /// None given: the cascade's last solver, whose plan alone is handed
+    /// to the solvers before it.
+    fn row_duals(&self) -> &[[f64; 2]] {
+        &[]
     }
 }

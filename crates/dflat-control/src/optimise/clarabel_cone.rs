@@ -6,7 +6,7 @@ use clarabel::algebra::CscMatrix;
 use clarabel::solver::{DefaultSolver, IPSolver, SolverStatus, SupportedConeT};
 
 use super::bounds::Row;
-use super::cascade::{PairSolver, SolveFailure, SolveInfo, SolverMethod};
+use super::cascade::{Carry, PairSolver, SolveFailure, SolveInfo, SolverMethod};
 use super::clarabel::{KktTuning, build_solver, push_axis_hessian};
 use super::cone::ConeBounds;
 use super::cone_solver::AxisWeights;
@@ -251,6 +251,9 @@ impl PairSolver for ClarabelConeSolver {
     fn set_centre(&mut self, centre: &[[f64; 2]]) -> Result<(), ControlError> {
         ClarabelConeSolver::set_centre(self, centre)
     }
+
+    /// Nothing carries: clarabel solves each SOCP from its own start.
+    fn carry(&mut self, _event: Carry<'_>) {}
 }
 
 /// The constraint matrix's triplets of [`ClarabelConeSolver`] and where

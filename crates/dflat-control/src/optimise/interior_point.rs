@@ -14,7 +14,7 @@
 use super::banded_ip::{AxisCost, BandedIp, Stages};
 use super::bounds::AxisBounds;
 use super::bounds::{Row, check_row_data};
-use super::cascade::{AxisSolver, SolveFailure, SolveInfo, SolverMethod};
+use super::cascade::{AxisSolver, Carry, SolveFailure, SolveInfo, SolverMethod};
 use super::fast_banded::FastBandedSolver;
 use super::problem::{AxisProblem, baseline};
 use super::smoothness::Smoothness;
@@ -305,4 +305,7 @@ impl AxisSolver for BandedInteriorPointSolver {
     fn row_duals(&self) -> &[[f64; 2]] {
         BandedInteriorPointSolver::row_duals(self)
     }
+
+    /// Nothing carries: each solve starts from its own interior point.
+    fn carry(&mut self, _event: Carry<'_>) {}
 }

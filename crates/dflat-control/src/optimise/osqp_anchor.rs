@@ -23,6 +23,7 @@ use clarabel::algebra::CscMatrix as ClarabelCsc;
 use osqp::{CscMatrix, Problem, Settings, Status};
 
 use super::bounds::AxisBounds;
+use super::cascade::AxisSolver;
 use super::clarabel::{ClarabelSolver, KktTuning};
 use super::problem::{AxisProblem, baseline};
 use super::smoothness::Smoothness;
@@ -278,6 +279,13 @@ impl OsqpBoxSolver {
             self.wx[n + f] = (y(j + 2) - 2.0 * y(j + 1) + y(j)) / dt2 - d2_0;
         }
         self.wy.fill(0.0);
+    }
+
+    /// This tick's offset of the plan's acceleration from the thrust's and
+    /// its change per stage ([`AxisSolver::set_offset`]): the bounds OSQP
+    /// is given move with them, as clarabel's do.
+    pub fn set_offset(&mut self, offset: Option<f64>, slope: f64) {
+        self.clarabel.set_offset(offset, slope);
     }
 
     /// Solves one axis's problem (plan on exit: OSQP's solution when it
