@@ -9,7 +9,7 @@
 
 use dflat_control::dfmpc::{DfMpc, DfMpcSettings, OutputConstraints};
 use dflat_control::window::MultiRateSettings;
-use dflat_control::{ControlModel, Controller, Measurement};
+use dflat_control::{ControlModel, Controller, Measurement, TickOutput};
 use dflat_model::{SpatialModel, SpatialParams};
 use nalgebra::Vector3;
 
@@ -37,39 +37,59 @@ fn controller(multi_rate: bool, delay: usize) -> DfMpc {
     DfMpc::new(ControlModel::Spatial(model), settings).unwrap()
 }
 
-/// The largest distance \[m\] between the plan's start at tick k and the
-/// position at k + `delay`, over the ticks flown; `skip(k)` says which
-/// ticks the shell skips.
-fn plan_start_error(multi_rate: bool, delay: usize, skip: &dyn Fn(usize) -> bool) -> f64 {
+/// Flies `ticks` ticks of DF-MPC (`multi_rate`, `delay` ticks of input
+/// delay) on its own model from rest, through an autopilot `delay` ticks
+/// late: each tick's exact pose is observed, then `tick(k, controller,
+/// pose)` runs the tick (an update, a skip, a fallback) and returns what
+/// it sent, if anything; the autopilot holds the newest command.
+fn fly(
+    multi_rate: bool,
+    delay: usize,
+    ticks: usize,
+    mut tick: impl FnMut(usize, &mut DfMpc, &Measurement) -> Option<TickOutput>,
+) {
     let params = SpatialParams::default();
     let mut ctrl = controller(multi_rate, delay);
     let mut sim = SpatialSim::at_rest(params, Vector3::new(0.0, 0.0, Z));
-    let mut reference = Line { t: 0.0 };
-    let dt = params.dt;
     let mut autopilot = DelayedAutopilot::new(delay, (0.0, 0.0, params.g));
-    let mut positions = Vec::new();
-    let mut starts = Vec::new();
-    for k in 0..TICKS {
-        let t = k as f64 * dt;
-        positions.push(sim.pos);
+    for k in 0..ticks {
         let measurement = Measurement {
-            t,
+            t: k as f64 * params.dt,
             position: sim.pos,
             yaw: 0.0,
         };
         ctrl.observe(&measurement);
-        if k > 10 && skip(k) {
-            ctrl.skipped(1);
-        } else {
-            reference.t = t;
-            let out = ctrl.update(&measurement, &mut reference).unwrap();
-            starts.push((k, out.plan[0]));
+        if let Some(out) = tick(k, &mut ctrl, &measurement) {
             let c = out.command;
             autopilot.send(k, (c.pitch, c.roll, c.thrust));
         }
         let (theta, phi, thrust) = autopilot.applied_at(k);
         sim.step(theta, phi, thrust);
     }
+}
+
+/// One update at the pose's time on the line.
+fn update(ctrl: &mut DfMpc, measurement: &Measurement) -> TickOutput {
+    let mut reference = Line { t: measurement.t };
+    ctrl.update(measurement, &mut reference).unwrap()
+}
+
+/// The largest distance \[m\] between the plan's start at tick k and the
+/// position at k + `delay`, over the ticks flown; `skip(k)` says which
+/// ticks the shell skips.
+fn plan_start_error(multi_rate: bool, delay: usize, skip: &dyn Fn(usize) -> bool) -> f64 {
+    let mut positions = Vec::new();
+    let mut starts = Vec::new();
+    fly(multi_rate, delay, TICKS, |k, ctrl, measurement| {
+        positions.push(measurement.position);
+        if k > 10 && skip(k) {
+            ctrl.skipped(1);
+            return None;
+        }
+        let out = update(ctrl, measurement);
+        starts.push((k, out.plan[0]));
+        Some(out)
+    });
     starts
         .iter()
         .filter(|(k, _)| k + delay < TICKS && *k > 10)
@@ -141,41 +161,26 @@ fn fallback_plans(
     skip: usize,
     fallbacks: usize,
 ) -> Vec<Option<Vector3<f64>>> {
-    let params = SpatialParams::default();
-    let mut ctrl = controller(multi_rate, delay);
-    let mut sim = SpatialSim::at_rest(params, Vector3::new(0.0, 0.0, Z));
-    let mut reference = Line { t: 0.0 };
-    let dt = params.dt;
-    let mut autopilot = DelayedAutopilot::new(delay, (0.0, 0.0, params.g));
     // Forty good ticks, then the skipped ticks and the fallbacks.
     let good = 40;
     let mut plans = Vec::new();
-    for k in 0..good + skip + fallbacks {
-        let t = k as f64 * dt;
-        let measurement = Measurement {
-            t,
-            position: sim.pos,
-            yaw: 0.0,
-        };
-        ctrl.observe(&measurement);
-        if k < good {
-            reference.t = t;
-            let out = ctrl.update(&measurement, &mut reference).unwrap();
-            let c = out.command;
-            autopilot.send(k, (c.pitch, c.roll, c.thrust));
-        } else if k < good + skip {
-            ctrl.skipped(1);
-        } else {
-            let out = ctrl.plan_fallback(&measurement, 10);
-            if let Some(out) = &out {
-                let c = out.command;
-                autopilot.send(k, (c.pitch, c.roll, c.thrust));
+    fly(
+        multi_rate,
+        delay,
+        good + skip + fallbacks,
+        |k, ctrl, measurement| {
+            if k < good {
+                return Some(update(ctrl, measurement));
             }
-            plans.push(out.map(|o| o.plan[0]));
-        }
-        let (theta, phi, thrust) = autopilot.applied_at(k);
-        sim.step(theta, phi, thrust);
-    }
+            if k < good + skip {
+                ctrl.skipped(1);
+                return None;
+            }
+            let out = ctrl.plan_fallback(measurement, 10);
+            plans.push(out.as_ref().map(|o| o.plan[0]));
+            out
+        },
+    );
     plans
 }
 
