@@ -43,9 +43,10 @@ impl dflat_control::Controller for Faulty {
         self.tick += 1;
         match (self.fault)(k) {
             Some(Fault::Fail) => {
-                return Err(dflat_control::ControlError::Solver(format!(
-                    "injected failure at update {k}"
-                )));
+                // As a solver that ran out of iterations.
+                return Err(
+                    dflat_control::optimise::SolverFault::NotConverged { iterations: 0 }.into(),
+                );
             }
             Some(Fault::Slow(d)) => std::thread::sleep(d),
             None => {}

@@ -126,9 +126,15 @@ pub enum ControlError {
     /// The reference holds NaN or infinite values.
     #[error("non-finite reference")]
     NonFiniteReference,
-    /// The constrained QP did not solve (the solver's status).
-    #[error("QP solver failed: {0}")]
-    Solver(String),
+    /// The constrained QP did not solve: the method that failed last
+    /// (`None` where the solver's caller names it) and why.
+    #[error("QP solver failed: {}{fault}", method.map_or(String::new(), |m| format!("{m}: ")))]
+    Solver {
+        /// The cascade's last method (`None` inside a solver).
+        method: Option<optimise::SolverMethod>,
+        /// Why it gave no plan.
+        fault: optimise::SolverFault,
+    },
     /// The banded system was not positive definite (bad weights).
     #[error("banded Cholesky failed: matrix not positive definite")]
     NotPositiveDefinite,

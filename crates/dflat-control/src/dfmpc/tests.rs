@@ -5,8 +5,8 @@ use crate::optimise::alm::COLD_TUNING;
 use crate::optimise::problem::baseline;
 use crate::optimise::smoothness::accel_block;
 use crate::optimise::{
-    AxisProblem, BandedInteriorPointSolver, BoxAlmSolver, ClarabelSolver, FastBandedSolver,
-    KktTuning, Smoothness,
+    AxisCascade, AxisProblem, AxisSolver, BandedInteriorPointSolver, BoxAlmSolver, ClarabelSolver,
+    FastBandedSolver, KktTuning, Smoothness, SolverFault, SolverMethod,
 };
 
 const DT: f64 = 0.02;
@@ -380,7 +380,30 @@ fn solver_failure_is_an_error() {
     let mut cs = ClarabelSolver::new(50, 1.0, 0.08, DT, bounds, 1e-12).unwrap();
     let mut plan = vec![0.0; 51];
     let r = cs.solve_problem(AxisProblem::new(&[0.0, 0.1, 0.2], &[10.0; 51], &mut plan));
-    assert!(matches!(r, Err(ControlError::Solver(_))), "{r:?}");
+    // The outcome is clarabel's own status, as a value (never a string).
+    assert!(
+        matches!(
+            r,
+            Err(ControlError::Solver {
+                method: None,
+                fault: SolverFault::Clarabel(clarabel::solver::SolverStatus::MaxTime)
+            })
+        ),
+        "{r:?}"
+    );
+    // The cascade names the method that failed last.
+    let mut cascade = AxisCascade::new(vec![Box::new(cs) as Box<dyn AxisSolver>]).unwrap();
+    let e = cascade
+        .solve(AxisProblem::new(&[0.0, 0.1, 0.2], &[10.0; 51], &mut plan))
+        .unwrap_err();
+    assert_eq!(
+        e,
+        ControlError::Solver {
+            method: Some(SolverMethod::Clarabel),
+            fault: SolverFault::Clarabel(clarabel::solver::SolverStatus::MaxTime)
+        }
+    );
+    assert_eq!(e.to_string(), "QP solver failed: clarabel: status MaxTime");
 }
 
 #[test]

@@ -63,6 +63,7 @@
 
 use super::banded::SymBand;
 use super::bounds::Row;
+use super::cascade::SolverFault;
 use crate::ControlError;
 
 pub use super::banded::BandedLdl;
@@ -181,8 +182,6 @@ struct Residuals {
 /// discs (either may be absent).
 #[derive(Debug, Clone)]
 pub struct BandedIp {
-    /// Name in its errors.
-    name: &'static str,
     stages: Stages,
     /// Stages (free outputs per axis).
     n: usize,
@@ -221,7 +220,7 @@ pub struct BandedIp {
 }
 
 impl BandedIp {
-    /// The interior point `name` (its errors say it) for n ≥ 1 stages of
+    /// The interior point for n ≥ 1 stages of
     /// `costs.len()` axes at step δt: the bound `rows`, each soft with the
     /// exact penalty ρ where its entry of `penalty` is finite (one per
     /// row; `f64::INFINITY`: hard), and discs of radius
@@ -229,7 +228,6 @@ impl BandedIp {
     /// `max_iterations` iterations.
     #[allow(clippy::too_many_arguments)]
     pub(in crate::optimise) fn new(
-        name: &'static str,
         n: usize,
         dt: f64,
         costs: &[&AxisCost],
@@ -274,7 +272,6 @@ impl BandedIp {
             .filter(|p| p.is_finite())
             .fold(0.0, f64::max);
         Self {
-            name,
             stages,
             n,
             max_iterations,
@@ -452,7 +449,7 @@ impl BandedIp {
                 && r.req.is_finite()
                 && r.rp_cone.is_finite())
             {
-                return Err(self.error("non-finite iterate"));
+                return Err(SolverFault::NonFinite.into());
             }
             // Each residual over its tolerance; converged at ≤ 1.
             let gap_target = GAP_TOLERANCE * (1.0 + r.objective.abs());
@@ -485,11 +482,14 @@ impl BandedIp {
                     self.v.copy_from_slice(&self.best);
                     return Ok(iteration);
                 }
-                return Err(self.error("factorisation failed"));
+                return Err(SolverFault::Factorisation.into());
             }
             self.mehrotra_step(r.gap, r.gap / pairs, GAP_FLOOR * gap_target / pairs);
         }
-        Err(self.error(&format!("no convergence (best merit {:.1e})", best.0)))
+        Err(SolverFault::NotConverged {
+            iterations: self.max_iterations,
+        }
+        .into())
     }
 
     /// The residuals at the iterate: `r = M·v + c + Σ z_f·u_f + Σ hᵀz`
@@ -625,11 +625,6 @@ impl BandedIp {
             sd.sig += alpha * sd.dsig;
             sd.w += alpha * sd.dw;
         }
-    }
-
-    /// [`ControlError::Solver`] naming this solver.
-    fn error(&self, what: &str) -> ControlError {
-        ControlError::Solver(format!("{}: {what}", self.name))
     }
 
     /// The weight `d` a side adds to `hhᵀ` in the KKT matrix.

@@ -7,7 +7,7 @@
 use super::alm::{AlmTuning, BandedAlm, RowBlock, StageSet};
 use super::bounds::AxisBounds;
 use super::bounds::Row;
-use super::cascade::{AxisSolver, Carry, SolveFailure, SolveInfo, SolverMethod};
+use super::cascade::{AxisSolver, Carry, SolveFailure, SolveInfo, SolverFault, SolverMethod};
 use super::problem::{AxisProblem, shifted_plan};
 use super::smoothness::Smoothness;
 use crate::ControlError;
@@ -288,7 +288,7 @@ impl BoxAlmSolver {
             let v = self.base[f] + self.alm.p(0, f);
             if !v.is_finite() {
                 self.alm.reset_multipliers();
-                return Err(ControlError::Solver("non-finite solution".to_string()));
+                return Err(SolverFault::NonFinite.into());
             }
             self.p[f] = v;
         }

@@ -79,26 +79,96 @@ impl SolveInfo {
     }
 }
 
+impl std::fmt::Display for SolverMethod {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Alm => "augmented Lagrangian",
+            Self::ActiveSet => "active set",
+            Self::InteriorPoint => "interior point",
+            Self::Clarabel => "clarabel",
+        })
+    }
+}
+
+/// Why a constrained solver gave no plan: its outcome as a value (never
+/// a string), carried by [`ControlError::Solver`] and
+/// [`SolveFailure::Failed`].
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum SolverFault {
+    /// No convergence within the method's budget of iterations (Newton
+    /// steps, KKT solves, interior-point iterations, multiplier updates).
+    #[error("no convergence in {iterations} iterations")]
+    NotConverged {
+        /// The iterations spent when it gave up.
+        iterations: usize,
+    },
+    /// The line search found no descent along the Newton direction
+    /// (`slope`: the directional derivative, ≥ 0).
+    #[error("no descent (slope {slope:.1e})")]
+    NoDescent {
+        /// The merit's directional derivative along the step.
+        slope: f64,
+    },
+    /// A warm start's step was cut to `alpha` by the line search: the
+    /// warm start is given up for a cold one.
+    #[error("the warm start's step is blocked (step length {alpha:.1e})")]
+    WarmStepBlocked {
+        /// The step length the line search reached.
+        alpha: f64,
+    },
+    /// A warm start's active set was far from the optimum's: the warm
+    /// start is given up for a cold one.
+    #[error("the warm start's set is far from the optimum's")]
+    WarmSetFar,
+    /// The active set met a constraint dependent on those already active
+    /// that cannot be met with them.
+    #[error("a dependent constraint cannot be met")]
+    DependentConstraint,
+    /// The active set's refined solution broke a bound.
+    #[error("the refined solution breaks a bound")]
+    BoundBroken,
+    /// An iterate or the solution held NaN or infinite values.
+    #[error("non-finite iterate or solution")]
+    NonFinite,
+    /// A factorisation met a pivot not of its sign, or not finite.
+    #[error("a factorisation failed")]
+    Factorisation,
+    /// clarabel ended with another status than `Solved`.
+    #[error("status {0:?}")]
+    Clarabel(clarabel::solver::SolverStatus),
+    /// An external solver (clarabel; OSQP on the bench) refused its
+    /// set-up or an update of its data.
+    #[error("the solver refused its set-up")]
+    SetupRefused,
+    /// No solver of the cascade tried the problem (each passed it on).
+    #[error("no solver of the cascade solved")]
+    NoSolver,
+}
+
+impl From<SolverFault> for ControlError {
+    /// The fault of a solver whose method its caller names
+    /// ([`SolveFailure::from_error`]).
+    fn from(fault: SolverFault) -> Self {
+        ControlError::Solver {
+            method: None,
+            fault,
+        }
+    }
+}
+
 /// Why a solve gave no plan.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum SolveFailure {
-    /// The method did not converge within its budget.
-    #[error("{method:?}: no convergence ({iterations} iterations)")]
-    NotConverged {
+    /// The method failed after `iterations`, for `fault`.
+    #[error("{method}: {fault} (after {iterations} iterations)")]
+    Failed {
         /// The method.
         method: SolverMethod,
-        /// Its iterations when it gave up.
+        /// Its iterations when it gave up (0 where it does not count).
         iterations: usize,
+        /// Why.
+        fault: SolverFault,
     },
-    /// A factorisation failed (a pivot not of its sign, or not finite).
-    #[error("{method:?}: a factorisation failed")]
-    Numerical {
-        /// The method.
-        method: SolverMethod,
-    },
-    /// clarabel ended with another status than `Solved`.
-    #[error("clarabel: {0:?}")]
-    Clarabel(clarabel::solver::SolverStatus),
     /// The problem's data or the solver's set-up are invalid.
     #[error(transparent)]
     Invalid(ControlError),
@@ -110,13 +180,20 @@ pub enum SolveFailure {
 
 impl SolveFailure {
     /// The failure of `method` after `iterations` from the error its own
-    /// code returned: an invalid setting stays one, a failed
-    /// factorisation is numerical, anything else did not converge.
+    /// code returned: a solver's fault stays that fault, a failed
+    /// factorisation ([`ControlError::NotPositiveDefinite`]) is
+    /// [`SolverFault::Factorisation`], and any other error (an invalid
+    /// setting, data the problem refused) is [`SolveFailure::Invalid`].
     pub fn from_error(method: SolverMethod, iterations: usize, e: ControlError) -> Self {
-        match e {
-            ControlError::InvalidSetting { .. } => Self::Invalid(e),
-            ControlError::NotPositiveDefinite => Self::Numerical { method },
-            _ => Self::NotConverged { method, iterations },
+        let fault = match e {
+            ControlError::Solver { fault, .. } => fault,
+            ControlError::NotPositiveDefinite => SolverFault::Factorisation,
+            e => return Self::Invalid(e),
+        };
+        Self::Failed {
+            method,
+            iterations,
+            fault,
         }
     }
 }
@@ -298,8 +375,11 @@ impl<S: ?Sized> Cascade<S> {
         }
         Err(match failure {
             Some(SolveFailure::Invalid(e)) => e,
-            Some(e) => ControlError::Solver(e.to_string()),
-            None => ControlError::Solver("no solver of the cascade solved".to_string()),
+            Some(SolveFailure::Failed { method, fault, .. }) => ControlError::Solver {
+                method: Some(method),
+                fault,
+            },
+            Some(SolveFailure::Observer) | None => SolverFault::NoSolver.into(),
         })
     }
 }

@@ -7,7 +7,7 @@ use clarabel::solver::{
 };
 
 use super::bounds::AxisBounds;
-use super::cascade::{AxisSolver, Carry, SolveFailure, SolveInfo, SolverMethod};
+use super::cascade::{AxisSolver, Carry, SolveFailure, SolveInfo, SolverFault, SolverMethod};
 use super::fast_banded::FastBandedSolver;
 use super::problem::{AxisProblem, baseline, invalid};
 use super::smoothness::Smoothness;
@@ -182,9 +182,9 @@ pub(super) fn build_solver(
         .direct_solve_method("qdldl".to_string())
         .max_threads(1)
         .build()
-        .map_err(|e| ControlError::Solver(format!("settings: {e}")))?;
+        .map_err(|_| ControlError::from(SolverFault::SetupRefused))?;
     DefaultSolver::new(p, q, a, b, cones, settings)
-        .map_err(|e| ControlError::Solver(format!("setup: {e}")))
+        .map_err(|_| ControlError::from(SolverFault::SetupRefused))
 }
 
 impl ClarabelSolver {
@@ -329,11 +329,11 @@ impl ClarabelSolver {
         self.solver
             .update_q(&self.qvec)
             .and_then(|()| self.solver.update_b(&self.bvec))
-            .map_err(|e| ControlError::Solver(format!("update: {e}")))?;
+            .map_err(|_| ControlError::from(SolverFault::SetupRefused))?;
         self.solver.solve();
         let status = self.solver.solution.status;
         if status != SolverStatus::Solved {
-            return Err(ControlError::Solver(format!("{status:?}")));
+            return Err(SolverFault::Clarabel(status).into());
         }
         let x = &self.solver.solution.x;
         let n = self.horizon - 2;
@@ -342,7 +342,7 @@ impl ClarabelSolver {
             plan[f + 3] = baseline(fixed, f + 3) + x[f];
         }
         if plan.iter().any(|v| !v.is_finite()) {
-            return Err(ControlError::Solver("non-finite solution".to_string()));
+            return Err(SolverFault::NonFinite.into());
         }
         Ok(())
     }
@@ -393,12 +393,8 @@ impl AxisSolver for ClarabelSolver {
 
     fn solve(&mut self, axis: AxisProblem<'_>) -> Result<SolveInfo, SolveFailure> {
         let method = SolverMethod::Clarabel;
-        self.solve_problem(axis).map_err(|e| match e {
-            ControlError::Solver(_) if self.solver.solution.status != SolverStatus::Solved => {
-                SolveFailure::Clarabel(self.solver.solution.status)
-            }
-            e => SolveFailure::from_error(method, 0, e),
-        })?;
+        self.solve_problem(axis)
+            .map_err(|e| SolveFailure::from_error(method, 0, e))?;
         Ok(SolveInfo::of(method))
     }
 

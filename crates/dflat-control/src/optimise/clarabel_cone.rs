@@ -6,7 +6,7 @@ use clarabel::algebra::CscMatrix;
 use clarabel::solver::{DefaultSolver, IPSolver, SolverStatus, SupportedConeT};
 
 use super::bounds::Row;
-use super::cascade::{Carry, PairSolver, SolveFailure, SolveInfo, SolverMethod};
+use super::cascade::{Carry, PairSolver, SolveFailure, SolveInfo, SolverFault, SolverMethod};
 use super::clarabel::{KktTuning, build_solver, push_axis_hessian};
 use super::cone::ConeBounds;
 use super::cone_solver::AxisWeights;
@@ -212,11 +212,11 @@ impl ClarabelConeSolver {
         self.solver
             .update_q(&self.qvec)
             .and_then(|()| self.solver.update_b(&self.bvec))
-            .map_err(|e| ControlError::Solver(format!("update: {e}")))?;
+            .map_err(|_| ControlError::from(SolverFault::SetupRefused))?;
         self.solver.solve();
         let status = self.solver.solution.status;
         if status != SolverStatus::Solved {
-            return Err(ControlError::Solver(format!("{status:?}")));
+            return Err(SolverFault::Clarabel(status).into());
         }
         let sol = &self.solver.solution.x;
         for (i, (plan, fx)) in [x.plan, y.plan].into_iter().zip(fixed).enumerate() {
@@ -225,7 +225,7 @@ impl ClarabelConeSolver {
                 plan[f + 3] = baseline(fx, f + 3) + sol[2 * n * i + f];
             }
             if plan.iter().any(|v| !v.is_finite()) {
-                return Err(ControlError::Solver("non-finite solution".to_string()));
+                return Err(SolverFault::NonFinite.into());
             }
         }
         Ok(())
@@ -235,12 +235,8 @@ impl ClarabelConeSolver {
 impl PairSolver for ClarabelConeSolver {
     fn solve(&mut self, x: AxisProblem<'_>, y: AxisProblem<'_>) -> Result<SolveInfo, SolveFailure> {
         let method = SolverMethod::Clarabel;
-        self.solve_pair(x, y).map_err(|e| match e {
-            ControlError::Solver(_) if self.solver.solution.status != SolverStatus::Solved => {
-                SolveFailure::Clarabel(self.solver.solution.status)
-            }
-            e => SolveFailure::from_error(method, 0, e),
-        })?;
+        self.solve_pair(x, y)
+            .map_err(|e| SolveFailure::from_error(method, 0, e))?;
         Ok(SolveInfo::of(method))
     }
 

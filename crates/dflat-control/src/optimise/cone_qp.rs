@@ -84,16 +84,7 @@ impl ConeQp {
         } else {
             MAX_ITERATIONS
         };
-        let ip = BandedIp::new(
-            "cone QP",
-            n,
-            dt,
-            &axes,
-            rows,
-            penalty,
-            Some(limit),
-            max_iterations,
-        );
+        let ip = BandedIp::new(n, dt, &axes, rows, penalty, Some(limit), max_iterations);
         Self { ip }
     }
 

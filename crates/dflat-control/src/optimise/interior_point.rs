@@ -14,7 +14,7 @@
 use super::banded_ip::{AxisCost, BandedIp, Stages};
 use super::bounds::AxisBounds;
 use super::bounds::{Row, check_row_data};
-use super::cascade::{AxisSolver, Carry, SolveFailure, SolveInfo, SolverMethod};
+use super::cascade::{AxisSolver, Carry, SolveFailure, SolveInfo, SolverFault, SolverMethod};
 use super::fast_banded::FastBandedSolver;
 use super::problem::{AxisProblem, baseline};
 use super::smoothness::Smoothness;
@@ -86,16 +86,7 @@ impl StageQp {
         };
         // Every row hard.
         let penalty = vec![f64::INFINITY; rows.len()];
-        let ip = BandedIp::new(
-            "stage QP",
-            n,
-            dt,
-            &[&cost],
-            rows,
-            penalty,
-            None,
-            max_iterations,
-        );
+        let ip = BandedIp::new(n, dt, &[&cost], rows, penalty, None, max_iterations);
         Self { ip, dt }
     }
 
@@ -280,7 +271,7 @@ impl BandedInteriorPointSolver {
             plan[f + 3] = baseline(fixed, f + 3) + self.p[f];
         }
         if plan.iter().any(|v| !v.is_finite()) {
-            return Err(ControlError::Solver("non-finite solution".to_string()));
+            return Err(SolverFault::NonFinite.into());
         }
         Ok(())
     }

@@ -82,7 +82,8 @@
 //! * [`fast_banded`] — [`FastBandedSolver`]: the unconstrained problem, a
 //!   banded Cholesky factor built once, O(N) per tick (the fast path).
 //! * [`cascade`] — [`AxisSolver`] and [`PairSolver`] (the box's and the
-//!   cone's solvers' interfaces: [`SolveInfo`] or [`SolveFailure`]) and
+//!   cone's solvers' interfaces: [`SolveInfo`] or [`SolveFailure`], the
+//!   method and its [`SolverFault`], an enum, never a string) and
 //!   [`Cascade`] (the fallback order, as data).
 //! * [`active_set`] — the active-set method of one axis with rows (the
 //!   tilt-rate bound's problem), on a compact KKT system in profile form.
@@ -146,7 +147,7 @@ pub use bounds::AxisBounds;
 pub use box_alm::BoxAlmSolver;
 pub use cascade::{
     AxisCascade, AxisSolver, Carry, Cascade, PairCascade, PairSolver, Restart, SolveFailure,
-    SolveInfo, SolverMethod,
+    SolveInfo, SolverFault, SolverMethod,
 };
 pub use clarabel::{ClarabelSolver, KktTuning};
 pub use clarabel_cone::ClarabelConeSolver;

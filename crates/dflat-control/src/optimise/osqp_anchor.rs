@@ -23,7 +23,7 @@ use clarabel::algebra::CscMatrix as ClarabelCsc;
 use osqp::{CscMatrix, Problem, Settings, Status};
 
 use super::bounds::AxisBounds;
-use super::cascade::AxisSolver;
+use super::cascade::{AxisSolver, SolverFault};
 use super::clarabel::{ClarabelSolver, KktTuning};
 use super::problem::{AxisProblem, baseline};
 use super::smoothness::Smoothness;
@@ -182,7 +182,7 @@ impl OsqpBoxSolver {
         let m = rows.len();
         let (l, u) = (vec![-OSQP_INFINITY; m], vec![OSQP_INFINITY; m]);
         let problem = Problem::new(p_osqp, q, a_osqp, &l, &u, &settings)
-            .map_err(|e| ControlError::Solver(format!("OSQP setup: {e:?}")))?;
+            .map_err(|_| ControlError::from(SolverFault::SetupRefused))?;
         Ok(Self {
             horizon,
             dt: weights.2,
@@ -349,7 +349,10 @@ impl OsqpBoxSolver {
         self.outcome = outcome;
         let Some(s) = solution else {
             // The next tick starts from the last solution it had.
-            return Err(ControlError::Solver(format!("OSQP: {outcome:?}")));
+            return Err(SolverFault::NotConverged {
+                iterations: self.tuning.max_iter as usize,
+            }
+            .into());
         };
         let (x, y) = (s.x(), s.y());
         plan[..3].copy_from_slice(fixed);

@@ -3,6 +3,7 @@
 use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
+use dflat_control::optimise::SolverFault;
 use dflat_control::{
     AttitudeCommand as ControlCommand, ControlError, Controller, Measurement, ReferenceSource,
     TickOutput,
@@ -57,7 +58,7 @@ impl Controller for Scripted {
         let (roll, pitch) = match step {
             Script::Command(r, p) => (r, p),
             Script::Nan => (0.0, f64::NAN),
-            Script::Fail => return Err(ControlError::Solver("scripted failure".into())),
+            Script::Fail => return Err(SolverFault::NotConverged { iterations: 0 }.into()),
         };
         Ok(TickOutput {
             command: ControlCommand {

@@ -4,6 +4,7 @@
 //! at a time when a block cannot, and the step without a primal move for
 //! a constraint the set's others determine.
 
+use super::super::cascade::SolverFault;
 use super::kkt::Con;
 use super::{ActiveSet, Problem, Side};
 use crate::ControlError;
@@ -182,9 +183,7 @@ impl ActiveSet {
                 if self.dependent_member(0).is_some_and(|id| id != add)
                     || !self.pure_dual_step(add, side)
                 {
-                    return Err(ControlError::Solver(
-                        "active set: a dependent constraint cannot be met".into(),
-                    ));
+                    return Err(SolverFault::DependentConstraint.into());
                 }
                 continue;
             }

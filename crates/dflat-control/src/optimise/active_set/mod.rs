@@ -92,6 +92,7 @@ use kkt::{Con, Kkt};
 
 use super::banded::SymBand;
 use super::bounds::Row;
+use super::cascade::SolverFault;
 use crate::ControlError;
 
 /// Block steps before the dual method.
@@ -583,9 +584,7 @@ impl ActiveSet {
     /// optimum's, and the cold start's is nearer.
     fn check_distance(&self, far: usize) -> Result<(), ControlError> {
         if self.warm && far > WARM_DISTANCE {
-            return Err(ControlError::Solver(
-                "active set: the warm start's set is far from the optimum's".into(),
-            ));
+            return Err(SolverFault::WarmSetFar.into());
         }
         Ok(())
     }

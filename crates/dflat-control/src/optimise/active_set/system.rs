@@ -4,6 +4,7 @@
 //! the solution read back; the dependent constraints the factorisation
 //! found.
 
+use super::super::cascade::SolverFault;
 use super::{ActiveSet, Problem, Side};
 use crate::ControlError;
 
@@ -15,9 +16,10 @@ impl ActiveSet {
     /// solution is refined ([`ActiveSet::refine`]).
     pub(super) fn kkt_solve(&mut self, prob: &Problem<'_>) -> Result<(), ControlError> {
         if self.work.solves == self.budget {
-            return Err(ControlError::Solver(
-                "active set: no convergence within its KKT solves".into(),
-            ));
+            return Err(SolverFault::NotConverged {
+                iterations: self.work.solves,
+            }
+            .into());
         }
         self.work.solves += 1;
         let (by_stage, stage_start) = (&self.by_stage, &self.stage_start);
@@ -43,9 +45,7 @@ impl ActiveSet {
         self.sol[..m].copy_from_slice(&self.rhs[..m]);
         self.kkt.solve(&mut self.sol);
         if !self.sol[..m].iter().all(|v| v.is_finite()) {
-            return Err(ControlError::Solver(
-                "active set: non-finite KKT solution".into(),
-            ));
+            return Err(SolverFault::NonFinite.into());
         }
         Ok(())
     }
@@ -73,9 +73,7 @@ impl ActiveSet {
         }
         self.take_solution(false);
         if (0..self.cons.len()).any(|id| self.broken(prob, id).0 > 0.0) {
-            return Err(ControlError::Solver(
-                "active set: the refined solution breaks a bound".into(),
-            ));
+            return Err(SolverFault::BoundBroken.into());
         }
         Ok(())
     }

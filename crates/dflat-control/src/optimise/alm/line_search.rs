@@ -3,6 +3,7 @@
 //! along the direction; the full step evaluated by the gradient's own
 //! stage pass so that the next gradient can take it.
 
+use super::super::cascade::SolverFault;
 use super::lagrangian::Vector;
 use super::lagrangian::{centred, disc_excess, interval_excess};
 use super::{ARMIJO, BandedAlm, StageSet};
@@ -24,9 +25,7 @@ impl BandedAlm {
         let slope = -decrement;
         if slope.is_nan() || slope >= 0.0 {
             // Not a descent direction: the factor is too inexact to go on.
-            return Err(ControlError::Solver(format!(
-                "ALM: no descent (slope {slope:.1e})"
-            )));
+            return Err(SolverFault::NoDescent { slope }.into());
         }
         // Quadratic part along d: α·(Px + c)·d + ½α²·dᵀPd (on the window:
         // the eliminated head's (Px + c) and (P·d) are 0).

@@ -7,6 +7,7 @@
 //! and σ update with its stopping tests ([`BandedAlm::outer_update`]).
 
 use super::super::bounds::check_solve_data;
+use super::super::cascade::SolverFault;
 use super::{
     BLOCKED_STEP, BandedAlm, DECREMENT_TOLERANCE, DUAL_TOLERANCE, Factored, GAP_TOLERANCE,
     GAP_TOLERANCE_AFTER_INTERIOR, INEXACT, LOCAL_STOP, LOOSE_REUSE, MAX_OUTER, PRIMAL_TOLERANCE,
@@ -150,9 +151,10 @@ impl BandedAlm {
             // The multipliers moved: the next decrement is not comparable.
             memory.compare_decrement = f64::INFINITY;
         }
-        Err(ControlError::Solver(
-            "ALM: no convergence in the multiplier updates".into(),
-        ))
+        Err(SolverFault::NotConverged {
+            iterations: self.ws.newton_steps,
+        }
+        .into())
     }
 
     /// The data's shapes and finiteness, and the stage intervals' order.
@@ -279,9 +281,10 @@ impl BandedAlm {
         if self.polish(a0, (lo, hi), (tol.stage, tol.row))? {
             Ok(0)
         } else {
-            Err(ControlError::Solver(
-                "active set: no convergence within its KKT solves".into(),
-            ))
+            Err(SolverFault::NotConverged {
+                iterations: self.ws.newton_steps,
+            }
+            .into())
         }
     }
 
@@ -336,12 +339,10 @@ impl BandedAlm {
                 return Ok(end(true));
             }
             if self.ws.newton_steps == tol.max_steps {
-                return Err(ControlError::Solver(format!(
-                    "ALM: no convergence in {} Newton steps \
-                     (gradient {gn:.1e}, residual {:.1e})",
-                    tol.max_steps,
-                    stage_res.max(row_res)
-                )));
+                return Err(SolverFault::NotConverged {
+                    iterations: tol.max_steps,
+                }
+                .into());
             }
             self.ws.newton_steps += 1;
             // Inexact inner solves while the multipliers are far off: the
@@ -369,9 +370,7 @@ impl BandedAlm {
             let (full, alpha) = self.line_search(decrement, lo, hi)?;
             memory.last_full = full;
             if tol.give_up_blocked && alpha < BLOCKED_STEP {
-                return Err(ControlError::Solver(format!(
-                    "ALM: the warm start's step is blocked (α = {alpha:.1e})"
-                )));
+                return Err(SolverFault::WarmStepBlocked { alpha }.into());
             }
             memory.exact_full = memory.last_full && !reuse;
             if memory.exact_full && decrement <= LOCAL_STOP * tol.c_scale * tol.x_scale {
@@ -496,7 +495,7 @@ impl BandedAlm {
         }
         if gap_small {
             if self.ws.x.iter().any(|v| !v.is_finite()) {
-                return Err(ControlError::Solver("ALM: non-finite iterate".into()));
+                return Err(SolverFault::NonFinite.into());
             }
             return Ok(Outer::Done(self.ws.newton_steps));
         }

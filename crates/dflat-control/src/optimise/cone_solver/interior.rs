@@ -5,7 +5,7 @@
 
 use super::{BandedConeSolver, LATE_ARC_SHARE};
 use crate::ControlError;
-use crate::optimise::cascade::Restart;
+use crate::optimise::cascade::{Restart, SolverFault};
 #[cfg(test)]
 use crate::optimise::problem::AxisProblem;
 
@@ -151,7 +151,10 @@ impl BandedConeSolver {
     /// augmented Lagrangian's next start takes its multipliers.
     pub(super) fn try_interior_point(&mut self, a0: [f64; 2]) -> Result<(), ControlError> {
         if self.qp.is_none() {
-            return Err(ControlError::Solver("cone ALM: no convergence".to_string()));
+            return Err(SolverFault::NotConverged {
+                iterations: self.iterations,
+            }
+            .into());
         }
         if self.bounds.tilt_rate.is_some() {
             // As the box's interior point: from the witness, strictly
@@ -160,7 +163,10 @@ impl BandedConeSolver {
             self.start_from_witness();
         }
         let Some(qp) = &mut self.qp else {
-            return Err(ControlError::Solver("cone ALM: no convergence".to_string()));
+            return Err(SolverFault::NotConverged {
+                iterations: self.iterations,
+            }
+            .into());
         };
         qp.ip.set_start(&[&self.p[0], &self.p[1]], self.dt);
         let result = qp.solve(&self.c, a0, (&self.lo, &self.hi));

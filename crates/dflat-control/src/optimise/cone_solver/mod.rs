@@ -8,7 +8,7 @@
 use super::alm::{AlmTuning, BandedAlm, RowBlock, StageSet};
 use super::banded_ip::AxisCost;
 use super::bounds::Row;
-use super::cascade::{Carry, PairSolver, SolveFailure, SolveInfo, SolverMethod};
+use super::cascade::{Carry, PairSolver, SolveFailure, SolveInfo, SolverFault, SolverMethod};
 use super::cone::ConeBounds;
 use super::cone_qp::{ConeQp, STAGE, a_at, p_at};
 use super::fast_banded::FastBandedSolver;
@@ -634,7 +634,7 @@ impl BandedConeSolver {
                 if let Some(alm) = &mut self.alm {
                     alm.reset_multipliers();
                 }
-                return Err(ControlError::Solver("non-finite solution".to_string()));
+                return Err(SolverFault::NonFinite.into());
             }
         }
         Ok(())
