@@ -160,7 +160,7 @@ impl From<SolverFault> for ControlError {
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum SolveFailure {
     /// The method failed after `iterations`, for `fault`.
-    #[error("{method}: {fault} (after {iterations} iterations)")]
+    #[error("{method}: {fault}")]
     Failed {
         /// The method.
         method: SolverMethod,
