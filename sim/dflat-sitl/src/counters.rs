@@ -100,6 +100,9 @@ pub struct SitlCounters {
     pub plant_steps: u64,
     /// Plant steps that ran late (the thread missed its deadline).
     pub late_steps: u64,
+    /// The longest a plant step ran behind its due time \[µs\] (the
+    /// plant thread woke late: the machine starved it).
+    pub step_lag_max_us: u64,
     /// Failed socket sends.
     pub send_errors: u64,
     /// Pose departure → command arrival and the command cadence
@@ -185,6 +188,7 @@ pub(super) struct Counters {
     pub(super) planner_samples: AtomicU64,
     pub(super) plant_steps: AtomicU64,
     pub(super) late_steps: AtomicU64,
+    pub(super) step_lag_max_us: AtomicU64,
     pub(super) send_errors: AtomicU64,
     pub(super) poses_dropped: AtomicU64,
     pub(super) poses_delayed: AtomicU64,
@@ -223,6 +227,12 @@ impl Counters {
         add(&self.poses_delayed, c.pose_latency.poses_delayed);
     }
 
+    /// A plant step ran `lag` behind its due time (the shell's clock).
+    pub(super) fn step_lag(&self, lag: std::time::Duration) {
+        let us = u64::try_from(lag.as_micros()).unwrap_or(u64::MAX);
+        self.step_lag_max_us.fetch_max(us, Ordering::Relaxed);
+    }
+
     /// The counters now, with the latency probe's figures `latency`.
     pub(super) fn snapshot(&self, latency: super::PoseLatency) -> SitlCounters {
         let v = self.to_vehicle.snapshot();
@@ -259,6 +269,7 @@ impl Counters {
             planner_samples: get(&self.planner_samples),
             plant_steps: get(&self.plant_steps),
             late_steps: get(&self.late_steps),
+            step_lag_max_us: get(&self.step_lag_max_us),
             send_errors: get(&self.send_errors),
             pose_latency: super::PoseLatency {
                 poses_dropped: get(&self.poses_dropped),
