@@ -320,11 +320,14 @@ impl Flight {
             None => r.ticks.iter().map(|t| t.path_error).collect(),
             Some(tr) => return self.judge_stream(r, &tr, judged_from),
         };
-        let axes = cross_track_per_axis(r, &TrialSetup::default().l_path());
+        let setup = TrialSetup::default();
+        let waypoints = setup.l_path();
+        let axes = cross_track_per_axis(r, &waypoints);
         let (constrained, tilt_p99_deg) = bound_use(r, judged_from);
         Judged {
             p95: percentile(horizontal, 95.0),
             axis_p95: axes,
+            arrival_s: arrival(r, &waypoints[waypoints.len() - 1], setup.arrival_radius),
             diverged: r.stop_reason == StopReason::Diverged,
             errors: r.errors.len(),
             constrained,
@@ -338,6 +341,7 @@ impl Flight {
         Judged {
             p95: f.p95,
             axis_p95: per_axis(r, from),
+            arrival_s: f64::NAN,
             diverged: r.stop_reason == StopReason::Diverged,
             errors: r.errors.len(),
             constrained,
@@ -363,6 +367,17 @@ fn bound_use(r: &TrialResult, from: f64) -> (f64, f64) {
         })
         .collect();
     (constrained, percentile(tilt, 99.0))
+}
+
+/// The time \[s\] of the first tick whose true position is within
+/// `radius` \[m\] of `end` (NaN: never): how long the flight took to fly
+/// the L, which its cross-track error does not count (a flight that
+/// reaches the corner slower overshoots it less and arrives later).
+fn arrival(r: &TrialResult, end: &Vector3<f64>, radius: f64) -> f64 {
+    r.ticks
+        .iter()
+        .find(|t| (t.truth.position - end).norm() <= radius)
+        .map_or(f64::NAN, |t| t.t)
 }
 
 /// p95 of each axis (x, y, z) of the cross-track error: the true
@@ -410,6 +425,11 @@ pub struct Judged {
     /// (to the closest point of the path), on a stream the error to the
     /// controller's reference.
     pub axis_p95: [f64; 3],
+    /// On the L, the time from the start to the first tick within the
+    /// arrival radius (1 m) of its end \[s\] (NaN on a stream, or when it
+    /// never arrived): the progress along the path that the cross-track
+    /// error does not judge.
+    pub arrival_s: f64,
     /// Diverged.
     pub diverged: bool,
     /// Controller errors.
@@ -427,6 +447,7 @@ impl Judged {
     pub const NONE: Self = Self {
         p95: f64::NAN,
         axis_p95: [f64::NAN; 3],
+        arrival_s: f64::NAN,
         diverged: false,
         errors: 0,
         constrained: f64::NAN,
