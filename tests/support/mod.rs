@@ -374,12 +374,20 @@ pub fn fly_in_process(name: &str, config_text: &str, fly: Duration) -> Flight {
 /// 20 ms period) means the machine starved the flight
 /// ([`fly_unstarved`]).
 pub const STARVED_US: f64 = 5000.0;
+/// A plant step this far behind its due time in the SITL's counters \[µs\]
+/// (half the daemon's 20 ms period: its pose then reaches the daemon a
+/// tick late) means the machine starved the flight ([`fly_unstarved`]).
+/// Half a period, not a quarter as for the daemon's ticks: the in-process
+/// SITL runs on the normal scheduler, and on the quiet 2-core VM its
+/// plant steps lag 2–7 ms now and then while the daemon's ticks do not.
+pub const SITL_STARVED_US: f64 = 10_000.0;
 /// Flights at most [`fly_unstarved`] flies when the machine starves them.
 pub const STARVED_ATTEMPTS: usize = 3;
 
 /// [`fly_in_process`], flown again while the daemon's own records show a
 /// tick later than [`STARVED_US`], or the SITL's counters a plant step
-/// that late (the machine starved it: said; the daemon may run at
+/// later than [`SITL_STARVED_US`] (the machine starved it: said; the
+/// lateness judged is the daemon's, or half the SITL's; the daemon may run at
 /// SCHED_FIFO, [`realtime_if_granted`], the in-process SITL does not), up to
 /// [`STARVED_ATTEMPTS`] flights; when every one was starved, the least
 /// late is returned (said). The flights run as `{name}-{attempt}`; the
@@ -393,7 +401,8 @@ pub fn fly_unstarved(name: &str, config_text: &str, fly: Duration) -> Flight {
             flight.latest_tick_us(),
             flight.report.counters.step_lag_max_us as f64,
         );
-        let late = tick.max(step);
+        // The SITL's lag on the daemon's scale (its threshold is twice).
+        let late = tick.max(step * STARVED_US / SITL_STARVED_US);
         if late > STARVED_US {
             println!(
                 "{name}: flight {attempt}: the daemon's latest tick {tick:.0} µs late, the SITL's latest plant step {step:.0} µs"
@@ -437,7 +446,7 @@ impl<T> LeastLate<T> {
         let on_time = late <= STARVED_US;
         if !on_time {
             println!(
-                "{}: a tick (the daemon's, or the SITL's plant step) ran {late:.0} µs late in flight {attempt} (the machine starved it){}",
+                "{}: the machine starved flight {attempt} (lateness {late:.0} µs){}",
                 self.name,
                 if attempt < STARVED_ATTEMPTS {
                     ": flown again"

@@ -280,7 +280,7 @@ impl DemoOutcome {
         );
         let _ = writeln!(
             s,
-            "  sitl                        sent pose {}, attitude {}, heartbeat {}; commands {} accepted, {} ignored, {} rejected, {} unauthenticated; late plant steps {}",
+            "  sitl                        sent pose {}, attitude {}, heartbeat {}; commands {} accepted, {} ignored, {} rejected, {} unauthenticated; late plant steps {} (the latest {:.1} ms behind)",
             c.positions_sent,
             c.attitudes_sent,
             c.heartbeats_sent,
@@ -288,7 +288,8 @@ impl DemoOutcome {
             c.commands_ignored,
             c.commands_rejected,
             c.commands_unauthenticated,
-            c.late_steps
+            c.late_steps,
+            c.step_lag_max_us as f64 / 1000.0
         );
         let cpu = d
             .cpu_percent

@@ -178,7 +178,7 @@ async fn run_until(
     say(&format!(
         "sitl stopped: commands {} accepted, {} ignored, {} rejected, {} unauthenticated; \
          to vehicle hb {} pos {} att {} status {}; to gcs hb {} pos {} att {} status {} replies {} routed {}; \
-         acked {} commands, params set {} refused {}; late steps {}",
+         acked {} commands, params set {} refused {}; late steps {} (the latest {:.1} ms behind)",
         c.commands_accepted,
         c.commands_ignored,
         c.commands_rejected,
@@ -196,7 +196,8 @@ async fn run_until(
         c.commands_acked,
         c.params_set,
         c.params_refused,
-        c.late_steps
+        c.late_steps,
+        c.step_lag_max_us as f64 / 1000.0
     ));
     let l = &c.pose_latency;
     say(&format!(

@@ -100,8 +100,9 @@ pub struct SitlCounters {
     pub plant_steps: u64,
     /// Plant steps that ran late (the thread missed its deadline).
     pub late_steps: u64,
-    /// The longest a plant step ran behind its due time \[µs\] (the
-    /// plant thread woke late: the machine starved it).
+    /// The longest a plant step ran behind its due time while in
+    /// offboard \[µs\] (the plant thread woke late: the machine starved
+    /// it while the commands flew the plant).
     pub step_lag_max_us: u64,
     /// Failed socket sends.
     pub send_errors: u64,

@@ -29,9 +29,13 @@ impl PlantLoop {
             if next > now {
                 std::thread::sleep(next - now);
             }
-            self.shared
-                .counters
-                .step_lag(Instant::now().saturating_duration_since(next));
+            if self.core.status().mode == SitlMode::Offboard {
+                // While the commands fly the plant (not while the process
+                // and the daemon start).
+                self.shared
+                    .counters
+                    .step_lag(Instant::now().saturating_duration_since(next));
+            }
             let clock = start.elapsed().as_secs_f64();
             let inputs: Vec<SitlInput> = self.inputs.try_iter().collect();
             let out = self.core.step(clock, inputs);
