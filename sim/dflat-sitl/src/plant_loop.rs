@@ -29,14 +29,16 @@ impl PlantLoop {
             if next > now {
                 std::thread::sleep(next - now);
             }
+            // One clock reading: the step's lag and its time.
+            let woke = Instant::now();
             if self.core.status().mode == SitlMode::Offboard {
                 // While the commands fly the plant (not while the process
                 // and the daemon start).
                 self.shared
                     .counters
-                    .step_lag(Instant::now().saturating_duration_since(next));
+                    .step_lag(woke.saturating_duration_since(next));
             }
-            let clock = start.elapsed().as_secs_f64();
+            let clock = woke.saturating_duration_since(start).as_secs_f64();
             let inputs: Vec<SitlInput> = self.inputs.try_iter().collect();
             let out = self.core.step(clock, inputs);
             // What a peer may see in this step's frames is published first
