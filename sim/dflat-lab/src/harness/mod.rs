@@ -333,6 +333,11 @@ pub struct TrialResult {
     pub errors: Vec<(usize, String)>,
     /// Why the trial ended.
     pub stop_reason: StopReason,
+    /// With a [`StopCondition::PathEnd`] stop: the time \[s\] of the first
+    /// tick whose true position was within its radius of its end (the
+    /// settle counts from it); `None` when it never came, or for another
+    /// stop.
+    pub arrived_at: Option<f64>,
     /// Summary metrics.
     pub metrics: Metrics,
 }
@@ -508,6 +513,7 @@ pub fn run_trial(spec: &TrialSpec, seed: u64) -> Result<TrialResult, SimError> {
         samples,
         errors,
         stop_reason,
+        arrived_at,
         metrics,
     })
 }

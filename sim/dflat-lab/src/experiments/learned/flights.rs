@@ -320,14 +320,13 @@ impl Flight {
             None => r.ticks.iter().map(|t| t.path_error).collect(),
             Some(tr) => return self.judge_stream(r, &tr, judged_from),
         };
-        let setup = TrialSetup::default();
-        let waypoints = setup.l_path();
-        let axes = cross_track_per_axis(r, &waypoints);
+        let axes = cross_track_per_axis(r, &TrialSetup::default().l_path());
         let (constrained, tilt_p99_deg) = bound_use(r, judged_from);
         Judged {
             p95: percentile(horizontal, 95.0),
             axis_p95: axes,
-            arrival_s: arrival(r, &waypoints[waypoints.len() - 1], setup.arrival_radius),
+            // The trial's own arrival at the L's end (its stop).
+            arrival_s: r.arrived_at.unwrap_or(f64::NAN),
             diverged: r.stop_reason == StopReason::Diverged,
             errors: r.errors.len(),
             constrained,
@@ -367,17 +366,6 @@ fn bound_use(r: &TrialResult, from: f64) -> (f64, f64) {
         })
         .collect();
     (constrained, percentile(tilt, 99.0))
-}
-
-/// The time \[s\] of the first tick whose true position is within
-/// `radius` \[m\] of `end` (NaN: never): how long the flight took to fly
-/// the L, which its cross-track error does not count (a flight that
-/// reaches the corner slower overshoots it less and arrives later).
-fn arrival(r: &TrialResult, end: &Vector3<f64>, radius: f64) -> f64 {
-    r.ticks
-        .iter()
-        .find(|t| (t.truth.position - end).norm() <= radius)
-        .map_or(f64::NAN, |t| t.t)
 }
 
 /// p95 of each axis (x, y, z) of the cross-track error: the true
