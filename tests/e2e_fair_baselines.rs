@@ -19,7 +19,6 @@ mod common;
 use std::time::Duration;
 
 use common::*;
-use dflat_link::MavMessage;
 
 const PATH: [[f64; 3]; 3] = [
     [-20.0, -30.0, -10.0],
@@ -123,6 +122,12 @@ fn fly(kind: &str) -> Figures {
         "{kind}: failsafe for {failsafe_s} s, {level_hover} level-hover ticks: {}",
         summary["guards"]
     );
+    // 300 ms is over two of the stream's intervals: no warning.
+    assert!(
+        !flight.statustexts().any(|t| t.contains("pose timeout")),
+        "{kind}: {:?}",
+        flight.statustexts().collect::<Vec<_>>()
+    );
     let mut tilts = Vec::new();
     for (_, d) in flight.attitude_targets() {
         let q = d.q.map(f64::from);
@@ -149,14 +154,7 @@ fn fly(kind: &str) -> Figures {
     if !arrived {
         // What the daemon said (state changes, failsafes): the diagnosis of
         // a flight that did not get to the end in 40 s.
-        let texts: Vec<String> = flight
-            .frames
-            .iter()
-            .filter_map(|f| match &f.message {
-                MavMessage::STATUSTEXT(d) => Some(d.text.to_str().unwrap_or("").to_owned()),
-                _ => None,
-            })
-            .collect();
+        let texts: Vec<String> = flight.statustexts().collect();
         let last = trace.last().map(|s| s.position);
         eprintln!("{kind}: not at the end; last position {last:?}; the daemon said {texts:?}");
     }

@@ -111,6 +111,19 @@ fn vision_at_15_hz_flies_the_short_l_with_valid_commands() {
         flight.report.counters.visions_sent
     );
     assert!(arrived, "the end of the path was not reached");
+    // The default 100 ms pose timeout is under two of 15 Hz vision's
+    // intervals (one lost pose can trip the stale-pose failsafe): the
+    // daemon says so, once, when the stream's period has settled.
+    let warnings = flight
+        .statustexts()
+        .filter(|t| t.contains("pose timeout 100ms < 2x period"))
+        .count();
+    assert_eq!(
+        warnings,
+        1,
+        "the pose timeout's warning: {:?}",
+        flight.statustexts().collect::<Vec<_>>()
+    );
     assert!(median <= MEDIAN_BOUND, "median {median:.3} m");
     assert!(p95 <= P95_BOUND, "p95 {p95:.3} m");
     assert!(max <= MAX_BOUND, "max {max:.3} m");

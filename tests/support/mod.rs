@@ -347,6 +347,15 @@ impl Flight {
             .fold(0.0, f64::max)
     }
 
+    /// The texts of the STATUSTEXT frames, in order.
+    #[allow(dead_code)]
+    pub fn statustexts(&self) -> impl Iterator<Item = String> + '_ {
+        self.frames.iter().filter_map(|f| match &f.message {
+            MavMessage::STATUSTEXT(d) => Some(d.text.to_str().unwrap_or("").to_owned()),
+            _ => None,
+        })
+    }
+
     /// The SET_ATTITUDE_TARGET frames.
     pub fn attitude_targets(
         &self,

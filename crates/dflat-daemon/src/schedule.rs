@@ -175,6 +175,9 @@ pub struct TickPlanner {
     pose_period: Option<f64>,
     /// Consecutive intervals rejected as outliers.
     rejected: u32,
+    /// Intervals the current period estimate has taken in (since its
+    /// last restart).
+    accepted: u32,
     counts: TickCounts,
 }
 
@@ -182,6 +185,22 @@ pub struct TickPlanner {
 const PERIOD_RESTART: u32 = 8;
 /// Gain of the period estimate (exponential average).
 const PERIOD_GAIN: f64 = 0.125;
+/// Intervals in a row the period estimate takes in before it counts as
+/// settled ([`TickPlanner::settled_pose_period`]).
+const PERIOD_SETTLED: u32 = 16;
+
+/// The stale-pose failsafe's timeout must be at least this many pose
+/// intervals: one lost pose leaves two intervals between poses, and a
+/// shorter timeout lets it trip the failsafe (docs/safety.md, "Losing
+/// pose").
+pub const POSE_TIMEOUT_MIN_INTERVALS: f64 = 2.0;
+
+/// Whether `pose_timeout` \[s\] (`safety.pose_timeout_ms`) is too tight
+/// for a pose stream of period `pose_period` \[s\]: under
+/// [`POSE_TIMEOUT_MIN_INTERVALS`] of its intervals.
+pub fn pose_timeout_too_tight(pose_timeout: f64, pose_period: f64) -> bool {
+    pose_timeout < POSE_TIMEOUT_MIN_INTERVALS * pose_period
+}
 
 impl TickPlanner {
     /// A planner with period `period` \[s\] (> 0), waiting up to `wait`
@@ -201,6 +220,7 @@ impl TickPlanner {
             last_pose: None,
             pose_period: None,
             rejected: 0,
+            accepted: 0,
             counts: TickCounts::default(),
         }
     }
@@ -213,6 +233,13 @@ impl TickPlanner {
     /// The estimated pose period \[s\], once two poses came.
     pub fn pose_period(&self) -> Option<f64> {
         self.pose_period
+    }
+
+    /// The estimated pose period \[s\] once it has taken in
+    /// [`PERIOD_SETTLED`] intervals in a row (none rejected in between
+    /// enough to restart it).
+    pub fn settled_pose_period(&self) -> Option<f64> {
+        self.pose_period.filter(|_| self.accepted >= PERIOD_SETTLED)
     }
 
     /// Nominal time of the next tick \[s\].
@@ -229,11 +256,13 @@ impl TickPlanner {
                 Some(p) if (interval - p).abs() <= 0.25 * p => {
                     self.pose_period = Some(p + PERIOD_GAIN * (interval - p));
                     self.rejected = 0;
+                    self.accepted = self.accepted.saturating_add(1);
                 }
                 Some(_) if self.rejected + 1 < PERIOD_RESTART => self.rejected += 1,
                 _ => {
                     self.pose_period = Some(interval);
                     self.rejected = 0;
+                    self.accepted = 0;
                 }
             }
         }
@@ -578,5 +607,53 @@ mod planner_tests {
         assert!((p.nominal() - 0.1).abs() < 1e-12);
         assert_eq!(p.poll(0.099), None);
         assert_eq!(p.counts().missed, 3);
+    }
+}
+
+#[cfg(test)]
+mod pose_timeout_tests {
+    use super::*;
+
+    /// Feeds `n` poses `period` apart from `from`; returns the next time.
+    fn feed(p: &mut TickPlanner, from: f64, period: f64, n: usize) -> f64 {
+        for k in 0..n {
+            p.on_pose(from + k as f64 * period);
+        }
+        from + n as f64 * period
+    }
+
+    #[test]
+    fn the_pose_period_settles_after_a_run_of_intervals_and_a_restart_unsettles_it() {
+        let mut p = TickPlanner::new(0.02, 0.003, true, 0.0);
+        assert_eq!(p.settled_pose_period(), None);
+        // 15 Hz vision: the first interval sets the estimate, 16 more
+        // settle it.
+        let t = feed(&mut p, 0.0, 1.0 / 15.0, 17);
+        assert_eq!(p.settled_pose_period(), None);
+        let t = feed(&mut p, t, 1.0 / 15.0, 1);
+        let settled = p.settled_pose_period().expect("settled");
+        assert!((settled - 1.0 / 15.0).abs() < 1e-9, "{settled}");
+        // A lost pose (a double interval) is an outlier: still settled.
+        let t = feed(&mut p, t + 1.0 / 15.0, 1.0 / 15.0, 1);
+        assert!(p.settled_pose_period().is_some());
+        // The stream changes to 50 Hz: the estimate restarts after
+        // PERIOD_RESTART outliers and is unsettled until 16 more.
+        let t = feed(&mut p, t, 0.02, PERIOD_RESTART as usize + 1);
+        assert_eq!(p.settled_pose_period(), None);
+        assert!((p.pose_period().unwrap() - 0.02).abs() < 1e-9);
+        feed(&mut p, t, 0.02, PERIOD_SETTLED as usize);
+        assert!((p.settled_pose_period().unwrap() - 0.02).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_timeout_under_two_intervals_is_too_tight() {
+        // The default 100 ms: fine at 50 and 30 Hz, not at 15 Hz (one
+        // lost pose leaves 133 ms between poses).
+        assert!(!pose_timeout_too_tight(0.1, 0.02));
+        assert!(!pose_timeout_too_tight(0.1, 1.0 / 30.0));
+        assert!(pose_timeout_too_tight(0.1, 1.0 / 15.0));
+        assert!(!pose_timeout_too_tight(0.3, 1.0 / 15.0));
+        assert!(!pose_timeout_too_tight(0.1, 0.05));
+        assert!(pose_timeout_too_tight(0.1, 0.0501));
     }
 }

@@ -19,14 +19,14 @@ use std::sync::mpsc::RecvTimeoutError;
 use std::time::{Duration, Instant};
 
 use tokio::sync::mpsc;
-use tracing::{debug, error, info};
+use tracing::{debug, error, info, warn};
 
 use super::{ControlReport, Outgoing, ST_SHUTDOWN, Stop, encode_state, notify_status};
 use crate::guard::WatchdogCadence;
 use crate::link_health::{CommandSlot, LinkHealth};
 use crate::realtime::{RealtimeApplied, RealtimeConfig, RealtimeError, apply_to_current_thread};
 use crate::records::CsvRecorder;
-use crate::schedule::{TickCause, TickPlanner};
+use crate::schedule::{POSE_TIMEOUT_MIN_INTERVALS, TickCause, TickPlanner, pose_timeout_too_tight};
 use crate::summary::Histogram;
 use crate::tick::{BATCH_MARGIN, ControlCore, Event, StepOutput, TickTime};
 
@@ -67,6 +67,9 @@ pub(super) struct ControlLoop {
     pub pose_lock: bool,
     /// How long a tick waits for an expected pose \[s\].
     pub pose_wait: f64,
+    /// `safety.pose_timeout_ms` \[s\], checked against the pose stream's
+    /// period once it settles ([`pose_timeout_too_tight`]).
+    pub pose_timeout: f64,
     /// Real-time settings for this thread.
     pub realtime: RealtimeConfig,
     /// Where the outcome of applying them goes (the daemon's start waits).
@@ -137,6 +140,7 @@ impl ControlLoop {
         // The graceful stop's bound \[s\] after it was asked for.
         let stop_bound = self.core.stop_bound() + STOP_MARGIN;
         let mut stop_asked_at: Option<f64> = None;
+        let mut pose_timeout_checked = false;
         while !self.stop.requested() {
             self.wait(&mut planner, &mut batch);
             if self.stop.requested() {
@@ -147,6 +151,10 @@ impl ControlLoop {
                 continue;
             };
             self.check_health(wake, watchdog.as_mut(), &mut outbound_dropped);
+            if !pose_timeout_checked && let Some(p) = planner.settled_pose_period() {
+                pose_timeout_checked = true;
+                self.check_pose_timeout(p, &mut outbound_dropped);
+            }
             let _span = tracing::debug_span!("tick", k = slot.tick).entered();
             if slot.missed > 0 {
                 debug!(missed = slot.missed, "ticks skipped");
@@ -288,6 +296,28 @@ impl ControlLoop {
         {
             let _ = sd_notify::notify(&[sd_notify::NotifyState::Watchdog]);
         }
+    }
+
+    /// Says once (log and STATUSTEXT) when `safety.pose_timeout_ms` is
+    /// under [`POSE_TIMEOUT_MIN_INTERVALS`] of the pose stream's settled
+    /// period `pose_period` \[s\]: one lost pose can then trip the
+    /// stale-pose failsafe.
+    fn check_pose_timeout(&self, pose_period: f64, outbound_dropped: &mut u64) {
+        if !pose_timeout_too_tight(self.pose_timeout, pose_period) {
+            return;
+        }
+        let (timeout_ms, period_ms) = (1e3 * self.pose_timeout, 1e3 * pose_period);
+        warn!(
+            pose_timeout_ms = timeout_ms,
+            pose_period_ms = period_ms,
+            "safety.pose_timeout_ms is under {POSE_TIMEOUT_MIN_INTERVALS} of the pose stream's \
+             intervals: one lost pose can trip the stale-pose failsafe (docs/safety.md, \"Losing pose\")"
+        );
+        let text = dflat_link::statustext(
+            dflat_link::dialect::MavSeverity::MAV_SEVERITY_WARNING,
+            &format!("dflat: pose timeout {timeout_ms:.0}ms < 2x period {period_ms:.0}ms"),
+        );
+        self.send(Outgoing::plain(text), outbound_dropped);
     }
 
     /// Hands a step's outputs on: state changes published, texts and the

@@ -614,6 +614,7 @@ pub async fn spawn_with_controller(
         period: period(&config),
         pose_lock: config.controller.tick == TickMode::Pose,
         pose_wait: config.controller.pose_wait_ms / 1000.0,
+        pose_timeout: config.safety.pose_timeout_ms / 1000.0,
         realtime: config.realtime.clone(),
         realtime_result: None,
     };
