@@ -187,7 +187,7 @@ const PERIOD_RESTART: u32 = 8;
 const PERIOD_GAIN: f64 = 0.125;
 /// Intervals in a row the period estimate takes in before it counts as
 /// settled ([`TickPlanner::settled_pose_period`]).
-const PERIOD_SETTLED: u32 = 16;
+pub const PERIOD_SETTLED: u32 = 16;
 
 /// The stale-pose failsafe's timeout must be at least this many pose
 /// intervals: one lost pose leaves two intervals between poses, and a
