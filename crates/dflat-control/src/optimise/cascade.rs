@@ -136,6 +136,10 @@ pub enum SolverFault {
     /// clarabel ended with another status than `Solved`.
     #[error("status {0:?}")]
     Clarabel(clarabel::solver::SolverStatus),
+    /// OSQP (the corner bench's anchor, feature `osqp-bench`) ended with
+    /// another status than `Solved`, named.
+    #[error("OSQP status {0}")]
+    Osqp(&'static str),
     /// An external solver (clarabel; OSQP on the bench) refused its
     /// set-up or an update of its data.
     #[error("the solver refused its set-up")]

@@ -349,10 +349,11 @@ impl OsqpBoxSolver {
         self.outcome = outcome;
         let Some(s) = solution else {
             // The next tick starts from the last solution it had.
-            return Err(SolverFault::NotConverged {
-                iterations: self.tuning.max_iter as usize,
-            }
-            .into());
+            let status = match outcome {
+                OsqpOutcome::Not(status) => status,
+                OsqpOutcome::Solved => "Solved without a solution",
+            };
+            return Err(SolverFault::Osqp(status).into());
         };
         let (x, y) = (s.x(), s.y());
         plan[..3].copy_from_slice(fixed);
@@ -366,5 +367,74 @@ impl OsqpBoxSolver {
         self.y.clear();
         self.y.extend_from_slice(y);
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::optimise::cascade::SolverFault;
+
+    /// A 10 m step from rest under a ±3 m/s² interval, N = 100.
+    fn step(solver: &mut OsqpBoxSolver) -> Result<Vec<f64>, ControlError> {
+        let horizon = 100;
+        let mut plan = vec![0.0; horizon + 1];
+        solver.solve_axis(AxisProblem {
+            fixed: &[0.0; 3],
+            sent: Some(0.0),
+            reference: &vec![10.0; horizon + 1],
+            plan: &mut plan,
+        })?;
+        Ok(plan)
+    }
+
+    fn solver(max_iter: u32) -> OsqpBoxSolver {
+        let bounds = AxisBounds {
+            acceleration: Some([-3.0, 3.0]),
+            speed: None,
+            tilt_rate: None,
+            drag: 0.0,
+            offset: None,
+            offset_slope: 0.0,
+        };
+        let tuning = OsqpTuning {
+            eps: 1e-6,
+            max_iter,
+            warm: OsqpWarm::Shifted,
+        };
+        OsqpBoxSolver::new(
+            100,
+            (1.0, 0.003, 0.02),
+            bounds,
+            Smoothness::default(),
+            tuning,
+        )
+        .unwrap()
+    }
+
+    /// OSQP stopped at its iteration cap says so by its status (not as our
+    /// own solvers' "not converged"), and gives no plan; with room it
+    /// solves the same step within its bounds.
+    #[test]
+    fn an_unsolved_status_is_named_in_the_fault() {
+        let err = step(&mut solver(2)).unwrap_err();
+        assert_eq!(
+            err,
+            ControlError::Solver {
+                method: None,
+                fault: SolverFault::Osqp("MaxIterationsReached"),
+            }
+        );
+        assert_eq!(
+            err.to_string(),
+            "QP solver failed: OSQP status MaxIterationsReached"
+        );
+        let mut s = solver(20_000);
+        let plan = step(&mut s).unwrap();
+        assert_eq!(s.outcome(), OsqpOutcome::Solved);
+        for w in plan.windows(3) {
+            let a = (w[2] - 2.0 * w[1] + w[0]) / (0.02 * 0.02);
+            assert!(a.abs() <= 3.0 + 1e-3, "acceleration {a}");
+        }
     }
 }
