@@ -112,16 +112,7 @@ fn fly(kind: &str) -> Figures {
         dist(p, PATH[2]) < ARRIVAL
     });
     assert!(flight.clean_exit, "{kind}: the daemon did not exit cleanly");
-    let summary = flight.summary().expect("the daemon's summary");
-    let failsafe_s = summary["time_in_state_s"]["failsafe"]
-        .as_f64()
-        .expect("a time");
-    let level_hover = summary["guards"]["level_hover"].as_u64().expect("a count");
-    assert!(
-        failsafe_s == 0.0 && level_hover == 0,
-        "{kind}: failsafe for {failsafe_s} s, {level_hover} level-hover ticks: {}",
-        summary["guards"]
-    );
+    flight.assert_no_failsafe(kind);
     // 300 ms is over two of the stream's intervals: no warning.
     assert!(
         !flight.statustexts().any(|t| t.contains("pose timeout")),

@@ -152,15 +152,7 @@ fn the_finite_difference_baselines_fly_through_dropped_and_late_poses() {
                     .map(|(_, d)| d),
             );
             // No failsafe (no brake, no level hover) in either flight.
-            let failsafe_s = summary["time_in_state_s"]["failsafe"]
-                .as_f64()
-                .expect("a time");
-            let level_hover = summary["guards"]["level_hover"].as_u64().expect("a count");
-            assert!(
-                failsafe_s == 0.0 && level_hover == 0,
-                "{kind}: failsafe for {failsafe_s} s, {level_hover} level-hover ticks: {}",
-                summary["guards"]
-            );
+            flight.assert_no_failsafe(kind);
             (largest_altitude_error(flight), errors, step)
         };
         let clean = judged(&fly_in_process(

@@ -347,6 +347,23 @@ impl Flight {
             .fold(0.0, f64::max)
     }
 
+    /// Asserts, from the daemon's summary, that it entered no failsafe:
+    /// no time in FAILSAFE and no level-hover ticks (no brake, no level);
+    /// `what` names the flight in the message.
+    #[allow(dead_code)]
+    pub fn assert_no_failsafe(&self, what: &str) {
+        let summary = self.summary().expect("the daemon's summary");
+        let failsafe_s = summary["time_in_state_s"]["failsafe"]
+            .as_f64()
+            .expect("a time");
+        let level_hover = summary["guards"]["level_hover"].as_u64().expect("a count");
+        assert!(
+            failsafe_s == 0.0 && level_hover == 0,
+            "{what}: failsafe for {failsafe_s} s, {level_hover} level-hover ticks: {}",
+            summary["guards"]
+        );
+    }
+
     /// The texts of the STATUSTEXT frames, in order.
     #[allow(dead_code)]
     pub fn statustexts(&self) -> impl Iterator<Item = String> + '_ {

@@ -315,7 +315,9 @@ impl ControlLoop {
         );
         let text = dflat_link::statustext(
             dflat_link::dialect::MavSeverity::MAV_SEVERITY_WARNING,
-            &format!("dflat: pose timeout {timeout_ms:.0}ms < 2x period {period_ms:.0}ms"),
+            &format!(
+                "dflat: pose timeout {timeout_ms:.0}ms < {POSE_TIMEOUT_MIN_INTERVALS}x period {period_ms:.0}ms"
+            ),
         );
         self.send(Outgoing::plain(text), outbound_dropped);
     }
