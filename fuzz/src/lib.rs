@@ -298,7 +298,7 @@ pub fn check_inbound(inbound: &Inbound) {
         Inbound::ParamValue(p) => {
             assert!(p.value.is_finite() && p.name.len() <= 16, "{p:?}");
         }
-        Inbound::Heartbeat(_) | Inbound::Other(_) => {}
+        Inbound::Heartbeat(_) | Inbound::CommandAck(_) | Inbound::Other(_) => {}
     }
 }
 

@@ -43,6 +43,7 @@ pub mod record_store;
 pub mod records;
 pub mod schedule;
 pub mod signing;
+pub mod stream_rates;
 pub mod summary;
 pub mod supervisor;
 pub mod tick;

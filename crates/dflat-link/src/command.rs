@@ -9,7 +9,9 @@
 //! component. What each component supports is its own business (the
 //! daemon's `commands` module, the SITL's `sitl::commands`).
 
-use mavlink::dialects::common::{COMMAND_ACK_DATA, MavCmd, MavMessage, MavResult};
+use mavlink::dialects::common::{
+    COMMAND_ACK_DATA, COMMAND_LONG_DATA, MavCmd, MavMessage, MavResult,
+};
 
 /// A command received as COMMAND_LONG or COMMAND_INT, with its sender.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -120,6 +122,27 @@ pub fn command_ack(req: &CommandRequest, result: MavResult) -> MavMessage {
     })
 }
 
+/// MAV_CMD_SET_MESSAGE_INTERVAL (511) to `target` = (system, component):
+/// message `message_id` every `interval_us` µs (−1 stops it, 0 restores
+/// the sender's default), on the link the command arrives by.
+pub fn set_message_interval(target: (u8, u8), message_id: u32, interval_us: f32) -> MavMessage {
+    MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
+        param1: message_id as f32,
+        param2: interval_us,
+        command: MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+        target_system: target.0,
+        target_component: target.1,
+        ..Default::default()
+    })
+}
+
+/// A result's name without its `MAV_RESULT_` prefix (`DENIED`,
+/// `UNSUPPORTED`, …), for words a person reads.
+pub fn result_name(result: MavResult) -> String {
+    let name = format!("{result:?}");
+    name.strip_prefix("MAV_RESULT_").unwrap_or(&name).to_owned()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -141,5 +164,23 @@ mod tests {
         for bad in [0.5, -1.0, f32::NAN, f32::INFINITY] {
             assert_eq!(whole(bad), None, "{bad}");
         }
+    }
+
+    /// The request reads back as what it asks (param1 the message id,
+    /// param2 the interval), addressed to the autopilot; an answer to it
+    /// is for the daemon when addressed to it or to nobody.
+    #[test]
+    fn a_message_interval_request_reads_back() {
+        let msg = set_message_interval((1, 1), 32, 20_000.0);
+        let req = CommandRequest::from_message(&msg, 1, 191).unwrap();
+        assert_eq!(req.command, MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL);
+        assert_eq!(req.requested_message_id(), Some(32));
+        assert_eq!(req.param2, 20_000.0);
+        assert_eq!(req.addressing((1, 1)), Addressing::ToUs);
+        assert_eq!(result_name(MavResult::MAV_RESULT_DENIED), "DENIED");
+        assert_eq!(
+            result_name(MavResult::MAV_RESULT_UNSUPPORTED),
+            "UNSUPPORTED"
+        );
     }
 }

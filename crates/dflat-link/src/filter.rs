@@ -24,7 +24,10 @@ use crate::{FrameError, LinkError, LinkStats, SignatureCheck, SignedFrame, Signi
 ///    [`Verdict::IgnoreNotAddressed`].
 /// 5. SET_ATTITUDE_TARGET (the SITL side): from any other component of the
 ///    own vehicle, addressed like rule 4.
-/// 6. Anything else: accepted from the autopilot or the ground station.
+/// 6. COMMAND_ACK: only from the autopilot (the answers to the daemon's
+///    own requests), addressed like rule 4 (an autopilot's answer to a
+///    ground station's command is not ours).
+/// 7. Anything else: accepted from the autopilot or the ground station.
 ///
 /// For the SITL, set `own_component_id` to the autopilot component (1).
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -122,13 +125,16 @@ impl SourceFilter {
                         && self.setpoint_components.contains(&header.component_id))
             }
             MavMessage::SET_ATTITUDE_TARGET(_) => self.sent_by_vehicle(header),
+            MavMessage::COMMAND_ACK(_) => self.sent_by_autopilot(header),
             _ => self.sent_by_autopilot(header) || self.sent_by_gcs(header),
         };
         if !trusted {
             return Verdict::IgnoreWrongSource;
         }
         match msg {
-            MavMessage::SET_POSITION_TARGET_LOCAL_NED(_) | MavMessage::SET_ATTITUDE_TARGET(_)
+            MavMessage::SET_POSITION_TARGET_LOCAL_NED(_)
+            | MavMessage::SET_ATTITUDE_TARGET(_)
+            | MavMessage::COMMAND_ACK(_)
                 if !self.addressed_to_us(msg) =>
             {
                 Verdict::IgnoreNotAddressed

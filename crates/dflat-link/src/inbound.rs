@@ -4,8 +4,9 @@ use mavlink::MavHeader;
 use mavlink::MessageData;
 use mavlink::dialects::common::{
     ATTITUDE_DATA, AttitudeTargetTypemask, HEARTBEAT_DATA, LOCAL_POSITION_NED_DATA, MavAutopilot,
-    MavFrame, MavMessage, MavModeFlag, MavState, MavType, ODOMETRY_DATA, PositionTargetTypemask,
-    SET_ATTITUDE_TARGET_DATA, SET_POSITION_TARGET_LOCAL_NED_DATA, VISION_POSITION_ESTIMATE_DATA,
+    MavCmd, MavFrame, MavMessage, MavModeFlag, MavResult, MavState, MavType, ODOMETRY_DATA,
+    PositionTargetTypemask, SET_ATTITUDE_TARGET_DATA, SET_POSITION_TARGET_LOCAL_NED_DATA,
+    VISION_POSITION_ESTIMATE_DATA,
 };
 
 use crate::math::{normalize_quaternion, quaternion_norm, yaw_from_quaternion};
@@ -27,6 +28,8 @@ pub enum Inbound {
     AttitudeTarget(AttitudeTarget),
     /// PARAM_VALUE (22): one of the autopilot's parameters.
     ParamValue(ParamValue),
+    /// COMMAND_ACK (77): the answer to a command.
+    CommandAck(CommandAck),
     /// Any other message of the common dialect, by message id.
     Other(u32),
 }
@@ -44,6 +47,30 @@ pub struct ParamValue {
     pub index: u16,
     /// Number of parameters the sender has.
     pub count: u16,
+}
+
+/// COMMAND_ACK (77) contents: which command was answered, how, and to
+/// whom (target 0/0: an autopilot that does not fill the extension
+/// fields; the answer is then for every requester).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CommandAck {
+    /// The command answered.
+    pub command: MavCmd,
+    /// The result (ACCEPTED, DENIED, UNSUPPORTED, IN_PROGRESS, …).
+    pub result: MavResult,
+    /// The requester's system id (0: not given).
+    pub target_system: u8,
+    /// The requester's component id (0: not given).
+    pub target_component: u8,
+}
+
+impl CommandAck {
+    /// Whether the answer is for the component `own` = (system,
+    /// component): addressed to it, or to nobody in particular.
+    pub fn is_for(&self, own: (u8, u8)) -> bool {
+        (self.target_system == 0 || self.target_system == own.0)
+            && (self.target_component == 0 || self.target_component == own.1)
+    }
 }
 
 /// HEARTBEAT (0) contents.
@@ -195,6 +222,12 @@ pub fn decode(header: &MavHeader, msg: &MavMessage) -> Result<Inbound, LinkError
             value: finite("PARAM_VALUE", "param_value", d.param_value)?,
             index: d.param_index,
             count: d.param_count,
+        }),
+        MavMessage::COMMAND_ACK(d) => Inbound::CommandAck(CommandAck {
+            command: d.command,
+            result: d.result,
+            target_system: d.target_system,
+            target_component: d.target_component,
         }),
         other => Inbound::Other(mavlink::Message::message_id(other)),
     })
@@ -444,4 +477,46 @@ pub mod ids {
     pub const ODOMETRY: u32 = ODOMETRY_DATA::ID;
     /// STATUSTEXT.
     pub const STATUSTEXT: u32 = mavlink::dialects::common::STATUSTEXT_DATA::ID;
+}
+
+#[cfg(test)]
+mod command_ack_tests {
+    use super::*;
+    use mavlink::dialects::common::COMMAND_ACK_DATA;
+
+    /// COMMAND_ACK decodes with its command, result and requester; it is
+    /// for us when addressed to us or to nobody (an autopilot that leaves
+    /// the extension fields 0), not when addressed to another component.
+    #[test]
+    fn a_command_ack_decodes_and_names_its_requester() {
+        let header = MavHeader {
+            system_id: 1,
+            component_id: 1,
+            sequence: 0,
+        };
+        let ack = |target_system, target_component| {
+            MavMessage::COMMAND_ACK(COMMAND_ACK_DATA {
+                command: MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+                result: MavResult::MAV_RESULT_DENIED,
+                progress: 0,
+                result_param2: 0,
+                target_system,
+                target_component,
+            })
+        };
+        let Ok(Inbound::CommandAck(a)) = decode(&header, &ack(1, 191)) else {
+            panic!("not a COMMAND_ACK");
+        };
+        assert_eq!(a.command, MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL);
+        assert_eq!(a.result, MavResult::MAV_RESULT_DENIED);
+        assert!(a.is_for((1, 191)));
+        let Ok(Inbound::CommandAck(anyone)) = decode(&header, &ack(0, 0)) else {
+            panic!("not a COMMAND_ACK");
+        };
+        assert!(anyone.is_for((1, 191)));
+        let Ok(Inbound::CommandAck(other)) = decode(&header, &ack(255, 190)) else {
+            panic!("not a COMMAND_ACK");
+        };
+        assert!(!other.is_for((1, 191)));
+    }
 }

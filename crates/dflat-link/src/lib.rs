@@ -64,8 +64,8 @@ pub use frame::{
     parse_frame, serialize_v2, write_v2,
 };
 pub use inbound::{
-    Attitude, AttitudeTarget, Heartbeat, Inbound, ParamValue, Pose, PoseSource, PositionSetpoint,
-    decode, ids,
+    Attitude, AttitudeTarget, CommandAck, Heartbeat, Inbound, ParamValue, Pose, PoseSource,
+    PositionSetpoint, decode, ids,
 };
 pub use math::{ThrustMapping, euler_from_quaternion, quaternion_from_euler};
 pub use modes::{AutopilotFamily, AutopilotMode};

@@ -285,6 +285,37 @@ fn source_filter_rules() {
     assert_eq!(vio.check(&header(1, 197, 0), &vpe), Verdict::Accept);
 }
 
+/// COMMAND_ACK: the autopilot's answers to this daemon (or to nobody)
+/// only; its answer to a ground station's command, and a ground station's
+/// own acks, are not acted on.
+#[test]
+fn command_acks_only_from_the_autopilot_to_us() {
+    use dflat_link::dialect::{COMMAND_ACK_DATA, MavCmd, MavResult};
+    let f = SourceFilter::default();
+    let ack = |target_system, target_component| {
+        MavMessage::COMMAND_ACK(COMMAND_ACK_DATA {
+            command: MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+            result: MavResult::MAV_RESULT_ACCEPTED,
+            progress: 0,
+            result_param2: 0,
+            target_system,
+            target_component,
+        })
+    };
+    assert_eq!(f.check(&AUTOPILOT, &ack(1, 191)), Verdict::Accept);
+    assert_eq!(f.check(&AUTOPILOT, &ack(0, 0)), Verdict::Accept);
+    assert_eq!(
+        f.check(&AUTOPILOT, &ack(255, 190)),
+        Verdict::IgnoreNotAddressed
+    );
+    assert_eq!(f.check(&GCS, &ack(1, 191)), Verdict::IgnoreWrongSource);
+    let mut rx = LinkRx::new(f);
+    assert!(matches!(
+        rx.handle(&AUTOPILOT, &ack(1, 191)),
+        RxOutcome::Accepted(Inbound::CommandAck(a)) if a.result == MavResult::MAV_RESULT_ACCEPTED
+    ));
+}
+
 #[test]
 fn sitl_side_accepts_attitude_targets_from_the_daemon() {
     let sitl = SourceFilter {

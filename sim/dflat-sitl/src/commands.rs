@@ -5,7 +5,7 @@
 //! |---|---|
 //! | MAV_CMD_REQUEST_MESSAGE (512): HEARTBEAT 0, SYS_STATUS 1, ATTITUDE 30, ATTITUDE_QUATERNION 31, LOCAL_POSITION_NED 32, GLOBAL_POSITION_INT 33, BATTERY_STATUS 147, AUTOPILOT_VERSION 148, HOME_POSITION 242, EXTENDED_SYS_STATE 245 | ACCEPTED, then the message (DENIED while the SITL has not sent it yet, e.g. the pose paused) |
 //! | MAV_CMD_GET_HOME_POSITION (410) | ACCEPTED, HOME_POSITION |
-//! | MAV_CMD_SET_MESSAGE_INTERVAL (511) | the streams of [`super::px4_face::Streams`]: ACCEPTED; HEARTBEAT, ATTITUDE, LOCAL_POSITION_NED (rate from the config) and others DENIED, STATUSTEXT (answered in the step, `step/services.rs`) |
+//! | MAV_CMD_SET_MESSAGE_INTERVAL (511) | the streams of [`super::px4_face::Streams`] and ATTITUDE, LOCAL_POSITION_NED ([`super::px4_face::TelemetryRates`]: from the vehicle link; DENIED from the ground station's and with `sitl.fixed_telemetry_rate`): ACCEPTED; HEARTBEAT, SYS_STATUS and others DENIED, STATUSTEXT (answered in the step, `step/services.rs`) |
 //! | MAV_CMD_DO_REPOSITION (192, `goto_location`) | ACCEPTED: AUTO_LOITER at the target (answered in the step, `step/services.rs`) |
 //! | MAV_CMD_NAV_RETURN_TO_LAUNCH (20) | ACCEPTED: AUTO_RTL, flies to home (the start point) and holds there |
 //! | MAV_CMD_NAV_TAKEOFF (22), MAV_CMD_NAV_LAND (21) | DENIED, STATUSTEXT: the plant starts in the air and cannot land |

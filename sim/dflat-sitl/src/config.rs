@@ -177,8 +177,15 @@ pub struct SitlConfig {
     pub plant: SitlPlant,
     /// Plant integration rate \[Hz\] (100–2000).
     pub plant_rate_hz: f64,
-    /// Rate of LOCAL_POSITION_NED / ATTITUDE out \[Hz\] (1–200).
+    /// Rate of LOCAL_POSITION_NED / ATTITUDE out \[Hz\] (1–200) until
+    /// MAV_CMD_SET_MESSAGE_INTERVAL changes it (the daemon asks for its
+    /// tick rate: `link.request_streams`).
     pub telemetry_rate_hz: f64,
+    /// Refuse MAV_CMD_SET_MESSAGE_INTERVAL for LOCAL_POSITION_NED and
+    /// ATTITUDE (DENIED, STATUSTEXT): an autopilot whose own settings
+    /// alone set those rates. `false` (default): set, as PX4 and ArduPilot
+    /// do.
+    pub fixed_telemetry_rate: bool,
     /// Plant attitude time constant \[s\] (may differ from the model's).
     pub tau: f64,
     /// Plant attitude gain [-].
@@ -282,6 +289,7 @@ impl Default for SitlConfig {
             plant: SitlPlant::Planar,
             plant_rate_hz: 200.0,
             telemetry_rate_hz: 50.0,
+            fixed_telemetry_rate: false,
             tau: 0.2,
             k: 1.0,
             hover_thrust: 0.5,

@@ -335,14 +335,86 @@ impl Stream {
     }
 }
 
-/// Message ids the SITL sends at `sitl.telemetry_rate_hz` or 1 Hz, whose
-/// interval it does not change (the daemon flies on them).
-pub const FIXED_STREAMS: [(u32, &str); 4] = [
-    (0, "HEARTBEAT"),
-    (1, "SYS_STATUS"),
-    (30, "ATTITUDE"),
-    (32, "LOCAL_POSITION_NED"),
-];
+/// Message ids the SITL sends at 1 Hz, whose interval it does not change.
+pub const FIXED_STREAMS: [(u32, &str); 2] = [(0, "HEARTBEAT"), (1, "SYS_STATUS")];
+
+/// The intervals of ATTITUDE (30) and LOCAL_POSITION_NED (32), the
+/// messages the daemon flies on, in plant steps: `sitl.telemetry_rate_hz`
+/// at start, then what MAV_CMD_SET_MESSAGE_INTERVAL sets (as PX4 and
+/// ArduPilot do, from the vehicle link: the SITL sends them at one rate
+/// on both links, where PX4 keeps one per link, so the ground station's
+/// requests are refused), or refused with `sitl.fixed_telemetry_rate` (an
+/// autopilot whose own settings alone set them). Pure.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TelemetryRates {
+    /// Plant steps per message at `sitl.telemetry_rate_hz`.
+    pub default_every: u64,
+    /// ATTITUDE's plant steps per message (`None`: stopped).
+    pub attitude_every: Option<u64>,
+    /// LOCAL_POSITION_NED's plant steps per message (`None`: stopped).
+    pub position_every: Option<u64>,
+    /// `sitl.fixed_telemetry_rate`: requests refused.
+    pub fixed: bool,
+}
+
+impl TelemetryRates {
+    /// Both at `default_every` plant steps.
+    pub fn new(default_every: u64, fixed: bool) -> Self {
+        Self {
+            default_every,
+            attitude_every: Some(default_every),
+            position_every: Some(default_every),
+            fixed,
+        }
+    }
+
+    /// MAV_CMD_SET_MESSAGE_INTERVAL for message `id` (`None`: not one of
+    /// these two) at plant step `dt` \[s\]: `interval_us` −1 stops it, 0
+    /// restores `sitl.telemetry_rate_hz`, > 0 sets it (rounded to whole
+    /// plant steps, at least one). `Err`: the refusal in words.
+    pub fn set(&mut self, id: u32, interval_us: f32, dt: f64) -> Option<Result<(), String>> {
+        let (name, slot) = match id {
+            30 => ("ATTITUDE", &mut self.attitude_every),
+            32 => ("LOCAL_POSITION_NED", &mut self.position_every),
+            _ => return None,
+        };
+        if self.fixed {
+            return Some(Err(format!("SITL: {name} rate fixed by config")));
+        }
+        *slot = if interval_us == -1.0 {
+            None
+        } else if interval_us == 0.0 {
+            Some(self.default_every)
+        } else if interval_us.is_finite() && interval_us > 0.0 {
+            Some(((f64::from(interval_us) * 1e-6 / dt).round() as u64).max(1))
+        } else {
+            return Some(Err(format!("SITL: interval {interval_us} us refused")));
+        };
+        Some(Ok(()))
+    }
+
+    /// A request for message `id` from the ground-station link (`None`:
+    /// not one of these two): refused, their rate is the vehicle link's.
+    pub fn refuse_on_gcs(&self, id: u32) -> Option<Result<(), String>> {
+        let name = match id {
+            30 => "ATTITUDE",
+            32 => "LOCAL_POSITION_NED",
+            _ => return None,
+        };
+        Some(Err(format!("SITL: {name} rate set on the vehicle link")))
+    }
+
+    /// The interval of message `id` \[µs\] at plant step `dt` (−1 stopped;
+    /// `None`: not one of these two).
+    pub fn interval_us(&self, id: u32, dt: f64) -> Option<i32> {
+        let every = match id {
+            30 => self.attitude_every,
+            32 => self.position_every,
+            _ => return None,
+        };
+        Some(every.map_or(-1, |e| (e as f64 * dt * 1e6).round() as i32))
+    }
+}
 
 /// The intervals of the [`Stream`]s and when each is next due (pure: time
 /// in seconds enters as an argument).
@@ -369,7 +441,7 @@ impl Streams {
     /// `Err`: the refusal in words.
     pub fn set(&mut self, id: u32, interval_us: f32, now: f64) -> Result<(), String> {
         if let Some((_, name)) = FIXED_STREAMS.iter().find(|(i, _)| *i == id) {
-            return Err(format!("SITL: {name} rate fixed by config"));
+            return Err(format!("SITL: {name} rate fixed"));
         }
         let Some(stream) = Stream::from_id(id) else {
             return Err(format!("SITL: message {id} not streamed"));
@@ -563,9 +635,38 @@ mod tests {
         assert!(!s.due(5.0).contains(&Stream::AttitudeQuaternion));
         s.set(31, 0.0, 5.0).unwrap();
         assert_eq!(s.interval_us(31), 100_000);
-        assert!(s.set(30, 1000.0, 0.0).unwrap_err().contains("ATTITUDE"));
+        assert!(s.set(0, 1000.0, 0.0).unwrap_err().contains("HEARTBEAT"));
         assert!(s.set(77, 1000.0, 0.0).unwrap_err().contains("77"));
         assert!(s.set(31, f32::NAN, 0.0).is_err());
         assert_eq!(s.interval_us(77), 0);
+    }
+
+    /// ATTITUDE and LOCAL_POSITION_NED: set in whole plant steps, stopped,
+    /// restored to `sitl.telemetry_rate_hz`, refused when fixed; other ids
+    /// are not theirs.
+    #[test]
+    fn the_daemons_messages_take_their_interval_unless_fixed() {
+        let dt = 1.0 / 200.0;
+        let mut r = TelemetryRates::new(40, false);
+        assert_eq!(r.interval_us(32, dt), Some(200_000));
+        assert_eq!(r.set(32, 20_000.0, dt), Some(Ok(())));
+        assert_eq!(r.position_every, Some(4));
+        assert_eq!(r.interval_us(32, dt), Some(20_000));
+        assert_eq!(r.attitude_every, Some(40), "the other one unchanged");
+        assert_eq!(r.set(30, 1.0, dt), Some(Ok(())));
+        assert_eq!(r.attitude_every, Some(1), "at least one step");
+        assert_eq!(r.set(30, -1.0, dt), Some(Ok(())));
+        assert_eq!(r.interval_us(30, dt), Some(-1));
+        assert_eq!(r.set(30, 0.0, dt), Some(Ok(())));
+        assert_eq!(r.attitude_every, Some(40));
+        assert!(r.set(32, f32::NAN, dt).unwrap().is_err());
+        assert_eq!(r.set(31, 1000.0, dt), None);
+        assert_eq!(r.interval_us(31, dt), None);
+        let mut fixed = TelemetryRates::new(40, true);
+        let refused = fixed.set(32, 20_000.0, dt).unwrap().unwrap_err();
+        assert_eq!(refused, "SITL: LOCAL_POSITION_NED rate fixed by config");
+        assert_eq!(fixed.position_every, Some(40));
+        assert!(r.refuse_on_gcs(30).unwrap().is_err());
+        assert_eq!(r.refuse_on_gcs(31), None);
     }
 }

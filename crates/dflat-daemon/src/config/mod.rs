@@ -184,6 +184,15 @@ pub struct LinkConfig {
     /// and this key, COMMAND_ACK DENIED) and never flown. The id is not a
     /// security boundary: signing is (docs/safety.md).
     pub gcs_system_ids: Vec<u8>,
+    /// Ask the autopilot (MAV_CMD_SET_MESSAGE_INTERVAL, at start-up and
+    /// after it was silent) to stream the pose message and ATTITUDE at
+    /// `controller.rate_hz`: LOCAL_POSITION_NED, or ODOMETRY when it is the
+    /// pose source and no `pose_components` are set (a pose from another
+    /// component is not the autopilot's to send). A refusal is said in
+    /// words and the autopilot's own rates stand ([`crate::stream_rates`]).
+    /// `false`: the autopilot's settings alone set the rates (PX4 `mavlink
+    /// stream`, ArduPilot `SRn_POSITION` / `SRn_EXTRA1`).
+    pub request_streams: bool,
 }
 
 impl LinkConfig {
@@ -254,6 +263,7 @@ impl Default for LinkConfig {
             signing_accept_unsigned: Vec::new(),
             peer: String::new(),
             gcs_system_ids: dflat_link::DEFAULT_GCS_SYSTEM_IDS.to_vec(),
+            request_streams: true,
         }
     }
 }

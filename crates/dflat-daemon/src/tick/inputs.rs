@@ -2,6 +2,7 @@
 //! the receive path built from the configuration (source filter, pose
 //! source, supervisor parameters) — shared by the daemon and the fuzzer.
 
+use dflat_link::dialect::MavCmd;
 use dflat_link::{AutopilotFamily, AutopilotMode, Inbound, PoseSource, SourceFilter};
 
 use crate::config::{Config, LinkConfig, PoseSourceKind};
@@ -53,6 +54,14 @@ pub enum Event {
         /// Its value (finite).
         value: f64,
     },
+    /// COMMAND_ACK from the autopilot to MAV_CMD_SET_MESSAGE_INTERVAL,
+    /// addressed to this daemon (or to nobody).
+    IntervalAck {
+        /// Arrival \[s\].
+        arrival: f64,
+        /// The autopilot's answer.
+        result: dflat_link::dialect::MavResult,
+    },
     /// An accepted position setpoint, or (velocity and/or acceleration
     /// given) a sample of a streamed trajectory.
     Setpoint {
@@ -88,6 +97,7 @@ impl Event {
             | Event::Attitude { arrival, .. }
             | Event::Heartbeat { arrival, .. }
             | Event::Param { arrival, .. }
+            | Event::IntervalAck { arrival, .. }
             | Event::Setpoint { arrival, .. }
             | Event::Mission { arrival, .. } => *arrival,
         }
@@ -101,6 +111,7 @@ impl Event {
             | Event::Attitude { arrival, .. }
             | Event::Heartbeat { arrival, .. }
             | Event::Param { arrival, .. }
+            | Event::IntervalAck { arrival, .. }
             | Event::Setpoint { arrival, .. }
             | Event::Mission { arrival, .. } => *arrival = t,
         }
@@ -167,6 +178,12 @@ pub fn event_from(inbound: &Inbound, pose_source: PoseSource, arrival: f64) -> O
             name: ParamName::new(&p.name),
             value: p.value,
         }),
+        Inbound::CommandAck(a) if a.command == MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL => {
+            Some(Event::IntervalAck {
+                arrival,
+                result: a.result,
+            })
+        }
         Inbound::PositionSetpoint(s) => Some(Event::Setpoint {
             arrival,
             position: s.position,

@@ -239,7 +239,7 @@ impl ControlCore {
                 crate::envelope::Envelope::from_config(config),
                 generation,
             ),
-            engagement: standby::Engagement::new(),
+            engagement: standby::Engagement::new(settings.streams.clone()),
             failsafe,
             last_sent: None,
             guard_note: None,
@@ -302,8 +302,9 @@ impl ControlCore {
             }
             self.apply(event);
         }
-        // Parameter requests due (sent with the texts).
+        // Parameter and stream-rate requests due (sent with the texts).
         self.request_params(t);
+        self.request_streams(t);
         // 2. Decide. (The level command a failsafe would leave is taken
         // before a failsafe resets the controller.)
         let level = self.failsafe_level_command();
@@ -465,9 +466,11 @@ impl ControlCore {
             Event::Mission { arrival, action } => self.apply_mission(arrival, action),
             Event::Heartbeat { arrival, mode } => {
                 self.supervisor.on_heartbeat(arrival);
+                self.engagement.streams.on_heartbeat(arrival);
                 self.apply_mode(mode, arrival);
             }
             Event::Param { name, value, .. } => self.apply_param(name.as_str(), value),
+            Event::IntervalAck { arrival, result } => self.apply_interval_ack(result, arrival),
             Event::Setpoint {
                 arrival,
                 position,

@@ -1,15 +1,19 @@
 //! The autopilot's parameters as the tick uses them: the requests due
 //! (`crate::autopilot_params`), and the values read back — the hover
 //! thrust (flown with `vehicle.hover_thrust_from_autopilot`, else compared)
-//! and the tilt limit (which refuses engagement: `tick/standby.rs`).
+//! and the tilt limit (which refuses engagement: `tick/standby.rs`); and
+//! the telemetry rates asked of it (`crate::stream_rates`) with their
+//! answers.
 
 use dflat_link::ThrustMapping;
-use dflat_link::dialect::MavSeverity;
+use dflat_link::command::{result_name, set_message_interval};
+use dflat_link::dialect::{MavResult, MavSeverity};
 use tracing::{debug, info, warn};
 
 use super::ControlCore;
 use crate::autopilot_params::ParamKind;
 use crate::config::ThrustMode;
+use crate::stream_rates::Answer;
 
 impl ControlCore {
     /// Queues the parameter requests due at `t` (sent with the texts).
@@ -21,6 +25,60 @@ impl ControlCore {
                     (self.settings.target.system, self.settings.target.component),
                     name,
                 ));
+        }
+    }
+
+    /// Queues the stream-rate request due at `t` (sent with the texts); a
+    /// request given up unanswered is said.
+    pub(super) fn request_streams(&mut self, t: f64) {
+        let given_up = self.engagement.streams.unanswered().len();
+        let due = self.engagement.streams.due(t);
+        if let Some(&r) = self.engagement.streams.unanswered().get(given_up) {
+            warn!(
+                message = r.name,
+                rate_hz = r.rate_hz(),
+                "the autopilot did not answer the stream-rate request: its own rate stands \
+                 (docs/deployment.md: PX4 `mavlink stream`, ArduPilot SRn_ parameters)"
+            );
+            let text = format!("dflat: {} at {:.0} Hz not answered", r.name, r.rate_hz());
+            self.text(MavSeverity::MAV_SEVERITY_WARNING, &text);
+        }
+        if let Some(r) = due {
+            debug!(
+                message = r.name,
+                interval_us = r.interval_us,
+                "asking the autopilot's stream rate"
+            );
+            let target = (self.settings.target.system, self.settings.target.component);
+            self.pending_texts
+                .push(set_message_interval(target, r.id, r.interval_us));
+        }
+    }
+
+    /// The autopilot's COMMAND_ACK to a stream-rate request at `t`: an
+    /// acceptance is logged, a refusal said in words (its own rate stands).
+    pub(super) fn apply_interval_ack(&mut self, result: MavResult, t: f64) {
+        match self.engagement.streams.on_ack(result, t) {
+            Some(Answer::Accepted(r)) => {
+                info!(
+                    message = r.name,
+                    rate_hz = r.rate_hz(),
+                    "the autopilot streams at the tick rate"
+                );
+            }
+            Some(Answer::Refused(r, result)) => {
+                let result = result_name(result);
+                warn!(
+                    message = r.name,
+                    rate_hz = r.rate_hz(),
+                    %result,
+                    "the autopilot refused the stream rate: its own rate stands \
+                     (docs/deployment.md: PX4 `mavlink stream`, ArduPilot SRn_ parameters)"
+                );
+                let text = format!("dflat: {} at {:.0} Hz {result}", r.name, r.rate_hz());
+                self.text(MavSeverity::MAV_SEVERITY_WARNING, &text);
+            }
+            Some(Answer::Pending) | None => {}
         }
     }
 

@@ -30,6 +30,9 @@ pub struct CoreSettings {
     pub goals: GoalSettings,
     /// The failsafe and the stop.
     pub failsafe: FailsafeSettings,
+    /// The messages the autopilot is asked to stream at the tick rate
+    /// (`link.request_streams`; empty: none asked).
+    pub streams: Vec<crate::stream_rates::StreamRequest>,
 }
 
 /// Poses in (`[link]`, `[safety]`).
@@ -169,6 +172,15 @@ impl CoreSettings {
                 stop_level: safety.stop_level_ms / 1000.0,
                 stop_requests_hold: safety.stop_requests_hold,
                 residual_failsafe: safety.residual_failsafe_m,
+            },
+            streams: if link.request_streams {
+                crate::stream_rates::requests_for(
+                    link.pose_source,
+                    !link.pose_components.is_empty(),
+                    config.controller.rate_hz,
+                )
+            } else {
+                Vec::new()
             },
         }
     }

@@ -15,6 +15,7 @@ use super::ControlCore;
 use super::envelope::Stop;
 use crate::autopilot_params::AutopilotParams;
 use crate::config::AutopilotKind;
+use crate::stream_rates::{StreamRates, StreamRequest};
 
 /// Engagement: the core's part that owns what the autopilot said of its
 /// mode and parameters, and the stop sequence.
@@ -24,6 +25,8 @@ pub(super) struct Engagement {
     pub(super) mode: Option<AutopilotMode>,
     /// The autopilot's own hover thrust and tilt limit, read at start-up.
     pub(super) params: AutopilotParams,
+    /// The telemetry rates asked of the autopilot (`link.request_streams`).
+    pub(super) streams: StreamRates,
     /// Engagement is refused (the autopilot's tilt limit is below ours);
     /// said once.
     pub(super) tilt_refusal_said: bool,
@@ -37,11 +40,13 @@ pub(super) struct Engagement {
 }
 
 impl Engagement {
-    /// Nothing heard from the autopilot yet.
-    pub(super) fn new() -> Self {
+    /// Nothing heard from the autopilot yet; `streams` the messages to ask
+    /// it for.
+    pub(super) fn new(streams: Vec<StreamRequest>) -> Self {
         Self {
             mode: None,
             params: AutopilotParams::new(),
+            streams: StreamRates::new(streams),
             tilt_refusal_said: false,
             standby_attitude: None,
             stop: None,

@@ -243,7 +243,18 @@ impl SitlCore {
         let (result, reason) = match req.command {
             MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL => {
                 let id = whole(req.param1).unwrap_or(u32::MAX);
-                match self.px4.streams.set(id, req.param2, self.clock) {
+                // ATTITUDE and LOCAL_POSITION_NED go out on both links at
+                // one rate: only the vehicle link's requests set it (PX4
+                // keeps one rate per link; the ground station's stays).
+                let telemetry = match link {
+                    Link::Vehicle => self.telemetry_rates.set(id, req.param2, self.dt),
+                    Link::Gcs => self.telemetry_rates.refuse_on_gcs(id),
+                };
+                let set = match telemetry {
+                    Some(set) => set,
+                    None => self.px4.streams.set(id, req.param2, self.clock),
+                };
+                match set {
                     Ok(()) => {
                         tracing::info!(id, interval_us = req.param2, "sitl: message interval set");
                         (MavResult::MAV_RESULT_ACCEPTED, None)

@@ -1,7 +1,8 @@
 //! What the step sends on its own after the plant moved: a delayed pose
 //! come due, the vision stand-in's samples, HEARTBEAT and SYS_STATUS, the
-//! PX4 face's streams, the planner's sample, and at the telemetry rate
-//! ATTITUDE then LOCAL_POSITION_NED with the truth sample.
+//! PX4 face's streams, the planner's sample, and ATTITUDE then
+//! LOCAL_POSITION_NED at their rates (`sitl.telemetry_rate_hz`, or what
+//! SET_MESSAGE_INTERVAL set) with the truth sample.
 
 use dflat_link::dialect::{MavAutopilot, MavLandedState, MavState};
 use dflat_sim::plant::PlantState;
@@ -38,7 +39,12 @@ impl SitlCore {
         }
         self.px4_streams(t, &state, out);
         self.planner_sample(t, &state, out);
-        if before / self.telemetry_every != self.steps / self.telemetry_every {
+        let steps = self.steps;
+        let crossed = |every: u64| before / every != steps / every;
+        let rates = self.telemetry_rates;
+        let attitude = rates.attitude_every.is_some_and(crossed);
+        let position = rates.position_every.is_some_and(crossed);
+        if crossed(self.telemetry_every) || attitude || position {
             let sample = TruthSample {
                 t,
                 position: state.position.into(),
@@ -47,7 +53,7 @@ impl SitlCore {
                 command: fresh,
                 mode: self.mode,
             };
-            self.telemetry(&sample, &state, out);
+            self.telemetry(&sample, &state, [attitude, position], out);
             self.truth = sample;
             out.truth = Some(sample);
         }
@@ -187,9 +193,16 @@ impl SitlCore {
         }
     }
 
-    /// ATTITUDE then LOCAL_POSITION_NED of `sample` (unless the pose is
+    /// ATTITUDE then LOCAL_POSITION_NED of `sample`, each when `due`
+    /// (their intervals: [`px4_face::TelemetryRates`]; unless the pose is
     /// paused; the position through the one-shot faults).
-    fn telemetry(&mut self, sample: &TruthSample, state: &PlantState, out: &mut SitlOutput) {
+    fn telemetry(
+        &mut self,
+        sample: &TruthSample,
+        state: &PlantState,
+        [attitude_due, position_due]: [bool; 2],
+        out: &mut SitlOutput,
+    ) {
         if self.pose_paused {
             return;
         }
@@ -198,9 +211,12 @@ impl SitlCore {
         // the attitude of the same instant too (it was one tick late when
         // the pose went first and a tick's cutoff fell between them).
         let rates = state.body_rates.into();
-        if let Ok(msg) = dflat_link::attitude(time_boot_ms, sample.euler, rates) {
+        if attitude_due && let Ok(msg) = dflat_link::attitude(time_boot_ms, sample.euler, rates) {
             self.latest.attitude = Some(msg.clone());
             out.send(msg, Dest::Both, SentKind::Attitude);
+        }
+        if !position_due {
+            return;
         }
         let measured = self.sensor.measure(sample.t);
         let p = measured.map_or(state.position, |m| m.position);

@@ -402,3 +402,68 @@ fn one_shot_pose_faults_drop_and_delay_the_next_poses() {
         .expect("the delayed pose never left");
     assert_eq!(late, with_truth + 3);
 }
+
+/// SET_MESSAGE_INTERVAL from the daemon's link sets how often ATTITUDE
+/// and LOCAL_POSITION_NED go out (from 5 Hz to 50 Hz, each on its own),
+/// ACKed on that link; with `sitl.fixed_telemetry_rate` it is DENIED and
+/// the rate stays.
+#[test]
+fn the_daemon_sets_the_pose_and_attitude_rates_unless_fixed() {
+    let count = |outs: &[SitlOutput], name: &str| {
+        all_names(outs).into_iter().filter(|n| *n == name).count()
+    };
+    let from_daemon = |at: f64, id: u32| SitlInput::Frame {
+        at,
+        link: Link::Vehicle,
+        header: dflat_link::header(1, 191, 0),
+        message: Box::new(dflat_link::command::set_message_interval(
+            (1, 1),
+            id,
+            20_000.0,
+        )),
+    };
+    for fixed in [false, true] {
+        let mut cfg = config();
+        cfg.sitl.telemetry_rate_hz = 5.0;
+        cfg.sitl.fixed_telemetry_rate = fixed;
+        let mut core = SitlCore::new(&cfg).unwrap();
+        // The ground station's request is refused: the rate is the
+        // vehicle link's.
+        let gcs = dflat_link::command::set_message_interval((1, 1), 32, 20_000.0);
+        let out = core.step(core.next_step_time(), [from_gcs(core.time(), gcs)]);
+        assert!(out.messages.iter().any(|m| matches!(
+            &m.message,
+            MavMessage::COMMAND_ACK(a) if a.result == MavResult::MAV_RESULT_DENIED
+        ) && m.to == Dest::Only(Link::Gcs)));
+        let outs = run(&mut core, 1.0, silence);
+        assert_eq!(count(&outs, "LOCAL_POSITION_NED"), 5);
+        assert_eq!(count(&outs, "ATTITUDE"), 5);
+        let out = core.step(core.next_step_time(), [from_daemon(core.time(), 32)]);
+        let ack = out
+            .messages
+            .iter()
+            .find_map(|m| match &m.message {
+                MavMessage::COMMAND_ACK(a) => Some((m.to, a.result)),
+                _ => None,
+            })
+            .expect("no ack");
+        let want = if fixed {
+            MavResult::MAV_RESULT_DENIED
+        } else {
+            MavResult::MAV_RESULT_ACCEPTED
+        };
+        assert_eq!(ack, (Dest::Only(Link::Vehicle), want));
+        let outs = run(&mut core, 2.0, silence);
+        let (position, attitude) = (count(&outs, "LOCAL_POSITION_NED"), count(&outs, "ATTITUDE"));
+        if fixed {
+            assert_eq!((position, attitude), (10, 10), "fixed");
+        } else {
+            assert!((99..=101).contains(&position), "{position} at 50 Hz");
+            assert_eq!(attitude, 10, "ATTITUDE not asked yet");
+            core.step(core.next_step_time(), [from_daemon(core.time(), 30)]);
+            let outs = run(&mut core, 1.0, silence);
+            let attitude = count(&outs, "ATTITUDE");
+            assert!((49..=51).contains(&attitude), "{attitude} at 50 Hz");
+        }
+    }
+}
