@@ -391,10 +391,13 @@ async fn a_ground_station_talks_to_both_components() {
         c.to_gcs.heartbeats
     );
     // Commands, requests and the setpoint to the SITL itself stayed there.
+    // The SITL acked the ground station's three commands and the daemon's
+    // two stream-rate requests (LOCAL_POSITION_NED, ATTITUDE:
+    // `link.request_streams`).
     assert!(c.gcs_frames_kept >= 6, "{c:?}");
     assert_eq!(
         (c.commands_acked, c.commands_unsupported, c.commands_denied),
-        (3, 0, 1),
+        (3 + 2, 0, 1),
         "{c:?}"
     );
 }
