@@ -78,11 +78,7 @@ fn problem(c: &Case) -> (Smoothness, AxisBounds) {
         },
         AxisBounds {
             acceleration: Some([-a, a]),
-            speed: None,
-            tilt_rate: None,
-            drag: 0.0,
-            offset: None,
-            offset_slope: 0.0,
+            ..Default::default()
         },
     )
 }

@@ -188,11 +188,7 @@ fn smooth_clarabel_agrees_with_fast_path() {
     }
     let bounds = AxisBounds {
         acceleration: Some([-2.0, 2.0]),
-        speed: None,
-        tilt_rate: None,
-        drag: 0.0,
-        offset: None,
-        offset_slope: 0.0,
+        ..Default::default()
     };
     let mut bounded =
         ClarabelSolver::with_smoothness(n, 1.0, 0.08, DT, bounds, f64::INFINITY, sm).unwrap();
@@ -202,11 +198,7 @@ fn smooth_clarabel_agrees_with_fast_path() {
         .unwrap();
     let relaxed = AxisBounds {
         acceleration: Some([-2.0001, 2.0001]),
-        speed: None,
-        tilt_rate: None,
-        drag: 0.0,
-        offset: None,
-        offset_slope: 0.0,
+        ..Default::default()
     };
     assert!(!relaxed.violated_by(&b, DT));
 }

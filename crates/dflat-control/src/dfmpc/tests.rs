@@ -116,10 +116,7 @@ fn constrained_plan_respects_bounds() {
     let bounds = AxisBounds {
         acceleration: Some([-a_max, a_max]),
         speed: Some(v_max),
-        tilt_rate: None,
-        drag: 0.0,
-        offset: None,
-        offset_slope: 0.0,
+        ..Default::default()
     };
     let mut fast = FastBandedSolver::new(100, 1.0, 0.08, DT).unwrap();
     let mut cs = ClarabelSolver::new(100, 1.0, 0.08, DT, bounds, f64::INFINITY).unwrap();
@@ -133,10 +130,7 @@ fn constrained_plan_respects_bounds() {
         !AxisBounds {
             acceleration: Some([-a_max * 1.0001, a_max * 1.0001]),
             speed: Some(v_max * 1.0001),
-            tilt_rate: None,
-            drag: 0.0,
-            offset: None,
-            offset_slope: 0.0,
+            ..Default::default()
         }
         .violated_by(&plan, DT)
     );
@@ -223,7 +217,7 @@ proptest::proptest! {
         let fixed = [y0, y0 + v0 * DT, y0 + 2.0 * v0 * DT + a0 * DT * DT];
         let reference: Vec<f64> =
             (0..=horizon).map(|j| target + slope * DT * j as f64).collect();
-        let bounds = AxisBounds { acceleration: Some([-a_max, a_max]), speed, tilt_rate: None, drag: 0.0, offset: None, offset_slope: 0.0 };
+        let bounds = AxisBounds { acceleration: Some([-a_max, a_max]), speed, ..Default::default() };
         let (smoothness, sent) = match smooth {
             Some((weight, kappa, delta)) => (
                 Smoothness { weight, kappa, gravity: 9.81 },
@@ -339,10 +333,7 @@ fn faster_than_the_speed_bound_brakes_in_a_funnel() {
     let bounds = AxisBounds {
         acceleration: Some([-a_max, a_max]),
         speed: Some(v_max),
-        tilt_rate: None,
-        drag: 0.0,
-        offset: None,
-        offset_slope: 0.0,
+        ..Default::default()
     };
     let n = 300; // 6 s: long enough to get down to 1 m/s
     let mut cs = ClarabelSolver::new(n, 1.0, 0.08, DT, bounds, f64::INFINITY).unwrap();
@@ -372,10 +363,7 @@ fn solver_failure_is_an_error() {
     let bounds = AxisBounds {
         acceleration: Some([-1.0, 1.0]),
         speed: Some(1.0),
-        tilt_rate: None,
-        drag: 0.0,
-        offset: None,
-        offset_slope: 0.0,
+        ..Default::default()
     };
     let mut cs = ClarabelSolver::new(50, 1.0, 0.08, DT, bounds, 1e-12).unwrap();
     let mut plan = vec![0.0; 51];
@@ -533,11 +521,7 @@ fn banded_failure_falls_back_to_clarabel_and_says_so() {
     // of this controller (length check): the axis goes to clarabel.
     let bounds = AxisBounds {
         acceleration: Some([-1.0, 1.0]),
-        speed: None,
-        tilt_rate: None,
-        drag: 0.0,
-        offset: None,
-        offset_slope: 0.0,
+        ..Default::default()
     };
     let weights = DfMpcSettings::default();
     for (axis, p) in broken.axes.iter_mut().enumerate() {

@@ -391,11 +391,7 @@ mod tests {
     fn solver(max_iter: u32) -> OsqpBoxSolver {
         let bounds = AxisBounds {
             acceleration: Some([-3.0, 3.0]),
-            speed: None,
-            tilt_rate: None,
-            drag: 0.0,
-            offset: None,
-            offset_slope: 0.0,
+            ..Default::default()
         };
         let tuning = OsqpTuning {
             eps: 1e-6,

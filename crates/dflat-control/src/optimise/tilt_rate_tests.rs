@@ -79,11 +79,8 @@ proptest::proptest! {
         let rate = TiltRate { step: step_deg.to_radians(), kappa, gain: 1.0, gravity: G };
         let bounds = AxisBounds {
             acceleration: a_max.map(|a| [-a, a]),
-            speed: None,
             tilt_rate: Some(rate),
-            drag: 0.0,
-            offset: None,
-            offset_slope: 0.0,
+            ..Default::default()
         };
         let smoothness = Smoothness { weight: smooth.unwrap_or(0.0), kappa, gravity: G };
         let sent = Some(a0 + sent_delta);
@@ -164,11 +161,8 @@ fn the_funnel_keeps_rate_and_acceleration_bounds_feasible() {
     let a = G * 10f64.to_radians().tan();
     let bounds = AxisBounds {
         acceleration: Some([-a, a]),
-        speed: None,
         tilt_rate: Some(rate),
-        drag: 0.0,
-        offset: None,
-        offset_slope: 0.0,
+        ..Default::default()
     };
     let sent = Some(a0);
     let mut banded =
@@ -239,16 +233,13 @@ const STEP_WEIGHTS: (f64, f64) = (1.0, 0.003);
 fn step_bounds(a_max: Option<f64>) -> AxisBounds {
     AxisBounds {
         acceleration: a_max.map(|a| [-a, a]),
-        speed: None,
         tilt_rate: Some(TiltRate {
             step: 2f64.to_radians(),
             kappa: 10.0,
             gain: 1.0,
             gravity: G,
         }),
-        drag: 0.0,
-        offset: None,
-        offset_slope: 0.0,
+        ..Default::default()
     }
 }
 
@@ -539,9 +530,7 @@ proptest::proptest! {
             acceleration: a_max.map(|a| [-a, a]),
             speed,
             tilt_rate: Some(rate),
-            drag: 0.0,
-            offset: None,
-            offset_slope: 0.0,
+            ..Default::default()
         };
         let smoothness = Smoothness::default();
         let mut reference_solver = ClarabelSolver::with_tuning(
