@@ -135,16 +135,19 @@ impl StreamRates {
     }
 
     /// The request to send at `t` \[s\], if one is due (a new one, or the
-    /// current one again after [`RETRY_S`]); a request sent [`TRIES`]
-    /// times without an answer is given up ([`StreamRates::unanswered`]).
-    pub fn due(&mut self, t: f64) -> Option<StreamRequest> {
+    /// current one again after [`RETRY_S`]), with its confirmation number
+    /// (0 the first time, then 1, 2: the command protocol's count of
+    /// retransmissions); a request sent [`TRIES`] times without an answer
+    /// is given up ([`StreamRates::unanswered`]).
+    pub fn due(&mut self, t: f64) -> Option<(StreamRequest, u8)> {
         loop {
             match &mut self.current {
                 Some(c) if t < c.next_at => return None,
                 Some(c) if c.tries < TRIES => {
+                    let confirmation = c.tries as u8;
                     c.tries += 1;
                     c.next_at = t + RETRY_S;
-                    return Some(c.request);
+                    return Some((c.request, confirmation));
                 }
                 Some(c) => {
                     self.unanswered.push(c.request);
@@ -246,11 +249,11 @@ mod tests {
         assert_eq!(s.due(0.0), None, "nothing before the autopilot is heard");
         assert_eq!(s.on_ack(MavResult::MAV_RESULT_ACCEPTED, 0.0), None);
         s.on_heartbeat(1.0);
-        assert_eq!(s.due(1.0).unwrap().name, "LOCAL_POSITION_NED");
+        assert_eq!(s.due(1.0).unwrap().0.name, "LOCAL_POSITION_NED");
         assert_eq!(s.due(1.5), None, "waits for the answer");
         let a = s.on_ack(MavResult::MAV_RESULT_ACCEPTED, 1.6).unwrap();
         assert!(matches!(a, Answer::Accepted(r) if r.id == 32));
-        assert_eq!(s.due(1.6).unwrap().name, "ATTITUDE");
+        assert_eq!(s.due(1.6).unwrap().0.name, "ATTITUDE");
         let a = s.on_ack(MavResult::MAV_RESULT_DENIED, 1.7).unwrap();
         assert!(matches!(a, Answer::Refused(r, MavResult::MAV_RESULT_DENIED) if r.id == 30));
         assert_eq!(s.due(5.0), None, "all answered");
@@ -266,10 +269,10 @@ mod tests {
         let wanted = requests_for(PoseSourceKind::VisionPositionEstimate, false, 50.0);
         let mut s = StreamRates::new(wanted);
         s.on_heartbeat(0.0);
-        assert!(s.due(0.0).is_some());
+        assert_eq!(s.due(0.0).unwrap().1, 0, "first sent");
         assert!(s.due(0.5).is_none());
-        assert!(s.due(1.0).is_some(), "second try");
-        assert!(s.due(2.0).is_some(), "third try");
+        assert_eq!(s.due(1.0).unwrap().1, 1, "second try");
+        assert_eq!(s.due(2.0).unwrap().1, 2, "third try");
         assert!(s.due(3.0).is_none(), "given up");
         assert_eq!(names(s.unanswered()), ["ATTITUDE"]);
         assert!(s.accepted().is_empty() && s.refused().is_empty());
@@ -312,7 +315,7 @@ mod tests {
             assert!(s.due(f64::from(k)).is_none(), "heartbeat {k}");
         }
         s.on_heartbeat(9.0 + SILENCE_S);
-        assert_eq!(s.due(9.0 + SILENCE_S).unwrap().name, "ATTITUDE");
+        assert_eq!(s.due(9.0 + SILENCE_S).unwrap().0.name, "ATTITUDE");
         assert!(s.accepted().is_empty(), "the old answers are forgotten");
         // Nothing wanted: nothing asked, ever.
         let mut none = StreamRates::new(Vec::new());

@@ -124,14 +124,22 @@ pub fn command_ack(req: &CommandRequest, result: MavResult) -> MavMessage {
 
 /// MAV_CMD_SET_MESSAGE_INTERVAL (511) to `target` = (system, component):
 /// message `message_id` every `interval_us` µs (−1 stops it, 0 restores
-/// the sender's default), on the link the command arrives by.
-pub fn set_message_interval(target: (u8, u8), message_id: u32, interval_us: f32) -> MavMessage {
+/// the sender's default), on the link the command arrives by;
+/// `confirmation` 0 the first time, counting up on each retransmission
+/// (the command protocol's rule).
+pub fn set_message_interval(
+    target: (u8, u8),
+    message_id: u32,
+    interval_us: f32,
+    confirmation: u8,
+) -> MavMessage {
     MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
         param1: message_id as f32,
         param2: interval_us,
         command: MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
         target_system: target.0,
         target_component: target.1,
+        confirmation,
         ..Default::default()
     })
 }
@@ -171,7 +179,7 @@ mod tests {
     /// is for the daemon when addressed to it or to nobody.
     #[test]
     fn a_message_interval_request_reads_back() {
-        let msg = set_message_interval((1, 1), 32, 20_000.0);
+        let msg = set_message_interval((1, 1), 32, 20_000.0, 0);
         let req = CommandRequest::from_message(&msg, 1, 191).unwrap();
         assert_eq!(req.command, MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL);
         assert_eq!(req.requested_message_id(), Some(32));

@@ -43,15 +43,20 @@ impl ControlCore {
             let text = format!("dflat: {} at {:.0} Hz not answered", r.name, r.rate_hz());
             self.text(MavSeverity::MAV_SEVERITY_WARNING, &text);
         }
-        if let Some(r) = due {
+        if let Some((r, confirmation)) = due {
             debug!(
                 message = r.name,
                 interval_us = r.interval_us,
+                confirmation,
                 "asking the autopilot's stream rate"
             );
             let target = (self.settings.target.system, self.settings.target.component);
-            self.pending_texts
-                .push(set_message_interval(target, r.id, r.interval_us));
+            self.pending_texts.push(set_message_interval(
+                target,
+                r.id,
+                r.interval_us,
+                confirmation,
+            ));
         }
     }
 

@@ -420,6 +420,7 @@ fn the_daemon_sets_the_pose_and_attitude_rates_unless_fixed() {
             (1, 1),
             id,
             20_000.0,
+            0,
         )),
     };
     for fixed in [false, true] {
@@ -429,7 +430,7 @@ fn the_daemon_sets_the_pose_and_attitude_rates_unless_fixed() {
         let mut core = SitlCore::new(&cfg).unwrap();
         // The ground station's request is refused: the rate is the
         // vehicle link's.
-        let gcs = dflat_link::command::set_message_interval((1, 1), 32, 20_000.0);
+        let gcs = dflat_link::command::set_message_interval((1, 1), 32, 20_000.0, 0);
         let out = core.step(core.next_step_time(), [from_gcs(core.time(), gcs)]);
         assert!(out.messages.iter().any(|m| matches!(
             &m.message,
