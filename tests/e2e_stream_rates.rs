@@ -3,7 +3,7 @@
 //! The SITL starts at 5 Hz (`sitl.telemetry_rate_hz`); the daemon asks it,
 //! by MAV_CMD_SET_MESSAGE_INTERVAL, for LOCAL_POSITION_NED and ATTITUDE at
 //! its 50 Hz (`link.request_streams`, default on) and flies the short L on
-//! them. An autopilot that refuses (`sitl.fixed_telemetry_rate`) is said in
+//! them, with the SITL's PX4 face and its ArduPilot face. An autopilot that refuses (`sitl.fixed_telemetry_rate`) is said in
 //! words, with the pose timeout's warning against the slow stream.
 
 #[path = "support/mod.rs"]
@@ -36,8 +36,21 @@ fn interval_requests(flight: &Flight) -> Vec<(u32, f32)> {
 
 #[test]
 fn a_slow_autopilot_stream_is_raised_to_the_tick_rate() {
-    let config = format!("{SHORT_L}\n[sitl]\nstart = [0.0, 0.0, -10.0]\n{SLOW}\n");
-    let flight = fly_in_process("stream-rates-raised", &config, Duration::from_secs(6));
+    raised("stream-rates-raised", "");
+}
+
+/// The same with the SITL's ArduPilot face (GUIDED_NOGPS engages; its
+/// `SRn_POSITION` defaults are a few Hz).
+#[test]
+fn a_slow_ardupilot_stream_is_raised_to_the_tick_rate() {
+    raised("stream-rates-raised-ardupilot", "autopilot = \"ardupilot\"");
+}
+
+/// Flies the short L against the SITL started at 5 Hz (with the further
+/// `[sitl]` keys `sitl`) and judges that the daemon raised the stream.
+fn raised(name: &str, sitl: &str) {
+    let config = format!("{SHORT_L}\n[sitl]\nstart = [0.0, 0.0, -10.0]\n{SLOW}\n{sitl}\n");
+    let flight = fly_in_process(name, &config, Duration::from_secs(6));
     assert!(flight.clean_exit, "the daemon did not exit cleanly");
     let asked = interval_requests(&flight);
     assert_eq!(
@@ -71,8 +84,8 @@ fn a_slow_autopilot_stream_is_raised_to_the_tick_rate() {
     assert!(ages.len() > 150, "{} commanded ticks", ages.len());
     let p95 = quantile(&ages, 0.95);
     eprintln!(
-        "SITL from 5 Hz: {} LOCAL_POSITION_NED, {} ATTITUDE sent; pose age at the ticks p95 {p95:.1} ms \
-         over {} commanding ticks",
+        "{name}: SITL from 5 Hz: {} LOCAL_POSITION_NED, {} ATTITUDE sent; pose age at the ticks \
+         p95 {p95:.1} ms over {} commanding ticks",
         flight.report.counters.positions_sent,
         flight.report.counters.attitudes_sent,
         ages.len()
