@@ -8,6 +8,9 @@
 //! binary crate.
 //!
 //! * [`commands`] — the command protocol: COMMAND_ACK, REQUEST_MESSAGE (pure).
+//! * [`autopilot_params`], [`stream_rates`] — what the daemon asks the
+//!   autopilot at start-up: its hover thrust and tilt limit, its pose and
+//!   ATTITUDE at the tick rate (pure).
 //! * [`config`] — the TOML schema, defaults and validation.
 //! * [`daemon`] — `dflat daemon`: [`daemon::run`], [`daemon::spawn`].
 //! * [`supervisor`] — the flight state machine (pure).
