@@ -95,6 +95,23 @@ fn raised(name: &str, sitl: &str) {
         "pose age p95 {p95:.1} ms: the stream stayed slow"
     );
     flight.assert_no_failsafe("the raised stream");
+    // The daemon's summary keeps the answers.
+    let summary = flight.summary().expect("the daemon's summary");
+    let answers: Vec<(&str, &str)> = summary["autopilot_streams"]
+        .as_array()
+        .expect("autopilot_streams")
+        .iter()
+        .map(|s| {
+            (
+                s["message"].as_str().unwrap(),
+                s["answer"].as_str().unwrap(),
+            )
+        })
+        .collect();
+    assert_eq!(
+        answers,
+        [("LOCAL_POSITION_NED", "accepted"), ("ATTITUDE", "accepted")]
+    );
     let (errors, arrived) = path_errors(
         &flight.report.trace,
         &[[0.0, 0.0, -10.0], [8.0, 0.0, -10.0], [8.0, 6.0, -10.0]],
@@ -140,4 +157,12 @@ fn an_autopilot_that_refuses_is_said_in_words() {
         2,
         "each asked once: a refusal is not asked again"
     );
+    let summary = flight.summary().expect("the daemon's summary");
+    let answers: Vec<&str> = summary["autopilot_streams"]
+        .as_array()
+        .expect("autopilot_streams")
+        .iter()
+        .map(|s| s["answer"].as_str().unwrap())
+        .collect();
+    assert_eq!(answers, ["DENIED", "DENIED"]);
 }

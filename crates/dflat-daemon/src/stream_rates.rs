@@ -81,6 +81,18 @@ pub fn requests_for(
         .collect()
 }
 
+/// What became of one stream-rate request, for the shutdown summary.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct StreamOutcome {
+    /// The message asked for (`LOCAL_POSITION_NED`, `ODOMETRY`, `ATTITUDE`).
+    pub message: String,
+    /// The rate asked \[Hz\].
+    pub rate_hz: f64,
+    /// `accepted`, the autopilot's refusal (`DENIED`, `UNSUPPORTED`, …),
+    /// `not answered`, `pending` or `not asked`.
+    pub answer: String,
+}
+
 /// What an answer did to a request.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Answer {
@@ -192,6 +204,34 @@ impl StreamRates {
         })
     }
 
+    /// Every wanted message with what became of its request since the
+    /// requests (re)started: `accepted`, the refusal's result (`DENIED`,
+    /// `UNSUPPORTED`, …), `not answered`, `pending` (in flight or queued)
+    /// or `not asked` (the autopilot not heard yet).
+    pub fn outcomes(&self) -> Vec<StreamOutcome> {
+        self.wanted
+            .iter()
+            .map(|w| {
+                let answer = if self.accepted.iter().any(|r| r.id == w.id) {
+                    "accepted".to_owned()
+                } else if let Some((_, result)) = self.refused.iter().find(|(r, _)| r.id == w.id) {
+                    dflat_link::command::result_name(*result)
+                } else if self.unanswered.iter().any(|r| r.id == w.id) {
+                    "not answered".to_owned()
+                } else if self.last_heard.is_none() {
+                    "not asked".to_owned()
+                } else {
+                    "pending".to_owned()
+                };
+                StreamOutcome {
+                    message: w.name.to_owned(),
+                    rate_hz: w.rate_hz(),
+                    answer,
+                }
+            })
+            .collect()
+    }
+
     /// The messages the autopilot accepted since the requests (re)started.
     pub fn accepted(&self) -> &[StreamRequest] {
         &self.accepted
@@ -247,6 +287,7 @@ mod tests {
         let wanted = requests_for(PoseSourceKind::LocalPositionNed, false, 50.0);
         let mut s = StreamRates::new(wanted);
         assert_eq!(s.due(0.0), None, "nothing before the autopilot is heard");
+        assert_eq!(s.outcomes()[0].answer, "not asked");
         assert_eq!(s.on_ack(MavResult::MAV_RESULT_ACCEPTED, 0.0), None);
         s.on_heartbeat(1.0);
         assert_eq!(s.due(1.0).unwrap().0.name, "LOCAL_POSITION_NED");
@@ -259,6 +300,8 @@ mod tests {
         assert_eq!(s.due(5.0), None, "all answered");
         assert_eq!(names(s.accepted()), ["LOCAL_POSITION_NED"]);
         assert_eq!(s.refused().len(), 1);
+        let answers: Vec<String> = s.outcomes().into_iter().map(|o| o.answer).collect();
+        assert_eq!(answers, ["accepted", "DENIED"]);
         // A late or stray answer changes nothing.
         assert_eq!(s.on_ack(MavResult::MAV_RESULT_ACCEPTED, 5.0), None);
         assert_eq!(names(s.accepted()), ["LOCAL_POSITION_NED"]);
@@ -276,6 +319,7 @@ mod tests {
         assert!(s.due(3.0).is_none(), "given up");
         assert_eq!(names(s.unanswered()), ["ATTITUDE"]);
         assert!(s.accepted().is_empty() && s.refused().is_empty());
+        assert_eq!(s.outcomes()[0].answer, "not answered");
     }
 
     /// IN_PROGRESS waits a retry interval on; TEMPORARILY_REJECTED asks

@@ -367,6 +367,10 @@ pub struct FlightSummary {
     /// multi-rate one the poses taken and refused and the ticks with no pose
     /// in the window (`blind_ticks`); `None` for the baselines.
     pub pose_window: Option<PoseWindowStats>,
+    /// What the autopilot answered to the stream-rate requests
+    /// (`link.request_streams`): per message asked, the rate and the
+    /// answer (empty when none were asked).
+    pub autopilot_streams: Vec<crate::stream_rates::StreamOutcome>,
     /// The link's guards: foreign senders, reconnects, the command slot,
     /// replies, link-task stalls.
     pub link_guard: crate::link_health::LinkGuardSummary,
@@ -494,6 +498,14 @@ impl FlightSummary {
 
     /// The link's counters.
     fn fmt_link(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if !self.autopilot_streams.is_empty() {
+            let streams: Vec<String> = self
+                .autopilot_streams
+                .iter()
+                .map(|s| format!("{} at {:.0} Hz {}", s.message, s.rate_hz, s.answer))
+                .collect();
+            writeln!(f, "  streams       {}", streams.join(", "))?;
+        }
         let l = &self.link_stats;
         writeln!(
             f,

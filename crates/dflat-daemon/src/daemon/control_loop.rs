@@ -398,6 +398,7 @@ impl ControlLoop {
             guards: counts.guards,
             solves: counts.solves,
             pose_window: self.core.window_stats(),
+            autopilot_streams: self.core.stream_outcomes(),
         }
     }
 }

@@ -211,6 +211,7 @@ struct ControlReport {
     guards: GuardCounts,
     solves: SolveCounts,
     pose_window: Option<dflat_control::window::PoseWindowStats>,
+    autopilot_streams: Vec<crate::stream_rates::StreamOutcome>,
 }
 
 /// What the receive task counted.
@@ -409,6 +410,7 @@ impl DaemonHandle {
             guards: control.guards,
             solves: control.solves,
             pose_window: control.pose_window,
+            autopilot_streams: control.autopilot_streams,
             link_guard,
             records: crate::record_store::finish_summary(records_summary, &records_budget),
         };

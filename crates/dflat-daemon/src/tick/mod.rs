@@ -273,6 +273,11 @@ impl ControlCore {
         self.controller.window_stats()
     }
 
+    /// What became of the stream-rate requests (`link.request_streams`).
+    pub fn stream_outcomes(&self) -> Vec<crate::stream_rates::StreamOutcome> {
+        self.engagement.streams.outcomes()
+    }
+
     /// The counters so far.
     pub fn counts(&self) -> &CoreCounts {
         &self.counts
