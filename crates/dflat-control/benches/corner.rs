@@ -279,6 +279,11 @@ struct ConeWork {
     /// the replays \[s\] (the replays take the same solver path: what is
     /// left is the code's cost without the host's interruptions).
     best: std::collections::BTreeMap<usize, f64>,
+    /// Per constrained tick of the flight, its solvers' Newton steps (or
+    /// KKT solves) in the first replay, and how many ticks of the later
+    /// replays took others (0: every replay took the same solves).
+    steps: std::collections::BTreeMap<usize, f64>,
+    differing: usize,
 }
 
 impl ConeWork {
@@ -356,7 +361,8 @@ fn replay(
             };
             if out.constrained {
                 constrained.push(t);
-                let best = work.best.entry((all.len() - 1) % flight.len()).or_insert(t);
+                let tick = (all.len() - 1) % flight.len();
+                let best = work.best.entry(tick).or_insert(t);
                 *best = best.min(t);
                 if was_constrained {
                     work.burst_rest.push(t);
@@ -369,10 +375,12 @@ fn replay(
                 for axis in 0..2 {
                     work.note(ctrl.box_cascade(axis).and_then(|c| c.solved_by()));
                 }
+                let steps: f64 = work.iterations[before..].iter().sum();
                 if !was_constrained {
-                    let steps = work.iterations[before..].iter().sum();
                     work.burst_steps.push(steps);
                 }
+                let first = *work.steps.entry(tick).or_insert(steps);
+                work.differing += usize::from(first != steps);
             }
             was_constrained = out.constrained;
         }
@@ -579,11 +587,19 @@ fn work_lines(config: Config, work: &ConeWork, ticks: usize, repeats: usize) -> 
         let mut best: Vec<f64> = work.best.values().copied().collect();
         lines.push(format!(
             "{}: constrained ticks, each at its fastest of the {repeats} replays (the same \
-             solves; the host's interruptions left out): median {} µs, p99 {} µs, max {} µs",
+             solves; the host's interruptions left out): median {} µs, p99 {} µs, max {} µs{}",
             config.name(),
             us(percentile(&mut best, 50.0)),
             us(percentile(&mut best, 99.0)),
             us(percentile(&mut best, 100.0)),
+            if work.differing > 0 {
+                format!(
+                    " ({} ticks of later replays took other Newton steps)",
+                    work.differing
+                )
+            } else {
+                String::new()
+            },
         ));
     }
     lines
