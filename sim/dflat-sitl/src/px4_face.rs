@@ -368,20 +368,34 @@ impl TelemetryRates {
         }
     }
 
+    /// The name of message `id` when it is one of these two.
+    fn name(id: u32) -> Option<&'static str> {
+        match id {
+            30 => Some("ATTITUDE"),
+            32 => Some("LOCAL_POSITION_NED"),
+            _ => None,
+        }
+    }
+
+    /// The interval slot of message `id` when it is one of these two.
+    fn slot(&mut self, id: u32) -> Option<&mut Option<u64>> {
+        match id {
+            30 => Some(&mut self.attitude_every),
+            32 => Some(&mut self.position_every),
+            _ => None,
+        }
+    }
+
     /// MAV_CMD_SET_MESSAGE_INTERVAL for message `id` (`None`: not one of
     /// these two) at plant step `dt` \[s\]: `interval_us` −1 stops it, 0
     /// restores `sitl.telemetry_rate_hz`, > 0 sets it (rounded to whole
     /// plant steps, at least one). `Err`: the refusal in words.
     pub fn set(&mut self, id: u32, interval_us: f32, dt: f64) -> Option<Result<(), String>> {
-        let (name, slot) = match id {
-            30 => ("ATTITUDE", &mut self.attitude_every),
-            32 => ("LOCAL_POSITION_NED", &mut self.position_every),
-            _ => return None,
-        };
+        let name = Self::name(id)?;
         if self.fixed {
             return Some(Err(format!("SITL: {name} rate fixed by config")));
         }
-        *slot = if interval_us == -1.0 {
+        let every = if interval_us == -1.0 {
             None
         } else if interval_us == 0.0 {
             Some(self.default_every)
@@ -390,17 +404,14 @@ impl TelemetryRates {
         } else {
             return Some(Err(format!("SITL: interval {interval_us} us refused")));
         };
+        *self.slot(id)? = every;
         Some(Ok(()))
     }
 
     /// A request for message `id` from the ground-station link (`None`:
     /// not one of these two): refused, their rate is the vehicle link's.
     pub fn refuse_on_gcs(&self, id: u32) -> Option<Result<(), String>> {
-        let name = match id {
-            30 => "ATTITUDE",
-            32 => "LOCAL_POSITION_NED",
-            _ => return None,
-        };
+        let name = Self::name(id)?;
         Some(Err(format!("SITL: {name} rate set on the vehicle link")))
     }
 

@@ -13,7 +13,7 @@ use tracing::{debug, info, warn};
 use super::ControlCore;
 use crate::autopilot_params::ParamKind;
 use crate::config::ThrustMode;
-use crate::stream_rates::Answer;
+use crate::stream_rates::{Answer, StreamRequest};
 
 impl ControlCore {
     /// Queues the parameter requests due at `t` (sent with the texts).
@@ -34,14 +34,7 @@ impl ControlCore {
         let given_up = self.engagement.streams.unanswered().len();
         let due = self.engagement.streams.due(t);
         if let Some(&r) = self.engagement.streams.unanswered().get(given_up) {
-            warn!(
-                message = r.name,
-                rate_hz = r.rate_hz(),
-                "the autopilot did not answer the stream-rate request: its own rate stands \
-                 (docs/deployment.md: PX4 `mavlink stream`, ArduPilot SRn_ parameters)"
-            );
-            let text = format!("dflat: {} at {:.0} Hz not answered", r.name, r.rate_hz());
-            self.text(MavSeverity::MAV_SEVERITY_WARNING, &text);
+            self.say_stream_not_granted(r, "not answered");
         }
         if let Some((r, confirmation)) = due {
             debug!(
@@ -72,19 +65,25 @@ impl ControlCore {
                 );
             }
             Some(Answer::Refused(r, result)) => {
-                let result = result_name(result);
-                warn!(
-                    message = r.name,
-                    rate_hz = r.rate_hz(),
-                    %result,
-                    "the autopilot refused the stream rate: its own rate stands \
-                     (docs/deployment.md: PX4 `mavlink stream`, ArduPilot SRn_ parameters)"
-                );
-                let text = format!("dflat: {} at {:.0} Hz {result}", r.name, r.rate_hz());
-                self.text(MavSeverity::MAV_SEVERITY_WARNING, &text);
+                self.say_stream_not_granted(r, &result_name(result));
             }
             Some(Answer::Pending) | None => {}
         }
+    }
+
+    /// Says that the autopilot did not grant the rate of `r` (`answer`: its
+    /// refusal's result, or `not answered`): a log warning naming the
+    /// parameters to set, and the STATUSTEXT `dflat: NAME at R Hz ANSWER`.
+    fn say_stream_not_granted(&mut self, r: StreamRequest, answer: &str) {
+        warn!(
+            message = r.name,
+            rate_hz = r.rate_hz(),
+            answer,
+            "the autopilot did not grant the stream rate: its own rate stands \
+             (docs/deployment.md: PX4 `mavlink stream`, ArduPilot SRn_ parameters)"
+        );
+        let text = format!("dflat: {} at {:.0} Hz {answer}", r.name, r.rate_hz());
+        self.text(MavSeverity::MAV_SEVERITY_WARNING, &text);
     }
 
     /// A PARAM_VALUE from the autopilot: a value dflat reads is logged next

@@ -228,10 +228,9 @@ pub struct SitlCore {
     options: PlantOptions,
     /// Plant step \[s\].
     dt: f64,
-    /// Plant steps per telemetry sample (`sitl.telemetry_rate_hz`: the
-    /// truth's samples).
-    telemetry_every: u64,
-    /// ATTITUDE's and LOCAL_POSITION_NED's intervals (SET_MESSAGE_INTERVAL).
+    /// ATTITUDE's and LOCAL_POSITION_NED's intervals (SET_MESSAGE_INTERVAL),
+    /// and the plant steps per sample at `sitl.telemetry_rate_hz` (the
+    /// truth's samples: `default_every`).
     telemetry_rates: crate::px4_face::TelemetryRates,
     /// Plant steps per heartbeat.
     heartbeat_every: u64,
@@ -325,7 +324,6 @@ impl SitlCore {
         Ok(Self {
             options,
             dt: 1.0 / s.plant_rate_hz,
-            telemetry_every: (s.plant_rate_hz / s.telemetry_rate_hz).round().max(1.0) as u64,
             telemetry_rates: crate::px4_face::TelemetryRates::new(
                 (s.plant_rate_hz / s.telemetry_rate_hz).round().max(1.0) as u64,
                 s.fixed_telemetry_rate,

@@ -44,7 +44,7 @@ impl SitlCore {
         let rates = self.telemetry_rates;
         let attitude = rates.attitude_every.is_some_and(crossed);
         let position = rates.position_every.is_some_and(crossed);
-        if crossed(self.telemetry_every) || attitude || position {
+        if crossed(rates.default_every) || attitude || position {
             let sample = TruthSample {
                 t,
                 position: state.position.into(),
