@@ -34,6 +34,21 @@ fn interval_requests(flight: &Flight) -> Vec<(u32, f32)> {
         .collect()
 }
 
+/// The daemon's summary's answers to its stream-rate requests: (message,
+/// answer), in the order asked.
+fn stream_answers(flight: &Flight) -> Vec<[String; 2]> {
+    let summary = flight.summary().expect("the daemon's summary");
+    summary["autopilot_streams"]
+        .as_array()
+        .expect("autopilot_streams")
+        .iter()
+        .map(|s| {
+            let field = |k: &str| s[k].as_str().expect("a string").to_owned();
+            [field("message"), field("answer")]
+        })
+        .collect()
+}
+
 #[test]
 fn a_slow_autopilot_stream_is_raised_to_the_tick_rate() {
     raised("stream-rates-raised", "");
@@ -96,21 +111,9 @@ fn raised(name: &str, sitl: &str) {
     );
     flight.assert_no_failsafe("the raised stream");
     // The daemon's summary keeps the answers.
-    let summary = flight.summary().expect("the daemon's summary");
-    let answers: Vec<(&str, &str)> = summary["autopilot_streams"]
-        .as_array()
-        .expect("autopilot_streams")
-        .iter()
-        .map(|s| {
-            (
-                s["message"].as_str().unwrap(),
-                s["answer"].as_str().unwrap(),
-            )
-        })
-        .collect();
     assert_eq!(
-        answers,
-        [("LOCAL_POSITION_NED", "accepted"), ("ATTITUDE", "accepted")]
+        stream_answers(&flight),
+        [["LOCAL_POSITION_NED", "accepted"], ["ATTITUDE", "accepted"]]
     );
     let (errors, arrived) = path_errors(
         &flight.report.trace,
@@ -157,12 +160,8 @@ fn an_autopilot_that_refuses_is_said_in_words() {
         2,
         "each asked once: a refusal is not asked again"
     );
-    let summary = flight.summary().expect("the daemon's summary");
-    let answers: Vec<&str> = summary["autopilot_streams"]
-        .as_array()
-        .expect("autopilot_streams")
-        .iter()
-        .map(|s| s["answer"].as_str().unwrap())
-        .collect();
-    assert_eq!(answers, ["DENIED", "DENIED"]);
+    assert_eq!(
+        stream_answers(&flight),
+        [["LOCAL_POSITION_NED", "DENIED"], ["ATTITUDE", "DENIED"]]
+    );
 }

@@ -510,6 +510,8 @@ mod heading_tests;
 #[cfg(test)]
 mod recovery_tests;
 #[cfg(test)]
+mod stream_rate_tests;
+#[cfg(test)]
 mod stream_time_tests;
 #[cfg(test)]
 mod tests;

@@ -90,7 +90,14 @@ pub(super) fn core(script: Vec<Script>) -> (ControlCore, Arc<AtomicUsize>) {
 
 /// [`core`], with the count of ticks the controller was told were skipped.
 fn core_counting_skipped(script: Vec<Script>) -> (ControlCore, Arc<AtomicUsize>, Arc<AtomicUsize>) {
-    let cfg = Config::default();
+    core_with(&Config::default(), script)
+}
+
+/// [`core_counting_skipped`] on the configuration `cfg`.
+pub(super) fn core_with(
+    cfg: &Config,
+    script: Vec<Script>,
+) -> (ControlCore, Arc<AtomicUsize>, Arc<AtomicUsize>) {
     let updates = Arc::new(AtomicUsize::new(0));
     let skipped = Arc::new(AtomicUsize::new(0));
     let controller = Scripted {
@@ -99,9 +106,9 @@ fn core_counting_skipped(script: Vec<Script>) -> (ControlCore, Arc<AtomicUsize>,
         updates: updates.clone(),
         skipped: skipped.clone(),
     };
-    let mapping = thrust_mapping(&cfg);
+    let mapping = thrust_mapping(cfg);
     (
-        ControlCore::new(&cfg, Box::new(controller), mapping),
+        ControlCore::new(cfg, Box::new(controller), mapping),
         updates,
         skipped,
     )
@@ -110,7 +117,7 @@ fn core_counting_skipped(script: Vec<Script>) -> (ControlCore, Arc<AtomicUsize>,
 /// Tick `k` (at k·δt) after an autopilot heartbeat (PX4 OFFBOARD) and a
 /// fresh pose stamped `source_time` (`None`: arrival) 1 ms before it, then
 /// `extra`; the stopwatch advances 0.1 ms per reading.
-fn step_at(
+pub(super) fn step_at(
     core: &mut ControlCore,
     k: u64,
     source_time: Option<f64>,
@@ -570,14 +577,7 @@ fn without_level_hover_pose_loss_goes_silent_at_once() {
     let tilt = 20f64.to_radians();
     let mut cfg = Config::default();
     cfg.safety.level_hover_max_ms = 0.0;
-    let controller = Scripted {
-        script: vec![Script::Command(tilt, 0.0)],
-        tick: 0,
-        updates: Arc::new(AtomicUsize::new(0)),
-        skipped: Arc::new(AtomicUsize::new(0)),
-    };
-    let mapping = thrust_mapping(&cfg);
-    let mut core = ControlCore::new(&cfg, Box::new(controller), mapping);
+    let (mut core, _, _) = core_with(&cfg, vec![Script::Command(tilt, 0.0)]);
     fly(&mut core, 50);
     let lost: Vec<StepOutput> = (50..80).map(|k| step_without_pose(&mut core, k)).collect();
     let failsafe_at = lost
@@ -607,14 +607,7 @@ fn flies_the_autopilots_hover_thrust_only_when_asked_and_before_engaging() {
         let mut cfg = Config::default();
         cfg.vehicle.thrust_mode = ThrustMode::Normalized;
         cfg.vehicle.hover_thrust_from_autopilot = from_autopilot;
-        let controller = Scripted {
-            script: vec![Script::Command(0.0, 0.0)],
-            tick: 0,
-            updates: Arc::new(AtomicUsize::new(0)),
-            skipped: Arc::new(AtomicUsize::new(0)),
-        };
-        let mapping = thrust_mapping(&cfg);
-        let mut core = ControlCore::new(&cfg, Box::new(controller), mapping);
+        let (mut core, _, _) = core_with(&cfg, vec![Script::Command(0.0, 0.0)]);
         let posctl = dflat_link::AutopilotMode {
             custom_mode: 3 << 16,
             ..OFFBOARD
@@ -685,13 +678,7 @@ fn the_stop_asks_for_a_hold_ramps_to_level_and_ends() {
     let tilt = 20f64.to_radians();
     let mut cfg = Config::default();
     cfg.safety.stop_requests_hold = true;
-    let controller = Scripted {
-        script: vec![Script::Command(tilt, 0.0)],
-        tick: 0,
-        updates: Arc::new(AtomicUsize::new(0)),
-        skipped: Arc::new(AtomicUsize::new(0)),
-    };
-    let mut core = ControlCore::new(&cfg, Box::new(controller), thrust_mapping(&cfg));
+    let (mut core, _, _) = core_with(&cfg, vec![Script::Command(tilt, 0.0)]);
     let out = fly(&mut core, 50);
     assert!(core.state().engaged());
     assert_eq!(out[49].command.as_ref().unwrap().command.roll, tilt);
@@ -753,84 +740,4 @@ fn the_stop_asks_for_a_hold_ramps_to_level_and_ends() {
     assert_eq!(stop.commands, rolls.len() as u64);
     // The stop's level is not a level-hover fallback.
     assert_eq!(core.counts().guards.level_hover, 0);
-}
-
-/// The stream-rate requests of `out`: (message id, interval µs).
-fn interval_requests(out: &StepOutput) -> Vec<(u32, f32)> {
-    out.texts
-        .iter()
-        .filter_map(|m| match m {
-            MavMessage::COMMAND_LONG(d)
-                if d.command == dflat_link::dialect::MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL =>
-            {
-                assert_eq!((d.target_system, d.target_component), (1, 1));
-                Some((d.param1 as u32, d.param2))
-            }
-            _ => None,
-        })
-        .collect()
-}
-
-/// `link.request_streams` (default): once the autopilot is heard, the
-/// pose message and then ATTITUDE are asked at the tick rate, one at a
-/// time; an acceptance moves on, a refusal is said in words; with the key
-/// off nothing is asked.
-#[test]
-fn asks_the_autopilot_for_its_streams_at_the_tick_rate_one_at_a_time() {
-    use dflat_link::dialect::MavResult;
-    let (mut core, _) = core(vec![Script::Command(0.0, 0.0)]);
-    let step = |core: &mut ControlCore, k: u64, extra: Vec<Event>| step_at(core, k, None, extra);
-    let out = step(&mut core, 0, vec![]);
-    assert_eq!(interval_requests(&out), [(32, 20_000.0)]);
-    assert!(
-        interval_requests(&step(&mut core, 1, vec![])).is_empty(),
-        "waits"
-    );
-    let ack = |result| Event::IntervalAck {
-        arrival: 0.03,
-        result,
-    };
-    let out = step(&mut core, 2, vec![ack(MavResult::MAV_RESULT_ACCEPTED)]);
-    assert_eq!(interval_requests(&out), [(30, 20_000.0)]);
-    let out = step(&mut core, 3, vec![ack(MavResult::MAV_RESULT_DENIED)]);
-    assert!(interval_requests(&out).is_empty());
-    let said: Vec<String> = out
-        .texts
-        .iter()
-        .filter_map(|m| match m {
-            MavMessage::STATUSTEXT(d) => Some(d.text.to_str().unwrap_or("").to_owned()),
-            _ => None,
-        })
-        .collect();
-    assert!(
-        said.iter().any(|t| t == "dflat: ATTITUDE at 50 Hz DENIED"),
-        "{said:?}"
-    );
-    for k in 4..200 {
-        assert!(
-            interval_requests(&step(&mut core, k, vec![])).is_empty(),
-            "tick {k}"
-        );
-    }
-
-    let cfg = Config {
-        link: crate::config::LinkConfig {
-            request_streams: false,
-            ..Default::default()
-        },
-        ..Config::default()
-    };
-    let controller = Scripted {
-        script: vec![Script::Command(0.0, 0.0)],
-        tick: 0,
-        updates: Arc::new(AtomicUsize::new(0)),
-        skipped: Arc::new(AtomicUsize::new(0)),
-    };
-    let mut quiet = ControlCore::new(&cfg, Box::new(controller), thrust_mapping(&cfg));
-    for k in 0..100 {
-        assert!(
-            interval_requests(&step(&mut quiet, k, vec![])).is_empty(),
-            "tick {k}"
-        );
-    }
 }

@@ -89,6 +89,18 @@ fn all_names(outs: &[SitlOutput]) -> Vec<&'static str> {
     outs.iter().flat_map(names).collect()
 }
 
+/// The COMMAND_ACK of `out`: where it goes and its result (panics
+/// without one).
+fn ack_of(out: &SitlOutput) -> (Dest, MavResult) {
+    out.messages
+        .iter()
+        .find_map(|m| match &m.message {
+            MavMessage::COMMAND_ACK(a) => Some((m.to, a.result)),
+            _ => None,
+        })
+        .expect("no ack")
+}
+
 #[test]
 fn without_commands_it_holds_where_it_started() {
     let cfg = config();
@@ -340,14 +352,7 @@ fn a_disarm_is_acked_on_its_link_and_heard_in_the_status() {
     assert!(!out.status.armed);
     assert_eq!(out.events, vec![SitlEvent::ArmedChanged(false)]);
     assert_eq!(out.counts.commands_acked, 1);
-    let ack = out
-        .messages
-        .iter()
-        .find_map(|m| match &m.message {
-            MavMessage::COMMAND_ACK(a) => Some((m.to, a.result)),
-            _ => None,
-        })
-        .expect("no ack");
+    let ack = ack_of(&out);
     assert_eq!(ack, (Dest::Only(Link::Gcs), MavResult::MAV_RESULT_ACCEPTED));
     // Disarmed, a stream is not flown.
     let outs = run(&mut core, 0.3, streaming(&cfg, -0.3));
@@ -432,22 +437,15 @@ fn the_daemon_sets_the_pose_and_attitude_rates_unless_fixed() {
         // vehicle link's.
         let gcs = dflat_link::command::set_message_interval((1, 1), 32, 20_000.0, 0);
         let out = core.step(core.next_step_time(), [from_gcs(core.time(), gcs)]);
-        assert!(out.messages.iter().any(|m| matches!(
-            &m.message,
-            MavMessage::COMMAND_ACK(a) if a.result == MavResult::MAV_RESULT_DENIED
-        ) && m.to == Dest::Only(Link::Gcs)));
+        assert_eq!(
+            ack_of(&out),
+            (Dest::Only(Link::Gcs), MavResult::MAV_RESULT_DENIED)
+        );
         let outs = run(&mut core, 1.0, silence);
         assert_eq!(count(&outs, "LOCAL_POSITION_NED"), 5);
         assert_eq!(count(&outs, "ATTITUDE"), 5);
         let out = core.step(core.next_step_time(), [from_daemon(core.time(), 32)]);
-        let ack = out
-            .messages
-            .iter()
-            .find_map(|m| match &m.message {
-                MavMessage::COMMAND_ACK(a) => Some((m.to, a.result)),
-                _ => None,
-            })
-            .expect("no ack");
+        let ack = ack_of(&out);
         let want = if fixed {
             MavResult::MAV_RESULT_DENIED
         } else {
