@@ -14,8 +14,8 @@
 //!
 //! The tilt-rate bound (`max_tilt_rate`, [`RATE_DEG_S`]) is timed with the
 //! box (the daemon's set-up: box + tilt rate), alone, with the cone, and
-//! with clarabel solving the same box + tilt-rate and cone + tilt-rate
-//! QPs; with the box its banded rows run the box's cascade (the
+//! with clarabel solving the same box + tilt-rate, tilt-rate-alone and
+//! cone + tilt-rate QPs; with the box its banded rows run the box's cascade (the
 //! augmented Lagrangian with its active-set polish, then the interior
 //! point), with the cone the cone's (the augmented Lagrangian, then the
 //! interior point, both with the rate rows).
@@ -43,8 +43,9 @@
 //! runs it when one of its parts is `ramp`.
 //!
 //! With the feature `osqp-bench` (off by default: the `osqp` crate builds
-//! OSQP's C through cmake), a table per horizon gives OSQP on the same box
-//! QPs as clarabel's, warm-started, beside our solver of the same ticks:
+//! OSQP's C through cmake), a table per horizon gives OSQP on the same
+//! linear QPs as clarabel's (the box, with and without the tilt rate, and
+//! the tilt rate alone), warm-started, beside our solver of the same ticks:
 //! its times, iterations, the share of solves it did not finish
 //! (`Solved`) and its plan's distance from ours (module `anchor` below;
 //! `docs/performance.md`, "OSQP beside clarabel"). The row "box,
@@ -151,13 +152,14 @@ enum Config {
     BoxRate,
     RateAlone,
     BoxRateClarabel,
+    RateAloneClarabel,
     BoxClarabel,
     ConeRate,
     ConeRateClarabel,
 }
 
 impl Config {
-    const ALL: [Self; 11] = [
+    const ALL: [Self; 12] = [
         Self::Fast,
         Self::ConeWarm,
         Self::ConeCold,
@@ -166,6 +168,7 @@ impl Config {
         Self::BoxRate,
         Self::RateAlone,
         Self::BoxRateClarabel,
+        Self::RateAloneClarabel,
         Self::BoxClarabel,
         Self::ConeRate,
         Self::ConeRateClarabel,
@@ -180,6 +183,7 @@ impl Config {
             Self::BoxRate => "box + tilt rate, ALM",
             Self::RateAlone => "tilt rate alone, ALM",
             Self::BoxRateClarabel => "box + tilt rate, clarabel",
+            Self::RateAloneClarabel => "tilt rate alone, clarabel",
             Self::BoxClarabel => "box, clarabel",
             Self::ConeRate => "cone + tilt rate, ALM",
             Self::ConeRateClarabel => "cone + tilt rate, clarabel",
@@ -201,7 +205,7 @@ impl Config {
                         ..constraints
                     }
                 }
-                Self::RateAlone => OutputConstraints {
+                Self::RateAlone | Self::RateAloneClarabel => OutputConstraints {
                     max_tilt_rate: rate,
                     ..Default::default()
                 },
@@ -210,6 +214,7 @@ impl Config {
             qp_solver: match self {
                 Self::ConeClarabel
                 | Self::BoxRateClarabel
+                | Self::RateAloneClarabel
                 | Self::BoxClarabel
                 | Self::ConeRateClarabel => QpSolver::Clarabel,
                 _ => QpSolver::Banded,
@@ -219,6 +224,7 @@ impl Config {
                 | Self::BoxRate
                 | Self::RateAlone
                 | Self::BoxRateClarabel
+                | Self::RateAloneClarabel
                 | Self::BoxClarabel => PlanTiltBound::Box,
                 _ => PlanTiltBound::Cone,
             },
@@ -545,6 +551,7 @@ fn work_lines(config: Config, work: &ConeWork, ticks: usize, repeats: usize) -> 
         Config::Fast
             | Config::ConeClarabel
             | Config::BoxRateClarabel
+            | Config::RateAloneClarabel
             | Config::BoxClarabel
             | Config::ConeRateClarabel
     ) {
@@ -608,7 +615,17 @@ fn work_lines(config: Config, work: &ConeWork, ticks: usize, repeats: usize) -> 
 /// The ratios the budgets are stated in (every configuration ran, in
 /// [`Config::ALL`]'s order).
 fn print_ratios(stats: &[[f64; 6]]) {
-    let (fast, warm, clarabel) = (stats[0], stats[1], stats[3]);
+    let of = |c: Config| {
+        stats[Config::ALL
+            .iter()
+            .position(|&a| a as usize == c as usize)
+            .unwrap()]
+    };
+    let (fast, warm, clarabel) = (
+        of(Config::Fast),
+        of(Config::ConeWarm),
+        of(Config::ConeClarabel),
+    );
     println!(
         "ratios (constrained ticks): clarabel / warm cone: median {:.1}×, p99 {:.1}×; \
          warm cone / fast tick median: median {:.1}×, p99 {:.1}×",
@@ -617,17 +634,22 @@ fn print_ratios(stats: &[[f64; 6]]) {
         warm[3] / fast[0],
         warm[4] / fast[0],
     );
-    let (rate, rate_clarabel) = (stats[5], stats[7]);
-    println!(
-        "tilt rate (constrained ticks): box + rate banded median {} µs, p99 {} µs; \
-         clarabel / banded: median {:.1}×, p99 {:.1}×; banded / fast tick median: {:.1}×",
-        us(rate[3]),
-        us(rate[4]),
-        rate_clarabel[3] / rate[3],
-        rate_clarabel[4] / rate[4],
-        rate[3] / fast[0],
-    );
-    let (cone_rate, cone_rate_clarabel) = (stats[9], stats[10]);
+    for (name, banded, by_clarabel) in [
+        ("box + rate", Config::BoxRate, Config::BoxRateClarabel),
+        ("rate alone", Config::RateAlone, Config::RateAloneClarabel),
+    ] {
+        let (rate, rate_clarabel) = (of(banded), of(by_clarabel));
+        println!(
+            "tilt rate (constrained ticks): {name} banded median {} µs, p99 {} µs; \
+             clarabel / banded: median {:.1}×, p99 {:.1}×; banded / fast tick median: {:.1}×",
+            us(rate[3]),
+            us(rate[4]),
+            rate_clarabel[3] / rate[3],
+            rate_clarabel[4] / rate[4],
+            rate[3] / fast[0],
+        );
+    }
+    let (cone_rate, cone_rate_clarabel) = (of(Config::ConeRate), of(Config::ConeRateClarabel));
     println!(
         "cone + tilt rate (constrained ticks): banded median {} µs, p99 {} µs; \
          clarabel / banded: median {:.1}×, p99 {:.1}×",

@@ -1,4 +1,5 @@
-//! OSQP on the same QPs (feature `osqp-bench`): the box's per-axis QP, as
+//! OSQP on the same QPs (feature `osqp-bench`): the box's per-axis QP
+//! (stage intervals and tilt-rate rows; either may be absent), as
 //! clarabel is given it, solved by OSQP warm-started (module docs of
 //! `dflat_control::optimise::osqp_anchor`). OSQP is inserted first in the
 //! cascade of each bounded axis of our solver's replay and returns its
@@ -198,11 +199,12 @@ fn replay(
     (ours, theirs, log)
 }
 
-/// The OSQP table of horizon `n`: the box's configurations the daemon
-/// can ship.
+/// The OSQP table of horizon `n`: the configurations the daemon can
+/// ship whose QPs are linear (the box, with and without the tilt rate,
+/// and the tilt rate alone).
 pub fn table(n: usize, flight: &[Measurement], repeats: usize, chosen: &dyn Fn(Config) -> bool) {
     let tuning = tuning();
-    let configs = [Config::BoxBanded, Config::BoxRate];
+    let configs = [Config::BoxBanded, Config::BoxRate, Config::RateAlone];
     if !configs.iter().any(|&c| chosen(c)) {
         return;
     }
